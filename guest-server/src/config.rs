@@ -1,0 +1,139 @@
+//! Server configuration: one struct, filled by clap from flags and `ARENA_*` variables.
+
+use std::net::{IpAddr, Ipv4Addr};
+use std::path::PathBuf;
+use std::time::Duration;
+
+/// Which backend drives the desktop.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum BackendKind {
+    /// The deterministic in-memory desktop (every platform).
+    Stub,
+    /// The real Windows desktop (Windows builds only).
+    Windows,
+}
+
+/// Log output format.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum LogFormat {
+    Text,
+    Json,
+}
+
+/// Everything the server needs to start.
+#[derive(Debug, Clone, clap::Parser)]
+#[command(name = "arena-guest", version, about = "Desktop-control server for Windows agent benchmarks (WAA-compatible)")]
+pub struct ServerConfig {
+    /// Backend: `windows` (default on Windows) or `stub`.
+    #[arg(long, env = "ARENA_BACKEND", value_enum)]
+    pub backend: Option<BackendKind>,
+
+    /// Address to bind. Anything but loopback needs a token or --allow-unauthenticated.
+    #[arg(long, env = "ARENA_BIND", default_value_t = IpAddr::V4(Ipv4Addr::LOCALHOST))]
+    pub bind: IpAddr,
+
+    /// TCP port (upstream WAA uses 5000; 0 picks a free one).
+    #[arg(long, env = "ARENA_PORT", default_value_t = 5000)]
+    pub port: u16,
+
+    /// Bearer token every request except `/probe` and `/v1/health` must carry.
+    #[arg(long, env = "ARENA_TOKEN", hide_env_values = true, conflicts_with = "token_file")]
+    pub token: Option<String>,
+
+    /// File holding the bearer token (first line, whitespace trimmed).
+    #[arg(long, env = "ARENA_TOKEN_FILE")]
+    pub token_file: Option<PathBuf>,
+
+    /// Serve a non-loopback address without a token, as upstream WAA does. Logs a warning.
+    #[arg(long, env = "ARENA_ALLOW_UNAUTHENTICATED")]
+    pub allow_unauthenticated: bool,
+
+    /// Stub backend: directory the guest's `C:\` and other drives are mapped into
+    /// (default: a fresh temporary directory, removed at exit).
+    #[arg(long, env = "ARENA_STUB_ROOT")]
+    pub stub_root: Option<PathBuf>,
+
+    /// Stub backend: JSON scenario seeding windows, files, clipboard, registry and programs.
+    #[arg(long, env = "ARENA_SCENARIO")]
+    pub scenario: Option<PathBuf>,
+
+    /// Stub backend: screen size as WIDTHxHEIGHT.
+    #[arg(long, env = "ARENA_SCREEN", default_value = "1440x900", value_parser = parse_size)]
+    pub screen: (u32, u32),
+
+    /// Largest request body accepted, in bytes (uploads included).
+    #[arg(long, env = "ARENA_MAX_BODY", default_value_t = 1 << 30)]
+    pub max_body_bytes: usize,
+
+    /// Deadline of one ordinary backend call, in milliseconds.
+    #[arg(long, env = "ARENA_CALL_TIMEOUT_MS", default_value_t = 30_000)]
+    pub call_timeout_ms: u64,
+
+    /// Deadline of an accessibility-tree walk, in milliseconds (upstream's client waits 300 s).
+    #[arg(long, env = "ARENA_A11Y_TIMEOUT_MS", default_value_t = 60_000)]
+    pub a11y_timeout_ms: u64,
+
+    /// Timeout of `/execute` commands in milliseconds (upstream: 120 s).
+    #[arg(long, env = "ARENA_EXEC_TIMEOUT_MS", default_value_t = 120_000)]
+    pub exec_timeout_ms: u64,
+
+    /// Pause after `/setup/open_file` opens a file, in milliseconds (upstream sleeps 5 s).
+    #[arg(long, env = "ARENA_OPEN_SETTLE_MS", default_value_t = 5_000)]
+    pub open_settle_ms: u64,
+
+    /// Pause between minimise and restore (and after restore) in strict `/setup/activate_window`,
+    /// in milliseconds (upstream sleeps 1 s each).
+    #[arg(long, env = "ARENA_ACTIVATE_SETTLE_MS", default_value_t = 1_000)]
+    pub activate_settle_ms: u64,
+
+    /// Log format.
+    #[arg(long, env = "ARENA_LOG_FORMAT", value_enum, default_value_t = LogFormat::Text)]
+    pub log_format: LogFormat,
+}
+
+impl ServerConfig {
+    /// The backend to use, defaulting by platform.
+    pub fn backend_kind(&self) -> BackendKind {
+        self.backend.unwrap_or(if cfg!(windows) { BackendKind::Windows } else { BackendKind::Stub })
+    }
+
+    pub fn call_timeout(&self) -> Duration {
+        Duration::from_millis(self.call_timeout_ms)
+    }
+
+    pub fn a11y_timeout(&self) -> Duration {
+        Duration::from_millis(self.a11y_timeout_ms)
+    }
+
+    /// A configuration for tests and embedding: stub backend on loopback, port 0, no token,
+    /// and no settle pauses.
+    pub fn for_stub() -> ServerConfig {
+        ServerConfig {
+            backend: Some(BackendKind::Stub),
+            bind: IpAddr::V4(Ipv4Addr::LOCALHOST),
+            port: 0,
+            token: None,
+            token_file: None,
+            allow_unauthenticated: false,
+            stub_root: None,
+            scenario: None,
+            screen: (1440, 900),
+            max_body_bytes: 1 << 30,
+            call_timeout_ms: 30_000,
+            a11y_timeout_ms: 60_000,
+            exec_timeout_ms: 120_000,
+            open_settle_ms: 0,
+            activate_settle_ms: 0,
+            log_format: LogFormat::Text,
+        }
+    }
+}
+
+fn parse_size(s: &str) -> Result<(u32, u32), String> {
+    let (w, h) = s.split_once(['x', 'X']).ok_or_else(|| format!("screen size {s:?} is not WIDTHxHEIGHT"))?;
+    let parse = |v: &str| v.trim().parse::<u32>().ok().filter(|n| (16..=16384).contains(n));
+    match (parse(w), parse(h)) {
+        (Some(w), Some(h)) => Ok((w, h)),
+        _ => Err(format!("screen size {s:?} needs two whole numbers from 16 to 16384")),
+    }
+}

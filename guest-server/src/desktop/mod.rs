@@ -1,0 +1,255 @@
+//! The one backend trait, [`Desktop`], and the platform-neutral types it speaks.
+//!
+//! The trait knows no HTTP: routes in [`crate::waa`] and [`crate::native`]
+//! call it, through [`crate::call::blocking`], which gives every call a deadline.
+//! It is synchronous and object-safe; the server holds it as `Arc<dyn Desktop>`.
+//! Backends are chosen at run time: [`stub`] builds everywhere (and runs inside
+//! the Windows exe too), the Windows backend only for `cfg(windows)`.
+//!
+//! # Coordinates
+//!
+//! Every point and rectangle is in physical pixels of the virtual screen,
+//! the space a per-monitor DPI-aware process sees.
+
+pub mod stub;
+
+use std::path::PathBuf;
+
+use arena_shared::action::Action;
+use arena_shared::files::KnownFolder;
+use arena_shared::geometry::Point;
+use arena_shared::health::Component;
+use arena_shared::observation::{A11yBackend, A11yTree, ScreenInfo, TreeBudget, WindowInfo};
+use arena_shared::registry::RegistryValue;
+
+/// What went wrong in a backend call. The same variants on every platform.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum DesktopError {
+    /// The caller asked for something malformed or impossible; the message says what.
+    #[error("{0}")]
+    InvalidInput(String),
+    /// A path, window, key or value does not exist.
+    #[error("{0}")]
+    NotFound(String),
+    /// The thing exists and may not be touched.
+    #[error("{0}")]
+    PermissionDenied(String),
+    /// The thing to be created exists already.
+    #[error("{0}")]
+    AlreadyExists(String),
+    /// This backend cannot do this.
+    #[error("{0}")]
+    Unsupported(String),
+    /// The call did not finish within its deadline.
+    #[error("{op} timed out after {ms} ms")]
+    Timeout { op: &'static str, ms: u64 },
+    /// The operating system refused; `message` carries its words.
+    #[error("{op}: {message}")]
+    Os { op: &'static str, message: String },
+}
+
+impl DesktopError {
+    /// Maps an I/O error about `what` (usually a path) onto the closest variant.
+    pub fn io(op: &'static str, what: &str, err: std::io::Error) -> DesktopError {
+        use std::io::ErrorKind;
+        match err.kind() {
+            ErrorKind::NotFound => DesktopError::NotFound(format!("{what}: not found")),
+            ErrorKind::PermissionDenied => DesktopError::PermissionDenied(format!("{what}: permission denied")),
+            ErrorKind::AlreadyExists => DesktopError::AlreadyExists(format!("{what}: already exists")),
+            _ => DesktopError::Os { op, message: format!("{what}: {err}") },
+        }
+    }
+}
+
+/// Result alias for backend calls.
+pub type DesktopResult<T> = Result<T, DesktopError>;
+
+/// A captured frame of the whole primary screen, in physical pixels.
+#[derive(Debug, Clone)]
+pub struct Frame {
+    pub image: image::RgbaImage,
+    /// Cursor position at capture time.
+    pub cursor: Option<Point>,
+    /// Whether the backend drew the cursor into `image`.
+    pub cursor_drawn: bool,
+}
+
+/// A window state change.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum WindowState {
+    Minimized,
+    Maximized,
+    /// Restored from minimised or maximised.
+    Normal,
+}
+
+/// Clipboard contents in backend form.
+#[derive(Debug, Clone, PartialEq)]
+pub enum ClipboardData {
+    Empty,
+    Text(String),
+    Image(image::RgbaImage),
+}
+
+/// How to start a program.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum CommandSpec {
+    /// Program and arguments, no shell. On Windows the command line is built
+    /// with the MSVC quoting rules (Python's `subprocess.list2cmdline`).
+    Argv(Vec<String>),
+    /// A command line given to the shell: `cmd.exe /c <line>` on Windows, `sh -c <line>` elsewhere.
+    Shell(String),
+}
+
+/// Limits on [`Desktop::run`].
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct ExecLimits {
+    /// Kill the process (and on Windows its whole job) after this many milliseconds.
+    pub timeout_ms: u64,
+    /// Keep at most this many bytes of each output stream; the rest is read and dropped.
+    pub max_output_bytes: u64,
+    /// Working directory (a guest path); `None` keeps the server's.
+    pub cwd: Option<String>,
+    /// Bytes for standard input.
+    pub stdin: Option<Vec<u8>>,
+}
+
+/// Output of a finished (or killed) program.
+///
+/// Streams are decoded text: on Windows from the ANSI code page, with CRLF and CR folded to LF
+/// (Python's `text=True`); elsewhere as lossy UTF-8 with the same newline folding.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct ExecOutput {
+    pub exit_code: Option<i32>,
+    pub stdout: String,
+    pub stderr: String,
+    pub stdout_truncated: bool,
+    pub stderr_truncated: bool,
+    pub timed_out: bool,
+    pub duration_ms: u64,
+}
+
+/// The backend: everything the server can ask of a desktop.
+///
+/// Implementations must be cheap to call from many threads at once; they
+/// serialise internally where the platform needs it.
+pub trait Desktop: Send + Sync + std::fmt::Debug {
+    /// `"stub"` or `"windows"`.
+    fn kind(&self) -> &'static str;
+
+    /// Checks that `component` works right now and says what was checked.
+    ///
+    /// # Errors
+    ///
+    /// Why the component is not usable.
+    fn probe(&self, component: Component) -> DesktopResult<String>;
+
+    /// Windows session id of the server process, where the platform has sessions.
+    fn session_id(&self) -> Option<u32> {
+        None
+    }
+
+    // ----- screen -----
+
+    /// Screen size, scale and monitors.
+    fn screen(&self) -> DesktopResult<ScreenInfo>;
+
+    /// Captures the primary screen; draws the cursor when `draw_cursor`.
+    fn capture(&self, draw_cursor: bool) -> DesktopResult<Frame>;
+
+    /// Cursor position.
+    fn cursor_position(&self) -> DesktopResult<Point>;
+
+    // ----- input -----
+
+    /// Performs one input action. [`Action::Wait`] is done by the caller, never sent here.
+    ///
+    /// # Errors
+    ///
+    /// [`DesktopError::InvalidInput`] for unknown key names or `Action::Unknown`.
+    fn perform(&self, action: &Action) -> DesktopResult<()>;
+
+    // ----- windows -----
+
+    /// Top-level windows, topmost first (z-order), with hidden ones flagged `visible: false`.
+    fn windows(&self) -> DesktopResult<Vec<WindowInfo>>;
+
+    /// Brings a window to the foreground (restoring it if minimised).
+    fn activate_window(&self, id: u64) -> DesktopResult<()>;
+
+    /// Minimises, maximises or restores a window.
+    fn set_window_state(&self, id: u64, state: WindowState) -> DesktopResult<()>;
+
+    /// Asks a window to close (`WM_CLOSE`): the program may refuse or prompt.
+    fn close_window(&self, id: u64) -> DesktopResult<()>;
+
+    // ----- accessibility -----
+
+    /// Walks the accessibility tree of the visible top-level windows within `budget`.
+    fn accessibility(&self, backend: A11yBackend, budget: &TreeBudget, foreground_only: bool) -> DesktopResult<A11yTree>;
+
+    // ----- clipboard -----
+
+    fn clipboard_get(&self) -> DesktopResult<ClipboardData>;
+
+    fn clipboard_set(&self, data: &ClipboardData) -> DesktopResult<()>;
+
+    // ----- paths and system -----
+
+    /// Maps a guest path (already `~`- and `%VAR%`-expanded, absolute) onto a path
+    /// this process can open with `std::fs`. Identity on Windows; the stub maps
+    /// `C:\Users\Docker\a.txt` under its root directory.
+    ///
+    /// # Errors
+    ///
+    /// [`DesktopError::InvalidInput`] for a relative path, a path that climbs out of its
+    /// root, or a device or UNC path the backend does not serve.
+    fn map_path(&self, guest_path: &str) -> DesktopResult<PathBuf>;
+
+    /// The inverse of [`Desktop::map_path`], for listing results.
+    fn unmap_path(&self, local: &std::path::Path) -> DesktopResult<String>;
+
+    /// An environment variable as programs in the guest see it (`USERPROFILE`, `APPDATA`, ...).
+    fn env_var(&self, name: &str) -> Option<String>;
+
+    /// A known folder's guest path.
+    fn known_folder(&self, folder: KnownFolder) -> DesktopResult<String>;
+
+    /// Moves a file or folder to the Recycle Bin.
+    fn recycle(&self, guest_path: &str) -> DesktopResult<()>;
+
+    /// Opens a file with its associated program (ShellExecute "open").
+    fn open_path(&self, guest_path: &str) -> DesktopResult<()>;
+
+    /// Reads a registry value; `value: None` is the key's default value.
+    fn registry_read(&self, key: &str, value: Option<&str>) -> DesktopResult<RegistryValue>;
+
+    /// Writes a registry value, creating the key.
+    fn registry_write(&self, key: &str, value: Option<&str>, data: &RegistryValue) -> DesktopResult<()>;
+
+    /// The current wallpaper's guest path, or `None` when there is none.
+    fn wallpaper(&self) -> DesktopResult<Option<String>>;
+
+    /// Sets the wallpaper to an image file.
+    fn set_wallpaper(&self, guest_path: &str) -> DesktopResult<()>;
+
+    /// The access mask of the first ACE in a directory's DACL that names `user`, if any.
+    fn directory_access_mask(&self, guest_path: &str, user: &str) -> DesktopResult<Option<u32>>;
+
+    // ----- processes -----
+
+    /// Runs a program to completion (or its timeout) and captures its output.
+    ///
+    /// # Errors
+    ///
+    /// [`DesktopError::NotFound`] when the program does not exist. A non-zero exit
+    /// code and a timeout are not errors: see [`ExecOutput`].
+    fn run(&self, cmd: &CommandSpec, limits: &ExecLimits) -> DesktopResult<ExecOutput>;
+
+    /// Starts a program without waiting; returns its process id.
+    fn spawn(&self, cmd: &CommandSpec) -> DesktopResult<u32>;
+
+    /// Shuts the machine down.
+    fn shutdown(&self) -> DesktopResult<()>;
+}

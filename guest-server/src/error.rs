@@ -1,0 +1,154 @@
+//! The two error shapes the server answers with.
+//!
+//! - [`ApiError`]: native `/v1/` routes, an [`ErrorBody`] with a precise status.
+//! - [`WaaError`]: legacy routes, upstream's `{"status":"error","message":...}`
+//!   with 500 for everything the catch-all handler would catch, or the exact
+//!   status and body a route returns itself (see [`WaaError::custom`]).
+//!
+//! Both log server-side failures once, here, and never panic.
+
+use axum::extract::rejection::{JsonRejection, QueryRejection};
+use axum::http::StatusCode;
+use axum::response::{IntoResponse, Response};
+use axum::Json;
+
+use arena_shared::error::{ErrorBody, ErrorCode};
+
+use crate::desktop::DesktopError;
+
+/// An error from a native route.
+#[derive(Debug, thiserror::Error)]
+pub enum ApiError {
+    #[error("{0}")]
+    BadRequest(String),
+    #[error("{0}")]
+    Unauthorized(String),
+    #[error("{0}")]
+    NotFound(String),
+    #[error("{0}")]
+    Conflict(String),
+    #[error("{0}")]
+    PayloadTooLarge(String),
+    #[error(transparent)]
+    Desktop(#[from] DesktopError),
+}
+
+impl ApiError {
+    fn status_and_code(&self) -> (StatusCode, ErrorCode) {
+        match self {
+            ApiError::BadRequest(_) => (StatusCode::BAD_REQUEST, ErrorCode::BadRequest),
+            ApiError::Unauthorized(_) => (StatusCode::UNAUTHORIZED, ErrorCode::Unauthorized),
+            ApiError::NotFound(_) => (StatusCode::NOT_FOUND, ErrorCode::NotFound),
+            ApiError::Conflict(_) => (StatusCode::CONFLICT, ErrorCode::Conflict),
+            ApiError::PayloadTooLarge(_) => (StatusCode::PAYLOAD_TOO_LARGE, ErrorCode::PayloadTooLarge),
+            ApiError::Desktop(err) => match err {
+                DesktopError::InvalidInput(_) => (StatusCode::BAD_REQUEST, ErrorCode::BadRequest),
+                DesktopError::NotFound(_) => (StatusCode::NOT_FOUND, ErrorCode::NotFound),
+                DesktopError::PermissionDenied(_) => (StatusCode::FORBIDDEN, ErrorCode::BadRequest),
+                DesktopError::AlreadyExists(_) => (StatusCode::CONFLICT, ErrorCode::Conflict),
+                DesktopError::Unsupported(_) => (StatusCode::NOT_IMPLEMENTED, ErrorCode::Unsupported),
+                DesktopError::Timeout { .. } => (StatusCode::GATEWAY_TIMEOUT, ErrorCode::Timeout),
+                DesktopError::Os { .. } => (StatusCode::INTERNAL_SERVER_ERROR, ErrorCode::Internal),
+            },
+        }
+    }
+}
+
+impl IntoResponse for ApiError {
+    fn into_response(self) -> Response {
+        let (status, code) = self.status_and_code();
+        if status.is_server_error() {
+            tracing::error!(error = %self, "native request failed");
+        } else {
+            tracing::debug!(error = %self, "native request rejected");
+        }
+        (status, Json(ErrorBody { error: code, message: self.to_string() })).into_response()
+    }
+}
+
+impl From<JsonRejection> for ApiError {
+    fn from(rejection: JsonRejection) -> ApiError {
+        match rejection {
+            JsonRejection::BytesRejection(err) if err.status() == StatusCode::PAYLOAD_TOO_LARGE => {
+                ApiError::PayloadTooLarge(err.body_text())
+            }
+            other => ApiError::BadRequest(format!("invalid JSON body: {}", other.body_text())),
+        }
+    }
+}
+
+impl From<QueryRejection> for ApiError {
+    fn from(rejection: QueryRejection) -> ApiError {
+        ApiError::BadRequest(format!("invalid query: {}", rejection.body_text()))
+    }
+}
+
+/// `Json<T>` whose rejections are [`ApiError`]s, so bad bodies get the one error shape.
+#[derive(Debug, Clone, Copy, Default, axum::extract::FromRequest)]
+#[from_request(via(axum::Json), rejection(ApiError))]
+pub struct AppJson<T>(pub T);
+
+impl<T: serde::Serialize> IntoResponse for AppJson<T> {
+    fn into_response(self) -> Response {
+        Json(self.0).into_response()
+    }
+}
+
+/// `Query<T>` whose rejections are [`ApiError`]s.
+#[derive(Debug, Clone, Copy, Default, axum::extract::FromRequestParts)]
+#[from_request(via(axum::extract::Query), rejection(ApiError))]
+pub struct AppQuery<T>(pub T);
+
+/// An error from a legacy WAA route.
+///
+/// [`WaaError::Catch`] is upstream's catch-all: `{"status":"error","message":m}` with 500.
+/// [`WaaError::Custom`] is a response a route returns on purpose (a 400 with
+/// `{"error": ...}`, a 404 text, ...), kept byte-compatible with upstream.
+#[derive(Debug)]
+pub enum WaaError {
+    Catch(String),
+    Custom(Response),
+}
+
+impl WaaError {
+    /// Upstream's catch-all 500 with `message`.
+    pub fn catch(message: impl Into<String>) -> WaaError {
+        WaaError::Catch(message.into())
+    }
+
+    /// A response the upstream route itself returns.
+    pub fn custom(response: impl IntoResponse) -> WaaError {
+        WaaError::Custom(response.into_response())
+    }
+
+    /// Werkzeug's 404 text for an unknown URL, as the catch-all renders it.
+    pub fn not_found_route() -> WaaError {
+        WaaError::catch(
+            "404 Not Found: The requested URL was not found on the server. If you entered the URL manually please check your spelling and try again.",
+        )
+    }
+
+    /// Werkzeug's 405 text, as the catch-all renders it.
+    pub fn method_not_allowed() -> WaaError {
+        WaaError::catch("405 Method Not Allowed: The method is not allowed for the requested URL.")
+    }
+}
+
+impl From<DesktopError> for WaaError {
+    fn from(err: DesktopError) -> WaaError {
+        WaaError::Catch(err.to_string())
+    }
+}
+
+impl IntoResponse for WaaError {
+    fn into_response(self) -> Response {
+        match self {
+            WaaError::Catch(message) => {
+                tracing::warn!(%message, "WAA request failed");
+                (StatusCode::INTERNAL_SERVER_ERROR, Json(serde_json::json!({"status": "error", "message": message})))
+                    .into_response()
+            }
+            WaaError::Custom(response) => response,
+        }
+    }
+}

@@ -1,0 +1,174 @@
+//! Platform-neutral image work: encoding, downscaling, black-frame detection
+//! and drawing the cursor, shared by every backend and both APIs.
+
+use std::io::Cursor;
+
+use arena_shared::geometry::Point;
+use arena_shared::observation::ImageFormat;
+use image::{ImageEncoder, RgbaImage};
+
+/// An image could not be encoded or decoded.
+#[derive(Debug, thiserror::Error)]
+#[error("{what}: {source}")]
+pub struct ImagingError {
+    what: &'static str,
+    #[source]
+    source: image::ImageError,
+}
+
+/// Encodes `image` as PNG (fast compression) or JPEG at `quality` (1 to 100).
+///
+/// # Errors
+///
+/// [`ImagingError`] if the encoder fails.
+pub fn encode(image: &RgbaImage, format: ImageFormat, quality: u8) -> Result<Vec<u8>, ImagingError> {
+    let mut out = Vec::with_capacity(image.as_raw().len() / 4);
+    match format {
+        ImageFormat::Jpeg => {
+            let rgb = image::DynamicImage::ImageRgba8(image.clone()).to_rgb8();
+            image::codecs::jpeg::JpegEncoder::new_with_quality(&mut out, quality.clamp(1, 100))
+                .encode_image(&rgb)
+                .map_err(|source| ImagingError { what: "encoding JPEG", source })?;
+        }
+        ImageFormat::Png | ImageFormat::Unknown => {
+            image::codecs::png::PngEncoder::new_with_quality(
+                &mut out,
+                image::codecs::png::CompressionType::Fast,
+                image::codecs::png::FilterType::Adaptive,
+            )
+            .write_image(image.as_raw(), image.width(), image.height(), image::ExtendedColorType::Rgba8)
+            .map_err(|source| ImagingError { what: "encoding PNG", source })?;
+        }
+    }
+    Ok(out)
+}
+
+/// Decodes PNG, JPEG (or any format this build reads) into RGBA.
+///
+/// # Errors
+///
+/// [`ImagingError`] naming the failure for bytes that are not an image.
+pub fn decode(bytes: &[u8]) -> Result<RgbaImage, ImagingError> {
+    image::ImageReader::new(Cursor::new(bytes))
+        .with_guessed_format()
+        .map_err(|err| ImagingError { what: "reading image", source: image::ImageError::IoError(err) })?
+        .decode()
+        .map(|img| img.to_rgba8())
+        .map_err(|source| ImagingError { what: "decoding image", source })
+}
+
+/// Downscales `image` so that its longer side is at most `max_side`, keeping the aspect ratio.
+///
+/// Returns the image and the scale, in source pixels per returned pixel (1.0 when unchanged).
+pub fn downscale_to_fit(image: RgbaImage, max_side: u32) -> (RgbaImage, f64) {
+    let longest = image.width().max(image.height());
+    if max_side == 0 || longest <= max_side {
+        return (image, 1.0);
+    }
+    let scale = f64::from(longest) / f64::from(max_side);
+    let width = ((f64::from(image.width()) / scale).round() as u32).max(1);
+    let height = ((f64::from(image.height()) / scale).round() as u32).max(1);
+    let resized = image::imageops::resize(&image, width, height, image::imageops::FilterType::Triangle);
+    (resized, scale)
+}
+
+/// Whether every pixel is black (a locked, secure or disconnected desktop).
+pub fn is_black(image: &RgbaImage) -> bool {
+    image.pixels().all(|p| p.0[0] == 0 && p.0[1] == 0 && p.0[2] == 0)
+}
+
+/// The arrow cursor upstream pastes into `/screenshot`: 13x21 pixels, tip at the top-left.
+/// `#` is the black outline, `o` the white fill.
+const CURSOR: [&str; 21] = [
+    "#            ",
+    "##           ",
+    "#o#          ",
+    "#oo#         ",
+    "#ooo#        ",
+    "#oooo#       ",
+    "#ooooo#      ",
+    "#oooooo#     ",
+    "#ooooooo#    ",
+    "#oooooooo#   ",
+    "#ooooooooo#  ",
+    "#oooooooooo# ",
+    "#oooooo######",
+    "#ooo#oo#     ",
+    "#oo# #oo#    ",
+    "#o#  #oo#    ",
+    "##    #oo#   ",
+    "#     #oo#   ",
+    "       #oo#  ",
+    "       #oo#  ",
+    "        ##   ",
+];
+
+/// Draws the arrow cursor with its tip at `at`, clipped to the image.
+pub fn draw_cursor(image: &mut RgbaImage, at: Point) {
+    for (dy, row) in CURSOR.iter().enumerate() {
+        for (dx, c) in row.chars().enumerate() {
+            let color = match c {
+                '#' => image::Rgba([0, 0, 0, 255]),
+                'o' => image::Rgba([255, 255, 255, 255]),
+                _ => continue,
+            };
+            let (x, y) = (at.x + dx as i32, at.y + dy as i32);
+            if x >= 0 && y >= 0 && (x as u32) < image.width() && (y as u32) < image.height() {
+                image.put_pixel(x as u32, y as u32, color);
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn png_round_trips() {
+        let mut img = RgbaImage::from_pixel(40, 30, image::Rgba([10, 20, 30, 255]));
+        draw_cursor(&mut img, Point::new(5, 5));
+        let bytes = encode(&img, ImageFormat::Png, 90).unwrap();
+        assert_eq!(&bytes[..8], b"\x89PNG\r\n\x1a\n");
+        let back = decode(&bytes).unwrap();
+        assert_eq!(back, img);
+    }
+
+    #[test]
+    fn jpeg_has_its_magic() {
+        let img = RgbaImage::from_pixel(16, 16, image::Rgba([200, 0, 0, 255]));
+        let bytes = encode(&img, ImageFormat::Jpeg, 80).unwrap();
+        assert_eq!(&bytes[..2], &[0xFF, 0xD8]);
+    }
+
+    #[test]
+    fn downscale_keeps_aspect_and_states_scale() {
+        let img = RgbaImage::new(1440, 900);
+        let (small, scale) = downscale_to_fit(img, 720);
+        assert_eq!((small.width(), small.height()), (720, 450));
+        assert!((scale - 2.0).abs() < 1e-9);
+        let (same, scale) = downscale_to_fit(RgbaImage::new(100, 50), 720);
+        assert_eq!((same.width(), scale), (100, 1.0));
+    }
+
+    #[test]
+    fn black_detection() {
+        let mut img = RgbaImage::from_pixel(8, 8, image::Rgba([0, 0, 0, 255]));
+        assert!(is_black(&img));
+        img.put_pixel(3, 3, image::Rgba([0, 1, 0, 255]));
+        assert!(!is_black(&img));
+    }
+
+    #[test]
+    fn cursor_is_clipped_at_edges() {
+        let mut img = RgbaImage::new(10, 10);
+        draw_cursor(&mut img, Point::new(8, 8));
+        draw_cursor(&mut img, Point::new(-5, -5));
+        assert_eq!(img.get_pixel(8, 8).0, [0, 0, 0, 255]);
+    }
+
+    #[test]
+    fn garbage_is_not_an_image() {
+        assert!(decode(b"not an image").is_err());
+    }
+}

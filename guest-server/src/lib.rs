@@ -1,0 +1,142 @@
+//! The in-guest desktop-control server.
+//!
+//! It serves two APIs over one [`desktop::Desktop`] backend:
+//!
+//! - the upstream WindowsAgentArena Flask server's 44 routes, byte-compatible
+//!   in methods, request fields, response shapes and status codes ([`waa`]), so
+//!   existing WAA hosts keep working;
+//! - a typed native API under `/v1/` ([`native`]) that the Rust host client uses.
+//!
+//! It is not the host side (see `arena-host`), and it holds no Win32 code outside
+//! `desktop/windows/`.
+//!
+//! # Layout
+//!
+//! - [`config`]: the one [`config::ServerConfig`].
+//! - [`desktop`]: the backend trait and its backends ([`desktop::stub`]).
+//! - [`call`]: backend calls with deadlines.
+//! - [`waa`], [`native`]: the routes. [`auth`]: token and cross-site guards.
+//! - [`error`]: the error shapes. [`state`]: handler state.
+//! - [`paths`], [`imaging`]: platform-neutral helpers the routes share.
+
+pub mod auth;
+pub mod call;
+pub mod config;
+pub mod desktop;
+pub mod error;
+pub mod imaging;
+pub mod native;
+pub mod paths;
+pub mod state;
+pub mod waa;
+
+use std::future::Future;
+use std::net::SocketAddr;
+use std::sync::Arc;
+
+use anyhow::Context;
+use axum::extract::{DefaultBodyLimit, Request};
+use axum::response::IntoResponse;
+use axum::Router;
+use tower_http::trace::TraceLayer;
+
+use crate::config::{BackendKind, ServerConfig};
+use crate::desktop::stub::{Scenario, StubConfig, StubDesktop};
+use crate::desktop::Desktop;
+use crate::error::{ApiError, WaaError};
+use crate::state::AppState;
+
+/// Builds the whole application: both APIs, the guards and the limits.
+pub fn router(state: AppState) -> Router {
+    let max_body = state.config.max_body_bytes;
+    Router::new()
+        .merge(native::routes())
+        .merge(waa::routes())
+        .fallback(fallback)
+        .method_not_allowed_fallback(method_not_allowed)
+        .layer(axum::middleware::from_fn_with_state(state.clone(), auth::guard))
+        .layer(DefaultBodyLimit::max(max_body))
+        .layer(TraceLayer::new_for_http())
+        .with_state(state)
+}
+
+async fn fallback(request: Request) -> axum::response::Response {
+    let path = request.uri().path();
+    if path.starts_with("/v1/") {
+        ApiError::NotFound(format!("no route {} {path}", request.method())).into_response()
+    } else {
+        WaaError::not_found_route().into_response()
+    }
+}
+
+async fn method_not_allowed(request: Request) -> axum::response::Response {
+    let path = request.uri().path();
+    if path.starts_with("/v1/") {
+        let mut res = ApiError::BadRequest(format!("method {} is not allowed on {path}", request.method())).into_response();
+        *res.status_mut() = axum::http::StatusCode::METHOD_NOT_ALLOWED;
+        res
+    } else {
+        WaaError::method_not_allowed().into_response()
+    }
+}
+
+/// Checks the configuration, builds the backend and the state.
+///
+/// # Errors
+///
+/// A non-loopback bind without a token or `--allow-unauthenticated`, an
+/// unreadable token file or scenario, or a backend this build does not have.
+pub fn build_state(config: ServerConfig) -> anyhow::Result<AppState> {
+    let token = resolve_token(&config)?;
+    if !config.bind.is_loopback() && token.is_none() {
+        if !config.allow_unauthenticated {
+            anyhow::bail!(
+                "refusing to serve {} without a token: pass --token or --token-file, or --allow-unauthenticated for WAA drop-in use",
+                config.bind
+            );
+        }
+        tracing::warn!(bind = %config.bind, "serving a non-loopback address WITHOUT authentication: anyone who can reach this port can run programs and read files");
+    }
+    let desktop: Arc<dyn Desktop> = match config.backend_kind() {
+        BackendKind::Stub => {
+            let scenario = match &config.scenario {
+                Some(path) => Some(Scenario::load(path).with_context(|| format!("loading scenario {}", path.display()))?),
+                None => None,
+            };
+            let stub = StubDesktop::with_config(StubConfig {
+                root: config.stub_root.clone(),
+                screen: config.screen,
+                scenario,
+            })
+            .context("starting the stub desktop")?;
+            Arc::new(stub)
+        }
+        BackendKind::Windows => anyhow::bail!("the windows backend is not part of this build yet; use --backend stub"),
+    };
+    Ok(AppState::new(desktop, config, token))
+}
+
+fn resolve_token(config: &ServerConfig) -> anyhow::Result<Option<String>> {
+    let token = match (&config.token, &config.token_file) {
+        (Some(token), _) => Some(token.trim().to_owned()),
+        (None, Some(path)) => {
+            let text = std::fs::read_to_string(path).with_context(|| format!("reading token file {}", path.display()))?;
+            Some(text.lines().next().unwrap_or("").trim().to_owned())
+        }
+        (None, None) => None,
+    };
+    match token {
+        Some(token) if token.len() < 16 => anyhow::bail!("the token must be at least 16 characters (got {})", token.len()),
+        token => Ok(token),
+    }
+}
+
+/// Serves `state` on `listener` until `shutdown` completes.
+///
+/// # Errors
+///
+/// I/O errors of the listener.
+pub async fn serve(listener: tokio::net::TcpListener, state: AppState, shutdown: impl Future<Output = ()> + Send + 'static) -> std::io::Result<()> {
+    let app = router(state).into_make_service_with_connect_info::<SocketAddr>();
+    axum::serve(listener, app).with_graceful_shutdown(shutdown).await
+}

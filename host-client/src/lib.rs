@@ -1,0 +1,1 @@
+//! PLACEHOLDER: the host client is being written.

@@ -1,0 +1,34 @@
+//! The one error body every native route answers with.
+
+use serde::{Deserialize, Serialize};
+
+/// Machine-readable error kind.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ErrorCode {
+    /// The request was malformed or named something invalid (400).
+    BadRequest,
+    /// Missing or wrong bearer token (401).
+    Unauthorized,
+    /// The path, window or value does not exist (404).
+    NotFound,
+    /// The request conflicts with the current state, e.g. a hash mismatch (409).
+    Conflict,
+    /// The body is over the configured limit (413).
+    PayloadTooLarge,
+    /// The backend cannot do this (501).
+    Unsupported,
+    /// A deadline passed (504).
+    Timeout,
+    /// Something failed inside the guest; details are in its log (500).
+    Internal,
+    #[serde(other)]
+    Unknown,
+}
+
+/// `{"error": "<code>", "message": "..."}`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ErrorBody {
+    pub error: ErrorCode,
+    pub message: String,
+}

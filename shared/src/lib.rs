@@ -1,0 +1,37 @@
+//! The wire vocabulary both sides of the arena speak.
+//!
+//! This crate is the only place that derives serde for types that cross the
+//! guest/host boundary: typed input actions, observations (screen, windows,
+//! accessibility), exec requests and results, file operations, the staged
+//! health report and the one error body.
+//! It does no I/O and knows nothing of HTTP, Windows or tokio.
+//!
+//! # Layout
+//!
+//! - [`geometry`]: points and rectangles in a named coordinate space.
+//! - [`action`]: the [`action::Action`] enum and mouse buttons.
+//! - [`keys`]: pyautogui key names and chord parsing.
+//! - [`observation`]: screen, screenshot, window and accessibility types.
+//! - [`exec`], [`files`], [`clipboard`], [`registry`]: request and result types.
+//! - [`health`]: the staged readiness report.
+//! - [`error`]: the error body every native route answers with.
+//!
+//! # Compatibility
+//!
+//! New fields are `Option` or `#[serde(default)]`, and enums that a newer peer
+//! may extend carry an `Unknown` fallback, so an older host can talk to a newer
+//! guest and the other way round.
+
+pub mod action;
+pub mod clipboard;
+pub mod error;
+pub mod exec;
+pub mod files;
+pub mod geometry;
+pub mod health;
+pub mod keys;
+pub mod observation;
+pub mod registry;
+
+/// The version of the native API spoken under `/v1/`.
+pub const API_VERSION: &str = "1";
