@@ -1,10 +1,52 @@
-//! PLACEHOLDER: the native /v1 routes are being written.
+//! The typed native API under `/v1/`, spoken by the Rust host client.
+//!
+//! Every route takes and returns the wire types of `arena_shared`, answers
+//! errors with the one [`arena_shared::error::ErrorBody`] shape (through
+//! [`crate::error::ApiError`], [`crate::error::AppJson`] and
+//! [`crate::error::AppQuery`]), and reaches the desktop only through
+//! [`crate::call::blocking`], so every backend call has a deadline.
+//! It is not the legacy WAA surface (see [`crate::waa`]) and holds no
+//! platform code: the backend behind [`crate::desktop::Desktop`] does that.
+//!
+//! The reference with every route, its types and statuses is `docs/native-api.md`.
+//!
+//! # Layout
+//!
+//! One private module per resource, each exposing its own `routes()`:
+//! `health`, `screen`, `input`, `a11y`, `windows`, `clipboard`, `files`,
+//! `exec` (exec, launch, open) and `registry` (registry, wallpaper).
+
+mod a11y;
+mod clipboard;
+mod exec;
+mod files;
+mod health;
+mod input;
+mod registry;
+mod screen;
+mod windows;
+
+use std::time::Duration;
 
 use axum::Router;
 
 use crate::state::AppState;
 
-/// The native API.
+/// The native API: every `/v1/` route.
 pub fn routes() -> Router<AppState> {
     Router::new()
+        .merge(health::routes())
+        .merge(screen::routes())
+        .merge(input::routes())
+        .merge(a11y::routes())
+        .merge(windows::routes())
+        .merge(clipboard::routes())
+        .merge(files::routes())
+        .merge(exec::routes())
+        .merge(registry::routes())
+}
+
+/// Milliseconds of `d`, saturating (a `u64` of milliseconds outlasts any uptime).
+fn millis(d: Duration) -> u64 {
+    u64::try_from(d.as_millis()).unwrap_or(u64::MAX)
 }

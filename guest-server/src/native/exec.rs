@@ -1,0 +1,111 @@
+//! `POST /v1/exec`, `/v1/launch` and `/v1/open`: running programs and opening files.
+//!
+//! Programs run from an argument vector, never through a shell, so no
+//! argument is ever re-parsed. A program that exits non-zero or runs out of
+//! time is a normal 200 [`ExecResult`]; only a program that cannot be started
+//! is an error.
+
+use std::time::Duration;
+
+use axum::extract::State;
+use axum::http::StatusCode;
+use axum::routing::post;
+use axum::Router;
+
+use arena_shared::exec::{ExecRequest, ExecResult, LaunchRequest, LaunchResult};
+use arena_shared::files::PathQuery;
+
+use crate::call::blocking;
+use crate::desktop::{CommandSpec, DesktopError, ExecLimits};
+use crate::error::{ApiError, AppJson};
+use crate::paths;
+use crate::state::AppState;
+
+use super::files::existing_guest_path;
+
+/// Timeout when the request names none.
+const DEFAULT_TIMEOUT_MS: u64 = 60_000;
+/// Longest timeout granted: ten minutes.
+const MAX_TIMEOUT_MS: u64 = 600_000;
+/// Output kept per stream when the request names no limit: 16 MiB.
+const DEFAULT_MAX_OUTPUT: u64 = 16 << 20;
+/// Most output kept per stream: 256 MiB.
+const MAX_OUTPUT: u64 = 256 << 20;
+/// Time the backend gets past the program's timeout to kill it and collect the output.
+const DEADLINE_MARGIN: Duration = Duration::from_secs(5);
+
+pub(crate) fn routes() -> Router<AppState> {
+    Router::new().route("/v1/exec", post(exec)).route("/v1/launch", post(launch)).route("/v1/open", post(open))
+}
+
+fn check_argv(argv: &[String]) -> Result<(), ApiError> {
+    match argv.first() {
+        None => Err(ApiError::BadRequest("argv must name a program".into())),
+        Some(program) if program.trim().is_empty() => Err(ApiError::BadRequest("argv[0] must not be empty".into())),
+        Some(_) => Ok(()),
+    }
+}
+
+/// Makes a backend "not found" name the program, whatever words the backend used.
+fn name_program(err: DesktopError, program: &str) -> ApiError {
+    match err {
+        DesktopError::NotFound(message) if !message.contains(program) => {
+            ApiError::NotFound(format!("program {program:?} not found: {message}"))
+        }
+        other => ApiError::from(other),
+    }
+}
+
+async fn exec(
+    State(state): State<AppState>,
+    AppJson(request): AppJson<ExecRequest>,
+) -> Result<AppJson<ExecResult>, ApiError> {
+    check_argv(&request.argv)?;
+    let timeout_ms = match request.timeout_ms {
+        Some(0) => return Err(ApiError::BadRequest("timeout_ms must be at least 1".into())),
+        Some(ms) => ms.min(MAX_TIMEOUT_MS),
+        None => DEFAULT_TIMEOUT_MS,
+    };
+    let max_output_bytes = request.max_output_bytes.unwrap_or(DEFAULT_MAX_OUTPUT).min(MAX_OUTPUT);
+    let program = request.argv[0].clone();
+    let deadline = Duration::from_millis(timeout_ms) + DEADLINE_MARGIN;
+    let ExecRequest { argv, cwd, stdin, .. } = request;
+    let output = blocking(&state.desktop, "run", deadline, move |d| {
+        let cwd = cwd.map(|cwd| paths::expand(&cwd, &|name| d.env_var(name)));
+        let limits = ExecLimits { timeout_ms, max_output_bytes, cwd, stdin: stdin.map(String::into_bytes) };
+        d.run(&CommandSpec::Argv(argv), &limits)
+    })
+    .await
+    .map_err(|err| name_program(err, &program))?;
+    Ok(AppJson(ExecResult {
+        exit_code: output.exit_code,
+        stdout: output.stdout,
+        stderr: output.stderr,
+        stdout_truncated: output.stdout_truncated,
+        stderr_truncated: output.stderr_truncated,
+        timed_out: output.timed_out,
+        duration_ms: output.duration_ms,
+    }))
+}
+
+async fn launch(
+    State(state): State<AppState>,
+    AppJson(request): AppJson<LaunchRequest>,
+) -> Result<AppJson<LaunchResult>, ApiError> {
+    check_argv(&request.argv)?;
+    let program = request.argv[0].clone();
+    let argv = request.argv;
+    let pid = blocking(&state.desktop, "spawn", state.call_timeout(), move |d| d.spawn(&CommandSpec::Argv(argv)))
+        .await
+        .map_err(|err| name_program(err, &program))?;
+    Ok(AppJson(LaunchResult { pid }))
+}
+
+async fn open(State(state): State<AppState>, AppJson(request): AppJson<PathQuery>) -> Result<StatusCode, ApiError> {
+    let opened = blocking(&state.desktop, "open_path", state.call_timeout(), move |d| {
+        Ok(existing_guest_path(d, &request.path).and_then(|guest| Ok(d.open_path(&guest)?)))
+    })
+    .await?;
+    opened?;
+    Ok(StatusCode::NO_CONTENT)
+}

@@ -1,0 +1,203 @@
+//! `POST /v1/actions`: a batch of typed input actions, executed in order.
+//!
+//! The whole batch is validated before anything runs, so a typo in the last
+//! key name never leaves the desktop half-driven. Then every action but
+//! [`Action::Wait`] is one backend call; waits sleep asynchronously between
+//! calls and hold no blocking thread. The first failure stops the batch and
+//! the error says which action failed and how many ran before it.
+
+use std::time::{Duration, Instant};
+
+use axum::extract::State;
+use axum::http::StatusCode;
+use axum::response::{IntoResponse, Response};
+use axum::routing::post;
+use axum::{Json, Router};
+
+use arena_shared::action::{Action, ActionBatch, ActionReport, MouseButton};
+use arena_shared::error::{ErrorBody, ErrorCode};
+use arena_shared::keys::Key;
+
+use crate::call::blocking;
+use crate::error::{ApiError, AppJson};
+use crate::state::AppState;
+
+use super::millis;
+
+/// Most actions in one batch.
+const MAX_ACTIONS: usize = 1000;
+/// Longest single wait.
+const MAX_WAIT_MS: u64 = 60_000;
+/// Most repetitions of one click or key press; more is a runaway loop, not an agent's intent.
+const MAX_REPEAT: u32 = 1000;
+
+pub(crate) fn routes() -> Router<AppState> {
+    Router::new().route("/v1/actions", post(actions))
+}
+
+async fn actions(
+    State(state): State<AppState>,
+    AppJson(batch): AppJson<ActionBatch>,
+) -> Result<AppJson<ActionReport>, Response> {
+    validate(&batch.actions).map_err(IntoResponse::into_response)?;
+    let started = Instant::now();
+    let total = batch.actions.len();
+    for (index, action) in batch.actions.into_iter().enumerate() {
+        if let Action::Wait { ms } = action {
+            tokio::time::sleep(Duration::from_millis(ms)).await;
+            continue;
+        }
+        let name = action_name(&action);
+        let res = blocking(&state.desktop, "perform", state.call_timeout(), move |d| d.perform(&action)).await;
+        if let Err(err) = res {
+            return Err(batch_failed(ApiError::from(err), index, name, total));
+        }
+    }
+    let cursor = blocking(&state.desktop, "cursor_position", state.call_timeout(), |d| d.cursor_position())
+        .await
+        .map_err(|err| ApiError::from(err).into_response())?;
+    Ok(AppJson(ActionReport { executed: total, cursor, elapsed_ms: millis(started.elapsed()) }))
+}
+
+/// Checks every action of a batch before any runs.
+fn validate(actions: &[Action]) -> Result<(), ApiError> {
+    if actions.len() > MAX_ACTIONS {
+        return Err(ApiError::BadRequest(format!(
+            "a batch holds at most {MAX_ACTIONS} actions (got {})",
+            actions.len()
+        )));
+    }
+    for (index, action) in actions.iter().enumerate() {
+        check_action(action)
+            .map_err(|why| ApiError::BadRequest(format!("action {index} ({}): {why}", action_name(action))))?;
+    }
+    Ok(())
+}
+
+fn check_action(action: &Action) -> Result<(), String> {
+    let key = |name: &str| Key::parse(name).map(drop).map_err(|err| err.to_string());
+    let button = |b: &MouseButton| match b {
+        MouseButton::Unknown => Err("unknown mouse button (expected left, right or middle)".to_owned()),
+        _ => Ok(()),
+    };
+    let repeat = |what: &str, n: u32| match n {
+        0 => Err(format!("{what} must be at least 1")),
+        n if n > MAX_REPEAT => Err(format!("{what} must be at most {MAX_REPEAT} (got {n})")),
+        _ => Ok(()),
+    };
+    let coords = |x: &Option<i32>, y: &Option<i32>| {
+        if x.is_some() == y.is_some() {
+            Ok(())
+        } else {
+            Err("give both x and y, or neither".to_owned())
+        }
+    };
+    match action {
+        Action::Unknown => Err("unknown action type".to_owned()),
+        Action::KeyPress { key: name, presses } => {
+            key(name)?;
+            repeat("presses", *presses)
+        }
+        Action::KeyDown { key: name } | Action::KeyUp { key: name } => key(name),
+        Action::Hotkey { keys } if keys.is_empty() => Err("a hotkey needs at least one key".to_owned()),
+        Action::Hotkey { keys } => keys.iter().try_for_each(|name| key(name)),
+        Action::Click { x, y, button: b, count } => {
+            coords(x, y)?;
+            button(b)?;
+            repeat("count", *count)
+        }
+        Action::MouseDown { button: b, x, y } | Action::MouseUp { button: b, x, y } => {
+            coords(x, y)?;
+            button(b)
+        }
+        Action::Drag { button: b, .. } => button(b),
+        Action::Scroll { x, y, .. } | Action::DoubleClick { x, y } | Action::RightClick { x, y } => coords(x, y),
+        Action::Wait { ms } if *ms > MAX_WAIT_MS => Err(format!("a wait lasts at most {MAX_WAIT_MS} ms (got {ms})")),
+        Action::Wait { .. } | Action::MoveTo { .. } | Action::MoveRel { .. } | Action::TypeText { .. } => Ok(()),
+    }
+}
+
+/// The wire name of an action's type, for messages.
+fn action_name(action: &Action) -> &'static str {
+    match action {
+        Action::MoveTo { .. } => "move_to",
+        Action::MoveRel { .. } => "move_rel",
+        Action::Click { .. } => "click",
+        Action::DoubleClick { .. } => "double_click",
+        Action::RightClick { .. } => "right_click",
+        Action::MouseDown { .. } => "mouse_down",
+        Action::MouseUp { .. } => "mouse_up",
+        Action::Drag { .. } => "drag",
+        Action::Scroll { .. } => "scroll",
+        Action::KeyPress { .. } => "key_press",
+        Action::Hotkey { .. } => "hotkey",
+        Action::KeyDown { .. } => "key_down",
+        Action::KeyUp { .. } => "key_up",
+        Action::TypeText { .. } => "type_text",
+        Action::Wait { .. } => "wait",
+        Action::Unknown => "unknown",
+    }
+}
+
+/// The error of a batch stopped by action `index`: the backend error's status and
+/// code, with a message that says which action failed and how many ran.
+///
+/// The status comes from [`ApiError`]'s own mapping; only the message is rewritten,
+/// because a timeout's message is fixed by [`crate::desktop::DesktopError`].
+fn batch_failed(err: ApiError, index: usize, name: &str, total: usize) -> Response {
+    let message = format!("action {index} ({name}) failed after {index} of {total} actions ran: {err}");
+    tracing::warn!(index, total, error = %err, "action batch stopped");
+    let status = err.into_response().status();
+    let code = match status {
+        StatusCode::BAD_REQUEST | StatusCode::FORBIDDEN => ErrorCode::BadRequest,
+        StatusCode::NOT_FOUND => ErrorCode::NotFound,
+        StatusCode::CONFLICT => ErrorCode::Conflict,
+        StatusCode::NOT_IMPLEMENTED => ErrorCode::Unsupported,
+        StatusCode::GATEWAY_TIMEOUT => ErrorCode::Timeout,
+        _ => ErrorCode::Internal,
+    };
+    (status, Json(ErrorBody { error: code, message })).into_response()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn check(action: Action, expected: Result<(), &str>) {
+        let got = check_action(&action);
+        match expected {
+            Ok(()) => assert_eq!(got, Ok(()), "{action:?}"),
+            Err(needle) => {
+                let msg = got.expect_err("expected a rejection");
+                assert!(msg.contains(needle), "{action:?}: {msg:?} lacks {needle:?}");
+            }
+        }
+    }
+
+    #[test]
+    fn actions_are_checked_before_running() {
+        check(Action::KeyPress { key: "enter".into(), presses: 1 }, Ok(()));
+        check(Action::KeyPress { key: "entr".into(), presses: 1 }, Err("entr"));
+        check(Action::KeyPress { key: "a".into(), presses: 0 }, Err("presses"));
+        check(Action::KeyDown { key: "shift".into() }, Ok(()));
+        check(Action::KeyUp { key: "hyper".into() }, Err("hyper"));
+        check(Action::Hotkey { keys: vec!["ctrl".into(), "c".into()] }, Ok(()));
+        check(Action::Hotkey { keys: vec!["ctrl".into(), "nokey".into()] }, Err("nokey"));
+        check(Action::Hotkey { keys: vec![] }, Err("at least one key"));
+        check(Action::Wait { ms: 60_000 }, Ok(()));
+        check(Action::Wait { ms: 60_001 }, Err("at most"));
+        check(Action::Unknown, Err("unknown action"));
+        check(Action::Click { x: None, y: None, button: MouseButton::Unknown, count: 1 }, Err("mouse button"));
+        check(Action::Click { x: Some(1), y: Some(2), button: MouseButton::Right, count: 2 }, Ok(()));
+        check(Action::DoubleClick { x: Some(1), y: None }, Err("both x and y"));
+        check(Action::MouseUp { button: MouseButton::Left, x: None, y: Some(1) }, Err("both x and y"));
+        check(Action::Scroll { x: None, y: None, dx: 0, dy: -120 }, Ok(()));
+    }
+
+    #[test]
+    fn a_batch_over_the_limit_is_refused() {
+        let batch = vec![Action::Wait { ms: 0 }; MAX_ACTIONS + 1];
+        assert!(matches!(validate(&batch), Err(ApiError::BadRequest(m)) if m.contains("at most")));
+        assert!(validate(&batch[..MAX_ACTIONS]).is_ok());
+    }
+}
