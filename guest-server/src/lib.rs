@@ -21,6 +21,7 @@
 
 pub mod auth;
 pub mod call;
+pub mod cmdline;
 pub mod config;
 pub mod desktop;
 pub mod error;
