@@ -107,7 +107,7 @@ pub struct AppQuery<T>(pub T);
 #[derive(Debug)]
 pub enum WaaError {
     Catch(String),
-    Custom(Response),
+    Custom(Box<Response>),
 }
 
 impl WaaError {
@@ -118,7 +118,7 @@ impl WaaError {
 
     /// A response the upstream route itself returns.
     pub fn custom(response: impl IntoResponse) -> WaaError {
-        WaaError::Custom(response.into_response())
+        WaaError::Custom(Box::new(response.into_response()))
     }
 
     /// Werkzeug's 404 text for an unknown URL, as the catch-all renders it.
@@ -148,7 +148,7 @@ impl IntoResponse for WaaError {
                 (StatusCode::INTERNAL_SERVER_ERROR, Json(serde_json::json!({"status": "error", "message": message})))
                     .into_response()
             }
-            WaaError::Custom(response) => response,
+            WaaError::Custom(response) => *response,
         }
     }
 }

@@ -24,10 +24,6 @@
 //! (500, `{"status":"error","message":...}`); the 400/404/501 answers a view returns
 //! itself are rebuilt byte for byte as [`WaaError::Custom`] or plain responses.
 
-// `WaaError::Custom` carries a whole `Response`, so every `Result<_, WaaError>` trips
-// this lint; the error is built once per failed request, where its size does not matter.
-#![allow(clippy::result_large_err)]
-
 pub mod a11y_xml;
 mod body;
 pub mod execute;
