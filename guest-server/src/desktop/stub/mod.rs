@@ -1,95 +1,703 @@
-//! PLACEHOLDER: the stub backend is being written; every call is unsupported for now.
+//! The stub backend: a deterministic, in-memory, Windows-like desktop.
+//!
+//! It is good enough to run real benchmark episodes in tests and on machines
+//! without Windows: windows with z-order, focus, title bars and text documents; a
+//! rendered screen; mouse and keyboard input; a clipboard; guest paths mapped under a
+//! root directory; a registry; known programs that open windows and real host
+//! processes for everything else. It is not an emulator: programs have no behaviour
+//! beyond their window and document, and nothing here runs Windows code.
+//!
+//! Determinism: no randomness; fake process ids count from 1000 and window ids from
+//! `0x10010`. All mutable state sits behind one mutex, so calls from many threads
+//! serialise.
+//!
+//! Layout: [`scenario`] (the seed file format), `window` (state, windows, documents),
+//! `input` (actions), `render` (screenshots), `a11y` (accessibility trees), `fs` (path
+//! mapping and the profile), `registry`, `process` (programs and real processes).
 
+mod a11y;
+mod fs;
+mod input;
+mod process;
+mod registry;
+mod render;
+pub mod scenario;
+mod window;
+
+#[cfg(test)]
+mod tests;
+
+use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
+use std::sync::{Mutex, MutexGuard};
 
 use arena_shared::action::Action;
 use arena_shared::files::KnownFolder;
-use arena_shared::geometry::Point;
+use arena_shared::geometry::{CoordinateSpace, Point, Rect};
 use arena_shared::health::Component;
-use arena_shared::observation::{A11yBackend, A11yTree, ScreenInfo, TreeBudget, WindowInfo};
+use arena_shared::observation::{A11yBackend, A11yTree, MonitorInfo, ScreenInfo, TreeBudget, WindowInfo};
 use arena_shared::registry::RegistryValue;
 
-use super::{ClipboardData, CommandSpec, Desktop, DesktopError, DesktopResult, ExecLimits, ExecOutput, Frame, WindowState};
+use self::process::Program;
+pub use self::scenario::{Scenario, ScenarioError};
+use self::window::{NewWindow, State, WallpaperCache};
+use super::{
+    ClipboardData, CommandSpec, Desktop, DesktopError, DesktopResult, ExecLimits, ExecOutput, Frame, WindowState,
+};
 
-/// A scenario seeding the stub.
-#[derive(Debug, Clone, Default, serde::Deserialize)]
-pub struct Scenario {}
-
-/// A scenario file could not be used.
-#[derive(Debug, thiserror::Error)]
-#[error("{0}")]
-pub struct ScenarioError(String);
-
-impl Scenario {
-    /// Loads a scenario file.
-    ///
-    /// # Errors
-    ///
-    /// Unreadable or invalid files.
-    pub fn load(path: &Path) -> Result<Scenario, ScenarioError> {
-        let text = std::fs::read_to_string(path).map_err(|e| ScenarioError(e.to_string()))?;
-        serde_json::from_str(&text).map_err(|e| ScenarioError(e.to_string()))
-    }
-}
+/// Files larger than this open without their text in the window.
+const MAX_DOCUMENT_BYTES: u64 = 1024 * 1024;
 
 /// How to start the stub.
 #[derive(Debug, Clone)]
 pub struct StubConfig {
+    /// Directory the guest drives live under; `None` makes a temporary one owned by the stub.
     pub root: Option<PathBuf>,
+    /// Screen size in pixels (a scenario's `screen` wins).
     pub screen: (u32, u32),
     pub scenario: Option<Scenario>,
 }
 
-/// The stub desktop.
+impl Default for StubConfig {
+    fn default() -> StubConfig {
+        StubConfig { root: None, screen: (1440, 900), scenario: None }
+    }
+}
+
+/// The stub desktop. See the module documentation.
 #[derive(Debug)]
 pub struct StubDesktop {
     root: PathBuf,
+    /// Keeps a temporary root alive as long as the stub.
+    _temp: Option<tempfile::TempDir>,
+    /// Environment, by upper-case name: (name as written, value).
+    env: BTreeMap<String, (String, String)>,
+    programs: BTreeMap<String, Program>,
+    associations: BTreeMap<String, String>,
+    /// Folded guest folder -> upper-case user -> mask.
+    acls: BTreeMap<String, BTreeMap<String, u32>>,
+    state: Mutex<State>,
 }
 
 impl StubDesktop {
+    /// A 1440x900 desktop with only Program Manager, its drives under `root`.
+    ///
     /// # Errors
-    /// Never yet.
+    ///
+    /// The I/O error of creating the user profile under `root`.
     pub fn new(root: PathBuf) -> DesktopResult<StubDesktop> {
-        Ok(StubDesktop { root })
+        StubDesktop::with_config(StubConfig { root: Some(root), ..StubConfig::default() })
     }
 
+    /// A desktop set up from `config` and its scenario.
+    ///
     /// # Errors
-    /// Never yet.
+    ///
+    /// [`DesktopError::InvalidInput`] for an unusable screen size or scenario value, and
+    /// the I/O errors of creating the root, the profile and the scenario's files.
     pub fn with_config(config: StubConfig) -> DesktopResult<StubDesktop> {
-        Ok(StubDesktop { root: config.root.unwrap_or_else(std::env::temp_dir) })
+        let scenario = config.scenario.unwrap_or_default();
+        let (temp, root) = match config.root {
+            Some(root) => {
+                std::fs::create_dir_all(&root)
+                    .map_err(|err| DesktopError::io("creating the stub root", &root.display().to_string(), err))?;
+                (None, root)
+            }
+            None => {
+                let temp = tempfile::Builder::new()
+                    .prefix("arena-stub-")
+                    .tempdir()
+                    .map_err(|err| DesktopError::io("creating the stub root", "a temporary directory", err))?;
+                let root = temp.path().to_path_buf();
+                (Some(temp), root)
+            }
+        };
+        // Canonical, so that unmapping paths the OS hands back (resolved symlinks) works.
+        let root = root
+            .canonicalize()
+            .map_err(|err| DesktopError::io("resolving the stub root", &root.display().to_string(), err))?;
+        let screen = scenario.screen.map_or(config.screen, |s| (s.width, s.height));
+        if !(64..=16384).contains(&screen.0) || !(64..=16384).contains(&screen.1) {
+            return Err(DesktopError::InvalidInput(format!(
+                "screen {}x{} is out of range (64 to 16384 pixels a side)",
+                screen.0, screen.1
+            )));
+        }
+        fs::create_profile(&root)?;
+
+        let mut env: BTreeMap<String, (String, String)> =
+            fs::default_env().into_iter().map(|(k, v)| (k.to_uppercase(), (k, v))).collect();
+        for (k, v) in &scenario.env {
+            env.insert(k.to_uppercase(), (k.clone(), v.clone()));
+        }
+        let mut programs = process::default_programs();
+        for (name, program) in &scenario.programs {
+            let key = process::program_key(name);
+            programs.insert(key.clone(), Program::from_scenario(&key, program));
+        }
+        let mut associations = process::default_associations();
+        for (ext, program) in &scenario.associations {
+            associations.insert(ext.to_lowercase(), process::program_key(program));
+        }
+        let mut acls = BTreeMap::new();
+        for (path, users) in &scenario.acls {
+            let key = fold_guest(path)?;
+            acls.insert(key, users.iter().map(|(u, m)| (u.to_uppercase(), *m)).collect());
+        }
+
+        let stub =
+            StubDesktop { root, _temp: temp, env, programs, associations, acls, state: Mutex::new(State::new(screen)) };
+        stub.apply_scenario(&scenario)?;
+        Ok(stub)
+    }
+
+    fn apply_scenario(&self, scenario: &Scenario) -> DesktopResult<()> {
+        for dir in &scenario.dirs {
+            let local = self.map_path(dir)?;
+            std::fs::create_dir_all(&local).map_err(|err| DesktopError::io("creating a scenario folder", dir, err))?;
+        }
+        for (path, content) in &scenario.files {
+            let local = self.map_path(path)?;
+            let bytes = content.bytes().map_err(|err| DesktopError::InvalidInput(format!("{path}: {err}")))?;
+            if let Some(parent) = local.parent() {
+                std::fs::create_dir_all(parent)
+                    .map_err(|err| DesktopError::io("creating a scenario folder", path, err))?;
+            }
+            std::fs::write(&local, bytes).map_err(|err| DesktopError::io("writing a scenario file", path, err))?;
+        }
+        let mut state = self.lock();
+        if let Some(cursor) = scenario.cursor {
+            state.cursor = state.clamp(cursor);
+        }
+        if let Some(text) = &scenario.clipboard {
+            state.clipboard = ClipboardData::Text(text.clone());
+        }
+        for value in &scenario.registry {
+            state.registry.write(&value.key, value.value.as_deref(), &value.data)?;
+        }
+        if let Some(wallpaper) = &scenario.wallpaper {
+            state.registry.write(
+                registry::DESKTOP_KEY,
+                Some(registry::WALLPAPER_VALUE),
+                &RegistryValue::String(wallpaper.clone()),
+            )?;
+        }
+        // Windows are listed topmost first; opening each on top means opening them in reverse.
+        let mut pids: BTreeMap<String, u32> = BTreeMap::new();
+        pids.insert("explorer.exe".into(), state.windows[state.windows.len() - 1].pid);
+        let mut focused = None;
+        let mut ids = Vec::new();
+        for spec in &scenario.windows {
+            let process_name = spec.process_name.clone().unwrap_or_else(|| "app.exe".into());
+            // Windows of one process share its pid, as File Explorer windows share explorer.exe.
+            let pid = match pids.get(&process_name.to_lowercase()) {
+                Some(pid) => *pid,
+                None => {
+                    let pid = state.alloc_pid();
+                    pids.insert(process_name.to_lowercase(), pid);
+                    pid
+                }
+            };
+            let file = match &spec.file {
+                Some(f) => Some(self.map_path(f)?),
+                None => None,
+            };
+            ids.push((spec, pid, process_name, file));
+        }
+        for (spec, pid, process_name, file) in ids.into_iter().rev() {
+            let id = state.open(NewWindow {
+                title: spec.title.clone(),
+                class_name: spec.class_name.clone(),
+                process_name,
+                pid: Some(pid),
+                rect: spec.rect,
+                text: spec.text.clone(),
+                file,
+                elements: spec.elements.clone(),
+                refuse_close: spec.refuse_close,
+            });
+            let work = state.work_area();
+            if let Some(window) = state.window_mut(id) {
+                window.visible = spec.visible;
+                window.minimized = spec.minimized;
+                if spec.maximized {
+                    window.maximized = true;
+                    window.rect = work;
+                }
+            }
+            if spec.focused {
+                focused = Some(id);
+            }
+        }
+        match focused {
+            Some(id) => state.focus = id,
+            None => state.refocus(),
+        }
+        Ok(())
+    }
+
+    fn lock(&self) -> MutexGuard<'_, State> {
+        // A panic elsewhere while holding the lock leaves plain data behind; keep serving it.
+        self.state.lock().unwrap_or_else(std::sync::PoisonError::into_inner)
+    }
+
+    /// The directory the guest drives live under (`<root>/C` is `C:\`).
+    pub fn root(&self) -> &Path {
+        &self.root
+    }
+
+    /// Every action performed so far, in order.
+    pub fn action_log(&self) -> Vec<Action> {
+        self.lock().log.clone()
+    }
+
+    /// The document text of a window, if it has one.
+    pub fn window_text(&self, id: u64) -> Option<String> {
+        self.lock().window(id).and_then(|w| w.text.as_ref()).map(|b| b.text.clone())
+    }
+
+    /// Whether [`Desktop::shutdown`] was called.
+    pub fn shutdown_requested(&self) -> bool {
+        self.lock().shutdown
+    }
+
+    /// The id of the first window, topmost first, whose title contains `needle` (ignoring case).
+    pub fn find_window(&self, needle: &str) -> Option<u64> {
+        let needle = needle.to_lowercase();
+        self.lock().windows.iter().find(|w| w.title.to_lowercase().contains(&needle)).map(|w| w.id)
+    }
+
+    /// Opens a known program's window; `args` may name a file or folder to open in it.
+    fn launch_known(&self, key: &str, args: &[String]) -> DesktopResult<u32> {
+        let Some(program) = self.programs.get(key) else {
+            return Err(DesktopError::NotFound(format!("program {key} not found")));
+        };
+        // The first argument that names an existing guest file or folder is opened in the program.
+        let target = args.iter().filter(|a| !a.starts_with(['-', '/'])).find_map(|a| {
+            let local = self.map_path(a).ok()?;
+            local.exists().then_some((a.clone(), local))
+        });
+        let mut new = NewWindow {
+            title: program.title.clone(),
+            class_name: program.class_name.clone(),
+            process_name: program.process_name.clone(),
+            text: program.text.clone(),
+            ..NewWindow::default()
+        };
+        if let Some((guest, local)) = target {
+            let name = display_name(&guest);
+            if local.is_dir() {
+                new.title = name;
+                new.text = None;
+            } else {
+                new.title = format!("{name} - {}", program.app_name);
+                new.text = read_document(&local);
+                new.file = Some(local);
+            }
+        }
+        let mut state = self.lock();
+        let id = state.open(new);
+        let pid = state.window(id).map_or(0, |w| w.pid);
+        tracing::debug!(program = key, pid, id, "stub opened a program window");
+        Ok(pid)
+    }
+
+    /// A command whose first word is a guest document (`start "" C:\\...\\a.txt`): that path.
+    fn document_launch(&self, cmd: &CommandSpec) -> Option<String> {
+        let words = process::launch_words(cmd)?;
+        let first = words.first()?;
+        let bytes = first.as_bytes();
+        // Only drive-letter paths: a Unix path such as /bin/echo is a host program.
+        if words.len() != 1 || bytes.len() < 3 || !bytes[0].is_ascii_alphabetic() || bytes[1] != b':' {
+            return None;
+        }
+        let local = self.map_path(first).ok()?;
+        local.exists().then(|| first.clone())
+    }
+
+    fn map_cwd(&self, limits: &ExecLimits) -> DesktopResult<Option<PathBuf>> {
+        let Some(cwd) = &limits.cwd else {
+            return Ok(None);
+        };
+        let local = self.map_path(cwd)?;
+        if !local.is_dir() {
+            return Err(DesktopError::NotFound(format!("working directory {cwd} not found")));
+        }
+        Ok(Some(local))
+    }
+
+    /// Names in the Desktop folder, sorted, as the desktop icons show them.
+    fn desktop_items(&self) -> Vec<String> {
+        let Ok(dir) = self.map_path(r"C:\Users\Docker\Desktop") else {
+            return Vec::new();
+        };
+        let mut names: Vec<String> = std::fs::read_dir(dir)
+            .map(|rd| rd.filter_map(Result::ok).map(|e| e.file_name().to_string_lossy().into_owned()).collect())
+            .unwrap_or_default();
+        names.sort_by_key(|n| n.to_lowercase());
+        names.truncate(500);
+        names
+    }
+
+    /// The wallpaper scaled to the screen, decoded once per file version and screen size.
+    fn wallpaper_image(&self, state: &mut State) -> Option<image::RgbaImage> {
+        let guest = match state.registry.read(registry::DESKTOP_KEY, Some(registry::WALLPAPER_VALUE)) {
+            Ok(RegistryValue::String(s)) if !s.is_empty() => s,
+            _ => return None,
+        };
+        let local = self.map_path(&guest).ok()?;
+        let meta = std::fs::metadata(&local).ok()?;
+        let key = (local.clone(), meta.len(), meta.modified().ok(), state.screen);
+        if let Some(cache) = &state.wallpaper {
+            if cache.key == key {
+                return cache.image.clone();
+            }
+        }
+        let image = std::fs::read(&local).ok().and_then(|bytes| match crate::imaging::decode(&bytes) {
+            Ok(img) => Some(image::imageops::resize(&img, state.screen.0, state.screen.1, image::imageops::FilterType::Triangle)),
+            Err(err) => {
+                tracing::debug!(wallpaper = %guest, %err, "the wallpaper does not decode; drawing the plain background");
+                None
+            }
+        });
+        state.wallpaper = Some(WallpaperCache { key, image: image.clone() });
+        image
+    }
+
+    fn render_frame(&self, draw_cursor: bool) -> Frame {
+        let items = self.desktop_items();
+        let mut state = self.lock();
+        let wallpaper = self.wallpaper_image(&mut state);
+        let mut image = render::render(&state, wallpaper.as_ref(), &items);
+        let cursor = state.cursor;
+        drop(state);
+        if draw_cursor {
+            crate::imaging::draw_cursor(&mut image, cursor);
+        }
+        Frame { image, cursor: Some(cursor), cursor_drawn: draw_cursor }
     }
 }
 
-fn todo_err<T>() -> DesktopResult<T> {
-    Err(DesktopError::Unsupported("stub not written yet".into()))
+/// The display name of a guest path: its last component, or `Local Disk (C:)` for a drive.
+fn display_name(guest: &str) -> String {
+    match fs::guest_components(guest) {
+        Ok((_, parts)) if !parts.is_empty() => parts[parts.len() - 1].clone(),
+        Ok((drive, _)) => format!("Local Disk ({drive}:)"),
+        Err(_) => crate::paths::basename(guest).to_owned(),
+    }
+}
+
+/// A file's text, when it is small and valid UTF-8 (a leading BOM dropped).
+fn read_document(local: &Path) -> Option<String> {
+    let meta = std::fs::metadata(local).ok()?;
+    if meta.len() > MAX_DOCUMENT_BYTES {
+        return None;
+    }
+    let bytes = std::fs::read(local).ok()?;
+    let text = String::from_utf8(bytes).ok()?;
+    Some(text.strip_prefix('\u{feff}').map(str::to_owned).unwrap_or(text))
+}
+
+/// A guest path folded for case-insensitive comparison: `c:/users/x/` -> `c:\users\x`.
+fn fold_guest(path: &str) -> DesktopResult<String> {
+    let (drive, parts) = fs::guest_components(path).map_err(DesktopError::InvalidInput)?;
+    Ok(format!("{drive}:\\{}", parts.join("\\")).to_lowercase())
+}
+
+fn elapsed_note(started: std::time::Instant) -> String {
+    format!("{} ms", started.elapsed().as_millis())
 }
 
 impl Desktop for StubDesktop {
-    fn kind(&self) -> &'static str { "stub" }
-    fn probe(&self, _: Component) -> DesktopResult<String> { todo_err() }
-    fn screen(&self) -> DesktopResult<ScreenInfo> { todo_err() }
-    fn capture(&self, _: bool) -> DesktopResult<Frame> { todo_err() }
-    fn cursor_position(&self) -> DesktopResult<Point> { todo_err() }
-    fn perform(&self, _: &Action) -> DesktopResult<()> { todo_err() }
-    fn windows(&self) -> DesktopResult<Vec<WindowInfo>> { todo_err() }
-    fn activate_window(&self, _: u64) -> DesktopResult<()> { todo_err() }
-    fn set_window_state(&self, _: u64, _: WindowState) -> DesktopResult<()> { todo_err() }
-    fn close_window(&self, _: u64) -> DesktopResult<()> { todo_err() }
-    fn accessibility(&self, _: A11yBackend, _: &TreeBudget, _: bool) -> DesktopResult<A11yTree> { todo_err() }
-    fn clipboard_get(&self) -> DesktopResult<ClipboardData> { todo_err() }
-    fn clipboard_set(&self, _: &ClipboardData) -> DesktopResult<()> { todo_err() }
-    fn map_path(&self, _: &str) -> DesktopResult<PathBuf> { let _ = &self.root; todo_err() }
-    fn unmap_path(&self, _: &Path) -> DesktopResult<String> { todo_err() }
-    fn env_var(&self, _: &str) -> Option<String> { None }
-    fn known_folder(&self, _: KnownFolder) -> DesktopResult<String> { todo_err() }
-    fn recycle(&self, _: &str) -> DesktopResult<()> { todo_err() }
-    fn open_path(&self, _: &str) -> DesktopResult<()> { todo_err() }
-    fn registry_read(&self, _: &str, _: Option<&str>) -> DesktopResult<RegistryValue> { todo_err() }
-    fn registry_write(&self, _: &str, _: Option<&str>, _: &RegistryValue) -> DesktopResult<()> { todo_err() }
-    fn wallpaper(&self) -> DesktopResult<Option<String>> { todo_err() }
-    fn set_wallpaper(&self, _: &str) -> DesktopResult<()> { todo_err() }
-    fn directory_access_mask(&self, _: &str, _: &str) -> DesktopResult<Option<u32>> { todo_err() }
-    fn run(&self, _: &CommandSpec, _: &ExecLimits) -> DesktopResult<ExecOutput> { todo_err() }
-    fn spawn(&self, _: &CommandSpec) -> DesktopResult<u32> { todo_err() }
-    fn shutdown(&self) -> DesktopResult<()> { todo_err() }
+    fn kind(&self) -> &'static str {
+        "stub"
+    }
+
+    fn probe(&self, component: Component) -> DesktopResult<String> {
+        let started = std::time::Instant::now();
+        match component {
+            Component::Capture => {
+                let frame = self.render_frame(false);
+                let (w, h) = self.lock().screen;
+                if (frame.image.width(), frame.image.height()) != (w, h) {
+                    return Err(DesktopError::Os {
+                        op: "probe capture",
+                        message: format!("rendered {}x{}, expected {w}x{h}", frame.image.width(), frame.image.height()),
+                    });
+                }
+                Ok(format!("rendered a {w}x{h} frame in {}", elapsed_note(started)))
+            }
+            Component::Input => {
+                let p = self.cursor_position()?;
+                Ok(format!("cursor at {},{}", p.x, p.y))
+            }
+            Component::Accessibility => {
+                let tree = self.accessibility(A11yBackend::Uia, &TreeBudget::WAA, false)?;
+                Ok(format!("walked {} windows, {} nodes", tree.windows.len(), tree.node_count))
+            }
+            Component::Clipboard => Ok(match self.clipboard_get()? {
+                ClipboardData::Empty => "clipboard is empty".to_owned(),
+                ClipboardData::Text(t) => format!("clipboard holds {} characters of text", t.chars().count()),
+                ClipboardData::Image(img) => format!("clipboard holds a {}x{} image", img.width(), img.height()),
+            }),
+            Component::Files => {
+                static PROBES: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
+                let n = PROBES.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                let probe = self.root.join(format!(".arena-probe-{}-{n}", std::process::id()));
+                let what = probe.display().to_string();
+                std::fs::write(&probe, b"arena probe").map_err(|err| DesktopError::io("probe files", &what, err))?;
+                let back = std::fs::read(&probe).map_err(|err| DesktopError::io("probe files", &what, err));
+                let removed = std::fs::remove_file(&probe).map_err(|err| DesktopError::io("probe files", &what, err));
+                if back? != b"arena probe" {
+                    return Err(DesktopError::Os {
+                        op: "probe files",
+                        message: format!("{what} read back different bytes"),
+                    });
+                }
+                removed?;
+                Ok(format!("wrote, read back and deleted a file under {}", self.root.display()))
+            }
+            Component::Exec => {
+                let shell = if cfg!(windows) { "cmd.exe" } else { "sh" };
+                if cfg!(windows) || process::on_path(shell) {
+                    Ok(format!("{shell} is available"))
+                } else {
+                    Err(DesktopError::NotFound(format!("{shell} is not on PATH")))
+                }
+            }
+            Component::Unknown => Err(DesktopError::InvalidInput("unknown component".into())),
+        }
+    }
+
+    fn screen(&self) -> DesktopResult<ScreenInfo> {
+        let (w, h) = self.lock().screen;
+        Ok(ScreenInfo {
+            physical_width: w,
+            physical_height: h,
+            logical_width: w,
+            logical_height: h,
+            scale_factor: 1.0,
+            monitors: vec![MonitorInfo {
+                name: r"\\.\DISPLAY1".into(),
+                rect: Rect::new(0, 0, w as i32, h as i32),
+                scale_factor: 1.0,
+                primary: true,
+            }],
+            coordinate_space: CoordinateSpace::Physical,
+        })
+    }
+
+    fn capture(&self, draw_cursor: bool) -> DesktopResult<Frame> {
+        Ok(self.render_frame(draw_cursor))
+    }
+
+    fn cursor_position(&self) -> DesktopResult<Point> {
+        Ok(self.lock().cursor)
+    }
+
+    fn perform(&self, action: &Action) -> DesktopResult<()> {
+        let effects = {
+            let mut state = self.lock();
+            let effects = input::perform(&mut state, action)?;
+            state.log.push(action.clone());
+            effects
+        };
+        for effect in effects {
+            match effect {
+                input::Effect::OpenDesktopItem(n) => {
+                    if let Some(name) = self.desktop_items().get(n) {
+                        self.open_path(&format!(r"C:\Users\Docker\Desktop\{name}"))?;
+                    }
+                }
+            }
+        }
+        Ok(())
+    }
+
+    fn windows(&self) -> DesktopResult<Vec<WindowInfo>> {
+        Ok(self.lock().infos())
+    }
+
+    fn activate_window(&self, id: u64) -> DesktopResult<()> {
+        let mut state = self.lock();
+        let index = state.index(id)?;
+        if state.windows[index].minimized {
+            state.windows[index].minimized = false;
+        }
+        state.activate(id)
+    }
+
+    fn set_window_state(&self, id: u64, window_state: WindowState) -> DesktopResult<()> {
+        self.lock().set_state(id, window_state)
+    }
+
+    fn close_window(&self, id: u64) -> DesktopResult<()> {
+        self.lock().close(id)
+    }
+
+    fn accessibility(
+        &self,
+        backend: A11yBackend,
+        budget: &TreeBudget,
+        foreground_only: bool,
+    ) -> DesktopResult<A11yTree> {
+        let items = self.desktop_items();
+        let state = self.lock();
+        a11y::tree(&state, backend, budget, foreground_only, &items)
+    }
+
+    fn clipboard_get(&self) -> DesktopResult<ClipboardData> {
+        Ok(self.lock().clipboard.clone())
+    }
+
+    fn clipboard_set(&self, data: &ClipboardData) -> DesktopResult<()> {
+        self.lock().clipboard = data.clone();
+        Ok(())
+    }
+
+    fn map_path(&self, guest_path: &str) -> DesktopResult<PathBuf> {
+        fs::map_path(&self.root, guest_path)
+    }
+
+    fn unmap_path(&self, local: &Path) -> DesktopResult<String> {
+        fs::unmap_path(&self.root, local)
+    }
+
+    fn env_var(&self, name: &str) -> Option<String> {
+        self.env.get(&name.to_uppercase()).map(|(_, v)| v.clone())
+    }
+
+    fn known_folder(&self, folder: KnownFolder) -> DesktopResult<String> {
+        fs::known_folder(folder)
+    }
+
+    fn recycle(&self, guest_path: &str) -> DesktopResult<()> {
+        let local = self.map_path(guest_path)?;
+        fs::recycle(&self.root, guest_path, &local)
+    }
+
+    fn open_path(&self, guest_path: &str) -> DesktopResult<()> {
+        let local = self.map_path(guest_path)?;
+        let meta = std::fs::metadata(&local).map_err(|err| DesktopError::io("open", guest_path, err))?;
+        let name = display_name(guest_path);
+        if meta.is_dir() {
+            let mut state = self.lock();
+            let pid = state.windows[state.windows.len() - 1].pid;
+            state.open(NewWindow {
+                title: name,
+                class_name: "CabinetWClass".into(),
+                process_name: "explorer.exe".into(),
+                pid: Some(pid),
+                ..NewWindow::default()
+            });
+            return Ok(());
+        }
+        let ext = Path::new(&name)
+            .extension()
+            .map(|e| format!(".{}", e.to_string_lossy().to_lowercase()))
+            .unwrap_or_default();
+        if ext == ".exe" {
+            let key = process::program_key(&name);
+            if self.programs.contains_key(&key) {
+                return self.launch_known(&key, &[]).map(|_| ());
+            }
+            return process::spawn_real(&CommandSpec::Argv(vec![local.display().to_string()]), None).map(|_| ());
+        }
+        let program = self.associations.get(&ext).and_then(|key| self.programs.get(key).map(|p| (key, p)));
+        let Some((key, _)) = program else {
+            return Err(DesktopError::Os {
+                op: "open",
+                message: format!(
+                    "{guest_path}: no application is associated with {}",
+                    if ext.is_empty() { "files without an extension" } else { &ext }
+                ),
+            });
+        };
+        let key = key.clone();
+        self.launch_known(&key, &[guest_path.to_owned()]).map(|_| ())
+    }
+
+    fn registry_read(&self, key: &str, value: Option<&str>) -> DesktopResult<RegistryValue> {
+        self.lock().registry.read(key, value)
+    }
+
+    fn registry_write(&self, key: &str, value: Option<&str>, data: &RegistryValue) -> DesktopResult<()> {
+        self.lock().registry.write(key, value, data)
+    }
+
+    fn wallpaper(&self) -> DesktopResult<Option<String>> {
+        match self.lock().registry.read(registry::DESKTOP_KEY, Some(registry::WALLPAPER_VALUE)) {
+            Ok(RegistryValue::String(s)) if !s.is_empty() => Ok(Some(s)),
+            Ok(_) | Err(DesktopError::NotFound(_)) => Ok(None),
+            Err(err) => Err(err),
+        }
+    }
+
+    fn set_wallpaper(&self, guest_path: &str) -> DesktopResult<()> {
+        let local = self.map_path(guest_path)?;
+        if !local.is_file() {
+            return Err(DesktopError::NotFound(format!("{guest_path}: not found")));
+        }
+        self.lock().registry.write(
+            registry::DESKTOP_KEY,
+            Some(registry::WALLPAPER_VALUE),
+            &RegistryValue::String(guest_path.to_owned()),
+        )
+    }
+
+    fn directory_access_mask(&self, guest_path: &str, user: &str) -> DesktopResult<Option<u32>> {
+        let local = self.map_path(guest_path)?;
+        let meta = std::fs::metadata(&local)
+            .map_err(|err| DesktopError::io("reading a security descriptor", guest_path, err))?;
+        if let Some(users) = self.acls.get(&fold_guest(guest_path)?) {
+            return Ok(users.get(&user.to_uppercase()).copied());
+        }
+        if !user.eq_ignore_ascii_case("Docker") {
+            return Ok(None);
+        }
+        // FILE_GENERIC_READ | FILE_GENERIC_EXECUTE for read-only, FILE_ALL_ACCESS otherwise.
+        Ok(Some(if meta.permissions().readonly() { 0x1200A9 } else { 0x1F01FF }))
+    }
+
+    fn run(&self, cmd: &CommandSpec, limits: &ExecLimits) -> DesktopResult<ExecOutput> {
+        let opened = if let Some(path) = self.document_launch(cmd) {
+            self.open_path(&path)?;
+            true
+        } else if let Some(launch) = process::known_launch(cmd, &self.programs) {
+            self.launch_known(&launch.key, &launch.args)?;
+            true
+        } else {
+            false
+        };
+        if opened {
+            return Ok(ExecOutput {
+                exit_code: Some(0),
+                stdout: String::new(),
+                stderr: String::new(),
+                stdout_truncated: false,
+                stderr_truncated: false,
+                timed_out: false,
+                duration_ms: 0,
+            });
+        }
+        let cwd = self.map_cwd(limits)?;
+        process::run_real(cmd, limits, cwd)
+    }
+
+    fn spawn(&self, cmd: &CommandSpec) -> DesktopResult<u32> {
+        if let Some(path) = self.document_launch(cmd) {
+            self.open_path(&path)?;
+            return Ok(self.lock().windows.first().map_or(0, |w| w.pid));
+        }
+        if let Some(launch) = process::known_launch(cmd, &self.programs) {
+            return self.launch_known(&launch.key, &launch.args);
+        }
+        process::spawn_real(cmd, None)
+    }
+
+    fn shutdown(&self) -> DesktopResult<()> {
+        tracing::info!("stub desktop: shutdown requested (the process keeps running)");
+        self.lock().shutdown = true;
+        Ok(())
+    }
 }

@@ -1,0 +1,703 @@
+//! Behaviour tests of the whole stub desktop through the `Desktop` trait.
+
+#[cfg(unix)]
+use std::time::{Duration, Instant};
+
+use arena_shared::action::MouseButton;
+use arena_shared::observation::A11yNode;
+
+use super::render::{BACKGROUND, TITLE_FOCUSED, TITLE_UNFOCUSED};
+use super::*;
+
+fn stub() -> StubDesktop {
+    StubDesktop::with_config(StubConfig::default()).unwrap()
+}
+
+fn stub_with(json: &str) -> StubDesktop {
+    let scenario = Scenario::parse(json, "test").unwrap();
+    StubDesktop::with_config(StubConfig { scenario: Some(scenario), ..StubConfig::default() }).unwrap()
+}
+
+fn key(name: &str) -> Action {
+    Action::KeyPress { key: name.into(), presses: 1 }
+}
+
+fn hotkey(keys: &[&str]) -> Action {
+    Action::Hotkey { keys: keys.iter().map(|k| (*k).to_owned()).collect() }
+}
+
+fn type_text(text: &str) -> Action {
+    Action::TypeText { text: text.into(), interval_ms: None }
+}
+
+fn click(x: i32, y: i32) -> Action {
+    Action::Click { x: Some(x), y: Some(y), button: MouseButton::Left, count: 1 }
+}
+
+fn open_notepad(d: &StubDesktop) -> u64 {
+    d.spawn(&CommandSpec::Shell("notepad".into())).unwrap();
+    d.find_window("Notepad").unwrap()
+}
+
+fn titles(d: &StubDesktop) -> Vec<String> {
+    d.windows().unwrap().into_iter().map(|w| w.title).collect()
+}
+
+fn focused_title(d: &StubDesktop) -> String {
+    d.windows().unwrap().into_iter().find(|w| w.focused).map(|w| w.title).unwrap_or_default()
+}
+
+fn limits(timeout_ms: u64) -> ExecLimits {
+    ExecLimits { timeout_ms, max_output_bytes: 1 << 20, cwd: None, stdin: None }
+}
+
+#[test]
+fn a_fresh_desktop_has_only_program_manager() {
+    let d = stub();
+    let windows = d.windows().unwrap();
+    assert_eq!(windows.len(), 1);
+    let pm = &windows[0];
+    assert_eq!(
+        (pm.title.as_str(), pm.class_name.as_str(), pm.process_name.as_str()),
+        ("Program Manager", "Progman", "explorer.exe")
+    );
+    assert_eq!((pm.id, pm.process_id), (0x10010, 1000));
+    assert_eq!(pm.rect, Rect::new(0, 0, 1440, 900));
+    assert!(pm.focused);
+    let screen = d.screen().unwrap();
+    assert_eq!((screen.physical_width, screen.physical_height, screen.scale_factor), (1440, 900, 1.0));
+    assert_eq!(screen.coordinate_space, CoordinateSpace::Physical);
+    assert_eq!(d.session_id(), None);
+}
+
+#[test]
+fn program_manager_cannot_be_closed() {
+    let d = stub();
+    let err = d.close_window(0x10010).unwrap_err();
+    assert!(matches!(err, DesktopError::PermissionDenied(_)), "{err:?}");
+    assert_eq!(d.windows().unwrap().len(), 1);
+    let err = d.close_window(0xdead).unwrap_err();
+    assert!(matches!(&err, DesktopError::NotFound(m) if m == "no window with id 0xdead"), "{err:?}");
+}
+
+#[test]
+fn typing_editing_and_the_clipboard() {
+    let d = stub();
+    let id = open_notepad(&d);
+    d.perform(&type_text("hello")).unwrap();
+    d.perform(&key("enter")).unwrap();
+    d.perform(&type_text("world")).unwrap();
+    d.perform(&key("tab")).unwrap();
+    d.perform(&key("backspace")).unwrap();
+    d.perform(&key("backspace")).unwrap();
+    assert_eq!(d.window_text(id).unwrap(), "hello\nworl");
+    d.perform(&key("home")).unwrap();
+    d.perform(&key("delete")).unwrap();
+    assert_eq!(d.window_text(id).unwrap(), "hello\norl");
+
+    // Select all, copy, type over it, paste it back twice.
+    d.perform(&hotkey(&["ctrl", "a"])).unwrap();
+    d.perform(&key("ctrl+c")).unwrap();
+    assert_eq!(d.clipboard_get().unwrap(), ClipboardData::Text("hello\norl".into()));
+    d.perform(&type_text("X")).unwrap();
+    assert_eq!(d.window_text(id).unwrap(), "X");
+    d.perform(&hotkey(&["ctrl", "v"])).unwrap();
+    d.perform(&hotkey(&["ctrl", "v"])).unwrap();
+    assert_eq!(d.window_text(id).unwrap(), "Xhello\norlhello\norl");
+
+    // Cut empties the document; backspace after select-all clears too.
+    d.perform(&hotkey(&["ctrl", "a"])).unwrap();
+    d.perform(&hotkey(&["ctrl", "x"])).unwrap();
+    assert_eq!(d.window_text(id).unwrap(), "");
+    assert_eq!(d.clipboard_get().unwrap(), ClipboardData::Text("Xhello\norlhello\norl".into()));
+    d.perform(&type_text("abc")).unwrap();
+    d.perform(&hotkey(&["ctrl", "a"])).unwrap();
+    d.perform(&key("backspace")).unwrap();
+    assert_eq!(d.window_text(id).unwrap(), "");
+
+    // Held modifiers make characters shortcuts, not text; esc changes nothing.
+    d.perform(&type_text("q")).unwrap();
+    d.perform(&Action::KeyDown { key: "ctrl".into() }).unwrap();
+    d.perform(&type_text("a")).unwrap();
+    d.perform(&Action::KeyUp { key: "ctrl".into() }).unwrap();
+    d.perform(&key("esc")).unwrap();
+    d.perform(&type_text("z")).unwrap();
+    assert_eq!(d.window_text(id).unwrap(), "z", "ctrl+a selected all, so z replaced q");
+    d.perform(&hotkey(&["shift", "b"])).unwrap();
+    assert_eq!(d.window_text(id).unwrap(), "zB");
+}
+
+#[test]
+fn unknown_keys_and_actions_are_invalid_and_change_nothing() {
+    let d = stub();
+    let id = open_notepad(&d);
+    let err = d.perform(&hotkey(&["ctrl", "nosuchkey"])).unwrap_err();
+    assert!(matches!(&err, DesktopError::InvalidInput(m) if m.contains("nosuchkey")), "{err:?}");
+    let err = d.perform(&key("enterr")).unwrap_err();
+    assert!(matches!(&err, DesktopError::InvalidInput(m) if m.contains("enterr")), "{err:?}");
+    assert!(matches!(d.perform(&Action::Unknown), Err(DesktopError::InvalidInput(_))));
+    assert_eq!(d.window_text(id).unwrap(), "");
+    // Failed actions are not logged.
+    assert!(d.action_log().is_empty());
+    d.perform(&type_text("x")).unwrap();
+    assert_eq!(d.action_log(), vec![type_text("x")]);
+}
+
+#[test]
+fn clicks_focus_and_raise_windows() {
+    let d = stub_with(
+        r#"{"windows": [
+            {"title": "Top", "rect": {"x": 100, "y": 100, "width": 400, "height": 300}},
+            {"title": "Bottom", "rect": {"x": 300, "y": 200, "width": 400, "height": 300}}
+        ]}"#,
+    );
+    assert_eq!(titles(&d), ["Top", "Bottom", "Program Manager"]);
+    assert_eq!(focused_title(&d), "Top");
+    // (600, 450) is only inside Bottom.
+    d.perform(&click(600, 450)).unwrap();
+    assert_eq!(titles(&d), ["Bottom", "Top", "Program Manager"]);
+    assert_eq!(focused_title(&d), "Bottom");
+    let z: Vec<u32> = d.windows().unwrap().iter().map(|w| w.z_order).collect();
+    assert_eq!(z, [0, 1, 2]);
+    // The overlap belongs to the topmost window.
+    d.perform(&click(350, 250)).unwrap();
+    assert_eq!(focused_title(&d), "Bottom");
+    // The bare desktop focuses Program Manager and raises nothing.
+    d.perform(&click(1300, 100)).unwrap();
+    assert_eq!(focused_title(&d), "Program Manager");
+    assert_eq!(titles(&d), ["Bottom", "Top", "Program Manager"]);
+    assert_eq!(d.cursor_position().unwrap(), Point::new(1300, 100));
+    // The cursor is clamped to the screen.
+    d.perform(&Action::MoveTo { x: 5000, y: -20 }).unwrap();
+    assert_eq!(d.cursor_position().unwrap(), Point::new(1439, 0));
+}
+
+#[test]
+fn dragging_a_title_bar_moves_the_window() {
+    let d = stub_with(r#"{"windows": [{"title": "W", "rect": {"x": 100, "y": 100, "width": 400, "height": 300}}]}"#);
+    let id = d.find_window("W").unwrap();
+    d.perform(&Action::Drag { from: Some(Point::new(150, 110)), to: Point::new(450, 310), button: MouseButton::Left })
+        .unwrap();
+    let w = d.windows().unwrap().into_iter().find(|w| w.id == id).unwrap();
+    assert_eq!(w.rect, Rect::new(400, 300, 400, 300));
+    // Dragging the body moves only the cursor.
+    d.perform(&Action::Drag { from: Some(Point::new(500, 500)), to: Point::new(700, 600), button: MouseButton::Left })
+        .unwrap();
+    let w = d.windows().unwrap().into_iter().find(|w| w.id == id).unwrap();
+    assert_eq!(w.rect, Rect::new(400, 300, 400, 300));
+    assert_eq!(d.cursor_position().unwrap(), Point::new(700, 600));
+    // Mouse down, moves and up do the same as a drag.
+    d.perform(&Action::MouseDown { button: MouseButton::Left, x: Some(450), y: Some(310) }).unwrap();
+    d.perform(&Action::MoveRel { dx: -100, dy: -50 }).unwrap();
+    d.perform(&Action::MouseUp { button: MouseButton::Left, x: None, y: None }).unwrap();
+    d.perform(&Action::MoveRel { dx: 100, dy: 100 }).unwrap();
+    let w = d.windows().unwrap().into_iter().find(|w| w.id == id).unwrap();
+    assert_eq!(w.rect, Rect::new(300, 250, 400, 300));
+}
+
+#[test]
+fn window_states_and_caption_buttons() {
+    let d = stub_with(r#"{"windows": [{"title": "W", "rect": {"x": 100, "y": 100, "width": 400, "height": 300}}]}"#);
+    let id = d.find_window("W").unwrap();
+    d.set_window_state(id, WindowState::Maximized).unwrap();
+    let w = &d.windows().unwrap()[0];
+    assert!(w.maximized);
+    assert_eq!(w.rect, Rect::new(0, 0, 1440, 860));
+    d.set_window_state(id, WindowState::Normal).unwrap();
+    assert_eq!(d.windows().unwrap()[0].rect, Rect::new(100, 100, 400, 300));
+    d.set_window_state(id, WindowState::Minimized).unwrap();
+    assert!(d.windows().unwrap()[0].minimized);
+    assert_eq!(focused_title(&d), "Program Manager");
+    d.activate_window(id).unwrap();
+    let w = &d.windows().unwrap()[0];
+    assert!(!w.minimized && w.focused);
+    // Double-clicking the title bar maximises; the caption buttons minimise and close.
+    d.perform(&Action::DoubleClick { x: Some(200), y: Some(110) }).unwrap();
+    assert!(d.windows().unwrap()[0].maximized);
+    d.perform(&Action::DoubleClick { x: Some(200), y: Some(10) }).unwrap();
+    assert!(!d.windows().unwrap()[0].maximized);
+    // Close button: the rightmost 46 pixels of the title bar.
+    d.perform(&click(490, 110)).unwrap();
+    assert_eq!(titles(&d), ["Program Manager"]);
+}
+
+#[test]
+fn close_alt_f4_and_refuse_close() {
+    let d = stub_with(
+        r#"{"windows": [
+            {"title": "Stubborn", "refuse_close": true},
+            {"title": "Meek"}
+        ]}"#,
+    );
+    let stubborn = d.find_window("Stubborn").unwrap();
+    let meek = d.find_window("Meek").unwrap();
+    d.close_window(stubborn).unwrap();
+    assert!(d.find_window("Stubborn").is_some(), "refuse_close keeps the window");
+    d.perform(&hotkey(&["alt", "f4"])).unwrap();
+    assert!(d.find_window("Stubborn").is_some());
+    d.activate_window(meek).unwrap();
+    d.perform(&hotkey(&["alt", "f4"])).unwrap();
+    assert!(d.find_window("Meek").is_none());
+    assert_eq!(focused_title(&d), "Stubborn");
+    d.close_window(meek).unwrap_err();
+}
+
+#[test]
+fn scrolling_moves_the_focused_document() {
+    let text: String = (0..200).map(|i| format!("line {i}\n")).collect();
+    let json = serde_json::json!({"windows": [{"title": "Doc", "text": text}]}).to_string();
+    let d = stub_with(&json);
+    d.perform(&Action::Scroll { x: None, y: None, dx: 0, dy: -240 }).unwrap();
+    assert_eq!(d.lock().windows[0].scroll, 6);
+    d.perform(&Action::Scroll { x: None, y: None, dx: 0, dy: 120 }).unwrap();
+    assert_eq!(d.lock().windows[0].scroll, 3);
+    d.perform(&Action::Scroll { x: None, y: None, dx: 0, dy: 12000 }).unwrap();
+    assert_eq!(d.lock().windows[0].scroll, 0);
+}
+
+#[test]
+fn open_path_titles_follow_the_associations() {
+    let d = stub_with(
+        r#"{"files": {
+            "C:\\Users\\Docker\\Desktop\\a.txt": "hello",
+            "C:\\Users\\Docker\\Desktop\\b.xlsx": "",
+            "C:\\Users\\Docker\\Desktop\\c.docx": "",
+            "C:\\Users\\Docker\\Desktop\\d.pdf": "",
+            "C:\\Users\\Docker\\Desktop\\e.png": "",
+            "C:\\Users\\Docker\\Desktop\\f.mp4": "",
+            "C:\\Users\\Docker\\Desktop\\g.xcf": "",
+            "C:\\Users\\Docker\\Desktop\\h.unknownext": ""
+        },
+        "programs": {"gimp": {"title": "GIMP"}},
+        "associations": {".xcf": "gimp"}}"#,
+    );
+    let check = |guest: &str, title: &str| {
+        d.open_path(guest).unwrap();
+        assert_eq!(d.windows().unwrap()[0].title, title, "opening {guest}");
+        assert!(d.windows().unwrap()[0].focused);
+    };
+    check(r"C:\Users\Docker\Desktop\a.txt", "a.txt - Notepad");
+    check(r"c:/users/docker/desktop/B.XLSX", "B.XLSX - LibreOffice Calc");
+    check(r"C:\Users\Docker\Desktop\c.docx", "c.docx - LibreOffice Writer");
+    check(r"C:\Users\Docker\Desktop\d.pdf", "d.pdf - Microsoft Edge");
+    check(r"C:\Users\Docker\Desktop\e.png", "e.png - Photos");
+    check(r"C:\Users\Docker\Desktop\f.mp4", "f.mp4 - VLC media player");
+    check(r"C:\Users\Docker\Desktop\g.xcf", "g.xcf - GIMP");
+    check(r"C:\Users\Docker\Documents", "Documents");
+    let notepad = d.find_window("a.txt - Notepad").unwrap();
+    assert_eq!(d.window_text(notepad).unwrap(), "hello");
+    assert!(matches!(d.open_path(r"C:\Users\Docker\Desktop\missing.txt"), Err(DesktopError::NotFound(_))));
+    assert!(matches!(d.open_path(r"C:\Users\Docker\Desktop\h.unknownext"), Err(DesktopError::Os { .. })));
+}
+
+#[test]
+fn ctrl_s_saves_an_opened_document() {
+    let d = stub_with(r#"{"files": {"C:\\Users\\Docker\\Documents\\n.txt": "old"}}"#);
+    d.open_path(r"C:\Users\Docker\Documents\n.txt").unwrap();
+    d.perform(&type_text(" and new")).unwrap();
+    d.perform(&hotkey(&["ctrl", "s"])).unwrap();
+    let saved = std::fs::read_to_string(d.map_path(r"C:\Users\Docker\Documents\n.txt").unwrap()).unwrap();
+    assert_eq!(saved, "old and new");
+}
+
+#[test]
+fn spawning_a_known_program_opens_its_window() {
+    let d = stub();
+    let pid = d.spawn(&CommandSpec::Shell("start notepad.exe".into())).unwrap();
+    assert_eq!(pid, 1001);
+    let w = &d.windows().unwrap()[0];
+    assert_eq!(
+        (w.title.as_str(), w.class_name.as_str(), w.process_name.as_str()),
+        ("Untitled - Notepad", "Notepad", "notepad.exe")
+    );
+    assert_eq!((w.id, w.process_id, w.focused), (0x10011, 1001, true));
+    let pid =
+        d.spawn(&CommandSpec::Argv(vec![r"C:\Program Files\Google\Chrome\Application\chrome.exe".into()])).unwrap();
+    assert_eq!(pid, 1002);
+    assert_eq!(d.windows().unwrap()[0].title, "New Tab - Google Chrome");
+    let out = d.run(&CommandSpec::Shell("calc".into()), &limits(1000)).unwrap();
+    assert_eq!((out.exit_code, out.stdout.as_str()), (Some(0), ""));
+    assert_eq!(d.windows().unwrap()[0].title, "Calculator");
+    let err = d.spawn(&CommandSpec::Argv(vec!["no-such-program-xyz".into()])).unwrap_err();
+    assert!(matches!(&err, DesktopError::NotFound(m) if m.contains("no-such-program-xyz")), "{err:?}");
+    let err = d.spawn(&CommandSpec::Shell("no-such-program-xyz --flag".into())).unwrap_err();
+    assert!(matches!(&err, DesktopError::NotFound(m) if m.contains("no-such-program-xyz")), "{err:?}");
+}
+
+#[test]
+fn a_known_program_opens_a_file_argument() {
+    let d = stub_with(r#"{"files": {"C:\\Users\\Docker\\Desktop\\x.txt": "from file"}}"#);
+    d.spawn(&CommandSpec::Shell(r#"notepad "C:\Users\Docker\Desktop\x.txt""#.into())).unwrap();
+    let w = &d.windows().unwrap()[0];
+    assert_eq!(w.title, "x.txt - Notepad");
+    assert_eq!(d.window_text(w.id).unwrap(), "from file");
+}
+
+#[cfg(unix)]
+#[test]
+fn spawn_runs_unknown_programs_for_real() {
+    let d = stub();
+    let marker = d.root().join("spawned");
+    let pid = d.spawn(&CommandSpec::Shell(format!("touch '{}'", marker.display()))).unwrap();
+    assert!(pid > 0);
+    let started = Instant::now();
+    while !marker.exists() && started.elapsed() < Duration::from_secs(5) {
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    assert!(marker.exists());
+}
+
+#[cfg(unix)]
+#[test]
+fn run_captures_output_and_exit_codes() {
+    let d = stub();
+    let out = d.run(&CommandSpec::Argv(vec!["echo".into(), "hello world".into()]), &limits(5000)).unwrap();
+    assert_eq!((out.exit_code, out.stdout.as_str(), out.timed_out), (Some(0), "hello world\n", false));
+    let out =
+        d.run(&CommandSpec::Shell("printf 'a\\r\\nb\\rc' ; echo oops >&2; exit 3".into()), &limits(5000)).unwrap();
+    assert_eq!(out.exit_code, Some(3));
+    assert_eq!(out.stdout, "a\nb\nc");
+    assert_eq!(out.stderr, "oops\n");
+    let stdin = ExecLimits { stdin: Some(b"piped in".to_vec()), ..limits(5000) };
+    let out = d.run(&CommandSpec::Argv(vec!["cat".into()]), &stdin).unwrap();
+    assert_eq!(out.stdout, "piped in");
+    let in_docs = ExecLimits { cwd: Some(r"C:\Users\Docker\Documents".into()), ..limits(5000) };
+    let out = d.run(&CommandSpec::Shell("pwd".into()), &in_docs).unwrap();
+    assert!(out.stdout.trim_end().ends_with("C/Users/Docker/Documents"), "{}", out.stdout);
+    let err = d.run(&CommandSpec::Argv(vec!["no-such-program-xyz".into()]), &limits(5000)).unwrap_err();
+    assert!(matches!(&err, DesktopError::NotFound(m) if m.contains("no-such-program-xyz")), "{err:?}");
+}
+
+#[cfg(unix)]
+#[test]
+fn run_times_out_and_kills_the_group() {
+    let d = stub();
+    let started = Instant::now();
+    let out = d.run(&CommandSpec::Shell("sleep 5; echo late".into()), &limits(200)).unwrap();
+    let took = started.elapsed();
+    assert!(out.timed_out);
+    assert_eq!(out.exit_code, None);
+    assert!(!out.stdout.contains("late"));
+    assert!(took < Duration::from_secs(3), "took {took:?}");
+}
+
+#[cfg(unix)]
+#[test]
+fn run_caps_output_and_keeps_draining() {
+    let d = stub();
+    let capped = ExecLimits { max_output_bytes: 1000, ..limits(10_000) };
+    let out =
+        d.run(&CommandSpec::Shell("head -c 300000 /dev/zero | tr '\\0' x; echo done >&2".into()), &capped).unwrap();
+    assert_eq!(out.exit_code, Some(0), "the writer was not blocked by the cap");
+    assert_eq!(out.stdout.len(), 1000);
+    assert!(out.stdout_truncated);
+    assert!(!out.stderr_truncated);
+    assert_eq!(out.stderr, "done\n");
+}
+
+#[test]
+fn registry_and_wallpaper() {
+    let d = stub_with(r#"{"files": {"C:\\Users\\Docker\\Pictures\\w.png": "not really a png"}}"#);
+    assert_eq!(d.wallpaper().unwrap(), None);
+    d.registry_write(r"HKEY_CURRENT_USER\Software\Test", Some("N"), &RegistryValue::Qword(5)).unwrap();
+    assert_eq!(d.registry_read(r"hkcu\software\test", Some("n")).unwrap(), RegistryValue::Qword(5));
+    assert!(matches!(d.registry_read(r"HKCU\Software\Test", Some("M")), Err(DesktopError::NotFound(_))));
+    assert!(matches!(d.registry_read(r"HKCU\Software\Nope", None), Err(DesktopError::NotFound(_))));
+    assert!(matches!(d.set_wallpaper(r"C:\Users\Docker\Pictures\missing.png"), Err(DesktopError::NotFound(_))));
+    d.set_wallpaper(r"C:\Users\Docker\Pictures\w.png").unwrap();
+    assert_eq!(d.wallpaper().unwrap().as_deref(), Some(r"C:\Users\Docker\Pictures\w.png"));
+    assert_eq!(
+        d.registry_read(r"HKCU\Control Panel\Desktop", Some("Wallpaper")).unwrap(),
+        RegistryValue::String(r"C:\Users\Docker\Pictures\w.png".into())
+    );
+    // A wallpaper that does not decode leaves the plain background.
+    let frame = d.capture(false).unwrap();
+    assert_eq!(frame.image.get_pixel(1000, 500).0, BACKGROUND);
+}
+
+#[test]
+fn files_env_and_recycle() {
+    let d = stub_with(r#"{"env": {"Extra": "1", "TEMP": "C:\\T"}}"#);
+    for dir in [
+        r"C:\Users\Docker\Desktop",
+        r"C:\Users\Docker\AppData\Local\Temp",
+        r"C:\Users\Docker\AppData\Roaming",
+        r"C:\Windows",
+    ] {
+        assert!(d.map_path(dir).unwrap().is_dir(), "{dir}");
+    }
+    assert_eq!(d.env_var("userprofile").as_deref(), Some(r"C:\Users\Docker"));
+    assert_eq!(d.env_var("SYSTEMROOT").as_deref(), Some(r"C:\Windows"));
+    assert_eq!(d.env_var("extra").as_deref(), Some("1"));
+    assert_eq!(d.env_var("TEMP").as_deref(), Some(r"C:\T"));
+    assert_eq!(d.env_var("NOPE"), None);
+    let local = d.map_path(r"C:\Users\Docker\Desktop\a.txt").unwrap();
+    std::fs::write(&local, "x").unwrap();
+    assert_eq!(d.unmap_path(&local).unwrap(), r"C:\Users\Docker\Desktop\a.txt");
+    d.recycle(r"C:\Users\Docker\Desktop\a.txt").unwrap();
+    assert!(!local.exists());
+    assert!(d.map_path(r"C:\$Recycle.Bin\a.txt").unwrap().exists());
+    assert!(matches!(d.recycle(r"C:\Users\Docker\Desktop\a.txt"), Err(DesktopError::NotFound(_))));
+    assert!(matches!(d.map_path(r"\\server\share"), Err(DesktopError::InvalidInput(_))));
+}
+
+#[test]
+fn a_given_root_is_used_and_kept() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = StubDesktop::new(dir.path().to_path_buf()).unwrap();
+    assert_eq!(d.map_path(r"C:\x").unwrap(), dir.path().canonicalize().unwrap().join("C").join("x"));
+    drop(d);
+    assert!(dir.path().join("C").join("Users").join("Docker").is_dir());
+}
+
+#[test]
+fn access_masks_come_from_the_scenario_or_the_permissions() {
+    let d = stub_with(r#"{"dirs": ["C:\\Locked", "C:\\Open"], "acls": {"c:\\locked": {"Docker": 1179817}}}"#);
+    assert_eq!(d.directory_access_mask(r"C:\LOCKED", "docker").unwrap(), Some(1179817));
+    assert_eq!(d.directory_access_mask(r"C:\Locked", "Guest").unwrap(), None);
+    assert_eq!(d.directory_access_mask(r"C:\Open", "Docker").unwrap(), Some(0x1F01FF));
+    assert_eq!(d.directory_access_mask(r"C:\Open", "Guest").unwrap(), None);
+    assert!(matches!(d.directory_access_mask(r"C:\Missing", "Docker"), Err(DesktopError::NotFound(_))));
+    let open = d.map_path(r"C:\Open").unwrap();
+    let mut perms = std::fs::metadata(&open).unwrap().permissions();
+    perms.set_readonly(true);
+    std::fs::set_permissions(&open, perms.clone()).unwrap();
+    assert_eq!(d.directory_access_mask(r"C:\Open", "Docker").unwrap(), Some(0x1200A9));
+    #[allow(clippy::permissions_set_readonly_false)]
+    perms.set_readonly(false);
+    std::fs::set_permissions(&open, perms).unwrap();
+}
+
+fn count(nodes: &[A11yNode]) -> u32 {
+    nodes.iter().map(|n| 1 + count(&n.children)).sum()
+}
+
+fn depth(nodes: &[A11yNode]) -> u32 {
+    nodes.iter().map(|n| 1 + depth(&n.children)).max().unwrap_or(0)
+}
+
+const A11Y_SCENARIO: &str = r#"{"windows": [
+    {"title": "Explorer", "class_name": "CabinetWClass", "text": "doc", "elements": [
+        {"role": "List", "class_name": "UIItemsView", "name": "Items", "enabled": true, "visible": true, "children": [
+            {"role": "ListItem", "class_name": "", "name": "a", "enabled": true, "visible": true},
+            {"role": "ListItem", "class_name": "", "name": "b", "enabled": true, "visible": true},
+            {"role": "ListItem", "class_name": "", "name": "c", "enabled": true, "visible": true}
+        ]}
+    ]},
+    {"title": "Hidden", "minimized": true},
+    {"title": "Invisible", "visible": false}
+]}"#;
+
+#[test]
+fn accessibility_mirrors_the_windows() {
+    let d = stub_with(A11Y_SCENARIO);
+    let tree = d.accessibility(A11yBackend::Uia, &TreeBudget::WAA, false).unwrap();
+    assert!(!tree.truncated);
+    let names: Vec<&str> = tree.windows.iter().map(|w| w.name.as_str()).collect();
+    assert_eq!(
+        names,
+        ["Explorer", "Program Manager"],
+        "minimised and hidden windows are left out, the desktop is last"
+    );
+    let listed = d.windows().unwrap();
+    assert!(listed.iter().any(|w| w.title == "Invisible" && !w.visible), "hidden windows are listed, flagged");
+    let explorer = &tree.windows[0];
+    assert_eq!((explorer.role.as_str(), explorer.focused), ("Window", true));
+    assert_eq!(explorer.states.maximized, Some(false));
+    let roles: Vec<&str> = explorer.children.iter().map(|c| c.role.as_str()).collect();
+    assert_eq!(roles, ["TitleBar", "List", "Document"]);
+    let buttons: Vec<&str> = explorer.children[0].children.iter().map(|c| c.name.as_str()).collect();
+    assert_eq!(buttons, ["Minimize", "Maximize", "Close"]);
+    assert_eq!(explorer.children[2].value.as_deref(), Some("doc"));
+    assert_eq!(tree.node_count, count(&tree.windows));
+    let id = d.find_window("Explorer").unwrap();
+    assert!(explorer.children[1].children.iter().all(|n| n.window_id == Some(id)));
+    assert_eq!(tree.coordinate_space, CoordinateSpace::Physical);
+
+    let win32 = d.accessibility(A11yBackend::Win32, &TreeBudget::WAA, true).unwrap();
+    assert_eq!(win32.windows.len(), 1, "foreground only");
+    let roles: Vec<&str> = win32.windows[0].children.iter().map(|c| c.role.as_str()).collect();
+    assert_eq!(roles, ["UIItemsView", "Edit"]);
+    assert_eq!(win32.windows[0].role, "CabinetWClass");
+}
+
+#[test]
+fn accessibility_honours_every_budget() {
+    let d = stub_with(A11Y_SCENARIO);
+    let full = d.accessibility(A11yBackend::Uia, &TreeBudget::WAA, false).unwrap();
+    let check = |budget: TreeBudget, nodes: u32, max_depth: u32| {
+        let tree = d.accessibility(A11yBackend::Uia, &budget, false).unwrap();
+        assert!(tree.truncated, "{budget:?}");
+        assert_eq!(tree.node_count, nodes, "{budget:?}");
+        assert_eq!(count(&tree.windows), nodes, "{budget:?}");
+        assert!(depth(&tree.windows) <= max_depth, "{budget:?}");
+    };
+    // Depth 1: the two windows alone.
+    check(TreeBudget { max_depth: 1, ..TreeBudget::WAA }, 2, 1);
+    // Depth 2: windows, their direct children (3 under Explorer, 1 under the desktop).
+    check(TreeBudget { max_depth: 2, ..TreeBudget::WAA }, 6, 2);
+    // One child a node: one window, its title bar, one button.
+    check(TreeBudget { max_children: 1, ..TreeBudget::WAA }, 3, 3);
+    check(TreeBudget { max_nodes: 5, ..TreeBudget::WAA }, 5, 50);
+    check(TreeBudget { max_depth: 0, ..TreeBudget::WAA }, 0, 0);
+    check(TreeBudget { max_ms: 0, ..TreeBudget::WAA }, 0, 0);
+    let exact = TreeBudget { max_nodes: full.node_count, ..TreeBudget::WAA };
+    assert!(!d.accessibility(A11yBackend::Uia, &exact, false).unwrap().truncated);
+    assert!(matches!(
+        d.accessibility(A11yBackend::Unknown, &TreeBudget::WAA, false),
+        Err(DesktopError::InvalidInput(_))
+    ));
+}
+
+#[test]
+fn capture_shows_focus_and_the_cursor() {
+    let d = stub_with(
+        r#"{"windows": [
+            {"title": "Front", "rect": {"x": 100, "y": 100, "width": 400, "height": 300}},
+            {"title": "Back", "rect": {"x": 700, "y": 100, "width": 400, "height": 300}}
+        ], "cursor": {"x": 1000, "y": 600}}"#,
+    );
+    // A point in each title bar, clear of the title text and the caption buttons.
+    let front = (300, 104);
+    let back = (900, 104);
+    let frame = d.capture(false).unwrap();
+    assert_eq!((frame.image.width(), frame.image.height()), (1440, 900));
+    assert_eq!(frame.image.get_pixel(front.0, front.1).0, TITLE_FOCUSED);
+    assert_eq!(frame.image.get_pixel(back.0, back.1).0, TITLE_UNFOCUSED);
+    assert_eq!(frame.image.get_pixel(1300, 50).0, BACKGROUND);
+    assert!(!frame.cursor_drawn);
+    assert_eq!(frame.image.get_pixel(1001, 602).0, BACKGROUND);
+    d.activate_window(d.find_window("Back").unwrap()).unwrap();
+    let frame = d.capture(true).unwrap();
+    assert_eq!(frame.image.get_pixel(front.0, front.1).0, TITLE_UNFOCUSED);
+    assert_eq!(frame.image.get_pixel(back.0, back.1).0, TITLE_FOCUSED);
+    assert!(frame.cursor_drawn);
+    assert_eq!(frame.cursor, Some(Point::new(1000, 600)));
+    assert_eq!(frame.image.get_pixel(1000, 600).0, [0, 0, 0, 255], "the cursor's tip");
+    assert_eq!(frame.image.get_pixel(1001, 602).0, [255, 255, 255, 255], "the cursor's fill");
+    // The title text is drawn: some pixel of the title area differs from the bar colour.
+    let title_area = (110..200).flat_map(|x| (108..124).map(move |y| (x, y)));
+    assert!(title_area.into_iter().any(|(x, y)| frame.image.get_pixel(x, y).0 != TITLE_UNFOCUSED));
+}
+
+#[test]
+fn capture_draws_a_decodable_wallpaper() {
+    let d = StubDesktop::with_config(StubConfig {
+        scenario: Some(Scenario::load(&Path::new(env!("CARGO_MANIFEST_DIR")).join("scenarios/example.json")).unwrap()),
+        ..StubConfig::default()
+    })
+    .unwrap();
+    let frame = d.capture(false).unwrap();
+    assert_eq!((frame.image.width(), frame.image.height()), (1280, 800), "the scenario's screen wins");
+    // The 2x2 wallpaper is scaled up: its top-right quadrant is green.
+    let p = frame.image.get_pixel(1270, 10).0;
+    assert!(p[1] > 150 && p[0] < 100, "{p:?}");
+}
+
+#[test]
+fn the_example_scenario_seeds_everything() {
+    let scenario = Scenario::load(&Path::new(env!("CARGO_MANIFEST_DIR")).join("scenarios/example.json")).unwrap();
+    let d = StubDesktop::with_config(StubConfig { scenario: Some(scenario), ..StubConfig::default() }).unwrap();
+    assert_eq!(titles(&d), ["notes.txt - Notepad", "Documents", "New Tab - Google Chrome", "Program Manager"]);
+    assert_eq!(focused_title(&d), "notes.txt - Notepad");
+    let windows = d.windows().unwrap();
+    assert_eq!(windows[1].process_id, windows[3].process_id, "explorer windows share explorer.exe");
+    assert!(windows[2].minimized);
+    assert_eq!(d.clipboard_get().unwrap(), ClipboardData::Text("copied earlier".into()));
+    assert_eq!(d.registry_read(r"HKCU\Software\Arena\Example", Some("Enabled")).unwrap(), RegistryValue::Dword(1));
+    assert_eq!(
+        d.registry_read(r"HKCU\Software\Arena\Example", None).unwrap(),
+        RegistryValue::String("default value".into())
+    );
+    assert_eq!(d.env_var("arena_example").as_deref(), Some("yes"));
+    assert!(d.map_path(r"D:\Data").unwrap().is_dir());
+    assert_eq!(
+        d.directory_access_mask(r"C:\Users\Docker\Documents\Projects", "Administrators").unwrap(),
+        Some(2032127)
+    );
+    assert_eq!(d.cursor_position().unwrap(), Point::new(640, 400));
+    d.open_path(r"C:\Users\Docker\Documents\report.csv").unwrap();
+    assert_eq!(titles(&d)[0], "report.csv - LibreOffice Calc");
+}
+
+#[test]
+fn desktop_icons_open_on_double_click() {
+    let d = stub_with(
+        r#"{"files": {"C:\\Users\\Docker\\Desktop\\b.txt": "bee", "C:\\Users\\Docker\\Desktop\\a.txt": "ay"}}"#,
+    );
+    let tree = d.accessibility(A11yBackend::Uia, &TreeBudget::WAA, false).unwrap();
+    let icons: Vec<&str> = tree.windows[0].children[0].children.iter().map(|n| n.name.as_str()).collect();
+    assert_eq!(icons, ["a.txt", "b.txt"]);
+    let second = tree.windows[0].children[0].children[1].rect.unwrap().center();
+    d.perform(&Action::DoubleClick { x: Some(second.x), y: Some(second.y) }).unwrap();
+    assert_eq!(titles(&d)[0], "b.txt - Notepad");
+}
+
+#[test]
+fn the_taskbar_switches_windows() {
+    let d = stub_with(r#"{"windows": [{"title": "One"}, {"title": "Two"}]}"#);
+    let buttons = render::taskbar_buttons(&d.lock());
+    assert_eq!(buttons.len(), 2);
+    // Oldest first: "Two" was opened first (the list is topmost first).
+    let two = buttons[0].1.center();
+    d.perform(&click(two.x, two.y)).unwrap();
+    assert_eq!(focused_title(&d), "Two");
+    d.perform(&click(two.x, two.y)).unwrap();
+    assert!(d.windows().unwrap().iter().any(|w| w.title == "Two" && w.minimized));
+    d.perform(&click(two.x, two.y)).unwrap();
+    assert_eq!(focused_title(&d), "Two");
+}
+
+#[test]
+fn probes_exercise_each_component() {
+    let d = stub();
+    for component in Component::ALL {
+        let detail = d.probe(component).unwrap();
+        assert!(!detail.is_empty(), "{component:?}");
+    }
+    assert!(matches!(d.probe(Component::Unknown), Err(DesktopError::InvalidInput(_))));
+    assert!(!d.shutdown_requested());
+    d.shutdown().unwrap();
+    assert!(d.shutdown_requested());
+}
+
+#[test]
+fn the_clipboard_holds_images() {
+    let d = stub();
+    let img = image::RgbaImage::from_pixel(3, 2, image::Rgba([1, 2, 3, 255]));
+    d.clipboard_set(&ClipboardData::Image(img.clone())).unwrap();
+    assert_eq!(d.clipboard_get().unwrap(), ClipboardData::Image(img));
+    d.clipboard_set(&ClipboardData::Empty).unwrap();
+    assert_eq!(d.clipboard_get().unwrap(), ClipboardData::Empty);
+}
+
+#[test]
+fn the_stub_is_shared_across_threads() {
+    let d = std::sync::Arc::new(stub());
+    let id = open_notepad(&d);
+    let handles: Vec<_> = (0..4)
+        .map(|_| {
+            let d = std::sync::Arc::clone(&d);
+            std::thread::spawn(move || {
+                for _ in 0..25 {
+                    d.perform(&type_text("x")).unwrap();
+                }
+            })
+        })
+        .collect();
+    for h in handles {
+        h.join().unwrap();
+    }
+    assert_eq!(d.window_text(id).unwrap().len(), 100);
+    assert_eq!(d.action_log().len(), 100);
+}
+
+#[test]
+fn starting_a_document_opens_it() {
+    let d = stub_with(r#"{"files": {"C:\\Users\\Docker\\Desktop\\r.csv": "a,b"}}"#);
+    d.spawn(&CommandSpec::Shell(r#"start "" "C:\Users\Docker\Desktop\r.csv""#.into())).unwrap();
+    assert_eq!(titles(&d)[0], "r.csv - LibreOffice Calc");
+    let out = d.run(&CommandSpec::Shell(r"cmd /c start C:\Users\Docker\Desktop".into()), &limits(1000)).unwrap();
+    assert_eq!(out.exit_code, Some(0));
+    assert_eq!(titles(&d)[0], "Desktop");
+}

@@ -1,0 +1,633 @@
+//! The stub's mutable desktop state: windows in z-order, focus, text buffers, the
+//! cursor, held buttons and keys, the clipboard and the registry.
+//!
+//! Everything here is plain data behind the one mutex of [`super::StubDesktop`];
+//! no I/O happens in this module.
+
+use std::path::PathBuf;
+
+use arena_shared::action::{Action, MouseButton};
+use arena_shared::geometry::{Point, Rect};
+use arena_shared::observation::{A11yNode, WindowInfo};
+
+use super::registry::Registry;
+use crate::desktop::{ClipboardData, DesktopError, DesktopResult, WindowState};
+
+/// Height of a window's title bar, inside its 1-pixel border.
+pub(crate) const TITLE_H: i32 = 30;
+/// Width of each caption button (minimise, maximise, close) at the right of the title bar.
+pub(crate) const CAPTION_W: i32 = 46;
+/// Height of the taskbar, which the maximised window rectangle leaves free.
+pub(crate) const TASKBAR_H: i32 = 40;
+/// Width of one glyph of the 8x8 font.
+pub(crate) const GLYPH_W: i32 = 8;
+/// Height of one text line in a window body.
+pub(crate) const LINE_H: i32 = 12;
+/// Padding between a body's edge and its text.
+pub(crate) const BODY_PAD: i32 = 4;
+/// The first window id, as a real desktop's first HWNDs look.
+pub(crate) const FIRST_WINDOW_ID: u64 = 0x10010;
+/// The first fake process id.
+pub(crate) const FIRST_PID: u32 = 1000;
+
+/// A caption button of a title bar.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum Caption {
+    Minimize,
+    Maximize,
+    Close,
+}
+
+/// What a point of a window is.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum Hit {
+    TitleBar,
+    Button(Caption),
+    Body,
+    /// The window's taskbar button.
+    Taskbar,
+}
+
+/// A window's document: its text, a caret (in characters) and whether everything is selected.
+///
+/// Selection is all-or-nothing: `ctrl+a` selects everything, and the next edit replaces it.
+#[derive(Debug, Clone, PartialEq, Eq, Default)]
+pub(crate) struct TextBuf {
+    pub(crate) text: String,
+    pub(crate) caret: usize,
+    pub(crate) all_selected: bool,
+}
+
+impl TextBuf {
+    pub(crate) fn new(text: String) -> TextBuf {
+        let caret = text.chars().count();
+        TextBuf { text, caret, all_selected: false }
+    }
+
+    fn byte_at(&self, chars: usize) -> usize {
+        self.text.char_indices().nth(chars).map_or(self.text.len(), |(i, _)| i)
+    }
+
+    fn len(&self) -> usize {
+        self.text.chars().count()
+    }
+
+    /// Replaces the selection, or inserts at the caret.
+    pub(crate) fn insert(&mut self, s: &str) {
+        if self.all_selected {
+            self.text.clear();
+            self.caret = 0;
+            self.all_selected = false;
+        }
+        let at = self.byte_at(self.caret);
+        self.text.insert_str(at, s);
+        self.caret += s.chars().count();
+    }
+
+    pub(crate) fn backspace(&mut self) {
+        if self.take_selection().is_some() || self.caret == 0 {
+            return;
+        }
+        let (start, end) = (self.byte_at(self.caret - 1), self.byte_at(self.caret));
+        self.text.replace_range(start..end, "");
+        self.caret -= 1;
+    }
+
+    pub(crate) fn delete(&mut self) {
+        if self.take_selection().is_some() || self.caret >= self.len() {
+            return;
+        }
+        let (start, end) = (self.byte_at(self.caret), self.byte_at(self.caret + 1));
+        self.text.replace_range(start..end, "");
+    }
+
+    pub(crate) fn select_all(&mut self) {
+        self.all_selected = true;
+        self.caret = self.len();
+    }
+
+    /// The selected text, if anything is selected.
+    pub(crate) fn selection(&self) -> Option<&str> {
+        (self.all_selected && !self.text.is_empty()).then_some(self.text.as_str())
+    }
+
+    /// Removes and returns the selection.
+    pub(crate) fn take_selection(&mut self) -> Option<String> {
+        if !self.all_selected {
+            return None;
+        }
+        self.all_selected = false;
+        self.caret = 0;
+        Some(std::mem::take(&mut self.text))
+    }
+
+    /// Line index and column of the caret, counting `\n` as the line break.
+    fn caret_line_col(&self) -> (usize, usize) {
+        let before: String = self.text.chars().take(self.caret).collect();
+        let line = before.matches('\n').count();
+        let col = before.rsplit('\n').next().map_or(0, |l| l.chars().count());
+        (line, col)
+    }
+
+    /// Character index of `line`, `col` (clamped to the line's end).
+    fn index_of(&self, line: usize, col: usize) -> usize {
+        let mut index = 0;
+        for (i, l) in self.text.split('\n').enumerate() {
+            let len = l.chars().count();
+            if i == line {
+                return index + col.min(len);
+            }
+            index += len + 1;
+        }
+        self.len()
+    }
+
+    /// Moves the caret for a navigation key; `doc` is ctrl (document-wide home and end).
+    pub(crate) fn navigate(&mut self, key: &str, doc: bool) {
+        let was_selected = std::mem::replace(&mut self.all_selected, false);
+        let (line, col) = self.caret_line_col();
+        self.caret = match key {
+            "left" if was_selected => 0,
+            "left" => self.caret.saturating_sub(1),
+            "right" if was_selected => self.len(),
+            "right" => (self.caret + 1).min(self.len()),
+            "home" if doc => 0,
+            "home" => self.index_of(line, 0),
+            "end" if doc => self.len(),
+            "end" => self.index_of(line, usize::MAX),
+            "up" if line == 0 => 0,
+            "up" => self.index_of(line - 1, col),
+            "down" if line + 1 >= self.text.split('\n').count() => self.len(),
+            "down" => self.index_of(line + 1, col),
+            "pageup" => 0,
+            "pagedown" => self.len(),
+            _ => self.caret,
+        };
+    }
+
+    /// Places the caret at a visual row and column of the wrapped layout.
+    pub(crate) fn place_caret(&mut self, lines: &[VisualLine], row: usize, col: usize) {
+        self.all_selected = false;
+        self.caret = match lines.get(row) {
+            Some(line) => line.start + col.min(line.len),
+            None => self.len(),
+        };
+    }
+}
+
+/// One row of wrapped text: where it starts in the buffer (in characters) and how many it shows.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) struct VisualLine {
+    pub(crate) start: usize,
+    pub(crate) len: usize,
+}
+
+/// Wraps `text` into rows of at most `cols` characters, breaking at `\n` and hard at the width.
+pub(crate) fn layout(text: &str, cols: usize) -> Vec<VisualLine> {
+    let cols = cols.max(1);
+    let mut lines = Vec::new();
+    let mut start = 0;
+    for line in text.split('\n') {
+        let len = line.chars().count();
+        if len == 0 {
+            lines.push(VisualLine { start, len: 0 });
+        }
+        let mut offset = 0;
+        while offset < len {
+            let take = cols.min(len - offset);
+            lines.push(VisualLine { start: start + offset, len: take });
+            offset += take;
+        }
+        start += len + 1;
+    }
+    lines
+}
+
+/// A top-level window.
+#[derive(Debug, Clone)]
+pub(crate) struct Window {
+    pub(crate) id: u64,
+    pub(crate) title: String,
+    pub(crate) class_name: String,
+    pub(crate) process_name: String,
+    pub(crate) pid: u32,
+    pub(crate) rect: Rect,
+    /// Where a maximised window returns to.
+    pub(crate) restore_rect: Rect,
+    pub(crate) visible: bool,
+    pub(crate) minimized: bool,
+    pub(crate) maximized: bool,
+    pub(crate) refuse_close: bool,
+    /// Program Manager: the desktop itself.
+    pub(crate) is_desktop: bool,
+    pub(crate) text: Option<TextBuf>,
+    /// First visible row of the wrapped text.
+    pub(crate) scroll: usize,
+    /// Local file `ctrl+s` writes the document to.
+    pub(crate) file: Option<PathBuf>,
+    /// Accessibility subtrees from the scenario.
+    pub(crate) elements: Vec<A11yNode>,
+}
+
+impl Window {
+    /// Whether it is drawn and can be clicked.
+    pub(crate) fn shown(&self) -> bool {
+        self.visible && !self.minimized
+    }
+
+    pub(crate) fn title_bar(&self) -> Rect {
+        let r = self.rect;
+        Rect::new(r.x + 1, r.y + 1, (r.width - 2).max(0), TITLE_H.min((r.height - 2).max(0)))
+    }
+
+    pub(crate) fn body(&self) -> Rect {
+        let r = self.rect;
+        Rect::new(r.x + 1, r.y + 1 + TITLE_H, (r.width - 2).max(0), (r.height - 2 - TITLE_H).max(0))
+    }
+
+    /// The caption buttons, right to left as they are laid out: close, maximise, minimise.
+    pub(crate) fn captions(&self) -> [(Caption, Rect); 3] {
+        let bar = self.title_bar();
+        let at = |n: i32| Rect::new(bar.right() - CAPTION_W * n, bar.y, CAPTION_W, bar.height);
+        [(Caption::Minimize, at(3)), (Caption::Maximize, at(2)), (Caption::Close, at(1))]
+    }
+
+    /// Text columns and rows the body shows.
+    pub(crate) fn text_grid(&self) -> (usize, usize) {
+        let body = self.body();
+        let cols = ((body.width - 2 * BODY_PAD) / GLYPH_W).max(1) as usize;
+        let rows = ((body.height - 2 * BODY_PAD) / LINE_H).max(0) as usize;
+        (cols, rows)
+    }
+
+    pub(crate) fn hit(&self, p: Point) -> Option<Hit> {
+        if self.is_desktop || !self.rect.contains(p) {
+            return self.rect.contains(p).then_some(Hit::Body);
+        }
+        if let Some((caption, _)) = self.captions().iter().find(|(_, r)| r.contains(p)) {
+            return Some(Hit::Button(*caption));
+        }
+        if self.title_bar().contains(p) {
+            return Some(Hit::TitleBar);
+        }
+        Some(Hit::Body)
+    }
+
+    pub(crate) fn info(&self, z: usize, focused: bool) -> WindowInfo {
+        WindowInfo {
+            id: self.id,
+            title: self.title.clone(),
+            class_name: self.class_name.clone(),
+            process_id: self.pid,
+            process_name: self.process_name.clone(),
+            rect: self.rect,
+            visible: self.visible,
+            minimized: self.minimized,
+            maximized: self.maximized,
+            focused,
+            z_order: u32::try_from(z).unwrap_or(u32::MAX),
+        }
+    }
+}
+
+/// What a new window looks like.
+#[derive(Debug, Clone, Default)]
+pub(crate) struct NewWindow {
+    pub(crate) title: String,
+    pub(crate) class_name: String,
+    pub(crate) process_name: String,
+    /// `None` gets a fresh pid.
+    pub(crate) pid: Option<u32>,
+    /// `None` gets a cascade position.
+    pub(crate) rect: Option<Rect>,
+    pub(crate) text: Option<String>,
+    pub(crate) file: Option<PathBuf>,
+    pub(crate) elements: Vec<A11yNode>,
+    pub(crate) refuse_close: bool,
+}
+
+/// Held modifier keys, sided forms folded.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub(crate) struct Modifiers {
+    pub(crate) ctrl: bool,
+    pub(crate) alt: bool,
+    pub(crate) shift: bool,
+    pub(crate) win: bool,
+}
+
+/// A title bar being dragged: the window and where in it the cursor grabbed it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) struct Grab {
+    pub(crate) window: u64,
+    pub(crate) dx: i32,
+    pub(crate) dy: i32,
+}
+
+/// A button press waiting for its release: where it went down and what it hit.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) struct Press {
+    pub(crate) button: MouseButton,
+    pub(crate) window: u64,
+    pub(crate) hit: Hit,
+}
+
+/// The wallpaper scaled to the screen, with what it was made from.
+#[derive(Debug, Clone)]
+pub(crate) struct WallpaperCache {
+    pub(crate) key: (PathBuf, u64, Option<std::time::SystemTime>, (u32, u32)),
+    pub(crate) image: Option<image::RgbaImage>,
+}
+
+/// The whole mutable desktop.
+#[derive(Debug)]
+pub(crate) struct State {
+    pub(crate) screen: (u32, u32),
+    pub(crate) cursor: Point,
+    /// Topmost first; Program Manager is always last.
+    pub(crate) windows: Vec<Window>,
+    /// The foreground window (Program Manager when the desktop has focus).
+    pub(crate) focus: u64,
+    pub(crate) next_id: u64,
+    pub(crate) next_pid: u32,
+    /// How many windows have been cascaded, for the next default position.
+    pub(crate) cascade: i32,
+    pub(crate) buttons: Vec<MouseButton>,
+    pub(crate) press: Option<Press>,
+    pub(crate) grab: Option<Grab>,
+    pub(crate) mods: Modifiers,
+    pub(crate) clipboard: ClipboardData,
+    pub(crate) registry: Registry,
+    pub(crate) log: Vec<Action>,
+    pub(crate) shutdown: bool,
+    pub(crate) wallpaper: Option<WallpaperCache>,
+}
+
+impl State {
+    /// A desktop with only Program Manager.
+    pub(crate) fn new(screen: (u32, u32)) -> State {
+        let (w, h) = screen;
+        let mut state = State {
+            screen,
+            cursor: Point::new((w / 2) as i32, (h / 2) as i32),
+            windows: Vec::new(),
+            focus: FIRST_WINDOW_ID,
+            next_id: FIRST_WINDOW_ID,
+            next_pid: FIRST_PID,
+            cascade: 0,
+            buttons: Vec::new(),
+            press: None,
+            grab: None,
+            mods: Modifiers::default(),
+            clipboard: ClipboardData::Empty,
+            registry: Registry::seeded(),
+            log: Vec::new(),
+            shutdown: false,
+            wallpaper: None,
+        };
+        let full = state.screen_rect();
+        let pid = state.alloc_pid();
+        let id = state.alloc_id();
+        state.windows.push(Window {
+            id,
+            title: "Program Manager".into(),
+            class_name: "Progman".into(),
+            process_name: "explorer.exe".into(),
+            pid,
+            rect: full,
+            restore_rect: full,
+            visible: true,
+            minimized: false,
+            maximized: false,
+            refuse_close: true,
+            is_desktop: true,
+            text: None,
+            scroll: 0,
+            file: None,
+            elements: Vec::new(),
+        });
+        state.focus = id;
+        state
+    }
+
+    fn alloc_id(&mut self) -> u64 {
+        let id = self.next_id;
+        self.next_id += 1;
+        id
+    }
+
+    pub(crate) fn alloc_pid(&mut self) -> u32 {
+        let pid = self.next_pid;
+        self.next_pid += 1;
+        pid
+    }
+
+    pub(crate) fn screen_rect(&self) -> Rect {
+        Rect::new(0, 0, self.screen.0 as i32, self.screen.1 as i32)
+    }
+
+    /// The screen minus the taskbar: where maximised windows go.
+    pub(crate) fn work_area(&self) -> Rect {
+        let r = self.screen_rect();
+        Rect::new(0, 0, r.width, (r.height - TASKBAR_H).max(1))
+    }
+
+    pub(crate) fn desktop_id(&self) -> u64 {
+        self.windows.iter().find(|w| w.is_desktop).map_or(FIRST_WINDOW_ID, |w| w.id)
+    }
+
+    pub(crate) fn index(&self, id: u64) -> DesktopResult<usize> {
+        self.windows
+            .iter()
+            .position(|w| w.id == id)
+            .ok_or_else(|| DesktopError::NotFound(format!("no window with id {id:#x}")))
+    }
+
+    pub(crate) fn window(&self, id: u64) -> Option<&Window> {
+        self.windows.iter().find(|w| w.id == id)
+    }
+
+    pub(crate) fn window_mut(&mut self, id: u64) -> Option<&mut Window> {
+        self.windows.iter_mut().find(|w| w.id == id)
+    }
+
+    /// The focused window, unless the desktop has focus.
+    pub(crate) fn focused_app_mut(&mut self) -> Option<&mut Window> {
+        let focus = self.focus;
+        self.windows.iter_mut().find(|w| w.id == focus && !w.is_desktop)
+    }
+
+    /// Opens a window on top, focused, and returns its id.
+    pub(crate) fn open(&mut self, new: NewWindow) -> u64 {
+        let id = self.alloc_id();
+        let pid = new.pid.unwrap_or_else(|| self.alloc_pid());
+        let rect = new.rect.unwrap_or_else(|| self.cascade_rect());
+        self.windows.insert(
+            0,
+            Window {
+                id,
+                title: new.title,
+                class_name: new.class_name,
+                process_name: new.process_name,
+                pid,
+                rect,
+                restore_rect: rect,
+                visible: true,
+                minimized: false,
+                maximized: false,
+                refuse_close: new.refuse_close,
+                is_desktop: false,
+                text: new.text.map(TextBuf::new),
+                scroll: 0,
+                file: new.file,
+                elements: new.elements,
+            },
+        );
+        self.focus = id;
+        id
+    }
+
+    /// The next default window position: a cascade from the top-left, 30 pixels a step.
+    fn cascade_rect(&mut self) -> Rect {
+        let work = self.work_area();
+        let step = self.cascade % 8;
+        self.cascade += 1;
+        let width = (work.width - 240).clamp(200, 960);
+        let height = (work.height - 240).clamp(150, 640);
+        Rect::new(60 + 30 * step, 40 + 30 * step, width, height)
+    }
+
+    /// Raises a window to the top (Program Manager stays at the bottom) and focuses it.
+    pub(crate) fn activate(&mut self, id: u64) -> DesktopResult<()> {
+        let index = self.index(id)?;
+        if !self.windows[index].is_desktop {
+            let window = self.windows.remove(index);
+            self.windows.insert(0, window);
+        }
+        self.focus = id;
+        Ok(())
+    }
+
+    /// Gives focus to the topmost shown window, or the desktop, after the focused one went away.
+    pub(crate) fn refocus(&mut self) {
+        self.focus =
+            self.windows.iter().find(|w| w.shown() && !w.is_desktop).map_or_else(|| self.desktop_id(), |w| w.id);
+    }
+
+    /// The topmost shown window under `p`.
+    pub(crate) fn window_at(&self, p: Point) -> Option<&Window> {
+        self.windows.iter().find(|w| w.shown() && w.rect.contains(p))
+    }
+
+    pub(crate) fn set_state(&mut self, id: u64, state: WindowState) -> DesktopResult<()> {
+        let index = self.index(id)?;
+        let work = self.work_area();
+        let window = &mut self.windows[index];
+        if window.is_desktop {
+            // Program Manager cannot be minimised or maximised; like ShowWindow on it, this does nothing.
+            return Ok(());
+        }
+        match state {
+            WindowState::Minimized => {
+                window.minimized = true;
+                if self.focus == id {
+                    self.refocus();
+                }
+                return Ok(());
+            }
+            WindowState::Maximized => {
+                if !window.maximized {
+                    window.restore_rect = window.rect;
+                }
+                window.maximized = true;
+                window.minimized = false;
+                window.rect = work;
+            }
+            WindowState::Normal => {
+                if window.minimized {
+                    window.minimized = false;
+                } else if window.maximized {
+                    window.maximized = false;
+                    window.rect = window.restore_rect;
+                }
+            }
+        }
+        self.activate(id)
+    }
+
+    /// `WM_CLOSE`: the window goes away unless it refuses.
+    pub(crate) fn close(&mut self, id: u64) -> DesktopResult<()> {
+        let index = self.index(id)?;
+        let window = &self.windows[index];
+        if window.is_desktop {
+            return Err(DesktopError::PermissionDenied("Program Manager (the desktop) cannot be closed".into()));
+        }
+        if window.refuse_close {
+            tracing::debug!(id, title = %window.title, "stub window refuses to close");
+            return Ok(());
+        }
+        self.windows.remove(index);
+        if self.grab.is_some_and(|g| g.window == id) {
+            self.grab = None;
+        }
+        if self.focus == id {
+            self.refocus();
+        }
+        Ok(())
+    }
+
+    pub(crate) fn infos(&self) -> Vec<WindowInfo> {
+        self.windows.iter().enumerate().map(|(z, w)| w.info(z, w.id == self.focus)).collect()
+    }
+
+    pub(crate) fn clamp(&self, p: Point) -> Point {
+        Point::new(p.x.clamp(0, self.screen.0 as i32 - 1), p.y.clamp(0, self.screen.1 as i32 - 1))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn text_editing_follows_the_caret() {
+        let mut buf = TextBuf::new("héllo".into());
+        buf.insert("!");
+        assert_eq!(buf.text, "héllo!");
+        buf.navigate("home", false);
+        buf.insert(">");
+        assert_eq!(buf.text, ">héllo!");
+        buf.navigate("right", false);
+        buf.delete();
+        assert_eq!(buf.text, ">hllo!");
+        buf.backspace();
+        assert_eq!(buf.text, ">llo!");
+        assert_eq!(buf.caret, 1);
+        buf.select_all();
+        assert_eq!(buf.selection(), Some(">llo!"));
+        buf.insert("new");
+        assert_eq!(buf.text, "new");
+        buf.select_all();
+        buf.backspace();
+        assert_eq!(buf.text, "");
+        assert_eq!(buf.selection(), None);
+    }
+
+    #[test]
+    fn caret_moves_between_lines() {
+        let mut buf = TextBuf::new("abc\nde\nfghij".into());
+        buf.navigate("up", false);
+        assert_eq!(buf.caret, 6, "end of \"de\"");
+        buf.navigate("up", false);
+        buf.insert("X");
+        assert_eq!(buf.text, "abXc\nde\nfghij");
+        buf.navigate("end", true);
+        assert_eq!(buf.caret, buf.text.chars().count());
+    }
+
+    #[test]
+    fn layout_wraps_and_breaks() {
+        let lines = layout("abcdefg\n\nxy", 3);
+        let got: Vec<(usize, usize)> = lines.iter().map(|l| (l.start, l.len)).collect();
+        assert_eq!(got, vec![(0, 3), (3, 3), (6, 1), (8, 0), (9, 2)]);
+    }
+}
