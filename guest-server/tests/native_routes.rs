@@ -1,0 +1,884 @@
+//! Router tests of the native `/v1/` API against the stub backend, driven with
+//! `tower::ServiceExt::oneshot` (no sockets).
+
+use std::sync::Arc;
+
+use axum::body::{Body, Bytes};
+use axum::http::{header, HeaderMap, Method, Request, StatusCode};
+use axum::Router;
+use base64::Engine as _;
+use http_body_util::BodyExt as _;
+use serde::de::DeserializeOwned;
+use serde_json::{json, Value};
+use tower::ServiceExt as _;
+
+use arena_guest::config::ServerConfig;
+use arena_guest::desktop::stub::{StubConfig, StubDesktop};
+use arena_guest::state::AppState;
+use arena_shared::action::ActionReport;
+use arena_shared::clipboard::ClipboardContent;
+use arena_shared::error::{ErrorBody, ErrorCode};
+use arena_shared::exec::{ExecResult, LaunchResult};
+use arena_shared::files::{DirListing, Exists, FileKind, FileStat, FileWritten, KnownFolder, KnownFolders};
+use arena_shared::geometry::{CoordinateSpace, Point};
+use arena_shared::health::{Component, HealthReport, Readiness};
+use arena_shared::observation::{A11yNode, A11yTree, ImageFormat, ScreenInfo, ScreenshotMeta, WindowInfo};
+use arena_shared::registry::{RegistryRead, RegistryValue};
+
+const TOKEN: &str = "0123456789abcdef0123";
+
+/// A router over a fresh stub whose drives live in a temporary directory.
+struct TestApp {
+    router: Router,
+    dir: tempfile::TempDir,
+}
+
+/// What a request answered.
+struct Answer {
+    status: StatusCode,
+    headers: HeaderMap,
+    body: Bytes,
+}
+
+impl Answer {
+    fn json<T: DeserializeOwned>(&self) -> T {
+        match serde_json::from_slice(&self.body) {
+            Ok(v) => v,
+            Err(err) => panic!(
+                "status {}: body {:?} is not the expected JSON: {err}",
+                self.status,
+                String::from_utf8_lossy(&self.body)
+            ),
+        }
+    }
+
+    /// Asserts an error answer: its status, the one error body shape, and a message mentioning `needle`.
+    fn assert_error(&self, status: StatusCode, code: ErrorCode, needle: &str) {
+        assert_eq!(self.status, status, "body: {}", String::from_utf8_lossy(&self.body));
+        let body: ErrorBody = self.json();
+        assert_eq!(body.error, code, "{body:?}");
+        assert!(body.message.contains(needle), "message {:?} lacks {needle:?}", body.message);
+    }
+
+    fn assert_status(&self, status: StatusCode) {
+        assert_eq!(self.status, status, "body: {}", String::from_utf8_lossy(&self.body));
+    }
+}
+
+fn app_with(token: Option<&str>) -> TestApp {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let stub =
+        StubDesktop::with_config(StubConfig { root: Some(dir.path().into()), screen: (1440, 900), scenario: None })
+            .expect("stub desktop");
+    let state = AppState::new(Arc::new(stub), ServerConfig::for_stub(), token.map(str::to_owned));
+    TestApp { router: arena_guest::router(state), dir }
+}
+
+fn app() -> TestApp {
+    app_with(None)
+}
+
+impl TestApp {
+    async fn send(&self, request: Request<Body>) -> Answer {
+        let response = self.router.clone().oneshot(request).await.expect("infallible router");
+        let status = response.status();
+        let headers = response.headers().clone();
+        let body = response.into_body().collect().await.expect("body").to_bytes();
+        Answer { status, headers, body }
+    }
+
+    async fn get(&self, uri: &str) -> Answer {
+        self.send(Request::get(uri).body(Body::empty()).unwrap()).await
+    }
+
+    async fn json(&self, method: Method, uri: &str, body: Value) -> Answer {
+        let request = Request::builder()
+            .method(method)
+            .uri(uri)
+            .header(header::CONTENT_TYPE, "application/json")
+            .body(Body::from(body.to_string()))
+            .unwrap();
+        self.send(request).await
+    }
+
+    async fn post(&self, uri: &str, body: Value) -> Answer {
+        self.json(Method::POST, uri, body).await
+    }
+
+    async fn put_bytes(&self, uri: &str, bytes: &[u8]) -> Answer {
+        self.send(Request::put(uri).body(Body::from(bytes.to_vec())).unwrap()).await
+    }
+
+    async fn delete(&self, uri: &str) -> Answer {
+        self.send(Request::delete(uri).body(Body::empty()).unwrap()).await
+    }
+
+    /// Launches notepad and answers its window.
+    async fn notepad(&self) -> WindowInfo {
+        self.post("/v1/launch", json!({"argv": ["notepad"]})).await.assert_status(StatusCode::OK);
+        let windows: Vec<WindowInfo> = self.get("/v1/windows").await.json();
+        windows.into_iter().find(|w| w.title.contains("Notepad")).expect("a notepad window")
+    }
+}
+
+/// Percent-encodes a query value.
+fn q(value: &str) -> String {
+    let mut out = String::new();
+    for b in value.bytes() {
+        if b.is_ascii_alphanumeric() || b"-_.~".contains(&b) {
+            out.push(b as char);
+        } else {
+            out.push_str(&format!("%{b:02X}"));
+        }
+    }
+    out
+}
+
+fn sha256_hex(bytes: &[u8]) -> String {
+    use sha2::Digest as _;
+    hex::encode(sha2::Sha256::digest(bytes))
+}
+
+fn find_node<'a>(node: &'a A11yNode, pred: &dyn Fn(&A11yNode) -> bool) -> Option<&'a A11yNode> {
+    if pred(node) {
+        return Some(node);
+    }
+    node.children.iter().find_map(|c| find_node(c, pred))
+}
+
+// ----- health and screen -----
+
+#[tokio::test]
+async fn health_lists_every_component_ok_on_the_stub() {
+    let app = app();
+    let answer = app.get("/v1/health").await;
+    answer.assert_status(StatusCode::OK);
+    let report: HealthReport = answer.json();
+    assert_eq!(report.status, Readiness::Ready, "{report:?}");
+    assert_eq!(report.backend, "stub");
+    assert_eq!(report.api_version, arena_shared::API_VERSION);
+    assert!(!report.auth_required);
+    for component in Component::ALL {
+        assert!(report.is_up(component), "{component:?} is not up: {report:?}");
+    }
+    assert_eq!(report.components.len(), Component::ALL.len());
+}
+
+#[tokio::test]
+async fn screen_reports_the_stub_size_in_physical_pixels() {
+    let info: ScreenInfo = app().get("/v1/screen").await.json();
+    assert_eq!((info.physical_width, info.physical_height), (1440, 900));
+    assert_eq!(info.coordinate_space, CoordinateSpace::Physical);
+}
+
+#[tokio::test]
+async fn screenshot_png_is_full_size_with_its_meta_header() {
+    let answer = app().get("/v1/screenshot").await;
+    answer.assert_status(StatusCode::OK);
+    assert_eq!(answer.headers[header::CONTENT_TYPE], "image/png");
+    let meta: ScreenshotMeta = serde_json::from_str(answer.headers["x-arena-screenshot"].to_str().unwrap()).unwrap();
+    let image = image::load_from_memory_with_format(&answer.body, image::ImageFormat::Png).expect("a PNG");
+    assert_eq!((image.width(), image.height()), (1440, 900));
+    assert_eq!((meta.width, meta.height, meta.physical_width, meta.physical_height), (1440, 900, 1440, 900));
+    assert_eq!(meta.scale, 1.0);
+    assert_eq!(meta.format, ImageFormat::Png);
+    assert_eq!(meta.coordinate_space, CoordinateSpace::Physical);
+    assert!(meta.cursor.is_some() && meta.cursor_drawn);
+    assert!(!meta.black_frame);
+}
+
+#[tokio::test]
+async fn screenshot_jpeg_downscales_and_reports_the_scale() {
+    let answer = app().get("/v1/screenshot?format=jpeg&quality=70&max_side=720&cursor=false").await;
+    answer.assert_status(StatusCode::OK);
+    assert_eq!(answer.headers[header::CONTENT_TYPE], "image/jpeg");
+    let meta: ScreenshotMeta = serde_json::from_str(answer.headers["x-arena-screenshot"].to_str().unwrap()).unwrap();
+    let image = image::load_from_memory_with_format(&answer.body, image::ImageFormat::Jpeg).expect("a JPEG");
+    assert_eq!((image.width(), image.height()), (720, 450));
+    assert_eq!((meta.width, meta.height), (720, 450));
+    assert_eq!((meta.physical_width, meta.physical_height), (1440, 900));
+    assert_eq!(meta.scale, 2.0);
+    assert_eq!(meta.coordinate_space, CoordinateSpace::Image);
+    assert!(!meta.cursor_drawn);
+}
+
+#[tokio::test]
+async fn screenshot_rejects_bad_quality_and_sizes() {
+    let app = app();
+    app.get("/v1/screenshot?format=jpeg&quality=0").await.assert_error(
+        StatusCode::BAD_REQUEST,
+        ErrorCode::BadRequest,
+        "quality",
+    );
+    app.get("/v1/screenshot?format=jpeg&quality=101").await.assert_error(
+        StatusCode::BAD_REQUEST,
+        ErrorCode::BadRequest,
+        "quality",
+    );
+    app.get("/v1/screenshot?max_side=0").await.assert_error(StatusCode::BAD_REQUEST, ErrorCode::BadRequest, "max_side");
+    app.get("/v1/screenshot?max_side=15").await.assert_error(
+        StatusCode::BAD_REQUEST,
+        ErrorCode::BadRequest,
+        "max_side",
+    );
+    app.get("/v1/screenshot?format=gif").await.assert_error(StatusCode::BAD_REQUEST, ErrorCode::BadRequest, "format");
+}
+
+// ----- input and accessibility -----
+
+#[tokio::test]
+async fn actions_move_the_cursor_and_type_into_a_launched_notepad() {
+    let app = app();
+    let launched: LaunchResult = app.post("/v1/launch", json!({"argv": ["notepad"]})).await.json();
+    assert!(launched.pid > 0);
+    let windows: Vec<WindowInfo> = app.get("/v1/windows").await.json();
+    let notepad = windows.iter().find(|w| w.title.contains("Notepad")).expect("notepad window");
+    let body = notepad.rect.center();
+    let batch = json!({"actions": [
+        {"type": "move_to", "x": 5, "y": 5},
+        {"type": "click", "x": body.x, "y": body.y},
+        {"type": "wait", "ms": 10},
+        {"type": "type_text", "text": "hello arena"},
+        {"type": "move_to", "x": 300, "y": 200},
+    ]});
+    let answer = app.post("/v1/actions", batch).await;
+    answer.assert_status(StatusCode::OK);
+    let report: ActionReport = answer.json();
+    assert_eq!(report.executed, 5);
+    assert_eq!(report.cursor, Point::new(300, 200));
+
+    let tree: A11yTree = app.get("/v1/a11y?backend=uia&foreground_only=true").await.json();
+    let edit = tree
+        .windows
+        .iter()
+        .find_map(|w| find_node(w, &|n| n.class_name == "Edit" && n.value.is_some()))
+        .expect("an Edit node with a value");
+    assert_eq!(edit.value.as_deref(), Some("hello arena"));
+}
+
+#[tokio::test]
+async fn an_unknown_key_is_refused_before_anything_runs() {
+    let app = app();
+    let batch = json!({"actions": [
+        {"type": "move_to", "x": 123, "y": 45},
+        {"type": "hotkey", "keys": ["ctrl", "sup3rkey"]},
+    ]});
+    app.post("/v1/actions", batch).await.assert_error(StatusCode::BAD_REQUEST, ErrorCode::BadRequest, "sup3rkey");
+    let report: ActionReport = app.post("/v1/actions", json!({"actions": []})).await.json();
+    assert_eq!(report.executed, 0);
+    assert_ne!(report.cursor, Point::new(123, 45), "the move before the bad key must not have run");
+}
+
+#[tokio::test]
+async fn an_unknown_action_type_is_refused_with_its_index() {
+    let batch = json!({"actions": [{"type": "wait", "ms": 1}, {"type": "teleport"}]});
+    app().post("/v1/actions", batch).await.assert_error(StatusCode::BAD_REQUEST, ErrorCode::BadRequest, "action 1");
+}
+
+#[tokio::test]
+async fn a11y_walks_the_desktop_and_rejects_bad_budgets() {
+    let app = app();
+    app.notepad().await;
+    let tree: A11yTree = app.get("/v1/a11y?max_depth=3&max_nodes=500").await.json();
+    assert!(!tree.windows.is_empty());
+    assert!(tree.node_count > 0);
+    app.get("/v1/a11y?max_depth=0").await.assert_error(StatusCode::BAD_REQUEST, ErrorCode::BadRequest, "max_depth");
+    app.get("/v1/a11y?max_ms=200000").await.assert_error(StatusCode::BAD_REQUEST, ErrorCode::BadRequest, "max_ms");
+    app.get("/v1/a11y?backend=atk").await.assert_error(StatusCode::BAD_REQUEST, ErrorCode::BadRequest, "backend");
+}
+
+// ----- windows -----
+
+#[tokio::test]
+async fn windows_activate_by_title_and_change_state() {
+    let app = app();
+    let notepad = app.notepad().await;
+    let active: WindowInfo = app.post("/v1/windows/activate", json!({"title": "untitled - NOTEPAD"})).await.json();
+    assert_eq!(active.id, notepad.id);
+    assert!(active.focused);
+
+    let minimized: WindowInfo = app.post("/v1/windows/minimize", json!({"id": notepad.id})).await.json();
+    assert!(minimized.minimized);
+    let restored: WindowInfo = app.post("/v1/windows/restore", json!({"id": notepad.id})).await.json();
+    assert!(!restored.minimized);
+    let maximized: WindowInfo = app.post("/v1/windows/maximize", json!({"id": notepad.id})).await.json();
+    assert!(maximized.maximized);
+
+    let closed: WindowInfo = app.post("/v1/windows/close", json!({"id": notepad.id})).await.json();
+    assert_eq!(closed.id, notepad.id);
+    let windows: Vec<WindowInfo> = app.get("/v1/windows").await.json();
+    assert!(windows.iter().all(|w| w.id != notepad.id), "closed window still listed");
+}
+
+#[tokio::test]
+async fn windows_targets_must_name_exactly_one_existing_window() {
+    let app = app();
+    let notepad = app.notepad().await;
+    app.post("/v1/windows/activate", json!({"title": "No Such Program"})).await.assert_error(
+        StatusCode::NOT_FOUND,
+        ErrorCode::NotFound,
+        "No Such Program",
+    );
+    app.post("/v1/windows/activate", json!({"id": notepad.id, "title": "Notepad"})).await.assert_error(
+        StatusCode::BAD_REQUEST,
+        ErrorCode::BadRequest,
+        "exactly one",
+    );
+    app.post("/v1/windows/close", json!({})).await.assert_error(
+        StatusCode::BAD_REQUEST,
+        ErrorCode::BadRequest,
+        "exactly one",
+    );
+    app.post("/v1/windows/close", json!({"id": 1})).await.assert_error(
+        StatusCode::NOT_FOUND,
+        ErrorCode::NotFound,
+        "id 1",
+    );
+}
+
+// ----- clipboard -----
+
+#[tokio::test]
+async fn clipboard_round_trips_text() {
+    let app = app();
+    let text = ClipboardContent::Text { text: "zwölf ✓".into() };
+    app.json(Method::PUT, "/v1/clipboard", serde_json::to_value(&text).unwrap())
+        .await
+        .assert_status(StatusCode::NO_CONTENT);
+    let back: ClipboardContent = app.get("/v1/clipboard").await.json();
+    assert_eq!(back, text);
+}
+
+#[tokio::test]
+async fn clipboard_round_trips_images() {
+    let app = app();
+    let image = image::RgbaImage::from_fn(7, 5, |x, y| image::Rgba([x as u8 * 30, y as u8 * 40, 200, 255]));
+    let mut png = Vec::new();
+    image::DynamicImage::ImageRgba8(image.clone())
+        .write_to(&mut std::io::Cursor::new(&mut png), image::ImageFormat::Png)
+        .unwrap();
+    let content = json!({"kind": "image", "width": 7, "height": 5, "png_base64": base64::engine::general_purpose::STANDARD.encode(&png)});
+    app.json(Method::PUT, "/v1/clipboard", content).await.assert_status(StatusCode::NO_CONTENT);
+    match app.get("/v1/clipboard").await.json::<ClipboardContent>() {
+        ClipboardContent::Image { width, height, png_base64 } => {
+            assert_eq!((width, height), (7, 5));
+            let bytes = base64::engine::general_purpose::STANDARD.decode(png_base64).unwrap();
+            let back = image::load_from_memory(&bytes).unwrap().to_rgba8();
+            assert_eq!(back, image);
+        }
+        other => panic!("expected an image, got {other:?}"),
+    }
+}
+
+#[tokio::test]
+async fn clipboard_refuses_bad_images_and_unknown_kinds() {
+    let app = app();
+    app.json(
+        Method::PUT,
+        "/v1/clipboard",
+        json!({"kind": "image", "width": 1, "height": 1, "png_base64": "not base64!"}),
+    )
+    .await
+    .assert_error(StatusCode::BAD_REQUEST, ErrorCode::BadRequest, "base64");
+    app.json(Method::PUT, "/v1/clipboard", json!({"kind": "image", "width": 1, "height": 1, "png_base64": "aGVsbG8="}))
+        .await
+        .assert_error(StatusCode::BAD_REQUEST, ErrorCode::BadRequest, "png_base64");
+    app.json(Method::PUT, "/v1/clipboard", json!({"kind": "rtf"})).await.assert_error(
+        StatusCode::BAD_REQUEST,
+        ErrorCode::BadRequest,
+        "unknown clipboard kind",
+    );
+}
+
+// ----- files -----
+
+#[tokio::test]
+async fn files_round_trip_with_sha256() {
+    let app = app();
+    let path = r"C:\Users\Docker\Desktop\notes\a.txt";
+    let content = b"hello\r\nworld\n";
+    let sha = sha256_hex(content);
+    let answer = app.put_bytes(&format!("/v1/files?path={}&sha256={sha}", q(path)), content).await;
+    answer.assert_status(StatusCode::OK);
+    let written: FileWritten = answer.json();
+    assert_eq!(written, FileWritten { path: path.into(), size: content.len() as u64, sha256: sha.clone() });
+
+    // `~` is expanded with the guest's profile folder.
+    let read = app.get(&format!("/v1/files?path={}", q(r"~\Desktop\notes\a.txt"))).await;
+    read.assert_status(StatusCode::OK);
+    assert_eq!(&read.body[..], content);
+    assert_eq!(read.headers["x-arena-sha256"], sha.as_str());
+    assert_eq!(read.headers[header::CONTENT_LENGTH], content.len().to_string().as_str());
+    assert_eq!(read.headers[header::CONTENT_TYPE], "application/octet-stream");
+
+    let stat: FileStat = app.get(&format!("/v1/files/stat?path={}", q(path))).await.json();
+    assert_eq!((stat.kind, stat.size, stat.hidden), (FileKind::File, content.len() as u64, false));
+    assert!(stat.modified_ms.is_some());
+
+    let exists: Exists = app.get(&format!("/v1/files/exists?path={}", q(path))).await.json();
+    assert_eq!(exists, Exists { exists: true, kind: Some(FileKind::File) });
+
+    app.put_bytes(&format!("/v1/files?path={}", q(r"C:\Users\Docker\Desktop\notes\0.txt")), b"0")
+        .await
+        .assert_status(StatusCode::OK);
+    app.post("/v1/files/mkdir", json!({"path": r"C:\Users\Docker\Desktop\notes\sub\deeper"}))
+        .await
+        .assert_status(StatusCode::NO_CONTENT);
+    let listing: DirListing =
+        app.get(&format!("/v1/files/list?path={}", q(r"C:\Users\Docker\Desktop\notes"))).await.json();
+    let names: Vec<(&str, FileKind)> = listing.entries.iter().map(|e| (e.name.as_str(), e.kind)).collect();
+    assert_eq!(names, [("0.txt", FileKind::File), ("a.txt", FileKind::File), ("sub", FileKind::Dir)]);
+
+    app.delete(&format!("/v1/files?path={}", q(path))).await.assert_status(StatusCode::NO_CONTENT);
+    let exists: Exists = app.get(&format!("/v1/files/exists?path={}", q(path))).await.json();
+    assert_eq!(exists, Exists { exists: false, kind: None });
+    app.get(&format!("/v1/files?path={}", q(path))).await.assert_error(
+        StatusCode::NOT_FOUND,
+        ErrorCode::NotFound,
+        "a.txt",
+    );
+}
+
+#[tokio::test]
+async fn a_sha256_mismatch_writes_nothing() {
+    let app = app();
+    let path = q(r"C:\Users\Docker\keep.txt");
+    app.put_bytes(&format!("/v1/files?path={path}"), b"old content").await.assert_status(StatusCode::OK);
+    let wrong = sha256_hex(b"something else");
+    app.put_bytes(&format!("/v1/files?path={path}&sha256={wrong}"), b"new content").await.assert_error(
+        StatusCode::CONFLICT,
+        ErrorCode::Conflict,
+        "nothing was written",
+    );
+    assert_eq!(&app.get(&format!("/v1/files?path={path}")).await.body[..], b"old content");
+    app.put_bytes(&format!("/v1/files?path={path}&sha256=xyz"), b"new content").await.assert_error(
+        StatusCode::BAD_REQUEST,
+        ErrorCode::BadRequest,
+        "sha256",
+    );
+    let local = app.dir.path().join("C/Users/Docker");
+    let stray: Vec<_> = std::fs::read_dir(&local)
+        .unwrap()
+        .flatten()
+        .filter(|e| e.file_name().to_string_lossy().starts_with(".tmp"))
+        .collect();
+    assert!(stray.is_empty(), "temporary files left behind: {stray:?}");
+}
+
+#[tokio::test]
+async fn writes_without_create_parents_need_the_parent() {
+    let app = app();
+    let path = q(r"C:\Users\Docker\missing\dir\a.txt");
+    app.put_bytes(&format!("/v1/files?path={path}&create_parents=false"), b"x").await.assert_error(
+        StatusCode::NOT_FOUND,
+        ErrorCode::NotFound,
+        "create_parents",
+    );
+    let exists: Exists = app.get(&format!("/v1/files/exists?path={}", q(r"C:\Users\Docker\missing"))).await.json();
+    assert!(!exists.exists);
+    app.put_bytes(&format!("/v1/files?path={path}"), b"x").await.assert_status(StatusCode::OK);
+}
+
+#[tokio::test]
+async fn file_paths_must_stay_absolute_and_inside_the_guest() {
+    let app = app();
+    let escape = q(r"C:\..\..\etc\passwd");
+    app.get(&format!("/v1/files?path={escape}")).await.assert_error(
+        StatusCode::BAD_REQUEST,
+        ErrorCode::BadRequest,
+        "climbs",
+    );
+    app.put_bytes(&format!("/v1/files?path={escape}"), b"x").await.assert_error(
+        StatusCode::BAD_REQUEST,
+        ErrorCode::BadRequest,
+        "climbs",
+    );
+    assert!(!app.dir.path().join("etc").exists() && !app.dir.path().parent().unwrap().join("etc/passwd").exists());
+    app.get(&format!("/v1/files/exists?path={}", q(r"Users\Docker\a.txt"))).await.assert_error(
+        StatusCode::BAD_REQUEST,
+        ErrorCode::BadRequest,
+        "relative",
+    );
+    app.get("/v1/files/stat?path=").await.assert_error(StatusCode::BAD_REQUEST, ErrorCode::BadRequest, "empty");
+    app.get("/v1/files/stat").await.assert_error(StatusCode::BAD_REQUEST, ErrorCode::BadRequest, "path");
+}
+
+#[tokio::test]
+async fn file_routes_refuse_the_wrong_kind_of_thing() {
+    let app = app();
+    let dir = q(r"C:\Users\Docker\Documents\d");
+    let file = q(r"C:\Users\Docker\Documents\d\f.txt");
+    app.put_bytes(&format!("/v1/files?path={file}"), b"x").await.assert_status(StatusCode::OK);
+    app.get(&format!("/v1/files?path={dir}")).await.assert_error(
+        StatusCode::BAD_REQUEST,
+        ErrorCode::BadRequest,
+        "is a directory",
+    );
+    app.put_bytes(&format!("/v1/files?path={dir}"), b"x").await.assert_error(
+        StatusCode::BAD_REQUEST,
+        ErrorCode::BadRequest,
+        "is a directory",
+    );
+    app.get(&format!("/v1/files/list?path={file}")).await.assert_error(
+        StatusCode::BAD_REQUEST,
+        ErrorCode::BadRequest,
+        "not a directory",
+    );
+    app.get(&format!("/v1/files/list?path={}", q(r"C:\nope"))).await.assert_error(
+        StatusCode::NOT_FOUND,
+        ErrorCode::NotFound,
+        "nope",
+    );
+    app.get(&format!("/v1/files/stat?path={}", q(r"C:\nope"))).await.assert_error(
+        StatusCode::NOT_FOUND,
+        ErrorCode::NotFound,
+        "nope",
+    );
+    app.delete(&format!("/v1/files?path={dir}")).await.assert_error(
+        StatusCode::CONFLICT,
+        ErrorCode::Conflict,
+        "not empty",
+    );
+    app.delete(&format!("/v1/files?path={}", q(r"C:\nope"))).await.assert_error(
+        StatusCode::NOT_FOUND,
+        ErrorCode::NotFound,
+        "nope",
+    );
+    app.post("/v1/files/mkdir", json!({"path": r"C:\Users\Docker\Documents\d\f.txt"})).await.assert_error(
+        StatusCode::CONFLICT,
+        ErrorCode::Conflict,
+        "not a directory",
+    );
+    app.delete(&format!("/v1/files?path={dir}&recursive=true")).await.assert_status(StatusCode::NO_CONTENT);
+    let exists: Exists = app.get(&format!("/v1/files/exists?path={dir}")).await.json();
+    assert!(!exists.exists);
+}
+
+#[tokio::test]
+async fn recycle_moves_a_file_away_and_needs_it_to_exist() {
+    let app = app();
+    let path = r"C:\Users\Docker\Desktop\old.txt";
+    app.put_bytes(&format!("/v1/files?path={}", q(path)), b"bin me").await.assert_status(StatusCode::OK);
+    app.post("/v1/files/recycle", json!({"path": path})).await.assert_status(StatusCode::NO_CONTENT);
+    let exists: Exists = app.get(&format!("/v1/files/exists?path={}", q(path))).await.json();
+    assert!(!exists.exists);
+    app.post("/v1/files/recycle", json!({"path": path})).await.assert_error(
+        StatusCode::NOT_FOUND,
+        ErrorCode::NotFound,
+        "old.txt",
+    );
+}
+
+#[tokio::test]
+async fn folders_name_every_known_folder() {
+    let app = app();
+    let folders: KnownFolders = app.get("/v1/folders").await.json();
+    let names: Vec<KnownFolder> = folders.folders.iter().map(|(f, _)| *f).collect();
+    assert_eq!(names, KnownFolder::ALL);
+    assert!(folders.folders.contains(&(KnownFolder::Desktop, r"C:\Users\Docker\Desktop".to_owned())), "{folders:?}");
+    app.post("/v1/folders", json!({})).await.assert_error(
+        StatusCode::METHOD_NOT_ALLOWED,
+        ErrorCode::BadRequest,
+        "POST",
+    );
+}
+
+// ----- programs -----
+
+#[tokio::test]
+async fn exec_runs_a_program_and_reports_its_output() {
+    let app = app();
+    let answer = app.post("/v1/exec", json!({"argv": ["echo", "hello", "a b"]})).await;
+    answer.assert_status(StatusCode::OK);
+    let result: ExecResult = answer.json();
+    assert_eq!(result.exit_code, Some(0));
+    assert_eq!(result.stdout, "hello a b\n");
+    assert!(!result.timed_out);
+
+    let failing: ExecResult = app.post("/v1/exec", json!({"argv": ["sh", "-c", "echo oops >&2; exit 3"]})).await.json();
+    assert_eq!((failing.exit_code, failing.stderr.as_str()), (Some(3), "oops\n"));
+}
+
+#[tokio::test]
+async fn exec_times_out_with_a_200_result() {
+    let result: ExecResult = app().post("/v1/exec", json!({"argv": ["sleep", "5"], "timeout_ms": 200})).await.json();
+    assert!(result.timed_out, "{result:?}");
+    assert_eq!(result.exit_code, None);
+    assert!(result.duration_ms < 4000, "{result:?}");
+}
+
+#[tokio::test]
+async fn exec_and_launch_refuse_missing_programs_and_empty_argv() {
+    let app = app();
+    app.post("/v1/exec", json!({"argv": ["no-such-program-xyz"]})).await.assert_error(
+        StatusCode::NOT_FOUND,
+        ErrorCode::NotFound,
+        "no-such-program-xyz",
+    );
+    app.post("/v1/exec", json!({"argv": []})).await.assert_error(
+        StatusCode::BAD_REQUEST,
+        ErrorCode::BadRequest,
+        "argv",
+    );
+    app.post("/v1/exec", json!({"argv": ["echo"], "timeout_ms": 0})).await.assert_error(
+        StatusCode::BAD_REQUEST,
+        ErrorCode::BadRequest,
+        "timeout_ms",
+    );
+    app.post("/v1/launch", json!({"argv": []})).await.assert_error(
+        StatusCode::BAD_REQUEST,
+        ErrorCode::BadRequest,
+        "argv",
+    );
+    app.post("/v1/launch", json!({"argv": ["no-such-program-xyz"]})).await.assert_error(
+        StatusCode::NOT_FOUND,
+        ErrorCode::NotFound,
+        "no-such-program-xyz",
+    );
+}
+
+#[tokio::test]
+async fn open_shows_an_existing_file_and_refuses_a_missing_one() {
+    let app = app();
+    let path = r"C:\Users\Docker\Documents\todo.txt";
+    app.put_bytes(&format!("/v1/files?path={}", q(path)), b"buy milk").await.assert_status(StatusCode::OK);
+    app.post("/v1/open", json!({"path": path})).await.assert_status(StatusCode::NO_CONTENT);
+    let windows: Vec<WindowInfo> = app.get("/v1/windows").await.json();
+    assert!(windows.iter().any(|w| w.title.contains("todo.txt")), "{windows:?}");
+    app.post("/v1/open", json!({"path": r"C:\Users\Docker\Documents\gone.txt"})).await.assert_error(
+        StatusCode::NOT_FOUND,
+        ErrorCode::NotFound,
+        "gone.txt",
+    );
+}
+
+// ----- registry and wallpaper -----
+
+#[tokio::test]
+async fn registry_values_round_trip() {
+    let app = app();
+    let key = r"HKCU\Software\Arena\Test";
+    let write = json!({"key": key, "value": "Count", "data": {"type": "dword", "data": 42}});
+    app.json(Method::PUT, "/v1/registry", write).await.assert_status(StatusCode::NO_CONTENT);
+    let read: RegistryRead = app.get(&format!("/v1/registry?key={}&value=Count", q(key))).await.json();
+    assert_eq!(read, RegistryRead { key: key.into(), value: Some("Count".into()), data: RegistryValue::Dword(42) });
+
+    app.get(&format!("/v1/registry?key={}&value=Missing", q(key))).await.assert_error(
+        StatusCode::NOT_FOUND,
+        ErrorCode::NotFound,
+        "Missing",
+    );
+    app.json(Method::PUT, "/v1/registry", json!({"key": key, "data": {"type": "reg_link"}})).await.assert_error(
+        StatusCode::BAD_REQUEST,
+        ErrorCode::BadRequest,
+        "registry value type",
+    );
+    app.json(Method::PUT, "/v1/registry", json!({"key": key, "data": {"type": "reg_link", "data": 1}}))
+        .await
+        .assert_error(StatusCode::BAD_REQUEST, ErrorCode::BadRequest, "JSON");
+    app.get("/v1/registry?key=").await.assert_error(StatusCode::BAD_REQUEST, ErrorCode::BadRequest, "key");
+}
+
+#[tokio::test]
+async fn wallpaper_answers_a_path_or_null() {
+    let answer = app().get("/v1/wallpaper").await;
+    answer.assert_status(StatusCode::OK);
+    let body: Value = answer.json();
+    assert!(body["path"].is_string() || body["path"].is_null(), "{body}");
+}
+
+// ----- protocol: errors, methods, auth -----
+
+#[tokio::test]
+async fn a_bad_json_body_is_a_400_error_body() {
+    let app = app();
+    let request = Request::post("/v1/actions")
+        .header(header::CONTENT_TYPE, "application/json")
+        .body(Body::from("{not json"))
+        .unwrap();
+    app.send(request).await.assert_error(StatusCode::BAD_REQUEST, ErrorCode::BadRequest, "JSON");
+    app.post("/v1/actions", json!({"acts": []})).await.assert_error(
+        StatusCode::BAD_REQUEST,
+        ErrorCode::BadRequest,
+        "actions",
+    );
+}
+
+#[tokio::test]
+async fn unknown_routes_and_wrong_methods_get_error_bodies() {
+    let app = app();
+    app.get("/v1/nothing-here").await.assert_error(StatusCode::NOT_FOUND, ErrorCode::NotFound, "/v1/nothing-here");
+    app.delete("/v1/screenshot").await.assert_error(StatusCode::METHOD_NOT_ALLOWED, ErrorCode::BadRequest, "DELETE");
+}
+
+#[tokio::test]
+async fn a_token_is_required_except_for_health() {
+    let app = app_with(Some(TOKEN));
+    app.get("/v1/screen").await.assert_error(StatusCode::UNAUTHORIZED, ErrorCode::Unauthorized, "Bearer");
+    let wrong = Request::get("/v1/screen")
+        .header(header::AUTHORIZATION, "Bearer 0123456789abcdef0124")
+        .body(Body::empty())
+        .unwrap();
+    app.send(wrong).await.assert_error(StatusCode::UNAUTHORIZED, ErrorCode::Unauthorized, "Bearer");
+    let right = Request::get("/v1/screen")
+        .header(header::AUTHORIZATION, format!("Bearer {TOKEN}"))
+        .body(Body::empty())
+        .unwrap();
+    app.send(right).await.assert_status(StatusCode::OK);
+    let health = app.get("/v1/health").await;
+    health.assert_status(StatusCode::OK);
+    assert!(health.json::<HealthReport>().auth_required);
+}
+
+#[tokio::test]
+async fn cross_site_requests_are_refused() {
+    let app = app();
+    let request = Request::get("/v1/screen").header(header::ORIGIN, "http://evil.example").body(Body::empty()).unwrap();
+    app.send(request).await.assert_error(StatusCode::FORBIDDEN, ErrorCode::BadRequest, "cross-site");
+}
+
+// ----- a batch that fails part-way -----
+
+/// The stub, except that typing `fail_on` times out, as a hung window would.
+#[derive(Debug)]
+struct HangsOnText {
+    inner: StubDesktop,
+    fail_on: &'static str,
+}
+
+mod delegate {
+    use std::path::{Path, PathBuf};
+
+    use arena_guest::desktop::{
+        ClipboardData, CommandSpec, Desktop, DesktopError, DesktopResult, ExecLimits, ExecOutput, Frame, WindowState,
+    };
+    use arena_shared::action::Action;
+    use arena_shared::files::KnownFolder;
+    use arena_shared::geometry::Point;
+    use arena_shared::health::Component;
+    use arena_shared::observation::{A11yBackend, A11yTree, ScreenInfo, TreeBudget, WindowInfo};
+    use arena_shared::registry::RegistryValue;
+
+    use super::HangsOnText;
+
+    impl Desktop for HangsOnText {
+        fn perform(&self, action: &Action) -> DesktopResult<()> {
+            match action {
+                Action::TypeText { text, .. } if text == self.fail_on => {
+                    Err(DesktopError::Timeout { op: "perform", ms: 1 })
+                }
+                other => self.inner.perform(other),
+            }
+        }
+        fn kind(&self) -> &'static str {
+            self.inner.kind()
+        }
+        fn probe(&self, c: Component) -> DesktopResult<String> {
+            self.inner.probe(c)
+        }
+        fn screen(&self) -> DesktopResult<ScreenInfo> {
+            self.inner.screen()
+        }
+        fn capture(&self, c: bool) -> DesktopResult<Frame> {
+            self.inner.capture(c)
+        }
+        fn cursor_position(&self) -> DesktopResult<Point> {
+            self.inner.cursor_position()
+        }
+        fn windows(&self) -> DesktopResult<Vec<WindowInfo>> {
+            self.inner.windows()
+        }
+        fn activate_window(&self, id: u64) -> DesktopResult<()> {
+            self.inner.activate_window(id)
+        }
+        fn set_window_state(&self, id: u64, s: WindowState) -> DesktopResult<()> {
+            self.inner.set_window_state(id, s)
+        }
+        fn close_window(&self, id: u64) -> DesktopResult<()> {
+            self.inner.close_window(id)
+        }
+        fn accessibility(&self, b: A11yBackend, t: &TreeBudget, f: bool) -> DesktopResult<A11yTree> {
+            self.inner.accessibility(b, t, f)
+        }
+        fn clipboard_get(&self) -> DesktopResult<ClipboardData> {
+            self.inner.clipboard_get()
+        }
+        fn clipboard_set(&self, d: &ClipboardData) -> DesktopResult<()> {
+            self.inner.clipboard_set(d)
+        }
+        fn map_path(&self, p: &str) -> DesktopResult<PathBuf> {
+            self.inner.map_path(p)
+        }
+        fn unmap_path(&self, p: &Path) -> DesktopResult<String> {
+            self.inner.unmap_path(p)
+        }
+        fn env_var(&self, n: &str) -> Option<String> {
+            self.inner.env_var(n)
+        }
+        fn known_folder(&self, f: KnownFolder) -> DesktopResult<String> {
+            self.inner.known_folder(f)
+        }
+        fn recycle(&self, p: &str) -> DesktopResult<()> {
+            self.inner.recycle(p)
+        }
+        fn open_path(&self, p: &str) -> DesktopResult<()> {
+            self.inner.open_path(p)
+        }
+        fn registry_read(&self, k: &str, v: Option<&str>) -> DesktopResult<RegistryValue> {
+            self.inner.registry_read(k, v)
+        }
+        fn registry_write(&self, k: &str, v: Option<&str>, d: &RegistryValue) -> DesktopResult<()> {
+            self.inner.registry_write(k, v, d)
+        }
+        fn wallpaper(&self) -> DesktopResult<Option<String>> {
+            self.inner.wallpaper()
+        }
+        fn set_wallpaper(&self, p: &str) -> DesktopResult<()> {
+            self.inner.set_wallpaper(p)
+        }
+        fn directory_access_mask(&self, p: &str, u: &str) -> DesktopResult<Option<u32>> {
+            self.inner.directory_access_mask(p, u)
+        }
+        fn run(&self, c: &CommandSpec, l: &ExecLimits) -> DesktopResult<ExecOutput> {
+            self.inner.run(c, l)
+        }
+        fn spawn(&self, c: &CommandSpec) -> DesktopResult<u32> {
+            self.inner.spawn(c)
+        }
+        fn shutdown(&self) -> DesktopResult<()> {
+            self.inner.shutdown()
+        }
+    }
+}
+
+#[tokio::test]
+async fn a_failing_action_stops_the_batch_and_says_where() {
+    let dir = tempfile::tempdir().unwrap();
+    let inner =
+        StubDesktop::with_config(StubConfig { root: Some(dir.path().into()), screen: (1440, 900), scenario: None })
+            .unwrap();
+    let state = AppState::new(Arc::new(HangsOnText { inner, fail_on: "boom" }), ServerConfig::for_stub(), None);
+    let app = TestApp { router: arena_guest::router(state), dir };
+    let batch = json!({"actions": [
+        {"type": "move_to", "x": 10, "y": 10},
+        {"type": "type_text", "text": "boom"},
+        {"type": "move_to", "x": 99, "y": 99},
+    ]});
+    app.post("/v1/actions", batch).await.assert_error(
+        StatusCode::GATEWAY_TIMEOUT,
+        ErrorCode::Timeout,
+        "action 1 (type_text) failed after 1 of 3 actions ran",
+    );
+    let report: ActionReport = app.post("/v1/actions", json!({"actions": []})).await.json();
+    assert_eq!(report.cursor, Point::new(10, 10), "the action after the failure must not run");
+}
+
+#[tokio::test]
+async fn exec_passes_stdin_and_a_guest_working_folder() {
+    let app = app();
+    let result: ExecResult = app.post("/v1/exec", json!({"argv": ["cat"], "stdin": "piped in"})).await.json();
+    assert_eq!(result.stdout, "piped in");
+    app.post("/v1/files/mkdir", json!({"path": r"C:\work\here"})).await.assert_status(StatusCode::NO_CONTENT);
+    let result: ExecResult = app.post("/v1/exec", json!({"argv": ["pwd"], "cwd": r"C:\work\here"})).await.json();
+    assert!(result.stdout.trim_end().ends_with("/C/work/here"), "{result:?}");
+}
