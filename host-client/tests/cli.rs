@@ -1,0 +1,56 @@
+//! The `arena` command line run through the library's [`arena_host::run`],
+//! against embedded stub guests.
+
+use std::process::ExitCode;
+
+use clap::Parser;
+
+use arena_host::cli::stub::{start, StubArgs};
+use arena_host::Cli;
+
+fn cli(words: &[&str]) -> Cli {
+    let mut cli = Cli::try_parse_from(std::iter::once("arena").chain(words.iter().copied())).expect("arguments parse");
+    // Keep a developer's ARENA_* environment out of the test's way.
+    cli.connection.token = None;
+    cli.connection.token_file = None;
+    cli
+}
+
+#[tokio::test]
+async fn demo_passes_against_its_own_stub_guest() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let shot = dir.path().join("demo.png");
+    let mut demo = cli(&["demo", "-o", shot.to_str().expect("utf-8 path")]);
+    demo.connection.guest = None;
+    let code = arena_host::run(demo).await.expect("demo runs");
+    assert_eq!(code, ExitCode::SUCCESS);
+    let bytes = std::fs::read(&shot).expect("screenshot written");
+    assert!(bytes.starts_with(b"\x89PNG"), "not a PNG");
+}
+
+#[tokio::test]
+async fn push_then_pull_round_trips_through_local_files() {
+    let stub = start(&StubArgs::default(), None).await.expect("stub");
+    let url = stub.url();
+    let dir = tempfile::tempdir().expect("temp dir");
+    let up = dir.path().join("up.bin");
+    let down = dir.path().join("down.bin");
+    std::fs::write(&up, b"bytes through the cli").expect("write");
+    let guest_path = r"C:\Users\Docker\cli\up.bin";
+
+    let push = cli(&["push", "--guest", &url, up.to_str().expect("utf-8"), guest_path]);
+    assert_eq!(arena_host::run(push).await.expect("push"), ExitCode::SUCCESS);
+    let pull = cli(&["pull", "--guest", &url, guest_path, down.to_str().expect("utf-8")]);
+    assert_eq!(arena_host::run(pull).await.expect("pull"), ExitCode::SUCCESS);
+    assert_eq!(std::fs::read(&down).expect("pulled"), b"bytes through the cli");
+
+    // A failed pull leaves the local file as it was.
+    let missing = cli(&["pull", "--guest", &url, r"C:\Users\Docker\cli\absent.bin", down.to_str().expect("utf-8")]);
+    let err = arena_host::run(missing).await.expect_err("absent");
+    assert!(format!("{err:#}").contains("404 not_found"), "{err:#}");
+    assert_eq!(std::fs::read(&down).expect("kept"), b"bytes through the cli");
+
+    let health = cli(&["health", "--guest", &url]);
+    assert_eq!(arena_host::run(health).await.expect("health"), ExitCode::SUCCESS);
+    stub.stop().await.expect("stub stops");
+}
