@@ -1,1 +1,129 @@
-//! End-to-end test helpers (see tests/).
+//! End-to-end test support: start the real `arena-guest` and `arena` binaries
+//! as child processes and find out where they listen.
+//!
+//! This crate holds no product code. Its tests (in `tests/`) drive the real
+//! server binary over loopback with the real host client, and its bench binary
+//! measures round trips.
+
+use std::io::{BufRead, BufReader};
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::sync::OnceLock;
+use std::time::{Duration, Instant};
+
+use anyhow::Context;
+
+/// Path of a workspace binary, built on first use with the same cargo that runs the tests.
+///
+/// # Errors
+///
+/// The build failing or the binary still missing afterwards.
+pub fn workspace_binary(package: &str, bin: &str) -> anyhow::Result<PathBuf> {
+    static BUILT: OnceLock<Result<(), String>> = OnceLock::new();
+    let built = BUILT.get_or_init(|| {
+        let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
+        let status = Command::new(cargo)
+            .args(["build", "--quiet", "-p", "arena-guest", "--bin", "arena-guest", "-p", "arena-host", "--bin", "arena"])
+            .current_dir(workspace_root())
+            .status();
+        match status {
+            Ok(s) if s.success() => Ok(()),
+            Ok(s) => Err(format!("cargo build of the binaries exited with {s}")),
+            Err(err) => Err(format!("running cargo build: {err}")),
+        }
+    });
+    if let Err(err) = built {
+        anyhow::bail!("building {package}/{bin}: {err}");
+    }
+    let exe = target_dir().join(format!("{bin}{}", std::env::consts::EXE_SUFFIX));
+    anyhow::ensure!(exe.exists(), "{} does not exist after building {package}", exe.display());
+    Ok(exe)
+}
+
+fn workspace_root() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).parent().map(Path::to_path_buf).unwrap_or_else(|| PathBuf::from("."))
+}
+
+/// The directory cargo puts binaries of the current profile in: the test
+/// executable lives in `<target>/<profile>/deps/`.
+fn target_dir() -> PathBuf {
+    let exe = std::env::current_exe().unwrap_or_default();
+    let mut dir = exe.parent().map(Path::to_path_buf).unwrap_or_default();
+    if dir.ends_with("deps") {
+        dir.pop();
+    }
+    dir
+}
+
+/// A child process that prints `listening on http://ADDR` and is killed on drop.
+#[derive(Debug)]
+pub struct Served {
+    child: Child,
+    pub url: String,
+    /// Kept so the guest's root outlives the process.
+    _root: Option<tempfile::TempDir>,
+}
+
+impl Served {
+    /// Starts `exe args...` and waits (up to 60 s) for its `listening on` line.
+    ///
+    /// # Errors
+    ///
+    /// The process failing to start, exiting early, or never printing the line.
+    pub fn start(exe: &Path, args: &[&str], root: Option<tempfile::TempDir>) -> anyhow::Result<Served> {
+        let mut child = Command::new(exe)
+            .args(args)
+            .stdout(Stdio::piped())
+            .stderr(Stdio::inherit())
+            .spawn()
+            .with_context(|| format!("starting {}", exe.display()))?;
+        let stdout = child.stdout.take().context("no stdout")?;
+        let (tx, rx) = std::sync::mpsc::channel();
+        std::thread::spawn(move || {
+            for line in BufReader::new(stdout).lines().map_while(Result::ok) {
+                if let Some(url) = line.strip_prefix("listening on ") {
+                    let _ = tx.send(url.trim().to_owned());
+                }
+            }
+        });
+        let deadline = Instant::now() + Duration::from_secs(60);
+        loop {
+            if let Ok(url) = rx.recv_timeout(Duration::from_millis(50)) {
+                return Ok(Served { child, url, _root: root });
+            }
+            if let Some(status) = child.try_wait()? {
+                anyhow::bail!("{} exited with {status} before listening", exe.display());
+            }
+            if Instant::now() > deadline {
+                let _ = child.kill();
+                anyhow::bail!("{} did not print its listening line within 60 s", exe.display());
+            }
+        }
+    }
+
+    /// Starts the real guest binary with the stub backend on a free loopback port.
+    ///
+    /// # Errors
+    ///
+    /// See [`Served::start`].
+    pub fn guest(extra: &[&str]) -> anyhow::Result<Served> {
+        let exe = workspace_binary("arena-guest", "arena-guest")?;
+        let root = tempfile::tempdir().context("creating the stub root")?;
+        let root_path = root.path().to_str().context("non-UTF-8 temp path")?.to_owned();
+        let mut args = vec!["--backend", "stub", "--port", "0", "--stub-root", &root_path, "--open-settle-ms", "0", "--activate-settle-ms", "0"];
+        args.extend_from_slice(extra);
+        Served::start(&exe, &args, Some(root))
+    }
+
+    /// Process id of the child.
+    pub fn pid(&self) -> u32 {
+        self.child.id()
+    }
+}
+
+impl Drop for Served {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
