@@ -15,6 +15,7 @@
 //! - [`exec`], [`files`], [`clipboard`], [`registry`]: request and result types.
 //! - [`health`]: the staged readiness report.
 //! - [`error`]: the error body every native route answers with.
+//! - [`script`]: a safe interpreter for the pyautogui and WAA `computer.*` Python that hosts send.
 //!
 //! # Compatibility
 //!
@@ -32,6 +33,7 @@ pub mod health;
 pub mod keys;
 pub mod observation;
 pub mod registry;
+pub mod script;
 
 /// The version of the native API spoken under `/v1/`.
 pub const API_VERSION: &str = "1";

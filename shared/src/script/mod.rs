@@ -1,0 +1,89 @@
+//! A safe interpreter for the Python that WAA hosts send: pyautogui one-liners
+//! (`python -c "import pyautogui; pyautogui.click(x=100, y=200)"`), evaluator
+//! getters (`import os; print(os.path.join(os.getenv('LOCALAPPDATA'), ...))`)
+//! and Navi's `computer.*` actions for `/execute_windows`.
+//!
+//! It is not Python: it parses a small subset (imports, assignments, calls,
+//! literals, containers, attribute access, subscripts and arithmetic) and
+//! rejects everything else (loops, `if`, `def`, comparisons, f-strings, ...)
+//! with a precise [`ParseError`]. Modules are interpreter objects, never real
+//! imports, and every effect goes through a [`ScriptHost`], so this module does
+//! no I/O. Output is what CPython would print; failures are
+//! [`ScriptError`]s styled like Python exceptions.
+//!
+//! # Layout
+//!
+//! - `lexer` and [`parser`]: source to [`ast::Program`]; [`parse`].
+//! - `interp`: statements, expressions, builtins; [`run`], [`Globals`], [`RunOutput`].
+//! - `value` and `ops`: runtime values, `str`/`repr`, arithmetic with Python semantics.
+//! - `pyautogui`: the pyautogui 0.9.54 module mapped to [`Action`]s.
+//! - `stdlib`: `time`, `os`, `os.path` (ntpath), `subprocess`, `platform`, `sys`, `PIL`, `pyperclip`.
+//! - `computer`: the Navi `Computer` object over [`ComputerState`]; `difflib` for its fuzzy window match.
+//! - [`host`]: the [`ScriptHost`] trait and the I/O-free [`RecordingHost`].
+//! - `argv`: recognising `python -c CODE` command lines.
+//!
+//! # Safety properties
+//!
+//! Parsing never panics and always ends (every loop consumes input, nesting is
+//! capped at [`parser::MAX_DEPTH`]). Running ends after at most one evaluation
+//! per syntax node (there are no loops or user functions); integers are 64-bit
+//! with overflow errors; strings and lists are capped at 10 million items; sleeps,
+//! clicks and key presses go through the host, which may refuse them.
+
+use crate::action::Action;
+
+mod argv;
+pub mod ast;
+mod computer;
+mod difflib;
+mod error;
+pub mod host;
+mod interp;
+mod lexer;
+mod ops;
+pub mod parser;
+mod pyautogui;
+mod stdlib;
+mod value;
+
+#[cfg(test)]
+mod tests;
+
+pub use argv::{is_python_program, python_code_from_argv, python_code_from_command_line, split_windows_command_line};
+pub use computer::ComputerState;
+pub use difflib::{get_close_matches, ratio as sequence_ratio};
+pub use error::{ErrorKind, ParseError, ScriptError};
+pub use host::{CommandArg, CommandOutput, PathKind, RecordingHost, ScriptHost};
+pub use interp::{run, Globals, RunOutput, KNOWN_MODULES};
+pub use parser::parse;
+pub use value::{float_repr, str_repr};
+
+/// Parses and runs `src` in one step.
+///
+/// # Errors
+///
+/// [`ScriptError`] with kind [`ErrorKind::Syntax`] when `src` does not parse,
+/// otherwise the first exception raised while running.
+pub fn run_source(src: &str, host: &mut dyn ScriptHost, globals: Globals<'_>) -> Result<RunOutput, ScriptError> {
+    let program = parse(src)?;
+    run(&program, host, globals)
+}
+
+/// Translates pyautogui code into the input actions it performs, without I/O.
+///
+/// The code runs against a [`RecordingHost`] for a screen of `screen` pixels with
+/// the cursor at `cursor`; `pyautogui` and `time` are imported first, as the
+/// upstream host's `import pyautogui; import time; ...` prefix does. Sleeps become
+/// [`Action::Wait`]; anything that is not input (screenshots, files, processes,
+/// the clipboard, windows) fails with a message saying it cannot be translated.
+///
+/// # Errors
+///
+/// [`ScriptError`] for a parse error, an unsupported call or a Python exception.
+pub fn actions_from_pyautogui(code: &str, screen: (u32, u32), cursor: (i32, i32)) -> Result<Vec<Action>, ScriptError> {
+    let program = parse(code)?;
+    let mut host = RecordingHost::new(screen, cursor);
+    let globals = Globals { computer: None, computer_action_delay: 0.25, preimport: &["pyautogui", "time"] };
+    run(&program, &mut host, globals)?;
+    Ok(host.actions)
+}

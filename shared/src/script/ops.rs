@@ -1,0 +1,370 @@
+//! Arithmetic, ordering and rounding with Python's semantics.
+//!
+//! Integers are 64-bit and overflow raises `OverflowError` instead of
+//! growing; floor division and modulo round toward negative infinity; `/`
+//! always gives a float; `round` rounds half to even.
+//! Results that would be huge (`'a' * 10**9`) raise `MemoryError`.
+
+use std::cmp::Ordering;
+
+use super::ast::{BinOp, UnaryOp};
+use super::error::{type_error, value_error, ErrorKind, ScriptError};
+use super::value::Value;
+
+/// The longest string (in bytes) an operation may build.
+pub(crate) const MAX_LEN: usize = 10_000_000;
+
+/// The most items a list or tuple operation may build.
+pub(crate) const MAX_ITEMS: usize = 1_000_000;
+
+fn overflow() -> ScriptError {
+    ScriptError::new(ErrorKind::Overflow, "integer overflow (this interpreter's integers are 64-bit)")
+}
+
+fn zero_division(message: &str) -> ScriptError {
+    ScriptError::new(ErrorKind::ZeroDivision, message)
+}
+
+fn too_big(limit: usize) -> ScriptError {
+    ScriptError::new(ErrorKind::Memory, format!("result would exceed {limit} items"))
+}
+
+/// A number operand: bools count as ints, as in Python.
+#[derive(Clone, Copy)]
+enum Num {
+    Int(i64),
+    Float(f64),
+}
+
+fn num(v: &Value) -> Option<Num> {
+    match v {
+        Value::Bool(b) => Some(Num::Int(i64::from(*b))),
+        Value::Int(i) => Some(Num::Int(*i)),
+        Value::Float(f) => Some(Num::Float(*f)),
+        _ => None,
+    }
+}
+
+fn as_float(n: Num) -> f64 {
+    match n {
+        // Precision loss above 2**53 matches Python's int-to-float conversion.
+        Num::Int(i) => i as f64,
+        Num::Float(f) => f,
+    }
+}
+
+/// `-x` and `+x`.
+pub(crate) fn unary(op: UnaryOp, v: &Value) -> Result<Value, ScriptError> {
+    let symbol = match op {
+        UnaryOp::Plus => "+",
+        UnaryOp::Minus => "-",
+    };
+    match (op, num(v)) {
+        (UnaryOp::Plus, Some(Num::Int(i))) => Ok(Value::Int(i)),
+        (UnaryOp::Plus, Some(Num::Float(f))) => Ok(Value::Float(f)),
+        (UnaryOp::Minus, Some(Num::Int(i))) => i.checked_neg().map(Value::Int).ok_or_else(overflow),
+        (UnaryOp::Minus, Some(Num::Float(f))) => Ok(Value::Float(-f)),
+        _ => Err(type_error(format!("bad operand type for unary {symbol}: '{}'", v.type_name()))),
+    }
+}
+
+/// `left op right`.
+pub(crate) fn binary(op: BinOp, left: &Value, right: &Value) -> Result<Value, ScriptError> {
+    if let (Some(a), Some(b)) = (num(left), num(right)) {
+        return match (a, b) {
+            (Num::Int(a), Num::Int(b)) => int_op(op, a, b),
+            (a, b) => float_op(op, as_float(a), as_float(b)),
+        };
+    }
+    match (op, left, right) {
+        (BinOp::Add, Value::Str(a), Value::Str(b)) => {
+            if a.len() + b.len() > MAX_LEN {
+                return Err(too_big(MAX_LEN));
+            }
+            Ok(Value::Str(format!("{a}{b}")))
+        }
+        (BinOp::Add, Value::List(a), Value::List(b)) => Ok(Value::List(concat(a, b)?)),
+        (BinOp::Add, Value::Tuple(a), Value::Tuple(b)) => Ok(Value::Tuple(concat(a, b)?)),
+        (BinOp::Add, Value::Str(_), other) => Err(type_error(format!(
+            "can only concatenate str (not \"{}\") to str",
+            other.type_name()
+        ))),
+        (BinOp::Mul, seq, n) | (BinOp::Mul, n, seq)
+            if matches!(seq, Value::Str(_) | Value::List(_) | Value::Tuple(_))
+                && matches!(n, Value::Int(_) | Value::Bool(_)) =>
+        {
+            let times = match num(n) {
+                Some(Num::Int(i)) => usize::try_from(i.max(0)).unwrap_or(usize::MAX),
+                _ => 0,
+            };
+            repeat(seq, times)
+        }
+        (BinOp::Mod, Value::Str(_), _) => {
+            Err(ScriptError::new(ErrorKind::NotSupported, "printf-style string formatting (`%`) is not supported"))
+        }
+        _ => Err(type_error(format!(
+            "unsupported operand type(s) for {}: '{}' and '{}'",
+            op.symbol(),
+            left.type_name(),
+            right.type_name()
+        ))),
+    }
+}
+
+fn concat(a: &[Value], b: &[Value]) -> Result<Vec<Value>, ScriptError> {
+    if a.len() + b.len() > MAX_ITEMS {
+        return Err(too_big(MAX_ITEMS));
+    }
+    Ok(a.iter().chain(b).cloned().collect())
+}
+
+fn repeat(seq: &Value, times: usize) -> Result<Value, ScriptError> {
+    let (len, limit) = match seq {
+        Value::Str(s) => (s.len(), MAX_LEN),
+        Value::List(v) | Value::Tuple(v) => (v.len(), MAX_ITEMS),
+        _ => (0, 0),
+    };
+    if len.checked_mul(times).is_none_or(|total| total > limit) {
+        return Err(too_big(limit));
+    }
+    Ok(match seq {
+        Value::Str(s) => Value::Str(s.repeat(times)),
+        Value::List(v) => Value::List(repeat_items(v, times)),
+        Value::Tuple(v) => Value::Tuple(repeat_items(v, times)),
+        other => other.clone(),
+    })
+}
+
+fn repeat_items(items: &[Value], times: usize) -> Vec<Value> {
+    (0..times).flat_map(|_| items.iter().cloned()).collect()
+}
+
+fn int_op(op: BinOp, a: i64, b: i64) -> Result<Value, ScriptError> {
+    let int = |r: Option<i64>| r.map(Value::Int).ok_or_else(overflow);
+    match op {
+        BinOp::Add => int(a.checked_add(b)),
+        BinOp::Sub => int(a.checked_sub(b)),
+        BinOp::Mul => int(a.checked_mul(b)),
+        BinOp::Div => {
+            if b == 0 {
+                return Err(zero_division("division by zero"));
+            }
+            Ok(Value::Float(a as f64 / b as f64))
+        }
+        BinOp::FloorDiv | BinOp::Mod => {
+            if b == 0 {
+                return Err(zero_division("integer division or modulo by zero"));
+            }
+            let q = a.checked_div(b).ok_or_else(overflow)?;
+            let r = a.checked_rem(b).ok_or_else(overflow)?;
+            // Rust truncates toward zero; Python floors, so adjust when the signs differ.
+            let (q, r) = if r != 0 && ((r < 0) != (b < 0)) { (q - 1, r + b) } else { (q, r) };
+            Ok(Value::Int(if op == BinOp::FloorDiv { q } else { r }))
+        }
+        BinOp::Pow => {
+            if b < 0 {
+                if a == 0 {
+                    return Err(zero_division("0.0 cannot be raised to a negative power"));
+                }
+                return Ok(Value::Float((a as f64).powf(b as f64)));
+            }
+            let exp = u32::try_from(b).map_err(|_| overflow())?;
+            int(a.checked_pow(exp))
+        }
+    }
+}
+
+fn float_op(op: BinOp, a: f64, b: f64) -> Result<Value, ScriptError> {
+    let value = match op {
+        BinOp::Add => a + b,
+        BinOp::Sub => a - b,
+        BinOp::Mul => a * b,
+        BinOp::Div => {
+            if b == 0.0 {
+                return Err(zero_division("float division by zero"));
+            }
+            a / b
+        }
+        BinOp::FloorDiv | BinOp::Mod => {
+            if b == 0.0 {
+                return Err(zero_division("float modulo"));
+            }
+            let (div, rem) = float_divmod(a, b);
+            if op == BinOp::FloorDiv {
+                div
+            } else {
+                rem
+            }
+        }
+        BinOp::Pow => {
+            if a == 0.0 && b < 0.0 {
+                return Err(zero_division("0.0 cannot be raised to a negative power"));
+            }
+            if a < 0.0 && b.fract() != 0.0 && b.is_finite() {
+                return Err(ScriptError::new(
+                    ErrorKind::NotSupported,
+                    "complex results (a negative number to a fractional power) are not supported",
+                ));
+            }
+            a.powf(b)
+        }
+    };
+    Ok(Value::Float(value))
+}
+
+/// CPython's `float_divmod`.
+fn float_divmod(a: f64, b: f64) -> (f64, f64) {
+    let mut rem = a % b;
+    let mut div = (a - rem) / b;
+    if rem != 0.0 {
+        if (b < 0.0) != (rem < 0.0) {
+            rem += b;
+            div -= 1.0;
+        }
+    } else {
+        rem = 0.0_f64.copysign(b);
+    }
+    let floordiv = if div != 0.0 {
+        let mut f = div.floor();
+        if div - f > 0.5 {
+            f += 1.0;
+        }
+        f
+    } else {
+        0.0_f64.copysign(a / b)
+    };
+    (floordiv, rem)
+}
+
+/// Orders two values for `min`/`max`: numbers with numbers, strings with strings.
+pub(crate) fn compare(a: &Value, b: &Value) -> Result<Ordering, ScriptError> {
+    match (num(a), num(b)) {
+        (Some(Num::Int(x)), Some(Num::Int(y))) => return Ok(x.cmp(&y)),
+        (Some(x), Some(y)) => return Ok(as_float(x).partial_cmp(&as_float(y)).unwrap_or(Ordering::Equal)),
+        _ => {}
+    }
+    match (a, b) {
+        (Value::Str(x), Value::Str(y)) => Ok(x.cmp(y)),
+        _ => Err(type_error(format!(
+            "'<' not supported between instances of '{}' and '{}'",
+            a.type_name(),
+            b.type_name()
+        ))),
+    }
+}
+
+/// Python equality for the values that can be dict keys or list items we look up.
+pub(crate) fn equal(a: &Value, b: &Value) -> bool {
+    match (num(a), num(b)) {
+        (Some(Num::Int(x)), Some(Num::Int(y))) => x == y,
+        (Some(x), Some(y)) => as_float(x) == as_float(y),
+        _ => a == b,
+    }
+}
+
+/// `round(x)`: a float rounded half to even, as an int.
+pub(crate) fn round_to_int(f: f64) -> Result<i64, ScriptError> {
+    if f.is_nan() {
+        return Err(value_error("cannot convert float NaN to integer"));
+    }
+    if f.is_infinite() {
+        return Err(ScriptError::new(ErrorKind::Overflow, "cannot convert float infinity to integer"));
+    }
+    let r = f.round_ties_even();
+    if !(-9.223_372_036_854_776e18..9.223_372_036_854_776e18).contains(&r) {
+        return Err(overflow());
+    }
+    Ok(r as i64)
+}
+
+/// `round(x, ndigits)`.
+pub(crate) fn round_ndigits(v: &Value, ndigits: i64) -> Result<Value, ScriptError> {
+    match num(v) {
+        Some(Num::Int(i)) => {
+            if ndigits >= 0 {
+                return Ok(Value::Int(i));
+            }
+            let Some(unit) = ndigits.checked_neg().and_then(|n| u32::try_from(n).ok()).and_then(|e| 10_i64.checked_pow(e)) else {
+                return Ok(Value::Int(0));
+            };
+            let (q, r) = (i.div_euclid(unit), i.rem_euclid(unit));
+            let twice = r.saturating_mul(2);
+            let up = twice > unit || (twice == unit && q % 2 != 0);
+            let q = if up { q + 1 } else { q };
+            q.checked_mul(unit).map(Value::Int).ok_or_else(overflow)
+        }
+        Some(Num::Float(f)) => {
+            if !f.is_finite() || ndigits > 323 {
+                return Ok(Value::Float(f));
+            }
+            if ndigits >= 0 {
+                // Formatting rounds the exact binary value half to even, like CPython's dtoa.
+                let text = format!("{f:.*}", ndigits as usize);
+                return Ok(Value::Float(text.parse().unwrap_or(f)));
+            }
+            if ndigits < -308 {
+                return Ok(Value::Float(0.0_f64.copysign(f)));
+            }
+            let unit = 10_f64.powi(-ndigits as i32);
+            Ok(Value::Float((f / unit).round_ties_even() * unit))
+        }
+        None => Err(type_error(format!("type {} doesn't define __round__ method", v.type_name()))),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn check(op: BinOp, a: Value, b: Value, expected: Value) {
+        assert_eq!(binary(op, &a, &b).unwrap(), expected, "{a:?} {op:?} {b:?}");
+    }
+
+    #[test]
+    fn arithmetic_follows_python() {
+        use Value::{Float as F, Int as I};
+        check(BinOp::FloorDiv, I(-7), I(2), I(-4));
+        check(BinOp::Mod, I(-7), I(2), I(1));
+        check(BinOp::Mod, I(7), I(-2), I(-1));
+        check(BinOp::Div, I(7), I(2), F(3.5));
+        check(BinOp::Div, I(1), I(3), F(1.0 / 3.0));
+        check(BinOp::Mod, F(-7.5), F(2.0), F(0.5));
+        check(BinOp::FloorDiv, F(7.5), F(-2.0), F(-4.0));
+        check(BinOp::Pow, I(2), I(10), I(1024));
+        check(BinOp::Pow, I(2), I(-1), F(0.5));
+        check(BinOp::Add, Value::Bool(true), I(1), I(2));
+        check(BinOp::Mul, Value::Str("ab".into()), I(3), Value::Str("ababab".into()));
+        check(BinOp::Mul, I(-1), Value::Str("ab".into()), Value::Str(String::new()));
+        check(BinOp::Add, Value::Str("a".into()), Value::Str("b".into()), Value::Str("ab".into()));
+    }
+
+    #[test]
+    fn arithmetic_errors_are_python_exceptions() {
+        let err = |op, a, b| binary(op, &a, &b).unwrap_err().python_message();
+        assert_eq!(err(BinOp::Div, Value::Int(1), Value::Int(0)), "ZeroDivisionError: division by zero");
+        assert_eq!(
+            err(BinOp::Add, Value::Str("a".into()), Value::Int(1)),
+            "TypeError: can only concatenate str (not \"int\") to str"
+        );
+        assert_eq!(
+            err(BinOp::Sub, Value::Str("a".into()), Value::Int(1)),
+            "TypeError: unsupported operand type(s) for -: 'str' and 'int'"
+        );
+        assert!(err(BinOp::Mul, Value::Int(i64::MAX), Value::Int(2)).starts_with("OverflowError"));
+        assert!(err(BinOp::Mul, Value::Str("ab".into()), Value::Int(1 << 40)).starts_with("MemoryError"));
+    }
+
+    #[test]
+    fn rounding_is_half_to_even() {
+        assert_eq!(round_to_int(0.5).unwrap(), 0);
+        assert_eq!(round_to_int(1.5).unwrap(), 2);
+        assert_eq!(round_to_int(2.5).unwrap(), 2);
+        assert_eq!(round_to_int(-2.5).unwrap(), -2);
+        assert_eq!(round_ndigits(&Value::Float(2.675), 2).unwrap(), Value::Float(2.67));
+        assert_eq!(round_ndigits(&Value::Float(0.125), 2).unwrap(), Value::Float(0.12));
+        assert_eq!(round_ndigits(&Value::Int(1250), -2).unwrap(), Value::Int(1200));
+        assert_eq!(round_ndigits(&Value::Int(1350), -2).unwrap(), Value::Int(1400));
+        assert_eq!(round_ndigits(&Value::Float(1234.5), -2).unwrap(), Value::Float(1200.0));
+        assert!(round_to_int(f64::NAN).is_err());
+    }
+}

@@ -1,0 +1,569 @@
+//! The standard-library modules a script may import: `time`, `os`, `os.path`
+//! (`ntpath` semantics, `\` separator), `subprocess`, `platform`, `sys`,
+//! `PIL` (as names; `ImageGrab.grab` works, `Image.open` does not) and
+//! `pyperclip`.
+//!
+//! They are Windows-flavoured stand-ins, never real imports: `platform.system()`
+//! is `"Windows"` and every effect (environment, files, processes, clipboard)
+//! goes through the [`super::host::ScriptHost`]. A child process's output that
+//! Python would not capture is appended to the script's own stdout/stderr, as
+//! it would appear in a real `python -c` run.
+
+use super::error::{not_supported, type_error, value_error, ErrorKind, ScriptError};
+use super::host::{CommandArg, CommandOutput, PathKind};
+use super::interp::{is_none, static_name, to_f64, to_i64, to_str, Args, Interp};
+use super::value::{Object, Value};
+
+const TIME: &[&str] = &["sleep"];
+const OS: &[&str] = &["getenv", "system", "listdir", "startfile"];
+const OS_PATH: &[&str] = &[
+    "join", "basename", "dirname", "exists", "isfile", "isdir", "expanduser", "split", "splitext", "isabs",
+    "splitdrive",
+];
+const SUBPROCESS: &[&str] = &["call", "run", "Popen", "check_call", "check_output"];
+const PLATFORM: &[&str] = &["system", "platform", "release", "version", "machine", "node"];
+const SYS: &[&str] = &["exit"];
+const PIL_IMAGE: &[&str] = &["open"];
+const PIL_IMAGEGRAB: &[&str] = &["grab"];
+const PYPERCLIP: &[&str] = &["copy", "paste"];
+
+/// `subprocess.PIPE`, `STDOUT` and `DEVNULL`.
+const PIPE: i64 = -1;
+const STDOUT: i64 = -2;
+const DEVNULL: i64 = -3;
+
+/// `<module>.<name>` for the non-pyautogui modules, or `None` when not provided.
+pub(crate) fn attr(module: &'static str, name: &str) -> Option<Value> {
+    let functions: &[&'static str] = match module {
+        "time" => TIME,
+        "os" => OS,
+        "os.path" | "ntpath" => OS_PATH,
+        "subprocess" => SUBPROCESS,
+        "platform" => PLATFORM,
+        "sys" => SYS,
+        "PIL.Image" => PIL_IMAGE,
+        "PIL.ImageGrab" => PIL_IMAGEGRAB,
+        "pyperclip" => PYPERCLIP,
+        _ => &[],
+    };
+    if let Some(f) = static_name(functions, name) {
+        // `ntpath` and `os.path` are the same module on Windows.
+        let module = if module == "ntpath" { "os.path" } else { module };
+        return Some(Value::Function { module, name: f });
+    }
+    let s = |v: &str| Some(Value::Str(v.to_owned()));
+    match (module, name) {
+        ("os", "path") => Some(Value::Module("os.path")),
+        ("os", "environ") => Some(Value::Object(Object::Environ)),
+        ("os", "name") => s("nt"),
+        ("os", "sep") | ("os.path" | "ntpath", "sep") => s("\\"),
+        ("os", "altsep") | ("os.path" | "ntpath", "altsep") => s("/"),
+        ("os", "linesep") => s("\r\n"),
+        ("os", "pathsep") | ("os.path" | "ntpath", "pathsep") => s(";"),
+        ("os", "curdir") | ("os.path" | "ntpath", "curdir") => s("."),
+        ("subprocess", "PIPE") => Some(Value::Int(PIPE)),
+        ("subprocess", "STDOUT") => Some(Value::Int(STDOUT)),
+        ("subprocess", "DEVNULL") => Some(Value::Int(DEVNULL)),
+        ("subprocess", "CREATE_NEW_CONSOLE") => Some(Value::Int(0x10)),
+        ("subprocess", "CREATE_NO_WINDOW") => Some(Value::Int(0x0800_0000)),
+        ("subprocess", "DETACHED_PROCESS") => Some(Value::Int(0x8)),
+        ("sys", "platform") => s("win32"),
+        ("sys", "argv") => Some(Value::List(vec![Value::Str("-c".into())])),
+        ("sys", "maxsize") => Some(Value::Int(i64::MAX)),
+        ("PIL", "Image") => Some(Value::Module("PIL.Image")),
+        ("PIL", "ImageGrab") => Some(Value::Module("PIL.ImageGrab")),
+        ("PIL.Image", "Image") => Some(Value::Type("PIL.Image.Image")),
+        _ => None,
+    }
+}
+
+/// Calls `<module>.<name>`.
+pub(crate) fn call(it: &mut Interp<'_, '_>, module: &str, name: &str, args: Args) -> Result<Value, ScriptError> {
+    match module {
+        "time" | "pyperclip" | "sys" | "platform" | "PIL.Image" | "PIL.ImageGrab" => misc(it, module, name, args),
+        "os" => os(it, name, args),
+        "os.path" => os_path(it, name, args),
+        "subprocess" => subprocess(it, name, args),
+        _ => Err(not_supported(format!("{module}.{name} is not supported"))),
+    }
+}
+
+fn arg(a: &[Option<Value>], i: usize) -> &Value {
+    a.get(i).and_then(Option::as_ref).unwrap_or(&Value::None)
+}
+
+/// A path argument, with the message `os.path` functions give for other types.
+fn path_arg(v: &Value) -> Result<&str, ScriptError> {
+    match v {
+        Value::Str(s) => Ok(s),
+        other => Err(type_error(format!(
+            "expected str, bytes or os.PathLike object, not {}",
+            other.type_name()
+        ))),
+    }
+}
+
+fn misc(it: &mut Interp<'_, '_>, module: &str, name: &str, args: Args) -> Result<Value, ScriptError> {
+    match (module, name) {
+        ("time", "sleep") => {
+            let a = args.bind("sleep", &["secs"], 1)?;
+            let secs = to_f64(arg(&a, 0), "sleep() argument")?;
+            it.sleep(secs)?;
+            Ok(Value::None)
+        }
+        ("pyperclip", "copy") => {
+            let a = args.bind("copy", &["text"], 1)?;
+            let text = match arg(&a, 0) {
+                v @ (Value::Str(_) | Value::Int(_) | Value::Float(_) | Value::Bool(_)) => v.to_str(),
+                other => {
+                    return Err(type_error(format!(
+                        "only str, int, float, and bool values can be copied to the clipboard, not {}",
+                        other.type_name()
+                    )))
+                }
+            };
+            let result = it.host.clipboard_set_text(&text);
+            it.host(result)?;
+            Ok(Value::None)
+        }
+        ("pyperclip", "paste") => {
+            args.bind("paste", &[], 0)?;
+            let text = it.host.clipboard_get_text();
+            Ok(Value::Str(it.host(text)?))
+        }
+        ("sys", "exit") => {
+            let a = args.bind("exit", &["status"], 0)?;
+            Err(exit_with(it, a[0].clone()))
+        }
+        ("platform", _) => {
+            args.bind(name, &[], 0)?;
+            Ok(Value::Str(match name {
+                "system" => "Windows".to_owned(),
+                "release" => "10".to_owned(),
+                "machine" => "AMD64".to_owned(),
+                "node" => it.host.env_var("COMPUTERNAME").unwrap_or_default(),
+                "version" => {
+                    let v = it.host.os_version();
+                    it.host(v)?
+                }
+                _ => {
+                    let v = it.host.os_version();
+                    format!("Windows-10-{}-SP0", it.host(v)?)
+                }
+            }))
+        }
+        ("PIL.ImageGrab", "grab") => {
+            let a = args.bind("grab", &["bbox", "include_layered_windows", "all_screens", "xdisplay"], 0)?;
+            let region = match a[0].as_ref().filter(|v| !matches!(v, Value::None)) {
+                None => None,
+                Some(bbox) => {
+                    let items = super::interp::iterate(bbox)?;
+                    let [l, t, r, b] = items.as_slice() else {
+                        return Err(value_error("bbox must be (left, top, right, bottom)"));
+                    };
+                    let (l, t) = (to_i64(l, "left")?, to_i64(t, "top")?);
+                    let (r, b) = (to_i64(r, "right")?, to_i64(b, "bottom")?);
+                    Some(Value::Tuple(vec![Value::Int(l), Value::Int(t), Value::Int(r - l), Value::Int(b - t)]))
+                }
+            };
+            super::pyautogui::screenshot_image(it, &region)
+        }
+        _ => Err(not_supported(format!(
+            "{module}.{name} is not supported: this interpreter has no image library"
+        ))),
+    }
+}
+
+/// `SystemExit(status)`: `None` is 0, an int is the code, anything else is printed to stderr and is 1.
+pub(crate) fn exit_with(it: &mut Interp<'_, '_>, status: Option<Value>) -> ScriptError {
+    let code = match status.unwrap_or(Value::None) {
+        Value::None => 0,
+        Value::Int(i) => i32::try_from(i).unwrap_or(-1),
+        Value::Bool(b) => i32::from(b),
+        other => {
+            it.out.stderr.push_str(&other.to_str());
+            it.out.stderr.push('\n');
+            1
+        }
+    };
+    it.system_exit(code)
+}
+
+fn os(it: &mut Interp<'_, '_>, name: &str, args: Args) -> Result<Value, ScriptError> {
+    match name {
+        "getenv" => {
+            let a = args.bind("getenv", &["key", "default"], 1)?;
+            let key = match arg(&a, 0) {
+                Value::Str(s) => s,
+                other => return Err(type_error(format!("str expected, not {}", other.type_name()))),
+            };
+            Ok(it.host.env_var(key).map(Value::Str).unwrap_or_else(|| arg(&a, 1).clone()))
+        }
+        "system" => {
+            let a = args.bind("system", &["command"], 1)?;
+            let command = to_str(arg(&a, 0), "system() argument")?.to_owned();
+            let result = it.host.run_command(&CommandArg::Line(command), true);
+            let output = it.host(result)?;
+            it.out.stdout.push_str(&output.stdout);
+            it.out.stderr.push_str(&output.stderr);
+            Ok(Value::Int(i64::from(output.code)))
+        }
+        "listdir" => {
+            let a = args.bind("listdir", &["path"], 0)?;
+            let path = match arg(&a, 0) {
+                Value::None => ".",
+                v => path_arg(v)?,
+            }
+            .to_owned();
+            let names = it.host.list_dir(&path);
+            Ok(Value::List(it.host(names)?.into_iter().map(Value::Str).collect()))
+        }
+        "startfile" => {
+            let a = args.bind("startfile", &["path", "operation"], 1)?;
+            if !is_none(&a[1]) {
+                return Err(not_supported("os.startfile(operation=...) is not supported"));
+            }
+            let path = path_arg(arg(&a, 0))?;
+            if path.contains('"') {
+                return Err(value_error("os.startfile() path must not contain '\"'"));
+            }
+            let command = CommandArg::Line(format!("start \"\" \"{path}\""));
+            let result = it.host.spawn_command(&command, true);
+            it.host(result)?;
+            Ok(Value::None)
+        }
+        other => Err(not_supported(format!("os.{other} is not supported"))),
+    }
+}
+
+fn os_path(it: &mut Interp<'_, '_>, name: &str, args: Args) -> Result<Value, ScriptError> {
+    let s = |v: String| Ok(Value::Str(v));
+    let pair = |(a, b): (String, String)| Ok(Value::Tuple(vec![Value::Str(a), Value::Str(b)]));
+    if name == "join" {
+        if !args.kw.is_empty() {
+            return Err(type_error("join() takes no keyword arguments"));
+        }
+        let Some((first, rest)) = args.pos.split_first() else {
+            return Err(type_error("join() missing 1 required positional argument: 'path'"));
+        };
+        let mut parts = vec![path_arg(first)?];
+        for p in rest {
+            parts.push(path_arg(p)?);
+        }
+        return s(ntpath::join(&parts));
+    }
+    let a = args.bind(name, &["path"], 1)?;
+    let path = path_arg(arg(&a, 0))?.to_owned();
+    match name {
+        "basename" => s(ntpath::split(&path).1),
+        "dirname" => s(ntpath::split(&path).0),
+        "split" => pair(ntpath::split(&path)),
+        "splitext" => pair(ntpath::splitext(&path)),
+        "splitdrive" => {
+            let (d, p) = ntpath::splitdrive(&path);
+            pair((d.to_owned(), p.to_owned()))
+        }
+        "isabs" => Ok(Value::Bool(ntpath::isabs(&path))),
+        "expanduser" => {
+            let host = &mut *it.host;
+            s(ntpath::expanduser(&path, &mut |var| host.env_var(var)))
+        }
+        _ => {
+            let kind = it.host.path_kind(&path);
+            Ok(Value::Bool(match name {
+                "isfile" => kind == Some(PathKind::File),
+                "isdir" => kind == Some(PathKind::Dir),
+                _ => kind.is_some(),
+            }))
+        }
+    }
+}
+
+/// What a `subprocess` call does with one output stream.
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum Stream {
+    /// Inherited: appended to the script's own output.
+    Inherit,
+    Capture,
+    Discard,
+    /// `stderr=STDOUT`.
+    ToStdout,
+}
+
+fn stream(v: Option<&Value>, what: &str) -> Result<Stream, ScriptError> {
+    match v {
+        None | Some(Value::None) => Ok(Stream::Inherit),
+        Some(Value::Int(PIPE)) => Ok(Stream::Capture),
+        Some(Value::Int(DEVNULL)) => Ok(Stream::Discard),
+        Some(Value::Int(STDOUT)) if what == "stderr" => Ok(Stream::ToStdout),
+        Some(_) => Err(not_supported(format!("subprocess {what}= accepts only None, PIPE, DEVNULL (or STDOUT for stderr)"))),
+    }
+}
+
+fn command_arg(v: &Value) -> Result<CommandArg, ScriptError> {
+    match v {
+        Value::Str(s) => Ok(CommandArg::Line(s.clone())),
+        Value::List(items) | Value::Tuple(items) => items
+            .iter()
+            .map(|item| match item {
+                Value::Str(s) => Ok(s.clone()),
+                other => Err(type_error(format!(
+                    "expected str, bytes or os.PathLike object, not {}",
+                    other.type_name()
+                ))),
+            })
+            .collect::<Result<Vec<_>, _>>()
+            .map(CommandArg::Args),
+        other => Err(type_error(format!("subprocess args must be a str or a list of str, not {}", other.type_name()))),
+    }
+}
+
+pub(crate) fn called_process_error(cmd: &Value, code: i64, stdout: Option<String>, stderr: Option<String>) -> ScriptError {
+    let _ = (stdout, stderr);
+    ScriptError::new(
+        ErrorKind::CalledProcess,
+        format!("Command '{}' returned non-zero exit status {code}.", cmd.to_str()),
+    )
+}
+
+fn subprocess(it: &mut Interp<'_, '_>, name: &str, args: Args) -> Result<Value, ScriptError> {
+    let mut pos = args.pos.into_iter();
+    let Some(cmd_value) = pos.next() else {
+        return Err(type_error(format!("{name}() missing 1 required positional argument: 'args'")));
+    };
+    if pos.next().is_some() {
+        return Err(not_supported(format!("subprocess.{name}() accepts only the command as a positional argument")));
+    }
+    let command = command_arg(&cmd_value)?;
+    let mut shell = false;
+    let mut out_stream = None;
+    let mut err_stream = None;
+    let mut capture = false;
+    let mut check = name.starts_with("check_");
+    for (k, v) in &args.kw {
+        match k.as_str() {
+            "shell" => shell = v.truthy(),
+            "stdout" => out_stream = Some(v.clone()),
+            "stderr" => err_stream = Some(v.clone()),
+            "capture_output" if name == "run" => capture = v.truthy(),
+            "check" if name == "run" => check = v.truthy(),
+            "text" | "universal_newlines" | "encoding" | "errors" | "timeout" | "creationflags" | "close_fds"
+            | "bufsize" | "startupinfo" => {}
+            "cwd" | "env" | "stdin" | "input" | "executable" | "preexec_fn" if matches!(v, Value::None) => {}
+            other => return Err(not_supported(format!("subprocess.{name}({other}=...) is not supported"))),
+        }
+    }
+    if name == "Popen" {
+        let result = it.host.spawn_command(&command, shell);
+        let pid = it.host(result)?;
+        return Ok(Value::Object(Object::Popen { args: Box::new(cmd_value), pid: i64::from(pid) }));
+    }
+    let (mut out_mode, mut err_mode) = (stream(out_stream.as_ref(), "stdout")?, stream(err_stream.as_ref(), "stderr")?);
+    if capture {
+        if out_stream.is_some() || err_stream.is_some() {
+            return Err(value_error("stdout and stderr arguments may not be used with capture_output."));
+        }
+        (out_mode, err_mode) = (Stream::Capture, Stream::Capture);
+    }
+    if name == "check_output" {
+        out_mode = Stream::Capture;
+    }
+    let result = it.host.run_command(&command, shell);
+    let CommandOutput { code, stdout, stderr } = it.host(result)?;
+    let (mut captured_out, mut captured_err) = (None, None);
+    let mut stdout = stdout;
+    if err_mode == Stream::ToStdout {
+        stdout.push_str(&stderr);
+    }
+    match out_mode {
+        Stream::Inherit => it.out.stdout.push_str(&stdout),
+        Stream::Capture => captured_out = Some(stdout),
+        Stream::Discard | Stream::ToStdout => {}
+    }
+    match err_mode {
+        Stream::Inherit => it.out.stderr.push_str(&stderr),
+        Stream::Capture => captured_err = Some(stderr),
+        Stream::Discard | Stream::ToStdout => {}
+    }
+    let code = i64::from(code);
+    if check && code != 0 {
+        return Err(called_process_error(&cmd_value, code, captured_out, captured_err));
+    }
+    Ok(match name {
+        "run" => Value::Object(Object::Completed {
+            args: Box::new(cmd_value),
+            returncode: code,
+            stdout: captured_out,
+            stderr: captured_err,
+        }),
+        "check_output" => Value::Str(captured_out.unwrap_or_default()),
+        "check_call" => Value::Int(0),
+        _ => Value::Int(code),
+    })
+}
+
+/// Python's `ntpath` (3.10) path functions, on `&str` with ASCII separators.
+pub(crate) mod ntpath {
+    fn is_sep(c: char) -> bool {
+        c == '\\' || c == '/'
+    }
+
+    /// `ntpath.splitdrive`: `C:` or a UNC `\\server\share` prefix.
+    pub(crate) fn splitdrive(p: &str) -> (&str, &str) {
+        if p.len() < 2 {
+            return ("", p);
+        }
+        let norm: String = p.chars().map(|c| if c == '/' { '\\' } else { c }).collect();
+        if norm.starts_with("\\\\") && !norm[2..].starts_with('\\') {
+            let Some(index) = norm[2..].find('\\').map(|i| i + 2) else {
+                return ("", p);
+            };
+            let index2 = match norm[index + 1..].find('\\').map(|i| i + index + 1) {
+                Some(i) if i == index + 1 => return ("", p),
+                Some(i) => i,
+                None => p.len(),
+            };
+            return p.split_at(index2);
+        }
+        if norm.as_bytes().get(1) == Some(&b':') && p.is_char_boundary(2) {
+            return p.split_at(2);
+        }
+        ("", p)
+    }
+
+    /// `ntpath.join`.
+    pub(crate) fn join(parts: &[&str]) -> String {
+        let (first_drive, first_path) = splitdrive(parts.first().copied().unwrap_or(""));
+        let mut drive = first_drive.to_owned();
+        let mut path = first_path.to_owned();
+        for part in parts.iter().skip(1) {
+            let (p_drive, p_path) = splitdrive(part);
+            if p_path.starts_with(is_sep) {
+                if !p_drive.is_empty() || drive.is_empty() {
+                    drive = p_drive.to_owned();
+                }
+                path = p_path.to_owned();
+                continue;
+            } else if !p_drive.is_empty() && p_drive != drive {
+                if p_drive.to_lowercase() != drive.to_lowercase() {
+                    drive = p_drive.to_owned();
+                    path = p_path.to_owned();
+                    continue;
+                }
+                drive = p_drive.to_owned();
+            }
+            if !path.is_empty() && !path.ends_with(is_sep) {
+                path.push('\\');
+            }
+            path.push_str(p_path);
+        }
+        if !path.is_empty() && !path.starts_with(is_sep) && !drive.is_empty() && !drive.ends_with(':') {
+            return format!("{drive}\\{path}");
+        }
+        format!("{drive}{path}")
+    }
+
+    /// `ntpath.split`: (head, tail), with trailing separators stripped from the head.
+    pub(crate) fn split(p: &str) -> (String, String) {
+        let (drive, rest) = splitdrive(p);
+        let i = rest.rfind(is_sep).map_or(0, |i| i + 1);
+        let (head, tail) = rest.split_at(i);
+        let stripped = head.trim_end_matches(is_sep);
+        let head = if stripped.is_empty() { head } else { stripped };
+        (format!("{drive}{head}"), tail.to_owned())
+    }
+
+    /// `ntpath.splitext`: leading dots of the file name do not start an extension.
+    pub(crate) fn splitext(p: &str) -> (String, String) {
+        let sep_index = p.rfind(is_sep).map_or(0, |i| i + 1);
+        if let Some(dot) = p.rfind('.').filter(|d| *d >= sep_index) {
+            if p[sep_index..dot].chars().any(|c| c != '.') {
+                return (p[..dot].to_owned(), p[dot..].to_owned());
+            }
+        }
+        (p.to_owned(), String::new())
+    }
+
+    /// `ntpath.isabs` (3.10): a separator right after the drive.
+    pub(crate) fn isabs(p: &str) -> bool {
+        splitdrive(p).1.starts_with(is_sep)
+    }
+
+    /// `ntpath.expanduser` with the environment read through `env`.
+    pub(crate) fn expanduser(path: &str, env: &mut dyn FnMut(&str) -> Option<String>) -> String {
+        if !path.starts_with('~') {
+            return path.to_owned();
+        }
+        let end = path[1..].find(is_sep).map_or(path.len(), |i| i + 1);
+        let mut home = match env("USERPROFILE") {
+            Some(home) => home,
+            None => match env("HOMEPATH") {
+                None => return path.to_owned(),
+                Some(home_path) => join(&[&env("HOMEDRIVE").unwrap_or_default(), &home_path]),
+            },
+        };
+        if end != 1 {
+            let target = &path[1..end];
+            if env("USERNAME").as_deref() != Some(target) {
+                let (parent, current) = split(&home);
+                if env("USERNAME").as_deref() != Some(current.as_str()) {
+                    return path.to_owned();
+                }
+                home = join(&[&parent, target]);
+            }
+        }
+        format!("{home}{}", &path[end..])
+    }
+
+    #[cfg(test)]
+    mod tests {
+        use super::*;
+
+        #[test]
+        fn join_matches_ntpath() {
+            let check = |parts: &[&str], expected: &str| assert_eq!(join(parts), expected, "{parts:?}");
+            check(&[r"C:\Users\Docker\AppData\Local", r"Google\Chrome\User Data\Default\History"],
+                r"C:\Users\Docker\AppData\Local\Google\Chrome\User Data\Default\History");
+            check(&["a", "b", "c"], r"a\b\c");
+            check(&[r"a\", "b"], r"a\b");
+            check(&["a/", "b"], "a/b");
+            check(&["a", r"\b"], r"\b");
+            check(&[r"C:\a", r"\b"], r"C:\b");
+            check(&[r"C:\a", r"D:b"], "D:b");
+            check(&[r"C:\a", r"c:b"], r"c:\a\b");
+            check(&["C:", "b"], "C:b");
+            check(&[r"\\server\share", "x"], r"\\server\share\x");
+            check(&["", "b"], "b");
+            check(&["a", ""], r"a\");
+        }
+
+        #[test]
+        fn split_and_friends_match_ntpath() {
+            let check = |p: &str, head: &str, tail: &str| assert_eq!(split(p), (head.to_owned(), tail.to_owned()), "{p}");
+            check(r"C:\Users\Docker\file.txt", r"C:\Users\Docker", "file.txt");
+            check(r"C:\file.txt", r"C:\", "file.txt");
+            check(r"C:\", r"C:\", "");
+            check("file", "", "file");
+            check(r"a\\b", "a", "b");
+            check(r"\\server\share\x", r"\\server\share\", "x");
+            assert_eq!(splitext(r"C:\a\b.tar.gz"), (r"C:\a\b.tar".to_owned(), ".gz".to_owned()));
+            assert_eq!(splitext(r"C:\a\.bashrc"), (r"C:\a\.bashrc".to_owned(), String::new()));
+            assert_eq!(splitext(r"a.b\c"), (r"a.b\c".to_owned(), String::new()));
+            assert!(isabs(r"C:\x") && isabs(r"\x") && !isabs("C:x") && !isabs("x"));
+        }
+
+        #[test]
+        fn expanduser_matches_ntpath() {
+            let mut env = |name: &str| match name {
+                "USERPROFILE" => Some(r"C:\Users\Docker".to_owned()),
+                "USERNAME" => Some("Docker".to_owned()),
+                _ => None,
+            };
+            assert_eq!(expanduser("~", &mut env), r"C:\Users\Docker");
+            assert_eq!(expanduser(r"~\Desktop", &mut env), r"C:\Users\Docker\Desktop");
+            assert_eq!(expanduser("~other/x", &mut env), r"C:\Users\other/x");
+            assert_eq!(expanduser("x~", &mut env), "x~");
+            assert_eq!(expanduser("~", &mut |_| None), "~");
+        }
+    }
+}

@@ -1,0 +1,751 @@
+//! End-to-end tests of the interpreter: the WAA corpus programs, the upstream
+//! host's getters and computer_13 templates, the `Computer` object, literal
+//! forms, precise errors, and property tests for the parser.
+
+use std::collections::HashMap;
+
+use super::*;
+use crate::action::{Action, MouseButton};
+use crate::geometry::Point;
+
+/// A scripted host: it records actions (sleeps as `Wait`) and every other call.
+#[derive(Debug)]
+struct FakeHost {
+    actions: Vec<Action>,
+    calls: Vec<String>,
+    cursor: (i32, i32),
+    screen: (u32, u32),
+    env: HashMap<String, String>,
+    windows: Vec<String>,
+    active_title: String,
+    installed: Vec<String>,
+    paths: Vec<(String, PathKind)>,
+    command: CommandOutput,
+    clipboard: String,
+}
+
+impl FakeHost {
+    fn new() -> FakeHost {
+        let env = [
+            ("USERPROFILE", r"C:\Users\Docker"),
+            ("USERNAME", "Docker"),
+            ("LOCALAPPDATA", r"C:\Users\Docker\AppData\Local"),
+            ("COMPUTERNAME", "WAA-VM"),
+        ];
+        FakeHost {
+            actions: Vec::new(),
+            calls: Vec::new(),
+            cursor: (10, 20),
+            screen: (1440, 900),
+            env: env.iter().map(|(k, v)| ((*k).to_owned(), (*v).to_owned())).collect(),
+            windows: Vec::new(),
+            active_title: "Untitled - Paint".to_owned(),
+            installed: vec!["msedge".to_owned(), "notepad".to_owned()],
+            paths: vec![(r"C:\Users\Docker\Desktop".to_owned(), PathKind::Dir), (r"C:\x.txt".to_owned(), PathKind::File)],
+            command: CommandOutput { code: 0, stdout: String::new(), stderr: String::new() },
+            clipboard: "clip".to_owned(),
+        }
+    }
+}
+
+impl ScriptHost for FakeHost {
+    fn perform(&mut self, action: Action) -> Result<(), String> {
+        self.cursor = host::cursor_after(&action, self.cursor);
+        self.actions.push(action);
+        Ok(())
+    }
+    fn sleep(&mut self, seconds: f64) -> Result<(), String> {
+        self.actions.push(Action::Wait { ms: (seconds * 1000.0).round() as u64 });
+        Ok(())
+    }
+    fn cursor_position(&mut self) -> Result<(i32, i32), String> {
+        Ok(self.cursor)
+    }
+    fn screen_size(&mut self) -> Result<(u32, u32), String> {
+        Ok(self.screen)
+    }
+    fn active_window_title(&mut self) -> Result<String, String> {
+        Ok(self.active_title.clone())
+    }
+    fn save_screenshot(&mut self, path: &str, region: Option<[i32; 4]>) -> Result<(), String> {
+        self.calls.push(format!("save_screenshot {path} {region:?}"));
+        Ok(())
+    }
+    fn env_var(&mut self, name: &str) -> Option<String> {
+        self.env.iter().find(|(k, _)| k.eq_ignore_ascii_case(name)).map(|(_, v)| v.clone())
+    }
+    fn path_kind(&mut self, path: &str) -> Option<PathKind> {
+        self.paths.iter().find(|(p, _)| p.eq_ignore_ascii_case(path)).map(|(_, k)| *k)
+    }
+    fn list_dir(&mut self, path: &str) -> Result<Vec<String>, String> {
+        self.calls.push(format!("list_dir {path}"));
+        Ok(vec!["a.txt".to_owned(), "b".to_owned()])
+    }
+    fn run_command(&mut self, cmd: &CommandArg, shell: bool) -> Result<CommandOutput, String> {
+        self.calls.push(format!("run_command {cmd:?} shell={shell}"));
+        Ok(self.command.clone())
+    }
+    fn spawn_command(&mut self, cmd: &CommandArg, shell: bool) -> Result<u32, String> {
+        self.calls.push(format!("spawn_command {cmd:?} shell={shell}"));
+        Ok(4242)
+    }
+    fn os_version(&mut self) -> Result<String, String> {
+        Ok("10.0.22631".to_owned())
+    }
+    fn clipboard_set_text(&mut self, text: &str) -> Result<(), String> {
+        self.calls.push(format!("clipboard_set_text {text}"));
+        self.clipboard = text.to_owned();
+        Ok(())
+    }
+    fn clipboard_get_text(&mut self) -> Result<String, String> {
+        Ok(self.clipboard.clone())
+    }
+    fn clipboard_set_image_from_screenshot_crop(&mut self, rect: [i32; 4]) -> Result<(), String> {
+        self.calls.push(format!("clipboard_set_image {rect:?}"));
+        Ok(())
+    }
+    fn open_program(&mut self, name: &str) -> Result<bool, String> {
+        self.calls.push(format!("open_program {name}"));
+        Ok(self.installed.iter().any(|p| p == name))
+    }
+    fn maximize_foreground(&mut self) -> Result<(), String> {
+        self.calls.push("maximize_foreground".to_owned());
+        Ok(())
+    }
+    fn window_titles(&mut self) -> Result<Vec<String>, String> {
+        Ok(self.windows.clone())
+    }
+    fn switch_to_window(&mut self, title: &str) -> Result<(), String> {
+        self.calls.push(format!("switch_to_window {title}"));
+        Ok(())
+    }
+}
+
+fn run_python(host: &mut FakeHost, src: &str) -> Result<RunOutput, ScriptError> {
+    run_source(src, host, Globals::python())
+}
+
+/// Runs `src` as `python -c` and returns (actions, stdout, other host calls).
+fn python(src: &str) -> (Vec<Action>, String, Vec<String>) {
+    let mut host = FakeHost::new();
+    let out = run_python(&mut host, src).unwrap_or_else(|e| panic!("{src}\n{e}\n{}", e.traceback()));
+    (host.actions, out.stdout, host.calls)
+}
+
+fn python_err(src: &str) -> String {
+    let mut host = FakeHost::new();
+    match run_python(&mut host, src) {
+        Ok(out) => panic!("{src} should fail, printed {:?}", out.stdout),
+        Err(e) => e.to_string(),
+    }
+}
+
+fn wait(ms: u64) -> Action {
+    Action::Wait { ms }
+}
+
+fn key(k: &str) -> Action {
+    Action::KeyPress { key: k.to_owned(), presses: 1 }
+}
+
+fn hotkey(keys: &[&str]) -> Action {
+    Action::Hotkey { keys: keys.iter().map(|k| (*k).to_owned()).collect() }
+}
+
+fn text(t: &str) -> Action {
+    Action::TypeText { text: t.to_owned(), interval_ms: None }
+}
+
+fn click_at(x: i32, y: i32) -> Action {
+    Action::Click { x: Some(x), y: Some(y), button: MouseButton::Left, count: 1 }
+}
+
+// ---- The corpus -------------------------------------------------------------------------
+
+#[test]
+fn corpus_save_hotkeys() {
+    let check = |src: &str, expected: &[Action]| {
+        let (actions, stdout, calls) = python(src);
+        assert_eq!(actions, expected, "{src}");
+        assert_eq!(stdout, "", "{src}");
+        assert!(calls.is_empty(), "{src}: {calls:?}");
+    };
+    check("import pyautogui; pyautogui.hotkey('ctrl', 's');", &[hotkey(&["ctrl", "s"])]);
+    check(
+        "import pyautogui; import time; pyautogui.hotkey('ctrl', 's'); time.sleep(0.5);",
+        &[hotkey(&["ctrl", "s"]), wait(500)],
+    );
+    check(
+        "import pyautogui; import time; pyautogui.hotkey('ctrl', 's'); time.sleep(0.5);;",
+        &[hotkey(&["ctrl", "s"]), wait(500)],
+    );
+    check("import pyautogui; import time; pyautogui.click(960, 540); time.sleep(0.5);", &[click_at(960, 540), wait(500)]);
+    check(
+        "import pyautogui; import time; pyautogui.hotkey('alt', 'f10'); time.sleep(0.5);",
+        &[hotkey(&["alt", "f10"]), wait(500)],
+    );
+    check("import pyautogui; pyautogui.press('f11');", &[key("f11")]);
+}
+
+#[test]
+fn corpus_paint_save_and_kill() {
+    let src = r#"import pyautogui; import time; from PIL import Image;import subprocess; pyautogui.hotkey('ctrl', 's'); time.sleep(1); pyautogui.typewrite(r'"C:\Users\Docker\Downloads\CanvasSize.png"'); time.sleep(2); pyautogui.press('enter'); time.sleep(2); subprocess.call("taskkill /f /im mspaint.exe")"#;
+    let mut host = FakeHost::new();
+    host.command.stdout = "SUCCESS: The process \"mspaint.exe\" with PID 1 has been terminated.\n".to_owned();
+    let out = run_python(&mut host, src).unwrap();
+    assert_eq!(
+        host.actions,
+        [
+            hotkey(&["ctrl", "s"]),
+            wait(1000),
+            text(r#""C:\Users\Docker\Downloads\CanvasSize.png""#),
+            wait(2000),
+            key("enter"),
+            wait(2000),
+        ]
+    );
+    assert_eq!(host.calls, [r#"run_command Line("taskkill /f /im mspaint.exe") shell=false"#]);
+    // The child's output is not captured by subprocess.call, so it lands in ours.
+    assert_eq!(out.stdout, host.command.stdout);
+}
+
+#[test]
+fn corpus_screenshot_type_and_save() {
+    let src = r#"import pyautogui;from PIL import Image;import subprocess;screenshot=pyautogui.screenshot();print(type(screenshot));screenshot.save(r"C:\Users\Docker\Downloads\Screenshot.png");subprocess.call("taskkill /f /im mspaint.exe");"#;
+    let (actions, stdout, calls) = python(src);
+    assert!(actions.is_empty());
+    assert_eq!(stdout, "<class 'PIL.Image.Image'>\n");
+    assert_eq!(
+        calls,
+        [
+            r"save_screenshot C:\Users\Docker\Downloads\Screenshot.png None".to_owned(),
+            r#"run_command Line("taskkill /f /im mspaint.exe") shell=false"#.to_owned(),
+        ]
+    );
+}
+
+#[test]
+fn upstream_prefix_records_failsafe() {
+    let mut host = FakeHost::new();
+    let src = "import pyautogui; import time; pyautogui.FAILSAFE = False; pyautogui.click(x=100, y=200)";
+    let out = run_python(&mut host, src).unwrap();
+    assert_eq!(out.failsafe, Some(false));
+    assert_eq!(host.actions, [click_at(100, 200)]);
+}
+
+#[test]
+fn explicit_pause_sleeps_after_each_input_call() {
+    let (actions, ..) = python("import pyautogui\npyautogui.PAUSE = 0.2\npyautogui.press('a')\npyautogui.position()\npyautogui.press('b')");
+    assert_eq!(actions, [key("a"), wait(200), key("b"), wait(200)]);
+}
+
+// ---- Getters ------------------------------------------------------------------------------
+
+#[test]
+fn getter_programs_print_like_python() {
+    let check = |src: &str, expected: &str| assert_eq!(python(src).1, expected, "{src}");
+    check("import platform; print(platform.system())", "Windows\n");
+    check(
+        r"import os; print(os.path.join(os.getenv('LOCALAPPDATA'), 'Google\\Chrome\\User Data\\Default\\History'))",
+        "C:\\Users\\Docker\\AppData\\Local\\Google\\Chrome\\User Data\\Default\\History\n",
+    );
+    check("import pyautogui; print(pyautogui.getActiveWindowTitle())", "Untitled - Paint\n");
+    check("import os; print(os.path.expanduser('~'))", "C:\\Users\\Docker\n");
+    check("import platform; print(platform.platform())", "Windows-10-10.0.22631-SP0\n");
+    check("import os; print(os.environ.get('USERNAME'), os.environ['COMPUTERNAME'], os.getenv('NOPE', 'dflt'))", "Docker WAA-VM dflt\n");
+    check(r"import os; print(os.path.exists(r'C:\x.txt'), os.path.isdir(r'C:\x.txt'), os.path.isfile('C:\\x.txt'))", "True False True\n");
+    check(r"import os; print(os.path.basename(r'C:\a\b.txt'), os.path.dirname(r'C:\a\b.txt'))", "b.txt C:\\a\n");
+    check("import os; print(os.listdir('C:\\\\'))", "['a.txt', 'b']\n");
+    check("import os.path; print(os.path.splitext('a.tar.gz'))", "('a.tar', '.gz')\n");
+    check("import sys; print(sys.platform)", "win32\n");
+}
+
+#[test]
+fn hidden_file_getter_fails_precisely() {
+    let src = r"import os; print(1 if os.path.basename(r'C:\x') .startswith('.') or (os.name == 'nt' and bool(os.stat(r'C:\x').st_file_attributes & 2)) else 0)";
+    let err = python_err(src);
+    assert_eq!(err, "line 1: SyntaxError: column 20: conditional expressions (`a if cond else b`) are not supported");
+}
+
+#[test]
+fn subprocess_and_os_system() {
+    let mut host = FakeHost::new();
+    host.command = CommandOutput { code: 3, stdout: "out\n".into(), stderr: "err\n".into() };
+    let src = "import subprocess, os\nr = subprocess.run(['cmd', '/c', 'ver'], capture_output=True, text=True)\nprint(r.returncode, repr(r.stdout), repr(r.stderr))\nprint(os.system('dir'))\np = subprocess.Popen('notepad.exe', shell=True)\nprint(p.pid)";
+    let out = run_python(&mut host, src).unwrap();
+    assert_eq!(out.stdout, "3 'out\\n' 'err\\n'\nout\n3\n4242\n");
+    assert_eq!(out.stderr, "err\n");
+    assert_eq!(
+        host.calls,
+        [
+            r#"run_command Args(["cmd", "/c", "ver"]) shell=false"#,
+            r#"run_command Line("dir") shell=true"#,
+            r#"spawn_command Line("notepad.exe") shell=true"#,
+        ]
+    );
+    let err = run_python(&mut host, "import subprocess\nsubprocess.check_output(['x', 'y'])").unwrap_err();
+    assert_eq!(err.python_message(), "subprocess.CalledProcessError: Command '['x', 'y']' returned non-zero exit status 3.");
+}
+
+#[test]
+fn sys_exit_ends_the_run_with_a_code() {
+    let mut host = FakeHost::new();
+    let out = run_python(&mut host, "import sys\nprint('a')\nsys.exit(4)\nprint('b')").unwrap();
+    assert_eq!((out.stdout.as_str(), out.exit_code), ("a\n", 4));
+    let out = run_python(&mut host, "import sys; sys.exit('bad')").unwrap();
+    assert_eq!((out.stderr.as_str(), out.exit_code), ("bad\n", 1));
+}
+
+// ---- computer_13 templates (waa-api.md §b.6) ------------------------------------------------
+
+#[test]
+fn computer_13_templates_translate_to_actions() {
+    let check = |code: &str, expected: &[Action]| {
+        let actions = actions_from_pyautogui(code, (1440, 900), (10, 20)).unwrap_or_else(|e| panic!("{code}: {e}"));
+        assert_eq!(actions, expected, "{code}");
+    };
+    check("pyautogui.moveTo(100, 200, 0.6, pyautogui.easeInQuad)", &[Action::MoveTo { x: 100, y: 200 }]);
+    check("pyautogui.moveTo(100.9, 200.2, 0.5, pyautogui.easeOutBounce)", &[Action::MoveTo { x: 100, y: 200 }]);
+    check(
+        "pyautogui.click(button='right', x=5, y=6, clicks=2)",
+        &[Action::Click { x: Some(5), y: Some(6), button: MouseButton::Right, count: 2 }],
+    );
+    check("pyautogui.click()", &[Action::Click { x: None, y: None, button: MouseButton::Left, count: 1 }]);
+    check("pyautogui.mouseDown(button='left')", &[Action::MouseDown { button: MouseButton::Left, x: None, y: None }]);
+    check("pyautogui.mouseUp(button='middle')", &[Action::MouseUp { button: MouseButton::Middle, x: None, y: None }]);
+    check("pyautogui.rightClick(x=7, y=8)", &[Action::RightClick { x: Some(7), y: Some(8) }]);
+    check("pyautogui.doubleClick(x=7, y=8)", &[Action::DoubleClick { x: Some(7), y: Some(8) }]);
+    check(
+        "pyautogui.dragTo(500, 400, duration=1.0, button='left', mouseDownUp=True)",
+        &[Action::Drag { from: None, to: Point::new(500, 400), button: MouseButton::Left }],
+    );
+    check("pyautogui.hscroll(-3)", &[Action::Scroll { x: None, y: None, dx: -3, dy: 0 }]);
+    check("pyautogui.vscroll(120)", &[Action::Scroll { x: None, y: None, dx: 0, dy: 120 }]);
+    check("pyautogui.scroll(-5, x=1, y=2)", &[Action::Scroll { x: Some(1), y: Some(2), dx: 0, dy: -5 }]);
+    check("pyautogui.typewrite('hello world')", &[text("hello world")]);
+    check("pyautogui.typewrite(\"it's\")", &[text("it's")]);
+    check("pyautogui.typewrite('a\\nb\\tc')", &[text("a"), key("enter"), text("b"), key("tab"), text("c")]);
+    check("pyautogui.write(['a', 'Enter', 'pgdn'])", &[key("a"), key("enter"), key("pagedown")]);
+    check("pyautogui.press('enter')", &[key("enter")]);
+    check("pyautogui.press('ESC', presses=3)", &[Action::KeyPress { key: "esc".into(), presses: 3 }]);
+    check("pyautogui.press(['a', 'b'], interval=0.1)", &[key("a"), key("b"), wait(100)]);
+    check("pyautogui.keyDown('shift')", &[Action::KeyDown { key: "shift".into() }]);
+    check("pyautogui.keyUp('shift')", &[Action::KeyUp { key: "shift".into() }]);
+    check("pyautogui.hotkey('ctrl', 'c')", &[hotkey(&["ctrl", "c"])]);
+    check("pyautogui.hotkey(['ctrl', 'shift', 't'])", &[hotkey(&["ctrl", "shift", "t"])]);
+    check(
+        "pyautogui.hotkey('ctrl', 'c', interval=0.1)",
+        &[
+            Action::KeyDown { key: "ctrl".into() },
+            wait(100),
+            Action::KeyDown { key: "c".into() },
+            wait(100),
+            Action::KeyUp { key: "c".into() },
+            wait(100),
+            Action::KeyUp { key: "ctrl".into() },
+            wait(100),
+        ],
+    );
+    check("pyautogui.moveRel(5, -5)", &[Action::MoveRel { dx: 5, dy: -5 }]);
+    check("pyautogui.move(None, 3)", &[Action::MoveRel { dx: 0, dy: 3 }]);
+    check(
+        "pyautogui.drag(30, 40, button='right')",
+        &[Action::Drag { from: None, to: Point::new(40, 60), button: MouseButton::Right }],
+    );
+    check("pyautogui.click((300, 400))", &[click_at(300, 400)]);
+    check("pyautogui.click(x=300)", &[click_at(300, 20)]);
+    check("pyautogui.click([100, 200, 50, 31])", &[click_at(125, 215)]);
+    check(
+        "pyautogui.click(1, 2, clicks=2, interval=0.25)",
+        &[click_at(1, 2), wait(250), Action::Click { x: None, y: None, button: MouseButton::Left, count: 1 }, wait(250)],
+    );
+    check("pyautogui.tripleClick()", &[Action::Click { x: None, y: None, button: MouseButton::Left, count: 3 }]);
+    check("pyautogui.sleep(0.3)", &[wait(300)]);
+    check("x = 1, 2", &[]);
+}
+
+#[test]
+fn translation_refuses_io() {
+    let err = actions_from_pyautogui("pyautogui.screenshot('a.png')", (100, 100), (0, 0)).unwrap_err();
+    assert_eq!(err.to_string(), "line 1: OSError: saving a screenshot cannot be translated into input actions");
+}
+
+#[test]
+fn position_size_and_points_print_like_pyautogui() {
+    let (_, stdout, _) = python(
+        "import pyautogui\npyautogui.moveTo(3, 4)\np = pyautogui.position()\nprint(p, p.x, p[1], len(p))\nprint(pyautogui.size())\nprint(pyautogui.onScreen(1439, 0), pyautogui.onScreen(1440, 0))\nprint(pyautogui.screenshot(region=(0, 0, 10, 20)).size)",
+    );
+    assert_eq!(stdout, "Point(x=3, y=4) 3 4 2\nSize(width=1440, height=900)\nTrue False\n(10, 20)\n");
+}
+
+// ---- The Computer object --------------------------------------------------------------------
+
+fn computer_state() -> ComputerState {
+    ComputerState {
+        rects: vec![[0, 0, 10, 10], [100, 50, 201, 151], [10, 20, 30, 40]],
+        window_rect: [5, 7, 1445, 907],
+        scale: (1.5, 2.0),
+        clipboard_content: None,
+        swap_ctrl_alt: false,
+        current_id: None,
+    }
+}
+
+fn navi(state: &mut ComputerState, host: &mut FakeHost, src: &str) -> Result<RunOutput, ScriptError> {
+    let globals = Globals { computer: Some(state), computer_action_delay: 0.25, preimport: &[] };
+    run_source(src, host, globals)
+}
+
+#[test]
+fn move_id_uses_centre_scale_and_window_offset() {
+    let mut state = computer_state();
+    let mut host = FakeHost::new();
+    navi(&mut state, &mut host, "computer.mouse.move_id(id=1)\ncomputer.mouse.single_click()").unwrap();
+    // centre (150, 100) * scale (1.5, 2.0) + offset (5, 7)
+    assert_eq!(
+        host.actions,
+        [
+            Action::MoveTo { x: 230, y: 207 },
+            wait(250),
+            Action::Click { x: None, y: None, button: MouseButton::Left, count: 1 },
+            wait(250),
+        ]
+    );
+    assert_eq!(state.current_id, Some(1));
+    let err = navi(&mut state, &mut host, "computer.mouse.move_id(7)").unwrap_err();
+    assert_eq!(err.python_message(), "IndexError: list index out of range");
+    navi(&mut state, &mut host, "computer.mouse.move_id(-1)").unwrap();
+    assert_eq!(state.current_id, Some(2));
+}
+
+#[test]
+fn move_abs_and_both_drag_signatures() {
+    let mut state = computer_state();
+    let check = |state: &mut ComputerState, src: &str, expected: Action| {
+        let mut host = FakeHost::new();
+        navi(state, &mut host, src).unwrap_or_else(|e| panic!("{src}: {e}"));
+        assert_eq!(host.actions, [expected, wait(250)], "{src}");
+    };
+    // int(0.5 * 1440) + 5, int(0.25 * 900) + 7
+    check(&mut state, "computer.mouse.move_abs(x=0.5, y=0.25)", Action::MoveTo { x: 725, y: 232 });
+    check(&mut state, "computer.mouse.move_abs(0.999, 0.001)", Action::MoveTo { x: 1443, y: 7 });
+    let drag = |x, y| Action::Drag { from: None, to: Point::new(x, y), button: MouseButton::Left };
+    check(&mut state, "computer.mouse.drag(x=0.35, y=0.48)", drag(508, 439));
+    check(&mut state, "computer.mouse.drag(screen_x=300, screen_y=200)", drag(300, 200));
+    check(&mut state, "computer.mouse.drag(300, 200)", drag(300, 200));
+    let mut host = FakeHost::new();
+    let err = navi(&mut state, &mut host, "computer.mouse.drag(x=35, y=48)").unwrap_err();
+    assert!(err.message.contains("fraction in [0, 1]"), "{err}");
+    let err = navi(&mut state, &mut host, "computer.mouse.drag(screen_x=3)").unwrap_err();
+    assert_eq!(err.python_message(), "TypeError: drag() missing 1 required positional argument: 'screen_y'");
+}
+
+#[test]
+fn keyboard_press_splits_chords() {
+    let check = |src: &str, expected: Action| {
+        let mut state = computer_state();
+        let mut host = FakeHost::new();
+        navi(&mut state, &mut host, src).unwrap_or_else(|e| panic!("{src}: {e}"));
+        assert_eq!(host.actions, [expected, wait(250)], "{src}");
+    };
+    check("computer.keyboard.press('ctrl+c')", hotkey(&["ctrl", "c"]));
+    check("computer.keyboard.press('ctrl-shift-s')", hotkey(&["ctrl", "shift", "s"]));
+    check("computer.keyboard.press('Enter')", key("enter"));
+    check("computer.keyboard.press('-')", key("-"));
+    check("computer.keyboard.write('hi')", text("hi"));
+    check("computer.mouse.scroll(dir='up')", Action::Scroll { x: None, y: None, dx: 0, dy: 400 });
+    check("computer.mouse.scroll()", Action::Scroll { x: None, y: None, dx: 0, dy: -400 });
+    let mut state = computer_state();
+    let err = navi(&mut state, &mut FakeHost::new(), "computer.keyboard.press('ctrl+enterr')").unwrap_err();
+    assert!(err.message.contains("unknown key name \"enterr\""), "{err}");
+}
+
+#[test]
+fn clipboard_copy_text_prints_and_paste_swaps() {
+    let mut state = computer_state();
+    let mut host = FakeHost::new();
+    let out = navi(&mut state, &mut host, "computer.clipboard.copy_text('an error here')").unwrap();
+    assert_eq!(out.stdout, "an error here\n");
+    assert_eq!(host.calls, ["clipboard_set_text an error here"]);
+    assert_eq!(state.clipboard_content.as_deref(), Some("an error here"));
+    assert!(host.actions.is_empty(), "copy_text does not sleep");
+
+    let mut host = FakeHost::new();
+    state.swap_ctrl_alt = true;
+    let out = navi(&mut state, &mut host, "computer.clipboard.copy_text()\ncomputer.clipboard.paste()").unwrap();
+    assert_eq!(out.stdout, "None\n");
+    assert_eq!(state.clipboard_content, None);
+    assert_eq!(
+        host.actions,
+        [Action::DoubleClick { x: None, y: None }, hotkey(&["alt", "c"]), hotkey(&["alt", "v"]), wait(250)]
+    );
+
+    let mut host = FakeHost::new();
+    let out = navi(&mut state, &mut host, "computer.clipboard.copy_image(id=1, description='logo')\nprint(computer.clipboard.view_clipboard())").unwrap();
+    assert_eq!(host.calls, ["clipboard_set_image [100, 50, 201, 151]"]);
+    assert_eq!(state.clipboard_content.as_deref(), Some("logo"));
+    assert_eq!(out.stdout, "clip\n");
+}
+
+#[test]
+fn open_program_prints_upstream_error_when_missing() {
+    let mut state = computer_state();
+    let mut host = FakeHost::new();
+    let out = navi(&mut state, &mut host, "computer.os.open_program('gimp')").unwrap();
+    assert_eq!(out.stdout, "error: Program gimp is not installed\n");
+    assert!(host.actions.is_empty());
+
+    let mut host = FakeHost::new();
+    navi(&mut state, &mut host, "computer.os.open_program('msedge')").unwrap();
+    assert_eq!(host.calls, ["open_program msedge", "maximize_foreground"]);
+    assert_eq!(
+        host.actions,
+        [wait(2000), key("esc"), key("esc"), wait(1000), key("esc"), wait(1000), key("esc"), wait(250)]
+    );
+}
+
+#[test]
+fn switch_to_application_matches_like_difflib() {
+    let windows = ["Untitled - Notepad", "Settings", "File  Explorer", "Google Chrome", "Document1 - Word"];
+    let check = |name: &str, expected: Option<&str>| {
+        let mut state = computer_state();
+        let mut host = FakeHost::new();
+        host.windows = windows.iter().map(|w| (*w).to_owned()).collect();
+        let out = navi(&mut state, &mut host, &format!("computer.window_manager.switch_to_application({name:?})")).unwrap();
+        match expected {
+            Some(title) => {
+                assert_eq!(host.calls, [format!("switch_to_window {title}")], "{name}");
+                assert_eq!(host.actions, [key("esc"), wait(250)], "{name}");
+                assert_eq!(out.stdout, "");
+            }
+            None => {
+                assert!(host.calls.is_empty(), "{name}: {:?}", host.calls);
+                assert_eq!(out.stdout, format!("No open window matches '{name}'.\n"));
+            }
+        }
+    };
+    check("Settings", Some("Settings"));
+    check("settings", Some("Settings"));
+    check("File Explorer", Some("File  Explorer"));
+    check("Explorer", Some("File  Explorer"));
+    check("Chrome", Some("Google Chrome"));
+    check("Notepad", None);
+    check("Untitled -   Notepad", Some("Untitled - Notepad"));
+    check("Document1 - Word", Some("Document1 - Word"));
+    check("Excel", None);
+}
+
+#[test]
+fn computer_is_only_bound_for_execute_windows() {
+    let err = python_err("computer.mouse.single_click()");
+    assert_eq!(err, "line 1: NameError: name 'computer' is not defined (it is only bound for /execute_windows)");
+    let mut state = computer_state();
+    let err = navi(&mut state, &mut FakeHost::new(), "computer.mouse.clik()").unwrap_err();
+    assert_eq!(err.python_message(), "AttributeError: 'Mouse' object has no attribute 'clik'");
+    let err = navi(&mut state, &mut FakeHost::new(), "human.ask_question('x?')").unwrap_err();
+    assert_eq!(err.kind, ErrorKind::NotSupported);
+    let out = navi(&mut state, &mut FakeHost::new(), "import time; time.sleep(1); print(computer.mouse.window_rect)").unwrap();
+    assert_eq!(out.stdout, "[5, 7, 1445, 907]\n");
+}
+
+// ---- Literals and printing ------------------------------------------------------------------
+
+fn printed(src: &str) -> String {
+    python(src).1
+}
+
+#[test]
+fn string_literal_forms() {
+    let check = |literal: &str, expected: &str| {
+        assert_eq!(printed(&format!("print({literal}, end='')")), expected, "{literal}");
+    };
+    check(r"'single'", "single");
+    check(r#""double""#, "double");
+    check(r#"'''tri'ple''"'''"#, r#"tri'ple''""#);
+    check("\"\"\"line1\nline2\"\"\"", "line1\nline2");
+    check(r"r'C:\Users\new'", r"C:\Users\new");
+    check(r"R'a\'b'", r"a\'b");
+    check(r"u'unicode é'", "unicode é");
+    check(r#"'a\nb\tc\\d\'e\"f'"#, "a\nb\tc\\d'e\"f");
+    check(r"'\x41\101\u00e9\U0001F600\0'", "AAé😀\0");
+    check(r"'\d\w unknown escapes'", r"\d\w unknown escapes");
+    check(r"'adj' 'acent' r'\raw'", r"adjacent\raw");
+    check("('a'\n 'b')", "ab");
+    check("'line \\\ncontinued'", "line continued");
+    check(r"''", "");
+}
+
+#[test]
+fn values_print_like_python() {
+    let check = |expr: &str, expected: &str| assert_eq!(printed(&format!("print({expr})")), format!("{expected}\n"), "{expr}");
+    check("1, 2.0", "1 2.0");
+    check("0.1 + 0.2", "0.30000000000000004");
+    check("1e-05, 1e16, 1e15, -0.0", "1e-05 1e+16 1000000000000000.0 -0.0");
+    check("float('inf'), float('-inf')", "inf -inf");
+    check("7 // 2, -7 // 2, 7 % -2, 7 / 2, 2 ** 10, 2 ** -1", "3 -4 -1 3.5 1024 0.5");
+    check("None, True, False", "None True False");
+    check("[1, 'a', (2,), (), {'k': None}]", "[1, 'a', (2,), (), {'k': None}]");
+    check("repr('it\\'s'), str(3), int('42'), int(3.9), float('1.5')", "\"it's\" 3 42 3 1.5");
+    check("round(2.5), round(3.5), round(2.675, 2), round(-0.5)", "2 4 2.67 0");
+    check("min(3, 1, 2), max([1.5, 2]), abs(-3), len('héllo'), sum([1, 2, 3])", "1 2 3 5 6");
+    check("'a' + 'b', 'ab' * 2, [1] + [2], 0x_ff, 1_000", "ab abab [1, 2] 255 1000");
+    check("'x'.upper(), ' a b '.strip(), 'a,b'.split(','), '-'.join(['a', 'b'])", "X a b ['a', 'b'] a-b");
+    check("type(1), type('s'), type(None), type([])", "<class 'int'> <class 'str'> <class 'NoneType'> <class 'list'>");
+    check("bool(0), bool('x'), list('ab'), tuple([1])", "False True ['a', 'b'] (1,)");
+    check("{'a': 1}['a'], {'a': 1}.get('b', 9), [5, 6][-1], 'abc'[1]", "1 9 6 b");
+}
+
+#[test]
+fn print_keywords() {
+    assert_eq!(printed("print(1, 2, sep='-', end='!')"), "1-2!");
+    assert_eq!(printed("print()"), "\n");
+    assert_eq!(printed("print('a', 'b', sep=None)"), "a b\n");
+}
+
+// ---- Errors ---------------------------------------------------------------------------------
+
+#[test]
+fn parse_errors_name_the_construct_and_position() {
+    let check = |src: &str, line: usize, column: usize, message: &str| {
+        let err = parse(src).expect_err(src);
+        assert_eq!((err.line, err.column, err.message.as_str()), (line, column, message), "{src}");
+    };
+    check("for x in y: pass", 1, 1, "`for` loops are not supported");
+    check("import os\nwhile True: pass", 2, 1, "`while` loops are not supported");
+    check("x = 1; if x: pass", 1, 8, "`if` statements are not supported");
+    check("def f(): pass", 1, 1, "function definitions (`def`) are not supported");
+    check("class A: pass", 1, 1, "class definitions (`class`) are not supported");
+    check("with open('x') as f: pass", 1, 1, "`with` statements are not supported");
+    check("try: pass", 1, 1, "`try` statements are not supported");
+    check("f = lambda: 1", 1, 5, "`lambda` expressions are not supported");
+    check("print(1 if x else 2)", 1, 9, "conditional expressions (`a if cond else b`) are not supported");
+    check("[x for x in y]", 1, 4, "comprehensions and generator expressions are not supported");
+    check("print(a == b)", 1, 9, "comparison operators (`==`) are not supported");
+    check("print(a and b)", 1, 9, "boolean operators (`and`) are not supported");
+    check("print(not a)", 1, 7, "boolean operators (`not`) are not supported");
+    check("x = f'{y}'", 1, 5, "f-strings are not supported");
+    check("x = b'y'", 1, 5, "bytes literals (b'...') are not supported");
+    check("x += 1", 1, 3, "augmented assignment (`+=`) is not supported");
+    check("a, b = 1, 2", 1, 1, "unpacking assignments (`a, b = ...`) are not supported");
+    check("x[0] = 1", 1, 1, "item assignment (`x[i] = ...`) is not supported");
+    check("x = y[1:2]", 1, 8, "slices are not supported");
+    check("f(*args)", 1, 3, "unpacking (`*`) is not supported");
+    check("x = 'abc", 1, 5, "unterminated string literal (detected at line 1)");
+    check("x = '''abc\n", 1, 5, "unterminated triple-quoted string literal (detected at line 2)");
+    check("print('a'\n", 1, 6, "'(' was never closed");
+    check("print(1))", 1, 9, "unmatched ')'");
+    check("  x = 1", 1, 3, "unexpected indent");
+    check("x = 1 $", 1, 7, "invalid character '$' (U+0024)");
+    check("x = '\\N{DASH}'", 1, 6, "\\N{...} escapes are not supported");
+    check(r"x = 'C:\Users'", 1, 8, "(unicode error) truncated \\UXXXXXXXX escape");
+    check("x = 99999999999999999999", 1, 5, "integer literal too large (this interpreter's integers are 64-bit)");
+    check("x = 012", 1, 5, "leading zeros in decimal integer literals are not permitted; use an 0o prefix for octal integers");
+    check("x = 1j", 1, 5, "complex number literals are not supported");
+    check("f(a=1, a=2)", 1, 8, "keyword argument repeated: a");
+    check("f(a=1, 2)", 1, 8, "positional argument follows keyword argument");
+    check("from os import *", 1, 16, "`from ... import *` is not supported");
+    check("x = {1, 2}", 1, 7, "set literals are not supported");
+    check("x = 1 2", 1, 7, "invalid syntax: expected `;` or a new line after a statement, found number");
+    check("print(x for x in y)", 1, 9, "comprehensions and generator expressions are not supported");
+    check("x = a & b", 1, 7, "bitwise operators (`&`) are not supported");
+    let deep = format!("x = {}1{}", "(".repeat(100), ")".repeat(100));
+    assert!(parse(&deep).unwrap_err().message.contains("nested too deeply"));
+    let long_chain = format!("x = 1{}", " + 1".repeat(200));
+    assert!(parse(&long_chain).unwrap_err().message.contains("nested too deeply"));
+    assert!(parse(&format!("x = 1{}", " + 1".repeat(40))).is_ok());
+}
+
+#[test]
+fn runtime_errors_are_python_exceptions() {
+    let check = |src: &str, expected: &str| assert_eq!(python_err(src), expected, "{src}");
+    check("print(x)", "line 1: NameError: name 'x' is not defined");
+    check("import pyautogui\n\npyautogui.clik(1, 2)", "line 3: AttributeError: module 'pyautogui' has no attribute 'clik' (pyautogui.clik is not supported by this interpreter)");
+    check("import numpy", "line 1: ModuleNotFoundError: No module named 'numpy' (this interpreter provides: pyautogui, time, os, os.path, ntpath, subprocess, platform, sys, PIL, PIL.Image, PIL.ImageGrab, pyperclip)");
+    check("import pyautogui; pyautogui.dragTo(1, 2, foo=3)", "line 1: TypeError: dragTo() got an unexpected keyword argument 'foo'");
+    check("import pyautogui; pyautogui.press('enterr')", "line 1: ValueError: press(): unknown key name \"enterr\" (expected a pyautogui key name such as \"enter\", \"ctrl\" or \"a\"); pyautogui would silently ignore it, this interpreter refuses");
+    check("import pyautogui; pyautogui.click(button='Left')", "line 1: ValueError: button argument must be one of ('left', 'middle', 'right', 'primary', 'secondary', 1, 2, 3), not 'Left'");
+    check("import time; time.sleep(-1)", "line 1: ValueError: sleep length must be non-negative");
+    check("print(1 / 0)", "line 1: ZeroDivisionError: division by zero");
+    check("print('a' + 1)", "line 1: TypeError: can only concatenate str (not \"int\") to str");
+    check("open('x')", "line 1: NotImplementedError: open() is not supported by this interpreter");
+    check("import os; os.path.join(os.getenv('NOPE'), 'x')", "line 1: TypeError: expected str, bytes or os.PathLike object, not NoneType");
+    check("import PIL.Image; PIL.Image.open('x.png')", "line 1: NotImplementedError: PIL.Image.open is not supported: this interpreter has no image library");
+    check("print([1][3])", "line 1: IndexError: list index out of range");
+    check("print({'a': 1}['b'])", "line 1: KeyError: 'b'");
+    check("x = 2 ** 70", "line 1: OverflowError: integer overflow (this interpreter's integers are 64-bit)");
+    check("x = 'a' * 100000000", "line 1: MemoryError: result would exceed 10000000 items");
+    check("print(len(5))", "line 1: TypeError: object of type 'int' has no len()");
+    check("(1)()", "line 1: TypeError: 'int' object is not callable");
+    check("import pyautogui; pyautogui.locateOnScreen('a.png')", "line 1: AttributeError: module 'pyautogui' has no attribute 'locateOnScreen' (pyautogui.locateOnScreen is not supported by this interpreter)");
+}
+
+#[test]
+fn resource_limits_stop_hostile_programs() {
+    let nested = format!("a = 1\n{}", "a = [a]\n".repeat(150));
+    assert_eq!(python_err(&nested), "line 102: MemoryError: value nested more than 100 levels deep");
+    let copies = format!("x = 'a' * 10000000\ny = [{}]", vec!["x"; 40].join(", "));
+    assert_eq!(python_err(&copies), "line 2: MemoryError: the program allocated more than 256 MiB");
+    let prints = "x = 'a' * 5000000\n".to_owned() + &"print(x)\n".repeat(40);
+    assert!(python_err(&prints).contains("MemoryError: the program allocated more than 256 MiB"));
+    assert!(python_err("x = ('ab' * 1000000).replace('a', 'aaaaaaaaaa')").contains("MemoryError"));
+    assert!(python_err("x = list('a' * 2000000)").contains("MemoryError"));
+    assert!(python_err("x = [1] * 2000000").contains("MemoryError"));
+    assert!(python_err("x = sum([[1]] * 1000, [])").contains("NotImplementedError"));
+}
+
+#[test]
+fn errors_keep_output_and_effects_before_them() {
+    let mut host = FakeHost::new();
+    let err = run_python(&mut host, "import pyautogui\nprint('before')\npyautogui.press('a')\nundefined_name").unwrap_err();
+    assert_eq!(err.stdout, "before\n");
+    assert_eq!(err.line, 4);
+    assert_eq!(host.actions, [key("a")]);
+    assert_eq!(
+        err.traceback(),
+        "Traceback (most recent call last):\n  File \"<string>\", line 4, in <module>\nNameError: name 'undefined_name' is not defined\n"
+    );
+}
+
+// ---- Properties -----------------------------------------------------------------------------
+
+proptest::proptest! {
+    #![proptest_config(proptest::prelude::ProptestConfig { cases: 512, ..Default::default() })]
+
+    #[test]
+    fn parse_never_panics(src in "\\PC{0,80}") {
+        let _ = parse(&src);
+    }
+
+    #[test]
+    fn parse_never_panics_on_token_soup(src in "[\\[\\](){}\"'\\\\\n;#a1.=,+*rbfu _:-]{0,60}") {
+        let _ = parse(&src);
+    }
+
+    #[test]
+    fn running_token_soup_never_panics(src in "[\\[\\]()'\"a-c1-3.,=+*/% ;\n]{0,40}") {
+        let mut host = FakeHost::new();
+        let _ = run_python(&mut host, &src);
+    }
+
+    #[test]
+    fn int_literals_round_trip(i in (i64::MIN + 1)..=i64::MAX, hex in proptest::bool::ANY) {
+        let literal = if hex && i >= 0 { format!("{i:#x}") } else { i.to_string() };
+        proptest::prop_assert_eq!(printed(&format!("print({literal})")), format!("{i}\n"));
+    }
+
+    #[test]
+    fn float_literals_round_trip(f in proptest::num::f64::NORMAL | proptest::num::f64::SUBNORMAL | proptest::num::f64::ZERO) {
+        let repr = float_repr(f);
+        // Python's repr is itself a valid literal that reads back as the same float.
+        proptest::prop_assert_eq!(repr.parse::<f64>().ok(), Some(f));
+        proptest::prop_assert_eq!(printed(&format!("print({repr})")), format!("{repr}\n"));
+        proptest::prop_assert_eq!(printed(&format!("print({f:?})")), format!("{repr}\n"));
+    }
+
+    #[test]
+    fn string_literals_round_trip(s in "\\PC{0,20}|[\\x00-\\x7f]{0,20}") {
+        let literal = str_repr(&s);
+        proptest::prop_assert_eq!(printed(&format!("print({literal}, end='')")), s.clone());
+        proptest::prop_assert_eq!(printed(&format!("print(repr({literal}), end='')")), literal);
+    }
+}

@@ -1,0 +1,363 @@
+//! Runtime values and how Python prints them.
+//!
+//! Values are plain data: containers are immutable copies (the subset has no
+//! mutating methods), modules and functions are names the interpreter
+//! dispatches on, and interpreter objects (a screenshot, the `Computer` parts,
+//! a finished process) are small enums. `str` and `repr` follow CPython,
+//! including float formatting (`0.5`, `1.0`, `1e-05`, `inf`).
+
+use std::fmt::Write as _;
+
+/// A runtime value.
+#[derive(Debug, Clone, PartialEq)]
+pub(crate) enum Value {
+    None,
+    Bool(bool),
+    Int(i64),
+    Float(f64),
+    Str(String),
+    List(Vec<Value>),
+    Tuple(Vec<Value>),
+    Dict(Vec<(Value, Value)>),
+    /// pyautogui's `Point(x, y)` named tuple.
+    Point(i64, i64),
+    /// pyautogui's `Size(width, height)` named tuple.
+    Size(i64, i64),
+    /// A module, by its dotted name (`os.path`).
+    Module(&'static str),
+    /// A module-level function: `module` is the dotted module name, `""` for builtins.
+    Function { module: &'static str, name: &'static str },
+    /// A method bound to its receiver.
+    Method(Box<Value>, &'static str),
+    /// A constant marker such as a pyautogui easing function.
+    Marker(&'static str),
+    /// A class object, by its qualified name (`PIL.Image.Image`), as `type(x)` returns.
+    Type(&'static str),
+    Object(Object),
+}
+
+/// Objects made by the interpreter.
+#[derive(Debug, Clone, PartialEq)]
+pub(crate) enum Object {
+    /// A screenshot: its size and the screen region it covers (`None`: the whole screen).
+    Image { width: i64, height: i64, region: Option<[i32; 4]> },
+    /// `os.environ`.
+    Environ,
+    /// A `subprocess.CompletedProcess`.
+    Completed { args: Box<Value>, returncode: i64, stdout: Option<String>, stderr: Option<String> },
+    /// A `subprocess.Popen` whose process was started and not waited for.
+    Popen { args: Box<Value>, pid: i64 },
+    Computer,
+    Mouse,
+    Keyboard,
+    Clipboard,
+    ComputerOs,
+    WindowManager,
+    Human,
+}
+
+impl Object {
+    /// The Python class name.
+    pub(crate) fn class_name(&self) -> &'static str {
+        match self {
+            Object::Image { .. } => "PIL.Image.Image",
+            Object::Environ => "os._Environ",
+            Object::Completed { .. } => "subprocess.CompletedProcess",
+            Object::Popen { .. } => "subprocess.Popen",
+            Object::Computer => "Computer",
+            Object::Mouse => "Mouse",
+            Object::Keyboard => "Keyboard",
+            Object::Clipboard => "Clipboard",
+            Object::ComputerOs => "OS",
+            Object::WindowManager => "WindowManager",
+            Object::Human => "Human",
+        }
+    }
+}
+
+impl Value {
+    /// The short type name used in error messages (`int`, `str`, `NoneType`).
+    pub(crate) fn type_name(&self) -> &'static str {
+        match self {
+            Value::None => "NoneType",
+            Value::Bool(_) => "bool",
+            Value::Int(_) => "int",
+            Value::Float(_) => "float",
+            Value::Str(_) => "str",
+            Value::List(_) => "list",
+            Value::Tuple(_) => "tuple",
+            Value::Dict(_) => "dict",
+            Value::Point(..) => "Point",
+            Value::Size(..) => "Size",
+            Value::Module(_) => "module",
+            Value::Function { module: "", .. } => "builtin_function_or_method",
+            Value::Function { .. } | Value::Marker(_) => "function",
+            Value::Method(..) => "method",
+            Value::Type(_) => "type",
+            Value::Object(obj) => obj.class_name().rsplit('.').next().unwrap_or("object"),
+        }
+    }
+
+    /// The qualified class name `type(x)` shows: `<class 'PIL.Image.Image'>`.
+    pub(crate) fn class_name(&self) -> &'static str {
+        match self {
+            Value::Point(..) => "pyautogui.Point",
+            Value::Size(..) => "pyautogui.Size",
+            Value::Object(obj) => obj.class_name(),
+            other => other.type_name(),
+        }
+    }
+
+    /// Python truthiness.
+    pub(crate) fn truthy(&self) -> bool {
+        match self {
+            Value::None => false,
+            Value::Bool(b) => *b,
+            Value::Int(i) => *i != 0,
+            Value::Float(f) => *f != 0.0,
+            Value::Str(s) => !s.is_empty(),
+            Value::List(v) | Value::Tuple(v) => !v.is_empty(),
+            Value::Dict(d) => !d.is_empty(),
+            _ => true,
+        }
+    }
+
+    /// `str(value)`.
+    pub(crate) fn to_str(&self) -> String {
+        match self {
+            Value::Str(s) => s.clone(),
+            other => other.repr(),
+        }
+    }
+
+    /// `repr(value)`.
+    pub(crate) fn repr(&self) -> String {
+        let mut out = String::new();
+        self.write_repr(&mut out);
+        out
+    }
+
+    fn write_repr(&self, out: &mut String) {
+        match self {
+            Value::None => out.push_str("None"),
+            Value::Bool(true) => out.push_str("True"),
+            Value::Bool(false) => out.push_str("False"),
+            Value::Int(i) => {
+                let _ = write!(out, "{i}");
+            }
+            Value::Float(f) => out.push_str(&float_repr(*f)),
+            Value::Str(s) => out.push_str(&str_repr(s)),
+            Value::List(items) => {
+                out.push('[');
+                write_items(out, items);
+                out.push(']');
+            }
+            Value::Tuple(items) => {
+                out.push('(');
+                write_items(out, items);
+                if items.len() == 1 {
+                    out.push(',');
+                }
+                out.push(')');
+            }
+            Value::Dict(entries) => {
+                out.push('{');
+                for (i, (k, v)) in entries.iter().enumerate() {
+                    if i > 0 {
+                        out.push_str(", ");
+                    }
+                    k.write_repr(out);
+                    out.push_str(": ");
+                    v.write_repr(out);
+                }
+                out.push('}');
+            }
+            Value::Point(x, y) => {
+                let _ = write!(out, "Point(x={x}, y={y})");
+            }
+            Value::Size(w, h) => {
+                let _ = write!(out, "Size(width={w}, height={h})");
+            }
+            Value::Module(name) => {
+                let _ = write!(out, "<module '{name}'>");
+            }
+            Value::Function { module: "", name } => {
+                let _ = write!(out, "<built-in function {name}>");
+            }
+            Value::Function { name, .. } | Value::Marker(name) => {
+                let _ = write!(out, "<function {name}>");
+            }
+            Value::Method(recv, name) => {
+                let _ = write!(out, "<bound method {}.{name}>", recv.type_name());
+            }
+            Value::Type(name) => {
+                let _ = write!(out, "<class '{name}'>");
+            }
+            Value::Object(Object::Image { width, height, .. }) => {
+                let _ = write!(out, "<PIL.Image.Image image mode=RGB size={width}x{height}>");
+            }
+            Value::Object(Object::Completed { args, returncode, stdout, stderr }) => {
+                let _ = write!(out, "CompletedProcess(args={}, returncode={returncode}", args.repr());
+                if let Some(s) = stdout {
+                    let _ = write!(out, ", stdout={}", str_repr(s));
+                }
+                if let Some(s) = stderr {
+                    let _ = write!(out, ", stderr={}", str_repr(s));
+                }
+                out.push(')');
+            }
+            Value::Object(Object::Popen { args, pid }) => {
+                let _ = write!(out, "<Popen: pid={pid} args={}>", args.repr());
+            }
+            Value::Object(obj) => {
+                let _ = write!(out, "<{} object>", obj.class_name());
+            }
+        }
+    }
+}
+
+fn write_items(out: &mut String, items: &[Value]) {
+    for (i, item) in items.iter().enumerate() {
+        if i > 0 {
+            out.push_str(", ");
+        }
+        item.write_repr(out);
+    }
+}
+
+/// Python's `repr(float)`: the shortest digits that round-trip, in positional
+/// notation for exponents -4..16 and scientific notation (`1e-05`, `1e+16`) otherwise.
+pub fn float_repr(f: f64) -> String {
+    if f.is_nan() {
+        return "nan".to_owned();
+    }
+    if f.is_infinite() {
+        return if f > 0.0 { "inf" } else { "-inf" }.to_owned();
+    }
+    if f == 0.0 {
+        return if f.is_sign_negative() { "-0.0" } else { "0.0" }.to_owned();
+    }
+    // `{:e}` gives the shortest round-tripping digits as `d.ddde<exp>`.
+    let sci = format!("{:e}", f.abs());
+    let (mantissa, exp) = sci.split_once('e').unwrap_or((&sci, "0"));
+    let exp: i32 = exp.parse().unwrap_or(0);
+    let digits: String = mantissa.chars().filter(|c| *c != '.').collect();
+    let sign = if f < 0.0 { "-" } else { "" };
+    if (-4..16).contains(&exp) {
+        if exp >= 0 {
+            let point = exp as usize + 1;
+            if digits.len() <= point {
+                format!("{sign}{digits}{}.0", "0".repeat(point - digits.len()))
+            } else {
+                format!("{sign}{}.{}", &digits[..point], &digits[point..])
+            }
+        } else {
+            format!("{sign}0.{}{digits}", "0".repeat((-exp - 1) as usize))
+        }
+    } else {
+        let (first, rest) = digits.split_at(1);
+        let frac = if rest.is_empty() { String::new() } else { format!(".{rest}") };
+        let exp_sign = if exp < 0 { '-' } else { '+' };
+        format!("{sign}{first}{frac}e{exp_sign}{:02}", exp.abs())
+    }
+}
+
+/// Python's `repr(str)`: single quotes unless the text holds `'` and no `"`,
+/// escapes for backslash, the quote, `\n`, `\r`, `\t` and non-printable characters.
+pub fn str_repr(s: &str) -> String {
+    let quote = if s.contains('\'') && !s.contains('"') { '"' } else { '\'' };
+    let mut out = String::with_capacity(s.len() + 2);
+    out.push(quote);
+    for c in s.chars() {
+        match c {
+            '\\' => out.push_str("\\\\"),
+            '\n' => out.push_str("\\n"),
+            '\r' => out.push_str("\\r"),
+            '\t' => out.push_str("\\t"),
+            c if c == quote => {
+                out.push('\\');
+                out.push(c);
+            }
+            c if !is_printable(c) => {
+                let code = c as u32;
+                let _ = if code < 0x100 {
+                    write!(out, "\\x{code:02x}")
+                } else if code < 0x10000 {
+                    write!(out, "\\u{code:04x}")
+                } else {
+                    write!(out, "\\U{code:08x}")
+                };
+            }
+            c => out.push(c),
+        }
+    }
+    out.push(quote);
+    out
+}
+
+/// An approximation of Python's `str.isprintable` for one character: control,
+/// format, separator (other than space) and private-use characters are not printable.
+/// Unassigned code points, which Python also escapes, are printed as they are.
+fn is_printable(c: char) -> bool {
+    let code = c as u32;
+    !(c.is_control()
+        || matches!(code, 0xA0 | 0xAD | 0x1680 | 0x2000..=0x200F | 0x2028..=0x202F | 0x205F..=0x2064)
+        || matches!(code, 0x3000 | 0xFEFF | 0xE000..=0xF8FF | 0xF0000..=0x10FFFF)
+        || matches!(code, 0x600..=0x605 | 0x61C | 0x6DD | 0x70F | 0x180E | 0xFFF9..=0xFFFB))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn floats_print_like_python() {
+        let check = |f: f64, expected: &str| assert_eq!(float_repr(f), expected, "{f:?}");
+        check(0.5, "0.5");
+        check(1.0, "1.0");
+        check(-2.0, "-2.0");
+        check(1e-05, "1e-05");
+        check(0.0001, "0.0001");
+        check(1e16, "1e+16");
+        check(1e15, "1000000000000000.0");
+        check(123456789012345678.0, "1.2345678901234568e+17");
+        check(0.1 + 0.2, "0.30000000000000004");
+        check(1.5e-7, "1.5e-07");
+        check(f64::INFINITY, "inf");
+        check(f64::NEG_INFINITY, "-inf");
+        check(f64::NAN, "nan");
+        check(-0.0, "-0.0");
+        check(1e300, "1e+300");
+        check(2.5e-300, "2.5e-300");
+        check(123.456, "123.456");
+    }
+
+    #[test]
+    fn strings_repr_like_python() {
+        let check = |s: &str, expected: &str| assert_eq!(str_repr(s), expected, "{s:?}");
+        check("abc", "'abc'");
+        check("it's", "\"it's\"");
+        check("both ' and \"", "'both \\' and \"'");
+        check("a\\b\n\t\r", "'a\\\\b\\n\\t\\r'");
+        check("\x07\u{7f}", "'\\x07\\x7f'");
+        check("é日本", "'é日本'");
+        check("\u{a0}\u{200b}", "'\\xa0\\u200b'");
+    }
+
+    #[test]
+    fn containers_repr_like_python() {
+        let v = Value::List(vec![
+            Value::Int(1),
+            Value::Str("a".into()),
+            Value::None,
+            Value::Tuple(vec![Value::Bool(true)]),
+            Value::Tuple(vec![]),
+            Value::Dict(vec![(Value::Str("k".into()), Value::Float(0.5))]),
+        ]);
+        assert_eq!(v.to_str(), "[1, 'a', None, (True,), (), {'k': 0.5}]");
+        assert_eq!(Value::Point(10, 20).to_str(), "Point(x=10, y=20)");
+        assert_eq!(Value::Size(1440, 900).to_str(), "Size(width=1440, height=900)");
+        assert_eq!(Value::Type("PIL.Image.Image").to_str(), "<class 'PIL.Image.Image'>");
+        assert_eq!(Value::Str("x".into()).to_str(), "x");
+    }
+}
