@@ -14,6 +14,7 @@
 
 pub mod cli;
 pub mod client;
+pub mod task;
 pub mod error;
 
 pub use client::{ClientConfig, GuestClient};
