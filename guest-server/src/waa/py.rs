@@ -57,100 +57,14 @@ pub(crate) fn repr_str_list(items: &[String]) -> String {
     format!("[{}]", items.iter().map(|s| repr_str(s)).collect::<Vec<_>>().join(", "))
 }
 
-/// `repr(s)` of a Python `str`: single quotes unless the text has a single quote and
-/// no double quote, backslashes doubled, control and non-printable characters escaped.
+/// `repr(s)` of a Python `str` (shared with the script interpreter).
 pub(crate) fn repr_str(s: &str) -> String {
-    let quote = if s.contains('\'') && !s.contains('"') { '"' } else { '\'' };
-    let mut out = String::with_capacity(s.len() + 2);
-    out.push(quote);
-    for c in s.chars() {
-        match c {
-            '\\' => out.push_str("\\\\"),
-            '\n' => out.push_str("\\n"),
-            '\r' => out.push_str("\\r"),
-            '\t' => out.push_str("\\t"),
-            c if c == quote => {
-                out.push('\\');
-                out.push(c);
-            }
-            c if !is_printable(c) => {
-                let n = u32::from(c);
-                if n <= 0xff {
-                    out.push_str(&format!("\\x{n:02x}"));
-                } else if n <= 0xffff {
-                    out.push_str(&format!("\\u{n:04x}"));
-                } else {
-                    out.push_str(&format!("\\U{n:08x}"));
-                }
-            }
-            c => out.push(c),
-        }
-    }
-    out.push(quote);
-    out
+    arena_shared::script::str_repr(s)
 }
 
-/// Python's `str.isprintable` for one character, for the characters that matter in
-/// practice: controls, separators other than the space, format characters and private use.
-fn is_printable(c: char) -> bool {
-    let n = u32::from(c);
-    if c.is_control() {
-        return false;
-    }
-    !matches!(
-        n,
-        0xa0 | 0xad
-            | 0x600..=0x605
-            | 0x61c
-            | 0x6dd
-            | 0x70f
-            | 0x1680
-            | 0x180e
-            | 0x2000..=0x200f
-            | 0x2028..=0x202f
-            | 0x205f..=0x2064
-            | 0x2066..=0x206f
-            | 0x3000
-            | 0xd800..=0xf8ff
-            | 0xfeff
-            | 0xfff9..=0xfffb
-            | 0xfffe..=0xffff
-            | 0xf0000..=0x10ffff
-    )
-}
-
-/// `repr(float)`: the shortest round-trip digits, in fixed notation with at least one
-/// decimal for exponents from -4 to 15, else scientific with a two-digit exponent.
+/// `repr(float)` (shared with the script interpreter).
 pub(crate) fn float_repr(f: f64) -> String {
-    if f.is_nan() {
-        return "nan".to_owned();
-    }
-    if f.is_infinite() {
-        return if f > 0.0 { "inf".to_owned() } else { "-inf".to_owned() };
-    }
-    // Rust's `{:e}` gives the shortest round-trip digits as `d.ddde[-]x`.
-    let sci = format!("{:e}", f.abs());
-    let (mantissa, exp) = sci.split_once('e').unwrap_or((&sci, "0"));
-    let exp: i32 = exp.parse().unwrap_or(0);
-    let digits: String = mantissa.chars().filter(|c| *c != '.').collect();
-    let sign = if f.is_sign_negative() { "-" } else { "" };
-    if (-4..16).contains(&exp) {
-        let body = if exp >= 0 {
-            let int_len = exp as usize + 1;
-            if digits.len() <= int_len {
-                format!("{digits}{}.0", "0".repeat(int_len - digits.len()))
-            } else {
-                format!("{}.{}", &digits[..int_len], &digits[int_len..])
-            }
-        } else {
-            format!("0.{}{digits}", "0".repeat((-exp - 1) as usize))
-        };
-        format!("{sign}{body}")
-    } else {
-        let mantissa = if digits.len() > 1 { format!("{}.{}", &digits[..1], &digits[1..]) } else { digits };
-        let exp_sign = if exp < 0 { '-' } else { '+' };
-        format!("{sign}{mantissa}e{exp_sign}{:02}", exp.abs())
-    }
+    arena_shared::script::float_repr(f)
 }
 
 /// `str(pathlib.WindowsPath(s))`: forward slashes become backslashes, empty and `.`
