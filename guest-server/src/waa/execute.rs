@@ -3,20 +3,30 @@
 //!
 //! Commands follow Python's `subprocess` on Windows: a string without `shell` is split
 //! with POSIX `shlex`, a list becomes one MSVC command line, `shell` (Python truthiness)
-//! runs it through `cmd /c`. The programs themselves are whatever the backend finds;
-//! nothing here interprets Python. `/execute_windows` code goes through
-//! [`run_computer_code`], the seam where the `computer.*` interpreter plugs in.
+//! runs it through `cmd /c`. A Python invocation with `-c` (`python -c CODE`, any
+//! spelling of the program, also inside a shell line) is not started as a process:
+//! the code runs natively with `arena_shared::script` over [`DesktopHost`], and the
+//! answer is what the Python process would have printed and returned. Code outside
+//! that subset runs with a real Python only when `--python` names one that exists;
+//! otherwise it is refused loudly, naming the construct. Other programs are whatever
+//! the backend finds. `/execute_windows` code runs with the same interpreter, with
+//! `computer` bound to the `/update_computer` state ([`run_computer_code`]).
 
-use std::time::Duration;
+use std::path::Path;
+use std::sync::Arc;
+use std::time::{Duration, Instant};
 
 use axum::extract::State;
 use axum::http::StatusCode;
 use base64::Engine;
 use serde_json::{json, Value};
 
+use arena_shared::script::{self, ErrorKind, Globals, ParseError, ScriptError};
+
 use crate::cmdline::{list2cmdline, shlex_split};
 use crate::desktop::{CommandSpec, Desktop, DesktopError, ExecLimits};
 use crate::error::WaaError;
+use crate::script_host::{python_available, DesktopHost};
 use crate::state::AppState;
 use crate::waa::body::{Data, PyJson};
 use crate::waa::{expand_user, json, json_err, on_backend, on_backend_within, py, text, WaaResult};
@@ -42,14 +52,18 @@ pub struct ComputerState {
     pub rects: Option<Value>,
     /// `[x0, y0, x1, y1]` of the observed view.
     pub window_rect: Option<Value>,
-    /// The decoded screenshot, used by `clipboard.copy_image`.
-    pub screenshot: image::RgbaImage,
+    /// The decoded screenshot, used by `clipboard.copy_image` (shared, so that
+    /// writing back what a script changed does not copy the pixels).
+    pub screenshot: Arc<image::RgbaImage>,
     /// `[sx, sy]` multiplying element centres.
     pub scale: Option<Value>,
     /// The virtual clipboard echoed by `/obs_winagent` (`null` when not sent).
     pub clipboard_content: Value,
     /// Use alt+c / alt+v instead of ctrl.
     pub swap_ctrl_alt: bool,
+    /// The element `mouse.move_id` last moved to (upstream's `Mouse.current_id`);
+    /// reset by `/update_computer`.
+    pub current_id: Option<usize>,
 }
 
 impl std::fmt::Debug for ComputerState {
@@ -62,6 +76,7 @@ impl std::fmt::Debug for ComputerState {
             .field("scale", &self.scale)
             .field("clipboard_content", &self.clipboard_content)
             .field("swap_ctrl_alt", &self.swap_ctrl_alt)
+            .field("current_id", &self.current_id)
             .finish()
     }
 }
@@ -109,10 +124,11 @@ pub(crate) async fn execute(State(state): State<AppState>, PyJson(body): PyJson)
         other => other,
     };
     let timeout_ms = state.config.exec_timeout_ms;
+    let python = state.config.python.clone();
     let deadline = Duration::from_millis(timeout_ms) + EXEC_MARGIN;
     on_backend_within(&state, "execute", deadline, move |desktop| {
         let command = expand_home_args(desktop, command)?;
-        let spec = match (&command, shell) {
+        let mut spec = match (&command, shell) {
             (Value::String(line), _) => CommandSpec::Shell(line.clone()),
             (Value::Array(items), true) => CommandSpec::Shell(list2cmdline(&string_list(items))),
             (Value::Array(items), false) if items.is_empty() => return Err(WaaError::catch("[WinError 87] The parameter is incorrect")),
@@ -121,6 +137,21 @@ pub(crate) async fn execute(State(state): State<AppState>, PyJson(body): PyJson)
                 return Err(WaaError::catch(format!("expected str, bytes or os.PathLike object, not {}", py::type_name(other))));
             }
         };
+        if let Some(code) = python_code(&spec) {
+            match run_python(desktop, &code, &command, timeout_ms) {
+                Native::Answer(answer) => return answer,
+                Native::Unsupported(message) => match python.as_deref().filter(|p| python_available(p)) {
+                    Some(program) => {
+                        tracing::info!(%message, python = %program.display(), "running code outside the native subset with a real Python");
+                        spec = with_program(spec, program);
+                    }
+                    None => {
+                        tracing::warn!(%message, "refusing Python code outside the native subset (no --python configured)");
+                        return Err(WaaError::catch(format!("{message}{NO_PYTHON}")));
+                    }
+                },
+            }
+        }
         let limits = ExecLimits { timeout_ms, max_output_bytes: MAX_OUTPUT_BYTES, cwd: None, stdin: None };
         match desktop.run(&spec, &limits) {
             Ok(out) if out.timed_out => Err(WaaError::catch(timeout_message(&command, timeout_ms))),
@@ -134,6 +165,95 @@ pub(crate) async fn execute(State(state): State<AppState>, PyJson(body): PyJson)
         }
     })
     .await
+}
+
+/// The code of a `python -c CODE` command, however it is spelled.
+fn python_code(spec: &CommandSpec) -> Option<String> {
+    match spec {
+        CommandSpec::Argv(argv) => script::python_code_from_argv(argv).map(str::to_owned),
+        CommandSpec::Shell(line) => script::python_code_from_command_line(line),
+    }
+}
+
+/// The command with the configured Python as its program (and without a `py`
+/// launcher's version selector such as `-3`, which python itself rejects). A shell
+/// line is left as it is: the shell finds `python` the way upstream's did.
+fn with_program(spec: CommandSpec, program: &Path) -> CommandSpec {
+    match spec {
+        CommandSpec::Argv(mut argv) if !argv.is_empty() => {
+            let base = crate::paths::basename(&argv[0]).to_ascii_lowercase();
+            let launcher = matches!(base.strip_suffix(".exe").unwrap_or(&base), "py" | "pyw");
+            let selector = argv.get(1).is_some_and(|a| {
+                a.starts_with("-V:") || a.strip_prefix('-').is_some_and(|v| v.starts_with(|c: char| c.is_ascii_digit()))
+            });
+            if launcher && selector {
+                argv.remove(1);
+            }
+            argv[0] = program.display().to_string();
+            CommandSpec::Argv(argv)
+        }
+        other => other,
+    }
+}
+
+/// What running `python -c` code natively came to.
+enum Native {
+    /// The answer to send, as the Python process would have produced it.
+    Answer(Result<axum::response::Response, WaaError>),
+    /// The code needs something outside the subset and nothing was performed yet;
+    /// the message names the construct.
+    Unsupported(String),
+}
+
+/// Whether a failure means "this interpreter does not cover that", rather than an
+/// exception CPython would raise too.
+fn outside_subset(err: &ScriptError) -> bool {
+    match err.kind {
+        ErrorKind::Syntax | ErrorKind::NotSupported | ErrorKind::ModuleNotFound | ErrorKind::Import => true,
+        // A module attribute the interpreter lacks (`os.walk`) is an AttributeError
+        // whose text says so; real modules have those attributes.
+        ErrorKind::Attribute => err.message.contains("not supported by this interpreter"),
+        _ => false,
+    }
+}
+
+/// Why `/execute` refuses code outside the subset, after the message naming the construct.
+const NO_PYTHON: &str = " (this guest runs Python code natively; start it with --python PATH to run other code with a real Python)";
+
+fn unsupported_parse(err: &ParseError) -> String {
+    format!("unsupported Python at line {}, column {}: {}", err.line, err.column, err.message)
+}
+
+fn unsupported_runtime(err: &ScriptError) -> String {
+    format!("unsupported Python at line {}: {}: {}", err.line, err.kind, err.message)
+}
+
+/// Runs `python -c` code natively and answers like upstream's `subprocess.run` would:
+/// 200 with stdout, stderr and the exit code (1 and a traceback for an exception).
+fn run_python(desktop: &dyn Desktop, code: &str, command: &Value, timeout_ms: u64) -> Native {
+    let program = match script::parse(code) {
+        Ok(program) => program,
+        Err(err) => return Native::Unsupported(unsupported_parse(&err)),
+    };
+    let mut host = DesktopHost::new(desktop, Instant::now() + Duration::from_millis(timeout_ms));
+    let (stdout, stderr, returncode) = match script::run(&program, &mut host, Globals::python()) {
+        Ok(out) => (out.stdout, out.stderr, out.exit_code),
+        Err(_) if host.timed_out() => return Native::Answer(Err(WaaError::catch(timeout_message(command, timeout_ms)))),
+        Err(err) if outside_subset(&err) && host.effects() == 0 => return Native::Unsupported(unsupported_runtime(&err)),
+        Err(err) if outside_subset(&err) => {
+            // Running it again with a real Python would repeat what was already done.
+            let message = format!("{}; it stopped there after {} action(s) had been performed", unsupported_runtime(&err), host.effects());
+            return Native::Answer(Err(WaaError::catch(message)));
+        }
+        Err(err) => {
+            let stderr = format!("{}{}", err.stderr, err.traceback());
+            (err.stdout, stderr, 1)
+        }
+    };
+    Native::Answer(Ok(json(
+        StatusCode::OK,
+        json!({"status": "success", "output": stdout, "error": stderr, "returncode": returncode}),
+    )))
 }
 
 /// `POST /setup/launch`: always through the shell, never waited for.
@@ -222,7 +342,8 @@ pub(crate) async fn update_computer(State(state): State<AppState>, PyJson(body):
         })
     })
     .await?;
-    state.waa.set_computer(ComputerState { rects, window_rect, screenshot, scale, clipboard_content, swap_ctrl_alt });
+    let screenshot = Arc::new(screenshot);
+    state.waa.set_computer(ComputerState { rects, window_rect, screenshot, scale, clipboard_content, swap_ctrl_alt, current_id: None });
     Ok(json(StatusCode::OK, json!({"success": true})))
 }
 
@@ -234,12 +355,25 @@ pub(crate) async fn execute_windows(State(state): State<AppState>, PyJson(body):
         _ => return Ok(exec_failure("exec() arg 1 must be a string, bytes or code object".to_owned())),
     };
     let computer = state.waa.computer();
-    let deadline = Duration::from_millis(state.config.exec_timeout_ms) + EXEC_MARGIN;
-    let outcome = on_backend_within(&state, "execute_windows", deadline, move |desktop| {
-        Ok(run_computer_code(desktop, &code, computer.as_deref()))
+    let started_from = computer.clone();
+    let options = CodeOptions {
+        action_delay: Duration::from_millis(state.config.computer_action_delay_ms),
+        timeout: Duration::from_millis(state.config.exec_timeout_ms),
+    };
+    let deadline = options.timeout + EXEC_MARGIN;
+    let run = on_backend_within(&state, "execute_windows", deadline, move |desktop| {
+        Ok(run_computer_code(desktop, &code, computer.as_deref(), &options))
     })
     .await?;
-    Ok(match outcome {
+    if let (Some(before), Some(after)) = (started_from, run.state) {
+        // Upstream's `Mouse` and `Clipboard` objects keep what the code changed until the
+        // next `/update_computer`, which wins if it came in while the code ran.
+        if before.current_id != after.current_id || before.clipboard_content != after.clipboard_content {
+            let next = ComputerState { current_id: after.current_id, clipboard_content: after.clipboard_content, ..(*before).clone() };
+            state.waa.replace_computer(&before, next);
+        }
+    }
+    Ok(match run.result {
         Ok(()) => json(StatusCode::OK, json!({"status": "success"})),
         Err(message) => exec_failure(message),
     })
@@ -251,31 +385,140 @@ fn exec_failure(message: String) -> axum::response::Response {
     json(StatusCode::INTERNAL_SERVER_ERROR, json!({"status": "error", "message": message}))
 }
 
+/// How `/execute_windows` code runs.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct CodeOptions {
+    /// The pause after each `computer.*` action (upstream: 0.25 s).
+    pub action_delay: Duration,
+    /// How long the code may run.
+    pub timeout: Duration,
+}
+
+/// What running `/execute_windows` code did.
+#[derive(Debug)]
+pub struct ComputerRun {
+    /// `Err` holds the message of the 500 answer.
+    pub result: Result<(), String>,
+    /// The state's `current_id` and `clipboard_content` after the run (also after a
+    /// failure: effects are not undone), `None` when there was no state.
+    pub state: Option<ComputerChanges>,
+}
+
+/// The parts of the `/update_computer` state a script may change.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ComputerChanges {
+    pub current_id: Option<usize>,
+    pub clipboard_content: Value,
+}
+
 /// Runs `/execute_windows` code (upstream: `exec(code, {'computer': ..., 'human': ...})`)
-/// against the `/update_computer` state.
+/// natively against the `/update_computer` state.
 ///
-/// This build has no interpreter for the `computer.*` call language yet. It does what it
-/// can answer exactly: code without statements succeeds (as `exec` of a blank program
-/// does), and before the first `/update_computer` a `computer.<part>.<method>` call fails
-/// with Python's `AttributeError` text. Everything else fails loudly, naming the first
-/// statement, so a host never mistakes an unperformed action for a success.
-///
-/// # Errors
-///
-/// The message of the 500 answer.
-pub fn run_computer_code(desktop: &dyn Desktop, code: &str, computer: Option<&ComputerState>) -> Result<(), String> {
-    let _ = desktop;
-    let Some(first) = statements(code).into_iter().next() else {
-        return Ok(());
+/// Upstream's rules hold: anything printed that contains "error" (any case) fails the
+/// request after all effects happened (Q8); an exception answers with its message.
+/// Code outside the interpreter's subset fails naming the construct, line and column.
+/// Before the first `/update_computer`, `computer.<part>.<method>` fails with Python's
+/// `AttributeError` text, as upstream's `None` parts do.
+pub fn run_computer_code(desktop: &dyn Desktop, code: &str, computer: Option<&ComputerState>, options: &CodeOptions) -> ComputerRun {
+    let fail = |message: String| ComputerRun { result: Err(message), state: None };
+    let program = match script::parse(code) {
+        Ok(program) => program,
+        Err(err) => return fail(unsupported_parse(&err)),
     };
-    if computer.is_none() {
-        if let Some(attribute) = none_attribute(&first) {
-            return Err(format!("'NoneType' object has no attribute '{attribute}'"));
+    let deadline = Instant::now() + options.timeout;
+    let Some(stored) = computer else {
+        if let Some(attribute) = statements(code).iter().find_map(|s| none_attribute(s)) {
+            return fail(format!("'NoneType' object has no attribute '{attribute}'"));
+        }
+        let mut host = DesktopHost::new(desktop, deadline);
+        let globals = Globals { computer: None, computer_action_delay: 0.0, preimport: &[] };
+        let result = script::run(&program, &mut host, globals);
+        return ComputerRun { result: code_result(result, &host, options), state: None };
+    };
+    let mut state = match script_state(stored) {
+        Ok(state) => state,
+        Err(message) => return fail(message),
+    };
+    let initial_clipboard = state.clipboard_content.clone();
+    let mut host = DesktopHost::new(desktop, deadline).with_screenshot(&stored.screenshot);
+    let globals = Globals { computer: Some(&mut state), computer_action_delay: options.action_delay.as_secs_f64(), preimport: &[] };
+    let result = script::run(&program, &mut host, globals);
+    let result = code_result(result, &host, options);
+    let clipboard_content = if state.clipboard_content == initial_clipboard {
+        stored.clipboard_content.clone()
+    } else {
+        state.clipboard_content.map_or(Value::Null, Value::String)
+    };
+    ComputerRun { result, state: Some(ComputerChanges { current_id: state.current_id, clipboard_content }) }
+}
+
+/// Upstream's verdict on a finished `exec`: an exception's text, or the captured
+/// stdout when it mentions "error".
+fn code_result(result: Result<script::RunOutput, ScriptError>, host: &DesktopHost<'_>, options: &CodeOptions) -> Result<(), String> {
+    match result {
+        Ok(out) if out.stdout.to_lowercase().contains("error") => Err(out.stdout),
+        Ok(_) => Ok(()),
+        Err(_) if host.timed_out() => Err(format!(
+            "the code did not finish within {} seconds",
+            py::float_repr(options.timeout.as_secs_f64())
+        )),
+        Err(err) if outside_subset(&err) => Err(unsupported_runtime(&err)),
+        // `str(e)`: the exception's message without its class, as upstream answers.
+        Err(err) => Err(err.message),
+    }
+}
+
+/// The interpreter's view of the stored `/update_computer` values.
+///
+/// Missing values get the defaults Navi sends (`window_rect` the screenshot, `scale`
+/// 1); values of the wrong shape fail the request naming the field, where upstream
+/// would raise only when a method used them.
+fn script_state(stored: &ComputerState) -> Result<script::ComputerState, String> {
+    let number = |v: &Value, what: &str| -> Result<f64, String> {
+        v.as_f64().filter(|f| f.is_finite()).ok_or_else(|| format!("{what} must hold numbers, not {}", py::repr(v)))
+    };
+    // Python's `int()` of a float truncates; the boxes are whole pixels anyway.
+    let pixel = |v: &Value, what: &str| -> Result<i32, String> {
+        let f = number(v, what)?;
+        Ok(f.trunc().clamp(f64::from(i32::MIN), f64::from(i32::MAX)) as i32)
+    };
+    let four = |v: &Value, what: &str| -> Result<[i32; 4], String> {
+        match v.as_array().map(Vec::as_slice) {
+            Some([a, b, c, d]) => Ok([pixel(a, what)?, pixel(b, what)?, pixel(c, what)?, pixel(d, what)?]),
+            _ => Err(format!("{what} must be [x1, y1, x2, y2], not {}", py::repr(v))),
+        }
+    };
+    let (width, height) = stored.screenshot.dimensions();
+    let mut state = script::ComputerState::for_screen(
+        i32::try_from(width).unwrap_or(i32::MAX),
+        i32::try_from(height).unwrap_or(i32::MAX),
+    );
+    match &stored.rects {
+        None | Some(Value::Null) => {}
+        Some(Value::Array(items)) => {
+            for (i, item) in items.iter().enumerate() {
+                state.rects.push(four(item, &format!("rects[{i}]"))?);
+            }
+        }
+        Some(other) => return Err(format!("rects must be a list of [x1, y1, x2, y2], not {}", py::repr(other))),
+    }
+    if let Some(rect) = stored.window_rect.as_ref().filter(|v| !v.is_null()) {
+        state.window_rect = four(rect, "window_rect")?;
+    }
+    if let Some(scale) = stored.scale.as_ref().filter(|v| !v.is_null()) {
+        match scale.as_array().map(Vec::as_slice) {
+            Some([sx, sy]) => state.scale = (number(sx, "scale")?, number(sy, "scale")?),
+            _ => return Err(format!("scale must be [sx, sy], not {}", py::repr(scale))),
         }
     }
-    Err(format!(
-        "computer.* code execution is not available in this build yet (the interpreter is still to come); nothing was run. First statement: {first}"
-    ))
+    state.clipboard_content = match &stored.clipboard_content {
+        Value::Null => None,
+        Value::String(s) => Some(s.clone()),
+        other => Some(py::str_of(other)),
+    };
+    state.swap_ctrl_alt = stored.swap_ctrl_alt;
+    state.current_id = stored.current_id;
+    Ok(state)
 }
 
 /// The statements of a program, roughly: non-blank lines that are not comments.
@@ -327,6 +570,36 @@ mod tests {
     fn timeout_messages_quote_the_command_like_python() {
         assert_eq!(timeout_message(&json!(["python", "-c", "x"]), 120_000), "Command '['python', '-c', 'x']' timed out after 120 seconds");
         assert_eq!(timeout_message(&json!("dir"), 1_500), "Command 'dir' timed out after 1.5 seconds");
+    }
+
+    #[test]
+    fn a_configured_python_replaces_the_program() {
+        let check = |argv: &[&str], expected: &[&str]| {
+            let spec = CommandSpec::Argv(argv.iter().map(|s| (*s).to_owned()).collect());
+            let expected = CommandSpec::Argv(expected.iter().map(|s| (*s).to_owned()).collect());
+            assert_eq!(with_program(spec, Path::new("/opt/py/bin/python3")), expected, "{argv:?}");
+        };
+        check(&["python", "-c", "x"], &["/opt/py/bin/python3", "-c", "x"]);
+        check(&[r"C:\Python310\python.exe", "-u", "-c", "x"], &["/opt/py/bin/python3", "-u", "-c", "x"]);
+        check(&["py", "-3.10", "-c", "x"], &["/opt/py/bin/python3", "-c", "x"]);
+        let shell = CommandSpec::Shell("python -c x".into());
+        assert_eq!(with_program(shell.clone(), Path::new("/p")), shell);
+    }
+
+    #[test]
+    fn failures_outside_the_subset_are_told_apart_from_python_exceptions() {
+        let err = |src: &str| {
+            let program = script::parse(src).expect("parses");
+            let dir = tempfile::tempdir().expect("temp dir");
+            let stub = crate::desktop::stub::StubDesktop::new(dir.path().to_path_buf()).expect("stub");
+            let mut host = DesktopHost::new(&stub, Instant::now() + Duration::from_secs(5));
+            script::run(&program, &mut host, Globals::python()).expect_err("fails")
+        };
+        assert!(outside_subset(&err("import numpy")));
+        assert!(outside_subset(&err("import os; os.walk('C:/')")));
+        assert!(outside_subset(&err("from os import walk")));
+        assert!(!outside_subset(&err("undefined_name")));
+        assert!(!outside_subset(&err("[1][3]")));
     }
 
     #[test]

@@ -30,7 +30,7 @@ pub mod execute;
 mod files;
 mod observe;
 mod py;
-mod queries;
+pub(crate) mod queries;
 mod recording;
 mod setup;
 
@@ -80,6 +80,17 @@ impl WaaState {
     /// Replaces the computer state, as `computer.update(...)` does.
     pub fn set_computer(&self, computer: ComputerState) {
         *lock(&self.computer) = Some(Arc::new(computer));
+    }
+
+    /// Replaces the computer state with `next` if it is still `current`: what an
+    /// `/execute_windows` run changed never overwrites a newer `/update_computer`.
+    pub fn replace_computer(&self, current: &Arc<ComputerState>, next: ComputerState) -> bool {
+        let mut slot = lock(&self.computer);
+        let unchanged = slot.as_ref().is_some_and(|stored| Arc::ptr_eq(stored, current));
+        if unchanged {
+            *slot = Some(Arc::new(next));
+        }
+        unchanged
     }
 
     /// Records a human question and answer for `/obs_winagent`'s `human_input`.

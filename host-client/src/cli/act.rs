@@ -28,6 +28,11 @@ pub struct ActArgs {
     #[arg(long, value_name = "FILE")]
     pub json_file: Option<PathBuf>,
 
+    /// pyautogui code, as agents write it (`pyautogui.click(10, 20)`), translated into
+    /// actions here with the guest's screen size and cursor; nothing runs as Python.
+    #[arg(long, value_name = "CODE", conflicts_with_all = ["json", "json_file"])]
+    pub pyautogui: Option<String>,
+
     #[command(subcommand)]
     pub action: Option<ActCommand>,
 }
@@ -161,10 +166,33 @@ impl ActArgs {
                 let text = std::fs::read_to_string(path).with_context(|| format!("reading --json-file {}", path.display()))?;
                 parse_batch_json(&text).with_context(|| format!("--json-file {}", path.display()))?
             }
-            (None, None, None) => bail!("name an action (`arena act click 100 200`) or give --json / --json-file"),
+            (None, None, None) if self.pyautogui.is_some() => bail!("--pyautogui needs the guest's screen size: use `ActArgs::batch_for`"),
+            (None, None, None) => bail!("name an action (`arena act click 100 200`) or give --json / --json-file / --pyautogui"),
             _ => bail!("give either an action, --json or --json-file, not several"),
         };
         validate_batch(&batch)?;
+        Ok(batch)
+    }
+}
+
+impl ActArgs {
+    /// The batch to send to `client`'s guest: [`ActArgs::to_batch`], or the
+    /// translation of `--pyautogui` code for the guest's screen and cursor.
+    ///
+    /// # Errors
+    ///
+    /// What [`ActArgs::to_batch`] refuses, the guest cannot be asked, or the code
+    /// cannot be translated (see [`crate::pyaction::actions_from_code`]).
+    pub async fn batch_for(&self, client: &crate::GuestClient) -> anyhow::Result<ActionBatch> {
+        let Some(code) = &self.pyautogui else {
+            return self.to_batch();
+        };
+        let screen = client.screen().await?;
+        // An empty wait performs nothing and reports where the cursor is.
+        let cursor = client.act(&ActionBatch { actions: vec![Action::Wait { ms: 0 }] }).await?.cursor;
+        let actions = crate::pyaction::actions_from_code(code, (screen.physical_width, screen.physical_height), (cursor.x, cursor.y))?;
+        let batch = ActionBatch { actions };
+        validate_batch(&batch).context("--pyautogui")?;
         Ok(batch)
     }
 }
@@ -403,6 +431,31 @@ mod tests {
         let batch = parse(&["--json-file", path.to_str().unwrap()]).unwrap();
         assert_eq!(batch.actions.len(), 2);
         assert_eq!(batch.actions[1], Action::Hotkey { keys: vec!["ctrl".into(), "s".into()] });
+    }
+
+    #[tokio::test]
+    async fn pyautogui_code_is_translated_for_the_guest_and_sent() {
+        let harness = Harness::try_parse_from(["act", "--pyautogui", "pyautogui.moveTo(30, 40); pyautogui.moveRel(1, 2); pyautogui.click()"])
+            .expect("parses");
+        assert!(format!("{:#}", harness.act.to_batch().expect_err("needs the guest")).contains("batch_for"));
+        let stub = crate::cli::stub::start(&crate::cli::stub::StubArgs::default(), None).await.expect("stub guest");
+        let client = crate::GuestClient::new(&stub.url(), crate::ClientConfig::default()).expect("client");
+        let batch = harness.act.batch_for(&client).await.expect("translated");
+        assert_eq!(
+            batch.actions,
+            vec![
+                Action::MoveTo { x: 30, y: 40 },
+                Action::MoveRel { dx: 1, dy: 2 },
+                Action::Click { x: None, y: None, button: MouseButton::Left, count: 1 },
+            ]
+        );
+        let report = client.act(&batch).await.expect("performed");
+        assert_eq!((report.cursor.x, report.cursor.y), (31, 42));
+        let bad = Harness::try_parse_from(["act", "--pyautogui", "pyautogui.screenshot('x.png')"]).expect("parses");
+        let err = format!("{:#}", bad.act.batch_for(&client).await.expect_err("not input"));
+        assert!(err.contains("saving a screenshot"), "{err}");
+        assert!(Harness::try_parse_from(["act", "--pyautogui", "x", "--json", "[]"]).is_err());
+        stub.stop().await.expect("stops");
     }
 
     #[test]

@@ -1,0 +1,154 @@
+//! `pyexec`: what one pyautogui action through WAA's `/execute` costs when the guest
+//! runs the code natively, against what upstream pays for the same action: starting
+//! a Python process (`python3 -c "pass"`, before any import).
+//!
+//! The guest runs in this process (the `arena_guest` library serving a real TCP
+//! listener on 127.0.0.1) over the stub backend, and every request is a real HTTP
+//! `POST /execute` with the upstream host's exact body, so the native figure
+//! includes HTTP, JSON, parsing, interpreting and the stub's click. The process
+//! figure is only the spawn-and-wait of a bare interpreter on this machine.
+//! Run it in release mode: `cargo run --release -p arena-tests --bin pyexec`.
+
+use std::process::ExitCode;
+use std::time::{Duration, Instant};
+
+use anyhow::Context;
+
+/// The upstream host's body for `pyautogui.click(x=100, y=200)` (waa-api.md §b.2).
+const CODE: &str = "import pyautogui; import time; pyautogui.FAILSAFE = False; pyautogui.click(x=100, y=200)";
+
+const NATIVE_RUNS: usize = 200;
+const PROCESS_RUNS: usize = 50;
+
+#[tokio::main]
+async fn main() -> ExitCode {
+    match run().await {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(err) => {
+            eprintln!("error: {err:#}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+/// Sorted samples with their median and mean.
+struct Stats {
+    samples: Vec<Duration>,
+}
+
+impl Stats {
+    fn new(mut samples: Vec<Duration>) -> Stats {
+        samples.sort();
+        Stats { samples }
+    }
+
+    fn p50(&self) -> Duration {
+        self.samples[self.samples.len() / 2]
+    }
+
+    fn mean(&self) -> Duration {
+        self.samples.iter().sum::<Duration>() / u32::try_from(self.samples.len()).unwrap_or(u32::MAX)
+    }
+
+    fn print(&self, name: &str) {
+        let n = self.samples.len();
+        let p95 = self.samples[((n as f64 - 1.0) * 0.95).round() as usize];
+        println!(
+            "{name:<46} n={n:<4} min={:>9.3} ms  p50={:>9.3} ms  p95={:>9.3} ms  mean={:>9.3} ms",
+            ms(self.samples[0]),
+            ms(self.p50()),
+            ms(p95),
+            ms(self.mean())
+        );
+    }
+}
+
+fn ms(d: Duration) -> f64 {
+    d.as_secs_f64() * 1000.0
+}
+
+/// Starts `program -c "pass"` once to warm the file cache, then `PROCESS_RUNS` times.
+fn spawn_python(program: &str) -> anyhow::Result<Stats> {
+    let spawn = || {
+        let status = std::process::Command::new(program)
+            .args(["-c", "pass"])
+            .stdin(std::process::Stdio::null())
+            .status()
+            .with_context(|| format!("starting {program} (is it on PATH?)"))?;
+        anyhow::ensure!(status.success(), "{program} -c pass exited with {status}");
+        Ok(())
+    };
+    spawn()?;
+    let mut samples = Vec::with_capacity(PROCESS_RUNS);
+    for _ in 0..PROCESS_RUNS {
+        let start = Instant::now();
+        spawn()?;
+        samples.push(start.elapsed());
+    }
+    Ok(Stats::new(samples))
+}
+
+async fn run() -> anyhow::Result<()> {
+    let root = tempfile::tempdir().context("creating the stub root")?;
+    let mut config = arena_guest::config::ServerConfig::for_stub();
+    config.stub_root = Some(root.path().to_path_buf());
+    let state = arena_guest::build_state(config)?;
+    let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.context("binding loopback")?;
+    let url = format!("http://{}/execute", listener.local_addr()?);
+    let (stop_tx, stop_rx) = tokio::sync::oneshot::channel::<()>();
+    let server = tokio::spawn(arena_guest::serve(listener, state, async {
+        let _ = stop_rx.await;
+    }));
+    let http = reqwest::Client::new();
+    let body = serde_json::json!({"command": ["python", "-c", CODE], "shell": false});
+    println!("arena pyexec bench: one pyautogui click through POST /execute, natively, vs. a Python process start");
+
+    let post = || async {
+        let answer: serde_json::Value = http.post(&url).json(&body).send().await?.error_for_status()?.json().await?;
+        anyhow::ensure!(answer["returncode"] == 0 && answer["status"] == "success", "unexpected answer {answer}");
+        Ok::<_, anyhow::Error>(())
+    };
+    for _ in 0..20 {
+        post().await.context("warming up")?;
+    }
+    let mut native = Vec::with_capacity(NATIVE_RUNS);
+    for _ in 0..NATIVE_RUNS {
+        let start = Instant::now();
+        post().await.context("measuring /execute")?;
+        native.push(start.elapsed());
+    }
+    let native = Stats::new(native);
+    native.print("native POST /execute pyautogui.click");
+
+    let process = spawn_python("python3")?;
+    process.print("process python3 -c \"pass\"");
+    // `python3` on PATH may be a wrapper (pyenv's shim is a shell script); the
+    // interpreter itself shows what a guest whose `python` is the real exe pays.
+    let exe = std::process::Command::new("python3")
+        .args(["-c", "import sys; print(sys.executable)"])
+        .output()
+        .context("asking python3 for its executable")?;
+    let exe = String::from_utf8_lossy(&exe.stdout).trim().to_owned();
+    let direct = if exe.is_empty() { None } else { Some(spawn_python(&exe)?) };
+    if let Some(direct) = &direct {
+        direct.print(&format!("process {exe} -c \"pass\""));
+    }
+
+    let ratio = |a: Duration, b: Duration| a.as_secs_f64() / b.as_secs_f64().max(1e-9);
+    println!(
+        "ratio (python3 process / native): p50 {:.1}x, mean {:.1}x",
+        ratio(process.p50(), native.p50()),
+        ratio(process.mean(), native.mean())
+    );
+    if let Some(direct) = &direct {
+        println!(
+            "ratio (interpreter exe process / native): p50 {:.1}x, mean {:.1}x",
+            ratio(direct.p50(), native.p50()),
+            ratio(direct.mean(), native.mean())
+        );
+    }
+
+    let _ = stop_tx.send(());
+    server.await.context("joining the server")??;
+    Ok(())
+}
