@@ -86,6 +86,20 @@ pub struct ServerConfig {
     #[arg(long, env = "ARENA_ACTIVATE_SETTLE_MS", default_value_t = 1_000)]
     pub activate_settle_ms: u64,
 
+    /// A real Python for `/execute` code outside the natively interpreted subset
+    /// (default: none, so such code is refused with a message naming the construct).
+    #[arg(long, env = "ARENA_PYTHON")]
+    pub python: Option<PathBuf>,
+
+    /// Pause after each `computer.*` action of `/execute_windows`, in milliseconds (upstream sleeps 0.25 s).
+    #[arg(long, env = "ARENA_COMPUTER_ACTION_DELAY_MS", default_value_t = 250)]
+    pub computer_action_delay_ms: u64,
+
+    /// Loopback port of the browser's DevTools HTTP endpoint that `/v1/browser/...`
+    /// forwards to (upstream starts Chrome and Edge with `--remote-debugging-port=1337`).
+    #[arg(long, env = "ARENA_CDP_PORT", default_value_t = 1337)]
+    pub cdp_port: u16,
+
     /// Log format.
     #[arg(long, env = "ARENA_LOG_FORMAT", value_enum, default_value_t = LogFormat::Text)]
     pub log_format: LogFormat,
@@ -106,7 +120,7 @@ impl ServerConfig {
     }
 
     /// A configuration for tests and embedding: stub backend on loopback, port 0, no token,
-    /// and no settle pauses.
+    /// no settle pauses, no action delay and no real Python.
     pub fn for_stub() -> ServerConfig {
         ServerConfig {
             backend: Some(BackendKind::Stub),
@@ -124,6 +138,9 @@ impl ServerConfig {
             exec_timeout_ms: 120_000,
             open_settle_ms: 0,
             activate_settle_ms: 0,
+            python: None,
+            computer_action_delay_ms: 0,
+            cdp_port: 1337,
             log_format: LogFormat::Text,
         }
     }

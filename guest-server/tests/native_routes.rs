@@ -687,6 +687,94 @@ async fn wallpaper_answers_a_path_or_null() {
     assert!(body["path"].is_string() || body["path"].is_null(), "{body}");
 }
 
+#[tokio::test]
+async fn wallpaper_is_set_from_an_existing_image_only() {
+    let app = app();
+    let path = r"C:\Users\Docker\Pictures\sky.png";
+    app.put_bytes(&format!("/v1/files?path={}", q(path)), b"not really a png").await.assert_status(StatusCode::OK);
+    app.json(Method::PUT, "/v1/wallpaper", json!({"path": path})).await.assert_status(StatusCode::NO_CONTENT);
+    let body: Value = app.get("/v1/wallpaper").await.json();
+    assert_eq!(body["path"], json!(path));
+    app.json(Method::PUT, "/v1/wallpaper", json!({"path": r"C:\Users\Docker\Pictures\gone.png"})).await.assert_error(
+        StatusCode::NOT_FOUND,
+        ErrorCode::NotFound,
+        "gone.png",
+    );
+    let body: Value = app.get("/v1/wallpaper").await.json();
+    assert_eq!(body["path"], json!(path), "a refused change keeps the old wallpaper");
+}
+
+// ----- browser (DevTools HTTP forwarded) -----
+
+/// A router over a fresh stub whose browser debugging port is `cdp_port`.
+fn app_with_cdp_port(cdp_port: u16) -> TestApp {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let stub =
+        StubDesktop::with_config(StubConfig { root: Some(dir.path().into()), screen: (1440, 900), scenario: None })
+            .expect("stub desktop");
+    let mut config = ServerConfig::for_stub();
+    config.cdp_port = cdp_port;
+    let state = AppState::new(Arc::new(stub), config, None);
+    TestApp { router: arena_guest::router(state), dir }
+}
+
+/// A fake DevTools endpoint that echoes what it received as JSON; answers its port.
+async fn fake_devtools() -> u16 {
+    async fn echo(method: Method, uri: axum::http::Uri, body: Bytes) -> axum::response::Response {
+        let text = json!({"method": method.as_str(), "path": uri.path(), "query": uri.query(), "body": String::from_utf8_lossy(&body)});
+        let status = if uri.path() == "/json/missing" { StatusCode::NOT_FOUND } else { StatusCode::OK };
+        (status, [(header::CONTENT_TYPE, "application/json; charset=UTF-8")], text.to_string()).into_response()
+    }
+    use axum::response::IntoResponse as _;
+    let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.expect("bind");
+    let port = listener.local_addr().expect("addr").port();
+    tokio::spawn(async move {
+        let _ = axum::serve(listener, Router::new().fallback(echo)).await;
+    });
+    port
+}
+
+#[tokio::test]
+async fn browser_requests_are_forwarded_with_query_body_and_status() {
+    let app = app_with_cdp_port(fake_devtools().await);
+    let answer = app.get("/v1/browser/json/list").await;
+    answer.assert_status(StatusCode::OK);
+    assert_eq!(answer.headers[header::CONTENT_TYPE], "application/json; charset=UTF-8");
+    let body: Value = answer.json();
+    assert_eq!((body["method"].as_str(), body["path"].as_str()), (Some("GET"), Some("/json/list")));
+
+    let answer =
+        app.send(Request::put("/v1/browser/json/new?https://example.com/a?b=1").body(Body::empty()).unwrap()).await;
+    answer.assert_status(StatusCode::OK);
+    let body: Value = answer.json();
+    assert_eq!(body["method"], "PUT");
+    assert_eq!(body["query"], "https://example.com/a?b=1");
+
+    let answer = app.send(Request::post("/v1/browser/json/echo").body(Body::from("payload")).unwrap()).await;
+    let body: Value = answer.json();
+    assert_eq!((body["method"].as_str(), body["body"].as_str()), (Some("POST"), Some("payload")));
+
+    app.get("/v1/browser/json/missing").await.assert_status(StatusCode::NOT_FOUND);
+    app.delete("/v1/browser/json/list").await.assert_error(StatusCode::BAD_REQUEST, ErrorCode::BadRequest, "DELETE");
+}
+
+#[tokio::test]
+async fn browser_requests_without_a_browser_are_a_502_naming_the_port() {
+    // Bind and drop a listener to get a port nothing listens on.
+    let port = {
+        let listener = std::net::TcpListener::bind("127.0.0.1:0").expect("bind");
+        listener.local_addr().expect("addr").port()
+    };
+    let app = app_with_cdp_port(port);
+    app.get("/v1/browser/json/version").await.assert_error(
+        StatusCode::BAD_GATEWAY,
+        ErrorCode::Internal,
+        &format!(
+            "no browser is listening on the debugging port {port}: start Chrome with --remote-debugging-port={port}"
+        ),
+    );
+}
+
 // ----- protocol: errors, methods, auth -----
 
 #[tokio::test]

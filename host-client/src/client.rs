@@ -26,6 +26,10 @@ use sha2::{Digest, Sha256};
 use arena_shared::action::{Action, ActionBatch, ActionReport};
 use arena_shared::clipboard::ClipboardContent;
 use arena_shared::error::ErrorBody;
+use arena_shared::eval::{
+    DetailsViewQuery, EvalAnswer, ImagesTaggedQuery, LibraryFolders, LibraryQuery, ReadOnlyQuery, SortedByModifiedQuery,
+    TimerQuery, WorldClockQuery,
+};
 use arena_shared::exec::{ExecRequest, ExecResult, LaunchRequest, LaunchResult};
 use arena_shared::files::{DirListing, Exists, FileStat, FileWritten, KnownFolders, MkdirRequest, PathQuery, WriteQuery};
 use arena_shared::health::{Component, HealthReport};
@@ -50,6 +54,8 @@ const FIRST_BACKOFF: Duration = Duration::from_millis(100);
 const MAX_BACKOFF: Duration = Duration::from_secs(2);
 /// How much of a non-JSON error body is kept in the message.
 const MAX_ERROR_TEXT: usize = 300;
+/// Shortest deadline of an evaluation query: the guest may walk an accessibility tree (60 s by default) and click.
+const EVAL_QUERY_DEADLINE: Duration = Duration::from_secs(90);
 
 /// How a [`GuestClient`] talks to its guest.
 #[derive(Debug, Clone)]
@@ -127,6 +133,8 @@ struct Call<'a> {
     method: Method,
     path: &'a str,
     query: Option<Vec<(String, String)>>,
+    /// A query string sent as written (the DevTools `/json/new?<url>` takes a whole URL there).
+    raw_query: Option<&'a str>,
     payload: Payload,
     deadline: Duration,
     retry: Retry,
@@ -625,13 +633,139 @@ impl GuestClient {
         self.send(call).await.map(drop)
     }
 
+    /// `PUT /v1/wallpaper`: sets the wallpaper to an existing guest image.
+    ///
+    /// # Errors
+    ///
+    /// Any [`ClientError`] of the call; `not_found` for a missing file.
+    pub async fn set_wallpaper(&self, path: &str) -> Result<(), ClientError> {
+        let call = Call {
+            payload: json_payload(&PathQuery { path: path.to_owned(), recursive: false }),
+            ..self.call(Method::PUT, "/v1/wallpaper")
+        };
+        self.send(call).await.map(drop)
+    }
+
+    // ----- evaluation queries -----
+
+    /// `POST /v1/eval/is_details_view`: whether the foreground File Explorer window shows Details view.
+    ///
+    /// # Errors
+    ///
+    /// Any [`ClientError`] of the call.
+    pub async fn eval_is_details_view(&self, query: &DetailsViewQuery) -> Result<EvalAnswer, ClientError> {
+        self.eval_query("/v1/eval/is_details_view", query).await
+    }
+
+    /// `POST /v1/eval/are_files_sorted_by_modified_time`.
+    ///
+    /// # Errors
+    ///
+    /// Any [`ClientError`] of the call.
+    pub async fn eval_files_sorted_by_modified(&self, query: &SortedByModifiedQuery) -> Result<EvalAnswer, ClientError> {
+        self.eval_query("/v1/eval/are_files_sorted_by_modified_time", query).await
+    }
+
+    /// `POST /v1/eval/check_if_timer_started`: may click the Clock app's "Maximize Clock" button first.
+    ///
+    /// # Errors
+    ///
+    /// Any [`ClientError`] of the call.
+    pub async fn eval_timer_started(&self, query: &TimerQuery) -> Result<EvalAnswer, ClientError> {
+        self.eval_query("/v1/eval/check_if_timer_started", query).await
+    }
+
+    /// `POST /v1/eval/check_if_world_clock_exists`: may click "Maximize Clock" first.
+    ///
+    /// # Errors
+    ///
+    /// Any [`ClientError`] of the call.
+    pub async fn eval_world_clock_exists(&self, query: &WorldClockQuery) -> Result<EvalAnswer, ClientError> {
+        self.eval_query("/v1/eval/check_if_world_clock_exists", query).await
+    }
+
+    /// `POST /v1/eval/is_directory_read_only_for_user`.
+    ///
+    /// # Errors
+    ///
+    /// Any [`ClientError`] of the call; `not_found` for a missing directory.
+    pub async fn eval_read_only_for_user(&self, query: &ReadOnlyQuery) -> Result<EvalAnswer, ClientError> {
+        self.eval_query("/v1/eval/is_directory_read_only_for_user", query).await
+    }
+
+    /// `POST /v1/eval/are_all_images_tagged`.
+    ///
+    /// # Errors
+    ///
+    /// Any [`ClientError`] of the call; `not_found` for a missing directory.
+    pub async fn eval_images_tagged(&self, query: &ImagesTaggedQuery) -> Result<EvalAnswer, ClientError> {
+        self.eval_query("/v1/eval/are_all_images_tagged", query).await
+    }
+
+    /// `POST /v1/eval/library_folders`: the folders of a Windows library.
+    ///
+    /// # Errors
+    ///
+    /// Any [`ClientError`] of the call.
+    pub async fn eval_library_folders(&self, query: &LibraryQuery) -> Result<LibraryFolders, ClientError> {
+        self.eval_query("/v1/eval/library_folders", query).await
+    }
+
+    /// One evaluation query. Not retried: the Clock queries may click, and a
+    /// second click would undo the first.
+    async fn eval_query<Q: Serialize, A: DeserializeOwned>(&self, path: &str, query: &Q) -> Result<A, ClientError> {
+        let call = Call {
+            payload: json_payload(query),
+            deadline: self.config.timeout.max(EVAL_QUERY_DEADLINE),
+            retry: Retry::Never,
+            ..self.call(Method::POST, path)
+        };
+        self.json(call).await
+    }
+
+    // ----- browser -----
+
+    /// `GET /v1/browser/{path}`: a GET of the browser's DevTools HTTP endpoint
+    /// inside the guest (`json/version`, `json/list`), forwarded by the guest.
+    /// `path` may carry a query (`json/new?https://example.com`), sent as written.
+    /// Answers the browser's body.
+    ///
+    /// # Errors
+    ///
+    /// Any [`ClientError`] of the call; a `502` when no browser listens on the
+    /// guest's debugging port, the browser's own status otherwise.
+    pub async fn browser_get(&self, path: &str) -> Result<Vec<u8>, ClientError> {
+        self.browser(Method::GET, path, Retry::Idempotent).await
+    }
+
+    /// `PUT /v1/browser/{path}`: a PUT of the browser's DevTools HTTP endpoint
+    /// (`json/new?<url>` opens a tab). Never retried: a retry after a lost answer
+    /// would open the tab twice.
+    ///
+    /// # Errors
+    ///
+    /// See [`GuestClient::browser_get`].
+    pub async fn browser_put(&self, path: &str) -> Result<Vec<u8>, ClientError> {
+        self.browser(Method::PUT, path, Retry::Never).await
+    }
+
+    async fn browser(&self, method: Method, path: &str, retry: Retry) -> Result<Vec<u8>, ClientError> {
+        let (path, query) = match path.split_once('?') {
+            Some((path, query)) => (path, Some(query)),
+            None => (path, None),
+        };
+        let route = format!("/v1/browser/{}", path.trim_start_matches('/'));
+        let call = Call { raw_query: query, retry, ..self.call(method, &route) };
+        self.send(call).await.map(|answer| answer.body)
+    }
+
     // ----- plumbing -----
 
     /// A call with the defaults: no query, no body, the default deadline, and
     /// retries for the idempotent methods.
     fn call<'a>(&self, method: Method, path: &'a str) -> Call<'a> {
         let retry = if method == Method::GET || method == Method::PUT { Retry::Idempotent } else { Retry::Never };
-        Call { method, path, query: None, payload: Payload::None, deadline: self.config.timeout, retry }
+        Call { method, path, query: None, raw_query: None, payload: Payload::None, deadline: self.config.timeout, retry }
     }
 
     fn site(&self, call: &Call<'_>) -> CallSite {
@@ -694,7 +828,10 @@ impl GuestClient {
 
     /// One attempt: send, then read the whole body, all within the deadline.
     async fn attempt(&self, site: &CallSite, call: &Call<'_>) -> Result<Answer, ClientError> {
-        let url = self.url(site, call.path)?;
+        let mut url = self.url(site, call.path)?;
+        if let Some(raw) = call.raw_query {
+            url.set_query(Some(raw));
+        }
         let mut request = self.http.request(call.method.clone(), url);
         if let Some(query) = &call.query {
             request = request.query(query);

@@ -11,11 +11,20 @@
 //!   with deadlines, retries of idempotent calls and a readiness wait.
 //! - [`cli`]: the `arena` command line (`main.rs` only parses and calls [`run`]).
 //! - [`error`]: [`error::ClientError`], which always names the guest, the call and the cause.
+//! - [`pyaction`]: agents' pyautogui code translated into typed actions.
 
+pub mod agent;
 pub mod cli;
 pub mod client;
+pub mod som;
 pub mod task;
 pub mod error;
+pub mod pyaction;
+pub mod eval;
+pub mod results;
+pub mod run;
+pub mod episode;
+pub mod setup;
 
 pub use client::{ClientConfig, GuestClient};
 pub use error::ClientError;

@@ -13,6 +13,7 @@
 //! - [`keys`]: pyautogui key names and chord parsing.
 //! - [`observation`]: screen, screenshot, window and accessibility types.
 //! - [`exec`], [`files`], [`clipboard`], [`registry`]: request and result types.
+//! - [`eval`]: the evaluation queries under `/v1/eval/`.
 //! - [`health`]: the staged readiness report.
 //! - [`error`]: the error body every native route answers with.
 //! - [`script`]: a safe interpreter for the pyautogui and WAA `computer.*` Python that hosts send.
@@ -26,6 +27,7 @@
 pub mod action;
 pub mod clipboard;
 pub mod error;
+pub mod eval;
 pub mod exec;
 pub mod files;
 pub mod geometry;

@@ -206,7 +206,7 @@ async fn stat(
             size: meta.len(),
             modified_ms: meta.modified().ok().and_then(epoch_ms),
             readonly: meta.permissions().readonly(),
-            hidden: is_hidden(&loc.guest),
+            hidden: is_hidden(&loc.guest) || hidden_attribute(&meta),
             path: loc.guest,
         })
     })
@@ -214,10 +214,28 @@ async fn stat(
     Ok(AppJson(stat))
 }
 
-/// Whether a file counts as hidden. This is the dot-file rule; the Windows
-/// hidden attribute would need a backend call, which the trait does not have yet.
+/// Whether a file's name marks it hidden (the dot-file rule), which is how the
+/// stub, whose files live on a host file system, models hidden files; see also
+/// [`hidden_attribute`].
 fn is_hidden(guest: &str) -> bool {
     paths::basename(guest).starts_with('.')
+}
+
+/// Whether the file system marks the file hidden: `FILE_ATTRIBUTE_HIDDEN` on
+/// Windows (what Python's `os.stat(p).st_file_attributes` reports upstream);
+/// other platforms have no such attribute.
+fn hidden_attribute(meta: &std::fs::Metadata) -> bool {
+    #[cfg(windows)]
+    {
+        use std::os::windows::fs::MetadataExt as _;
+        const FILE_ATTRIBUTE_HIDDEN: u32 = 0x2;
+        meta.file_attributes() & FILE_ATTRIBUTE_HIDDEN != 0
+    }
+    #[cfg(not(windows))]
+    {
+        let _ = meta;
+        false
+    }
 }
 
 async fn exists(

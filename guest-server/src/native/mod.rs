@@ -14,10 +14,13 @@
 //!
 //! One private module per resource, each exposing its own `routes()`:
 //! `health`, `screen`, `input`, `a11y`, `windows`, `clipboard`, `files`,
-//! `exec` (exec, launch, open) and `registry` (registry, wallpaper).
+//! `exec` (exec, launch, open), `registry` (registry, wallpaper) and
+//! `browser` (the browser's DevTools HTTP endpoint, forwarded).
 
 mod a11y;
+mod browser;
 mod clipboard;
+mod eval_queries;
 mod exec;
 mod files;
 mod health;
@@ -44,6 +47,8 @@ pub fn routes() -> Router<AppState> {
         .merge(files::routes())
         .merge(exec::routes())
         .merge(registry::routes())
+        .merge(browser::routes())
+        .merge(eval_queries::routes())
 }
 
 /// Milliseconds of `d`, saturating (a `u64` of milliseconds outlasts any uptime).

@@ -1,5 +1,5 @@
-//! `GET` and `PUT /v1/registry`, and `GET /v1/wallpaper`: system settings a
-//! task sets up or checks.
+//! `GET` and `PUT /v1/registry`, and `GET` and `PUT /v1/wallpaper`: system
+//! settings a task sets up or checks.
 //!
 //! Keys are written the way `reg.exe` names them (`HKCU\Control Panel\Desktop`);
 //! an absent value name is the key's default value.
@@ -9,6 +9,7 @@ use axum::http::StatusCode;
 use axum::routing::get;
 use axum::{Json, Router};
 
+use arena_shared::files::PathQuery;
 use arena_shared::registry::{RegistryQuery, RegistryRead, RegistryValue, RegistryWrite};
 
 use crate::call::blocking;
@@ -16,7 +17,7 @@ use crate::error::{ApiError, AppJson, AppQuery};
 use crate::state::AppState;
 
 pub(crate) fn routes() -> Router<AppState> {
-    Router::new().route("/v1/registry", get(read).put(write)).route("/v1/wallpaper", get(wallpaper))
+    Router::new().route("/v1/registry", get(read).put(write)).route("/v1/wallpaper", get(wallpaper).put(set_wallpaper))
 }
 
 fn check_key(key: &str) -> Result<(), ApiError> {
@@ -61,4 +62,18 @@ async fn write(
 async fn wallpaper(State(state): State<AppState>) -> Result<Json<serde_json::Value>, ApiError> {
     let path = blocking(&state.desktop, "wallpaper", state.call_timeout(), |d| d.wallpaper()).await?;
     Ok(Json(serde_json::json!({ "path": path })))
+}
+
+/// `PUT /v1/wallpaper` `{"path": "C:\\...\\img.jpg"}`: sets the wallpaper (upstream's
+/// `/setup/change_wallpaper`); `~` and `%VAR%` are expanded, a missing file is `404`.
+async fn set_wallpaper(
+    State(state): State<AppState>,
+    AppJson(request): AppJson<PathQuery>,
+) -> Result<StatusCode, ApiError> {
+    let set = blocking(&state.desktop, "set_wallpaper", state.call_timeout(), move |d| {
+        Ok(super::files::existing_guest_path(d, &request.path).and_then(|guest| Ok(d.set_wallpaper(&guest)?)))
+    })
+    .await?;
+    set?;
+    Ok(StatusCode::NO_CONTENT)
 }

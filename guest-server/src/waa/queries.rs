@@ -30,7 +30,7 @@ use crate::waa::{json, json_err, on_backend, on_backend_within, path_arg, WaaRes
 /// The first descendant of `node` (not `node` itself), depth first in document order,
 /// whose name satisfies `matches`; direct children named exactly `exact` are tried first,
 /// as upstream's `find_element_by_name` does with `FindFirst` before walking.
-fn find_element<'a>(node: &'a A11yNode, exact: Option<&str>, matches: &dyn Fn(&str) -> bool) -> Option<&'a A11yNode> {
+pub(crate) fn find_element<'a>(node: &'a A11yNode, exact: Option<&str>, matches: &dyn Fn(&str) -> bool) -> Option<&'a A11yNode> {
     if let Some(exact) = exact {
         if let Some(child) = node.children.iter().find(|c| c.name == exact) {
             return Some(child);
@@ -51,12 +51,12 @@ fn find_element<'a>(node: &'a A11yNode, exact: Option<&str>, matches: &dyn Fn(&s
 }
 
 /// [`find_element`] over every root of a (foreground-only) tree.
-fn find_in_tree<'a>(tree: &'a A11yTree, exact: Option<&str>, matches: &dyn Fn(&str) -> bool) -> Option<&'a A11yNode> {
+pub(crate) fn find_in_tree<'a>(tree: &'a A11yTree, exact: Option<&str>, matches: &dyn Fn(&str) -> bool) -> Option<&'a A11yNode> {
     tree.windows.iter().find_map(|w| find_element(w, exact, matches))
 }
 
 /// `re.match(".*<text>.*", name)`: `.` stops at a newline, so the text must be on the first line.
-fn first_line_contains(name: &str, text: &str) -> bool {
+pub(crate) fn first_line_contains(name: &str, text: &str) -> bool {
     name.split('\n').next().unwrap_or("").contains(text)
 }
 
@@ -69,12 +69,12 @@ async fn foreground_tree(state: &AppState) -> Result<A11yTree, WaaError> {
 
 /// The names of the items of File Explorer's item list (the first child of the
 /// "Shell Folder View" element) in the foreground window, in display order.
-fn explorer_items(tree: &A11yTree) -> Option<Vec<String>> {
+pub(crate) fn explorer_items(tree: &A11yTree) -> Option<Vec<String>> {
     let view = find_in_tree(tree, Some("Shell Folder View"), &|n| n == "Shell Folder View")?;
     Some(view.children.first().map(|list| list.children.iter().map(|c| c.name.clone()).collect()).unwrap_or_default())
 }
 
-fn guest_exists(desktop: &dyn Desktop, guest: &str) -> bool {
+pub(crate) fn guest_exists(desktop: &dyn Desktop, guest: &str) -> bool {
     desktop.map_path(guest).is_ok_and(|local| std::fs::metadata(local).is_ok())
 }
 
@@ -116,7 +116,7 @@ pub(crate) async fn is_details_view(State(state): State<AppState>, PyJson(body):
 
 /// Whether `names` (display order) equals the names sorted by modification time,
 /// either files first newest first, or folders first oldest first (upstream's two keys).
-fn sorted_by_mtime(names: &[String], items: &[(String, i64, bool)]) -> bool {
+pub(crate) fn sorted_by_mtime(names: &[String], items: &[(String, i64, bool)]) -> bool {
     let mut desc = items.to_vec();
     desc.sort_by(|a, b| (a.2, -a.1, &a.0).cmp(&(b.2, -b.1, &b.0)));
     let mut asc = items.to_vec();
@@ -286,7 +286,7 @@ fn decode_utf16_lossy(bytes: &[u8]) -> String {
 /// The string forms of an image's EXIF values, as upstream makes them from `_getexif()`:
 /// byte strings (the `XP*` tags Windows writes its tags to) decoded as UTF-16, text as
 /// text, numbers and tuples of numbers joined with spaces.
-fn exif_strings(path: &Path) -> Vec<String> {
+pub(crate) fn exif_strings(path: &Path) -> Vec<String> {
     let Ok(file) = std::fs::File::open(path) else {
         return Vec::new();
     };
@@ -359,7 +359,7 @@ pub(crate) async fn are_all_images_tagged(State(state): State<AppState>, PyJson(
 const LIBRARY_NS: &str = "http://schemas.microsoft.com/windows/2009/library";
 
 /// Text of a `.library-ms` file: UTF-8 (with or without BOM) or UTF-16 with a BOM.
-fn decode_xml_text(bytes: &[u8]) -> String {
+pub(crate) fn decode_xml_text(bytes: &[u8]) -> String {
     match bytes {
         [0xef, 0xbb, 0xbf, rest @ ..] => String::from_utf8_lossy(rest).into_owned(),
         [0xff, 0xfe, ..] | [0xfe, 0xff, ..] => decode_utf16_lossy(bytes),

@@ -18,7 +18,9 @@ pub mod act;
 pub mod demo;
 pub mod local;
 pub mod render;
+pub mod runs;
 pub mod stub;
+pub mod validate;
 
 use std::io::{IsTerminal, Write};
 use std::path::PathBuf;
@@ -223,6 +225,14 @@ pub enum Command {
     },
     /// Start a stub guest (unless --guest is given) and run every kind of call against it.
     Demo(demo::DemoArgs),
+    /// Load a task folder and report what each task needs and whether this build supports it.
+    Validate(validate::ValidateArgs),
+    /// Run tasks over a pool of guests and write result folders and a report.
+    Run(runs::RunArgs),
+    /// Merge shard result folders into one, with its summary and report.
+    Merge(runs::MergeArgs),
+    /// Rebuild summary.json, summary.md and report.html of a result folder.
+    Report(runs::ReportArgs),
 }
 
 /// Arguments of `arena tree`.
@@ -419,8 +429,9 @@ pub async fn run(cli: Cli) -> anyhow::Result<ExitCode> {
             Ok(ExitCode::SUCCESS)
         }
         Command::Act(args) => {
-            let batch = args.to_batch()?;
-            let report = conn.client()?.act(&batch).await?;
+            let client = conn.client()?;
+            let batch = args.batch_for(&client).await?;
+            let report = client.act(&batch).await?;
             emit(&format!(
                 "executed {} action(s) in {} ms; cursor at {},{}\n",
                 report.executed, report.elapsed_ms, report.cursor.x, report.cursor.y
@@ -510,6 +521,10 @@ pub async fn run(cli: Cli) -> anyhow::Result<ExitCode> {
             Ok(ExitCode::SUCCESS)
         }
         Command::Demo(args) => demo::run(conn, args).await,
+        Command::Validate(args) => validate::run(&args),
+        Command::Run(args) => runs::run(conn, args).await,
+        Command::Merge(args) => runs::merge(&args),
+        Command::Report(args) => runs::report(&args),
     }
 }
 

@@ -1,0 +1,131 @@
+//! `GET`, `PUT` and `POST /v1/browser/{*path}`: the browser's DevTools HTTP
+//! endpoint, forwarded.
+//!
+//! Chrome and Edge started with `--remote-debugging-port=<port>` answer plain
+//! HTTP on the guest's loopback (`/json/version`, `/json/list`,
+//! `PUT /json/new?<url>`, `/json/close/<id>`). Upstream's host reaches that
+//! port through a port forward (socat or Caddy on 9222); here the host asks
+//! the guest server, which forwards the request with its query string and
+//! body to `http://127.0.0.1:<cdp_port>/<path>` and returns the answer's
+//! status, content type and bytes as they are.
+//!
+//! It is not a DevTools client and it does not forward websockets: the host
+//! only needs the HTTP endpoints to open, list and close tabs. It never
+//! touches the backend, so it holds no platform code.
+
+use std::sync::OnceLock;
+use std::time::Duration;
+
+use axum::body::Bytes;
+use axum::extract::{Path, RawQuery, State};
+use axum::http::{header, HeaderValue, Method, StatusCode};
+use axum::response::{IntoResponse, Response};
+use axum::routing::any;
+use axum::{Json, Router};
+
+use arena_shared::error::{ErrorBody, ErrorCode};
+
+use crate::error::ApiError;
+use crate::state::AppState;
+
+/// Longest a DevTools answer may take: opening a tab answers at once, before the page loads.
+const MAX_DEADLINE: Duration = Duration::from_secs(30);
+
+pub(crate) fn routes() -> Router<AppState> {
+    Router::new().route("/v1/browser/{*path}", any(forward))
+}
+
+/// One HTTP client for every forwarded request, so connections to the browser are reused.
+fn http() -> Result<&'static reqwest::Client, ApiError> {
+    static CLIENT: OnceLock<reqwest::Client> = OnceLock::new();
+    if let Some(client) = CLIENT.get() {
+        return Ok(client);
+    }
+    // The browser is on loopback: a proxy from the environment must not get in between.
+    let client =
+        reqwest::Client::builder().no_proxy().connect_timeout(Duration::from_secs(5)).build().map_err(|err| {
+            ApiError::Desktop(crate::desktop::DesktopError::Os { op: "browser", message: err.to_string() })
+        })?;
+    Ok(CLIENT.get_or_init(|| client))
+}
+
+/// An error body with a status [`ApiError`] has no variant for (502).
+fn error_response(status: StatusCode, code: ErrorCode, message: String) -> Response {
+    tracing::warn!(status = status.as_u16(), %message, "browser request failed");
+    (status, Json(ErrorBody { error: code, message })).into_response()
+}
+
+async fn forward(
+    State(state): State<AppState>,
+    method: Method,
+    Path(path): Path<String>,
+    RawQuery(query): RawQuery,
+    body: Bytes,
+) -> Result<Response, ApiError> {
+    let method = match method {
+        Method::GET => reqwest::Method::GET,
+        Method::PUT => reqwest::Method::PUT,
+        Method::POST => reqwest::Method::POST,
+        other => {
+            return Err(ApiError::BadRequest(format!(
+                "method {other} is not forwarded to the browser (GET, PUT and POST are)"
+            )))
+        }
+    };
+    let port = state.config.cdp_port;
+    let mut url = reqwest::Url::parse(&format!("http://127.0.0.1:{port}/"))
+        .map_err(|err| ApiError::BadRequest(format!("cannot build the DevTools URL: {err}")))?;
+    // `set_path` percent-encodes what needs it; the query goes on as the host wrote it,
+    // since `/json/new?<url>` takes a whole URL there.
+    url.set_path(path.trim_start_matches('/'));
+    url.set_query(query.as_deref());
+    let deadline = state.call_timeout().min(MAX_DEADLINE);
+    let mut request = http()?.request(method, url.clone()).timeout(deadline);
+    if !body.is_empty() {
+        request = request.body(body);
+    }
+    let answer = match request.send().await {
+        Ok(answer) => answer,
+        Err(err) if err.is_connect() => {
+            return Ok(error_response(
+                StatusCode::BAD_GATEWAY,
+                ErrorCode::Internal,
+                format!(
+                    "no browser is listening on the debugging port {port}: start Chrome with --remote-debugging-port={port}"
+                ),
+            ))
+        }
+        Err(err) if err.is_timeout() => {
+            return Ok(error_response(
+                StatusCode::GATEWAY_TIMEOUT,
+                ErrorCode::Timeout,
+                format!("the browser on port {port} did not answer {} within {} ms", url.path(), deadline.as_millis()),
+            ))
+        }
+        Err(err) => {
+            return Ok(error_response(
+                StatusCode::BAD_GATEWAY,
+                ErrorCode::Internal,
+                format!("the browser on port {port} failed on {}: {err}", url.path()),
+            ))
+        }
+    };
+    let status = StatusCode::from_u16(answer.status().as_u16()).unwrap_or(StatusCode::BAD_GATEWAY);
+    let content_type =
+        answer.headers().get(reqwest::header::CONTENT_TYPE).and_then(|v| HeaderValue::from_bytes(v.as_bytes()).ok());
+    let bytes = match answer.bytes().await {
+        Ok(bytes) => bytes,
+        Err(err) => {
+            return Ok(error_response(
+                StatusCode::BAD_GATEWAY,
+                ErrorCode::Internal,
+                format!("the browser on port {port} broke off its answer to {}: {err}", url.path()),
+            ))
+        }
+    };
+    let mut response = (status, bytes).into_response();
+    if let Some(content_type) = content_type {
+        response.headers_mut().insert(header::CONTENT_TYPE, content_type);
+    }
+    Ok(response)
+}

@@ -1,0 +1,582 @@
+//! Carrying out an [`AgentAction`] on a guest: [`execute`].
+//!
+//! Navi `computer.*` code and pyautogui code run here on the host, in the
+//! `arena_shared::script` interpreter, against [`GuestHost`]: a
+//! [`ScriptHost`] whose every effect is a typed call of the guest's `/v1`
+//! API (an input action is `POST /v1/actions`, `subprocess.run` is
+//! `POST /v1/exec`, `pyperclip.copy` is `PUT /v1/clipboard`, ...). The
+//! interpreter is synchronous, so a script runs on a blocking worker thread
+//! and reaches the async client through the runtime's [`Handle`].
+//!
+//! Failures are sorted in two: what the agent did wrong or the desktop refused
+//! (a Python exception, an unknown key, a program that is not installed) is
+//! recorded in [`ActionOutcome::error`] and the episode goes on, as upstream's
+//! `/execute_windows` answers 500 and the runner carries on; a guest that cannot
+//! be reached at all is an [`AgentError::Guest`], an infrastructure error.
+//!
+//! Deliberate differences from upstream:
+//! - `computer.clipboard.copy_image(id)` crops a fresh screenshot (without the
+//!   cursor) instead of the one the agent observed; nothing else changed between
+//!   the two unless the script moved things first.
+//! - Shell commands (`os.system`, `subprocess.run(..., shell=True)`) and
+//!   environment variables are run through `cmd.exe /d /c` on the guest, so they
+//!   need a Windows guest; on the stub they fail as a missing program.
+
+use std::future::Future;
+use std::io::Cursor;
+use std::time::{Duration, Instant};
+
+use base64::Engine as _;
+use image::ImageFormat;
+use serde::{Deserialize, Serialize};
+use tokio::runtime::Handle;
+
+use arena_shared::action::{ActionBatch, Action};
+use arena_shared::clipboard::ClipboardContent;
+use arena_shared::exec::{ExecRequest, LaunchRequest};
+use arena_shared::files::FileKind;
+use arena_shared::geometry::Point;
+use arena_shared::observation::{ImageFormat as WireImageFormat, ScreenshotQuery, WindowInfo, WindowTarget};
+use arena_shared::registry::RegistryValue;
+use arena_shared::script::{
+    parse, run, split_windows_command_line, CommandArg, CommandOutput, ComputerState, Globals, PathKind, ScriptError,
+    ScriptHost,
+};
+
+use super::{AgentAction, AgentError};
+use crate::client::GuestClient;
+use crate::error::ClientError;
+use crate::som::Marks;
+
+/// Where `Computer.os.open_program` looks first, as upstream's `is_installed` does.
+const APP_PATHS: [&str; 2] = [
+    r"HKLM\SOFTWARE\Microsoft\Windows\CurrentVersion\App Paths",
+    r"HKLM\SOFTWARE\Wow6432Node\Microsoft\Windows\CurrentVersion\App Paths",
+];
+
+/// Where Windows keeps the version numbers `platform.version()` prints.
+const CURRENT_VERSION: &str = r"HKLM\SOFTWARE\Microsoft\Windows NT\CurrentVersion";
+
+/// How scripts are run.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ExecOptions {
+    /// Multiplies every sleep a script asks for (1.0 in real runs; 0.0 makes tests fast).
+    pub sleep_scale: f64,
+    /// Seconds slept after each `computer.*` call (upstream: 0.25).
+    pub computer_action_delay: f64,
+    /// Longest a script may run; a sleep past it stops the script (upstream's client gives up after 90 s).
+    pub max_duration: Duration,
+}
+
+impl Default for ExecOptions {
+    fn default() -> ExecOptions {
+        ExecOptions { sleep_scale: 1.0, computer_action_delay: 0.25, max_duration: Duration::from_secs(90) }
+    }
+}
+
+impl ExecOptions {
+    /// No sleeping at all: for tests and the stub.
+    pub fn instant() -> ExecOptions {
+        ExecOptions { sleep_scale: 0.0, computer_action_delay: 0.0, ..ExecOptions::default() }
+    }
+}
+
+/// What carrying out one action did.
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+pub struct ActionOutcome {
+    /// What the script printed.
+    #[serde(default, skip_serializing_if = "String::is_empty")]
+    pub stdout: String,
+    /// Why the action failed: a Python exception (`NameError: ...`), a refused
+    /// input action, or printed text containing "error" (upstream's
+    /// `/execute_windows` rule). Effects before the failure are not undone.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub error: Option<String>,
+    /// The cursor after the last input action, when one was sent.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub cursor: Option<Point>,
+    /// How many input actions were sent to the guest.
+    pub performed: usize,
+    pub elapsed_ms: u64,
+}
+
+/// Carries out `action` on the guest with upstream's timings ([`ExecOptions::default`]).
+///
+/// `marks` (when given) become the `computer` state's `rects` with
+/// `window_rect = [0, 0, W, H]` and scale 1, as Navi's `/update_computer`;
+/// `computer` keeps the clipboard text and the rest across steps.
+/// `WAIT`, `DONE` and `FAIL` do nothing here: pausing and stopping are the episode's business.
+///
+/// # Errors
+///
+/// [`AgentError::Guest`] when the guest cannot be reached (connection refused,
+/// no answer in time, a broken transfer); [`AgentError::Worker`] if the script
+/// thread died. Everything else is an [`ActionOutcome::error`].
+pub async fn execute(
+    client: &GuestClient,
+    action: &AgentAction,
+    marks: Option<&Marks>,
+    computer: &mut ComputerState,
+) -> Result<ActionOutcome, AgentError> {
+    execute_with(client, action, marks, computer, &ExecOptions::default()).await
+}
+
+/// [`execute`] with explicit [`ExecOptions`].
+///
+/// # Errors
+///
+/// As [`execute`].
+pub async fn execute_with(
+    client: &GuestClient,
+    action: &AgentAction,
+    marks: Option<&Marks>,
+    computer: &mut ComputerState,
+    options: &ExecOptions,
+) -> Result<ActionOutcome, AgentError> {
+    let started = Instant::now();
+    if let Some(marks) = marks {
+        apply_marks(computer, marks);
+    }
+    let mut outcome = match action {
+        AgentAction::Wait | AgentAction::Done | AgentAction::Fail => ActionOutcome::default(),
+        AgentAction::Typed(actions) => typed(client, actions).await?,
+        AgentAction::Computer(code) => run_script(client, code, Lang::Computer, computer, options).await?,
+        AgentAction::Pyautogui(code) => run_script(client, code, Lang::Pyautogui, computer, options).await?,
+    };
+    outcome.elapsed_ms = u64::try_from(started.elapsed().as_millis()).unwrap_or(u64::MAX);
+    Ok(outcome)
+}
+
+/// Navi's `/update_computer` from the Set-of-Marks: the element boxes, the whole
+/// screen as the view, and scale 1. `current_id` is forgotten when the boxes change.
+fn apply_marks(computer: &mut ComputerState, marks: &Marks) {
+    if computer.rects != marks.rects {
+        computer.rects = marks.rects.clone();
+        computer.current_id = None;
+    }
+    let (w, h) = marks.size;
+    computer.window_rect = [0, 0, i32::try_from(w).unwrap_or(i32::MAX), i32::try_from(h).unwrap_or(i32::MAX)];
+    computer.scale = (1.0, 1.0);
+}
+
+/// Whether a client error means the guest is out of reach, rather than that it refused the call.
+fn is_unreachable(err: &ClientError) -> bool {
+    matches!(err, ClientError::Connect { .. } | ClientError::Timeout { .. } | ClientError::Io { .. })
+}
+
+async fn typed(client: &GuestClient, actions: &[Action]) -> Result<ActionOutcome, AgentError> {
+    match client.act(&ActionBatch { actions: actions.to_vec() }).await {
+        Ok(report) => Ok(ActionOutcome { cursor: Some(report.cursor), performed: report.executed, ..ActionOutcome::default() }),
+        Err(err) if is_unreachable(&err) => Err(AgentError::Guest(err)),
+        Err(err) => Ok(ActionOutcome { error: Some(err.to_string()), ..ActionOutcome::default() }),
+    }
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Lang {
+    Computer,
+    Pyautogui,
+}
+
+async fn run_script(
+    client: &GuestClient,
+    code: &str,
+    lang: Lang,
+    computer: &mut ComputerState,
+    options: &ExecOptions,
+) -> Result<ActionOutcome, AgentError> {
+    let program = match parse(code) {
+        Ok(program) => program,
+        Err(err) => {
+            return Ok(ActionOutcome { error: Some(format!("SyntaxError: {err}")), ..ActionOutcome::default() });
+        }
+    };
+    let mut host = GuestHost::new(client.clone(), Handle::current(), options.clone());
+    let mut state = computer.clone();
+    let delay = options.computer_action_delay;
+    let (result, state, host) = tokio::task::spawn_blocking(move || {
+        let globals = match lang {
+            Lang::Computer => Globals { computer: Some(&mut state), computer_action_delay: delay, preimport: &[] },
+            // Upstream runs pyautogui code as `python -c "import pyautogui; import time; ..."`.
+            Lang::Pyautogui => Globals { computer: None, computer_action_delay: delay, preimport: &["pyautogui", "time"] },
+        };
+        let result = run(&program, &mut host, globals);
+        (result, state, host)
+    })
+    .await
+    .map_err(|err| AgentError::Worker(err.to_string()))?;
+    *computer = state;
+    if let Some(err) = host.unreachable {
+        return Err(AgentError::Guest(err));
+    }
+    let mut outcome = ActionOutcome { cursor: host.cursor, performed: host.performed, ..ActionOutcome::default() };
+    match result {
+        Ok(out) => {
+            // Upstream's /execute_windows fails a call whose printed output mentions
+            // "error" (open_program's "error: Program X is not installed").
+            if lang == Lang::Computer && out.stdout.to_lowercase().contains("error") {
+                outcome.error = Some(out.stdout.trim_end().to_owned());
+            }
+            outcome.stdout = out.stdout;
+        }
+        Err(err) => {
+            outcome.error = Some(script_error(&err));
+            outcome.stdout = err.stdout;
+        }
+    }
+    Ok(outcome)
+}
+
+fn script_error(err: &ScriptError) -> String {
+    if err.line > 0 {
+        format!("line {}: {}", err.line, err.python_message())
+    } else {
+        err.python_message()
+    }
+}
+
+/// A [`ScriptHost`] whose effects are calls of one guest's `/v1` API.
+///
+/// It must run on a thread that is not a runtime worker (a `spawn_blocking`
+/// thread), because it blocks on the client's futures through `rt`. On a
+/// current-thread runtime this works only while that thread is inside
+/// `Runtime::block_on` (awaiting the script), which drives the I/O; [`execute`]
+/// guarantees that by awaiting the worker.
+#[derive(Debug)]
+pub struct GuestHost {
+    client: GuestClient,
+    rt: Handle,
+    options: ExecOptions,
+    started: Instant,
+    /// The cursor after the last input action.
+    pub cursor: Option<Point>,
+    /// How many input actions were sent.
+    pub performed: usize,
+    /// The first error that showed the guest unreachable; later calls fail at once.
+    pub unreachable: Option<ClientError>,
+}
+
+impl GuestHost {
+    pub fn new(client: GuestClient, rt: Handle, options: ExecOptions) -> GuestHost {
+        GuestHost { client, rt, options, started: Instant::now(), cursor: None, performed: 0, unreachable: None }
+    }
+
+    /// Runs one client call to completion, remembering an unreachable guest.
+    fn call<T, F>(&mut self, call: impl FnOnce(GuestClient) -> F) -> Result<T, String>
+    where
+        F: Future<Output = Result<T, ClientError>>,
+    {
+        if let Some(err) = &self.unreachable {
+            return Err(format!("the guest is unreachable: {err}"));
+        }
+        match self.rt.block_on(call(self.client.clone())) {
+            Ok(value) => Ok(value),
+            Err(err) => {
+                let message = err.to_string();
+                if is_unreachable(&err) {
+                    self.unreachable = Some(err);
+                }
+                Err(message)
+            }
+        }
+    }
+
+    fn remaining(&self) -> Duration {
+        self.options.max_duration.saturating_sub(self.started.elapsed())
+    }
+
+    fn windows(&mut self) -> Result<Vec<WindowInfo>, String> {
+        self.call(|c| async move { c.windows().await })
+    }
+
+    fn foreground(&mut self) -> Result<Option<WindowInfo>, String> {
+        Ok(self.windows()?.into_iter().find(|w| w.focused))
+    }
+
+    /// A screenshot without the cursor, decoded.
+    fn capture(&mut self) -> Result<image::RgbaImage, String> {
+        let query = ScreenshotQuery { format: WireImageFormat::Png, cursor: Some(false), ..ScreenshotQuery::default() };
+        let shot = self.call(|c| async move { c.screenshot(&query).await })?;
+        image::load_from_memory(&shot.bytes).map(|i| i.to_rgba8()).map_err(|e| format!("cannot decode the screenshot: {e}"))
+    }
+
+    fn exec(&mut self, argv: Vec<String>) -> Result<CommandOutput, String> {
+        let timeout_ms = u64::try_from(self.remaining().as_millis()).unwrap_or(u64::MAX).max(1);
+        let request = ExecRequest { argv, timeout_ms: Some(timeout_ms), max_output_bytes: None, cwd: None, stdin: None };
+        let result = self.call(|c| async move { c.exec(&request).await })?;
+        if result.timed_out {
+            return Err("the command ran out of time".to_owned());
+        }
+        Ok(CommandOutput { code: result.exit_code.unwrap_or(-1), stdout: result.stdout, stderr: result.stderr })
+    }
+
+    fn target(id: u64) -> WindowTarget {
+        WindowTarget { id: Some(id), title: None }
+    }
+}
+
+/// Crops `[x1, y1, x2, y2]` out of `img`, clamped to the image; an empty crop is an error.
+fn crop(img: &image::RgbaImage, [x1, y1, x2, y2]: [i64; 4]) -> Result<image::RgbaImage, String> {
+    let clamp = |v: i64, hi: u32| v.clamp(0, i64::from(hi)) as u32;
+    let (l, t) = (clamp(x1, img.width()), clamp(y1, img.height()));
+    let (r, b) = (clamp(x2, img.width()), clamp(y2, img.height()));
+    if r <= l || b <= t {
+        return Err(format!("the box [{x1}, {y1}, {x2}, {y2}] is empty or off the screen"));
+    }
+    Ok(image::imageops::crop_imm(img, l, t, r - l, b - t).to_image())
+}
+
+fn encode(img: &image::RgbaImage, format: ImageFormat) -> Result<Vec<u8>, String> {
+    let mut out = Cursor::new(Vec::new());
+    let result = if format == ImageFormat::Jpeg {
+        image::DynamicImage::ImageRgba8(img.clone()).to_rgb8().write_to(&mut out, format)
+    } else {
+        img.write_to(&mut out, format)
+    };
+    result.map_err(|e| format!("cannot encode the image: {e}"))?;
+    Ok(out.into_inner())
+}
+
+fn command_argv(cmd: &CommandArg, shell: bool) -> Vec<String> {
+    let line = || match cmd {
+        CommandArg::Line(line) => line.clone(),
+        CommandArg::Args(args) => args.join(" "),
+    };
+    if shell {
+        return vec!["cmd.exe".to_owned(), "/d".to_owned(), "/c".to_owned(), line()];
+    }
+    match cmd {
+        CommandArg::Line(line) => split_windows_command_line(line),
+        CommandArg::Args(args) => args.clone(),
+    }
+}
+
+impl ScriptHost for GuestHost {
+    fn perform(&mut self, action: Action) -> Result<(), String> {
+        let report = self.call(|c| async move { c.act_one(action).await })?;
+        self.cursor = Some(report.cursor);
+        self.performed += 1;
+        Ok(())
+    }
+
+    fn sleep(&mut self, seconds: f64) -> Result<(), String> {
+        let scaled = (seconds * self.options.sleep_scale).max(0.0);
+        let wanted = Duration::try_from_secs_f64(scaled).unwrap_or(Duration::MAX);
+        if wanted > self.remaining() {
+            return Err(format!(
+                "sleeping {seconds} s would take the action past its {} s limit",
+                self.options.max_duration.as_secs()
+            ));
+        }
+        std::thread::sleep(wanted);
+        Ok(())
+    }
+
+    fn cursor_position(&mut self) -> Result<(i32, i32), String> {
+        // An empty batch does nothing and reports where the cursor is.
+        let report = self.call(|c| async move { c.act(&ActionBatch { actions: Vec::new() }).await })?;
+        self.cursor = Some(report.cursor);
+        Ok((report.cursor.x, report.cursor.y))
+    }
+
+    fn screen_size(&mut self) -> Result<(u32, u32), String> {
+        let screen = self.call(|c| async move { c.screen().await })?;
+        Ok((screen.physical_width, screen.physical_height))
+    }
+
+    fn active_window_title(&mut self) -> Result<String, String> {
+        Ok(self.foreground()?.map(|w| w.title).unwrap_or_default())
+    }
+
+    fn save_screenshot(&mut self, path: &str, region: Option<[i32; 4]>) -> Result<(), String> {
+        let img = self.capture()?;
+        let img = match region {
+            None => img,
+            Some([left, top, width, height]) => {
+                let (l, t) = (i64::from(left), i64::from(top));
+                crop(&img, [l, t, l + i64::from(width), t + i64::from(height)])?
+            }
+        };
+        let lower = path.to_ascii_lowercase();
+        let format = if lower.ends_with(".jpg") || lower.ends_with(".jpeg") { ImageFormat::Jpeg } else { ImageFormat::Png };
+        let bytes = encode(&img, format)?;
+        let path = path.to_owned();
+        self.call(|c| async move { c.push_file(&path, bytes, Some(true)).await }).map(drop)
+    }
+
+    fn env_var(&mut self, name: &str) -> Option<String> {
+        if name.is_empty() || !name.chars().all(|c| c.is_ascii_alphanumeric() || "_()".contains(c)) {
+            return None;
+        }
+        let out = self.exec(vec!["cmd.exe".into(), "/d".into(), "/c".into(), format!("echo %{name}%")]).ok()?;
+        let value = out.stdout.trim_end_matches(['\r', '\n']).to_owned();
+        // cmd.exe echoes an undefined variable's reference unchanged.
+        (out.code == 0 && value != format!("%{name}%")).then_some(value)
+    }
+
+    fn path_kind(&mut self, path: &str) -> Option<PathKind> {
+        let path = path.to_owned();
+        let exists = self.call(|c| async move { c.exists(&path).await }).ok()?;
+        match (exists.exists, exists.kind) {
+            (false, _) => None,
+            (true, Some(FileKind::Dir)) => Some(PathKind::Dir),
+            (true, _) => Some(PathKind::File),
+        }
+    }
+
+    fn list_dir(&mut self, path: &str) -> Result<Vec<String>, String> {
+        let path = path.to_owned();
+        let listing = self.call(|c| async move { c.list_dir(&path).await })?;
+        Ok(listing.entries.into_iter().map(|e| e.name).collect())
+    }
+
+    fn run_command(&mut self, cmd: &CommandArg, shell: bool) -> Result<CommandOutput, String> {
+        self.exec(command_argv(cmd, shell))
+    }
+
+    fn spawn_command(&mut self, cmd: &CommandArg, shell: bool) -> Result<u32, String> {
+        let request = LaunchRequest { argv: command_argv(cmd, shell) };
+        Ok(self.call(|c| async move { c.launch(&request).await })?.pid)
+    }
+
+    fn os_version(&mut self) -> Result<String, String> {
+        let mut parts = Vec::new();
+        for value in ["CurrentMajorVersionNumber", "CurrentMinorVersionNumber", "CurrentBuildNumber"] {
+            let read = self.call(|c| async move { c.registry_get(CURRENT_VERSION, Some(value)).await })?;
+            parts.push(match read.data {
+                RegistryValue::Dword(n) => n.to_string(),
+                RegistryValue::Qword(n) => n.to_string(),
+                RegistryValue::String(s) => s,
+                other => return Err(format!("{CURRENT_VERSION}\\{value} is not a number: {other:?}")),
+            });
+        }
+        Ok(parts.join("."))
+    }
+
+    fn clipboard_set_text(&mut self, text: &str) -> Result<(), String> {
+        let content = ClipboardContent::Text { text: text.to_owned() };
+        self.call(|c| async move { c.clipboard_set(&content).await })
+    }
+
+    fn clipboard_get_text(&mut self) -> Result<String, String> {
+        match self.call(|c| async move { c.clipboard_get().await })? {
+            ClipboardContent::Text { text } => Ok(text),
+            // pyperclip.paste() gives "" when the clipboard holds no text.
+            _ => Ok(String::new()),
+        }
+    }
+
+    fn clipboard_set_image_from_screenshot_crop(&mut self, rect: [i32; 4]) -> Result<(), String> {
+        let img = crop(&self.capture()?, rect.map(i64::from))?;
+        let png = encode(&img, ImageFormat::Png)?;
+        let content = ClipboardContent::Image {
+            width: img.width(),
+            height: img.height(),
+            png_base64: base64::engine::general_purpose::STANDARD.encode(png),
+        };
+        self.call(|c| async move { c.clipboard_set(&content).await })
+    }
+
+    fn open_program(&mut self, name: &str) -> Result<bool, String> {
+        // Upstream runs `os.system(f"start {program}")`; a name with cmd.exe syntax in it
+        // would run more than a program, so it is refused instead.
+        if name.trim().is_empty() || name.contains(['&', '|', '<', '>', '^', '%', '"', '\n', '\r']) {
+            return Err(format!("{name:?} is not a program name"));
+        }
+        let mut registered = false;
+        for key in APP_PATHS {
+            let key = format!(r"{key}\{name}.exe");
+            if self.call(|c| async move { c.registry_get(&key, None).await }).is_ok() {
+                registered = true;
+                break;
+            }
+        }
+        let argv = if registered {
+            vec!["cmd.exe".to_owned(), "/d".to_owned(), "/c".to_owned(), "start".to_owned(), name.to_owned()]
+        } else {
+            vec![name.to_owned()]
+        };
+        let request = LaunchRequest { argv };
+        let launched = self.rt.block_on(self.client.launch(&request));
+        match launched {
+            Ok(_) => Ok(true),
+            // Upstream's fallback check is "does starting it raise OSError".
+            Err(err) if err.status() == Some(404) => Ok(false),
+            Err(err) => {
+                let message = err.to_string();
+                if is_unreachable(&err) {
+                    self.unreachable = Some(err);
+                }
+                Err(message)
+            }
+        }
+    }
+
+    fn maximize_foreground(&mut self) -> Result<(), String> {
+        let Some(window) = self.foreground()? else {
+            return Ok(());
+        };
+        self.call(|c| async move { c.maximize_window(&GuestHost::target(window.id)).await }).map(drop)
+    }
+
+    fn window_titles(&mut self) -> Result<Vec<String>, String> {
+        let mut titles: Vec<String> = Vec::new();
+        for window in self.windows()? {
+            if window.visible && !window.title.is_empty() && !titles.contains(&window.title) {
+                titles.push(window.title);
+            }
+        }
+        Ok(titles)
+    }
+
+    fn switch_to_window(&mut self, title: &str) -> Result<(), String> {
+        let window = self
+            .windows()?
+            .into_iter()
+            .find(|w| w.visible && w.title == title)
+            .ok_or_else(|| format!("no visible window is titled {title:?}"))?;
+        let id = window.id;
+        self.call(|c| async move { c.restore_window(&GuestHost::target(id)).await })?;
+        self.call(|c| async move { c.maximize_window(&GuestHost::target(id)).await })?;
+        self.call(|c| async move { c.activate_window(&GuestHost::target(id)).await }).map(drop)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn command_lines_become_argv() {
+        let check = |cmd: CommandArg, shell: bool, expected: &[&str]| {
+            assert_eq!(command_argv(&cmd, shell), expected.iter().map(|s| (*s).to_owned()).collect::<Vec<_>>());
+        };
+        check(CommandArg::Line("notepad C:\\a.txt".into()), false, &["notepad", "C:\\a.txt"]);
+        check(CommandArg::Line("echo hi && dir".into()), true, &["cmd.exe", "/d", "/c", "echo hi && dir"]);
+        check(CommandArg::Args(vec!["a b".into(), "c".into()]), false, &["a b", "c"]);
+        check(CommandArg::Args(vec!["dir".into(), "/b".into()]), true, &["cmd.exe", "/d", "/c", "dir /b"]);
+    }
+
+    #[test]
+    fn marks_set_the_computer_state_as_update_computer_does() {
+        let mut state = ComputerState::for_screen(10, 10);
+        state.current_id = Some(0);
+        state.clipboard_content = Some("kept".into());
+        let marks = Marks { entities: Vec::new(), rects: vec![[1, 2, 3, 4]], size: (1920, 1080) };
+        apply_marks(&mut state, &marks);
+        assert_eq!(state.rects, vec![[1, 2, 3, 4]]);
+        assert_eq!(state.window_rect, [0, 0, 1920, 1080]);
+        assert_eq!(state.current_id, None);
+        assert_eq!(state.clipboard_content.as_deref(), Some("kept"));
+        state.current_id = Some(0);
+        apply_marks(&mut state, &marks);
+        assert_eq!(state.current_id, Some(0), "the same boxes keep the current id");
+    }
+
+    #[test]
+    fn crops_clamp_to_the_image() {
+        let img = image::RgbaImage::new(10, 10);
+        assert_eq!(crop(&img, [-5, 2, 4, 20]).expect("crop").dimensions(), (4, 8));
+        assert!(crop(&img, [20, 20, 30, 30]).is_err());
+    }
+}

@@ -1,0 +1,278 @@
+//! Agents: what decides the next action from an observation, and how an
+//! agent's actions are carried out on a guest.
+//!
+//! Every agent implements [`Agent`]: it gets an [`Observation`] and answers a
+//! [`Prediction`] holding [`AgentAction`]s. [`execute`] carries out one action:
+//! typed actions go straight to `POST /v1/actions`; Navi `computer.*` code and
+//! pyautogui code run here on the host, in the `arena_shared::script`
+//! interpreter, whose effects become typed `/v1` calls (see [`exec`]). The
+//! guest therefore never runs agent code.
+//!
+//! It is not the episode loop (observe, predict, execute, evaluate: that is
+//! `crate::episode`), and it does not decide when a step counts or when to stop.
+//!
+//! # Layout
+//!
+//! - [`exec`]: [`execute`] and the [`script::ScriptHost`](arena_shared::script::ScriptHost) over a [`GuestClient`].
+//! - [`parse`]: code blocks, `DONE`/`FAIL`/`WAIT` and the memory block in model output.
+//! - [`navi`]: [`navi::NaviAgent`], Navi-style prompting of any OpenAI-compatible chat endpoint.
+//! - [`scripted`]: [`scripted::ScriptedAgent`], which follows a plan file (oracle solutions, tests).
+//! - [`replay`]: [`replay::ReplayAgent`], which repeats a recorded trajectory.
+
+pub mod exec;
+pub mod navi;
+pub mod parse;
+pub mod replay;
+pub mod scripted;
+
+use serde::{Deserialize, Serialize};
+
+use arena_shared::action::Action;
+use arena_shared::clipboard::ClipboardContent;
+use arena_shared::observation::{A11yQuery, A11yTree, ScreenInfo, ScreenshotQuery};
+
+use crate::client::GuestClient;
+use crate::error::ClientError;
+use crate::som::Marks;
+use crate::task::Task;
+
+pub use exec::{execute, execute_with, ActionOutcome, ExecOptions};
+
+/// What an agent sees at one step.
+#[derive(Debug, Clone)]
+pub struct Observation {
+    /// 1-based step number.
+    pub step: u32,
+    /// The task's instruction.
+    pub instruction: String,
+    /// The full-screen screenshot as PNG.
+    pub screenshot_png: Vec<u8>,
+    pub screen: ScreenInfo,
+    /// The accessibility tree, when it could be read.
+    pub a11y: Option<A11yTree>,
+    /// Titles of the visible top-level windows.
+    pub window_titles: Vec<String>,
+    pub foreground_title: String,
+    /// The clipboard's text, when it holds text.
+    pub clipboard: Option<String>,
+}
+
+impl Observation {
+    /// The screen's size in physical pixels, which the tree's rectangles use.
+    pub fn screen_size(&self) -> (u32, u32) {
+        (self.screen.physical_width, self.screen.physical_height)
+    }
+
+    /// The Set-of-Marks boxes of this observation, when it has a tree.
+    pub fn marks(&self) -> Option<Marks> {
+        self.a11y.as_ref().map(|tree| crate::som::marks_from_tree(tree, self.screen_size()))
+    }
+
+    /// Observes the guest as upstream's `_get_obs` does: a full-size PNG
+    /// screenshot with the cursor, the UIA tree (left out when it cannot be
+    /// read, as upstream's `None`), the visible window titles and the clipboard's text.
+    ///
+    /// # Errors
+    ///
+    /// [`ClientError`] when the screen, the screenshot or the window list cannot be read.
+    pub async fn capture(client: &GuestClient, step: u32, instruction: &str) -> Result<Observation, ClientError> {
+        let screen = client.screen().await?;
+        let shot = client.screenshot(&ScreenshotQuery::default()).await?;
+        let a11y = match client.a11y(&A11yQuery::default()).await {
+            Ok(tree) => Some(tree),
+            Err(err) => {
+                tracing::warn!(error = %err, "no accessibility tree this step");
+                None
+            }
+        };
+        let windows = client.windows().await?;
+        let mut window_titles: Vec<String> = Vec::new();
+        for w in &windows {
+            if w.visible && !w.title.is_empty() && !window_titles.contains(&w.title) {
+                window_titles.push(w.title.clone());
+            }
+        }
+        let foreground_title = windows.iter().find(|w| w.focused).map(|w| w.title.clone()).unwrap_or_default();
+        let clipboard = match client.clipboard_get().await {
+            Ok(ClipboardContent::Text { text }) => Some(text),
+            _ => None,
+        };
+        Ok(Observation {
+            step,
+            instruction: instruction.to_owned(),
+            screenshot_png: shot.bytes,
+            screen,
+            a11y,
+            window_titles,
+            foreground_title,
+            clipboard,
+        })
+    }
+}
+
+/// One thing an agent wants done.
+///
+/// In trajectories it is written as JSON with a `kind` tag:
+/// `{"kind": "computer", "code": "..."}`, `{"kind": "pyautogui", "code": "..."}`,
+/// `{"kind": "typed", "actions": [...]}`, `{"kind": "wait"}`, `{"kind": "done"}`, `{"kind": "fail"}`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(into = "ActionRecord", from = "ActionRecord")]
+pub enum AgentAction {
+    /// Navi `computer.*` code, run with `computer` bound (upstream's `/execute_windows`).
+    Computer(String),
+    /// pyautogui code, run with `pyautogui` and `time` imported (upstream's `python -c`).
+    Pyautogui(String),
+    /// Typed input actions, sent as one batch.
+    Typed(Vec<Action>),
+    /// The agent waits a step.
+    Wait,
+    /// The agent says the task is done.
+    Done,
+    /// The agent says the task cannot be done.
+    Fail,
+}
+
+impl AgentAction {
+    /// Whether this action ends the episode (`DONE` or `FAIL`).
+    pub fn is_terminal(&self) -> bool {
+        matches!(self, AgentAction::Done | AgentAction::Fail)
+    }
+
+    /// A one-line description for logs and prompts' action history.
+    pub fn summary(&self) -> String {
+        match self {
+            AgentAction::Computer(code) | AgentAction::Pyautogui(code) => code.trim().replace('\n', "; "),
+            AgentAction::Typed(actions) => serde_json::to_string(actions).unwrap_or_else(|_| format!("{actions:?}")),
+            AgentAction::Wait => "WAIT".to_owned(),
+            AgentAction::Done => "DONE".to_owned(),
+            AgentAction::Fail => "FAIL".to_owned(),
+        }
+    }
+}
+
+/// The JSON shape of [`AgentAction`].
+#[derive(Serialize, Deserialize)]
+#[serde(tag = "kind", rename_all = "snake_case")]
+enum ActionRecord {
+    Computer { code: String },
+    Pyautogui { code: String },
+    Typed { actions: Vec<Action> },
+    Wait,
+    Done,
+    Fail,
+}
+
+impl From<AgentAction> for ActionRecord {
+    fn from(a: AgentAction) -> ActionRecord {
+        match a {
+            AgentAction::Computer(code) => ActionRecord::Computer { code },
+            AgentAction::Pyautogui(code) => ActionRecord::Pyautogui { code },
+            AgentAction::Typed(actions) => ActionRecord::Typed { actions },
+            AgentAction::Wait => ActionRecord::Wait,
+            AgentAction::Done => ActionRecord::Done,
+            AgentAction::Fail => ActionRecord::Fail,
+        }
+    }
+}
+
+impl From<ActionRecord> for AgentAction {
+    fn from(r: ActionRecord) -> AgentAction {
+        match r {
+            ActionRecord::Computer { code } => AgentAction::Computer(code),
+            ActionRecord::Pyautogui { code } => AgentAction::Pyautogui(code),
+            ActionRecord::Typed { actions } => AgentAction::Typed(actions),
+            ActionRecord::Wait => AgentAction::Wait,
+            ActionRecord::Done => AgentAction::Done,
+            ActionRecord::Fail => AgentAction::Fail,
+        }
+    }
+}
+
+/// An agent's answer for one step.
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+pub struct Prediction {
+    /// The model's full reply (or a description of the plan step).
+    pub response: String,
+    /// What to do, in order. Empty when the output was malformed.
+    pub actions: Vec<AgentAction>,
+    /// The element boxes `move_id` resolves against, when the agent used Set-of-Marks.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub marks: Option<Marks>,
+    /// Why the output could not be used (no code block, a parse error). The
+    /// step is spent and the agent is asked again; the agent keeps the error
+    /// to tell the model.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub raw_error: Option<String>,
+}
+
+/// Why an agent could not answer, or an action could not be carried out.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum AgentError {
+    /// The model endpoint failed (unreachable, HTTP error, an answer that is not a chat completion).
+    #[error("model endpoint {endpoint}: {reason}")]
+    Model { endpoint: String, reason: String },
+    /// A plan or trajectory file is missing or malformed.
+    #[error("{path}: {reason}")]
+    Plan { path: String, reason: String },
+    /// A scripted or replayed agent has no steps left.
+    #[error("{0}: no steps left")]
+    Exhausted(String),
+    /// The guest could not be reached while carrying out an action (an infrastructure error,
+    /// not the agent's fault).
+    #[error(transparent)]
+    Guest(#[from] ClientError),
+    /// The agent's configuration is unusable.
+    #[error("agent configuration: {0}")]
+    Config(String),
+    /// The worker thread that ran a script died.
+    #[error("the script worker failed: {0}")]
+    Worker(String),
+}
+
+/// Something that picks actions from observations.
+#[async_trait::async_trait]
+pub trait Agent: Send {
+    /// A short name for results and logs (`navi`, `scripted`, `replay`).
+    fn name(&self) -> &str;
+
+    /// Forgets the previous episode and prepares for `task`.
+    async fn reset(&mut self, task: &Task);
+
+    /// The next actions for `obs`.
+    ///
+    /// # Errors
+    ///
+    /// [`AgentError`] when no answer can be had at all (model endpoint down,
+    /// plan missing or used up). Malformed model output is not an error: it is a
+    /// [`Prediction`] with no actions and [`Prediction::raw_error`] set.
+    async fn predict(&mut self, obs: &Observation) -> Result<Prediction, AgentError>;
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use arena_shared::action::MouseButton;
+
+    #[test]
+    fn actions_round_trip_through_json_with_a_kind_tag() {
+        let check = |action: AgentAction, json: &str| {
+            assert_eq!(serde_json::to_string(&action).expect("serialize"), json);
+            assert_eq!(serde_json::from_str::<AgentAction>(json).expect("deserialize"), action);
+        };
+        check(AgentAction::Computer("computer.mouse.move_id(id=3)".into()), r#"{"kind":"computer","code":"computer.mouse.move_id(id=3)"}"#);
+        check(AgentAction::Pyautogui("pyautogui.click()".into()), r#"{"kind":"pyautogui","code":"pyautogui.click()"}"#);
+        check(
+            AgentAction::Typed(vec![Action::Click { x: Some(1), y: Some(2), button: MouseButton::Left, count: 1 }]),
+            r#"{"kind":"typed","actions":[{"type":"click","x":1,"y":2,"button":"left"}]}"#,
+        );
+        check(AgentAction::Wait, r#"{"kind":"wait"}"#);
+        check(AgentAction::Done, r#"{"kind":"done"}"#);
+        check(AgentAction::Fail, r#"{"kind":"fail"}"#);
+    }
+
+    #[test]
+    fn an_unknown_kind_is_an_error() {
+        assert!(serde_json::from_str::<AgentAction>(r#"{"kind":"teleport"}"#).is_err());
+    }
+}

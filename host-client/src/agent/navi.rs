@@ -1,0 +1,355 @@
+//! [`NaviAgent`]: a Navi-style agent over any OpenAI-compatible
+//! chat-completions endpoint.
+//!
+//! Each step sends one conversation: a system prompt that describes the
+//! `computer` API (our own wording of what upstream's planner prompt
+//! advertises) and one user message with the task, the screenshot annotated
+//! with Set-of-Marks boxes, the previous step's screenshot, the element list,
+//! the window titles, the clipboard, the action history and the memory the
+//! model keeps. The reply must hold a ```` ```python ```` block (Navi
+//! `computer.*` code or pyautogui) or `DONE`/`FAIL`/`WAIT`; see
+//! [`super::parse`]. A reply without one, or whose code does not parse, is a
+//! [`Prediction`] with no actions and [`Prediction::raw_error`] set; the model
+//! is told what was wrong on the next step.
+//!
+//! It is not a client of any one vendor's API and keeps no conversation
+//! between steps beyond the history and memory it writes into the prompt.
+
+use std::time::Duration;
+
+use base64::Engine as _;
+use serde_json::{json, Value};
+
+use super::parse::parse_reply;
+use super::{Agent, AgentAction, AgentError, Observation, Prediction};
+use crate::som::{annotate, Marks};
+use crate::task::Task;
+
+/// Environment variables the API key is read from, in order, when the configuration has none.
+pub const KEY_VARS: [&str; 2] = ["ARENA_LLM_KEY", "OPENAI_API_KEY"];
+
+/// How to reach the model.
+#[derive(Debug, Clone, PartialEq)]
+pub struct NaviConfig {
+    /// Base URL of the API, e.g. `https://api.openai.com/v1` or `http://127.0.0.1:8000/v1`;
+    /// `/chat/completions` is appended unless it is already there.
+    pub base_url: String,
+    pub model: String,
+    /// Bearer token; `None` reads [`KEY_VARS`], and no key at all sends no `Authorization` header.
+    pub api_key: Option<String>,
+    pub temperature: f64,
+    pub max_tokens: u32,
+    /// Deadline of one chat-completions call.
+    pub timeout: Duration,
+    /// How many previous steps the prompt's action history shows.
+    pub max_history: usize,
+}
+
+impl NaviConfig {
+    pub fn new(base_url: &str, model: &str) -> NaviConfig {
+        NaviConfig {
+            base_url: base_url.to_owned(),
+            model: model.to_owned(),
+            api_key: None,
+            temperature: 0.0,
+            max_tokens: 1500,
+            timeout: Duration::from_secs(120),
+            max_history: 15,
+        }
+    }
+
+    /// The key to send: the configured one, else the first non-empty [`KEY_VARS`] variable.
+    pub fn resolved_key(&self) -> Option<String> {
+        self.api_key.clone().filter(|k| !k.is_empty()).or_else(|| {
+            KEY_VARS.iter().find_map(|var| std::env::var(var).ok().filter(|v| !v.trim().is_empty()))
+        })
+    }
+
+    /// The chat-completions URL.
+    pub fn endpoint(&self) -> String {
+        let base = self.base_url.trim_end_matches('/');
+        if base.ends_with("/chat/completions") {
+            base.to_owned()
+        } else {
+            format!("{base}/chat/completions")
+        }
+    }
+}
+
+/// The system prompt: what the model may do and how to answer.
+pub const SYSTEM_PROMPT: &str = r#"You operate a Windows 11 computer to complete a task for the user.
+Each turn you see the current screen with numbered boxes drawn on the elements you can use, a list of those
+elements, the open windows, the clipboard, what you did so far and your own notes.
+
+Act by writing Python in one ```python code block. The object `computer` is ready to use:
+
+- computer.mouse.move_id(id=12)                      move the pointer to the centre of element 12
+- computer.mouse.move_abs(x=0.25, y=0.80)            move the pointer to a point given as fractions of the screen width and height
+- computer.mouse.single_click()                      left click where the pointer is
+- computer.mouse.double_click()                      double click where the pointer is
+- computer.mouse.right_click()                       right click where the pointer is
+- computer.mouse.scroll(dir="down")                  scroll at the pointer, dir is "up" or "down"
+- computer.mouse.drag(x=0.40, y=0.55)                hold the left button, move to that point (fractions of the screen), release
+- computer.keyboard.write("some text")               type text
+- computer.keyboard.press("enter")                   press a key or a combination such as "ctrl+s" or "alt+f4"
+- computer.clipboard.copy_text("some text")          put text on the clipboard
+- computer.clipboard.copy_image(id=7, description="a chart")   put the picture of element 7 on the clipboard
+- computer.clipboard.paste()                         paste the clipboard
+- computer.os.open_program("notepad")                start a program by its executable name (msedge, winword, excel, explorer, ...)
+- computer.window_manager.switch_to_application("Document - Word")   bring the window with this title to the front
+
+Move the pointer before you click. Several lines run in order. pyautogui calls (import pyautogui) are also accepted.
+
+When the task is complete, answer DONE. If it cannot be done, answer FAIL. To wait for the screen to change, answer WAIT.
+You may keep notes for later turns: write a line starting with "Memory:" followed by what you want to remember;
+it replaces your previous notes. Think briefly first, then give the code block or the word."#;
+
+/// One line of the action history.
+#[derive(Debug, Clone, PartialEq)]
+struct Turn {
+    step: u32,
+    text: String,
+}
+
+/// The Navi-style agent. See the module documentation.
+#[derive(Debug)]
+pub struct NaviAgent {
+    config: NaviConfig,
+    key: Option<String>,
+    http: reqwest::Client,
+    history: Vec<Turn>,
+    memory: String,
+    previous_png: Option<Vec<u8>>,
+    last_error: Option<String>,
+}
+
+fn data_uri(png: &[u8]) -> String {
+    format!("data:image/png;base64,{}", base64::engine::general_purpose::STANDARD.encode(png))
+}
+
+impl NaviAgent {
+    /// An agent for `config`; the API key is resolved now.
+    ///
+    /// # Errors
+    ///
+    /// [`AgentError::Config`] when the base URL is empty or the HTTP client cannot be built.
+    pub fn new(config: NaviConfig) -> Result<NaviAgent, AgentError> {
+        if config.base_url.trim().is_empty() || config.model.trim().is_empty() {
+            return Err(AgentError::Config("the model's base URL and name must not be empty".into()));
+        }
+        let http = reqwest::Client::builder()
+            .timeout(config.timeout)
+            .build()
+            .map_err(|e| AgentError::Config(format!("cannot build the HTTP client: {e}")))?;
+        Ok(NaviAgent {
+            key: config.resolved_key(),
+            config,
+            http,
+            history: Vec::new(),
+            memory: String::new(),
+            previous_png: None,
+            last_error: None,
+        })
+    }
+
+    /// The text part of the user message.
+    fn prompt_text(&self, obs: &Observation, marks: Option<&Marks>) -> String {
+        let mut t = String::new();
+        t.push_str(&format!("Task: {}\n\nStep: {}\n\n", obs.instruction, obs.step));
+        t.push_str("Open windows:\n");
+        if obs.window_titles.is_empty() {
+            t.push_str("(none)\n");
+        }
+        for title in &obs.window_titles {
+            let mark = if *title == obs.foreground_title { " (foreground)" } else { "" };
+            t.push_str(&format!("- {title}{mark}\n"));
+        }
+        t.push_str(&format!(
+            "\nClipboard: {}\n\n",
+            obs.clipboard.as_deref().filter(|c| !c.is_empty()).unwrap_or("(empty)")
+        ));
+        t.push_str("Previous actions:\n");
+        if self.history.is_empty() {
+            t.push_str("(none)\n");
+        }
+        let skip = self.history.len().saturating_sub(self.config.max_history);
+        for turn in &self.history[skip..] {
+            t.push_str(&format!("Step {}: {}\n", turn.step, turn.text));
+        }
+        t.push_str(&format!("\nMemory: {}\n\n", if self.memory.is_empty() { "(empty)" } else { &self.memory }));
+        match marks {
+            Some(marks) => {
+                t.push_str("Elements on the screen (the numbers drawn on the screenshot):\n");
+                t.push_str(&marks.candidate_list());
+                t.push('\n');
+            }
+            None => t.push_str("No element list is available this turn: use computer.mouse.move_abs.\n"),
+        }
+        if let Some(err) = &self.last_error {
+            t.push_str(&format!(
+                "\nYour previous reply could not be used: {err}\nAnswer with one ```python code block, or DONE, FAIL or WAIT.\n"
+            ));
+        }
+        t
+    }
+
+    /// The chat-completions request body.
+    fn request_body(&self, obs: &Observation, marks: Option<&Marks>, annotated: &[u8]) -> Value {
+        let mut content = vec![
+            json!({"type": "text", "text": self.prompt_text(obs, marks)}),
+            json!({"type": "text", "text": "The current screen, with the elements' numbers:"}),
+            json!({"type": "image_url", "image_url": {"url": data_uri(annotated)}}),
+        ];
+        if let Some(previous) = &self.previous_png {
+            content.push(json!({"type": "text", "text": "The screen before your last action:"}));
+            content.push(json!({"type": "image_url", "image_url": {"url": data_uri(previous)}}));
+        }
+        json!({
+            "model": self.config.model,
+            "messages": [
+                {"role": "system", "content": SYSTEM_PROMPT},
+                {"role": "user", "content": content},
+            ],
+            "temperature": self.config.temperature,
+            "max_tokens": self.config.max_tokens,
+        })
+    }
+
+    async fn complete(&self, body: &Value) -> Result<String, AgentError> {
+        let endpoint = self.config.endpoint();
+        let fail = |reason: String| AgentError::Model { endpoint: endpoint.clone(), reason };
+        let mut request = self.http.post(&endpoint).json(body);
+        if let Some(key) = &self.key {
+            request = request.bearer_auth(key);
+        }
+        let response = request.send().await.map_err(|e| fail(crate_error_text(&e)))?;
+        let status = response.status();
+        let text = response.text().await.map_err(|e| fail(crate_error_text(&e)))?;
+        if !status.is_success() {
+            let snippet: String = text.chars().take(300).collect();
+            return Err(fail(format!("HTTP {status}: {snippet}")));
+        }
+        let value: Value = serde_json::from_str(&text).map_err(|e| fail(format!("the answer is not JSON: {e}")))?;
+        reply_text(&value).ok_or_else(|| fail("the answer has no choices[0].message.content".into()))
+    }
+}
+
+/// An error and its sources on one line (reqwest hides the useful part in the chain).
+fn crate_error_text(err: &(dyn std::error::Error + 'static)) -> String {
+    let mut text = err.to_string();
+    let mut source = err.source();
+    while let Some(inner) = source {
+        let more = inner.to_string();
+        if !text.contains(&more) {
+            text.push_str(": ");
+            text.push_str(&more);
+        }
+        source = inner.source();
+    }
+    text
+}
+
+/// `choices[0].message.content`, as a string or as a list of text parts.
+fn reply_text(answer: &Value) -> Option<String> {
+    let content = answer.get("choices")?.get(0)?.get("message")?.get("content")?;
+    match content {
+        Value::String(s) => Some(s.clone()),
+        Value::Array(parts) => {
+            Some(parts.iter().filter_map(|p| p.get("text").and_then(Value::as_str)).collect::<Vec<_>>().join("\n"))
+        }
+        _ => None,
+    }
+}
+
+#[async_trait::async_trait]
+impl Agent for NaviAgent {
+    fn name(&self) -> &str {
+        "navi"
+    }
+
+    async fn reset(&mut self, _task: &Task) {
+        self.history.clear();
+        self.memory.clear();
+        self.previous_png = None;
+        self.last_error = None;
+    }
+
+    async fn predict(&mut self, obs: &Observation) -> Result<Prediction, AgentError> {
+        let marks = obs.marks();
+        let annotated = match &marks {
+            Some(m) => annotate(&obs.screenshot_png, m).unwrap_or_else(|err| {
+                tracing::warn!(error = %err, "cannot annotate the screenshot; sending it unannotated");
+                obs.screenshot_png.clone()
+            }),
+            None => obs.screenshot_png.clone(),
+        };
+        let body = self.request_body(obs, marks.as_ref(), &annotated);
+        let response = self.complete(&body).await?;
+        self.previous_png = Some(obs.screenshot_png.clone());
+        let prediction = match parse_reply(&response) {
+            Ok(parsed) => {
+                if let Some(memory) = parsed.memory {
+                    self.memory = memory;
+                }
+                let summary: Vec<String> = parsed.actions.iter().map(AgentAction::summary).collect();
+                self.history.push(Turn { step: obs.step, text: summary.join(" | ") });
+                self.last_error = None;
+                Prediction { response, actions: parsed.actions, marks, raw_error: None }
+            }
+            Err(err) => {
+                tracing::info!(step = obs.step, error = %err, "unusable model reply");
+                self.history.push(Turn { step: obs.step, text: format!("(reply not usable: {err})") });
+                self.last_error = Some(err.clone());
+                Prediction { response, actions: Vec::new(), marks, raw_error: Some(err) }
+            }
+        };
+        Ok(prediction)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn endpoints() {
+        let check = |base: &str, expected: &str| assert_eq!(NaviConfig::new(base, "m").endpoint(), expected);
+        check("http://127.0.0.1:8000/v1", "http://127.0.0.1:8000/v1/chat/completions");
+        check("http://127.0.0.1:8000/v1/", "http://127.0.0.1:8000/v1/chat/completions");
+        check("https://x.example/openai/v1/chat/completions", "https://x.example/openai/v1/chat/completions");
+    }
+
+    #[test]
+    fn reply_text_reads_strings_and_parts() {
+        let check = |answer: Value, expected: Option<&str>| assert_eq!(reply_text(&answer).as_deref(), expected);
+        check(json!({"choices": [{"message": {"content": "DONE"}}]}), Some("DONE"));
+        check(json!({"choices": [{"message": {"content": [{"type": "text", "text": "a"}, {"type": "text", "text": "b"}]}}]}), Some("a\nb"));
+        check(json!({"choices": []}), None);
+        check(json!({"error": "x"}), None);
+    }
+
+    #[test]
+    fn a_configured_key_wins_over_the_environment() {
+        let mut config = NaviConfig::new("http://x/v1", "m");
+        config.api_key = Some("configured".into());
+        assert_eq!(config.resolved_key().as_deref(), Some("configured"));
+    }
+
+    #[tokio::test]
+    async fn https_endpoints_are_supported() {
+        // Port 9 on loopback has no TLS server: the call must fail while
+        // connecting, not because the build cannot speak https.
+        let mut config = NaviConfig::new("https://127.0.0.1:9/v1", "m");
+        config.timeout = Duration::from_secs(5);
+        let agent = NaviAgent::new(config).expect("agent");
+        let err = agent.complete(&json!({})).await.expect_err("nothing listens");
+        let text = err.to_string();
+        assert!(text.contains("https://127.0.0.1:9/v1/chat/completions"), "{text}");
+        assert!(!text.contains("scheme is not http"), "{text}");
+    }
+
+    #[test]
+    fn empty_configuration_is_refused() {
+        assert!(matches!(NaviAgent::new(NaviConfig::new("", "m")), Err(AgentError::Config(_))));
+    }
+}

@@ -1,0 +1,196 @@
+//! Reading a model's reply: fenced code blocks, the control words `DONE`,
+//! `FAIL` and `WAIT`, and the memory block the model may rewrite.
+//!
+//! A reply is usable when it holds at least one fenced code block (```` ```python ````,
+//! ```` ```py ````, or unlabelled) or a control word. In a block, a line that
+//! is only `DONE`, `FAIL` or `WAIT` ends the code before it and becomes that
+//! control action, so `computer.keyboard.press("enter")` followed by `DONE` is
+//! two actions. Code that mentions `pyautogui` and not `computer.` is
+//! pyautogui code; anything else is Navi `computer.*` code. Every code action
+//! must parse with the interpreter's parser, so a syntax error is reported
+//! here, before anything runs.
+//!
+//! It does not run anything and does not talk to the model.
+
+use arena_shared::script::parse;
+
+use super::AgentAction;
+
+/// What a reply holds.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Parsed {
+    pub actions: Vec<AgentAction>,
+    /// The text after a `Memory:` line, when the reply has one.
+    pub memory: Option<String>,
+}
+
+fn control(word: &str) -> Option<AgentAction> {
+    match word.trim().trim_matches(|c: char| c == '`' || c == '.' || c == '*') {
+        "DONE" => Some(AgentAction::Done),
+        "FAIL" => Some(AgentAction::Fail),
+        "WAIT" => Some(AgentAction::Wait),
+        _ => None,
+    }
+}
+
+/// The bodies of the fenced code blocks of `text` whose language is Python or
+/// unlabelled, in order. An unclosed block runs to the end of the text.
+pub fn code_blocks(text: &str) -> Vec<String> {
+    let mut blocks = Vec::new();
+    let mut current: Option<(bool, Vec<&str>)> = None;
+    for line in text.lines() {
+        let trimmed = line.trim_start();
+        let fence = trimmed.starts_with("```");
+        match current.take() {
+            None if fence => {
+                let lang = trimmed.trim_start_matches('`').trim().to_ascii_lowercase();
+                let wanted = matches!(lang.as_str(), "" | "python" | "py" | "python3");
+                current = Some((wanted, Vec::new()));
+            }
+            None => {}
+            Some((true, lines)) if fence => blocks.push(lines.join("\n")),
+            Some((false, _)) if fence => {}
+            Some((wanted, mut lines)) => {
+                lines.push(line);
+                current = Some((wanted, lines));
+            }
+        }
+    }
+    if let Some((true, lines)) = current {
+        blocks.push(lines.join("\n"));
+    }
+    blocks
+}
+
+fn code_action(code: &str) -> Result<Option<AgentAction>, String> {
+    let meaningful = code.lines().any(|l| {
+        let l = l.trim();
+        !l.is_empty() && !l.starts_with('#')
+    });
+    if !meaningful {
+        return Ok(None);
+    }
+    parse(code).map_err(|e| format!("the code block does not parse: {e}"))?;
+    let pyautogui = code.contains("pyautogui") && !code.contains("computer.");
+    Ok(Some(if pyautogui { AgentAction::Pyautogui(code.to_owned()) } else { AgentAction::Computer(code.to_owned()) }))
+}
+
+/// The actions of one code block, split at control-word lines.
+fn block_actions(block: &str, out: &mut Vec<AgentAction>) -> Result<(), String> {
+    let mut code: Vec<&str> = Vec::new();
+    for line in block.lines() {
+        if let Some(word) = control(line) {
+            if let Some(action) = code_action(&code.join("\n"))? {
+                out.push(action);
+            }
+            code.clear();
+            out.push(word);
+        } else {
+            code.push(line);
+        }
+    }
+    if let Some(action) = code_action(&code.join("\n"))? {
+        out.push(action);
+    }
+    Ok(())
+}
+
+/// The memory block: the lines after a line starting with `Memory:` (its rest
+/// included), up to a code fence or the end.
+pub fn memory(text: &str) -> Option<String> {
+    let mut lines = text.lines();
+    let first = lines.by_ref().find_map(|l| {
+        let t = l.trim_start().trim_start_matches(['#', '*', ' ']);
+        t.strip_prefix("Memory:").or_else(|| t.strip_prefix("MEMORY:")).map(|rest| rest.trim_start_matches('*').trim())
+    })?;
+    let mut out: Vec<&str> = Vec::new();
+    if !first.is_empty() {
+        out.push(first);
+    }
+    for line in lines {
+        if line.trim_start().starts_with("```") {
+            break;
+        }
+        out.push(line);
+    }
+    let memory = out.join("\n").trim().to_owned();
+    (!memory.is_empty()).then_some(memory)
+}
+
+/// Reads a model reply.
+///
+/// # Errors
+///
+/// A message for the model when the reply has neither a code block nor a
+/// control word, or when a code block does not parse.
+pub fn parse_reply(text: &str) -> Result<Parsed, String> {
+    let mut actions = Vec::new();
+    for block in code_blocks(text) {
+        block_actions(&block, &mut actions)?;
+    }
+    if actions.is_empty() {
+        // No usable block: a control word on a line of its own, or as the reply's last word.
+        let last_word = text.split_whitespace().last().and_then(control);
+        let on_a_line = text.lines().find_map(control);
+        if let Some(word) = on_a_line.or(last_word) {
+            actions.push(word);
+        }
+    }
+    if actions.is_empty() {
+        return Err("the reply has no ```python code block and no DONE, FAIL or WAIT".to_owned());
+    }
+    Ok(Parsed { actions, memory: memory(text) })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn check(reply: &str, expected: Result<Vec<AgentAction>, &str>) {
+        match (parse_reply(reply), expected) {
+            (Ok(parsed), Ok(actions)) => assert_eq!(parsed.actions, actions, "{reply}"),
+            (Err(err), Err(needle)) => assert!(err.contains(needle), "{err} lacks {needle}"),
+            (got, want) => panic!("{reply:?}: got {got:?}, expected {want:?}"),
+        }
+    }
+
+    fn computer(code: &str) -> AgentAction {
+        AgentAction::Computer(code.to_owned())
+    }
+
+    #[test]
+    fn replies() {
+        check("I will click.\n```python\ncomputer.mouse.move_id(id=3)\ncomputer.mouse.single_click()\n```", Ok(vec![computer(
+            "computer.mouse.move_id(id=3)\ncomputer.mouse.single_click()",
+        )]));
+        check("```\nimport pyautogui\npyautogui.hotkey('ctrl', 's')\n```", Ok(vec![AgentAction::Pyautogui(
+            "import pyautogui\npyautogui.hotkey('ctrl', 's')".to_owned(),
+        )]));
+        check("```python\ncomputer.keyboard.press(\"enter\")\nDONE\n```", Ok(vec![
+            computer("computer.keyboard.press(\"enter\")"),
+            AgentAction::Done,
+        ]));
+        check("```python\nDONE\n```", Ok(vec![AgentAction::Done]));
+        check("The task is impossible.\nFAIL", Ok(vec![AgentAction::Fail]));
+        check("Nothing to do yet, WAIT", Ok(vec![AgentAction::Wait]));
+        check("```python\n# only a comment\n```\nDONE", Ok(vec![AgentAction::Done]));
+        check("Two blocks:\n```python\ncomputer.mouse.move_abs(x=0.5, y=0.5)\n```\nthen\n```py\ncomputer.mouse.single_click()\n```", Ok(vec![
+            computer("computer.mouse.move_abs(x=0.5, y=0.5)"),
+            computer("computer.mouse.single_click()"),
+        ]));
+        check("```json\n{\"a\": 1}\n```", Err("no ```python code block"));
+        check("I am not sure what to do.", Err("no ```python code block"));
+        check("```python\nfor i in x:\n    pass\n```", Err("does not parse"));
+        check("```python\ncomputer.mouse.single_click(\n", Err("does not parse"));
+    }
+
+    #[test]
+    fn memory_blocks() {
+        let check = |reply: &str, expected: Option<&str>| assert_eq!(memory(reply).as_deref(), expected, "{reply}");
+        check("Memory: the file is saved\n```python\nDONE\n```", Some("the file is saved"));
+        check("Plan...\nMemory:\n- opened notepad\n- typed hello\n```python\n```", Some("- opened notepad\n- typed hello"));
+        check("**Memory:** step two", Some("step two"));
+        check("no memory here", None);
+        check("Memory:\n```python\n```", None);
+    }
+}

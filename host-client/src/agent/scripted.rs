@@ -1,0 +1,231 @@
+//! [`ScriptedAgent`]: follows a plan, one step per prediction. Used for oracle
+//! solutions of tasks and in tests.
+//!
+//! A plan is JSON:
+//!
+//! ```json
+//! {"steps": [
+//!   {"code": "computer.mouse.move_id(id=3)\ncomputer.mouse.single_click()"},
+//!   {"code": "pyautogui.hotkey('ctrl', 's')", "lang": "pyautogui"},
+//!   {"actions": [{"type": "type_text", "text": "hello"}]},
+//!   "WAIT",
+//!   "DONE"
+//! ]}
+//! ```
+//!
+//! `lang` is `computer` (the default) or `pyautogui`. Where the plan comes
+//! from is a [`PlanSource`]: one plan for every task, a folder with one plan
+//! per task, or a `plan` key inside the task file itself (task files keep
+//! unknown top-level keys).
+//!
+//! It is not a model and never looks at the screen, except to compute the
+//! Set-of-Marks boxes so that `move_id` in a plan means what it would mean
+//! for Navi.
+
+use std::path::{Path, PathBuf};
+
+use serde::{Deserialize, Serialize};
+
+use arena_shared::action::Action;
+
+use super::{Agent, AgentAction, AgentError, Observation, Prediction};
+use crate::task::Task;
+
+/// One plan step as written.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(untagged)]
+pub enum PlanStep {
+    /// `"DONE"`, `"FAIL"` or `"WAIT"`.
+    Control(String),
+    Code {
+        code: String,
+        #[serde(default)]
+        lang: CodeLang,
+    },
+    Actions {
+        actions: Vec<Action>,
+    },
+}
+
+/// The language of a code step.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum CodeLang {
+    #[default]
+    Computer,
+    Pyautogui,
+}
+
+/// A plan file.
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+pub struct Plan {
+    pub steps: Vec<PlanStep>,
+}
+
+impl PlanStep {
+    fn action(&self) -> Result<AgentAction, String> {
+        Ok(match self {
+            PlanStep::Control(word) => match word.trim() {
+                "DONE" => AgentAction::Done,
+                "FAIL" => AgentAction::Fail,
+                "WAIT" => AgentAction::Wait,
+                other => return Err(format!("unknown step {other:?} (expected DONE, FAIL or WAIT)")),
+            },
+            PlanStep::Code { code, lang: CodeLang::Computer } => AgentAction::Computer(code.clone()),
+            PlanStep::Code { code, lang: CodeLang::Pyautogui } => AgentAction::Pyautogui(code.clone()),
+            PlanStep::Actions { actions } => AgentAction::Typed(actions.clone()),
+        })
+    }
+}
+
+impl Plan {
+    /// Parses a plan; `origin` names it in errors.
+    ///
+    /// # Errors
+    ///
+    /// [`AgentError::Plan`] for bad JSON or an unknown control word, naming the step.
+    pub fn parse(text: &str, origin: &str) -> Result<Plan, AgentError> {
+        let plan: Plan = serde_json::from_str(text).map_err(|e| plan_error(origin, e.to_string()))?;
+        plan.actions(origin)?;
+        Ok(plan)
+    }
+
+    /// Reads and parses a plan file.
+    ///
+    /// # Errors
+    ///
+    /// [`AgentError::Plan`] when the file cannot be read or parsed.
+    pub fn load(path: &Path) -> Result<Plan, AgentError> {
+        let origin = path.display().to_string();
+        let text = std::fs::read_to_string(path).map_err(|e| plan_error(&origin, e.to_string()))?;
+        Plan::parse(&text, &origin)
+    }
+
+    /// The plan's actions, one per step.
+    ///
+    /// # Errors
+    ///
+    /// [`AgentError::Plan`] naming the first step that is not a valid action.
+    pub fn actions(&self, origin: &str) -> Result<Vec<AgentAction>, AgentError> {
+        self.steps
+            .iter()
+            .enumerate()
+            .map(|(i, s)| s.action().map_err(|e| plan_error(origin, format!("step {}: {e}", i + 1))))
+            .collect()
+    }
+}
+
+fn plan_error(origin: &str, reason: String) -> AgentError {
+    AgentError::Plan { path: origin.to_owned(), reason }
+}
+
+/// Where a [`ScriptedAgent`] gets the plan for a task.
+#[derive(Debug, Clone, PartialEq)]
+pub enum PlanSource {
+    /// The same plan for every task.
+    Fixed(Plan),
+    /// `<dir>/<domain>/<task name>.json`, else `<dir>/<task name>.json`, else the task's own `plan` key.
+    Dir(PathBuf),
+    /// The `plan` key of the task file.
+    TaskKey,
+}
+
+/// Follows a plan: step `n` of the episode answers the plan's step `n`.
+#[derive(Debug)]
+pub struct ScriptedAgent {
+    source: PlanSource,
+    /// The current task's actions, or why they could not be had.
+    steps: Result<Vec<AgentAction>, String>,
+    origin: String,
+    next: usize,
+}
+
+/// The task-file key holding an inline plan.
+pub const TASK_PLAN_KEY: &str = "plan";
+
+impl ScriptedAgent {
+    pub fn new(source: PlanSource) -> ScriptedAgent {
+        let mut agent = ScriptedAgent { source, steps: Ok(Vec::new()), origin: String::from("plan"), next: 0 };
+        if let PlanSource::Fixed(plan) = &agent.source {
+            agent.steps = plan.actions("plan").map_err(|e| e.to_string());
+        }
+        agent
+    }
+
+    /// An agent that runs these actions, one per step, for any task.
+    pub fn from_actions(actions: Vec<AgentAction>) -> ScriptedAgent {
+        ScriptedAgent { source: PlanSource::Fixed(Plan::default()), steps: Ok(actions), origin: "plan".into(), next: 0 }
+    }
+
+    /// An agent that runs the plan file at `path` for any task.
+    ///
+    /// # Errors
+    ///
+    /// [`AgentError::Plan`] when the file cannot be read or parsed.
+    pub fn from_file(path: &Path) -> Result<ScriptedAgent, AgentError> {
+        let plan = Plan::load(path)?;
+        let mut agent = ScriptedAgent::new(PlanSource::Fixed(plan));
+        agent.origin = path.display().to_string();
+        Ok(agent)
+    }
+
+    fn load_for(&self, task: &Task) -> Result<(Vec<AgentAction>, String), AgentError> {
+        let inline = || -> Result<(Vec<AgentAction>, String), AgentError> {
+            let origin = format!("{} ({TASK_PLAN_KEY} key)", task.path.display());
+            let value = task.extra.get(TASK_PLAN_KEY).ok_or_else(|| plan_error(&origin, "the task has no plan".into()))?;
+            let plan: Plan = serde_json::from_value(value.clone()).map_err(|e| plan_error(&origin, e.to_string()))?;
+            Ok((plan.actions(&origin)?, origin))
+        };
+        match &self.source {
+            PlanSource::Fixed(plan) => Ok((plan.actions(&self.origin)?, self.origin.clone())),
+            PlanSource::TaskKey => inline(),
+            PlanSource::Dir(dir) => {
+                let candidates = [dir.join(&task.domain).join(format!("{}.json", task.name)), dir.join(format!("{}.json", task.name))];
+                match candidates.iter().find(|p| p.is_file()) {
+                    Some(path) => Ok((Plan::load(path)?.actions(&path.display().to_string())?, path.display().to_string())),
+                    None if task.extra.contains_key(TASK_PLAN_KEY) => inline(),
+                    None => Err(plan_error(
+                        &candidates[0].display().to_string(),
+                        format!("no plan for task {} (also looked for {})", task.name, candidates[1].display()),
+                    )),
+                }
+            }
+        }
+    }
+}
+
+#[async_trait::async_trait]
+impl Agent for ScriptedAgent {
+    fn name(&self) -> &str {
+        "scripted"
+    }
+
+    async fn reset(&mut self, task: &Task) {
+        self.next = 0;
+        if let (PlanSource::Fixed(_), Ok(steps)) = (&self.source, &self.steps) {
+            if !steps.is_empty() {
+                return;
+            }
+        }
+        match self.load_for(task) {
+            Ok((steps, origin)) => {
+                self.steps = Ok(steps);
+                self.origin = origin;
+            }
+            Err(err) => self.steps = Err(err.to_string()),
+        }
+    }
+
+    async fn predict(&mut self, obs: &Observation) -> Result<Prediction, AgentError> {
+        let steps = self.steps.as_ref().map_err(|e| AgentError::Plan { path: self.origin.clone(), reason: e.clone() })?;
+        let action = steps.get(self.next).cloned().ok_or_else(|| AgentError::Exhausted(self.origin.clone()))?;
+        self.next += 1;
+        let uses_marks = matches!(action, AgentAction::Computer(_));
+        Ok(Prediction {
+            response: format!("plan step {}: {}", self.next, action.summary()),
+            marks: if uses_marks { obs.marks() } else { None },
+            actions: vec![action],
+            raw_error: None,
+        })
+    }
+}

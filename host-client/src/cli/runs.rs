@@ -1,0 +1,310 @@
+//! `arena run`, `arena merge` and `arena report`: benchmark runs from the command line.
+//!
+//! `run` loads a task folder or index, keeps its `--shard`, skips finished
+//! tasks, spreads the rest over the guests (`--guest`, `--guests`,
+//! `--guests-file`, or `--stub-guests N` embedded stub guests) with the chosen
+//! agent, and writes upstream's result folders plus `summary.json`,
+//! `summary.md` and `report.html` under `--out`. `merge` combines shard
+//! folders; `report` rebuilds the summary and report of a folder.
+//!
+//! The global `--guest` names one guest; a pool is given with `--guests
+//! URL,URL,...` (repeatable) or a file of URLs, one per line (`#` comments).
+//! It is not the run machinery itself ([`crate::run`], [`crate::episode`]).
+
+use std::io::IsTerminal;
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+use std::sync::Arc;
+use std::time::Duration;
+
+use anyhow::{bail, Context};
+use clap::{Args, ValueEnum};
+
+use super::{emit, stub, Connection};
+use crate::agent::navi::{NaviAgent, NaviConfig};
+use crate::agent::replay::{ReplayAgent, ReplaySource};
+use crate::agent::scripted::{PlanSource, ScriptedAgent};
+use crate::agent::{Agent, ExecOptions};
+use crate::episode::{AgentFactory, EpisodeConfig, EpisodeRunner};
+use crate::results::html::write_report;
+use crate::results::summary::Summary;
+use crate::results::RunLayout;
+use crate::run::pool::PoolConfig;
+use crate::run::shard::Shard;
+use crate::run::{load_tasks, run_tasks, RunOptions};
+use crate::setup::{DownloadCache, Settle};
+use crate::task::Difficulty;
+
+/// Which agent plays.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum AgentKind {
+    /// Follows plan files (`--plans`), or each task's own `plan` key.
+    Scripted,
+    /// Repeats recorded trajectories (`--replay`).
+    Replay,
+    /// Navi-style prompting of an OpenAI-compatible chat endpoint (`--llm-url`, `--model`).
+    Navi,
+}
+
+/// Arguments of `arena run`.
+#[derive(Debug, Clone, Args)]
+pub struct RunArgs {
+    /// A task folder (or a corpus root holding `examples/`), or an index file such as `test_all.json`.
+    #[arg(long, value_name = "PATH")]
+    pub tasks: PathBuf,
+    /// Which variant of the corpus an index or root resolves into.
+    #[arg(long, value_enum, default_value_t = Difficulty::Normal)]
+    pub difficulty: Difficulty,
+    #[arg(long, value_enum, default_value_t = AgentKind::Scripted)]
+    pub agent: AgentKind,
+    /// Scripted agent: one plan file for every task, or a folder of `<task name>.json`
+    /// plans [default: `<tasks>/plans` when it exists, else each task's `plan` key].
+    #[arg(long, value_name = "PATH")]
+    pub plans: Option<PathBuf>,
+    /// Replay agent: a `traj.jsonl` for every task, or a result folder
+    /// (`<out>/<agent>/<observation>/<model>`) holding `<domain>/<task>/traj.jsonl`.
+    #[arg(long, value_name = "PATH")]
+    pub replay: Option<PathBuf>,
+    /// Navi agent: base URL of the OpenAI-compatible API (key from ARENA_LLM_KEY or OPENAI_API_KEY).
+    #[arg(long, env = "ARENA_LLM_URL", value_name = "URL")]
+    pub llm_url: Option<String>,
+    /// Navi agent: the model name.
+    #[arg(long, env = "ARENA_LLM_MODEL")]
+    pub model: Option<String>,
+    /// Navi agent: sampling temperature.
+    #[arg(long, default_value_t = 0.0)]
+    pub temperature: f64,
+    /// Guests of the pool, comma-separated (repeatable); the global --guest is added to them.
+    #[arg(long, value_delimiter = ',', value_name = "URL,...")]
+    pub guests: Vec<String>,
+    /// A file of guest URLs, one per line (blank lines and `#` comments ignored).
+    #[arg(long, value_name = "FILE")]
+    pub guests_file: Option<PathBuf>,
+    /// Start N embedded stub guests for the run (demos and tests); implies --fast.
+    #[arg(long, value_name = "N")]
+    pub stub_guests: Option<u16>,
+    /// This machine's slice, i/n with i from 1 (a 0-based JOB_COMPLETION_INDEX is $((INDEX + 1))/N).
+    #[arg(long, default_value = "1/1", value_parser = parse_shard)]
+    pub shard: Shard,
+    /// Result folder.
+    #[arg(long, default_value = "results", value_name = "DIR")]
+    pub out: PathBuf,
+    /// Download cache [default: <out>/download-cache].
+    #[arg(long, value_name = "DIR")]
+    pub cache: Option<PathBuf>,
+    /// Step cap per episode (upstream: 15).
+    #[arg(long, default_value_t = crate::episode::DEFAULT_MAX_STEPS)]
+    pub max_steps: u32,
+    /// Pause after each action, in seconds (upstream: 3; --fast makes it 0).
+    #[arg(long, value_name = "SECONDS")]
+    pub sleep_after: Option<f64>,
+    /// No pauses at all (setup, actions, scripts): for stub guests, which need none.
+    #[arg(long)]
+    pub fast: bool,
+    /// Run every task of the shard again, even those with a result.txt.
+    #[arg(long)]
+    pub no_resume: bool,
+    /// Tries per task after infrastructure errors, the first included.
+    #[arg(long, default_value_t = 3)]
+    pub attempts: u32,
+    /// Leave the accessibility tree out of observations.
+    #[arg(long)]
+    pub no_a11y: bool,
+    /// The observation label of the result folders (upstream's --observation_type).
+    #[arg(long, default_value = "a11y_tree")]
+    pub observation: String,
+}
+
+/// Arguments of `arena merge`.
+#[derive(Debug, Clone, Args)]
+pub struct MergeArgs {
+    /// The merged folder (created).
+    pub out: PathBuf,
+    /// Shard result folders.
+    #[arg(required = true)]
+    pub shards: Vec<PathBuf>,
+}
+
+/// Arguments of `arena report`.
+#[derive(Debug, Clone, Args)]
+pub struct ReportArgs {
+    /// A result folder.
+    pub dir: PathBuf,
+}
+
+fn parse_shard(text: &str) -> Result<Shard, String> {
+    text.parse()
+}
+
+/// Whether to draw a progress bar: on a terminal, and not in CI.
+fn progress_wanted() -> bool {
+    std::io::stderr().is_terminal() && std::env::var_os("CI").is_none()
+}
+
+fn guests_from_file(path: &Path) -> anyhow::Result<Vec<String>> {
+    let text = std::fs::read_to_string(path).with_context(|| format!("reading --guests-file {}", path.display()))?;
+    Ok(text
+        .lines()
+        .map(|l| l.split('#').next().unwrap_or("").trim())
+        .filter(|l| !l.is_empty())
+        .map(str::to_owned)
+        .collect())
+}
+
+/// The agent factory, the agent label and the model label of the result folders.
+fn agent_factory(args: &RunArgs) -> anyhow::Result<(AgentFactory, String, String)> {
+    match args.agent {
+        AgentKind::Scripted => {
+            let default_dir = if args.tasks.is_dir() {
+                Some(args.tasks.join("plans"))
+            } else {
+                args.tasks.parent().map(|p| p.join("plans"))
+            };
+            let source = match &args.plans {
+                Some(path) if path.is_dir() => PlanSource::Dir(path.clone()),
+                Some(path) => PlanSource::Fixed(crate::agent::scripted::Plan::load(path)?),
+                None => match default_dir.filter(|d| d.is_dir()) {
+                    Some(dir) => PlanSource::Dir(dir),
+                    None => PlanSource::TaskKey,
+                },
+            };
+            let factory: AgentFactory =
+                Arc::new(move || Ok(Box::new(ScriptedAgent::new(source.clone())) as Box<dyn Agent>));
+            Ok((factory, "scripted".into(), "plan".into()))
+        }
+        AgentKind::Replay => {
+            let Some(path) = args.replay.clone() else { bail!("--agent replay needs --replay FILE_OR_DIR") };
+            let source = if path.is_dir() { ReplaySource::Dir(path) } else { ReplaySource::File(path) };
+            let factory: AgentFactory =
+                Arc::new(move || Ok(Box::new(ReplayAgent::new(source.clone())) as Box<dyn Agent>));
+            Ok((factory, "replay".into(), "replay".into()))
+        }
+        AgentKind::Navi => {
+            let (Some(url), Some(model)) = (args.llm_url.clone(), args.model.clone()) else {
+                bail!("--agent navi needs --llm-url (or ARENA_LLM_URL) and --model (or ARENA_LLM_MODEL)");
+            };
+            let mut config = NaviConfig::new(&url, &model);
+            config.temperature = args.temperature;
+            // Fail now, not once per task, when the configuration is unusable.
+            NaviAgent::new(config.clone())?;
+            let factory: AgentFactory =
+                Arc::new(move || Ok(Box::new(NaviAgent::new(config.clone())?) as Box<dyn Agent>));
+            // Upstream files Navi's results under its action space.
+            Ok((factory, "code_block".into(), model))
+        }
+    }
+}
+
+/// `arena run`.
+///
+/// # Errors
+///
+/// Unusable arguments, tasks that do not load, no guest, or results that cannot be written.
+pub async fn run(conn: &Connection, args: RunArgs) -> anyhow::Result<ExitCode> {
+    let tasks = load_tasks(&args.tasks, args.difficulty)?;
+    let (agents, agent_label, model) = agent_factory(&args)?;
+
+    let mut urls: Vec<String> = conn.guest.iter().cloned().collect();
+    urls.extend(args.guests.iter().map(|s| s.trim().to_owned()).filter(|s| !s.is_empty()));
+    if let Some(file) = &args.guests_file {
+        urls.extend(guests_from_file(file)?);
+    }
+    let mut stubs = Vec::new();
+    for _ in 0..args.stub_guests.unwrap_or(0) {
+        let running = stub::start(&stub::StubArgs::default(), conn.resolve_token()?).await?;
+        urls.push(running.url());
+        stubs.push(running);
+    }
+    urls.dedup();
+    if urls.is_empty() {
+        bail!("no guest: give --guest, --guests, --guests-file or --stub-guests");
+    }
+    let guests = urls.iter().map(|u| conn.client_for(u)).collect::<anyhow::Result<Vec<_>>>()?;
+
+    let cache_dir = args.cache.clone().unwrap_or_else(|| args.out.join("download-cache"));
+    let cache = DownloadCache::new(&cache_dir)
+        .with_context(|| format!("opening the download cache {}", cache_dir.display()))?;
+    let fast = args.fast || args.stub_guests.is_some();
+    let mut config = if fast { EpisodeConfig::instant(cache) } else { EpisodeConfig::upstream(cache) };
+    config.max_steps = args.max_steps;
+    config.a11y = !args.no_a11y;
+    config.model = model.clone();
+    if let Some(secs) = args.sleep_after {
+        config.sleep_after_action =
+            Duration::try_from_secs_f64(secs).context("--sleep-after must be a number of seconds, 0 or more")?;
+    }
+    if fast {
+        config.settle = Settle::none();
+        config.exec = ExecOptions::instant();
+    }
+    let layout = RunLayout { root: args.out.clone(), agent: agent_label, observation: args.observation.clone(), model };
+    let options = RunOptions {
+        layout: layout.clone(),
+        shard: args.shard,
+        resume: !args.no_resume,
+        pool: PoolConfig { max_attempts: args.attempts.max(1), ..PoolConfig::default() },
+        progress: progress_wanted(),
+        title: format!("arena run: {} ({})", args.tasks.display(), layout.base().display()),
+    };
+    let runner = EpisodeRunner { layout, config, agents };
+    let outcome = run_tasks(tasks, guests, Arc::new(runner), &options).await?;
+    for stub in stubs {
+        if let Err(err) = stub.stop().await {
+            tracing::warn!(error = format!("{err:#}"), "stopping a stub guest");
+        }
+    }
+
+    emit(&format!(
+        "shard {}: {} task(s) run, {} already finished, {} episode(s) on {} guest(s)\n\n",
+        args.shard,
+        outcome.todo,
+        outcome.skipped,
+        outcome.pool.episodes,
+        urls.len()
+    ))?;
+    emit(&outcome.summary.markdown())?;
+    emit(&format!("\nreport: {}\n", outcome.report.display()))?;
+    let unfinished = outcome.pool.not_run.len() + outcome.pool.results.iter().filter(|r| r.status.is_infra()).count();
+    if unfinished > 0 {
+        emit(&format!(
+            "{unfinished} task(s) have no result (infrastructure errors); run the same command again to retry them\n"
+        ))?;
+        return Ok(ExitCode::from(2));
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
+/// `arena merge`.
+///
+/// # Errors
+///
+/// A shard that cannot be read, or an output that cannot be written.
+pub fn merge(args: &MergeArgs) -> anyhow::Result<ExitCode> {
+    let report =
+        crate::run::merge::merge(&args.out, &args.shards, &format!("arena merge of {} shard(s)", args.shards.len()))?;
+    for (task, kept) in &report.duplicates {
+        tracing::warn!(%task, kept = %kept.display(), "task found in more than one shard");
+    }
+    emit(&format!(
+        "merged {} task folder(s) from {} shard(s) into {}\n\n",
+        report.copied,
+        args.shards.len(),
+        args.out.display()
+    ))?;
+    emit(&report.summary.markdown())?;
+    emit(&format!("\nreport: {}\n", report.report.display()))?;
+    Ok(ExitCode::SUCCESS)
+}
+
+/// `arena report`.
+///
+/// # Errors
+///
+/// The folder cannot be read or the files cannot be written.
+pub fn report(args: &ReportArgs) -> anyhow::Result<ExitCode> {
+    let (summary, path): (Summary, PathBuf) =
+        write_report(&args.dir, &format!("arena report: {}", args.dir.display()))?;
+    emit(&summary.markdown())?;
+    emit(&format!("\nreport: {}\n", path.display()))?;
+    Ok(ExitCode::SUCCESS)
+}

@@ -1,0 +1,712 @@
+//! One episode: reset the guest, set the task up, let the agent act until it
+//! says DONE or FAIL or the step cap is reached, run the post-config, and
+//! evaluate; with every step's observation, response, actions and timings
+//! written to the task's result folder as it happens.
+//!
+//! The sequence is upstream's `lib_run_single.run_single_example` (waa-api.md
+//! §b.5), over the typed `/v1` API:
+//!
+//! 1. `agent.reset(task)`; [`setup::reset`] (close windows, wait for the
+//!    guest's staged health, clear Downloads); the task's `config` steps. A
+//!    failed reset or an aborted setup (a download that cannot be had) ends
+//!    the episode as an infrastructure error.
+//! 2. Up to `max_steps` times: observe (screenshot, accessibility tree,
+//!    windows, clipboard), `agent.predict`, then each action in order:
+//!    `DONE`/`FAIL` stop, `WAIT` pauses, anything else is carried out by
+//!    [`agent::execute_with`] and followed by the pause upstream calls
+//!    `--sleep_after_execution`.
+//! 3. The evaluator's `postconfig` steps, then [`eval::evaluate`] with the
+//!    agent's last control word.
+//!
+//! Errors are sorted three ways ([`EpisodeStatus`]): an unreachable guest (or a
+//! failed reset, setup download or result write) is an infrastructure error
+//! that says nothing about the agent, so no `result.txt` is written and the
+//! run tries again; an agent that cannot answer (model endpoint down after
+//! the retries, plan used up) ends the loop as an agent error and the task is
+//! still evaluated; malformed model output and actions the desktop refuses are
+//! recorded in the step and the episode goes on, as upstream does.
+//!
+//! It is not the pool of guests ([`crate::run`]) and writes nothing outside its
+//! [`TaskDir`].
+
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+use serde_json::Value;
+
+use arena_shared::clipboard::ClipboardContent;
+use arena_shared::observation::{A11yQuery, ImageFormat, ScreenshotQuery};
+use arena_shared::script::ComputerState;
+
+use crate::agent::{self, Agent, AgentAction, AgentError, ExecOptions, Observation, Prediction};
+use crate::client::GuestClient;
+use crate::error::ClientError;
+use crate::eval::{self, EvalContext, LastAction};
+use crate::results::{timestamp_now, unix_now, RunLayout, StepRecord, StepTimings, TaskDir};
+use crate::run::pool::TaskRunner;
+use crate::setup::{self, DownloadCache, Settle, SetupContext};
+use crate::task::Task;
+
+pub use crate::results::{EpisodeResult, EpisodeStatus};
+
+/// Upstream's `--max_steps`.
+pub const DEFAULT_MAX_STEPS: u32 = 15;
+/// Upstream's `--sleep_after_execution`.
+pub const DEFAULT_SLEEP_AFTER_ACTION: Duration = Duration::from_secs(3);
+
+/// How an episode runs.
+#[derive(Debug, Clone)]
+pub struct EpisodeConfig {
+    /// Steps the agent gets (upstream: 15).
+    pub max_steps: u32,
+    /// Pause after each action and for `WAIT` (upstream: 3 s; 0 against the stub).
+    pub sleep_after_action: Duration,
+    /// Whether observations include the accessibility tree (upstream's `a11y_tree` observation).
+    pub a11y: bool,
+    /// Budget of one accessibility-tree walk.
+    pub a11y_query: A11yQuery,
+    /// How many times a failing model call is asked again within one step
+    /// before the episode ends as an agent error.
+    pub max_model_retries: u32,
+    /// Longest one prediction, and one action, may take.
+    pub step_timeout: Duration,
+    /// Pauses of setup steps.
+    pub settle: Settle,
+    /// How agent code runs (its sleeps and per-call delays).
+    pub exec: ExecOptions,
+    /// Where downloads are cached.
+    pub cache: DownloadCache,
+    /// The model's name, for the record.
+    pub model: String,
+}
+
+impl EpisodeConfig {
+    /// Upstream's timings, with downloads cached in `cache`.
+    pub fn upstream(cache: DownloadCache) -> EpisodeConfig {
+        EpisodeConfig {
+            max_steps: DEFAULT_MAX_STEPS,
+            sleep_after_action: DEFAULT_SLEEP_AFTER_ACTION,
+            a11y: true,
+            a11y_query: A11yQuery::default(),
+            max_model_retries: 2,
+            step_timeout: Duration::from_secs(600),
+            settle: Settle::upstream(),
+            exec: ExecOptions::default(),
+            cache,
+            model: String::new(),
+        }
+    }
+
+    /// No pauses anywhere: for the stub guest, which needs none.
+    pub fn instant(cache: DownloadCache) -> EpisodeConfig {
+        EpisodeConfig {
+            sleep_after_action: Duration::ZERO,
+            settle: Settle::none(),
+            exec: ExecOptions::instant(),
+            ..EpisodeConfig::upstream(cache)
+        }
+    }
+}
+
+/// Runs one episode of `task` on the guest behind `client` and writes it into `out`.
+/// Never fails: what went wrong is in the result's status.
+pub async fn run_episode(
+    client: &GuestClient,
+    task: &Task,
+    agent: &mut dyn Agent,
+    config: &EpisodeConfig,
+    out: &TaskDir,
+) -> EpisodeResult {
+    run_attempt(client, task, agent, config, out, 1).await
+}
+
+/// [`run_episode`] for try number `attempt` of the task (recorded in `episode.json`).
+pub async fn run_attempt(
+    client: &GuestClient,
+    task: &Task,
+    agent: &mut dyn Agent,
+    config: &EpisodeConfig,
+    out: &TaskDir,
+    attempt: u32,
+) -> EpisodeResult {
+    let started = Instant::now();
+    let mut ep = Episode {
+        result: EpisodeResult {
+            task_id: task.id.clone(),
+            task_name: task.name.clone(),
+            domain: task.domain.clone(),
+            instruction: task.instruction.clone(),
+            agent: agent.name().to_owned(),
+            model: config.model.clone(),
+            guest: client.base_url().to_owned(),
+            attempt,
+            score: 0.0,
+            status: EpisodeStatus::Completed,
+            steps: 0,
+            last_action: "none".into(),
+            elapsed_ms: 0,
+            setup_ms: 0,
+            eval_ms: 0,
+            started_unix: unix_now(),
+            setup: Vec::new(),
+            eval: Value::Null,
+            timings: Vec::new(),
+        },
+        steps: Vec::new(),
+    };
+    if let Err(err) = out.prepare() {
+        ep.result.status = EpisodeStatus::InfraError(format!("cannot prepare the result folder: {err}"));
+        return ep.result;
+    }
+    if let Err(status) = ep.play(client, task, agent, config, out, started).await {
+        ep.result.status = status;
+    }
+    ep.result.elapsed_ms = ms(started.elapsed());
+    ep.result.timings = ep.steps.iter().map(|s| s.timings).collect();
+    if let Err(err) = out.finish(&ep.result, &ep.steps) {
+        tracing::error!(task = %task.name, error = %err, "cannot write the episode's results");
+        ep.result.status = EpisodeStatus::InfraError(format!("cannot write the results: {err}"));
+        ep.result.score = 0.0;
+    }
+    tracing::info!(
+        task = %task.name,
+        score = ep.result.score,
+        status = ep.result.status.kind(),
+        steps = ep.result.steps,
+        elapsed_ms = ep.result.elapsed_ms,
+        "episode finished"
+    );
+    ep.result
+}
+
+/// The episode being played: its record and its steps so far.
+struct Episode {
+    result: EpisodeResult,
+    steps: Vec<StepRecord>,
+}
+
+fn ms(d: Duration) -> u64 {
+    u64::try_from(d.as_millis()).unwrap_or(u64::MAX)
+}
+
+/// Whether a client error means the guest is out of reach (rather than refusing one call).
+fn unreachable(err: &ClientError) -> bool {
+    matches!(
+        err,
+        ClientError::Connect { .. }
+            | ClientError::Timeout { .. }
+            | ClientError::Io { .. }
+            | ClientError::NotReady { .. }
+    )
+}
+
+fn infra(what: &str, err: impl std::fmt::Display) -> EpisodeStatus {
+    EpisodeStatus::InfraError(format!("{what}: {err}"))
+}
+
+fn phase(report: &setup::StepReport, phase: &str) -> Value {
+    let mut value = serde_json::to_value(report).unwrap_or(Value::Null);
+    if let Value::Object(map) = &mut value {
+        map.insert("phase".into(), Value::String(phase.to_owned()));
+    }
+    value
+}
+
+impl Episode {
+    /// Steps 1 to 3 of the module documentation. `Err` is an infrastructure
+    /// error that ends the episode where it happened.
+    async fn play(
+        &mut self,
+        client: &GuestClient,
+        task: &Task,
+        agent: &mut dyn Agent,
+        config: &EpisodeConfig,
+        out: &TaskDir,
+        started: Instant,
+    ) -> Result<(), EpisodeStatus> {
+        agent.reset(task).await;
+        setup::reset(client).await.map_err(|err| infra("reset", err))?;
+        let ctx = SetupContext {
+            client: client.clone(),
+            cache: config.cache.clone(),
+            host_dir: out.setup_dir(),
+            settle: config.settle,
+        };
+        let reports = setup::run_steps(&ctx, &task.config).await;
+        self.result.setup.extend(reports.iter().map(|r| phase(r, "config")));
+        if setup::aborted(&reports) {
+            let detail = reports.last().map(|r| r.detail.clone()).unwrap_or_default();
+            return Err(EpisodeStatus::InfraError(format!("setup {detail}")));
+        }
+        self.result.setup_ms = ms(started.elapsed());
+
+        let screen = client.screen().await.map_err(|err| infra("reading the screen", err))?;
+        let mut computer = ComputerState::for_screen(
+            i32::try_from(screen.physical_width).unwrap_or(i32::MAX),
+            i32::try_from(screen.physical_height).unwrap_or(i32::MAX),
+        );
+        let mut last: Option<LastAction> = None;
+        for step in 1..=config.max_steps {
+            let (stop, step_last) = self.step(client, task, agent, config, out, &screen, &mut computer, step).await?;
+            if step_last.is_some() {
+                last = step_last;
+            }
+            if stop {
+                break;
+            }
+        }
+        self.result.last_action = match last {
+            None => "none",
+            Some(LastAction::Done) => "done",
+            Some(LastAction::Fail) => "fail",
+            Some(LastAction::Wait) => "wait",
+            Some(LastAction::Other) => "other",
+        }
+        .to_owned();
+
+        let eval_started = Instant::now();
+        let post = setup::run_steps(&ctx, &task.evaluator.postconfig).await;
+        self.result.setup.extend(post.iter().map(|r| phase(r, "postconfig")));
+        if setup::aborted(&post) {
+            let detail = post.last().map(|r| r.detail.clone()).unwrap_or_default();
+            return Err(EpisodeStatus::InfraError(format!("postconfig {detail}")));
+        }
+        let ectx = EvalContext { client: client.clone(), cache: config.cache.clone(), work_dir: out.eval_dir() };
+        let outcome = eval::evaluate(&ectx, &task.evaluator, last.as_ref()).await;
+        self.result.eval_ms = ms(eval_started.elapsed());
+        self.result.eval = serde_json::to_value(&outcome).unwrap_or(Value::Null);
+        // A getter that failed because the guest went away scored 0 for the
+        // wrong reason: find out before trusting the score.
+        if outcome.error.is_some() {
+            if let Err(err) = client.health().await {
+                return Err(infra("the guest stopped answering during evaluation", err));
+            }
+        }
+        self.result.score = outcome.score;
+        Ok(())
+    }
+
+    /// One step: observe, predict, act, record. Answers whether the episode
+    /// stops here and the step's last control word.
+    #[allow(clippy::too_many_arguments)]
+    async fn step(
+        &mut self,
+        client: &GuestClient,
+        task: &Task,
+        agent: &mut dyn Agent,
+        config: &EpisodeConfig,
+        out: &TaskDir,
+        screen: &arena_shared::observation::ScreenInfo,
+        computer: &mut ComputerState,
+        step: u32,
+    ) -> Result<(bool, Option<LastAction>), EpisodeStatus> {
+        let t_observe = Instant::now();
+        let obs = observe(client, task, config, screen, step).await?;
+        let observe_ms = ms(t_observe.elapsed());
+        let screenshot_file =
+            out.write_screenshot(step, &obs.screenshot_png).map_err(|err| infra("writing the screenshot", err))?;
+        let mut record = StepRecord {
+            step_num: step,
+            step,
+            action_timestamp: timestamp_now(),
+            action: String::new(),
+            response: String::new(),
+            actions: Vec::new(),
+            done: false,
+            screenshot_file,
+            timings: StepTimings { observe_ms, ..StepTimings::default() },
+            window_title: obs.foreground_title.clone(),
+            error: None,
+            outcomes: Vec::new(),
+        };
+        self.result.steps = step;
+
+        let t_predict = Instant::now();
+        let prediction = predict(agent, &obs, config).await;
+        record.timings.predict_ms = ms(t_predict.elapsed());
+        let prediction = match prediction {
+            Ok(p) => p,
+            Err(AgentError::Guest(err)) => {
+                self.push(out, record)?;
+                return Err(infra("the guest stopped answering", err));
+            }
+            Err(err) => {
+                let message = err.to_string();
+                record.error = Some(message.clone());
+                record.done = true;
+                self.result.status = EpisodeStatus::AgentError(message);
+                self.push(out, record)?;
+                return Ok((true, None));
+            }
+        };
+        record.response = prediction.response.clone();
+        record.actions = prediction.actions.clone();
+        record.action = prediction.actions.iter().map(AgentAction::summary).collect::<Vec<_>>().join("\n");
+        if let Some(raw) = &prediction.raw_error {
+            // The step is spent; the agent keeps the error to tell the model next time.
+            record.error = Some(raw.clone());
+        }
+
+        let t_act = Instant::now();
+        let mut stop = false;
+        let mut last = None;
+        let mut pause = Duration::ZERO;
+        for action in &prediction.actions {
+            match action {
+                AgentAction::Done | AgentAction::Fail => {
+                    last = Some(if *action == AgentAction::Done { LastAction::Done } else { LastAction::Fail });
+                    stop = true;
+                    break;
+                }
+                AgentAction::Wait => {
+                    last = Some(LastAction::Wait);
+                    pause += config.sleep_after_action;
+                    tokio::time::sleep(config.sleep_after_action).await;
+                }
+                _ => {
+                    last = Some(LastAction::Other);
+                    let run = agent::execute_with(client, action, prediction.marks.as_ref(), computer, &config.exec);
+                    match tokio::time::timeout(config.step_timeout, run).await {
+                        Ok(Ok(outcome)) => {
+                            if let Some(error) = &outcome.error {
+                                tracing::debug!(task = %task.name, step, error, "an action failed");
+                            }
+                            record.outcomes.push(serde_json::to_value(&outcome).unwrap_or(Value::Null));
+                        }
+                        Ok(Err(AgentError::Guest(err))) => {
+                            record.timings.act_ms = ms(t_act.elapsed());
+                            self.push(out, record)?;
+                            return Err(infra("the guest stopped answering", err));
+                        }
+                        Ok(Err(err)) => {
+                            record.outcomes.push(serde_json::json!({ "error": err.to_string() }));
+                        }
+                        Err(_) => {
+                            record.outcomes.push(serde_json::json!({ "error": format!("the action took longer than {} s", config.step_timeout.as_secs()) }));
+                        }
+                    }
+                    if !config.sleep_after_action.is_zero() {
+                        pause += config.sleep_after_action;
+                        tokio::time::sleep(config.sleep_after_action).await;
+                    }
+                }
+            }
+        }
+        record.timings.act_ms = ms(t_act.elapsed().saturating_sub(pause));
+        record.timings.pause_ms = ms(pause);
+        record.done = stop || step == config.max_steps;
+        self.push(out, record)?;
+        Ok((stop, last))
+    }
+
+    /// Records a step and rewrites the trajectory, so a crash keeps every finished step.
+    fn push(&mut self, out: &TaskDir, record: StepRecord) -> Result<(), EpisodeStatus> {
+        self.steps.push(record);
+        out.write_trajectory(&self.steps).map_err(|err| infra("writing the trajectory", err))
+    }
+}
+
+/// Asks the agent, retrying model failures within the step as configured.
+async fn predict(agent: &mut dyn Agent, obs: &Observation, config: &EpisodeConfig) -> Result<Prediction, AgentError> {
+    let mut tries = 0;
+    loop {
+        tries += 1;
+        let answer = match tokio::time::timeout(config.step_timeout, agent.predict(obs)).await {
+            Ok(answer) => answer,
+            Err(_) => Err(AgentError::Model {
+                endpoint: agent.name().to_owned(),
+                reason: format!("no answer within {} s", config.step_timeout.as_secs()),
+            }),
+        };
+        match answer {
+            Err(AgentError::Model { endpoint, reason }) if tries <= config.max_model_retries => {
+                tracing::warn!(%endpoint, %reason, tries, "the model failed; asking again");
+                tokio::time::sleep(Duration::from_millis(500 * u64::from(tries))).await;
+            }
+            other => return other,
+        }
+    }
+}
+
+/// Screenshot (required), windows (required), accessibility tree and clipboard
+/// (optional: a failure that is not an unreachable guest leaves them out).
+async fn observe(
+    client: &GuestClient,
+    task: &Task,
+    config: &EpisodeConfig,
+    screen: &arena_shared::observation::ScreenInfo,
+    step: u32,
+) -> Result<Observation, EpisodeStatus> {
+    // Upstream's full-screen frames come from QEMU and carry no cursor.
+    let query = ScreenshotQuery { format: ImageFormat::Png, cursor: Some(false), ..ScreenshotQuery::default() };
+    let (shot, windows, tree, clipboard) = tokio::join!(
+        client.screenshot(&query),
+        client.windows(),
+        async {
+            if config.a11y {
+                Some(client.a11y(&config.a11y_query).await)
+            } else {
+                None
+            }
+        },
+        client.clipboard_get(),
+    );
+    let shot = shot.map_err(|err| infra("taking the screenshot", err))?;
+    let windows = windows.map_err(|err| infra("listing windows", err))?;
+    let a11y = match tree {
+        None => None,
+        Some(Ok(tree)) => Some(tree),
+        Some(Err(err)) if unreachable(&err) => return Err(infra("reading the accessibility tree", err)),
+        Some(Err(err)) => {
+            tracing::warn!(task = %task.name, step, error = %err, "no accessibility tree this step");
+            None
+        }
+    };
+    let clipboard = match clipboard {
+        Ok(ClipboardContent::Text { text }) => Some(text),
+        Ok(_) => None,
+        Err(err) if unreachable(&err) => return Err(infra("reading the clipboard", err)),
+        Err(err) => {
+            tracing::debug!(error = %err, "no clipboard this step");
+            None
+        }
+    };
+    let foreground_title = windows.iter().find(|w| w.focused).map(|w| w.title.clone()).unwrap_or_default();
+    let window_titles =
+        windows.iter().filter(|w| w.visible && !w.minimized && !w.title.is_empty()).map(|w| w.title.clone()).collect();
+    Ok(Observation {
+        step,
+        instruction: task.instruction.clone(),
+        screenshot_png: shot.bytes,
+        screen: screen.clone(),
+        a11y,
+        window_titles,
+        foreground_title,
+        clipboard,
+    })
+}
+
+/// Makes a fresh agent for each episode.
+pub type AgentFactory = Arc<dyn Fn() -> Result<Box<dyn Agent>, AgentError> + Send + Sync>;
+
+/// The [`TaskRunner`] of real runs: a fresh agent per episode, results in the run's layout.
+#[derive(Clone)]
+pub struct EpisodeRunner {
+    pub layout: RunLayout,
+    pub config: EpisodeConfig,
+    pub agents: AgentFactory,
+}
+
+impl std::fmt::Debug for EpisodeRunner {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("EpisodeRunner")
+            .field("layout", &self.layout)
+            .field("config", &self.config)
+            .finish_non_exhaustive()
+    }
+}
+
+#[async_trait::async_trait]
+impl TaskRunner for EpisodeRunner {
+    async fn run(&self, guest: &GuestClient, task: &Task, attempt: u32) -> EpisodeResult {
+        let out = self.layout.task_dir(task);
+        match (self.agents)() {
+            Ok(mut agent) => run_attempt(guest, task, agent.as_mut(), &self.config, &out, attempt).await,
+            Err(err) => {
+                // Without an agent nothing can run anywhere: record it as the
+                // agent's failure so the run does not retry it on every guest.
+                let result = EpisodeResult {
+                    task_id: task.id.clone(),
+                    task_name: task.name.clone(),
+                    domain: task.domain.clone(),
+                    instruction: task.instruction.clone(),
+                    agent: String::new(),
+                    model: self.config.model.clone(),
+                    guest: guest.base_url().to_owned(),
+                    attempt,
+                    score: 0.0,
+                    status: EpisodeStatus::AgentError(format!("cannot create the agent: {err}")),
+                    steps: 0,
+                    last_action: "none".into(),
+                    elapsed_ms: 0,
+                    setup_ms: 0,
+                    eval_ms: 0,
+                    started_unix: unix_now(),
+                    setup: Vec::new(),
+                    eval: Value::Null,
+                    timings: Vec::new(),
+                };
+                if let Err(err) = out.prepare().and_then(|()| out.finish(&result, &[])) {
+                    tracing::error!(task = %task.name, error = %err, "cannot write the episode's results");
+                }
+                result
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use std::collections::VecDeque;
+    use std::path::PathBuf;
+
+    use super::*;
+    use crate::cli::stub::{start, RunningStub, StubArgs};
+    use crate::client::ClientConfig;
+    use crate::results::RESULT_FILE;
+
+    /// Answers from a script of results; a `None` entry stops the guest first.
+    struct Fake {
+        script: VecDeque<Option<Result<Prediction, AgentError>>>,
+        stub: Option<RunningStub>,
+    }
+
+    fn says(actions: Vec<AgentAction>) -> Option<Result<Prediction, AgentError>> {
+        Some(Ok(Prediction { response: "ok".into(), actions, marks: None, raw_error: None }))
+    }
+
+    fn model_down() -> Option<Result<Prediction, AgentError>> {
+        Some(Err(AgentError::Model { endpoint: "http://model".into(), reason: "503".into() }))
+    }
+
+    #[async_trait::async_trait]
+    impl Agent for Fake {
+        fn name(&self) -> &str {
+            "fake"
+        }
+
+        async fn reset(&mut self, _task: &Task) {}
+
+        async fn predict(&mut self, _obs: &Observation) -> Result<Prediction, AgentError> {
+            match self.script.pop_front() {
+                Some(Some(answer)) => answer,
+                Some(None) => {
+                    if let Some(stub) = self.stub.take() {
+                        stub.stop().await.expect("the stub stops");
+                    }
+                    Ok(Prediction {
+                        response: "typing".into(),
+                        actions: vec![AgentAction::Pyautogui("pyautogui.write('x')".into())],
+                        ..Prediction::default()
+                    })
+                }
+                None => Err(AgentError::Exhausted("script".into())),
+            }
+        }
+    }
+
+    fn task(func: &str) -> Task {
+        let evaluator = if func == "infeasible" {
+            r#"{"func": "infeasible"}"#.to_owned()
+        } else {
+            r#"{"func": "exact_match", "result": {"type": "vm_active_window_title"}, "expected": {"type": "rule", "rules": {"expected": "Untitled - Notepad"}}}"#.to_owned()
+        };
+        let text = format!(
+            r#"{{"id": "t", "instruction": "do it", "config": [{{"type": "launch", "parameters": {{"command": "notepad"}}}}], "evaluator": {evaluator}}}"#
+        );
+        Task::parse(&text, &PathBuf::from("/tasks/notepad/t.json")).unwrap()
+    }
+
+    async fn play(
+        task: &Task,
+        script: Vec<Option<Result<Prediction, AgentError>>>,
+        stop_guest: bool,
+    ) -> (EpisodeResult, TaskDir, tempfile::TempDir) {
+        let stub = start(&StubArgs::default(), None).await.unwrap();
+        let client =
+            GuestClient::new(&stub.url(), ClientConfig { token: None, timeout: Duration::from_secs(5), retries: 1 })
+                .unwrap();
+        let tmp = tempfile::tempdir().unwrap();
+        let mut config = EpisodeConfig::instant(DownloadCache::new(tmp.path().join("cache")).unwrap());
+        config.max_steps = 4;
+        let mut agent = Fake { script: script.into(), stub: None };
+        let keep = if stop_guest {
+            agent.stub = Some(stub);
+            None
+        } else {
+            Some(stub)
+        };
+        let out = TaskDir::new(tmp.path().join("out"));
+        let result = run_episode(&client, task, &mut agent, &config, &out).await;
+        if let Some(stub) = keep {
+            stub.stop().await.unwrap();
+        }
+        (result, out, tmp)
+    }
+
+    #[tokio::test]
+    async fn model_failures_are_retried_within_the_step() {
+        let (result, out, _tmp) =
+            play(&task("exact_match"), vec![model_down(), model_down(), says(vec![AgentAction::Done])], false).await;
+        assert_eq!(
+            (result.status.clone(), result.steps, result.score),
+            (EpisodeStatus::Completed, 1, 1.0),
+            "{result:?}"
+        );
+        assert_eq!(result.last_action, "done");
+        assert_eq!(std::fs::read_to_string(out.path().join(RESULT_FILE)).unwrap(), "1.0\n");
+    }
+
+    #[tokio::test]
+    async fn a_model_that_stays_down_is_an_agent_error_and_the_task_is_still_scored() {
+        let (result, out, _tmp) =
+            play(&task("exact_match"), vec![model_down(), model_down(), model_down()], false).await;
+        assert!(matches!(&result.status, EpisodeStatus::AgentError(m) if m.contains("503")), "{:?}", result.status);
+        // Notepad is still in front: the evaluation ran and counts.
+        assert_eq!(result.score, 1.0);
+        assert!(out.is_finished());
+        let traj = out.read_trajectory().unwrap();
+        assert_eq!(traj.len(), 1);
+        assert!(traj[0].done && traj[0].error.as_deref().unwrap_or("").contains("503"));
+    }
+
+    #[tokio::test]
+    async fn malformed_output_spends_a_step_and_the_cap_ends_the_loop() {
+        let malformed = Some(Ok(Prediction {
+            response: "no code here".into(),
+            actions: vec![],
+            marks: None,
+            raw_error: Some("no code block".into()),
+        }));
+        let script = vec![
+            malformed,
+            says(vec![AgentAction::Wait]),
+            says(vec![AgentAction::Wait]),
+            says(vec![AgentAction::Wait]),
+        ];
+        let (result, out, _tmp) = play(&task("infeasible"), script, false).await;
+        assert_eq!(
+            (result.status.clone(), result.steps, result.last_action.as_str()),
+            (EpisodeStatus::Completed, 4, "wait")
+        );
+        assert_eq!(result.score, 0.0, "an infeasible task not answered with FAIL");
+        let traj = out.read_trajectory().unwrap();
+        assert_eq!(traj.len(), 4);
+        assert_eq!(traj[0].error.as_deref(), Some("no code block"));
+        assert!(traj[3].done && !traj[2].done);
+        for (i, step) in traj.iter().enumerate() {
+            assert_eq!(step.step, i as u32 + 1);
+            assert!(out.path().join(&step.screenshot_file).is_file());
+        }
+        assert_eq!(result.timings.len(), 4);
+    }
+
+    #[tokio::test]
+    async fn fail_scores_an_infeasible_task() {
+        let (result, _out, _tmp) = play(&task("infeasible"), vec![says(vec![AgentAction::Fail])], false).await;
+        assert_eq!((result.score, result.last_action.as_str(), result.steps), (1.0, "fail", 1));
+    }
+
+    #[tokio::test]
+    async fn a_guest_that_dies_mid_episode_is_an_infrastructure_error_without_a_result() {
+        let (result, out, _tmp) = play(&task("exact_match"), vec![says(vec![AgentAction::Wait]), None], true).await;
+        assert!(
+            matches!(&result.status, EpisodeStatus::InfraError(m) if m.contains("stopped answering")),
+            "{:?}",
+            result.status
+        );
+        assert!(!out.is_finished(), "no result.txt: the run will try again");
+        assert_eq!(out.read_episode().unwrap().status, result.status);
+        assert_eq!(out.read_trajectory().unwrap().len(), 2, "the steps before the failure are kept");
+    }
+}

@@ -1,0 +1,279 @@
+//! `report.html`: the run's table, a bar chart of success per domain, and
+//! every task's trajectory with its screenshots, in one HTML file.
+//!
+//! The file is self-contained in the sense of the result *folder*: CSS and
+//! the chart (SVG) are inline and nothing is fetched from a network or needs
+//! a server, but screenshots are linked relatively (`<domain>/<task>/step_1.png`)
+//! rather than embedded, which keeps the file small (a 20-task run with 15
+//! steps would otherwise carry 300 PNGs as base64). Open it from the folder it
+//! was written into, or copy the folder with it.
+//!
+//! It is not a templating engine: the page is written with `format!` and every
+//! text from a task or a model goes through [`escape`].
+
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+
+use super::summary::{DomainRow, Summary};
+use super::{read_trajectory, scan, write_atomic, FoundTask, ResultsError, StepRecord, REPORT_HTML, TRAJ_FILE};
+
+/// Escapes text for HTML element content and attribute values.
+pub fn escape(text: &str) -> String {
+    let mut out = String::with_capacity(text.len());
+    for c in text.chars() {
+        match c {
+            '&' => out.push_str("&amp;"),
+            '<' => out.push_str("&lt;"),
+            '>' => out.push_str("&gt;"),
+            '"' => out.push_str("&quot;"),
+            '\'' => out.push_str("&#39;"),
+            _ => out.push(c),
+        }
+    }
+    out
+}
+
+/// Percent-encodes a relative path for an `href`/`src`, keeping `/`.
+fn url_path(path: &str) -> String {
+    let mut out = String::with_capacity(path.len());
+    for b in path.bytes() {
+        if b.is_ascii_alphanumeric() || matches!(b, b'-' | b'_' | b'.' | b'~' | b'/' | b'@' | b'+') {
+            out.push(b as char);
+        } else {
+            let _ = write!(out, "%{b:02X}");
+        }
+    }
+    out
+}
+
+const STYLE: &str = "
+body{font-family:system-ui,-apple-system,Segoe UI,Roboto,sans-serif;margin:2rem;color:#1d232a;background:#fafbfc}
+h1{font-size:1.6rem;margin-bottom:.2rem} h2{margin-top:2rem;border-bottom:1px solid #d0d7de;padding-bottom:.3rem}
+table{border-collapse:collapse;margin:1rem 0;background:#fff}
+th,td{border:1px solid #d0d7de;padding:.35rem .6rem;text-align:left;font-size:.9rem}
+th{background:#eef1f4} td.num{text-align:right;font-variant-numeric:tabular-nums}
+tr.overall td{font-weight:700;background:#f3f6f9}
+.ok{color:#116329;font-weight:600} .bad{color:#a40e26;font-weight:600} .warn{color:#9a6700;font-weight:600}
+details{background:#fff;border:1px solid #d0d7de;border-radius:6px;margin:.5rem 0;padding:.4rem .8rem}
+summary{cursor:pointer;font-weight:600}
+.step{display:flex;gap:1rem;border-top:1px solid #eaeef2;padding:.6rem 0;align-items:flex-start}
+.step img{max-width:480px;width:40vw;border:1px solid #d0d7de}
+pre{white-space:pre-wrap;word-break:break-word;background:#f6f8fa;padding:.5rem;border-radius:4px;font-size:.8rem;margin:.3rem 0}
+.meta{color:#57606a;font-size:.85rem}
+";
+
+/// Renders the report of the tasks found under `root`, with their trajectories.
+pub fn render(summary: &Summary, found: &[FoundTask], title: &str) -> String {
+    let mut html = String::new();
+    let _ = write!(
+        html,
+        "<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\"><meta name=\"viewport\" content=\"width=device-width\">\
+         <title>{}</title><style>{STYLE}</style></head><body>\n",
+        escape(title)
+    );
+    let o = &summary.overall;
+    let _ = writeln!(
+        html,
+        "<h1>{}</h1><p class=\"meta\" id=\"overall\">{} of {} finished tasks solved ({:.1}%), mean score {:.3}; {} unfinished.</p>",
+        escape(title),
+        o.successes,
+        o.tasks,
+        o.success_rate,
+        o.mean_score,
+        o.unfinished
+    );
+    html.push_str("<h2>Success per domain</h2>\n");
+    html.push_str(&chart(&summary.domains, o));
+    html.push_str(&table(summary));
+    html.push_str("<h2>Tasks</h2>\n");
+    for task in found {
+        html.push_str(&task_section(task));
+    }
+    html.push_str("</body></html>\n");
+    html
+}
+
+/// A horizontal bar per domain and one for the total: the success rate, with `successes/tasks`.
+fn chart(domains: &[DomainRow], overall: &DomainRow) -> String {
+    const LABEL: u32 = 170;
+    const BAR: u32 = 360;
+    const ROW: u32 = 26;
+    let rows: Vec<&DomainRow> = domains.iter().chain(std::iter::once(overall)).collect();
+    let height = ROW * rows.len() as u32 + 24;
+    let width = LABEL + BAR + 130;
+    let mut svg = format!(
+        "<svg xmlns=\"http://www.w3.org/2000/svg\" id=\"chart\" role=\"img\" aria-label=\"success rate per domain\" width=\"{width}\" height=\"{height}\" viewBox=\"0 0 {width} {height}\" font-family=\"sans-serif\" font-size=\"13\">\n"
+    );
+    for pct in [0u32, 50, 100] {
+        let x = LABEL + BAR * pct / 100;
+        let _ = writeln!(svg, "<line x1=\"{x}\" y1=\"0\" x2=\"{x}\" y2=\"{}\" stroke=\"#d0d7de\"/><text x=\"{x}\" y=\"{}\" text-anchor=\"middle\" fill=\"#57606a\">{pct}%</text>", height - 18, height - 4);
+    }
+    for (i, row) in rows.iter().enumerate() {
+        let y = ROW * i as u32 + 4;
+        let w = (row.success_rate.clamp(0.0, 100.0) / 100.0 * f64::from(BAR)).round() as u32;
+        let is_total = i + 1 == rows.len();
+        let fill = if is_total { "#0969da" } else { "#54aeff" };
+        let _ = writeln!(
+            svg,
+            "<text x=\"{}\" y=\"{}\" text-anchor=\"end\"{}>{}</text><rect x=\"{LABEL}\" y=\"{y}\" width=\"{w}\" height=\"{}\" fill=\"{fill}\"/><text x=\"{}\" y=\"{}\">{}/{} ({:.1}%)</text>",
+            LABEL - 8,
+            y + 15,
+            if is_total { " font-weight=\"bold\"" } else { "" },
+            escape(&row.domain),
+            ROW - 8,
+            LABEL + w + 6,
+            y + 15,
+            row.successes,
+            row.tasks,
+            row.success_rate
+        );
+    }
+    svg.push_str("</svg>\n");
+    svg
+}
+
+fn table(summary: &Summary) -> String {
+    let mut t = String::from(
+        "<table id=\"summary\"><thead><tr><th>Domain</th><th>Tasks</th><th>Successes</th><th>Success rate</th><th>Mean score</th>\
+         <th>Avg steps</th><th>Avg time (s)</th><th>Agent errors</th><th>Unfinished</th></tr></thead><tbody>\n",
+    );
+    for (row, class) in
+        summary.domains.iter().map(|r| (r, "")).chain(std::iter::once((&summary.overall, " class=\"overall\"")))
+    {
+        let _ = writeln!(
+            t,
+            "<tr{class}><td>{}</td><td class=\"num\">{}</td><td class=\"num\">{}</td><td class=\"num\">{:.1}%</td><td class=\"num\">{:.3}</td>\
+             <td class=\"num\">{:.1}</td><td class=\"num\">{:.1}</td><td class=\"num\">{}</td><td class=\"num\">{}</td></tr>",
+            escape(&row.domain),
+            row.tasks,
+            row.successes,
+            row.success_rate,
+            row.mean_score,
+            row.avg_steps,
+            row.avg_seconds,
+            row.agent_errors,
+            row.unfinished
+        );
+    }
+    t.push_str("</tbody></table>\n");
+    t.push_str("<table id=\"tasks\"><thead><tr><th>Domain</th><th>Task</th><th>Score</th><th>Status</th><th>Steps</th><th>Time (s)</th><th>Attempt</th><th>Guest</th></tr></thead><tbody>\n");
+    for task in &summary.tasks {
+        let (class, score) = match task.score {
+            Some(s) if task.success => ("ok", super::python_float(s)),
+            Some(s) => ("bad", super::python_float(s)),
+            None => ("warn", "-".to_owned()),
+        };
+        let _ = writeln!(
+            t,
+            "<tr><td>{}</td><td><a href=\"#{}\">{}</a></td><td class=\"num {class}\">{score}</td><td>{}</td><td class=\"num\">{}</td><td class=\"num\">{:.1}</td><td class=\"num\">{}</td><td>{}</td></tr>",
+            escape(&task.domain),
+            anchor(&task.path),
+            escape(&task.name),
+            escape(&task.status),
+            task.steps,
+            task.elapsed_ms as f64 / 1000.0,
+            task.attempt,
+            escape(&task.guest)
+        );
+    }
+    t.push_str("</tbody></table>\n");
+    t
+}
+
+fn anchor(path: &str) -> String {
+    let id: String = path.chars().map(|c| if c.is_ascii_alphanumeric() || c == '-' { c } else { '_' }).collect();
+    format!("t-{id}")
+}
+
+fn relative_str(path: &Path) -> String {
+    path.components().map(|c| c.as_os_str().to_string_lossy().into_owned()).collect::<Vec<_>>().join("/")
+}
+
+fn task_section(task: &FoundTask) -> String {
+    let rel = relative_str(&task.relative);
+    let mut s = String::new();
+    let (class, score) = match task.score {
+        Some(v) if v >= 1.0 - 1e-9 => ("ok", super::python_float(v)),
+        Some(v) => ("bad", super::python_float(v)),
+        None => ("warn", "unfinished".to_owned()),
+    };
+    let _ = writeln!(
+        s,
+        "<details id=\"{}\"><summary>{} / {} &mdash; <span class=\"{class}\">{score}</span></summary>",
+        anchor(&rel),
+        escape(&task.domain()),
+        escape(&task.name())
+    );
+    if let Some(ep) = &task.episode {
+        let _ = writeln!(
+            s,
+            "<p>{}</p><p class=\"meta\">agent {} &middot; model {} &middot; guest {} &middot; {} steps &middot; {:.1} s (setup {:.1} s, evaluation {:.1} s) &middot; attempt {} &middot; last action {}</p>",
+            escape(&ep.instruction),
+            escape(&ep.agent),
+            escape(&ep.model),
+            escape(&ep.guest),
+            ep.steps,
+            ep.elapsed_ms as f64 / 1000.0,
+            ep.setup_ms as f64 / 1000.0,
+            ep.eval_ms as f64 / 1000.0,
+            ep.attempt,
+            escape(&ep.last_action)
+        );
+        if let Some(message) = ep.status.message() {
+            let _ = writeln!(s, "<p class=\"bad\">{}: {}</p>", escape(ep.status.kind()), escape(message));
+        }
+        if !ep.eval.is_null() {
+            let eval = serde_json::to_string_pretty(&ep.eval).unwrap_or_default();
+            let _ = writeln!(s, "<details><summary>evaluation</summary><pre>{}</pre></details>", escape(&eval));
+        }
+    }
+    match read_trajectory(&task.dir.path().join(TRAJ_FILE)) {
+        Ok(steps) => {
+            for step in &steps {
+                s.push_str(&step_html(&rel, step));
+            }
+        }
+        Err(err) => {
+            let _ = write!(s, "<p class=\"bad\">{}</p>", escape(&err.to_string()));
+        }
+    }
+    s.push_str("</details>\n");
+    s
+}
+
+fn step_html(rel: &str, step: &StepRecord) -> String {
+    let src = url_path(&format!("{rel}/{}", step.screenshot_file));
+    let t = &step.timings;
+    let mut s = format!(
+        "<div class=\"step\"><a href=\"{src}\"><img loading=\"lazy\" src=\"{src}\" alt=\"step {n} screenshot\"></a><div>\
+         <p><b>Step {n}</b> <span class=\"meta\">{} &middot; window {} &middot; observe {} ms, predict {} ms, act {} ms</span></p>\
+         <pre>{}</pre><p class=\"meta\">response</p><pre>{}</pre>",
+        escape(&step.action_timestamp),
+        escape(&step.window_title),
+        t.observe_ms,
+        t.predict_ms,
+        t.act_ms,
+        escape(&step.action),
+        escape(&step.response),
+        n = step.step_num
+    );
+    if let Some(error) = &step.error {
+        let _ = write!(s, "<p class=\"bad\">{}</p>", escape(error));
+    }
+    s.push_str("</div></div>\n");
+    s
+}
+
+/// Scans `root`, writes `summary.json`, `summary.md` and `report.html` there, and returns the summary.
+///
+/// # Errors
+///
+/// `root` cannot be read or a file cannot be written.
+pub fn write_report(root: &Path, title: &str) -> Result<(Summary, PathBuf), ResultsError> {
+    let found = scan(root)?;
+    let summary = Summary::from_found(&found);
+    summary.write(root)?;
+    let path = root.join(REPORT_HTML);
+    write_atomic(&path, render(&summary, &found, title).as_bytes())?;
+    Ok((summary, path))
+}

@@ -1,0 +1,622 @@
+//! Result folders of a run: where each task's trajectory, screenshots, score
+//! and record go, and how they are read back.
+//!
+//! The layout is upstream's (`lib_run_single.py` under `run.py`'s result
+//! directory), so upstream's `show_result.py` reads it:
+//!
+//! ```text
+//! <out>/<agent>/<observation>/<model>/<domain>/<task name>/
+//!     result.txt     the score as text ("1.0"), written LAST
+//!     traj.jsonl     one JSON object per step ([`StepRecord`])
+//!     step_<n>.png   the screenshot the agent saw at step n (1-based)
+//!     episode.json   our full record ([`EpisodeResult`])
+//!     setup/, eval/  files setup steps and getters wrote
+//! ```
+//!
+//! Every file is written to a temporary name beside it and renamed into
+//! place, and `result.txt` is written after everything else, so a run that
+//! crashes loses nothing already written, and a folder holding `result.txt`
+//! is a finished task (what resuming relies on). An episode that ends in an
+//! infrastructure error gets an `episode.json` but no `result.txt`, so the
+//! next run of the same folder tries it again.
+//!
+//! This module does no guest I/O and knows nothing of agents; [`summary`]
+//! aggregates folders into the paper's table and [`html`] renders the report.
+//!
+//! # Layout
+//!
+//! - this file: [`RunLayout`], [`TaskDir`], the records, atomic writes, scanning.
+//! - [`summary`]: [`summary::Summary`], `summary.json` and `summary.md`.
+//! - [`html`]: the HTML report, `report.html`.
+
+pub mod html;
+pub mod summary;
+
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use std::time::{SystemTime, UNIX_EPOCH};
+
+use serde::{Deserialize, Serialize};
+use serde_json::Value;
+
+use crate::agent::AgentAction;
+use crate::task::Task;
+
+/// The score file upstream writes and reads.
+pub const RESULT_FILE: &str = "result.txt";
+/// The trajectory, one JSON object per step.
+pub const TRAJ_FILE: &str = "traj.jsonl";
+/// Our full record of the episode.
+pub const EPISODE_FILE: &str = "episode.json";
+/// Machine-readable run summary, at the root of a result folder.
+pub const SUMMARY_JSON: &str = "summary.json";
+/// The summary as a Markdown table.
+pub const SUMMARY_MD: &str = "summary.md";
+/// The HTML report.
+pub const REPORT_HTML: &str = "report.html";
+
+/// A result file could not be written or read. Always names the path.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum ResultsError {
+    #[error("{path}: {source}")]
+    Io {
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+    #[error("{path}: {message}")]
+    Format { path: PathBuf, message: String },
+}
+
+impl ResultsError {
+    fn io(path: &Path, source: std::io::Error) -> ResultsError {
+        ResultsError::Io { path: path.to_owned(), source }
+    }
+}
+
+/// How an episode ended.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(tag = "kind", content = "message", rename_all = "snake_case")]
+pub enum EpisodeStatus {
+    /// The loop ran to DONE, FAIL or the step cap, and the task was evaluated.
+    Completed,
+    /// The agent failed (its model kept failing, its output could not be run);
+    /// the task was still evaluated and the score counts.
+    AgentError(String),
+    /// The guest or the host's setup failed (unreachable guest, failed
+    /// download, reset that did not work): the score says nothing about the
+    /// agent, no `result.txt` is written, and the task is tried again.
+    InfraError(String),
+}
+
+impl EpisodeStatus {
+    /// `completed`, `agent_error` or `infra_error`.
+    pub fn kind(&self) -> &'static str {
+        match self {
+            EpisodeStatus::Completed => "completed",
+            EpisodeStatus::AgentError(_) => "agent_error",
+            EpisodeStatus::InfraError(_) => "infra_error",
+        }
+    }
+
+    /// The error message, if any.
+    pub fn message(&self) -> Option<&str> {
+        match self {
+            EpisodeStatus::Completed => None,
+            EpisodeStatus::AgentError(m) | EpisodeStatus::InfraError(m) => Some(m),
+        }
+    }
+
+    pub fn is_infra(&self) -> bool {
+        matches!(self, EpisodeStatus::InfraError(_))
+    }
+}
+
+/// Host-side timings of one step, in milliseconds.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+pub struct StepTimings {
+    /// Screenshot, accessibility tree, windows and clipboard.
+    pub observe_ms: u64,
+    /// The agent's `predict` (Set-of-Marks and the model call, when it has them).
+    pub predict_ms: u64,
+    /// Executing every action of the step.
+    pub act_ms: u64,
+    /// The pause after the actions (`sleep_after_action`, upstream's `--sleep_after_execution`).
+    #[serde(default)]
+    pub pause_ms: u64,
+}
+
+/// One line of `traj.jsonl`.
+///
+/// The first fields are upstream's (`step_num`, `action_timestamp`, `action`,
+/// `response`, `done`, `screenshot_file`); the rest are ours. `actions` holds
+/// the agent's actions in their serialised form, which is what the replay
+/// agent reads back.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct StepRecord {
+    /// 1-based step number.
+    pub step_num: u32,
+    /// The same number under the name the replay agent reads ([`crate::agent::replay`]).
+    pub step: u32,
+    /// `YYYYMMDD@HHMMSS` (UTC) when the step's actions started, as upstream writes it.
+    pub action_timestamp: String,
+    /// The actions as upstream logs them: code blocks and control words, one per line.
+    pub action: String,
+    /// The agent's raw response (the model's text).
+    pub response: String,
+    /// The actions, tagged by kind (`{"kind": "computer", "code": "..."}`), as the replay agent reads them.
+    #[serde(default)]
+    pub actions: Vec<AgentAction>,
+    /// Whether the episode ended with this step (DONE, FAIL or an error).
+    pub done: bool,
+    /// The screenshot the agent saw (`step_<n>.png`), in the task folder.
+    pub screenshot_file: String,
+    #[serde(default)]
+    pub timings: StepTimings,
+    /// The foreground window's title when observed.
+    #[serde(default)]
+    pub window_title: String,
+    /// What went wrong in this step: unparsable model output, a failed action.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub error: Option<String>,
+    /// Per-action outcomes the agent's executor reported (free-form).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub outcomes: Vec<Value>,
+}
+
+/// Everything about one episode; `episode.json`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct EpisodeResult {
+    pub task_id: String,
+    /// The file stem: upstream's name for the task and its folder.
+    pub task_name: String,
+    pub domain: String,
+    pub instruction: String,
+    pub agent: String,
+    #[serde(default)]
+    pub model: String,
+    /// The guest the episode ran on.
+    #[serde(default)]
+    pub guest: String,
+    /// 1 for the first try; higher when an infrastructure error made the run try again.
+    #[serde(default = "one")]
+    pub attempt: u32,
+    /// 0.0 to 1.0; 0.0 for an infrastructure error.
+    pub score: f64,
+    pub status: EpisodeStatus,
+    /// Steps the agent took.
+    pub steps: u32,
+    /// The agent's last control word: `done`, `fail`, `wait` or `none`.
+    #[serde(default)]
+    pub last_action: String,
+    /// Wall time of the whole episode, reset to evaluation.
+    pub elapsed_ms: u64,
+    /// Wall time of reset and setup.
+    #[serde(default)]
+    pub setup_ms: u64,
+    /// Wall time of post-config and evaluation.
+    #[serde(default)]
+    pub eval_ms: u64,
+    /// Seconds since the Unix epoch when the episode started.
+    #[serde(default)]
+    pub started_unix: u64,
+    /// Reports of the setup steps (config and postconfig), as [`crate::setup`] gives them.
+    #[serde(default)]
+    pub setup: Vec<Value>,
+    /// The evaluation outcome, as [`crate::eval`] gives it (`null` when it did not run).
+    #[serde(default)]
+    pub eval: Value,
+    /// The per-step timings, in step order (a copy of what `traj.jsonl` holds).
+    #[serde(default)]
+    pub timings: Vec<StepTimings>,
+}
+
+fn one() -> u32 {
+    1
+}
+
+impl EpisodeResult {
+    /// Whether the task counts as solved: a score of 1 (within rounding).
+    pub fn success(&self) -> bool {
+        !self.status.is_infra() && self.score >= 1.0 - 1e-9
+    }
+}
+
+/// Folder names are kept to a safe alphabet: path separators and other
+/// characters a model name may hold (`meta/llama-3:70b`) become `_`.
+pub fn safe_component(text: &str) -> String {
+    let cleaned: String = text
+        .chars()
+        .map(|c| if c.is_ascii_alphanumeric() || matches!(c, '-' | '_' | '.' | '@' | '+') { c } else { '_' })
+        .collect();
+    match cleaned.as_str() {
+        "" | "." | ".." => "_".to_owned(),
+        _ => cleaned,
+    }
+}
+
+/// Where a run writes: `<root>/<agent>/<observation>/<model>/`.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct RunLayout {
+    pub root: PathBuf,
+    /// The action space or agent name (upstream's `--action_space`, e.g. `code_block`).
+    pub agent: String,
+    /// Upstream's `--observation_type` (`a11y_tree`, `screenshot`, ...).
+    pub observation: String,
+    pub model: String,
+}
+
+impl RunLayout {
+    /// The folder the domains go in.
+    pub fn base(&self) -> PathBuf {
+        self.root
+            .join(safe_component(&self.agent))
+            .join(safe_component(&self.observation))
+            .join(safe_component(&self.model))
+    }
+
+    /// The folder of one task (not created).
+    pub fn task_dir(&self, task: &Task) -> TaskDir {
+        TaskDir::new(self.base().join(safe_component(&task.domain)).join(safe_component(&task.name)))
+    }
+}
+
+/// One task's result folder.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct TaskDir {
+    path: PathBuf,
+}
+
+impl TaskDir {
+    pub fn new(path: PathBuf) -> TaskDir {
+        TaskDir { path }
+    }
+
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+
+    /// Where setup steps put the stdout/stderr files `execute` names.
+    pub fn setup_dir(&self) -> PathBuf {
+        self.path.join("setup")
+    }
+
+    /// Where getters put their `dest` files.
+    pub fn eval_dir(&self) -> PathBuf {
+        self.path.join("eval")
+    }
+
+    /// Whether the task is finished: its `result.txt` holds a score.
+    pub fn is_finished(&self) -> bool {
+        read_score(&self.path.join(RESULT_FILE)).is_ok()
+    }
+
+    /// Empties the folder (the leftovers of an unfinished try) and creates it with
+    /// its `setup/` and `eval/` subfolders.
+    ///
+    /// # Errors
+    ///
+    /// The folder cannot be removed or created.
+    pub fn prepare(&self) -> Result<(), ResultsError> {
+        match std::fs::remove_dir_all(&self.path) {
+            Ok(()) => {}
+            Err(err) if err.kind() == std::io::ErrorKind::NotFound => {}
+            Err(err) => return Err(ResultsError::io(&self.path, err)),
+        }
+        for dir in [self.path.clone(), self.setup_dir(), self.eval_dir()] {
+            std::fs::create_dir_all(&dir).map_err(|err| ResultsError::io(&dir, err))?;
+        }
+        Ok(())
+    }
+
+    /// The screenshot file name of step `n`.
+    pub fn screenshot_name(step: u32) -> String {
+        format!("step_{step}.png")
+    }
+
+    /// Writes the screenshot of step `step` and returns its file name.
+    ///
+    /// # Errors
+    ///
+    /// The file cannot be written.
+    pub fn write_screenshot(&self, step: u32, png: &[u8]) -> Result<String, ResultsError> {
+        let name = TaskDir::screenshot_name(step);
+        write_atomic(&self.path.join(&name), png)?;
+        Ok(name)
+    }
+
+    /// Rewrites `traj.jsonl` with `steps` (atomically, so a crash leaves the
+    /// previous complete version, never a torn line).
+    ///
+    /// # Errors
+    ///
+    /// The file cannot be written.
+    pub fn write_trajectory(&self, steps: &[StepRecord]) -> Result<(), ResultsError> {
+        let path = self.path.join(TRAJ_FILE);
+        let mut text = String::new();
+        for step in steps {
+            let line = serde_json::to_string(step)
+                .map_err(|err| ResultsError::Format { path: path.clone(), message: err.to_string() })?;
+            text.push_str(&line);
+            text.push('\n');
+        }
+        write_atomic(&path, text.as_bytes())
+    }
+
+    /// Writes `episode.json`.
+    ///
+    /// # Errors
+    ///
+    /// The file cannot be written.
+    pub fn write_episode(&self, episode: &EpisodeResult) -> Result<(), ResultsError> {
+        let path = self.path.join(EPISODE_FILE);
+        let text = serde_json::to_vec_pretty(episode)
+            .map_err(|err| ResultsError::Format { path: path.clone(), message: err.to_string() })?;
+        write_atomic(&path, &text)
+    }
+
+    /// Writes `result.txt` as upstream does (`f"{score}\n"`, so `1.0`, `0.0`,
+    /// `0.5`). Call it last: it marks the task finished.
+    ///
+    /// # Errors
+    ///
+    /// The file cannot be written.
+    pub fn write_result(&self, score: f64) -> Result<(), ResultsError> {
+        write_atomic(&self.path.join(RESULT_FILE), format!("{}\n", python_float(score)).as_bytes())
+    }
+
+    /// Writes a whole episode's files in the order that keeps a crash harmless:
+    /// trajectory, record, and `result.txt` last (only when the episode was not
+    /// an infrastructure error).
+    ///
+    /// # Errors
+    ///
+    /// The first file that cannot be written.
+    pub fn finish(&self, episode: &EpisodeResult, steps: &[StepRecord]) -> Result<(), ResultsError> {
+        self.write_trajectory(steps)?;
+        self.write_episode(episode)?;
+        if !episode.status.is_infra() {
+            self.write_result(episode.score)?;
+        }
+        Ok(())
+    }
+
+    /// Reads `episode.json`.
+    ///
+    /// # Errors
+    ///
+    /// The file is missing or malformed.
+    pub fn read_episode(&self) -> Result<EpisodeResult, ResultsError> {
+        read_episode(&self.path.join(EPISODE_FILE))
+    }
+
+    /// Reads `traj.jsonl` (an absent file is an empty trajectory).
+    ///
+    /// # Errors
+    ///
+    /// A line that is not a [`StepRecord`].
+    pub fn read_trajectory(&self) -> Result<Vec<StepRecord>, ResultsError> {
+        read_trajectory(&self.path.join(TRAJ_FILE))
+    }
+}
+
+/// Formats a score as Python's `str(float)` does for the values scores take
+/// (`1.0`, `0.0`, `0.5`, `0.3333333333333333`).
+pub fn python_float(value: f64) -> String {
+    if !value.is_finite() {
+        return if value.is_nan() {
+            "nan".into()
+        } else if value > 0.0 {
+            "inf".into()
+        } else {
+            "-inf".into()
+        };
+    }
+    if value.fract() == 0.0 && value.abs() < 1e16 {
+        format!("{value:.1}")
+    } else {
+        format!("{value}")
+    }
+}
+
+/// Reads a `result.txt`: one number, as upstream writes it (Python's float
+/// repr, possibly `True`/`False` from a metric that returned a bool).
+///
+/// # Errors
+///
+/// The file is missing or holds no number.
+pub fn read_score(path: &Path) -> Result<f64, ResultsError> {
+    let text = std::fs::read_to_string(path).map_err(|err| ResultsError::io(path, err))?;
+    let word = text.trim();
+    match word {
+        "True" => return Ok(1.0),
+        "False" => return Ok(0.0),
+        _ => {}
+    }
+    word.parse::<f64>().ok().filter(|s| s.is_finite()).ok_or_else(|| ResultsError::Format {
+        path: path.to_owned(),
+        message: format!("not a score: {:?}", truncate(word, 40)),
+    })
+}
+
+/// Reads an `episode.json`.
+///
+/// # Errors
+///
+/// The file is missing or malformed.
+pub fn read_episode(path: &Path) -> Result<EpisodeResult, ResultsError> {
+    let bytes = std::fs::read(path).map_err(|err| ResultsError::io(path, err))?;
+    serde_json::from_slice(&bytes)
+        .map_err(|err| ResultsError::Format { path: path.to_owned(), message: err.to_string() })
+}
+
+/// Reads a `traj.jsonl` (an absent file is an empty trajectory; blank lines are skipped).
+///
+/// # Errors
+///
+/// A line that is not a [`StepRecord`], naming its number.
+pub fn read_trajectory(path: &Path) -> Result<Vec<StepRecord>, ResultsError> {
+    let text = match std::fs::read_to_string(path) {
+        Ok(text) => text,
+        Err(err) if err.kind() == std::io::ErrorKind::NotFound => return Ok(Vec::new()),
+        Err(err) => return Err(ResultsError::io(path, err)),
+    };
+    text.lines()
+        .enumerate()
+        .filter(|(_, line)| !line.trim().is_empty())
+        .map(|(idx, line)| {
+            serde_json::from_str(line).map_err(|err| ResultsError::Format {
+                path: path.to_owned(),
+                message: format!("line {}: {err}", idx + 1),
+            })
+        })
+        .collect()
+}
+
+fn truncate(text: &str, max: usize) -> &str {
+    let mut end = text.len().min(max);
+    while !text.is_char_boundary(end) {
+        end -= 1;
+    }
+    &text[..end]
+}
+
+/// Writes `bytes` to `path` through a temporary file in the same folder and a
+/// rename, so readers (and a crash) see the old file or the new one, never half.
+///
+/// # Errors
+///
+/// The folder is missing or not writable, or the disk is full.
+pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), ResultsError> {
+    let dir = match path.parent() {
+        Some(parent) if !parent.as_os_str().is_empty() => parent,
+        _ => Path::new("."),
+    };
+    let mut temp =
+        tempfile::Builder::new().prefix(".partial-").tempfile_in(dir).map_err(|err| ResultsError::io(path, err))?;
+    temp.write_all(bytes).map_err(|err| ResultsError::io(path, err))?;
+    temp.persist(path).map_err(|err| ResultsError::io(path, err.error))?;
+    Ok(())
+}
+
+/// A task folder found under a result root.
+#[derive(Debug, Clone, PartialEq)]
+pub struct FoundTask {
+    pub dir: TaskDir,
+    /// The folder relative to the root it was found under.
+    pub relative: PathBuf,
+    /// `result.txt`'s score, when the task is finished.
+    pub score: Option<f64>,
+    /// `episode.json`, when present and readable.
+    pub episode: Option<EpisodeResult>,
+}
+
+impl FoundTask {
+    /// The task's domain: from its record, else its parent folder's name.
+    pub fn domain(&self) -> String {
+        match &self.episode {
+            Some(ep) => ep.domain.clone(),
+            None => self
+                .relative
+                .parent()
+                .and_then(|p| p.file_name())
+                .map(|n| n.to_string_lossy().into_owned())
+                .unwrap_or_default(),
+        }
+    }
+
+    /// The task's name: from its record, else its folder's name.
+    pub fn name(&self) -> String {
+        match &self.episode {
+            Some(ep) => ep.task_name.clone(),
+            None => self.relative.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default(),
+        }
+    }
+}
+
+/// Every task folder below `root` (a folder holding `result.txt` or
+/// `episode.json`), sorted by relative path.
+///
+/// # Errors
+///
+/// `root` cannot be read.
+pub fn scan(root: &Path) -> Result<Vec<FoundTask>, ResultsError> {
+    std::fs::read_dir(root).map_err(|err| ResultsError::io(root, err))?;
+    let mut dirs = Vec::new();
+    collect_task_dirs(root, 0, &mut dirs);
+    dirs.sort();
+    let mut found = Vec::with_capacity(dirs.len());
+    for dir in dirs {
+        let relative = dir.strip_prefix(root).map(Path::to_path_buf).unwrap_or_else(|_| dir.clone());
+        let score = read_score(&dir.join(RESULT_FILE)).ok();
+        let episode = match read_episode(&dir.join(EPISODE_FILE)) {
+            Ok(ep) => Some(ep),
+            Err(ResultsError::Io { .. }) => None,
+            Err(err) => {
+                tracing::warn!(error = %err, "ignoring an unreadable episode record");
+                None
+            }
+        };
+        found.push(FoundTask { dir: TaskDir::new(dir), relative, score, episode });
+    }
+    Ok(found)
+}
+
+/// Upstream's layout is five levels deep; a little slack covers a root given one level up.
+const MAX_SCAN_DEPTH: usize = 8;
+
+fn collect_task_dirs(dir: &Path, depth: usize, out: &mut Vec<PathBuf>) {
+    if dir.join(RESULT_FILE).is_file() || dir.join(EPISODE_FILE).is_file() {
+        out.push(dir.to_owned());
+        return;
+    }
+    if depth >= MAX_SCAN_DEPTH {
+        return;
+    }
+    let Ok(entries) = std::fs::read_dir(dir) else {
+        return;
+    };
+    for entry in entries.flatten() {
+        // Symbolic links are not followed: a link loop must not hang a report.
+        if entry.file_type().is_ok_and(|t| t.is_dir()) {
+            collect_task_dirs(&entry.path(), depth + 1, out);
+        }
+    }
+}
+
+/// `YYYYMMDD@HHMMSS` in UTC, upstream's `action_timestamp` format.
+pub fn timestamp_now() -> String {
+    let secs = SystemTime::now().duration_since(UNIX_EPOCH).map(|d| d.as_secs()).unwrap_or(0);
+    format_timestamp(secs)
+}
+
+/// Seconds since the Unix epoch now.
+pub fn unix_now() -> u64 {
+    SystemTime::now().duration_since(UNIX_EPOCH).map(|d| d.as_secs()).unwrap_or(0)
+}
+
+/// Formats Unix seconds as `YYYYMMDD@HHMMSS` (UTC).
+pub fn format_timestamp(secs: u64) -> String {
+    let (y, m, d) = civil_from_days((secs / 86_400) as i64);
+    let rem = secs % 86_400;
+    format!("{y:04}{m:02}{d:02}@{:02}{:02}{:02}", rem / 3600, rem % 3600 / 60, rem % 60)
+}
+
+/// The proleptic Gregorian date of a day count since 1970-01-01 (Howard
+/// Hinnant's `civil_from_days`), to avoid a date crate for one timestamp.
+fn civil_from_days(days: i64) -> (i64, u32, u32) {
+    let z = days + 719_468;
+    let era = z.div_euclid(146_097);
+    let doe = z.rem_euclid(146_097);
+    let yoe = (doe - doe / 1460 + doe / 36_524 - doe / 146_096) / 365;
+    let doy = doe - (365 * yoe + yoe / 4 - yoe / 100);
+    let mp = (5 * doy + 2) / 153;
+    let d = (doy - (153 * mp + 2) / 5 + 1) as u32;
+    let m = if mp < 10 { mp + 3 } else { mp - 9 } as u32;
+    let y = yoe + era * 400 + i64::from(m <= 2);
+    (y, m, d)
+}
+
+#[cfg(test)]
+pub(crate) mod tests;

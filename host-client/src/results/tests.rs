@@ -1,0 +1,234 @@
+use super::summary::Summary;
+use super::*;
+
+pub(crate) fn episode(domain: &str, name: &str, score: f64, status: EpisodeStatus, steps: u32) -> EpisodeResult {
+    EpisodeResult {
+        task_id: format!("{name}-id"),
+        task_name: name.to_owned(),
+        domain: domain.to_owned(),
+        instruction: format!("do {name}"),
+        agent: "scripted".into(),
+        model: "plan".into(),
+        guest: "http://g".into(),
+        attempt: 1,
+        score,
+        status,
+        steps,
+        last_action: "done".into(),
+        elapsed_ms: 1500,
+        setup_ms: 100,
+        eval_ms: 50,
+        started_unix: 0,
+        setup: Vec::new(),
+        eval: Value::Null,
+        timings: Vec::new(),
+    }
+}
+
+fn step(n: u32) -> StepRecord {
+    StepRecord {
+        step_num: n,
+        step: n,
+        action_timestamp: format_timestamp(0),
+        action: "DONE".into(),
+        response: "<b>ok</b>".into(),
+        actions: vec![crate::agent::AgentAction::Done],
+        done: true,
+        screenshot_file: TaskDir::screenshot_name(n),
+        timings: StepTimings { observe_ms: 3, predict_ms: 1, act_ms: 2, pause_ms: 0 },
+        window_title: "Untitled - Notepad".into(),
+        error: None,
+        outcomes: Vec::new(),
+    }
+}
+
+fn layout(root: &Path) -> RunLayout {
+    RunLayout {
+        root: root.to_owned(),
+        agent: "scripted".into(),
+        observation: "a11y_tree".into(),
+        model: "meta/llama:3".into(),
+    }
+}
+
+fn task(domain: &str, name: &str) -> Task {
+    let text = r#"{"id": "x", "instruction": "i", "config": [], "evaluator": {"func": "infeasible"}}"#;
+    Task::parse(text, &PathBuf::from(format!("/tasks/{domain}/{name}.json"))).unwrap()
+}
+
+#[test]
+fn scores_are_written_as_python_prints_floats() {
+    fn check(value: f64, expected: &str) {
+        assert_eq!(python_float(value), expected, "{value}");
+    }
+    check(1.0, "1.0");
+    check(0.0, "0.0");
+    check(0.5, "0.5");
+    check(1.0 / 3.0, "0.3333333333333333");
+    check(-2.0, "-2.0");
+}
+
+#[test]
+fn scores_are_read_in_every_form_upstream_writes() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join(RESULT_FILE);
+    for (text, expected) in [
+        ("1.0\n", Some(1.0)),
+        ("0\n", Some(0.0)),
+        ("True\n", Some(1.0)),
+        ("False", Some(0.0)),
+        ("0.25 ", Some(0.25)),
+        ("nan", None),
+        ("", None),
+        ("score", None),
+    ] {
+        std::fs::write(&path, text).unwrap();
+        assert_eq!(read_score(&path).ok(), expected, "{text:?}");
+    }
+}
+
+#[test]
+fn timestamps_are_upstream_format_in_utc() {
+    assert_eq!(format_timestamp(0), "19700101@000000");
+    assert_eq!(format_timestamp(1_700_000_000), "20231114@221320");
+    assert_eq!(format_timestamp(951_782_400), "20000229@000000");
+    assert_eq!(timestamp_now().len(), 15);
+}
+
+#[test]
+fn folder_names_are_made_safe() {
+    fn check(input: &str, expected: &str) {
+        assert_eq!(safe_component(input), expected, "{input:?}");
+    }
+    check("gpt-4o", "gpt-4o");
+    check("meta/llama-3:70b", "meta_llama-3_70b");
+    check("..", "_");
+    check("", "_");
+    check(r"a\b", "a_b");
+}
+
+#[test]
+fn layout_mirrors_upstream() {
+    let l = layout(Path::new("/out"));
+    let dir = l.task_dir(&task("notepad", "draft"));
+    assert_eq!(dir.path(), Path::new("/out/scripted/a11y_tree/meta_llama_3/notepad/draft"));
+}
+
+#[test]
+fn result_txt_is_written_last_and_only_for_finished_episodes() {
+    let root = tempfile::tempdir().unwrap();
+    let l = layout(root.path());
+    let dir = l.task_dir(&task("notepad", "draft"));
+    dir.prepare().unwrap();
+    assert!(!dir.is_finished());
+    dir.write_screenshot(1, b"png").unwrap();
+    let steps = vec![step(1)];
+    let infra = episode("notepad", "draft", 0.0, EpisodeStatus::InfraError("guest gone".into()), 1);
+    dir.finish(&infra, &steps).unwrap();
+    assert!(!dir.is_finished(), "an infrastructure error leaves the task to be run again");
+    assert_eq!(dir.read_episode().unwrap(), infra);
+
+    // A new try starts from an empty folder.
+    dir.prepare().unwrap();
+    assert!(!dir.path().join(EPISODE_FILE).exists());
+    assert!(dir.setup_dir().is_dir() && dir.eval_dir().is_dir());
+    let done = episode("notepad", "draft", 1.0, EpisodeStatus::Completed, 1);
+    dir.finish(&done, &steps).unwrap();
+    assert!(dir.is_finished());
+    assert_eq!(std::fs::read_to_string(dir.path().join(RESULT_FILE)).unwrap(), "1.0\n");
+    assert_eq!(dir.read_trajectory().unwrap(), steps);
+    let line = std::fs::read_to_string(dir.path().join(TRAJ_FILE)).unwrap();
+    let value: Value = serde_json::from_str(line.trim()).unwrap();
+    for key in ["step_num", "action_timestamp", "action", "response", "done", "screenshot_file", "actions", "timings"] {
+        assert!(value.get(key).is_some(), "traj.jsonl lacks {key}: {line}");
+    }
+    // No temporary files are left behind.
+    let leftovers: Vec<_> = std::fs::read_dir(dir.path())
+        .unwrap()
+        .flatten()
+        .filter(|e| e.file_name().to_string_lossy().starts_with(".partial"))
+        .collect();
+    assert!(leftovers.is_empty());
+}
+
+#[test]
+fn a_bad_trajectory_line_is_named() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join(TRAJ_FILE);
+    let good = serde_json::to_string(&step(1)).unwrap();
+    std::fs::write(&path, format!("{good}\n\n{{\"step_num\": \"x\"}}\n")).unwrap();
+    let err = read_trajectory(&path).unwrap_err().to_string();
+    assert!(err.contains("line 3"), "{err}");
+    assert!(read_trajectory(&dir.path().join("absent.jsonl")).unwrap().is_empty());
+}
+
+/// Writes a finished (or unfinished) task under `root` with the upstream layout.
+pub(crate) fn write_task(root: &Path, domain: &str, name: &str, score: f64, status: EpisodeStatus) {
+    let dir = layout(root).task_dir(&task(domain, name));
+    dir.prepare().unwrap();
+    dir.write_screenshot(1, b"png").unwrap();
+    dir.finish(&episode(domain, name, score, status, 2), &[step(1)]).unwrap();
+}
+
+#[test]
+fn the_summary_gives_the_papers_table() {
+    let root = tempfile::tempdir().unwrap();
+    write_task(root.path(), "notepad", "a", 1.0, EpisodeStatus::Completed);
+    write_task(root.path(), "notepad", "b", 0.0, EpisodeStatus::AgentError("model down".into()));
+    write_task(root.path(), "notepad", "c", 0.5, EpisodeStatus::Completed);
+    write_task(root.path(), "file_explorer", "d", 1.0, EpisodeStatus::Completed);
+    write_task(root.path(), "file_explorer", "e", 0.0, EpisodeStatus::InfraError("gone".into()));
+    let summary = Summary::from_dir(root.path()).unwrap();
+    assert_eq!(
+        summary.table(),
+        vec![
+            ("file_explorer".to_owned(), 1, 1, 100.0),
+            ("notepad".to_owned(), 3, 1, 100.0 / 3.0),
+            ("Overall".to_owned(), 4, 2, 50.0),
+        ]
+    );
+    assert_eq!(summary.overall.unfinished, 1);
+    assert_eq!(summary.overall.agent_errors, 1);
+    assert!((summary.overall.mean_score - 2.5 / 4.0).abs() < 1e-9);
+    assert_eq!(summary.overall.avg_steps, 2.0);
+    assert_eq!(summary.unfinished().map(|t| t.name.as_str()).collect::<Vec<_>>(), ["e"]);
+    assert_eq!(summary.tasks[0].path, "scripted/a11y_tree/meta_llama_3/file_explorer/d");
+
+    let (json, md) = summary.write(root.path()).unwrap();
+    let back: Summary = serde_json::from_slice(&std::fs::read(json).unwrap()).unwrap();
+    assert_eq!(back, summary);
+    let md = std::fs::read_to_string(md).unwrap();
+    assert!(md.contains("| notepad | 3 | 1 | 33.3% |"), "{md}");
+    assert!(md.contains("| **Overall** | 4 | 2 | 50.0% |"), "{md}");
+    assert!(md.contains("model down"), "{md}");
+}
+
+#[test]
+fn a_folder_without_a_record_still_counts_by_its_path() {
+    let root = tempfile::tempdir().unwrap();
+    let dir = root.path().join("code_block/a11y_tree/gpt-4o/chrome/task-1");
+    std::fs::create_dir_all(&dir).unwrap();
+    std::fs::write(dir.join(RESULT_FILE), "1.0\n").unwrap();
+    let summary = Summary::from_dir(root.path()).unwrap();
+    assert_eq!(summary.table(), vec![("chrome".to_owned(), 1, 1, 100.0), ("Overall".to_owned(), 1, 1, 100.0)]);
+    assert_eq!(summary.tasks[0].status, "unknown");
+    assert!(Summary::from_dir(&root.path().join("absent")).is_err());
+}
+
+#[test]
+fn the_report_holds_the_table_the_chart_and_escaped_trajectories() {
+    let root = tempfile::tempdir().unwrap();
+    write_task(root.path(), "notepad", "a b", 1.0, EpisodeStatus::Completed);
+    write_task(root.path(), "notepad", "<script>", 0.0, EpisodeStatus::Completed);
+    let (summary, path) = html::write_report(root.path(), "Run <1>").unwrap();
+    assert_eq!(summary.overall.tasks, 2);
+    let page = std::fs::read_to_string(path).unwrap();
+    assert!(page.starts_with("<!DOCTYPE html>"));
+    assert!(page.contains("<table id=\"summary\">") && page.contains("<svg") && page.contains("Run &lt;1&gt;"));
+    assert!(!page.contains("<script>"), "task text is escaped");
+    assert!(page.contains("&lt;b&gt;ok&lt;/b&gt;"), "model text is escaped");
+    // Safe names keep spaces out of folders; links are relative and encoded.
+    assert!(page.contains("src=\"scripted/a11y_tree/meta_llama_3/notepad/a_b/step_1.png\""), "{page}");
+    assert!(!page.contains("<link") && !page.contains("<script") && !page.contains("url("), "nothing is fetched");
+    assert!(root.path().join(SUMMARY_JSON).is_file() && root.path().join(SUMMARY_MD).is_file());
+}

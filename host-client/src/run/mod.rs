@@ -1,0 +1,200 @@
+//! Runs of many tasks: the task list, its shard, resuming, the pool of
+//! guests, and the summary and report at the end.
+//!
+//! A run is: load the tasks (a folder, or an upstream index such as
+//! `test_all.json`) and sort them by domain and name; keep this machine's
+//! [`shard::Shard`]; drop the tasks whose folder already holds a `result.txt`
+//! (resuming is the default, so running the same command again after a crash
+//! finishes the job); spread the rest over the guests ([`pool`]); then write
+//! `summary.json`, `summary.md` and `report.html` at the root of the output.
+//!
+//! It is not the episode (see [`crate::episode`]) and it does not parse the
+//! command line (see `crate::cli::run`).
+//!
+//! # Layout
+//!
+//! - [`pool`]: [`pool::run_pool`], one task per guest, retries, dead guests set aside.
+//! - [`shard`]: [`shard::Shard`], `--shard i/n`.
+//! - [`merge`]: [`merge::merge`], shard folders into one.
+
+pub mod merge;
+pub mod pool;
+pub mod shard;
+
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+use crate::client::GuestClient;
+use crate::results::html::write_report;
+use crate::results::summary::Summary;
+use crate::results::{ResultsError, RunLayout};
+use crate::task::{Difficulty, Task, TaskError};
+
+use self::pool::{run_pool, PoolConfig, PoolEvent, PoolReport, TaskRunner};
+use self::shard::Shard;
+
+/// The task list could not be loaded.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum LoadError {
+    /// One or more task files are broken (all are listed).
+    #[error("{} task file(s) could not be loaded:\n{}", .0.len(), list(.0))]
+    Tasks(Vec<TaskError>),
+    #[error("{path}: no task files found")]
+    Empty { path: PathBuf },
+    #[error("{path}: {source}")]
+    Io {
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+}
+
+fn list(errors: &[TaskError]) -> String {
+    errors.iter().map(|e| format!("  {e}")).collect::<Vec<_>>().join("\n")
+}
+
+/// Loads the tasks of a folder (every task file below it) or an index file
+/// (`test_all.json`: domain -> names, resolved into
+/// `<index folder>/<examples or examples_noctxt>/<domain>/<name>.json`), sorted
+/// by domain and name so every machine sees the same order.
+///
+/// # Errors
+///
+/// Any task that does not load (all of them, for a folder), or no tasks at all.
+pub fn load_tasks(spec: &Path, difficulty: Difficulty) -> Result<Vec<Task>, LoadError> {
+    let meta = std::fs::metadata(spec).map_err(|source| LoadError::Io { path: spec.to_owned(), source })?;
+    let mut tasks = if meta.is_dir() {
+        // A corpus root (holding `examples/`) is read in the chosen difficulty.
+        let examples = spec.join(difficulty.folder());
+        let dir = if examples.is_dir() { examples } else { spec.to_owned() };
+        let (tasks, errors) = crate::task::load_dir(&dir);
+        if !errors.is_empty() {
+            return Err(LoadError::Tasks(errors));
+        }
+        tasks
+    } else {
+        let root = spec.parent().unwrap_or(Path::new("."));
+        crate::task::load_index(root, spec, difficulty).map_err(|err| LoadError::Tasks(vec![err]))?
+    };
+    if tasks.is_empty() {
+        return Err(LoadError::Empty { path: spec.to_owned() });
+    }
+    sort_tasks(&mut tasks);
+    Ok(tasks)
+}
+
+/// Sorts by domain, then name (then path, for duplicates).
+pub fn sort_tasks(tasks: &mut [Task]) {
+    tasks.sort_by(|a, b| (&a.domain, &a.name, &a.path).cmp(&(&b.domain, &b.name, &b.path)));
+}
+
+/// Which tasks a run will do.
+#[derive(Debug)]
+pub struct Plan {
+    /// This shard's unfinished tasks, in order.
+    pub todo: Vec<Task>,
+    /// This shard's tasks that already have a `result.txt` (resuming).
+    pub finished: Vec<Task>,
+}
+
+/// This shard's slice of `tasks` (sorted), split into to-do and already finished.
+/// With `resume` off every task of the shard is to do again.
+pub fn plan(tasks: Vec<Task>, shard: Shard, layout: &RunLayout, resume: bool) -> Plan {
+    let (finished, todo) =
+        shard.select(tasks).into_iter().partition(|task| resume && layout.task_dir(task).is_finished());
+    Plan { todo, finished }
+}
+
+/// How a run behaves.
+#[derive(Debug, Clone)]
+pub struct RunOptions {
+    pub layout: RunLayout,
+    pub shard: Shard,
+    /// Skip tasks that have a `result.txt` (default on).
+    pub resume: bool,
+    pub pool: PoolConfig,
+    /// Show a progress bar on stderr.
+    pub progress: bool,
+    /// The report's title.
+    pub title: String,
+}
+
+/// What a run did.
+#[derive(Debug)]
+pub struct RunOutcome {
+    /// Tasks of this shard that were to do.
+    pub todo: usize,
+    /// Tasks of this shard skipped as already finished.
+    pub skipped: usize,
+    pub pool: PoolReport,
+    /// Of the whole output folder.
+    pub summary: Summary,
+    pub report: PathBuf,
+}
+
+/// Runs this shard's unfinished `tasks` over `guests` with `runner`, then
+/// writes the summary and report of the output folder.
+///
+/// # Errors
+///
+/// The output folder cannot be created, or the summary or report cannot be written.
+pub async fn run_tasks(
+    tasks: Vec<Task>,
+    guests: Vec<GuestClient>,
+    runner: Arc<dyn TaskRunner>,
+    options: &RunOptions,
+) -> Result<RunOutcome, ResultsError> {
+    let root = &options.layout.root;
+    std::fs::create_dir_all(root).map_err(|source| ResultsError::Io { path: root.clone(), source })?;
+    let plan = plan(tasks, options.shard, &options.layout, options.resume);
+    let (todo, skipped) = (plan.todo.len(), plan.finished.len());
+    tracing::info!(shard = %options.shard, todo, skipped, guests = guests.len(), "starting the run");
+    let bar = if options.progress {
+        let bar = indicatif::ProgressBar::new(todo as u64);
+        if let Ok(style) = indicatif::ProgressStyle::with_template("{elapsed_precise} [{bar:30}] {pos}/{len} {msg}") {
+            bar.set_style(style.progress_chars("=> "));
+        }
+        bar
+    } else {
+        indicatif::ProgressBar::hidden()
+    };
+    let mut solved = 0u32;
+    let mut on_event = |event: PoolEvent<'_>| match event {
+        PoolEvent::Started { task, guest, attempt } => {
+            tracing::info!(task = %task.name, domain = %task.domain, guest, attempt, "task started");
+        }
+        PoolEvent::Finished { task, result } => {
+            if result.success() {
+                solved += 1;
+            }
+            tracing::info!(task = %task.name, domain = %task.domain, score = result.score, status = result.status.kind(), steps = result.steps, "task finished");
+            bar.inc(1);
+            bar.set_message(format!(
+                "{solved} solved; last {}/{} {}",
+                task.domain,
+                task.name,
+                crate::results::python_float(result.score)
+            ));
+        }
+        PoolEvent::Retrying { task, attempt, error } => {
+            tracing::warn!(task = %task.name, attempt, error, "infrastructure error: trying the task again");
+        }
+        PoolEvent::GuestDown { guest, error } => {
+            tracing::warn!(guest, error, "guest taken out of the pool until it answers again");
+            bar.println(format!("guest {guest} is down: {error}"));
+        }
+        PoolEvent::GuestBack { guest } => tracing::info!(guest, "guest back in the pool"),
+        PoolEvent::GaveUp { task, reason } => {
+            tracing::error!(task = %task.name, reason, "task given up");
+            bar.println(format!("gave up {}/{}: {reason}", task.domain, task.name));
+        }
+    };
+    let report = run_pool(guests, plan.todo, runner, &options.pool, &mut on_event).await;
+    bar.finish_and_clear();
+    let (summary, path) = write_report(root, &options.title)?;
+    Ok(RunOutcome { todo, skipped, pool: report, summary, report: path })
+}
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,403 @@
+//! Agents and action execution against a real in-process stub guest on
+//! `127.0.0.1:0`, and the Navi agent against a mock OpenAI-compatible server
+//! (a real axum HTTP server in the test) whose requests are checked.
+
+use std::collections::VecDeque;
+use std::path::Path;
+use std::sync::{Arc, Mutex};
+use std::time::Duration;
+
+use axum::extract::State;
+use axum::http::{HeaderMap, StatusCode};
+use axum::routing::post;
+use axum::{Json, Router};
+use base64::Engine as _;
+use serde_json::{json, Value};
+use tokio::net::TcpListener;
+
+use arena_guest::config::ServerConfig;
+use arena_host::agent::navi::{NaviAgent, NaviConfig};
+use arena_host::agent::replay::{ReplayAgent, ReplaySource, TrajectoryStep};
+use arena_host::agent::scripted::{PlanSource, ScriptedAgent};
+use arena_host::agent::{execute_with, Agent, AgentAction, AgentError, ExecOptions, Observation};
+use arena_host::client::{ClientConfig, GuestClient};
+use arena_host::task::Task;
+use arena_shared::action::Action;
+use arena_shared::clipboard::ClipboardContent;
+use arena_shared::exec::LaunchRequest;
+use arena_shared::observation::{A11yNode, A11yQuery};
+use arena_shared::script::ComputerState;
+
+/// A stub guest serving in a task; stops when dropped.
+struct Guest {
+    url: String,
+    _stop: tokio::sync::oneshot::Sender<()>,
+    _root: tempfile::TempDir,
+}
+
+async fn start_guest() -> Guest {
+    let root = tempfile::tempdir().expect("temporary stub root");
+    let mut config = ServerConfig::for_stub();
+    config.token = None;
+    config.stub_root = Some(root.path().to_path_buf());
+    let state = arena_guest::build_state(config).expect("stub state");
+    let listener = TcpListener::bind("127.0.0.1:0").await.expect("bind");
+    let url = format!("http://{}", listener.local_addr().expect("addr"));
+    let (stop, stopped) = tokio::sync::oneshot::channel::<()>();
+    tokio::spawn(arena_guest::serve(listener, state, async move {
+        let _ = stopped.await;
+    }));
+    Guest { url, _stop: stop, _root: root }
+}
+
+fn client(url: &str) -> GuestClient {
+    GuestClient::new(url, ClientConfig { token: None, timeout: Duration::from_secs(20), retries: 1 }).expect("client")
+}
+
+/// A guest with Notepad open and focused.
+async fn guest_with_notepad() -> (Guest, GuestClient) {
+    let guest = start_guest().await;
+    let c = client(&guest.url);
+    c.launch(&LaunchRequest { argv: vec!["notepad.exe".into()] }).await.expect("launch notepad");
+    (guest, c)
+}
+
+fn find<'a>(node: &'a A11yNode, pred: &dyn Fn(&A11yNode) -> bool) -> Option<&'a A11yNode> {
+    if pred(node) {
+        return Some(node);
+    }
+    node.children.iter().find_map(|c| find(c, pred))
+}
+
+/// The text of Notepad's document, read back from the accessibility tree.
+async fn notepad_text(c: &GuestClient) -> String {
+    let tree = c.a11y(&A11yQuery::default()).await.expect("tree");
+    let window = tree.windows.iter().find(|w| w.name.contains("Notepad")).expect("a Notepad window");
+    let doc = find(window, &|n| n.role == "Document").expect("a document node");
+    doc.value.clone().unwrap_or_default()
+}
+
+fn task(dir: &Path, extra: &str) -> Task {
+    let domain = dir.join("notepad");
+    std::fs::create_dir_all(&domain).expect("domain dir");
+    let path = domain.join("type-hello.json");
+    let text = format!(r#"{{"id": "type-hello", "instruction": "Type hello in Notepad", "config": [], "evaluator": {{"func": "infeasible"}}{extra}}}"#);
+    std::fs::write(&path, &text).expect("write task");
+    Task::load(&path).expect("task loads")
+}
+
+async fn run(c: &GuestClient, action: &AgentAction, obs: &Observation, state: &mut ComputerState) -> arena_host::agent::ActionOutcome {
+    execute_with(c, action, obs.marks().as_ref(), state, &ExecOptions::instant()).await.expect("execute")
+}
+
+fn computer(code: &str) -> AgentAction {
+    AgentAction::Computer(code.to_owned())
+}
+
+#[tokio::test]
+async fn move_id_moves_to_the_centre_of_the_mark_and_typing_reaches_notepad() {
+    let (_guest, c) = guest_with_notepad().await;
+    let obs = Observation::capture(&c, 1, "type").await.expect("observe");
+    let marks = obs.marks().expect("marks from the tree");
+    let doc = marks.entities.iter().find(|m| m.text == "Text Editor").expect("the document is a mark");
+    let r = marks.rects[doc.id];
+    let mut state = ComputerState::for_screen(1, 1);
+
+    let code = format!("computer.mouse.move_id(id={})\ncomputer.mouse.single_click()", doc.id);
+    let outcome = run(&c, &computer(&code), &obs, &mut state).await;
+    assert_eq!(outcome.error, None, "{outcome:?}");
+    assert_eq!(outcome.performed, 2);
+    let cursor = outcome.cursor.expect("a cursor after input");
+    assert_eq!((cursor.x, cursor.y), ((r[0] + r[2]) / 2, (r[1] + r[3]) / 2));
+    assert_eq!(state.current_id, Some(doc.id));
+    assert_eq!(state.window_rect, [0, 0, obs.screen.physical_width as i32, obs.screen.physical_height as i32]);
+
+    let outcome = run(&c, &computer("computer.keyboard.write(\"hello world\")"), &obs, &mut state).await;
+    assert_eq!(outcome.error, None, "{outcome:?}");
+    assert_eq!(notepad_text(&c).await, "hello world");
+}
+
+#[tokio::test]
+async fn pyautogui_hotkeys_and_the_clipboard_work_through_the_guest() {
+    let (_guest, c) = guest_with_notepad().await;
+    let obs = Observation::capture(&c, 1, "copy").await.expect("observe");
+    let mut state = ComputerState::for_screen(1, 1);
+    let code = "pyautogui.write('abc')\npyautogui.hotkey('ctrl', 'a')\npyautogui.hotkey('ctrl', 'c')\nprint(pyautogui.position())";
+    let outcome = run(&c, &AgentAction::Pyautogui(code.into()), &obs, &mut state).await;
+    assert_eq!(outcome.error, None, "{outcome:?}");
+    assert!(outcome.stdout.starts_with("Point(x="), "{}", outcome.stdout);
+    assert_eq!(c.clipboard_get().await.expect("clipboard"), ClipboardContent::Text { text: "abc".into() });
+
+    // copy_text puts text on the guest's clipboard and in the state, which later steps keep.
+    let code = "computer.clipboard.copy_text(\"pasted\")\ncomputer.keyboard.press(\"end\")\ncomputer.clipboard.paste()";
+    let outcome = run(&c, &computer(code), &obs, &mut state).await;
+    assert_eq!(outcome.error, None, "{outcome:?}");
+    assert_eq!(state.clipboard_content.as_deref(), Some("pasted"));
+    assert_eq!(notepad_text(&c).await, "abcpasted");
+}
+
+#[tokio::test]
+async fn typed_actions_open_program_and_switching_windows() {
+    let guest = start_guest().await;
+    let c = client(&guest.url);
+    let obs = Observation::capture(&c, 1, "open").await.expect("observe");
+    let mut state = ComputerState::for_screen(1, 1);
+    let outcome = run(&c, &computer("computer.os.open_program(\"notepad\")"), &obs, &mut state).await;
+    assert_eq!(outcome.error, None, "{outcome:?}");
+    let windows = c.windows().await.expect("windows");
+    let notepad = windows.iter().find(|w| w.title.contains("Notepad")).expect("notepad opened");
+    assert!(notepad.focused && notepad.maximized, "{notepad:?}");
+
+    let typed = AgentAction::Typed(vec![Action::TypeText { text: "typed".into(), interval_ms: None }]);
+    let outcome = run(&c, &typed, &obs, &mut state).await;
+    assert_eq!((outcome.error, outcome.performed), (None, 1));
+    assert_eq!(notepad_text(&c).await, "typed");
+
+    let outcome = run(&c, &computer("computer.window_manager.switch_to_application(\"Untitled - Notepad\")"), &obs, &mut state).await;
+    assert_eq!(outcome.error, None, "{outcome:?}");
+
+    // An unknown program is upstream's printed "error: ..." failure, not a crash.
+    let outcome = run(&c, &computer("computer.os.open_program(\"no-such-program-xyz\")"), &obs, &mut state).await;
+    assert!(outcome.error.as_deref().is_some_and(|e| e.contains("not installed")), "{outcome:?}");
+}
+
+#[tokio::test]
+async fn script_errors_are_recorded_and_an_unreachable_guest_is_an_infrastructure_error() {
+    let (_guest, c) = guest_with_notepad().await;
+    let obs = Observation::capture(&c, 1, "x").await.expect("observe");
+    let mut state = ComputerState::for_screen(1, 1);
+    let check = |outcome: arena_host::agent::ActionOutcome, needle: &str| {
+        let err = outcome.error.unwrap_or_default();
+        assert!(err.contains(needle), "{err:?} lacks {needle:?}");
+    };
+    check(run(&c, &computer("computer.mouse.move_id(id=100000)"), &obs, &mut state).await, "IndexError");
+    check(run(&c, &computer("computer.mouse.single_click("), &obs, &mut state).await, "SyntaxError");
+    check(run(&c, &computer("computer.keyboard.presss('a')"), &obs, &mut state).await, "AttributeError");
+    let bad_key = AgentAction::Typed(vec![Action::KeyPress { key: "nokey".into(), presses: 1 }]);
+    check(run(&c, &bad_key, &obs, &mut state).await, "nokey");
+
+    // Nothing listens on this port any more.
+    let dead_url = {
+        let listener = std::net::TcpListener::bind("127.0.0.1:0").expect("bind");
+        format!("http://{}", listener.local_addr().expect("addr"))
+    };
+    let dead = client(&dead_url);
+    let result = execute_with(&dead, &computer("computer.mouse.single_click()"), None, &mut state, &ExecOptions::instant()).await;
+    assert!(matches!(result, Err(AgentError::Guest(_))), "{result:?}");
+}
+
+// ----- the mock model -----
+
+/// A recorded request: its `Authorization` header and its JSON body.
+type Recorded = (Option<String>, Value);
+
+#[derive(Clone, Default)]
+struct Mock {
+    requests: Arc<Mutex<Vec<Recorded>>>,
+    replies: Arc<Mutex<VecDeque<(u16, String)>>>,
+}
+
+async fn completions(State(mock): State<Mock>, headers: HeaderMap, Json(body): Json<Value>) -> (StatusCode, Json<Value>) {
+    let auth = headers.get("authorization").and_then(|v| v.to_str().ok()).map(str::to_owned);
+    mock.requests.lock().expect("lock").push((auth, body));
+    let (status, reply) = mock.replies.lock().expect("lock").pop_front().unwrap_or((200, "DONE".to_owned()));
+    if status != 200 {
+        return (StatusCode::from_u16(status).unwrap_or(StatusCode::INTERNAL_SERVER_ERROR), Json(json!({"error": reply})));
+    }
+    (StatusCode::OK, Json(json!({"choices": [{"index": 0, "message": {"role": "assistant", "content": reply}}]})))
+}
+
+async fn start_mock(replies: &[(u16, &str)]) -> (String, Mock) {
+    let mock = Mock::default();
+    mock.replies.lock().expect("lock").extend(replies.iter().map(|(s, r)| (*s, (*r).to_owned())));
+    let app = Router::new().route("/v1/chat/completions", post(completions)).with_state(mock.clone());
+    let listener = TcpListener::bind("127.0.0.1:0").await.expect("bind");
+    let url = format!("http://{}/v1", listener.local_addr().expect("addr"));
+    tokio::spawn(async move {
+        let _ = axum::serve(listener, app).await;
+    });
+    (url, mock)
+}
+
+/// The image data URIs and the text of a recorded request's user message.
+fn user_parts(body: &Value) -> (Vec<String>, String) {
+    let content = body["messages"][1]["content"].as_array().expect("user content parts");
+    let images = content.iter().filter_map(|p| p["image_url"]["url"].as_str().map(str::to_owned)).collect();
+    let text = content.iter().filter_map(|p| p["text"].as_str()).collect::<Vec<_>>().join("\n");
+    (images, text)
+}
+
+#[tokio::test]
+async fn navi_sends_the_annotated_screenshot_and_elements_and_retries_malformed_output() {
+    let (_guest, c) = guest_with_notepad().await;
+    let (url, mock) = start_mock(&[
+        (200, "I am not sure what to do here."),
+        (200, "Click the editor and type.\nMemory: typing hello into the editor\n```python\ncomputer.mouse.move_id(id=ID)\ncomputer.mouse.single_click()\ncomputer.keyboard.write(\"hello\")\n```"),
+        (200, "It is typed.\n```python\nDONE\n```"),
+        (500, "overloaded"),
+    ])
+    .await;
+    let mut config = NaviConfig::new(&url, "mock-model");
+    config.api_key = Some("test-key".into());
+    let mut agent = NaviAgent::new(config).expect("agent");
+    let dir = tempfile::tempdir().expect("dir");
+    agent.reset(&task(dir.path(), "")).await;
+
+    // Step 1: a reply without a code block is recorded, not a crash.
+    let obs = Observation::capture(&c, 1, "Type hello in Notepad").await.expect("observe");
+    let marks = obs.marks().expect("marks");
+    let doc_id = marks.entities.iter().find(|m| m.text == "Text Editor").expect("document mark").id;
+    let p = agent.predict(&obs).await.expect("prediction");
+    assert!(p.actions.is_empty());
+    assert!(p.raw_error.as_deref().is_some_and(|e| e.contains("no ```python code block")), "{p:?}");
+
+    let requests = mock.requests.lock().expect("lock").clone();
+    let (auth, body) = &requests[0];
+    assert_eq!(auth.as_deref(), Some("Bearer test-key"));
+    assert_eq!(body["model"], "mock-model");
+    assert!(body["messages"][0]["content"].as_str().is_some_and(|s| s.contains("computer.mouse.move_id")));
+    let (images, text) = user_parts(body);
+    assert_eq!(images.len(), 1, "no previous screenshot on the first step");
+    let annotated = images[0].strip_prefix("data:image/png;base64,").expect("a PNG data URI");
+    let annotated = base64::engine::general_purpose::STANDARD.decode(annotated).expect("base64");
+    assert_ne!(annotated, obs.screenshot_png, "the screenshot sent is annotated");
+    let sent = image::load_from_memory(&annotated).expect("decodes").to_rgba8();
+    let raw = image::load_from_memory(&obs.screenshot_png).expect("decodes").to_rgba8();
+    assert_eq!(sent.dimensions(), raw.dimensions());
+    let r = marks.rects[doc_id];
+    let (x, y) = (r[0] as u32 + 1, r[3] as u32 - 1);
+    assert_ne!(sent.get_pixel(x, y), raw.get_pixel(x, y), "a box is drawn on the document's edge");
+    assert!(text.contains("Type hello in Notepad"));
+    assert!(text.contains(&marks.candidate_list()), "{text}");
+    assert!(text.contains(&format!("{doc_id} | a11y | Text Editor | [")), "{text}");
+    assert!(text.contains("Untitled - Notepad (foreground)"), "{text}");
+
+    // Step 2: the model is told about its unusable reply and answers with code.
+    {
+        let mut replies = mock.replies.lock().expect("lock");
+        let next = replies.front_mut().expect("reply");
+        next.1 = next.1.replace("ID", &doc_id.to_string());
+    }
+    let obs2 = Observation::capture(&c, 2, "Type hello in Notepad").await.expect("observe");
+    let p = agent.predict(&obs2).await.expect("prediction");
+    assert_eq!(p.raw_error, None);
+    assert_eq!(p.actions.len(), 1);
+    let body = mock.requests.lock().expect("lock")[1].1.clone();
+    let (images, text) = user_parts(&body);
+    assert_eq!(images.len(), 2, "the previous screenshot is sent too");
+    assert!(text.contains("could not be used"), "{text}");
+    let mut state = ComputerState::for_screen(1, 1);
+    let outcome = execute_with(&c, &p.actions[0], p.marks.as_ref(), &mut state, &ExecOptions::instant()).await.expect("execute");
+    assert_eq!(outcome.error, None, "{outcome:?}");
+    assert_eq!(notepad_text(&c).await, "hello");
+
+    // Step 3: memory and history are in the prompt; DONE ends it.
+    let obs3 = Observation::capture(&c, 3, "Type hello in Notepad").await.expect("observe");
+    let p = agent.predict(&obs3).await.expect("prediction");
+    assert_eq!(p.actions, vec![AgentAction::Done]);
+    let (_, text) = user_parts(&mock.requests.lock().expect("lock")[2].1);
+    assert!(text.contains("Memory: typing hello into the editor"), "{text}");
+    assert!(text.contains("Step 1: (reply not usable"), "{text}");
+    assert!(text.contains("computer.keyboard.write(\"hello\")"), "{text}");
+
+    // An HTTP failure of the endpoint is an error the caller sees.
+    let err = agent.predict(&obs3).await.expect_err("HTTP 500");
+    assert!(matches!(err, AgentError::Model { .. }) && err.to_string().contains("500"), "{err}");
+}
+
+#[tokio::test]
+async fn scripted_agent_follows_a_plan_file_against_the_stub() {
+    let (_guest, c) = guest_with_notepad().await;
+    let dir = tempfile::tempdir().expect("dir");
+    let plan = json!({"steps": [
+        {"code": "computer.mouse.move_abs(x=0.5, y=0.5)\ncomputer.mouse.single_click()"},
+        {"code": "pyautogui.write('hi ')", "lang": "pyautogui"},
+        {"actions": [{"type": "type_text", "text": "there"}]},
+        "WAIT",
+        "DONE"
+    ]});
+    let plans = dir.path().join("plans");
+    std::fs::create_dir_all(plans.join("notepad")).expect("plans dir");
+    std::fs::write(plans.join("notepad").join("type-hello.json"), plan.to_string()).expect("plan");
+    let mut agent = ScriptedAgent::new(PlanSource::Dir(plans));
+    let t = task(dir.path(), "");
+    agent.reset(&t).await;
+    let mut state = ComputerState::for_screen(1, 1);
+    let mut seen = Vec::new();
+    for step in 1..=5 {
+        let obs = Observation::capture(&c, step, &t.instruction).await.expect("observe");
+        let p = agent.predict(&obs).await.expect("prediction");
+        assert_eq!(p.actions.len(), 1);
+        let outcome = execute_with(&c, &p.actions[0], p.marks.as_ref(), &mut state, &ExecOptions::instant()).await.expect("execute");
+        assert_eq!(outcome.error, None, "step {step}: {outcome:?}");
+        seen.push(p.actions[0].clone());
+    }
+    assert_eq!(seen[3..], [AgentAction::Wait, AgentAction::Done]);
+    assert_eq!(notepad_text(&c).await, "hi there");
+    let obs = Observation::capture(&c, 6, "").await.expect("observe");
+    assert!(matches!(agent.predict(&obs).await, Err(AgentError::Exhausted(_))));
+
+    // Reset starts over; a plan inside the task file works too; a missing plan is a clear error.
+    agent.reset(&t).await;
+    assert!(agent.predict(&obs).await.expect("again").actions[0] == seen[0]);
+    let mut inline = ScriptedAgent::new(PlanSource::TaskKey);
+    inline.reset(&task(dir.path(), r#", "plan": {"steps": ["FAIL"]}"#)).await;
+    assert_eq!(inline.predict(&obs).await.expect("inline").actions, vec![AgentAction::Fail]);
+    let mut missing = ScriptedAgent::new(PlanSource::Dir(dir.path().join("nowhere")));
+    missing.reset(&task(dir.path(), "")).await;
+    let err = missing.predict(&obs).await.expect_err("no plan");
+    assert!(err.to_string().contains("type-hello"), "{err}");
+    let bad = dir.path().join("bad.json");
+    std::fs::write(&bad, r#"{"steps": ["MAYBE"]}"#).expect("write");
+    let err = ScriptedAgent::from_file(&bad).expect_err("bad plan");
+    assert!(err.to_string().contains("step 1") && err.to_string().contains("MAYBE"), "{err}");
+}
+
+#[tokio::test]
+async fn replay_repeats_a_recorded_trajectory() {
+    let (_guest, c) = guest_with_notepad().await;
+    let dir = tempfile::tempdir().expect("dir");
+    let t = task(dir.path(), "");
+    let recorded = vec![
+        TrajectoryStep { step: 1, actions: vec![computer("computer.keyboard.write(\"again\")")] },
+        TrajectoryStep { step: 2, actions: vec![] },
+        TrajectoryStep { step: 3, actions: vec![AgentAction::Typed(vec![Action::KeyPress { key: "backspace".into(), presses: 1 }]), AgentAction::Done] },
+    ];
+    // As the episode writer lays it out, with extra fields the replay ignores.
+    let task_dir = dir.path().join("results").join("notepad").join("type-hello");
+    std::fs::create_dir_all(&task_dir).expect("dir");
+    let lines: Vec<String> = recorded
+        .iter()
+        .map(|s| {
+            let mut v = serde_json::to_value(s).expect("json");
+            v["response"] = json!("recorded reply");
+            v["elapsed_ms"] = json!(12);
+            v.to_string()
+        })
+        .collect();
+    std::fs::write(task_dir.join("traj.jsonl"), lines.join("\n") + "\n").expect("write");
+
+    let mut agent = ReplayAgent::new(ReplaySource::Dir(dir.path().join("results")));
+    agent.reset(&t).await;
+    let mut state = ComputerState::for_screen(1, 1);
+    let mut replayed = Vec::new();
+    for step in 1..=3 {
+        let obs = Observation::capture(&c, step, &t.instruction).await.expect("observe");
+        let p = agent.predict(&obs).await.expect("prediction");
+        for action in &p.actions {
+            execute_with(&c, action, p.marks.as_ref(), &mut state, &ExecOptions::instant()).await.expect("execute");
+        }
+        replayed.push(TrajectoryStep { step, actions: p.actions });
+    }
+    assert_eq!(replayed, recorded);
+    assert_eq!(notepad_text(&c).await, "agai");
+    let obs = Observation::capture(&c, 4, "").await.expect("observe");
+    assert!(matches!(agent.predict(&obs).await, Err(AgentError::Exhausted(_))));
+
+    let broken = dir.path().join("broken.jsonl");
+    std::fs::write(&broken, "{\"step\": 1, \"actions\": []}\nnot json\n").expect("write");
+    let mut agent = ReplayAgent::new(ReplaySource::File(broken));
+    agent.reset(&t).await;
+    let err = agent.predict(&obs).await.expect_err("broken trajectory");
+    assert!(err.to_string().contains("line 2"), "{err}");
+}

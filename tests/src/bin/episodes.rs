@@ -1,0 +1,200 @@
+//! `episodes`: measures the host's overhead per episode step on the stub guest,
+//! and the wall time of a 20-task run over a pool of 1 versus 4 guests.
+//!
+//! Per step (excluding any model): the observation (screenshot, accessibility
+//! tree, windows and clipboard, fetched concurrently as the episode does),
+//! Set-of-Marks (element selection and the annotated screenshot), and one
+//! action (a pyautogui line run by the host-side interpreter, which becomes a
+//! typed `/v1/actions` call). The guests are real `arena-guest` stub
+//! processes on loopback; the pool runs use the oracle plans of
+//! `tasks/stub` repeated to 20 tasks, without pauses and with a 250 ms pause
+//! after each action.
+//!
+//! Run: `cargo run -p arena-tests --bin episodes` (add `--release` for
+//! release figures).
+
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+use anyhow::Context;
+use arena_host::agent::scripted::{PlanSource, ScriptedAgent};
+use arena_host::agent::{execute_with, Agent, AgentAction, ExecOptions};
+use arena_host::client::{ClientConfig, GuestClient};
+use arena_host::episode::{AgentFactory, EpisodeConfig, EpisodeRunner};
+use arena_host::results::RunLayout;
+use arena_host::run::pool::PoolConfig;
+use arena_host::run::shard::Shard;
+use arena_host::run::{load_tasks, run_tasks, RunOptions};
+use arena_host::setup::DownloadCache;
+use arena_host::som::{annotate, marks_from_tree};
+use arena_host::task::{Difficulty, Task};
+use arena_shared::clipboard::ClipboardContent;
+use arena_shared::exec::LaunchRequest;
+use arena_shared::observation::{A11yQuery, ImageFormat, ScreenshotQuery};
+use arena_shared::script::ComputerState;
+use arena_tests::Served;
+
+const STEPS: usize = 40;
+const TASKS: usize = 20;
+
+#[tokio::main]
+async fn main() -> ExitCode {
+    match run().await {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(err) => {
+            eprintln!("error: {err:#}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+fn client(url: &str) -> anyhow::Result<GuestClient> {
+    Ok(GuestClient::new(url, ClientConfig { token: None, timeout: Duration::from_secs(30), retries: 1 })?)
+}
+
+fn ms(d: Duration) -> f64 {
+    d.as_secs_f64() * 1000.0
+}
+
+/// Median and 90th percentile of `samples`, in milliseconds.
+fn stats(samples: &mut [Duration]) -> (f64, f64, f64) {
+    samples.sort();
+    let n = samples.len();
+    let mean = samples.iter().sum::<Duration>() / u32::try_from(n.max(1)).unwrap_or(1);
+    (ms(samples[n / 2]), ms(samples[((n as f64 - 1.0) * 0.9).round() as usize]), ms(mean))
+}
+
+fn print(name: &str, samples: &mut [Duration]) {
+    let (p50, p90, mean) = stats(samples);
+    println!("  {name:<34} p50 {p50:>7.2} ms   p90 {p90:>7.2} ms   mean {mean:>7.2} ms");
+}
+
+async fn per_step(url: &str) -> anyhow::Result<()> {
+    let client = client(url)?;
+    client.wait_ready(&[], Duration::from_secs(30), Duration::from_millis(50)).await?;
+    client.launch(&LaunchRequest { argv: vec!["notepad".into()] }).await?;
+    let screen = client.screen().await?;
+    let size = (screen.physical_width, screen.physical_height);
+    let mut computer = ComputerState::for_screen(i32::try_from(size.0)?, i32::try_from(size.1)?);
+    let query = ScreenshotQuery { format: ImageFormat::Png, cursor: Some(false), ..ScreenshotQuery::default() };
+    let tree_query = A11yQuery::default();
+    let action = AgentAction::Pyautogui("pyautogui.write('a')".into());
+    let options = ExecOptions::instant();
+    let (mut observe, mut som, mut act, mut total) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+    let mut marks_count = 0;
+    for _ in 0..STEPS {
+        let t0 = Instant::now();
+        let (shot, windows, tree, clip) =
+            tokio::join!(client.screenshot(&query), client.windows(), client.a11y(&tree_query), client.clipboard_get());
+        let (shot, _windows, tree) = (shot?, windows?, tree?);
+        let _text = matches!(clip?, ClipboardContent::Text { .. });
+        let t1 = Instant::now();
+        let marks = marks_from_tree(&tree, size);
+        let annotated = annotate(&shot.bytes, &marks)?;
+        anyhow::ensure!(!annotated.is_empty());
+        marks_count = marks.entities.len();
+        let t2 = Instant::now();
+        let outcome = execute_with(&client, &action, Some(&marks), &mut computer, &options).await?;
+        anyhow::ensure!(outcome.error.is_none(), "the action failed: {:?}", outcome.error);
+        let t3 = Instant::now();
+        observe.push(t1 - t0);
+        som.push(t2 - t1);
+        act.push(t3 - t2);
+        total.push(t3 - t0);
+    }
+    println!(
+        "host overhead per step on the stub ({STEPS} steps, 1440x900, Notepad open, {marks_count} marks; no model):"
+    );
+    print("observe (shot+tree+windows+clip)", &mut observe);
+    print("set-of-marks (select + annotate)", &mut som);
+    print("action (pyautogui line)", &mut act);
+    print("total", &mut total);
+    Ok(())
+}
+
+fn stub_dir() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../tasks/stub")
+}
+
+/// The stub tasks repeated to `n`, each with its oracle plan inline.
+fn repeated(n: usize) -> anyhow::Result<Vec<Task>> {
+    let base = load_tasks(&stub_dir(), Difficulty::Normal)?;
+    (0..n)
+        .map(|i| {
+            let mut task = base[i % base.len()].clone();
+            let plan = std::fs::read_to_string(stub_dir().join("plans").join(format!("{}.json", task.name)))?;
+            task.extra.insert("plan".into(), serde_json::from_str(&plan)?);
+            task.name = format!("{}-{i:02}", task.name);
+            Ok(task)
+        })
+        .collect()
+}
+
+async fn pool_run(guests: &[Served], pause: Duration) -> anyhow::Result<(Duration, u32, f64, f64)> {
+    let tmp = tempfile::tempdir()?;
+    let layout = RunLayout {
+        root: tmp.path().join("out"),
+        agent: "scripted".into(),
+        observation: "a11y_tree".into(),
+        model: "oracle".into(),
+    };
+    let mut config = EpisodeConfig::instant(DownloadCache::new(tmp.path().join("cache"))?);
+    config.sleep_after_action = pause;
+    let agents: AgentFactory = Arc::new(|| Ok(Box::new(ScriptedAgent::new(PlanSource::TaskKey)) as Box<dyn Agent>));
+    let runner = EpisodeRunner { layout: layout.clone(), config, agents };
+    let options = RunOptions {
+        layout,
+        shard: Shard::ALL,
+        resume: true,
+        pool: PoolConfig::default(),
+        progress: false,
+        title: "bench".into(),
+    };
+    let clients = guests.iter().map(|g| client(&g.url)).collect::<anyhow::Result<Vec<_>>>()?;
+    let started = Instant::now();
+    let outcome = run_tasks(repeated(TASKS)?, clients, Arc::new(runner), &options).await?;
+    let wall = started.elapsed();
+    let steps: Vec<_> = outcome.pool.results.iter().flat_map(|r| r.timings.iter().copied()).collect();
+    let n = steps.len().max(1) as f64;
+    let observe = steps.iter().map(|t| t.observe_ms as f64).sum::<f64>() / n;
+    let act = steps.iter().map(|t| t.act_ms as f64).sum::<f64>() / n;
+    anyhow::ensure!(
+        outcome.summary.overall.successes as usize == TASKS,
+        "not every task was solved: {:?}",
+        outcome.summary.overall
+    );
+    Ok((wall, outcome.summary.overall.successes, observe, act))
+}
+
+async fn run() -> anyhow::Result<()> {
+    let guests: Vec<Served> =
+        (0..4).map(|_| Served::guest(&[])).collect::<anyhow::Result<_>>().context("starting stub guests")?;
+    println!(
+        "arena episode bench ({} build, {} CPUs)",
+        if cfg!(debug_assertions) { "debug" } else { "release" },
+        std::thread::available_parallelism().map_or(1, |n| n.get())
+    );
+    per_step(&guests[0].url).await?;
+    // Without pauses the stub's work is all CPU, on the same cores as the
+    // host; with a pause after each action (upstream waits 3 s) the guests'
+    // time is mostly waiting, as with real VMs, and the pool's gain shows.
+    for pause in [Duration::ZERO, Duration::from_millis(250)] {
+        println!(
+            "{TASKS}-task run of the stub tasks (oracle plans, {} ms pause after each action), wall time:",
+            pause.as_millis()
+        );
+        for n in [1usize, 4] {
+            // A fresh set of guests per run, so every run starts from the same state.
+            let fresh: Vec<Served> = (0..n).map(|_| Served::guest(&[])).collect::<anyhow::Result<_>>()?;
+            let (wall, solved, observe, act) = pool_run(&fresh, pause).await?;
+            println!(
+                "  {n} guest(s): {:>7.0} ms  ({:.0} ms per task; {solved}/{TASKS} solved; mean observe {observe:.1} ms, act {act:.1} ms per step)",
+                ms(wall),
+                ms(wall) / TASKS as f64
+            );
+        }
+    }
+    Ok(())
+}
