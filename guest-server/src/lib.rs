@@ -18,6 +18,7 @@
 //! - [`waa`], [`native`]: the routes. [`auth`]: token and cross-site guards.
 //! - [`error`]: the error shapes. [`state`]: handler state.
 //! - [`paths`], [`imaging`]: platform-neutral helpers the routes share.
+//! - [`script_host`]: the desktop side of the native Python-subset interpreter.
 
 pub mod auth;
 pub mod call;
@@ -28,6 +29,7 @@ pub mod error;
 pub mod imaging;
 pub mod native;
 pub mod paths;
+pub mod script_host;
 pub mod state;
 pub mod waa;
 
@@ -112,7 +114,10 @@ pub fn build_state(config: ServerConfig) -> anyhow::Result<AppState> {
             .context("starting the stub desktop")?;
             Arc::new(stub)
         }
-        BackendKind::Windows => anyhow::bail!("the windows backend is not part of this build yet; use --backend stub"),
+        #[cfg(windows)]
+        BackendKind::Windows => Arc::new(crate::desktop::windows::WindowsDesktop::new().context("starting the windows desktop")?),
+        #[cfg(not(windows))]
+        BackendKind::Windows => anyhow::bail!("the windows backend exists only in Windows builds; use --backend stub"),
     };
     Ok(AppState::new(desktop, config, token))
 }

@@ -11,7 +11,15 @@
 //! Every point and rectangle is in physical pixels of the virtual screen,
 //! the space a per-monitor DPI-aware process sees.
 
+pub mod a11y_walk;
+pub mod pointer;
+pub mod session;
 pub mod stub;
+pub mod text;
+pub mod vk;
+pub mod winsys;
+#[cfg(windows)]
+pub mod windows;
 
 use std::path::PathBuf;
 

@@ -1,0 +1,99 @@
+//! Which Windows session the server may drive a desktop from.
+//!
+//! Session 0 is where services run: it has no interactive desktop, so screenshots
+//! come back black, input goes nowhere and windows the server starts are invisible to
+//! the user. The Windows backend asks [`refuse_session_zero`] before every call that
+//! needs the user's desktop and answers those calls with a clear error instead of
+//! silently doing nothing. File, registry and process calls still work there.
+//!
+//! Platform-neutral: the session id comes from `ProcessIdToSessionId` in
+//! `desktop/windows/`; the decision and its wording are here and tested natively.
+
+use super::{DesktopError, DesktopResult};
+
+/// The session services run in.
+pub const SERVICE_SESSION: u32 = 0;
+
+/// What an operation needs from the session it runs in.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Needs {
+    /// Screen, input, windows, clipboard, accessibility: only an interactive session has them.
+    InteractiveDesktop,
+    /// Files, registry, processes: any session will do.
+    AnySession,
+}
+
+/// Refuses `op` when it needs the interactive desktop and the server runs in session 0.
+///
+/// An unknown session (`None`, the call to find it failed) is given the benefit of the
+/// doubt: refusing everything because of a failed query would be worse than trying.
+///
+/// # Errors
+///
+/// [`DesktopError::Unsupported`] naming the operation and what to do instead.
+pub fn refuse_session_zero(session: Option<u32>, op: &str, needs: Needs) -> DesktopResult<()> {
+    match (session, needs) {
+        (Some(SERVICE_SESSION), Needs::InteractiveDesktop) => Err(DesktopError::Unsupported(format!(
+            "{op} needs the user's desktop, but this server runs in session 0 (the services session), \
+             which has none: screenshots would be black and input would go nowhere. \
+             Start the server from the user's logon task, or run `arena-guest service install`, \
+             whose service starts a worker in the active console session"
+        ))),
+        _ => Ok(()),
+    }
+}
+
+/// What the service supervisor should do about its worker.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum SupervisorStep {
+    /// Nobody is logged on at the console: wait and look again.
+    WaitForLogon,
+    /// Start a worker in this session.
+    Launch(u32),
+    /// The worker runs in the wrong session (the user switched): stop it, then launch in this one.
+    Relaunch { from: u32, to: u32 },
+    /// All is well.
+    Keep,
+}
+
+/// Decides the supervisor's next step from the active console session (`None` or
+/// `0xFFFFFFFF` when nobody is attached) and the session of the running worker, if any.
+pub fn supervisor_step(console_session: Option<u32>, worker_session: Option<u32>) -> SupervisorStep {
+    let console = console_session.filter(|&s| s != u32::MAX && s != SERVICE_SESSION);
+    match (console, worker_session) {
+        (None, _) => SupervisorStep::WaitForLogon,
+        (Some(to), None) => SupervisorStep::Launch(to),
+        (Some(to), Some(from)) if from != to => SupervisorStep::Relaunch { from, to },
+        (Some(_), Some(_)) => SupervisorStep::Keep,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn session_zero_refuses_desktop_calls_only() {
+        let err = refuse_session_zero(Some(0), "capture", Needs::InteractiveDesktop).unwrap_err();
+        let DesktopError::Unsupported(message) = err else { panic!("wrong variant") };
+        assert!(message.starts_with("capture needs the user's desktop"), "{message}");
+        assert!(message.contains("session 0"), "{message}");
+        assert!(refuse_session_zero(Some(0), "registry read", Needs::AnySession).is_ok());
+        assert!(refuse_session_zero(Some(1), "capture", Needs::InteractiveDesktop).is_ok());
+        assert!(refuse_session_zero(None, "capture", Needs::InteractiveDesktop).is_ok());
+    }
+
+    fn check(console: Option<u32>, worker: Option<u32>, expected: SupervisorStep) {
+        assert_eq!(supervisor_step(console, worker), expected, "console {console:?}, worker {worker:?}");
+    }
+
+    #[test]
+    fn supervisor_follows_the_console_session() {
+        check(None, None, SupervisorStep::WaitForLogon);
+        check(Some(u32::MAX), Some(1), SupervisorStep::WaitForLogon);
+        check(Some(0), None, SupervisorStep::WaitForLogon);
+        check(Some(1), None, SupervisorStep::Launch(1));
+        check(Some(2), Some(1), SupervisorStep::Relaunch { from: 1, to: 2 });
+        check(Some(1), Some(1), SupervisorStep::Keep);
+    }
+}

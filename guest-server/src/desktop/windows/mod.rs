@@ -1,0 +1,346 @@
+//! The Windows backend: the [`Desktop`] trait over Win32, COM and UI Automation.
+//!
+//! This folder is FFI glue only. What to send and how to shape results is decided
+//! by the platform-neutral modules next to it, which are tested natively:
+//! [`crate::desktop::vk`] (key names to strokes), [`crate::desktop::pointer`]
+//! (absolute mouse coordinates), [`crate::desktop::a11y_walk`] (tree budgets and
+//! node shapes), [`crate::desktop::winsys`] (paths and registry data),
+//! [`crate::desktop::text`] (newlines, UTF-16) and [`crate::desktop::session`]
+//! (the session-0 refusal).
+//!
+//! Layout: `sys` (handle guards, error conversion), `window`, `input`, `capture`,
+//! `clipboard`, `process`, `system` (files, registry, wallpaper, ACLs, shutdown),
+//! `win32_tree` and `uia` (the two accessibility sources).
+//!
+//! # Platform-specific behavior
+//!
+//! The process makes itself per-monitor DPI aware when the backend starts, so every
+//! coordinate is in physical pixels. Calls that need the user's desktop are refused
+//! in session 0 (a service) with [`DesktopError::Unsupported`].
+
+mod capture;
+mod clipboard;
+mod input;
+mod process;
+mod sys;
+mod system;
+mod uia;
+mod win32_tree;
+mod window;
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use arena_shared::action::Action;
+use arena_shared::files::KnownFolder;
+use arena_shared::geometry::Point;
+use arena_shared::health::Component;
+use arena_shared::observation::{A11yBackend, A11yTree, ScreenInfo, TreeBudget, WindowInfo};
+use arena_shared::registry::RegistryValue;
+use windows::Win32::UI::HiDpi::{
+    SetProcessDpiAwareness, SetProcessDpiAwarenessContext, DPI_AWARENESS_CONTEXT_PER_MONITOR_AWARE_V2,
+    PROCESS_PER_MONITOR_DPI_AWARE,
+};
+use windows::Win32::UI::Input::KeyboardAndMouse::{
+    SendInput, INPUT, INPUT_0, INPUT_MOUSE, MOUSEEVENTF_MOVE, MOUSEINPUT,
+};
+use windows::Win32::UI::WindowsAndMessaging::{SetProcessDPIAware, ShowCursor};
+
+use super::session::{refuse_session_zero, Needs};
+use super::{
+    ClipboardData, CommandSpec, Desktop, DesktopError, DesktopResult, ExecLimits, ExecOutput, Frame, WindowState,
+};
+
+/// The real Windows desktop of the session the server runs in.
+#[derive(Debug)]
+pub struct WindowsDesktop {
+    session: Option<u32>,
+    uia: uia::UiaWorker,
+}
+
+/// Makes the process per-monitor DPI aware (v2, else v1, else system aware), so
+/// capture, input and window rectangles all use physical pixels.
+fn make_dpi_aware() -> &'static str {
+    // SAFETY: process-wide settings with no preconditions; each fails harmlessly if already set.
+    unsafe {
+        if SetProcessDpiAwarenessContext(DPI_AWARENESS_CONTEXT_PER_MONITOR_AWARE_V2).is_ok() {
+            return "per-monitor v2";
+        }
+        if SetProcessDpiAwareness(PROCESS_PER_MONITOR_DPI_AWARE).is_ok() {
+            return "per-monitor";
+        }
+        if SetProcessDPIAware().as_bool() {
+            return "system";
+        }
+    }
+    "unchanged (already set)"
+}
+
+/// Upstream's cursor fix: show the cursor and nudge it, so VMs that hide the cursor
+/// until the mouse moves draw it in screenshots. The nudge goes one pixel right and
+/// back, so the cursor ends where it was.
+fn wake_cursor() {
+    let nudge = |dx| INPUT {
+        r#type: INPUT_MOUSE,
+        Anonymous: INPUT_0 {
+            mi: MOUSEINPUT { dx, dy: 0, mouseData: 0, dwFlags: MOUSEEVENTF_MOVE, time: 0, dwExtraInfo: 0 },
+        },
+    };
+    // SAFETY: ShowCursor only changes this thread's display counter; SendInput gets two initialised records.
+    unsafe {
+        ShowCursor(true);
+        SendInput(&[nudge(1), nudge(-1)], std::mem::size_of::<INPUT>() as i32);
+    }
+}
+
+impl WindowsDesktop {
+    /// Starts the backend: DPI awareness, the session check and the cursor fix.
+    ///
+    /// # Errors
+    ///
+    /// None today; the signature leaves room for checks that can fail.
+    pub fn new() -> DesktopResult<WindowsDesktop> {
+        let dpi = make_dpi_aware();
+        let session = system::session_id();
+        tracing::info!(dpi_awareness = dpi, session = ?session, "windows backend started");
+        if session == Some(super::session::SERVICE_SESSION) {
+            tracing::warn!("running in session 0: screen, input, windows and clipboard calls will be refused");
+        } else {
+            wake_cursor();
+        }
+        Ok(WindowsDesktop { session, uia: uia::UiaWorker::default() })
+    }
+
+    fn need_desktop(&self, op: &str) -> DesktopResult<()> {
+        refuse_session_zero(self.session, op, Needs::InteractiveDesktop)
+    }
+
+    fn probe_inner(&self, component: Component) -> DesktopResult<String> {
+        match component {
+            Component::Capture => {
+                self.need_desktop("capture")?;
+                let started = Instant::now();
+                let frame = capture::capture(false)?;
+                let (w, h) = frame.image.dimensions();
+                if crate::imaging::is_black(&frame.image) {
+                    return Err(DesktopError::Os {
+                        op: "probe capture",
+                        message: format!(
+                            "the {w}x{h} frame is entirely black (locked, secure or disconnected desktop?)"
+                        ),
+                    });
+                }
+                Ok(format!("captured a {w}x{h} frame in {} ms", started.elapsed().as_millis()))
+            }
+            Component::Input => {
+                self.need_desktop("input")?;
+                let p = input::cursor()?;
+                Ok(format!("cursor at {},{}", p.x, p.y))
+            }
+            Component::Accessibility => {
+                self.need_desktop("accessibility")?;
+                let tree = super::a11y_walk::walk(
+                    &mut win32_tree::Win32Source::new(),
+                    A11yBackend::Win32,
+                    &TreeBudget { max_ms: 2_000, ..TreeBudget::WAA },
+                    true,
+                )?;
+                Ok(format!(
+                    "walked the foreground window's win32 tree: {} nodes in {} ms",
+                    tree.node_count, tree.elapsed_ms
+                ))
+            }
+            Component::Clipboard => {
+                self.need_desktop("clipboard")?;
+                Ok(match clipboard::get()? {
+                    ClipboardData::Empty => "opened the clipboard: it is empty".to_owned(),
+                    ClipboardData::Text(t) => format!("opened the clipboard: {} characters of text", t.chars().count()),
+                    ClipboardData::Image(img) => {
+                        format!("opened the clipboard: a {}x{} image", img.width(), img.height())
+                    }
+                })
+            }
+            Component::Files => {
+                let dir = std::env::temp_dir();
+                let probe = dir.join(format!("arena-probe-{}.tmp", std::process::id()));
+                let what = probe.display().to_string();
+                std::fs::write(&probe, b"arena probe").map_err(|err| DesktopError::io("probe files", &what, err))?;
+                let back = std::fs::read(&probe).map_err(|err| DesktopError::io("probe files", &what, err));
+                let _ = std::fs::remove_file(&probe);
+                if back? != b"arena probe" {
+                    return Err(DesktopError::Os {
+                        op: "probe files",
+                        message: format!("{what} read back different bytes"),
+                    });
+                }
+                Ok(format!("wrote, read back and deleted {what}"))
+            }
+            Component::Exec => {
+                let limits = ExecLimits { timeout_ms: 10_000, max_output_bytes: 4096, cwd: None, stdin: None };
+                let out = process::run(&CommandSpec::Argv(vec!["cmd".into(), "/c".into(), "exit 0".into()]), &limits)?;
+                match out.exit_code {
+                    Some(0) => Ok(format!("ran cmd /c exit 0 in {} ms", out.duration_ms)),
+                    other => Err(DesktopError::Os {
+                        op: "probe exec",
+                        message: format!("cmd /c exit 0 ended with {other:?}"),
+                    }),
+                }
+            }
+            Component::Unknown => Err(DesktopError::InvalidInput("unknown component".into())),
+        }
+    }
+}
+
+impl Desktop for WindowsDesktop {
+    fn kind(&self) -> &'static str {
+        "windows"
+    }
+
+    fn probe(&self, component: Component) -> DesktopResult<String> {
+        self.probe_inner(component)
+    }
+
+    fn session_id(&self) -> Option<u32> {
+        self.session
+    }
+
+    fn screen(&self) -> DesktopResult<ScreenInfo> {
+        self.need_desktop("screen")?;
+        capture::screen()
+    }
+
+    fn capture(&self, draw_cursor: bool) -> DesktopResult<Frame> {
+        self.need_desktop("capture")?;
+        capture::capture(draw_cursor)
+    }
+
+    fn cursor_position(&self) -> DesktopResult<Point> {
+        self.need_desktop("cursor position")?;
+        input::cursor()
+    }
+
+    fn perform(&self, action: &Action) -> DesktopResult<()> {
+        self.need_desktop("input")?;
+        input::perform(action)
+    }
+
+    fn windows(&self) -> DesktopResult<Vec<WindowInfo>> {
+        self.need_desktop("window list")?;
+        Ok(window::list())
+    }
+
+    fn activate_window(&self, id: u64) -> DesktopResult<()> {
+        self.need_desktop("activate window")?;
+        window::activate(id)
+    }
+
+    fn set_window_state(&self, id: u64, state: WindowState) -> DesktopResult<()> {
+        self.need_desktop("window state")?;
+        window::set_state(id, state)
+    }
+
+    fn close_window(&self, id: u64) -> DesktopResult<()> {
+        self.need_desktop("close window")?;
+        window::close(id)
+    }
+
+    fn accessibility(
+        &self,
+        backend: A11yBackend,
+        budget: &TreeBudget,
+        foreground_only: bool,
+    ) -> DesktopResult<A11yTree> {
+        self.need_desktop("accessibility")?;
+        match backend {
+            A11yBackend::Win32 => {
+                super::a11y_walk::walk(&mut win32_tree::Win32Source::new(), A11yBackend::Win32, budget, foreground_only)
+            }
+            A11yBackend::Uia => self.uia.tree(budget, foreground_only),
+            A11yBackend::Unknown => Err(DesktopError::InvalidInput("unknown accessibility backend".into())),
+        }
+    }
+
+    fn clipboard_get(&self) -> DesktopResult<ClipboardData> {
+        self.need_desktop("clipboard")?;
+        clipboard::get()
+    }
+
+    fn clipboard_set(&self, data: &ClipboardData) -> DesktopResult<()> {
+        self.need_desktop("clipboard")?;
+        clipboard::set(data)
+    }
+
+    fn map_path(&self, guest_path: &str) -> DesktopResult<PathBuf> {
+        super::winsys::check_guest_path(guest_path)?;
+        Ok(PathBuf::from(guest_path))
+    }
+
+    fn unmap_path(&self, local: &Path) -> DesktopResult<String> {
+        let s = local
+            .to_str()
+            .ok_or_else(|| DesktopError::InvalidInput(format!("{} is not valid Unicode", local.display())))?;
+        Ok(super::winsys::unverbatim(s))
+    }
+
+    fn env_var(&self, name: &str) -> Option<String> {
+        if name.is_empty() || name.contains(['=', '\0']) {
+            return None;
+        }
+        std::env::var(name).ok()
+    }
+
+    fn known_folder(&self, folder: KnownFolder) -> DesktopResult<String> {
+        system::known_folder(folder)
+    }
+
+    fn recycle(&self, guest_path: &str) -> DesktopResult<()> {
+        super::winsys::check_guest_path(guest_path)?;
+        system::recycle(guest_path)
+    }
+
+    fn open_path(&self, guest_path: &str) -> DesktopResult<()> {
+        super::winsys::check_guest_path(guest_path)?;
+        process::open(guest_path)
+    }
+
+    fn registry_read(&self, key: &str, value: Option<&str>) -> DesktopResult<RegistryValue> {
+        system::registry_read(key, value)
+    }
+
+    fn registry_write(&self, key: &str, value: Option<&str>, data: &RegistryValue) -> DesktopResult<()> {
+        system::registry_write(key, value, data)
+    }
+
+    fn wallpaper(&self) -> DesktopResult<Option<String>> {
+        system::wallpaper()
+    }
+
+    fn set_wallpaper(&self, guest_path: &str) -> DesktopResult<()> {
+        super::winsys::check_guest_path(guest_path)?;
+        system::set_wallpaper(guest_path)
+    }
+
+    fn directory_access_mask(&self, guest_path: &str, user: &str) -> DesktopResult<Option<u32>> {
+        super::winsys::check_guest_path(guest_path)?;
+        system::directory_access_mask(guest_path, user)
+    }
+
+    fn run(&self, cmd: &CommandSpec, limits: &ExecLimits) -> DesktopResult<ExecOutput> {
+        if let Some(cwd) = &limits.cwd {
+            super::winsys::check_guest_path(cwd)?;
+            if !Path::new(cwd).is_dir() {
+                return Err(DesktopError::NotFound(format!("working directory {cwd} not found")));
+            }
+        }
+        process::run(cmd, limits)
+    }
+
+    fn spawn(&self, cmd: &CommandSpec) -> DesktopResult<u32> {
+        process::spawn(cmd)
+    }
+
+    fn shutdown(&self) -> DesktopResult<()> {
+        tracing::warn!("shutting the machine down as asked");
+        system::shutdown()
+    }
+}

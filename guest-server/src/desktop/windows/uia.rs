@@ -1,0 +1,352 @@
+//! The `uia` accessibility source: IUIAutomation with one cache request per window.
+//!
+//! All COM objects live on one dedicated thread, which takes requests over a channel
+//! and answers over another, so no UI Automation pointer ever crosses a thread. Each
+//! top-level window costs one cross-process call (`BuildUpdatedCache` with
+//! `TreeScope_Subtree` and every property the output needs); the walk then reads the
+//! cache. `IUIAutomation2`'s transaction timeout bounds that call by the window's share
+//! of the time budget.
+//!
+//! If a request does not come back in time (a provider that hangs beyond the
+//! transaction timeout), the worker is abandoned: the next request starts a fresh
+//! thread, and the stuck one ends on its own when its call returns.
+//!
+//! Where UI Automation is missing (Wine), creating `CUIAutomation` fails: the worker
+//! says so once, and every later request is answered at once with
+//! [`DesktopError::Unsupported`].
+
+use std::sync::mpsc;
+use std::sync::Mutex;
+use std::time::Duration;
+
+use arena_shared::observation::{A11yBackend, A11yNode, A11yTree, TreeBudget};
+use windows::core::Interface;
+use windows::Win32::Foundation::HWND;
+use windows::Win32::System::Com::{CoCreateInstance, CLSCTX_INPROC_SERVER, COINIT_MULTITHREADED};
+use windows::Win32::System::Variant::{VariantClear, VARIANT, VT_BOOL, VT_BSTR, VT_I4};
+use windows::Win32::UI::Accessibility::*;
+use windows::Win32::UI::WindowsAndMessaging::IsWindowVisible;
+
+use super::sys::{ComApartment, Hwnd};
+use super::window;
+use crate::desktop::a11y_walk::{self, TreeSource, UiaProps};
+use crate::desktop::{DesktopError, DesktopResult};
+
+/// Extra time the caller waits beyond the walk's own budget before abandoning the worker.
+const REPLY_GRACE: Duration = Duration::from_secs(3);
+
+/// Properties the cache request fetches: everything [`UiaProps`] needs.
+const PROPERTIES: [UIA_PROPERTY_ID; 18] = [
+    UIA_NamePropertyId,
+    UIA_ClassNamePropertyId,
+    UIA_ControlTypePropertyId,
+    UIA_BoundingRectanglePropertyId,
+    UIA_IsEnabledPropertyId,
+    UIA_IsOffscreenPropertyId,
+    UIA_HasKeyboardFocusPropertyId,
+    UIA_IsValuePatternAvailablePropertyId,
+    UIA_ValueValuePropertyId,
+    UIA_ValueIsReadOnlyPropertyId,
+    UIA_IsWindowPatternAvailablePropertyId,
+    UIA_WindowWindowVisualStatePropertyId,
+    UIA_IsExpandCollapsePatternAvailablePropertyId,
+    UIA_ExpandCollapseExpandCollapseStatePropertyId,
+    UIA_IsSelectionItemPatternAvailablePropertyId,
+    UIA_SelectionItemIsSelectedPropertyId,
+    UIA_IsTogglePatternAvailablePropertyId,
+    UIA_ToggleToggleStatePropertyId,
+];
+
+struct Request {
+    budget: TreeBudget,
+    foreground_only: bool,
+    reply: mpsc::SyncSender<DesktopResult<A11yTree>>,
+}
+
+#[derive(Debug, Default)]
+struct State {
+    /// The running worker's request channel.
+    worker: Option<mpsc::Sender<Request>>,
+    /// Why UI Automation cannot be used here, once a worker found out.
+    unavailable: Option<String>,
+}
+
+/// The handle the backend keeps: starts the worker thread on first use.
+#[derive(Debug, Default)]
+pub(super) struct UiaWorker {
+    state: Mutex<State>,
+}
+
+impl UiaWorker {
+    /// Walks the visible top-level windows with UI Automation.
+    ///
+    /// # Errors
+    ///
+    /// [`DesktopError::Unsupported`] where UI Automation does not exist,
+    /// [`DesktopError::Timeout`] when the worker does not answer in time.
+    pub(super) fn tree(&self, budget: &TreeBudget, foreground_only: bool) -> DesktopResult<A11yTree> {
+        let tx = {
+            let mut state = self.state.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
+            if let Some(why) = &state.unavailable {
+                return Err(DesktopError::Unsupported(why.clone()));
+            }
+            match &state.worker {
+                Some(tx) => tx.clone(),
+                None => {
+                    let tx = spawn_worker()?;
+                    state.worker = Some(tx.clone());
+                    tx
+                }
+            }
+        };
+        let (reply, answer) = mpsc::sync_channel(1);
+        if tx.send(Request { budget: *budget, foreground_only, reply }).is_err() {
+            self.forget_worker();
+            return Err(DesktopError::Os { op: "uia", message: "the UI Automation worker has stopped; retry".into() });
+        }
+        let wait = Duration::from_millis(budget.max_ms) + REPLY_GRACE;
+        match answer.recv_timeout(wait) {
+            Ok(Err(DesktopError::Unsupported(why))) => {
+                let mut state = self.state.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
+                state.unavailable = Some(why.clone());
+                state.worker = None;
+                Err(DesktopError::Unsupported(why))
+            }
+            Ok(result) => result,
+            Err(mpsc::RecvTimeoutError::Timeout) => {
+                tracing::warn!(wait_ms = wait.as_millis() as u64, "the UI Automation worker is stuck; abandoning it");
+                self.forget_worker();
+                Err(DesktopError::Timeout { op: "uia tree", ms: wait.as_millis() as u64 })
+            }
+            Err(mpsc::RecvTimeoutError::Disconnected) => {
+                self.forget_worker();
+                Err(DesktopError::Os { op: "uia", message: "the UI Automation worker ended without answering".into() })
+            }
+        }
+    }
+
+    fn forget_worker(&self) {
+        self.state.lock().unwrap_or_else(std::sync::PoisonError::into_inner).worker = None;
+    }
+}
+
+fn spawn_worker() -> DesktopResult<mpsc::Sender<Request>> {
+    let (tx, rx) = mpsc::channel::<Request>();
+    std::thread::Builder::new()
+        .name("uia".into())
+        .spawn(move || worker_main(&rx))
+        .map_err(|err| DesktopError::Os { op: "uia", message: format!("starting the UI Automation thread: {err}") })?;
+    Ok(tx)
+}
+
+/// The COM objects of the worker thread.
+struct Uia {
+    automation: IUIAutomation,
+    cache: IUIAutomationCacheRequest,
+    /// For the per-window transaction timeout (Windows 8 and later).
+    automation2: Option<IUIAutomation2>,
+}
+
+fn unsupported(what: &str, err: &windows::core::Error) -> DesktopError {
+    DesktopError::Unsupported(format!(
+        "UI Automation is not available on this system ({what} failed: {}); use backend=win32",
+        super::sys::describe(err)
+    ))
+}
+
+fn setup() -> DesktopResult<Uia> {
+    // SAFETY: creating the in-process UIA client object on a COM-initialised thread.
+    let automation: IUIAutomation = unsafe { CoCreateInstance(&CUIAutomation8, None, CLSCTX_INPROC_SERVER) }
+        // SAFETY: as above; CUIAutomation is the pre-Windows-8 class.
+        .or_else(|_| unsafe { CoCreateInstance(&CUIAutomation, None, CLSCTX_INPROC_SERVER) })
+        .map_err(|err| unsupported("CoCreateInstance(CUIAutomation)", &err))?;
+    // SAFETY: COM calls on live interfaces owned by this thread.
+    let cache = unsafe {
+        let cache = automation.CreateCacheRequest().map_err(|err| unsupported("CreateCacheRequest", &err))?;
+        for property in PROPERTIES {
+            cache.AddProperty(property).map_err(|err| unsupported("AddProperty", &err))?;
+        }
+        cache.SetTreeScope(TreeScope_Subtree).map_err(|err| unsupported("SetTreeScope", &err))?;
+        let view = automation.ControlViewCondition().map_err(|err| unsupported("ControlViewCondition", &err))?;
+        cache.SetTreeFilter(&view).map_err(|err| unsupported("SetTreeFilter", &err))?;
+        cache
+    };
+    let automation2 = automation.cast::<IUIAutomation2>().ok();
+    Ok(Uia { automation, cache, automation2 })
+}
+
+fn worker_main(rx: &mpsc::Receiver<Request>) {
+    let setup = ComApartment::init(COINIT_MULTITHREADED).and_then(|com| setup().map(|uia| (com, uia)));
+    let (_com, uia) = match setup {
+        Ok(ok) => ok,
+        Err(err) => {
+            let err = match err {
+                DesktopError::Unsupported(m) => DesktopError::Unsupported(m),
+                other => {
+                    DesktopError::Unsupported(format!("UI Automation could not start: {other}; use backend=win32"))
+                }
+            };
+            // The thread that started this worker sends its request right away: answer
+            // it and whatever else is queued, then stop. The caller remembers the reason.
+            if let Ok(request) = rx.recv() {
+                let _ = request.reply.send(Err(DesktopError::Unsupported(err.to_string())));
+            }
+            while let Ok(request) = rx.try_recv() {
+                let _ = request.reply.send(Err(DesktopError::Unsupported(err.to_string())));
+            }
+            return;
+        }
+    };
+    while let Ok(request) = rx.recv() {
+        let mut source = UiaSource { uia: &uia };
+        let result = a11y_walk::walk(&mut source, A11yBackend::Uia, &request.budget, request.foreground_only);
+        let _ = request.reply.send(result);
+    }
+}
+
+/// A VARIANT read from the cache, cleared on drop.
+struct Variant(VARIANT);
+
+impl Drop for Variant {
+    fn drop(&mut self) {
+        // SAFETY: the VARIANT came from UIA and is cleared exactly once.
+        let _ = unsafe { VariantClear(&mut self.0) };
+    }
+}
+
+impl Variant {
+    fn vt(&self) -> u16 {
+        // SAFETY: reading the tag of an initialised VARIANT.
+        unsafe { self.0.Anonymous.Anonymous.vt.0 }
+    }
+
+    fn as_bool(&self) -> Option<bool> {
+        // SAFETY: the tag says the union holds a VARIANT_BOOL.
+        (self.vt() == VT_BOOL.0).then(|| unsafe { self.0.Anonymous.Anonymous.Anonymous.boolVal.as_bool() })
+    }
+
+    fn as_i32(&self) -> Option<i32> {
+        // SAFETY: the tag says the union holds an i32.
+        (self.vt() == VT_I4.0).then(|| unsafe { self.0.Anonymous.Anonymous.Anonymous.lVal })
+    }
+
+    fn as_string(&self) -> Option<String> {
+        // SAFETY: the tag says the union holds a BSTR, owned by this VARIANT.
+        (self.vt() == VT_BSTR.0).then(|| unsafe { self.0.Anonymous.Anonymous.Anonymous.bstrVal.to_string() })
+    }
+}
+
+fn cached(elem: &IUIAutomationElement, property: UIA_PROPERTY_ID) -> Option<Variant> {
+    // SAFETY: a cached read on a live element; the VARIANT goes to a guard.
+    unsafe { elem.GetCachedPropertyValue(property) }.ok().map(Variant)
+}
+
+fn cached_bool(elem: &IUIAutomationElement, property: UIA_PROPERTY_ID) -> Option<bool> {
+    cached(elem, property).and_then(|v| v.as_bool())
+}
+
+/// A pattern property, only when the element supports the pattern.
+fn pattern<T>(elem: &IUIAutomationElement, available: UIA_PROPERTY_ID, read: impl FnOnce() -> Option<T>) -> Option<T> {
+    if cached_bool(elem, available) == Some(true) {
+        read()
+    } else {
+        None
+    }
+}
+
+struct UiaSource<'a> {
+    uia: &'a Uia,
+}
+
+impl TreeSource for UiaSource<'_> {
+    type Elem = IUIAutomationElement;
+
+    fn roots(&mut self, foreground_only: bool) -> DesktopResult<Vec<(u64, IUIAutomationElement)>> {
+        let hwnds: Vec<HWND> = if foreground_only { vec![window::foreground()] } else { window::top_level() };
+        let mut out = Vec::new();
+        for hwnd in hwnds {
+            // SAFETY: IsWindowVisible accepts any handle.
+            if hwnd.is_invalid() || !unsafe { IsWindowVisible(hwnd) }.as_bool() {
+                continue;
+            }
+            // SAFETY: a COM call on the worker's live automation object.
+            match unsafe { self.uia.automation.ElementFromHandle(hwnd) } {
+                Ok(elem) => out.push((Hwnd::id(hwnd), elem)),
+                Err(err) => tracing::debug!(%err, "no UIA element for a window"),
+            }
+        }
+        Ok(out)
+    }
+
+    fn prepare(&mut self, root: IUIAutomationElement, time: Duration) -> DesktopResult<IUIAutomationElement> {
+        if let Some(a2) = &self.uia.automation2 {
+            let ms = u32::try_from(time.as_millis()).unwrap_or(u32::MAX).max(100);
+            // SAFETY: COM calls on the worker's live automation object.
+            unsafe {
+                let _ = a2.SetTransactionTimeout(ms);
+                let _ = a2.SetConnectionTimeout(ms.min(2_000));
+            }
+        }
+        // SAFETY: one cross-process call that fetches the window's whole cached subtree.
+        unsafe { root.BuildUpdatedCache(&self.uia.cache) }.map_err(|err| super::sys::os("BuildUpdatedCache", &err))
+    }
+
+    fn record(&mut self, elem: &IUIAutomationElement) -> A11yNode {
+        // SAFETY: cached reads on a live element; none of them crosses processes.
+        let (name, class_name, control_type, rect, enabled, offscreen, focus) = unsafe {
+            (
+                elem.CachedName().map(|b| b.to_string()).unwrap_or_default(),
+                elem.CachedClassName().map(|b| b.to_string()).unwrap_or_default(),
+                elem.CachedControlType().map(|t| t.0).unwrap_or(0),
+                elem.CachedBoundingRectangle().ok(),
+                elem.CachedIsEnabled().map(|b| b.as_bool()).unwrap_or(false),
+                elem.CachedIsOffscreen().map(|b| b.as_bool()).unwrap_or(false),
+                elem.CachedHasKeyboardFocus().map(|b| b.as_bool()).unwrap_or(false),
+            )
+        };
+        let bounds = rect.map_or([0.0; 4], |r| {
+            [f64::from(r.left), f64::from(r.top), f64::from(r.right - r.left), f64::from(r.bottom - r.top)]
+        });
+        UiaProps {
+            control_type,
+            class_name,
+            name,
+            bounds,
+            enabled,
+            offscreen,
+            has_keyboard_focus: focus,
+            value: pattern(elem, UIA_IsValuePatternAvailablePropertyId, || {
+                cached(elem, UIA_ValueValuePropertyId).and_then(|v| v.as_string())
+            }),
+            value_read_only: pattern(elem, UIA_IsValuePatternAvailablePropertyId, || {
+                cached_bool(elem, UIA_ValueIsReadOnlyPropertyId)
+            }),
+            window_visual_state: pattern(elem, UIA_IsWindowPatternAvailablePropertyId, || {
+                cached(elem, UIA_WindowWindowVisualStatePropertyId).and_then(|v| v.as_i32())
+            }),
+            expand_collapse_state: pattern(elem, UIA_IsExpandCollapsePatternAvailablePropertyId, || {
+                cached(elem, UIA_ExpandCollapseExpandCollapseStatePropertyId).and_then(|v| v.as_i32())
+            }),
+            selected: pattern(elem, UIA_IsSelectionItemPatternAvailablePropertyId, || {
+                cached_bool(elem, UIA_SelectionItemIsSelectedPropertyId)
+            }),
+            toggle_state: pattern(elem, UIA_IsTogglePatternAvailablePropertyId, || {
+                cached(elem, UIA_ToggleToggleStatePropertyId).and_then(|v| v.as_i32())
+            }),
+        }
+        .into_node()
+    }
+
+    fn children(&mut self, elem: &IUIAutomationElement, limit: usize) -> Vec<IUIAutomationElement> {
+        // SAFETY: reads the cached children array of a live element.
+        let Ok(array) = (unsafe { elem.GetCachedChildren() }) else {
+            return Vec::new();
+        };
+        // SAFETY: as above.
+        let len = unsafe { array.Length() }.unwrap_or(0).max(0) as usize;
+        (0..len.min(limit.saturating_add(1)))
+            // SAFETY: index < Length.
+            .filter_map(|i| unsafe { array.GetElement(i as i32) }.ok())
+            .collect()
+    }
+}
