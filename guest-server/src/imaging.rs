@@ -77,6 +77,21 @@ pub fn is_black(image: &RgbaImage) -> bool {
     image.pixels().all(|p| p.0[0] == 0 && p.0[1] == 0 && p.0[2] == 0)
 }
 
+/// Width and height of the area around the cursor's hot spot that a drawn cursor may cover
+/// (Windows cursors are at most 32x32 at 100 % scale, 64x64 at 200 %).
+pub const CURSOR_BOX: u32 = 64;
+
+/// Whether every pixel outside the `size`x`size` box whose top-left corner is `at` is black:
+/// [`is_black`] for a frame with a cursor drawn into it.
+pub fn is_black_outside(image: &RgbaImage, at: Point, size: u32) -> bool {
+    let size = i64::from(size);
+    image.enumerate_pixels().all(|(x, y, p)| {
+        let (dx, dy) = (i64::from(x) - i64::from(at.x), i64::from(y) - i64::from(at.y));
+        let covered = (0..size).contains(&dx) && (0..size).contains(&dy);
+        covered || (p.0[0] == 0 && p.0[1] == 0 && p.0[2] == 0)
+    })
+}
+
 /// The arrow cursor upstream pastes into `/screenshot`: 13x21 pixels, tip at the top-left.
 /// `#` is the black outline, `o` the white fill.
 const CURSOR: [&str; 21] = [
@@ -157,6 +172,16 @@ mod tests {
         assert!(is_black(&img));
         img.put_pixel(3, 3, image::Rgba([0, 1, 0, 255]));
         assert!(!is_black(&img));
+    }
+
+    #[test]
+    fn a_drawn_cursor_does_not_hide_a_black_frame() {
+        let mut img = RgbaImage::from_pixel(100, 100, image::Rgba([0, 0, 0, 255]));
+        draw_cursor(&mut img, Point::new(40, 40));
+        assert!(!is_black(&img));
+        assert!(is_black_outside(&img, Point::new(40, 40), CURSOR_BOX));
+        img.put_pixel(5, 5, image::Rgba([9, 9, 9, 255]));
+        assert!(!is_black_outside(&img, Point::new(40, 40), CURSOR_BOX));
     }
 
     #[test]

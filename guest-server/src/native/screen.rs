@@ -86,11 +86,17 @@ fn shoot(
     want_cursor: bool,
 ) -> DesktopResult<(Vec<u8>, ScreenshotMeta)> {
     let started = Instant::now();
-    let frame = d.capture(false)?;
+    // The backend draws the real cursor shape where it can (the Windows backend
+    // composites the live cursor); the stub arrow below is the fallback.
+    let frame = d.capture(want_cursor)?;
     let capture_ms = millis(started.elapsed());
     let mut image = frame.image;
     let (physical_width, physical_height) = image.dimensions();
-    let black_frame = imaging::is_black(&image);
+    // A cursor drawn on a black (locked or secure) desktop must not hide that it is black.
+    let black_frame = match (frame.cursor_drawn, frame.cursor) {
+        (true, Some(at)) => imaging::is_black_outside(&image, at, imaging::CURSOR_BOX),
+        _ => imaging::is_black(&image),
+    };
     let mut cursor_drawn = frame.cursor_drawn;
     if want_cursor && !cursor_drawn {
         if let Some(at) = frame.cursor {
