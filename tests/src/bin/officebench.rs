@@ -7,7 +7,9 @@
 //! 200-paragraph documents into a temporary folder, then calls the registered
 //! metrics through `arena_host::eval::metrics::lookup`, exactly as an
 //! evaluation does. Each comparison opens and parses both files from disk.
-//! Run it in release mode: `cargo run --release -p arena-tests --bin officebench [iterations]`.
+//! Run it in release mode: `cargo run --release -p arena-tests --bin officebench [iterations] [--keep DIR]`.
+//! `--keep DIR` writes the files into DIR and leaves them there, so that
+//! `tests/bench/office_upstream.py DIR` can time the Python libraries on the same files.
 
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -35,15 +37,28 @@ fn main() -> ExitCode {
 }
 
 fn run() -> anyhow::Result<()> {
-    let iterations: usize = match std::env::args().nth(1) {
-        Some(n) => n.parse().context("the argument is the number of iterations")?,
-        None => 20,
+    let mut iterations = 20;
+    let mut keep: Option<PathBuf> = None;
+    let mut args = std::env::args().skip(1);
+    while let Some(arg) = args.next() {
+        match arg.as_str() {
+            "--keep" => keep = Some(args.next().context("--keep needs a folder")?.into()),
+            n => iterations = n.parse().with_context(|| format!("{n:?} is not a number of iterations"))?,
+        }
+    }
+    let temp = tempfile::tempdir()?;
+    let dir_path = match &keep {
+        Some(dir) => {
+            std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+            dir.clone()
+        }
+        None => temp.path().to_path_buf(),
     };
-    let dir = tempfile::tempdir()?;
-    let (a, b) = (dir.path().join("result.xlsx"), dir.path().join("gold.xlsx"));
+    let dir = dir_path.as_path();
+    let (a, b) = (dir.join("result.xlsx"), dir.join("gold.xlsx"));
     write_workbook(&a)?;
     write_workbook(&b)?;
-    let (c, d) = (dir.path().join("result.docx"), dir.path().join("gold.docx"));
+    let (c, d) = (dir.join("result.docx"), dir.join("gold.docx"));
     write_document(&c)?;
     write_document(&d)?;
     println!("officebench: {iterations} iterations; xlsx {ROWS}x{COLS} ({} KiB), docx {PARAGRAPHS} paragraphs ({} KiB)", size_kib(&a), size_kib(&c));
