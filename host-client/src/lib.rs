@@ -25,6 +25,7 @@ pub mod results;
 pub mod run;
 pub mod episode;
 pub mod setup;
+pub mod prep;
 
 pub use client::{ClientConfig, GuestClient};
 pub use error::ClientError;

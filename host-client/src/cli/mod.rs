@@ -17,6 +17,7 @@
 pub mod act;
 pub mod demo;
 pub mod local;
+pub mod prep;
 pub mod render;
 pub mod runs;
 pub mod stub;
@@ -233,6 +234,8 @@ pub enum Command {
     Merge(runs::MergeArgs),
     /// Rebuild summary.json, summary.md and report.html of a result folder.
     Report(runs::ReportArgs),
+    /// Stage an OEM folder for a new Windows image, verify one, or wait for a prepared guest.
+    Prep(prep::PrepArgs),
 }
 
 /// Arguments of `arena tree`.
@@ -525,6 +528,7 @@ pub async fn run(cli: Cli) -> anyhow::Result<ExitCode> {
         Command::Run(args) => runs::run(conn, args).await,
         Command::Merge(args) => runs::merge(&args),
         Command::Report(args) => runs::report(&args),
+        Command::Prep(args) => prep::run(conn, args).await,
     }
 }
 

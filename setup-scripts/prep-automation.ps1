@@ -1,0 +1,122 @@
+<#
+.SYNOPSIS
+Turns off what breaks unattended desktop automation: Windows Update, the lock
+screen, the screen saver, sleep, UAC's secure desktop, first-run pop-ups and
+focus-stealing notifications; shows file extensions.
+
+.DESCRIPTION
+Run it in the benchmark user's session (setup.ps1 does, at first logon): the
+per-user settings go to that user's HKCU. Every registry value is compared
+before it is written, so a rerun reports "already" for each.
+
+Exit codes: 0 done, 2 not elevated, 3 a setting could not be applied.
+#>
+[CmdletBinding()]
+param(
+    # Keep Windows Update running (for an image that is patched before it is frozen).
+    [switch]$KeepWindowsUpdate
+)
+
+Set-StrictMode -Version Latest
+$ErrorActionPreference = 'Stop'
+
+function Write-Step([string]$Message) {
+    Write-Host "[prep-automation] $Message"
+}
+
+# Writes a registry value only when it differs; creates the key when missing.
+function Set-RegistryValue([string]$Key, [string]$Name, $Value, [string]$Type = 'DWord') {
+    if (-not (Test-Path -LiteralPath $Key)) {
+        New-Item -Path $Key -Force | Out-Null
+    }
+    $current = Get-ItemProperty -LiteralPath $Key -Name $Name -ErrorAction SilentlyContinue
+    if ($null -ne $current -and "$($current.$Name)" -eq "$Value") {
+        Write-Step "already $Key\$Name = $Value"
+        return
+    }
+    New-ItemProperty -LiteralPath $Key -Name $Name -Value $Value -PropertyType $Type -Force | Out-Null
+    Write-Step "set $Key\$Name = $Value"
+}
+
+# Runs powercfg; it only sets values, so running it again with the same values changes nothing.
+function Invoke-PowerCfg([string[]]$Arguments) {
+    & powercfg.exe @Arguments
+    if ($LASTEXITCODE -ne 0) {
+        throw "powercfg $($Arguments -join ' ') exited with $LASTEXITCODE"
+    }
+}
+
+$identity = [Security.Principal.WindowsIdentity]::GetCurrent()
+if (-not (New-Object Security.Principal.WindowsPrincipal($identity)).IsInRole([Security.Principal.WindowsBuiltInRole]::Administrator)) {
+    Write-Step 'ERROR: run this from an elevated PowerShell (it writes HKLM and services)'
+    exit 2
+}
+
+try {
+    # Windows Update: a reboot or a "restart now" toast in the middle of an episode ruins it.
+    if (-not $KeepWindowsUpdate) {
+        Set-RegistryValue 'HKLM:\SOFTWARE\Policies\Microsoft\Windows\WindowsUpdate\AU' 'NoAutoUpdate' 1
+        Set-RegistryValue 'HKLM:\SOFTWARE\Policies\Microsoft\Windows\WindowsUpdate\AU' 'NoAutoRebootWithLoggedOnUsers' 1
+        Set-RegistryValue 'HKLM:\SOFTWARE\Policies\Microsoft\Windows\WindowsUpdate' 'SetDisableUXWUAccess' 1
+        $wu = Get-Service -Name 'wuauserv'
+        if ($wu.StartType -ne 'Disabled') {
+            Stop-Service -Name 'wuauserv' -Force
+            Set-Service -Name 'wuauserv' -StartupType Disabled
+            Write-Step 'wuauserv stopped and disabled'
+        }
+        else {
+            Write-Step 'already wuauserv disabled'
+        }
+    }
+
+    # Lock screen and sign-in on wake: the guest cannot see or type into the secure desktop.
+    Set-RegistryValue 'HKLM:\SOFTWARE\Policies\Microsoft\Windows\Personalization' 'NoLockScreen' 1
+    Set-RegistryValue 'HKLM:\SOFTWARE\Policies\Microsoft\Windows\System' 'DisableLockScreenAppNotifications' 1
+    Invoke-PowerCfg @('/SETACVALUEINDEX', 'SCHEME_CURRENT', 'SUB_NONE', 'CONSOLELOCK', '0')
+
+    # Screen saver: a blank or animated screen makes screenshots and clicks meaningless.
+    Set-RegistryValue 'HKCU:\Control Panel\Desktop' 'ScreenSaveActive' '0' 'String'
+    Set-RegistryValue 'HKCU:\Software\Policies\Microsoft\Windows\Control Panel\Desktop' 'ScreenSaveActive' '0' 'String'
+
+    # Sleep, hibernation and monitor blanking.
+    Invoke-PowerCfg @('/change', 'standby-timeout-ac', '0')
+    Invoke-PowerCfg @('/change', 'monitor-timeout-ac', '0')
+    Invoke-PowerCfg @('/change', 'hibernate-timeout-ac', '0')
+    Invoke-PowerCfg @('/hibernate', 'off')
+
+    # UAC: the consent prompt runs on the secure desktop, where input from the guest
+    # (running as the user) does not land, so an elevation would hang the episode.
+    # This VM is a disposable benchmark image, not a workstation.
+    Set-RegistryValue 'HKLM:\SOFTWARE\Microsoft\Windows\CurrentVersion\Policies\System' 'PromptOnSecureDesktop' 0
+    Set-RegistryValue 'HKLM:\SOFTWARE\Microsoft\Windows\CurrentVersion\Policies\System' 'ConsentPromptBehaviorAdmin' 0
+
+    # First-run and "finish setting up" pop-ups that cover the window a task expects.
+    Set-RegistryValue 'HKCU:\Software\Microsoft\Windows\CurrentVersion\UserProfileEngagement' 'ScoobeSystemSettingEnabled' 0
+    Set-RegistryValue 'HKLM:\SOFTWARE\Policies\Microsoft\Windows\CloudContent' 'DisableWindowsConsumerFeatures' 1
+    Set-RegistryValue 'HKLM:\SOFTWARE\Policies\Microsoft\Windows\CloudContent' 'DisableSoftLanding' 1
+    Set-RegistryValue 'HKCU:\Software\Microsoft\Windows\CurrentVersion\ContentDeliveryManager' 'SubscribedContent-310093Enabled' 0
+    Set-RegistryValue 'HKCU:\Software\Microsoft\Windows\CurrentVersion\ContentDeliveryManager' 'SubscribedContent-338389Enabled' 0
+    Set-RegistryValue 'HKLM:\SOFTWARE\Policies\Microsoft\Edge' 'HideFirstRunExperience' 1
+    Set-RegistryValue 'HKLM:\SOFTWARE\Policies\Microsoft\Edge' 'DefaultBrowserSettingEnabled' 0
+    Set-RegistryValue 'HKLM:\SOFTWARE\Policies\Microsoft\Edge' 'StartupBoostEnabled' 0
+    Set-RegistryValue 'HKLM:\SOFTWARE\Policies\Microsoft\EdgeUpdate' 'UpdateDefault' 0
+    Set-RegistryValue 'HKLM:\SOFTWARE\Policies\Google\Chrome' 'DefaultBrowserSettingEnabled' 0
+    Set-RegistryValue 'HKLM:\SOFTWARE\Policies\Google\Chrome' 'PromotionsEnabled' 0
+    Set-RegistryValue 'HKLM:\SOFTWARE\Policies\Google\Chrome' 'BrowserSignin' 0
+    Set-RegistryValue 'HKLM:\SOFTWARE\Policies\Google\Chrome' 'MetricsReportingEnabled' 0
+    Set-RegistryValue 'HKLM:\SOFTWARE\Policies\Google\Chrome' 'PrivacySandboxPromptEnabled' 0
+    # Chrome and Edge updaters would change the browser under a frozen image.
+    Set-RegistryValue 'HKLM:\SOFTWARE\Policies\Google\Update' 'UpdateDefault' 0
+
+    # Notifications: a toast takes focus from the window a task is typing into.
+    Set-RegistryValue 'HKCU:\Software\Microsoft\Windows\CurrentVersion\PushNotifications' 'ToastEnabled' 0
+    Set-RegistryValue 'HKCU:\Software\Policies\Microsoft\Windows\Explorer' 'DisableNotificationCenter' 1
+
+    # File extensions: tasks name files with their extension and check Explorer's view.
+    Set-RegistryValue 'HKCU:\Software\Microsoft\Windows\CurrentVersion\Explorer\Advanced' 'HideFileExt' 0
+}
+catch {
+    Write-Step "ERROR: $($_.Exception.Message)"
+    exit 3
+}
+exit 0

@@ -1,0 +1,89 @@
+<#
+.SYNOPSIS
+Prepares a fresh Windows 11 image for the arena, step by step, logging to
+C:\OEM\arena-setup.log, and stops at the first step that fails.
+
+.DESCRIPTION
+The steps, in order (each its own script in this folder, run as a child
+PowerShell so its exit code is its own):
+  1. prep-autologon.ps1   the Docker user logs on at every boot
+  2. prep-automation.ps1  no updates, lock screen, screen saver, sleep, pop-ups
+  3. prep-display.ps1     1440x900
+  4. prep-apps.ps1        the apps the tasks use (skipped with -SkipApps)
+  5. prep-browser.ps1     DevTools on loopback for the guest to forward
+  6. install-guest.ps1    the guest itself, checked through its health endpoint
+
+Rerunning it is safe: every step skips what is already done.
+
+Exit codes: 0 every step succeeded; otherwise the exit code of the first step
+that failed (2 missing input, 3 a step failed, 4 the guest not healthy in time),
+or 5 when a step's script is missing.
+#>
+[CmdletBinding()]
+param(
+    [string]$OemDir = 'C:\OEM',
+    [string]$LogPath = '',
+    [ValidateRange(1, 65535)]
+    [int]$Port = 5000,
+    [string]$HostNetwork = '20.20.20.0/24',
+    [ValidateSet('service', 'logon-task')]
+    [string]$Mode = 'service',
+    [string]$UserName = 'Docker',
+    [switch]$SkipApps
+)
+
+Set-StrictMode -Version Latest
+$ErrorActionPreference = 'Stop'
+
+if ([string]::IsNullOrEmpty($LogPath)) {
+    $LogPath = Join-Path $OemDir 'arena-setup.log'
+}
+
+function Write-Log([string]$Message) {
+    $line = "$(Get-Date -Format 'yyyy-MM-dd HH:mm:ss') $Message"
+    Write-Host $line
+    Add-Content -LiteralPath $LogPath -Value $line
+}
+
+# Runs one step's script in a child PowerShell (the same executable as this one) and
+# copies its output into the log; returns its exit code.
+function Invoke-Step([string]$Script, [string[]]$Arguments) {
+    $path = Join-Path $PSScriptRoot $Script
+    if (-not (Test-Path -LiteralPath $path -PathType Leaf)) {
+        Write-Log "step $Script is missing from $PSScriptRoot"
+        return 5
+    }
+    Write-Log "---- $Script $($Arguments -join ' ')"
+    $shell = (Get-Process -Id $PID).Path
+    # A child's stderr would be turned into terminating errors by 'Stop' on
+    # Windows PowerShell 5.1; its exit code is what decides here.
+    $ErrorActionPreference = 'Continue'
+    & $shell -NoProfile -ExecutionPolicy Bypass -File $path @Arguments 2>&1 | ForEach-Object { Write-Log "  $_" }
+    $code = $LASTEXITCODE
+    $ErrorActionPreference = 'Stop'
+    Write-Log "---- $Script exited with $code"
+    return $code
+}
+
+Write-Log "arena setup starting (OEM folder $OemDir, mode $Mode, port $Port, host network $HostNetwork)"
+$steps = @(
+    @{ Script = 'prep-autologon.ps1'; Arguments = @('-UserName', $UserName) },
+    @{ Script = 'prep-automation.ps1'; Arguments = @() },
+    @{ Script = 'prep-display.ps1'; Arguments = @() },
+    @{ Script = 'prep-apps.ps1'; Arguments = @('-OemDir', $OemDir) },
+    @{ Script = 'prep-browser.ps1'; Arguments = @() },
+    @{ Script = 'install-guest.ps1'; Arguments = @('-OemDir', $OemDir, '-Port', "$Port", '-HostNetwork', $HostNetwork, '-Mode', $Mode) }
+)
+foreach ($step in $steps) {
+    if ($SkipApps -and $step.Script -eq 'prep-apps.ps1') {
+        Write-Log '---- prep-apps.ps1 skipped (-SkipApps)'
+        continue
+    }
+    $code = Invoke-Step $step.Script $step.Arguments
+    if ($code -ne 0) {
+        Write-Log "arena setup FAILED at $($step.Script) with exit code $code"
+        exit $code
+    }
+}
+Write-Log 'arena setup finished: the guest is installed and healthy'
+exit 0
