@@ -91,5 +91,5 @@ export ARENA_WINDOWS_EXE="$EXE"
 export ARENA_WINE="${ARENA_WINE:-$(command -v wine)}"
 export ARENA_REQUIRE_WINE="${ARENA_REQUIRE_WINE:-1}"
 started=$(date +%s)
-cargo test -p arena-tests --test wine -- --nocapture
+cargo test -p arena-tests --test wine --test wine_prep -- --nocapture
 echo "wine suite took $(( $(date +%s) - started )) s"
