@@ -103,6 +103,13 @@ pub struct ServerConfig {
     /// Log format.
     #[arg(long, env = "ARENA_LOG_FORMAT", value_enum, default_value_t = LogFormat::Text)]
     pub log_format: LogFormat,
+
+    /// Set by the Windows service's supervisor on the worker it starts: the worker shuts
+    /// down gracefully when its standard input closes (the supervisor's stop signal, which
+    /// also fires when the supervisor dies) and logs without colours, since its output
+    /// goes to a file.
+    #[arg(long, hide = true)]
+    pub worker: bool,
 }
 
 impl ServerConfig {
@@ -142,6 +149,7 @@ impl ServerConfig {
             computer_action_delay_ms: 0,
             cdp_port: 1337,
             log_format: LogFormat::Text,
+            worker: false,
         }
     }
 }

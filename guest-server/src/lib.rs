@@ -19,6 +19,7 @@
 //! - [`error`]: the error shapes. [`state`]: handler state.
 //! - [`paths`], [`imaging`]: platform-neutral helpers the routes share.
 //! - [`script_host`]: the desktop side of the native Python-subset interpreter.
+//! - [`service_cli`]: the `service` and `logon-task` subcommands (running in the user's session).
 
 pub mod auth;
 pub mod call;
@@ -30,6 +31,7 @@ pub mod imaging;
 pub mod native;
 pub mod paths;
 pub mod script_host;
+pub mod service_cli;
 pub mod state;
 pub mod waa;
 

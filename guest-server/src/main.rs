@@ -1,4 +1,5 @@
-//! `arena-guest`: parses the configuration, sets up logging, binds and serves.
+//! `arena-guest`: parses the command line, sets up logging, and serves (the default)
+//! or runs a `service` / `logon-task` subcommand from [`arena_guest::service_cli`].
 
 use std::net::SocketAddr;
 use std::process::ExitCode;
@@ -6,10 +7,40 @@ use std::process::ExitCode;
 use clap::Parser;
 
 use arena_guest::config::{LogFormat, ServerConfig};
+use arena_guest::service_cli::{Cli, Command, ServiceCommand};
 
 fn main() -> ExitCode {
-    let config = ServerConfig::parse();
-    init_tracing(config.log_format);
+    let cli = Cli::parse();
+    let outcome = match &cli.command {
+        None => return serve(cli.serve),
+        // The supervisor logs to its own file (a service has no console); see service_cli.
+        Some(Command::Service(command @ ServiceCommand::Run(_))) => arena_guest::service_cli::execute_service(command),
+        Some(Command::Service(command)) => {
+            init_tracing(LogFormat::Text, false);
+            arena_guest::service_cli::execute_service(command)
+        }
+        Some(Command::LogonTask(command)) => {
+            init_tracing(LogFormat::Text, false);
+            arena_guest::service_cli::execute_logon_task(command)
+        }
+    };
+    match outcome {
+        Ok(message) => {
+            if !message.is_empty() {
+                println!("{message}");
+            }
+            ExitCode::SUCCESS
+        }
+        Err(err) => {
+            eprintln!("error: {err}");
+            ExitCode::from(err.exit_code())
+        }
+    }
+}
+
+fn serve(config: ServerConfig) -> ExitCode {
+    // A worker's output goes to a log file: no colour codes there.
+    init_tracing(config.log_format, config.worker);
     let runtime = match tokio::runtime::Runtime::new() {
         Ok(rt) => rt,
         Err(err) => {
@@ -29,28 +60,36 @@ fn main() -> ExitCode {
 async fn run(config: ServerConfig) -> anyhow::Result<()> {
     use anyhow::Context;
     let addr = SocketAddr::new(config.bind, config.port);
+    let worker = config.worker;
+    if worker {
+        tracing::info!(
+            pid = std::process::id(),
+            "started as the service's worker; stops when its standard input closes"
+        );
+    }
     let state = arena_guest::build_state(config)?;
     let listener = tokio::net::TcpListener::bind(addr).await.with_context(|| format!("binding {addr}"))?;
     let local = listener.local_addr().context("reading the bound address")?;
     // Scripts and tests read this exact line to learn the port.
     tracing::info!(backend = state.desktop.kind(), "listening on http://{local}");
     println!("listening on http://{local}");
-    arena_guest::serve(listener, state, shutdown_signal()).await.context("serving")?;
+    arena_guest::serve(listener, state, shutdown_signal(worker)).await.context("serving")?;
     tracing::info!("shut down");
     Ok(())
 }
 
-fn init_tracing(format: LogFormat) {
+fn init_tracing(format: LogFormat, plain: bool) {
     let filter = tracing_subscriber::EnvFilter::try_from_default_env()
         .unwrap_or_else(|_| "arena_guest=info,tower_http=warn".into());
     let builder = tracing_subscriber::fmt().with_env_filter(filter).with_writer(std::io::stderr);
+    let builder = if plain { builder.with_ansi(false) } else { builder };
     match format {
         LogFormat::Text => builder.init(),
         LogFormat::Json => builder.json().init(),
     }
 }
 
-async fn shutdown_signal() {
+async fn shutdown_signal(worker: bool) {
     let ctrl_c = async {
         let _ = tokio::signal::ctrl_c().await;
     };
@@ -65,8 +104,18 @@ async fn shutdown_signal() {
     };
     #[cfg(not(unix))]
     let terminate = std::future::pending::<()>();
+    // The supervisor's stop signal: it closes the worker's standard input.
+    let supervisor = async {
+        if worker {
+            arena_guest::service_cli::stdin_closed().await;
+            tracing::info!("standard input closed: the supervisor asks this worker to stop");
+        } else {
+            std::future::pending::<()>().await;
+        }
+    };
     tokio::select! {
         () = ctrl_c => {},
         () = terminate => {},
+        () = supervisor => {},
     }
 }

@@ -10,7 +10,9 @@
 //!
 //! Layout: `sys` (handle guards, error conversion), `window`, `input`, `capture`,
 //! `clipboard`, `process`, `system` (files, registry, wallpaper, ACLs, shutdown),
-//! `win32_tree` and `uia` (the two accessibility sources).
+//! `win32_tree` and `uia` (the two accessibility sources); `service` (the Windows
+//! service mode: SCM registration and the supervisor that starts the worker in the
+//! user's session).
 //!
 //! # Platform-specific behavior
 //!
@@ -22,6 +24,7 @@ mod capture;
 mod clipboard;
 mod input;
 mod process;
+pub mod service;
 mod sys;
 mod system;
 mod uia;

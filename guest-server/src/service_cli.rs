@@ -1,0 +1,624 @@
+//! The command line of `arena-guest` beyond serving: the `service` and `logon-task`
+//! subcommands, and the platform-neutral parts of running the server in the user's
+//! session from a Windows service or a logon task.
+//!
+//! What is here: the clap definitions ([`Cli`]), the checks on the serve options a
+//! service or task passes on, the command lines the supervisor and `schtasks.exe` are
+//! given (quoted with [`crate::cmdline::list2cmdline`]), the worker's relaunch backoff,
+//! the log folder and log rotation, and the worker's stop signal (its standard input
+//! closing). All of it is tested natively.
+//!
+//! What is not: the Service Control Manager, tokens and `CreateProcessAsUserW`; those
+//! are FFI glue in `desktop/windows/service.rs`, which follows
+//! [`crate::desktop::session::supervisor_step`] for its decisions. On other platforms
+//! [`execute`] answers [`ServiceCliError::OnlyOnWindows`].
+
+use std::path::{Path, PathBuf};
+use std::time::Duration;
+
+use clap::Parser as _;
+
+use crate::cmdline::list2cmdline;
+use crate::config::ServerConfig;
+
+/// The service name used when `--name` is not given.
+pub const DEFAULT_SERVICE_NAME: &str = "ArenaGuest";
+
+/// The scheduled task name used when `--name` is not given.
+pub const DEFAULT_TASK_NAME: &str = "ArenaGuest";
+
+/// `schtasks /TR` accepts at most this many characters.
+pub const SCHTASKS_TR_MAX: usize = 261;
+
+/// The whole command line: serve flags (no subcommand: serve, as before), or a subcommand.
+#[derive(Debug, Clone, clap::Parser)]
+#[command(
+    name = "arena-guest",
+    version,
+    about = "Desktop-control server for Windows agent benchmarks (WAA-compatible)",
+    args_conflicts_with_subcommands = true
+)]
+pub struct Cli {
+    #[command(subcommand)]
+    pub command: Option<Command>,
+
+    #[command(flatten)]
+    pub serve: ServerConfig,
+}
+
+/// The subcommands.
+#[derive(Debug, Clone, clap::Subcommand)]
+pub enum Command {
+    /// Run as a Windows service that starts the server in the logged-on user's session (Windows only).
+    #[command(subcommand)]
+    Service(ServiceCommand),
+    /// Start the server at every logon through a scheduled task, as upstream WAA does (Windows only).
+    #[command(subcommand)]
+    LogonTask(LogonTaskCommand),
+}
+
+/// `arena-guest service ...`.
+#[derive(Debug, Clone, clap::Subcommand)]
+pub enum ServiceCommand {
+    /// Register the service (automatic start, LocalSystem) and leave it stopped.
+    /// An existing service of that name gets the new command line.
+    Install(SupervisorOptions),
+    /// Stop the service if it runs, and delete it.
+    Uninstall(NameOption),
+    /// Print the service's state and command line.
+    Status(NameOption),
+    /// The supervisor itself: what the Service Control Manager starts. Not for interactive use.
+    Run(SupervisorOptions),
+}
+
+/// `arena-guest logon-task ...`.
+#[derive(Debug, Clone, clap::Subcommand)]
+pub enum LogonTaskCommand {
+    /// Create (or replace) a task that starts the server at every logon, elevated.
+    Install(TaskOptions),
+    /// Delete the task.
+    Uninstall(TaskNameOption),
+}
+
+/// Just a service name.
+#[derive(Debug, Clone, clap::Args)]
+pub struct NameOption {
+    /// Service name.
+    #[arg(long, default_value = DEFAULT_SERVICE_NAME)]
+    pub name: String,
+}
+
+/// Just a task name.
+#[derive(Debug, Clone, clap::Args)]
+pub struct TaskNameOption {
+    /// Scheduled task name.
+    #[arg(long, default_value = DEFAULT_TASK_NAME)]
+    pub name: String,
+}
+
+/// The options of `service install` and `service run`.
+#[derive(Debug, Clone, PartialEq, Eq, clap::Args)]
+pub struct SupervisorOptions {
+    /// Service name.
+    #[arg(long, default_value = DEFAULT_SERVICE_NAME)]
+    pub name: String,
+
+    /// When the logged-on user's token cannot be had (Wine has no real sessions), start
+    /// the worker in the service's own session instead of waiting. On real Windows that
+    /// is session 0, where desktop calls are refused: for tests only.
+    #[arg(long)]
+    pub allow_same_session: bool,
+
+    /// The serve options the worker gets, exactly as `arena-guest` takes them
+    /// (e.g. `--bind 0.0.0.0 --port 5000 --token-file C:\arena\token`). They come last.
+    #[arg(trailing_var_arg = true, allow_hyphen_values = true, value_name = "SERVE OPTIONS")]
+    pub serve_args: Vec<String>,
+}
+
+/// The options of `logon-task install`.
+#[derive(Debug, Clone, PartialEq, Eq, clap::Args)]
+pub struct TaskOptions {
+    /// Scheduled task name.
+    #[arg(long, default_value = DEFAULT_TASK_NAME)]
+    pub name: String,
+
+    /// The serve options the task passes to `arena-guest`. They come last.
+    #[arg(trailing_var_arg = true, allow_hyphen_values = true, value_name = "SERVE OPTIONS")]
+    pub serve_args: Vec<String>,
+}
+
+/// Why a `service` or `logon-task` subcommand failed.
+#[derive(Debug, thiserror::Error)]
+pub enum ServiceCliError {
+    /// The subcommand needs Windows.
+    #[error("`arena-guest {0}` works only on Windows (this build is for another platform)")]
+    OnlyOnWindows(&'static str),
+    /// The serve options to pass on are not valid.
+    #[error("invalid serve options: {0}")]
+    InvalidServeOptions(String),
+    /// An OS call failed.
+    #[error("{op}: {message}")]
+    Os { op: String, message: String },
+    /// A file or program could not be used.
+    #[error("{what}: {source}")]
+    Io {
+        what: String,
+        #[source]
+        source: std::io::Error,
+    },
+}
+
+impl ServiceCliError {
+    /// The process exit code for this error: 2 for a usage problem (wrong platform,
+    /// bad options), 1 for a failure while doing the work.
+    pub fn exit_code(&self) -> u8 {
+        match self {
+            ServiceCliError::OnlyOnWindows(_) | ServiceCliError::InvalidServeOptions(_) => 2,
+            ServiceCliError::Os { .. } | ServiceCliError::Io { .. } => 1,
+        }
+    }
+}
+
+/// Checks the serve options a service or logon task will pass to `arena-guest`, by
+/// parsing them as the server will, and returns the configuration they give.
+///
+/// Beyond what the server itself checks, this refuses `--worker` (the supervisor adds
+/// it), `--token` (a command line stored in the service or task is readable by every
+/// local user: use `--token-file`) and port 0 (nobody could find the server).
+///
+/// # Errors
+///
+/// [`ServiceCliError::InvalidServeOptions`] saying what is wrong.
+pub fn validate_serve_args(serve_args: &[String]) -> Result<ServerConfig, ServiceCliError> {
+    let invalid = |why: String| Err(ServiceCliError::InvalidServeOptions(why));
+    for arg in serve_args {
+        let flag = arg.split_once('=').map_or(arg.as_str(), |(flag, _)| flag);
+        match flag {
+            "--worker" => return invalid("--worker is added by the supervisor; leave it out".into()),
+            "--token" => {
+                return invalid(
+                    "--token would be stored in a command line every local user can read; use --token-file".into(),
+                )
+            }
+            _ => {}
+        }
+    }
+    let argv = std::iter::once("arena-guest").chain(serve_args.iter().map(String::as_str));
+    let config = ServerConfig::try_parse_from(argv).map_err(|err| {
+        // clap's rendering ends with a usage hint over several lines; the first line says it all.
+        let text = err.to_string();
+        ServiceCliError::InvalidServeOptions(text.lines().next().unwrap_or("").trim_start_matches("error: ").to_owned())
+    })?;
+    if config.port == 0 {
+        return invalid("--port 0 picks a random port nobody could find; give a fixed port".into());
+    }
+    Ok(config)
+}
+
+/// The arguments the Service Control Manager starts the exe with (after the exe path):
+/// `service run --name NAME [--allow-same-session] -- SERVE OPTIONS`.
+///
+/// The `--` keeps serve options that happen to look like supervisor options (`--name`)
+/// with the worker.
+pub fn service_run_args(options: &SupervisorOptions) -> Vec<String> {
+    let mut args = vec!["service".to_owned(), "run".to_owned(), "--name".to_owned(), options.name.clone()];
+    if options.allow_same_session {
+        args.push("--allow-same-session".to_owned());
+    }
+    args.push("--".to_owned());
+    args.extend(options.serve_args.iter().cloned());
+    args
+}
+
+/// `exe` quoted as the program of a command line. Program names are not parsed by
+/// the C runtime's backslash rules, only split at the closing quote, and Windows
+/// paths cannot contain `"`, so plain quotes always do.
+pub fn quote_program(exe: &Path) -> String {
+    format!("\"{}\"", exe.display())
+}
+
+/// `program` followed by `args` joined with [`list2cmdline`].
+pub fn command_line(exe: &Path, args: &[String]) -> String {
+    if args.is_empty() {
+        quote_program(exe)
+    } else {
+        format!("{} {}", quote_program(exe), list2cmdline(args))
+    }
+}
+
+/// The worker's command line: `"<exe>" SERVE OPTIONS --worker`.
+pub fn worker_command_line(exe: &Path, serve_args: &[String]) -> String {
+    let mut args = serve_args.to_vec();
+    args.push("--worker".to_owned());
+    command_line(exe, &args)
+}
+
+/// The arguments of `schtasks.exe` that create the logon task: at every logon of any
+/// user, with the highest privileges, replacing a task of the same name.
+///
+/// # Errors
+///
+/// [`ServiceCliError::InvalidServeOptions`] when the command line is longer than
+/// `schtasks /TR` accepts ([`SCHTASKS_TR_MAX`] characters).
+pub fn schtasks_create_args(name: &str, exe: &Path, serve_args: &[String]) -> Result<Vec<String>, ServiceCliError> {
+    let run = command_line(exe, serve_args);
+    if run.chars().count() > SCHTASKS_TR_MAX {
+        return Err(ServiceCliError::InvalidServeOptions(format!(
+            "the task's command line is {} characters, more than the {SCHTASKS_TR_MAX} schtasks accepts; \
+             move the exe to a shorter path or use fewer options",
+            run.chars().count()
+        )));
+    }
+    Ok(["/Create", "/TN", name, "/SC", "ONLOGON", "/RL", "HIGHEST", "/TR", &run, "/F"]
+        .iter()
+        .map(|s| (*s).to_owned())
+        .collect())
+}
+
+/// The arguments of `schtasks.exe` that delete the logon task.
+pub fn schtasks_delete_args(name: &str) -> Vec<String> {
+    ["/Delete", "/TN", name, "/F"].iter().map(|s| (*s).to_owned()).collect()
+}
+
+/// How long the supervisor waits before starting a worker again after one ended.
+///
+/// A worker that keeps dying at once (a taken port, a bad option) is restarted after
+/// 1, 2, 4, ... up to 30 seconds, so it does not spin; one that ran for a minute or
+/// more is restarted after a second again.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Backoff {
+    next: Duration,
+}
+
+impl Backoff {
+    /// The first delay.
+    pub const MIN: Duration = Duration::from_secs(1);
+    /// The longest delay.
+    pub const MAX: Duration = Duration::from_secs(30);
+    /// A worker that ran this long counts as healthy: the delay starts over.
+    pub const HEALTHY: Duration = Duration::from_secs(60);
+
+    pub fn new() -> Backoff {
+        Backoff { next: Backoff::MIN }
+    }
+
+    /// The delay before the next start, given how long the worker that ended ran.
+    pub fn after_exit(&mut self, ran_for: Duration) -> Duration {
+        if ran_for >= Backoff::HEALTHY {
+            self.next = Backoff::MIN;
+        }
+        let delay = self.next;
+        self.next = (self.next * 2).min(Backoff::MAX);
+        delay
+    }
+}
+
+impl Default for Backoff {
+    fn default() -> Backoff {
+        Backoff::new()
+    }
+}
+
+/// The folder the service logs into: `%ProgramData%\arena` (`C:\ProgramData\arena` when
+/// the variable is missing). A service has no console, so its logs go to files there:
+/// `service.log` (the supervisor) and `worker.log` (the worker's output).
+pub fn log_dir(program_data: Option<&std::ffi::OsStr>) -> PathBuf {
+    let base = program_data.filter(|p| !p.is_empty()).map_or_else(|| PathBuf::from(r"C:\ProgramData"), PathBuf::from);
+    base.join("arena")
+}
+
+/// Largest log file kept before it is rotated.
+pub const LOG_MAX_BYTES: u64 = 10 * 1024 * 1024;
+
+/// Moves `path` to `<path>.old` (replacing an older one) when it is larger than
+/// `max_bytes`, so logs that are only ever appended to stay bounded.
+///
+/// # Errors
+///
+/// The rename failing; a missing file is not an error.
+pub fn rotate_log(path: &Path, max_bytes: u64) -> std::io::Result<bool> {
+    match std::fs::metadata(path) {
+        Ok(meta) if meta.len() > max_bytes => {
+            let mut old = path.as_os_str().to_owned();
+            old.push(".old");
+            let old = PathBuf::from(old);
+            // Windows' rename does not replace an existing file.
+            let _ = std::fs::remove_file(&old);
+            std::fs::rename(path, &old)?;
+            Ok(true)
+        }
+        Ok(_) => Ok(false),
+        Err(err) if err.kind() == std::io::ErrorKind::NotFound => Ok(false),
+        Err(err) => Err(err),
+    }
+}
+
+/// Reads `input` to its end (or to an error), discarding what it reads.
+///
+/// The worker's standard input is a pipe whose other end only the supervisor holds;
+/// it never writes to it, so the end of input means "stop": the supervisor closed it,
+/// or died.
+pub fn drain_to_eof(mut input: impl std::io::Read) {
+    let mut buf = [0u8; 256];
+    loop {
+        match input.read(&mut buf) {
+            Ok(0) => return,
+            Ok(_) => {}
+            Err(err) if err.kind() == std::io::ErrorKind::Interrupted => {}
+            Err(_) => return,
+        }
+    }
+}
+
+/// Completes when this process's standard input reaches its end (see [`drain_to_eof`]).
+///
+/// The read runs on a plain thread, not the runtime's blocking pool, so a process that
+/// stops for another reason is not held up by a read that never returns.
+pub async fn stdin_closed() {
+    let (tx, rx) = tokio::sync::oneshot::channel::<()>();
+    let spawned = std::thread::Builder::new().name("worker-stdin".into()).spawn(move || {
+        drain_to_eof(std::io::stdin().lock());
+        let _ = tx.send(());
+    });
+    match spawned {
+        Ok(_) => {
+            let _ = rx.await;
+        }
+        // Without the watcher the worker can still be stopped by its process being ended.
+        Err(err) => {
+            tracing::warn!(%err, "cannot watch standard input; the supervisor will have to terminate this worker");
+            std::future::pending::<()>().await;
+        }
+    }
+}
+
+/// Runs a `service` subcommand and returns what to tell the user.
+///
+/// # Errors
+///
+/// [`ServiceCliError::OnlyOnWindows`] on other platforms; invalid serve options; the
+/// Service Control Manager refusing (not an administrator, ...).
+pub fn execute_service(command: &ServiceCommand) -> Result<String, ServiceCliError> {
+    if let ServiceCommand::Install(options) | ServiceCommand::Run(options) = command {
+        validate_serve_args(&options.serve_args)?;
+    }
+    #[cfg(windows)]
+    {
+        crate::desktop::windows::service::execute(command)
+    }
+    #[cfg(not(windows))]
+    {
+        let _ = command;
+        Err(ServiceCliError::OnlyOnWindows("service"))
+    }
+}
+
+/// Runs a `logon-task` subcommand through `schtasks.exe` and returns what to tell the user.
+///
+/// # Errors
+///
+/// [`ServiceCliError::OnlyOnWindows`] on other platforms; invalid serve options;
+/// `schtasks.exe` missing or failing (its output is in the message).
+pub fn execute_logon_task(command: &LogonTaskCommand) -> Result<String, ServiceCliError> {
+    let args = match command {
+        LogonTaskCommand::Install(options) => {
+            validate_serve_args(&options.serve_args)?;
+            let exe = current_exe()?;
+            schtasks_create_args(&options.name, &exe, &options.serve_args)?
+        }
+        LogonTaskCommand::Uninstall(name) => schtasks_delete_args(&name.name),
+    };
+    if !cfg!(windows) {
+        return Err(ServiceCliError::OnlyOnWindows("logon-task"));
+    }
+    let output = std::process::Command::new("schtasks.exe")
+        .args(&args)
+        .output()
+        .map_err(|source| ServiceCliError::Io { what: "running schtasks.exe".into(), source })?;
+    let text = format!("{}{}", String::from_utf8_lossy(&output.stdout), String::from_utf8_lossy(&output.stderr));
+    let text = text.trim();
+    if output.status.success() {
+        Ok(match command {
+            LogonTaskCommand::Install(options) => {
+                format!("logon task {:?} created: {}\n{text}", options.name, args[8])
+            }
+            LogonTaskCommand::Uninstall(name) => format!("logon task {:?} deleted\n{text}", name.name),
+        })
+    } else {
+        let code = output.status.code().map_or_else(|| "no exit code".to_owned(), |c| format!("exit code {c}"));
+        let said = if text.is_empty() { "no output".to_owned() } else { text.to_owned() };
+        Err(ServiceCliError::Os { op: format!("schtasks {}", list2cmdline(&args)), message: format!("{code}: {said}") })
+    }
+}
+
+/// This program's path, for the command lines stored in the service or task.
+///
+/// # Errors
+///
+/// The OS not telling.
+pub fn current_exe() -> Result<PathBuf, ServiceCliError> {
+    std::env::current_exe().map_err(|source| ServiceCliError::Io { what: "finding this program's path".into(), source })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn strings(words: &[&str]) -> Vec<String> {
+        words.iter().map(|s| (*s).to_owned()).collect()
+    }
+
+    fn parse(words: &[&str]) -> Result<Cli, clap::Error> {
+        Cli::try_parse_from(std::iter::once("arena-guest").chain(words.iter().copied()))
+    }
+
+    #[test]
+    fn flags_alone_still_mean_serve() {
+        let cli = parse(&["--port", "5001", "--backend", "stub"]).unwrap();
+        assert!(cli.command.is_none());
+        assert_eq!(cli.serve.port, 5001);
+        assert!(!cli.serve.worker);
+        let worker = parse(&["--port", "5001", "--worker"]).unwrap();
+        assert!(worker.serve.worker);
+    }
+
+    #[test]
+    fn service_install_takes_its_options_then_the_serve_options() {
+        let cli = parse(&["service", "install", "--name", "Svc", "--port", "5002", "--bind", "0.0.0.0"]).unwrap();
+        let Some(Command::Service(ServiceCommand::Install(options))) = cli.command else {
+            panic!("not service install: {:?}", cli.command)
+        };
+        assert_eq!(options.name, "Svc");
+        assert!(!options.allow_same_session);
+        assert_eq!(options.serve_args, strings(&["--port", "5002", "--bind", "0.0.0.0"]));
+
+        let cli = parse(&["service", "status"]).unwrap();
+        let Some(Command::Service(ServiceCommand::Status(name))) = cli.command else { panic!("not status") };
+        assert_eq!(name.name, DEFAULT_SERVICE_NAME);
+
+        // Serve flags before the subcommand are a mistake, not silently dropped.
+        assert!(parse(&["--port", "5003", "service", "install"]).is_err());
+    }
+
+    #[test]
+    fn the_service_command_line_parses_back_to_the_same_options() {
+        let options = SupervisorOptions {
+            name: "Arena Guest".into(),
+            allow_same_session: true,
+            // A serve option that looks like a supervisor option stays a serve option.
+            serve_args: strings(&["--port", "5004", "--token-file", r"C:\Program Files\arena\token", "--name"]),
+        };
+        let args = service_run_args(&options);
+        assert_eq!(
+            &args[..5],
+            strings(&["service", "run", "--name", "Arena Guest", "--allow-same-session"]).as_slice()
+        );
+        let cli = Cli::try_parse_from(std::iter::once("arena-guest".to_owned()).chain(args)).unwrap();
+        let Some(Command::Service(ServiceCommand::Run(back))) = cli.command else { panic!("not service run") };
+        assert_eq!(back, options);
+    }
+
+    fn check_line(exe: &str, args: &[&str], expected: &str) {
+        assert_eq!(command_line(Path::new(exe), &strings(args)), expected, "{exe} {args:?}");
+    }
+
+    #[test]
+    fn command_lines_quote_the_program_and_the_arguments() {
+        check_line(r"C:\arena\arena-guest.exe", &[], r#""C:\arena\arena-guest.exe""#);
+        check_line(
+            r"C:\Program Files\arena\arena-guest.exe",
+            &["--port", "5000", "--token-file", r"C:\My Token\t.txt"],
+            r#""C:\Program Files\arena\arena-guest.exe" --port 5000 --token-file "C:\My Token\t.txt""#,
+        );
+        check_line(r"C:\a.exe", &["--scenario", r#"say "hi""#, ""], r#""C:\a.exe" --scenario "say \"hi\"" """#);
+        assert_eq!(
+            worker_command_line(Path::new(r"C:\a b\g.exe"), &strings(&["--port", "5000"])),
+            r#""C:\a b\g.exe" --port 5000 --worker"#
+        );
+    }
+
+    fn check_invalid(args: &[&str], expected: &str) {
+        match validate_serve_args(&strings(args)) {
+            Err(ServiceCliError::InvalidServeOptions(why)) => assert!(why.contains(expected), "{args:?}: {why}"),
+            other => panic!("{args:?} gave {other:?}"),
+        }
+    }
+
+    #[test]
+    fn serve_options_are_checked_before_they_are_stored() {
+        let config = validate_serve_args(&strings(&["--port", "5005", "--backend", "stub"])).unwrap();
+        assert_eq!(config.port, 5005);
+        check_invalid(&["--port", "5005", "--worker"], "--worker");
+        check_invalid(&["--token", "0123456789abcdef0123"], "--token-file");
+        check_invalid(&["--token=0123456789abcdef0123"], "--token-file");
+        check_invalid(&["--port", "0"], "--port 0");
+        check_invalid(&["--port", "notaport"], "notaport");
+        check_invalid(&["--no-such-flag"], "--no-such-flag");
+        let err = validate_serve_args(&strings(&["--port", "0"])).unwrap_err();
+        assert_eq!(err.exit_code(), 2);
+        assert_eq!(ServiceCliError::OnlyOnWindows("service").exit_code(), 2);
+    }
+
+    #[test]
+    fn schtasks_gets_a_logon_task_with_the_serve_command_line() {
+        let exe = Path::new(r"C:\arena\arena-guest.exe");
+        let args = schtasks_create_args("ArenaGuest", exe, &strings(&["--port", "5000"])).unwrap();
+        assert_eq!(
+            args,
+            strings(&[
+                "/Create",
+                "/TN",
+                "ArenaGuest",
+                "/SC",
+                "ONLOGON",
+                "/RL",
+                "HIGHEST",
+                "/TR",
+                r#""C:\arena\arena-guest.exe" --port 5000"#,
+                "/F"
+            ])
+        );
+        let long = vec!["--scenario".to_owned(), "x".repeat(300)];
+        assert!(matches!(
+            schtasks_create_args("ArenaGuest", exe, &long),
+            Err(ServiceCliError::InvalidServeOptions(why)) if why.contains("261")
+        ));
+        assert_eq!(schtasks_delete_args("T"), strings(&["/Delete", "/TN", "T", "/F"]));
+    }
+
+    #[test]
+    fn backoff_grows_while_the_worker_keeps_dying_and_resets_after_a_good_run() {
+        let mut backoff = Backoff::new();
+        let quick = Duration::from_millis(200);
+        let delays: Vec<u64> = (0..7).map(|_| backoff.after_exit(quick).as_secs()).collect();
+        assert_eq!(delays, [1, 2, 4, 8, 16, 30, 30]);
+        assert_eq!(backoff.after_exit(Backoff::HEALTHY), Backoff::MIN);
+        assert_eq!(backoff.after_exit(quick), Duration::from_secs(2));
+    }
+
+    #[test]
+    fn logs_go_under_program_data() {
+        let dir = log_dir(Some(std::ffi::OsStr::new("/data")));
+        assert_eq!(dir, Path::new("/data").join("arena"));
+        assert_eq!(log_dir(None), PathBuf::from(r"C:\ProgramData").join("arena"));
+        assert_eq!(log_dir(Some(std::ffi::OsStr::new(""))), PathBuf::from(r"C:\ProgramData").join("arena"));
+    }
+
+    #[test]
+    fn a_large_log_is_moved_aside() {
+        let dir = tempfile::tempdir().unwrap();
+        let log = dir.path().join("service.log");
+        assert!(!rotate_log(&log, 10).unwrap(), "a missing log is left alone");
+        std::fs::write(&log, b"0123456789").unwrap();
+        assert!(!rotate_log(&log, 10).unwrap());
+        std::fs::write(dir.path().join("service.log.old"), b"older").unwrap();
+        std::fs::write(&log, b"0123456789ab").unwrap();
+        assert!(rotate_log(&log, 10).unwrap());
+        assert!(!log.exists());
+        assert_eq!(std::fs::read(dir.path().join("service.log.old")).unwrap(), b"0123456789ab");
+    }
+
+    #[test]
+    fn the_stop_signal_is_the_end_of_input() {
+        // Returns (instead of hanging) at the end of input, however much came first.
+        drain_to_eof(std::io::Cursor::new(vec![7u8; 1000]));
+        drain_to_eof(std::io::empty());
+    }
+
+    #[test]
+    fn other_platforms_say_windows_only() {
+        if cfg!(windows) {
+            return;
+        }
+        let install = ServiceCommand::Install(SupervisorOptions {
+            name: DEFAULT_SERVICE_NAME.into(),
+            allow_same_session: false,
+            serve_args: strings(&["--port", "5000"]),
+        });
+        let err = execute_service(&install).unwrap_err();
+        assert!(matches!(err, ServiceCliError::OnlyOnWindows("service")), "{err}");
+        assert!(err.to_string().contains("only on Windows"));
+        let task = LogonTaskCommand::Uninstall(TaskNameOption { name: DEFAULT_TASK_NAME.into() });
+        assert!(matches!(execute_logon_task(&task), Err(ServiceCliError::OnlyOnWindows("logon-task"))));
+    }
+}
