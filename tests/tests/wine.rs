@@ -244,6 +244,27 @@ async fn windows_backend_under_wine() {
     assert_eq!(edit.value.as_deref(), Some(shortened));
     assert!(edit.rect.is_some_and(|r| !r.is_empty()));
 
+    // 6b. pyautogui code sent to /execute as `python -c` runs natively (no Python in the
+    // prefix) and its hotkey and typewrite reach notepad; then the text is put back.
+    c.activate_window(&WindowTarget { id: Some(first.id), title: None }).await.expect("activate the first notepad");
+    for typed in ["typed by pyautogui", shortened] {
+        let code = format!("import pyautogui; import time; pyautogui.FAILSAFE = False; pyautogui.hotkey('ctrl', 'a'); pyautogui.typewrite('{typed}')");
+        let answer: serde_json::Value = http
+            .post(format!("{}/execute", guest.url))
+            .json(&serde_json::json!({"command": ["python", "-c", code], "shell": false}))
+            .send()
+            .await
+            .expect("POST /execute")
+            .json()
+            .await
+            .expect("JSON answer");
+        assert_eq!((answer["status"].as_str(), answer["returncode"].as_i64()), (Some("success"), Some(0)), "{answer}");
+        eventually("notepad to hold the text pyautogui typed", Duration::from_secs(10), || async {
+            notepad_text(&c, first.id).await.filter(|t| t == typed)
+        })
+        .await;
+    }
+
     // 7. Activation changes the foreground; close closes an (unmodified) window.
     let second = launch_notepad(&c).await;
     eventually("the new notepad in the foreground", Duration::from_secs(10), || async {
