@@ -107,13 +107,13 @@ const NAMES: [(&str, BrowserGetter); 30] = [
 
 /// The getter of this family named `name`, if implemented.
 pub(super) fn lookup(name: &str) -> Option<BrowserGetter> {
-    NAMES.iter().find_map(|(known, getter)| (*known == name).then_some(*getter))
+    super::by_name(&NAMES, name)
 }
 
 impl BrowserGetter {
     /// The upstream name, for error messages.
     fn name(self) -> &'static str {
-        NAMES.iter().find_map(|(name, getter)| (*getter == self).then_some(*name)).unwrap_or("browser")
+        super::name_of(&NAMES, self).unwrap_or("browser")
     }
 
     pub(super) async fn fetch(self, ctx: &EvalContext, params: &Map<String, Value>) -> Result<Fetched, GetterError> {

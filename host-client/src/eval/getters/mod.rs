@@ -83,6 +83,16 @@ pub enum Getter {
     System(system::SystemGetter),
 }
 
+/// The entry of a family's name table called `name`.
+pub(super) fn by_name<G: Copy>(table: &[(&'static str, G)], name: &str) -> Option<G> {
+    table.iter().find_map(|(known, getter)| (*known == name).then_some(*getter))
+}
+
+/// The upstream name of `getter` in a family's name table.
+pub(super) fn name_of<G: Copy + PartialEq>(table: &[(&'static str, G)], getter: G) -> Option<&'static str> {
+    table.iter().find_map(|(name, known)| (*known == getter).then_some(*name))
+}
+
 /// The implementation of getter `name` (a task's `type`), or `None`.
 pub fn lookup(name: &str) -> Option<Getter> {
     Some(match name {

@@ -92,13 +92,13 @@ const NAMES: [(&str, SystemGetter); 23] = [
 
 /// The getter of this family named `name`, if implemented.
 pub(super) fn lookup(name: &str) -> Option<SystemGetter> {
-    NAMES.iter().find_map(|(n, g)| (*n == name).then_some(*g))
+    super::by_name(&NAMES, name)
 }
 
 impl SystemGetter {
     /// The upstream name.
     fn name(self) -> &'static str {
-        NAMES.iter().find_map(|(n, g)| (*g == self).then_some(*n)).unwrap_or("system getter")
+        super::name_of(&NAMES, self).unwrap_or("system getter")
     }
 
     pub(super) async fn fetch(self, ctx: &EvalContext, params: &Map<String, Value>) -> Result<Fetched, GetterError> {
