@@ -9,7 +9,6 @@
 //! One guest serves all the steps, in order, to keep the suite fast; each step says
 //! what it checks. The last step prints measured figures as `BENCH:` lines.
 
-use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
 use arena_host::client::{ClientConfig, GuestClient};
@@ -19,46 +18,12 @@ use arena_shared::exec::{ExecRequest, LaunchRequest};
 use arena_shared::health::Component;
 use arena_shared::observation::{A11yBackend, A11yNode, A11yQuery, ScreenshotQuery, WindowInfo, WindowTarget};
 use arena_shared::registry::{RegistryValue, RegistryWrite};
-use arena_tests::Served;
+use arena_tests::{wine_or_skip, Served, WineSetup};
 use base64::Engine;
-
-/// Where the Wine pieces are, when the suite can run.
-struct WineSetup {
-    wine: PathBuf,
-    exe: PathBuf,
-}
 
 /// Finds Wine and the exe, or says loudly why the suite cannot run.
 fn setup() -> Option<WineSetup> {
-    let required = std::env::var("ARENA_REQUIRE_WINE").is_ok_and(|v| v == "1");
-    let skip = |why: String| -> Option<WineSetup> {
-        // Straight to the stderr handle, past the test harness's output capture, so the
-        // skip shows in every `cargo test` log and is never mistaken for a pass.
-        use std::io::Write;
-        let banner = format!(
-            "\n==============================================================\n\
-             SKIPPED: the Wine suite did not run: {why}\n\
-             Run scripts/wine-test.sh (it builds the exe and sets up Wine).\n\
-             ==============================================================\n"
-        );
-        let _ = std::io::stderr().write_all(banner.as_bytes());
-        assert!(!required, "ARENA_REQUIRE_WINE=1 but the Wine suite cannot run: {why}");
-        None
-    };
-    let Some(exe) = std::env::var_os("ARENA_WINDOWS_EXE").map(PathBuf::from) else {
-        return skip("ARENA_WINDOWS_EXE is not set".into());
-    };
-    if !exe.is_file() {
-        return skip(format!("{} does not exist", exe.display()));
-    }
-    let wine = std::env::var_os("ARENA_WINE").map(PathBuf::from).unwrap_or_else(|| PathBuf::from("/usr/bin/wine"));
-    if !wine.is_file() {
-        return skip(format!("{} does not exist (apt-get install wine wine64)", wine.display()));
-    }
-    if std::env::var_os("DISPLAY").is_none() || std::env::var_os("WINEPREFIX").is_none() {
-        return skip("DISPLAY and WINEPREFIX must be set (Xvfb and a prepared prefix)".into());
-    }
-    Some(WineSetup { wine, exe })
+    wine_or_skip("the Wine suite")
 }
 
 fn start(setup: &WineSetup, backend: &str) -> Served {

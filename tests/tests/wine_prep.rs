@@ -17,33 +17,7 @@ use arena_host::prep::{self, StageOptions};
 use arena_tests::Served;
 
 fn setup() -> Option<(PathBuf, PathBuf)> {
-    let required = std::env::var("ARENA_REQUIRE_WINE").is_ok_and(|v| v == "1");
-    let skip = |why: String| {
-        use std::io::Write;
-        let banner = format!(
-            "\n==============================================================\n\
-             SKIPPED: the Wine prep test did not run: {why}\n\
-             Run scripts/wine-test.sh, or set ARENA_WINDOWS_EXE and WINEPREFIX.\n\
-             ==============================================================\n"
-        );
-        let _ = std::io::stderr().write_all(banner.as_bytes());
-        assert!(!required, "ARENA_REQUIRE_WINE=1 but the Wine prep test cannot run: {why}");
-        None
-    };
-    let Some(exe) = std::env::var_os("ARENA_WINDOWS_EXE").map(PathBuf::from) else {
-        return skip("ARENA_WINDOWS_EXE is not set".into());
-    };
-    if !exe.is_file() {
-        return skip(format!("{} does not exist", exe.display()));
-    }
-    let wine = std::env::var_os("ARENA_WINE").map(PathBuf::from).unwrap_or_else(|| PathBuf::from("/usr/bin/wine"));
-    if !wine.is_file() {
-        return skip(format!("{} does not exist", wine.display()));
-    }
-    if std::env::var_os("WINEPREFIX").is_none() {
-        return skip("WINEPREFIX is not set (a prefix with the bcryptprimitives shim)".into());
-    }
-    Some((wine, exe))
+    arena_tests::wine_or_skip("the Wine prep test").map(|it| (it.wine, it.exe))
 }
 
 /// The Windows spelling of a Unix path under Wine's `Z:` drive.
