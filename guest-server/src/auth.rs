@@ -30,7 +30,11 @@ pub async fn guard(State(state): State<AppState>, request: Request, next: Next) 
     }
     if let Some(token) = &state.token {
         if !OPEN_PATHS.contains(&path.as_str()) && !token_matches(request.headers(), token) {
-            return refuse(native, StatusCode::UNAUTHORIZED, "missing or wrong bearer token (Authorization: Bearer <token>)");
+            return refuse(
+                native,
+                StatusCode::UNAUTHORIZED,
+                "missing or wrong bearer token (Authorization: Bearer <token>)",
+            );
         }
     }
     next.run(request).await

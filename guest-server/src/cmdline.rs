@@ -170,7 +170,11 @@ mod tests {
     use serde_json::json;
 
     fn check(input: &str, expected: &[&str]) {
-        assert_eq!(shlex_split(input).as_deref(), Ok(&expected.iter().map(|s| s.to_string()).collect::<Vec<_>>()[..]), "splitting {input:?}");
+        assert_eq!(
+            shlex_split(input).as_deref(),
+            Ok(&expected.iter().map(|s| s.to_string()).collect::<Vec<_>>()[..]),
+            "splitting {input:?}"
+        );
     }
 
     #[test]
@@ -268,7 +272,17 @@ mod tests {
         for falsy in [json!(null), json!(false), json!(0), json!(0.0), json!(-0.0), json!(""), json!([]), json!({})] {
             assert!(!truthy(&falsy), "{falsy} should be falsy");
         }
-        for truthy_value in [json!(true), json!(1), json!(-1), json!(0.5), json!("false"), json!("0"), json!([0]), json!({"a": null}), json!(u64::MAX)] {
+        for truthy_value in [
+            json!(true),
+            json!(1),
+            json!(-1),
+            json!(0.5),
+            json!("false"),
+            json!("0"),
+            json!([0]),
+            json!({"a": null}),
+            json!(u64::MAX),
+        ] {
             assert!(truthy(&truthy_value), "{truthy_value} should be truthy");
         }
     }

@@ -22,7 +22,11 @@ pub enum LogFormat {
 
 /// Everything the server needs to start.
 #[derive(Debug, Clone, clap::Parser)]
-#[command(name = "arena-guest", version, about = "Desktop-control server for Windows agent benchmarks (WAA-compatible)")]
+#[command(
+    name = "arena-guest",
+    version,
+    about = "Desktop-control server for Windows agent benchmarks (WAA-compatible)"
+)]
 pub struct ServerConfig {
     /// Backend: `windows` (default on Windows) or `stub`.
     #[arg(long, env = "ARENA_BACKEND", value_enum)]

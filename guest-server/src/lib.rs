@@ -77,7 +77,8 @@ async fn fallback(request: Request) -> axum::response::Response {
 async fn method_not_allowed(request: Request) -> axum::response::Response {
     let path = request.uri().path();
     if path.starts_with("/v1/") {
-        let mut res = ApiError::BadRequest(format!("method {} is not allowed on {path}", request.method())).into_response();
+        let mut res =
+            ApiError::BadRequest(format!("method {} is not allowed on {path}", request.method())).into_response();
         *res.status_mut() = axum::http::StatusCode::METHOD_NOT_ALLOWED;
         res
     } else {
@@ -105,7 +106,9 @@ pub fn build_state(config: ServerConfig) -> anyhow::Result<AppState> {
     let desktop: Arc<dyn Desktop> = match config.backend_kind() {
         BackendKind::Stub => {
             let scenario = match &config.scenario {
-                Some(path) => Some(Scenario::load(path).with_context(|| format!("loading scenario {}", path.display()))?),
+                Some(path) => {
+                    Some(Scenario::load(path).with_context(|| format!("loading scenario {}", path.display()))?)
+                }
                 None => None,
             };
             let stub = StubDesktop::with_config(StubConfig {
@@ -117,7 +120,9 @@ pub fn build_state(config: ServerConfig) -> anyhow::Result<AppState> {
             Arc::new(stub)
         }
         #[cfg(windows)]
-        BackendKind::Windows => Arc::new(crate::desktop::windows::WindowsDesktop::new().context("starting the windows desktop")?),
+        BackendKind::Windows => {
+            Arc::new(crate::desktop::windows::WindowsDesktop::new().context("starting the windows desktop")?)
+        }
         #[cfg(not(windows))]
         BackendKind::Windows => anyhow::bail!("the windows backend exists only in Windows builds; use --backend stub"),
     };
@@ -128,13 +133,16 @@ fn resolve_token(config: &ServerConfig) -> anyhow::Result<Option<String>> {
     let token = match (&config.token, &config.token_file) {
         (Some(token), _) => Some(token.trim().to_owned()),
         (None, Some(path)) => {
-            let text = std::fs::read_to_string(path).with_context(|| format!("reading token file {}", path.display()))?;
+            let text =
+                std::fs::read_to_string(path).with_context(|| format!("reading token file {}", path.display()))?;
             Some(text.lines().next().unwrap_or("").trim().to_owned())
         }
         (None, None) => None,
     };
     match token {
-        Some(token) if token.len() < 16 => anyhow::bail!("the token must be at least 16 characters (got {})", token.len()),
+        Some(token) if token.len() < 16 => {
+            anyhow::bail!("the token must be at least 16 characters (got {})", token.len())
+        }
         token => Ok(token),
     }
 }
@@ -144,7 +152,11 @@ fn resolve_token(config: &ServerConfig) -> anyhow::Result<Option<String>> {
 /// # Errors
 ///
 /// I/O errors of the listener.
-pub async fn serve(listener: tokio::net::TcpListener, state: AppState, shutdown: impl Future<Output = ()> + Send + 'static) -> std::io::Result<()> {
+pub async fn serve(
+    listener: tokio::net::TcpListener,
+    state: AppState,
+    shutdown: impl Future<Output = ()> + Send + 'static,
+) -> std::io::Result<()> {
     let app = router(state).into_make_service_with_connect_info::<SocketAddr>();
     axum::serve(listener, app).with_graceful_shutdown(shutdown).await
 }

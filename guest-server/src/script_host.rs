@@ -155,7 +155,13 @@ fn format_for(path: &str) -> Result<ImageFormat, String> {
 
 /// `image.crop((left, top, right, bottom))` with Pillow's semantics: parts outside the
 /// image are black.
-fn crop_padded(image: &image::RgbaImage, left: i64, top: i64, right: i64, bottom: i64) -> Result<image::RgbaImage, String> {
+fn crop_padded(
+    image: &image::RgbaImage,
+    left: i64,
+    top: i64,
+    right: i64,
+    bottom: i64,
+) -> Result<image::RgbaImage, String> {
     if right < left {
         return Err("Coordinate 'right' is less than 'left'".to_owned());
     }
@@ -341,7 +347,8 @@ impl ScriptHost for DesktopHost<'_> {
     }
 
     fn clipboard_set_image_from_screenshot_crop(&mut self, rect: [i32; 4]) -> Result<(), String> {
-        let screenshot = self.screenshot.ok_or_else(|| "there is no /update_computer screenshot to copy from".to_owned())?;
+        let screenshot =
+            self.screenshot.ok_or_else(|| "there is no /update_computer screenshot to copy from".to_owned())?;
         let [x1, y1, x2, y2] = rect.map(i64::from);
         let crop = crop_padded(screenshot, x1, y1, x2, y2)?;
         self.effect()?;
@@ -355,9 +362,8 @@ impl ScriptHost for DesktopHost<'_> {
             return Err(format!("{name:?} is not a program name"));
         }
         self.effect()?;
-        let registered = APP_PATHS
-            .iter()
-            .any(|key| self.desktop.registry_read(&format!(r"{key}\{name}.exe"), None).is_ok());
+        let registered =
+            APP_PATHS.iter().any(|key| self.desktop.registry_read(&format!(r"{key}\{name}.exe"), None).is_ok());
         if registered {
             self.desktop.spawn(&CommandSpec::Shell(format!("start {name}"))).map_err(|err| err.to_string())?;
             return Ok(true);
@@ -424,9 +430,14 @@ mod tests {
 
     #[test]
     fn commands_are_built_like_python_subprocess() {
-        let check = |cmd: CommandArg, shell: bool, expected: CommandSpec| assert_eq!(command_spec(&cmd, shell), expected);
+        let check =
+            |cmd: CommandArg, shell: bool, expected: CommandSpec| assert_eq!(command_spec(&cmd, shell), expected);
         let args = |a: &[&str]| a.iter().map(|s| (*s).to_owned()).collect::<Vec<_>>();
-        check(CommandArg::Line("taskkill /f /im a.exe".into()), false, CommandSpec::Argv(args(&["taskkill", "/f", "/im", "a.exe"])));
+        check(
+            CommandArg::Line("taskkill /f /im a.exe".into()),
+            false,
+            CommandSpec::Argv(args(&["taskkill", "/f", "/im", "a.exe"])),
+        );
         check(CommandArg::Line("dir & echo".into()), true, CommandSpec::Shell("dir & echo".into()));
         check(CommandArg::Args(args(&["echo", "a b"])), true, CommandSpec::Shell("echo \"a b\"".into()));
         check(CommandArg::Args(args(&["echo", "a b"])), false, CommandSpec::Argv(args(&["echo", "a b"])));

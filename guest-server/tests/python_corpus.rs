@@ -37,7 +37,8 @@ struct App {
 
 impl App {
     fn new(scenario: Value, config: ServerConfig) -> App {
-        let scenario = Scenario::parse(&scenario.to_string(), "test").unwrap_or_else(|err| panic!("test scenario: {err}"));
+        let scenario =
+            Scenario::parse(&scenario.to_string(), "test").unwrap_or_else(|err| panic!("test scenario: {err}"));
         let dir = tempfile::tempdir().expect("temp dir");
         let config_stub = StubConfig { root: Some(dir.path().into()), screen: (1440, 900), scenario: Some(scenario) };
         let stub = Arc::new(StubDesktop::with_config(config_stub).expect("stub desktop"));
@@ -55,7 +56,8 @@ impl App {
             request = request.header(header::CONTENT_TYPE, "application/json");
         }
         let body = body.map_or_else(Body::empty, |b| Body::from(b.to_string()));
-        let response = self.router.clone().oneshot(request.body(body).expect("request")).await.expect("infallible router");
+        let response =
+            self.router.clone().oneshot(request.body(body).expect("request")).await.expect("infallible router");
         let status = response.status();
         let bytes = response.into_body().collect().await.expect("body").to_bytes();
         let value = serde_json::from_slice(&bytes)
@@ -76,7 +78,11 @@ impl App {
     async fn python_ok(&self, code: &str, output: &str, error: &str, returncode: i64) {
         let (status, body) = self.python(code).await;
         assert_eq!(status, StatusCode::OK, "{code}: {body}");
-        assert_eq!(body, json!({"status": "success", "output": output, "error": error, "returncode": returncode}), "{code}");
+        assert_eq!(
+            body,
+            json!({"status": "success", "output": output, "error": error, "returncode": returncode}),
+            "{code}"
+        );
     }
 
     fn focused_title(&self) -> Option<String> {
@@ -149,10 +155,13 @@ fn json_files(dir: &Path, out: &mut Vec<PathBuf>) {
 /// The code of a step's command when it is a Python invocation, following the route:
 /// a string without a shell is split with POSIX shlex first.
 fn step_code(command: &Value, shell: bool) -> Option<String> {
-    let strings = |items: &[Value]| items.iter().map(|v| v.as_str().map(str::to_owned)).collect::<Option<Vec<String>>>();
+    let strings =
+        |items: &[Value]| items.iter().map(|v| v.as_str().map(str::to_owned)).collect::<Option<Vec<String>>>();
     match (command, shell) {
         (Value::Array(items), false) => python_code_from_argv(&strings(items)?).map(str::to_owned),
-        (Value::Array(items), true) => python_code_from_command_line(&arena_guest::cmdline::list2cmdline(&strings(items)?)),
+        (Value::Array(items), true) => {
+            python_code_from_command_line(&arena_guest::cmdline::list2cmdline(&strings(items)?))
+        }
         (Value::String(line), true) => python_code_from_command_line(line),
         (Value::String(line), false) => python_code_from_argv(&shlex_split(line).ok()?).map(str::to_owned),
         _ => None,
@@ -224,7 +233,8 @@ async fn run_corpus_command(cmd: CorpusCommand) -> bool {
     let output = body["output"].as_str().unwrap_or_default();
     if code.contains("screenshot.save(") {
         let file = app.local(r"C:\Users\Docker\Downloads\Screenshot.png");
-        let bytes = std::fs::read(&file).unwrap_or_else(|err| panic!("{at}: the screenshot {} was not written: {err}", file.display()));
+        let bytes = std::fs::read(&file)
+            .unwrap_or_else(|err| panic!("{at}: the screenshot {} was not written: {err}", file.display()));
         assert!(bytes.starts_with(b"\x89PNG\r\n\x1a\n"), "{at}: the screenshot is not a PNG");
         assert_eq!(output, "<class 'PIL.Image.Image'>\n", "{at}");
         checked.set(checked.get() + 1);
@@ -237,7 +247,10 @@ async fn run_corpus_command(cmd: CorpusCommand) -> bool {
         // The stub runs unknown programs as host processes, and this host has no
         // taskkill: Python would stop there too, after every earlier effect.
         assert_eq!(body["returncode"], json!(1), "{at}: {body}");
-        assert!(error.starts_with("Traceback (most recent call last):\n  File \"<string>\", line 1, in <module>\n"), "{at}: {error}");
+        assert!(
+            error.starts_with("Traceback (most recent call last):\n  File \"<string>\", line 1, in <module>\n"),
+            "{at}: {error}"
+        );
         assert!(error.contains("[WinError 2] The system cannot find the file specified"), "{at}: {error}");
     } else {
         assert_eq!((body["returncode"].clone(), error), (json!(0), ""), "{at}: {body}");
@@ -350,7 +363,10 @@ async fn the_hidden_file_getter_is_refused_loudly_without_a_python() {
     assert!(body.get("output").is_none(), "upstream's error shape has no output: {body}");
     let message = body["message"].as_str().unwrap_or_default();
     let column = PREFIX.len() + "import os; print(1 ".len() + 1;
-    assert!(message.starts_with(&format!("unsupported Python at line 1, column {column}: conditional expressions")), "{message}");
+    assert!(
+        message.starts_with(&format!("unsupported Python at line 1, column {column}: conditional expressions")),
+        "{message}"
+    );
     assert!(message.contains("--python"), "{message}");
 }
 
@@ -428,7 +444,10 @@ async fn a_sleep_past_the_timeout_answers_pythons_timeout_text() {
     let app = App::new(json!({}), config);
     let (status, body) = app.python("import time; time.sleep(5)").await;
     assert_eq!(status, StatusCode::INTERNAL_SERVER_ERROR, "{body}");
-    assert_eq!(body["message"], json!("Command '['python', '-c', 'import time; time.sleep(5)']' timed out after 0.3 seconds"));
+    assert_eq!(
+        body["message"],
+        json!("Command '['python', '-c', 'import time; time.sleep(5)']' timed out after 0.3 seconds")
+    );
 }
 
 // ----- /execute_windows (Navi's computer.* code, waa-api.md §c) -----
@@ -436,7 +455,9 @@ async fn a_sleep_past_the_timeout_answers_pythons_timeout_text() {
 fn png_b64(width: u32, height: u32) -> String {
     let img = image::RgbaImage::from_fn(width, height, |x, y| image::Rgba([(x % 256) as u8, (y % 256) as u8, 7, 255]));
     let mut bytes = Vec::new();
-    image::DynamicImage::ImageRgba8(img).write_to(&mut std::io::Cursor::new(&mut bytes), image::ImageFormat::Png).expect("png");
+    image::DynamicImage::ImageRgba8(img)
+        .write_to(&mut std::io::Cursor::new(&mut bytes), image::ImageFormat::Png)
+        .expect("png");
     base64::engine::general_purpose::STANDARD.encode(bytes)
 }
 
@@ -463,8 +484,13 @@ async fn windows_ok(app: &App, code: &str) {
 async fn computer_mouse_and_keyboard_act_on_the_desktop() {
     let app = computer_app().await;
     windows_ok(&app, "computer.mouse.move_id(id=1)\ncomputer.mouse.single_click()").await;
-    windows_ok(&app, "# the element is remembered between calls\ncomputer.mouse.move_id(computer.mouse.current_id)").await;
-    windows_ok(&app, "computer.keyboard.write('hi'); computer.keyboard.press('ctrl+shift+s'); computer.keyboard.press('enter')").await;
+    windows_ok(&app, "# the element is remembered between calls\ncomputer.mouse.move_id(computer.mouse.current_id)")
+        .await;
+    windows_ok(
+        &app,
+        "computer.keyboard.write('hi'); computer.keyboard.press('ctrl+shift+s'); computer.keyboard.press('enter')",
+    )
+    .await;
     windows_ok(&app, "computer.mouse.drag(500, 400)\ncomputer.mouse.drag(x=0.5, y=0.25)").await;
     windows_ok(&app, "computer.mouse.move_abs(x=0.1, y=0.2); computer.mouse.scroll(dir='up')").await;
     let left = MouseButton::Left;
@@ -525,22 +551,33 @@ async fn printed_errors_and_exceptions_fail_like_upstream() {
     let app = computer_app().await;
     // Q8: printed text containing "error" fails the call after its effects.
     let (status, body) = windows_code(&app, "computer.clipboard.copy_text('an Error here')").await;
-    assert_eq!((status, body), (StatusCode::INTERNAL_SERVER_ERROR, json!({"status": "error", "message": "an Error here\n"})));
+    assert_eq!(
+        (status, body),
+        (StatusCode::INTERNAL_SERVER_ERROR, json!({"status": "error", "message": "an Error here\n"}))
+    );
     assert_eq!(app.stub.clipboard_get().expect("clipboard"), ClipboardData::Text("an Error here".into()));
     let (status, body) = windows_code(&app, "computer.os.open_program('arena-no-such-program')").await;
     assert_eq!(
         (status, body),
-        (StatusCode::INTERNAL_SERVER_ERROR, json!({"status": "error", "message": "error: Program arena-no-such-program is not installed\n"}))
+        (
+            StatusCode::INTERNAL_SERVER_ERROR,
+            json!({"status": "error", "message": "error: Program arena-no-such-program is not installed\n"})
+        )
     );
     // An exception answers with str(e).
     let (status, body) = windows_code(&app, "computer.mouse.move_id(id=7)").await;
-    assert_eq!((status, body), (StatusCode::INTERNAL_SERVER_ERROR, json!({"status": "error", "message": "list index out of range"})));
+    assert_eq!(
+        (status, body),
+        (StatusCode::INTERNAL_SERVER_ERROR, json!({"status": "error", "message": "list index out of range"}))
+    );
 }
 
 #[tokio::test]
 async fn unsupported_computer_code_is_refused_naming_the_construct() {
     let app = computer_app().await;
-    let (status, body) = windows_code(&app, "computer.mouse.single_click()\nfor i in range(3):\n    computer.mouse.single_click()").await;
+    let (status, body) =
+        windows_code(&app, "computer.mouse.single_click()\nfor i in range(3):\n    computer.mouse.single_click()")
+            .await;
     assert_eq!(status, StatusCode::INTERNAL_SERVER_ERROR, "{body}");
     assert_eq!(body["message"], json!("unsupported Python at line 2, column 1: `for` loops are not supported"));
     assert!(app.stub.action_log().is_empty(), "nothing runs when the code does not parse");

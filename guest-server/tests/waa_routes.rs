@@ -78,7 +78,10 @@ fn scenario(value: Value) -> Scenario {
 
 fn app_with(scenario: Option<Scenario>, config: ServerConfig) -> TestApp {
     let dir = tempfile::tempdir().expect("temp dir");
-    let stub = Arc::new(StubDesktop::with_config(StubConfig { root: Some(dir.path().into()), screen: (1440, 900), scenario }).expect("stub desktop"));
+    let stub = Arc::new(
+        StubDesktop::with_config(StubConfig { root: Some(dir.path().into()), screen: (1440, 900), scenario })
+            .expect("stub desktop"),
+    );
     let state = AppState::new(stub.clone(), config, None);
     TestApp { router: arena_guest::router(state), stub, _dir: dir }
 }
@@ -102,7 +105,9 @@ const BOUNDARY: &str = "arena-test-boundary-7d1f";
 fn multipart(fields: &[(&str, &str)], files: &[(&str, &str, &[u8])]) -> Vec<u8> {
     let mut body = Vec::new();
     for (name, value) in fields {
-        body.extend_from_slice(format!("--{BOUNDARY}\r\nContent-Disposition: form-data; name=\"{name}\"\r\n\r\n{value}\r\n").as_bytes());
+        body.extend_from_slice(
+            format!("--{BOUNDARY}\r\nContent-Disposition: form-data; name=\"{name}\"\r\n\r\n{value}\r\n").as_bytes(),
+        );
     }
     for (name, filename, data) in files {
         body.extend_from_slice(
@@ -217,7 +222,9 @@ async fn malformed_json_is_a_500_with_400_text() {
 async fn non_object_json_bodies_raise_pythons_errors() {
     let app = app();
     app.post_json("/execute", json!(["command"])).await.assert_catch("'list' object has no attribute 'get'");
-    app.post_json("/setup/create_folder", json!(null)).await.assert_catch("argument of type 'NoneType' is not iterable");
+    app.post_json("/setup/create_folder", json!(null))
+        .await
+        .assert_catch("argument of type 'NoneType' is not iterable");
 }
 
 // ----- 1, 2: /update_computer, /execute_windows -----
@@ -225,7 +232,9 @@ async fn non_object_json_bodies_raise_pythons_errors() {
 fn png_b64(width: u32, height: u32) -> String {
     let img = image::RgbaImage::from_pixel(width, height, image::Rgba([9, 8, 7, 255]));
     let mut bytes = Vec::new();
-    image::DynamicImage::ImageRgba8(img).write_to(&mut std::io::Cursor::new(&mut bytes), image::ImageFormat::Png).expect("png");
+    image::DynamicImage::ImageRgba8(img)
+        .write_to(&mut std::io::Cursor::new(&mut bytes), image::ImageFormat::Png)
+        .expect("png");
     base64::engine::general_purpose::STANDARD.encode(bytes)
 }
 
@@ -255,7 +264,10 @@ async fn update_computer_without_a_screenshot_fails_like_upstream() {
 #[tokio::test]
 async fn execute_windows_before_update_computer_is_an_attribute_error() {
     app()
-        .post_json("/execute_windows", json!({"command": "computer.mouse.move_id(id=78)\ncomputer.mouse.single_click()"}))
+        .post_json(
+            "/execute_windows",
+            json!({"command": "computer.mouse.move_id(id=78)\ncomputer.mouse.single_click()"}),
+        )
         .await
         .assert_catch("'NoneType' object has no attribute 'move_id'");
 }
@@ -264,17 +276,26 @@ async fn execute_windows_before_update_computer_is_an_attribute_error() {
 async fn execute_windows_runs_the_code() {
     // The interpreter's own tests are in python_corpus.rs; this pins the route's success shape.
     let app = app();
-    app.post_json("/update_computer", json!({"screenshot": png_b64(2, 2)})).await.assert_json(StatusCode::OK, json!({"success": true}));
+    app.post_json("/update_computer", json!({"screenshot": png_b64(2, 2)}))
+        .await
+        .assert_json(StatusCode::OK, json!({"success": true}));
     let answer = app.post_json("/execute_windows", json!({"command": "# click\ncomputer.mouse.single_click()"})).await;
     answer.assert_json(StatusCode::OK, json!({"status": "success"}));
-    assert_eq!(app.stub.action_log(), vec![Action::Click { x: None, y: None, button: arena_shared::action::MouseButton::Left, count: 1 }]);
+    assert_eq!(
+        app.stub.action_log(),
+        vec![Action::Click { x: None, y: None, button: arena_shared::action::MouseButton::Left, count: 1 }]
+    );
 }
 
 #[tokio::test]
 async fn execute_windows_blank_code_succeeds_and_non_strings_fail() {
     let app = app();
-    app.post_json("/execute_windows", json!({"command": "\n# only a comment\n"})).await.assert_json(StatusCode::OK, json!({"status": "success"}));
-    app.post_json("/execute_windows", json!({})).await.assert_catch("exec() arg 1 must be a string, bytes or code object");
+    app.post_json("/execute_windows", json!({"command": "\n# only a comment\n"}))
+        .await
+        .assert_json(StatusCode::OK, json!({"status": "success"}));
+    app.post_json("/execute_windows", json!({}))
+        .await
+        .assert_catch("exec() arg 1 must be a string, bytes or code object");
 }
 
 // ----- 3, 4: /execute and /setup/execute -----
@@ -305,15 +326,23 @@ async fn execute_treats_the_string_true_and_false_as_truthy_shell() {
 async fn execute_splits_a_string_command_with_posix_shlex() {
     // Without a shell the string is split: quotes group, and `&&` is just an argument.
     let answer = app().post_json("/execute", json!({"command": "printf '%s|' 'a b' \"c\\\"d\" && x"})).await;
-    answer.assert_json(StatusCode::OK, json!({"status": "success", "output": "a b|c\"d|&&|x|", "error": "", "returncode": 0}));
+    answer.assert_json(
+        StatusCode::OK,
+        json!({"status": "success", "output": "a b|c\"d|&&|x|", "error": "", "returncode": 0}),
+    );
 }
 
 #[cfg(unix)]
 #[tokio::test]
 async fn execute_joins_a_shell_list_with_list2cmdline() {
     // waa-api.md §d.2: the words with spaces are quoted, the metacharacters stay bare for the shell.
-    let answer = app().post_json("/execute", json!({"command": ["echo", "Hello  World 1", "|", "tr", "a-z", "A-Z"], "shell": "true"})).await;
-    answer.assert_json(StatusCode::OK, json!({"status": "success", "output": "HELLO  WORLD 1\n", "error": "", "returncode": 0}));
+    let answer = app()
+        .post_json("/execute", json!({"command": ["echo", "Hello  World 1", "|", "tr", "a-z", "A-Z"], "shell": "true"}))
+        .await;
+    answer.assert_json(
+        StatusCode::OK,
+        json!({"status": "success", "output": "HELLO  WORLD 1\n", "error": "", "returncode": 0}),
+    );
 }
 
 #[cfg(unix)]
@@ -329,7 +358,9 @@ async fn execute_error_cases_match_python() {
     app.post_json("/execute", json!({"command": ["arena-no-such-program-xyz"]}))
         .await
         .assert_catch("[WinError 2] The system cannot find the file specified");
-    app.post_json("/execute", json!({"command": ["echo", 5]})).await.assert_catch("'int' object has no attribute 'startswith'");
+    app.post_json("/execute", json!({"command": ["echo", 5]}))
+        .await
+        .assert_catch("'int' object has no attribute 'startswith'");
     app.post_json("/execute", json!({"command": "echo 'open"})).await.assert_catch("No closing quotation");
     app.post_json("/execute", json!({"command": "echo x\\"})).await.assert_catch("No escaped character");
     app.post_json("/execute", json!({"command": 7})).await.assert_catch("'int' object is not iterable");
@@ -340,22 +371,28 @@ async fn execute_times_out_with_pythons_message() {
     let mut config = ServerConfig::for_stub();
     config.exec_timeout_ms = 300;
     let app = app_with(None, config);
-    app.post_json("/execute", json!({"command": "sleep 5", "shell": true})).await.assert_catch("Command 'sleep 5' timed out after 0.3 seconds");
+    app.post_json("/execute", json!({"command": "sleep 5", "shell": true}))
+        .await
+        .assert_catch("Command 'sleep 5' timed out after 0.3 seconds");
 }
 
 // ----- 5, 6: /probe, /shutdown -----
 
 #[tokio::test]
 async fn probe_answers_upstreams_json() {
-    app().get("/probe").await.assert_json(StatusCode::OK, json!({"status": "Probe successful", "message": "Service is operational"}));
+    app()
+        .get("/probe")
+        .await
+        .assert_json(StatusCode::OK, json!({"status": "Probe successful", "message": "Service is operational"}));
 }
 
 #[tokio::test]
 async fn shutdown_asks_the_backend_and_answers_upstreams_json() {
     let app = app();
-    app.post("/shutdown")
-        .await
-        .assert_json(StatusCode::OK, json!({"status": "Shutdown started successfully", "message": "Shutdown started successfully"}));
+    app.post("/shutdown").await.assert_json(
+        StatusCode::OK,
+        json!({"status": "Shutdown started successfully", "message": "Shutdown started successfully"}),
+    );
     assert!(app.stub.shutdown_requested());
 }
 
@@ -373,7 +410,9 @@ async fn setup_launch_maps_google_chrome_and_answers_the_list_repr() {
 #[tokio::test]
 async fn setup_launch_string_and_missing_program_still_succeed() {
     let app = app();
-    app.post_json("/setup/launch", json!({"command": "calc", "shell": false})).await.assert_text(StatusCode::OK, "calc launched successfully");
+    app.post_json("/setup/launch", json!({"command": "calc", "shell": false}))
+        .await
+        .assert_text(StatusCode::OK, "calc launched successfully");
     assert!(app.stub.find_window("Calculator").is_some());
     app.post_json("/setup/launch", json!({"command": ["arena-no-such-program-xyz", "tcp-listen:9222,fork"]}))
         .await
@@ -402,7 +441,10 @@ async fn screenshot_is_a_full_screen_png() {
 
 #[tokio::test]
 async fn terminal_is_not_implemented_on_windows() {
-    app().get("/terminal").await.assert_text(StatusCode::INTERNAL_SERVER_ERROR, "Currently not implemented for platform Windows-10-10.0.22631-SP0.");
+    app().get("/terminal").await.assert_text(
+        StatusCode::INTERNAL_SERVER_ERROR,
+        "Currently not implemented for platform Windows-10-10.0.22631-SP0.",
+    );
 }
 
 #[tokio::test]
@@ -423,7 +465,8 @@ async fn obs_winagent_crops_the_foreground_window() {
     let names: Vec<&str> = obs["window_names_str"].as_str().unwrap_or_default().split('\n').collect();
     assert_eq!(&names[..2], &["Doc - Notepad", "Other"]);
     assert_eq!(names.iter().filter(|n| **n == "Doc - Notepad").count(), 1);
-    let png = base64::engine::general_purpose::STANDARD.decode(obs["image"].as_str().unwrap_or_default()).expect("base64");
+    let png =
+        base64::engine::general_purpose::STANDARD.decode(obs["image"].as_str().unwrap_or_default()).expect("base64");
     let img = image::load_from_memory(&png).expect("png");
     assert_eq!((img.width(), img.height()), (400, 300));
 }
@@ -452,7 +495,8 @@ async fn accessibility_defaults_to_win32_and_serves_uia() {
     let doc = parse_xml(&xml);
     assert_eq!(doc.root_element().tag_name().name(), "desktop");
     assert!(xml.contains("st:unicode=\"true\"") && xml.contains("hwndwrapper.HwndWrapper"), "{xml}");
-    let notepad = doc.root_element().children().find(|n| n.attribute("name") == Some("Doc - Notepad")).expect("window node");
+    let notepad =
+        doc.root_element().children().find(|n| n.attribute("name") == Some("Doc - Notepad")).expect("window node");
     assert_eq!(notepad.tag_name().name(), "notepad");
     assert_eq!(notepad.attribute(("uri:deskat:state.at-spi.gnome.org", "active")), Some("true"));
 
@@ -496,11 +540,14 @@ async fn desktop_path_answers_the_guest_path_or_404() {
 #[tokio::test]
 async fn documents_path_answers_the_guest_path_or_400() {
     let app = app();
-    app.post("/documents_path").await.assert_json(StatusCode::OK, json!({"documents_path": "C:\\Users\\Docker\\Documents"}));
-    std::fs::remove_dir_all(app.local(r"C:\Users\Docker\Documents")).expect("rm");
     app.post("/documents_path")
         .await
-        .assert_json(StatusCode::BAD_REQUEST, json!({"error": "Unsupported operating system or documents path not found"}));
+        .assert_json(StatusCode::OK, json!({"documents_path": "C:\\Users\\Docker\\Documents"}));
+    std::fs::remove_dir_all(app.local(r"C:\Users\Docker\Documents")).expect("rm");
+    app.post("/documents_path").await.assert_json(
+        StatusCode::BAD_REQUEST,
+        json!({"error": "Unsupported operating system or documents path not found"}),
+    );
 }
 
 // ----- 16-20: create, recycle, exists -----
@@ -516,7 +563,9 @@ async fn setup_create_folder_creates_reports_existing_and_failures() {
     app.post_json("/setup/create_folder", json!({"path": path}))
         .await
         .assert_json(StatusCode::OK, json!({"status": "success", "message": format!("{path} already exists.")}));
-    app.post_json("/setup/create_folder", json!({})).await.assert_json(StatusCode::BAD_REQUEST, json!({"error": "path required"}));
+    app.post_json("/setup/create_folder", json!({}))
+        .await
+        .assert_json(StatusCode::BAD_REQUEST, json!({"error": "path required"}));
     app.post_json("/setup/create_folder", json!({"path": 5}))
         .await
         .assert_json(StatusCode::BAD_REQUEST, json!({"status": "error", "message": "Failed to create 5."}));
@@ -533,8 +582,12 @@ async fn setup_create_file_writes_crlf_text() {
     app.post_json("/setup/create_file", json!({"path": r"C:\Users\Docker\Desktop"}))
         .await
         .assert_json(StatusCode::BAD_REQUEST, json!({"status": "error", "message": "path is not a file"}));
-    app.post_json("/setup/create_file", json!({"content": "x"})).await.assert_json(StatusCode::BAD_REQUEST, json!({"error": "path required"}));
-    app.post_json("/setup/create_file", json!({"path": 3})).await.assert_catch("expected str, bytes or os.PathLike object, not int");
+    app.post_json("/setup/create_file", json!({"content": "x"}))
+        .await
+        .assert_json(StatusCode::BAD_REQUEST, json!({"error": "path required"}));
+    app.post_json("/setup/create_file", json!({"path": 3}))
+        .await
+        .assert_catch("expected str, bytes or os.PathLike object, not int");
 }
 
 #[tokio::test]
@@ -546,10 +599,13 @@ async fn setup_recycle_moves_files_away_and_reports_failures() {
         .await
         .assert_json(StatusCode::OK, json!({"status": "success", "message": format!("{path} recycled")}));
     assert!(!app.local(path).exists());
-    app.post_json("/setup/recycle", json!({"path": path}))
+    app.post_json("/setup/recycle", json!({"path": path})).await.assert_json(
+        StatusCode::BAD_REQUEST,
+        json!({"status": "error", "message": format!("Failed to recycle {path}")}),
+    );
+    app.post_json("/setup/recycle", json!({}))
         .await
-        .assert_json(StatusCode::BAD_REQUEST, json!({"status": "error", "message": format!("Failed to recycle {path}")}));
-    app.post_json("/setup/recycle", json!({})).await.assert_json(StatusCode::BAD_REQUEST, json!({"error": "Missing 'path' parameter"}));
+        .assert_json(StatusCode::BAD_REQUEST, json!({"error": "Missing 'path' parameter"}));
 }
 
 #[tokio::test]
@@ -557,14 +613,20 @@ async fn folder_exists_answers_200_or_400() {
     let app = app();
     let docs = r"C:\Users\Docker\Documents";
     std::fs::create_dir_all(app.local(r"C:\Users\Docker\Documents\Projects")).expect("mkdir");
-    app.post_json("/folder_exists", json!({"folder_name": "Projects", "path": docs}))
+    app.post_json("/folder_exists", json!({"folder_name": "Projects", "path": docs})).await.assert_json(
+        StatusCode::OK,
+        json!({"status": "success", "message": format!("Folder Projects exists in {docs}.")}),
+    );
+    app.post_json("/folder_exists", json!({"folder_name": "Nope", "path": docs})).await.assert_json(
+        StatusCode::BAD_REQUEST,
+        json!({"status": "error", "message": format!("Folder Nope does not exist in {docs}.")}),
+    );
+    app.post_json("/folder_exists", json!({"path": docs}))
         .await
-        .assert_json(StatusCode::OK, json!({"status": "success", "message": format!("Folder Projects exists in {docs}.")}));
-    app.post_json("/folder_exists", json!({"folder_name": "Nope", "path": docs}))
+        .assert_json(StatusCode::BAD_REQUEST, json!({"error": "folder_name required"}));
+    app.post_json("/folder_exists", json!({"folder_name": "x"}))
         .await
-        .assert_json(StatusCode::BAD_REQUEST, json!({"status": "error", "message": format!("Folder Nope does not exist in {docs}.")}));
-    app.post_json("/folder_exists", json!({"path": docs})).await.assert_json(StatusCode::BAD_REQUEST, json!({"error": "folder_name required"}));
-    app.post_json("/folder_exists", json!({"folder_name": "x"})).await.assert_json(StatusCode::BAD_REQUEST, json!({"error": "path required"}));
+        .assert_json(StatusCode::BAD_REQUEST, json!({"error": "path required"}));
 }
 
 #[tokio::test]
@@ -576,10 +638,13 @@ async fn file_exists_answers_200_or_400() {
         .await
         .assert_json(StatusCode::OK, json!({"status": "success", "message": format!("File a.txt exists in {desk}.")}));
     // A folder is not a file.
-    app.post_json("/file_exists", json!({"file_name": "Desktop", "path": r"C:\Users\Docker"}))
+    app.post_json("/file_exists", json!({"file_name": "Desktop", "path": r"C:\Users\Docker"})).await.assert_json(
+        StatusCode::BAD_REQUEST,
+        json!({"status": "error", "message": "File Desktop does not exist in C:\\Users\\Docker."}),
+    );
+    app.post_json("/file_exists", json!({"path": desk}))
         .await
-        .assert_json(StatusCode::BAD_REQUEST, json!({"status": "error", "message": "File Desktop does not exist in C:\\Users\\Docker."}));
-    app.post_json("/file_exists", json!({"path": desk})).await.assert_json(StatusCode::BAD_REQUEST, json!({"error": "file_name required"}));
+        .assert_json(StatusCode::BAD_REQUEST, json!({"error": "file_name required"}));
     app.post_json("/file_exists", json!({"file_name": 1, "path": desk}))
         .await
         .assert_catch("join() argument must be str, bytes, or os.PathLike object, not 'int'");
@@ -597,10 +662,13 @@ fn explorer(items: &[&str]) -> Value {
 async fn is_details_view_looks_for_the_header_in_the_item_list() {
     let app = app_scenario(json!({"windows": [explorer(&["Header", "a.txt"])]}));
     let path = r"C:\Users\Docker\Downloads";
-    app.post_json("/is_details_view", json!({"path": path}))
+    app.post_json("/is_details_view", json!({"path": path})).await.assert_json(
+        StatusCode::OK,
+        json!({"status": "success", "message": "File Explorer is in Details view", "is_details_view": true}),
+    );
+    app.post_json("/is_details_view", json!({}))
         .await
-        .assert_json(StatusCode::OK, json!({"status": "success", "message": "File Explorer is in Details view", "is_details_view": true}));
-    app.post_json("/is_details_view", json!({})).await.assert_json(StatusCode::BAD_REQUEST, json!({"error": "path is required"}));
+        .assert_json(StatusCode::BAD_REQUEST, json!({"error": "path is required"}));
 
     let app = app_scenario(json!({"windows": [explorer(&["a.txt"])]}));
     app.post_json("/is_details_view", json!({"path": path})).await.assert_json(
@@ -626,16 +694,25 @@ async fn are_files_sorted_by_modified_time_compares_the_display_order() {
         }
         let answer = app.post_json("/are_files_sorted_by_modified_time", json!({"directory": dir})).await;
         if ok {
-            answer.assert_json(StatusCode::OK, json!({"status": "success", "message": format!("{dir}: files are sorted by modified time")}));
+            answer.assert_json(
+                StatusCode::OK,
+                json!({"status": "success", "message": format!("{dir}: files are sorted by modified time")}),
+            );
         } else {
-            answer.assert_json(StatusCode::BAD_REQUEST, json!({"status": "error", "message": format!("{dir}: files are not sorted by modified time")}));
+            answer.assert_json(
+                StatusCode::BAD_REQUEST,
+                json!({"status": "error", "message": format!("{dir}: files are not sorted by modified time")}),
+            );
         }
     };
     // "Header" and other names that are not files in the folder are ignored.
     check(&["Header", "new.txt", "old.txt"], true).await;
     check(&["old.txt", "new.txt"], true).await;
     check(&["old.txt", "gone.txt", "new.txt", "old.txt"], false).await;
-    app().post_json("/are_files_sorted_by_modified_time", json!({})).await.assert_json(StatusCode::BAD_REQUEST, json!({"error": "directory is required"}));
+    app()
+        .post_json("/are_files_sorted_by_modified_time", json!({}))
+        .await
+        .assert_json(StatusCode::BAD_REQUEST, json!({"error": "directory is required"}));
 }
 
 fn clock(elements: Vec<Value>) -> Value {
@@ -645,7 +722,8 @@ fn clock(elements: Vec<Value>) -> Value {
 
 #[tokio::test]
 async fn check_if_timer_started_finds_a_running_timer() {
-    let timer = el("Group", "Timer 1, 0 hours 30 minutes 0 seconds", vec![el("Button", "Timer running, Pause", vec![])]);
+    let timer =
+        el("Group", "Timer 1, 0 hours 30 minutes 0 seconds", vec![el("Button", "Timer running, Pause", vec![])]);
     let app = app_scenario(clock(vec![timer]));
     app.post_json("/check_if_timer_started", json!({"hours": 0, "minutes": 30, "seconds": 0}))
         .await
@@ -696,7 +774,9 @@ async fn setup_change_wallpaper_then_wallpaper_serves_the_file() {
     let png = base64::engine::general_purpose::STANDARD.decode(png_b64(3, 3)).expect("png");
     let path = r"C:\Users\Docker\Pictures\wall.png";
     app.write(path, &png);
-    app.post_json("/setup/change_wallpaper", json!({})).await.assert_text(StatusCode::BAD_REQUEST, "Path not supplied!");
+    app.post_json("/setup/change_wallpaper", json!({}))
+        .await
+        .assert_text(StatusCode::BAD_REQUEST, "Path not supplied!");
     app.post_json("/setup/change_wallpaper", json!({"path": "C:/Users/Docker/Pictures/none.png"}))
         .await
         .assert_text(StatusCode::NOT_FOUND, r"File not found: C:\Users\Docker\Pictures\none.png");
@@ -732,7 +812,9 @@ async fn list_directory_builds_upstreams_tree() {
         .as_str()
         .map(|name| assert_eq!(name, ""))
         .expect("name");
-    app.post_json("/list_directory", json!({})).await.assert_json(StatusCode::BAD_REQUEST, json!({"error": "Missing 'path' parameter"}));
+    app.post_json("/list_directory", json!({}))
+        .await
+        .assert_json(StatusCode::BAD_REQUEST, json!({"error": "Missing 'path' parameter"}));
     app.post_json("/list_directory", json!({"path": r"C:\Users\Docker\Music\Album\A.mp3"}))
         .await
         .assert_json(StatusCode::BAD_REQUEST, json!({"error": "The provided path is not a directory"}));
@@ -754,12 +836,18 @@ async fn setup_upload_then_file_round_trips_binary_bytes() {
     assert_eq!(answer.status, StatusCode::OK, "{}", answer.text());
     assert_eq!(&answer.body[..], &bytes[..]);
     assert_eq!(answer.content_type(), "application/octet-stream");
-    assert_eq!(answer.headers.get(header::CONTENT_DISPOSITION).and_then(|v| v.to_str().ok()), Some("attachment; filename=data.bin"));
+    assert_eq!(
+        answer.headers.get(header::CONTENT_DISPOSITION).and_then(|v| v.to_str().ok()),
+        Some("attachment; filename=data.bin")
+    );
 
     // Multipart works for /file too, and a text file gets a text type.
     app.write(r"C:\Users\Docker\Desktop\notes.txt", b"hi");
     let answer = app.post_multipart("/file", &[("file_path", r"~\Desktop\notes.txt")], &[]).await;
-    assert_eq!((answer.status, answer.text().as_str(), answer.content_type()), (StatusCode::OK, "hi", "text/plain; charset=utf-8"));
+    assert_eq!(
+        (answer.status, answer.text().as_str(), answer.content_type()),
+        (StatusCode::OK, "hi", "text/plain; charset=utf-8")
+    );
 }
 
 #[tokio::test]
@@ -767,22 +855,29 @@ async fn setup_upload_overwrites_atomically() {
     let app = app();
     let path = r"C:\Users\Docker\Desktop\x.txt";
     app.write(path, b"old contents that are longer");
-    app.post_multipart("/setup/upload", &[("file_path", path)], &[("file_data", "x.txt", b"new")]).await.assert_text(StatusCode::OK, "File Uploaded");
+    app.post_multipart("/setup/upload", &[("file_path", path)], &[("file_data", "x.txt", b"new")])
+        .await
+        .assert_text(StatusCode::OK, "File Uploaded");
     assert_eq!(std::fs::read(app.local(path)).expect("read"), b"new");
-    let names: Vec<_> = std::fs::read_dir(app.local(r"C:\Users\Docker\Desktop")).expect("ls").map(|e| e.expect("entry").file_name()).collect();
+    let names: Vec<_> = std::fs::read_dir(app.local(r"C:\Users\Docker\Desktop"))
+        .expect("ls")
+        .map(|e| e.expect("entry").file_name())
+        .collect();
     assert_eq!(names, vec![std::ffi::OsString::from("x.txt")]);
 }
 
 #[tokio::test]
 async fn setup_upload_to_a_missing_folder_fails_and_leaves_nothing_behind() {
     let app = app();
-    let before: Vec<_> = std::fs::read_dir(app.local(r"C:\Users\Docker")).expect("ls").map(|e| e.expect("entry").file_name()).collect();
+    let before: Vec<_> =
+        std::fs::read_dir(app.local(r"C:\Users\Docker")).expect("ls").map(|e| e.expect("entry").file_name()).collect();
     let path = r"C:\Users\Docker\NoSuchFolder\a.txt";
     app.post_multipart("/setup/upload", &[("file_path", path)], &[("file_data", "a.txt", b"data")])
         .await
         .assert_catch(r"[Errno 2] No such file or directory: 'C:\\Users\\Docker\\NoSuchFolder\\a.txt'");
     assert!(!app.local(r"C:\Users\Docker\NoSuchFolder").exists());
-    let after: Vec<_> = std::fs::read_dir(app.local(r"C:\Users\Docker")).expect("ls").map(|e| e.expect("entry").file_name()).collect();
+    let after: Vec<_> =
+        std::fs::read_dir(app.local(r"C:\Users\Docker")).expect("ls").map(|e| e.expect("entry").file_name()).collect();
     assert_eq!(before, after);
 }
 
@@ -790,12 +885,16 @@ async fn setup_upload_to_a_missing_folder_fails_and_leaves_nothing_behind() {
 async fn setup_upload_needs_both_parts() {
     let app = app();
     let missing = json!({"error": "file_path and file_data are required"});
-    app.post_multipart("/setup/upload", &[("file_path", r"C:\a.txt")], &[]).await.assert_json(StatusCode::BAD_REQUEST, missing.clone());
+    app.post_multipart("/setup/upload", &[("file_path", r"C:\a.txt")], &[])
+        .await
+        .assert_json(StatusCode::BAD_REQUEST, missing.clone());
     // file_data sent as a plain field is not a file part.
     app.post_multipart("/setup/upload", &[("file_path", r"C:\a.txt"), ("file_data", "x")], &[])
         .await
         .assert_json(StatusCode::BAD_REQUEST, missing.clone());
-    app.post_form("/setup/upload", "file_path=C%3A%5Ca.txt").await.assert_json(StatusCode::BAD_REQUEST, missing.clone());
+    app.post_form("/setup/upload", "file_path=C%3A%5Ca.txt")
+        .await
+        .assert_json(StatusCode::BAD_REQUEST, missing.clone());
     app.post("/setup/upload").await.assert_json(StatusCode::BAD_REQUEST, missing);
 }
 
@@ -803,7 +902,9 @@ async fn setup_upload_needs_both_parts() {
 async fn file_error_cases_match_upstream() {
     let app = app();
     app.post("/file").await.assert_json(StatusCode::BAD_REQUEST, json!({"error": "file_path is required"}));
-    app.post_form("/file", "file_path=C%3A%5Cnope.txt").await.assert_json(StatusCode::NOT_FOUND, json!({"error": "File not found"}));
+    app.post_form("/file", "file_path=C%3A%5Cnope.txt")
+        .await
+        .assert_json(StatusCode::NOT_FOUND, json!({"error": "File not found"}));
     app.post_form("/file", "file_path=C%3A%5CUsers").await.assert_catch(r"[Errno 13] Permission denied: 'C:\\Users'");
 }
 
@@ -825,7 +926,9 @@ async fn cursor_position_answers_json_instead_of_crashing() {
 #[tokio::test]
 async fn setup_download_file_is_disabled() {
     let app = app();
-    app.post_json("/setup/download_file", json!({"url": "http://x"})).await.assert_text(StatusCode::BAD_REQUEST, "Path or URL not supplied!");
+    app.post_json("/setup/download_file", json!({"url": "http://x"}))
+        .await
+        .assert_text(StatusCode::BAD_REQUEST, "Path or URL not supplied!");
     app.post_json("/setup/download_file", json!({"url": "http://example.com/a.txt", "path": r"C:\Users\Docker\a.txt"}))
         .await
         .assert_text(
@@ -840,9 +943,13 @@ async fn setup_open_file_opens_existing_files() {
     let app = app();
     let path = r"C:\Users\Docker\Desktop\example.txt";
     app.write(path, b"hello");
-    app.post_json("/setup/open_file", json!({"path": path})).await.assert_text(StatusCode::OK, "File opened successfully");
+    app.post_json("/setup/open_file", json!({"path": path}))
+        .await
+        .assert_text(StatusCode::OK, "File opened successfully");
     assert!(app.stub.find_window("example.txt").is_some());
-    app.post_json("/setup/open_file", json!({"path": ""})).await.assert_text(StatusCode::BAD_REQUEST, "Path not supplied!");
+    app.post_json("/setup/open_file", json!({"path": ""}))
+        .await
+        .assert_text(StatusCode::BAD_REQUEST, "Path not supplied!");
     app.post_json("/setup/open_file", json!({"path": "~/Desktop/missing.docx"}))
         .await
         .assert_text(StatusCode::NOT_FOUND, r"File not found: C:\Users\Docker\Desktop\missing.docx");
@@ -878,10 +985,13 @@ async fn setup_activate_window_non_strict_also_activates() {
 #[tokio::test]
 async fn setup_activate_window_error_texts() {
     let app = app_scenario(two_windows());
-    app.post_json("/setup/activate_window", json!({"window_name": ""})).await.assert_text(StatusCode::BAD_REQUEST, "window_name required");
-    app.post_json("/setup/activate_window", json!({"window_name": "x", "by_class": "yes"}))
+    app.post_json("/setup/activate_window", json!({"window_name": ""}))
         .await
-        .assert_text(StatusCode::INTERNAL_SERVER_ERROR, "Get window by class name is currently not supported on Windows.");
+        .assert_text(StatusCode::BAD_REQUEST, "window_name required");
+    app.post_json("/setup/activate_window", json!({"window_name": "x", "by_class": "yes"})).await.assert_text(
+        StatusCode::INTERNAL_SERVER_ERROR,
+        "Get window by class name is currently not supported on Windows.",
+    );
     app.post_json("/setup/activate_window", json!({"window_name": "Word"}))
         .await
         .assert_text(StatusCode::NOT_FOUND, "Window Word not found (empty results)");
@@ -894,15 +1004,18 @@ async fn setup_close_window_closes_the_first_match_and_strict_is_always_404() {
         .await
         .assert_text(StatusCode::NOT_FOUND, "Window notepad not found (strict mode).");
     assert!(app.stub.find_window("Notepad").is_some());
-    app.post_json("/setup/close_window", json!({"window_name": "notepad"})).await.assert_text(StatusCode::OK, "Window closed successfully.");
+    app.post_json("/setup/close_window", json!({"window_name": "notepad"}))
+        .await
+        .assert_text(StatusCode::OK, "Window closed successfully.");
     assert!(app.stub.find_window("Notepad").is_none());
     app.post_json("/setup/close_window", json!({"window_name": "notepad"}))
         .await
         .assert_text(StatusCode::NOT_FOUND, "Window notepad not found (empty results)");
     app.post_json("/setup/close_window", json!({})).await.assert_text(StatusCode::BAD_REQUEST, "window_name required");
-    app.post_json("/setup/close_window", json!({"window_name": "x", "by_class": true}))
-        .await
-        .assert_text(StatusCode::INTERNAL_SERVER_ERROR, "Get window by class name is not supported on Windows currently.");
+    app.post_json("/setup/close_window", json!({"window_name": "x", "by_class": true})).await.assert_text(
+        StatusCode::INTERNAL_SERVER_ERROR,
+        "Get window by class name is not supported on Windows currently.",
+    );
 }
 
 #[tokio::test]
@@ -914,7 +1027,13 @@ async fn setup_close_all_closes_every_titled_window_but_program_manager() {
     ]}));
     app.post("/setup/close_all").await.assert_text(StatusCode::OK, "All windows closed successfully.");
     let titles: Vec<String> = app.stub.windows().expect("windows").into_iter().map(|w| w.title).collect();
-    assert_eq!(titles, vec!["Administrator: C:\\Windows\\System32\\WindowsPowerShell\\v1.0\\powershell.exe".to_owned(), "Program Manager".to_owned()]);
+    assert_eq!(
+        titles,
+        vec![
+            "Administrator: C:\\Windows\\System32\\WindowsPowerShell\\v1.0\\powershell.exe".to_owned(),
+            "Program Manager".to_owned()
+        ]
+    );
 }
 
 // ----- 32: /setup/clear_task_files -----
@@ -951,10 +1070,10 @@ async fn setup_clear_task_files_removes_files_and_reports_folders() {
 
 #[tokio::test]
 async fn end_recording_without_a_recording_is_400() {
-    app()
-        .post("/end_recording")
-        .await
-        .assert_json(StatusCode::BAD_REQUEST, json!({"status": "error", "message": "No recording in progress to stop."}));
+    app().post("/end_recording").await.assert_json(
+        StatusCode::BAD_REQUEST,
+        json!({"status": "error", "message": "No recording in progress to stop."}),
+    );
 }
 
 #[tokio::test]
@@ -964,15 +1083,20 @@ async fn start_recording_reports_a_missing_ffmpeg() {
     if answer.status == StatusCode::OK {
         // This machine has an ffmpeg: then a second start must be refused.
         let message = answer.json()["message"].as_str().unwrap_or_default().to_owned();
-        assert!(message.starts_with("Started recording to: ") && message.contains("\nCOMMAND: ffmpeg -y -f gdigrab"), "{message}");
-        app.post("/start_recording")
-            .await
-            .assert_json(StatusCode::BAD_REQUEST, json!({"status": "error", "message": "Recording is already in progress."}));
+        assert!(
+            message.starts_with("Started recording to: ") && message.contains("\nCOMMAND: ffmpeg -y -f gdigrab"),
+            "{message}"
+        );
+        app.post("/start_recording").await.assert_json(
+            StatusCode::BAD_REQUEST,
+            json!({"status": "error", "message": "Recording is already in progress."}),
+        );
     } else {
         answer.assert_catch("[WinError 2] The system cannot find the file specified");
-        app.post("/end_recording")
-            .await
-            .assert_json(StatusCode::BAD_REQUEST, json!({"status": "error", "message": "No recording in progress to stop."}));
+        app.post("/end_recording").await.assert_json(
+            StatusCode::BAD_REQUEST,
+            json!({"status": "error", "message": "No recording in progress to stop."}),
+        );
     }
 }
 
@@ -993,7 +1117,10 @@ async fn save_state_reproduces_upstreams_checks_then_501() {
 
 #[tokio::test]
 async fn revert_to_snapshot_is_501() {
-    app().post("/revert_to_snapshot").await.assert_json(StatusCode::NOT_IMPLEMENTED, json!({"error": "Restore snapshot no implemented"}));
+    app()
+        .post("/revert_to_snapshot")
+        .await
+        .assert_json(StatusCode::NOT_IMPLEMENTED, json!({"error": "Restore snapshot no implemented"}));
 }
 
 // ----- 40-42: file-system evaluator helpers -----
@@ -1004,12 +1131,24 @@ async fn is_directory_read_only_for_user_applies_the_mask_rule() {
         "dirs": [r"C:\Users\Docker\Documents\ReadOnly", r"C:\Users\Docker\Documents\Open"],
         "acls": {r"C:\Users\Docker\Documents\ReadOnly": {"Docker": 0x1200A9}, r"C:\Users\Docker\Documents\Open": {"Docker": 0x1F01FF}},
     }));
-    app.post_json("/is_directory_read_only_for_user", json!({"directory": r"C:\Users\Docker\Documents\ReadOnly", "user": "Docker"}))
-        .await
-        .assert_json(StatusCode::OK, json!({"status": "success", "message": "C:\\Users\\Docker\\Documents\\ReadOnly is read-only for Docker"}));
-    app.post_json("/is_directory_read_only_for_user", json!({"directory": r"C:\Users\Docker\Documents\Open", "user": "Docker"}))
-        .await
-        .assert_json(StatusCode::BAD_REQUEST, json!({"status": "error", "message": "C:\\Users\\Docker\\Documents\\Open is not read-only for Docker"}));
+    app.post_json(
+        "/is_directory_read_only_for_user",
+        json!({"directory": r"C:\Users\Docker\Documents\ReadOnly", "user": "Docker"}),
+    )
+    .await
+    .assert_json(
+        StatusCode::OK,
+        json!({"status": "success", "message": "C:\\Users\\Docker\\Documents\\ReadOnly is read-only for Docker"}),
+    );
+    app.post_json(
+        "/is_directory_read_only_for_user",
+        json!({"directory": r"C:\Users\Docker\Documents\Open", "user": "Docker"}),
+    )
+    .await
+    .assert_json(
+        StatusCode::BAD_REQUEST,
+        json!({"status": "error", "message": "C:\\Users\\Docker\\Documents\\Open is not read-only for Docker"}),
+    );
     app.post_json("/is_directory_read_only_for_user", json!({"directory": "x"}))
         .await
         .assert_json(StatusCode::BAD_REQUEST, json!({"error": "user is required"}));
@@ -1045,13 +1184,17 @@ async fn are_all_images_tagged_reads_windows_tags_from_exif() {
     app.write(&format!(r"{dir}\a.jpg"), &jpeg_with_keywords("beach;holiday"));
     app.write(&format!(r"{dir}\b.JPEG"), &jpeg_with_keywords("holiday"));
     app.write(&format!(r"{dir}\notes.txt"), b"not an image");
-    app.post_json("/are_all_images_tagged", json!({"directory": dir, "tag": "holiday"}))
+    app.post_json("/are_all_images_tagged", json!({"directory": dir, "tag": "holiday"})).await.assert_json(
+        StatusCode::OK,
+        json!({"status": "success", "message": format!("All images in {dir} are tagged with holiday")}),
+    );
+    app.post_json("/are_all_images_tagged", json!({"directory": dir, "tag": "beach"})).await.assert_json(
+        StatusCode::BAD_REQUEST,
+        json!({"status": "error", "message": format!("b.JPEG in {dir} is not tagged with beach")}),
+    );
+    app.post_json("/are_all_images_tagged", json!({"directory": dir}))
         .await
-        .assert_json(StatusCode::OK, json!({"status": "success", "message": format!("All images in {dir} are tagged with holiday")}));
-    app.post_json("/are_all_images_tagged", json!({"directory": dir, "tag": "beach"}))
-        .await
-        .assert_json(StatusCode::BAD_REQUEST, json!({"status": "error", "message": format!("b.JPEG in {dir} is not tagged with beach")}));
-    app.post_json("/are_all_images_tagged", json!({"directory": dir})).await.assert_json(StatusCode::BAD_REQUEST, json!({"error": "tag is required"}));
+        .assert_json(StatusCode::BAD_REQUEST, json!({"error": "tag is required"}));
     app.post_json("/are_all_images_tagged", json!({"directory": r"C:\Users\Docker\Nope", "tag": "x"}))
         .await
         .assert_catch(r"[WinError 3] The system cannot find the path specified: 'C:\\Users\\Docker\\Nope'");
@@ -1066,10 +1209,16 @@ async fn library_folders_lists_the_library_urls_sorted() {
     <searchConnectorDescription><simpleLocation><url>C:\Art</url></simpleLocation></searchConnectorDescription>
   </searchConnectorDescriptionList>
 </libraryDescription>"#;
-    let app = app_scenario(json!({"files": {r"C:\Users\Docker\AppData\Roaming\Microsoft\Windows\Libraries\Pictures.library-ms": format!("\u{feff}{xml}")}}));
+    let app = app_scenario(
+        json!({"files": {r"C:\Users\Docker\AppData\Roaming\Microsoft\Windows\Libraries\Pictures.library-ms": format!("\u{feff}{xml}")}}),
+    );
     app.post_json("/library_folders", json!({"library_name": "Pictures"}))
         .await
         .assert_json(StatusCode::OK, json!({"status": "success", "output": [r"C:\Art", r"C:\Users\Docker\Pictures"]}));
-    app.post_json("/library_folders", json!({"library_name": "Videos"})).await.assert_json(StatusCode::BAD_REQUEST, json!({"error": "Videos does not exist"}));
-    app.post_json("/library_folders", json!({})).await.assert_json(StatusCode::BAD_REQUEST, json!({"error": "library_name is required"}));
+    app.post_json("/library_folders", json!({"library_name": "Videos"}))
+        .await
+        .assert_json(StatusCode::BAD_REQUEST, json!({"error": "Videos does not exist"}));
+    app.post_json("/library_folders", json!({}))
+        .await
+        .assert_json(StatusCode::BAD_REQUEST, json!({"error": "library_name is required"}));
 }

@@ -27,13 +27,17 @@ use arena_shared::action::{Action, ActionBatch, ActionReport};
 use arena_shared::clipboard::ClipboardContent;
 use arena_shared::error::ErrorBody;
 use arena_shared::eval::{
-    DetailsViewQuery, EvalAnswer, ImagesTaggedQuery, LibraryFolders, LibraryQuery, ReadOnlyQuery, SortedByModifiedQuery,
-    TimerQuery, WorldClockQuery,
+    DetailsViewQuery, EvalAnswer, ImagesTaggedQuery, LibraryFolders, LibraryQuery, ReadOnlyQuery,
+    SortedByModifiedQuery, TimerQuery, WorldClockQuery,
 };
 use arena_shared::exec::{ExecRequest, ExecResult, LaunchRequest, LaunchResult};
-use arena_shared::files::{DirListing, Exists, FileStat, FileWritten, KnownFolders, MkdirRequest, PathQuery, WriteQuery};
+use arena_shared::files::{
+    DirListing, Exists, FileStat, FileWritten, KnownFolders, MkdirRequest, PathQuery, WriteQuery,
+};
 use arena_shared::health::{Component, HealthReport};
-use arena_shared::observation::{A11yQuery, A11yTree, ScreenInfo, ScreenshotMeta, ScreenshotQuery, WindowInfo, WindowTarget};
+use arena_shared::observation::{
+    A11yQuery, A11yTree, ScreenInfo, ScreenshotMeta, ScreenshotQuery, WindowInfo, WindowTarget,
+};
 use arena_shared::registry::{RegistryQuery, RegistryRead, RegistryWrite};
 
 use crate::error::{code_for_status, flatten, CallSite, ClientError};
@@ -170,7 +174,9 @@ impl GuestClient {
         let trimmed = base_url.trim().trim_end_matches('/');
         let base = Url::parse(trimmed).map_err(|err| invalid(&err.to_string()))?;
         if base.scheme() != "http" {
-            return Err(invalid("only http:// is supported (this client has no TLS; guard the guest with a token on a private network)"));
+            return Err(invalid(
+                "only http:// is supported (this client has no TLS; guard the guest with a token on a private network)",
+            ));
         }
         if base.host_str().is_none_or(str::is_empty) {
             return Err(invalid("no host"));
@@ -248,7 +254,12 @@ impl GuestClient {
     /// [`ClientError::NotReady`] after `overall`, listing what is still down
     /// and the last error seen; an [`ClientError::Api`] error that says the
     /// token is wrong ends the wait at once, since waiting will not fix it.
-    pub async fn wait_ready(&self, components: &[Component], overall: Duration, poll: Duration) -> Result<HealthReport, ClientError> {
+    pub async fn wait_ready(
+        &self,
+        components: &[Component],
+        overall: Duration,
+        poll: Duration,
+    ) -> Result<HealthReport, ClientError> {
         let wanted: Vec<Component> = if components.is_empty() { Component::ALL.to_vec() } else { components.to_vec() };
         let started = Instant::now();
         let mut down: Vec<Component> = Vec::new();
@@ -274,7 +285,12 @@ impl GuestClient {
             }
             let remaining = overall.saturating_sub(started.elapsed());
             if remaining.is_zero() {
-                return Err(ClientError::NotReady { guest: self.guest.clone(), waited: started.elapsed(), down, last_error });
+                return Err(ClientError::NotReady {
+                    guest: self.guest.clone(),
+                    waited: started.elapsed(),
+                    down,
+                    last_error,
+                });
             }
             tokio::time::sleep(poll.min(remaining)).await;
         }
@@ -470,7 +486,12 @@ impl GuestClient {
     ///
     /// Any [`ClientError`] of the call; [`ClientError::Integrity`] when the
     /// guest reports a different hash.
-    pub async fn push_file(&self, path: &str, bytes: Vec<u8>, create_parents: Option<bool>) -> Result<FileWritten, ClientError> {
+    pub async fn push_file(
+        &self,
+        path: &str,
+        bytes: Vec<u8>,
+        create_parents: Option<bool>,
+    ) -> Result<FileWritten, ClientError> {
         let sha256 = sha256_hex(&bytes);
         let query = WriteQuery { path: path.to_owned(), create_parents, sha256: Some(sha256.clone()) };
         // An upload may be large: give it at least the default deadline plus a
@@ -525,7 +546,8 @@ impl GuestClient {
     /// Any [`ClientError`] of the call.
     pub async fn delete(&self, path: &str, recursive: bool) -> Result<(), ClientError> {
         let query = PathQuery { path: path.to_owned(), recursive };
-        let call = Call { query: Some(to_query(&query)), retry: Retry::Never, ..self.call(Method::DELETE, "/v1/files") };
+        let call =
+            Call { query: Some(to_query(&query)), retry: Retry::Never, ..self.call(Method::DELETE, "/v1/files") };
         self.send(call).await.map(drop)
     }
 
@@ -593,7 +615,8 @@ impl GuestClient {
     ///
     /// Any [`ClientError`] of the call.
     pub async fn launch(&self, request: &LaunchRequest) -> Result<LaunchResult, ClientError> {
-        let call = Call { payload: json_payload(request), retry: Retry::Never, ..self.call(Method::POST, "/v1/launch") };
+        let call =
+            Call { payload: json_payload(request), retry: Retry::Never, ..self.call(Method::POST, "/v1/launch") };
         self.json(call).await
     }
 
@@ -662,7 +685,10 @@ impl GuestClient {
     /// # Errors
     ///
     /// Any [`ClientError`] of the call.
-    pub async fn eval_files_sorted_by_modified(&self, query: &SortedByModifiedQuery) -> Result<EvalAnswer, ClientError> {
+    pub async fn eval_files_sorted_by_modified(
+        &self,
+        query: &SortedByModifiedQuery,
+    ) -> Result<EvalAnswer, ClientError> {
         self.eval_query("/v1/eval/are_files_sorted_by_modified_time", query).await
     }
 
@@ -765,14 +791,26 @@ impl GuestClient {
     /// retries for the idempotent methods.
     fn call<'a>(&self, method: Method, path: &'a str) -> Call<'a> {
         let retry = if method == Method::GET || method == Method::PUT { Retry::Idempotent } else { Retry::Never };
-        Call { method, path, query: None, raw_query: None, payload: Payload::None, deadline: self.config.timeout, retry }
+        Call {
+            method,
+            path,
+            query: None,
+            raw_query: None,
+            payload: Payload::None,
+            deadline: self.config.timeout,
+            retry,
+        }
     }
 
     fn site(&self, call: &Call<'_>) -> CallSite {
         CallSite { guest: self.guest.clone(), method: method_name(&call.method), path: call.path.to_owned() }
     }
 
-    async fn get_json<T: DeserializeOwned>(&self, path: &str, query: Option<Vec<(String, String)>>) -> Result<T, ClientError> {
+    async fn get_json<T: DeserializeOwned>(
+        &self,
+        path: &str,
+        query: Option<Vec<(String, String)>>,
+    ) -> Result<T, ClientError> {
         let call = Call { query, ..self.call(Method::GET, path) };
         self.json(call).await
     }
@@ -819,8 +857,12 @@ impl GuestClient {
             }
             let delay = backoff(attempt);
             match &result {
-                Ok(answer) => tracing::debug!(call = %site, status = answer.status.as_u16(), attempt, delay_ms = delay.as_millis() as u64, "retrying"),
-                Err(err) => tracing::debug!(call = %site, error = %err, attempt, delay_ms = delay.as_millis() as u64, "retrying"),
+                Ok(answer) => {
+                    tracing::debug!(call = %site, status = answer.status.as_u16(), attempt, delay_ms = delay.as_millis() as u64, "retrying")
+                }
+                Err(err) => {
+                    tracing::debug!(call = %site, error = %err, attempt, delay_ms = delay.as_millis() as u64, "retrying")
+                }
             }
             tokio::time::sleep(delay).await;
         }
@@ -887,7 +929,9 @@ fn batch_duration(actions: &[Action]) -> Duration {
         .iter()
         .map(|action| match action {
             Action::Wait { ms } => *ms,
-            Action::TypeText { text, interval_ms: Some(interval) } => interval.saturating_mul(text.chars().count() as u64),
+            Action::TypeText { text, interval_ms: Some(interval) } => {
+                interval.saturating_mul(text.chars().count() as u64)
+            }
             _ => 0,
         })
         .fold(0u64, u64::saturating_add);
@@ -1023,11 +1067,18 @@ mod tests {
 
     #[test]
     fn queries_leave_out_absent_fields_and_use_wire_names() {
-        let query = ScreenshotQuery { format: arena_shared::observation::ImageFormat::Jpeg, quality: Some(80), max_side: None, cursor: Some(false) };
+        let query = ScreenshotQuery {
+            format: arena_shared::observation::ImageFormat::Jpeg,
+            quality: Some(80),
+            max_side: None,
+            cursor: Some(false),
+        };
         let mut pairs = to_query(&query);
         pairs.sort();
-        let expected: Vec<(String, String)> =
-            [("cursor", "false"), ("format", "jpeg"), ("quality", "80")].iter().map(|(k, v)| (k.to_string(), v.to_string())).collect();
+        let expected: Vec<(String, String)> = [("cursor", "false"), ("format", "jpeg"), ("quality", "80")]
+            .iter()
+            .map(|(k, v)| (k.to_string(), v.to_string()))
+            .collect();
         assert_eq!(pairs, expected);
     }
 

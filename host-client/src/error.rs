@@ -205,7 +205,12 @@ mod tests {
     #[test]
     fn every_call_error_names_guest_call_and_reason() {
         check(
-            ClientError::Api { call: site(), status: 404, code: ErrorCode::NotFound, message: "C:\\x.txt: not found".into() },
+            ClientError::Api {
+                call: site(),
+                status: 404,
+                code: ErrorCode::NotFound,
+                message: "C:\\x.txt: not found".into(),
+            },
             "guest http://10.0.0.5:5000: GET /v1/files: HTTP 404 not_found: C:\\x.txt: not found",
         );
         check(
@@ -254,7 +259,8 @@ mod tests {
 
     #[test]
     fn transient_errors_are_connect_timeout_and_gateway_statuses() {
-        let api = |status| ClientError::Api { call: site(), status, code: code_for_status(status), message: String::new() };
+        let api =
+            |status| ClientError::Api { call: site(), status, code: code_for_status(status), message: String::new() };
         assert!(api(502).is_transient());
         assert!(api(503).is_transient());
         assert!(api(504).is_transient());

@@ -16,16 +16,16 @@
 pub mod agent;
 pub mod cli;
 pub mod client;
-pub mod som;
-pub mod task;
+pub mod episode;
 pub mod error;
-pub mod pyaction;
 pub mod eval;
+pub mod prep;
+pub mod pyaction;
 pub mod results;
 pub mod run;
-pub mod episode;
 pub mod setup;
-pub mod prep;
+pub mod som;
+pub mod task;
 
 pub use client::{ClientConfig, GuestClient};
 pub use error::ClientError;

@@ -57,7 +57,10 @@ mod tests {
 
     #[test]
     fn agent_code_becomes_actions() {
-        check("pyautogui.click(10, 20)", &[Action::Click { x: Some(10), y: Some(20), button: MouseButton::Left, count: 1 }]);
+        check(
+            "pyautogui.click(10, 20)",
+            &[Action::Click { x: Some(10), y: Some(20), button: MouseButton::Left, count: 1 }],
+        );
         check(
             "import pyautogui; pyautogui.FAILSAFE = False; pyautogui.moveRel(5, 5); time.sleep(0.5); pyautogui.hotkey('ctrl', 'v')",
             &[
@@ -66,18 +69,19 @@ mod tests {
                 Action::Hotkey { keys: vec!["ctrl".into(), "v".into()] },
             ],
         );
-        check("p = pyautogui.position()\npyautogui.click(p[0] + 1, p.y)", &[Action::Click {
-            x: Some(11),
-            y: Some(20),
-            button: MouseButton::Left,
-            count: 1,
-        }]);
+        check(
+            "p = pyautogui.position()\npyautogui.click(p[0] + 1, p.y)",
+            &[Action::Click { x: Some(11), y: Some(20), button: MouseButton::Left, count: 1 }],
+        );
         check("", &[]);
     }
 
     #[test]
     fn errors_name_the_code_and_the_problem() {
-        check_err("for i in range(3): pyautogui.click()", &["cannot parse", "for i in range", "`for` loops are not supported"]);
+        check_err(
+            "for i in range(3): pyautogui.click()",
+            &["cannot parse", "for i in range", "`for` loops are not supported"],
+        );
         check_err("pyautogui.screenshot('a.png')", &["cannot translate", "saving a screenshot"]);
         check_err("pyautogui.press('entr')", &["cannot translate", "entr"]);
         let long = format!("pyautogui.typewrite('{}'); foo()", "a".repeat(300));

@@ -347,7 +347,8 @@ mod tests {
         disabled.enabled = false;
         let mut invisible = leaf("invisible", 40, 10, 20, 20);
         invisible.visible = false;
-        let mut hidden_group = node("group", Some(Rect::new(0, 100, 200, 100)), vec![leaf("under hidden", 10, 110, 20, 20)]);
+        let mut hidden_group =
+            node("group", Some(Rect::new(0, 100, 200, 100)), vec![leaf("under hidden", 10, 110, 20, 20)]);
         hidden_group.visible = false;
         let no_rect = node("no rect", None, Vec::new());
         let group = node("panel", Some(Rect::new(0, 300, 400, 100)), vec![leaf("deep", 10, 310, 30, 30)]);
@@ -448,7 +449,9 @@ mod tests {
 
     #[test]
     fn rounding_matches_python() {
-        for (v, expected) in [(0.125, "0.12"), (0.375, "0.38"), (1.0 / 3.0, "0.33"), (0.999, "1.0"), (0.005, "0.01"), (0.0, "0.0")] {
+        for (v, expected) in
+            [(0.125, "0.12"), (0.375, "0.38"), (1.0 / 3.0, "0.33"), (0.999, "1.0"), (0.005, "0.01"), (0.0, "0.0")]
+        {
             assert_eq!(round2(v), expected, "round({v}, 2)");
         }
     }
@@ -478,7 +481,9 @@ mod tests {
         assert_eq!(img.get_pixel(130, 60), &Rgba([250, 250, 250, 255]));
         assert_eq!(img.get_pixel(5, 95), &Rgba([250, 250, 250, 255]));
         // The label sits above the box and holds white glyph pixels.
-        let label_white = (22..40).flat_map(|y| (100..118).map(move |x| (x, y))).any(|(x, y)| img.get_pixel(x, y) == &Rgba([255, 255, 255, 255]));
+        let label_white = (22..40)
+            .flat_map(|y| (100..118).map(move |x| (x, y)))
+            .any(|(x, y)| img.get_pixel(x, y) == &Rgba([255, 255, 255, 255]));
         assert!(label_white, "no label drawn above the box");
     }
 

@@ -81,12 +81,19 @@ fn task(dir: &Path, extra: &str) -> Task {
     let domain = dir.join("notepad");
     std::fs::create_dir_all(&domain).expect("domain dir");
     let path = domain.join("type-hello.json");
-    let text = format!(r#"{{"id": "type-hello", "instruction": "Type hello in Notepad", "config": [], "evaluator": {{"func": "infeasible"}}{extra}}}"#);
+    let text = format!(
+        r#"{{"id": "type-hello", "instruction": "Type hello in Notepad", "config": [], "evaluator": {{"func": "infeasible"}}{extra}}}"#
+    );
     std::fs::write(&path, &text).expect("write task");
     Task::load(&path).expect("task loads")
 }
 
-async fn run(c: &GuestClient, action: &AgentAction, obs: &Observation, state: &mut ComputerState) -> arena_host::agent::ActionOutcome {
+async fn run(
+    c: &GuestClient,
+    action: &AgentAction,
+    obs: &Observation,
+    state: &mut ComputerState,
+) -> arena_host::agent::ActionOutcome {
     execute_with(c, action, obs.marks().as_ref(), state, &ExecOptions::instant()).await.expect("execute")
 }
 
@@ -153,7 +160,9 @@ async fn typed_actions_open_program_and_switching_windows() {
     assert_eq!((outcome.error, outcome.performed), (None, 1));
     assert_eq!(notepad_text(&c).await, "typed");
 
-    let outcome = run(&c, &computer("computer.window_manager.switch_to_application(\"Untitled - Notepad\")"), &obs, &mut state).await;
+    let outcome =
+        run(&c, &computer("computer.window_manager.switch_to_application(\"Untitled - Notepad\")"), &obs, &mut state)
+            .await;
     assert_eq!(outcome.error, None, "{outcome:?}");
 
     // An unknown program is upstream's printed "error: ..." failure, not a crash.
@@ -182,7 +191,9 @@ async fn script_errors_are_recorded_and_an_unreachable_guest_is_an_infrastructur
         format!("http://{}", listener.local_addr().expect("addr"))
     };
     let dead = client(&dead_url);
-    let result = execute_with(&dead, &computer("computer.mouse.single_click()"), None, &mut state, &ExecOptions::instant()).await;
+    let result =
+        execute_with(&dead, &computer("computer.mouse.single_click()"), None, &mut state, &ExecOptions::instant())
+            .await;
     assert!(matches!(result, Err(AgentError::Guest(_))), "{result:?}");
 }
 
@@ -197,12 +208,19 @@ struct Mock {
     replies: Arc<Mutex<VecDeque<(u16, String)>>>,
 }
 
-async fn completions(State(mock): State<Mock>, headers: HeaderMap, Json(body): Json<Value>) -> (StatusCode, Json<Value>) {
+async fn completions(
+    State(mock): State<Mock>,
+    headers: HeaderMap,
+    Json(body): Json<Value>,
+) -> (StatusCode, Json<Value>) {
     let auth = headers.get("authorization").and_then(|v| v.to_str().ok()).map(str::to_owned);
     mock.requests.lock().expect("lock").push((auth, body));
     let (status, reply) = mock.replies.lock().expect("lock").pop_front().unwrap_or((200, "DONE".to_owned()));
     if status != 200 {
-        return (StatusCode::from_u16(status).unwrap_or(StatusCode::INTERNAL_SERVER_ERROR), Json(json!({"error": reply})));
+        return (
+            StatusCode::from_u16(status).unwrap_or(StatusCode::INTERNAL_SERVER_ERROR),
+            Json(json!({"error": reply})),
+        );
     }
     (StatusCode::OK, Json(json!({"choices": [{"index": 0, "message": {"role": "assistant", "content": reply}}]})))
 }
@@ -287,7 +305,8 @@ async fn navi_sends_the_annotated_screenshot_and_elements_and_retries_malformed_
     assert_eq!(images.len(), 2, "the previous screenshot is sent too");
     assert!(text.contains("could not be used"), "{text}");
     let mut state = ComputerState::for_screen(1, 1);
-    let outcome = execute_with(&c, &p.actions[0], p.marks.as_ref(), &mut state, &ExecOptions::instant()).await.expect("execute");
+    let outcome =
+        execute_with(&c, &p.actions[0], p.marks.as_ref(), &mut state, &ExecOptions::instant()).await.expect("execute");
     assert_eq!(outcome.error, None, "{outcome:?}");
     assert_eq!(notepad_text(&c).await, "hello");
 
@@ -328,7 +347,9 @@ async fn scripted_agent_follows_a_plan_file_against_the_stub() {
         let obs = Observation::capture(&c, step, &t.instruction).await.expect("observe");
         let p = agent.predict(&obs).await.expect("prediction");
         assert_eq!(p.actions.len(), 1);
-        let outcome = execute_with(&c, &p.actions[0], p.marks.as_ref(), &mut state, &ExecOptions::instant()).await.expect("execute");
+        let outcome = execute_with(&c, &p.actions[0], p.marks.as_ref(), &mut state, &ExecOptions::instant())
+            .await
+            .expect("execute");
         assert_eq!(outcome.error, None, "step {step}: {outcome:?}");
         seen.push(p.actions[0].clone());
     }
@@ -361,7 +382,13 @@ async fn replay_repeats_a_recorded_trajectory() {
     let recorded = vec![
         TrajectoryStep { step: 1, actions: vec![computer("computer.keyboard.write(\"again\")")] },
         TrajectoryStep { step: 2, actions: vec![] },
-        TrajectoryStep { step: 3, actions: vec![AgentAction::Typed(vec![Action::KeyPress { key: "backspace".into(), presses: 1 }]), AgentAction::Done] },
+        TrajectoryStep {
+            step: 3,
+            actions: vec![
+                AgentAction::Typed(vec![Action::KeyPress { key: "backspace".into(), presses: 1 }]),
+                AgentAction::Done,
+            ],
+        },
     ];
     // As the episode writer lays it out, with extra fields the replay ignores.
     let task_dir = dir.path().join("results").join("notepad").join("type-hello");

@@ -50,7 +50,8 @@ fn client(url: &str) -> GuestClient {
 }
 
 fn authed(url: &str) -> GuestClient {
-    GuestClient::new(url, ClientConfig { token: Some(TOKEN.to_owned()), timeout: Duration::from_secs(20), retries: 1 }).expect("client")
+    GuestClient::new(url, ClientConfig { token: Some(TOKEN.to_owned()), timeout: Duration::from_secs(20), retries: 1 })
+        .expect("client")
 }
 
 /// Asserts `err` is an API error with this status and code whose message names the guest and the call.
@@ -83,7 +84,8 @@ async fn health_and_wait_ready() {
     assert_eq!(report.backend, "stub");
     assert_eq!(report.status, Readiness::Ready);
     assert!(!report.auth_required);
-    let only = c.wait_ready(&[Component::Files], Duration::from_secs(5), Duration::from_millis(50)).await.expect("files up");
+    let only =
+        c.wait_ready(&[Component::Files], Duration::from_secs(5), Duration::from_millis(50)).await.expect("files up");
     assert!(only.is_up(Component::Files));
 }
 
@@ -99,7 +101,8 @@ async fn screen_and_screenshots() {
     assert_eq!((png.meta.width, png.meta.height), (1440, 900));
     assert_eq!(png.meta.format, ImageFormat::Png);
 
-    let query = ScreenshotQuery { format: ImageFormat::Jpeg, quality: Some(70), max_side: Some(720), cursor: Some(false) };
+    let query =
+        ScreenshotQuery { format: ImageFormat::Jpeg, quality: Some(70), max_side: Some(720), cursor: Some(false) };
     let jpeg = c.screenshot(&query).await.expect("jpeg");
     assert!(jpeg.bytes.starts_with(&[0xff, 0xd8]), "not a JPEG");
     assert_eq!(jpeg.meta.width, 720);
@@ -143,7 +146,10 @@ async fn notepad_typing_shows_in_windows_and_the_tree() {
     c.act_one(Action::TypeText { text: "typed by the client".into(), interval_ms: None }).await.expect("type");
     let tree = c.a11y(&A11yQuery::default()).await.expect("tree");
     assert!(tree.windows.iter().any(|w| find(w, "typed by the client").is_some()), "text not in tree: {tree:?}");
-    let fg = c.a11y(&A11yQuery { foreground_only: true, max_depth: Some(1), ..A11yQuery::default() }).await.expect("foreground tree");
+    let fg = c
+        .a11y(&A11yQuery { foreground_only: true, max_depth: Some(1), ..A11yQuery::default() })
+        .await
+        .expect("foreground tree");
     assert_eq!(fg.windows.len(), 1);
 
     let min = c.minimize_window(&target).await.expect("minimize");
@@ -156,7 +162,10 @@ async fn notepad_typing_shows_in_windows_and_the_tree() {
     let after = c.windows().await.expect("windows");
     assert!(after.iter().all(|w| w.id != notepad.id), "closed window still listed");
 
-    let err = c.activate_window(&WindowTarget { id: None, title: Some("no such window title".into()) }).await.expect_err("missing");
+    let err = c
+        .activate_window(&WindowTarget { id: None, title: Some("no such window title".into()) })
+        .await
+        .expect_err("missing");
     assert_api(&err, &guest.url, "POST /v1/windows/activate", 404, ErrorCode::NotFound);
 }
 
@@ -214,8 +223,15 @@ async fn files_round_trip_with_hashes() {
 async fn exec_launch_and_open() {
     let guest = start_guest(None).await;
     let c = client(&guest.url);
-    let argv: Vec<String> = if cfg!(windows) { vec!["cmd".into(), "/c".into(), "echo".into(), "hi there".into()] } else { vec!["echo".into(), "hi there".into()] };
-    let result = c.exec(&ExecRequest { argv, timeout_ms: Some(20_000), max_output_bytes: None, cwd: None, stdin: None }).await.expect("exec");
+    let argv: Vec<String> = if cfg!(windows) {
+        vec!["cmd".into(), "/c".into(), "echo".into(), "hi there".into()]
+    } else {
+        vec!["echo".into(), "hi there".into()]
+    };
+    let result = c
+        .exec(&ExecRequest { argv, timeout_ms: Some(20_000), max_output_bytes: None, cwd: None, stdin: None })
+        .await
+        .expect("exec");
     assert_eq!(result.exit_code, Some(0), "{result:?}");
     assert!(result.stdout.contains("hi there"), "{result:?}");
     assert!(!result.timed_out);
@@ -231,7 +247,9 @@ async fn registry_round_trip() {
     let guest = start_guest(None).await;
     let c = client(&guest.url);
     let key = r"HKCU\Software\ArenaTest";
-    c.registry_set(&RegistryWrite { key: key.into(), value: Some("Answer".into()), data: RegistryValue::Dword(42) }).await.expect("set");
+    c.registry_set(&RegistryWrite { key: key.into(), value: Some("Answer".into()), data: RegistryValue::Dword(42) })
+        .await
+        .expect("set");
     let read = c.registry_get(key, Some("Answer")).await.expect("get");
     assert_eq!(read.data, RegistryValue::Dword(42));
     let err = c.registry_get(key, Some("Missing")).await.expect_err("missing");
@@ -323,7 +341,8 @@ async fn gateway_errors_are_retried_for_gets_only_and_keep_a_non_json_body() {
         "HTTP/1.1 502 Bad Gateway\r\nContent-Type: text/html\r\nContent-Length: 20\r\nConnection: close\r\n\r\n<h1>bad gateway</h1>",
     ))
     .await;
-    let c = GuestClient::new(&url, ClientConfig { token: None, timeout: Duration::from_secs(5), retries: 2 }).expect("client");
+    let c = GuestClient::new(&url, ClientConfig { token: None, timeout: Duration::from_secs(5), retries: 2 })
+        .expect("client");
     let err = c.windows().await.expect_err("502");
     assert_eq!(hits.load(Ordering::SeqCst), 3, "one try and two retries");
     assert_eq!(err.status(), Some(502));
@@ -339,7 +358,8 @@ async fn gateway_errors_are_retried_for_gets_only_and_keep_a_non_json_body() {
 #[tokio::test]
 async fn a_silent_guest_times_out_at_the_deadline() {
     let (url, hits) = scripted(None).await;
-    let c = GuestClient::new(&url, ClientConfig { token: None, timeout: Duration::from_millis(300), retries: 1 }).expect("client");
+    let c = GuestClient::new(&url, ClientConfig { token: None, timeout: Duration::from_millis(300), retries: 1 })
+        .expect("client");
     let err = c.screen().await.expect_err("no answer");
     assert!(matches!(err, ClientError::Timeout { after, .. } if after == Duration::from_millis(300)), "{err:?}");
     assert_eq!(err.to_string(), format!("guest {url}: GET /v1/screen: no answer within 300 ms"));

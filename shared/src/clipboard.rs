@@ -7,8 +7,14 @@ use serde::{Deserialize, Serialize};
 #[serde(tag = "kind", rename_all = "snake_case")]
 pub enum ClipboardContent {
     Empty,
-    Text { text: String },
-    Image { width: u32, height: u32, png_base64: String },
+    Text {
+        text: String,
+    },
+    Image {
+        width: u32,
+        height: u32,
+        png_base64: String,
+    },
     #[serde(other)]
     Unknown,
 }

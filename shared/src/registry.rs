@@ -31,7 +31,10 @@ impl<'de> Deserialize<'de> for RegistryValue {
             #[serde(default)]
             data: serde_json::Value,
         }
-        fn data<T: serde::de::DeserializeOwned, E: serde::de::Error>(kind: &str, data: serde_json::Value) -> Result<T, E> {
+        fn data<T: serde::de::DeserializeOwned, E: serde::de::Error>(
+            kind: &str,
+            data: serde_json::Value,
+        ) -> Result<T, E> {
             serde_json::from_value(data).map_err(|err| E::custom(format!("registry value of type {kind}: {err}")))
         }
         let Tagged { kind, data: value } = Tagged::deserialize(deserializer)?;
@@ -59,7 +62,10 @@ mod tests {
     fn values_decode_and_unknown_types_fall_back() {
         check(r#"{"type": "dword", "data": 42}"#, Some(RegistryValue::Dword(42)));
         check(r#"{"type": "string", "data": "x"}"#, Some(RegistryValue::String("x".into())));
-        check(r#"{"type": "multi_string", "data": ["a", "b"]}"#, Some(RegistryValue::MultiString(vec!["a".into(), "b".into()])));
+        check(
+            r#"{"type": "multi_string", "data": ["a", "b"]}"#,
+            Some(RegistryValue::MultiString(vec!["a".into(), "b".into()])),
+        );
         check(r#"{"type": "binary", "data": [1, 2]}"#, Some(RegistryValue::Binary(vec![1, 2])));
         check(r#"{"type": "reg_link", "data": 1}"#, Some(RegistryValue::Unknown));
         check(r#"{"type": "reg_link"}"#, Some(RegistryValue::Unknown));

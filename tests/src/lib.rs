@@ -23,7 +23,18 @@ pub fn workspace_binary(package: &str, bin: &str) -> anyhow::Result<PathBuf> {
     let built = BUILT.get_or_init(|| {
         let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
         let status = Command::new(cargo)
-            .args(["build", "--quiet", "-p", "arena-guest", "--bin", "arena-guest", "-p", "arena-host", "--bin", "arena"])
+            .args([
+                "build",
+                "--quiet",
+                "-p",
+                "arena-guest",
+                "--bin",
+                "arena-guest",
+                "-p",
+                "arena-host",
+                "--bin",
+                "arena",
+            ])
             .current_dir(workspace_root())
             .status();
         match status {
@@ -110,7 +121,18 @@ impl Served {
         let exe = workspace_binary("arena-guest", "arena-guest")?;
         let root = tempfile::tempdir().context("creating the stub root")?;
         let root_path = root.path().to_str().context("non-UTF-8 temp path")?.to_owned();
-        let mut args = vec!["--backend", "stub", "--port", "0", "--stub-root", &root_path, "--open-settle-ms", "0", "--activate-settle-ms", "0"];
+        let mut args = vec![
+            "--backend",
+            "stub",
+            "--port",
+            "0",
+            "--stub-root",
+            &root_path,
+            "--open-settle-ms",
+            "0",
+            "--activate-settle-ms",
+            "0",
+        ];
         args.extend_from_slice(extra);
         Served::start(&exe, &args, Some(root))
     }

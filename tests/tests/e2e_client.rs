@@ -41,7 +41,12 @@ async fn client_drives_the_real_guest_binary() {
     let report = client
         .act(&ActionBatch {
             actions: vec![
-                Action::Click { x: Some(notepad.rect.x + 50), y: Some(notepad.rect.y + 80), button: Default::default(), count: 1 },
+                Action::Click {
+                    x: Some(notepad.rect.x + 50),
+                    y: Some(notepad.rect.y + 80),
+                    button: Default::default(),
+                    count: 1,
+                },
                 Action::TypeText { text: "héllo wörld".into(), interval_ms: None },
                 Action::KeyPress { key: "enter".into(), presses: 1 },
                 Action::TypeText { text: "line two".into(), interval_ms: None },
@@ -58,7 +63,8 @@ async fn client_drives_the_real_guest_binary() {
     let shot = client.screenshot(&ScreenshotQuery::default()).await.unwrap();
     assert_eq!((shot.meta.width, shot.meta.height, shot.meta.scale), (1440, 900, 1.0));
     assert_eq!(&shot.bytes[..8], b"\x89PNG\r\n\x1a\n");
-    let small = client.screenshot(&ScreenshotQuery { max_side: Some(720), ..ScreenshotQuery::default() }).await.unwrap();
+    let small =
+        client.screenshot(&ScreenshotQuery { max_side: Some(720), ..ScreenshotQuery::default() }).await.unwrap();
     assert_eq!((small.meta.width, small.meta.height, small.meta.scale), (720, 450, 2.0));
 
     // Files round trip with hashes; a wrong path is a clear error.
@@ -76,7 +82,13 @@ async fn client_drives_the_real_guest_binary() {
 
     // Exec with argv, exit codes and output.
     let res = client
-        .exec(&ExecRequest { argv: vec!["sh".into(), "-c".into(), "echo out; echo err >&2; exit 7".into()], timeout_ms: Some(10_000), max_output_bytes: None, cwd: None, stdin: None })
+        .exec(&ExecRequest {
+            argv: vec!["sh".into(), "-c".into(), "echo out; echo err >&2; exit 7".into()],
+            timeout_ms: Some(10_000),
+            max_output_bytes: None,
+            cwd: None,
+            stdin: None,
+        })
         .await
         .unwrap();
     assert_eq!((res.exit_code, res.stdout.as_str(), res.stderr.as_str()), (Some(7), "out\n", "err\n"));
@@ -103,7 +115,12 @@ async fn token_is_required_when_configured() {
     right.windows().await.unwrap();
 
     // The legacy routes are guarded too, with upstream's error shape.
-    let res = reqwest::Client::new().post(format!("{}/execute", guest.url)).json(&serde_json::json!({"command": ["echo", "x"]})).send().await.unwrap();
+    let res = reqwest::Client::new()
+        .post(format!("{}/execute", guest.url))
+        .json(&serde_json::json!({"command": ["echo", "x"]}))
+        .send()
+        .await
+        .unwrap();
     assert_eq!(res.status(), 401);
     let body: serde_json::Value = res.json().await.unwrap();
     assert_eq!(body["status"], "error");
@@ -124,7 +141,8 @@ fn bad_scenario_is_a_clear_startup_error() {
     let dir = tempfile::tempdir().unwrap();
     let scenario = dir.path().join("broken.json");
     std::fs::write(&scenario, "{\"windows\": [ {\"title\": 5} ]}").unwrap();
-    let out = Command::new(exe).args(["--backend", "stub", "--port", "0", "--scenario"]).arg(&scenario).output().unwrap();
+    let out =
+        Command::new(exe).args(["--backend", "stub", "--port", "0", "--scenario"]).arg(&scenario).output().unwrap();
     assert!(!out.status.success());
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(stderr.contains("broken.json"), "{stderr}");
@@ -185,6 +203,11 @@ fn demo_runs_end_to_end_on_the_embedded_stub() {
     let exe = workspace_binary("arena-host", "arena").unwrap();
     let dir = tempfile::tempdir().unwrap();
     let out = Command::new(exe).arg("demo").current_dir(dir.path()).output().unwrap();
-    assert!(out.status.success(), "stdout:\n{}\nstderr:\n{}", String::from_utf8_lossy(&out.stdout), String::from_utf8_lossy(&out.stderr));
+    assert!(
+        out.status.success(),
+        "stdout:\n{}\nstderr:\n{}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
     assert!(dir.path().join("arena-demo.png").exists());
 }

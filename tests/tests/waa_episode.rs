@@ -52,10 +52,12 @@ async fn upstream_host_sequence_for_one_episode() {
 
     // SetupController.setup(config): the `download` step uploads what the host fetched.
     let largefile = "an example line\nanother example\nno match here\nexample again\n".repeat(50);
-    let (status, text) = upload(&client, &base, &format!(r"{DOCS}\largefile.txt"), largefile.clone().into_bytes()).await;
+    let (status, text) =
+        upload(&client, &base, &format!(r"{DOCS}\largefile.txt"), largefile.clone().into_bytes()).await;
     assert_eq!((status, text.as_str()), (200, "File Uploaded"));
     // A `launch` step as the corpus writes them.
-    let (status, text) = post_json(&client, &format!("{base}/setup/launch"), json!({"command": ["notepad"], "shell": false})).await;
+    let (status, text) =
+        post_json(&client, &format!("{base}/setup/launch"), json!({"command": ["notepad"], "shell": false})).await;
     assert_eq!((status, text.as_str()), (200, "['notepad'] launched successfully"));
 
     // _get_obs(): accessibility tree (uia) and obs_winagent.
@@ -91,12 +93,14 @@ async fn upstream_host_sequence_for_one_episode() {
 
     // The scripted agent's work: it writes the answer file (as typing and Ctrl+S would).
     let count = largefile.matches("example").count();
-    let (status, _) = upload(&client, &base, &format!(r"{DOCS}\example_count.txt"), count.to_string().into_bytes()).await;
+    let (status, _) =
+        upload(&client, &base, &format!(r"{DOCS}\example_count.txt"), count.to_string().into_bytes()).await;
     assert_eq!(status, 200);
 
     // evaluator.postconfig: open both files, activate one strictly.
     for name in ["largefile.txt", "example_count.txt"] {
-        let (status, text) = post_json(&client, &format!("{base}/setup/open_file"), json!({"path": format!(r"{DOCS}\{name}")})).await;
+        let (status, text) =
+            post_json(&client, &format!("{base}/setup/open_file"), json!({"path": format!(r"{DOCS}\{name}")})).await;
         assert_eq!((status, text.as_str()), (200, "File opened successfully"));
     }
     let (status, text) = post_json(
@@ -110,7 +114,8 @@ async fn upstream_host_sequence_for_one_episode() {
     assert_eq!(obs["window_title"], "largefile.txt - Notepad");
 
     // The `execute` postconfig step with the corpus's string-`"true"` shell flag.
-    let (status, text) = post_json(&client, &format!("{base}/setup/execute"), json!({"command": "echo saved", "shell": "true"})).await;
+    let (status, text) =
+        post_json(&client, &format!("{base}/setup/execute"), json!({"command": "echo saved", "shell": "true"})).await;
     assert_eq!(status, 200, "{text}");
     let out: Value = serde_json::from_str(&text).unwrap();
     assert_eq!(out["status"], "success");

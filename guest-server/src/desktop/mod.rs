@@ -17,9 +17,9 @@ pub mod session;
 pub mod stub;
 pub mod text;
 pub mod vk;
-pub mod winsys;
 #[cfg(windows)]
 pub mod windows;
+pub mod winsys;
 
 use std::path::PathBuf;
 
@@ -195,7 +195,12 @@ pub trait Desktop: Send + Sync + std::fmt::Debug {
     // ----- accessibility -----
 
     /// Walks the accessibility tree of the visible top-level windows within `budget`.
-    fn accessibility(&self, backend: A11yBackend, budget: &TreeBudget, foreground_only: bool) -> DesktopResult<A11yTree>;
+    fn accessibility(
+        &self,
+        backend: A11yBackend,
+        budget: &TreeBudget,
+        foreground_only: bool,
+    ) -> DesktopResult<A11yTree>;
 
     // ----- clipboard -----
 

@@ -143,7 +143,8 @@ fn write_node(out: &mut String, ctx: &Context, node: &A11yNode, depth: u32, pare
     attr("win:class", class);
 
     let text = node.text.as_deref().filter(|t| !t.is_empty() && *t != node.name);
-    let children: &[A11yNode] = if depth >= MAX_DEPTH { &[] } else { &node.children[..node.children.len().min(MAX_CHILDREN)] };
+    let children: &[A11yNode] =
+        if depth >= MAX_DEPTH { &[] } else { &node.children[..node.children.len().min(MAX_CHILDREN)] };
     if text.is_none() && children.is_empty() {
         out.push_str("/>");
         return;
@@ -240,7 +241,14 @@ mod tests {
     }
 
     fn tree(backend: A11yBackend, windows: Vec<A11yNode>) -> A11yTree {
-        A11yTree { backend, windows, truncated: false, node_count: 0, elapsed_ms: 0, coordinate_space: CoordinateSpace::Physical }
+        A11yTree {
+            backend,
+            windows,
+            truncated: false,
+            node_count: 0,
+            elapsed_ms: 0,
+            coordinate_space: CoordinateSpace::Physical,
+        }
     }
 
     const DECLS: &str = r#"xmlns:st="uri:deskat:state.at-spi.gnome.org" xmlns:attr="uri:deskat:attributes.at-spi.gnome.org" xmlns:cp="uri:deskat:component.at-spi.gnome.org" xmlns:doc="uri:deskat:document.at-spi.gnome.org" xmlns:docattr="uri:deskat:attributes.document.at-spi.gnome.org" xmlns:txt="uri:deskat:text.at-spi.gnome.org" xmlns:val="uri:deskat:value.at-spi.gnome.org" xmlns:act="uri:deskat:action.at-spi.gnome.org" xmlns:win="uri:deskat:uia.windows.microsoft.org""#;

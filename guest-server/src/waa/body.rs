@@ -287,7 +287,10 @@ mod tests {
         assert!(Data(&list).contains("path").unwrap());
         assert_eq!(message(Data(&list).index("path").unwrap_err()), "list indices must be integers or slices, not str");
         assert_eq!(message(Data(&list).get("x").unwrap_err()), "'list' object has no attribute 'get'");
-        assert_eq!(message(Data(&json!(null)).contains("x").unwrap_err()), "argument of type 'NoneType' is not iterable");
+        assert_eq!(
+            message(Data(&json!(null)).contains("x").unwrap_err()),
+            "argument of type 'NoneType' is not iterable"
+        );
         assert_eq!(message(Data(&obj).index("zz").unwrap_err()), "'zz'");
     }
 }

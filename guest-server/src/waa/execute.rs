@@ -90,7 +90,9 @@ fn expand_home_args(desktop: &dyn Desktop, command: Value) -> Result<Value, WaaE
             .map(|item| match item {
                 Value::String(arg) if arg.starts_with("~/") => Ok(Value::String(expand_user(desktop, &arg))),
                 Value::String(arg) => Ok(Value::String(arg)),
-                other => Err(WaaError::catch(format!("'{}' object has no attribute 'startswith'", py::type_name(&other)))),
+                other => {
+                    Err(WaaError::catch(format!("'{}' object has no attribute 'startswith'", py::type_name(&other))))
+                }
             })
             .collect::<Result<Vec<_>, _>>()
             .map(Value::Array),
@@ -107,7 +109,11 @@ fn string_list(items: &[Value]) -> Vec<String> {
 
 /// Python's `TimeoutExpired` text: `Command '<cmd>' timed out after <n> seconds`.
 fn timeout_message(command: &Value, timeout_ms: u64) -> String {
-    let seconds = if timeout_ms % 1000 == 0 { (timeout_ms / 1000).to_string() } else { py::float_repr(timeout_ms as f64 / 1000.0) };
+    let seconds = if timeout_ms % 1000 == 0 {
+        (timeout_ms / 1000).to_string()
+    } else {
+        py::float_repr(timeout_ms as f64 / 1000.0)
+    };
     format!("Command '{}' timed out after {seconds} seconds", py::str_of(command))
 }
 
@@ -218,7 +224,8 @@ fn outside_subset(err: &ScriptError) -> bool {
 }
 
 /// Why `/execute` refuses code outside the subset, after the message naming the construct.
-const NO_PYTHON: &str = " (this guest runs Python code natively; start it with --python PATH to run other code with a real Python)";
+const NO_PYTHON: &str =
+    " (this guest runs Python code natively; start it with --python PATH to run other code with a real Python)";
 
 fn unsupported_parse(err: &ParseError) -> String {
     format!("unsupported Python at line {}, column {}: {}", err.line, err.column, err.message)
@@ -238,11 +245,19 @@ fn run_python(desktop: &dyn Desktop, code: &str, command: &Value, timeout_ms: u6
     let mut host = DesktopHost::new(desktop, Instant::now() + Duration::from_millis(timeout_ms));
     let (stdout, stderr, returncode) = match script::run(&program, &mut host, Globals::python()) {
         Ok(out) => (out.stdout, out.stderr, out.exit_code),
-        Err(_) if host.timed_out() => return Native::Answer(Err(WaaError::catch(timeout_message(command, timeout_ms)))),
-        Err(err) if outside_subset(&err) && host.effects() == 0 => return Native::Unsupported(unsupported_runtime(&err)),
+        Err(_) if host.timed_out() => {
+            return Native::Answer(Err(WaaError::catch(timeout_message(command, timeout_ms))))
+        }
+        Err(err) if outside_subset(&err) && host.effects() == 0 => {
+            return Native::Unsupported(unsupported_runtime(&err))
+        }
         Err(err) if outside_subset(&err) => {
             // Running it again with a real Python would repeat what was already done.
-            let message = format!("{}; it stopped there after {} action(s) had been performed", unsupported_runtime(&err), host.effects());
+            let message = format!(
+                "{}; it stopped there after {} action(s) had been performed",
+                unsupported_runtime(&err),
+                host.effects()
+            );
             return Native::Answer(Err(WaaError::catch(message)));
         }
         Err(err) => {
@@ -296,7 +311,9 @@ pub(crate) async fn launch(State(state): State<AppState>, PyJson(body): PyJson) 
         };
         match desktop.spawn(&CommandSpec::Shell(line)) {
             // `cmd /c` starts even when the program it names does not exist; upstream "succeeds".
-            Ok(_) | Err(DesktopError::NotFound(_)) => Ok(text(StatusCode::OK, format!("{} launched successfully", py::str_of(&command)))),
+            Ok(_) | Err(DesktopError::NotFound(_)) => {
+                Ok(text(StatusCode::OK, format!("{} launched successfully", py::str_of(&command))))
+            }
             Err(err) => Err(failure(&command, err.to_string())),
         }
     })
@@ -327,7 +344,9 @@ pub(crate) async fn update_computer(State(state): State<AppState>, PyJson(body):
         Some(Value::String(s)) => s.clone(),
         other => {
             let type_name = other.map_or("NoneType", py::type_name);
-            return Err(WaaError::catch(format!("argument should be a bytes-like object or ASCII string, not '{type_name}'")));
+            return Err(WaaError::catch(format!(
+                "argument should be a bytes-like object or ASCII string, not '{type_name}'"
+            )));
         }
     };
     let scale = data.get("scale")?.cloned();
@@ -343,7 +362,15 @@ pub(crate) async fn update_computer(State(state): State<AppState>, PyJson(body):
     })
     .await?;
     let screenshot = Arc::new(screenshot);
-    state.waa.set_computer(ComputerState { rects, window_rect, screenshot, scale, clipboard_content, swap_ctrl_alt, current_id: None });
+    state.waa.set_computer(ComputerState {
+        rects,
+        window_rect,
+        screenshot,
+        scale,
+        clipboard_content,
+        swap_ctrl_alt,
+        current_id: None,
+    });
     Ok(json(StatusCode::OK, json!({"success": true})))
 }
 
@@ -369,7 +396,11 @@ pub(crate) async fn execute_windows(State(state): State<AppState>, PyJson(body):
         // Upstream's `Mouse` and `Clipboard` objects keep what the code changed until the
         // next `/update_computer`, which wins if it came in while the code ran.
         if before.current_id != after.current_id || before.clipboard_content != after.clipboard_content {
-            let next = ComputerState { current_id: after.current_id, clipboard_content: after.clipboard_content, ..(*before).clone() };
+            let next = ComputerState {
+                current_id: after.current_id,
+                clipboard_content: after.clipboard_content,
+                ..(*before).clone()
+            };
             state.waa.replace_computer(&before, next);
         }
     }
@@ -419,7 +450,12 @@ pub struct ComputerChanges {
 /// Code outside the interpreter's subset fails naming the construct, line and column.
 /// Before the first `/update_computer`, `computer.<part>.<method>` fails with Python's
 /// `AttributeError` text, as upstream's `None` parts do.
-pub fn run_computer_code(desktop: &dyn Desktop, code: &str, computer: Option<&ComputerState>, options: &CodeOptions) -> ComputerRun {
+pub fn run_computer_code(
+    desktop: &dyn Desktop,
+    code: &str,
+    computer: Option<&ComputerState>,
+    options: &CodeOptions,
+) -> ComputerRun {
     let fail = |message: String| ComputerRun { result: Err(message), state: None };
     let program = match script::parse(code) {
         Ok(program) => program,
@@ -441,7 +477,11 @@ pub fn run_computer_code(desktop: &dyn Desktop, code: &str, computer: Option<&Co
     };
     let initial_clipboard = state.clipboard_content.clone();
     let mut host = DesktopHost::new(desktop, deadline).with_screenshot(&stored.screenshot);
-    let globals = Globals { computer: Some(&mut state), computer_action_delay: options.action_delay.as_secs_f64(), preimport: &[] };
+    let globals = Globals {
+        computer: Some(&mut state),
+        computer_action_delay: options.action_delay.as_secs_f64(),
+        preimport: &[],
+    };
     let result = script::run(&program, &mut host, globals);
     let result = code_result(result, &host, options);
     let clipboard_content = if state.clipboard_content == initial_clipboard {
@@ -454,14 +494,17 @@ pub fn run_computer_code(desktop: &dyn Desktop, code: &str, computer: Option<&Co
 
 /// Upstream's verdict on a finished `exec`: an exception's text, or the captured
 /// stdout when it mentions "error".
-fn code_result(result: Result<script::RunOutput, ScriptError>, host: &DesktopHost<'_>, options: &CodeOptions) -> Result<(), String> {
+fn code_result(
+    result: Result<script::RunOutput, ScriptError>,
+    host: &DesktopHost<'_>,
+    options: &CodeOptions,
+) -> Result<(), String> {
     match result {
         Ok(out) if out.stdout.to_lowercase().contains("error") => Err(out.stdout),
         Ok(_) => Ok(()),
-        Err(_) if host.timed_out() => Err(format!(
-            "the code did not finish within {} seconds",
-            py::float_repr(options.timeout.as_secs_f64())
-        )),
+        Err(_) if host.timed_out() => {
+            Err(format!("the code did not finish within {} seconds", py::float_repr(options.timeout.as_secs_f64())))
+        }
         Err(err) if outside_subset(&err) => Err(unsupported_runtime(&err)),
         // `str(e)`: the exception's message without its class, as upstream answers.
         Err(err) => Err(err.message),
@@ -557,7 +600,8 @@ mod tests {
 
     #[test]
     fn none_attribute_names_the_method() {
-        let check = |stmt: &str, expected: Option<&str>| assert_eq!(none_attribute(stmt).as_deref(), expected, "{stmt:?}");
+        let check =
+            |stmt: &str, expected: Option<&str>| assert_eq!(none_attribute(stmt).as_deref(), expected, "{stmt:?}");
         check("computer.mouse.move_id(id=78)", Some("move_id"));
         check("computer.keyboard.write('a.b')", Some("write"));
         check("x = 1; computer.clipboard.copy_text('x')", Some("copy_text"));
@@ -568,7 +612,10 @@ mod tests {
 
     #[test]
     fn timeout_messages_quote_the_command_like_python() {
-        assert_eq!(timeout_message(&json!(["python", "-c", "x"]), 120_000), "Command '['python', '-c', 'x']' timed out after 120 seconds");
+        assert_eq!(
+            timeout_message(&json!(["python", "-c", "x"]), 120_000),
+            "Command '['python', '-c', 'x']' timed out after 120 seconds"
+        );
         assert_eq!(timeout_message(&json!("dir"), 1_500), "Command 'dir' timed out after 1.5 seconds");
     }
 

@@ -111,7 +111,11 @@ pub(crate) async fn file(State(state): State<AppState>, form: PyForm) -> WaaResu
         };
         let meta = std::fs::metadata(&local).map_err(read_error)?;
         if meta.is_dir() {
-            return Err(WaaError::catch(py::os_error(OsCall::Open, &std::io::ErrorKind::PermissionDenied.into(), &path)));
+            return Err(WaaError::catch(py::os_error(
+                OsCall::Open,
+                &std::io::ErrorKind::PermissionDenied.into(),
+                &path,
+            )));
         }
         let bytes = std::fs::read(&local).map_err(read_error)?;
         let name = paths::basename(&path);
@@ -179,11 +183,19 @@ pub(crate) async fn create_folder(State(state): State<AppState>, PyJson(body): P
     };
     on_backend(&state, "create_folder", move |desktop| {
         let shown = py::str_of(&path);
-        let failed = || json_err(StatusCode::BAD_REQUEST, json!({"status": "error", "message": format!("Failed to create {shown}.")}));
+        let failed = || {
+            json_err(
+                StatusCode::BAD_REQUEST,
+                json!({"status": "error", "message": format!("Failed to create {shown}.")}),
+            )
+        };
         let Value::String(guest) = &path else { return Err(failed()) };
         let local = desktop.map_path(guest).map_err(|_| failed())?;
         if exists(&local) {
-            return Ok(json(StatusCode::OK, json!({"status": "success", "message": format!("{shown} already exists.")})));
+            return Ok(json(
+                StatusCode::OK,
+                json!({"status": "success", "message": format!("{shown} already exists.")}),
+            ));
         }
         std::fs::create_dir_all(&local).map_err(|_| failed())?;
         Ok(json(StatusCode::OK, json!({"status": "success", "message": format!("{shown} created.")})))
@@ -206,7 +218,12 @@ pub(crate) async fn create_file(State(state): State<AppState>, PyJson(body): PyJ
         if local.as_ref().is_ok_and(|l| l.is_dir()) {
             return Err(json_err(StatusCode::BAD_REQUEST, json!({"status": "error", "message": "path is not a file"})));
         }
-        let failed = || json_err(StatusCode::BAD_REQUEST, json!({"status": "error", "message": format!("Failed to create {shown}.")}));
+        let failed = || {
+            json_err(
+                StatusCode::BAD_REQUEST,
+                json!({"status": "error", "message": format!("Failed to create {shown}.")}),
+            )
+        };
         let local = local.map_err(|_| failed())?;
         if let Some(parent) = local.parent() {
             std::fs::create_dir_all(parent).map_err(|_| failed())?;
@@ -233,13 +250,18 @@ pub(crate) async fn recycle(State(state): State<AppState>, PyJson(body): PyJson)
     on_backend(&state, "recycle", move |desktop| {
         let shown = py::str_of(&path);
         let recycled = match &path {
-            Value::String(guest) => desktop.recycle(guest).map_err(|err| tracing::debug!(error = %err, "recycle failed")).is_ok(),
+            Value::String(guest) => {
+                desktop.recycle(guest).map_err(|err| tracing::debug!(error = %err, "recycle failed")).is_ok()
+            }
             _ => false,
         };
         if recycled {
             Ok(json(StatusCode::OK, json!({"status": "success", "message": format!("{shown} recycled")})))
         } else {
-            Err(json_err(StatusCode::BAD_REQUEST, json!({"status": "error", "message": format!("Failed to recycle {shown}")})))
+            Err(json_err(
+                StatusCode::BAD_REQUEST,
+                json!({"status": "error", "message": format!("Failed to recycle {shown}")}),
+            ))
         }
     })
     .await
@@ -289,7 +311,10 @@ async fn exists_route(state: AppState, body: Value, kind: Kind) -> WaaResult {
     if found {
         Ok(json(StatusCode::OK, json!({"status": "success", "message": format!("{noun} {name} exists in {path}.")})))
     } else {
-        Err(json_err(StatusCode::BAD_REQUEST, json!({"status": "error", "message": format!("{noun} {name} does not exist in {path}.")})))
+        Err(json_err(
+            StatusCode::BAD_REQUEST,
+            json!({"status": "error", "message": format!("{noun} {name} does not exist in {path}.")}),
+        ))
     }
 }
 
@@ -402,7 +427,9 @@ pub(crate) async fn change_wallpaper(State(state): State<AppState>, PyJson(body)
         }
         match desktop.set_wallpaper(&path) {
             Ok(()) => Ok(text(StatusCode::OK, "Wallpaper changed successfully")),
-            Err(err) => Err(text_err(StatusCode::INTERNAL_SERVER_ERROR, format!("Failed to change wallpaper. Error: {err}"))),
+            Err(err) => {
+                Err(text_err(StatusCode::INTERNAL_SERVER_ERROR, format!("Failed to change wallpaper. Error: {err}")))
+            }
         }
     })
     .await
@@ -419,7 +446,10 @@ pub(crate) async fn download_file(PyJson(body): PyJson) -> WaaResult {
     }
     Err(text_err(
         StatusCode::INTERNAL_SERVER_ERROR,
-        format!("Failed to download {}. No retries left. Error: guest-side downloads are disabled; the host uploads files", py::str_of(&url)),
+        format!(
+            "Failed to download {}. No retries left. Error: guest-side downloads are disabled; the host uploads files",
+            py::str_of(&url)
+        ),
     ))
 }
 
@@ -466,9 +496,12 @@ fn clear_downloads(desktop: &dyn Desktop) -> Result<Response, WaaError> {
             failed.push(guest);
         }
     }
-    let (removed_repr, failed_repr, dir_repr) = (py::repr_str_list(&removed), py::repr_str_list(&failed), py::repr_str(&dir));
+    let (removed_repr, failed_repr, dir_repr) =
+        (py::repr_str_list(&removed), py::repr_str_list(&failed), py::repr_str(&dir));
     let message = match (failed.is_empty(), removed.is_empty()) {
-        (false, false) => format!("Failed to remove ({failed_repr}) but sucessfully cleared ({removed_repr}) from {dir_repr}."),
+        (false, false) => {
+            format!("Failed to remove ({failed_repr}) but sucessfully cleared ({removed_repr}) from {dir_repr}.")
+        }
         (false, true) => format!("Failed to remove ({failed_repr}) from {dir_repr}."),
         (true, false) => format!("All task files ({removed_repr}) cleared successfully from {dir_repr}."),
         (true, true) => format!("No task files to clear from {dir_repr}."),
@@ -489,7 +522,10 @@ mod tests {
     fn content_disposition_quotes_like_werkzeug() {
         assert_eq!(content_disposition("a.txt"), "attachment; filename=a.txt");
         assert_eq!(content_disposition("my file.txt"), "attachment; filename=\"my file.txt\"");
-        assert_eq!(content_disposition("résumé.pdf"), "attachment; filename=rsum.pdf; filename*=UTF-8''r%C3%A9sum%C3%A9.pdf");
+        assert_eq!(
+            content_disposition("résumé.pdf"),
+            "attachment; filename=rsum.pdf; filename*=UTF-8''r%C3%A9sum%C3%A9.pdf"
+        );
     }
 
     #[test]

@@ -219,7 +219,12 @@ where
 }
 
 /// [`on_backend`] with an explicit deadline.
-pub(crate) async fn on_backend_within<T, F>(state: &AppState, op: &'static str, deadline: Duration, f: F) -> Result<T, WaaError>
+pub(crate) async fn on_backend_within<T, F>(
+    state: &AppState,
+    op: &'static str,
+    deadline: Duration,
+    f: F,
+) -> Result<T, WaaError>
 where
     F: FnOnce(&dyn Desktop) -> Result<T, WaaError> + Send + 'static,
     T: Send + 'static,
@@ -241,6 +246,8 @@ pub(crate) fn expand_user(desktop: &dyn Desktop, path: &str) -> String {
 pub(crate) fn path_arg(value: &serde_json::Value) -> Result<String, WaaError> {
     match value {
         serde_json::Value::String(s) => Ok(s.clone()),
-        other => Err(WaaError::catch(format!("expected str, bytes or os.PathLike object, not {}", py::type_name(other)))),
+        other => {
+            Err(WaaError::catch(format!("expected str, bytes or os.PathLike object, not {}", py::type_name(other))))
+        }
     }
 }

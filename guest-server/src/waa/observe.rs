@@ -40,7 +40,10 @@ pub(crate) async fn probe() -> WaaResult {
 /// `POST /shutdown`.
 pub(crate) async fn shutdown(State(state): State<AppState>) -> WaaResult {
     on_backend(&state, "shutdown", |desktop| Ok(desktop.shutdown()?)).await?;
-    Ok(json(StatusCode::OK, json!({"status": "Shutdown started successfully", "message": "Shutdown started successfully"})))
+    Ok(json(
+        StatusCode::OK,
+        json!({"status": "Shutdown started successfully", "message": "Shutdown started successfully"}),
+    ))
 }
 
 /// `GET /platform`.
@@ -201,7 +204,10 @@ async fn existing_known_folder(state: &AppState, folder: KnownFolder) -> Option<
 pub(crate) async fn desktop_path(State(state): State<AppState>) -> WaaResult {
     match existing_known_folder(&state, KnownFolder::Desktop).await {
         Some(path) => Ok(json(StatusCode::OK, json!({"desktop_path": path}))),
-        None => Err(json_err(StatusCode::NOT_FOUND, json!({"error": "Unsupported operating system or desktop path not found"}))),
+        None => Err(json_err(
+            StatusCode::NOT_FOUND,
+            json!({"error": "Unsupported operating system or desktop path not found"}),
+        )),
     }
 }
 
@@ -209,7 +215,10 @@ pub(crate) async fn desktop_path(State(state): State<AppState>) -> WaaResult {
 pub(crate) async fn documents_path(State(state): State<AppState>) -> WaaResult {
     match existing_known_folder(&state, KnownFolder::Documents).await {
         Some(path) => Ok(json(StatusCode::OK, json!({"documents_path": path}))),
-        None => Err(json_err(StatusCode::BAD_REQUEST, json!({"error": "Unsupported operating system or documents path not found"}))),
+        None => Err(json_err(
+            StatusCode::BAD_REQUEST,
+            json!({"error": "Unsupported operating system or documents path not found"}),
+        )),
     }
 }
 
@@ -220,7 +229,8 @@ mod tests {
     #[test]
     fn crops_clamp_to_the_screen() {
         let img = image::RgbaImage::from_pixel(100, 50, image::Rgba([1, 2, 3, 255]));
-        let check = |rect: Rect, size: (u32, u32)| assert_eq!(crop_to_screen(&img, rect).dimensions(), size, "{rect:?}");
+        let check =
+            |rect: Rect, size: (u32, u32)| assert_eq!(crop_to_screen(&img, rect).dimensions(), size, "{rect:?}");
         check(Rect::new(10, 10, 20, 20), (20, 20));
         check(Rect::from_ltrb(-8, -8, 108, 58), (100, 50));
         check(Rect::new(-32000, -32000, 160, 28), (1, 1));

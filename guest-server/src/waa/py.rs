@@ -170,7 +170,10 @@ mod tests {
     fn os_errors_read_like_windows_python() {
         let nf = std::io::Error::from(std::io::ErrorKind::NotFound);
         assert_eq!(os_error(OsCall::Open, &nf, r"C:\x\a.txt"), r"[Errno 2] No such file or directory: 'C:\\x\\a.txt'");
-        assert_eq!(os_error(OsCall::Win32Dir, &nf, r"C:\x"), r"[WinError 3] The system cannot find the path specified: 'C:\\x'");
+        assert_eq!(
+            os_error(OsCall::Win32Dir, &nf, r"C:\x"),
+            r"[WinError 3] The system cannot find the path specified: 'C:\\x'"
+        );
         let denied = std::io::Error::from(std::io::ErrorKind::PermissionDenied);
         assert_eq!(os_error(OsCall::Open, &denied, r"C:\x"), r"[Errno 13] Permission denied: 'C:\\x'");
         assert_eq!(os_error(OsCall::Win32File, &denied, r"C:\x"), r"[WinError 5] Access is denied: 'C:\\x'");

@@ -30,7 +30,11 @@ use crate::waa::{json, json_err, on_backend, on_backend_within, path_arg, WaaRes
 /// The first descendant of `node` (not `node` itself), depth first in document order,
 /// whose name satisfies `matches`; direct children named exactly `exact` are tried first,
 /// as upstream's `find_element_by_name` does with `FindFirst` before walking.
-pub(crate) fn find_element<'a>(node: &'a A11yNode, exact: Option<&str>, matches: &dyn Fn(&str) -> bool) -> Option<&'a A11yNode> {
+pub(crate) fn find_element<'a>(
+    node: &'a A11yNode,
+    exact: Option<&str>,
+    matches: &dyn Fn(&str) -> bool,
+) -> Option<&'a A11yNode> {
     if let Some(exact) = exact {
         if let Some(child) = node.children.iter().find(|c| c.name == exact) {
             return Some(child);
@@ -51,7 +55,11 @@ pub(crate) fn find_element<'a>(node: &'a A11yNode, exact: Option<&str>, matches:
 }
 
 /// [`find_element`] over every root of a (foreground-only) tree.
-pub(crate) fn find_in_tree<'a>(tree: &'a A11yTree, exact: Option<&str>, matches: &dyn Fn(&str) -> bool) -> Option<&'a A11yNode> {
+pub(crate) fn find_in_tree<'a>(
+    tree: &'a A11yTree,
+    exact: Option<&str>,
+    matches: &dyn Fn(&str) -> bool,
+) -> Option<&'a A11yNode> {
     tree.windows.iter().find_map(|w| find_element(w, exact, matches))
 }
 
@@ -105,7 +113,10 @@ pub(crate) async fn is_details_view(State(state): State<AppState>, PyJson(body):
     })
     .await?;
     if is_details {
-        Ok(json(StatusCode::OK, json!({"status": "success", "message": "File Explorer is in Details view", "is_details_view": true})))
+        Ok(json(
+            StatusCode::OK,
+            json!({"status": "success", "message": "File Explorer is in Details view", "is_details_view": true}),
+        ))
     } else {
         Err(json_err(
             StatusCode::BAD_REQUEST,
@@ -126,13 +137,18 @@ pub(crate) fn sorted_by_mtime(names: &[String], items: &[(String, i64, bool)]) -
 }
 
 /// `POST /are_files_sorted_by_modified_time`.
-pub(crate) async fn are_files_sorted_by_modified_time(State(state): State<AppState>, PyJson(body): PyJson) -> WaaResult {
+pub(crate) async fn are_files_sorted_by_modified_time(
+    State(state): State<AppState>,
+    PyJson(body): PyJson,
+) -> WaaResult {
     let Some(directory) = Data(&body).required("directory")?.cloned() else {
         return Err(json_err(StatusCode::BAD_REQUEST, json!({"error": "directory is required"})));
     };
     let tree = foreground_tree(&state).await?;
     let Some(items) = explorer_items(&tree) else {
-        return Err(WaaError::catch("the foreground window has no \"Shell Folder View\" element (is File Explorer in front?)"));
+        return Err(WaaError::catch(
+            "the foreground window has no \"Shell Folder View\" element (is File Explorer in front?)",
+        ));
     };
     let shown = py::str_of(&directory);
     let sorted = on_backend(&state, "are_files_sorted_by_modified_time", move |desktop| {
@@ -143,7 +159,8 @@ pub(crate) async fn are_files_sorted_by_modified_time(State(state): State<AppSta
             let Some(meta) = desktop.map_path(&guest).ok().and_then(|local| std::fs::metadata(local).ok()) else {
                 continue;
             };
-            let mtime = meta.modified().map_err(|err| WaaError::catch(py::os_error(OsCall::Win32File, &err, &guest)))?;
+            let mtime =
+                meta.modified().map_err(|err| WaaError::catch(py::os_error(OsCall::Win32File, &err, &guest)))?;
             let secs = match mtime.duration_since(std::time::UNIX_EPOCH) {
                 Ok(d) => d.as_secs() as i64,
                 Err(before) => -(before.duration().as_secs_f64().ceil() as i64),
@@ -155,9 +172,15 @@ pub(crate) async fn are_files_sorted_by_modified_time(State(state): State<AppSta
     })
     .await?;
     if sorted {
-        Ok(json(StatusCode::OK, json!({"status": "success", "message": format!("{shown}: files are sorted by modified time")})))
+        Ok(json(
+            StatusCode::OK,
+            json!({"status": "success", "message": format!("{shown}: files are sorted by modified time")}),
+        ))
     } else {
-        Err(json_err(StatusCode::BAD_REQUEST, json!({"status": "error", "message": format!("{shown}: files are not sorted by modified time")})))
+        Err(json_err(
+            StatusCode::BAD_REQUEST,
+            json!({"status": "error", "message": format!("{shown}: files are not sorted by modified time")}),
+        ))
     }
 }
 
@@ -187,7 +210,12 @@ async fn clock_tree(state: &AppState) -> Result<A11yTree, WaaError> {
     };
     let centre = rect.center();
     on_backend(state, "maximize_clock", move |desktop| {
-        Ok(desktop.perform(&Action::Click { x: Some(centre.x), y: Some(centre.y), button: MouseButton::Left, count: 1 })?)
+        Ok(desktop.perform(&Action::Click {
+            x: Some(centre.x),
+            y: Some(centre.y),
+            button: MouseButton::Left,
+            count: 1,
+        })?)
     })
     .await?;
     // Upstream sleeps a second for the window to grow before it reads the tree again.
@@ -263,11 +291,19 @@ pub(crate) async fn is_directory_read_only_for_user(State(state): State<AppState
     };
     let (dir, who) = (path_arg(&directory)?, path_arg(&user)?);
     let (shown_dir, shown_user) = (dir.clone(), who.clone());
-    let mask = on_backend(&state, "directory_access_mask", move |desktop| Ok(desktop.directory_access_mask(&dir, &who)?)).await?;
+    let mask =
+        on_backend(&state, "directory_access_mask", move |desktop| Ok(desktop.directory_access_mask(&dir, &who)?))
+            .await?;
     if mask.is_some_and(mask_is_read_only) {
-        Ok(json(StatusCode::OK, json!({"status": "success", "message": format!("{shown_dir} is read-only for {shown_user}")})))
+        Ok(json(
+            StatusCode::OK,
+            json!({"status": "success", "message": format!("{shown_dir} is read-only for {shown_user}")}),
+        ))
     } else {
-        Err(json_err(StatusCode::BAD_REQUEST, json!({"status": "error", "message": format!("{shown_dir} is not read-only for {shown_user}")})))
+        Err(json_err(
+            StatusCode::BAD_REQUEST,
+            json!({"status": "error", "message": format!("{shown_dir} is not read-only for {shown_user}")}),
+        ))
     }
 }
 
@@ -279,7 +315,13 @@ fn decode_utf16_lossy(bytes: &[u8]) -> String {
         [0xff, 0xfe, rest @ ..] => (false, rest),
         _ => (false, bytes),
     };
-    let units = body.chunks_exact(2).map(|c| if big_endian { u16::from_be_bytes([c[0], c[1]]) } else { u16::from_le_bytes([c[0], c[1]]) });
+    let units = body.chunks_exact(2).map(|c| {
+        if big_endian {
+            u16::from_be_bytes([c[0], c[1]])
+        } else {
+            u16::from_le_bytes([c[0], c[1]])
+        }
+    });
     char::decode_utf16(units).filter_map(Result::ok).collect()
 }
 
@@ -297,7 +339,9 @@ pub(crate) fn exif_strings(path: &Path) -> Vec<String> {
     exif.fields()
         .map(|field| match &field.value {
             exif::Value::Byte(bytes) | exif::Value::Undefined(bytes, _) => decode_utf16_lossy(bytes),
-            exif::Value::Ascii(strings) => join(strings.iter().map(|s| String::from_utf8_lossy(s).into_owned()).collect()),
+            exif::Value::Ascii(strings) => {
+                join(strings.iter().map(|s| String::from_utf8_lossy(s).into_owned()).collect())
+            }
             exif::Value::Short(v) => join(v.iter().map(u16::to_string).collect()),
             exif::Value::Long(v) => join(v.iter().map(u32::to_string).collect()),
             exif::Value::SByte(v) => join(v.iter().map(i8::to_string).collect()),
@@ -338,7 +382,10 @@ pub(crate) async fn are_all_images_tagged(State(state): State<AppState>, PyJson(
                 continue;
             }
             let Value::String(tag) = &tag else {
-                return Err(WaaError::catch(format!("'in <string>' requires string as left operand, not {}", py::type_name(&tag))));
+                return Err(WaaError::catch(format!(
+                    "'in <string>' requires string as left operand, not {}",
+                    py::type_name(&tag)
+                )));
             };
             if !exif_strings(&local.join(&name)).iter().any(|value| value.contains(tag.as_str())) {
                 return Ok(Some(name));
@@ -348,7 +395,10 @@ pub(crate) async fn are_all_images_tagged(State(state): State<AppState>, PyJson(
     })
     .await?;
     match untagged {
-        None => Ok(json(StatusCode::OK, json!({"status": "success", "message": format!("All images in {shown_dir} are tagged with {shown_tag}")}))),
+        None => Ok(json(
+            StatusCode::OK,
+            json!({"status": "success", "message": format!("All images in {shown_dir} are tagged with {shown_tag}")}),
+        )),
         Some(name) => Err(json_err(
             StatusCode::BAD_REQUEST,
             json!({"status": "error", "message": format!("{name} in {shown_dir} is not tagged with {shown_tag}")}),
@@ -374,7 +424,9 @@ pub(crate) fn decode_xml_text(bytes: &[u8]) -> String {
 /// The parser's message for malformed XML.
 pub(crate) fn library_urls(xml: &str) -> Result<Vec<String>, String> {
     let doc = roxmltree::Document::parse(xml).map_err(|err| err.to_string())?;
-    let is = |node: &roxmltree::Node<'_, '_>, name: &str| node.is_element() && node.tag_name().name() == name && node.tag_name().namespace() == Some(LIBRARY_NS);
+    let is = |node: &roxmltree::Node<'_, '_>, name: &str| {
+        node.is_element() && node.tag_name().name() == name && node.tag_name().namespace() == Some(LIBRARY_NS)
+    };
     let mut urls: Vec<String> = doc
         .descendants()
         .filter(|n| is(n, "searchConnectorDescriptionList"))
@@ -426,7 +478,8 @@ mod tests {
 
     #[test]
     fn mtime_sorting_accepts_both_upstream_orders() {
-        let items = vec![("b.txt".to_owned(), 30, false), ("a.txt".to_owned(), 10, false), ("dir".to_owned(), 20, true)];
+        let items =
+            vec![("b.txt".to_owned(), 30, false), ("a.txt".to_owned(), 10, false), ("dir".to_owned(), 20, true)];
         let names = |v: &[&str]| v.iter().map(|s| s.to_string()).collect::<Vec<_>>();
         assert!(sorted_by_mtime(&names(&["b.txt", "a.txt", "dir"]), &items));
         assert!(sorted_by_mtime(&names(&["dir", "a.txt", "b.txt"]), &items));

@@ -48,7 +48,10 @@ fn recordings_dir(desktop: &dyn Desktop) -> Result<String, WaaError> {
 pub(crate) async fn start_recording(State(state): State<AppState>) -> WaaResult {
     let mut recording = state.waa.recording.lock().await;
     if recording.is_some() {
-        return Err(json_err(StatusCode::BAD_REQUEST, json!({"status": "error", "message": "Recording is already in progress."})));
+        return Err(json_err(
+            StatusCode::BAD_REQUEST,
+            json!({"status": "error", "message": "Recording is already in progress."}),
+        ));
     }
     let (pid, path, command) = on_backend(&state, "start_recording", |desktop| {
         let dir = recordings_dir(desktop)?;
@@ -70,18 +73,30 @@ pub(crate) async fn start_recording(State(state): State<AppState>) -> WaaResult 
     })
     .await?;
     *recording = Some(Recording { pid, path: path.clone() });
-    Ok(json(StatusCode::OK, json!({"status": "success", "message": format!("Started recording to: {path}.\nCOMMAND: {command}")})))
+    Ok(json(
+        StatusCode::OK,
+        json!({"status": "success", "message": format!("Started recording to: {path}.\nCOMMAND: {command}")}),
+    ))
 }
 
 /// `POST /end_recording`.
 pub(crate) async fn end_recording(State(state): State<AppState>) -> WaaResult {
     let mut recording = state.waa.recording.lock().await;
     let Some(current) = recording.take() else {
-        return Err(json_err(StatusCode::BAD_REQUEST, json!({"status": "error", "message": "No recording in progress to stop."})));
+        return Err(json_err(
+            StatusCode::BAD_REQUEST,
+            json!({"status": "error", "message": "No recording in progress to stop."}),
+        ));
     };
     let path = current.path.clone();
     let saved = on_backend(&state, "end_recording", move |desktop| {
-        let stop = CommandSpec::Argv(vec!["taskkill".into(), "/PID".into(), current.pid.to_string(), "/T".into(), "/F".into()]);
+        let stop = CommandSpec::Argv(vec![
+            "taskkill".into(),
+            "/PID".into(),
+            current.pid.to_string(),
+            "/T".into(),
+            "/F".into(),
+        ]);
         let limits = ExecLimits { timeout_ms: 10_000, max_output_bytes: 64 << 10, cwd: None, stdin: None };
         if let Err(err) = desktop.run(&stop, &limits) {
             tracing::warn!(error = %err, pid = current.pid, "could not stop the recording process");

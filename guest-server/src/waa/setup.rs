@@ -49,17 +49,26 @@ pub(crate) async fn activate_window(State(state): State<AppState>, PyJson(body):
     };
     let strict = data.flag("strict")?;
     if data.flag("by_class")? {
-        return Err(text_err(StatusCode::INTERNAL_SERVER_ERROR, "Get window by class name is currently not supported on Windows."));
+        return Err(text_err(
+            StatusCode::INTERNAL_SERVER_ERROR,
+            "Get window by class name is currently not supported on Windows.",
+        ));
     }
     let name = name_arg(&name)?;
     let lookup = name.clone();
-    let matches = on_backend(&state, "activate_window", move |desktop| Ok(windows_with_title(visible_windows(desktop)?, &lookup))).await?;
+    let matches = on_backend(&state, "activate_window", move |desktop| {
+        Ok(windows_with_title(visible_windows(desktop)?, &lookup))
+    })
+    .await?;
     let Some(target) = matches.first().map(|w| w.id) else {
         return Err(text_err(StatusCode::NOT_FOUND, format!("Window {name} not found (empty results)")));
     };
     let settle = Duration::from_millis(state.config.activate_settle_ms);
     if strict {
-        on_backend(&state, "activate_window", move |desktop| Ok(desktop.set_window_state(target, WindowState::Minimized)?)).await?;
+        on_backend(&state, "activate_window", move |desktop| {
+            Ok(desktop.set_window_state(target, WindowState::Minimized)?)
+        })
+        .await?;
         tokio::time::sleep(settle).await;
         on_backend(&state, "activate_window", move |desktop| {
             desktop.set_window_state(target, WindowState::Normal)?;
@@ -75,7 +84,8 @@ pub(crate) async fn activate_window(State(state): State<AppState>, PyJson(body):
             return Err(WaaError::catch(""));
         }
     } else {
-        let activated = on_backend(&state, "activate_window", move |desktop| Ok(desktop.activate_window(target)?)).await;
+        let activated =
+            on_backend(&state, "activate_window", move |desktop| Ok(desktop.activate_window(target)?)).await;
         if let Err(err) = activated {
             // Upstream does nothing here, so a refused activation is not a failure either.
             tracing::warn!(?err, window = target, "non-strict activate_window could not activate the window");
@@ -93,11 +103,16 @@ pub(crate) async fn close_window(State(state): State<AppState>, PyJson(body): Py
     };
     let strict = data.flag("strict")?;
     if data.flag("by_class")? {
-        return Err(text_err(StatusCode::INTERNAL_SERVER_ERROR, "Get window by class name is not supported on Windows currently."));
+        return Err(text_err(
+            StatusCode::INTERNAL_SERVER_ERROR,
+            "Get window by class name is not supported on Windows currently.",
+        ));
     }
     let name = name_arg(&name)?;
     let lookup = name.clone();
-    let matches = on_backend(&state, "close_window", move |desktop| Ok(windows_with_title(visible_windows(desktop)?, &lookup))).await?;
+    let matches =
+        on_backend(&state, "close_window", move |desktop| Ok(windows_with_title(visible_windows(desktop)?, &lookup)))
+            .await?;
     let Some(target) = matches.first().map(|w| w.id) else {
         return Err(text_err(StatusCode::NOT_FOUND, format!("Window {name} not found (empty results)")));
     };

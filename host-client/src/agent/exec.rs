@@ -31,7 +31,7 @@ use image::ImageFormat;
 use serde::{Deserialize, Serialize};
 use tokio::runtime::Handle;
 
-use arena_shared::action::{ActionBatch, Action};
+use arena_shared::action::{Action, ActionBatch};
 use arena_shared::clipboard::ClipboardContent;
 use arena_shared::exec::{ExecRequest, LaunchRequest};
 use arena_shared::files::FileKind;
@@ -166,7 +166,9 @@ fn is_unreachable(err: &ClientError) -> bool {
 
 async fn typed(client: &GuestClient, actions: &[Action]) -> Result<ActionOutcome, AgentError> {
     match client.act(&ActionBatch { actions: actions.to_vec() }).await {
-        Ok(report) => Ok(ActionOutcome { cursor: Some(report.cursor), performed: report.executed, ..ActionOutcome::default() }),
+        Ok(report) => {
+            Ok(ActionOutcome { cursor: Some(report.cursor), performed: report.executed, ..ActionOutcome::default() })
+        }
         Err(err) if is_unreachable(&err) => Err(AgentError::Guest(err)),
         Err(err) => Ok(ActionOutcome { error: Some(err.to_string()), ..ActionOutcome::default() }),
     }
@@ -198,7 +200,9 @@ async fn run_script(
         let globals = match lang {
             Lang::Computer => Globals { computer: Some(&mut state), computer_action_delay: delay, preimport: &[] },
             // Upstream runs pyautogui code as `python -c "import pyautogui; import time; ..."`.
-            Lang::Pyautogui => Globals { computer: None, computer_action_delay: delay, preimport: &["pyautogui", "time"] },
+            Lang::Pyautogui => {
+                Globals { computer: None, computer_action_delay: delay, preimport: &["pyautogui", "time"] }
+            }
         };
         let result = run(&program, &mut host, globals);
         (result, state, host)
@@ -297,12 +301,15 @@ impl GuestHost {
     fn capture(&mut self) -> Result<image::RgbaImage, String> {
         let query = ScreenshotQuery { format: WireImageFormat::Png, cursor: Some(false), ..ScreenshotQuery::default() };
         let shot = self.call(|c| async move { c.screenshot(&query).await })?;
-        image::load_from_memory(&shot.bytes).map(|i| i.to_rgba8()).map_err(|e| format!("cannot decode the screenshot: {e}"))
+        image::load_from_memory(&shot.bytes)
+            .map(|i| i.to_rgba8())
+            .map_err(|e| format!("cannot decode the screenshot: {e}"))
     }
 
     fn exec(&mut self, argv: Vec<String>) -> Result<CommandOutput, String> {
         let timeout_ms = u64::try_from(self.remaining().as_millis()).unwrap_or(u64::MAX).max(1);
-        let request = ExecRequest { argv, timeout_ms: Some(timeout_ms), max_output_bytes: None, cwd: None, stdin: None };
+        let request =
+            ExecRequest { argv, timeout_ms: Some(timeout_ms), max_output_bytes: None, cwd: None, stdin: None };
         let result = self.call(|c| async move { c.exec(&request).await })?;
         if result.timed_out {
             return Err("the command ran out of time".to_owned());
@@ -398,7 +405,8 @@ impl ScriptHost for GuestHost {
             }
         };
         let lower = path.to_ascii_lowercase();
-        let format = if lower.ends_with(".jpg") || lower.ends_with(".jpeg") { ImageFormat::Jpeg } else { ImageFormat::Png };
+        let format =
+            if lower.ends_with(".jpg") || lower.ends_with(".jpeg") { ImageFormat::Jpeg } else { ImageFormat::Png };
         let bytes = encode(&img, format)?;
         let path = path.to_owned();
         self.call(|c| async move { c.push_file(&path, bytes, Some(true)).await }).map(drop)

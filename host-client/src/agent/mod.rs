@@ -260,7 +260,10 @@ mod tests {
             assert_eq!(serde_json::to_string(&action).expect("serialize"), json);
             assert_eq!(serde_json::from_str::<AgentAction>(json).expect("deserialize"), action);
         };
-        check(AgentAction::Computer("computer.mouse.move_id(id=3)".into()), r#"{"kind":"computer","code":"computer.mouse.move_id(id=3)"}"#);
+        check(
+            AgentAction::Computer("computer.mouse.move_id(id=3)".into()),
+            r#"{"kind":"computer","code":"computer.mouse.move_id(id=3)"}"#,
+        );
         check(AgentAction::Pyautogui("pyautogui.click()".into()), r#"{"kind":"pyautogui","code":"pyautogui.click()"}"#);
         check(
             AgentAction::Typed(vec![Action::Click { x: Some(1), y: Some(2), button: MouseButton::Left, count: 1 }]),

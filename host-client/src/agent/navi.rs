@@ -60,9 +60,10 @@ impl NaviConfig {
 
     /// The key to send: the configured one, else the first non-empty [`KEY_VARS`] variable.
     pub fn resolved_key(&self) -> Option<String> {
-        self.api_key.clone().filter(|k| !k.is_empty()).or_else(|| {
-            KEY_VARS.iter().find_map(|var| std::env::var(var).ok().filter(|v| !v.trim().is_empty()))
-        })
+        self.api_key
+            .clone()
+            .filter(|k| !k.is_empty())
+            .or_else(|| KEY_VARS.iter().find_map(|var| std::env::var(var).ok().filter(|v| !v.trim().is_empty())))
     }
 
     /// The chat-completions URL.
@@ -323,7 +324,10 @@ mod tests {
     fn reply_text_reads_strings_and_parts() {
         let check = |answer: Value, expected: Option<&str>| assert_eq!(reply_text(&answer).as_deref(), expected);
         check(json!({"choices": [{"message": {"content": "DONE"}}]}), Some("DONE"));
-        check(json!({"choices": [{"message": {"content": [{"type": "text", "text": "a"}, {"type": "text", "text": "b"}]}}]}), Some("a\nb"));
+        check(
+            json!({"choices": [{"message": {"content": [{"type": "text", "text": "a"}, {"type": "text", "text": "b"}]}}]}),
+            Some("a\nb"),
+        );
         check(json!({"choices": []}), None);
         check(json!({"error": "x"}), None);
     }

@@ -160,16 +160,18 @@ mod tests {
 
     #[test]
     fn replies() {
-        check("I will click.\n```python\ncomputer.mouse.move_id(id=3)\ncomputer.mouse.single_click()\n```", Ok(vec![computer(
-            "computer.mouse.move_id(id=3)\ncomputer.mouse.single_click()",
-        )]));
-        check("```\nimport pyautogui\npyautogui.hotkey('ctrl', 's')\n```", Ok(vec![AgentAction::Pyautogui(
-            "import pyautogui\npyautogui.hotkey('ctrl', 's')".to_owned(),
-        )]));
-        check("```python\ncomputer.keyboard.press(\"enter\")\nDONE\n```", Ok(vec![
-            computer("computer.keyboard.press(\"enter\")"),
-            AgentAction::Done,
-        ]));
+        check(
+            "I will click.\n```python\ncomputer.mouse.move_id(id=3)\ncomputer.mouse.single_click()\n```",
+            Ok(vec![computer("computer.mouse.move_id(id=3)\ncomputer.mouse.single_click()")]),
+        );
+        check(
+            "```\nimport pyautogui\npyautogui.hotkey('ctrl', 's')\n```",
+            Ok(vec![AgentAction::Pyautogui("import pyautogui\npyautogui.hotkey('ctrl', 's')".to_owned())]),
+        );
+        check(
+            "```python\ncomputer.keyboard.press(\"enter\")\nDONE\n```",
+            Ok(vec![computer("computer.keyboard.press(\"enter\")"), AgentAction::Done]),
+        );
         check("```python\nDONE\n```", Ok(vec![AgentAction::Done]));
         check("The task is impossible.\nFAIL", Ok(vec![AgentAction::Fail]));
         check("Nothing to do yet, WAIT", Ok(vec![AgentAction::Wait]));
@@ -188,7 +190,10 @@ mod tests {
     fn memory_blocks() {
         let check = |reply: &str, expected: Option<&str>| assert_eq!(memory(reply).as_deref(), expected, "{reply}");
         check("Memory: the file is saved\n```python\nDONE\n```", Some("the file is saved"));
-        check("Plan...\nMemory:\n- opened notepad\n- typed hello\n```python\n```", Some("- opened notepad\n- typed hello"));
+        check(
+            "Plan...\nMemory:\n- opened notepad\n- typed hello\n```python\n```",
+            Some("- opened notepad\n- typed hello"),
+        );
         check("**Memory:** step two", Some("step two"));
         check("no memory here", None);
         check("Memory:\n```python\n```", None);

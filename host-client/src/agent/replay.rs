@@ -73,7 +73,12 @@ impl ReplayAgent {
 
     /// A replay of these steps for any task.
     pub fn from_steps(steps: Vec<TrajectoryStep>) -> ReplayAgent {
-        ReplayAgent { source: ReplaySource::File(PathBuf::new()), steps: Ok(steps), origin: "trajectory".into(), next: 0 }
+        ReplayAgent {
+            source: ReplaySource::File(PathBuf::new()),
+            steps: Ok(steps),
+            origin: "trajectory".into(),
+            next: 0,
+        }
     }
 
     fn path_for(&self, task: &Task) -> PathBuf {
@@ -85,7 +90,8 @@ impl ReplayAgent {
 
     fn load(path: &Path) -> Result<Vec<TrajectoryStep>, AgentError> {
         let origin = path.display().to_string();
-        let text = std::fs::read_to_string(path).map_err(|e| AgentError::Plan { path: origin.clone(), reason: e.to_string() })?;
+        let text = std::fs::read_to_string(path)
+            .map_err(|e| AgentError::Plan { path: origin.clone(), reason: e.to_string() })?;
         parse_trajectory(&text, &origin)
     }
 }
@@ -108,7 +114,8 @@ impl Agent for ReplayAgent {
     }
 
     async fn predict(&mut self, obs: &Observation) -> Result<Prediction, AgentError> {
-        let steps = self.steps.as_ref().map_err(|e| AgentError::Plan { path: self.origin.clone(), reason: e.clone() })?;
+        let steps =
+            self.steps.as_ref().map_err(|e| AgentError::Plan { path: self.origin.clone(), reason: e.clone() })?;
         let step = steps.get(self.next).cloned().ok_or_else(|| AgentError::Exhausted(self.origin.clone()))?;
         self.next += 1;
         let uses_marks = step.actions.iter().any(|a| matches!(a, AgentAction::Computer(_)));

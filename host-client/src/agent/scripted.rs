@@ -172,7 +172,8 @@ impl ScriptedAgent {
     fn load_for(&self, task: &Task) -> Result<(Vec<AgentAction>, String), AgentError> {
         let inline = || -> Result<(Vec<AgentAction>, String), AgentError> {
             let origin = format!("{} ({TASK_PLAN_KEY} key)", task.path.display());
-            let value = task.extra.get(TASK_PLAN_KEY).ok_or_else(|| plan_error(&origin, "the task has no plan".into()))?;
+            let value =
+                task.extra.get(TASK_PLAN_KEY).ok_or_else(|| plan_error(&origin, "the task has no plan".into()))?;
             let plan: Plan = serde_json::from_value(value.clone()).map_err(|e| plan_error(&origin, e.to_string()))?;
             Ok((plan.actions(&origin)?, origin))
         };
@@ -180,9 +181,14 @@ impl ScriptedAgent {
             PlanSource::Fixed(plan) => Ok((plan.actions(&self.origin)?, self.origin.clone())),
             PlanSource::TaskKey => inline(),
             PlanSource::Dir(dir) => {
-                let candidates = [dir.join(&task.domain).join(format!("{}.json", task.name)), dir.join(format!("{}.json", task.name))];
+                let candidates = [
+                    dir.join(&task.domain).join(format!("{}.json", task.name)),
+                    dir.join(format!("{}.json", task.name)),
+                ];
                 match candidates.iter().find(|p| p.is_file()) {
-                    Some(path) => Ok((Plan::load(path)?.actions(&path.display().to_string())?, path.display().to_string())),
+                    Some(path) => {
+                        Ok((Plan::load(path)?.actions(&path.display().to_string())?, path.display().to_string()))
+                    }
                     None if task.extra.contains_key(TASK_PLAN_KEY) => inline(),
                     None => Err(plan_error(
                         &candidates[0].display().to_string(),
@@ -217,7 +223,8 @@ impl Agent for ScriptedAgent {
     }
 
     async fn predict(&mut self, obs: &Observation) -> Result<Prediction, AgentError> {
-        let steps = self.steps.as_ref().map_err(|e| AgentError::Plan { path: self.origin.clone(), reason: e.clone() })?;
+        let steps =
+            self.steps.as_ref().map_err(|e| AgentError::Plan { path: self.origin.clone(), reason: e.clone() })?;
         let action = steps.get(self.next).cloned().ok_or_else(|| AgentError::Exhausted(self.origin.clone()))?;
         self.next += 1;
         let uses_marks = matches!(action, AgentAction::Computer(_));

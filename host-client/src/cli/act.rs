@@ -163,11 +163,16 @@ impl ActArgs {
             (Some(action), None, None) => ActionBatch { actions: vec![action.to_action()?] },
             (None, Some(json), None) => parse_batch_json(json).context("--json")?,
             (None, None, Some(path)) => {
-                let text = std::fs::read_to_string(path).with_context(|| format!("reading --json-file {}", path.display()))?;
+                let text =
+                    std::fs::read_to_string(path).with_context(|| format!("reading --json-file {}", path.display()))?;
                 parse_batch_json(&text).with_context(|| format!("--json-file {}", path.display()))?
             }
-            (None, None, None) if self.pyautogui.is_some() => bail!("--pyautogui needs the guest's screen size: use `ActArgs::batch_for`"),
-            (None, None, None) => bail!("name an action (`arena act click 100 200`) or give --json / --json-file / --pyautogui"),
+            (None, None, None) if self.pyautogui.is_some() => {
+                bail!("--pyautogui needs the guest's screen size: use `ActArgs::batch_for`")
+            }
+            (None, None, None) => {
+                bail!("name an action (`arena act click 100 200`) or give --json / --json-file / --pyautogui")
+            }
             _ => bail!("give either an action, --json or --json-file, not several"),
         };
         validate_batch(&batch)?;
@@ -190,7 +195,11 @@ impl ActArgs {
         let screen = client.screen().await?;
         // An empty wait performs nothing and reports where the cursor is.
         let cursor = client.act(&ActionBatch { actions: vec![Action::Wait { ms: 0 }] }).await?.cursor;
-        let actions = crate::pyaction::actions_from_code(code, (screen.physical_width, screen.physical_height), (cursor.x, cursor.y))?;
+        let actions = crate::pyaction::actions_from_code(
+            code,
+            (screen.physical_width, screen.physical_height),
+            (cursor.x, cursor.y),
+        )?;
         let batch = ActionBatch { actions };
         validate_batch(&batch).context("--pyautogui")?;
         Ok(batch)
@@ -231,7 +240,9 @@ impl ActCommand {
                 let at = at.as_deref().map(|text| parse_point(text).context("--at")).transpose()?;
                 Action::Scroll { x: at.map(|p| p.x), y: at.map(|p| p.y), dx: *dx, dy: *dy }
             }
-            ActCommand::Type { text, interval_ms } => Action::TypeText { text: text.clone(), interval_ms: *interval_ms },
+            ActCommand::Type { text, interval_ms } => {
+                Action::TypeText { text: text.clone(), interval_ms: *interval_ms }
+            }
             ActCommand::Key { key, presses } => {
                 check_key(key)?;
                 Action::KeyPress { key: key.clone(), presses: *presses }
@@ -275,11 +286,15 @@ impl ActCommand {
 pub fn parse_batch_json(text: &str) -> anyhow::Result<ActionBatch> {
     let value: serde_json::Value = serde_json::from_str(text).context("malformed JSON")?;
     let batch = match value {
-        serde_json::Value::Array(_) => ActionBatch { actions: serde_json::from_value(value).context("not a list of actions")? },
+        serde_json::Value::Array(_) => {
+            ActionBatch { actions: serde_json::from_value(value).context("not a list of actions")? }
+        }
         serde_json::Value::Object(ref map) if map.contains_key("actions") => {
             serde_json::from_value(value).context("not an action batch")?
         }
-        serde_json::Value::Object(_) => ActionBatch { actions: vec![serde_json::from_value(value).context("not an action")?] },
+        serde_json::Value::Object(_) => {
+            ActionBatch { actions: vec![serde_json::from_value(value).context("not an action")?] }
+        }
         _ => bail!("expected an action object, a list of actions or {{\"actions\": [...]}}"),
     };
     Ok(batch)
@@ -294,7 +309,9 @@ fn validate_batch(batch: &ActionBatch) -> anyhow::Result<()> {
         let at = || format!("action {index}");
         match action {
             Action::Unknown => bail!("{}: unknown action type (see `arena act --help` for the known ones)", at()),
-            Action::KeyPress { key, .. } | Action::KeyDown { key } | Action::KeyUp { key } => check_key(key).with_context(at)?,
+            Action::KeyPress { key, .. } | Action::KeyDown { key } | Action::KeyUp { key } => {
+                check_key(key).with_context(at)?
+            }
             Action::Hotkey { keys } => {
                 if keys.is_empty() {
                     bail!("{}: a hotkey needs at least one key", at());
@@ -303,7 +320,10 @@ fn validate_batch(batch: &ActionBatch) -> anyhow::Result<()> {
                     check_key(key).with_context(at)?;
                 }
             }
-            Action::Click { button, .. } | Action::MouseDown { button, .. } | Action::MouseUp { button, .. } | Action::Drag { button, .. }
+            Action::Click { button, .. }
+            | Action::MouseDown { button, .. }
+            | Action::MouseUp { button, .. }
+            | Action::Drag { button, .. }
                 if *button == MouseButton::Unknown =>
             {
                 bail!("{}: unknown mouse button (expected left, right or middle)", at())
@@ -325,7 +345,8 @@ fn check_key(name: &str) -> anyhow::Result<()> {
 }
 
 fn button_named(name: &str) -> anyhow::Result<MouseButton> {
-    MouseButton::from_name(name).ok_or_else(|| anyhow::anyhow!("unknown mouse button {name:?} (expected left, right or middle)"))
+    MouseButton::from_name(name)
+        .ok_or_else(|| anyhow::anyhow!("unknown mouse button {name:?} (expected left, right or middle)"))
 }
 
 fn optional_point(x: Option<i32>, y: Option<i32>) -> anyhow::Result<(Option<i32>, Option<i32>)> {
@@ -338,7 +359,8 @@ fn optional_point(x: Option<i32>, y: Option<i32>) -> anyhow::Result<(Option<i32>
 /// Parses `X,Y` (spaces allowed).
 fn parse_point(text: &str) -> anyhow::Result<Point> {
     let (x, y) = text.split_once(',').ok_or_else(|| anyhow::anyhow!("{text:?} is not X,Y"))?;
-    let number = |s: &str| s.trim().parse::<i32>().map_err(|_| anyhow::anyhow!("{text:?} is not X,Y with whole numbers"));
+    let number =
+        |s: &str| s.trim().parse::<i32>().map_err(|_| anyhow::anyhow!("{text:?} is not X,Y with whole numbers"));
     Ok(Point::new(number(x)?, number(y)?))
 }
 
@@ -379,7 +401,10 @@ mod tests {
 
     #[test]
     fn mouse_words() {
-        check(&["click", "100", "200"], Action::Click { x: Some(100), y: Some(200), button: MouseButton::Left, count: 1 });
+        check(
+            &["click", "100", "200"],
+            Action::Click { x: Some(100), y: Some(200), button: MouseButton::Left, count: 1 },
+        );
         check(
             &["click", "100", "200", "--button", "right", "--count", "2"],
             Action::Click { x: Some(100), y: Some(200), button: MouseButton::Right, count: 2 },
@@ -391,13 +416,19 @@ mod tests {
         check(&["double-click"], Action::DoubleClick { x: None, y: None });
         check(&["double-click", "5", "6"], Action::DoubleClick { x: Some(5), y: Some(6) });
         check(&["right-click"], Action::RightClick { x: None, y: None });
-        check(&["drag", "300", "400"], Action::Drag { from: None, to: Point::new(300, 400), button: MouseButton::Left });
+        check(
+            &["drag", "300", "400"],
+            Action::Drag { from: None, to: Point::new(300, 400), button: MouseButton::Left },
+        );
         check(
             &["drag", "300", "400", "--from", "1,2", "--button", "middle"],
             Action::Drag { from: Some(Point::new(1, 2)), to: Point::new(300, 400), button: MouseButton::Middle },
         );
         check(&["scroll", "-240"], Action::Scroll { x: None, y: None, dx: 0, dy: -240 });
-        check(&["scroll", "120", "--dx", "-120", "--at", "50, 60"], Action::Scroll { x: Some(50), y: Some(60), dx: -120, dy: 120 });
+        check(
+            &["scroll", "120", "--dx", "-120", "--at", "50, 60"],
+            Action::Scroll { x: Some(50), y: Some(60), dx: -120, dy: 120 },
+        );
         check(&["mouse-down"], Action::MouseDown { button: MouseButton::Left, x: None, y: None });
         check(&["mouse-up", "--button", "right"], Action::MouseUp { button: MouseButton::Right, x: None, y: None });
         check(&["wait", "250"], Action::Wait { ms: 250 });
@@ -418,7 +449,10 @@ mod tests {
 
     #[test]
     fn json_forms() {
-        check(&["--json", r#"{"type":"click","x":1,"y":2}"#], Action::Click { x: Some(1), y: Some(2), button: MouseButton::Left, count: 1 });
+        check(
+            &["--json", r#"{"type":"click","x":1,"y":2}"#],
+            Action::Click { x: Some(1), y: Some(2), button: MouseButton::Left, count: 1 },
+        );
         check(&["--json", r#"[{"type":"key_press","key":"esc"}]"#], Action::KeyPress { key: "esc".into(), presses: 1 });
         check(&["--json", r#"{"actions":[{"type":"wait","ms":5}]}"#], Action::Wait { ms: 5 });
     }
@@ -435,8 +469,12 @@ mod tests {
 
     #[tokio::test]
     async fn pyautogui_code_is_translated_for_the_guest_and_sent() {
-        let harness = Harness::try_parse_from(["act", "--pyautogui", "pyautogui.moveTo(30, 40); pyautogui.moveRel(1, 2); pyautogui.click()"])
-            .expect("parses");
+        let harness = Harness::try_parse_from([
+            "act",
+            "--pyautogui",
+            "pyautogui.moveTo(30, 40); pyautogui.moveRel(1, 2); pyautogui.click()",
+        ])
+        .expect("parses");
         assert!(format!("{:#}", harness.act.to_batch().expect_err("needs the guest")).contains("batch_for"));
         let stub = crate::cli::stub::start(&crate::cli::stub::StubArgs::default(), None).await.expect("stub guest");
         let client = crate::GuestClient::new(&stub.url(), crate::ClientConfig::default()).expect("client");

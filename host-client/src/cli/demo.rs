@@ -58,7 +58,11 @@ struct Report {
 
 impl Report {
     /// Runs one step, recording its time and outcome; returns its value when it succeeded.
-    async fn step<T>(&mut self, name: &'static str, work: impl Future<Output = anyhow::Result<(T, String)>>) -> Option<T> {
+    async fn step<T>(
+        &mut self,
+        name: &'static str,
+        work: impl Future<Output = anyhow::Result<(T, String)>>,
+    ) -> Option<T> {
         let started = Instant::now();
         let outcome = with_spinner(name, work).await;
         let elapsed = started.elapsed();
@@ -80,7 +84,14 @@ impl Report {
         let rows: Vec<Vec<String>> = self
             .steps
             .iter()
-            .map(|s| vec![s.name.to_owned(), if s.ok { "ok" } else { "FAILED" }.to_owned(), render::duration(s.elapsed), s.detail.clone()])
+            .map(|s| {
+                vec![
+                    s.name.to_owned(),
+                    if s.ok { "ok" } else { "FAILED" }.to_owned(),
+                    render::duration(s.elapsed),
+                    s.detail.clone(),
+                ]
+            })
             .collect();
         let passed = self.steps.iter().filter(|s| s.ok).count();
         format!(
@@ -163,7 +174,10 @@ pub async fn run(conn: &Connection, args: DemoArgs) -> anyhow::Result<ExitCode> 
             if file.bytes != sent {
                 bail!("pulled {} bytes that differ from the {} pushed", file.bytes.len(), sent.len());
             }
-            Ok(((), format!("{} bytes, sha256 {} verified", file.bytes.len(), &file.sha256[..16.min(file.sha256.len())])))
+            Ok((
+                (),
+                format!("{} bytes, sha256 {} verified", file.bytes.len(), &file.sha256[..16.min(file.sha256.len())]),
+            ))
         })
         .await;
 
@@ -175,7 +189,9 @@ pub async fn run(conn: &Connection, args: DemoArgs) -> anyhow::Result<ExitCode> 
                 ["echo", GREETING].map(str::to_owned).to_vec()
             };
             let shown = argv.join(" ");
-            let result = client.exec(&ExecRequest { argv, timeout_ms: Some(30_000), max_output_bytes: None, cwd: None, stdin: None }).await?;
+            let result = client
+                .exec(&ExecRequest { argv, timeout_ms: Some(30_000), max_output_bytes: None, cwd: None, stdin: None })
+                .await?;
             if result.exit_code != Some(0) {
                 bail!("`{shown}` exited with {:?}: {}", result.exit_code, result.stderr.trim());
             }
@@ -190,7 +206,16 @@ pub async fn run(conn: &Connection, args: DemoArgs) -> anyhow::Result<ExitCode> 
         .step("take a screenshot", async {
             let shot = client.screenshot(&ScreenshotQuery::default()).await?;
             local::write_atomic(&args.output, &shot.bytes)?;
-            Ok(((), format!("{}x{}, {} -> {}", shot.meta.width, shot.meta.height, render::size(shot.bytes.len() as u64), args.output.display())))
+            Ok((
+                (),
+                format!(
+                    "{}x{}, {} -> {}",
+                    shot.meta.width,
+                    shot.meta.height,
+                    render::size(shot.bytes.len() as u64),
+                    args.output.display()
+                ),
+            ))
         })
         .await;
 
@@ -244,10 +269,17 @@ async fn read_back(client: &GuestClient) -> anyhow::Result<((), String)> {
     loop {
         let tree = client.a11y(&A11yQuery { max_ms: Some(20_000), ..A11yQuery::default() }).await?;
         if let Some(node) = tree.windows.iter().find_map(|w| find_text(w, SENTENCE)) {
-            return Ok(((), format!("found in {} {:?} ({} nodes, {} ms)", node.role, node.name, tree.node_count, tree.elapsed_ms)));
+            return Ok((
+                (),
+                format!("found in {} {:?} ({} nodes, {} ms)", node.role, node.name, tree.node_count, tree.elapsed_ms),
+            ));
         }
         if Instant::now() >= deadline {
-            bail!("the sentence is not in the accessibility tree ({} nodes, truncated: {})", tree.node_count, tree.truncated);
+            bail!(
+                "the sentence is not in the accessibility tree ({} nodes, truncated: {})",
+                tree.node_count,
+                tree.truncated
+            );
         }
         tokio::time::sleep(Duration::from_millis(300)).await;
     }

@@ -36,10 +36,14 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> anyhow::Result<()> {
         Err(_) => default_permissions(),
     };
     if let Some(permissions) = permissions {
-        temp.as_file().set_permissions(permissions).with_context(|| format!("setting the permissions of {}", path.display()))?;
+        temp.as_file()
+            .set_permissions(permissions)
+            .with_context(|| format!("setting the permissions of {}", path.display()))?;
     }
     temp.as_file().sync_all().with_context(|| format!("syncing {}", path.display()))?;
-    temp.persist(path).map_err(|err| anyhow::Error::new(err.error)).with_context(|| format!("renaming the download onto {}", path.display()))?;
+    temp.persist(path)
+        .map_err(|err| anyhow::Error::new(err.error))
+        .with_context(|| format!("renaming the download onto {}", path.display()))?;
     Ok(())
 }
 

@@ -92,7 +92,8 @@ impl Connection {
         match (&self.token, &self.token_file) {
             (Some(token), _) => Ok(Some(token.trim().to_owned())),
             (None, Some(path)) => {
-                let text = std::fs::read_to_string(path).with_context(|| format!("reading --token-file {}", path.display()))?;
+                let text = std::fs::read_to_string(path)
+                    .with_context(|| format!("reading --token-file {}", path.display()))?;
                 let token = text.lines().next().unwrap_or("").trim().to_owned();
                 if token.is_empty() {
                     anyhow::bail!("--token-file {} is empty", path.display());
@@ -366,9 +367,14 @@ pub async fn run(cli: Cli) -> anyhow::Result<ExitCode> {
                 let _ = tokio::signal::ctrl_c().await;
                 tracing::info!("Ctrl-C: stopping");
             };
-            stub::serve_until(&args, token, |addr| {
-                let _ = emit(&format!("listening on http://{addr}\n"));
-            }, shutdown)
+            stub::serve_until(
+                &args,
+                token,
+                |addr| {
+                    let _ = emit(&format!("listening on http://{addr}\n"));
+                },
+                shutdown,
+            )
             .await?;
             Ok(ExitCode::SUCCESS)
         }
@@ -455,8 +461,15 @@ pub async fn run(cli: Cli) -> anyhow::Result<ExitCode> {
         Command::Push { local: from, guest_path, no_parents } => {
             let bytes = local::read(&from)?;
             let client = conn.client()?;
-            let written = with_spinner("uploading", client.push_file(&guest_path, bytes, no_parents.then_some(false))).await?;
-            emit(&format!("wrote {} ({}) to {} sha256 {}\n", written.size, render::size(written.size), written.path, written.sha256))?;
+            let written =
+                with_spinner("uploading", client.push_file(&guest_path, bytes, no_parents.then_some(false))).await?;
+            emit(&format!(
+                "wrote {} ({}) to {} sha256 {}\n",
+                written.size,
+                render::size(written.size),
+                written.path,
+                written.sha256
+            ))?;
             Ok(ExitCode::SUCCESS)
         }
         Command::Pull { guest_path, local: to } => {
@@ -495,7 +508,10 @@ pub async fn run(cli: Cli) -> anyhow::Result<ExitCode> {
                 .folders
                 .iter()
                 .map(|(folder, path)| {
-                    let name = serde_json::to_value(folder).ok().and_then(|v| v.as_str().map(str::to_owned)).unwrap_or_default();
+                    let name = serde_json::to_value(folder)
+                        .ok()
+                        .and_then(|v| v.as_str().map(str::to_owned))
+                        .unwrap_or_default();
                     vec![name, path.clone()]
                 })
                 .collect();
@@ -543,7 +559,9 @@ async fn health(conn: &Connection, wait: Option<Duration>, json: bool) -> anyhow
     };
     let report = match wait {
         Some(overall) => {
-            let waited = with_spinner("waiting for the guest", client.wait_ready(&[], overall, Duration::from_millis(500))).await;
+            let waited =
+                with_spinner("waiting for the guest", client.wait_ready(&[], overall, Duration::from_millis(500)))
+                    .await;
             match waited {
                 Ok(report) => report,
                 Err(err @ ClientError::NotReady { .. }) => {
@@ -559,7 +577,8 @@ async fn health(conn: &Connection, wait: Option<Duration>, json: bool) -> anyhow
         None => client.health().await?,
     };
     show(&report)?;
-    let ready = report.status == Readiness::Ready || (!report.components.is_empty() && report.components.iter().all(|c| c.ok));
+    let ready =
+        report.status == Readiness::Ready || (!report.components.is_empty() && report.components.iter().all(|c| c.ok));
     Ok(if ready { ExitCode::SUCCESS } else { ExitCode::FAILURE })
 }
 

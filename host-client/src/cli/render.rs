@@ -72,7 +72,14 @@ pub fn health(guest: &str, report: &HealthReport) -> String {
     let rows: Vec<Vec<String>> = report
         .components
         .iter()
-        .map(|c| vec![component_name(c.component), if c.ok { "up" } else { "DOWN" }.to_owned(), c.elapsed_ms.to_string(), c.detail.clone()])
+        .map(|c| {
+            vec![
+                component_name(c.component),
+                if c.ok { "up" } else { "DOWN" }.to_owned(),
+                c.elapsed_ms.to_string(),
+                c.detail.clone(),
+            ]
+        })
         .collect();
     out.push_str(&table(&["COMPONENT", "STATE", "MS", "DETAIL"], &rows));
     out
@@ -117,7 +124,11 @@ pub fn outline(tree: &A11yTree) -> String {
         outline_node(&mut out, window, 0);
     }
     if tree.truncated {
-        let _ = writeln!(out, "(truncated: {} nodes in {} ms; raise --max-depth, --max-nodes or --max-ms)", tree.node_count, tree.elapsed_ms);
+        let _ = writeln!(
+            out,
+            "(truncated: {} nodes in {} ms; raise --max-depth, --max-nodes or --max-ms)",
+            tree.node_count, tree.elapsed_ms
+        );
     }
     out
 }
@@ -287,7 +298,10 @@ mod tests {
 
     #[test]
     fn tables_align_columns() {
-        let text = table(&["A", "LONGER", "LAST"], &[vec!["xyz".into(), "1".into(), "end".into()], vec!["q".into(), "22".into(), "".into()]]);
+        let text = table(
+            &["A", "LONGER", "LAST"],
+            &[vec!["xyz".into(), "1".into(), "end".into()], vec!["q".into(), "22".into(), "".into()]],
+        );
         assert_eq!(text, "A    LONGER  LAST\nxyz  1       end\nq    22\n");
     }
 
@@ -300,7 +314,12 @@ mod tests {
             rect: Some(Rect::new(10, 20, 300, 200)),
             ..A11yNode::default()
         };
-        let window = A11yNode { role: "Window".into(), name: "Untitled - Notepad".into(), children: vec![edit], ..A11yNode::default() };
+        let window = A11yNode {
+            role: "Window".into(),
+            name: "Untitled - Notepad".into(),
+            children: vec![edit],
+            ..A11yNode::default()
+        };
         let tree = A11yTree {
             backend: A11yBackend::Uia,
             windows: vec![window],
@@ -325,7 +344,12 @@ mod tests {
             backend: "stub".into(),
             components: vec![
                 ComponentHealth { component: Component::Capture, ok: true, detail: "1440x900".into(), elapsed_ms: 3 },
-                ComponentHealth { component: Component::Accessibility, ok: false, detail: "no UIA".into(), elapsed_ms: 12 },
+                ComponentHealth {
+                    component: Component::Accessibility,
+                    ok: false,
+                    detail: "no UIA".into(),
+                    elapsed_ms: 12,
+                },
             ],
             uptime_ms: 1500,
             auth_required: true,

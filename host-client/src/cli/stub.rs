@@ -80,7 +80,10 @@ fn server_config(args: &StubArgs, token: Option<String>) -> ServerConfig {
 }
 
 /// Binds and builds the stub guest; returns the listener and state to serve.
-async fn prepare(args: &StubArgs, token: Option<String>) -> anyhow::Result<(tokio::net::TcpListener, arena_guest::state::AppState)> {
+async fn prepare(
+    args: &StubArgs,
+    token: Option<String>,
+) -> anyhow::Result<(tokio::net::TcpListener, arena_guest::state::AppState)> {
     let config = server_config(args, token);
     let addr = SocketAddr::new(config.bind, config.port);
     let state = arena_guest::build_state(config).context("building the stub guest")?;

@@ -14,7 +14,7 @@ use clap::Args;
 use serde::Serialize;
 
 use crate::eval::{getter_supported, metric_supported};
-use crate::task::{load_dir, read_index, names, Difficulty, Task, TaskError};
+use crate::task::{load_dir, names, read_index, Difficulty, Task, TaskError};
 
 /// Arguments of `arena validate`.
 #[derive(Debug, Clone, Args)]
@@ -109,7 +109,12 @@ impl Report {
     /// Builds the report from loaded tasks and load errors.
     pub fn new(tasks: &[Task], errors: &[TaskError]) -> Report {
         let tasks: Vec<TaskReport> = tasks.iter().map(TaskReport::of).collect();
-        let mut totals = Totals { files: tasks.len() + errors.len(), loaded: tasks.len(), failed: errors.len(), ..Totals::default() };
+        let mut totals = Totals {
+            files: tasks.len() + errors.len(),
+            loaded: tasks.len(),
+            failed: errors.len(),
+            ..Totals::default()
+        };
         let (mut steps, mut getters, mut metrics) = (BTreeMap::new(), BTreeMap::new(), BTreeMap::new());
         for task in &tasks {
             totals.supported += usize::from(task.supported());
@@ -234,7 +239,13 @@ mod tests {
     }
 
     fn args(folder: &Path) -> ValidateArgs {
-        ValidateArgs { folder: folder.to_owned(), index: None, difficulty: Difficulty::Normal, json: false, strict: false }
+        ValidateArgs {
+            folder: folder.to_owned(),
+            index: None,
+            difficulty: Difficulty::Normal,
+            json: false,
+            strict: false,
+        }
     }
 
     #[test]
@@ -251,7 +262,10 @@ mod tests {
         assert_eq!(report.passes(true), missing_tasks == 0);
         let text = report.render();
         assert!(text.starts_with("TASK"), "{text}");
-        assert!(text.contains(&format!("{} of {} tasks fully supported", report.totals.supported, report.totals.loaded)), "{text}");
+        assert!(
+            text.contains(&format!("{} of {} tasks fully supported", report.totals.supported, report.totals.loaded)),
+            "{text}"
+        );
         let json = serde_json::to_value(&report).unwrap();
         assert_eq!(json["totals"]["loaded"], report.totals.loaded);
     }
@@ -263,9 +277,13 @@ mod tests {
             let a = ValidateArgs { index: Some("test_small.json".into()), difficulty, ..args(&root) };
             let (tasks, errors) = load(&a).unwrap();
             assert!(errors.is_empty(), "{errors:?}");
-            let expected: usize = read_index(&root.join("test_small.json")).unwrap().iter().map(|(_, ids)| ids.len()).sum();
+            let expected: usize =
+                read_index(&root.join("test_small.json")).unwrap().iter().map(|(_, ids)| ids.len()).sum();
             assert_eq!(tasks.len(), expected);
-            assert!(tasks.iter().all(|t| t.path.components().any(|c| c.as_os_str() == difficulty.folder())), "{difficulty:?}");
+            assert!(
+                tasks.iter().all(|t| t.path.components().any(|c| c.as_os_str() == difficulty.folder())),
+                "{difficulty:?}"
+            );
         }
         let missing = ValidateArgs { index: Some("absent_index.json".into()), ..args(&root) };
         assert!(load(&missing).is_err());
@@ -318,9 +336,22 @@ mod tests {
     #[test]
     fn the_command_line_parses() {
         use clap::Parser;
-        let cli = crate::cli::Cli::try_parse_from(["arena", "validate", "tasks", "--index", "test_all.json", "--difficulty", "hard", "--json"]).unwrap();
+        let cli = crate::cli::Cli::try_parse_from([
+            "arena",
+            "validate",
+            "tasks",
+            "--index",
+            "test_all.json",
+            "--difficulty",
+            "hard",
+            "--json",
+        ])
+        .unwrap();
         let crate::cli::Command::Validate(a) = cli.command else { panic!("not validate") };
-        assert_eq!((a.folder, a.index, a.difficulty, a.json, a.strict), ("tasks".into(), Some("test_all.json".into()), Difficulty::Hard, true, false));
+        assert_eq!(
+            (a.folder, a.index, a.difficulty, a.json, a.strict),
+            ("tasks".into(), Some("test_all.json".into()), Difficulty::Hard, true, false)
+        );
         assert!(crate::cli::Cli::try_parse_from(["arena", "validate", "tasks", "--difficulty", "hard"]).is_err());
     }
 }

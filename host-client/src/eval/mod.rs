@@ -38,9 +38,9 @@ use crate::client::GuestClient;
 use crate::setup::DownloadCache;
 use crate::task::{Conj, Evaluator, GetterSpec, MetricCall, Scoring, Task};
 
+pub use getters::{Getter, GetterError};
 pub use metrics::{MetricError, MetricFn, MetricInput};
 pub use value::Fetched;
-pub use getters::{Getter, GetterError};
 
 /// What getters need: the guest, the host's download cache, and a folder of
 /// their own for the files they save (`dest`).
@@ -138,7 +138,12 @@ pub async fn evaluate(ctx: &EvalContext, evaluator: &Evaluator, last_action: Opt
         };
     }
     if calls.is_empty() {
-        return EvalOutcome { score: 0.0, metrics: Vec::new(), error: Some("the evaluator names no metric".into()), note: None };
+        return EvalOutcome {
+            score: 0.0,
+            metrics: Vec::new(),
+            error: Some("the evaluator names no metric".into()),
+            note: None,
+        };
     }
     let mut outcomes = Vec::with_capacity(calls.len());
     let mut stopped = None;
@@ -175,8 +180,14 @@ fn combine(conj: Conj, scores: impl Iterator<Item = f64>) -> f64 {
 /// Runs one metric with its getters; every failure becomes a 0 with the reason.
 async fn run_metric(ctx: &EvalContext, call: &MetricCall, last: Option<LastAction>) -> MetricOutcome {
     let started = Instant::now();
-    let mut outcome =
-        MetricOutcome { metric: call.metric.clone(), score: 0.0, result: None, expected: None, error: None, elapsed_ms: 0 };
+    let mut outcome = MetricOutcome {
+        metric: call.metric.clone(),
+        score: 0.0,
+        result: None,
+        expected: None,
+        error: None,
+        elapsed_ms: 0,
+    };
     let finish = |mut outcome: MetricOutcome| {
         outcome.elapsed_ms = u64::try_from(started.elapsed().as_millis()).unwrap_or(u64::MAX);
         if let Some(error) = &outcome.error {

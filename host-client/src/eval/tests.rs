@@ -37,7 +37,11 @@ fn listed(conj: &str, metrics: &[Option<bool>]) -> Evaluator {
     for metric in metrics {
         let (f, r, e) = match metric {
             Some(pass) => rule_metric(*pass),
-            None => (json!("exact_match"), json!({"type": "vm_screen_size", "dest": "vlcrc"}), json!({"type": "rule", "rules": {"expected": 1}})),
+            None => (
+                json!("exact_match"),
+                json!({"type": "vm_screen_size", "dest": "vlcrc"}),
+                json!({"type": "rule", "rules": {"expected": 1}}),
+            ),
         };
         funcs.push(f);
         results.push(r);
@@ -70,7 +74,9 @@ async fn conjunctions_stop_early_and_combine() {
 
 #[test]
 fn and_is_the_mean_and_or_the_max() {
-    let check = |conj, scores: &[f64], want: f64| assert_eq!(combine(conj, scores.iter().copied()), want, "{conj:?} {scores:?}");
+    let check = |conj, scores: &[f64], want: f64| {
+        assert_eq!(combine(conj, scores.iter().copied()), want, "{conj:?} {scores:?}")
+    };
     check(Conj::And, &[1.0, 0.5], 0.75);
     check(Conj::And, &[0.25, 0.25, 1.0], 0.5);
     check(Conj::Or, &[0.25, 0.75, 0.5], 0.75);
@@ -83,7 +89,9 @@ async fn infeasible_scores_the_last_action() {
     let dir = tempfile::tempdir().unwrap();
     let ctx = offline_ctx(dir.path());
     let task = evaluator(json!({"func": "infeasible", "result": {}, "expected": {}}));
-    for (last, want) in [(Some(LastAction::Fail), 1.0), (Some(LastAction::Done), 0.0), (Some(LastAction::Other), 0.0), (None, 0.0)] {
+    for (last, want) in
+        [(Some(LastAction::Fail), 1.0), (Some(LastAction::Done), 0.0), (Some(LastAction::Other), 0.0), (None, 0.0)]
+    {
         let outcome = evaluate(&ctx, &task, last.as_ref()).await;
         assert_eq!(outcome.score, want, "{last:?}");
         assert_eq!(outcome.metrics.len(), 1);
@@ -125,11 +133,16 @@ async fn getter_failures_score_zero_with_the_reason() {
         assert_eq!(outcome.score, 0.0);
         let error = outcome.metrics[0].error.as_deref().unwrap_or_default();
         assert!(error.contains(reason), "{error:?} lacks {reason:?}");
-        assert!(outcome.error.as_deref().is_some_and(|e| e.starts_with("exact_match: ") && e.contains(reason)), "{outcome:?}");
+        assert!(
+            outcome.error.as_deref().is_some_and(|e| e.starts_with("exact_match: ") && e.contains(reason)),
+            "{outcome:?}"
+        );
         assert_eq!(outcome.metrics[0].result, None);
     }
     // A metric failure is recorded the same way.
-    let task = evaluator(json!({"func": "exact_match", "result": {"type": "rule", "rules": 1}, "expected": {"type": "rule", "rules": {"no": 1}}}));
+    let task = evaluator(
+        json!({"func": "exact_match", "result": {"type": "rule", "rules": 1}, "expected": {"type": "rule", "rules": {"no": 1}}}),
+    );
     let outcome = evaluate(&ctx, &task, Some(&LastAction::Done)).await;
     assert_eq!(outcome.score, 0.0);
     assert_eq!(outcome.metrics[0].error.as_deref(), Some("the rules have no `expected`"));
@@ -184,7 +197,11 @@ fn corpus_coverage() {
         getters.len(),
         metrics.len()
     );
-    let missing: Vec<&String> = getters.iter().filter(|g| !getter_supported(g)).chain(metrics.iter().filter(|m| !metric_supported(m))).collect();
+    let missing: Vec<&String> = getters
+        .iter()
+        .filter(|g| !getter_supported(g))
+        .chain(metrics.iter().filter(|m| !metric_supported(m)))
+        .collect();
     println!("unimplemented ({}): {missing:?}", missing.len());
     // The upstream counts (58 result + 6 expected getters overlap in `vm_file`; 45 metrics).
     assert_eq!(metrics.len(), 45, "{metrics:?}");

@@ -243,12 +243,7 @@ impl Task {
 
     fn from_data(data: TaskData, path: &Path) -> Result<Task, String> {
         let name = path.file_stem().and_then(|s| s.to_str()).unwrap_or(&data.id).to_owned();
-        let domain = path
-            .parent()
-            .and_then(|p| p.file_name())
-            .and_then(|s| s.to_str())
-            .unwrap_or("")
-            .to_owned();
+        let domain = path.parent().and_then(|p| p.file_name()).and_then(|s| s.to_str()).unwrap_or("").to_owned();
         let config = steps(&data.config, "config")?;
         let evaluator = evaluator(data.evaluator)?;
         let mut extra = data.extra;
@@ -306,7 +301,10 @@ fn push_unique(list: &mut Vec<String>, item: &str) {
 }
 
 fn steps(data: &[StepData], place: &str) -> Result<Vec<SetupStep>, String> {
-    data.iter().enumerate().map(|(idx, step)| setup_step(step).map_err(|err| format!("{place}[{idx}] ({}): {err}", step.kind))).collect()
+    data.iter()
+        .enumerate()
+        .map(|(idx, step)| setup_step(step).map_err(|err| format!("{place}[{idx}] ({}): {err}", step.kind)))
+        .collect()
 }
 
 fn setup_step(step: &StepData) -> Result<SetupStep, String> {
@@ -398,14 +396,11 @@ fn setup_step(step: &StepData) -> Result<SetupStep, String> {
                 .collect::<Result<_, String>>()?,
         },
         "change_wallpaper" => SetupStep::ChangeWallpaper { path: p.string("path")? },
-        "create_file" => SetupStep::CreateFile { path: p.string("path")?, content: p.opt_string("content")?.unwrap_or_default() },
-        "close_all" => SetupStep::CloseAll,
-        other => {
-            return Err(format!(
-                "unknown setup step type `{other}` (known: {})",
-                names::SETUP_STEPS.join(", ")
-            ))
+        "create_file" => {
+            SetupStep::CreateFile { path: p.string("path")?, content: p.opt_string("content")?.unwrap_or_default() }
         }
+        "close_all" => SetupStep::CloseAll,
+        other => return Err(format!("unknown setup step type `{other}` (known: {})", names::SETUP_STEPS.join(", "))),
     };
     Ok(res)
 }
@@ -521,7 +516,9 @@ fn evaluator(data: EvaluatorData) -> Result<Evaluator, String> {
             }
             Some(OneOrMany::One(item)) if listed => Ok(vec![item; n]),
             Some(OneOrMany::Many(items)) if items.is_empty() => Ok(vec![Value::Null; n]),
-            Some(OneOrMany::Many(_)) => Err(format!("evaluator.{field} is a list but evaluator.func is a single metric")),
+            Some(OneOrMany::Many(_)) => {
+                Err(format!("evaluator.{field} is a list but evaluator.func is a single metric"))
+            }
             Some(OneOrMany::One(item)) => Ok(vec![item]),
         }
     };
@@ -529,10 +526,13 @@ fn evaluator(data: EvaluatorData) -> Result<Evaluator, String> {
     let expecteds = spread("expected", data.expected)?;
     let options = spread("options", data.options)?;
     let mut calls = Vec::with_capacity(n);
-    for (idx, (((metric, result), expected), options)) in funcs.into_iter().zip(results).zip(expecteds).zip(options).enumerate() {
+    for (idx, (((metric, result), expected), options)) in
+        funcs.into_iter().zip(results).zip(expecteds).zip(options).enumerate()
+    {
         let place = if listed { format!("[{idx}]") } else { String::new() };
         let result = getter(result, names::RESULT_GETTERS).map_err(|err| format!("evaluator.result{place}: {err}"))?;
-        let expected = getter(expected, names::EXPECTED_GETTERS).map_err(|err| format!("evaluator.expected{place}: {err}"))?;
+        let expected =
+            getter(expected, names::EXPECTED_GETTERS).map_err(|err| format!("evaluator.expected{place}: {err}"))?;
         let options = match options {
             Value::Null => Map::new(),
             Value::Object(map) => map,
@@ -568,7 +568,8 @@ fn getter(value: Value, known: &[&str]) -> Result<Option<GetterSpec>, String> {
 /// [`TaskError`] for an unreadable or malformed index.
 pub fn read_index(path: &Path) -> Result<Vec<(String, Vec<String>)>, TaskError> {
     let text = std::fs::read_to_string(path).map_err(|source| TaskError::Read { path: path.to_owned(), source })?;
-    let value: Value = serde_json::from_str(&text).map_err(|err| TaskError::Json { path: path.to_owned(), message: err.to_string() })?;
+    let value: Value = serde_json::from_str(&text)
+        .map_err(|err| TaskError::Json { path: path.to_owned(), message: err.to_string() })?;
     let invalid = |message: String| TaskError::Invalid { path: path.to_owned(), message };
     let Value::Object(map) = value else {
         return Err(invalid("an index is an object of domain -> list of task ids".into()));
@@ -579,7 +580,9 @@ pub fn read_index(path: &Path) -> Result<Vec<(String, Vec<String>)>, TaskError> 
                 .as_array()
                 .ok_or_else(|| invalid(format!("`{domain}` must be a list of task ids")))?
                 .iter()
-                .map(|id| id.as_str().map(str::to_owned).ok_or_else(|| invalid(format!("`{domain}` holds a non-string id"))))
+                .map(|id| {
+                    id.as_str().map(str::to_owned).ok_or_else(|| invalid(format!("`{domain}` holds a non-string id")))
+                })
                 .collect::<Result<Vec<_>, _>>()?;
             Ok((domain, ids))
         })

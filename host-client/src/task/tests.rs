@@ -39,7 +39,8 @@ fn the_name_is_the_file_stem_and_the_domain_the_folder() {
 #[test]
 fn the_corpus_uses_every_step_type_once_at_least() {
     let (tasks, _) = load_dir(&corpus_root());
-    let mut seen: Vec<&str> = tasks.iter().flat_map(|t| t.config.iter().chain(&t.evaluator.postconfig)).map(SetupStep::kind).collect();
+    let mut seen: Vec<&str> =
+        tasks.iter().flat_map(|t| t.config.iter().chain(&t.evaluator.postconfig)).map(SetupStep::kind).collect();
     seen.sort_unstable();
     seen.dedup();
     assert_eq!(seen.len(), 12, "{seen:?}");
@@ -58,15 +59,36 @@ fn task_json(config: &str, evaluator: &str) -> String {
 #[test]
 fn bad_tasks_fail_at_load_naming_the_file_and_the_name() {
     let ok_eval = r#"{"func": "exact_match", "result": {"type": "vm_file", "path": "a"}, "expected": {"type": "rule", "rules": {}}}"#;
-    check(&task_json(r#"[{"type": "teleport", "parameters": {}}]"#, ok_eval), "config[0] (teleport): unknown setup step type `teleport`");
-    check(&task_json(r#"[{"type": "sleep", "parameters": {}}]"#, ok_eval), "config[0] (sleep): missing parameter `seconds`");
-    check(&task_json(r#"[{"type": "sleep", "parameters": {"seconds": "2"}}]"#, ok_eval), "`seconds` must be a number, not a string");
-    check(&task_json(r#"[{"type": "launch", "parameters": {"command": 5}}]"#, ok_eval), "`command` must be a string or a list of strings");
+    check(
+        &task_json(r#"[{"type": "teleport", "parameters": {}}]"#, ok_eval),
+        "config[0] (teleport): unknown setup step type `teleport`",
+    );
+    check(
+        &task_json(r#"[{"type": "sleep", "parameters": {}}]"#, ok_eval),
+        "config[0] (sleep): missing parameter `seconds`",
+    );
+    check(
+        &task_json(r#"[{"type": "sleep", "parameters": {"seconds": "2"}}]"#, ok_eval),
+        "`seconds` must be a number, not a string",
+    );
+    check(
+        &task_json(r#"[{"type": "launch", "parameters": {"command": 5}}]"#, ok_eval),
+        "`command` must be a string or a list of strings",
+    );
     check(&task_json("[]", r#"{"func": "made_up_metric"}"#), "unknown metric `made_up_metric`");
-    check(&task_json("[]", r#"{"func": "exact_match", "result": {"type": "vm_fiel"}}"#), "evaluator.result: unknown getter `vm_fiel`");
-    check(&task_json("[]", r#"{"func": ["exact_match", "compare_text_file"], "result": [{"type": "vm_file"}]}"#), "evaluator.result has 1 entries for 2 metrics");
+    check(
+        &task_json("[]", r#"{"func": "exact_match", "result": {"type": "vm_fiel"}}"#),
+        "evaluator.result: unknown getter `vm_fiel`",
+    );
+    check(
+        &task_json("[]", r#"{"func": ["exact_match", "compare_text_file"], "result": [{"type": "vm_file"}]}"#),
+        "evaluator.result has 1 entries for 2 metrics",
+    );
     check(&task_json("[]", r#"{"func": "exact_match", "conj": "xor"}"#), "evaluator.conj must be");
-    check(&task_json("[]", r#"{"func": "exact_match", "postconfig": [{"type": "nope"}]}"#), "evaluator.postconfig[0] (nope)");
+    check(
+        &task_json("[]", r#"{"func": "exact_match", "postconfig": [{"type": "nope"}]}"#),
+        "evaluator.postconfig[0] (nope)",
+    );
     check("{\"id\": 1}", "invalid JSON");
 }
 

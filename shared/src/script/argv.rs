@@ -73,7 +73,9 @@ fn is_version_selector(arg: &str) -> bool {
         return true;
     }
     let rest = &arg[1..];
-    !rest.is_empty() && rest.starts_with(|c: char| c.is_ascii_digit()) && rest.chars().all(|c| c.is_ascii_digit() || c == '.' || c == '-')
+    !rest.is_empty()
+        && rest.starts_with(|c: char| c.is_ascii_digit())
+        && rest.chars().all(|c| c.is_ascii_digit() || c == '.' || c == '-')
 }
 
 /// Splits a Windows command line the way the MSVC runtime builds `argv`:
@@ -213,7 +215,8 @@ mod tests {
 
     #[test]
     fn splits_windows_command_lines() {
-        let check = |line: &str, expected: &[&str]| assert_eq!(split_windows_command_line(line), argv(expected), "{line}");
+        let check =
+            |line: &str, expected: &[&str]| assert_eq!(split_windows_command_line(line), argv(expected), "{line}");
         check(r#"python -c "import os; print(1)""#, &["python", "-c", "import os; print(1)"]);
         check(r#""C:\Program Files\py.exe" a"#, &[r"C:\Program Files\py.exe", "a"]);
         check(r#"p a\\b "c\"d" e\\\"f "g\\" h"#, &["p", r"a\\b", r#"c"d"#, r#"e\"f"#, r"g\", "h"]);
@@ -224,10 +227,7 @@ mod tests {
 
     #[test]
     fn command_lines_with_cmd_syntax_are_refused() {
-        assert_eq!(
-            python_code_from_command_line(r#"python -c "print('a & b')""#).as_deref(),
-            Some("print('a & b')")
-        );
+        assert_eq!(python_code_from_command_line(r#"python -c "print('a & b')""#).as_deref(), Some("print('a & b')"));
         assert_eq!(python_code_from_command_line(r#"python -c "print(1)" & calc"#), None);
         assert_eq!(python_code_from_command_line(r#"python -c "print('%PATH%')""#), None);
         assert_eq!(python_code_from_command_line("notepad.exe"), None);

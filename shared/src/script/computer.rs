@@ -120,7 +120,12 @@ pub(crate) fn attr(it: &mut Interp<'_, '_>, object: &Object, name: &str) -> Resu
 }
 
 /// Calls a method of one of the `Computer` objects.
-pub(crate) fn call_method(it: &mut Interp<'_, '_>, object: Object, name: &str, args: Args) -> Result<Value, ScriptError> {
+pub(crate) fn call_method(
+    it: &mut Interp<'_, '_>,
+    object: Object,
+    name: &str,
+    args: Args,
+) -> Result<Value, ScriptError> {
     let delay = it.action_delay;
     let result = match (&object, name) {
         (Object::Mouse, "move_id") => {
@@ -269,7 +274,9 @@ pub(crate) fn call_method(it: &mut Interp<'_, '_>, object: Object, name: &str, a
         (Object::ComputerOs, "maximize_window") => {
             let a = args.bind("maximize_window", &["window"], 0)?;
             if !is_none(&a[0]) {
-                return Err(not_supported("maximize_window(window=...) is not supported; it maximizes the foreground window"));
+                return Err(not_supported(
+                    "maximize_window(window=...) is not supported; it maximizes the foreground window",
+                ));
             }
             let maximized = it.host.maximize_foreground();
             it.host(maximized)?;
@@ -286,8 +293,11 @@ pub(crate) fn call_method(it: &mut Interp<'_, '_>, object: Object, name: &str, a
             let titles = it.host.window_titles();
             let titles = it.host(titles)?;
             let normalized: Vec<String> = titles.iter().map(|t| normalize_whitespace(t)).collect();
-            let best = get_close_matches(&normalize_whitespace(&app_name), &normalized, 1, 0.6).first().map(|s| (*s).to_owned());
-            let target = best.and_then(|m| normalized.iter().position(|n| *n == m)).and_then(|i| titles.get(i).cloned());
+            let best = get_close_matches(&normalize_whitespace(&app_name), &normalized, 1, 0.6)
+                .first()
+                .map(|s| (*s).to_owned());
+            let target =
+                best.and_then(|m| normalized.iter().position(|n| *n == m)).and_then(|i| titles.get(i).cloned());
             let Some(title) = target else {
                 it.print(&format!("No open window matches '{app_name}'.\n"))?;
                 return Ok(Value::None);
@@ -312,9 +322,7 @@ pub(crate) fn call_method(it: &mut Interp<'_, '_>, object: Object, name: &str, a
 fn element(s: &ComputerState, id: &Value) -> Result<(usize, [i32; 4]), ScriptError> {
     let id = match id {
         Value::Int(_) | Value::Bool(_) => to_i64(id, "id")?,
-        other => {
-            return Err(type_error(format!("list indices must be integers or slices, not {}", other.type_name())))
-        }
+        other => return Err(type_error(format!("list indices must be integers or slices, not {}", other.type_name()))),
     };
     let len = i64::try_from(s.rects.len()).unwrap_or(i64::MAX);
     let resolved = if id < 0 { id + len } else { id };
@@ -368,4 +376,3 @@ fn ctrl_or_alt(it: &mut Interp<'_, '_>) -> Result<String, ScriptError> {
 fn normalize_whitespace(s: &str) -> String {
     s.split_whitespace().collect::<Vec<_>>().join(" ")
 }
-

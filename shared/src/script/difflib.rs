@@ -24,11 +24,8 @@ pub fn ratio(a: &str, b: &str) -> f64 {
 /// possibilities scoring at least `cutoff`, best first; ties go to the larger string,
 /// as Python's `heapq.nlargest` over `(score, x)` tuples does.
 pub fn get_close_matches<'a>(word: &str, possibilities: &'a [String], n: usize, cutoff: f64) -> Vec<&'a str> {
-    let mut scored: Vec<(f64, &str)> = possibilities
-        .iter()
-        .map(|x| (ratio(x, word), x.as_str()))
-        .filter(|(score, _)| *score >= cutoff)
-        .collect();
+    let mut scored: Vec<(f64, &str)> =
+        possibilities.iter().map(|x| (ratio(x, word), x.as_str())).filter(|(score, _)| *score >= cutoff).collect();
     scored.sort_by(|l, r| r.0.total_cmp(&l.0).then_with(|| r.1.cmp(l.1)));
     scored.into_iter().take(n).map(|(_, x)| x).collect()
 }

@@ -33,17 +33,63 @@ pub const KNOWN_MODULES: &[&str] = &[
 ];
 
 const BUILTINS: &[&str] = &[
-    "print", "type", "str", "int", "float", "len", "repr", "abs", "round", "min", "max", "bool", "list",
-    "tuple", "dict", "sum", "chr", "ord", "exit", "quit",
+    "print", "type", "str", "int", "float", "len", "repr", "abs", "round", "min", "max", "bool", "list", "tuple",
+    "dict", "sum", "chr", "ord", "exit", "quit",
 ];
 
 /// Builtins that exist in Python but that this interpreter refuses by design.
 const REFUSED_BUILTINS: &[&str] = &[
-    "open", "eval", "exec", "compile", "__import__", "input", "getattr", "setattr", "delattr", "globals",
-    "locals", "vars", "dir", "help", "breakpoint", "memoryview", "bytearray", "bytes", "range", "enumerate",
-    "zip", "map", "filter", "sorted", "reversed", "isinstance", "issubclass", "hasattr", "set", "frozenset",
-    "object", "super", "iter", "next", "format", "hex", "oct", "bin", "hash", "id", "callable", "any", "all",
-    "divmod", "pow", "complex", "slice", "property", "staticmethod", "classmethod", "ascii",
+    "open",
+    "eval",
+    "exec",
+    "compile",
+    "__import__",
+    "input",
+    "getattr",
+    "setattr",
+    "delattr",
+    "globals",
+    "locals",
+    "vars",
+    "dir",
+    "help",
+    "breakpoint",
+    "memoryview",
+    "bytearray",
+    "bytes",
+    "range",
+    "enumerate",
+    "zip",
+    "map",
+    "filter",
+    "sorted",
+    "reversed",
+    "isinstance",
+    "issubclass",
+    "hasattr",
+    "set",
+    "frozenset",
+    "object",
+    "super",
+    "iter",
+    "next",
+    "format",
+    "hex",
+    "oct",
+    "bin",
+    "hash",
+    "id",
+    "callable",
+    "any",
+    "all",
+    "divmod",
+    "pow",
+    "complex",
+    "slice",
+    "property",
+    "staticmethod",
+    "classmethod",
+    "ascii",
 ];
 
 /// How many bytes (roughly) a run may allocate for values and printed text in total.
@@ -112,7 +158,9 @@ pub fn run(program: &Program, host: &mut dyn ScriptHost, globals: Globals<'_>) -
     let preimport_line = program.statements.first().map_or(1, |s| s.line);
     for module in globals.preimport {
         let stmt = StmtKind::Import(vec![super::ast::ImportName { module: (*module).to_owned(), alias: None }]);
-        interp.statement(&Stmt { line: preimport_line, column: 1, kind: stmt }).map_err(|e| interp.finish_error(e, 1))?;
+        interp
+            .statement(&Stmt { line: preimport_line, column: 1, kind: stmt })
+            .map_err(|e| interp.finish_error(e, 1))?;
     }
     if interp.computer.is_some() {
         interp.vars.insert("computer".into(), Value::Object(Object::Computer));
@@ -223,7 +271,10 @@ pub(crate) fn iterate(v: &Value) -> Result<Vec<Value>, ScriptError> {
         Value::List(items) | Value::Tuple(items) => Ok(items.clone()),
         Value::Str(s) => {
             if s.len() > ops::MAX_ITEMS {
-                return Err(ScriptError::new(ErrorKind::Memory, format!("result would exceed {} items", ops::MAX_ITEMS)));
+                return Err(ScriptError::new(
+                    ErrorKind::Memory,
+                    format!("result would exceed {} items", ops::MAX_ITEMS),
+                ));
             }
             Ok(s.chars().map(|c| Value::Str(c.to_string())).collect())
         }
@@ -340,7 +391,9 @@ impl Interp<'_, '_> {
                         None => self.module_attr(module, name).map_err(|_| {
                             ScriptError::new(
                                 ErrorKind::Import,
-                                format!("cannot import name '{name}' from '{module}' (not supported by this interpreter)"),
+                                format!(
+                                    "cannot import name '{name}' from '{module}' (not supported by this interpreter)"
+                                ),
                             )
                         })?,
                     };
@@ -377,12 +430,11 @@ impl Interp<'_, '_> {
                 self.out.pause = Some(pause);
                 Ok(())
             }
-            (Value::Module("pyautogui"), "MINIMUM_DURATION" | "MINIMUM_SLEEP" | "DARWIN_CATCH_UP_TIME" | "LOG_SCREENSHOTS") => {
-                Ok(())
-            }
-            (Value::Module(module), _) => {
-                Err(not_supported(format!("assigning {module}.{attr} is not supported")))
-            }
+            (
+                Value::Module("pyautogui"),
+                "MINIMUM_DURATION" | "MINIMUM_SLEEP" | "DARWIN_CATCH_UP_TIME" | "LOG_SCREENSHOTS",
+            ) => Ok(()),
+            (Value::Module(module), _) => Err(not_supported(format!("assigning {module}.{attr} is not supported"))),
             _ => Err(not_supported(format!("assigning attributes of {} objects is not supported", obj.type_name()))),
         }
     }
@@ -494,11 +546,24 @@ impl Interp<'_, '_> {
 
     fn get_attr(&mut self, obj: Value, name: &str) -> Result<Value, ScriptError> {
         const STR_METHODS: &[&str] = &[
-            "lower", "upper", "strip", "lstrip", "rstrip", "startswith", "endswith", "replace", "split", "join",
-            "find", "count", "splitlines",
+            "lower",
+            "upper",
+            "strip",
+            "lstrip",
+            "rstrip",
+            "startswith",
+            "endswith",
+            "replace",
+            "split",
+            "join",
+            "find",
+            "count",
+            "splitlines",
         ];
         const DICT_METHODS: &[&str] = &["get", "keys", "values", "items"];
-        let method = |list: &[&'static str], obj: &Value| static_name(list, name).map(|m| Value::Method(Box::new(obj.clone()), m));
+        let method = |list: &[&'static str], obj: &Value| {
+            static_name(list, name).map(|m| Value::Method(Box::new(obj.clone()), m))
+        };
         let found = match &obj {
             Value::Module(module) => return self.module_attr(module, name),
             Value::Str(_) => method(STR_METHODS, &obj),
@@ -571,9 +636,7 @@ impl Interp<'_, '_> {
         match obj {
             Value::List(items) => Ok(items[seq_index(items.len(), "list")?].clone()),
             Value::Tuple(items) => Ok(items[seq_index(items.len(), "tuple")?].clone()),
-            Value::Point(a, b) | Value::Size(a, b) => {
-                Ok(Value::Int(if seq_index(2, "tuple")? == 0 { *a } else { *b }))
-            }
+            Value::Point(a, b) | Value::Size(a, b) => Ok(Value::Int(if seq_index(2, "tuple")? == 0 { *a } else { *b })),
             Value::Str(s) => {
                 let chars: Vec<char> = s.chars().collect();
                 let i = seq_index(chars.len(), "string")?;
@@ -618,9 +681,7 @@ impl Interp<'_, '_> {
                 }
                 "keys" => Ok(Value::List(entries.iter().map(|(k, _)| k.clone()).collect())),
                 "values" => Ok(Value::List(entries.iter().map(|(_, v)| v.clone()).collect())),
-                _ => Ok(Value::List(
-                    entries.iter().map(|(k, v)| Value::Tuple(vec![k.clone(), v.clone()])).collect(),
-                )),
+                _ => Ok(Value::List(entries.iter().map(|(k, v)| Value::Tuple(vec![k.clone(), v.clone()])).collect())),
             },
             Value::Object(Object::Environ) => {
                 let a = args.bind("get", &["key", "default"], 1)?;
@@ -708,7 +769,10 @@ impl Interp<'_, '_> {
                     v @ (Value::Int(_) | Value::Bool(_)) => {
                         let i = to_i64(v, "abs() argument")?;
                         i.checked_abs().map(Value::Int).ok_or_else(|| {
-                            ScriptError::new(ErrorKind::Overflow, "integer overflow (this interpreter's integers are 64-bit)")
+                            ScriptError::new(
+                                ErrorKind::Overflow,
+                                "integer overflow (this interpreter's integers are 64-bit)",
+                            )
                         })
                     }
                     other => Err(type_error(format!("bad operand type for abs(): '{}'", other.type_name()))),
@@ -721,9 +785,7 @@ impl Interp<'_, '_> {
                     return match number {
                         Value::Float(f) => ops::round_to_int(f).map(Value::Int),
                         Value::Int(_) | Value::Bool(_) => Ok(Value::Int(to_i64(&number, "number")?)),
-                        other => {
-                            Err(type_error(format!("type {} doesn't define __round__ method", other.type_name())))
-                        }
+                        other => Err(type_error(format!("type {} doesn't define __round__ method", other.type_name()))),
                     };
                 }
                 let ndigits = to_i64(a[1].as_ref().unwrap_or(&Value::None), "ndigits")?;
@@ -828,9 +890,9 @@ fn weight(v: &Value, depth: usize) -> Option<usize> {
     match v {
         Value::Str(s) => Some(SLOT + s.len()),
         Value::List(v) | Value::Tuple(v) => items(v),
-        Value::Dict(entries) => entries
-            .iter()
-            .try_fold(SLOT, |acc, (k, v)| Some(acc + weight(k, depth + 1)? + weight(v, depth + 1)?)),
+        Value::Dict(entries) => {
+            entries.iter().try_fold(SLOT, |acc, (k, v)| Some(acc + weight(k, depth + 1)? + weight(v, depth + 1)?))
+        }
         Value::Method(recv, _) => Some(SLOT + weight(recv, depth + 1)?),
         Value::Object(Object::Completed { args, stdout, stderr, .. }) => Some(
             SLOT + weight(args, depth + 1)?
@@ -878,7 +940,10 @@ fn builtin_int(args: Args) -> Result<Value, ScriptError> {
             }
             let t = f.trunc();
             if !(-9.223_372_036_854_776e18..9.223_372_036_854_776e18).contains(&t) {
-                return Err(ScriptError::new(ErrorKind::Overflow, "integer overflow (this interpreter's integers are 64-bit)"));
+                return Err(ScriptError::new(
+                    ErrorKind::Overflow,
+                    "integer overflow (this interpreter's integers are 64-bit)",
+                ));
             }
             Ok(Value::Int(t as i64))
         }
@@ -942,10 +1007,9 @@ fn builtin_float(args: Args) -> Result<Value, ScriptError> {
                 .ok_or_else(|| value_error(format!("could not convert string to float: {}", super::value::str_repr(s))))
         }
         Some(v @ (Value::Int(_) | Value::Bool(_) | Value::Float(_))) => Ok(Value::Float(to_f64(v, "x")?)),
-        Some(other) => Err(type_error(format!(
-            "float() argument must be a string or a real number, not '{}'",
-            other.type_name()
-        ))),
+        Some(other) => {
+            Err(type_error(format!("float() argument must be a string or a real number, not '{}'", other.type_name())))
+        }
     }
 }
 
@@ -996,7 +1060,8 @@ fn str_method(s: &str, name: &str, args: Args) -> Result<Value, ScriptError> {
                 None => -1,
             };
             let occurrences = if old.is_empty() { s.chars().count() + 1 } else { s.matches(old).count() };
-            let occurrences = if count < 0 { occurrences } else { occurrences.min(usize::try_from(count).unwrap_or(usize::MAX)) };
+            let occurrences =
+                if count < 0 { occurrences } else { occurrences.min(usize::try_from(count).unwrap_or(usize::MAX)) };
             if occurrences.saturating_mul(new.len()).saturating_add(s.len()) > ops::MAX_LEN {
                 return Err(ScriptError::new(ErrorKind::Memory, "result too large"));
             }
@@ -1043,7 +1108,8 @@ fn str_method(s: &str, name: &str, args: Args) -> Result<Value, ScriptError> {
                     }
                 }
             }
-            let total = parts.iter().map(String::len).sum::<usize>().saturating_add(s.len().saturating_mul(parts.len()));
+            let total =
+                parts.iter().map(String::len).sum::<usize>().saturating_add(s.len().saturating_mul(parts.len()));
             if total > ops::MAX_LEN {
                 return Err(ScriptError::new(ErrorKind::Memory, "result too large"));
             }
@@ -1056,9 +1122,7 @@ fn str_method(s: &str, name: &str, args: Args) -> Result<Value, ScriptError> {
                 let n = if sub.is_empty() { s.chars().count() + 1 } else { s.matches(sub).count() };
                 return Ok(Value::Int(i64::try_from(n).unwrap_or(i64::MAX)));
             }
-            Ok(Value::Int(s.find(sub).map_or(-1, |byte| {
-                i64::try_from(s[..byte].chars().count()).unwrap_or(i64::MAX)
-            })))
+            Ok(Value::Int(s.find(sub).map_or(-1, |byte| i64::try_from(s[..byte].chars().count()).unwrap_or(i64::MAX))))
         }
         other => Err(not_supported(format!("str.{other} is not supported"))),
     }

@@ -35,9 +35,9 @@ pub(crate) struct Token {
 
 /// Operators, longest first so that the first match is the longest one.
 const OPERATORS: &[&str] = &[
-    "**=", "//=", ">>=", "<<=", "...", "->", ":=", "**", "//", "==", "!=", "<=", ">=", "<<", ">>",
-    "+=", "-=", "*=", "/=", "%=", "&=", "|=", "^=", "@=", "+", "-", "*", "/", "%", "@", "&", "|",
-    "^", "~", "<", ">", "(", ")", "[", "]", "{", "}", ",", ":", ".", ";", "=",
+    "**=", "//=", ">>=", "<<=", "...", "->", ":=", "**", "//", "==", "!=", "<=", ">=", "<<", ">>", "+=", "-=", "*=",
+    "/=", "%=", "&=", "|=", "^=", "@=", "+", "-", "*", "/", "%", "@", "&", "|", "^", "~", "<", ">", "(", ")", "[", "]",
+    "{", "}", ",", ":", ".", ";", "=",
 ];
 
 struct Lexer {
@@ -146,9 +146,7 @@ impl Lexer {
                             self.bump();
                         }
                         None => return Err(self.error("unexpected end of input after line continuation character")),
-                        Some(_) => {
-                            return Err(self.error("unexpected character after line continuation character"))
-                        }
+                        Some(_) => return Err(self.error("unexpected character after line continuation character")),
                     }
                 }
                 '\'' | '"' => {
@@ -180,9 +178,10 @@ impl Lexer {
                     }
                 }
                 _ => {
-                    let op = OPERATORS.iter().copied().find(|op| {
-                        op.chars().enumerate().all(|(i, oc)| self.peek_at(i) == Some(oc))
-                    });
+                    let op = OPERATORS
+                        .iter()
+                        .copied()
+                        .find(|op| op.chars().enumerate().all(|(i, oc)| self.peek_at(i) == Some(oc)));
                     let Some(op) = op else {
                         return Err(self.error(format!("invalid character '{c}' (U+{:04X})", c as u32)));
                     };

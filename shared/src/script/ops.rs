@@ -85,10 +85,9 @@ pub(crate) fn binary(op: BinOp, left: &Value, right: &Value) -> Result<Value, Sc
         }
         (BinOp::Add, Value::List(a), Value::List(b)) => Ok(Value::List(concat(a, b)?)),
         (BinOp::Add, Value::Tuple(a), Value::Tuple(b)) => Ok(Value::Tuple(concat(a, b)?)),
-        (BinOp::Add, Value::Str(_), other) => Err(type_error(format!(
-            "can only concatenate str (not \"{}\") to str",
-            other.type_name()
-        ))),
+        (BinOp::Add, Value::Str(_), other) => {
+            Err(type_error(format!("can only concatenate str (not \"{}\") to str", other.type_name())))
+        }
         (BinOp::Mul, seq, n) | (BinOp::Mul, n, seq)
             if matches!(seq, Value::Str(_) | Value::List(_) | Value::Tuple(_))
                 && matches!(n, Value::Int(_) | Value::Bool(_)) =>
@@ -284,7 +283,9 @@ pub(crate) fn round_ndigits(v: &Value, ndigits: i64) -> Result<Value, ScriptErro
             if ndigits >= 0 {
                 return Ok(Value::Int(i));
             }
-            let Some(unit) = ndigits.checked_neg().and_then(|n| u32::try_from(n).ok()).and_then(|e| 10_i64.checked_pow(e)) else {
+            let Some(unit) =
+                ndigits.checked_neg().and_then(|n| u32::try_from(n).ok()).and_then(|e| 10_i64.checked_pow(e))
+            else {
                 return Ok(Value::Int(0));
             };
             let (q, r) = (i.div_euclid(unit), i.rem_euclid(unit));

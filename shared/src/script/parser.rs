@@ -36,10 +36,9 @@ struct Parser {
 /// Python keywords; a name in this list never starts or continues an expression
 /// except `True`, `False` and `None`.
 const KEYWORDS: &[&str] = &[
-    "False", "None", "True", "and", "as", "assert", "async", "await", "break", "class", "continue",
-    "def", "del", "elif", "else", "except", "finally", "for", "from", "global", "if", "import", "in",
-    "is", "lambda", "nonlocal", "not", "or", "pass", "raise", "return", "try", "while", "with",
-    "yield",
+    "False", "None", "True", "and", "as", "assert", "async", "await", "break", "class", "continue", "def", "del",
+    "elif", "else", "except", "finally", "for", "from", "global", "if", "import", "in", "is", "lambda", "nonlocal",
+    "not", "or", "pass", "raise", "return", "try", "while", "with", "yield",
 ];
 
 /// The message for a keyword that starts an unsupported construct.
@@ -128,10 +127,9 @@ impl Parser {
     fn enter(&mut self) -> Result<(), ParseError> {
         self.depth += 1;
         if self.depth > MAX_DEPTH {
-            return Err(self.error_at(
-                self.peek(),
-                format!("expression nested too deeply (more than {MAX_DEPTH} levels)"),
-            ));
+            return Err(
+                self.error_at(self.peek(), format!("expression nested too deeply (more than {MAX_DEPTH} levels)"))
+            );
         }
         Ok(())
     }
@@ -257,8 +255,9 @@ impl Parser {
 
     fn expression_statement(&mut self) -> Result<StmtKind, ParseError> {
         let first = self.expr_list()?;
-        if let Tok::Op(op @ ("+=" | "-=" | "*=" | "/=" | "//=" | "%=" | "**=" | "&=" | "|=" | "^=" | ">>=" | "<<=" | "@=")) =
-            self.peek().tok
+        if let Tok::Op(
+            op @ ("+=" | "-=" | "*=" | "/=" | "//=" | "%=" | "**=" | "&=" | "|=" | "^=" | ">>=" | "<<=" | "@="),
+        ) = self.peek().tok
         {
             return Err(self.error_at(self.peek(), format!("augmented assignment (`{op}`) is not supported")));
         }
@@ -309,7 +308,9 @@ impl Parser {
         let token = self.peek();
         let message = match &token.tok {
             Tok::Name(n) if n == "if" => Some("conditional expressions (`a if cond else b`) are not supported".into()),
-            Tok::Name(n) if n == "for" || n == "async" => Some("comprehensions and generator expressions are not supported".into()),
+            Tok::Name(n) if n == "for" || n == "async" => {
+                Some("comprehensions and generator expressions are not supported".into())
+            }
             Tok::Name(n) if matches!(n.as_str(), "and" | "or" | "not" | "in" | "is") => {
                 if n == "not" {
                     Some("comparison operators (`not in`) are not supported".into())
@@ -320,7 +321,9 @@ impl Parser {
             Tok::Op(op @ ("==" | "!=" | "<" | ">" | "<=" | ">=")) => {
                 Some(format!("comparison operators (`{op}`) are not supported"))
             }
-            Tok::Op(op @ ("&" | "|" | "^" | "<<" | ">>")) => Some(format!("bitwise operators (`{op}`) are not supported")),
+            Tok::Op(op @ ("&" | "|" | "^" | "<<" | ">>")) => {
+                Some(format!("bitwise operators (`{op}`) are not supported"))
+            }
             Tok::Op(":=") => Some("assignment expressions (`:=`) are not supported".into()),
             _ => None,
         };
@@ -359,9 +362,7 @@ impl Parser {
                 Tok::Op("/") => BinOp::Div,
                 Tok::Op("//") => BinOp::FloorDiv,
                 Tok::Op("%") => BinOp::Mod,
-                Tok::Op("@") => {
-                    return Err(self.error_at(self.peek(), "matrix multiplication (`@`) is not supported"))
-                }
+                Tok::Op("@") => return Err(self.error_at(self.peek(), "matrix multiplication (`@`) is not supported")),
                 _ => break,
             };
             self.enter()?;

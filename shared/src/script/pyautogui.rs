@@ -29,26 +29,98 @@ use super::value::{Object, Value};
 const MAX_REPEAT: i64 = 1000;
 
 const FUNCTIONS: &[&str] = &[
-    "moveTo", "moveRel", "move", "dragTo", "dragRel", "drag", "click", "leftClick", "rightClick",
-    "middleClick", "doubleClick", "tripleClick", "mouseDown", "mouseUp", "scroll", "hscroll", "vscroll",
-    "typewrite", "write", "press", "keyDown", "keyUp", "hotkey", "position", "size", "onScreen",
-    "screenshot", "getActiveWindowTitle", "getAllTitles", "sleep", "isValidKey",
+    "moveTo",
+    "moveRel",
+    "move",
+    "dragTo",
+    "dragRel",
+    "drag",
+    "click",
+    "leftClick",
+    "rightClick",
+    "middleClick",
+    "doubleClick",
+    "tripleClick",
+    "mouseDown",
+    "mouseUp",
+    "scroll",
+    "hscroll",
+    "vscroll",
+    "typewrite",
+    "write",
+    "press",
+    "keyDown",
+    "keyUp",
+    "hotkey",
+    "position",
+    "size",
+    "onScreen",
+    "screenshot",
+    "getActiveWindowTitle",
+    "getAllTitles",
+    "sleep",
+    "isValidKey",
 ];
 
 /// Functions that end with pyautogui's automatic pause.
 const PAUSED: &[&str] = &[
-    "moveTo", "moveRel", "move", "dragTo", "dragRel", "drag", "click", "leftClick", "rightClick",
-    "middleClick", "doubleClick", "tripleClick", "mouseDown", "mouseUp", "scroll", "hscroll", "vscroll",
-    "typewrite", "write", "press", "keyDown", "keyUp", "hotkey",
+    "moveTo",
+    "moveRel",
+    "move",
+    "dragTo",
+    "dragRel",
+    "drag",
+    "click",
+    "leftClick",
+    "rightClick",
+    "middleClick",
+    "doubleClick",
+    "tripleClick",
+    "mouseDown",
+    "mouseUp",
+    "scroll",
+    "hscroll",
+    "vscroll",
+    "typewrite",
+    "write",
+    "press",
+    "keyDown",
+    "keyUp",
+    "hotkey",
 ];
 
 /// pytweening's easing functions, re-exported by pyautogui; accepted as `tween` values.
 const EASINGS: &[&str] = &[
-    "linear", "easeInQuad", "easeOutQuad", "easeInOutQuad", "easeInCubic", "easeOutCubic",
-    "easeInOutCubic", "easeInQuart", "easeOutQuart", "easeInOutQuart", "easeInQuint", "easeOutQuint",
-    "easeInOutQuint", "easeInSine", "easeOutSine", "easeInOutSine", "easeInExpo", "easeOutExpo",
-    "easeInOutExpo", "easeInCirc", "easeOutCirc", "easeInOutCirc", "easeInElastic", "easeOutElastic",
-    "easeInOutElastic", "easeInBack", "easeOutBack", "easeInOutBack", "easeInBounce", "easeOutBounce",
+    "linear",
+    "easeInQuad",
+    "easeOutQuad",
+    "easeInOutQuad",
+    "easeInCubic",
+    "easeOutCubic",
+    "easeInOutCubic",
+    "easeInQuart",
+    "easeOutQuart",
+    "easeInOutQuart",
+    "easeInQuint",
+    "easeOutQuint",
+    "easeInOutQuint",
+    "easeInSine",
+    "easeOutSine",
+    "easeInOutSine",
+    "easeInExpo",
+    "easeOutExpo",
+    "easeInOutExpo",
+    "easeInCirc",
+    "easeOutCirc",
+    "easeInOutCirc",
+    "easeInElastic",
+    "easeOutElastic",
+    "easeInOutElastic",
+    "easeInBack",
+    "easeOutBack",
+    "easeInOutBack",
+    "easeInBounce",
+    "easeOutBounce",
     "easeInOutBounce",
 ];
 
@@ -97,7 +169,8 @@ const MOUSE_BUTTON: &[&str] = &["x", "y", "button", "duration", "tween", "logScr
 const MOVE_TO: &[&str] = &["x", "y", "duration", "tween", "logScreenshot", "_pause"];
 const MOVE_REL: &[&str] = &["xOffset", "yOffset", "duration", "tween", "logScreenshot", "_pause"];
 const DRAG_TO: &[&str] = &["x", "y", "duration", "tween", "button", "logScreenshot", "_pause", "mouseDownUp"];
-const DRAG_REL: &[&str] = &["xOffset", "yOffset", "duration", "tween", "button", "logScreenshot", "_pause", "mouseDownUp"];
+const DRAG_REL: &[&str] =
+    &["xOffset", "yOffset", "duration", "tween", "button", "logScreenshot", "_pause", "mouseDownUp"];
 const SCROLL: &[&str] = &["clicks", "x", "y", "logScreenshot", "_pause"];
 
 fn dispatch(it: &mut Interp<'_, '_>, name: &'static str, args: Args) -> Result<Value, ScriptError> {
@@ -137,11 +210,8 @@ fn dispatch(it: &mut Interp<'_, '_>, name: &'static str, args: Args) -> Result<V
             let button = button(&a[2])?;
             let at = normalize_xy(it, &a[0], &a[1])?;
             let (x, y) = (at.map(|p| p.0), at.map(|p| p.1));
-            let action = if name == "mouseDown" {
-                Action::MouseDown { button, x, y }
-            } else {
-                Action::MouseUp { button, x, y }
-            };
+            let action =
+                if name == "mouseDown" { Action::MouseDown { button, x, y } } else { Action::MouseUp { button, x, y } };
             perform(it, action)?;
         }
         "moveTo" => {
@@ -206,7 +276,12 @@ fn dispatch(it: &mut Interp<'_, '_>, name: &'static str, args: Args) -> Result<V
                         }
                     }
                 }
-                other => return Err(type_error(format!("{name}() message must be a str or a list of key names, not {}", other.type_name()))),
+                other => {
+                    return Err(type_error(format!(
+                        "{name}() message must be a str or a list of key names, not {}",
+                        other.type_name()
+                    )))
+                }
             }
         }
         "press" => {
@@ -358,11 +433,17 @@ pub(crate) fn coord(v: &Value, what: &str) -> Result<i32, ScriptError> {
         Value::Int(i) => *i,
         Value::Float(f) => {
             if !f.is_finite() {
-                return Err(value_error(format!("{what} must be a finite number, not {}", super::value::float_repr(*f))));
+                return Err(value_error(format!(
+                    "{what} must be a finite number, not {}",
+                    super::value::float_repr(*f)
+                )));
             }
             let t = f.trunc();
             if t.abs() > 1e15 {
-                return Err(value_error(format!("{what} {} is outside the screen coordinate range", super::value::float_repr(*f))));
+                return Err(value_error(format!(
+                    "{what} {} is outside the screen coordinate range",
+                    super::value::float_repr(*f)
+                )));
             }
             t as i64
         }
@@ -434,7 +515,11 @@ pub(crate) fn normalize_xy(
 }
 
 /// Like [`normalize_xy`], with the current position filled in.
-pub(crate) fn full_xy(it: &mut Interp<'_, '_>, x: &Option<Value>, y: &Option<Value>) -> Result<(i32, i32), ScriptError> {
+pub(crate) fn full_xy(
+    it: &mut Interp<'_, '_>,
+    x: &Option<Value>,
+    y: &Option<Value>,
+) -> Result<(i32, i32), ScriptError> {
     match normalize_xy(it, x, y)? {
         Some(p) => Ok(p),
         None => {
@@ -551,25 +636,24 @@ fn clicks_at(
 }
 
 fn drag_to(it: &mut Interp<'_, '_>, x: i32, y: i32, button: MouseButton, down_up: bool) -> Result<(), ScriptError> {
-    let action = if down_up {
-        Action::Drag { from: None, to: Point::new(x, y), button }
-    } else {
-        Action::MoveTo { x, y }
-    };
+    let action =
+        if down_up { Action::Drag { from: None, to: Point::new(x, y), button } } else { Action::MoveTo { x, y } };
     perform(it, action)
 }
 
 /// Validates a key name and returns its canonical pyautogui name.
 pub(crate) fn key_name(func: &str, name: &str) -> Result<String, ScriptError> {
-    Key::parse(name)
-        .map(|k| k.to_string())
-        .map_err(|e| value_error(format!("{func}(): {e}; pyautogui would silently ignore it, this interpreter refuses")))
+    Key::parse(name).map(|k| k.to_string()).map_err(|e| {
+        value_error(format!("{func}(): {e}; pyautogui would silently ignore it, this interpreter refuses"))
+    })
 }
 
 fn key_list(func: &str, seq: &Value) -> Result<Vec<String>, ScriptError> {
     let items = match seq {
         Value::List(items) | Value::Tuple(items) => items,
-        other => return Err(type_error(format!("{func}() keys must be a str or a list of str, not {}", other.type_name()))),
+        other => {
+            return Err(type_error(format!("{func}() keys must be a str or a list of str, not {}", other.type_name())))
+        }
     };
     items
         .iter()
@@ -580,7 +664,12 @@ fn key_list(func: &str, seq: &Value) -> Result<Vec<String>, ScriptError> {
         .collect()
 }
 
-pub(crate) fn press_keys(it: &mut Interp<'_, '_>, keys: &[String], presses: u32, interval: f64) -> Result<(), ScriptError> {
+pub(crate) fn press_keys(
+    it: &mut Interp<'_, '_>,
+    keys: &[String],
+    presses: u32,
+    interval: f64,
+) -> Result<(), ScriptError> {
     if let ([key], 0.0) = (keys, interval) {
         if presses > 0 {
             perform(it, Action::KeyPress { key: key.clone(), presses })?;

@@ -17,7 +17,16 @@ use super::value::{Object, Value};
 const TIME: &[&str] = &["sleep"];
 const OS: &[&str] = &["getenv", "system", "listdir", "startfile"];
 const OS_PATH: &[&str] = &[
-    "join", "basename", "dirname", "exists", "isfile", "isdir", "expanduser", "split", "splitext", "isabs",
+    "join",
+    "basename",
+    "dirname",
+    "exists",
+    "isfile",
+    "isdir",
+    "expanduser",
+    "split",
+    "splitext",
+    "isabs",
     "splitdrive",
 ];
 const SUBPROCESS: &[&str] = &["call", "run", "Popen", "check_call", "check_output"];
@@ -96,10 +105,7 @@ fn arg(a: &[Option<Value>], i: usize) -> &Value {
 fn path_arg(v: &Value) -> Result<&str, ScriptError> {
     match v {
         Value::Str(s) => Ok(s),
-        other => Err(type_error(format!(
-            "expected str, bytes or os.PathLike object, not {}",
-            other.type_name()
-        ))),
+        other => Err(type_error(format!("expected str, bytes or os.PathLike object, not {}", other.type_name()))),
     }
 }
 
@@ -168,9 +174,7 @@ fn misc(it: &mut Interp<'_, '_>, module: &str, name: &str, args: Args) -> Result
             };
             super::pyautogui::screenshot_image(it, &region)
         }
-        _ => Err(not_supported(format!(
-            "{module}.{name} is not supported: this interpreter has no image library"
-        ))),
+        _ => Err(not_supported(format!("{module}.{name} is not supported: this interpreter has no image library"))),
     }
 }
 
@@ -296,7 +300,9 @@ fn stream(v: Option<&Value>, what: &str) -> Result<Stream, ScriptError> {
         Some(Value::Int(PIPE)) => Ok(Stream::Capture),
         Some(Value::Int(DEVNULL)) => Ok(Stream::Discard),
         Some(Value::Int(STDOUT)) if what == "stderr" => Ok(Stream::ToStdout),
-        Some(_) => Err(not_supported(format!("subprocess {what}= accepts only None, PIPE, DEVNULL (or STDOUT for stderr)"))),
+        Some(_) => {
+            Err(not_supported(format!("subprocess {what}= accepts only None, PIPE, DEVNULL (or STDOUT for stderr)")))
+        }
     }
 }
 
@@ -307,10 +313,9 @@ fn command_arg(v: &Value) -> Result<CommandArg, ScriptError> {
             .iter()
             .map(|item| match item {
                 Value::Str(s) => Ok(s.clone()),
-                other => Err(type_error(format!(
-                    "expected str, bytes or os.PathLike object, not {}",
-                    other.type_name()
-                ))),
+                other => {
+                    Err(type_error(format!("expected str, bytes or os.PathLike object, not {}", other.type_name())))
+                }
             })
             .collect::<Result<Vec<_>, _>>()
             .map(CommandArg::Args),
@@ -318,7 +323,12 @@ fn command_arg(v: &Value) -> Result<CommandArg, ScriptError> {
     }
 }
 
-pub(crate) fn called_process_error(cmd: &Value, code: i64, stdout: Option<String>, stderr: Option<String>) -> ScriptError {
+pub(crate) fn called_process_error(
+    cmd: &Value,
+    code: i64,
+    stdout: Option<String>,
+    stderr: Option<String>,
+) -> ScriptError {
     let _ = (stdout, stderr);
     ScriptError::new(
         ErrorKind::CalledProcess,
@@ -522,8 +532,10 @@ pub(crate) mod ntpath {
         #[test]
         fn join_matches_ntpath() {
             let check = |parts: &[&str], expected: &str| assert_eq!(join(parts), expected, "{parts:?}");
-            check(&[r"C:\Users\Docker\AppData\Local", r"Google\Chrome\User Data\Default\History"],
-                r"C:\Users\Docker\AppData\Local\Google\Chrome\User Data\Default\History");
+            check(
+                &[r"C:\Users\Docker\AppData\Local", r"Google\Chrome\User Data\Default\History"],
+                r"C:\Users\Docker\AppData\Local\Google\Chrome\User Data\Default\History",
+            );
             check(&["a", "b", "c"], r"a\b\c");
             check(&[r"a\", "b"], r"a\b");
             check(&["a/", "b"], "a/b");
@@ -539,7 +551,8 @@ pub(crate) mod ntpath {
 
         #[test]
         fn split_and_friends_match_ntpath() {
-            let check = |p: &str, head: &str, tail: &str| assert_eq!(split(p), (head.to_owned(), tail.to_owned()), "{p}");
+            let check =
+                |p: &str, head: &str, tail: &str| assert_eq!(split(p), (head.to_owned(), tail.to_owned()), "{p}");
             check(r"C:\Users\Docker\file.txt", r"C:\Users\Docker", "file.txt");
             check(r"C:\file.txt", r"C:\", "file.txt");
             check(r"C:\", r"C:\", "");

@@ -41,7 +41,10 @@ impl FakeHost {
             windows: Vec::new(),
             active_title: "Untitled - Paint".to_owned(),
             installed: vec!["msedge".to_owned(), "notepad".to_owned()],
-            paths: vec![(r"C:\Users\Docker\Desktop".to_owned(), PathKind::Dir), (r"C:\x.txt".to_owned(), PathKind::File)],
+            paths: vec![
+                (r"C:\Users\Docker\Desktop".to_owned(), PathKind::Dir),
+                (r"C:\x.txt".to_owned(), PathKind::File),
+            ],
             command: CommandOutput { code: 0, stdout: String::new(), stderr: String::new() },
             clipboard: "clip".to_owned(),
         }
@@ -179,7 +182,10 @@ fn corpus_save_hotkeys() {
         "import pyautogui; import time; pyautogui.hotkey('ctrl', 's'); time.sleep(0.5);;",
         &[hotkey(&["ctrl", "s"]), wait(500)],
     );
-    check("import pyautogui; import time; pyautogui.click(960, 540); time.sleep(0.5);", &[click_at(960, 540), wait(500)]);
+    check(
+        "import pyautogui; import time; pyautogui.click(960, 540); time.sleep(0.5);",
+        &[click_at(960, 540), wait(500)],
+    );
     check(
         "import pyautogui; import time; pyautogui.hotkey('alt', 'f10'); time.sleep(0.5);",
         &[hotkey(&["alt", "f10"]), wait(500)],
@@ -235,7 +241,9 @@ fn upstream_prefix_records_failsafe() {
 
 #[test]
 fn explicit_pause_sleeps_after_each_input_call() {
-    let (actions, ..) = python("import pyautogui\npyautogui.PAUSE = 0.2\npyautogui.press('a')\npyautogui.position()\npyautogui.press('b')");
+    let (actions, ..) = python(
+        "import pyautogui\npyautogui.PAUSE = 0.2\npyautogui.press('a')\npyautogui.position()\npyautogui.press('b')",
+    );
     assert_eq!(actions, [key("a"), wait(200), key("b"), wait(200)]);
 }
 
@@ -252,8 +260,14 @@ fn getter_programs_print_like_python() {
     check("import pyautogui; print(pyautogui.getActiveWindowTitle())", "Untitled - Paint\n");
     check("import os; print(os.path.expanduser('~'))", "C:\\Users\\Docker\n");
     check("import platform; print(platform.platform())", "Windows-10-10.0.22631-SP0\n");
-    check("import os; print(os.environ.get('USERNAME'), os.environ['COMPUTERNAME'], os.getenv('NOPE', 'dflt'))", "Docker WAA-VM dflt\n");
-    check(r"import os; print(os.path.exists(r'C:\x.txt'), os.path.isdir(r'C:\x.txt'), os.path.isfile('C:\\x.txt'))", "True False True\n");
+    check(
+        "import os; print(os.environ.get('USERNAME'), os.environ['COMPUTERNAME'], os.getenv('NOPE', 'dflt'))",
+        "Docker WAA-VM dflt\n",
+    );
+    check(
+        r"import os; print(os.path.exists(r'C:\x.txt'), os.path.isdir(r'C:\x.txt'), os.path.isfile('C:\\x.txt'))",
+        "True False True\n",
+    );
     check(r"import os; print(os.path.basename(r'C:\a\b.txt'), os.path.dirname(r'C:\a\b.txt'))", "b.txt C:\\a\n");
     check("import os; print(os.listdir('C:\\\\'))", "['a.txt', 'b']\n");
     check("import os.path; print(os.path.splitext('a.tar.gz'))", "('a.tar', '.gz')\n");
@@ -284,7 +298,10 @@ fn subprocess_and_os_system() {
         ]
     );
     let err = run_python(&mut host, "import subprocess\nsubprocess.check_output(['x', 'y'])").unwrap_err();
-    assert_eq!(err.python_message(), "subprocess.CalledProcessError: Command '['x', 'y']' returned non-zero exit status 3.");
+    assert_eq!(
+        err.python_message(),
+        "subprocess.CalledProcessError: Command '['x', 'y']' returned non-zero exit status 3."
+    );
 }
 
 #[test]
@@ -357,7 +374,12 @@ fn computer_13_templates_translate_to_actions() {
     check("pyautogui.click([100, 200, 50, 31])", &[click_at(125, 215)]);
     check(
         "pyautogui.click(1, 2, clicks=2, interval=0.25)",
-        &[click_at(1, 2), wait(250), Action::Click { x: None, y: None, button: MouseButton::Left, count: 1 }, wait(250)],
+        &[
+            click_at(1, 2),
+            wait(250),
+            Action::Click { x: None, y: None, button: MouseButton::Left, count: 1 },
+            wait(250),
+        ],
     );
     check("pyautogui.tripleClick()", &[Action::Click { x: None, y: None, button: MouseButton::Left, count: 3 }]);
     check("pyautogui.sleep(0.3)", &[wait(300)]);
@@ -481,7 +503,12 @@ fn clipboard_copy_text_prints_and_paste_swaps() {
     );
 
     let mut host = FakeHost::new();
-    let out = navi(&mut state, &mut host, "computer.clipboard.copy_image(id=1, description='logo')\nprint(computer.clipboard.view_clipboard())").unwrap();
+    let out = navi(
+        &mut state,
+        &mut host,
+        "computer.clipboard.copy_image(id=1, description='logo')\nprint(computer.clipboard.view_clipboard())",
+    )
+    .unwrap();
     assert_eq!(host.calls, ["clipboard_set_image [100, 50, 201, 151]"]);
     assert_eq!(state.clipboard_content.as_deref(), Some("logo"));
     assert_eq!(out.stdout, "clip\n");
@@ -511,7 +538,8 @@ fn switch_to_application_matches_like_difflib() {
         let mut state = computer_state();
         let mut host = FakeHost::new();
         host.windows = windows.iter().map(|w| (*w).to_owned()).collect();
-        let out = navi(&mut state, &mut host, &format!("computer.window_manager.switch_to_application({name:?})")).unwrap();
+        let out =
+            navi(&mut state, &mut host, &format!("computer.window_manager.switch_to_application({name:?})")).unwrap();
         match expected {
             Some(title) => {
                 assert_eq!(host.calls, [format!("switch_to_window {title}")], "{name}");
@@ -544,7 +572,8 @@ fn computer_is_only_bound_for_execute_windows() {
     assert_eq!(err.python_message(), "AttributeError: 'Mouse' object has no attribute 'clik'");
     let err = navi(&mut state, &mut FakeHost::new(), "human.ask_question('x?')").unwrap_err();
     assert_eq!(err.kind, ErrorKind::NotSupported);
-    let out = navi(&mut state, &mut FakeHost::new(), "import time; time.sleep(1); print(computer.mouse.window_rect)").unwrap();
+    let out = navi(&mut state, &mut FakeHost::new(), "import time; time.sleep(1); print(computer.mouse.window_rect)")
+        .unwrap();
     assert_eq!(out.stdout, "[5, 7, 1445, 907]\n");
 }
 
@@ -577,7 +606,8 @@ fn string_literal_forms() {
 
 #[test]
 fn values_print_like_python() {
-    let check = |expr: &str, expected: &str| assert_eq!(printed(&format!("print({expr})")), format!("{expected}\n"), "{expr}");
+    let check =
+        |expr: &str, expected: &str| assert_eq!(printed(&format!("print({expr})")), format!("{expected}\n"), "{expr}");
     check("1, 2.0", "1 2.0");
     check("0.1 + 0.2", "0.30000000000000004");
     check("1e-05, 1e16, 1e15, -0.0", "1e-05 1e+16 1000000000000000.0 -0.0");
@@ -639,7 +669,12 @@ fn parse_errors_name_the_construct_and_position() {
     check("x = '\\N{DASH}'", 1, 6, "\\N{...} escapes are not supported");
     check(r"x = 'C:\Users'", 1, 8, "(unicode error) truncated \\UXXXXXXXX escape");
     check("x = 99999999999999999999", 1, 5, "integer literal too large (this interpreter's integers are 64-bit)");
-    check("x = 012", 1, 5, "leading zeros in decimal integer literals are not permitted; use an 0o prefix for octal integers");
+    check(
+        "x = 012",
+        1,
+        5,
+        "leading zeros in decimal integer literals are not permitted; use an 0o prefix for octal integers",
+    );
     check("x = 1j", 1, 5, "complex number literals are not supported");
     check("f(a=1, a=2)", 1, 8, "keyword argument repeated: a");
     check("f(a=1, 2)", 1, 8, "positional argument follows keyword argument");
@@ -661,15 +696,24 @@ fn runtime_errors_are_python_exceptions() {
     check("print(x)", "line 1: NameError: name 'x' is not defined");
     check("import pyautogui\n\npyautogui.clik(1, 2)", "line 3: AttributeError: module 'pyautogui' has no attribute 'clik' (pyautogui.clik is not supported by this interpreter)");
     check("import numpy", "line 1: ModuleNotFoundError: No module named 'numpy' (this interpreter provides: pyautogui, time, os, os.path, ntpath, subprocess, platform, sys, PIL, PIL.Image, PIL.ImageGrab, pyperclip)");
-    check("import pyautogui; pyautogui.dragTo(1, 2, foo=3)", "line 1: TypeError: dragTo() got an unexpected keyword argument 'foo'");
+    check(
+        "import pyautogui; pyautogui.dragTo(1, 2, foo=3)",
+        "line 1: TypeError: dragTo() got an unexpected keyword argument 'foo'",
+    );
     check("import pyautogui; pyautogui.press('enterr')", "line 1: ValueError: press(): unknown key name \"enterr\" (expected a pyautogui key name such as \"enter\", \"ctrl\" or \"a\"); pyautogui would silently ignore it, this interpreter refuses");
     check("import pyautogui; pyautogui.click(button='Left')", "line 1: ValueError: button argument must be one of ('left', 'middle', 'right', 'primary', 'secondary', 1, 2, 3), not 'Left'");
     check("import time; time.sleep(-1)", "line 1: ValueError: sleep length must be non-negative");
     check("print(1 / 0)", "line 1: ZeroDivisionError: division by zero");
     check("print('a' + 1)", "line 1: TypeError: can only concatenate str (not \"int\") to str");
     check("open('x')", "line 1: NotImplementedError: open() is not supported by this interpreter");
-    check("import os; os.path.join(os.getenv('NOPE'), 'x')", "line 1: TypeError: expected str, bytes or os.PathLike object, not NoneType");
-    check("import PIL.Image; PIL.Image.open('x.png')", "line 1: NotImplementedError: PIL.Image.open is not supported: this interpreter has no image library");
+    check(
+        "import os; os.path.join(os.getenv('NOPE'), 'x')",
+        "line 1: TypeError: expected str, bytes or os.PathLike object, not NoneType",
+    );
+    check(
+        "import PIL.Image; PIL.Image.open('x.png')",
+        "line 1: NotImplementedError: PIL.Image.open is not supported: this interpreter has no image library",
+    );
     check("print([1][3])", "line 1: IndexError: list index out of range");
     check("print({'a': 1}['b'])", "line 1: KeyError: 'b'");
     check("x = 2 ** 70", "line 1: OverflowError: integer overflow (this interpreter's integers are 64-bit)");
@@ -696,7 +740,8 @@ fn resource_limits_stop_hostile_programs() {
 #[test]
 fn errors_keep_output_and_effects_before_them() {
     let mut host = FakeHost::new();
-    let err = run_python(&mut host, "import pyautogui\nprint('before')\npyautogui.press('a')\nundefined_name").unwrap_err();
+    let err =
+        run_python(&mut host, "import pyautogui\nprint('before')\npyautogui.press('a')\nundefined_name").unwrap_err();
     assert_eq!(err.stdout, "before\n");
     assert_eq!(err.line, 4);
     assert_eq!(host.actions, [key("a")]);

@@ -26,7 +26,10 @@ pub(crate) enum Value {
     /// A module, by its dotted name (`os.path`).
     Module(&'static str),
     /// A module-level function: `module` is the dotted module name, `""` for builtins.
-    Function { module: &'static str, name: &'static str },
+    Function {
+        module: &'static str,
+        name: &'static str,
+    },
     /// A method bound to its receiver.
     Method(Box<Value>, &'static str),
     /// A constant marker such as a pyautogui easing function.
@@ -40,13 +43,25 @@ pub(crate) enum Value {
 #[derive(Debug, Clone, PartialEq)]
 pub(crate) enum Object {
     /// A screenshot: its size and the screen region it covers (`None`: the whole screen).
-    Image { width: i64, height: i64, region: Option<[i32; 4]> },
+    Image {
+        width: i64,
+        height: i64,
+        region: Option<[i32; 4]>,
+    },
     /// `os.environ`.
     Environ,
     /// A `subprocess.CompletedProcess`.
-    Completed { args: Box<Value>, returncode: i64, stdout: Option<String>, stderr: Option<String> },
+    Completed {
+        args: Box<Value>,
+        returncode: i64,
+        stdout: Option<String>,
+        stderr: Option<String>,
+    },
     /// A `subprocess.Popen` whose process was started and not waited for.
-    Popen { args: Box<Value>, pid: i64 },
+    Popen {
+        args: Box<Value>,
+        pid: i64,
+    },
     Computer,
     Mouse,
     Keyboard,

@@ -61,14 +61,26 @@ fn run() -> anyhow::Result<()> {
     let (c, d) = (dir.join("result.docx"), dir.join("gold.docx"));
     write_document(&c)?;
     write_document(&d)?;
-    println!("officebench: {iterations} iterations; xlsx {ROWS}x{COLS} ({} KiB), docx {PARAGRAPHS} paragraphs ({} KiB)", size_kib(&a), size_kib(&c));
+    println!(
+        "officebench: {iterations} iterations; xlsx {ROWS}x{COLS} ({} KiB), docx {PARAGRAPHS} paragraphs ({} KiB)",
+        size_kib(&a),
+        size_kib(&c)
+    );
 
     let sheet_data = json!({"rules": [{"type": "sheet_data", "sheet_idx0": 0, "sheet_idx1": "EI0"}]});
-    let style = json!({"rules": [{"type": "style", "sheet_idx0": 0, "sheet_idx1": "EI0", "props": ["bgcolor", "font_color"]}]});
+    let style =
+        json!({"rules": [{"type": "style", "sheet_idx0": 0, "sheet_idx1": "EI0", "props": ["bgcolor", "font_color"]}]});
     bench("compare_table sheet_data", "compare_table", &a, &b, &sheet_data, iterations)?;
     bench("compare_table style", "compare_table", &a, &b, &style, iterations)?;
     bench("compare_docx_files", "compare_docx_files", &c, &d, &json!({}), iterations)?;
-    bench("compare_docx_files ignore_blanks=false", "compare_docx_files", &c, &d, &json!({"ignore_blanks": false}), iterations)?;
+    bench(
+        "compare_docx_files ignore_blanks=false",
+        "compare_docx_files",
+        &c,
+        &d,
+        &json!({"ignore_blanks": false}),
+        iterations,
+    )?;
     Ok(())
 }
 
@@ -76,7 +88,14 @@ fn size_kib(path: &Path) -> u64 {
     std::fs::metadata(path).map(|m| m.len() / 1024).unwrap_or(0)
 }
 
-fn bench(label: &str, metric: &str, result: &Path, expected: &Path, options: &Value, iterations: usize) -> anyhow::Result<()> {
+fn bench(
+    label: &str,
+    metric: &str,
+    result: &Path,
+    expected: &Path,
+    options: &Value,
+    iterations: usize,
+) -> anyhow::Result<()> {
     let f = lookup(metric).with_context(|| format!("metric {metric} is not registered"))?;
     let options: Map<String, Value> = options.as_object().cloned().unwrap_or_default();
     let input = MetricInput {
@@ -107,7 +126,8 @@ fn bench(label: &str, metric: &str, result: &Path, expected: &Path, options: &Va
 fn write_workbook(path: &PathBuf) -> anyhow::Result<()> {
     let mut book = Workbook::new();
     let sheet = book.add_worksheet();
-    let fill = Format::new().set_pattern(FormatPattern::Solid).set_background_color(0xFFFF00).set_foreground_color(0xFFFF00);
+    let fill =
+        Format::new().set_pattern(FormatPattern::Solid).set_background_color(0xFFFF00).set_foreground_color(0xFFFF00);
     for col in 0..COLS {
         sheet.write_string(0, col, format!("Column {col}"))?;
     }
@@ -122,7 +142,11 @@ fn write_workbook(path: &PathBuf) -> anyhow::Result<()> {
                     sheet.write_number(row, col, f64::from(row))?;
                 }
                 2 => {
-                    sheet.write_formula(row, col, Formula::new(format!("=B{}*1.25", row + 1)).set_result(n.to_string()))?;
+                    sheet.write_formula(
+                        row,
+                        col,
+                        Formula::new(format!("=B{}*1.25", row + 1)).set_result(n.to_string()),
+                    )?;
                 }
                 _ if col == COLS - 1 => {
                     sheet.write_number_with_format(row, col, n / 3.0, &fill)?;

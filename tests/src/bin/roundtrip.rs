@@ -84,7 +84,9 @@ async fn run() -> anyhow::Result<()> {
     }));
 
     let client = GuestClient::new(&url, ClientConfig { token: None, timeout: Duration::from_secs(30), retries: 0 })?;
-    client.wait_ready(&arena_shared::health::Component::ALL, Duration::from_secs(30), Duration::from_millis(20)).await?;
+    client
+        .wait_ready(&arena_shared::health::Component::ALL, Duration::from_secs(30), Duration::from_millis(20))
+        .await?;
     client.launch(&LaunchRequest { argv: vec!["notepad".into()] }).await?;
     let raw = reqwest::Client::new();
 
@@ -120,7 +122,10 @@ async fn run() -> anyhow::Result<()> {
             Ok(client.screenshot(&query).await?.bytes.len())
         })
         .await?,
-        measure("accessibility tree (uia, json)", 10, 300, || async { Ok(client.a11y(&A11yQuery::default()).await?.node_count) }).await?,
+        measure("accessibility tree (uia, json)", 10, 300, || async {
+            Ok(client.a11y(&A11yQuery::default()).await?.node_count)
+        })
+        .await?,
         measure("push+pull 1 MiB with sha256", 3, 50, || async {
             let bytes = vec![0x5a_u8; 1 << 20];
             let path = r"C:\Users\Docker\Desktop\bench.bin";

@@ -9,7 +9,10 @@ use crate::eval::value::Fetched;
 use crate::eval::EvalContext;
 
 /// `get_vm_folder_exists_in_documents`: whether `Documents\<folder_name>` is a directory.
-pub(super) async fn vm_folder_exists_in_documents(ctx: &EvalContext, params: &Params<'_>) -> Result<Fetched, GetterError> {
+pub(super) async fn vm_folder_exists_in_documents(
+    ctx: &EvalContext,
+    params: &Params<'_>,
+) -> Result<Fetched, GetterError> {
     let name = params.string("folder_name")?;
     let documents = known_folder(ctx, params, KnownFolder::Documents).await?;
     is_kind(ctx, params, &guest_join(&documents, name), FileKind::Dir).await
@@ -27,7 +30,11 @@ pub(super) async fn vm_file_exists_in_desktop(ctx: &EvalContext, params: &Params
 /// # Errors
 ///
 /// A failed call, or a guest that does not name the folder.
-pub(crate) async fn known_folder(ctx: &EvalContext, params: &Params<'_>, folder: KnownFolder) -> Result<String, GetterError> {
+pub(crate) async fn known_folder(
+    ctx: &EvalContext,
+    params: &Params<'_>,
+    folder: KnownFolder,
+) -> Result<String, GetterError> {
     let folders = ctx.client.folders().await.map_err(|err| params.guest(err))?;
     folders
         .folders

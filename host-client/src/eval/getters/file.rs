@@ -96,7 +96,10 @@ pub(super) async fn cloud_file(ctx: &EvalContext, params: &Params<'_>) -> Result
 /// file `folder_name\file_name`, else `0.0` (also when either name is empty).
 /// Upstream downloads the file and tests the bytes' truthiness, so an empty
 /// file counts as missing; a stat gives the same answer without the download.
-pub(super) async fn vm_file_exists_in_vm_folder(ctx: &EvalContext, params: &Params<'_>) -> Result<Fetched, GetterError> {
+pub(super) async fn vm_file_exists_in_vm_folder(
+    ctx: &EvalContext,
+    params: &Params<'_>,
+) -> Result<Fetched, GetterError> {
     let folder = params.string("folder_name")?;
     let name = params.string("file_name")?;
     if folder.is_empty() || name.is_empty() {

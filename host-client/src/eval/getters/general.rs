@@ -37,12 +37,18 @@ pub(super) fn command_argv(params: &Params<'_>) -> Result<Vec<String>, GetterErr
     let command = params.get("command")?;
     let argv = match command {
         Value::String(line) if shell => vec!["cmd".into(), "/c".into(), line.clone()],
-        Value::String(line) => shlex_split(line).map_err(|err| params.bad(format!("`command` does not split: {err}")))?,
+        Value::String(line) => {
+            shlex_split(line).map_err(|err| params.bad(format!("`command` does not split: {err}")))?
+        }
         Value::Array(items) => {
             let words = items
                 .iter()
                 .enumerate()
-                .map(|(idx, v)| v.as_str().map(str::to_owned).ok_or_else(|| params.bad(format!("`command[{idx}]` must be a string"))))
+                .map(|(idx, v)| {
+                    v.as_str()
+                        .map(str::to_owned)
+                        .ok_or_else(|| params.bad(format!("`command[{idx}]` must be a string")))
+                })
                 .collect::<Result<Vec<_>, _>>()?;
             if shell {
                 vec!["cmd".into(), "/c".into(), list2cmdline(&words)]

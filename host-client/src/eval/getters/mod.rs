@@ -125,13 +125,16 @@ impl Getter {
                 file::vm_file_exists_in_vm_folder(ctx, &Params::new("vm_file_exists_in_vm_folder", params)).await
             }
             Getter::VmFolderExistsInDocuments => {
-                explorer::vm_folder_exists_in_documents(ctx, &Params::new("vm_folder_exists_in_documents", params)).await
+                explorer::vm_folder_exists_in_documents(ctx, &Params::new("vm_folder_exists_in_documents", params))
+                    .await
             }
             Getter::VmFileExistsInDesktop => {
                 explorer::vm_file_exists_in_desktop(ctx, &Params::new("vm_file_exists_in_desktop", params)).await
             }
             Getter::VmCommandLine => general::vm_command_line(ctx, &Params::new("vm_command_line", params)).await,
-            Getter::VmActiveWindowTitle => info::vm_active_window_title(ctx, &Params::new("vm_active_window_title", params)).await,
+            Getter::VmActiveWindowTitle => {
+                info::vm_active_window_title(ctx, &Params::new("vm_active_window_title", params)).await
+            }
             Getter::VmWallpaper => info::vm_wallpaper(ctx, &Params::new("vm_wallpaper", params)).await,
             Getter::Browser(getter) => getter.fetch(ctx, params).await,
             Getter::System(getter) => getter.fetch(ctx, params).await,
@@ -222,9 +225,8 @@ impl<'a> Params<'a> {
 /// [`GetterError::Io`] when the folder cannot be created.
 pub(crate) fn dest_path(ctx: &EvalContext, params: &Params<'_>, dest: &str) -> Result<PathBuf, GetterError> {
     let relative = Path::new(dest);
-    let plain = !dest.is_empty()
-        && !dest.contains('\\')
-        && relative.components().all(|c| matches!(c, Component::Normal(_)));
+    let plain =
+        !dest.is_empty() && !dest.contains('\\') && relative.components().all(|c| matches!(c, Component::Normal(_)));
     if !plain {
         return Err(params.bad(format!("`dest` {dest:?} must be a relative file name inside the work folder")));
     }

@@ -35,7 +35,8 @@ pub(crate) async fn start_guest() -> Guest {
     tokio::spawn(arena_guest::serve(listener, state, async move {
         let _ = stopped.await;
     }));
-    let client = GuestClient::new(&url, ClientConfig { token: None, timeout: Duration::from_secs(20), retries: 1 }).expect("client");
+    let client = GuestClient::new(&url, ClientConfig { token: None, timeout: Duration::from_secs(20), retries: 1 })
+        .expect("client");
     client.wait_ready(&[], Duration::from_secs(20), Duration::from_millis(50)).await.expect("stub ready");
     let host = tempfile::tempdir().expect("host dir");
     let cache = DownloadCache::new(host.path().join("cache")).expect("cache");
@@ -71,7 +72,12 @@ async fn check(guest: &Guest, getter: Value, want: Result<Fetched, &str>) {
 #[tokio::test]
 async fn rule_returns_its_rules() {
     let guest = start_guest().await;
-    check(&guest, json!({"type": "rule", "rules": {"expected": [1, "a"]}}), Ok(Fetched::Json(json!({"expected": [1, "a"]})))).await;
+    check(
+        &guest,
+        json!({"type": "rule", "rules": {"expected": [1, "a"]}}),
+        Ok(Fetched::Json(json!({"expected": [1, "a"]}))),
+    )
+    .await;
     check(&guest, json!({"type": "rule"}), Err("missing parameter `rules`")).await;
 }
 
@@ -83,11 +89,18 @@ async fn vm_file_saves_dest_and_returns_none_for_missing_files() {
     push(&guest, &format!(r"{docs}\second.txt"), b"two").await;
     let work = guest.ctx.work_dir.clone();
 
-    let got = fetch(&guest.ctx, &spec(json!({"type": "vm_file", "path": format!(r"{docs}\draft.txt"), "dest": "draft.txt"}))).await;
+    let got =
+        fetch(&guest.ctx, &spec(json!({"type": "vm_file", "path": format!(r"{docs}\draft.txt"), "dest": "draft.txt"})))
+            .await;
     assert_eq!(got.unwrap(), Fetched::File(work.join("draft.txt")));
     assert_eq!(std::fs::read(work.join("draft.txt")).unwrap(), b"hello\r\n");
 
-    check(&guest, json!({"type": "vm_file", "path": format!(r"{docs}\absent.txt"), "dest": "absent.txt"}), Ok(Fetched::None)).await;
+    check(
+        &guest,
+        json!({"type": "vm_file", "path": format!(r"{docs}\absent.txt"), "dest": "absent.txt"}),
+        Ok(Fetched::None),
+    )
+    .await;
     assert!(!work.join("absent.txt").exists());
 
     // multi + gives: the listed entries, `None` where the guest has no file.
@@ -109,8 +122,10 @@ async fn vm_file_saves_dest_and_returns_none_for_missing_files() {
     none["gives"] = json!([]);
     check(&guest, none, Ok(Fetched::List(vec![]))).await;
 
-    check(&guest, json!({"type": "vm_file", "path": r"C:\x.txt", "dest": "../escape.txt"}), Err("relative file name")).await;
-    check(&guest, json!({"type": "vm_file", "path": r"C:\x.txt", "dest": "/tmp/abs.txt"}), Err("relative file name")).await;
+    check(&guest, json!({"type": "vm_file", "path": r"C:\x.txt", "dest": "../escape.txt"}), Err("relative file name"))
+        .await;
+    check(&guest, json!({"type": "vm_file", "path": r"C:\x.txt", "dest": "/tmp/abs.txt"}), Err("relative file name"))
+        .await;
     check(&guest, json!({"type": "vm_file", "multi": true, "path": ["a"], "dest": ["a", "b"]}), Err("1 entries")).await;
     check(&guest, json!({"type": "vm_file", "dest": "x"}), Err("missing parameter `path`")).await;
 }
@@ -131,7 +146,8 @@ async fn vm_file_time_suffix_renames_both_paths() {
     let getter = json!({"type": "vm_file", "path": format!(r"{docs}\report.csv"), "dest": "report.csv", "time_suffix": true, "time_format": "%Y%m%d"});
     let got = fetch(&guest.ctx, &spec(getter)).await.unwrap();
     let after = stamp_now();
-    let expected: Vec<_> = [before, after].iter().map(|s| Fetched::File(guest.ctx.work_dir.join(format!("report{s}.csv")))).collect();
+    let expected: Vec<_> =
+        [before, after].iter().map(|s| Fetched::File(guest.ctx.work_dir.join(format!("report{s}.csv")))).collect();
     assert!(expected.contains(&got), "{got:?}");
 }
 
@@ -169,9 +185,24 @@ async fn file_and_folder_existence() {
 #[tokio::test]
 async fn vm_command_line_returns_stdout() {
     let guest = start_guest().await;
-    check(&guest, json!({"type": "vm_command_line", "command": ["sh", "-c", "echo ms-python.python; exit 3"]}), Ok(Fetched::Text("ms-python.python\n".into()))).await;
-    check(&guest, json!({"type": "vm_command_line", "command": "echo 'two words'"}), Ok(Fetched::Text("two words\n".into()))).await;
-    check(&guest, json!({"type": "vm_command_line", "command": ["no-such-program-xyz"]}), Err("getter vm_command_line")).await;
+    check(
+        &guest,
+        json!({"type": "vm_command_line", "command": ["sh", "-c", "echo ms-python.python; exit 3"]}),
+        Ok(Fetched::Text("ms-python.python\n".into())),
+    )
+    .await;
+    check(
+        &guest,
+        json!({"type": "vm_command_line", "command": "echo 'two words'"}),
+        Ok(Fetched::Text("two words\n".into())),
+    )
+    .await;
+    check(
+        &guest,
+        json!({"type": "vm_command_line", "command": ["no-such-program-xyz"]}),
+        Err("getter vm_command_line"),
+    )
+    .await;
     check(&guest, json!({"type": "vm_command_line", "command": 5}), Err("string or a list")).await;
 }
 
@@ -185,10 +216,16 @@ fn command_lines_become_argv_like_upstream() {
             (got, want) => panic!("{params}: got {got:?}, want {want:?}"),
         }
     };
-    check(json!({"command": ["cmd", "/c", "code", "--list-extensions", "|", "findstr", "x"]}), Ok(&["cmd", "/c", "code", "--list-extensions", "|", "findstr", "x"]));
+    check(
+        json!({"command": ["cmd", "/c", "code", "--list-extensions", "|", "findstr", "x"]}),
+        Ok(&["cmd", "/c", "code", "--list-extensions", "|", "findstr", "x"]),
+    );
     check(json!({"command": "powershell -Command \"Get-TimeZone\""}), Ok(&["powershell", "-Command", "Get-TimeZone"]));
     check(json!({"command": "dir C:\\x", "shell": true}), Ok(&["cmd", "/c", "dir C:\\x"]));
-    check(json!({"command": ["dir", "C:\\Program Files"], "shell": true}), Ok(&["cmd", "/c", "dir \"C:\\Program Files\""]));
+    check(
+        json!({"command": ["dir", "C:\\Program Files"], "shell": true}),
+        Ok(&["cmd", "/c", "dir \"C:\\Program Files\""]),
+    );
     check(json!({"command": "echo 'open"}), Err("does not split"));
     check(json!({"command": []}), Err("empty"));
 }
@@ -251,7 +288,9 @@ async fn file_server() -> (String, std::sync::Arc<std::sync::atomic::AtomicUsize
             };
             let response = match body {
                 Some(body) => {
-                    let mut r = format!("HTTP/1.1 200 OK\r\ncontent-length: {}\r\nconnection: close\r\n\r\n", body.len()).into_bytes();
+                    let mut r =
+                        format!("HTTP/1.1 200 OK\r\ncontent-length: {}\r\nconnection: close\r\n\r\n", body.len())
+                            .into_bytes();
                     r.extend_from_slice(body);
                     r
                 }
@@ -271,25 +310,50 @@ async fn cloud_file_downloads_through_the_cache_and_replays_offline() {
     let (url, hits, server) = file_server().await;
     let gold = format!("{url}/gold.txt");
 
-    check(&guest, json!({"type": "cloud_file", "path": gold, "dest": "gold.txt"}), Ok(Fetched::File(work.join("gold.txt")))).await;
+    check(
+        &guest,
+        json!({"type": "cloud_file", "path": gold, "dest": "gold.txt"}),
+        Ok(Fetched::File(work.join("gold.txt"))),
+    )
+    .await;
     assert_eq!(std::fs::read(work.join("gold.txt")).unwrap(), b"gold text\n");
 
     let multi = json!({
         "type": "cloud_file", "multi": true,
         "path": [gold, format!("{url}/other.txt")], "dest": ["g2.txt", "o.txt"], "gives": [0, 1],
     });
-    check(&guest, multi.clone(), Ok(Fetched::List(vec![Fetched::File(work.join("g2.txt")), Fetched::File(work.join("o.txt"))]))).await;
+    check(
+        &guest,
+        multi.clone(),
+        Ok(Fetched::List(vec![Fetched::File(work.join("g2.txt")), Fetched::File(work.join("o.txt"))])),
+    )
+    .await;
     assert_eq!(std::fs::read(work.join("o.txt")).unwrap(), b"other");
 
-    check(&guest, json!({"type": "cloud_file", "path": format!("{url}/missing.txt"), "dest": "m.txt"}), Err("missing.txt")).await;
+    check(
+        &guest,
+        json!({"type": "cloud_file", "path": format!("{url}/missing.txt"), "dest": "m.txt"}),
+        Err("missing.txt"),
+    )
+    .await;
 
     // With the server gone, cached URLs are still served; the cache was asked once per URL.
     server.abort();
     let served = hits.load(std::sync::atomic::Ordering::SeqCst);
     std::fs::remove_file(work.join("gold.txt")).unwrap();
-    check(&guest, json!({"type": "cloud_file", "path": gold, "dest": "gold.txt"}), Ok(Fetched::File(work.join("gold.txt")))).await;
+    check(
+        &guest,
+        json!({"type": "cloud_file", "path": gold, "dest": "gold.txt"}),
+        Ok(Fetched::File(work.join("gold.txt"))),
+    )
+    .await;
     assert_eq!(std::fs::read(work.join("gold.txt")).unwrap(), b"gold text\n");
-    check(&guest, multi, Ok(Fetched::List(vec![Fetched::File(work.join("g2.txt")), Fetched::File(work.join("o.txt"))]))).await;
+    check(
+        &guest,
+        multi,
+        Ok(Fetched::List(vec![Fetched::File(work.join("g2.txt")), Fetched::File(work.join("o.txt"))])),
+    )
+    .await;
     assert_eq!(hits.load(std::sync::atomic::Ordering::SeqCst), served);
 }
 
@@ -315,7 +379,8 @@ async fn a_corpus_style_task_evaluates_end_to_end() {
             ]
         }
     });
-    let evaluator = crate::task::Task::parse(&task.to_string(), std::path::Path::new("notepad/t.json")).unwrap().evaluator;
+    let evaluator =
+        crate::task::Task::parse(&task.to_string(), std::path::Path::new("notepad/t.json")).unwrap().evaluator;
 
     let missing = evaluate(&guest.ctx, &evaluator, Some(&LastAction::Done)).await;
     assert_eq!((missing.score, missing.metrics.len()), (0.0, 1), "{missing:?}");

@@ -55,7 +55,8 @@ pub(super) fn check_direct_json_object(input: &MetricInput) -> Result<f64, Metri
         } else {
             match want {
                 Value::Array(options) => {
-                    matches!(have, Value::Array(_)) && options.iter().any(|option| py_contains(have, option) == Some(true))
+                    matches!(have, Value::Array(_))
+                        && options.iter().any(|option| py_contains(have, option) == Some(true))
                 }
                 // `want not in have` raises for a `None` or number `have`; the bare
                 // `except` turns that into 0 as well.
@@ -73,5 +74,6 @@ pub(super) fn check_direct_json_object(input: &MetricInput) -> Result<f64, Metri
 /// Upstream's `json.loads(text.strip().replace("'", '"'))`.
 fn parse_loose_json(text: &str) -> Result<Value, MetricError> {
     let text = text.trim().replace('\'', "\"");
-    serde_json::from_str(&text).map_err(|err| MetricError::Parse { what: "the result as JSON".into(), message: err.to_string() })
+    serde_json::from_str(&text)
+        .map_err(|err| MetricError::Parse { what: "the result as JSON".into(), message: err.to_string() })
 }

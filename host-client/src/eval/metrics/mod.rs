@@ -98,7 +98,9 @@ impl MetricInput {
     pub fn rules(&self) -> Result<&Map<String, Value>, MetricError> {
         match self.expected()? {
             Fetched::Json(Value::Object(rules)) => Ok(rules),
-            other => Err(MetricError::BadInput(format!("the expected value must be a rules dict, not {}", other.kind()))),
+            other => {
+                Err(MetricError::BadInput(format!("the expected value must be a rules dict, not {}", other.kind())))
+            }
         }
     }
 
@@ -123,7 +125,9 @@ impl MetricInput {
 ///
 /// [`MetricError::BadInput`] naming `role` when the value is not a file.
 pub(crate) fn file_of<'a>(value: &'a Fetched, role: &str) -> Result<&'a Path, MetricError> {
-    value.as_path().ok_or_else(|| MetricError::BadInput(format!("the {role} value must be a file, not {}", value.kind())))
+    value
+        .as_path()
+        .ok_or_else(|| MetricError::BadInput(format!("the {role} value must be a file, not {}", value.kind())))
 }
 
 /// Reads a file as Python's `open(path).read()` does: UTF-8 text with

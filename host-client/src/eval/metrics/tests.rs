@@ -21,7 +21,9 @@ fn check(metric: &str, input: MetricInput, want: Want) {
     let got = f(&input);
     match (&got, &want) {
         (Ok(score), Want::Score(expected)) => assert_eq!(score, expected, "{metric} on {input:?}"),
-        (Err(err), Want::Error(text)) => assert!(err.to_string().contains(text), "{metric}: error {err:?} lacks {text:?}"),
+        (Err(err), Want::Error(text)) => {
+            assert!(err.to_string().contains(text), "{metric}: error {err:?} lacks {text:?}")
+        }
         _ => panic!("{metric} on {input:?}: got {got:?}, want {want:?}"),
     }
 }
@@ -64,7 +66,9 @@ fn exact_match_uses_python_equality() {
 
 #[test]
 fn infeasible_follows_the_last_action() {
-    for (last, want) in [(Some(LastAction::Fail), 1.0), (Some(LastAction::Done), 0.0), (None, 0.0), (Some(LastAction::Wait), 0.0)] {
+    for (last, want) in
+        [(Some(LastAction::Fail), 1.0), (Some(LastAction::Done), 0.0), (None, 0.0), (Some(LastAction::Wait), 0.0)]
+    {
         let mut case = input(Fetched::None, None, json!({}));
         case.last_action = last;
         check("infeasible", case, Want::Score(want));
@@ -172,13 +176,24 @@ fn is_extension_installed_contains_or_not() {
 #[test]
 fn metrics_without_rules_say_so() {
     check("exact_match", input(Fetched::Bool(true), None, json!({})), Want::Error("needs an `expected` getter"));
-    check("exact_match", input(Fetched::Bool(true), Some(Fetched::Text("x".into())), json!({})), Want::Error("rules dict"));
+    check(
+        "exact_match",
+        input(Fetched::Bool(true), Some(Fetched::Text("x".into())), json!({})),
+        Want::Error("rules dict"),
+    );
 }
 
 #[test]
 fn unknown_metrics_are_not_registered() {
     assert!(lookup("no_such_metric").is_none());
-    for name in ["exact_match", "infeasible", "compare_text_file", "check_json_settings", "check_direct_json_object", "is_extension_installed"] {
+    for name in [
+        "exact_match",
+        "infeasible",
+        "compare_text_file",
+        "check_json_settings",
+        "check_direct_json_object",
+        "is_extension_installed",
+    ] {
         assert!(lookup(name).is_some(), "{name}");
         assert!(crate::task::names::METRICS.contains(&name), "{name} is not an upstream metric name");
     }

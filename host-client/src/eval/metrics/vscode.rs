@@ -52,7 +52,9 @@ pub(super) fn check_json_settings(input: &MetricInput) -> Result<f64, MetricErro
     };
     match data {
         Value::Object(data) => Ok(score(dict_contains(&data, expect))),
-        other => Err(MetricError::BadInput(format!("{} holds {}, not a settings object", path.display(), json_kind(&other)))),
+        other => {
+            Err(MetricError::BadInput(format!("{} holds {}, not a settings object", path.display(), json_kind(&other))))
+        }
     }
 }
 

@@ -62,7 +62,8 @@ impl TextOptions {
         }
     }
 
-    const DEFAULT: TextOptions = TextOptions { ignore_blanks: true, ignore_case: false, ignore_order: false, content_only: false };
+    const DEFAULT: TextOptions =
+        TextOptions { ignore_blanks: true, ignore_case: false, ignore_order: false, content_only: false };
 }
 
 /// The paragraph texts of a docx or odt file as upstream collects them.
@@ -104,7 +105,11 @@ fn text_score(file1: &Path, file2: &Path, options: TextOptions) -> Result<f64, M
     if paras1.len() != paras2.len() {
         return Ok(0.0);
     }
-    let same = paras1.iter().zip(&paras2).all(|(a, b)| if options.ignore_case { a.to_lowercase() == b.to_lowercase() } else { a == b });
+    let same =
+        paras1
+            .iter()
+            .zip(&paras2)
+            .all(|(a, b)| if options.ignore_case { a.to_lowercase() == b.to_lowercase() } else { a == b });
     Ok(score(same))
 }
 
@@ -146,13 +151,17 @@ pub(super) fn compare_line_spacing(input: &MetricInput) -> Result<f64, MetricErr
 pub(super) fn check_tabstops(input: &MetricInput) -> Result<f64, MetricError> {
     let Some((result, expected)) = pair(input)? else { return Ok(0.0) };
     let (doc1, doc2) = (Document::open(result)?, Document::open(expected)?);
-    let nonblank = |doc: &Document| doc.paragraphs.iter().filter(|p| !p.text.trim().is_empty()).cloned().collect::<Vec<Paragraph>>();
+    let nonblank = |doc: &Document| {
+        doc.paragraphs.iter().filter(|p| !p.text.trim().is_empty()).cloned().collect::<Vec<Paragraph>>()
+    };
     let (para1, para2) = (nonblank(&doc1), nonblank(&doc2));
     if para1.len() != para2.len() {
         return Ok(0.0);
     }
     if let Some(number) = input.options.get("word_number_split_by_tabstop").filter(|v| !v.is_null()) {
-        let number = number.as_u64().ok_or_else(|| MetricError::BadInput(format!("word_number_split_by_tabstop must be a count, not {number}")))?;
+        let number = number.as_u64().ok_or_else(|| {
+            MetricError::BadInput(format!("word_number_split_by_tabstop must be a count, not {number}"))
+        })?;
         let index = input.options.get("index").and_then(serde_json::Value::as_i64).unwrap_or(0);
         for p in &para1 {
             let splits: Vec<&str> = p.text.split('\t').collect();
@@ -164,16 +173,25 @@ pub(super) fn check_tabstops(input: &MetricInput) -> Result<f64, MetricError> {
             }
         }
     }
-    let section = doc2.sections.first().ok_or_else(|| MetricError::BadInput("the expected document has no section".into()))?;
+    let section =
+        doc2.sections.first().ok_or_else(|| MetricError::BadInput("the expected document has no section".into()))?;
     let width = match (section.page_width, section.left_margin, section.right_margin) {
         (Some(w), Some(l), Some(r)) if w - l - r != 0 => (w - l - r) as f64,
-        _ => return Err(MetricError::BadInput("the expected document's first section has no usable page width and margins".into())),
+        _ => {
+            return Err(MetricError::BadInput(
+                "the expected document's first section has no usable page width and margins".into(),
+            ))
+        }
     };
     if para1.is_empty() {
         return Err(MetricError::BadInput("no non-blank paragraphs to compare (upstream divides by zero)".into()));
     }
     let kept = |p: &Paragraph| {
-        p.tab_stops.iter().filter(|t| !(t.alignment == "clear" || (t.alignment == "left" && t.position == 0))).cloned().collect::<Vec<_>>()
+        p.tab_stops
+            .iter()
+            .filter(|t| !(t.alignment == "clear" || (t.alignment == "left" && t.position == 0)))
+            .cloned()
+            .collect::<Vec<_>>()
     };
     let mut minus = 0.0;
     for (p1, p2) in para1.iter().zip(&para2) {
@@ -210,7 +228,11 @@ pub(super) fn compare_docx_tables(input: &MetricInput) -> Result<f64, MetricErro
                 match (t1.cell(i, j), t2.cell(i, j)) {
                     (Some(a), Some(b)) if a.trim() == b.trim() => {}
                     (Some(_), Some(_)) => return Ok(0.0),
-                    _ => return Err(MetricError::BadInput(format!("table cell ({i}, {j}) is outside the table's cell grid"))),
+                    _ => {
+                        return Err(MetricError::BadInput(format!(
+                            "table cell ({i}, {j}) is outside the table's cell grid"
+                        )))
+                    }
                 }
             }
         }
@@ -243,7 +265,9 @@ pub(super) fn check_italic_font_size_14(input: &MetricInput) -> Result<f64, Metr
         return Ok(0.0);
     }
     let doc = Document::open(result)?;
-    Ok(score(doc.paragraphs.iter().flat_map(|p| &p.runs).filter(|r| r.italic == Some(true)).all(|r| r.size == Some(14.0))))
+    Ok(score(
+        doc.paragraphs.iter().flat_map(|p| &p.runs).filter(|r| r.italic == Some(true)).all(|r| r.size == Some(14.0)),
+    ))
 }
 
 /// `find_default_font(config, rules)`: Writer's default font (the last
@@ -253,7 +277,8 @@ pub(super) fn find_default_font(input: &MetricInput) -> Result<f64, MetricError>
     let expected = font_rule(input)?;
     let Some(path) = single(input)? else { return Ok(0.0) };
     let text = read_text(path)?;
-    let xml = parse_xml(&text).map_err(|err| MetricError::Parse { what: path.display().to_string(), message: err.to_string() })?;
+    let xml = parse_xml(&text)
+        .map_err(|err| MetricError::Parse { what: path.display().to_string(), message: err.to_string() })?;
     let mut found: Option<String> = None;
     for item in xml.descendants().filter(|n| n.has_tag_name("item")) {
         if attr(item, "path") != Some("/org.openoffice.Office.Writer/DefaultFont") {
@@ -309,11 +334,9 @@ pub(super) fn compare_highlighted_text(input: &MetricInput) -> Result<f64, Metri
 pub(super) fn compare_subscript_contains(input: &MetricInput) -> Result<f64, MetricError> {
     let Some((result, expected)) = pair(input)? else { return Ok(0.0) };
     let (doc1, doc2) = (Document::open(result)?, Document::open(expected)?);
-    let found = doc1
-        .paragraphs
-        .iter()
-        .zip(&doc2.paragraphs)
-        .any(|(p1, p2)| p1.runs.iter().zip(&p2.runs).any(|(r1, r2)| r1.subscript == Some(true) && r2.subscript == Some(true)));
+    let found = doc1.paragraphs.iter().zip(&doc2.paragraphs).any(|(p1, p2)| {
+        p1.runs.iter().zip(&p2.runs).any(|(r1, r2)| r1.subscript == Some(true) && r2.subscript == Some(true))
+    });
     Ok(score(found))
 }
 
@@ -363,7 +386,9 @@ fn odt_paragraphs(path: &Path) -> Result<Vec<String>, MetricError> {
     for part in ["styles.xml", "content.xml"] {
         let Some(text) = pkg.part(part)? else { continue };
         let xml = parse_xml(&text).map_err(|err| pkg.error(format!("{part}: {err}")))?;
-        for p in descendants(xml.root_element(), "p").filter(|n| n.tag_name().namespace().is_some_and(|ns| ns.contains(":text:"))) {
+        for p in descendants(xml.root_element(), "p")
+            .filter(|n| n.tag_name().namespace().is_some_and(|ns| ns.contains(":text:")))
+        {
             out.push(odt_paragraph_text(p));
         }
     }

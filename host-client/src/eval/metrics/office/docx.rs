@@ -223,8 +223,10 @@ fn table(tbl: Node<'_, '_>) -> Table {
     for tr in &rows {
         for tc in children(*tr, "tc") {
             let tcpr = child(tc, "tcPr");
-            let span = tcpr.and_then(|p| child_val(p, "gridSpan")).and_then(|v| v.parse::<usize>().ok()).unwrap_or(1).max(1);
-            let continued = tcpr.and_then(|p| child(p, "vMerge")).is_some_and(|m| attr(m, "val").is_none_or(|v| v == "continue"));
+            let span =
+                tcpr.and_then(|p| child_val(p, "gridSpan")).and_then(|v| v.parse::<usize>().ok()).unwrap_or(1).max(1);
+            let continued =
+                tcpr.and_then(|p| child(p, "vMerge")).is_some_and(|m| attr(m, "val").is_none_or(|v| v == "continue"));
             let text = children(tc, "p").map(|p| paragraph_text(p, false)).collect::<Vec<_>>().join("\n");
             for i in 0..span {
                 let value = if continued && columns > 0 && cells.len() >= columns {

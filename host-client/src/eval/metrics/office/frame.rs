@@ -250,7 +250,9 @@ fn infer_column(values: Vec<PyObj>) -> Column {
     if let Some(bools) = values.iter().map(bool_of).collect::<Option<Vec<bool>>>() {
         return Column::Bool(bools);
     }
-    if values.iter().all(|v| matches!(v, PyObj::Date(_) | PyObj::NaN)) && values.iter().any(|v| matches!(v, PyObj::Date(_))) {
+    if values.iter().all(|v| matches!(v, PyObj::Date(_) | PyObj::NaN))
+        && values.iter().any(|v| matches!(v, PyObj::Date(_)))
+    {
         // WAA converts datetime columns to whole days since 1899-12-30; NaT makes the column float.
         if values.iter().any(|v| matches!(v, PyObj::NaN)) {
             return Column::Float(
@@ -307,7 +309,10 @@ mod tests {
             vec![Value::Empty, Value::Empty, Value::Empty, Value::Empty],
         ];
         let frame = Frame::from_grid(&grid);
-        assert_eq!(frame.labels, vec![PyObj::Str("a".into()), PyObj::Str("Unnamed: 1".into()), PyObj::Str("a.1".into())]);
+        assert_eq!(
+            frame.labels,
+            vec![PyObj::Str("a".into()), PyObj::Str("Unnamed: 1".into()), PyObj::Str("a.1".into())]
+        );
         assert_eq!(frame.rows, 1);
         assert_eq!(frame.columns[0], Column::Int(vec![1]));
     }

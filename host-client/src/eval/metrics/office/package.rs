@@ -46,10 +46,7 @@ impl Rels {
 
     /// The targets whose type URI ends with `/{kind}` (e.g. `drawing`, `pivotTable`), in order.
     pub(super) fn of_kind<'a>(&'a self, kind: &'a str) -> impl Iterator<Item = &'a str> + 'a {
-        self.0
-            .iter()
-            .filter(move |rel| rel.kind.rsplit('/').next() == Some(kind))
-            .map(|rel| rel.target.as_str())
+        self.0.iter().filter(move |rel| rel.kind.rsplit('/').next() == Some(kind)).map(|rel| rel.target.as_str())
     }
 }
 
@@ -83,13 +80,18 @@ impl Package {
         let entry = match self.archive.by_name(name) {
             Ok(entry) => entry,
             Err(zip::result::ZipError::FileNotFound) => return Ok(None),
-            Err(err) => return Err(MetricError::Parse { what: self.path.display().to_string(), message: format!("{name}: {err}") }),
+            Err(err) => {
+                return Err(MetricError::Parse {
+                    what: self.path.display().to_string(),
+                    message: format!("{name}: {err}"),
+                })
+            }
         };
         let mut bytes = Vec::new();
-        entry
-            .take(MAX_PART_BYTES)
-            .read_to_end(&mut bytes)
-            .map_err(|err| MetricError::Parse { what: self.path.display().to_string(), message: format!("{name}: {err}") })?;
+        entry.take(MAX_PART_BYTES).read_to_end(&mut bytes).map_err(|err| MetricError::Parse {
+            what: self.path.display().to_string(),
+            message: format!("{name}: {err}"),
+        })?;
         String::from_utf8(bytes).map(Some).map_err(|err| self.error(format!("{name} is not UTF-8: {err}")))
     }
 
@@ -148,7 +150,13 @@ pub(super) fn parse_xml(text: &str) -> Result<roxmltree::Document<'_>, roxmltree
 
 /// Resolves a relationship target against the folder of its source part.
 fn resolve(dir: &str, target: &str) -> String {
-    let joined = if let Some(absolute) = target.strip_prefix('/') { absolute.to_owned() } else if dir.is_empty() { target.to_owned() } else { format!("{dir}/{target}") };
+    let joined = if let Some(absolute) = target.strip_prefix('/') {
+        absolute.to_owned()
+    } else if dir.is_empty() {
+        target.to_owned()
+    } else {
+        format!("{dir}/{target}")
+    };
     let mut parts: Vec<&str> = Vec::new();
     for piece in joined.split('/') {
         match piece {

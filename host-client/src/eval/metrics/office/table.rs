@@ -10,8 +10,8 @@
 //! `formulas` package, which this build does not reproduce, so such a sheet
 //! is reported as an error rather than scored on a guess.
 
-use std::collections::{BTreeMap, BTreeSet};
 use serde_json::{json, Map, Value as J};
+use std::collections::{BTreeMap, BTreeSet};
 
 use super::frame::Frame;
 use super::xlsx::{parse_coordinate, Sheet, Value, Workbook};
@@ -40,9 +40,10 @@ impl Books {
     fn book(&mut self, side: Side) -> Result<&mut Workbook, MetricError> {
         match side {
             Side::Result => Ok(&mut self.result),
-            Side::Expected => {
-                self.expected.as_mut().ok_or_else(|| MetricError::BadInput("the rule names the expected workbook, but there is none".into()))
-            }
+            Side::Expected => self
+                .expected
+                .as_mut()
+                .ok_or_else(|| MetricError::BadInput("the rule names the expected workbook, but there is none".into())),
         }
     }
 
@@ -58,16 +59,22 @@ impl Books {
         };
         match idx {
             J::Number(n) => {
-                let i = n.as_i64().ok_or_else(|| MetricError::BadInput(format!("sheet index {n} is not an integer")))?;
+                let i =
+                    n.as_i64().ok_or_else(|| MetricError::BadInput(format!("sheet index {n} is not an integer")))?;
                 Ok((Side::Result, by_index(Some(&self.result_names), i)))
             }
             J::String(s) => {
                 let (prefix, rest) = (s.get(..2).unwrap_or_default(), s.get(2..).unwrap_or_default());
                 let index = || rest.parse::<i64>().ok();
                 match prefix {
-                    "RI" => Ok((Side::Result, index().map(|i| by_index(Some(&self.result_names), i)).unwrap_or_default())),
+                    "RI" => {
+                        Ok((Side::Result, index().map(|i| by_index(Some(&self.result_names), i)).unwrap_or_default()))
+                    }
                     "RN" => Ok((Side::Result, rest.to_owned())),
-                    "EI" => Ok((Side::Expected, index().map(|i| by_index(self.expected_names.as_ref(), i)).unwrap_or_default())),
+                    "EI" => Ok((
+                        Side::Expected,
+                        index().map(|i| by_index(self.expected_names.as_ref(), i)).unwrap_or_default(),
+                    )),
                     "EN" => Ok((Side::Expected, rest.to_owned())),
                     _ => Err(MetricError::BadInput(format!("unrecognized sheet index {s:?}"))),
                 }
@@ -137,7 +144,8 @@ fn idx<'a>(rule: &'a Map<String, J>, key: &str) -> Result<&'a J, MetricError> {
 /// `None` when the first sheet is missing (upstream scores 0).
 fn sheet_data(books: &mut Books, rule: &Map<String, J>) -> Result<Option<bool>, MetricError> {
     let precision = rule.get("precision").and_then(J::as_i64).unwrap_or(4);
-    let precision = i32::try_from(precision).map_err(|_| MetricError::BadInput(format!("precision {precision} is out of range")))?;
+    let precision = i32::try_from(precision)
+        .map_err(|_| MetricError::BadInput(format!("precision {precision} is out of range")))?;
     let (side0, _, first) = books.sheet(idx(rule, "sheet_idx0")?)?;
     let Some(first) = first else { return Ok(None) };
     let mut frame0 = frame_of(books.book(side0)?, &first);
@@ -188,8 +196,13 @@ fn cell_style(book: &Workbook, sheet: &Sheet, coord: (u32, u32), prop: &str) -> 
     let opt = |v: Option<J>| v.unwrap_or(J::Null);
     let value = match prop {
         "number_format" => {
-            let numeric = cell.is_some_and(|c| !c.has_formula && c.v.is_some() && matches!(c.kind.as_deref(), None | Some("n")));
-            if numeric { J::String(styles.number_format(style)) } else { J::Null }
+            let numeric =
+                cell.is_some_and(|c| !c.has_formula && c.v.is_some() && matches!(c.kind.as_deref(), None | Some("n")));
+            if numeric {
+                J::String(styles.number_format(style))
+            } else {
+                J::Null
+            }
         }
         "font_name" if has_value => opt(font().name.map(J::String)),
         "font_family" if has_value => opt(font().family.map(J::from)),
@@ -198,7 +211,9 @@ fn cell_style(book: &Workbook, sheet: &Sheet, coord: (u32, u32), prop: &str) -> 
         "font_italic" if has_value => opt(font().italic.map(J::Bool)),
         "font_underline" if has_value => opt(font().underline.map(J::String)),
         "font_size" if has_value => opt(font().size.map(J::from)),
-        "font_name" | "font_family" | "font_color" | "font_bold" | "font_italic" | "font_underline" | "font_size" => J::Null,
+        "font_name" | "font_family" | "font_color" | "font_bold" | "font_italic" | "font_underline" | "font_size" => {
+            J::Null
+        }
         "fill_type" => J::String(styles.fill(style).tag),
         "bgcolor" => opt(styles.fill(style).bg.map(J::String)),
         "fgcolor" => opt(styles.fill(style).fg.map(J::String)),
@@ -227,7 +242,9 @@ fn sheet_styles(book: &Workbook, sheet: &Sheet, props: &[String]) -> Result<BTre
         cols = cols.max(c2);
     }
     if u64::from(rows) * u64::from(cols) > MAX_STYLE_CELLS {
-        return Err(MetricError::BadInput(format!("the sheet's used range ({rows} rows x {cols} columns) is too large to compare styles")));
+        return Err(MetricError::BadInput(format!(
+            "the sheet's used range ({rows} rows x {cols} columns) is too large to compare styles"
+        )));
     }
     let mut out = BTreeMap::new();
     for col in 1..=cols {
@@ -240,7 +257,10 @@ fn sheet_styles(book: &Workbook, sheet: &Sheet, props: &[String]) -> Result<BTre
 }
 
 fn string_list(rule: &Map<String, J>, key: &str) -> Vec<String> {
-    rule.get(key).and_then(J::as_array).map(|a| a.iter().filter_map(J::as_str).map(str::to_owned).collect()).unwrap_or_default()
+    rule.get(key)
+        .and_then(J::as_array)
+        .map(|a| a.iter().filter_map(J::as_str).map(str::to_owned).collect())
+        .unwrap_or_default()
 }
 
 /// `style`: the style dicts of both sheets are equal (a missing sheet gives an empty dict).
@@ -256,7 +276,10 @@ fn style(books: &mut Books, rule: &Map<String, J>) -> Result<bool, MetricError> 
         dicts.push(dict);
     }
     Ok(dicts[0].len() == dicts[1].len()
-        && dicts[0].iter().zip(&dicts[1]).all(|((ka, va), (kb, vb))| ka == kb && va.iter().zip(vb).all(|(a, b)| py_eq(a, b))))
+        && dicts[0]
+            .iter()
+            .zip(&dicts[1])
+            .all(|((ka, va), (kb, vb))| ka == kb && va.iter().zip(vb).all(|(a, b)| py_eq(a, b))))
 }
 
 /// `check_cell`: each prop of one cell matches its `{method, ref}` rule.
@@ -264,14 +287,19 @@ fn check_cell(books: &mut Books, rule: &Map<String, J>) -> Result<Option<bool>, 
     let (side, _, sheet) = books.sheet(idx(rule, "sheet_idx")?)?;
     let Some(sheet) = sheet else { return Ok(None) };
     let coordinate = idx(rule, "coordinate")?.as_str().unwrap_or_default();
-    let coord = parse_coordinate(coordinate).ok_or_else(|| MetricError::BadInput(format!("bad coordinate {coordinate:?}")))?;
+    let coord =
+        parse_coordinate(coordinate).ok_or_else(|| MetricError::BadInput(format!("bad coordinate {coordinate:?}")))?;
     let props = match idx(rule, "props")? {
         J::Object(props) => props,
         other => return Err(MetricError::BadInput(format!("check_cell props must be a dict, not {other}"))),
     };
     let book = books.book(side)?;
     for (prop, matcher) in props {
-        let value = if prop == "value" { book.raw_value(sheet.cells.get(&coord)) } else { cell_style(book, &sheet, coord, prop)? };
+        let value = if prop == "value" {
+            book.raw_value(sheet.cells.get(&coord))
+        } else {
+            cell_style(book, &sheet, coord, prop)?
+        };
         if !match_value_to_rule(&value, matcher)? {
             return Ok(Some(false));
         }
@@ -303,7 +331,8 @@ pub(super) fn match_value_to_rule(value: &J, rule: &J) -> Result<bool, MetricErr
         "ge" => Ok(order(value, reference)? != Less),
         m if m.starts_with("approx:") => {
             let threshold: f64 = m[7..].parse().map_err(|_| MetricError::BadInput(format!("bad method {m}")))?;
-            let wanted = number(reference).ok_or_else(|| MetricError::BadInput(format!("approx needs a numeric ref, not {reference}")))?;
+            let wanted = number(reference)
+                .ok_or_else(|| MetricError::BadInput(format!("approx needs a numeric ref, not {reference}")))?;
             let got = match value {
                 J::String(s) => s.trim().parse::<f64>().ok(),
                 other => number(other),
@@ -311,7 +340,10 @@ pub(super) fn match_value_to_rule(value: &J, rule: &J) -> Result<bool, MetricErr
             Ok(got.is_some_and(|g| (g - wanted).abs() <= threshold))
         }
         m if m.starts_with("range.") && m.len() == 8 => {
-            let bounds = reference.as_array().filter(|a| a.len() == 2).ok_or_else(|| MetricError::BadInput("range needs a [low, high] ref".into()))?;
+            let bounds = reference
+                .as_array()
+                .filter(|a| a.len() == 2)
+                .ok_or_else(|| MetricError::BadInput("range needs a [low, high] ref".into()))?;
             let (left, right) = (&m[6..7], &m[7..8]);
             let low = order(&bounds[0], value)?;
             let high = order(value, &bounds[1])?;
@@ -321,7 +353,8 @@ pub(super) fn match_value_to_rule(value: &J, rule: &J) -> Result<bool, MetricErr
         "str_list_eq" | "str_set_eq" => {
             let text = value.as_str().unwrap_or_default().trim_matches(|c| c == '"' || c == '\'');
             let items: Vec<&str> = text.split(',').collect();
-            let refs: Vec<&str> = reference.as_array().map(|a| a.iter().filter_map(J::as_str).collect()).unwrap_or_default();
+            let refs: Vec<&str> =
+                reference.as_array().map(|a| a.iter().filter_map(J::as_str).collect()).unwrap_or_default();
             if method == "str_list_eq" {
                 Ok(items == refs)
             } else {
@@ -374,18 +407,19 @@ fn pivots(books: &mut Books, rule: &Map<String, J>, key: &str) -> Result<BTreeMa
         let right = rest.iter().rev().take_while(|f| f.is_empty()).count();
         let selection = &rest[..rest.len() - right];
         let source_ref = pvt.source_ref.clone().unwrap_or_default();
-        let source = match source_ref.split_once(':').and_then(|(a, b)| Some((parse_coordinate(a)?, parse_coordinate(b)?))) {
-            Some(((r1, c1), (r2, c2))) => format!(
-                "{};({}, {}):({}, {});{}",
-                pvt.source_type,
-                r1,
-                i64::from(c1) + left as i64,
-                r2,
-                i64::from(c2) - right as i64,
-                pvt.source_sheet.clone().unwrap_or_else(|| "None".into())
-            ),
-            None => format!("{};{};{}", pvt.source_type, source_ref, pvt.source_sheet.clone().unwrap_or_default()),
-        };
+        let source =
+            match source_ref.split_once(':').and_then(|(a, b)| Some((parse_coordinate(a)?, parse_coordinate(b)?))) {
+                Some(((r1, c1), (r2, c2))) => format!(
+                    "{};({}, {}):({}, {});{}",
+                    pvt.source_type,
+                    r1,
+                    i64::from(c1) + left as i64,
+                    r2,
+                    i64::from(c2) - right as i64,
+                    pvt.source_sheet.clone().unwrap_or_else(|| "None".into())
+                ),
+                None => format!("{};{};{}", pvt.source_type, source_ref, pvt.source_sheet.clone().unwrap_or_default()),
+            };
         let bias = left as i64;
         let mut info = Map::new();
         if props.contains("name") {
@@ -407,7 +441,8 @@ fn pivots(books: &mut Books, rule: &Map<String, J>, key: &str) -> Result<BTreeMa
             info.insert("location".into(), json!(pvt.location));
         }
         if props.contains("filter") || props.contains("selection") {
-            let encode = |items: &[(Option<bool>, i64)]| -> Vec<J> { items.iter().map(|(h, x)| json!([h, x])).collect() };
+            let encode =
+                |items: &[(Option<bool>, i64)]| -> Vec<J> { items.iter().map(|(h, x)| json!([h, x])).collect() };
             let value: Vec<J> = if props.contains("ordered") {
                 selection.iter().map(|f| J::Array(encode(f))).collect()
             } else {

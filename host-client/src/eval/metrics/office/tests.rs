@@ -7,8 +7,8 @@ use std::io::Write;
 use std::path::Path;
 
 use rust_xlsxwriter::{
-    Chart, ChartLegendPosition, ChartType, ConditionalFormatCell, ConditionalFormatCellRule, Format, FormatPattern, Formula,
-    Workbook as XlsxBook,
+    Chart, ChartLegendPosition, ChartType, ConditionalFormatCell, ConditionalFormatCellRule, Format, FormatPattern,
+    Formula, Workbook as XlsxBook,
 };
 use serde_json::{json, Map, Value};
 
@@ -32,7 +32,9 @@ fn check(metric: &str, result: Fetched, expected: Option<Fetched>, options: Valu
     let input = MetricInput { result, expected, options, last_action: None };
     let got = f(&input);
     match (&got, &want) {
-        (Ok(score), Score(expected)) => assert!((score - expected).abs() < 1e-9, "{metric}: got {score}, want {expected} on {input:?}"),
+        (Ok(score), Score(expected)) => {
+            assert!((score - expected).abs() < 1e-9, "{metric}: got {score}, want {expected} on {input:?}")
+        }
         (Err(err), Error(text)) => assert!(err.to_string().contains(text), "{metric}: error {err} lacks {text:?}"),
         _ => panic!("{metric} on {input:?}: got {got:?}, want {want:?}"),
     }
@@ -87,7 +89,11 @@ fn styled_book(dir: &Path, name: &str, fill: u32, font: u32, bold: bool) -> Fetc
     let mut book = XlsxBook::new();
     let sheet = book.add_worksheet();
     sheet.set_name("Profile").unwrap();
-    let mut format = Format::new().set_pattern(FormatPattern::Solid).set_background_color(fill).set_foreground_color(fill).set_font_color(font);
+    let mut format = Format::new()
+        .set_pattern(FormatPattern::Solid)
+        .set_background_color(fill)
+        .set_foreground_color(fill)
+        .set_font_color(font);
     if bold {
         format = format.set_bold();
     }
@@ -134,9 +140,17 @@ const PKG_REL_NS: &str = "http://schemas.openxmlformats.org/package/2006/relatio
 
 /// A workbook whose Sheet2 holds a pivot table over Sheet1!A1:C20, built from parts.
 fn pivot_book(dir: &Path, name: &str, row_field: i64, data_field: i64) -> Fetched {
-    let rel = |id: &str, kind: &str, target: &str| format!(r#"<Relationship Id="{id}" Type="{REL_NS}/{kind}" Target="{target}"/>"#);
+    let rel = |id: &str, kind: &str, target: &str| {
+        format!(r#"<Relationship Id="{id}" Type="{REL_NS}/{kind}" Target="{target}"/>"#)
+    };
     let parts = [
-        ("_rels/.rels", format!(r#"<Relationships xmlns="{PKG_REL_NS}">{}</Relationships>"#, rel("rId1", "officeDocument", "xl/workbook.xml"))),
+        (
+            "_rels/.rels",
+            format!(
+                r#"<Relationships xmlns="{PKG_REL_NS}">{}</Relationships>"#,
+                rel("rId1", "officeDocument", "xl/workbook.xml")
+            ),
+        ),
         (
             "xl/workbook.xml",
             format!(
@@ -156,7 +170,10 @@ fn pivot_book(dir: &Path, name: &str, row_field: i64, data_field: i64) -> Fetche
         ("xl/worksheets/sheet2.xml", format!(r#"<worksheet xmlns="{MAIN_NS}"><sheetData/></worksheet>"#)),
         (
             "xl/worksheets/_rels/sheet2.xml.rels",
-            format!(r#"<Relationships xmlns="{PKG_REL_NS}">{}</Relationships>"#, rel("rId1", "pivotTable", "../pivotTables/pivotTable1.xml")),
+            format!(
+                r#"<Relationships xmlns="{PKG_REL_NS}">{}</Relationships>"#,
+                rel("rId1", "pivotTable", "../pivotTables/pivotTable1.xml")
+            ),
         ),
         (
             "xl/pivotTables/pivotTable1.xml",
@@ -166,7 +183,9 @@ fn pivot_book(dir: &Path, name: &str, row_field: i64, data_field: i64) -> Fetche
         ),
         (
             "xl/pivotCache/pivotCacheDefinition1.xml",
-            format!(r#"<pivotCacheDefinition xmlns="{MAIN_NS}"><cacheSource type="worksheet"><worksheetSource ref="A1:C20" sheet="Sheet1"/></cacheSource></pivotCacheDefinition>"#),
+            format!(
+                r#"<pivotCacheDefinition xmlns="{MAIN_NS}"><cacheSource type="worksheet"><worksheetSource ref="A1:C20" sheet="Sheet1"/></cacheSource></pivotCacheDefinition>"#
+            ),
         ),
     ];
     zip_file(dir, name, &parts)
@@ -189,12 +208,37 @@ fn compare_table_sheet_data_follows_pandas() {
         (as_float.clone(), gold.clone(), first.clone(), Score(0.0)),
         // Two float columns equal after rounding to 4 decimals.
         (near.clone(), as_float.clone(), first.clone(), Score(1.0)),
-        (near.clone(), as_float.clone(), json!({"rules": [{"type": "sheet_data", "sheet_idx0": 0, "sheet_idx1": "EI0", "precision": 6}]}), Score(0.0)),
-        (gold.clone(), gold.clone(), json!({"rules": [{"type": "sheet_data", "sheet_idx0": "RNSheet1", "sheet_idx1": "ENSheet1"}]}), Score(1.0)),
+        (
+            near.clone(),
+            as_float.clone(),
+            json!({"rules": [{"type": "sheet_data", "sheet_idx0": 0, "sheet_idx1": "EI0", "precision": 6}]}),
+            Score(0.0),
+        ),
+        (
+            gold.clone(),
+            gold.clone(),
+            json!({"rules": [{"type": "sheet_data", "sheet_idx0": "RNSheet1", "sheet_idx1": "ENSheet1"}]}),
+            Score(1.0),
+        ),
         // A result sheet that does not exist scores 0.
-        (gold.clone(), gold.clone(), json!({"rules": [{"type": "sheet_data", "sheet_idx0": "RNSheet2", "sheet_idx1": "ENSheet1"}]}), Score(0.0)),
-        (gold.clone(), gold.clone(), json!({"rules": [{"type": "sheet_data", "sheet_idx0": "RNSheet1", "sheet_idx1": "ENSheet9"}]}), Error("no sheet")),
-        (gold.clone(), gold.clone(), json!({"rules": [{"type": "sheet_data", "sheet_idx0": "XX0", "sheet_idx1": "EI0"}]}), Error("unrecognized sheet index")),
+        (
+            gold.clone(),
+            gold.clone(),
+            json!({"rules": [{"type": "sheet_data", "sheet_idx0": "RNSheet2", "sheet_idx1": "ENSheet1"}]}),
+            Score(0.0),
+        ),
+        (
+            gold.clone(),
+            gold.clone(),
+            json!({"rules": [{"type": "sheet_data", "sheet_idx0": "RNSheet1", "sheet_idx1": "ENSheet9"}]}),
+            Error("no sheet"),
+        ),
+        (
+            gold.clone(),
+            gold.clone(),
+            json!({"rules": [{"type": "sheet_data", "sheet_idx0": "XX0", "sheet_idx1": "EI0"}]}),
+            Error("unrecognized sheet index"),
+        ),
         (gold.clone(), gold.clone(), json!({"rules": [{"type": "sparkle"}]}), Error("unimplemented sheet check")),
         (gold.clone(), gold.clone(), json!({"rules": [{"type": "sheet_name"}]}), Score(1.0)),
     ];
@@ -221,17 +265,38 @@ fn compare_table_sheet_names_styles_and_cells() {
             "font_bold": {"method": "eq", "ref": bold},
             "value": {"method": "eq", "ref": "Demographic Profile"}}}]})
     };
-    let style = |props: Value| json!({"rules": [{"type": "style", "sheet_idx0": 0, "sheet_idx1": "EI0", "props": props}]});
+    let style =
+        |props: Value| json!({"rules": [{"type": "style", "sheet_idx0": 0, "sheet_idx1": "EI0", "props": props}]});
     let cases = [
         (blue.clone(), Some(blue_again.clone()), json!({"rules": [{"type": "sheet_name"}]}), Score(1.0)),
         (plain.clone(), Some(blue_again.clone()), json!({"rules": [{"type": "sheet_name"}]}), Score(0.0)),
         (blue.clone(), None, cell(true), Score(1.0)),
         (blue.clone(), None, cell(false), Score(0.0)),
         (red.clone(), None, cell(true), Score(0.0)),
-        (blue.clone(), None, json!({"rules": [{"type": "check_cell", "sheet_idx": "RNMissing", "coordinate": "A1", "props": {}}]}), Score(0.0)),
-        (blue.clone(), None, json!({"rules": [{"type": "check_cell", "sheet_idx": 0, "coordinate": "B2", "props": {"value": {"method": "approx:0.1", "ref": 7.05}}}]}), Score(0.0)),
-        (blue.clone(), None, json!({"rules": [{"type": "check_cell", "sheet_idx": 0, "coordinate": "A2", "props": {"value": {"method": "approx:0.1", "ref": 7.05}}}]}), Score(1.0)),
-        (blue.clone(), None, json!({"rules": [{"type": "check_cell", "sheet_idx": 0, "coordinate": "A1", "props": {"value": {"method": "re", "ref": "x"}}}]}), Error("unsupported match method")),
+        (
+            blue.clone(),
+            None,
+            json!({"rules": [{"type": "check_cell", "sheet_idx": "RNMissing", "coordinate": "A1", "props": {}}]}),
+            Score(0.0),
+        ),
+        (
+            blue.clone(),
+            None,
+            json!({"rules": [{"type": "check_cell", "sheet_idx": 0, "coordinate": "B2", "props": {"value": {"method": "approx:0.1", "ref": 7.05}}}]}),
+            Score(0.0),
+        ),
+        (
+            blue.clone(),
+            None,
+            json!({"rules": [{"type": "check_cell", "sheet_idx": 0, "coordinate": "A2", "props": {"value": {"method": "approx:0.1", "ref": 7.05}}}]}),
+            Score(1.0),
+        ),
+        (
+            blue.clone(),
+            None,
+            json!({"rules": [{"type": "check_cell", "sheet_idx": 0, "coordinate": "A1", "props": {"value": {"method": "re", "ref": "x"}}}]}),
+            Error("unsupported match method"),
+        ),
         (blue.clone(), Some(blue_again.clone()), style(json!(["bgcolor", "font_color"])), Score(1.0)),
         (red.clone(), Some(blue_again.clone()), style(json!(["bgcolor"])), Score(0.0)),
         // Only the fill differs, so a rule about fonts passes.
@@ -267,7 +332,12 @@ fn compare_table_charts_and_pivots() {
         (pivot_book(d, "p3.xlsx", 0, 2), pivot_book(d, "p4.xlsx", 0, 1), pivot.clone(), Score(0.0)),
         (pivot_book(d, "p5.xlsx", 1, 1), pivot_book(d, "p6.xlsx", 0, 1), pivot.clone(), Score(0.0)),
         // A sheet without pivots against one with a pivot.
-        (line.clone(), pivot_book(d, "p7.xlsx", 0, 1), json!({"rules": [{"type": "pivot_table", "sheet_idx0": 0, "sheet_idx1": "ENSheet2", "pivot_props": ["row_fields"]}]}), Score(0.0)),
+        (
+            line.clone(),
+            pivot_book(d, "p7.xlsx", 0, 1),
+            json!({"rules": [{"type": "pivot_table", "sheet_idx0": 0, "sheet_idx1": "ENSheet2", "pivot_props": ["row_fields"]}]}),
+            Score(0.0),
+        ),
     ];
     for (result, expected, options, want) in cases {
         check("compare_table", result, Some(expected), options, want);
@@ -294,10 +364,17 @@ fn docx(dir: &Path, name: &str, body: &str, footers: &[&str]) -> Fetched {
     let mut rels = String::new();
     let names: Vec<String> = (1..=footers.len()).map(|i| format!("word/footer{i}.xml")).collect();
     for (i, footer) in footers.iter().enumerate() {
-        rels.push_str(&format!(r#"<Relationship Id="rIdF{}" Type="{REL_NS}/footer" Target="footer{}.xml"/>"#, i + 1, i + 1));
+        rels.push_str(&format!(
+            r#"<Relationship Id="rIdF{}" Type="{REL_NS}/footer" Target="footer{}.xml"/>"#,
+            i + 1,
+            i + 1
+        ));
         parts.push((names[i].as_str(), format!(r#"<w:ftr xmlns:w="{W_NS}" xmlns:r="{REL_NS}">{footer}</w:ftr>"#)));
     }
-    parts.push(("word/_rels/document.xml.rels", format!(r#"<Relationships xmlns="{PKG_REL_NS}">{rels}</Relationships>"#)));
+    parts.push((
+        "word/_rels/document.xml.rels",
+        format!(r#"<Relationships xmlns="{PKG_REL_NS}">{rels}</Relationships>"#),
+    ));
     zip_file(dir, name, &parts)
 }
 
@@ -314,8 +391,11 @@ fn plain(text: &str) -> String {
 }
 
 fn sect(footer: Option<&str>) -> String {
-    let reference = footer.map(|id| format!(r#"<w:footerReference w:type="default" r:id="{id}"/>"#)).unwrap_or_default();
-    format!(r#"<w:sectPr>{reference}<w:pgSz w:w="12240" w:h="15840"/><w:pgMar w:left="1440" w:right="1440" w:top="1440" w:bottom="1440"/></w:sectPr>"#)
+    let reference =
+        footer.map(|id| format!(r#"<w:footerReference w:type="default" r:id="{id}"/>"#)).unwrap_or_default();
+    format!(
+        r#"<w:sectPr>{reference}<w:pgSz w:w="12240" w:h="15840"/><w:pgMar w:left="1440" w:right="1440" w:top="1440" w:bottom="1440"/></w:sectPr>"#
+    )
 }
 
 #[test]
@@ -356,7 +436,8 @@ fn compare_docx_files_compares_paragraph_text() {
 fn line_spacing_fonts_italics_strike_and_centering() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
-    let spacing = |line: u32| para(&format!(r#"<w:spacing w:line="{line}" w:lineRule="auto"/>"#), &[run("", "Body text")]);
+    let spacing =
+        |line: u32| para(&format!(r#"<w:spacing w:line="{line}" w:lineRule="auto"/>"#), &[run("", "Body text")]);
     let double = docx(d, "double.docx", &(spacing(480) + &plain("tail")), &[]);
     let double_again = docx(d, "double2.docx", &(spacing(480) + &plain("tail")), &[]);
     let single = docx(d, "single.docx", &(spacing(240) + &plain("tail")), &[]);
@@ -364,14 +445,20 @@ fn line_spacing_fonts_italics_strike_and_centering() {
     check("compare_line_spacing", single.clone(), Some(double_again.clone()), json!({}), Score(0.0));
 
     let font = |name: &str| format!(r#"<w:rFonts w:ascii="{name}" w:hAnsi="{name}"/>"#);
-    let times = docx(d, "times.docx", &para("", &[run(&font("Times New Roman"), "a"), run(&font("Times New Roman"), "b")]), &[]);
+    let times = docx(
+        d,
+        "times.docx",
+        &para("", &[run(&font("Times New Roman"), "a"), run(&font("Times New Roman"), "b")]),
+        &[],
+    );
     let mixed = docx(d, "mixed.docx", &para("", &[run(&font("Times New Roman"), "a"), run("", "b")]), &[]);
     let font_rule = rules(json!({"font_name": "Times New Roman"}));
     check("compare_font_names", times.clone(), font_rule.clone(), json!({}), Score(1.0));
     check("compare_font_names", mixed.clone(), font_rule.clone(), json!({}), Score(0.0));
     check("compare_font_names", times.clone(), rules(json!({"other": 1})), json!({}), Error("font_name"));
 
-    let italic = |size: u32| para("", &[run("", "Plain "), run(&format!(r#"<w:i/><w:sz w:val="{size}"/>"#), "slanted")]);
+    let italic =
+        |size: u32| para("", &[run("", "Plain "), run(&format!(r#"<w:i/><w:sz w:val="{size}"/>"#), "slanted")]);
     let big = docx(d, "big.docx", &italic(28), &[]);
     let gold = docx(d, "gold.docx", &italic(24), &[]);
     let small = docx(d, "small.docx", &italic(24), &[]);
@@ -386,7 +473,8 @@ fn line_spacing_fonts_italics_strike_and_centering() {
     check("evaluate_strike_through_last_paragraph", all_struck, Some(strike_gold.clone()), json!({}), Score(1.0));
     check("evaluate_strike_through_last_paragraph", half, Some(strike_gold), json!({}), Score(0.0));
 
-    let centered = docx(d, "centered.docx", &(para(r#"<w:jc w:val="center"/>"#, &[run("", "Title")]) + &plain("body")), &[]);
+    let centered =
+        docx(d, "centered.docx", &(para(r#"<w:jc w:val="center"/>"#, &[run("", "Title")]) + &plain("body")), &[]);
     let left = docx(d, "left.docx", &(para(r#"<w:jc w:val="left"/>"#, &[run("", "Title")]) + &plain("body")), &[]);
     let empty = docx(d, "empty.docx", "", &[]);
     check("is_first_line_centered", centered, None, json!({}), Score(1.0));
@@ -399,7 +487,10 @@ fn tab_stops_tables_subscripts_highlights_and_footers() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
     let tabbed = |pos: u32, text: &str| {
-        para(&format!(r#"<w:tabs><w:tab w:val="right" w:pos="{pos}"/><w:tab w:val="left" w:pos="0"/></w:tabs>"#), &[run("", text)])
+        para(
+            &format!(r#"<w:tabs><w:tab w:val="right" w:pos="{pos}"/><w:tab w:val="left" w:pos="0"/></w:tabs>"#),
+            &[run("", text)],
+        )
     };
     let words = "One two three\tand the rest";
     let gold = docx(d, "tabs_gold.docx", &(tabbed(9360, words) + &sect(None)), &[]);
@@ -454,9 +545,15 @@ fn tab_stops_tables_subscripts_highlights_and_footers() {
 
     let page_field = r#"<w:p><w:r><w:t xml:space="preserve">Page </w:t></w:r><w:r><w:fldChar w:fldCharType="begin"/></w:r><w:r><w:instrText> PAGE </w:instrText></w:r><w:r><w:fldChar w:fldCharType="separate"/></w:r><w:r><w:t>1</w:t></w:r><w:r><w:fldChar w:fldCharType="end"/></w:r></w:p>"#;
     let simple_field = r#"<w:p><w:fldSimple w:instr="PAGE"><w:r><w:t>3</w:t></w:r></w:fldSimple></w:p>"#;
-    let numbered = docx(d, "numbered.docx", &(plain("one") + &para(&sect(Some("rIdF1")), &[]) + &plain("two") + &sect(None)), &[page_field]);
+    let numbered = docx(
+        d,
+        "numbered.docx",
+        &(plain("one") + &para(&sect(Some("rIdF1")), &[]) + &plain("two") + &sect(None)),
+        &[page_field],
+    );
     let simple = docx(d, "simple.docx", &(plain("one") + &sect(Some("rIdF1"))), &[simple_field]);
-    let unnumbered = docx(d, "unnumbered.docx", &(plain("one") + &sect(Some("rIdF1"))), &["<w:p><w:r><w:t>Draft</w:t></w:r></w:p>"]);
+    let unnumbered =
+        docx(d, "unnumbered.docx", &(plain("one") + &sect(Some("rIdF1"))), &["<w:p><w:r><w:t>Draft</w:t></w:r></w:p>"]);
     let no_footer = docx(d, "nofooter.docx", &(plain("one") + &sect(None)), &[]);
     check("has_page_numbers_in_footers", numbered, None, json!({}), Score(1.0));
     check("has_page_numbers_in_footers", simple, None, json!({}), Score(1.0));
@@ -510,8 +607,20 @@ fn highlighted_words_default_font_and_pdfs() {
         )
     };
     let want = rules(json!({"font_name": "Times New Roman"}));
-    check("find_default_font", raw_file(d, "a.xcu", xcu("Times New Roman").as_bytes()), want.clone(), json!({}), Score(1.0));
-    check("find_default_font", raw_file(d, "b.xcu", xcu("Liberation Serif").as_bytes()), want.clone(), json!({}), Score(0.0));
+    check(
+        "find_default_font",
+        raw_file(d, "a.xcu", xcu("Times New Roman").as_bytes()),
+        want.clone(),
+        json!({}),
+        Score(1.0),
+    );
+    check(
+        "find_default_font",
+        raw_file(d, "b.xcu", xcu("Liberation Serif").as_bytes()),
+        want.clone(),
+        json!({}),
+        Score(0.0),
+    );
     check("find_default_font", raw_file(d, "c.xcu", b"<oor:items"), want.clone(), json!({}), Error("c.xcu"));
     check("find_default_font", Fetched::None, want, json!({}), Score(0.0));
 
@@ -520,9 +629,17 @@ fn highlighted_words_default_font_and_pdfs() {
     let other = raw_file(d, "other.pdf", &pdf_bytes("Goodbye Moon"));
     check("compare_pdfs", hello.clone(), Some(hello_again.clone()), json!({}), Score(1.0));
     let f = lookup("compare_pdfs").unwrap();
-    let partial = f(&MetricInput { result: other, expected: Some(hello_again.clone()), options: Map::new(), last_action: None }).unwrap();
+    let partial =
+        f(&MetricInput { result: other, expected: Some(hello_again.clone()), options: Map::new(), last_action: None })
+            .unwrap();
     assert!(partial > 0.0 && partial < 0.8, "different PDFs scored {partial}");
-    check("compare_pdfs", raw_file(d, "bad.pdf", b"%PDF-1.4 nonsense"), Some(hello_again.clone()), json!({}), Error("bad.pdf"));
+    check(
+        "compare_pdfs",
+        raw_file(d, "bad.pdf", b"%PDF-1.4 nonsense"),
+        Some(hello_again.clone()),
+        json!({}),
+        Error("bad.pdf"),
+    );
     check("compare_pdfs", Fetched::None, Some(hello_again), json!({}), Score(0.0));
 }
 
@@ -547,7 +664,9 @@ fn pdf_bytes(text: &str) -> Vec<u8> {
     for offset in offsets {
         out.extend_from_slice(format!("{offset:010} 00000 n \n").as_bytes());
     }
-    out.extend_from_slice(format!("trailer\n<< /Size {} /Root 1 0 R >>\nstartxref\n{xref}\n%%EOF\n", objects.len() + 1).as_bytes());
+    out.extend_from_slice(
+        format!("trailer\n<< /Size {} /Root 1 0 R >>\nstartxref\n{xref}\n%%EOF\n", objects.len() + 1).as_bytes(),
+    );
     out
 }
 

@@ -180,10 +180,8 @@ impl Workbook {
             }
             Ok((sheets, caches))
         })?;
-        let pivot_caches = cache_ids
-            .into_iter()
-            .filter_map(|(id, rid)| book_rels.target(&rid).map(|t| (id, t.to_owned())))
-            .collect();
+        let pivot_caches =
+            cache_ids.into_iter().filter_map(|(id, rid)| book_rels.target(&rid).map(|t| (id, t.to_owned()))).collect();
         let shared_part = book_rels.of_kind("sharedStrings").next().unwrap_or("xl/sharedStrings.xml").to_owned();
         let shared = match pkg.part(&shared_part)? {
             Some(text) => {
@@ -271,10 +269,11 @@ impl Workbook {
             Some("inlineStr") => cell.inline.clone().or_else(|| cell.v.clone()).map_or(Value::Empty, Value::Text),
             Some("b") => cell.v.as_deref().map_or(Value::Empty, |v| Value::Bool(v.trim() == "1" || v.trim() == "true")),
             Some("e") => Value::Error,
-            Some("d") => cell.v.as_deref().and_then(iso_to_serial).map_or_else(
-                || cell.v.clone().map_or(Value::Empty, Value::Text),
-                Value::Date,
-            ),
+            Some("d") => cell
+                .v
+                .as_deref()
+                .and_then(iso_to_serial)
+                .map_or_else(|| cell.v.clone().map_or(Value::Empty, Value::Text), Value::Date),
             _ => match cell.v.as_deref().map(str::trim) {
                 None | Some("") => Value::Empty,
                 Some(v) => match v.parse::<f64>() {
@@ -370,7 +369,9 @@ impl Styles {
     fn parse(root: Node<'_, '_>) -> Styles {
         let mut styles = Styles::default();
         for fmt in child(root, "numFmts").into_iter().flat_map(|n| children(n, "numFmt")) {
-            if let (Some(id), Some(code)) = (attr(fmt, "numFmtId").and_then(|i| i.parse().ok()), attr(fmt, "formatCode")) {
+            if let (Some(id), Some(code)) =
+                (attr(fmt, "numFmtId").and_then(|i| i.parse().ok()), attr(fmt, "formatCode"))
+            {
                 styles.num_fmts.insert(id, code.to_owned());
             }
         }
@@ -473,7 +474,15 @@ fn parse_chart(space: Node<'_, '_>) -> Option<Chart> {
     let axis_title = |local: &str| {
         plot.children()
             .filter(|n| n.is_element() && n.tag_name().name().ends_with("Ax"))
-            .find(|ax| child_val(*ax, "axPos").is_some_and(|p| if local == "x" { p == "b" || p == "t" } else { p == "l" || p == "r" }))
+            .find(|ax| {
+                child_val(*ax, "axPos").is_some_and(|p| {
+                    if local == "x" {
+                        p == "b" || p == "t"
+                    } else {
+                        p == "l" || p == "r"
+                    }
+                })
+            })
             .and_then(|ax| child(ax, "title"))
             .and_then(rich_title)
     };
