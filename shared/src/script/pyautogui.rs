@@ -28,39 +28,9 @@ use super::value::{Object, Value};
 /// The most repetitions (`clicks`, `presses`) one call may ask for.
 const MAX_REPEAT: i64 = 1000;
 
-const FUNCTIONS: &[&str] = &[
-    "moveTo",
-    "moveRel",
-    "move",
-    "dragTo",
-    "dragRel",
-    "drag",
-    "click",
-    "leftClick",
-    "rightClick",
-    "middleClick",
-    "doubleClick",
-    "tripleClick",
-    "mouseDown",
-    "mouseUp",
-    "scroll",
-    "hscroll",
-    "vscroll",
-    "typewrite",
-    "write",
-    "press",
-    "keyDown",
-    "keyUp",
-    "hotkey",
-    "position",
-    "size",
-    "onScreen",
-    "screenshot",
-    "getActiveWindowTitle",
-    "getAllTitles",
-    "sleep",
-    "isValidKey",
-];
+/// Functions that only ask (or wait) and take no automatic pause.
+const QUERIES: &[&str] =
+    &["position", "size", "onScreen", "screenshot", "getActiveWindowTitle", "getAllTitles", "sleep", "isValidKey"];
 
 /// Functions that end with pyautogui's automatic pause.
 const PAUSED: &[&str] = &[
@@ -126,7 +96,7 @@ const EASINGS: &[&str] = &[
 
 /// `pyautogui.<name>`, or `None` when this interpreter does not provide it.
 pub(crate) fn attr(name: &str, out: &RunOutput) -> Option<Value> {
-    if let Some(f) = static_name(FUNCTIONS, name) {
+    if let Some(f) = static_name(PAUSED, name).or_else(|| static_name(QUERIES, name)) {
         return Some(Value::Function { module: "pyautogui", name: f });
     }
     if let Some(e) = static_name(EASINGS, name) {
