@@ -2,11 +2,20 @@
 
 use serde::{Deserialize, Serialize};
 
-/// Body of `POST /v1/exec`: run a program with an argument vector, no shell.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+use crate::cmdline::CommandSpec;
+
+/// Body of `POST /v1/exec`: run a program from an argument vector, or one command
+/// line through the guest's shell.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 pub struct ExecRequest {
     /// Program and arguments; `argv[0]` is looked up on the guest's `PATH`.
+    /// Empty when `shell` is given.
+    #[serde(default)]
     pub argv: Vec<String>,
+    /// A command line run through the shell unchanged (`cmd.exe /c "<line>"` on
+    /// Windows, as Python's `subprocess` with `shell=True`); `argv` must then be empty.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub shell: Option<String>,
     /// Kill the process (tree) after this long; the guest caps it.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub timeout_ms: Option<u64>,
@@ -37,9 +46,71 @@ pub struct ExecResult {
 }
 
 /// Body of `POST /v1/launch`: start a program and do not wait for it.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 pub struct LaunchRequest {
+    /// Program and arguments; empty when `shell` is given.
+    #[serde(default)]
     pub argv: Vec<String>,
+    /// A command line run through the shell unchanged, as in [`ExecRequest::shell`].
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub shell: Option<String>,
+}
+
+/// Which program a request names: its argument vector or its shell line, exactly one.
+///
+/// # Errors
+///
+/// A message naming the problem: neither given, both given, or an empty program.
+fn command_of(argv: &[String], shell: Option<&str>) -> Result<CommandSpec, String> {
+    match (argv.first(), shell) {
+        (Some(_), Some(_)) => Err("give either argv or shell, not both".into()),
+        (None, None) => Err("argv must name a program, or shell give a command line".into()),
+        (None, Some(line)) if line.trim().is_empty() => Err("shell must not be empty".into()),
+        (None, Some(line)) => Ok(CommandSpec::Shell(line.to_owned())),
+        (Some(program), None) if program.trim().is_empty() => Err("argv[0] must not be empty".into()),
+        (Some(_), None) => Ok(CommandSpec::Argv(argv.to_vec())),
+    }
+}
+
+impl ExecRequest {
+    /// A request to run `command` with the guest's default limits.
+    pub fn new(command: CommandSpec) -> ExecRequest {
+        let (argv, shell) = split_command(command);
+        ExecRequest { argv, shell, ..ExecRequest::default() }
+    }
+
+    /// The command this request names.
+    ///
+    /// # Errors
+    ///
+    /// See [`command_of`]: neither or both of `argv` and `shell`, or an empty program.
+    pub fn command(&self) -> Result<CommandSpec, String> {
+        command_of(&self.argv, self.shell.as_deref())
+    }
+}
+
+impl LaunchRequest {
+    /// A request to start `command`.
+    pub fn new(command: CommandSpec) -> LaunchRequest {
+        let (argv, shell) = split_command(command);
+        LaunchRequest { argv, shell }
+    }
+
+    /// The command this request names.
+    ///
+    /// # Errors
+    ///
+    /// Neither or both of `argv` and `shell`, or an empty program.
+    pub fn command(&self) -> Result<CommandSpec, String> {
+        command_of(&self.argv, self.shell.as_deref())
+    }
+}
+
+fn split_command(command: CommandSpec) -> (Vec<String>, Option<String>) {
+    match command {
+        CommandSpec::Argv(argv) => (argv, None),
+        CommandSpec::Shell(line) => (Vec::new(), Some(line)),
+    }
 }
 
 /// A started program.

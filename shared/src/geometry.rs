@@ -20,7 +20,7 @@ impl Point {
 }
 
 /// A rectangle given by its top-left corner and its size, in pixels.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Hash, Serialize, Deserialize)]
 pub struct Rect {
     pub x: i32,
     pub y: i32,
@@ -57,6 +57,16 @@ impl Rect {
 
     pub const fn is_empty(&self) -> bool {
         self.width <= 0 || self.height <= 0
+    }
+
+    /// Whether the two rectangles share at least one pixel.
+    pub const fn intersects(&self, other: &Rect) -> bool {
+        !self.is_empty()
+            && !other.is_empty()
+            && self.x < other.right()
+            && other.x < self.right()
+            && self.y < other.bottom()
+            && other.y < self.bottom()
     }
 }
 

@@ -25,14 +25,19 @@
 //! guest and the other way round.
 
 pub mod action;
+pub mod atomic;
 pub mod clipboard;
+pub mod close_all;
+pub mod cmdline;
 pub mod error;
 pub mod eval;
 pub mod exec;
 pub mod files;
 pub mod geometry;
 pub mod health;
+pub mod imaging;
 pub mod keys;
+pub mod ntfs;
 pub mod observation;
 pub mod registry;
 pub mod script;

@@ -96,7 +96,7 @@ pub struct ScreenshotMeta {
 }
 
 /// A top-level window.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 pub struct WindowInfo {
     /// Opaque window id (the HWND on Windows).
     pub id: u64,

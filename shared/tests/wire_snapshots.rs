@@ -4,6 +4,7 @@
 
 use arena_shared::action::{Action, ActionBatch, ActionReport, MouseButton};
 use arena_shared::clipboard::ClipboardContent;
+use arena_shared::cmdline::CommandSpec;
 use arena_shared::error::{ErrorBody, ErrorCode};
 use arena_shared::exec::{ExecRequest, ExecResult, LaunchRequest, LaunchResult};
 use arena_shared::files::{
@@ -176,6 +177,7 @@ fn programs() {
         "exec_request",
         ExecRequest {
             argv: vec!["cmd.exe".into(), "/c".into(), "echo hi".into()],
+            shell: None,
             timeout_ms: Some(10_000),
             max_output_bytes: None,
             cwd: Some(r"C:\Users\Docker".into()),
@@ -194,7 +196,16 @@ fn programs() {
             duration_ms: 42,
         }
     );
-    assert_json_snapshot!("launch_request", LaunchRequest { argv: vec!["notepad.exe".into(), r"C:\a.txt".into()] });
+    assert_json_snapshot!(
+        "launch_request",
+        LaunchRequest { argv: vec!["notepad.exe".into(), r"C:\a.txt".into()], shell: None }
+    );
+    // A shell line travels unchanged, quotes and all; argv is then empty.
+    assert_json_snapshot!(
+        "exec_request_shell",
+        ExecRequest::new(CommandSpec::Shell(r#"echo "a b" > "C:\Users\Docker\x y.txt""#.into()))
+    );
+    assert_json_snapshot!("launch_request_shell", LaunchRequest::new(CommandSpec::Shell("start notepad".into())));
     assert_json_snapshot!("launch_result", LaunchResult { pid: 4242 });
 }
 

@@ -9,6 +9,8 @@
 //! Anything else (a script path, `-m module`, stdin, cmd.exe syntax) is `None`:
 //! not a program this interpreter can stand in for.
 
+use crate::cmdline::split_windows_command_line;
+
 /// Whether `program` names a Python interpreter: `python`, `python3`, `python3.10`,
 /// `pythonw`, `py` or `pyw`, with or without a directory and `.exe`, in any case.
 pub fn is_python_program(program: &str) -> bool {
@@ -78,85 +80,6 @@ fn is_version_selector(arg: &str) -> bool {
         && rest.chars().all(|c| c.is_ascii_digit() || c == '.' || c == '-')
 }
 
-/// Splits a Windows command line the way the MSVC runtime builds `argv`:
-/// the program name ends at the first space (or closing quote, with no escapes);
-/// later arguments are separated by spaces or tabs outside quotes; `2n` backslashes
-/// before `"` give `n` backslashes and a quote toggle, `2n+1` give `n` and a literal
-/// `"`; other backslashes are literal; `""` inside quotes is a literal `"`.
-pub fn split_windows_command_line(line: &str) -> Vec<String> {
-    let chars: Vec<char> = line.chars().collect();
-    let mut args = Vec::new();
-    let mut i = 0;
-    while i < chars.len() && matches!(chars[i], ' ' | '\t') {
-        i += 1;
-    }
-    if i >= chars.len() {
-        return args;
-    }
-    // The program name.
-    let mut program = String::new();
-    if chars[i] == '"' {
-        i += 1;
-        while i < chars.len() && chars[i] != '"' {
-            program.push(chars[i]);
-            i += 1;
-        }
-        i += 1;
-    } else {
-        while i < chars.len() && !matches!(chars[i], ' ' | '\t') {
-            program.push(chars[i]);
-            i += 1;
-        }
-    }
-    args.push(program);
-    loop {
-        while i < chars.len() && matches!(chars[i], ' ' | '\t') {
-            i += 1;
-        }
-        if i >= chars.len() {
-            return args;
-        }
-        let mut arg = String::new();
-        let mut quoted = false;
-        while i < chars.len() {
-            let c = chars[i];
-            if c == '\\' {
-                let start = i;
-                while i < chars.len() && chars[i] == '\\' {
-                    i += 1;
-                }
-                let n = i - start;
-                if i < chars.len() && chars[i] == '"' {
-                    arg.extend(std::iter::repeat_n('\\', n / 2));
-                    if n % 2 == 1 {
-                        arg.push('"');
-                        i += 1;
-                    }
-                } else {
-                    arg.extend(std::iter::repeat_n('\\', n));
-                }
-                continue;
-            }
-            if c == '"' {
-                if quoted && chars.get(i + 1) == Some(&'"') {
-                    arg.push('"');
-                    i += 2;
-                    continue;
-                }
-                quoted = !quoted;
-                i += 1;
-                continue;
-            }
-            if !quoted && matches!(c, ' ' | '\t') {
-                break;
-            }
-            arg.push(c);
-            i += 1;
-        }
-        args.push(arg);
-    }
-}
-
 /// The program text of a `python -c "CODE"` command line run with `shell=True`.
 ///
 /// `None` when the line is not a Python invocation, or when `cmd.exe` would change
@@ -211,18 +134,6 @@ mod tests {
         check(&["cmd", "/c", "python -c x"], None);
         check(&["python3.", "-c", "x"], None);
         check(&[], None);
-    }
-
-    #[test]
-    fn splits_windows_command_lines() {
-        let check =
-            |line: &str, expected: &[&str]| assert_eq!(split_windows_command_line(line), argv(expected), "{line}");
-        check(r#"python -c "import os; print(1)""#, &["python", "-c", "import os; print(1)"]);
-        check(r#""C:\Program Files\py.exe" a"#, &[r"C:\Program Files\py.exe", "a"]);
-        check(r#"p a\\b "c\"d" e\\\"f "g\\" h"#, &["p", r"a\\b", r#"c"d"#, r#"e\"f"#, r"g\", "h"]);
-        check(r#"p "a""b" c"#, &["p", r#"a"b"#, "c"]);
-        check("  p   a\tb  ", &["p", "a", "b"]);
-        check("", &[]);
     }
 
     #[test]

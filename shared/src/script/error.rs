@@ -46,6 +46,10 @@ pub enum ErrorKind {
     NotSupported,
     /// The host (desktop, file system, process runner) refused or failed.
     Host,
+    /// The host's deadline passed while the script ran; the script stopped there.
+    Timeout,
+    /// What the host acts on went out of reach; the script stopped there.
+    Unreachable,
     /// `subprocess.check_call` / `check_output` saw a non-zero exit code.
     CalledProcess,
     /// `sys.exit()`: [`super::run`] turns it into a normal end with an exit code and never returns it.
@@ -70,6 +74,8 @@ impl ErrorKind {
             ErrorKind::Import => "ImportError",
             ErrorKind::NotSupported => "NotImplementedError",
             ErrorKind::Host => "OSError",
+            ErrorKind::Timeout => "TimeoutError",
+            ErrorKind::Unreachable => "ConnectionError",
             ErrorKind::CalledProcess => "subprocess.CalledProcessError",
             ErrorKind::SystemExit => "SystemExit",
         }
@@ -150,6 +156,12 @@ pub(crate) fn not_supported(message: impl Into<String>) -> ScriptError {
     ScriptError::new(ErrorKind::NotSupported, message)
 }
 
-pub(crate) fn host_error(message: impl Into<String>) -> ScriptError {
-    ScriptError::new(ErrorKind::Host, message)
+/// A host failure as the exception the script sees.
+pub(crate) fn host_error(err: super::host::HostError) -> ScriptError {
+    use super::host::HostError;
+    match err {
+        HostError::Failed(message) => ScriptError::new(ErrorKind::Host, message),
+        HostError::TimedOut(message) => ScriptError::new(ErrorKind::Timeout, message),
+        HostError::Unreachable(message) => ScriptError::new(ErrorKind::Unreachable, message),
+    }
 }

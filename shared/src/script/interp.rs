@@ -12,7 +12,7 @@ use std::collections::HashMap;
 use super::ast::{Const, Expr, ExprKind, Program, Stmt, StmtKind, Target};
 use super::computer::ComputerState;
 use super::error::{not_supported, type_error, value_error, ErrorKind, ScriptError};
-use super::host::ScriptHost;
+use super::host::{HostResult, ScriptHost};
 use super::ops;
 use super::value::{Object, Value};
 
@@ -322,8 +322,9 @@ impl Interp<'_, '_> {
         err
     }
 
-    /// Host failures become `OSError`s carrying the host's message.
-    pub(crate) fn host<T>(&mut self, result: Result<T, String>) -> Result<T, ScriptError> {
+    /// Host failures become `OSError`s carrying the host's message; a timeout or an
+    /// unreachable host becomes its own kind, which stops the script.
+    pub(crate) fn host<T>(&mut self, result: HostResult<T>) -> Result<T, ScriptError> {
         result.map_err(super::error::host_error)
     }
 

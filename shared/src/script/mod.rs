@@ -49,11 +49,11 @@ mod value;
 #[cfg(test)]
 mod tests;
 
-pub use argv::{is_python_program, python_code_from_argv, python_code_from_command_line, split_windows_command_line};
+pub use argv::{is_python_program, python_code_from_argv, python_code_from_command_line};
 pub use computer::ComputerState;
 pub use difflib::{get_close_matches, ratio as sequence_ratio};
 pub use error::{ErrorKind, ParseError, ScriptError};
-pub use host::{CommandArg, CommandOutput, PathKind, RecordingHost, ScriptHost};
+pub use host::{CommandArg, CommandOutput, HostError, HostResult, PathKind, RecordingHost, ScriptHost};
 pub use interp::{run, Globals, RunOutput, KNOWN_MODULES};
 pub use parser::parse;
 pub use value::{float_repr, str_repr};

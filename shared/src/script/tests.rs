@@ -52,25 +52,25 @@ impl FakeHost {
 }
 
 impl ScriptHost for FakeHost {
-    fn perform(&mut self, action: Action) -> Result<(), String> {
+    fn perform(&mut self, action: Action) -> HostResult<()> {
         self.cursor = host::cursor_after(&action, self.cursor);
         self.actions.push(action);
         Ok(())
     }
-    fn sleep(&mut self, seconds: f64) -> Result<(), String> {
+    fn sleep(&mut self, seconds: f64) -> HostResult<()> {
         self.actions.push(Action::Wait { ms: (seconds * 1000.0).round() as u64 });
         Ok(())
     }
-    fn cursor_position(&mut self) -> Result<(i32, i32), String> {
+    fn cursor_position(&mut self) -> HostResult<(i32, i32)> {
         Ok(self.cursor)
     }
-    fn screen_size(&mut self) -> Result<(u32, u32), String> {
+    fn screen_size(&mut self) -> HostResult<(u32, u32)> {
         Ok(self.screen)
     }
-    fn active_window_title(&mut self) -> Result<String, String> {
+    fn active_window_title(&mut self) -> HostResult<String> {
         Ok(self.active_title.clone())
     }
-    fn save_screenshot(&mut self, path: &str, region: Option<[i32; 4]>) -> Result<(), String> {
+    fn save_screenshot(&mut self, path: &str, region: Option<[i32; 4]>) -> HostResult<()> {
         self.calls.push(format!("save_screenshot {path} {region:?}"));
         Ok(())
     }
@@ -80,45 +80,45 @@ impl ScriptHost for FakeHost {
     fn path_kind(&mut self, path: &str) -> Option<PathKind> {
         self.paths.iter().find(|(p, _)| p.eq_ignore_ascii_case(path)).map(|(_, k)| *k)
     }
-    fn list_dir(&mut self, path: &str) -> Result<Vec<String>, String> {
+    fn list_dir(&mut self, path: &str) -> HostResult<Vec<String>> {
         self.calls.push(format!("list_dir {path}"));
         Ok(vec!["a.txt".to_owned(), "b".to_owned()])
     }
-    fn run_command(&mut self, cmd: &CommandArg, shell: bool) -> Result<CommandOutput, String> {
+    fn run_command(&mut self, cmd: &CommandArg, shell: bool) -> HostResult<CommandOutput> {
         self.calls.push(format!("run_command {cmd:?} shell={shell}"));
         Ok(self.command.clone())
     }
-    fn spawn_command(&mut self, cmd: &CommandArg, shell: bool) -> Result<u32, String> {
+    fn spawn_command(&mut self, cmd: &CommandArg, shell: bool) -> HostResult<u32> {
         self.calls.push(format!("spawn_command {cmd:?} shell={shell}"));
         Ok(4242)
     }
-    fn os_version(&mut self) -> Result<String, String> {
+    fn os_version(&mut self) -> HostResult<String> {
         Ok("10.0.22631".to_owned())
     }
-    fn clipboard_set_text(&mut self, text: &str) -> Result<(), String> {
+    fn clipboard_set_text(&mut self, text: &str) -> HostResult<()> {
         self.calls.push(format!("clipboard_set_text {text}"));
         self.clipboard = text.to_owned();
         Ok(())
     }
-    fn clipboard_get_text(&mut self) -> Result<String, String> {
+    fn clipboard_get_text(&mut self) -> HostResult<String> {
         Ok(self.clipboard.clone())
     }
-    fn clipboard_set_image_from_screenshot_crop(&mut self, rect: [i32; 4]) -> Result<(), String> {
+    fn clipboard_set_image_from_screenshot_crop(&mut self, rect: [i32; 4]) -> HostResult<()> {
         self.calls.push(format!("clipboard_set_image {rect:?}"));
         Ok(())
     }
-    fn open_program(&mut self, name: &str) -> Result<bool, String> {
+    fn open_program(&mut self, name: &str) -> HostResult<bool> {
         self.calls.push(format!("open_program {name}"));
         Ok(self.installed.iter().any(|p| p == name))
     }
-    fn maximize_foreground(&mut self) -> Result<(), String> {
+    fn maximize_foreground(&mut self) -> HostResult<()> {
         self.calls.push("maximize_foreground".to_owned());
         Ok(())
     }
-    fn window_titles(&mut self) -> Result<Vec<String>, String> {
+    fn window_titles(&mut self) -> HostResult<Vec<String>> {
         Ok(self.windows.clone())
     }
-    fn switch_to_window(&mut self, title: &str) -> Result<(), String> {
+    fn switch_to_window(&mut self, title: &str) -> HostResult<()> {
         self.calls.push(format!("switch_to_window {title}"));
         Ok(())
     }

@@ -1,10 +1,73 @@
-//! Command-line handling with the exact semantics of the Python functions upstream WAA
-//! hosts depend on: `shlex.split` (POSIX mode), `subprocess.list2cmdline` (the MSVC
-//! quoting rules) and Python truthiness of JSON values.
+//! How programs are started, decided once for both sides: Python's `shlex.split`
+//! (POSIX mode), `subprocess.list2cmdline` (the MSVC quoting rules), the MSVC
+//! runtime's splitting of a command line, what `subprocess.run(cmd, shell=...)`
+//! starts on Windows ([`subprocess_command`]), and Python truthiness of JSON values.
 //!
-//! Platform-neutral and free of I/O: the `/execute` route builds command lines with
-//! these and hands them to the backend. It is not a shell: nothing here expands
+//! The guest's `/execute` routes and script host, the host's agent executor and its
+//! setup steps all build their commands here, so a command string reaches the
+//! guest's process launcher the same way whichever path it took.
+//! Platform-neutral and free of I/O. It is not a shell: nothing here expands
 //! variables, globs or redirections.
+
+use crate::script::CommandArg;
+
+/// How to start a program.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum CommandSpec {
+    /// Program and arguments, no shell. On Windows the command line is built
+    /// with [`list2cmdline`], as Python's `subprocess` builds it.
+    Argv(Vec<String>),
+    /// A command line given to the shell unchanged: `%COMSPEC% /c "<line>"` on
+    /// Windows (Python's `subprocess` with `shell=True`), `sh -c <line>` elsewhere.
+    /// Quotes inside the line reach `cmd.exe` as written.
+    Shell(String),
+}
+
+/// The arguments `cmd.exe` gets for a shell line, as Python's `subprocess` writes
+/// them with `shell=True`: `/c "<line>"`. `cmd.exe` strips the outer quotes again
+/// (its `/c` rule), so the line runs exactly as written, inner quotes included.
+/// Every Windows path that starts a shell line (the Windows backend, the stub
+/// running inside the Windows exe) appends this to the shell's program name.
+pub fn cmd_arguments(line: &str) -> String {
+    format!("/c \"{line}\"")
+}
+
+/// What Python's `subprocess.run(cmd, shell=shell)` (and `Popen`, `call`) starts on
+/// Windows: with the shell, one command line (a list is joined with
+/// [`list2cmdline`] first); without it, an argument vector (a string is the
+/// command line `CreateProcess` gets, split as the program's runtime splits it).
+pub fn subprocess_command(cmd: &CommandArg, shell: bool) -> CommandSpec {
+    match (cmd, shell) {
+        (CommandArg::Line(line), true) => CommandSpec::Shell(line.clone()),
+        (CommandArg::Args(args), true) => CommandSpec::Shell(list2cmdline(args)),
+        (CommandArg::Line(line), false) => CommandSpec::Argv(split_windows_command_line(line)),
+        (CommandArg::Args(args), false) => CommandSpec::Argv(args.clone()),
+    }
+}
+
+/// What upstream's `/execute` route runs for a request's `command` and `shell`:
+/// a string without the shell is first split with POSIX [`shlex_split`] (the
+/// route's own step), words of a list that start with `~/` are expanded with
+/// `home` (Python's `os.path.expanduser`, when the caller knows the home folder),
+/// then [`subprocess_command`]. Used by the host's setup steps and getters, which
+/// send what upstream's host sent to that route.
+///
+/// # Errors
+///
+/// The string does not split (an unclosed quote, a trailing backslash).
+pub fn execute_command(cmd: &CommandArg, shell: bool, home: Option<&str>) -> Result<CommandSpec, ShlexError> {
+    let mut words = match cmd {
+        CommandArg::Line(line) if shell => return Ok(CommandSpec::Shell(line.clone())),
+        CommandArg::Line(line) => shlex_split(line)?,
+        CommandArg::Args(words) => words.clone(),
+    };
+    if let Some(home) = home {
+        for word in words.iter_mut().filter(|w| w.starts_with("~/")) {
+            *word = format!("{home}{}", &word[1..]);
+        }
+    }
+    Ok(subprocess_command(&CommandArg::Args(words), shell))
+}
 
 /// Why [`shlex_split`] rejected a string; the messages are Python's `ValueError` texts.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
@@ -142,6 +205,85 @@ pub fn list2cmdline(args: &[String]) -> String {
     line
 }
 
+/// Splits a Windows command line the way the MSVC runtime builds `argv`:
+/// the program name ends at the first space (or closing quote, with no escapes);
+/// later arguments are separated by spaces or tabs outside quotes; `2n` backslashes
+/// before `"` give `n` backslashes and a quote toggle, `2n+1` give `n` and a literal
+/// `"`; other backslashes are literal; `""` inside quotes is a literal `"`.
+pub fn split_windows_command_line(line: &str) -> Vec<String> {
+    let chars: Vec<char> = line.chars().collect();
+    let mut args = Vec::new();
+    let mut i = 0;
+    while i < chars.len() && matches!(chars[i], ' ' | '\t') {
+        i += 1;
+    }
+    if i >= chars.len() {
+        return args;
+    }
+    // The program name.
+    let mut program = String::new();
+    if chars[i] == '"' {
+        i += 1;
+        while i < chars.len() && chars[i] != '"' {
+            program.push(chars[i]);
+            i += 1;
+        }
+        i += 1;
+    } else {
+        while i < chars.len() && !matches!(chars[i], ' ' | '\t') {
+            program.push(chars[i]);
+            i += 1;
+        }
+    }
+    args.push(program);
+    loop {
+        while i < chars.len() && matches!(chars[i], ' ' | '\t') {
+            i += 1;
+        }
+        if i >= chars.len() {
+            return args;
+        }
+        let mut arg = String::new();
+        let mut quoted = false;
+        while i < chars.len() {
+            let c = chars[i];
+            if c == '\\' {
+                let start = i;
+                while i < chars.len() && chars[i] == '\\' {
+                    i += 1;
+                }
+                let n = i - start;
+                if i < chars.len() && chars[i] == '"' {
+                    arg.extend(std::iter::repeat_n('\\', n / 2));
+                    if n % 2 == 1 {
+                        arg.push('"');
+                        i += 1;
+                    }
+                } else {
+                    arg.extend(std::iter::repeat_n('\\', n));
+                }
+                continue;
+            }
+            if c == '"' {
+                if quoted && chars.get(i + 1) == Some(&'"') {
+                    arg.push('"');
+                    i += 2;
+                    continue;
+                }
+                quoted = !quoted;
+                i += 1;
+                continue;
+            }
+            if !quoted && matches!(c, ' ' | '\t') {
+                break;
+            }
+            arg.push(c);
+            i += 1;
+        }
+        args.push(arg);
+    }
+}
+
 /// Python truthiness of a JSON value: `null`, `false`, `0`, `0.0`, `""`, `[]` and `{}`
 /// are false, everything else (including the string `"false"`) is true.
 pub fn truthy(value: &serde_json::Value) -> bool {
@@ -265,6 +407,83 @@ mod tests {
             ]),
             r#"cmd /c rmdir /s /q C:\Users\Docker\Pictures\Photos | mkdir C:\Users\Docker\Pictures\Photos | echo "Hello World 1" > C:\Users\Docker\Pictures\Photos\HelloWorld1.txt"#
         );
+    }
+
+    #[test]
+    fn splits_windows_command_lines() {
+        let check = |line: &str, expected: &[&str]| {
+            assert_eq!(
+                split_windows_command_line(line),
+                expected.iter().map(|s| s.to_string()).collect::<Vec<_>>(),
+                "{line}"
+            )
+        };
+        check(r#"python -c "import os; print(1)""#, &["python", "-c", "import os; print(1)"]);
+        check(r#""C:\Program Files\py.exe" a"#, &[r"C:\Program Files\py.exe", "a"]);
+        check(r#"p a\\b "c\"d" e\\\"f "g\\" h"#, &["p", r"a\\b", r#"c"d"#, r#"e\"f"#, r"g\", "h"]);
+        check(r#"p "a""b" c"#, &["p", r#"a"b"#, "c"]);
+        check("  p   a\tb  ", &["p", "a", "b"]);
+        check("", &[]);
+    }
+
+    #[test]
+    fn shell_lines_reach_cmd_as_python_writes_them() {
+        assert_eq!(cmd_arguments("dir"), r#"/c "dir""#);
+        assert_eq!(cmd_arguments(r#"echo "a b" > "x y.txt""#), r#"/c "echo "a b" > "x y.txt"""#);
+    }
+
+    #[test]
+    fn subprocess_commands_follow_python_on_windows() {
+        let check = |cmd: CommandArg, shell: bool, expected: CommandSpec| {
+            assert_eq!(subprocess_command(&cmd, shell), expected, "{cmd:?} shell={shell}");
+        };
+        let words = |w: &[&str]| w.iter().map(|s| s.to_string()).collect::<Vec<_>>();
+        // A shell line keeps its quotes exactly: cmd.exe reads them, not the MSVC runtime.
+        let quoted = r#"echo "a b" > "C:\Users\Docker\x y.txt""#;
+        check(CommandArg::Line(quoted.into()), true, CommandSpec::Shell(quoted.into()));
+        check(
+            CommandArg::Args(words(&["echo", "a b", "|", "more"])),
+            true,
+            CommandSpec::Shell(r#"echo "a b" | more"#.into()),
+        );
+        check(
+            CommandArg::Line(r#""C:\Program Files\x.exe" -v "a\"b""#.into()),
+            false,
+            CommandSpec::Argv(words(&[r"C:\Program Files\x.exe", "-v", r#"a"b"#])),
+        );
+        check(
+            CommandArg::Args(words(&["notepad", "a b.txt"])),
+            false,
+            CommandSpec::Argv(words(&["notepad", "a b.txt"])),
+        );
+    }
+
+    #[test]
+    fn execute_commands_follow_upstreams_route() {
+        let words = |w: &[&str]| w.iter().map(|s| s.to_string()).collect::<Vec<_>>();
+        let home = Some(r"C:\Users\Docker");
+        let check = |cmd: CommandArg, shell: bool, expected: Result<CommandSpec, ShlexError>| {
+            assert_eq!(execute_command(&cmd, shell, home), expected, "{cmd:?} shell={shell}");
+        };
+        check(
+            CommandArg::Line(r#"echo "a b" c\ d"#.into()),
+            false,
+            Ok(CommandSpec::Argv(words(&["echo", "a b", "c d"]))),
+        );
+        check(CommandArg::Line(r#"echo "a b" > x"#.into()), true, Ok(CommandSpec::Shell(r#"echo "a b" > x"#.into())));
+        check(
+            CommandArg::Args(words(&["dir", "~/Desktop", "a b"])),
+            true,
+            Ok(CommandSpec::Shell(r#"dir C:\Users\Docker/Desktop "a b""#.into())),
+        );
+        check(
+            CommandArg::Args(words(&["ls", "~/x", "x~/"])),
+            false,
+            Ok(CommandSpec::Argv(words(&["ls", r"C:\Users\Docker/x", "x~/"]))),
+        );
+        // A shell string is not split, so a `~/` inside it stays as written.
+        check(CommandArg::Line("dir ~/x".into()), true, Ok(CommandSpec::Shell("dir ~/x".into())));
+        check(CommandArg::Line("echo 'open".into()), false, Err(ShlexError::NoClosingQuotation));
     }
 
     #[test]
