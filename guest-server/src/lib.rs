@@ -19,11 +19,11 @@
 //! - [`error`]: the error shapes. [`state`]: handler state.
 //! - [`paths`], [`imaging`]: platform-neutral helpers the routes share.
 //! - [`script_host`]: the desktop side of the native Python-subset interpreter.
-//! - [`service_cli`]: the `service` and `logon-task` subcommands (running in the user's session).
+//! - [`service`]: the `service` and `logon-task` subcommands (running in the user's session), with the
+//!   Windows service supervisor in `service/windows/`.
 
 pub mod auth;
 pub mod call;
-pub mod cmdline;
 pub mod config;
 pub mod desktop;
 pub mod error;
@@ -31,7 +31,7 @@ pub mod imaging;
 pub mod native;
 pub mod paths;
 pub mod script_host;
-pub mod service_cli;
+pub mod service;
 pub mod state;
 pub mod waa;
 
@@ -119,12 +119,7 @@ pub fn build_state(config: ServerConfig) -> anyhow::Result<AppState> {
             .context("starting the stub desktop")?;
             Arc::new(stub)
         }
-        #[cfg(windows)]
-        BackendKind::Windows => {
-            Arc::new(crate::desktop::windows::WindowsDesktop::new().context("starting the windows desktop")?)
-        }
-        #[cfg(not(windows))]
-        BackendKind::Windows => anyhow::bail!("the windows backend exists only in Windows builds; use --backend stub"),
+        BackendKind::Windows => crate::desktop::windows::start()?,
     };
     Ok(AppState::new(desktop, config, token))
 }

@@ -1,5 +1,5 @@
 //! `arena-guest`: parses the command line, sets up logging, and serves (the default)
-//! or runs a `service` / `logon-task` subcommand from [`arena_guest::service_cli`].
+//! or runs a `service` / `logon-task` subcommand from [`arena_guest::service`].
 
 use std::net::SocketAddr;
 use std::process::ExitCode;
@@ -7,21 +7,21 @@ use std::process::ExitCode;
 use clap::Parser;
 
 use arena_guest::config::{LogFormat, ServerConfig};
-use arena_guest::service_cli::{Cli, Command, ServiceCommand};
+use arena_guest::service::{Cli, Command, ServiceCommand};
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
     let outcome = match &cli.command {
         None => return serve(cli.serve),
-        // The supervisor logs to its own file (a service has no console); see service_cli.
-        Some(Command::Service(command @ ServiceCommand::Run(_))) => arena_guest::service_cli::execute_service(command),
+        // The supervisor logs to its own file (a service has no console); see service.
+        Some(Command::Service(command @ ServiceCommand::Run(_))) => arena_guest::service::execute_service(command),
         Some(Command::Service(command)) => {
             init_tracing(LogFormat::Text, false);
-            arena_guest::service_cli::execute_service(command)
+            arena_guest::service::execute_service(command)
         }
         Some(Command::LogonTask(command)) => {
             init_tracing(LogFormat::Text, false);
-            arena_guest::service_cli::execute_logon_task(command)
+            arena_guest::service::execute_logon_task(command)
         }
     };
     match outcome {
@@ -107,7 +107,7 @@ async fn shutdown_signal(worker: bool) {
     // The supervisor's stop signal: it closes the worker's standard input.
     let supervisor = async {
         if worker {
-            arena_guest::service_cli::stdin_closed().await;
+            arena_guest::service::stdin_closed().await;
             tracing::info!("standard input closed: the supervisor asks this worker to stop");
         } else {
             std::future::pending::<()>().await;

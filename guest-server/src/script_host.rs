@@ -8,8 +8,9 @@
 //! answers look.
 //!
 //! Every call checks one deadline (the `/execute` timeout): sleeps past it and
-//! commands that would outlive it stop the script, and [`DesktopHost::timed_out`]
-//! tells the route to answer with Python's `TimeoutExpired` text.
+//! commands that would outlive it stop the script with a [`HostError::TimedOut`],
+//! which the route sees as the script error's kind and answers with Python's
+//! `TimeoutExpired` text.
 //! [`DesktopHost::effects`] counts the effects performed, so a route knows whether
 //! re-running the code with a real Python would repeat something.
 
@@ -17,11 +18,12 @@ use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
 use arena_shared::action::Action;
+use arena_shared::cmdline::subprocess_command;
+use arena_shared::imaging::crop_padded;
 use arena_shared::observation::{ImageFormat, WindowInfo};
 use arena_shared::registry::RegistryValue;
-use arena_shared::script::{split_windows_command_line, CommandArg, CommandOutput, PathKind, ScriptHost};
+use arena_shared::script::{CommandArg, CommandOutput, HostError, HostResult, PathKind, ScriptHost};
 
-use crate::cmdline::list2cmdline;
 use crate::desktop::{ClipboardData, CommandSpec, Desktop, DesktopError, ExecLimits, WindowState};
 
 /// Output kept per stream of a command a script runs (as `/execute` keeps).
@@ -50,13 +52,12 @@ pub struct DesktopHost<'a> {
     /// The `/update_computer` screenshot that `clipboard.copy_image` crops.
     screenshot: Option<&'a image::RgbaImage>,
     effects: usize,
-    timed_out: bool,
 }
 
 impl<'a> DesktopHost<'a> {
     /// A host acting on `desktop` until `deadline`.
     pub fn new(desktop: &'a dyn Desktop, deadline: Instant) -> DesktopHost<'a> {
-        DesktopHost { desktop, deadline, screenshot: None, effects: 0, timed_out: false }
+        DesktopHost { desktop, deadline, screenshot: None, effects: 0 }
     }
 
     /// Sets the screenshot `copy_image` crops (the one `/update_computer` stored).
@@ -72,57 +73,48 @@ impl<'a> DesktopHost<'a> {
         self.effects
     }
 
-    /// Whether the script was stopped by the deadline.
-    pub fn timed_out(&self) -> bool {
-        self.timed_out
-    }
-
     fn remaining(&self) -> Duration {
         self.deadline.saturating_duration_since(Instant::now())
     }
 
     /// Refuses new work once the deadline has passed.
-    fn check_deadline(&mut self) -> Result<(), String> {
+    fn check_deadline(&mut self) -> HostResult<()> {
         if self.remaining().is_zero() {
-            self.timed_out = true;
-            return Err("the script ran out of time".to_owned());
+            return Err(HostError::TimedOut("the script ran out of time".to_owned()));
         }
         Ok(())
     }
 
     /// Counts an effect about to happen, after checking the deadline.
-    fn effect(&mut self) -> Result<(), String> {
+    fn effect(&mut self) -> HostResult<()> {
         self.check_deadline()?;
         self.effects += 1;
         Ok(())
     }
 
-    fn windows(&self) -> Result<Vec<WindowInfo>, String> {
-        self.desktop.windows().map_err(|err| err.to_string())
+    fn windows(&self) -> HostResult<Vec<WindowInfo>> {
+        self.desktop.windows().map_err(fail)
     }
 
-    fn foreground(&self) -> Result<Option<WindowInfo>, String> {
+    fn foreground(&self) -> HostResult<Option<WindowInfo>> {
         Ok(self.windows()?.into_iter().find(|w| w.focused))
     }
 }
 
-/// The backend command for a `subprocess` argument, as Python's `subprocess` on Windows
-/// builds it: a shell gets one command line, a list becomes an argument vector, and a
-/// string without a shell is the command line `CreateProcess` would split.
-fn command_spec(cmd: &CommandArg, shell: bool) -> CommandSpec {
-    match (cmd, shell) {
-        (CommandArg::Line(line), true) => CommandSpec::Shell(line.clone()),
-        (CommandArg::Args(args), true) => CommandSpec::Shell(list2cmdline(args)),
-        (CommandArg::Line(line), false) => CommandSpec::Argv(split_windows_command_line(line)),
-        (CommandArg::Args(args), false) => CommandSpec::Argv(args.clone()),
+/// A backend failure in the words Python's `OSError` would use where they differ.
+fn os_error(err: DesktopError) -> HostError {
+    match err {
+        DesktopError::NotFound(_) => HostError::Failed(PROGRAM_NOT_FOUND.to_owned()),
+        other => fail(other),
     }
 }
 
-/// A backend failure in the words Python's `OSError` would use where they differ.
-fn os_error(err: DesktopError) -> String {
+/// A backend failure as the script sees it: a backend deadline stops the script,
+/// anything else is an `OSError` it may handle.
+fn fail(err: DesktopError) -> HostError {
     match err {
-        DesktopError::NotFound(_) => PROGRAM_NOT_FOUND.to_owned(),
-        other => other.to_string(),
+        DesktopError::Timeout { .. } => HostError::TimedOut(err.to_string()),
+        other => HostError::Failed(other.to_string()),
     }
 }
 
@@ -142,94 +134,45 @@ pub fn python_available(program: &Path) -> bool {
 }
 
 /// The image format a file name asks for, as Pillow picks it from the extension.
-fn format_for(path: &str) -> Result<ImageFormat, String> {
+fn format_for(path: &str) -> HostResult<ImageFormat> {
     let name = crate::paths::basename(path);
     let ext = name.rsplit_once('.').map(|(_, e)| e.to_ascii_lowercase()).unwrap_or_default();
     match ext.as_str() {
         "png" => Ok(ImageFormat::Png),
         "jpg" | "jpeg" | "jpe" | "jfif" => Ok(ImageFormat::Jpeg),
-        "" => Err(format!("unknown file extension: {name} (this guest saves .png and .jpg screenshots)")),
-        other => Err(format!("unknown file extension: .{other} (this guest saves .png and .jpg screenshots)")),
+        "" => Err(format!("unknown file extension: {name} (this guest saves .png and .jpg screenshots)").into()),
+        other => Err(format!("unknown file extension: .{other} (this guest saves .png and .jpg screenshots)").into()),
     }
 }
 
-/// `image.crop((left, top, right, bottom))` with Pillow's semantics: parts outside the
-/// image are black.
-fn crop_padded(
-    image: &image::RgbaImage,
-    left: i64,
-    top: i64,
-    right: i64,
-    bottom: i64,
-) -> Result<image::RgbaImage, String> {
-    if right < left {
-        return Err("Coordinate 'right' is less than 'left'".to_owned());
+/// Writes `bytes` to `local` atomically, so a reader never sees half an image; like
+/// Pillow's `save`, it does not create missing folders.
+fn write_file(local: &Path, guest: &str, bytes: &[u8]) -> HostResult<()> {
+    if !local.parent().is_some_and(Path::is_dir) {
+        return Err(format!("[Errno 2] No such file or directory: '{guest}'").into());
     }
-    if bottom < top {
-        return Err("Coordinate 'lower' is less than 'upper'".to_owned());
-    }
-    let width = u32::try_from(right - left).map_err(|_| "the crop is too large".to_owned())?;
-    let height = u32::try_from(bottom - top).map_err(|_| "the crop is too large".to_owned())?;
-    if u64::from(width) * u64::from(height) > 1 << 28 {
-        return Err(format!("a {width}x{height} crop is too large"));
-    }
-    let mut out = image::RgbaImage::from_pixel(width, height, image::Rgba([0, 0, 0, 255]));
-    for y in 0..height {
-        let sy = top + i64::from(y);
-        let Ok(sy) = u32::try_from(sy) else { continue };
-        if sy >= image.height() {
-            break;
-        }
-        for x in 0..width {
-            let Ok(sx) = u32::try_from(left + i64::from(x)) else { continue };
-            if sx >= image.width() {
-                break;
-            }
-            let mut pixel = *image.get_pixel(sx, sy);
-            // Upstream converts to RGB before putting the image on the clipboard.
-            pixel.0[3] = 255;
-            out.put_pixel(x, y, pixel);
-        }
-    }
-    Ok(out)
-}
-
-/// Writes `bytes` to `local` through a temporary file in the same folder, so a reader
-/// never sees half an image.
-fn write_atomically(local: &Path, guest: &str, bytes: &[u8]) -> Result<(), String> {
-    let dir = local.parent().ok_or_else(|| format!("[Errno 2] No such file or directory: '{guest}'"))?;
-    if !dir.is_dir() {
-        return Err(format!("[Errno 2] No such file or directory: '{guest}'"));
-    }
-    let mut temp = tempfile::Builder::new()
-        .prefix(".arena-screenshot-")
-        .tempfile_in(dir)
-        .map_err(|err| format!("{guest}: {err}"))?;
-    std::io::Write::write_all(&mut temp, bytes).map_err(|err| format!("{guest}: {err}"))?;
-    temp.persist(local).map_err(|err| format!("{guest}: {}", err.error))?;
-    Ok(())
+    arena_shared::atomic::write_atomic(local, bytes).map_err(|err| format!("{guest}: {err}").into())
 }
 
 impl ScriptHost for DesktopHost<'_> {
-    fn perform(&mut self, action: Action) -> Result<(), String> {
+    fn perform(&mut self, action: Action) -> HostResult<()> {
         if let Action::Wait { ms } = action {
             // The backend never sees waits; they are sleeps of the script.
             return self.sleep(ms as f64 / 1000.0);
         }
         self.effect()?;
-        self.desktop.perform(&action).map_err(|err| err.to_string())
+        self.desktop.perform(&action).map_err(fail)
     }
 
-    fn sleep(&mut self, seconds: f64) -> Result<(), String> {
+    fn sleep(&mut self, seconds: f64) -> HostResult<()> {
         if seconds.is_nan() || seconds < 0.0 {
-            return Err(format!("cannot sleep {seconds} s"));
+            return Err(format!("cannot sleep {seconds} s").into());
         }
         let remaining = self.remaining();
         // Infinity lands here too, so it never reaches `Duration::from_secs_f64`.
         if seconds > remaining.as_secs_f64() {
             std::thread::sleep(remaining);
-            self.timed_out = true;
-            return Err(format!("sleeping {seconds} s would outlast the command's timeout"));
+            return Err(HostError::TimedOut(format!("sleeping {seconds} s would outlast the command's timeout")));
         }
         if seconds > 0.0 {
             std::thread::sleep(Duration::from_secs_f64(seconds));
@@ -237,35 +180,36 @@ impl ScriptHost for DesktopHost<'_> {
         Ok(())
     }
 
-    fn cursor_position(&mut self) -> Result<(i32, i32), String> {
-        let p = self.desktop.cursor_position().map_err(|err| err.to_string())?;
+    fn cursor_position(&mut self) -> HostResult<(i32, i32)> {
+        let p = self.desktop.cursor_position().map_err(fail)?;
         Ok((p.x, p.y))
     }
 
-    fn screen_size(&mut self) -> Result<(u32, u32), String> {
-        let screen = self.desktop.screen().map_err(|err| err.to_string())?;
+    fn screen_size(&mut self) -> HostResult<(u32, u32)> {
+        let screen = self.desktop.screen().map_err(fail)?;
         Ok((screen.physical_width, screen.physical_height))
     }
 
-    fn active_window_title(&mut self) -> Result<String, String> {
+    fn active_window_title(&mut self) -> HostResult<String> {
         Ok(self.foreground()?.map(|w| w.title).unwrap_or_default())
     }
 
-    fn save_screenshot(&mut self, path: &str, region: Option<[i32; 4]>) -> Result<(), String> {
+    fn save_screenshot(&mut self, path: &str, region: Option<[i32; 4]>) -> HostResult<()> {
         let format = format_for(path)?;
         self.effect()?;
-        let local = self.desktop.map_path(path).map_err(|err| err.to_string())?;
+        let local = self.desktop.map_path(path).map_err(fail)?;
         // pyautogui's screenshots never show the cursor.
-        let frame = self.desktop.capture(false).map_err(|err| err.to_string())?;
+        let frame = self.desktop.capture(false).map_err(fail)?;
         let image = match region {
             None => frame.image,
             Some([left, top, width, height]) => {
                 let (l, t) = (i64::from(left), i64::from(top));
-                crop_padded(&frame.image, l, t, l + i64::from(width), t + i64::from(height))?
+                crop_padded(&frame.image, l, t, l + i64::from(width), t + i64::from(height))
+                    .map_err(|e| e.to_string())?
             }
         };
         let bytes = crate::imaging::encode(&image, format, PIL_JPEG_QUALITY).map_err(|err| err.to_string())?;
-        write_atomically(&local, path, &bytes)
+        write_file(&local, path, &bytes)
     }
 
     fn env_var(&mut self, name: &str) -> Option<String> {
@@ -278,8 +222,8 @@ impl ScriptHost for DesktopHost<'_> {
         Some(if meta.is_dir() { PathKind::Dir } else { PathKind::File })
     }
 
-    fn list_dir(&mut self, path: &str) -> Result<Vec<String>, String> {
-        let local = self.desktop.map_path(path).map_err(|err| err.to_string())?;
+    fn list_dir(&mut self, path: &str) -> HostResult<Vec<String>> {
+        let local = self.desktop.map_path(path).map_err(fail)?;
         let entries = std::fs::read_dir(&local).map_err(|err| match err.kind() {
             std::io::ErrorKind::NotFound => format!("[WinError 3] The system cannot find the path specified: '{path}'"),
             std::io::ErrorKind::NotADirectory => format!("[WinError 267] The directory name is invalid: '{path}'"),
@@ -287,36 +231,29 @@ impl ScriptHost for DesktopHost<'_> {
         })?;
         let mut names: Vec<String> =
             entries.filter_map(Result::ok).map(|e| e.file_name().to_string_lossy().into_owned()).collect();
-        // NTFS lists names in case-insensitive order; sort so the answer is stable everywhere.
-        names.sort_by_key(|n| n.to_lowercase());
+        arena_shared::ntfs::sort_names(&mut names);
         Ok(names)
     }
 
-    fn run_command(&mut self, cmd: &CommandArg, shell: bool) -> Result<CommandOutput, String> {
+    fn run_command(&mut self, cmd: &CommandArg, shell: bool) -> HostResult<CommandOutput> {
         self.effect()?;
-        let spec = command_spec(cmd, shell);
+        let spec = subprocess_command(cmd, shell);
         let timeout_ms = u64::try_from(self.remaining().as_millis()).unwrap_or(u64::MAX).max(1);
         let limits = ExecLimits { timeout_ms, max_output_bytes: MAX_OUTPUT_BYTES, cwd: None, stdin: None };
         match self.desktop.run(&spec, &limits) {
-            Ok(out) if out.timed_out => {
-                self.timed_out = true;
-                Err("the command ran out of time".to_owned())
-            }
+            Ok(out) if out.timed_out => Err(HostError::TimedOut("the command ran out of time".to_owned())),
             Ok(out) => Ok(CommandOutput { code: out.exit_code.unwrap_or(-1), stdout: out.stdout, stderr: out.stderr }),
-            Err(DesktopError::Timeout { .. }) => {
-                self.timed_out = true;
-                Err("the command ran out of time".to_owned())
-            }
+            Err(DesktopError::Timeout { .. }) => Err(HostError::TimedOut("the command ran out of time".to_owned())),
             Err(err) => Err(os_error(err)),
         }
     }
 
-    fn spawn_command(&mut self, cmd: &CommandArg, shell: bool) -> Result<u32, String> {
+    fn spawn_command(&mut self, cmd: &CommandArg, shell: bool) -> HostResult<u32> {
         self.effect()?;
-        self.desktop.spawn(&command_spec(cmd, shell)).map_err(os_error)
+        self.desktop.spawn(&subprocess_command(cmd, shell)).map_err(os_error)
     }
 
-    fn os_version(&mut self) -> Result<String, String> {
+    fn os_version(&mut self) -> HostResult<String> {
         let read = |value: &str| self.desktop.registry_read(CURRENT_VERSION, Some(value)).ok();
         let number = |v: Option<RegistryValue>| match v {
             Some(RegistryValue::Dword(n)) => Some(n.to_string()),
@@ -329,43 +266,43 @@ impl ScriptHost for DesktopHost<'_> {
             number(read("CurrentBuildNumber")),
         ) {
             (Some(major), Some(minor), Some(build)) => Ok(format!("{major}.{minor}.{build}")),
-            _ => Err(format!("the Windows version is not recorded under {CURRENT_VERSION} on this desktop")),
+            _ => Err(format!("the Windows version is not recorded under {CURRENT_VERSION} on this desktop").into()),
         }
     }
 
-    fn clipboard_set_text(&mut self, text: &str) -> Result<(), String> {
+    fn clipboard_set_text(&mut self, text: &str) -> HostResult<()> {
         self.effect()?;
-        self.desktop.clipboard_set(&ClipboardData::Text(text.to_owned())).map_err(|err| err.to_string())
+        self.desktop.clipboard_set(&ClipboardData::Text(text.to_owned())).map_err(fail)
     }
 
-    fn clipboard_get_text(&mut self) -> Result<String, String> {
-        match self.desktop.clipboard_get().map_err(|err| err.to_string())? {
+    fn clipboard_get_text(&mut self) -> HostResult<String> {
+        match self.desktop.clipboard_get().map_err(fail)? {
             ClipboardData::Text(text) => Ok(text),
             // pyperclip.paste() gives "" when the clipboard holds no text.
             ClipboardData::Empty | ClipboardData::Image(_) => Ok(String::new()),
         }
     }
 
-    fn clipboard_set_image_from_screenshot_crop(&mut self, rect: [i32; 4]) -> Result<(), String> {
+    fn clipboard_set_image_from_screenshot_crop(&mut self, rect: [i32; 4]) -> HostResult<()> {
         let screenshot =
             self.screenshot.ok_or_else(|| "there is no /update_computer screenshot to copy from".to_owned())?;
         let [x1, y1, x2, y2] = rect.map(i64::from);
-        let crop = crop_padded(screenshot, x1, y1, x2, y2)?;
+        let crop = crop_padded(screenshot, x1, y1, x2, y2).map_err(|e| e.to_string())?;
         self.effect()?;
-        self.desktop.clipboard_set(&ClipboardData::Image(crop)).map_err(|err| err.to_string())
+        self.desktop.clipboard_set(&ClipboardData::Image(crop)).map_err(fail)
     }
 
-    fn open_program(&mut self, name: &str) -> Result<bool, String> {
+    fn open_program(&mut self, name: &str) -> HostResult<bool> {
         // Upstream runs `os.system(f"start {program}")`; a name with cmd.exe syntax in it
         // would run more than a program, so it is refused instead.
         if name.trim().is_empty() || name.contains(['&', '|', '<', '>', '^', '%', '"', '\n', '\r']) {
-            return Err(format!("{name:?} is not a program name"));
+            return Err(format!("{name:?} is not a program name").into());
         }
         self.effect()?;
         let registered =
             APP_PATHS.iter().any(|key| self.desktop.registry_read(&format!(r"{key}\{name}.exe"), None).is_ok());
         if registered {
-            self.desktop.spawn(&CommandSpec::Shell(format!("start {name}"))).map_err(|err| err.to_string())?;
+            self.desktop.spawn(&CommandSpec::Shell(format!("start {name}"))).map_err(fail)?;
             return Ok(true);
         }
         // Upstream's fallback check starts the program (`Popen([program])`); starting it is
@@ -373,19 +310,19 @@ impl ScriptHost for DesktopHost<'_> {
         match self.desktop.spawn(&CommandSpec::Argv(vec![name.to_owned()])) {
             Ok(_) => Ok(true),
             Err(DesktopError::NotFound(_)) => Ok(false),
-            Err(err) => Err(err.to_string()),
+            Err(err) => Err(fail(err)),
         }
     }
 
-    fn maximize_foreground(&mut self) -> Result<(), String> {
+    fn maximize_foreground(&mut self) -> HostResult<()> {
         let Some(window) = self.foreground()? else {
             return Ok(());
         };
         self.effect()?;
-        self.desktop.set_window_state(window.id, WindowState::Maximized).map_err(|err| err.to_string())
+        self.desktop.set_window_state(window.id, WindowState::Maximized).map_err(fail)
     }
 
-    fn window_titles(&mut self) -> Result<Vec<String>, String> {
+    fn window_titles(&mut self) -> HostResult<Vec<String>> {
         let mut titles: Vec<String> = Vec::new();
         for window in self.windows()? {
             if window.visible && !window.title.is_empty() && !titles.contains(&window.title) {
@@ -395,14 +332,13 @@ impl ScriptHost for DesktopHost<'_> {
         Ok(titles)
     }
 
-    fn switch_to_window(&mut self, title: &str) -> Result<(), String> {
+    fn switch_to_window(&mut self, title: &str) -> HostResult<()> {
         let window = self
             .windows()?
             .into_iter()
             .find(|w| w.visible && w.title == title)
             .ok_or_else(|| format!("no visible window is titled {title:?}"))?;
         self.effect()?;
-        let fail = |err: DesktopError| err.to_string();
         self.desktop.set_window_state(window.id, WindowState::Normal).map_err(fail)?;
         self.desktop.set_window_state(window.id, WindowState::Maximized).map_err(fail)?;
         self.desktop.activate_window(window.id).map_err(fail)
@@ -429,36 +365,11 @@ mod tests {
     }
 
     #[test]
-    fn commands_are_built_like_python_subprocess() {
-        let check =
-            |cmd: CommandArg, shell: bool, expected: CommandSpec| assert_eq!(command_spec(&cmd, shell), expected);
-        let args = |a: &[&str]| a.iter().map(|s| (*s).to_owned()).collect::<Vec<_>>();
-        check(
-            CommandArg::Line("taskkill /f /im a.exe".into()),
-            false,
-            CommandSpec::Argv(args(&["taskkill", "/f", "/im", "a.exe"])),
-        );
-        check(CommandArg::Line("dir & echo".into()), true, CommandSpec::Shell("dir & echo".into()));
-        check(CommandArg::Args(args(&["echo", "a b"])), true, CommandSpec::Shell("echo \"a b\"".into()));
-        check(CommandArg::Args(args(&["echo", "a b"])), false, CommandSpec::Argv(args(&["echo", "a b"])));
-    }
-
-    #[test]
-    fn crops_pad_with_black_like_pillow() {
-        let image = image::RgbaImage::from_pixel(4, 4, image::Rgba([10, 20, 30, 40]));
-        let crop = crop_padded(&image, 2, 2, 6, 5).expect("crop");
-        assert_eq!(crop.dimensions(), (4, 3));
-        assert_eq!(crop.get_pixel(0, 0).0, [10, 20, 30, 255]);
-        assert_eq!(crop.get_pixel(3, 2).0, [0, 0, 0, 255]);
-        assert!(crop_padded(&image, 3, 0, 1, 1).is_err());
-    }
-
-    #[test]
     fn image_formats_follow_the_extension() {
         assert_eq!(format_for(r"C:\a\b.PNG"), Ok(ImageFormat::Png));
         assert_eq!(format_for("x.jpeg"), Ok(ImageFormat::Jpeg));
         let err = format_for("x.bmp").expect_err("bmp is not encoded here");
-        assert!(err.contains(".bmp"), "{err}");
+        assert!(err.to_string().contains(".bmp"), "{err}");
     }
 
     #[test]
@@ -466,7 +377,7 @@ mod tests {
         let (_dir, stub) = stub();
         let mut host = DesktopHost::new(stub.as_ref(), Instant::now() + Duration::from_millis(30));
         let err = run_source("import time; time.sleep(5)", &mut host, Globals::python()).expect_err("times out");
-        assert!(host.timed_out(), "{err}");
+        assert_eq!(err.kind, arena_shared::script::ErrorKind::Timeout, "{err}");
         let mut host = DesktopHost::new(stub.as_ref(), far());
         assert!(host.sleep(f64::NAN).is_err());
     }
@@ -495,7 +406,7 @@ mod tests {
         let image = crate::imaging::decode(&bytes).expect("png");
         assert_eq!(image.dimensions(), (30, 20));
         let err = host.save_screenshot(r"C:\Users\Docker\Nope\s.png", None).expect_err("no folder");
-        assert!(err.contains("No such file or directory"), "{err}");
+        assert!(err.to_string().contains("No such file or directory"), "{err}");
     }
 
     #[test]

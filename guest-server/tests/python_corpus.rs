@@ -16,12 +16,12 @@ use http_body_util::BodyExt as _;
 use serde_json::{json, Value};
 use tower::ServiceExt as _;
 
-use arena_guest::cmdline::{shlex_split, truthy};
 use arena_guest::config::ServerConfig;
 use arena_guest::desktop::stub::{Scenario, StubConfig, StubDesktop};
 use arena_guest::desktop::{ClipboardData, Desktop};
 use arena_guest::state::AppState;
 use arena_shared::action::{Action, MouseButton};
+use arena_shared::cmdline::{shlex_split, truthy};
 use arena_shared::geometry::Point;
 use arena_shared::script::{python_code_from_argv, python_code_from_command_line};
 
@@ -160,7 +160,7 @@ fn step_code(command: &Value, shell: bool) -> Option<String> {
     match (command, shell) {
         (Value::Array(items), false) => python_code_from_argv(&strings(items)?).map(str::to_owned),
         (Value::Array(items), true) => {
-            python_code_from_command_line(&arena_guest::cmdline::list2cmdline(&strings(items)?))
+            python_code_from_command_line(&arena_shared::cmdline::list2cmdline(&strings(items)?))
         }
         (Value::String(line), true) => python_code_from_command_line(line),
         (Value::String(line), false) => python_code_from_argv(&shlex_split(line).ok()?).map(str::to_owned),

@@ -1,6 +1,6 @@
-//! The accessibility-tree walker of the Windows backend, behind a small adapter.
+//! The accessibility-tree walker of every backend, behind a small adapter.
 //!
-//! Both Windows tree backends walk the same way: the visible top-level windows,
+//! Every tree walks the same way (the two Windows sources and the stub's model): the visible top-level windows,
 //! topmost first, each within a fair share of the node and time budget, depth and
 //! width caps as upstream WAA (50 and 2048), and a `truncated` flag when anything was
 //! left out. What differs is where elements come from, so that sits behind
@@ -8,9 +8,10 @@
 //!
 //! - `uia`: IUIAutomation with a cache request; [`TreeSource::prepare`] is one
 //!   `BuildUpdatedCache(TreeScope_Subtree)` per window and the walk then reads the cache;
-//! - `win32`: `EnumWindows`/`EnumChildWindows`, `WM_GETTEXT` with a timeout and MSAA values.
+//! - `win32`: `EnumWindows`/`EnumChildWindows`, `WM_GETTEXT` with a timeout and MSAA values;
+//! - the stub: its windows' modelled trees, read by reference.
 //!
-//! The sources live in `desktop/windows/`; this module holds the walk, the budget
+//! The Windows sources live in `desktop/windows/`, the stub's in `desktop/stub/a11y.rs`; this module holds the walk, the budget
 //! arithmetic and the mapping from raw properties ([`UiaProps`], [`Win32Props`]) to
 //! [`A11yNode`]s, and is tested natively with a fake tree. Nothing here calls the OS.
 
@@ -94,7 +95,8 @@ impl Walk {
         limit: u32,
         deadline: Instant,
     ) -> Option<A11yNode> {
-        if self.count >= limit || Instant::now() >= deadline {
+        // A depth cap of 0 keeps nothing, not even the windows.
+        if depth > self.budget.max_depth || self.count >= limit || Instant::now() >= deadline {
             self.truncated = true;
             return None;
         }

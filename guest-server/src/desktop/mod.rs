@@ -4,7 +4,9 @@
 //! call it, through [`crate::call::blocking`], which gives every call a deadline.
 //! It is synchronous and object-safe; the server holds it as `Arc<dyn Desktop>`.
 //! Backends are chosen at run time: [`stub`] builds everywhere (and runs inside
-//! the Windows exe too), the Windows backend only for `cfg(windows)`.
+//! the Windows exe too); [`windows`] holds the Windows backend, whose FFI glue is
+//! compiled only for Windows and whose neutral halves everywhere.
+//! [`a11y_walk`] is the accessibility walker every backend feeds its trees through.
 //!
 //! # Coordinates
 //!
@@ -12,14 +14,8 @@
 //! the space a per-monitor DPI-aware process sees.
 
 pub mod a11y_walk;
-pub mod pointer;
-pub mod session;
 pub mod stub;
-pub mod text;
-pub mod vk;
-#[cfg(windows)]
 pub mod windows;
-pub mod winsys;
 
 use std::path::PathBuf;
 
@@ -100,15 +96,7 @@ pub enum ClipboardData {
     Image(image::RgbaImage),
 }
 
-/// How to start a program.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub enum CommandSpec {
-    /// Program and arguments, no shell. On Windows the command line is built
-    /// with the MSVC quoting rules (Python's `subprocess.list2cmdline`).
-    Argv(Vec<String>),
-    /// A command line given to the shell: `cmd.exe /c <line>` on Windows, `sh -c <line>` elsewhere.
-    Shell(String),
-}
+pub use arena_shared::cmdline::CommandSpec;
 
 /// Limits on [`Desktop::run`].
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -246,6 +234,14 @@ pub trait Desktop: Send + Sync + std::fmt::Debug {
 
     /// Sets the wallpaper to an image file.
     fn set_wallpaper(&self, guest_path: &str) -> DesktopResult<()>;
+
+    /// Whether the file at `local` (a mapped path) is hidden. The default is the
+    /// dot-file rule, which is how the stub, whose files live on a host file system,
+    /// models hidden files; the Windows backend adds `FILE_ATTRIBUTE_HIDDEN` (what
+    /// Python's `os.stat(p).st_file_attributes` reports upstream).
+    fn is_hidden(&self, local: &std::path::Path) -> bool {
+        local.file_name().is_some_and(|name| name.to_string_lossy().starts_with('.'))
+    }
 
     /// The access mask of the first ACE in a directory's DACL that names `user`, if any.
     fn directory_access_mask(&self, guest_path: &str, user: &str) -> DesktopResult<Option<u32>>;

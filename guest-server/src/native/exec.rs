@@ -1,7 +1,8 @@
 //! `POST /v1/exec`, `/v1/launch` and `/v1/open`: running programs and opening files.
 //!
-//! Programs run from an argument vector, never through a shell, so no
-//! argument is ever re-parsed. A program that exits non-zero or runs out of
+//! Programs run from an argument vector, so no argument is ever re-parsed, or,
+//! when the request gives `shell` instead, from one command line handed to the
+//! shell unchanged (as Python's `subprocess` with `shell=True`). A program that exits non-zero or runs out of
 //! time is a normal 200 [`ExecResult`]; only a program that cannot be started
 //! is an error.
 
@@ -38,11 +39,11 @@ pub(crate) fn routes() -> Router<AppState> {
     Router::new().route("/v1/exec", post(exec)).route("/v1/launch", post(launch)).route("/v1/open", post(open))
 }
 
-fn check_argv(argv: &[String]) -> Result<(), ApiError> {
-    match argv.first() {
-        None => Err(ApiError::BadRequest("argv must name a program".into())),
-        Some(program) if program.trim().is_empty() => Err(ApiError::BadRequest("argv[0] must not be empty".into())),
-        Some(_) => Ok(()),
+/// The program a command names, for error messages: `argv[0]`, or the shell.
+fn program_of(command: &CommandSpec) -> String {
+    match command {
+        CommandSpec::Argv(argv) => argv.first().cloned().unwrap_or_default(),
+        CommandSpec::Shell(_) => "the shell".to_owned(),
     }
 }
 
@@ -60,20 +61,20 @@ async fn exec(
     State(state): State<AppState>,
     AppJson(request): AppJson<ExecRequest>,
 ) -> Result<AppJson<ExecResult>, ApiError> {
-    check_argv(&request.argv)?;
+    let command = request.command().map_err(ApiError::BadRequest)?;
     let timeout_ms = match request.timeout_ms {
         Some(0) => return Err(ApiError::BadRequest("timeout_ms must be at least 1".into())),
         Some(ms) => ms.min(MAX_TIMEOUT_MS),
         None => DEFAULT_TIMEOUT_MS,
     };
     let max_output_bytes = request.max_output_bytes.unwrap_or(DEFAULT_MAX_OUTPUT).min(MAX_OUTPUT);
-    let program = request.argv[0].clone();
+    let program = program_of(&command);
     let deadline = Duration::from_millis(timeout_ms) + DEADLINE_MARGIN;
-    let ExecRequest { argv, cwd, stdin, .. } = request;
+    let ExecRequest { cwd, stdin, .. } = request;
     let output = blocking(&state.desktop, "run", deadline, move |d| {
         let cwd = cwd.map(|cwd| paths::expand(&cwd, &|name| d.env_var(name)));
         let limits = ExecLimits { timeout_ms, max_output_bytes, cwd, stdin: stdin.map(String::into_bytes) };
-        d.run(&CommandSpec::Argv(argv), &limits)
+        d.run(&command, &limits)
     })
     .await
     .map_err(|err| name_program(err, &program))?;
@@ -92,10 +93,9 @@ async fn launch(
     State(state): State<AppState>,
     AppJson(request): AppJson<LaunchRequest>,
 ) -> Result<AppJson<LaunchResult>, ApiError> {
-    check_argv(&request.argv)?;
-    let program = request.argv[0].clone();
-    let argv = request.argv;
-    let pid = blocking(&state.desktop, "spawn", state.call_timeout(), move |d| d.spawn(&CommandSpec::Argv(argv)))
+    let command = request.command().map_err(ApiError::BadRequest)?;
+    let program = program_of(&command);
+    let pid = blocking(&state.desktop, "spawn", state.call_timeout(), move |d| d.spawn(&command))
         .await
         .map_err(|err| name_program(err, &program))?;
     Ok(AppJson(LaunchResult { pid }))

@@ -13,7 +13,6 @@
 //! is flushed to disk and then renamed over the target, so a failed or
 //! interrupted write leaves either the old content or the new, never a mix.
 
-use std::io::Write as _;
 use std::path::PathBuf;
 use std::time::SystemTime;
 
@@ -183,12 +182,7 @@ fn write_atomic(loc: &Located, bytes: &[u8], create_parents: bool) -> Result<(),
         }
         Err(err) => return Err(io(err)),
     }
-    let mut temp = tempfile::NamedTempFile::new_in(parent).map_err(io)?;
-    temp.write_all(bytes).map_err(io)?;
-    temp.as_file().sync_all().map_err(io)?;
-    // Dropping a temporary file that was not persisted removes it, so every early
-    // return above leaves the target untouched and no stray file behind.
-    temp.persist(&loc.local).map_err(|err| io(err.error))?;
+    arena_shared::atomic::write_atomic(&loc.local, bytes).map_err(io)?;
     Ok(())
 }
 
@@ -206,36 +200,12 @@ async fn stat(
             size: meta.len(),
             modified_ms: meta.modified().ok().and_then(epoch_ms),
             readonly: meta.permissions().readonly(),
-            hidden: is_hidden(&loc.guest) || hidden_attribute(&meta),
+            hidden: d.is_hidden(&loc.local),
             path: loc.guest,
         })
     })
     .await?;
     Ok(AppJson(stat))
-}
-
-/// Whether a file's name marks it hidden (the dot-file rule), which is how the
-/// stub, whose files live on a host file system, models hidden files; see also
-/// [`hidden_attribute`].
-fn is_hidden(guest: &str) -> bool {
-    paths::basename(guest).starts_with('.')
-}
-
-/// Whether the file system marks the file hidden: `FILE_ATTRIBUTE_HIDDEN` on
-/// Windows (what Python's `os.stat(p).st_file_attributes` reports upstream);
-/// other platforms have no such attribute.
-fn hidden_attribute(meta: &std::fs::Metadata) -> bool {
-    #[cfg(windows)]
-    {
-        use std::os::windows::fs::MetadataExt as _;
-        const FILE_ATTRIBUTE_HIDDEN: u32 = 0x2;
-        meta.file_attributes() & FILE_ATTRIBUTE_HIDDEN != 0
-    }
-    #[cfg(not(windows))]
-    {
-        let _ = meta;
-        false
-    }
 }
 
 async fn exists(
@@ -275,7 +245,7 @@ async fn list(
             let entry = entry.map_err(|err| io_error("list", &loc, err))?;
             entries.extend(dir_entry(&entry));
         }
-        entries.sort_by(|a, b| a.name.cmp(&b.name));
+        entries.sort_by(|a, b| arena_shared::ntfs::cmp_names(&a.name, &b.name));
         Ok(DirListing { path: loc.guest, entries })
     })
     .await?;
@@ -384,12 +354,6 @@ mod tests {
         let before = SystemTime::UNIX_EPOCH - std::time::Duration::from_millis(2500);
         assert_eq!(epoch_ms(after), Some(1500));
         assert_eq!(epoch_ms(before), Some(-2500));
-    }
-
-    #[test]
-    fn dot_files_are_hidden() {
-        assert!(is_hidden(r"C:\Users\Docker\.config"));
-        assert!(!is_hidden(r"C:\Users\Docker\a.txt"));
     }
 
     #[test]

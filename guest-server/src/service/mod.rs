@@ -4,22 +4,28 @@
 //!
 //! What is here: the clap definitions ([`Cli`]), the checks on the serve options a
 //! service or task passes on, the command lines the supervisor and `schtasks.exe` are
-//! given (quoted with [`crate::cmdline::list2cmdline`]), the worker's relaunch backoff,
+//! given (quoted with [`arena_shared::cmdline::list2cmdline`]), the worker's relaunch backoff,
 //! the log folder and log rotation, and the worker's stop signal (its standard input
 //! closing). All of it is tested natively.
 //!
+//! The supervisor's decisions ([`supervisor_step`]) are here too.
+//!
 //! What is not: the Service Control Manager, tokens and `CreateProcessAsUserW`; those
-//! are FFI glue in `desktop/windows/service.rs`, which follows
-//! [`crate::desktop::session::supervisor_step`] for its decisions. On other platforms
-//! [`execute`] answers [`ServiceCliError::OnlyOnWindows`].
+//! are FFI glue in [`windows`] (compiled for Windows only), which follows
+//! [`supervisor_step`]. On other platforms [`execute_service`] answers
+//! [`ServiceCliError::OnlyOnWindows`].
+//! The service is not part of a desktop backend: it starts the server, whose
+//! backend then drives the desktop.
+
+pub mod windows;
 
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
 use clap::Parser as _;
 
-use crate::cmdline::list2cmdline;
 use crate::config::ServerConfig;
+use arena_shared::cmdline::list2cmdline;
 
 /// The service name used when `--name` is not given.
 pub const DEFAULT_SERVICE_NAME: &str = "ArenaGuest";
@@ -382,15 +388,7 @@ pub fn execute_service(command: &ServiceCommand) -> Result<String, ServiceCliErr
     if let ServiceCommand::Install(options) | ServiceCommand::Run(options) = command {
         validate_serve_args(&options.serve_args)?;
     }
-    #[cfg(windows)]
-    {
-        crate::desktop::windows::service::execute(command)
-    }
-    #[cfg(not(windows))]
-    {
-        let _ = command;
-        Err(ServiceCliError::OnlyOnWindows("service"))
-    }
+    windows::execute(command)
 }
 
 /// Runs a `logon-task` subcommand through `schtasks.exe` and returns what to tell the user.
@@ -438,6 +436,31 @@ pub fn execute_logon_task(command: &LogonTaskCommand) -> Result<String, ServiceC
 /// The OS not telling.
 pub fn current_exe() -> Result<PathBuf, ServiceCliError> {
     std::env::current_exe().map_err(|source| ServiceCliError::Io { what: "finding this program's path".into(), source })
+}
+
+/// What the service supervisor should do about its worker.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum SupervisorStep {
+    /// Nobody is logged on at the console: wait and look again.
+    WaitForLogon,
+    /// Start a worker in this session.
+    Launch(u32),
+    /// The worker runs in the wrong session (the user switched): stop it, then launch in this one.
+    Relaunch { from: u32, to: u32 },
+    /// All is well.
+    Keep,
+}
+
+/// Decides the supervisor's next step from the active console session (`None` or
+/// `0xFFFFFFFF` when nobody is attached) and the session of the running worker, if any.
+pub fn supervisor_step(console_session: Option<u32>, worker_session: Option<u32>) -> SupervisorStep {
+    let console = console_session.filter(|&s| s != u32::MAX && s != crate::desktop::windows::session::SERVICE_SESSION);
+    match (console, worker_session) {
+        (None, _) => SupervisorStep::WaitForLogon,
+        (Some(to), None) => SupervisorStep::Launch(to),
+        (Some(to), Some(from)) if from != to => SupervisorStep::Relaunch { from, to },
+        (Some(_), Some(_)) => SupervisorStep::Keep,
+    }
 }
 
 #[cfg(test)]
@@ -620,5 +643,19 @@ mod tests {
         assert!(err.to_string().contains("only on Windows"));
         let task = LogonTaskCommand::Uninstall(TaskNameOption { name: DEFAULT_TASK_NAME.into() });
         assert!(matches!(execute_logon_task(&task), Err(ServiceCliError::OnlyOnWindows("logon-task"))));
+    }
+
+    fn check(console: Option<u32>, worker: Option<u32>, expected: SupervisorStep) {
+        assert_eq!(supervisor_step(console, worker), expected, "console {console:?}, worker {worker:?}");
+    }
+
+    #[test]
+    fn supervisor_follows_the_console_session() {
+        check(None, None, SupervisorStep::WaitForLogon);
+        check(Some(u32::MAX), Some(1), SupervisorStep::WaitForLogon);
+        check(Some(0), None, SupervisorStep::WaitForLogon);
+        check(Some(1), None, SupervisorStep::Launch(1));
+        check(Some(2), Some(1), SupervisorStep::Relaunch { from: 1, to: 2 });
+        check(Some(1), Some(1), SupervisorStep::Keep);
     }
 }

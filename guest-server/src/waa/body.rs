@@ -131,7 +131,7 @@ impl<'a> Data<'a> {
     ///
     /// As [`Data::get`].
     pub(crate) fn flag(&self, key: &str) -> Result<bool, WaaError> {
-        Ok(self.get(key)?.is_some_and(crate::cmdline::truthy))
+        Ok(self.get(key)?.is_some_and(arena_shared::cmdline::truthy))
     }
 }
 

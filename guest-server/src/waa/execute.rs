@@ -23,13 +23,13 @@ use serde_json::{json, Value};
 
 use arena_shared::script::{self, ErrorKind, Globals, ParseError, ScriptError};
 
-use crate::cmdline::{list2cmdline, shlex_split};
 use crate::desktop::{CommandSpec, Desktop, DesktopError, ExecLimits};
 use crate::error::WaaError;
 use crate::script_host::{python_available, DesktopHost};
 use crate::state::AppState;
 use crate::waa::body::{Data, PyJson};
 use crate::waa::{expand_user, json, json_err, on_backend, on_backend_within, py, text, WaaResult};
+use arena_shared::cmdline::{list2cmdline, shlex_split};
 
 /// Output kept per stream: far above anything upstream ever returned, so nothing is lost,
 /// while a runaway program cannot exhaust the server's memory.
@@ -245,7 +245,7 @@ fn run_python(desktop: &dyn Desktop, code: &str, command: &Value, timeout_ms: u6
     let mut host = DesktopHost::new(desktop, Instant::now() + Duration::from_millis(timeout_ms));
     let (stdout, stderr, returncode) = match script::run(&program, &mut host, Globals::python()) {
         Ok(out) => (out.stdout, out.stderr, out.exit_code),
-        Err(_) if host.timed_out() => {
+        Err(err) if err.kind == ErrorKind::Timeout => {
             return Native::Answer(Err(WaaError::catch(timeout_message(command, timeout_ms))))
         }
         Err(err) if outside_subset(&err) && host.effects() == 0 => {
@@ -469,7 +469,7 @@ pub fn run_computer_code(
         let mut host = DesktopHost::new(desktop, deadline);
         let globals = Globals { computer: None, computer_action_delay: 0.0, preimport: &[] };
         let result = script::run(&program, &mut host, globals);
-        return ComputerRun { result: code_result(result, &host, options), state: None };
+        return ComputerRun { result: code_result(result, options), state: None };
     };
     let mut state = match script_state(stored) {
         Ok(state) => state,
@@ -483,7 +483,7 @@ pub fn run_computer_code(
         preimport: &[],
     };
     let result = script::run(&program, &mut host, globals);
-    let result = code_result(result, &host, options);
+    let result = code_result(result, options);
     let clipboard_content = if state.clipboard_content == initial_clipboard {
         stored.clipboard_content.clone()
     } else {
@@ -494,15 +494,11 @@ pub fn run_computer_code(
 
 /// Upstream's verdict on a finished `exec`: an exception's text, or the captured
 /// stdout when it mentions "error".
-fn code_result(
-    result: Result<script::RunOutput, ScriptError>,
-    host: &DesktopHost<'_>,
-    options: &CodeOptions,
-) -> Result<(), String> {
+fn code_result(result: Result<script::RunOutput, ScriptError>, options: &CodeOptions) -> Result<(), String> {
     match result {
         Ok(out) if out.stdout.to_lowercase().contains("error") => Err(out.stdout),
         Ok(_) => Ok(()),
-        Err(_) if host.timed_out() => {
+        Err(err) if err.kind == ErrorKind::Timeout => {
             Err(format!("the code did not finish within {} seconds", py::float_repr(options.timeout.as_secs_f64())))
         }
         Err(err) if outside_subset(&err) => Err(unsupported_runtime(&err)),

@@ -7,7 +7,6 @@
 //! mapped to local paths by the backend ([`Desktop::map_path`]) and then handled with
 //! `std::fs`, on the blocking pool.
 
-use std::io::Write;
 use std::path::Path;
 use std::time::Duration;
 
@@ -18,7 +17,6 @@ use serde_json::{json, Value};
 
 use arena_shared::files::KnownFolder;
 
-use crate::cmdline::truthy;
 use crate::desktop::Desktop;
 use crate::error::WaaError;
 use crate::paths;
@@ -26,6 +24,7 @@ use crate::state::AppState;
 use crate::waa::body::{Data, PyForm, PyJson};
 use crate::waa::py::{self, OsCall};
 use crate::waa::{expand, json, json_err, on_backend, path_arg, text, text_err, WaaResult};
+use arena_shared::cmdline::truthy;
 
 /// Most entries `/list_directory` walks before it stops (upstream has no limit and can
 /// spend minutes on `C:\`).
@@ -41,14 +40,14 @@ fn exists(local: &Path) -> bool {
     std::fs::metadata(local).is_ok() || std::fs::symlink_metadata(local).is_ok()
 }
 
-/// Directory entry names in NTFS order (case-insensitive ordinal), which is what
-/// `os.listdir` and `glob` return on the Windows guests; sorting makes every backend agree.
+/// Directory entry names in the order `os.listdir` and `glob` return them on the
+/// Windows guests (see [`arena_shared::ntfs`]), whatever the backend's file system.
 fn read_dir_sorted(dir: &Path) -> std::io::Result<Vec<String>> {
     let mut names: Vec<String> = std::fs::read_dir(dir)?
         .filter_map(|entry| entry.ok())
         .map(|entry| entry.file_name().to_string_lossy().into_owned())
         .collect();
-    names.sort_by(|a, b| a.to_uppercase().cmp(&b.to_uppercase()).then_with(|| a.cmp(b)));
+    arena_shared::ntfs::sort_names(&mut names);
     Ok(names)
 }
 
@@ -135,29 +134,18 @@ pub(crate) async fn file(State(state): State<AppState>, form: PyForm) -> WaaResu
 
 // ----- /setup/upload -----
 
-/// Writes `bytes` to `target` through a temporary file in the same directory, renamed
-/// over the target at the end, so a failed upload never leaves a half-written file.
-/// Like upstream it does not create missing parent directories.
+/// Writes `bytes` to `target` atomically (see [`arena_shared::atomic`]), so a failed
+/// upload never leaves a half-written file. Like upstream it does not create missing
+/// parent directories, and a folder in the way is Python's `PermissionError`.
 fn write_atomically(target: &Path, bytes: &[u8]) -> std::io::Result<()> {
     use std::io::ErrorKind;
-    let parent = target.parent().filter(|p| p.is_dir()).ok_or_else(|| std::io::Error::from(ErrorKind::NotFound))?;
+    if !target.parent().is_some_and(Path::is_dir) {
+        return Err(ErrorKind::NotFound.into());
+    }
     if target.is_dir() {
         return Err(ErrorKind::PermissionDenied.into());
     }
-    let name = target.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
-    let temp = parent.join(format!(".{name}.{:016x}.upload", rand::random::<u64>()));
-    let written = (|| {
-        let mut file = std::fs::OpenOptions::new().write(true).create_new(true).open(&temp)?;
-        file.write_all(bytes)?;
-        file.flush()?;
-        drop(file);
-        std::fs::rename(&temp, target)
-    })();
-    if written.is_err() {
-        // Best effort: the temporary name is ours alone, so removing it cannot hurt anything.
-        let _ = std::fs::remove_file(&temp);
-    }
-    written
+    arena_shared::atomic::write_atomic(target, bytes)
 }
 
 /// `POST /setup/upload`: multipart `file_path` + `file_data`.

@@ -94,19 +94,19 @@ pub(crate) async fn screenshot(State(state): State<AppState>) -> WaaResult {
     Ok(res)
 }
 
-/// Crops `image` (the primary screen, origin at 0,0) to `rect`, clamped to the screen.
-/// A rectangle entirely off-screen (a minimised foreground window) gives one black pixel,
-/// so the observation still succeeds.
-fn crop_to_screen(image: &image::RgbaImage, rect: Rect) -> image::RgbaImage {
-    let (w, h) = (i64::from(image.width()), i64::from(image.height()));
-    let left = i64::from(rect.x).clamp(0, w);
-    let top = i64::from(rect.y).clamp(0, h);
-    let right = (i64::from(rect.x) + i64::from(rect.width)).clamp(0, w);
-    let bottom = (i64::from(rect.y) + i64::from(rect.height)).clamp(0, h);
-    if right <= left || bottom <= top {
-        return image::RgbaImage::from_pixel(1, 1, image::Rgba([0, 0, 0, 255]));
+/// Crops `image` (the primary screen, origin at 0,0) to `rect` as upstream's Pillow
+/// does: parts off the screen are black. A rectangle entirely off-screen (a minimised
+/// foreground window, where upstream fails) gives one black pixel, so the observation
+/// still succeeds.
+fn crop_window(image: &image::RgbaImage, rect: Rect) -> image::RgbaImage {
+    let black = || image::RgbaImage::from_pixel(1, 1, image::Rgba([0, 0, 0, 255]));
+    let screen = Rect::new(0, 0, image.width() as i32, image.height() as i32);
+    if !rect.intersects(&screen) {
+        return black();
     }
-    image::imageops::crop_imm(image, left as u32, top as u32, (right - left) as u32, (bottom - top) as u32).to_image()
+    let (left, top) = (i64::from(rect.x), i64::from(rect.y));
+    let (right, bottom) = (left + i64::from(rect.width), top + i64::from(rect.height));
+    arena_shared::imaging::crop_padded(image, left, top, right, bottom).unwrap_or_else(|_| black())
 }
 
 /// `window_names_str`: visible windows' non-empty titles in z-order, first occurrence kept.
@@ -147,7 +147,7 @@ pub(crate) async fn obs_winagent(State(state): State<AppState>) -> WaaResult {
             }
         };
         let frame = desktop.capture(false)?;
-        let png = crate::imaging::encode(&crop_to_screen(&frame.image, crop), ImageFormat::Png, 0)
+        let png = crate::imaging::encode(&crop_window(&frame.image, crop), ImageFormat::Png, 0)
             .map_err(|err| WaaError::catch(err.to_string()))?;
         Ok((base64::engine::general_purpose::STANDARD.encode(png), title, rect, window_names(&windows).join("\n")))
     })
@@ -227,14 +227,17 @@ mod tests {
     use super::*;
 
     #[test]
-    fn crops_clamp_to_the_screen() {
+    fn crops_pad_off_screen_parts_like_pillow() {
         let img = image::RgbaImage::from_pixel(100, 50, image::Rgba([1, 2, 3, 255]));
-        let check =
-            |rect: Rect, size: (u32, u32)| assert_eq!(crop_to_screen(&img, rect).dimensions(), size, "{rect:?}");
+        let check = |rect: Rect, size: (u32, u32)| assert_eq!(crop_window(&img, rect).dimensions(), size, "{rect:?}");
         check(Rect::new(10, 10, 20, 20), (20, 20));
-        check(Rect::from_ltrb(-8, -8, 108, 58), (100, 50));
+        // A maximised window's frame hangs 8 px over every edge: padded, as upstream.
+        check(Rect::from_ltrb(-8, -8, 108, 58), (116, 66));
         check(Rect::new(-32000, -32000, 160, 28), (1, 1));
-        check(Rect::new(90, 40, 50, 50), (10, 10));
+        check(Rect::new(90, 40, 50, 50), (50, 50));
+        let padded = crop_window(&img, Rect::new(90, 40, 50, 50));
+        assert_eq!(padded.get_pixel(0, 0).0, [1, 2, 3, 255]);
+        assert_eq!(padded.get_pixel(20, 20).0, [0, 0, 0, 255]);
     }
 
     #[test]

@@ -15,13 +15,13 @@ use serde_json::json;
 
 use arena_shared::files::KnownFolder;
 
-use crate::cmdline::shlex_split;
 use crate::desktop::{CommandSpec, Desktop, DesktopError, ExecLimits};
 use crate::error::WaaError;
 use crate::paths;
 use crate::state::AppState;
 use crate::waa::body::PyForm;
 use crate::waa::{json, json_err, on_backend, WaaResult};
+use arena_shared::cmdline::shlex_split;
 
 /// A running recording: the ffmpeg process and the file it writes.
 #[derive(Debug, Clone)]

@@ -18,9 +18,6 @@ use crate::waa::body::{Data, PyJson};
 use crate::waa::observe::visible_windows;
 use crate::waa::{on_backend, py, text, text_err, WaaResult};
 
-/// The elevated PowerShell that upstream's scheduled task runs the server in.
-const ADMIN_POWERSHELL: &str = r"Administrator: C:\Windows\System32\WindowsPowerShell\v1.0\powershell.exe";
-
 /// `getWindowsWithTitle(name)`: the visible windows whose title contains `name`, ignoring case.
 fn windows_with_title(windows: Vec<WindowInfo>, name: &str) -> Vec<WindowInfo> {
     let needle = name.to_uppercase();
@@ -44,7 +41,7 @@ fn name_arg(value: &Value) -> Result<String, WaaError> {
 pub(crate) async fn activate_window(State(state): State<AppState>, PyJson(body): PyJson) -> WaaResult {
     let data = Data(&body);
     let name = match data.get("window_name")? {
-        Some(v) if crate::cmdline::truthy(v) => v.clone(),
+        Some(v) if arena_shared::cmdline::truthy(v) => v.clone(),
         _ => return Err(text_err(StatusCode::BAD_REQUEST, "window_name required")),
     };
     let strict = data.flag("strict")?;
@@ -129,11 +126,7 @@ pub(crate) async fn close_all(State(state): State<AppState>) -> WaaResult {
     let own_pid = std::process::id();
     on_backend(&state, "close_all", move |desktop| {
         for window in visible_windows(desktop)? {
-            let skip = window.title.is_empty()
-                || window.title == "Program Manager"
-                || window.title == ADMIN_POWERSHELL
-                || window.process_id == own_pid;
-            if skip {
+            if arena_shared::close_all::spares(&window, Some(own_pid)) {
                 continue;
             }
             match desktop.close_window(window.id) {

@@ -5,34 +5,26 @@
 //! `elements`, then a document node when the window holds text. Program Manager comes
 //! last, as UIA lists it, with its Desktop icon list. This is a model of the shapes
 //! agents read, not a UI Automation provider.
+//!
+//! The budget pruning is not the stub's own: the windows' trees are fed through the
+//! same walker as the Windows backend's ([`crate::desktop::a11y_walk`]), so fair
+//! shares, caps and the `truncated` flag behave the same in every stub run.
 
-use std::time::{Duration, Instant};
-
-use arena_shared::geometry::{CoordinateSpace, Rect};
+use arena_shared::geometry::Rect;
 use arena_shared::observation::{A11yBackend, A11yNode, A11yStates, A11yTree, TreeBudget};
 
 use super::input::ICON_PITCH;
 use super::window::{Caption, State, Window};
+use crate::desktop::a11y_walk::{self, TreeSource};
 use crate::desktop::{DesktopError, DesktopResult};
 
-/// The Win32 role (pywinauto's friendly class name) of a window class, or `fallback`.
+/// The Win32 role (pywinauto's friendly class name) of a window class, or `fallback`
+/// for a node without a class.
 fn win32_role(class_name: &str, fallback: &str) -> String {
-    let known = match class_name {
-        "Edit" | "RichEdit20W" | "RICHEDIT50W" => "Edit",
-        "Button" => "Button",
-        "Static" => "Static",
-        "ComboBox" | "ComboBoxEx32" => "ComboBox",
-        "ListBox" => "ListBox",
-        "SysListView32" => "ListView",
-        "SysTreeView32" => "TreeView",
-        "SysTabControl32" => "TabControl",
-        "ToolbarWindow32" => "Toolbar",
-        "msctls_statusbar32" => "StatusBar",
-        "#32770" => "Dialog",
-        "" => fallback,
-        other => other,
-    };
-    known.to_owned()
+    if class_name.is_empty() {
+        return fallback.to_owned();
+    }
+    a11y_walk::win32_role(class_name).to_owned()
 }
 
 fn leaf(role: &str, class_name: &str, name: &str, rect: Rect) -> A11yNode {
@@ -127,49 +119,42 @@ fn to_win32_roles(node: &mut A11yNode) {
     }
 }
 
-/// The running count and limits of one walk.
-struct Walk {
-    budget: TreeBudget,
-    deadline: Option<Instant>,
-    count: u32,
-    truncated: bool,
+/// The stub's windows as a [`TreeSource`]: each shown window's full tree is built
+/// first, and the walker reads it by reference.
+struct StubSource<'a> {
+    windows: &'a [(u64, A11yNode)],
 }
 
-impl Walk {
-    fn out_of_budget(&mut self) -> bool {
-        let over_time = self.deadline.is_some_and(|d| Instant::now() >= d);
-        if self.count >= self.budget.max_nodes || over_time {
-            self.truncated = true;
-            return true;
-        }
-        false
+impl<'a> TreeSource for StubSource<'a> {
+    type Elem = &'a A11yNode;
+
+    fn roots(&mut self, _foreground_only: bool) -> DesktopResult<Vec<(u64, &'a A11yNode)>> {
+        // `tree` already kept only the foreground window when asked to.
+        Ok(self.windows.iter().map(|(id, node)| (*id, node)).collect())
     }
 
-    /// Emits `node` at `depth` (top-level windows are 1) with as much of its subtree as
-    /// the budget allows; `None` when the budget is spent.
-    fn emit(&mut self, mut node: A11yNode, depth: u32, window_id: u64) -> Option<A11yNode> {
-        if depth > self.budget.max_depth || self.out_of_budget() {
-            self.truncated = true;
-            return None;
+    fn record(&mut self, elem: &&'a A11yNode) -> A11yNode {
+        let A11yNode {
+            role, class_name, name, value, text, rect, enabled, visible, focused, states, window_id, ..
+        } = *elem;
+        A11yNode {
+            role: role.clone(),
+            class_name: class_name.clone(),
+            name: name.clone(),
+            value: value.clone(),
+            text: text.clone(),
+            rect: *rect,
+            enabled: *enabled,
+            visible: *visible,
+            focused: *focused,
+            states: states.clone(),
+            window_id: *window_id,
+            children: Vec::new(),
         }
-        self.count += 1;
-        node.window_id = Some(window_id);
-        let children = std::mem::take(&mut node.children);
-        if depth >= self.budget.max_depth {
-            self.truncated |= !children.is_empty();
-            return Some(node);
-        }
-        let keep = self.budget.max_children as usize;
-        if children.len() > keep {
-            self.truncated = true;
-        }
-        for child in children.into_iter().take(keep) {
-            match self.emit(child, depth + 1, window_id) {
-                Some(child) => node.children.push(child),
-                None => break,
-            }
-        }
-        Some(node)
+    }
+
+    fn children(&mut self, elem: &&'a A11yNode, limit: usize) -> Vec<&'a A11yNode> {
+        elem.children.iter().take(limit.saturating_add(1)).collect()
     }
 }
 
@@ -188,33 +173,11 @@ pub(crate) fn tree(
     if backend == A11yBackend::Unknown {
         return Err(DesktopError::InvalidInput("unknown accessibility backend".into()));
     }
-    let started = Instant::now();
-    let mut walk = Walk {
-        budget: *budget,
-        deadline: started.checked_add(Duration::from_millis(budget.max_ms)),
-        count: 0,
-        truncated: false,
-    };
-    let windows: Vec<&Window> =
-        state.windows.iter().filter(|w| w.shown() && (!foreground_only || w.id == state.focus)).collect();
-    let keep = budget.max_children as usize;
-    if windows.len() > keep {
-        walk.truncated = true;
-    }
-    let mut out = Vec::new();
-    for window in windows.into_iter().take(keep) {
-        let node = window_node(window, window.id == state.focus, backend, desktop_items);
-        match walk.emit(node, 1, window.id) {
-            Some(node) => out.push(node),
-            None => break,
-        }
-    }
-    Ok(A11yTree {
-        backend,
-        windows: out,
-        truncated: walk.truncated,
-        node_count: walk.count,
-        elapsed_ms: u64::try_from(started.elapsed().as_millis()).unwrap_or(u64::MAX),
-        coordinate_space: CoordinateSpace::Physical,
-    })
+    let windows: Vec<(u64, A11yNode)> = state
+        .windows
+        .iter()
+        .filter(|w| w.shown() && (!foreground_only || w.id == state.focus))
+        .map(|w| (w.id, window_node(w, w.id == state.focus, backend, desktop_items)))
+        .collect();
+    a11y_walk::walk(&mut StubSource { windows: &windows }, backend, budget, foreground_only)
 }

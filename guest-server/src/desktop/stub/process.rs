@@ -7,11 +7,12 @@
 use std::collections::BTreeMap;
 use std::io::{Read, Write};
 use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Stdio};
+use std::process::{Command, Stdio};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
 use super::scenario::ScenarioProgram;
+use crate::desktop::windows::std_child::{isolate, kill_tree, shell_command};
 use crate::desktop::{CommandSpec, DesktopError, DesktopResult, ExecLimits, ExecOutput};
 
 /// A program that the stub "runs" by opening a window.
@@ -249,69 +250,6 @@ fn host_command(cmd: &CommandSpec) -> DesktopResult<Command> {
             Ok(shell_command(line))
         }
     }
-}
-
-#[cfg(unix)]
-fn shell_command(line: &str) -> Command {
-    let mut command = Command::new("sh");
-    command.arg("-c").arg(line);
-    command
-}
-
-#[cfg(windows)]
-fn shell_command(line: &str) -> Command {
-    use std::os::windows::process::CommandExt;
-    let mut command = Command::new("cmd.exe");
-    // cmd.exe parses its own command line, so the line is passed as written.
-    command.arg("/d").arg("/c").raw_arg(line);
-    command
-}
-
-#[cfg(not(any(unix, windows)))]
-fn shell_command(line: &str) -> Command {
-    let mut command = Command::new("sh");
-    command.arg("-c").arg(line);
-    command
-}
-
-/// Puts the child in its own process group so a timeout can kill everything it started.
-fn isolate(command: &mut Command) {
-    #[cfg(unix)]
-    {
-        use std::os::unix::process::CommandExt;
-        command.process_group(0);
-    }
-    #[cfg(not(unix))]
-    let _ = command;
-}
-
-/// Kills the child and, on Unix, its whole process group.
-fn kill_tree(child: &mut Child) {
-    let pid = child.id();
-    #[cfg(unix)]
-    {
-        // The child leads its own group (see `isolate`), so `kill -KILL -- -pid` reaches
-        // the grandchildren a shell line started too.
-        let status = Command::new("kill")
-            .args(["-KILL", "--", &format!("-{pid}")])
-            .stdin(Stdio::null())
-            .stdout(Stdio::null())
-            .stderr(Stdio::null())
-            .status();
-        if let Err(err) = status {
-            tracing::warn!(pid, %err, "could not run kill for the process group");
-        }
-    }
-    #[cfg(windows)]
-    {
-        let _ = Command::new("taskkill")
-            .args(["/T", "/F", "/PID", &pid.to_string()])
-            .stdin(Stdio::null())
-            .stdout(Stdio::null())
-            .stderr(Stdio::null())
-            .status();
-    }
-    let _ = child.kill();
 }
 
 fn spawn_error(cmd: &CommandSpec, err: std::io::Error) -> DesktopError {

@@ -1,35 +1,11 @@
-//! The Windows backend: the [`Desktop`] trait over Win32, COM and UI Automation.
-//!
-//! This folder is FFI glue only. What to send and how to shape results is decided
-//! by the platform-neutral modules next to it, which are tested natively:
-//! [`crate::desktop::vk`] (key names to strokes), [`crate::desktop::pointer`]
-//! (absolute mouse coordinates), [`crate::desktop::a11y_walk`] (tree budgets and
-//! node shapes), [`crate::desktop::winsys`] (paths and registry data),
-//! [`crate::desktop::text`] (newlines, UTF-16) and [`crate::desktop::session`]
-//! (the session-0 refusal).
-//!
-//! Layout: `sys` (handle guards, error conversion), `window`, `input`, `capture`,
-//! `clipboard`, `process`, `system` (files, registry, wallpaper, ACLs, shutdown),
-//! `win32_tree` and `uia` (the two accessibility sources); `service` (the Windows
-//! service mode: SCM registration and the supervisor that starts the worker in the
-//! user's session).
+//! The Windows backend's [`Desktop`] implementation: every trait method as calls
+//! into the FFI glue beside it (see the folder's `mod.rs` for the layout).
 //!
 //! # Platform-specific behavior
 //!
 //! The process makes itself per-monitor DPI aware when the backend starts, so every
 //! coordinate is in physical pixels. Calls that need the user's desktop are refused
 //! in session 0 (a service) with [`DesktopError::Unsupported`].
-
-mod capture;
-mod clipboard;
-mod input;
-mod process;
-pub mod service;
-mod sys;
-mod system;
-mod uia;
-mod win32_tree;
-mod window;
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -50,7 +26,8 @@ use windows::Win32::UI::Input::KeyboardAndMouse::{
 use windows::Win32::UI::WindowsAndMessaging::{SetProcessDPIAware, ShowCursor};
 
 use super::session::{refuse_session_zero, Needs};
-use super::{
+use super::{capture, clipboard, input, process, system, uia, win32_tree, window};
+use crate::desktop::{
     ClipboardData, CommandSpec, Desktop, DesktopError, DesktopResult, ExecLimits, ExecOutput, Frame, WindowState,
 };
 
@@ -142,7 +119,7 @@ impl WindowsDesktop {
             }
             Component::Accessibility => {
                 self.need_desktop("accessibility")?;
-                let tree = super::a11y_walk::walk(
+                let tree = crate::desktop::a11y_walk::walk(
                     &mut win32_tree::Win32Source::new(),
                     A11yBackend::Win32,
                     &TreeBudget { max_ms: 2_000, ..TreeBudget::WAA },
@@ -255,9 +232,12 @@ impl Desktop for WindowsDesktop {
     ) -> DesktopResult<A11yTree> {
         self.need_desktop("accessibility")?;
         match backend {
-            A11yBackend::Win32 => {
-                super::a11y_walk::walk(&mut win32_tree::Win32Source::new(), A11yBackend::Win32, budget, foreground_only)
-            }
+            A11yBackend::Win32 => crate::desktop::a11y_walk::walk(
+                &mut win32_tree::Win32Source::new(),
+                A11yBackend::Win32,
+                budget,
+                foreground_only,
+            ),
             A11yBackend::Uia => self.uia.tree(budget, foreground_only),
             A11yBackend::Unknown => Err(DesktopError::InvalidInput("unknown accessibility backend".into())),
         }
@@ -321,6 +301,14 @@ impl Desktop for WindowsDesktop {
     fn set_wallpaper(&self, guest_path: &str) -> DesktopResult<()> {
         super::winsys::check_guest_path(guest_path)?;
         system::set_wallpaper(guest_path)
+    }
+
+    fn is_hidden(&self, local: &Path) -> bool {
+        use std::os::windows::fs::MetadataExt as _;
+        const FILE_ATTRIBUTE_HIDDEN: u32 = 0x2;
+        let dot_file = local.file_name().is_some_and(|name| name.to_string_lossy().starts_with('.'));
+        let attribute = std::fs::metadata(local).is_ok_and(|meta| meta.file_attributes() & FILE_ATTRIBUTE_HIDDEN != 0);
+        dot_file || attribute
     }
 
     fn directory_access_mask(&self, guest_path: &str, user: &str) -> DesktopResult<Option<u32>> {

@@ -40,7 +40,7 @@ fn monitors() -> Vec<MonitorInfo> {
         let _ = unsafe { GetDpiForMonitor(monitor, MDT_EFFECTIVE_DPI, &mut dx, &mut dy) };
         let r = info.monitorInfo.rcMonitor;
         list.push(MonitorInfo {
-            name: crate::desktop::text::from_wide_until_nul(&info.szDevice),
+            name: crate::desktop::windows::text::from_wide_until_nul(&info.szDevice),
             rect: Rect::from_ltrb(r.left, r.top, r.right, r.bottom),
             scale_factor: f64::from(dx.max(1)) / 96.0,
             primary: info.monitorInfo.dwFlags & MONITORINFOF_PRIMARY != 0,

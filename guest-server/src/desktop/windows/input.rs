@@ -1,7 +1,7 @@
 //! Mouse and keyboard input through `SendInput`, with pyautogui's semantics.
 //!
-//! Which strokes to send is decided by the neutral [`crate::desktop::vk`] and
-//! [`crate::desktop::pointer`] modules; this file turns them into `INPUT` records.
+//! Which strokes to send is decided by the neutral [`crate::desktop::windows::vk`] and
+//! [`crate::desktop::windows::pointer`] modules; this file turns them into `INPUT` records.
 
 use std::time::Duration;
 
@@ -22,8 +22,8 @@ use windows::Win32::UI::WindowsAndMessaging::{
 };
 
 use super::sys::os;
-use crate::desktop::pointer;
-use crate::desktop::vk::{self, CharKey, Stroke};
+use crate::desktop::windows::pointer;
+use crate::desktop::windows::vk::{self, CharKey, Stroke};
 use crate::desktop::{DesktopError, DesktopResult};
 
 /// The most clicks or key presses one action may ask for (as the stub).

@@ -36,7 +36,7 @@ use windows::Win32::UI::Shell::ShellExecuteW;
 use windows::Win32::UI::WindowsAndMessaging::{SW_HIDE, SW_SHOWNORMAL};
 
 use super::sys::{is_win32, os, OwnedHandle};
-use crate::desktop::text::{fold_newlines, wide_nul, CappedBuffer};
+use crate::desktop::windows::text::{fold_newlines, wide_nul, CappedBuffer};
 use crate::desktop::{CommandSpec, DesktopError, DesktopResult, ExecLimits, ExecOutput};
 
 /// Creating inheritable pipe ends and the process that inherits them happens under
@@ -55,12 +55,12 @@ fn command_line(cmd: &CommandSpec) -> DesktopResult<(String, bool)> {
             if argv.is_empty() {
                 return Err(DesktopError::InvalidInput("empty command".into()));
             }
-            (crate::cmdline::list2cmdline(argv), false)
+            (arena_shared::cmdline::list2cmdline(argv), false)
         }
         CommandSpec::Shell(line) => {
             // Python's subprocess: COMSPEC (or cmd.exe) /c "<line>", window hidden.
             let comspec = std::env::var("COMSPEC").unwrap_or_else(|_| "cmd.exe".into());
-            (format!("{comspec} /c \"{line}\""), true)
+            (format!("{comspec} {}", arena_shared::cmdline::cmd_arguments(line)), true)
         }
     };
     if line.contains('\0') {

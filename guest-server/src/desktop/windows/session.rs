@@ -9,7 +9,7 @@
 //! Platform-neutral: the session id comes from `ProcessIdToSessionId` in
 //! `desktop/windows/`; the decision and its wording are here and tested natively.
 
-use super::{DesktopError, DesktopResult};
+use crate::desktop::{DesktopError, DesktopResult};
 
 /// The session services run in.
 pub const SERVICE_SESSION: u32 = 0;
@@ -43,31 +43,6 @@ pub fn refuse_session_zero(session: Option<u32>, op: &str, needs: Needs) -> Desk
     }
 }
 
-/// What the service supervisor should do about its worker.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum SupervisorStep {
-    /// Nobody is logged on at the console: wait and look again.
-    WaitForLogon,
-    /// Start a worker in this session.
-    Launch(u32),
-    /// The worker runs in the wrong session (the user switched): stop it, then launch in this one.
-    Relaunch { from: u32, to: u32 },
-    /// All is well.
-    Keep,
-}
-
-/// Decides the supervisor's next step from the active console session (`None` or
-/// `0xFFFFFFFF` when nobody is attached) and the session of the running worker, if any.
-pub fn supervisor_step(console_session: Option<u32>, worker_session: Option<u32>) -> SupervisorStep {
-    let console = console_session.filter(|&s| s != u32::MAX && s != SERVICE_SESSION);
-    match (console, worker_session) {
-        (None, _) => SupervisorStep::WaitForLogon,
-        (Some(to), None) => SupervisorStep::Launch(to),
-        (Some(to), Some(from)) if from != to => SupervisorStep::Relaunch { from, to },
-        (Some(_), Some(_)) => SupervisorStep::Keep,
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -81,19 +56,5 @@ mod tests {
         assert!(refuse_session_zero(Some(0), "registry read", Needs::AnySession).is_ok());
         assert!(refuse_session_zero(Some(1), "capture", Needs::InteractiveDesktop).is_ok());
         assert!(refuse_session_zero(None, "capture", Needs::InteractiveDesktop).is_ok());
-    }
-
-    fn check(console: Option<u32>, worker: Option<u32>, expected: SupervisorStep) {
-        assert_eq!(supervisor_step(console, worker), expected, "console {console:?}, worker {worker:?}");
-    }
-
-    #[test]
-    fn supervisor_follows_the_console_session() {
-        check(None, None, SupervisorStep::WaitForLogon);
-        check(Some(u32::MAX), Some(1), SupervisorStep::WaitForLogon);
-        check(Some(0), None, SupervisorStep::WaitForLogon);
-        check(Some(1), None, SupervisorStep::Launch(1));
-        check(Some(2), Some(1), SupervisorStep::Relaunch { from: 1, to: 2 });
-        check(Some(1), Some(1), SupervisorStep::Keep);
     }
 }

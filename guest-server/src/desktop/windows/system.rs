@@ -37,8 +37,8 @@ use windows::Win32::UI::WindowsAndMessaging::{
 };
 
 use super::sys::{os, CoTaskString, OwnedHandle};
-use crate::desktop::text::{from_wide_until_nul, wide_multi, wide_nul};
-use crate::desktop::winsys::{self, Hive};
+use crate::desktop::windows::text::{from_wide_until_nul, wide_multi, wide_nul};
+use crate::desktop::windows::winsys::{self, Hive};
 use crate::desktop::{DesktopError, DesktopResult};
 
 /// The session this process runs in.

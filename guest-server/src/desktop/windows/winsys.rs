@@ -6,7 +6,7 @@
 
 use arena_shared::registry::RegistryValue;
 
-use super::{DesktopError, DesktopResult};
+use crate::desktop::{DesktopError, DesktopResult};
 
 /// Registry value types, as `winnt.h` numbers them.
 pub const REG_SZ: u32 = 1;

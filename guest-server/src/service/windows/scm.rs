@@ -11,8 +11,8 @@
 //! [`Backoff`]) or when the console session changes. Closing the pipe asks the worker
 //! to stop; after a grace period it is terminated.
 //!
-//! FFI glue only: the decisions are [`supervisor_step`], the command lines, option
-//! checks, backoff and log handling are in [`crate::service_cli`], all tested natively.
+//! FFI glue only: the decisions ([`supervisor_step`]), the command lines, option
+//! checks, backoff and log handling are in [`crate::service`], all tested natively.
 
 use std::ffi::OsString;
 use std::os::windows::io::AsRawHandle;
@@ -45,11 +45,10 @@ use windows_service::service_manager::{ServiceManager, ServiceManagerAccess};
 
 use windows::Win32::UI::Shell::{FOLDERID_ProgramData, SHGetKnownFolderPath, KF_FLAG_DEFAULT};
 
-use super::sys::{describe, CoTaskString, OwnedHandle};
-use crate::desktop::session::{supervisor_step, SupervisorStep};
-use crate::service_cli::{
-    log_dir, rotate_log, service_run_args, worker_command_line, Backoff, ServiceCliError, ServiceCommand,
-    SupervisorOptions, LOG_MAX_BYTES,
+use crate::desktop::windows::sys::{describe, CoTaskString, OwnedHandle};
+use crate::service::{
+    log_dir, rotate_log, service_run_args, supervisor_step, worker_command_line, Backoff, ServiceCliError,
+    ServiceCommand, SupervisorOptions, SupervisorStep, LOG_MAX_BYTES,
 };
 
 /// How long a worker gets to stop after its standard input closes, before it is terminated.
@@ -109,7 +108,7 @@ fn manager(access: ServiceManagerAccess) -> Result<ServiceManager, ServiceCliErr
 }
 
 fn install(options: &SupervisorOptions) -> Result<String, ServiceCliError> {
-    let exe = crate::service_cli::current_exe()?;
+    let exe = crate::service::current_exe()?;
     let info = ServiceInfo {
         name: OsString::from(&options.name),
         display_name: OsString::from("Arena guest (desktop-control server)"),
@@ -249,7 +248,7 @@ static RUN: OnceLock<RunContext> = OnceLock::new();
 windows_service::define_windows_service!(ffi_service_main, service_main);
 
 fn run(options: &SupervisorOptions) -> Result<String, ServiceCliError> {
-    let exe = crate::service_cli::current_exe()?;
+    let exe = crate::service::current_exe()?;
     let logs = logs_dir();
     init_file_logging(&logs)?;
     tracing::info!(name = %options.name, exe = %exe.display(), serve = ?options.serve_args, "service process started");
