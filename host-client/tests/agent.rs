@@ -58,7 +58,7 @@ fn client(url: &str) -> GuestClient {
 async fn guest_with_notepad() -> (Guest, GuestClient) {
     let guest = start_guest().await;
     let c = client(&guest.url);
-    c.launch(&LaunchRequest { argv: vec!["notepad.exe".into()] }).await.expect("launch notepad");
+    c.launch(&LaunchRequest { shell: None, argv: vec!["notepad.exe".into()] }).await.expect("launch notepad");
     (guest, c)
 }
 

@@ -135,7 +135,7 @@ async fn actions_move_the_cursor_and_bad_keys_are_api_errors() {
 async fn notepad_typing_shows_in_windows_and_the_tree() {
     let guest = start_guest(None).await;
     let c = client(&guest.url);
-    let launched = c.launch(&LaunchRequest { argv: vec!["notepad.exe".into()] }).await.expect("launch");
+    let launched = c.launch(&LaunchRequest { shell: None, argv: vec!["notepad.exe".into()] }).await.expect("launch");
     assert!(launched.pid > 0);
     let windows = c.windows().await.expect("windows");
     let notepad = windows.iter().find(|w| w.title.contains("Notepad")).expect("a Notepad window").clone();
@@ -229,7 +229,14 @@ async fn exec_launch_and_open() {
         vec!["echo".into(), "hi there".into()]
     };
     let result = c
-        .exec(&ExecRequest { argv, timeout_ms: Some(20_000), max_output_bytes: None, cwd: None, stdin: None })
+        .exec(&ExecRequest {
+            shell: None,
+            argv,
+            timeout_ms: Some(20_000),
+            max_output_bytes: None,
+            cwd: None,
+            stdin: None,
+        })
         .await
         .expect("exec");
     assert_eq!(result.exit_code, Some(0), "{result:?}");

@@ -148,7 +148,7 @@ async fn launch_opens_programs_through_cmd_and_maps_google_chrome() {
     let guest = start_guest().await;
     let ctx = &guest.ctx;
     let report = step_ok(ctx, SetupStep::Launch { command: CommandArg::Str("notepad".into()), shell: false }).await;
-    assert!(report.detail.contains("cmd /c notepad"), "{}", report.detail);
+    assert!(report.detail.contains(r#"cmd /c "notepad""#), "{}", report.detail);
     step_ok(
         ctx,
         SetupStep::Launch {

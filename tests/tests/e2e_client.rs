@@ -34,7 +34,7 @@ async fn client_drives_the_real_guest_binary() {
     assert!(!health.auth_required);
 
     // Launch a program, type into it, read the text back through the accessibility tree.
-    client.launch(&LaunchRequest { argv: vec!["notepad".into()] }).await.unwrap();
+    client.launch(&LaunchRequest { shell: None, argv: vec!["notepad".into()] }).await.unwrap();
     let windows = client.windows().await.unwrap();
     let notepad = windows.iter().find(|w| w.title == "Untitled - Notepad").expect("notepad window");
     assert!(notepad.focused);
@@ -83,6 +83,7 @@ async fn client_drives_the_real_guest_binary() {
     // Exec with argv, exit codes and output.
     let res = client
         .exec(&ExecRequest {
+            shell: None,
             argv: vec!["sh".into(), "-c".into(), "echo out; echo err >&2; exit 7".into()],
             timeout_ms: Some(10_000),
             max_output_bytes: None,

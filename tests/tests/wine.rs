@@ -76,7 +76,7 @@ async fn notepad_text(client: &GuestClient, id: u64) -> Option<String> {
 /// A new notepad window: launches one and waits for the window that was not there before.
 async fn launch_notepad(client: &GuestClient) -> WindowInfo {
     let before: Vec<u64> = notepads(&client.windows().await.unwrap()).iter().map(|w| w.id).collect();
-    client.launch(&LaunchRequest { argv: vec!["notepad".into()] }).await.expect("launch notepad");
+    client.launch(&LaunchRequest { shell: None, argv: vec!["notepad".into()] }).await.expect("launch notepad");
     eventually("a new notepad window", Duration::from_secs(20), || async {
         let windows = client.windows().await.ok()?;
         notepads(&windows).into_iter().find(|w| !before.contains(&w.id))
@@ -270,6 +270,7 @@ async fn windows_backend_under_wine() {
 
     // 8. exec: output and exit codes, and a timeout that kills the whole process tree.
     let run = |argv: &[&str], timeout_ms: u64| ExecRequest {
+        shell: None,
         argv: argv.iter().map(|s| (*s).to_owned()).collect(),
         timeout_ms: Some(timeout_ms),
         max_output_bytes: None,

@@ -18,9 +18,13 @@
 //! - `computer.clipboard.copy_image(id)` crops a fresh screenshot (without the
 //!   cursor) instead of the one the agent observed; nothing else changed between
 //!   the two unless the script moved things first.
-//! - Shell commands (`os.system`, `subprocess.run(..., shell=True)`) and
-//!   environment variables are run through `cmd.exe /d /c` on the guest, so they
-//!   need a Windows guest; on the stub they fail as a missing program.
+//! - Environment variables are read by running `cmd.exe /d /c echo %NAME%` on the
+//!   guest, so they need a Windows guest; on the stub they are unset.
+//!
+//! What a command, a crop or a listing becomes is decided in `arena_shared`
+//! ([`arena_shared::cmdline`], [`arena_shared::imaging`], [`arena_shared::ntfs`]),
+//! the same modules the guest's own script host uses, so code gives the same
+//! result whether it runs here or in the guest's `/execute`.
 
 use std::future::Future;
 use std::io::Cursor;
@@ -33,13 +37,15 @@ use tokio::runtime::Handle;
 
 use arena_shared::action::{Action, ActionBatch};
 use arena_shared::clipboard::ClipboardContent;
+use arena_shared::cmdline::{subprocess_command, CommandSpec};
 use arena_shared::exec::{ExecRequest, LaunchRequest};
 use arena_shared::files::FileKind;
 use arena_shared::geometry::Point;
+use arena_shared::imaging::crop_padded;
 use arena_shared::observation::{ImageFormat as WireImageFormat, ScreenshotQuery, WindowInfo, WindowTarget};
 use arena_shared::registry::RegistryValue;
 use arena_shared::script::{
-    parse, run, split_windows_command_line, CommandArg, CommandOutput, ComputerState, Globals, PathKind, ScriptError,
+    parse, run, CommandArg, CommandOutput, ComputerState, Globals, HostError, HostResult, PathKind, ScriptError,
     ScriptHost,
 };
 
@@ -211,6 +217,8 @@ async fn run_script(
     .map_err(|err| AgentError::Worker(err.to_string()))?;
     *computer = state;
     if let Some(err) = host.unreachable {
+        // The script stopped at the first call that found the guest gone
+        // (`ErrorKind::Unreachable`); the client's error says how.
         return Err(AgentError::Guest(err));
     }
     let mut outcome = ActionOutcome { cursor: host.cursor, performed: host.performed, ..ActionOutcome::default() };
@@ -256,7 +264,8 @@ pub struct GuestHost {
     pub cursor: Option<Point>,
     /// How many input actions were sent.
     pub performed: usize,
-    /// The first error that showed the guest unreachable; later calls fail at once.
+    /// The first error that showed the guest unreachable. The script saw it as a
+    /// [`HostError::Unreachable`] and stopped; the client error is kept for the caller.
     pub unreachable: Option<ClientError>,
 }
 
@@ -266,53 +275,54 @@ impl GuestHost {
     }
 
     /// Runs one client call to completion, remembering an unreachable guest.
-    fn call<T, F>(&mut self, call: impl FnOnce(GuestClient) -> F) -> Result<T, String>
+    fn call<T, F>(&mut self, call: impl FnOnce(GuestClient) -> F) -> HostResult<T>
     where
         F: Future<Output = Result<T, ClientError>>,
     {
         if let Some(err) = &self.unreachable {
-            return Err(format!("the guest is unreachable: {err}"));
+            return Err(HostError::Unreachable(format!("the guest is unreachable: {err}")));
         }
-        match self.rt.block_on(call(self.client.clone())) {
-            Ok(value) => Ok(value),
-            Err(err) => {
-                let message = err.to_string();
-                if is_unreachable(&err) {
-                    self.unreachable = Some(err);
-                }
-                Err(message)
-            }
+        let result = self.rt.block_on(call(self.client.clone()));
+        result.map_err(|err| self.client_error(err))
+    }
+
+    /// A client error as the script sees it; an unreachable guest is remembered.
+    fn client_error(&mut self, err: ClientError) -> HostError {
+        let message = err.to_string();
+        if is_unreachable(&err) {
+            self.unreachable = Some(err);
+            return HostError::Unreachable(message);
         }
+        HostError::Failed(message)
     }
 
     fn remaining(&self) -> Duration {
         self.options.max_duration.saturating_sub(self.started.elapsed())
     }
 
-    fn windows(&mut self) -> Result<Vec<WindowInfo>, String> {
+    fn windows(&mut self) -> HostResult<Vec<WindowInfo>> {
         self.call(|c| async move { c.windows().await })
     }
 
-    fn foreground(&mut self) -> Result<Option<WindowInfo>, String> {
+    fn foreground(&mut self) -> HostResult<Option<WindowInfo>> {
         Ok(self.windows()?.into_iter().find(|w| w.focused))
     }
 
     /// A screenshot without the cursor, decoded.
-    fn capture(&mut self) -> Result<image::RgbaImage, String> {
+    fn capture(&mut self) -> HostResult<image::RgbaImage> {
         let query = ScreenshotQuery { format: WireImageFormat::Png, cursor: Some(false), ..ScreenshotQuery::default() };
         let shot = self.call(|c| async move { c.screenshot(&query).await })?;
         image::load_from_memory(&shot.bytes)
             .map(|i| i.to_rgba8())
-            .map_err(|e| format!("cannot decode the screenshot: {e}"))
+            .map_err(|e| HostError::Failed(format!("cannot decode the screenshot: {e}")))
     }
 
-    fn exec(&mut self, argv: Vec<String>) -> Result<CommandOutput, String> {
+    fn exec(&mut self, command: CommandSpec) -> HostResult<CommandOutput> {
         let timeout_ms = u64::try_from(self.remaining().as_millis()).unwrap_or(u64::MAX).max(1);
-        let request =
-            ExecRequest { argv, timeout_ms: Some(timeout_ms), max_output_bytes: None, cwd: None, stdin: None };
+        let request = ExecRequest { timeout_ms: Some(timeout_ms), ..ExecRequest::new(command) };
         let result = self.call(|c| async move { c.exec(&request).await })?;
         if result.timed_out {
-            return Err("the command ran out of time".to_owned());
+            return Err(HostError::TimedOut("the command ran out of time".to_owned()));
         }
         Ok(CommandOutput { code: result.exit_code.unwrap_or(-1), stdout: result.stdout, stderr: result.stderr })
     }
@@ -322,18 +332,12 @@ impl GuestHost {
     }
 }
 
-/// Crops `[x1, y1, x2, y2]` out of `img`, clamped to the image; an empty crop is an error.
-fn crop(img: &image::RgbaImage, [x1, y1, x2, y2]: [i64; 4]) -> Result<image::RgbaImage, String> {
-    let clamp = |v: i64, hi: u32| v.clamp(0, i64::from(hi)) as u32;
-    let (l, t) = (clamp(x1, img.width()), clamp(y1, img.height()));
-    let (r, b) = (clamp(x2, img.width()), clamp(y2, img.height()));
-    if r <= l || b <= t {
-        return Err(format!("the box [{x1}, {y1}, {x2}, {y2}] is empty or off the screen"));
-    }
-    Ok(image::imageops::crop_imm(img, l, t, r - l, b - t).to_image())
+/// Crops `[x1, y1, x2, y2]` out of `img` as Pillow does (see [`crop_padded`]).
+fn crop(img: &image::RgbaImage, [x1, y1, x2, y2]: [i64; 4]) -> HostResult<image::RgbaImage> {
+    crop_padded(img, x1, y1, x2, y2).map_err(|err| HostError::Failed(err.to_string()))
 }
 
-fn encode(img: &image::RgbaImage, format: ImageFormat) -> Result<Vec<u8>, String> {
+fn encode(img: &image::RgbaImage, format: ImageFormat) -> HostResult<Vec<u8>> {
     let mut out = Cursor::new(Vec::new());
     let result = if format == ImageFormat::Jpeg {
         image::DynamicImage::ImageRgba8(img.clone()).to_rgb8().write_to(&mut out, format)
@@ -344,58 +348,44 @@ fn encode(img: &image::RgbaImage, format: ImageFormat) -> Result<Vec<u8>, String
     Ok(out.into_inner())
 }
 
-fn command_argv(cmd: &CommandArg, shell: bool) -> Vec<String> {
-    let line = || match cmd {
-        CommandArg::Line(line) => line.clone(),
-        CommandArg::Args(args) => args.join(" "),
-    };
-    if shell {
-        return vec!["cmd.exe".to_owned(), "/d".to_owned(), "/c".to_owned(), line()];
-    }
-    match cmd {
-        CommandArg::Line(line) => split_windows_command_line(line),
-        CommandArg::Args(args) => args.clone(),
-    }
-}
-
 impl ScriptHost for GuestHost {
-    fn perform(&mut self, action: Action) -> Result<(), String> {
+    fn perform(&mut self, action: Action) -> HostResult<()> {
         let report = self.call(|c| async move { c.act_one(action).await })?;
         self.cursor = Some(report.cursor);
         self.performed += 1;
         Ok(())
     }
 
-    fn sleep(&mut self, seconds: f64) -> Result<(), String> {
+    fn sleep(&mut self, seconds: f64) -> HostResult<()> {
         let scaled = (seconds * self.options.sleep_scale).max(0.0);
         let wanted = Duration::try_from_secs_f64(scaled).unwrap_or(Duration::MAX);
         if wanted > self.remaining() {
-            return Err(format!(
+            return Err(HostError::TimedOut(format!(
                 "sleeping {seconds} s would take the action past its {} s limit",
                 self.options.max_duration.as_secs()
-            ));
+            )));
         }
         std::thread::sleep(wanted);
         Ok(())
     }
 
-    fn cursor_position(&mut self) -> Result<(i32, i32), String> {
+    fn cursor_position(&mut self) -> HostResult<(i32, i32)> {
         // An empty batch does nothing and reports where the cursor is.
         let report = self.call(|c| async move { c.act(&ActionBatch { actions: Vec::new() }).await })?;
         self.cursor = Some(report.cursor);
         Ok((report.cursor.x, report.cursor.y))
     }
 
-    fn screen_size(&mut self) -> Result<(u32, u32), String> {
+    fn screen_size(&mut self) -> HostResult<(u32, u32)> {
         let screen = self.call(|c| async move { c.screen().await })?;
         Ok((screen.physical_width, screen.physical_height))
     }
 
-    fn active_window_title(&mut self) -> Result<String, String> {
+    fn active_window_title(&mut self) -> HostResult<String> {
         Ok(self.foreground()?.map(|w| w.title).unwrap_or_default())
     }
 
-    fn save_screenshot(&mut self, path: &str, region: Option<[i32; 4]>) -> Result<(), String> {
+    fn save_screenshot(&mut self, path: &str, region: Option<[i32; 4]>) -> HostResult<()> {
         let img = self.capture()?;
         let img = match region {
             None => img,
@@ -416,7 +406,7 @@ impl ScriptHost for GuestHost {
         if name.is_empty() || !name.chars().all(|c| c.is_ascii_alphanumeric() || "_()".contains(c)) {
             return None;
         }
-        let out = self.exec(vec!["cmd.exe".into(), "/d".into(), "/c".into(), format!("echo %{name}%")]).ok()?;
+        let out = self.exec(CommandSpec::Shell(format!("echo %{name}%"))).ok()?;
         let value = out.stdout.trim_end_matches(['\r', '\n']).to_owned();
         // cmd.exe echoes an undefined variable's reference unchanged.
         (out.code == 0 && value != format!("%{name}%")).then_some(value)
@@ -432,22 +422,26 @@ impl ScriptHost for GuestHost {
         }
     }
 
-    fn list_dir(&mut self, path: &str) -> Result<Vec<String>, String> {
+    fn list_dir(&mut self, path: &str) -> HostResult<Vec<String>> {
         let path = path.to_owned();
         let listing = self.call(|c| async move { c.list_dir(&path).await })?;
-        Ok(listing.entries.into_iter().map(|e| e.name).collect())
+        let mut names: Vec<String> = listing.entries.into_iter().map(|e| e.name).collect();
+        // The guest lists in this order already; sorting keeps `os.listdir` right
+        // against a guest that does not.
+        arena_shared::ntfs::sort_names(&mut names);
+        Ok(names)
     }
 
-    fn run_command(&mut self, cmd: &CommandArg, shell: bool) -> Result<CommandOutput, String> {
-        self.exec(command_argv(cmd, shell))
+    fn run_command(&mut self, cmd: &CommandArg, shell: bool) -> HostResult<CommandOutput> {
+        self.exec(subprocess_command(cmd, shell))
     }
 
-    fn spawn_command(&mut self, cmd: &CommandArg, shell: bool) -> Result<u32, String> {
-        let request = LaunchRequest { argv: command_argv(cmd, shell) };
+    fn spawn_command(&mut self, cmd: &CommandArg, shell: bool) -> HostResult<u32> {
+        let request = LaunchRequest::new(subprocess_command(cmd, shell));
         Ok(self.call(|c| async move { c.launch(&request).await })?.pid)
     }
 
-    fn os_version(&mut self) -> Result<String, String> {
+    fn os_version(&mut self) -> HostResult<String> {
         let mut parts = Vec::new();
         for value in ["CurrentMajorVersionNumber", "CurrentMinorVersionNumber", "CurrentBuildNumber"] {
             let read = self.call(|c| async move { c.registry_get(CURRENT_VERSION, Some(value)).await })?;
@@ -455,18 +449,18 @@ impl ScriptHost for GuestHost {
                 RegistryValue::Dword(n) => n.to_string(),
                 RegistryValue::Qword(n) => n.to_string(),
                 RegistryValue::String(s) => s,
-                other => return Err(format!("{CURRENT_VERSION}\\{value} is not a number: {other:?}")),
+                other => return Err(format!("{CURRENT_VERSION}\\{value} is not a number: {other:?}").into()),
             });
         }
         Ok(parts.join("."))
     }
 
-    fn clipboard_set_text(&mut self, text: &str) -> Result<(), String> {
+    fn clipboard_set_text(&mut self, text: &str) -> HostResult<()> {
         let content = ClipboardContent::Text { text: text.to_owned() };
         self.call(|c| async move { c.clipboard_set(&content).await })
     }
 
-    fn clipboard_get_text(&mut self) -> Result<String, String> {
+    fn clipboard_get_text(&mut self) -> HostResult<String> {
         match self.call(|c| async move { c.clipboard_get().await })? {
             ClipboardContent::Text { text } => Ok(text),
             // pyperclip.paste() gives "" when the clipboard holds no text.
@@ -474,7 +468,7 @@ impl ScriptHost for GuestHost {
         }
     }
 
-    fn clipboard_set_image_from_screenshot_crop(&mut self, rect: [i32; 4]) -> Result<(), String> {
+    fn clipboard_set_image_from_screenshot_crop(&mut self, rect: [i32; 4]) -> HostResult<()> {
         let img = crop(&self.capture()?, rect.map(i64::from))?;
         let png = encode(&img, ImageFormat::Png)?;
         let content = ClipboardContent::Image {
@@ -485,11 +479,11 @@ impl ScriptHost for GuestHost {
         self.call(|c| async move { c.clipboard_set(&content).await })
     }
 
-    fn open_program(&mut self, name: &str) -> Result<bool, String> {
+    fn open_program(&mut self, name: &str) -> HostResult<bool> {
         // Upstream runs `os.system(f"start {program}")`; a name with cmd.exe syntax in it
         // would run more than a program, so it is refused instead.
         if name.trim().is_empty() || name.contains(['&', '|', '<', '>', '^', '%', '"', '\n', '\r']) {
-            return Err(format!("{name:?} is not a program name"));
+            return Err(format!("{name:?} is not a program name").into());
         }
         let mut registered = false;
         for key in APP_PATHS {
@@ -499,35 +493,30 @@ impl ScriptHost for GuestHost {
                 break;
             }
         }
-        let argv = if registered {
-            vec!["cmd.exe".to_owned(), "/d".to_owned(), "/c".to_owned(), "start".to_owned(), name.to_owned()]
+        // As the guest's own script host starts it: `start NAME` through the shell.
+        let command = if registered {
+            CommandSpec::Shell(format!("start {name}"))
         } else {
-            vec![name.to_owned()]
+            CommandSpec::Argv(vec![name.to_owned()])
         };
-        let request = LaunchRequest { argv };
+        let request = LaunchRequest::new(command);
         let launched = self.rt.block_on(self.client.launch(&request));
         match launched {
             Ok(_) => Ok(true),
             // Upstream's fallback check is "does starting it raise OSError".
             Err(err) if err.status() == Some(404) => Ok(false),
-            Err(err) => {
-                let message = err.to_string();
-                if is_unreachable(&err) {
-                    self.unreachable = Some(err);
-                }
-                Err(message)
-            }
+            Err(err) => Err(self.client_error(err)),
         }
     }
 
-    fn maximize_foreground(&mut self) -> Result<(), String> {
+    fn maximize_foreground(&mut self) -> HostResult<()> {
         let Some(window) = self.foreground()? else {
             return Ok(());
         };
         self.call(|c| async move { c.maximize_window(&GuestHost::target(window.id)).await }).map(drop)
     }
 
-    fn window_titles(&mut self) -> Result<Vec<String>, String> {
+    fn window_titles(&mut self) -> HostResult<Vec<String>> {
         let mut titles: Vec<String> = Vec::new();
         for window in self.windows()? {
             if window.visible && !window.title.is_empty() && !titles.contains(&window.title) {
@@ -537,7 +526,7 @@ impl ScriptHost for GuestHost {
         Ok(titles)
     }
 
-    fn switch_to_window(&mut self, title: &str) -> Result<(), String> {
+    fn switch_to_window(&mut self, title: &str) -> HostResult<()> {
         let window = self
             .windows()?
             .into_iter()
@@ -555,17 +544,6 @@ mod tests {
     use super::*;
 
     #[test]
-    fn command_lines_become_argv() {
-        let check = |cmd: CommandArg, shell: bool, expected: &[&str]| {
-            assert_eq!(command_argv(&cmd, shell), expected.iter().map(|s| (*s).to_owned()).collect::<Vec<_>>());
-        };
-        check(CommandArg::Line("notepad C:\\a.txt".into()), false, &["notepad", "C:\\a.txt"]);
-        check(CommandArg::Line("echo hi && dir".into()), true, &["cmd.exe", "/d", "/c", "echo hi && dir"]);
-        check(CommandArg::Args(vec!["a b".into(), "c".into()]), false, &["a b", "c"]);
-        check(CommandArg::Args(vec!["dir".into(), "/b".into()]), true, &["cmd.exe", "/d", "/c", "dir /b"]);
-    }
-
-    #[test]
     fn marks_set_the_computer_state_as_update_computer_does() {
         let mut state = ComputerState::for_screen(10, 10);
         state.current_id = Some(0);
@@ -579,12 +557,5 @@ mod tests {
         state.current_id = Some(0);
         apply_marks(&mut state, &marks);
         assert_eq!(state.current_id, Some(0), "the same boxes keep the current id");
-    }
-
-    #[test]
-    fn crops_clamp_to_the_image() {
-        let img = image::RgbaImage::new(10, 10);
-        assert_eq!(crop(&img, [-5, 2, 4, 20]).expect("crop").dimensions(), (4, 8));
-        assert!(crop(&img, [20, 20, 30, 30]).is_err());
     }
 }

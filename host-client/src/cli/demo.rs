@@ -190,7 +190,14 @@ pub async fn run(conn: &Connection, args: DemoArgs) -> anyhow::Result<ExitCode> 
             };
             let shown = argv.join(" ");
             let result = client
-                .exec(&ExecRequest { argv, timeout_ms: Some(30_000), max_output_bytes: None, cwd: None, stdin: None })
+                .exec(&ExecRequest {
+                    shell: None,
+                    argv,
+                    timeout_ms: Some(30_000),
+                    max_output_bytes: None,
+                    cwd: None,
+                    stdin: None,
+                })
                 .await?;
             if result.exit_code != Some(0) {
                 bail!("`{shown}` exited with {:?}: {}", result.exit_code, result.stderr.trim());
@@ -237,7 +244,7 @@ fn is_notepad(window: &WindowInfo) -> bool {
 }
 
 async fn launch_notepad(client: &GuestClient) -> anyhow::Result<((), String)> {
-    let launched = client.launch(&LaunchRequest { argv: vec!["notepad.exe".to_owned()] }).await?;
+    let launched = client.launch(&LaunchRequest { shell: None, argv: vec!["notepad.exe".to_owned()] }).await?;
     // The window appears some time after the process starts: poll for it.
     let deadline = Instant::now() + Duration::from_secs(15);
     let window = loop {

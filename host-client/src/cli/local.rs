@@ -4,7 +4,6 @@
 //! renamed over it only once every byte is on disk, so an interrupted or
 //! failed pull never leaves a truncated file where a good one was.
 
-use std::io::Write;
 use std::path::Path;
 
 use anyhow::Context;
@@ -17,45 +16,10 @@ use anyhow::Context;
 /// The directory does not exist or is not writable, or the disk is full; the
 /// message names `path`. On error `path` is left as it was.
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> anyhow::Result<()> {
-    let dir = match path.parent() {
-        Some(parent) if !parent.as_os_str().is_empty() => parent,
-        _ => Path::new("."),
-    };
     if path.is_dir() {
         anyhow::bail!("{} is a directory; name the file to write", path.display());
     }
-    let mut temp = tempfile::Builder::new()
-        .prefix(".arena-partial-")
-        .tempfile_in(dir)
-        .with_context(|| format!("creating a temporary file in {} for {}", dir.display(), path.display()))?;
-    temp.write_all(bytes).with_context(|| format!("writing {}", path.display()))?;
-    // A temporary file is private (0600); the result should look like any
-    // other file the user writes, or keep the permissions of the file it replaces.
-    let permissions = match std::fs::metadata(path) {
-        Ok(meta) => Some(meta.permissions()),
-        Err(_) => default_permissions(),
-    };
-    if let Some(permissions) = permissions {
-        temp.as_file()
-            .set_permissions(permissions)
-            .with_context(|| format!("setting the permissions of {}", path.display()))?;
-    }
-    temp.as_file().sync_all().with_context(|| format!("syncing {}", path.display()))?;
-    temp.persist(path)
-        .map_err(|err| anyhow::Error::new(err.error))
-        .with_context(|| format!("renaming the download onto {}", path.display()))?;
-    Ok(())
-}
-
-#[cfg(unix)]
-fn default_permissions() -> Option<std::fs::Permissions> {
-    use std::os::unix::fs::PermissionsExt;
-    Some(std::fs::Permissions::from_mode(0o644))
-}
-
-#[cfg(not(unix))]
-fn default_permissions() -> Option<std::fs::Permissions> {
-    None
+    arena_shared::atomic::write_atomic(path, bytes).with_context(|| format!("writing {}", path.display()))
 }
 
 /// Reads a whole local file for upload.

@@ -128,6 +128,7 @@ impl Connection {
 #[derive(Debug, Clone, Subcommand)]
 pub enum Command {
     /// Serve an in-process stub guest until Ctrl-C.
+    #[cfg(feature = "stub-guest")]
     ServeStub(stub::StubArgs),
     /// Show the guest's staged health; exits 0 only when it is ready.
     Health {
@@ -361,6 +362,7 @@ pub(crate) async fn with_spinner<F: std::future::Future>(message: &str, future: 
 pub async fn run(cli: Cli) -> anyhow::Result<ExitCode> {
     let conn = &cli.connection;
     match cli.command {
+        #[cfg(feature = "stub-guest")]
         Command::ServeStub(args) => {
             let token = conn.resolve_token()?;
             let shutdown = async {
@@ -449,7 +451,7 @@ pub async fn run(cli: Cli) -> anyhow::Result<ExitCode> {
         }
         Command::Exec(args) => exec(conn, args).await,
         Command::Launch { argv } => {
-            let result = conn.client()?.launch(&LaunchRequest { argv }).await?;
+            let result = conn.client()?.launch(&LaunchRequest { shell: None, argv }).await?;
             emit(&format!("started pid {}\n", result.pid))?;
             Ok(ExitCode::SUCCESS)
         }
@@ -584,6 +586,7 @@ async fn health(conn: &Connection, wait: Option<Duration>, json: bool) -> anyhow
 
 async fn exec(conn: &Connection, args: ExecArgs) -> anyhow::Result<ExitCode> {
     let request = ExecRequest {
+        shell: None,
         argv: args.argv,
         timeout_ms: args.timeout.map(|d| d.as_millis() as u64),
         max_output_bytes: None,

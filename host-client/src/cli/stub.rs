@@ -4,6 +4,10 @@
 //! It runs the real `arena-guest` router over its deterministic stub desktop
 //! in this process, so the host side can be tried without a VM.
 //! It is not a second server implementation: everything is `arena_guest`'s.
+//!
+//! The embedded guest is the `stub-guest` feature (on by default). A host built
+//! without it (`--no-default-features`) has no server code in it; then `serve-stub`
+//! does not exist, and `demo` and `run --stub-guests` without a guest say so.
 
 use std::future::Future;
 use std::net::{IpAddr, SocketAddr};
@@ -13,6 +17,7 @@ use anyhow::Context;
 use clap::Args;
 use tokio::task::JoinHandle;
 
+#[cfg(feature = "stub-guest")]
 use arena_guest::config::ServerConfig;
 
 /// Arguments of `arena serve-stub`.
@@ -68,6 +73,16 @@ impl RunningStub {
     }
 }
 
+/// What a host built without the embedded guest answers where one is needed.
+#[cfg(not(feature = "stub-guest"))]
+fn not_built_in() -> anyhow::Error {
+    anyhow::format_err!(
+        "this arena was built without the embedded stub guest (the stub-guest feature); \
+         point it at a guest with --guest, or run arena-guest --backend stub"
+    )
+}
+
+#[cfg(feature = "stub-guest")]
 fn server_config(args: &StubArgs, token: Option<String>) -> ServerConfig {
     let mut config = ServerConfig::for_stub();
     config.bind = args.bind;
@@ -80,6 +95,7 @@ fn server_config(args: &StubArgs, token: Option<String>) -> ServerConfig {
 }
 
 /// Binds and builds the stub guest; returns the listener and state to serve.
+#[cfg(feature = "stub-guest")]
 async fn prepare(
     args: &StubArgs,
     token: Option<String>,
@@ -95,7 +111,9 @@ async fn prepare(
 ///
 /// # Errors
 ///
-/// The address cannot be bound, or the scenario or root is unusable.
+/// The address cannot be bound, or the scenario or root is unusable; or this host
+/// was built without the embedded guest.
+#[cfg(feature = "stub-guest")]
 pub async fn start(args: &StubArgs, token: Option<String>) -> anyhow::Result<RunningStub> {
     let (listener, state) = prepare(args, token).await?;
     let addr = listener.local_addr().context("reading the bound address")?;
@@ -113,6 +131,7 @@ pub async fn start(args: &StubArgs, token: Option<String>) -> anyhow::Result<Run
 /// # Errors
 ///
 /// As [`start`], and I/O errors while serving.
+#[cfg(feature = "stub-guest")]
 pub async fn serve_until(
     args: &StubArgs,
     token: Option<String>,
@@ -123,6 +142,16 @@ pub async fn serve_until(
     let addr = listener.local_addr().context("reading the bound address")?;
     on_listening(addr);
     arena_guest::serve(listener, state, shutdown).await.with_context(|| format!("serving on {addr}"))
+}
+
+/// Without the embedded guest: always the error saying how to get a guest.
+///
+/// # Errors
+///
+/// Always.
+#[cfg(not(feature = "stub-guest"))]
+pub async fn start(_args: &StubArgs, _token: Option<String>) -> anyhow::Result<RunningStub> {
+    Err(not_built_in())
 }
 
 fn parse_screen(text: &str) -> Result<(u32, u32), String> {

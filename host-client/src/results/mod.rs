@@ -32,7 +32,6 @@
 pub mod html;
 pub mod summary;
 
-use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::time::{SystemTime, UNIX_EPOCH};
 
@@ -489,15 +488,7 @@ fn truncate(text: &str, max: usize) -> &str {
 ///
 /// The folder is missing or not writable, or the disk is full.
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), ResultsError> {
-    let dir = match path.parent() {
-        Some(parent) if !parent.as_os_str().is_empty() => parent,
-        _ => Path::new("."),
-    };
-    let mut temp =
-        tempfile::Builder::new().prefix(".partial-").tempfile_in(dir).map_err(|err| ResultsError::io(path, err))?;
-    temp.write_all(bytes).map_err(|err| ResultsError::io(path, err))?;
-    temp.persist(path).map_err(|err| ResultsError::io(path, err.error))?;
-    Ok(())
+    arena_shared::atomic::write_atomic(path, bytes).map_err(|err| ResultsError::io(path, err))
 }
 
 /// A task folder found under a result root.

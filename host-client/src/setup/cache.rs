@@ -17,12 +17,14 @@
 //! what it was when first fetched, which is what repeatable runs need.
 
 use std::collections::BTreeMap;
+use std::io::Write as _;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::time::Duration;
 
 use sha2::{Digest, Sha256};
-use tokio::io::AsyncWriteExt;
+
+use arena_shared::atomic::AtomicFile;
 
 use super::SetupError;
 
@@ -151,22 +153,19 @@ impl DownloadCache {
             return Err(Failure::Network(format!("HTTP {status}")));
         }
         let blobs = self.dir.join("blobs");
-        let temp = tempfile::Builder::new()
-            .prefix(".part-")
-            .tempfile_in(&blobs)
-            .map_err(|err| Failure::Cache(cache_error(&blobs, &err)))?;
-        let (file, temp_path) = temp.into_parts();
-        let mut file = tokio::fs::File::from_std(file);
+        // Named once the hash is known; the temporary file sits in the same folder.
+        let mut blob =
+            AtomicFile::create(&blobs.join("incoming")).map_err(|err| Failure::Cache(cache_error(&blobs, &err)))?;
         let mut hasher = Sha256::new();
         while let Some(chunk) = response.chunk().await.map_err(|err| Failure::Network(describe(&err)))? {
             hasher.update(&chunk);
-            file.write_all(&chunk).await.map_err(|err| Failure::Cache(cache_error(&temp_path, &err)))?;
+            // A local write of one network chunk: short enough to do in place.
+            blob.file().write_all(&chunk).map_err(|err| Failure::Cache(cache_error(blob.temp_path(), &err)))?;
         }
-        file.flush().await.map_err(|err| Failure::Cache(cache_error(&temp_path, &err)))?;
-        drop(file);
         let sha256 = hex::encode(hasher.finalize());
-        let blob = self.blob_path(&sha256);
-        temp_path.persist(&blob).map_err(|err| Failure::Cache(cache_error(&blob, &err.error)))?;
+        let path = self.blob_path(&sha256);
+        blob.retarget(&path);
+        blob.commit().map_err(|err| Failure::Cache(cache_error(&path, &err)))?;
         Ok(sha256)
     }
 
@@ -190,13 +189,8 @@ impl DownloadCache {
         let path = self.index_path();
         let text = serde_json::to_vec_pretty(&index)
             .map_err(|err| SetupError::Cache { path: path.clone(), reason: err.to_string() })?;
-        let dir = self.dir.clone();
         tokio::task::spawn_blocking(move || -> Result<(), SetupError> {
-            let mut temp =
-                tempfile::Builder::new().prefix(".index-").tempfile_in(&dir).map_err(|err| cache_error(&dir, &err))?;
-            std::io::Write::write_all(&mut temp, &text).map_err(|err| cache_error(temp.path(), &err))?;
-            temp.persist(&path).map_err(|err| cache_error(&path, &err.error))?;
-            Ok(())
+            arena_shared::atomic::write_atomic(&path, &text).map_err(|err| cache_error(&path, &err))
         })
         .await
         .map_err(|err| SetupError::Cache {

@@ -50,8 +50,6 @@ pub use cdp::compare_urls;
 const READY_WAIT: Duration = Duration::from_secs(100);
 /// How often [`reset`] polls the guest's health.
 const READY_POLL: Duration = Duration::from_millis(250);
-/// The elevated PowerShell that upstream's scheduled task runs its server in; `close_all` spares it.
-const ADMIN_POWERSHELL: &str = r"Administrator: C:\Windows\System32\WindowsPowerShell\v1.0\powershell.exe";
 
 /// A setup step or reset could not be done in a way that must stop the episode's setup.
 #[derive(Debug, thiserror::Error)]
@@ -213,18 +211,12 @@ pub async fn reset(client: &GuestClient) -> Result<(), SetupError> {
     Ok(())
 }
 
-/// Whether `close_all` leaves this window open: the desktop, untitled windows,
-/// upstream's server console and the guest server itself.
-fn spared_by_close_all(title: &str, process_name: &str) -> bool {
-    let process = process_name.to_ascii_lowercase();
-    title.is_empty() || title == "Program Manager" || title == ADMIN_POWERSHELL || process.starts_with("arena-guest")
-}
-
 /// Asks every visible window `close_all` does not spare to close; answers how many were asked.
 pub(crate) async fn close_all(client: &GuestClient) -> Result<usize, ClientError> {
     let mut asked = 0;
     for window in client.windows().await? {
-        if !window.visible || spared_by_close_all(&window.title, &window.process_name) {
+        // The guest's server process id is not known here; the rule spares it by name.
+        if arena_shared::close_all::spares(&window, None) {
             continue;
         }
         let target = arena_shared::observation::WindowTarget { id: Some(window.id), title: None };
@@ -272,19 +264,6 @@ mod tests {
         assert_eq!(Settle { factor: 0.1, max_pause: None }.scale(five), Duration::from_millis(500));
         assert_eq!(Settle { factor: f64::NAN, max_pause: None }.scale(five), Duration::ZERO);
         assert_eq!(Settle { factor: 1e300, max_pause: None }.scale(five), Duration::MAX);
-    }
-
-    #[test]
-    fn close_all_spares_the_desktop_the_console_and_the_server() {
-        let check = |title: &str, process: &str, spared: bool| {
-            assert_eq!(spared_by_close_all(title, process), spared, "{title:?} {process:?}");
-        };
-        check("Program Manager", "explorer.exe", true);
-        check("", "explorer.exe", true);
-        check(ADMIN_POWERSHELL, "powershell.exe", true);
-        check("arena", "arena-guest.exe", true);
-        check("Untitled - Notepad", "notepad.exe", false);
-        check("Windows PowerShell", "powershell.exe", false);
     }
 
     #[test]

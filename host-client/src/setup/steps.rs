@@ -146,9 +146,9 @@ async fn launch(ctx: &SetupContext, command: &CommandArg, shell: bool) -> Outcom
         }
     }
     let home = home(&ctx.client, command).await;
-    let argv = command::launch_argv(command, shell, home.as_deref());
-    let line = command::display(&argv);
-    match ctx.client.launch(&LaunchRequest { argv }).await {
+    let spec = command::launch_command(command, shell, home.as_deref());
+    let line = command::display(&spec);
+    match ctx.client.launch(&LaunchRequest::new(spec)).await {
         Ok(started) => Outcome::done(format!("started pid {}: {line}", started.pid)),
         // Upstream's guest ran launches through the shell and never looked at the
         // result, so a missing program (socat, a cmdlet) was a success there too.
@@ -376,9 +376,9 @@ async fn execute(
 /// One attempt of an `execute` step: pyautogui code as typed actions when it is only
 /// input, any other command (or code doing more than input) run on the guest.
 async fn run_once(client: &GuestClient, plan: &ExecPlan) -> Result<Ran, String> {
-    let argv = match plan {
-        ExecPlan::Argv(argv) => argv,
-        ExecPlan::Python { code, argv } => {
+    let spec = match plan {
+        ExecPlan::Run(spec) => spec,
+        ExecPlan::Python { code, command } => {
             let (screen, cursor) = pointer_context(client).await?;
             match actions_from_pyautogui(code, screen, cursor) {
                 Ok(actions) => {
@@ -393,20 +393,14 @@ async fn run_once(client: &GuestClient, plan: &ExecPlan) -> Result<Ran, String> 
                 }
                 Err(err) => {
                     tracing::info!(error = %err, "python code is not only input; running it on the guest");
-                    argv
+                    command
                 }
             }
         }
     };
-    let request = ExecRequest {
-        argv: argv.clone(),
-        timeout_ms: Some(EXEC_TIMEOUT_MS),
-        max_output_bytes: None,
-        cwd: None,
-        stdin: None,
-    };
+    let request = ExecRequest { timeout_ms: Some(EXEC_TIMEOUT_MS), ..ExecRequest::new(spec.clone()) };
     let result: ExecResult = client.exec(&request).await.map_err(|err| err.to_string())?;
-    let mut how = format!("ran {}", command::display(argv));
+    let mut how = format!("ran {}", command::display(spec));
     if result.timed_out {
         how.push_str(&format!(" (killed after {} s)", EXEC_TIMEOUT_MS / 1000));
     }

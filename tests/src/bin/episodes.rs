@@ -74,7 +74,7 @@ fn print(name: &str, samples: &mut [Duration]) {
 async fn per_step(url: &str) -> anyhow::Result<()> {
     let client = client(url)?;
     client.wait_ready(&[], Duration::from_secs(30), Duration::from_millis(50)).await?;
-    client.launch(&LaunchRequest { argv: vec!["notepad".into()] }).await?;
+    client.launch(&LaunchRequest { shell: None, argv: vec!["notepad".into()] }).await?;
     let screen = client.screen().await?;
     let size = (screen.physical_width, screen.physical_height);
     let mut computer = ComputerState::for_screen(i32::try_from(size.0)?, i32::try_from(size.1)?);

@@ -87,7 +87,7 @@ async fn run() -> anyhow::Result<()> {
     client
         .wait_ready(&arena_shared::health::Component::ALL, Duration::from_secs(30), Duration::from_millis(20))
         .await?;
-    client.launch(&LaunchRequest { argv: vec!["notepad".into()] }).await?;
+    client.launch(&LaunchRequest { shell: None, argv: vec!["notepad".into()] }).await?;
     let raw = reqwest::Client::new();
 
     println!("arena round-trip bench: stub guest on {url} (in-process server, real HTTP on loopback)");

@@ -196,6 +196,7 @@ impl BrowserGetter {
                 // Edge keeps its cookie database locked while it runs; upstream
                 // kills it first (and ignores whether that worked), so do we.
                 let kill = ExecRequest {
+                    shell: None,
                     argv: ["taskkill", "/F", "/IM", "msedge.exe", "/T"].map(String::from).to_vec(),
                     timeout_ms: Some(30_000),
                     max_output_bytes: Some(4096),
@@ -1092,6 +1093,7 @@ async fn pwa_in_start_menu(ctx: &EvalContext, p: &Params<'_>, needle: &str) -> R
 
 async fn pwa_in_appx(ctx: &EvalContext, needle: &str) -> bool {
     let request = ExecRequest {
+        shell: None,
         argv: [
             "powershell",
             "-NoProfile",
@@ -1138,6 +1140,7 @@ async fn pdf_from_url(ctx: &EvalContext, p: &Params<'_>) -> Result<Fetched, Gett
     let pdf = guest_join(&temp, &format!("arena-pdf-{stamp}.pdf"));
     let profile = guest_join(&temp, &format!("arena-pdf-profile-{stamp}"));
     let request = ExecRequest {
+        shell: None,
         argv: headless_print_argv(url, &pdf, &profile),
         timeout_ms: Some(120_000),
         max_output_bytes: Some(64 << 10),

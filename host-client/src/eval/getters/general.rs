@@ -1,8 +1,9 @@
 //! Getters of upstream's `getters/general.py` and `getters/misc.py`: `rule`
 //! (the task's own rules) and `vm_command_line` (a program's output).
 
-use arena_guest::cmdline::{list2cmdline, shlex_split};
+use arena_shared::cmdline::{execute_command, CommandSpec};
 use arena_shared::exec::ExecRequest;
+use arena_shared::script::CommandArg;
 use serde_json::Value;
 
 use super::{GetterError, Params};
@@ -20,8 +21,7 @@ pub(super) fn rule(params: &Params<'_>) -> Result<Fetched, GetterError> {
 /// a lost connection) is an error here, where upstream returns `None`, so
 /// the reason is recorded.
 pub(super) async fn vm_command_line(ctx: &EvalContext, params: &Params<'_>) -> Result<Fetched, GetterError> {
-    let argv = command_argv(params)?;
-    let request = ExecRequest { argv, timeout_ms: None, max_output_bytes: None, cwd: None, stdin: None };
+    let request = ExecRequest::new(command_spec(params)?);
     let result = ctx.client.exec(&request).await.map_err(|err| params.guest(err))?;
     if result.timed_out {
         return Err(params.failed(format!("the command was killed after {} ms", result.duration_ms)));
@@ -29,19 +29,16 @@ pub(super) async fn vm_command_line(ctx: &EvalContext, params: &Params<'_>) -> R
     Ok(Fetched::Text(result.stdout))
 }
 
-/// The argument vector upstream's `/execute` would run: a list as is; a string
-/// split like `shlex.split` (POSIX); with `shell`, the line handed to `cmd /c`
-/// (a list joined as `subprocess.list2cmdline` does).
-pub(super) fn command_argv(params: &Params<'_>) -> Result<Vec<String>, GetterError> {
+/// The command upstream's `/execute` would run (see
+/// [`arena_shared::cmdline::execute_command`]): a list as is; a string split like
+/// `shlex.split` (POSIX); with `shell`, one line for `cmd /c` (a list joined as
+/// `subprocess.list2cmdline` does).
+pub(super) fn command_spec(params: &Params<'_>) -> Result<CommandSpec, GetterError> {
     let shell = params.truthy("shell");
-    let command = params.get("command")?;
-    let argv = match command {
-        Value::String(line) if shell => vec!["cmd".into(), "/c".into(), line.clone()],
-        Value::String(line) => {
-            shlex_split(line).map_err(|err| params.bad(format!("`command` does not split: {err}")))?
-        }
-        Value::Array(items) => {
-            let words = items
+    let command = match params.get("command")? {
+        Value::String(line) => CommandArg::Line(line.clone()),
+        Value::Array(items) => CommandArg::Args(
+            items
                 .iter()
                 .enumerate()
                 .map(|(idx, v)| {
@@ -49,17 +46,18 @@ pub(super) fn command_argv(params: &Params<'_>) -> Result<Vec<String>, GetterErr
                         .map(str::to_owned)
                         .ok_or_else(|| params.bad(format!("`command[{idx}]` must be a string")))
                 })
-                .collect::<Result<Vec<_>, _>>()?;
-            if shell {
-                vec!["cmd".into(), "/c".into(), list2cmdline(&words)]
-            } else {
-                words
-            }
-        }
+                .collect::<Result<Vec<_>, _>>()?,
+        ),
         other => return Err(params.bad(format!("`command` must be a string or a list, not {}", json_kind(other)))),
     };
-    if argv.first().is_none_or(String::is_empty) {
+    let spec =
+        execute_command(&command, shell, None).map_err(|err| params.bad(format!("`command` does not split: {err}")))?;
+    let empty = match &spec {
+        CommandSpec::Shell(line) => line.is_empty(),
+        CommandSpec::Argv(argv) => argv.first().is_none_or(String::is_empty),
+    };
+    if empty {
         return Err(params.bad("`command` is empty"));
     }
-    Ok(argv)
+    Ok(spec)
 }

@@ -207,25 +207,29 @@ async fn vm_command_line_returns_stdout() {
 }
 
 #[test]
-fn command_lines_become_argv_like_upstream() {
-    let check = |params: Value, want: Result<&[&str], &str>| {
+fn command_lines_become_commands_like_upstream() {
+    use arena_shared::cmdline::CommandSpec;
+    let argv = |w: &[&str]| Ok(CommandSpec::Argv(w.iter().map(|s| (*s).to_owned()).collect()));
+    let shell = |line: &str| Ok(CommandSpec::Shell(line.to_owned()));
+    let check = |params: Value, want: Result<CommandSpec, &str>| {
         let Value::Object(map) = params.clone() else { panic!() };
-        match (super::general::command_argv(&Params::new("vm_command_line", &map)), want) {
-            (Ok(argv), Ok(want)) => assert_eq!(argv, want, "{params}"),
+        match (super::general::command_spec(&Params::new("vm_command_line", &map)), want) {
+            (Ok(got), Ok(want)) => assert_eq!(got, want, "{params}"),
             (Err(err), Err(text)) => assert!(err.to_string().contains(text), "{err}"),
             (got, want) => panic!("{params}: got {got:?}, want {want:?}"),
         }
     };
     check(
         json!({"command": ["cmd", "/c", "code", "--list-extensions", "|", "findstr", "x"]}),
-        Ok(&["cmd", "/c", "code", "--list-extensions", "|", "findstr", "x"]),
+        argv(&["cmd", "/c", "code", "--list-extensions", "|", "findstr", "x"]),
     );
-    check(json!({"command": "powershell -Command \"Get-TimeZone\""}), Ok(&["powershell", "-Command", "Get-TimeZone"]));
-    check(json!({"command": "dir C:\\x", "shell": true}), Ok(&["cmd", "/c", "dir C:\\x"]));
     check(
-        json!({"command": ["dir", "C:\\Program Files"], "shell": true}),
-        Ok(&["cmd", "/c", "dir \"C:\\Program Files\""]),
+        json!({"command": "powershell -Command \"Get-TimeZone\""}),
+        argv(&["powershell", "-Command", "Get-TimeZone"]),
     );
+    check(json!({"command": "dir C:\\x", "shell": true}), shell("dir C:\\x"));
+    check(json!({"command": "echo \"a b\" > x.txt", "shell": true}), shell("echo \"a b\" > x.txt"));
+    check(json!({"command": ["dir", "C:\\Program Files"], "shell": true}), shell("dir \"C:\\Program Files\""));
     check(json!({"command": "echo 'open"}), Err("does not split"));
     check(json!({"command": []}), Err("empty"));
 }
@@ -233,7 +237,12 @@ fn command_lines_become_argv_like_upstream() {
 #[tokio::test]
 async fn active_window_title_is_the_foreground_window() {
     let guest = start_guest().await;
-    guest.ctx.client.launch(&LaunchRequest { argv: vec!["notepad".into()] }).await.expect("launch notepad");
+    guest
+        .ctx
+        .client
+        .launch(&LaunchRequest { shell: None, argv: vec!["notepad".into()] })
+        .await
+        .expect("launch notepad");
     check(&guest, json!({"type": "vm_active_window_title"}), Ok(Fetched::Text("Untitled - Notepad".into()))).await;
 }
 
