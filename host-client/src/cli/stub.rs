@@ -9,7 +9,6 @@
 //! without it (`--no-default-features`) has no server code in it; then `serve-stub`
 //! does not exist, and `demo` and `run --stub-guests` without a guest say so.
 
-use std::future::Future;
 use std::net::{IpAddr, SocketAddr};
 use std::path::PathBuf;
 
@@ -136,7 +135,7 @@ pub async fn serve_until(
     args: &StubArgs,
     token: Option<String>,
     on_listening: impl FnOnce(SocketAddr),
-    shutdown: impl Future<Output = ()> + Send + 'static,
+    shutdown: impl std::future::Future<Output = ()> + Send + 'static,
 ) -> anyhow::Result<()> {
     let (listener, state) = prepare(args, token).await?;
     let addr = listener.local_addr().context("reading the bound address")?;
