@@ -18,6 +18,7 @@
 //! - [`waa`], [`native`]: the routes. [`auth`]: token and cross-site guards.
 //! - [`error`]: the error shapes. [`state`]: handler state.
 //! - [`paths`], [`imaging`]: platform-neutral helpers the routes share.
+//! - [`inspect`]: the logic of the evaluator queries both APIs answer.
 //! - [`script_host`]: the desktop side of the native Python-subset interpreter.
 //! - [`service`]: the `service` and `logon-task` subcommands (running in the user's session), with the
 //!   Windows service supervisor in `service/windows/`.
@@ -28,6 +29,7 @@ pub mod config;
 pub mod desktop;
 pub mod error;
 pub mod imaging;
+pub mod inspect;
 pub mod native;
 pub mod paths;
 pub mod script_host;
@@ -56,7 +58,7 @@ pub fn router(state: AppState) -> Router {
     let max_body = state.config.max_body_bytes;
     Router::new()
         .merge(native::routes())
-        .merge(waa::routes())
+        .merge(waa::routes(&state))
         .fallback(fallback)
         .method_not_allowed_fallback(method_not_allowed)
         .layer(axum::middleware::from_fn_with_state(state.clone(), auth::guard))

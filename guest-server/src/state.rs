@@ -6,7 +6,8 @@ use std::time::{Duration, Instant};
 use crate::config::ServerConfig;
 use crate::desktop::Desktop;
 
-/// State of every handler: the backend, the configuration and the WAA session state.
+/// State of every handler: the backend and the configuration. (The WAA layer's
+/// session state is its own: see [`crate::waa::routes`].)
 #[derive(Debug, Clone)]
 pub struct AppState {
     pub desktop: Arc<dyn Desktop>,
@@ -14,19 +15,11 @@ pub struct AppState {
     /// The bearer token in force, if any.
     pub token: Option<Arc<str>>,
     pub started: Instant,
-    /// State that upstream keeps in module globals (`computer`, recording, human input).
-    pub waa: Arc<crate::waa::WaaState>,
 }
 
 impl AppState {
     pub fn new(desktop: Arc<dyn Desktop>, config: ServerConfig, token: Option<String>) -> AppState {
-        AppState {
-            desktop,
-            config: Arc::new(config),
-            token: token.map(Arc::from),
-            started: Instant::now(),
-            waa: Arc::new(crate::waa::WaaState::default()),
-        }
+        AppState { desktop, config: Arc::new(config), token: token.map(Arc::from), started: Instant::now() }
     }
 
     /// Deadline of an ordinary backend call.

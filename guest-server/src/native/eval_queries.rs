@@ -1,9 +1,9 @@
 //! `POST /v1/eval/<query>`: the evaluation queries of upstream's bespoke WAA
 //! routes, with typed bodies and answers (`arena_shared::eval`).
 //!
-//! Each route answers the same question as its legacy twin in
-//! [`crate::waa::queries`] and reuses that module's pure logic (tree search,
-//! the sort rule, the DACL rule, EXIF strings, library XML); only the
+//! Each route answers the same question as its legacy twin in the WAA layer,
+//! with the same logic from [`crate::inspect`] (tree search, the sort rule, the
+//! DACL rule, EXIF strings, library XML); only the
 //! plumbing differs: paths are expanded like every native path, errors are
 //! [`ApiError`]s, and "no" is a 200 with `value: false` rather than a 400.
 //!
@@ -26,9 +26,9 @@ use arena_shared::observation::{A11yBackend, A11yTree, TreeBudget};
 use crate::call::blocking;
 use crate::desktop::{Desktop, DesktopError};
 use crate::error::{ApiError, AppJson};
+use crate::inspect as logic;
 use crate::paths;
 use crate::state::AppState;
-use crate::waa::queries as logic;
 
 pub(crate) fn routes() -> Router<AppState> {
     Router::new()

@@ -28,6 +28,7 @@ use crate::error::WaaError;
 use crate::script_host::{python_available, DesktopHost};
 use crate::state::AppState;
 use crate::waa::body::{Data, PyJson};
+use crate::waa::WaaState;
 use crate::waa::{expand_user, json, json_err, on_backend, on_backend_within, py, text, WaaResult};
 use arena_shared::cmdline::{list2cmdline, shlex_split};
 
@@ -336,7 +337,11 @@ fn b64decode(s: &str) -> Result<Vec<u8>, WaaError> {
 }
 
 /// `POST /update_computer`.
-pub(crate) async fn update_computer(State(state): State<AppState>, PyJson(body): PyJson) -> WaaResult {
+pub(crate) async fn update_computer(
+    State(state): State<AppState>,
+    State(session): State<Arc<WaaState>>,
+    PyJson(body): PyJson,
+) -> WaaResult {
     let data = Data(&body);
     let rects = data.get("rects")?.cloned();
     let window_rect = data.get("window_rect")?.cloned();
@@ -362,7 +367,7 @@ pub(crate) async fn update_computer(State(state): State<AppState>, PyJson(body):
     })
     .await?;
     let screenshot = Arc::new(screenshot);
-    state.waa.set_computer(ComputerState {
+    session.set_computer(ComputerState {
         rects,
         window_rect,
         screenshot,
@@ -375,13 +380,17 @@ pub(crate) async fn update_computer(State(state): State<AppState>, PyJson(body):
 }
 
 /// `POST /execute_windows`.
-pub(crate) async fn execute_windows(State(state): State<AppState>, PyJson(body): PyJson) -> WaaResult {
+pub(crate) async fn execute_windows(
+    State(state): State<AppState>,
+    State(session): State<Arc<WaaState>>,
+    PyJson(body): PyJson,
+) -> WaaResult {
     let data = Data(&body);
     let code = match data.get("command")? {
         Some(Value::String(code)) => code.clone(),
         _ => return Ok(exec_failure("exec() arg 1 must be a string, bytes or code object".to_owned())),
     };
-    let computer = state.waa.computer();
+    let computer = session.computer();
     let started_from = computer.clone();
     let options = CodeOptions {
         action_delay: Duration::from_millis(state.config.computer_action_delay_ms),
@@ -401,7 +410,7 @@ pub(crate) async fn execute_windows(State(state): State<AppState>, PyJson(body):
                 clipboard_content: after.clipboard_content,
                 ..(*before).clone()
             };
-            state.waa.replace_computer(&before, next);
+            session.replace_computer(&before, next);
         }
     }
     Ok(match run.result {

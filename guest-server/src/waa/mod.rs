@@ -37,6 +37,7 @@ mod setup;
 use std::sync::{Arc, Mutex, MutexGuard};
 use std::time::Duration;
 
+use axum::extract::FromRef;
 use axum::http::{header, HeaderValue, StatusCode};
 use axum::response::{IntoResponse, Response};
 use axum::routing::{get, post, MethodRouter};
@@ -48,20 +49,13 @@ use crate::state::AppState;
 
 pub use execute::ComputerState;
 
-/// What upstream keeps in module globals: the `/update_computer` state, the human
-/// question and answer shown by `/obs_winagent`, and the recording process.
+/// What upstream keeps in module globals: the `/update_computer` state and the
+/// recording process. (Upstream's third, the human question and answer, never
+/// changes here: `human.*` code is refused, so `/obs_winagent` shows its defaults.)
 #[derive(Debug, Default)]
 pub struct WaaState {
     computer: Mutex<Option<Arc<ComputerState>>>,
-    human: Mutex<HumanInput>,
     recording: tokio::sync::Mutex<Option<recording::Recording>>,
-}
-
-/// The last question asked through `human.ask_question` and its answer.
-#[derive(Debug, Clone, Default, PartialEq, Eq)]
-pub struct HumanInput {
-    pub question: Option<String>,
-    pub answer: Option<String>,
 }
 
 /// Locks a mutex, carrying on with the data if a panicking thread poisoned it:
@@ -93,24 +87,36 @@ impl WaaState {
         unchanged
     }
 
-    /// Records a human question and answer for `/obs_winagent`'s `human_input`.
-    pub fn set_human_input(&self, input: HumanInput) {
-        *lock(&self.human) = input;
-    }
-
-    /// `human.get_past_input()`: `"Question: <q>\nAnswer: <a>"` with upstream's defaults.
-    pub fn human_input(&self) -> String {
-        let human = lock(&self.human);
-        format!(
-            "Question: {}\nAnswer: {}",
-            human.question.as_deref().unwrap_or("No question asked yet"),
-            human.answer.as_deref().unwrap_or("No answer given yet")
-        )
+    /// `human.get_past_input()` before any question: upstream's default text.
+    pub fn human_input(&self) -> &'static str {
+        "Question: No question asked yet\nAnswer: No answer given yet"
     }
 }
 
-/// The 44 upstream URL rules with upstream's methods (plus the `OPTIONS` Flask adds).
-pub fn routes() -> Router<AppState> {
+/// What WAA handlers can extract: the server's state, and the WAA session state,
+/// which belongs to this layer alone (the native API never sees it).
+#[derive(Debug, Clone)]
+pub(crate) struct WaaContext {
+    app: AppState,
+    session: Arc<WaaState>,
+}
+
+impl FromRef<WaaContext> for AppState {
+    fn from_ref(ctx: &WaaContext) -> AppState {
+        ctx.app.clone()
+    }
+}
+
+impl FromRef<WaaContext> for Arc<WaaState> {
+    fn from_ref(ctx: &WaaContext) -> Arc<WaaState> {
+        ctx.session.clone()
+    }
+}
+
+/// The 44 upstream URL rules with upstream's methods (plus the `OPTIONS` Flask adds),
+/// with a fresh WAA session (no `/update_computer` yet, no recording).
+pub fn routes(state: &AppState) -> Router<AppState> {
+    let ctx = WaaContext { app: state.clone(), session: Arc::new(WaaState::default()) };
     Router::new()
         .route("/update_computer", post_rule(execute::update_computer))
         .route("/execute_windows", post_rule(execute::execute_windows))
@@ -156,21 +162,22 @@ pub fn routes() -> Router<AppState> {
         .route("/library_folders", post_rule(queries::library_folders))
         .route("/check_if_timer_started", post_rule(queries::check_if_timer_started))
         .route("/check_if_world_clock_exists", post_rule(queries::check_if_world_clock_exists))
+        .with_state(ctx)
 }
 
 /// A `POST` rule; Flask also answers `OPTIONS` on it.
-fn post_rule<H, T>(handler: H) -> MethodRouter<AppState>
+fn post_rule<H, T>(handler: H) -> MethodRouter<WaaContext>
 where
-    H: axum::handler::Handler<T, AppState>,
+    H: axum::handler::Handler<T, WaaContext>,
     T: 'static,
 {
     post(handler).options(|| async { allow("OPTIONS, POST") })
 }
 
 /// A `GET` rule; axum answers `HEAD` from it, and Flask also answers `OPTIONS`.
-fn get_rule<H, T>(handler: H) -> MethodRouter<AppState>
+fn get_rule<H, T>(handler: H) -> MethodRouter<WaaContext>
 where
-    H: axum::handler::Handler<T, AppState>,
+    H: axum::handler::Handler<T, WaaContext>,
     T: 'static,
 {
     get(handler).options(|| async { allow("GET, HEAD, OPTIONS") })

@@ -16,7 +16,9 @@ use crate::desktop::Desktop;
 use crate::error::WaaError;
 use crate::state::AppState;
 use crate::waa::body::{parse_urlencoded, PyForm};
+use crate::waa::WaaState;
 use crate::waa::{a11y_xml, json, json_err, on_backend, on_backend_within, text, text_err, WaaResult};
+use std::sync::Arc;
 
 /// `platform.platform()` of the Windows 11 guests WAA runs on; `/terminal` names it.
 const PLATFORM: &str = "Windows-10-10.0.22631-SP0";
@@ -121,9 +123,9 @@ pub(crate) fn window_names(windows: &[WindowInfo]) -> Vec<String> {
 }
 
 /// `GET /obs_winagent`.
-pub(crate) async fn obs_winagent(State(state): State<AppState>) -> WaaResult {
-    let clipboard = state.waa.computer().map_or(Value::Null, |c| c.clipboard_content.clone());
-    let human_input = state.waa.human_input();
+pub(crate) async fn obs_winagent(State(state): State<AppState>, State(session): State<Arc<WaaState>>) -> WaaResult {
+    let clipboard = session.computer().map_or(Value::Null, |c| c.clipboard_content.clone());
+    let human_input = session.human_input();
     let (image, title, rect, names) = on_backend(&state, "obs_winagent", |desktop| {
         let all = desktop.windows()?;
         let foreground = all.iter().find(|w| w.focused).cloned();

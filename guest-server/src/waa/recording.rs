@@ -20,8 +20,10 @@ use crate::error::WaaError;
 use crate::paths;
 use crate::state::AppState;
 use crate::waa::body::PyForm;
+use crate::waa::WaaState;
 use crate::waa::{json, json_err, on_backend, WaaResult};
 use arena_shared::cmdline::shlex_split;
+use std::sync::Arc;
 
 /// A running recording: the ffmpeg process and the file it writes.
 #[derive(Debug, Clone)]
@@ -45,8 +47,8 @@ fn recordings_dir(desktop: &dyn Desktop) -> Result<String, WaaError> {
 }
 
 /// `POST /start_recording`.
-pub(crate) async fn start_recording(State(state): State<AppState>) -> WaaResult {
-    let mut recording = state.waa.recording.lock().await;
+pub(crate) async fn start_recording(State(state): State<AppState>, State(session): State<Arc<WaaState>>) -> WaaResult {
+    let mut recording = session.recording.lock().await;
     if recording.is_some() {
         return Err(json_err(
             StatusCode::BAD_REQUEST,
@@ -80,8 +82,8 @@ pub(crate) async fn start_recording(State(state): State<AppState>) -> WaaResult 
 }
 
 /// `POST /end_recording`.
-pub(crate) async fn end_recording(State(state): State<AppState>) -> WaaResult {
-    let mut recording = state.waa.recording.lock().await;
+pub(crate) async fn end_recording(State(state): State<AppState>, State(session): State<Arc<WaaState>>) -> WaaResult {
+    let mut recording = session.recording.lock().await;
     let Some(current) = recording.take() else {
         return Err(json_err(
             StatusCode::BAD_REQUEST,
