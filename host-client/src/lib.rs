@@ -1,17 +1,27 @@
-//! The host side of the arena: a typed client of the guest's native API and
-//! the `arena` command line built on it.
+//! The host side of the arena: a typed client of the guest's native API, the
+//! benchmark harness on top of it (tasks, setup, agents, episodes, evaluation,
+//! results, runs over a pool of guests), and the `arena` command line.
 //!
-//! It is not the guest server (see `arena-guest`, which this crate embeds only
-//! to offer `arena serve-stub` and a self-contained `arena demo`), and it does
-//! not speak the legacy WAA routes.
+//! It is not the guest server (see `arena-guest`, which this crate embeds only with
+//! its default `stub-guest` feature, for `arena serve-stub`, `run --stub-guests` and
+//! a self-contained `arena demo`), and it does not speak the legacy WAA routes.
 //!
 //! # Layout
 //!
 //! - [`client`]: [`client::GuestClient`], one async method per `/v1/` route,
 //!   with deadlines, retries of idempotent calls and a readiness wait.
-//! - [`cli`]: the `arena` command line (`main.rs` only parses and calls [`run`]).
 //! - [`error`]: [`error::ClientError`], which always names the guest, the call and the cause.
+//! - [`task`]: WAA task files, read in two layers (raw mirror, validated task).
+//! - [`setup`]: the tasks' setup steps over the guest API, and the download cache.
+//! - [`agent`]: the agent trait; Navi, scripted and replay agents; running agent code.
+//! - [`som`]: Set-of-Marks from the accessibility tree.
 //! - [`pyaction`]: agents' pyautogui code translated into typed actions.
+//! - [`episode`]: one episode: reset, setup, the observe/act loop, evaluation.
+//! - [`eval`]: getters and metrics by closed registries.
+//! - [`results`]: result folders in upstream's layout, the summary and the HTML report.
+//! - [`run`]: task lists, shards, the pool of guests, merging shards.
+//! - [`prep`]: staging a Windows image's OEM folder and waiting for its guest.
+//! - [`cli`]: the `arena` command line (`main.rs` only parses and calls [`run`]).
 
 pub mod agent;
 pub mod cli;

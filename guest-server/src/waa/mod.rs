@@ -1,6 +1,6 @@
 //! The upstream WindowsAgentArena server's 44 URL rules, compatible in methods,
 //! request fields, response shapes, status codes and error texts
-//! (`/work/shared/reference/waa-api.md` §a; deviations in `docs/compatibility.md`).
+//! (the reference's `waa-api.md` §a; deviations in `docs/compatibility.md`).
 //!
 //! This is a thin layer over the same [`Desktop`] calls the native API uses: the
 //! routes parse Flask-style bodies, call the backend through [`crate::call::blocking`],
