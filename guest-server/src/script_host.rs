@@ -224,14 +224,11 @@ impl ScriptHost for DesktopHost<'_> {
 
     fn list_dir(&mut self, path: &str) -> HostResult<Vec<String>> {
         let local = self.desktop.map_path(path).map_err(fail)?;
-        let entries = std::fs::read_dir(&local).map_err(|err| match err.kind() {
+        let names = arena_shared::ntfs::list_dir(&local).map_err(|err| match err.kind() {
             std::io::ErrorKind::NotFound => format!("[WinError 3] The system cannot find the path specified: '{path}'"),
             std::io::ErrorKind::NotADirectory => format!("[WinError 267] The directory name is invalid: '{path}'"),
             _ => format!("{path}: {err}"),
         })?;
-        let mut names: Vec<String> =
-            entries.filter_map(Result::ok).map(|e| e.file_name().to_string_lossy().into_owned()).collect();
-        arena_shared::ntfs::sort_names(&mut names);
         Ok(names)
     }
 

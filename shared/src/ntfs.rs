@@ -8,6 +8,8 @@
 //! executor all sort with [`cmp_names`], so a listing is the same from every path and
 //! on every backend (the stub's Linux file system returns names in no useful order).
 //!
+//! [`list_dir`] is `os.listdir` itself for a local folder.
+//!
 //! The upcase table is approximated by Unicode simple uppercase mapping of code units
 //! that map to a single code unit, which is what the table holds for the characters
 //! file names use.
@@ -40,6 +42,21 @@ pub fn sort_names(names: &mut [String]) {
     names.sort_by(|a, b| cmp_names(a, b));
 }
 
+/// Python's `os.listdir` of a local folder as a Windows guest answers it: the entry
+/// names (lossily decoded), in NTFS order. Entries that vanish while listing are left out.
+///
+/// # Errors
+///
+/// The folder cannot be read (missing, not a folder, no permission).
+pub fn list_dir(folder: &std::path::Path) -> std::io::Result<Vec<String>> {
+    let mut names: Vec<String> = std::fs::read_dir(folder)?
+        .filter_map(Result::ok)
+        .map(|entry| entry.file_name().to_string_lossy().into_owned())
+        .collect();
+    sort_names(&mut names);
+    Ok(names)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -70,6 +87,16 @@ mod tests {
         check(&["ärger", "Ärger2"], &["ärger", "Ärger2"]);
         check(&["ß", "SS", "t"], &["SS", "t", "ß"]);
         check(&[], &[]);
+    }
+
+    #[test]
+    fn folders_are_listed_in_ntfs_order() {
+        let dir = tempfile::tempdir().expect("dir");
+        for name in ["b", "_x", "A"] {
+            std::fs::write(dir.path().join(name), b"").expect("write");
+        }
+        assert_eq!(list_dir(dir.path()).expect("list"), ["A", "b", "_x"]);
+        assert!(list_dir(&dir.path().join("missing")).is_err());
     }
 
     #[test]

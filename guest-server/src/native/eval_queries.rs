@@ -204,13 +204,8 @@ async fn are_all_images_tagged(
     let untagged = blocking(&state.desktop, "are_all_images_tagged", state.call_timeout(), move |d| {
         let folder = expand(d, &directory);
         let local = d.map_path(&folder)?;
-        let mut names: Vec<String> = std::fs::read_dir(&local)
-            .map_err(|err| DesktopError::io("list", &folder, err))?
-            .filter_map(Result::ok)
-            .map(|e| e.file_name().to_string_lossy().into_owned())
-            .collect();
-        // Upstream walks `os.listdir`, which is case-insensitive name order on NTFS.
-        names.sort_by(|a, b| a.to_uppercase().cmp(&b.to_uppercase()).then_with(|| a.cmp(b)));
+        // Upstream walks `os.listdir`.
+        let names = arena_shared::ntfs::list_dir(&local).map_err(|err| DesktopError::io("list", &folder, err))?;
         let image = |name: &str| {
             let lower = name.to_lowercase();
             lower.ends_with("jpg") || lower.ends_with("jpeg") || lower.ends_with("tiff")

@@ -40,17 +40,6 @@ fn exists(local: &Path) -> bool {
     std::fs::metadata(local).is_ok() || std::fs::symlink_metadata(local).is_ok()
 }
 
-/// Directory entry names in the order `os.listdir` and `glob` return them on the
-/// Windows guests (see [`arena_shared::ntfs`]), whatever the backend's file system.
-fn read_dir_sorted(dir: &Path) -> std::io::Result<Vec<String>> {
-    let mut names: Vec<String> = std::fs::read_dir(dir)?
-        .filter_map(|entry| entry.ok())
-        .map(|entry| entry.file_name().to_string_lossy().into_owned())
-        .collect();
-    arena_shared::ntfs::sort_names(&mut names);
-    Ok(names)
-}
-
 // ----- /file -----
 
 /// Werkzeug's `Content-Disposition` for `send_file(as_attachment=True)`.
@@ -326,7 +315,7 @@ struct ListBudget {
 /// Upstream's `_list_dir_contents`: `{"type": "directory", "name", "children"}`, files as
 /// `{"type": "file", "name"}`, and `{"error": msg}` for a directory that cannot be listed.
 fn list_tree(local: &Path, guest: &str, budget: &mut ListBudget, depth: usize) -> Value {
-    let names = match read_dir_sorted(local) {
+    let names = match arena_shared::ntfs::list_dir(local) {
         Ok(names) => names,
         Err(err) => return json!({"error": py::os_error(OsCall::Win32Dir, &err, guest)}),
     };
@@ -467,7 +456,8 @@ pub(crate) async fn open_file(State(state): State<AppState>, PyJson(body): PyJso
 fn clear_downloads(desktop: &dyn Desktop) -> Result<Response, WaaError> {
     let dir = desktop.known_folder(KnownFolder::Downloads)?;
     let local = desktop.map_path(&dir)?;
-    let names = read_dir_sorted(&local).map_err(|err| WaaError::catch(py::os_error(OsCall::Win32Dir, &err, &dir)))?;
+    let names = arena_shared::ntfs::list_dir(&local)
+        .map_err(|err| WaaError::catch(py::os_error(OsCall::Win32Dir, &err, &dir)))?;
     let (mut removed, mut failed) = (Vec::new(), Vec::new());
     // `glob("...\\*")` skips names starting with a dot.
     for name in names.into_iter().filter(|n| !n.starts_with('.')) {

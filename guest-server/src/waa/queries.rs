@@ -245,12 +245,7 @@ pub(crate) async fn are_all_images_tagged(State(state): State<AppState>, PyJson(
     let untagged = on_backend(&state, "are_all_images_tagged", move |desktop| {
         let listing_error = |err: std::io::Error| WaaError::catch(py::os_error(OsCall::Win32Dir, &err, &dir));
         let local = desktop.map_path(&dir).map_err(|_| listing_error(std::io::ErrorKind::NotFound.into()))?;
-        let mut names: Vec<String> = std::fs::read_dir(&local)
-            .map_err(listing_error)?
-            .filter_map(|e| e.ok())
-            .map(|e| e.file_name().to_string_lossy().into_owned())
-            .collect();
-        names.sort_by(|a, b| a.to_uppercase().cmp(&b.to_uppercase()).then_with(|| a.cmp(b)));
+        let names = arena_shared::ntfs::list_dir(&local).map_err(listing_error)?;
         for name in names {
             let lower = name.to_lowercase();
             if !(lower.ends_with("jpg") || lower.ends_with("jpeg") || lower.ends_with("tiff")) {

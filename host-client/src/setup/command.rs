@@ -11,7 +11,7 @@
 //! are [`arena_shared::cmdline`]'s, the same the guest's own routes use.
 //! Pure and free of I/O.
 
-use arena_shared::cmdline::{execute_command, list2cmdline, CommandSpec};
+use arena_shared::cmdline::{cmd_arguments, execute_command, list2cmdline, CommandSpec};
 use arena_shared::script::{python_code_from_argv, python_code_from_command_line, CommandArg as ScriptCommand};
 
 use crate::task::CommandArg;
@@ -92,7 +92,7 @@ pub(super) fn exec_plan(command: &CommandArg, shell: bool, home: Option<&str>) -
 pub(super) fn display(command: &CommandSpec) -> String {
     match command {
         CommandSpec::Argv(argv) => list2cmdline(argv),
-        CommandSpec::Shell(line) => format!("cmd /c \"{line}\""),
+        CommandSpec::Shell(line) => format!("cmd {}", cmd_arguments(line)),
     }
 }
 

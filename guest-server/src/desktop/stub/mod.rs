@@ -331,10 +331,7 @@ impl StubDesktop {
         let Ok(dir) = self.map_path(r"C:\Users\Docker\Desktop") else {
             return Vec::new();
         };
-        let mut names: Vec<String> = std::fs::read_dir(dir)
-            .map(|rd| rd.filter_map(Result::ok).map(|e| e.file_name().to_string_lossy().into_owned()).collect())
-            .unwrap_or_default();
-        names.sort_by_key(|n| n.to_lowercase());
+        let mut names = arena_shared::ntfs::list_dir(&dir).unwrap_or_default();
         names.truncate(500);
         names
     }
