@@ -136,10 +136,6 @@ struct CorpusCommand {
     code: String,
 }
 
-fn corpus_dir() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/reference/waa-tasks")
-}
-
 fn json_files(dir: &Path, out: &mut Vec<PathBuf>) {
     let entries = std::fs::read_dir(dir).unwrap_or_else(|err| panic!("reading {}: {err}", dir.display()));
     for entry in entries {
@@ -168,13 +164,9 @@ fn step_code(command: &Value, shell: bool) -> Option<String> {
     }
 }
 
-fn corpus_commands() -> Vec<CorpusCommand> {
-    let dir = corpus_dir();
-    assert!(
-        dir.is_dir(),
-        "the WAA task corpus was expected at {} (shared/reference/waa-tasks beside the workspace); it is missing",
-        dir.display()
-    );
+/// The corpus's Python commands, or `None` after a loud, counted skip.
+fn corpus_commands(test: &str) -> Option<Vec<CorpusCommand>> {
+    let dir = arena_test_support::waa_corpus(test)?;
     let mut files = Vec::new();
     json_files(&dir, &mut files);
     files.sort();
@@ -199,7 +191,7 @@ fn corpus_commands() -> Vec<CorpusCommand> {
             }
         }
     }
-    commands
+    Some(commands)
 }
 
 /// Runs one corpus command on a fresh stub and asserts its effects; returns whether it
@@ -260,7 +252,7 @@ async fn run_corpus_command(cmd: CorpusCommand) -> bool {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 4)]
 async fn every_corpus_python_command_runs_natively() {
-    let commands = corpus_commands();
+    let Some(commands) = corpus_commands("python_corpus::every_corpus_python_command_runs_natively") else { return };
     let total = commands.len();
     assert!(total >= 100, "expected the corpus's python -c commands (126), found {total}");
     // The commands sleep 0.5 to 5 s each (their own `time.sleep`s); each gets its own

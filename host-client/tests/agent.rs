@@ -15,7 +15,6 @@ use base64::Engine as _;
 use serde_json::{json, Value};
 use tokio::net::TcpListener;
 
-use arena_guest::config::ServerConfig;
 use arena_host::agent::navi::{NaviAgent, NaviConfig};
 use arena_host::agent::replay::{ReplayAgent, ReplaySource, TrajectoryStep};
 use arena_host::agent::scripted::{PlanSource, ScriptedAgent};
@@ -27,27 +26,10 @@ use arena_shared::clipboard::ClipboardContent;
 use arena_shared::exec::LaunchRequest;
 use arena_shared::observation::{A11yNode, A11yQuery};
 use arena_shared::script::ComputerState;
+use arena_test_support::StubGuest;
 
-/// A stub guest serving in a task; stops when dropped.
-struct Guest {
-    url: String,
-    _stop: tokio::sync::oneshot::Sender<()>,
-    _root: tempfile::TempDir,
-}
-
-async fn start_guest() -> Guest {
-    let root = tempfile::tempdir().expect("temporary stub root");
-    let mut config = ServerConfig::for_stub();
-    config.token = None;
-    config.stub_root = Some(root.path().to_path_buf());
-    let state = arena_guest::build_state(config).expect("stub state");
-    let listener = TcpListener::bind("127.0.0.1:0").await.expect("bind");
-    let url = format!("http://{}", listener.local_addr().expect("addr"));
-    let (stop, stopped) = tokio::sync::oneshot::channel::<()>();
-    tokio::spawn(arena_guest::serve(listener, state, async move {
-        let _ = stopped.await;
-    }));
-    Guest { url, _stop: stop, _root: root }
+async fn start_guest() -> StubGuest {
+    StubGuest::start().await
 }
 
 fn client(url: &str) -> GuestClient {
@@ -55,9 +37,9 @@ fn client(url: &str) -> GuestClient {
 }
 
 /// A guest with Notepad open and focused.
-async fn guest_with_notepad() -> (Guest, GuestClient) {
+async fn guest_with_notepad() -> (StubGuest, GuestClient) {
     let guest = start_guest().await;
-    let c = client(&guest.url);
+    let c = client(guest.url());
     c.launch(&LaunchRequest { shell: None, argv: vec!["notepad.exe".into()] }).await.expect("launch notepad");
     (guest, c)
 }
@@ -146,7 +128,7 @@ async fn pyautogui_hotkeys_and_the_clipboard_work_through_the_guest() {
 #[tokio::test]
 async fn typed_actions_open_program_and_switching_windows() {
     let guest = start_guest().await;
-    let c = client(&guest.url);
+    let c = client(guest.url());
     let obs = Observation::capture(&c, 1, "open").await.expect("observe");
     let mut state = ComputerState::for_screen(1, 1);
     let outcome = run(&c, &computer("computer.os.open_program(\"notepad\")"), &obs, &mut state).await;

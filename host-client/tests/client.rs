@@ -9,7 +9,6 @@ use std::time::{Duration, Instant};
 use tokio::io::{AsyncReadExt, AsyncWriteExt};
 use tokio::net::TcpListener;
 
-use arena_guest::config::ServerConfig;
 use arena_host::client::{sha256_hex, ClientConfig, GuestClient, WindowOp};
 use arena_host::error::ClientError;
 use arena_shared::action::{Action, ActionBatch, MouseButton};
@@ -20,29 +19,14 @@ use arena_shared::files::{FileKind, KnownFolder};
 use arena_shared::health::{Component, Readiness};
 use arena_shared::observation::{A11yNode, A11yQuery, ImageFormat, ScreenshotQuery, WindowTarget};
 use arena_shared::registry::{RegistryValue, RegistryWrite};
+use arena_test_support::StubGuest;
 
 const TOKEN: &str = "test-token-0123456789abcdef";
 
-/// A stub guest serving in a task; stops when dropped.
-struct Guest {
-    url: String,
-    _stop: tokio::sync::oneshot::Sender<()>,
-    _root: tempfile::TempDir,
-}
-
-async fn start_guest(token: Option<&str>) -> Guest {
-    let root = tempfile::tempdir().expect("temporary stub root");
-    let mut config = ServerConfig::for_stub();
-    config.token = token.map(str::to_owned);
-    config.stub_root = Some(root.path().to_path_buf());
-    let state = arena_guest::build_state(config).expect("stub state");
-    let listener = TcpListener::bind("127.0.0.1:0").await.expect("bind");
-    let url = format!("http://{}", listener.local_addr().expect("addr"));
-    let (stop, stopped) = tokio::sync::oneshot::channel::<()>();
-    tokio::spawn(arena_guest::serve(listener, state, async move {
-        let _ = stopped.await;
-    }));
-    Guest { url, _stop: stop, _root: root }
+/// A stub guest (the shared test launcher), with the token when given.
+async fn start_guest(token: Option<&str>) -> StubGuest {
+    let token = token.map(str::to_owned);
+    StubGuest::start_with(|config| config.token = token).await
 }
 
 fn client(url: &str) -> GuestClient {
@@ -75,7 +59,7 @@ fn find<'a>(node: &'a A11yNode, needle: &str) -> Option<&'a A11yNode> {
 #[tokio::test]
 async fn health_and_wait_ready() {
     let guest = start_guest(None).await;
-    let c = client(&guest.url);
+    let c = client(guest.url());
     let report = c.wait_ready(&[], Duration::from_secs(20), Duration::from_millis(50)).await.expect("ready");
     for component in Component::ALL {
         assert!(report.is_up(component), "{component:?} down: {report:?}");
@@ -92,7 +76,7 @@ async fn health_and_wait_ready() {
 #[tokio::test]
 async fn screen_and_screenshots() {
     let guest = start_guest(None).await;
-    let c = client(&guest.url);
+    let c = client(guest.url());
     let screen = c.screen().await.expect("screen");
     assert_eq!((screen.physical_width, screen.physical_height), (1440, 900));
 
@@ -112,7 +96,7 @@ async fn screen_and_screenshots() {
 #[tokio::test]
 async fn actions_move_the_cursor_and_bad_keys_are_api_errors() {
     let guest = start_guest(None).await;
-    let c = client(&guest.url);
+    let c = client(guest.url());
     let report = c
         .act(&ActionBatch {
             actions: vec![
@@ -127,14 +111,14 @@ async fn actions_move_the_cursor_and_bad_keys_are_api_errors() {
     assert_eq!((report.cursor.x, report.cursor.y), (100, 200));
 
     let err = c.act_one(Action::KeyPress { key: "no-such-key".into(), presses: 1 }).await.expect_err("bad key");
-    assert_api(&err, &guest.url, "POST /v1/actions", 400, ErrorCode::BadRequest);
+    assert_api(&err, guest.url(), "POST /v1/actions", 400, ErrorCode::BadRequest);
     assert!(err.to_string().contains("no-such-key"), "{err}");
 }
 
 #[tokio::test]
 async fn notepad_typing_shows_in_windows_and_the_tree() {
     let guest = start_guest(None).await;
-    let c = client(&guest.url);
+    let c = client(guest.url());
     let launched = c.launch(&LaunchRequest { shell: None, argv: vec!["notepad.exe".into()] }).await.expect("launch");
     assert!(launched.pid > 0);
     let windows = c.windows().await.expect("windows");
@@ -166,13 +150,13 @@ async fn notepad_typing_shows_in_windows_and_the_tree() {
         .activate_window(&WindowTarget { id: None, title: Some("no such window title".into()) })
         .await
         .expect_err("missing");
-    assert_api(&err, &guest.url, "POST /v1/windows/activate", 404, ErrorCode::NotFound);
+    assert_api(&err, guest.url(), "POST /v1/windows/activate", 404, ErrorCode::NotFound);
 }
 
 #[tokio::test]
 async fn clipboard_round_trip() {
     let guest = start_guest(None).await;
-    let c = client(&guest.url);
+    let c = client(guest.url());
     c.clipboard_set(&ClipboardContent::Text { text: "copied ✓".into() }).await.expect("set");
     assert_eq!(c.clipboard_get().await.expect("get"), ClipboardContent::Text { text: "copied ✓".into() });
 }
@@ -180,7 +164,7 @@ async fn clipboard_round_trip() {
 #[tokio::test]
 async fn files_round_trip_with_hashes() {
     let guest = start_guest(None).await;
-    let c = client(&guest.url);
+    let c = client(guest.url());
     let folders = c.folders().await.expect("folders");
     assert!(folders.folders.iter().any(|(k, _)| *k == KnownFolder::Desktop), "{folders:?}");
 
@@ -214,15 +198,15 @@ async fn files_round_trip_with_hashes() {
     assert!(!c.exists(dir).await.expect("exists").exists);
 
     let err = c.pull_file(&path).await.expect_err("gone");
-    assert_api(&err, &guest.url, "GET /v1/files", 404, ErrorCode::NotFound);
+    assert_api(&err, guest.url(), "GET /v1/files", 404, ErrorCode::NotFound);
     let err = c.stat(&path).await.expect_err("gone");
-    assert_api(&err, &guest.url, "GET /v1/files/stat", 404, ErrorCode::NotFound);
+    assert_api(&err, guest.url(), "GET /v1/files/stat", 404, ErrorCode::NotFound);
 }
 
 #[tokio::test]
 async fn exec_launch_and_open() {
     let guest = start_guest(None).await;
-    let c = client(&guest.url);
+    let c = client(guest.url());
     let argv: Vec<String> = if cfg!(windows) {
         vec!["cmd".into(), "/c".into(), "echo".into(), "hi there".into()]
     } else {
@@ -252,7 +236,7 @@ async fn exec_launch_and_open() {
 #[tokio::test]
 async fn registry_round_trip() {
     let guest = start_guest(None).await;
-    let c = client(&guest.url);
+    let c = client(guest.url());
     let key = r"HKCU\Software\ArenaTest";
     c.registry_set(&RegistryWrite { key: key.into(), value: Some("Answer".into()), data: RegistryValue::Dword(42) })
         .await
@@ -260,19 +244,19 @@ async fn registry_round_trip() {
     let read = c.registry_get(key, Some("Answer")).await.expect("get");
     assert_eq!(read.data, RegistryValue::Dword(42));
     let err = c.registry_get(key, Some("Missing")).await.expect_err("missing");
-    assert_api(&err, &guest.url, "GET /v1/registry", 404, ErrorCode::NotFound);
+    assert_api(&err, guest.url(), "GET /v1/registry", 404, ErrorCode::NotFound);
 }
 
 #[tokio::test]
 async fn the_token_is_sent_and_required() {
     let guest = start_guest(Some(TOKEN)).await;
-    let anonymous = client(&guest.url);
+    let anonymous = client(guest.url());
     // Health is open, so readiness can be polled before the token is known.
     let report = anonymous.health().await.expect("open health");
     assert!(report.auth_required);
     let err = anonymous.screen().await.expect_err("no token");
-    assert_api(&err, &guest.url, "GET /v1/screen", 401, ErrorCode::Unauthorized);
-    authed(&guest.url).screen().await.expect("with token");
+    assert_api(&err, guest.url(), "GET /v1/screen", 401, ErrorCode::Unauthorized);
+    authed(guest.url()).screen().await.expect("with token");
 }
 
 #[tokio::test]

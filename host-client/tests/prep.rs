@@ -9,12 +9,10 @@
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
-use tokio::net::TcpListener;
-
-use arena_guest::config::ServerConfig;
 use arena_host::client::{sha256_hex, ClientConfig, GuestClient};
 use arena_host::error::ClientError;
 use arena_host::prep::{self, PrepError, StageOptions, WaitEvent};
+use arena_test_support::StubGuest;
 
 fn scripts_dir() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("..").join("setup-scripts")
@@ -38,25 +36,10 @@ fn options(out: &Path, exe: &Path, token_out: &Path) -> StageOptions {
     }
 }
 
-struct Guest {
-    url: String,
-    _stop: tokio::sync::oneshot::Sender<()>,
-    _root: tempfile::TempDir,
-}
-
-async fn start_guest(token_file: &Path) -> Guest {
-    let root = tempfile::tempdir().expect("stub root");
-    let mut config = ServerConfig::for_stub();
-    config.token_file = Some(token_file.to_path_buf());
-    config.stub_root = Some(root.path().to_path_buf());
-    let state = arena_guest::build_state(config).expect("the guest accepts the staged token file");
-    let listener = TcpListener::bind("127.0.0.1:0").await.expect("bind");
-    let url = format!("http://{}", listener.local_addr().expect("addr"));
-    let (stop, stopped) = tokio::sync::oneshot::channel::<()>();
-    tokio::spawn(arena_guest::serve(listener, state, async move {
-        let _ = stopped.await;
-    }));
-    Guest { url, _stop: stop, _root: root }
+/// A stub guest reading its token from a staged token file.
+async fn start_guest(token_file: &Path) -> StubGuest {
+    let token_file = token_file.to_path_buf();
+    StubGuest::start_with(|config| config.token_file = Some(token_file)).await
 }
 
 fn client(url: &str, token: Option<&str>) -> GuestClient {
@@ -188,20 +171,20 @@ async fn the_staged_token_is_accepted_and_a_wrong_one_refused() {
     let token = std::fs::read_to_string(&token_out).unwrap().trim().to_owned();
 
     // Health is open, and says a token is required.
-    let health = client(&guest.url, None).health().await.unwrap();
+    let health = client(guest.url(), None).health().await.unwrap();
     assert!(health.auth_required);
 
-    client(&guest.url, Some(&token)).folders().await.expect("the staged token is accepted");
+    client(guest.url(), Some(&token)).folders().await.expect("the staged token is accepted");
     let wrong = "0".repeat(64);
-    let err = client(&guest.url, Some(&wrong)).folders().await.unwrap_err();
+    let err = client(guest.url(), Some(&wrong)).folders().await.unwrap_err();
     assert!(matches!(err, ClientError::Api { status: 401, .. }), "{err}");
-    let err = client(&guest.url, None).folders().await.unwrap_err();
+    let err = client(guest.url(), None).folders().await.unwrap_err();
     assert!(matches!(err, ClientError::Api { status: 401, .. }), "{err}");
 
     // wait_healthy: every component reported up, then the token checked.
     let mut events = Vec::new();
     let report = prep::wait_healthy(
-        &client(&guest.url, Some(&token)),
+        &client(guest.url(), Some(&token)),
         Duration::from_secs(10),
         Duration::from_millis(100),
         |e| {
@@ -221,7 +204,7 @@ async fn the_staged_token_is_accepted_and_a_wrong_one_refused() {
 
     // The wrong token ends the wait at once, with a reason.
     let err = prep::wait_healthy(
-        &client(&guest.url, Some(&wrong)),
+        &client(guest.url(), Some(&wrong)),
         Duration::from_secs(10),
         Duration::from_millis(100),
         |_| {},

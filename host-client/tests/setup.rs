@@ -14,12 +14,12 @@ use axum::{Json, Router};
 use serde_json::{json, Value};
 use tokio::net::TcpListener;
 
-use arena_guest::config::ServerConfig;
 use arena_host::client::{ClientConfig, GuestClient};
 use arena_host::setup::{self, DownloadCache, Settle, SetupContext, SetupError, StepReport};
 use arena_host::task::{Browser, CommandArg, DownloadFile, HistoryEntry, SetupStep, Until};
 use arena_shared::files::FileKind;
 use arena_shared::observation::WindowInfo;
+use arena_test_support::StubGuest;
 
 const DOCS: &str = r"C:\Users\Docker\Documents";
 const DOWNLOADS: &str = r"C:\Users\Docker\Downloads";
@@ -55,34 +55,24 @@ impl Served {
     }
 }
 
-/// A stub guest serving in a task, with its context for setup steps.
+/// A stub guest (the shared test launcher), with its context for setup steps.
 struct Guest {
     ctx: SetupContext,
-    _stop: tokio::sync::oneshot::Sender<()>,
-    _root: tempfile::TempDir,
+    _stub: StubGuest,
     host_dir: tempfile::TempDir,
     cache_dir: tempfile::TempDir,
 }
 
 async fn start_guest_with(cdp_port: u16) -> Guest {
-    let root = tempfile::tempdir().expect("stub root");
-    let mut config = ServerConfig::for_stub();
-    config.stub_root = Some(root.path().to_path_buf());
-    config.cdp_port = cdp_port;
-    let state = arena_guest::build_state(config).expect("stub state");
-    let listener = TcpListener::bind("127.0.0.1:0").await.expect("bind");
-    let url = format!("http://{}", listener.local_addr().expect("addr"));
-    let (stop, stopped) = tokio::sync::oneshot::channel::<()>();
-    tokio::spawn(arena_guest::serve(listener, state, async move {
-        let _ = stopped.await;
-    }));
-    let client = GuestClient::new(&url, ClientConfig { token: None, timeout: Duration::from_secs(20), retries: 1 })
-        .expect("client");
+    let stub = StubGuest::start_with(|config| config.cdp_port = cdp_port).await;
+    let client =
+        GuestClient::new(stub.url(), ClientConfig { token: None, timeout: Duration::from_secs(20), retries: 1 })
+            .expect("client");
     let host_dir = tempfile::tempdir().expect("host dir");
     let cache_dir = tempfile::tempdir().expect("cache dir");
     let cache = DownloadCache::new(cache_dir.path()).expect("cache");
     let ctx = SetupContext { client, cache, host_dir: host_dir.path().to_path_buf(), settle: Settle::none() };
-    Guest { ctx, _stop: stop, _root: root, host_dir, cache_dir }
+    Guest { ctx, _stub: stub, host_dir, cache_dir }
 }
 
 async fn start_guest() -> Guest {

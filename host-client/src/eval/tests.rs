@@ -3,7 +3,7 @@
 //! and what the upstream corpus needs from this build.
 
 use std::collections::BTreeSet;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::time::Duration;
 
 use serde_json::{json, Value};
@@ -173,14 +173,10 @@ fn supported_names_come_from_the_registries() {
     assert_eq!(unsupported_names(&task), ["vm_screen_size"]);
 }
 
-fn corpus_dir() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/reference/waa-tasks")
-}
-
 /// What the upstream corpus names and how much of it this build implements: everything.
 #[test]
 fn corpus_coverage() {
-    let dir = corpus_dir();
+    let Some(dir) = arena_test_support::waa_corpus("eval::corpus_coverage") else { return };
     let (tasks, errors) = load_dir(&dir);
     assert!(errors.is_empty(), "corpus files fail to load: {errors:?}");
     assert!(tasks.len() > 100, "found only {} tasks under {}", tasks.len(), dir.display());

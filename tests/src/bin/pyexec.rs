@@ -89,16 +89,9 @@ fn spawn_python(program: &str) -> anyhow::Result<Stats> {
 }
 
 async fn run() -> anyhow::Result<()> {
-    let root = tempfile::tempdir().context("creating the stub root")?;
-    let mut config = arena_guest::config::ServerConfig::for_stub();
-    config.stub_root = Some(root.path().to_path_buf());
-    let state = arena_guest::build_state(config)?;
-    let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.context("binding loopback")?;
-    let url = format!("http://{}/execute", listener.local_addr()?);
-    let (stop_tx, stop_rx) = tokio::sync::oneshot::channel::<()>();
-    let server = tokio::spawn(arena_guest::serve(listener, state, async {
-        let _ = stop_rx.await;
-    }));
+    // The one test launcher; the guest stops when `stub` is dropped at the end.
+    let stub = arena_test_support::StubGuest::start().await;
+    let url = format!("{}/execute", stub.url());
     let http = reqwest::Client::new();
     let body = serde_json::json!({"command": ["python", "-c", CODE], "shell": false});
     println!("arena pyexec bench: one pyautogui click through POST /execute, natively, vs. a Python process start");
@@ -148,7 +141,6 @@ async fn run() -> anyhow::Result<()> {
         );
     }
 
-    let _ = stop_tx.send(());
-    server.await.context("joining the server")??;
+    drop(stub);
     Ok(())
 }

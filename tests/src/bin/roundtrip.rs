@@ -72,16 +72,9 @@ where
 }
 
 async fn run() -> anyhow::Result<()> {
-    let root = tempfile::tempdir().context("creating the stub root")?;
-    let mut config = arena_guest::config::ServerConfig::for_stub();
-    config.stub_root = Some(root.path().to_path_buf());
-    let state = arena_guest::build_state(config)?;
-    let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.context("binding loopback")?;
-    let url = format!("http://{}", listener.local_addr()?);
-    let (stop_tx, stop_rx) = tokio::sync::oneshot::channel::<()>();
-    let server = tokio::spawn(arena_guest::serve(listener, state, async {
-        let _ = stop_rx.await;
-    }));
+    // The one test launcher; the guest stops when `stub` is dropped at the end.
+    let stub = arena_test_support::StubGuest::start().await;
+    let url = stub.url().to_owned();
 
     let client = GuestClient::new(&url, ClientConfig { token: None, timeout: Duration::from_secs(30), retries: 0 })?;
     client
@@ -140,7 +133,6 @@ async fn run() -> anyhow::Result<()> {
     let png = client.screenshot(&ScreenshotQuery::default()).await?;
     println!("PNG size of one 1440x900 stub frame: {} bytes", png.bytes.len());
 
-    let _ = stop_tx.send(());
-    server.await.context("joining the server")??;
+    drop(stub);
     Ok(())
 }

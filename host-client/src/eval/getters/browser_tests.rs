@@ -5,54 +5,21 @@
 
 use std::path::Path;
 use std::sync::{Arc, Mutex};
-use std::time::Duration;
 
-use arena_guest::config::ServerConfig;
 use arena_shared::files::KnownFolder;
 use arena_shared::observation::A11yNode;
 use serde_json::{json, Value};
 
+use super::super::tests::{start_guest_with, Guest};
 use super::{bare_home_page, headless_print_argv, parse_lnk, parse_qs, unquote};
-use crate::client::{ClientConfig, GuestClient};
+use crate::eval::fetch;
 use crate::eval::value::Fetched;
-use crate::eval::{fetch, EvalContext};
-use crate::setup::DownloadCache;
 use crate::task::GetterSpec;
-
-/// A stub guest serving in a task; stops when dropped.
-struct Guest {
-    ctx: EvalContext,
-    _stop: tokio::sync::oneshot::Sender<()>,
-    _dirs: Vec<tempfile::TempDir>,
-}
 
 /// Starts a stub guest, seeded by `scenario` when given, whose DevTools
 /// forward goes to `cdp_port` (default: a port nothing listens on).
 async fn start(scenario: Option<Value>, cdp_port: Option<u16>) -> Guest {
-    let root = tempfile::tempdir().expect("stub root");
-    let host = tempfile::tempdir().expect("host dir");
-    let mut config = ServerConfig::for_stub();
-    config.token = None;
-    config.stub_root = Some(root.path().to_path_buf());
-    config.cdp_port = cdp_port.unwrap_or(1);
-    if let Some(scenario) = scenario {
-        let path = host.path().join("scenario.json");
-        std::fs::write(&path, scenario.to_string()).expect("write scenario");
-        config.scenario = Some(path);
-    }
-    let state = arena_guest::build_state(config).expect("stub state");
-    let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.expect("bind");
-    let url = format!("http://{}", listener.local_addr().expect("addr"));
-    let (stop, stopped) = tokio::sync::oneshot::channel::<()>();
-    tokio::spawn(arena_guest::serve(listener, state, async move {
-        let _ = stopped.await;
-    }));
-    let client = GuestClient::new(&url, ClientConfig { token: None, timeout: Duration::from_secs(20), retries: 0 })
-        .expect("client");
-    client.wait_ready(&[], Duration::from_secs(20), Duration::from_millis(50)).await.expect("stub ready");
-    let cache = DownloadCache::new(host.path().join("cache")).expect("cache");
-    let ctx = EvalContext { client, cache, work_dir: host.path().join("work") };
-    Guest { ctx, _stop: stop, _dirs: vec![root, host] }
+    start_guest_with(scenario, |config| config.cdp_port = cdp_port.unwrap_or(1)).await
 }
 
 fn spec(value: &Value) -> GetterSpec {

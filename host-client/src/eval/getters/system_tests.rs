@@ -8,51 +8,19 @@ use std::io::Cursor;
 use std::path::{Path, PathBuf};
 use std::time::{Duration, UNIX_EPOCH};
 
-use arena_guest::config::ServerConfig;
 use arena_shared::files::KnownFolder;
 use arena_shared::registry::{RegistryValue, RegistryWrite};
 use serde_json::{json, Value};
 
+use super::super::tests::{start_guest_with, Guest};
 use super::{decode_night_light, has_red_circle, protected_7z_holds, rule_relative_time, Day};
-use crate::client::{ClientConfig, GuestClient};
+use crate::eval::fetch;
 use crate::eval::getters::Params;
 use crate::eval::value::Fetched;
-use crate::eval::{fetch, EvalContext};
-use crate::setup::DownloadCache;
 use crate::task::GetterSpec;
 
-/// A stub guest (optionally seeded by a scenario) and where its `C:` drive lives on this host.
-struct Guest {
-    ctx: EvalContext,
-    root: PathBuf,
-    _stop: tokio::sync::oneshot::Sender<()>,
-    _dirs: Vec<tempfile::TempDir>,
-}
-
 async fn start(scenario: Option<Value>) -> Guest {
-    let root = tempfile::tempdir().expect("stub root");
-    let host = tempfile::tempdir().expect("host dir");
-    let mut config = ServerConfig::for_stub();
-    config.token = None;
-    config.stub_root = Some(root.path().to_path_buf());
-    if let Some(scenario) = scenario {
-        let path = host.path().join("scenario.json");
-        std::fs::write(&path, scenario.to_string()).expect("write scenario");
-        config.scenario = Some(path);
-    }
-    let state = arena_guest::build_state(config).expect("stub state");
-    let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.expect("bind");
-    let url = format!("http://{}", listener.local_addr().expect("addr"));
-    let (stop, stopped) = tokio::sync::oneshot::channel::<()>();
-    tokio::spawn(arena_guest::serve(listener, state, async move {
-        let _ = stopped.await;
-    }));
-    let client = GuestClient::new(&url, ClientConfig { token: None, timeout: Duration::from_secs(20), retries: 1 })
-        .expect("client");
-    client.wait_ready(&[], Duration::from_secs(20), Duration::from_millis(50)).await.expect("stub ready");
-    let cache = DownloadCache::new(host.path().join("cache")).expect("cache");
-    let ctx = EvalContext { client, cache, work_dir: host.path().join("work") };
-    Guest { ctx, root: root.path().to_path_buf(), _stop: stop, _dirs: vec![root, host] }
+    start_guest_with(scenario, |_| {}).await
 }
 
 impl Guest {
@@ -73,7 +41,7 @@ impl Guest {
     /// Where the stub keeps a `C:\...` path on this host.
     fn local(&self, guest: &str) -> PathBuf {
         let rest = guest.trim_start_matches("C:").trim_start_matches(['\\', '/']);
-        rest.split(['\\', '/']).fold(self.root.join("C"), |path, part| path.join(part))
+        rest.split(['\\', '/']).fold(self.root().join("C"), |path, part| path.join(part))
     }
 
     /// Runs a getter and compares with `want`: a value, or an error containing the text.

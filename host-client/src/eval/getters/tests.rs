@@ -6,6 +6,7 @@ use arena_guest::config::ServerConfig;
 use arena_shared::exec::LaunchRequest;
 use arena_shared::files::KnownFolder;
 use arena_shared::registry::{RegistryValue, RegistryWrite};
+use arena_test_support::StubGuest;
 use serde_json::{json, Value};
 
 use super::{lookup, GetterError, Params};
@@ -15,33 +16,46 @@ use crate::eval::{fetch, EvalContext};
 use crate::setup::DownloadCache;
 use crate::task::GetterSpec;
 
-/// A stub guest serving in a task, with a work folder and a cache folder; stops when dropped.
+/// A stub guest serving in a task (the one test launcher), with a host work folder
+/// and a download cache; stops when dropped.
 pub(crate) struct Guest {
     pub(crate) ctx: EvalContext,
-    _stop: tokio::sync::oneshot::Sender<()>,
-    _root: tempfile::TempDir,
+    stub: StubGuest,
     _host: tempfile::TempDir,
 }
 
+impl Guest {
+    /// The host folder the guest's drives are mapped into.
+    pub(crate) fn root(&self) -> &std::path::Path {
+        self.stub.root()
+    }
+}
+
 pub(crate) async fn start_guest() -> Guest {
-    let root = tempfile::tempdir().expect("stub root");
-    let mut config = ServerConfig::for_stub();
-    config.token = None;
-    config.stub_root = Some(root.path().to_path_buf());
-    let state = arena_guest::build_state(config).expect("stub state");
-    let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.expect("bind");
-    let url = format!("http://{}", listener.local_addr().expect("addr"));
-    let (stop, stopped) = tokio::sync::oneshot::channel::<()>();
-    tokio::spawn(arena_guest::serve(listener, state, async move {
-        let _ = stopped.await;
-    }));
-    let client = GuestClient::new(&url, ClientConfig { token: None, timeout: Duration::from_secs(20), retries: 1 })
-        .expect("client");
-    client.wait_ready(&[], Duration::from_secs(20), Duration::from_millis(50)).await.expect("stub ready");
+    start_guest_with(None, |_| {}).await
+}
+
+/// A stub guest seeded by `scenario` when given, its configuration adjusted by
+/// `configure`, and an evaluation context over it.
+pub(crate) async fn start_guest_with(scenario: Option<Value>, configure: impl FnOnce(&mut ServerConfig)) -> Guest {
     let host = tempfile::tempdir().expect("host dir");
+    let scenario = scenario.map(|scenario| {
+        let path = host.path().join("scenario.json");
+        std::fs::write(&path, scenario.to_string()).expect("write scenario");
+        path
+    });
+    let stub = StubGuest::start_with(|config| {
+        config.scenario = scenario;
+        configure(config);
+    })
+    .await;
+    let client =
+        GuestClient::new(stub.url(), ClientConfig { token: None, timeout: Duration::from_secs(20), retries: 0 })
+            .expect("client");
+    client.wait_ready(&[], Duration::from_secs(20), Duration::from_millis(50)).await.expect("stub ready");
     let cache = DownloadCache::new(host.path().join("cache")).expect("cache");
     let ctx = EvalContext { client, cache, work_dir: host.path().join("work") };
-    Guest { ctx, _stop: stop, _root: root, _host: host }
+    Guest { ctx, stub, _host: host }
 }
 
 pub(crate) fn spec(value: Value) -> GetterSpec {
