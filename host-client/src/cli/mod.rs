@@ -15,6 +15,7 @@
 //! - [`demo`]: the end-to-end demonstration.
 
 pub mod act;
+pub mod corpus;
 pub mod demo;
 pub mod local;
 pub mod prep;
@@ -238,6 +239,8 @@ pub enum Command {
     Report(runs::ReportArgs),
     /// Stage an OEM folder for a new Windows image, verify one, or wait for a prepared guest.
     Prep(prep::PrepArgs),
+    /// Get the upstream WAA task corpus without cloning WindowsAgentArena.
+    Corpus(corpus::CorpusArgs),
 }
 
 /// Arguments of `arena tree`.
@@ -547,6 +550,7 @@ pub async fn run(cli: Cli) -> anyhow::Result<ExitCode> {
         Command::Merge(args) => runs::merge(&args),
         Command::Report(args) => runs::report(&args),
         Command::Prep(args) => prep::run(conn, args).await,
+        Command::Corpus(args) => corpus::run(args).await,
     }
 }
 
