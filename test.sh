@@ -1,17 +1,37 @@
 #!/usr/bin/env bash
 # The one command that runs every test:
-#   1. the whole workspace (`cargo test --workspace`): unit, route, end-to-end tests on the stub guest;
-#   2. the Windows backend: cross-builds arena-guest.exe and drives it under Wine (scripts/wine-test.sh).
-# Step 2 needs Debian packages (installed automatically when run as root; see .ci/run).
+#   1. formatting (`cargo fmt --check`), lints (`cargo clippy -D warnings`, every target)
+#      and a host built without the embedded guest (`--no-default-features`);
+#   2. the whole workspace (`cargo test --workspace`): unit, route, end-to-end and tidy
+#      tests on the stub guest; tests that need the upstream WAA corpus find it through
+#      ARENA_WAA_TASKS or ../shared/reference/waa-tasks, and say SKIPPED when it is
+#      absent (counted at the end; ARENA_REQUIRE_CORPUS=1 makes that a failure);
+#   3. the Windows backend: cross-builds arena-guest.exe and drives it under Wine
+#      (scripts/wine-test.sh).
+# Step 3 needs Debian packages (installed automatically when run as root; see .ci/run).
 # ARENA_SKIP_WINE=1 skips it, saying so.
 set -euo pipefail
 cd "$(dirname "$0")"
 
 started=$(date +%s)
-# The Wine test file is part of the workspace; it only runs for real in step 2,
+cargo fmt --all --check
+cargo clippy --workspace --all-targets --locked -- -D warnings
+cargo clippy -p arena-host --no-default-features --locked -- -D warnings
+echo "format and lint checks took $(( $(date +%s) - started )) s"
+
+started=$(date +%s)
+mkdir -p target
+log=target/test-output.log
+# The Wine test file is part of the workspace; it only runs for real in step 3,
 # which sets up the display, the prefix and the exe for it.
-env -u ARENA_REQUIRE_WINE -u ARENA_WINDOWS_EXE cargo test --workspace --locked "$@"
+env -u ARENA_REQUIRE_WINE -u ARENA_WINDOWS_EXE cargo test --workspace --locked "$@" 2>&1 | tee "$log"
 echo "workspace tests took $(( $(date +%s) - started )) s"
+
+skipped=$(grep -c '^SKIPPED: .*WAA corpus not found' "$log" || true)
+echo "corpus tests skipped: $skipped"
+if [ "$skipped" -gt 0 ]; then
+    grep '^SKIPPED: .*WAA corpus not found' "$log" | sed 's/^/  /'
+fi
 
 if [ "${ARENA_SKIP_WINE:-0}" = 1 ]; then
     echo "SKIPPED: the Wine suite (ARENA_SKIP_WINE=1); the Windows backend was not tested" >&2

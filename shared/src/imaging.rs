@@ -71,8 +71,11 @@ mod tests {
         RgbaImage::from_fn(4, 4, |x, y| Rgba([x as u8, y as u8, 7, 40]))
     }
 
-    /// Crops `ltrb` and compares size and a few pixels (`None` = black padding).
-    fn check(ltrb: [i64; 4], size: (u32, u32), pixels: &[((u32, u32), Option<(u8, u8)>)]) {
+    /// A pixel of the crop and the source pixel it must show (`None`: black padding).
+    type Expect = ((u32, u32), Option<(u8, u8)>);
+
+    /// Crops `ltrb` and compares size and a few pixels.
+    fn check(ltrb: [i64; 4], size: (u32, u32), pixels: &[Expect]) {
         let [l, t, r, b] = ltrb;
         let crop = crop_padded(&image(), l, t, r, b).expect("crop");
         assert_eq!(crop.dimensions(), size, "{ltrb:?}");

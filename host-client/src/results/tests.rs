@@ -1,3 +1,5 @@
+//! Tests of result folders: layout, trajectories, scores, the summary and the report.
+
 use super::summary::Summary;
 use super::*;
 

@@ -1,3 +1,5 @@
+//! Tests of runs: task lists, shards, the pool of stub guests, resuming and merging.
+
 use std::collections::HashMap;
 use std::sync::Mutex;
 use std::time::Duration;

@@ -107,7 +107,7 @@ fn find_case_insensitive(dir: &Path, name: &str) -> Option<PathBuf> {
         .map(|entry| entry.path())
 }
 
-/// The guest path of a local path under `root`: `<root>/C/Users/a.txt` -> `C:\Users\a.txt`.
+/// The guest path of a local path under `root`: `<root>/C/Users/Docker/a.txt` -> `C:\Users\Docker\a.txt`.
 ///
 /// # Errors
 ///

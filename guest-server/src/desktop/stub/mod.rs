@@ -395,7 +395,7 @@ fn read_document(local: &Path) -> Option<String> {
     Some(text.strip_prefix('\u{feff}').map(str::to_owned).unwrap_or(text))
 }
 
-/// A guest path folded for case-insensitive comparison: `c:/users/x/` -> `c:\users\x`.
+/// A guest path folded for case-insensitive comparison: `c:/users/docker/x/` -> `c:\users\docker\x`.
 fn fold_guest(path: &str) -> DesktopResult<String> {
     let (drive, parts) = fs::guest_components(path).map_err(DesktopError::InvalidInput)?;
     Ok(format!("{drive}:\\{}", parts.join("\\")).to_lowercase())

@@ -24,6 +24,7 @@ use crate::desktop::{DesktopError, DesktopResult, Frame};
 
 /// One monitor as Windows reports it.
 fn monitors() -> Vec<MonitorInfo> {
+    // SAFETY: a callback for EnumDisplayMonitors below, which passes the LPARAM it was given.
     unsafe extern "system" fn collect(monitor: HMONITOR, _: HDC, _: *mut RECT, lparam: LPARAM) -> windows::core::BOOL {
         // SAFETY: lparam is the &mut Vec passed by monitors() below, alive for the whole call.
         let list = unsafe { &mut *(lparam.0 as *mut Vec<MonitorInfo>) };

@@ -181,6 +181,7 @@ impl TreeSource for Win32Source {
             limit: usize,
             out: Vec<HWND>,
         }
+        // SAFETY: a callback for EnumChildWindows below, which passes the LPARAM it was given.
         unsafe extern "system" fn each(child: HWND, lparam: LPARAM) -> windows::core::BOOL {
             // SAFETY: lparam is the &mut Collect passed below, alive for the whole call.
             let c = unsafe { &mut *(lparam.0 as *mut Collect) };

@@ -28,6 +28,7 @@ const ACTIVATE_WAIT: Duration = Duration::from_millis(300);
 
 /// Every top-level window handle, topmost first (EnumWindows walks the z-order).
 pub(super) fn top_level() -> Vec<HWND> {
+    // SAFETY: a callback for EnumWindows below, which passes the LPARAM it was given.
     unsafe extern "system" fn collect(hwnd: HWND, lparam: LPARAM) -> windows::core::BOOL {
         // SAFETY: lparam is the &mut Vec<HWND> passed by top_level below, alive for the whole EnumWindows call.
         let list = unsafe { &mut *(lparam.0 as *mut Vec<HWND>) };
