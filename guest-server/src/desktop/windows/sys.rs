@@ -12,12 +12,12 @@ use windows::Win32::System::Com::{CoInitializeEx, CoUninitialize, COINIT};
 use crate::desktop::DesktopError;
 
 /// Converts a windows-rs error into [`DesktopError::Os`], keeping the OS's words and code.
-pub(super) fn os(op: &'static str, err: &windows::core::Error) -> DesktopError {
+pub(crate) fn os(op: &'static str, err: &windows::core::Error) -> DesktopError {
     DesktopError::Os { op, message: describe(err) }
 }
 
 /// The OS's words for `err` and its code; Wine often has no words, only the code.
-pub(super) fn describe(err: &windows::core::Error) -> String {
+pub(crate) fn describe(err: &windows::core::Error) -> String {
     let message = err.message();
     let message = message.trim_end();
     if message.is_empty() {
@@ -28,33 +28,33 @@ pub(super) fn describe(err: &windows::core::Error) -> String {
 }
 
 /// [`os`] for the calling thread's last error, for APIs that return a bare BOOL or handle.
-pub(super) fn last_os(op: &'static str) -> DesktopError {
+pub(crate) fn last_os(op: &'static str) -> DesktopError {
     // SAFETY: GetLastError only reads the calling thread's error slot.
     let code = unsafe { GetLastError() };
     os(op, &windows::core::Error::from(code.to_hresult()))
 }
 
 /// Whether a windows-rs error carries `code` (a Win32 error such as `ERROR_FILE_NOT_FOUND`).
-pub(super) fn is_win32(err: &windows::core::Error, code: WIN32_ERROR) -> bool {
+pub(crate) fn is_win32(err: &windows::core::Error, code: WIN32_ERROR) -> bool {
     err.code() == code.to_hresult()
 }
 
 /// An owned kernel handle (process, thread, job, pipe end, token), closed on drop.
 #[derive(Debug)]
-pub(super) struct OwnedHandle(pub(super) HANDLE);
+pub(crate) struct OwnedHandle(pub(crate) HANDLE);
 
 impl OwnedHandle {
     /// Takes ownership of `handle`; `None` for a null or invalid one.
-    pub(super) fn new(handle: HANDLE) -> Option<OwnedHandle> {
+    pub(crate) fn new(handle: HANDLE) -> Option<OwnedHandle> {
         (!handle.is_invalid() && !handle.0.is_null()).then_some(OwnedHandle(handle))
     }
 
-    pub(super) fn raw(&self) -> HANDLE {
+    pub(crate) fn raw(&self) -> HANDLE {
         self.0
     }
 
     /// Gives the handle up without closing it.
-    pub(super) fn into_raw(self) -> HANDLE {
+    pub(crate) fn into_raw(self) -> HANDLE {
         let handle = self.0;
         std::mem::forget(self);
         handle
@@ -72,14 +72,14 @@ impl Drop for OwnedHandle {
 
 /// A device context from `GetDC`, released with `ReleaseDC` on drop.
 #[derive(Debug)]
-pub(super) struct WindowDc {
+pub(crate) struct WindowDc {
     hwnd: Option<HWND>,
-    pub(super) hdc: HDC,
+    pub(crate) hdc: HDC,
 }
 
 impl WindowDc {
     /// The DC of `hwnd`, or of the whole screen for `None`.
-    pub(super) fn get(hwnd: Option<HWND>) -> Option<WindowDc> {
+    pub(crate) fn get(hwnd: Option<HWND>) -> Option<WindowDc> {
         // SAFETY: GetDC has no preconditions; a null result is checked below.
         let hdc = unsafe { windows::Win32::Graphics::Gdi::GetDC(hwnd) };
         (!hdc.is_invalid()).then_some(WindowDc { hwnd, hdc })
@@ -95,7 +95,7 @@ impl Drop for WindowDc {
 
 /// A memory DC from `CreateCompatibleDC`, deleted on drop.
 #[derive(Debug)]
-pub(super) struct MemoryDc(pub(super) HDC);
+pub(crate) struct MemoryDc(pub(crate) HDC);
 
 impl Drop for MemoryDc {
     fn drop(&mut self) {
@@ -109,7 +109,7 @@ impl Drop for MemoryDc {
 
 /// A GDI bitmap, deleted on drop.
 #[derive(Debug)]
-pub(super) struct Bitmap(pub(super) HBITMAP);
+pub(crate) struct Bitmap(pub(crate) HBITMAP);
 
 impl Drop for Bitmap {
     fn drop(&mut self) {
@@ -123,7 +123,7 @@ impl Drop for Bitmap {
 
 /// An object selected into a DC; the previous object is selected back on drop.
 #[derive(Debug)]
-pub(super) struct SelectGuard {
+pub(crate) struct SelectGuard {
     hdc: HDC,
     previous: HGDIOBJ,
 }
@@ -134,7 +134,7 @@ impl SelectGuard {
     /// # Safety
     ///
     /// `hdc` and `object` must be live and outlive the guard.
-    pub(super) unsafe fn select(hdc: HDC, object: HGDIOBJ) -> SelectGuard {
+    pub(crate) unsafe fn select(hdc: HDC, object: HGDIOBJ) -> SelectGuard {
         // SAFETY: the caller guarantees both handles are live.
         let previous = unsafe { SelectObject(hdc, object) };
         SelectGuard { hdc, previous }
@@ -152,7 +152,7 @@ impl Drop for SelectGuard {
 
 /// COM initialised on the current thread; uninitialised on drop.
 #[derive(Debug)]
-pub(super) struct ComApartment(());
+pub(crate) struct ComApartment(());
 
 impl ComApartment {
     /// Initialises COM on this thread with `model` (apartment or multithreaded).
@@ -160,7 +160,7 @@ impl ComApartment {
     /// # Errors
     ///
     /// The OS refusing, e.g. when the thread already uses the other model.
-    pub(super) fn init(model: COINIT) -> Result<ComApartment, DesktopError> {
+    pub(crate) fn init(model: COINIT) -> Result<ComApartment, DesktopError> {
         // SAFETY: called at most once per guard; paired with CoUninitialize in Drop.
         let hr = unsafe { CoInitializeEx(None, model) };
         hr.ok().map_err(|err| os("CoInitializeEx", &err))?;
@@ -178,10 +178,10 @@ impl Drop for ComApartment {
 
 /// Memory the shell allocated with `CoTaskMemAlloc` (known-folder paths), freed on drop.
 #[derive(Debug)]
-pub(super) struct CoTaskString(pub(super) windows::core::PWSTR);
+pub(crate) struct CoTaskString(pub(crate) windows::core::PWSTR);
 
 impl CoTaskString {
-    pub(super) fn to_string_lossy(&self) -> String {
+    pub(crate) fn to_string_lossy(&self) -> String {
         if self.0.is_null() {
             return String::new();
         }
@@ -199,18 +199,18 @@ impl Drop for CoTaskString {
 
 /// `Send` wrapper for an HWND: a window handle is a plain number any thread may use.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub(super) struct Hwnd(pub(super) isize);
+pub(crate) struct Hwnd(pub(crate) isize);
 
 impl Hwnd {
-    pub(super) fn from_id(id: u64) -> Hwnd {
+    pub(crate) fn from_id(id: u64) -> Hwnd {
         Hwnd(id as isize)
     }
 
-    pub(super) fn get(self) -> HWND {
+    pub(crate) fn get(self) -> HWND {
         HWND(self.0 as *mut _)
     }
 
-    pub(super) fn id(hwnd: HWND) -> u64 {
+    pub(crate) fn id(hwnd: HWND) -> u64 {
         hwnd.0 as isize as u64
     }
 }
