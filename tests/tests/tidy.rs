@@ -116,7 +116,10 @@ fn unsafe_has_safety(path: &str, text: &str) -> Vec<Violation> {
         let word_start = pos == 0 || !line[..pos].ends_with(|c: char| c.is_alphanumeric() || c == '_');
         let after = line[pos + "unsafe".len()..].trim_start();
         let is_unsafe = word_start
-            && (after.starts_with('{') || after.starts_with("fn ") || after.starts_with("impl") || after.starts_with("extern"));
+            && (after.starts_with('{')
+                || after.starts_with("fn ")
+                || after.starts_with("impl")
+                || after.starts_with("extern"));
         if !is_unsafe || raw.contains("unsafe_op_in_unsafe_fn") {
             continue;
         }
@@ -125,8 +128,8 @@ fn unsafe_has_safety(path: &str, text: &str) -> Vec<Violation> {
             continue;
         }
         let before = &lines[i.saturating_sub(6)..i];
-        let explained = raw.contains("SAFETY:")
-            || before.iter().any(|l| l.contains("SAFETY:") || l.trim() == "/// # Safety");
+        let explained =
+            raw.contains("SAFETY:") || before.iter().any(|l| l.contains("SAFETY:") || l.trim() == "/// # Safety");
         if !explained {
             out.push(at(i + 1, "unsafe without a SAFETY: comment (or a # Safety section) just before it"));
         }
@@ -186,9 +189,8 @@ fn names_a_user_folder(text: &str) -> bool {
 fn names_a_machine_path(text: &str) -> bool {
     let machine = ["/work/", "/tmp/", "/root/", "/home/"];
     machine.iter().any(|m| {
-        text.match_indices(m).any(|(i, _)| {
-            text[i + m.len()..].starts_with(|c: char| c.is_alphanumeric() || "._-".contains(c))
-        })
+        text.match_indices(m)
+            .any(|(i, _)| text[i + m.len()..].starts_with(|c: char| c.is_alphanumeric() || "._-".contains(c)))
     })
 }
 
