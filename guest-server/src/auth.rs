@@ -7,6 +7,11 @@
 //!   comes from a web page (host clients send neither) and is refused, so a page
 //!   browsed inside the VM cannot drive the server with a cross-origin form post
 //!   (upstream's CSRF hole, waa-api.md §a.5 item 8).
+//! - Without a token, the `Host` header must name this server: an IP address, a
+//!   loopback name (`localhost`), or a name given with `--allow-host`. A page in the
+//!   VM's browser that reaches the server through DNS rebinding sends its own domain
+//!   name as the host, so it is refused even for simple GETs (which carry no
+//!   `Origin`). An address cannot come from rebinding, so addresses are accepted.
 
 use axum::extract::{Request, State};
 use axum::http::{header, HeaderMap, StatusCode};
@@ -28,6 +33,15 @@ pub async fn guard(State(state): State<AppState>, request: Request, next: Next) 
     if let Some(reason) = cross_site(request.headers()) {
         return refuse(native, StatusCode::FORBIDDEN, &format!("cross-site request refused: {reason}"));
     }
+    if state.token.is_none() {
+        if let Err(host) = host_allowed(request.headers(), &state.config.allow_host) {
+            return refuse(
+                native,
+                StatusCode::FORBIDDEN,
+                &format!("Host {host:?} is not this server (without a token only addresses, localhost and --allow-host names are served)"),
+            );
+        }
+    }
     if let Some(token) = &state.token {
         if !OPEN_PATHS.contains(&path.as_str()) && !token_matches(request.headers(), token) {
             return refuse(
@@ -38,6 +52,34 @@ pub async fn guard(State(state): State<AppState>, request: Request, next: Next) 
         }
     }
     next.run(request).await
+}
+
+/// Whether the request's `Host` names this server; `Err` carries the refused host.
+fn host_allowed(headers: &HeaderMap, allowed: &[String]) -> Result<(), String> {
+    let Some(value) = headers.get(header::HOST) else {
+        // HTTP/1.0 clients may send none; browsers always do.
+        return Ok(());
+    };
+    let Ok(host) = value.to_str() else { return Err("<binary>".to_owned()) };
+    let name = host_name(host);
+    let loopback_name = name.eq_ignore_ascii_case("localhost") || name.to_ascii_lowercase().ends_with(".localhost");
+    let listed = allowed.iter().any(|a| a.trim().eq_ignore_ascii_case(name));
+    if name.parse::<std::net::IpAddr>().is_ok() || loopback_name || listed {
+        Ok(())
+    } else {
+        Err(host.to_owned())
+    }
+}
+
+/// The name or address of a `Host` header, without its port or IPv6 brackets.
+fn host_name(host: &str) -> &str {
+    if let Some(rest) = host.strip_prefix('[') {
+        return rest.split(']').next().unwrap_or(rest);
+    }
+    match host.rsplit_once(':') {
+        Some((name, port)) if port.chars().all(|c| c.is_ascii_digit()) => name,
+        _ => host,
+    }
 }
 
 fn cross_site(headers: &HeaderMap) -> Option<String> {
@@ -65,6 +107,7 @@ fn refuse(native: bool, status: StatusCode, message: &str) -> Response {
     if native {
         let err = match status {
             StatusCode::UNAUTHORIZED => ApiError::Unauthorized(message.to_owned()),
+            StatusCode::FORBIDDEN => ApiError::Forbidden(message.to_owned()),
             _ => ApiError::BadRequest(message.to_owned()),
         };
         let mut res = err.into_response();

@@ -52,6 +52,11 @@ pub struct ServerConfig {
     #[arg(long, env = "ARENA_ALLOW_UNAUTHENTICATED")]
     pub allow_unauthenticated: bool,
 
+    /// Without a token, also accept requests whose Host header names this host (a DNS
+    /// name the host side reaches the guest by). Repeat or separate with commas.
+    #[arg(long, env = "ARENA_ALLOW_HOST", value_delimiter = ',', value_name = "NAME")]
+    pub allow_host: Vec<String>,
+
     /// Stub backend: directory the guest's `C:\` and other drives are mapped into
     /// (default: a fresh temporary directory, removed at exit).
     #[arg(long, env = "ARENA_STUB_ROOT")]
@@ -140,6 +145,7 @@ impl ServerConfig {
             token: None,
             token_file: None,
             allow_unauthenticated: false,
+            allow_host: Vec::new(),
             stub_root: None,
             scenario: None,
             screen: (1440, 900),

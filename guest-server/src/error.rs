@@ -24,6 +24,8 @@ pub enum ApiError {
     #[error("{0}")]
     Unauthorized(String),
     #[error("{0}")]
+    Forbidden(String),
+    #[error("{0}")]
     NotFound(String),
     #[error("{0}")]
     Conflict(String),
@@ -38,13 +40,14 @@ impl ApiError {
         match self {
             ApiError::BadRequest(_) => (StatusCode::BAD_REQUEST, ErrorCode::BadRequest),
             ApiError::Unauthorized(_) => (StatusCode::UNAUTHORIZED, ErrorCode::Unauthorized),
+            ApiError::Forbidden(_) => (StatusCode::FORBIDDEN, ErrorCode::Forbidden),
             ApiError::NotFound(_) => (StatusCode::NOT_FOUND, ErrorCode::NotFound),
             ApiError::Conflict(_) => (StatusCode::CONFLICT, ErrorCode::Conflict),
             ApiError::PayloadTooLarge(_) => (StatusCode::PAYLOAD_TOO_LARGE, ErrorCode::PayloadTooLarge),
             ApiError::Desktop(err) => match err {
                 DesktopError::InvalidInput(_) => (StatusCode::BAD_REQUEST, ErrorCode::BadRequest),
                 DesktopError::NotFound(_) => (StatusCode::NOT_FOUND, ErrorCode::NotFound),
-                DesktopError::PermissionDenied(_) => (StatusCode::FORBIDDEN, ErrorCode::BadRequest),
+                DesktopError::PermissionDenied(_) => (StatusCode::FORBIDDEN, ErrorCode::Forbidden),
                 DesktopError::AlreadyExists(_) => (StatusCode::CONFLICT, ErrorCode::Conflict),
                 DesktopError::Unsupported(_) => (StatusCode::NOT_IMPLEMENTED, ErrorCode::Unsupported),
                 DesktopError::Timeout { .. } => (StatusCode::GATEWAY_TIMEOUT, ErrorCode::Timeout),

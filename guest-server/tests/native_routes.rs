@@ -823,7 +823,57 @@ async fn a_token_is_required_except_for_health() {
 async fn cross_site_requests_are_refused() {
     let app = app();
     let request = Request::get("/v1/screen").header(header::ORIGIN, "http://evil.example").body(Body::empty()).unwrap();
-    app.send(request).await.assert_error(StatusCode::FORBIDDEN, ErrorCode::BadRequest, "cross-site");
+    app.send(request).await.assert_error(StatusCode::FORBIDDEN, ErrorCode::Forbidden, "cross-site");
+}
+
+/// A request for `uri` that says it is for `host`, as a browser's would.
+fn for_host(uri: &str, host: &str) -> Request<Body> {
+    Request::get(uri).header(header::HOST, host).body(Body::empty()).unwrap()
+}
+
+#[tokio::test]
+async fn without_a_token_only_this_servers_host_names_are_served() {
+    let app = app();
+    // DNS rebinding: a page on a domain that resolves to the guest sends its own name.
+    let refused = app.send(for_host("/v1/files/list?path=C:%5CUsers%5CDocker", "evil.example:5000")).await;
+    refused.assert_error(StatusCode::FORBIDDEN, ErrorCode::Forbidden, "evil.example");
+    app.send(for_host("/v1/clipboard", "attacker.test")).await.assert_error(
+        StatusCode::FORBIDDEN,
+        ErrorCode::Forbidden,
+        "--allow-host",
+    );
+    for host in ["127.0.0.1:5000", "localhost:5000", "LOCALHOST", "[::1]:5000", "20.20.20.21:5000", "app.localhost"] {
+        app.send(for_host("/v1/screen", host)).await.assert_status(StatusCode::OK);
+    }
+    // The legacy routes are guarded the same way, with upstream's error shape.
+    let legacy = app.send(for_host("/probe", "evil.example")).await;
+    assert_eq!(legacy.status, StatusCode::FORBIDDEN);
+    assert_eq!(legacy.json::<Value>()["status"], "error");
+}
+
+#[tokio::test]
+async fn allowed_host_names_and_a_token_let_other_names_through() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let stub =
+        StubDesktop::with_config(StubConfig { root: Some(dir.path().into()), screen: (1440, 900), scenario: None })
+            .expect("stub desktop");
+    let mut config = ServerConfig::for_stub();
+    config.allow_host = vec!["guest-7.cluster.local".into()];
+    let app = TestApp { router: arena_guest::router(AppState::new(Arc::new(stub), config, None)), dir };
+    app.send(for_host("/v1/screen", "Guest-7.cluster.local:5000")).await.assert_status(StatusCode::OK);
+    app.send(for_host("/v1/screen", "guest-8.cluster.local")).await.assert_error(
+        StatusCode::FORBIDDEN,
+        ErrorCode::Forbidden,
+        "guest-8",
+    );
+    // With a token, the token is the guard: any name may carry it.
+    let app = app_with(Some(TOKEN));
+    let request = Request::get("/v1/screen")
+        .header(header::HOST, "vm-17.example")
+        .header(header::AUTHORIZATION, format!("Bearer {TOKEN}"))
+        .body(Body::empty())
+        .unwrap();
+    app.send(request).await.assert_status(StatusCode::OK);
 }
 
 // ----- a batch that fails part-way -----

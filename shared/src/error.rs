@@ -10,6 +10,9 @@ pub enum ErrorCode {
     BadRequest,
     /// Missing or wrong bearer token (401).
     Unauthorized,
+    /// The request is understood and refused: a cross-site or foreign-host request, or
+    /// an operation on something that must not be touched (403).
+    Forbidden,
     /// The path, window or value does not exist (404).
     NotFound,
     /// The request conflicts with the current state, e.g. a hash mismatch (409).
