@@ -26,8 +26,14 @@ use crate::state::AppState;
 /// Paths that answer without a token, so readiness can be polled before provisioning finishes.
 const OPEN_PATHS: &[&str] = &["/probe", "/v1/health"];
 
+/// Whether the request proved it may see everything: it carried the right token, or
+/// none is configured. Set on every request that passes [`guard`]; open routes
+/// (`/v1/health`) answer less to a caller without it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Authorized(pub bool);
+
 /// Middleware enforcing the token and the cross-site check.
-pub async fn guard(State(state): State<AppState>, request: Request, next: Next) -> Response {
+pub async fn guard(State(state): State<AppState>, mut request: Request, next: Next) -> Response {
     let path = request.uri().path().to_owned();
     let native = path.starts_with("/v1/");
     if let Some(reason) = cross_site(request.headers()) {
@@ -42,15 +48,15 @@ pub async fn guard(State(state): State<AppState>, request: Request, next: Next) 
             );
         }
     }
-    if let Some(token) = &state.token {
-        if !OPEN_PATHS.contains(&path.as_str()) && !token_matches(request.headers(), token) {
-            return refuse(
-                native,
-                StatusCode::UNAUTHORIZED,
-                "missing or wrong bearer token (Authorization: Bearer <token>)",
-            );
-        }
+    let authorized = state.token.as_deref().is_none_or(|token| token_matches(request.headers(), token));
+    if !authorized && !OPEN_PATHS.contains(&path.as_str()) {
+        return refuse(
+            native,
+            StatusCode::UNAUTHORIZED,
+            "missing or wrong bearer token (Authorization: Bearer <token>)",
+        );
     }
+    request.extensions_mut().insert(Authorized(authorized));
     next.run(request).await
 }
 

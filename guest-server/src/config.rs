@@ -70,6 +70,11 @@ pub struct ServerConfig {
     #[arg(long, env = "ARENA_SCREEN", default_value = "1440x900", value_parser = parse_size)]
     pub screen: (u32, u32),
 
+    /// How long one health report is reused, in milliseconds: a flood of `/v1/health`
+    /// polls costs one probe of each component per period.
+    #[arg(long, env = "ARENA_HEALTH_CACHE_MS", default_value_t = 1000)]
+    pub health_cache_ms: u64,
+
     /// Largest request body accepted, in bytes (uploads included).
     #[arg(long, env = "ARENA_MAX_BODY", default_value_t = 1 << 30)]
     pub max_body_bytes: usize,
@@ -150,6 +155,7 @@ impl ServerConfig {
             scenario: None,
             screen: (1440, 900),
             max_body_bytes: 1 << 30,
+            health_cache_ms: 1000,
             call_timeout_ms: 30_000,
             a11y_timeout_ms: 60_000,
             exec_timeout_ms: 120_000,

@@ -15,11 +15,19 @@ pub struct AppState {
     /// The bearer token in force, if any.
     pub token: Option<Arc<str>>,
     pub started: Instant,
+    /// The last health report and when it was made, shared by concurrent polls.
+    pub health: Arc<tokio::sync::Mutex<Option<(Instant, arena_shared::health::HealthReport)>>>,
 }
 
 impl AppState {
     pub fn new(desktop: Arc<dyn Desktop>, config: ServerConfig, token: Option<String>) -> AppState {
-        AppState { desktop, config: Arc::new(config), token: token.map(Arc::from), started: Instant::now() }
+        AppState {
+            desktop,
+            config: Arc::new(config),
+            token: token.map(Arc::from),
+            started: Instant::now(),
+            health: Arc::default(),
+        }
     }
 
     /// Deadline of an ordinary backend call.

@@ -820,10 +820,67 @@ async fn a_token_is_required_except_for_health() {
 }
 
 #[tokio::test]
+async fn health_without_the_token_shows_stages_only() {
+    let app = app_with(Some(TOKEN));
+    let anonymous: HealthReport = app.get("/v1/health").await.json();
+    assert!(!anonymous.components.is_empty());
+    assert!(anonymous.components.iter().all(|c| c.detail == "up" || c.detail == "down"), "{anonymous:?}");
+    let authed =
+        Request::get("/v1/health").header(header::AUTHORIZATION, format!("Bearer {TOKEN}")).body(Body::empty());
+    let full: HealthReport = app.send(authed.unwrap()).await.json();
+    assert!(full.components.iter().any(|c| c.detail != "up" && c.detail != "down"), "{full:?}");
+    assert_eq!(
+        full.components.iter().map(|c| (c.component, c.ok)).collect::<Vec<_>>(),
+        anonymous.components.iter().map(|c| (c.component, c.ok)).collect::<Vec<_>>(),
+        "the same stages, with or without the token"
+    );
+}
+
+/// Five health polls against a stub that counts its probes, with `cache_ms` of reuse.
+async fn probes_for_five_polls(cache_ms: u64) -> usize {
+    let dir = tempfile::tempdir().unwrap();
+    let inner =
+        StubDesktop::with_config(StubConfig { root: Some(dir.path().into()), screen: (1440, 900), scenario: None })
+            .unwrap();
+    let desktop = Arc::new(HangsOnText::new(inner, "never"));
+    let mut config = ServerConfig::for_stub();
+    config.health_cache_ms = cache_ms;
+    let app = TestApp { router: arena_guest::router(AppState::new(desktop.clone(), config, None)), dir };
+    for _ in 0..5 {
+        app.get("/v1/health").await.assert_status(StatusCode::OK);
+    }
+    desktop.probes.load(std::sync::atomic::Ordering::Relaxed)
+}
+
+#[tokio::test]
+async fn health_reports_are_reused_within_the_cache_period() {
+    let per_report = Component::ALL.len();
+    assert_eq!(probes_for_five_polls(3_600_000).await, per_report, "one report for five polls");
+    assert_eq!(probes_for_five_polls(0).await, 5 * per_report, "no reuse when the period is 0");
+}
+
+#[tokio::test]
 async fn cross_site_requests_are_refused() {
     let app = app();
     let request = Request::get("/v1/screen").header(header::ORIGIN, "http://evil.example").body(Body::empty()).unwrap();
     app.send(request).await.assert_error(StatusCode::FORBIDDEN, ErrorCode::Forbidden, "cross-site");
+}
+
+#[tokio::test]
+async fn drive_roots_system_folders_and_the_profile_are_never_deleted_or_recycled() {
+    let app = app();
+    let keep_local = app.dir.path().join("C/Users/Docker/Desktop/keep.txt");
+    std::fs::create_dir_all(keep_local.parent().unwrap()).unwrap();
+    std::fs::write(&keep_local, b"x").unwrap();
+    for path in ["C:%5C", "C:", "C:%5CUsers", "C:%5CUsers%5CDocker", "C:%5CUsers%5CDocker%5CDesktop", "C:%5CWindows"] {
+        let uri = format!("/v1/files?path={path}&recursive=true");
+        app.delete(&uri).await.assert_error(StatusCode::FORBIDDEN, ErrorCode::Forbidden, "never removes");
+        let recycle = app.json(Method::POST, "/v1/files/recycle", json!({"path": path.replace("%5C", "\\")})).await;
+        recycle.assert_error(StatusCode::FORBIDDEN, ErrorCode::Forbidden, "never removes");
+    }
+    assert!(keep_local.exists(), "a file on the Desktop is still there");
+    app.delete("/v1/files?path=C:%5CUsers%5CDocker%5CDesktop%5Ckeep.txt").await.assert_status(StatusCode::NO_CONTENT);
+    assert!(!keep_local.exists());
 }
 
 /// A request for `uri` that says it is for `host`, as a browser's would.
@@ -878,11 +935,19 @@ async fn allowed_host_names_and_a_token_let_other_names_through() {
 
 // ----- a batch that fails part-way -----
 
-/// The stub, except that typing `fail_on` times out, as a hung window would.
+/// The stub, except that typing `fail_on` times out, as a hung window would; it
+/// also counts component probes.
 #[derive(Debug)]
 struct HangsOnText {
     inner: StubDesktop,
     fail_on: &'static str,
+    probes: std::sync::atomic::AtomicUsize,
+}
+
+impl HangsOnText {
+    fn new(inner: StubDesktop, fail_on: &'static str) -> HangsOnText {
+        HangsOnText { inner, fail_on, probes: std::sync::atomic::AtomicUsize::new(0) }
+    }
 }
 
 mod delegate {
@@ -913,6 +978,7 @@ mod delegate {
             self.inner.kind()
         }
         fn probe(&self, c: Component) -> DesktopResult<String> {
+            self.probes.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
             self.inner.probe(c)
         }
         fn screen(&self) -> DesktopResult<ScreenInfo> {
@@ -996,7 +1062,7 @@ async fn a_failing_action_stops_the_batch_and_says_where() {
     let inner =
         StubDesktop::with_config(StubConfig { root: Some(dir.path().into()), screen: (1440, 900), scenario: None })
             .unwrap();
-    let state = AppState::new(Arc::new(HangsOnText { inner, fail_on: "boom" }), ServerConfig::for_stub(), None);
+    let state = AppState::new(Arc::new(HangsOnText::new(inner, "boom")), ServerConfig::for_stub(), None);
     let app = TestApp { router: arena_guest::router(state), dir };
     let batch = json!({"actions": [
         {"type": "move_to", "x": 10, "y": 10},

@@ -15,7 +15,10 @@
 //! by a bearer token.
 
 use std::hash::{BuildHasher, Hasher};
-use std::time::{Duration, Instant};
+use std::time::Duration;
+
+// Tokio's clock (the system clock unless a test pauses it), so waits are testable.
+use tokio::time::Instant;
 
 use reqwest::header::{HeaderMap, CONTENT_TYPE};
 use reqwest::{Method, StatusCode, Url};
@@ -230,6 +233,16 @@ impl GuestClient {
     /// Any [`ClientError`] of the call.
     pub async fn health(&self) -> Result<HealthReport, ClientError> {
         self.health_with(self.config.timeout, Retry::Idempotent).await
+    }
+
+    /// One `GET /v1/health` within `deadline`, never retried: what a command that must
+    /// answer promptly asks (a hung guest costs `deadline`, not every retry's).
+    ///
+    /// # Errors
+    ///
+    /// As [`GuestClient::health`].
+    pub async fn health_once(&self, deadline: Duration) -> Result<HealthReport, ClientError> {
+        self.health_with(deadline, Retry::Never).await
     }
 
     async fn health_with(&self, deadline: Duration, retry: Retry) -> Result<HealthReport, ClientError> {

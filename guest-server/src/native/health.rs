@@ -4,15 +4,23 @@
 //! backend call, so one hung part (say, a stuck accessibility provider) costs
 //! only its own probe. The route always answers 200: the body says what is up.
 //! It is not a liveness check of the HTTP server alone; that is `/probe`.
+//!
+//! The route is open (readiness is polled before the token is provisioned), so it
+//! is kept cheap and discreet: one report is reused for `--health-cache-ms` (1 s by
+//! default) and concurrent polls wait for the same probes, and a caller without the
+//! token sees the stages' states only, not what each probe read (a cursor
+//! position, a clipboard length, a path).
 
 use std::time::{Duration, Instant};
 
 use axum::extract::State;
 use axum::routing::get;
+use axum::Extension;
 use axum::Router;
 
 use arena_shared::health::{Component, ComponentHealth, HealthReport, Readiness};
 
+use crate::auth::Authorized;
 use crate::call::blocking;
 use crate::error::AppJson;
 use crate::state::AppState;
@@ -26,8 +34,40 @@ pub(crate) fn routes() -> Router<AppState> {
     Router::new().route("/v1/health", get(health))
 }
 
-async fn health(State(state): State<AppState>) -> AppJson<HealthReport> {
-    let probes = Component::ALL.into_iter().map(|component| probe(&state, component));
+async fn health(State(state): State<AppState>, authorized: Option<Extension<Authorized>>) -> AppJson<HealthReport> {
+    let report = cached_report(&state).await;
+    let authorized = authorized.is_some_and(|Extension(Authorized(yes))| yes);
+    AppJson(if authorized { report } else { redacted(report) })
+}
+
+/// The last report if it is fresh enough, else a new one; concurrent callers wait
+/// for the one being made.
+async fn cached_report(state: &AppState) -> HealthReport {
+    let mut slot = state.health.lock().await;
+    let ttl = Duration::from_millis(state.config.health_cache_ms);
+    if let Some((made, report)) = slot.as_ref() {
+        if made.elapsed() < ttl {
+            let mut report = report.clone();
+            report.uptime_ms = millis(state.started.elapsed());
+            return report;
+        }
+    }
+    let report = fresh_report(state).await;
+    *slot = Some((Instant::now(), report.clone()));
+    report
+}
+
+/// What a caller without the token may see: which stages are up, and nothing they read.
+fn redacted(mut report: HealthReport) -> HealthReport {
+    for component in &mut report.components {
+        component.detail = if component.ok { "up".into() } else { "down".into() };
+    }
+    report.session_id = None;
+    report
+}
+
+async fn fresh_report(state: &AppState) -> HealthReport {
+    let probes = Component::ALL.into_iter().map(|component| probe(state, component));
     let components = futures_util::future::join_all(probes).await;
     let up = components.iter().filter(|c| c.ok).count();
     let status = match up {
@@ -35,7 +75,7 @@ async fn health(State(state): State<AppState>) -> AppJson<HealthReport> {
         n if n == components.len() => Readiness::Ready,
         _ => Readiness::Degraded,
     };
-    AppJson(HealthReport {
+    HealthReport {
         status,
         version: env!("CARGO_PKG_VERSION").to_owned(),
         api_version: arena_shared::API_VERSION.to_owned(),
@@ -44,7 +84,7 @@ async fn health(State(state): State<AppState>) -> AppJson<HealthReport> {
         uptime_ms: millis(state.started.elapsed()),
         auth_required: state.token.is_some(),
         session_id: state.desktop.session_id(),
-    })
+    }
 }
 
 async fn probe(state: &AppState, component: Component) -> ComponentHealth {

@@ -563,6 +563,9 @@ async fn health(conn: &Connection, wait: Option<Duration>, json: bool) -> anyhow
             emit(&render::health(client.base_url(), report))
         }
     };
+    // Each call gets --timeout once, no retries: `health` answers within --wait plus
+    // one call, whatever state the guest is in.
+    let per_call = conn.timeout;
     let report = match wait {
         Some(overall) => {
             let waited =
@@ -571,16 +574,23 @@ async fn health(conn: &Connection, wait: Option<Duration>, json: bool) -> anyhow
             match waited {
                 Ok(report) => report,
                 Err(err @ ClientError::NotReady { .. }) => {
-                    // Show the last state before failing, so the table says what is down.
-                    if let Ok(report) = client.health().await {
-                        show(&report)?;
+                    // Show the last state before failing, so the table says what is down;
+                    // a guest that did not answer at all is not asked again.
+                    if let ClientError::NotReady { last_error: None, .. } = &err {
+                        if let Ok(report) = client.health_once(per_call).await {
+                            show(&report)?;
+                        }
                     }
-                    return Err(err.into());
+                    return Err(anyhow::Error::new(err)
+                        .context(format!("each health call may take up to {} s (--timeout)", per_call.as_secs_f64())));
                 }
                 Err(err) => return Err(err.into()),
             }
         }
-        None => client.health().await?,
+        None => client
+            .health_once(per_call)
+            .await
+            .with_context(|| format!("one health call of up to {} s (--timeout)", per_call.as_secs_f64()))?,
     };
     show(&report)?;
     let ready =

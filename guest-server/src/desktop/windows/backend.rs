@@ -142,7 +142,10 @@ impl WindowsDesktop {
             }
             Component::Files => {
                 let dir = std::env::temp_dir();
-                let probe = dir.join(format!("arena-probe-{}.tmp", std::process::id()));
+                // A name of its own per call: concurrent probes must not share (and delete) one file.
+                static PROBES: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
+                let n = PROBES.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                let probe = dir.join(format!("arena-probe-{}-{n}.tmp", std::process::id()));
                 let what = probe.display().to_string();
                 std::fs::write(&probe, b"arena probe").map_err(|err| DesktopError::io("probe files", &what, err))?;
                 let back = std::fs::read(&probe).map_err(|err| DesktopError::io("probe files", &what, err));
