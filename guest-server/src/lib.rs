@@ -19,6 +19,7 @@
 //! - [`error`]: the error shapes. [`state`]: handler state.
 //! - [`paths`], [`imaging`]: platform-neutral helpers the routes share.
 //! - [`inspect`]: the logic of the evaluator queries both APIs answer.
+//! - [`protect`]: what no route may delete, move or recycle.
 //! - [`script_host`]: the desktop side of the native Python-subset interpreter.
 //! - [`service`]: the `service` and `logon-task` subcommands (running in the user's session), with the
 //!   Windows service supervisor in `service/windows/`.
@@ -32,6 +33,7 @@ pub mod imaging;
 pub mod inspect;
 pub mod native;
 pub mod paths;
+pub mod protect;
 pub mod script_host;
 pub mod service;
 pub mod state;

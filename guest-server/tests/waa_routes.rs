@@ -609,6 +609,20 @@ async fn setup_recycle_moves_files_away_and_reports_failures() {
 }
 
 #[tokio::test]
+async fn setup_recycle_refuses_drive_roots_and_the_users_folders() {
+    let app = app();
+    app.write(r"C:\Users\Docker\Desktop\keep.txt", b"x");
+    for path in [r"C:\", r"C:\Users\Docker", r"C:\Users\Docker\Desktop", r"C:\Windows"] {
+        let answer = app.post_json("/setup/recycle", json!({"path": path})).await;
+        assert_eq!(answer.status, StatusCode::FORBIDDEN, "{path}");
+        let body: Value = serde_json::from_slice(&answer.body).expect("json");
+        assert_eq!(body["status"], "error");
+        assert!(body["message"].as_str().is_some_and(|m| m.contains("never removes")), "{body}");
+    }
+    assert!(app.local(r"C:\Users\Docker\Desktop\keep.txt").exists(), "nothing moved");
+}
+
+#[tokio::test]
 async fn folder_exists_answers_200_or_400() {
     let app = app();
     let docs = r"C:\Users\Docker\Documents";

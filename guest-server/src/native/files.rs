@@ -274,6 +274,7 @@ fn dir_entry(entry: &std::fs::DirEntry) -> Option<DirEntry> {
 async fn delete(State(state): State<AppState>, AppQuery(query): AppQuery<PathQuery>) -> Result<StatusCode, ApiError> {
     run(&state, "delete", move |d| {
         let loc = locate(d, &query.path)?;
+        crate::protect::refuse_destructive(d, "delete", &loc.guest)?;
         let io = |err| io_error("delete", &loc, err);
         let meta = std::fs::symlink_metadata(&loc.local).map_err(io)?;
         if !meta.is_dir() {
@@ -309,6 +310,7 @@ async fn mkdir(State(state): State<AppState>, AppJson(request): AppJson<MkdirReq
 async fn recycle(State(state): State<AppState>, AppJson(request): AppJson<PathQuery>) -> Result<StatusCode, ApiError> {
     run(&state, "recycle", move |d| {
         let loc = locate(d, &request.path)?;
+        crate::protect::refuse_destructive(d, "recycle", &loc.guest)?;
         ensure_exists(&loc)?;
         Ok(d.recycle(&loc.guest)?)
     })

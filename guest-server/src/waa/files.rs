@@ -228,6 +228,10 @@ pub(crate) async fn recycle(State(state): State<AppState>, PyJson(body): PyJson)
         let shown = py::str_of(&path);
         let recycled = match &path {
             Value::String(guest) => {
+                // A protected folder is refused outright (403), on every backend.
+                crate::protect::refuse_destructive(desktop, "recycle", guest).map_err(|err| {
+                    json_err(StatusCode::FORBIDDEN, json!({"status": "error", "message": err.to_string()}))
+                })?;
                 desktop.recycle(guest).map_err(|err| tracing::debug!(error = %err, "recycle failed")).is_ok()
             }
             _ => false,

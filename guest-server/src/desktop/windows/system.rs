@@ -94,6 +94,11 @@ pub(super) fn recycle(path: &str) -> DesktopResult<()> {
             message: format!("{path}: SHFileOperationW failed with code {code:#x}"),
         });
     }
+    // The shell reports success for some paths it did not move (a drive root):
+    // success means the path is gone.
+    if std::fs::symlink_metadata(path).is_ok() {
+        return Err(DesktopError::Os { op: "recycle", message: format!("{path}: the shell moved nothing") });
+    }
     Ok(())
 }
 
