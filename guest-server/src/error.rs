@@ -97,10 +97,48 @@ impl<T: serde::Serialize> IntoResponse for AppJson<T> {
     }
 }
 
-/// `Query<T>` whose rejections are [`ApiError`]s.
-#[derive(Debug, Clone, Copy, Default, axum::extract::FromRequestParts)]
-#[from_request(via(axum::extract::Query), rejection(ApiError))]
+/// `Query<T>` whose rejections are [`ApiError`]s, and which refuses a query string
+/// that is not UTF-8 once percent-decoded (axum's own would silently replace the
+/// bad bytes, so a path could name a different file than the client meant).
+#[derive(Debug, Clone, Copy, Default)]
 pub struct AppQuery<T>(pub T);
+
+impl<T, S> axum::extract::FromRequestParts<S> for AppQuery<T>
+where
+    T: serde::de::DeserializeOwned,
+    S: Send + Sync,
+{
+    type Rejection = ApiError;
+
+    async fn from_request_parts(parts: &mut axum::http::request::Parts, state: &S) -> Result<Self, ApiError> {
+        if let Some(query) = parts.uri.query() {
+            check_utf8_query(query)?;
+        }
+        let axum::extract::Query(value) = axum::extract::Query::<T>::from_request_parts(parts, state).await?;
+        Ok(AppQuery(value))
+    }
+}
+
+/// Refuses a query string whose decoded names or values are not UTF-8, naming the
+/// parameter and the byte offset of the first bad byte.
+fn check_utf8_query(query: &str) -> Result<(), ApiError> {
+    for pair in query.split('&').filter(|p| !p.is_empty()) {
+        let (name, value) = pair.split_once('=').unwrap_or((pair, ""));
+        for (what, raw) in [("name", name), ("value", value)] {
+            let bytes = crate::urlencoded::decode(raw);
+            if let Err(err) = std::str::from_utf8(&bytes) {
+                let at = err.valid_up_to();
+                let shown = String::from_utf8_lossy(&crate::urlencoded::decode(name)).into_owned();
+                return Err(ApiError::BadRequest(format!(
+                    "the query parameter {shown:?} has a {what} that is not UTF-8: byte {:#04x} at offset {at} \
+                     (percent-encode the UTF-8 bytes of the text)",
+                    bytes[at]
+                )));
+            }
+        }
+    }
+    Ok(())
+}
 
 /// An error from a legacy WAA route.
 ///

@@ -37,6 +37,7 @@ pub mod protect;
 pub mod script_host;
 pub mod service;
 pub mod state;
+pub mod urlencoded;
 pub mod waa;
 
 use std::future::Future;
@@ -130,11 +131,11 @@ pub fn build_state(config: ServerConfig) -> anyhow::Result<AppState> {
 
 fn resolve_token(config: &ServerConfig) -> anyhow::Result<Option<String>> {
     let token = match (&config.token, &config.token_file) {
-        (Some(token), _) => Some(token.trim().to_owned()),
+        (Some(token), _) => Some(arena_shared::token::parse(token).context("--token")?),
         (None, Some(path)) => {
             let text =
                 std::fs::read_to_string(path).with_context(|| format!("reading token file {}", path.display()))?;
-            Some(text.lines().next().unwrap_or("").trim().to_owned())
+            Some(arena_shared::token::parse(&text).with_context(|| format!("token file {}", path.display()))?)
         }
         (None, None) => None,
     };

@@ -608,6 +608,48 @@ async fn exec_times_out_with_a_200_result() {
 }
 
 #[tokio::test]
+async fn a_read_only_file_is_not_replaced() {
+    let app = app();
+    let local = app.dir.path().join("C/Users/Docker/Desktop/locked.txt");
+    std::fs::create_dir_all(local.parent().unwrap()).unwrap();
+    std::fs::write(&local, b"old").unwrap();
+    let mut permissions = std::fs::metadata(&local).unwrap().permissions();
+    permissions.set_readonly(true);
+    std::fs::set_permissions(&local, permissions).unwrap();
+    let request =
+        Request::put("/v1/files?path=C:%5CUsers%5CDocker%5CDesktop%5Clocked.txt").body(Body::from("new")).unwrap();
+    app.send(request).await.assert_error(StatusCode::FORBIDDEN, ErrorCode::Forbidden, "read-only");
+    assert_eq!(std::fs::read(&local).unwrap(), b"old");
+    assert!(std::fs::metadata(&local).unwrap().permissions().readonly(), "the mode is kept");
+}
+
+#[tokio::test]
+async fn a_nul_in_a_command_is_a_bad_request() {
+    let app = app();
+    app.post("/v1/exec", json!({"argv": ["echo", "a\0b"]})).await.assert_error(
+        StatusCode::BAD_REQUEST,
+        ErrorCode::BadRequest,
+        "argv[1] contains a NUL",
+    );
+    app.post("/v1/launch", json!({"shell": "echo \0"})).await.assert_error(
+        StatusCode::BAD_REQUEST,
+        ErrorCode::BadRequest,
+        "NUL",
+    );
+}
+
+#[tokio::test]
+async fn a_query_that_is_not_utf8_is_refused_with_the_offset() {
+    let app = app();
+    app.get("/v1/files/stat?path=C:%5Cab%FFc").await.assert_error(
+        StatusCode::BAD_REQUEST,
+        ErrorCode::BadRequest,
+        "byte 0xff at offset 5",
+    );
+    app.get("/v1/files/exists?path=C:%5C%C3%A9t%C3%A9.txt").await.assert_status(StatusCode::OK);
+}
+
+#[tokio::test]
 async fn exec_and_launch_refuse_missing_programs_and_empty_argv() {
     let app = app();
     app.post("/v1/exec", json!({"argv": ["no-such-program-xyz"]})).await.assert_error(
@@ -1086,4 +1128,29 @@ async fn exec_passes_stdin_and_a_guest_working_folder() {
     app.post("/v1/files/mkdir", json!({"path": r"C:\work\here"})).await.assert_status(StatusCode::NO_CONTENT);
     let result: ExecResult = app.post("/v1/exec", json!({"argv": ["pwd"], "cwd": r"C:\work\here"})).await.json();
     assert!(result.stdout.trim_end().ends_with("/C/work/here"), "{result:?}");
+}
+
+#[tokio::test]
+async fn token_files_are_read_like_an_editor_wrote_them_and_bad_tokens_stop_start_up() {
+    let dir = tempfile::tempdir().unwrap();
+    let state = |text: &str| {
+        let file = dir.path().join("token");
+        std::fs::write(&file, text).unwrap();
+        let mut config = ServerConfig::for_stub();
+        config.stub_root = Some(dir.path().join("root"));
+        config.token_file = Some(file);
+        arena_guest::build_state(config)
+    };
+    // A byte-order mark and CRLF, as PowerShell's Out-File writes them.
+    let app = TestApp {
+        router: arena_guest::router(state(&format!("\u{feff}{TOKEN}\r\n")).unwrap()),
+        dir: tempfile::tempdir().unwrap(),
+    };
+    let request =
+        Request::get("/v1/screen").header(header::AUTHORIZATION, format!("Bearer {TOKEN}")).body(Body::empty());
+    app.send(request.unwrap()).await.assert_status(StatusCode::OK);
+    let err = state("0123456789abcdéf0123").unwrap_err();
+    assert!(format!("{err:#}").contains("printable ASCII"), "{err:#}");
+    let err = state("\n").unwrap_err();
+    assert!(format!("{err:#}").contains("empty"), "{err:#}");
 }

@@ -837,6 +837,18 @@ async fn list_directory_builds_upstreams_tree() {
 // ----- 24, 25: /file and /setup/upload -----
 
 #[tokio::test]
+async fn setup_upload_takes_names_up_to_the_file_system_limit() {
+    let app = app();
+    // 250 bytes: a legal NTFS (and ext4) name, too long for a temporary name built from it.
+    let name = format!("{}.txt", "n".repeat(246));
+    let path = format!(r"C:\Users\Docker\Downloads\{name}");
+    app.post_multipart("/setup/upload", &[("file_path", &path)], &[("file_data", "x.txt", b"long")])
+        .await
+        .assert_text(StatusCode::OK, "File Uploaded");
+    assert_eq!(std::fs::read(app.local(&path)).expect("read"), b"long");
+}
+
+#[tokio::test]
 async fn setup_upload_then_file_round_trips_binary_bytes() {
     let app = app();
     let bytes: Vec<u8> = (0..=255u8).chain([0, 0, 13, 10, 255]).collect();

@@ -60,8 +60,16 @@ pub struct LaunchRequest {
 ///
 /// # Errors
 ///
-/// A message naming the problem: neither given, both given, or an empty program.
+/// A message naming the problem: neither given, both given, an empty program, or a NUL
+/// character anywhere.
 fn command_of(argv: &[String], shell: Option<&str>) -> Result<CommandSpec, String> {
+    // No program can receive a NUL: the operating system's command line ends there.
+    if let Some(i) = argv.iter().position(|a| a.contains('\0')) {
+        return Err(format!("argv[{i}] contains a NUL character, which no command line can carry"));
+    }
+    if shell.is_some_and(|line| line.contains('\0')) {
+        return Err("shell contains a NUL character, which no command line can carry".into());
+    }
     match (argv.first(), shell) {
         (Some(_), Some(_)) => Err("give either argv or shell, not both".into()),
         (None, None) => Err("argv must name a program, or shell give a command line".into()),
@@ -117,4 +125,30 @@ fn split_command(command: CommandSpec) -> (Vec<String>, Option<String>) {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct LaunchResult {
     pub pid: u32,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_request_names_exactly_one_usable_command() {
+        let argv = |w: &[&str]| w.iter().map(|s| s.to_string()).collect::<Vec<_>>();
+        let check = |argv: Vec<String>, shell: Option<&str>, expected: Result<CommandSpec, &str>| {
+            let request = ExecRequest { argv: argv.clone(), shell: shell.map(str::to_owned), ..ExecRequest::default() };
+            match (request.command(), expected) {
+                (Ok(got), Ok(want)) => assert_eq!(got, want),
+                (Err(got), Err(needle)) => assert!(got.contains(needle), "{got}"),
+                (got, want) => panic!("{argv:?} {shell:?}: got {got:?}, want {want:?}"),
+            }
+        };
+        check(argv(&["notepad", "a.txt"]), None, Ok(CommandSpec::Argv(argv(&["notepad", "a.txt"]))));
+        check(Vec::new(), Some("dir"), Ok(CommandSpec::Shell("dir".into())));
+        check(argv(&["dir"]), Some("dir"), Err("not both"));
+        check(Vec::new(), None, Err("argv must name a program"));
+        check(argv(&[" "]), None, Err("argv[0] must not be empty"));
+        check(Vec::new(), Some("  "), Err("shell must not be empty"));
+        check(argv(&["echo", "a\0b"]), None, Err("argv[1] contains a NUL"));
+        check(Vec::new(), Some("echo \0"), Err("shell contains a NUL"));
+    }
 }

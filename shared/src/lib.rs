@@ -41,6 +41,7 @@ pub mod ntfs;
 pub mod observation;
 pub mod registry;
 pub mod script;
+pub mod token;
 
 /// The version of the native API spoken under `/v1/`.
 pub const API_VERSION: &str = "1";

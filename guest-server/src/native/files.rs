@@ -166,6 +166,10 @@ fn write_atomic(loc: &Located, bytes: &[u8], create_parents: bool) -> Result<(),
     if loc.local.is_dir() {
         return Err(ApiError::BadRequest(format!("{} is a directory", loc.guest)));
     }
+    // Windows refuses to replace a read-only file; a rename would do it on any backend.
+    if std::fs::metadata(&loc.local).is_ok_and(|meta| meta.permissions().readonly()) {
+        return Err(ApiError::Forbidden(format!("{} is read-only; nothing was written", loc.guest)));
+    }
     let parent =
         loc.local.parent().ok_or_else(|| ApiError::BadRequest(format!("{} has no parent folder", loc.guest)))?;
     match std::fs::metadata(parent) {

@@ -91,15 +91,11 @@ impl Connection {
     /// The token file cannot be read or is empty.
     pub fn resolve_token(&self) -> anyhow::Result<Option<String>> {
         match (&self.token, &self.token_file) {
-            (Some(token), _) => Ok(Some(token.trim().to_owned())),
+            (Some(token), _) => Ok(Some(arena_shared::token::parse(token).context("--token")?)),
             (None, Some(path)) => {
                 let text = std::fs::read_to_string(path)
                     .with_context(|| format!("reading --token-file {}", path.display()))?;
-                let token = text.lines().next().unwrap_or("").trim().to_owned();
-                if token.is_empty() {
-                    anyhow::bail!("--token-file {} is empty", path.display());
-                }
-                Ok(Some(token))
+                Ok(Some(arena_shared::token::parse(&text).with_context(|| format!("--token-file {}", path.display()))?))
             }
             (None, None) => Ok(None),
         }
