@@ -3,12 +3,27 @@
 //! Every backend call goes through [`blocking`]: it runs on tokio's blocking
 //! pool and the request gets [`DesktopError::Timeout`] when the deadline
 //! passes. A hung window or provider then costs that one request, never the
-//! server; the abandoned call finishes (or not) on its own thread.
+//! server. The call itself is told to stop ([`crate::desktop::cancel`]): work
+//! that checks between its units (keystrokes, pauses) ends within one unit; a
+//! call stuck inside the operating system finishes (or not) on its own thread.
 
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::time::Duration;
 
+use crate::desktop::cancel::Scope;
 use crate::desktop::{Desktop, DesktopError, DesktopResult};
+
+/// Sets the cancel flag when dropped: after a finished call it changes nothing; after a
+/// timeout, or when the client went away and the request future was dropped, it stops
+/// the work still running.
+struct StopOnDrop(Arc<AtomicBool>);
+
+impl Drop for StopOnDrop {
+    fn drop(&mut self) {
+        self.0.store(true, Ordering::Relaxed);
+    }
+}
 
 /// Runs `f` against the backend on the blocking pool, failing after `deadline`.
 ///
@@ -22,7 +37,17 @@ where
     T: Send + 'static,
 {
     let desktop = Arc::clone(desktop);
-    let task = tokio::task::spawn_blocking(move || f(desktop.as_ref()));
+    let cancel = Arc::new(AtomicBool::new(false));
+    let ms = u64::try_from(deadline.as_millis()).unwrap_or(u64::MAX);
+    let task = tokio::task::spawn_blocking({
+        let cancel = Arc::clone(&cancel);
+        move || {
+            let _scope = Scope::enter(op, ms, cancel);
+            f(desktop.as_ref())
+        }
+    });
+    // Whatever ends this call (its deadline, or the request going away), the work stops.
+    let _stop = StopOnDrop(cancel);
     match tokio::time::timeout(deadline, task).await {
         Ok(Ok(res)) => res,
         Ok(Err(join_err)) => {
@@ -51,6 +76,23 @@ mod tests {
         })
         .await;
         assert!(matches!(res, Err(DesktopError::Timeout { op: "sleepy", ms: 20 })), "{res:?}");
+    }
+
+    #[tokio::test]
+    async fn a_timed_out_call_is_told_to_stop() {
+        let dir = tempfile::tempdir().unwrap();
+        let desktop: Arc<dyn Desktop> = Arc::new(StubDesktop::new(dir.path().to_path_buf()).unwrap());
+        let (done, stopped) = std::sync::mpsc::channel();
+        let res = blocking(&desktop, "long", Duration::from_millis(20), move |_| {
+            // An hour of work in slices, as typing with pauses is.
+            let outcome = crate::desktop::cancel::sleep(Duration::from_secs(3600));
+            let _ = done.send(outcome);
+            Ok(())
+        })
+        .await;
+        assert!(matches!(res, Err(DesktopError::Timeout { op: "long", ms: 20 })), "{res:?}");
+        let outcome = stopped.recv_timeout(Duration::from_secs(30)).expect("the work stopped instead of running on");
+        assert!(matches!(outcome, Err(DesktopError::Timeout { op: "long", .. })), "{outcome:?}");
     }
 
     #[tokio::test]

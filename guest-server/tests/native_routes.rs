@@ -1154,3 +1154,51 @@ async fn token_files_are_read_like_an_editor_wrote_them_and_bad_tokens_stop_star
     let err = state("\n").unwrap_err();
     assert!(format!("{err:#}").contains("empty"), "{err:#}");
 }
+
+/// Polls `f` until it holds, for at most ten seconds.
+async fn eventually(what: &str, mut f: impl FnMut() -> bool) {
+    for _ in 0..1000 {
+        if f() {
+            return;
+        }
+        tokio::time::sleep(std::time::Duration::from_millis(10)).await;
+    }
+    panic!("{what} did not happen within 10 s");
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn slow_typing_leaves_the_desktop_to_other_calls_and_stops_when_abandoned() {
+    let dir = tempfile::tempdir().unwrap();
+    let stub = Arc::new(
+        StubDesktop::with_config(StubConfig { root: Some(dir.path().into()), screen: (1440, 900), scenario: None })
+            .unwrap(),
+    );
+    let app = TestApp { router: arena_guest::router(AppState::new(stub.clone(), ServerConfig::for_stub(), None)), dir };
+    app.post("/v1/launch", json!({"argv": ["notepad"]})).await.assert_status(StatusCode::OK);
+    let notepad = stub.find_window("Notepad").expect("notepad opened");
+    let typed = || stub.window_text(notepad).unwrap_or_default().chars().count();
+
+    // Ten characters a second apart: nine seconds of typing in one call.
+    let body = json!({"actions": [{"type": "type_text", "text": "abcdefghij", "interval_ms": 1000}]});
+    let request = Request::post("/v1/actions")
+        .header(header::CONTENT_TYPE, "application/json")
+        .body(Body::from(body.to_string()))
+        .unwrap();
+    let typing = tokio::spawn(app.router.clone().oneshot(request));
+    eventually("the first character", || typed() >= 1).await;
+
+    // Meanwhile the desktop answers: the typing holds it one character at a time.
+    app.get("/v1/health").await.assert_status(StatusCode::OK);
+    app.get("/v1/screenshot").await.assert_status(StatusCode::OK);
+    app.get("/v1/windows").await.assert_status(StatusCode::OK);
+    let while_typing = typed();
+    assert!(while_typing < 10, "the other calls were answered while typing was under way ({while_typing} typed)");
+
+    // The client goes away: the call is cancelled and no more keys arrive.
+    typing.abort();
+    let _ = typing.await;
+    let at_abort = typed();
+    tokio::time::sleep(std::time::Duration::from_millis(2500)).await;
+    assert!(typed() <= at_abort + 1, "typing went on after the request was dropped: {at_abort} -> {}", typed());
+    assert!(typed() < 10);
+}

@@ -230,6 +230,42 @@ async fn windows_backend_under_wine() {
         .await;
     }
 
+    // 6c. A call whose client goes away stops: a slow type_text abandoned after 1.2 s
+    // types no more keys into notepad (the keys used to keep arriving for the whole text).
+    c.act(&ActionBatch { actions: vec![Action::Hotkey { keys: vec!["ctrl".into(), "a".into()] }] })
+        .await
+        .expect("select all");
+    let impatient = reqwest::Client::builder().timeout(Duration::from_millis(1200)).build().expect("client");
+    let slow = serde_json::json!({"actions": [{"type": "type_text", "text": "0123456789", "interval_ms": 500}]});
+    let abandoned = impatient.post(format!("{}/v1/actions", guest.url)).json(&slow).send().await;
+    assert!(abandoned.is_err(), "the client gave up before the typing could finish: {abandoned:?}");
+    let at_abort = notepad_text(&c, first.id).await.unwrap_or_default().chars().count();
+    tokio::time::sleep(Duration::from_millis(2500)).await;
+    let later = notepad_text(&c, first.id).await.unwrap_or_default();
+    assert!(
+        later.chars().count() <= at_abort + 1,
+        "typing went on after the call was abandoned: {at_abort} -> {later:?}"
+    );
+    assert!(later.chars().count() < 10, "the whole text arrived: {later:?}");
+    c.act(&ActionBatch {
+        actions: vec![
+            Action::Hotkey { keys: vec!["ctrl".into(), "a".into()] },
+            Action::TypeText { text: shortened.into(), interval_ms: None },
+        ],
+    })
+    .await
+    .expect("put the text back");
+    eventually("notepad to hold its text again", Duration::from_secs(10), || async {
+        notepad_text(&c, first.id).await.filter(|t| t == shortened)
+    })
+    .await;
+
+    // 6d. Deleting or recycling a drive root (Wine maps Z: to the host's /) is refused.
+    for root in [r"C:\", r"Z:\"] {
+        let err = c.delete(root, true).await.expect_err("a drive root is never deleted");
+        assert_eq!(err.status(), Some(403), "{root}: {err}");
+    }
+
     // 7. Activation changes the foreground; close closes an (unmodified) window.
     let second = launch_notepad(&c).await;
     eventually("the new notepad in the foreground", Duration::from_secs(10), || async {

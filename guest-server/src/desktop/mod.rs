@@ -14,6 +14,7 @@
 //! the space a per-monitor DPI-aware process sees.
 
 pub mod a11y_walk;
+pub mod cancel;
 pub mod stub;
 pub mod windows;
 

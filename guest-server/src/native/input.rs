@@ -39,7 +39,7 @@ async fn actions(
     State(state): State<AppState>,
     AppJson(batch): AppJson<ActionBatch>,
 ) -> Result<AppJson<ActionReport>, Response> {
-    validate(&batch.actions).map_err(IntoResponse::into_response)?;
+    validate(&batch.actions, state.call_timeout()).map_err(IntoResponse::into_response)?;
     let started = Instant::now();
     let total = batch.actions.len();
     for (index, action) in batch.actions.into_iter().enumerate() {
@@ -59,8 +59,23 @@ async fn actions(
     Ok(AppJson(ActionReport { executed: total, cursor, elapsed_ms: millis(started.elapsed()) }))
 }
 
-/// Checks every action of a batch before any runs.
-fn validate(actions: &[Action]) -> Result<(), ApiError> {
+/// Longest pause between typed characters that a backend honours.
+const MAX_TYPING_PAUSE_MS: u64 = 10_000;
+
+/// How long an action takes at least, by its own pauses (typing with an interval).
+fn planned_duration(action: &Action) -> Duration {
+    match action {
+        Action::TypeText { text, interval_ms: Some(ms) } => {
+            let pauses = u64::try_from(text.chars().count().saturating_sub(1)).unwrap_or(u64::MAX);
+            Duration::from_millis(pauses.saturating_mul((*ms).min(MAX_TYPING_PAUSE_MS)))
+        }
+        _ => Duration::ZERO,
+    }
+}
+
+/// Checks every action of a batch before any runs: names, counts, and that no action
+/// is planned to outlast the call deadline (it would be cut off part-way).
+fn validate(actions: &[Action], call_deadline: Duration) -> Result<(), ApiError> {
     if actions.len() > MAX_ACTIONS {
         return Err(ApiError::BadRequest(format!(
             "a batch holds at most {MAX_ACTIONS} actions (got {})",
@@ -70,6 +85,16 @@ fn validate(actions: &[Action]) -> Result<(), ApiError> {
     for (index, action) in actions.iter().enumerate() {
         check_action(action)
             .map_err(|why| ApiError::BadRequest(format!("action {index} ({}): {why}", action_name(action))))?;
+        let planned = planned_duration(action);
+        if planned >= call_deadline {
+            return Err(ApiError::BadRequest(format!(
+                "action {index} ({}) would take {:.1} s by its own pauses, past the call deadline of {:.1} s \
+                 (--call-timeout-ms); split the text or shorten the interval",
+                action_name(action),
+                planned.as_secs_f64(),
+                call_deadline.as_secs_f64()
+            )));
+        }
     }
     Ok(())
 }
@@ -196,8 +221,25 @@ mod tests {
 
     #[test]
     fn a_batch_over_the_limit_is_refused() {
+        let deadline = Duration::from_secs(30);
         let batch = vec![Action::Wait { ms: 0 }; MAX_ACTIONS + 1];
-        assert!(matches!(validate(&batch), Err(ApiError::BadRequest(m)) if m.contains("at most")));
-        assert!(validate(&batch[..MAX_ACTIONS]).is_ok());
+        assert!(matches!(validate(&batch, deadline), Err(ApiError::BadRequest(m)) if m.contains("at most")));
+        assert!(validate(&batch[..MAX_ACTIONS], deadline).is_ok());
+    }
+
+    #[test]
+    fn typing_planned_past_the_call_deadline_is_refused_up_front() {
+        let deadline = Duration::from_secs(30);
+        let typing = |text: &str, ms: u64| vec![Action::TypeText { text: text.into(), interval_ms: Some(ms) }];
+        // 20 characters 2 s apart: 38 s of pauses.
+        let err = validate(&typing("abcdefghijklmnopqrst", 2000), deadline).expect_err("too slow");
+        let ApiError::BadRequest(message) = err else { panic!("{err:?}") };
+        assert!(
+            message.contains("38.0 s") && message.contains("30.0 s") && message.contains("call-timeout"),
+            "{message}"
+        );
+        assert!(validate(&typing("abcde", 2000), deadline).is_ok(), "8 s fits");
+        assert!(validate(&typing(&"x".repeat(100_000), 0), deadline).is_ok(), "no pauses, no limit");
+        assert_eq!(planned_duration(&typing("ab", u64::MAX)[0]), Duration::from_millis(MAX_TYPING_PAUSE_MS));
     }
 }

@@ -106,6 +106,18 @@ pub(crate) fn perform(state: &mut State, action: &Action) -> DesktopResult<Vec<E
             }
         }
         Action::TypeText { text, interval_ms: _ } => {
+            let mods = state.mods;
+            if !(mods.ctrl || mods.alt || mods.win) {
+                // Plain typing is one edit, not one per character: laying the text out
+                // again after every character made long texts quadratic.
+                let text: String = text
+                    .chars()
+                    .filter(|c| *c != '\r')
+                    .map(|c| if mods.shift { c.to_uppercase().next().unwrap_or(c) } else { c })
+                    .collect();
+                edit(state, |buf| buf.insert(&text));
+                return Ok(effects);
+            }
             for c in text.chars() {
                 let key = match c {
                     '\n' => Key::Named("enter"),

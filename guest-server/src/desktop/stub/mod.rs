@@ -246,9 +246,26 @@ impl StubDesktop {
         &self.root
     }
 
-    /// Every action performed so far, in order.
+    /// The actions performed most recently, oldest first (the last
+    /// 1000, with long typed texts shortened).
     pub fn action_log(&self) -> Vec<Action> {
-        self.lock().log.clone()
+        self.lock().log.iter().cloned().collect()
+    }
+
+    /// Types `text` one character at a time with `pause` between, as pyautogui's
+    /// `write(interval=...)` does. The desktop is locked for one character at a time, so
+    /// other calls (health, screenshots) go on meanwhile, and the typing stops at once
+    /// when its call is cancelled.
+    fn type_slowly(&self, action: &Action, text: &str, pause: std::time::Duration) -> DesktopResult<()> {
+        self.lock().record(action);
+        for (i, c) in text.chars().enumerate() {
+            if i > 0 {
+                super::cancel::sleep(pause)?;
+            }
+            let one = Action::TypeText { text: c.to_string(), interval_ms: None };
+            input::perform(&mut self.lock(), &one)?;
+        }
+        Ok(())
     }
 
     /// The document text of a window, if it has one.
@@ -493,10 +510,15 @@ impl Desktop for StubDesktop {
     }
 
     fn perform(&self, action: &Action) -> DesktopResult<()> {
+        if let Action::TypeText { text, interval_ms: Some(ms) } = action {
+            if *ms > 0 {
+                return self.type_slowly(action, text, std::time::Duration::from_millis(*ms));
+            }
+        }
         let effects = {
             let mut state = self.lock();
             let effects = input::perform(&mut state, action)?;
-            state.log.push(action.clone());
+            state.record(action);
             effects
         };
         for effect in effects {

@@ -29,6 +29,10 @@ pub(crate) const BODY_PAD: i32 = 4;
 pub(crate) const FIRST_WINDOW_ID: u64 = 0x10010;
 /// The first fake process id.
 pub(crate) const FIRST_PID: u32 = 1000;
+/// Most actions the log keeps; older ones are dropped.
+pub(crate) const LOG_CAPACITY: usize = 1000;
+/// Longest typed text the log keeps whole, in characters; longer ones are cut there.
+const LOG_TEXT_CHARS: usize = 4096;
 
 /// A caption button of a title bar.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -357,12 +361,28 @@ pub(crate) struct State {
     pub(crate) mods: Modifiers,
     pub(crate) clipboard: ClipboardData,
     pub(crate) registry: Registry,
-    pub(crate) log: Vec<Action>,
+    /// The last [`LOG_CAPACITY`] actions (see [`State::record`]).
+    pub(crate) log: std::collections::VecDeque<Action>,
     pub(crate) shutdown: bool,
     pub(crate) wallpaper: Option<WallpaperCache>,
 }
 
 impl State {
+    /// Logs `action`, keeping the log within [`LOG_CAPACITY`] actions and long typed
+    /// texts within [`LOG_TEXT_CHARS`], so hours of typing cannot grow memory.
+    pub(crate) fn record(&mut self, action: &Action) {
+        let logged = match action {
+            Action::TypeText { text, interval_ms } if text.chars().count() > LOG_TEXT_CHARS => {
+                Action::TypeText { text: text.chars().take(LOG_TEXT_CHARS).collect(), interval_ms: *interval_ms }
+            }
+            other => other.clone(),
+        };
+        if self.log.len() >= LOG_CAPACITY {
+            self.log.pop_front();
+        }
+        self.log.push_back(logged);
+    }
+
     /// A desktop with only Program Manager.
     pub(crate) fn new(screen: (u32, u32)) -> State {
         let (w, h) = screen;
@@ -380,7 +400,7 @@ impl State {
             mods: Modifiers::default(),
             clipboard: ClipboardData::Empty,
             registry: Registry::seeded(),
-            log: Vec::new(),
+            log: std::collections::VecDeque::new(),
             shutdown: false,
             wallpaper: None,
         };

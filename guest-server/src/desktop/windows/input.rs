@@ -263,7 +263,8 @@ pub(super) fn perform(action: &Action) -> DesktopResult<()> {
                     let pause = Duration::from_millis(ms.min(10_000));
                     for (i, group) in groups.iter().enumerate() {
                         if i > 0 {
-                            std::thread::sleep(pause);
+                            // Stops here when the call timed out: no keys after the answer.
+                            crate::desktop::cancel::sleep(pause)?;
                         }
                         send_strokes(group, "type text")?;
                     }
