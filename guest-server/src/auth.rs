@@ -32,10 +32,34 @@ const OPEN_PATHS: &[&str] = &["/probe", "/v1/health"];
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct Authorized(pub bool);
 
+/// Longest request target (path and query) served; upstream's Werkzeug has no limit,
+/// but no route needs more, and a bigger one is refused with a body that says so.
+pub const MAX_URI_BYTES: usize = 16 << 10;
+/// Most header bytes (names and values) served.
+pub const MAX_HEADER_BYTES: usize = 64 << 10;
+
 /// Middleware enforcing the token and the cross-site check.
 pub async fn guard(State(state): State<AppState>, mut request: Request, next: Next) -> Response {
     let path = request.uri().path().to_owned();
     let native = path.starts_with("/v1/");
+    let target = request.uri().path_and_query().map_or(0, |pq| pq.as_str().len());
+    if target > MAX_URI_BYTES {
+        return refuse(
+            native,
+            StatusCode::URI_TOO_LONG,
+            &format!(
+                "the request target is {target} bytes; at most {MAX_URI_BYTES} are served (send data in the body)"
+            ),
+        );
+    }
+    let header_bytes: usize = request.headers().iter().map(|(name, value)| name.as_str().len() + value.len()).sum();
+    if header_bytes > MAX_HEADER_BYTES {
+        return refuse(
+            native,
+            StatusCode::REQUEST_HEADER_FIELDS_TOO_LARGE,
+            &format!("the headers are {header_bytes} bytes; at most {MAX_HEADER_BYTES} are served"),
+        );
+    }
     if let Some(reason) = cross_site(request.headers()) {
         return refuse(native, StatusCode::FORBIDDEN, &format!("cross-site request refused: {reason}"));
     }

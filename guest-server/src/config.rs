@@ -70,6 +70,20 @@ pub struct ServerConfig {
     #[arg(long, env = "ARENA_SCREEN", default_value = "1440x900", value_parser = parse_size)]
     pub screen: (u32, u32),
 
+    /// Most connections served at once; one more is answered 503 and closed.
+    #[arg(long, env = "ARENA_MAX_CONNECTIONS", default_value_t = 128)]
+    pub max_connections: usize,
+
+    /// Time a client has to send a request's headers, and that an idle keep-alive
+    /// connection stays open, in milliseconds.
+    #[arg(long, env = "ARENA_HEADER_TIMEOUT_MS", default_value_t = 10_000)]
+    pub header_timeout_ms: u64,
+
+    /// On shutdown, how long requests in flight may take before their connections are
+    /// dropped, in milliseconds.
+    #[arg(long, env = "ARENA_SHUTDOWN_GRACE_MS", default_value_t = 5_000)]
+    pub shutdown_grace_ms: u64,
+
     /// How long one health report is reused, in milliseconds: a flood of `/v1/health`
     /// polls costs one probe of each component per period.
     #[arg(long, env = "ARENA_HEALTH_CACHE_MS", default_value_t = 1000)]
@@ -156,6 +170,9 @@ impl ServerConfig {
             screen: (1440, 900),
             max_body_bytes: 1 << 30,
             health_cache_ms: 1000,
+            max_connections: 128,
+            header_timeout_ms: 10_000,
+            shutdown_grace_ms: 5_000,
             call_timeout_ms: 30_000,
             a11y_timeout_ms: 60_000,
             exec_timeout_ms: 120_000,

@@ -35,13 +35,13 @@ pub mod native;
 pub mod paths;
 pub mod protect;
 pub mod script_host;
+pub mod serve;
 pub mod service;
 pub mod state;
 pub mod urlencoded;
 pub mod waa;
 
 use std::future::Future;
-use std::net::SocketAddr;
 use std::sync::Arc;
 
 use anyhow::Context;
@@ -147,7 +147,8 @@ fn resolve_token(config: &ServerConfig) -> anyhow::Result<Option<String>> {
     }
 }
 
-/// Serves `state` on `listener` until `shutdown` completes.
+/// Serves `state` on `listener` until `shutdown` completes, within the connection
+/// limits of its configuration (see [`serve`](crate::serve)).
 ///
 /// # Errors
 ///
@@ -157,6 +158,12 @@ pub async fn serve(
     state: AppState,
     shutdown: impl Future<Output = ()> + Send + 'static,
 ) -> std::io::Result<()> {
-    let app = router(state).into_make_service_with_connect_info::<SocketAddr>();
-    axum::serve(listener, app).with_graceful_shutdown(shutdown).await
+    let config = &state.config;
+    let limits = serve::ConnLimits {
+        max_connections: config.max_connections,
+        header_timeout: std::time::Duration::from_millis(config.header_timeout_ms.max(1)),
+        shutdown_grace: std::time::Duration::from_millis(config.shutdown_grace_ms),
+        max_head_bytes: 256 << 10,
+    };
+    serve::serve(listener, router(state), limits, shutdown).await
 }

@@ -1,0 +1,135 @@
+//! The server's connection limits, over real sockets on loopback: too many
+//! connections, idle and half-sent requests, oversized heads, and shutdown with
+//! connections that never finish. Every wait is bounded; none is measured.
+
+use std::sync::Arc;
+use std::time::Duration;
+
+use tokio::io::{AsyncReadExt, AsyncWriteExt};
+use tokio::net::{TcpListener, TcpStream};
+
+use arena_guest::config::ServerConfig;
+use arena_guest::desktop::stub::{StubConfig, StubDesktop};
+use arena_guest::state::AppState;
+
+/// A guest on `127.0.0.1:0` with `configure`d limits; the sender stops it.
+struct Guest {
+    addr: std::net::SocketAddr,
+    stop: Option<tokio::sync::oneshot::Sender<()>>,
+    served: tokio::task::JoinHandle<std::io::Result<()>>,
+    _dir: tempfile::TempDir,
+}
+
+async fn start(configure: impl FnOnce(&mut ServerConfig)) -> Guest {
+    let dir = tempfile::tempdir().expect("dir");
+    let stub =
+        StubDesktop::with_config(StubConfig { root: Some(dir.path().into()), screen: (1440, 900), scenario: None })
+            .expect("stub");
+    let mut config = ServerConfig::for_stub();
+    configure(&mut config);
+    let state = AppState::new(Arc::new(stub), config, None);
+    let listener = TcpListener::bind("127.0.0.1:0").await.expect("bind");
+    let addr = listener.local_addr().expect("addr");
+    let (stop, stopped) = tokio::sync::oneshot::channel::<()>();
+    let served = tokio::spawn(arena_guest::serve(listener, state, async move {
+        let _ = stopped.await;
+    }));
+    Guest { addr, stop: Some(stop), served, _dir: dir }
+}
+
+/// Everything the server sends until it closes the connection (bounded by 30 s).
+async fn read_to_close(stream: &mut TcpStream) -> String {
+    let mut answer = Vec::new();
+    let read = tokio::time::timeout(Duration::from_secs(30), stream.read_to_end(&mut answer)).await;
+    assert!(read.is_ok(), "the server kept the connection open; it had sent {:?}", String::from_utf8_lossy(&answer));
+    String::from_utf8_lossy(&answer).into_owned()
+}
+
+async fn get(addr: std::net::SocketAddr, path: &str) -> String {
+    let mut stream = TcpStream::connect(addr).await.expect("connect");
+    let request = format!("GET {path} HTTP/1.1\r\nhost: 127.0.0.1\r\nconnection: close\r\n\r\n");
+    stream.write_all(request.as_bytes()).await.expect("send");
+    read_to_close(&mut stream).await
+}
+
+#[tokio::test]
+async fn a_connection_over_the_limit_is_answered_503_and_closed() {
+    let guest = start(|c| c.max_connections = 2).await;
+    // Two idle connections take both places.
+    let _a = TcpStream::connect(guest.addr).await.expect("connect");
+    let _b = TcpStream::connect(guest.addr).await.expect("connect");
+    tokio::time::sleep(Duration::from_millis(100)).await;
+    let answer = get(guest.addr, "/v1/screen").await;
+    assert!(answer.starts_with("HTTP/1.1 503"), "{answer}");
+    assert!(answer.contains("\"error\":\"unavailable\"") && answer.contains("--max-connections"), "{answer}");
+    // When they go, a place is free again.
+    drop((_a, _b));
+    let mut answer = String::new();
+    for _ in 0..100 {
+        answer = get(guest.addr, "/v1/screen").await;
+        if answer.starts_with("HTTP/1.1 200") {
+            break;
+        }
+        tokio::time::sleep(Duration::from_millis(20)).await;
+    }
+    assert!(answer.starts_with("HTTP/1.1 200"), "{answer}");
+}
+
+#[tokio::test]
+async fn idle_and_half_sent_requests_are_closed_after_the_header_timeout() {
+    let guest = start(|c| c.header_timeout_ms = 200).await;
+    let mut idle = TcpStream::connect(guest.addr).await.expect("connect");
+    let said = read_to_close(&mut idle).await;
+    assert!(!said.starts_with("HTTP/1.1 200"), "{said}");
+    let mut slow = TcpStream::connect(guest.addr).await.expect("connect");
+    slow.write_all(b"GET /v1/screen HTTP/1.1\r\nhost: 127.0.0.1\r\n").await.expect("half a head");
+    read_to_close(&mut slow).await;
+    // A finished request on a keep-alive connection, then silence: closed too.
+    let mut kept = TcpStream::connect(guest.addr).await.expect("connect");
+    kept.write_all(b"GET /probe HTTP/1.1\r\nhost: 127.0.0.1\r\n\r\n").await.expect("send");
+    let answer = read_to_close(&mut kept).await;
+    assert!(answer.starts_with("HTTP/1.1 200"), "{answer}");
+}
+
+#[tokio::test]
+async fn oversized_targets_and_headers_get_an_error_body() {
+    let guest = start(|_| {}).await;
+    let long = format!("/v1/files/stat?path={}", "a".repeat(20 << 10));
+    let answer = get(guest.addr, &long).await;
+    assert!(answer.starts_with("HTTP/1.1 414"), "{}", &answer[..answer.len().min(200)]);
+    assert!(answer.contains("request target") && answer.contains("bad_request"), "{answer}");
+
+    let mut stream = TcpStream::connect(guest.addr).await.expect("connect");
+    let filler = "x".repeat(8 << 10);
+    let mut request = String::from("GET /probe HTTP/1.1\r\nhost: 127.0.0.1\r\nconnection: close\r\n");
+    for i in 0..10 {
+        request.push_str(&format!("x-filler-{i}: {filler}\r\n"));
+    }
+    request.push_str("\r\n");
+    stream.write_all(request.as_bytes()).await.expect("send");
+    let answer = read_to_close(&mut stream).await;
+    assert!(answer.starts_with("HTTP/1.1 431"), "{}", &answer[..answer.len().min(200)]);
+    assert!(answer.contains("\"status\":\"error\"") && answer.contains("headers are"), "{answer}");
+}
+
+#[tokio::test]
+async fn shutdown_ends_even_with_connections_that_never_finish() {
+    let mut guest = start(|c| {
+        c.shutdown_grace_ms = 300;
+        c.header_timeout_ms = 3_600_000;
+    })
+    .await;
+    // A half-sent request that will never complete.
+    let mut stuck = TcpStream::connect(guest.addr).await.expect("connect");
+    stuck
+        .write_all(b"POST /v1/actions HTTP/1.1\r\nhost: 127.0.0.1\r\ncontent-length: 1000\r\n\r\n{")
+        .await
+        .expect("send");
+    tokio::time::sleep(Duration::from_millis(100)).await;
+    let _ = guest.stop.take().expect("stop").send(());
+    let ended = tokio::time::timeout(Duration::from_secs(30), &mut guest.served).await;
+    let served = ended.expect("the server ended within the grace period, not waiting for the client");
+    assert!(matches!(served, Ok(Ok(()))), "{served:?}");
+    read_to_close(&mut stuck).await;
+    assert!(TcpStream::connect(guest.addr).await.is_err(), "no new connection after shutdown");
+}
