@@ -1202,3 +1202,27 @@ async fn slow_typing_leaves_the_desktop_to_other_calls_and_stops_when_abandoned(
     assert!(typed() <= at_abort + 1, "typing went on after the request was dropped: {at_abort} -> {}", typed());
     assert!(typed() < 10);
 }
+
+#[tokio::test]
+async fn registry_paths_past_windows_limits_are_refused_and_not_stored() {
+    let app = app();
+    // 39 KiB of short key names: 20 000 levels, where Windows allows 512.
+    let deep = format!(r"HKCU\Software{}", r"\k".repeat(20_000));
+    let write = json!({"key": deep, "value": "v", "data": {"type": "dword", "data": 1}});
+    app.json(Method::PUT, "/v1/registry", write).await.assert_error(
+        StatusCode::BAD_REQUEST,
+        ErrorCode::BadRequest,
+        "levels deep",
+    );
+    let long = json!({"key": format!(r"HKCU\{}", "n".repeat(300)), "data": {"type": "dword", "data": 1}});
+    app.json(Method::PUT, "/v1/registry", long).await.assert_error(
+        StatusCode::BAD_REQUEST,
+        ErrorCode::BadRequest,
+        "255",
+    );
+    app.get(r"/v1/registry?key=HKCU%5CSoftware%5Ck").await.assert_error(
+        StatusCode::NOT_FOUND,
+        ErrorCode::NotFound,
+        "not found",
+    );
+}

@@ -20,18 +20,18 @@ pub(crate) fn routes() -> Router<AppState> {
     Router::new().route("/v1/registry", get(read).put(write)).route("/v1/wallpaper", get(wallpaper).put(set_wallpaper))
 }
 
-fn check_key(key: &str) -> Result<(), ApiError> {
+fn check_key(key: &str, value: Option<&str>) -> Result<(), ApiError> {
     if key.trim().is_empty() {
         return Err(ApiError::BadRequest("key must not be empty".into()));
     }
-    Ok(())
+    crate::desktop::windows::winsys::check_registry_limits(key, value).map_err(ApiError::BadRequest)
 }
 
 async fn read(
     State(state): State<AppState>,
     AppQuery(query): AppQuery<RegistryQuery>,
 ) -> Result<AppJson<RegistryRead>, ApiError> {
-    check_key(&query.key)?;
+    check_key(&query.key, query.value.as_deref())?;
     let RegistryQuery { key, value } = query;
     let read = blocking(&state.desktop, "registry_read", state.call_timeout(), move |d| {
         let data = d.registry_read(&key, value.as_deref())?;
@@ -45,7 +45,7 @@ async fn write(
     State(state): State<AppState>,
     AppJson(request): AppJson<RegistryWrite>,
 ) -> Result<StatusCode, ApiError> {
-    check_key(&request.key)?;
+    check_key(&request.key, request.value.as_deref())?;
     if request.data == RegistryValue::Unknown {
         return Err(ApiError::BadRequest(
             "unknown registry value type (expected string, dword, qword, multi_string or binary)".into(),

@@ -40,6 +40,7 @@ pub(crate) struct KeyPath {
 ///
 /// A message naming the key for an empty path or an unknown hive.
 pub(crate) fn normalize_key(key: &str) -> Result<KeyPath, String> {
+    crate::desktop::windows::winsys::check_registry_limits(key, None)?;
     let mut parts = key.split('\\').filter(|p| !p.is_empty());
     let Some(hive) = parts.next() else {
         return Err(format!("registry key {key:?} is empty"));

@@ -8,6 +8,39 @@ use arena_shared::registry::RegistryValue;
 
 use crate::desktop::{DesktopError, DesktopResult};
 
+/// Longest registry key name component, in characters (Windows' own limit).
+pub const MAX_KEY_NAME: usize = 255;
+/// Deepest registry key, in levels below the hive (Windows' own limit).
+pub const MAX_KEY_DEPTH: usize = 512;
+/// Longest registry value name, in characters (Windows' own limit).
+pub const MAX_VALUE_NAME: usize = 16_383;
+
+/// Checks a registry key path and value name against Windows' limits, so every
+/// backend refuses what Windows would (the stub would otherwise keep any size).
+///
+/// # Errors
+///
+/// A message naming the limit and the offending part.
+pub fn check_registry_limits(key: &str, value: Option<&str>) -> Result<(), String> {
+    let parts: Vec<&str> = key.split('\\').filter(|p| !p.is_empty()).collect();
+    if parts.len() > MAX_KEY_DEPTH + 1 {
+        return Err(format!("registry key is {} levels deep; Windows allows {MAX_KEY_DEPTH}", parts.len() - 1));
+    }
+    if let Some(long) = parts.iter().find(|p| p.chars().count() > MAX_KEY_NAME) {
+        let shown: String = long.chars().take(32).collect();
+        return Err(format!(
+            "registry key name {shown:?}... is {} characters; Windows allows {MAX_KEY_NAME}",
+            long.chars().count()
+        ));
+    }
+    if let Some(value) = value.filter(|v| v.chars().count() > MAX_VALUE_NAME) {
+        return Err(format!(
+            "registry value name is {} characters; Windows allows {MAX_VALUE_NAME}",
+            value.chars().count()
+        ));
+    }
+    Ok(())
+}
 /// Registry value types, as `winnt.h` numbers them.
 pub const REG_SZ: u32 = 1;
 pub const REG_EXPAND_SZ: u32 = 2;
@@ -155,6 +188,18 @@ pub fn decode_value(kind: u32, data: &[u8]) -> RegistryValue {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn registry_paths_are_held_to_windows_limits() {
+        assert!(check_registry_limits(r"HKCU\Software\Arena", Some("Name")).is_ok());
+        let deep = format!("HKCU{}", "\\k".repeat(MAX_KEY_DEPTH));
+        assert!(check_registry_limits(&deep, None).is_ok());
+        let too_deep = format!("{deep}\\k");
+        assert!(check_registry_limits(&too_deep, None).unwrap_err().contains("levels deep"));
+        let long = format!(r"HKCU\{}", "n".repeat(MAX_KEY_NAME + 1));
+        assert!(check_registry_limits(&long, None).unwrap_err().contains("255"));
+        assert!(check_registry_limits("HKCU", Some(&"v".repeat(MAX_VALUE_NAME + 1))).unwrap_err().contains("16383"));
+    }
 
     #[test]
     fn only_absolute_drive_and_unc_paths_are_served() {
