@@ -126,7 +126,55 @@ pub fn build_state(config: ServerConfig) -> anyhow::Result<AppState> {
         }
         BackendKind::Windows => crate::desktop::windows::start()?,
     };
+    let sweep = Arc::clone(&desktop);
+    std::thread::Builder::new()
+        .name("leftover-sweep".into())
+        .spawn(move || sweep_leftovers(sweep.as_ref()))
+        .context("starting the leftover sweep")?;
     Ok(AppState::new(desktop, config, token))
+}
+
+/// How old a temporary file must be before the start-up sweep removes it: a writer
+/// that old died (a write takes seconds at most).
+const LEFTOVER_AGE: std::time::Duration = std::time::Duration::from_secs(60);
+/// How deep below each known folder the sweep looks.
+const SWEEP_DEPTH: usize = 3;
+
+/// Removes the temporary files that writers killed mid-write (a `kill -9`, a reset VM)
+/// left in the user's folders ([`arena_shared::atomic::TEMP_PREFIX`] files older than a
+/// minute), a few levels deep; logs what it removed.
+pub fn sweep_leftovers(desktop: &dyn Desktop) -> usize {
+    use arena_shared::files::KnownFolder;
+    fn sweep(dir: &std::path::Path, depth: usize) -> usize {
+        let mut removed = arena_shared::atomic::remove_leftovers(dir, LEFTOVER_AGE);
+        if depth == 0 {
+            return removed;
+        }
+        let Ok(entries) = std::fs::read_dir(dir) else { return removed };
+        for entry in entries.flatten().take(10_000) {
+            if entry.file_type().is_ok_and(|t| t.is_dir()) {
+                removed += sweep(&entry.path(), depth - 1);
+            }
+        }
+        removed
+    }
+    let folders = [
+        KnownFolder::Desktop,
+        KnownFolder::Documents,
+        KnownFolder::Downloads,
+        KnownFolder::Pictures,
+        KnownFolder::Music,
+        KnownFolder::Videos,
+    ];
+    let mut removed = 0;
+    for folder in folders {
+        let Ok(local) = desktop.known_folder(folder).and_then(|guest| desktop.map_path(&guest)) else { continue };
+        removed += sweep(&local, SWEEP_DEPTH);
+    }
+    if removed > 0 {
+        tracing::info!(removed, "removed temporary files that interrupted writes left behind");
+    }
+    removed
 }
 
 fn resolve_token(config: &ServerConfig) -> anyhow::Result<Option<String>> {

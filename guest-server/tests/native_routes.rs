@@ -1226,3 +1226,25 @@ async fn registry_paths_past_windows_limits_are_refused_and_not_stored() {
         "not found",
     );
 }
+
+#[tokio::test]
+async fn temporary_files_of_interrupted_writes_are_swept_at_start_up() {
+    let dir = tempfile::tempdir().unwrap();
+    let stub =
+        StubDesktop::with_config(StubConfig { root: Some(dir.path().into()), screen: (1440, 900), scenario: None })
+            .unwrap();
+    let folder = dir.path().join("C/Users/Docker/Documents/reports");
+    std::fs::create_dir_all(&folder).unwrap();
+    let stale = folder.join(format!("{}x1y2z3", arena_shared::atomic::TEMP_PREFIX));
+    let fresh = folder.join(format!("{}being-written", arena_shared::atomic::TEMP_PREFIX));
+    let mine = folder.join("report.txt");
+    for path in [&stale, &fresh, &mine] {
+        std::fs::write(path, b"x").unwrap();
+    }
+    let hour_ago = std::time::SystemTime::now() - std::time::Duration::from_secs(3600);
+    std::fs::File::options().write(true).open(&stale).unwrap().set_modified(hour_ago).unwrap();
+    assert_eq!(arena_guest::sweep_leftovers(&stub), 1);
+    assert!(!stale.exists(), "an old leftover is removed");
+    assert!(fresh.exists(), "a file a live writer may still be writing is kept");
+    assert!(mine.exists(), "the user's files are kept");
+}
