@@ -43,18 +43,30 @@ pub fn encode(image: &RgbaImage, format: ImageFormat, quality: u8) -> Result<Vec
     Ok(out)
 }
 
-/// Decodes PNG, JPEG (or any format this build reads) into RGBA.
+/// Largest image side accepted for decoding: four 4K screens side by side.
+pub const MAX_DECODED_SIDE: u32 = 16_384;
+/// Most memory one decode may allocate: a 8K screen in RGBA with room to spare.
+pub const MAX_DECODED_BYTES: u64 = 256 << 20;
+
+/// Decodes PNG, JPEG (or any format this build reads) into RGBA, refusing one that
+/// claims more than [`MAX_DECODED_SIDE`] pixels a
+/// side or [`MAX_DECODED_BYTES`] of memory before decoding it.
 ///
 /// # Errors
 ///
-/// [`ImagingError`] naming the failure for bytes that are not an image.
+/// The bytes are not an image this build decodes, or the image is over the limits.
 pub fn decode(bytes: &[u8]) -> Result<RgbaImage, ImagingError> {
-    image::ImageReader::new(Cursor::new(bytes))
+    let mut reader = image::ImageReader::new(Cursor::new(bytes))
         .with_guessed_format()
-        .map_err(|err| ImagingError { what: "reading image", source: image::ImageError::IoError(err) })?
-        .decode()
-        .map(|img| img.to_rgba8())
-        .map_err(|source| ImagingError { what: "decoding image", source })
+        .map_err(|err| ImagingError { what: "reading image", source: image::ImageError::IoError(err) })?;
+    // Checked from the header, before any pixel is decoded: a few hundred KB of PNG
+    // can claim gigabytes of pixels.
+    let mut limits = image::Limits::default();
+    limits.max_image_width = Some(MAX_DECODED_SIDE);
+    limits.max_image_height = Some(MAX_DECODED_SIDE);
+    limits.max_alloc = Some(MAX_DECODED_BYTES);
+    reader.limits(limits);
+    reader.decode().map(|img| img.to_rgba8()).map_err(|source| ImagingError { what: "decoding image", source })
 }
 
 /// Downscales `image` so that its longer side is at most `max_side`, keeping the aspect ratio.
@@ -147,6 +159,51 @@ mod tests {
         assert_eq!(&bytes[..8], b"\x89PNG\r\n\x1a\n");
         let back = decode(&bytes).unwrap();
         assert_eq!(back, img);
+    }
+
+    /// A PNG of `width` x `height` whose header is all there is: what a decompression
+    /// bomb claims before a single pixel is read.
+    fn png_claiming(width: u32, height: u32) -> Vec<u8> {
+        fn crc32(bytes: &[u8]) -> u32 {
+            let mut crc = !0u32;
+            for &b in bytes {
+                crc ^= u32::from(b);
+                for _ in 0..8 {
+                    crc = if crc & 1 == 1 { (crc >> 1) ^ 0xEDB8_8320 } else { crc >> 1 };
+                }
+            }
+            !crc
+        }
+        let chunk = |kind: &[u8], data: &[u8]| {
+            let mut body = kind.to_vec();
+            body.extend_from_slice(data);
+            let mut out = u32::try_from(data.len()).unwrap().to_be_bytes().to_vec();
+            out.extend_from_slice(&body);
+            out.extend_from_slice(&crc32(&body).to_be_bytes());
+            out
+        };
+        let mut ihdr = width.to_be_bytes().to_vec();
+        ihdr.extend_from_slice(&height.to_be_bytes());
+        ihdr.extend_from_slice(&[8, 6, 0, 0, 0]);
+        let mut png = b"\x89PNG\r\n\x1a\n".to_vec();
+        png.extend(chunk(b"IHDR", &ihdr));
+        png.extend(chunk(b"IDAT", &[0x78, 0x9c, 0x03, 0x00, 0x00, 0x00, 0x00, 0x01]));
+        png.extend(chunk(b"IEND", &[]));
+        png
+    }
+
+    #[test]
+    fn images_claiming_too_many_pixels_are_refused_before_decoding() {
+        let limited = |result: Result<RgbaImage, ImagingError>| {
+            matches!(result, Err(ImagingError { source: image::ImageError::Limits(_), .. }))
+        };
+        // 20 000 pixels a side: over the side limit.
+        assert!(limited(decode(&png_claiming(20_000, 10))));
+        // 12 000 x 12 000 RGBA is 576 MB: under the side limit, over the memory limit.
+        assert!(limited(decode(&png_claiming(12_000, 12_000))));
+        // A small claim passes the limits and fails on its (empty) pixel data instead.
+        let small = decode(&png_claiming(4, 4));
+        assert!(small.is_err() && !limited(small), "a 4x4 image is within the limits");
     }
 
     #[test]
