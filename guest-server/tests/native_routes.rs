@@ -1248,3 +1248,34 @@ async fn temporary_files_of_interrupted_writes_are_swept_at_start_up() {
     assert!(fresh.exists(), "a file a live writer may still be writing is kept");
     assert!(mine.exists(), "the user's files are kept");
 }
+
+#[tokio::test]
+async fn large_files_stream_both_ways_and_an_oversized_body_writes_nothing() {
+    let dir = tempfile::tempdir().unwrap();
+    let stub =
+        StubDesktop::with_config(StubConfig { root: Some(dir.path().into()), screen: (1440, 900), scenario: None })
+            .unwrap();
+    let mut config = ServerConfig::for_stub();
+    config.max_body_bytes = 3 << 20;
+    let app = TestApp { router: arena_guest::router(AppState::new(Arc::new(stub), config, None)), dir };
+    // 2.5 MiB: several chunks each way.
+    let bytes: Vec<u8> = (0..(5 << 19)).map(|i: u32| (i % 253) as u8).collect();
+    let uri = "/v1/files?path=C:%5CUsers%5CDocker%5CDownloads%5Cbig.bin";
+    let put = app.send(Request::put(uri).body(Body::from(bytes.clone())).unwrap()).await;
+    put.assert_status(StatusCode::OK);
+    let written: Value = put.json();
+    assert_eq!(written["size"], bytes.len());
+    let got = app.get(uri).await;
+    got.assert_status(StatusCode::OK);
+    assert_eq!(&got.body[..], &bytes[..]);
+    assert_eq!(got.headers["x-arena-sha256"].to_str().unwrap(), written["sha256"].as_str().unwrap());
+
+    let too_big = vec![1u8; 4 << 20];
+    let over = app.send(Request::put(uri).body(Body::from(too_big)).unwrap()).await;
+    over.assert_error(StatusCode::PAYLOAD_TOO_LARGE, ErrorCode::PayloadTooLarge, "--max-body");
+    let downloads = app.dir.path().join("C/Users/Docker/Downloads");
+    let names: Vec<String> =
+        std::fs::read_dir(&downloads).unwrap().map(|e| e.unwrap().file_name().to_string_lossy().into_owned()).collect();
+    assert_eq!(names, ["big.bin"], "no temporary file stays behind");
+    assert_eq!(std::fs::read(downloads.join("big.bin")).unwrap(), bytes, "the old content is kept");
+}

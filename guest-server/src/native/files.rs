@@ -16,14 +16,14 @@
 use std::path::PathBuf;
 use std::time::SystemTime;
 
-use axum::body::Bytes;
-use axum::extract::rejection::BytesRejection;
 use axum::extract::State;
 use axum::http::{header, HeaderName, HeaderValue, StatusCode};
 use axum::response::{IntoResponse, Response};
 use axum::routing::{get, post};
 use axum::Router;
 use sha2::{Digest, Sha256};
+
+use arena_shared::atomic::AtomicFile;
 
 use arena_shared::files::{
     DirEntry, DirListing, Exists, FileKind, FileStat, FileWritten, KnownFolder, KnownFolders, MkdirRequest, PathQuery,
@@ -101,67 +101,105 @@ fn epoch_ms(time: SystemTime) -> Option<i64> {
     }
 }
 
-fn sha256_hex(bytes: &[u8]) -> String {
-    hex::encode(Sha256::digest(bytes))
-}
-
 // ----- read -----
 
+/// Size of the chunks files are hashed, read and written in.
+const CHUNK: usize = 256 << 10;
+
+/// Streams the file: it is hashed in a first pass (for the `x-arena-sha256` header),
+/// then sent from disk chunk by chunk, so a large file costs a chunk of memory, not
+/// its size.
 async fn read(State(state): State<AppState>, AppQuery(query): AppQuery<PathQuery>) -> Result<Response, ApiError> {
-    let (bytes, sha256) = run(&state, "read_file", move |d| read_file(d, &query.path)).await?;
+    let (local, size, sha256) = run(&state, "read_file", move |d| {
+        let loc = locate(d, &query.path)?;
+        let meta = std::fs::metadata(&loc.local).map_err(|err| io_error("read_file", &loc, err))?;
+        if meta.is_dir() {
+            return Err(ApiError::BadRequest(format!("{} is a directory", loc.guest)));
+        }
+        let sha256 = hash_file(&loc.local).map_err(|err| io_error("read_file", &loc, err))?;
+        Ok((loc.local, meta.len(), sha256))
+    })
+    .await?;
+    let file = tokio::fs::File::open(&local)
+        .await
+        .map_err(|err| ApiError::Desktop(DesktopError::io("read_file", &local.display().to_string(), err)))?;
+    let body = axum::body::Body::from_stream(tokio_util::io::ReaderStream::with_capacity(file, CHUNK));
     let headers = [
         (header::CONTENT_TYPE, HeaderValue::from_static("application/octet-stream")),
-        (header::CONTENT_LENGTH, HeaderValue::from(bytes.len())),
+        (header::CONTENT_LENGTH, HeaderValue::from(size)),
         (SHA256_HEADER, HeaderValue::from_str(&sha256).unwrap_or(HeaderValue::from_static(""))),
     ];
-    Ok((headers, bytes).into_response())
+    Ok((headers, body).into_response())
 }
 
-fn read_file(d: &dyn Desktop, path: &str) -> Result<(Vec<u8>, String), ApiError> {
-    let loc = locate(d, path)?;
-    let meta = std::fs::metadata(&loc.local).map_err(|err| io_error("read_file", &loc, err))?;
-    if meta.is_dir() {
-        return Err(ApiError::BadRequest(format!("{} is a directory", loc.guest)));
+/// The SHA-256 of a file, read in chunks.
+fn hash_file(path: &std::path::Path) -> std::io::Result<String> {
+    use std::io::Read as _;
+    let mut file = std::fs::File::open(path)?;
+    let mut hasher = Sha256::new();
+    let mut buf = vec![0; CHUNK];
+    loop {
+        match file.read(&mut buf)? {
+            0 => return Ok(hex::encode(hasher.finalize())),
+            n => hasher.update(&buf[..n]),
+        }
     }
-    let bytes = std::fs::read(&loc.local).map_err(|err| io_error("read_file", &loc, err))?;
-    let sha256 = sha256_hex(&bytes);
-    Ok((bytes, sha256))
 }
 
 // ----- write -----
 
+/// Streams the body into a temporary file beside the target while hashing it, and
+/// renames it into place only when the whole body arrived and matches `sha256`.
 async fn write(
     State(state): State<AppState>,
     AppQuery(query): AppQuery<WriteQuery>,
-    body: Result<Bytes, BytesRejection>,
+    body: axum::body::Body,
 ) -> Result<AppJson<FileWritten>, ApiError> {
-    let body = body.map_err(|rejection| match rejection.status() {
-        StatusCode::PAYLOAD_TOO_LARGE => ApiError::PayloadTooLarge(rejection.body_text()),
-        _ => ApiError::BadRequest(format!("reading the body: {}", rejection.body_text())),
-    })?;
+    use futures_util::StreamExt as _;
+    use tokio::io::AsyncWriteExt as _;
     let expected = match query.sha256 {
         Some(sha) if sha.len() == 64 && sha.bytes().all(|b| b.is_ascii_hexdigit()) => Some(sha.to_ascii_lowercase()),
         Some(sha) => return Err(ApiError::BadRequest(format!("sha256 must be 64 hex digits (got {sha:?})"))),
         None => None,
     };
     let create_parents = query.create_parents.unwrap_or(true);
-    let written = run(&state, "write_file", move |d| {
-        let sha256 = sha256_hex(&body);
-        if let Some(expected) = expected.filter(|e| *e != sha256) {
-            return Err(ApiError::Conflict(format!(
-                "the body hashes to {sha256}, not {expected}; nothing was written"
-            )));
-        }
+    let limit = state.config.max_body_bytes;
+    let (loc, mut temp) = run(&state, "write_file", move |d| {
         let loc = locate(d, &query.path)?;
-        write_atomic(&loc, &body, create_parents)?;
-        Ok(FileWritten { path: loc.guest, size: body.len() as u64, sha256 })
+        prepare_write(&loc, create_parents)?;
+        let temp = AtomicFile::create(&loc.local).map_err(|err| io_error("write_file", &loc, err))?;
+        Ok((loc, temp))
     })
     .await?;
-    Ok(AppJson(written))
+    let io = |err: std::io::Error| ApiError::Desktop(DesktopError::io("write_file", &loc.guest, err));
+    let mut file = tokio::fs::File::from_std(temp.file().try_clone().map_err(io)?);
+    let (mut hasher, mut size) = (Sha256::new(), 0usize);
+    let mut stream = body.into_data_stream();
+    while let Some(chunk) = stream.next().await {
+        let chunk = chunk.map_err(|err| ApiError::BadRequest(format!("reading the body: {err}")))?;
+        size += chunk.len();
+        if size > limit {
+            return Err(ApiError::PayloadTooLarge(format!(
+                "the body is over {limit} bytes (--max-body); nothing was written"
+            )));
+        }
+        hasher.update(&chunk);
+        file.write_all(&chunk).await.map_err(io)?;
+    }
+    file.flush().await.map_err(io)?;
+    drop(file);
+    let sha256 = hex::encode(hasher.finalize());
+    if let Some(expected) = expected.filter(|e| *e != sha256) {
+        return Err(ApiError::Conflict(format!("the body hashes to {sha256}, not {expected}; nothing was written")));
+    }
+    let guest = loc.guest.clone();
+    run(&state, "write_file", move |_| temp.commit().map_err(|err| io_error("write_file", &loc, err))).await?;
+    Ok(AppJson(FileWritten { path: guest, size: size as u64, sha256 }))
 }
 
-/// Replaces the file at `loc` with `bytes` through a temporary file in the same folder.
-fn write_atomic(loc: &Located, bytes: &[u8], create_parents: bool) -> Result<(), ApiError> {
+/// Checks that `loc` may be written (not a folder, not read-only) and that its
+/// folder exists, creating it when asked.
+fn prepare_write(loc: &Located, create_parents: bool) -> Result<(), ApiError> {
     let io = |err| io_error("write_file", loc, err);
     if loc.local.is_dir() {
         return Err(ApiError::BadRequest(format!("{} is a directory", loc.guest)));
@@ -186,7 +224,6 @@ fn write_atomic(loc: &Located, bytes: &[u8], create_parents: bool) -> Result<(),
         }
         Err(err) => return Err(io(err)),
     }
-    arena_shared::atomic::write_atomic(&loc.local, bytes).map_err(io)?;
     Ok(())
 }
 
@@ -363,16 +400,23 @@ mod tests {
     }
 
     #[test]
-    fn a_failed_write_keeps_the_old_content() {
+    fn writes_are_prepared_only_where_they_may_go() {
         let dir = tempfile::tempdir().unwrap();
-        let target = dir.path().join("a.txt");
-        std::fs::write(&target, b"old").unwrap();
-        let loc = Located { guest: r"C:\a.txt".into(), local: target.clone() };
-        write_atomic(&loc, b"new", false).unwrap();
-        assert_eq!(std::fs::read(&target).unwrap(), b"new");
+        let target = dir.path().join("new").join("a.txt");
+        let loc = Located { guest: r"C:\new\a.txt".into(), local: target.clone() };
+        assert!(matches!(prepare_write(&loc, false), Err(ApiError::NotFound(_))));
+        prepare_write(&loc, true).unwrap();
+        assert!(target.parent().unwrap().is_dir(), "the folder was created");
         let as_dir = Located { guest: r"C:\d".into(), local: dir.path().to_path_buf() };
-        assert!(matches!(write_atomic(&as_dir, b"x", true), Err(ApiError::BadRequest(_))));
-        let leftovers: Vec<_> = std::fs::read_dir(dir.path()).unwrap().collect();
-        assert_eq!(leftovers.len(), 1, "no temporary file may stay behind");
+        assert!(matches!(prepare_write(&as_dir, true), Err(ApiError::BadRequest(_))));
+    }
+
+    #[test]
+    fn files_are_hashed_in_chunks() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("big.bin");
+        let bytes: Vec<u8> = (0..(CHUNK * 2 + 7)).map(|i| (i % 251) as u8).collect();
+        std::fs::write(&path, &bytes).unwrap();
+        assert_eq!(hash_file(&path).unwrap(), hex::encode(Sha256::digest(&bytes)));
     }
 }
