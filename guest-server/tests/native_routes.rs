@@ -765,8 +765,16 @@ fn app_with_cdp_port(cdp_port: u16) -> TestApp {
 async fn fake_devtools() -> u16 {
     async fn echo(method: Method, uri: axum::http::Uri, body: Bytes) -> axum::response::Response {
         let text = json!({"method": method.as_str(), "path": uri.path(), "query": uri.query(), "body": String::from_utf8_lossy(&body)});
-        let status = if uri.path() == "/json/missing" { StatusCode::NOT_FOUND } else { StatusCode::OK };
-        (status, [(header::CONTENT_TYPE, "application/json; charset=UTF-8")], text.to_string()).into_response()
+        match uri.path() {
+            // A redirect elsewhere (another port of the machine, another host).
+            "/json/redirect" => {
+                (StatusCode::FOUND, [(header::LOCATION, "http://127.0.0.1:9/secret")], String::new()).into_response()
+            }
+            "/json/huge" => (StatusCode::OK, "x".repeat(17 << 20)).into_response(),
+            "/json/missing" => (StatusCode::NOT_FOUND, text.to_string()).into_response(),
+            _ => (StatusCode::OK, [(header::CONTENT_TYPE, "application/json; charset=UTF-8")], text.to_string())
+                .into_response(),
+        }
     }
     use axum::response::IntoResponse as _;
     let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.expect("bind");
@@ -799,6 +807,15 @@ async fn browser_requests_are_forwarded_with_query_body_and_status() {
 
     app.get("/v1/browser/json/missing").await.assert_status(StatusCode::NOT_FOUND);
     app.delete("/v1/browser/json/list").await.assert_error(StatusCode::BAD_REQUEST, ErrorCode::BadRequest, "DELETE");
+}
+
+#[tokio::test]
+async fn browser_redirects_are_not_followed_and_answers_are_bounded() {
+    let app = app_with_cdp_port(fake_devtools().await);
+    let redirect = app.get("/v1/browser/json/redirect").await;
+    redirect.assert_status(StatusCode::FOUND);
+    assert_eq!(redirect.headers[header::LOCATION], "http://127.0.0.1:9/secret", "handed back, not followed");
+    app.get("/v1/browser/json/huge").await.assert_error(StatusCode::BAD_GATEWAY, ErrorCode::Internal, "over 16777216");
 }
 
 #[tokio::test]

@@ -12,6 +12,10 @@
 //! It is not a DevTools client and it does not forward websockets: the host
 //! only needs the HTTP endpoints to open, list and close tabs. It never
 //! touches the backend, so it holds no platform code.
+//!
+//! It reaches the configured DevTools port and nothing else: a redirect in the
+//! browser's answer is handed back as it is, never followed (to another host or
+//! port of the VM's network), and an answer is read up to [`MAX_ANSWER`] bytes.
 
 use std::sync::OnceLock;
 use std::time::Duration;
@@ -31,6 +35,9 @@ use crate::state::AppState;
 /// Longest a DevTools answer may take: opening a tab answers at once, before the page loads.
 const MAX_DEADLINE: Duration = Duration::from_secs(30);
 
+/// Largest DevTools answer forwarded (the JSON endpoints answer a few KB).
+const MAX_ANSWER: usize = 16 << 20;
+
 pub(crate) fn routes() -> Router<AppState> {
     Router::new().route("/v1/browser/{*path}", any(forward))
 }
@@ -42,8 +49,12 @@ fn http() -> Result<&'static reqwest::Client, ApiError> {
         return Ok(client);
     }
     // The browser is on loopback: a proxy from the environment must not get in between.
-    let client =
-        reqwest::Client::builder().no_proxy().connect_timeout(Duration::from_secs(5)).build().map_err(|err| {
+    let client = reqwest::Client::builder()
+        .no_proxy()
+        .redirect(reqwest::redirect::Policy::none())
+        .connect_timeout(Duration::from_secs(5))
+        .build()
+        .map_err(|err| {
             ApiError::Desktop(crate::desktop::DesktopError::Os { op: "browser", message: err.to_string() })
         })?;
     Ok(CLIENT.get_or_init(|| client))
@@ -113,19 +124,36 @@ async fn forward(
     let status = StatusCode::from_u16(answer.status().as_u16()).unwrap_or(StatusCode::BAD_GATEWAY);
     let content_type =
         answer.headers().get(reqwest::header::CONTENT_TYPE).and_then(|v| HeaderValue::from_bytes(v.as_bytes()).ok());
-    let bytes = match answer.bytes().await {
-        Ok(bytes) => bytes,
-        Err(err) => {
-            return Ok(error_response(
-                StatusCode::BAD_GATEWAY,
-                ErrorCode::Internal,
-                format!("the browser on port {port} broke off its answer to {}: {err}", url.path()),
-            ))
+    let location =
+        answer.headers().get(reqwest::header::LOCATION).and_then(|v| HeaderValue::from_bytes(v.as_bytes()).ok());
+    let mut answer = answer;
+    let mut bytes = Vec::new();
+    loop {
+        match answer.chunk().await {
+            Ok(Some(chunk)) if bytes.len() + chunk.len() > MAX_ANSWER => {
+                return Ok(error_response(
+                    StatusCode::BAD_GATEWAY,
+                    ErrorCode::Internal,
+                    format!("the browser's answer to {} is over {MAX_ANSWER} bytes; it was not forwarded", url.path()),
+                ));
+            }
+            Ok(Some(chunk)) => bytes.extend_from_slice(&chunk),
+            Ok(None) => break,
+            Err(err) => {
+                return Ok(error_response(
+                    StatusCode::BAD_GATEWAY,
+                    ErrorCode::Internal,
+                    format!("the browser on port {port} broke off its answer to {}: {err}", url.path()),
+                ))
+            }
         }
-    };
+    }
     let mut response = (status, bytes).into_response();
     if let Some(content_type) = content_type {
         response.headers_mut().insert(header::CONTENT_TYPE, content_type);
+    }
+    if let Some(location) = location {
+        response.headers_mut().insert(header::LOCATION, location);
     }
     Ok(response)
 }
