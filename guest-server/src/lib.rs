@@ -158,14 +158,10 @@ pub fn sweep_leftovers(desktop: &dyn Desktop) -> usize {
         }
         removed
     }
-    let folders = [
-        KnownFolder::Desktop,
-        KnownFolder::Documents,
-        KnownFolder::Downloads,
-        KnownFolder::Pictures,
-        KnownFolder::Music,
-        KnownFolder::Videos,
-    ];
+    // The user's document folders; the profile itself and AppData are too big to walk at start-up.
+    let folders = KnownFolder::ALL.into_iter().filter(|f| {
+        !matches!(f, KnownFolder::Home | KnownFolder::AppData | KnownFolder::LocalAppData | KnownFolder::Temp)
+    });
     let mut removed = 0;
     for folder in folders {
         let Ok(local) = desktop.known_folder(folder).and_then(|guest| desktop.map_path(&guest)) else { continue };
