@@ -71,7 +71,7 @@ pub struct ServerConfig {
     pub screen: (u32, u32),
 
     /// Most connections served at once; one more is answered 503 and closed.
-    #[arg(long, env = "ARENA_MAX_CONNECTIONS", default_value_t = 256)]
+    #[arg(long, env = "ARENA_MAX_CONNECTIONS", default_value_t = 1024)]
     pub max_connections: usize,
 
     /// Time a client has to send a request's headers, and that an idle keep-alive
@@ -170,7 +170,7 @@ impl ServerConfig {
             screen: (1440, 900),
             max_body_bytes: 1 << 30,
             health_cache_ms: 1000,
-            max_connections: 256,
+            max_connections: 1024,
             header_timeout_ms: 10_000,
             shutdown_grace_ms: 5_000,
             call_timeout_ms: 30_000,

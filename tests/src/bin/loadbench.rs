@@ -1,0 +1,182 @@
+//! `loadbench`: the guest under load and under attack, on loopback, bounded in count
+//! and time; prints figures.
+//!
+//! The guest is the real server (`arena_guest::serve` on 127.0.0.1 in this process,
+//! stub backend) driven over HTTP:
+//! - a mixed workload (health, screen, a small action, a file stat, the foreground
+//!   accessibility tree) from 50 and from 200 concurrent clients for a few seconds
+//!   each: requests/s, p50/p99 and the number of errors;
+//! - the same 50 clients while 500 connections hold half-sent requests open;
+//! - resident memory: peak and settled, and the peak around a PNG bomb sent as a
+//!   clipboard image and a 1 GiB file read.
+//!
+//! Memory figures read `/proc/self/status` (Linux); elsewhere they print as unknown.
+//! Run it in release mode: `cargo run --release -p arena-tests --bin loadbench`.
+
+use std::process::ExitCode;
+use std::time::{Duration, Instant};
+
+use anyhow::Context;
+use arena_host::client::{ClientConfig, GuestClient};
+use arena_shared::action::Action;
+use arena_shared::observation::A11yQuery;
+use tokio::io::AsyncWriteExt as _;
+
+/// How long each load phase runs.
+const PHASE: Duration = Duration::from_secs(4);
+
+#[tokio::main]
+async fn main() -> ExitCode {
+    match run().await {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(err) => {
+            eprintln!("error: {err:#}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+/// A `/proc/self/status` field in MiB (`VmRSS`, `VmHWM`), when the platform has it.
+fn memory(field: &str) -> Option<f64> {
+    let status = std::fs::read_to_string("/proc/self/status").ok()?;
+    let line = status.lines().find(|l| l.starts_with(field))?;
+    let kb: f64 = line.split_whitespace().nth(1)?.parse().ok()?;
+    Some(kb / 1024.0)
+}
+
+fn mib(value: Option<f64>) -> String {
+    value.map_or_else(|| "unknown".to_owned(), |v| format!("{v:.0} MiB"))
+}
+
+/// One client's loop: the mixed workload until `until`; latencies and errors.
+async fn client_loop(client: GuestClient, until: Instant, id: usize) -> (Vec<Duration>, usize) {
+    let (mut latencies, mut errors) = (Vec::new(), 0);
+    let mut n = id;
+    while Instant::now() < until {
+        let started = Instant::now();
+        let result = match n % 5 {
+            0 => client.health().await.map(drop),
+            1 => client.screen().await.map(drop),
+            2 => client.act_one(Action::MoveTo { x: (n % 1400) as i32, y: 300 }).await.map(drop),
+            3 => client.stat(r"C:\Users\Docker\Desktop").await.map(drop),
+            _ => client.a11y(&A11yQuery { foreground_only: true, ..A11yQuery::default() }).await.map(drop),
+        };
+        match result {
+            Ok(()) => latencies.push(started.elapsed()),
+            Err(_) => errors += 1,
+        }
+        n += 1;
+    }
+    (latencies, errors)
+}
+
+/// Runs `clients` concurrent clients for [`PHASE`] and prints the figures.
+async fn phase(url: &str, name: &str, clients: usize) -> anyhow::Result<()> {
+    let until = Instant::now() + PHASE;
+    let mut tasks = tokio::task::JoinSet::new();
+    for id in 0..clients {
+        let config = ClientConfig { token: None, timeout: Duration::from_secs(30), retries: 0 };
+        let client = GuestClient::new(url, config)?;
+        tasks.spawn(client_loop(client, until, id));
+    }
+    let (mut latencies, mut errors) = (Vec::new(), 0);
+    while let Some(done) = tasks.join_next().await {
+        let (l, e) = done.context("a client task failed")?;
+        latencies.extend(l);
+        errors += e;
+    }
+    latencies.sort();
+    let pct = |p: f64| latencies.get(((latencies.len().max(1) - 1) as f64 * p) as usize).copied().unwrap_or_default();
+    println!(
+        "{name:<46} {:>8.0} req/s  p50 {:>7.2} ms  p99 {:>7.2} ms  errors {errors}",
+        latencies.len() as f64 / PHASE.as_secs_f64(),
+        pct(0.5).as_secs_f64() * 1000.0,
+        pct(0.99).as_secs_f64() * 1000.0,
+    );
+    Ok(())
+}
+
+async fn run() -> anyhow::Result<()> {
+    let stub = arena_test_support::StubGuest::start().await;
+    let url = stub.url().to_owned();
+    println!("arena load bench: stub guest on {url} (in-process server, real HTTP on loopback)");
+    println!("resident memory at start: {}", mib(memory("VmRSS:")));
+    phase(&url, "mixed workload, 50 concurrent clients", 50).await?;
+    phase(&url, "mixed workload, 200 concurrent clients", 200).await?;
+
+    // 500 connections that send half a request and wait, as a slow-loris client does.
+    let addr = url.trim_start_matches("http://").to_owned();
+    let mut slow = Vec::new();
+    for _ in 0..500 {
+        let mut stream = tokio::net::TcpStream::connect(&addr).await.context("connecting a slow client")?;
+        stream.write_all(b"GET /v1/screen HTTP/1.1\r\nhost: 127.0.0.1\r\n").await?;
+        slow.push(stream);
+    }
+    phase(&url, "50 clients while 500 connections hang", 50).await?;
+    drop(slow);
+
+    println!("resident memory after the load: peak {}, now {}", mib(memory("VmHWM:")), mib(memory("VmRSS:")));
+
+    // A PNG bomb: a header claiming 60 000 x 60 000 pixels, sent as a clipboard image.
+    let before = memory("VmRSS:");
+    let client = GuestClient::new(&url, ClientConfig { token: None, timeout: Duration::from_secs(30), retries: 0 })?;
+    let bomb = png_header(60_000, 60_000);
+    let image = arena_shared::clipboard::ClipboardContent::Image {
+        width: 60_000,
+        height: 60_000,
+        png_base64: base64::Engine::encode(&base64::engine::general_purpose::STANDARD, &bomb),
+    };
+    let refused = client.clipboard_set(&image).await.is_err();
+    println!(
+        "PNG bomb (60000x60000 claimed) as a clipboard image: refused {refused}, resident memory {} -> {}",
+        mib(before),
+        mib(memory("VmRSS:"))
+    );
+
+    // A 1 GiB file (sparse on disk) read through GET /v1/files, counted as it streams.
+    let big = stub.root().join("C/Users/Docker/Downloads/big.bin");
+    std::fs::File::create(&big)?.set_len(1 << 30)?;
+    let before = memory("VmRSS:");
+    let started = Instant::now();
+    let read = reqwest::get(format!("{url}/v1/files?path=C:%5CUsers%5CDocker%5CDownloads%5Cbig.bin")).await?;
+    let mut body = read.bytes_stream();
+    let mut total = 0usize;
+    while let Some(chunk) = futures_util::StreamExt::next(&mut body).await {
+        total += chunk?.len();
+    }
+    println!(
+        "1 GiB file read: {total} bytes in {:.1} s, resident memory {} -> {} (peak {})",
+        started.elapsed().as_secs_f64(),
+        mib(before),
+        mib(memory("VmRSS:")),
+        mib(memory("VmHWM:"))
+    );
+    drop(stub);
+    Ok(())
+}
+
+/// A PNG whose header claims `width` x `height` and holds no pixels.
+fn png_header(width: u32, height: u32) -> Vec<u8> {
+    fn crc32(bytes: &[u8]) -> u32 {
+        let mut crc = !0u32;
+        for &b in bytes {
+            crc ^= u32::from(b);
+            for _ in 0..8 {
+                crc = if crc & 1 == 1 { (crc >> 1) ^ 0xEDB8_8320 } else { crc >> 1 };
+            }
+        }
+        !crc
+    }
+    let mut ihdr = b"IHDR".to_vec();
+    ihdr.extend_from_slice(&width.to_be_bytes());
+    ihdr.extend_from_slice(&height.to_be_bytes());
+    ihdr.extend_from_slice(&[8, 6, 0, 0, 0]);
+    let mut png = b"\x89PNG\r\n\x1a\n".to_vec();
+    png.extend_from_slice(&13u32.to_be_bytes());
+    png.extend_from_slice(&ihdr);
+    png.extend_from_slice(&crc32(&ihdr).to_be_bytes());
+    png.extend_from_slice(&[0, 0, 0, 0]);
+    png.extend_from_slice(b"IEND");
+    png.extend_from_slice(&crc32(b"IEND").to_be_bytes());
+    png
+}
