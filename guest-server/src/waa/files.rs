@@ -105,10 +105,17 @@ pub(crate) async fn file(State(state): State<AppState>, form: PyForm) -> WaaResu
                 &path,
             )));
         }
-        let bytes = std::fs::read(&local).map_err(read_error)?;
+        // Sent from disk as it is read (Flask's send_file streams too): a large file
+        // costs a chunk of memory, not its size.
+        let file = std::fs::File::open(&local).map_err(read_error)?;
+        let body = axum::body::Body::from_stream(tokio_util::io::ReaderStream::with_capacity(
+            tokio::fs::File::from_std(file),
+            256 << 10,
+        ));
         let name = paths::basename(&path);
-        let mut res = bytes.into_response();
+        let mut res = body.into_response();
         let headers = res.headers_mut();
+        headers.insert(header::CONTENT_LENGTH, HeaderValue::from(meta.len()));
         if let Ok(v) = HeaderValue::from_str(&guess_content_type(name)) {
             headers.insert(header::CONTENT_TYPE, v);
         }
