@@ -27,11 +27,14 @@ log=target/test-output.log
 env -u ARENA_REQUIRE_WINE -u ARENA_WINDOWS_EXE cargo test --workspace --locked "$@" 2>&1 | tee "$log"
 echo "workspace tests took $(( $(date +%s) - started )) s"
 
-skipped=$(grep -c '^SKIPPED: .*WAA corpus not found' "$log" || true)
-echo "corpus tests skipped: $skipped"
-if [ "$skipped" -gt 0 ]; then
-    grep '^SKIPPED: .*WAA corpus not found' "$log" | sed 's/^/  /'
-fi
+# Anywhere on a line: with one test thread libtest prints "test NAME ... " before the
+# test runs, so a skip's line can follow it on the same line.
+mapfile -t skipped < <(grep -ao 'SKIPPED: .*: WAA corpus not found' "$log" \
+    | sed 's/^SKIPPED: \(.*\): WAA corpus not found$/\1/' || true)
+echo "corpus tests skipped: ${#skipped[@]}"
+for name in "${skipped[@]}"; do
+    echo "  $name"
+done
 
 if [ "${ARENA_SKIP_WINE:-0}" = 1 ]; then
     echo "SKIPPED: the Wine suite (ARENA_SKIP_WINE=1); the Windows backend was not tested" >&2

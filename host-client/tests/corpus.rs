@@ -14,22 +14,43 @@ use sha2::{Digest, Sha256};
 const TOP: &str = "WindowsAgentArena-0123abcd";
 const CORPUS: &str = "src/win-arena-container/client/evaluation_examples_windows";
 
-/// A zip archive shaped like the upstream repository's, with `tasks` under the corpus folder.
-fn archive() -> Vec<u8> {
+/// A zip archive of `entries` (path, text), in that order; a path ending in `/` is a
+/// folder entry, as in GitHub's archives.
+fn zip_of(entries: &[(String, &str)]) -> Vec<u8> {
     let mut zip = zip::ZipWriter::new(std::io::Cursor::new(Vec::new()));
     let options = zip::write::SimpleFileOptions::default();
-    let mut add = |path: String, text: &str| {
-        zip.start_file(path, options).expect("start entry");
+    for (path, text) in entries {
+        if path.ends_with('/') {
+            zip.add_directory(path.as_str(), options).expect("folder entry");
+            continue;
+        }
+        zip.start_file(path.as_str(), options).expect("start entry");
         zip.write_all(text.as_bytes()).expect("write entry");
-    };
-    add(format!("{TOP}/README.md"), "not part of the corpus");
-    add(format!("{TOP}/{CORPUS}/examples/notepad/t1-wos.json"), r#"{"id": "t1", "instruction": "a test task"}"#);
-    add(format!("{TOP}/{CORPUS}/examples/notepad/t2-wos.json"), r#"{"id": "t2", "instruction": "another"}"#);
-    add(format!("{TOP}/{CORPUS}/examples_noctxt/notepad/t1-wos.json"), r#"{"id": "t1", "instruction": "hard"}"#);
-    add(format!("{TOP}/{CORPUS}/test_all.json"), r#"{"notepad": ["t1-wos", "t2-wos"]}"#);
-    add(format!("{TOP}/{CORPUS}/settings/other.json"), "{}");
-    add(format!("{TOP}/src/win-arena-container/vm/setup.ps1"), "# not part of the corpus");
+    }
     zip.finish().expect("finish zip").into_inner()
+}
+
+/// The entries of an archive shaped like the upstream repository's: a few task files
+/// under the corpus folder, and files elsewhere that must not be extracted.
+fn upstream_entries() -> Vec<(String, &'static str)> {
+    vec![
+        (format!("{TOP}/"), ""),
+        (format!("{TOP}/README.md"), "not part of the corpus"),
+        (format!("{TOP}/{CORPUS}/"), ""),
+        (format!("{TOP}/{CORPUS}/examples/"), ""),
+        (format!("{TOP}/{CORPUS}/examples/notepad/"), ""),
+        (format!("{TOP}/{CORPUS}/examples/notepad/t1-wos.json"), r#"{"id": "t1", "instruction": "a test task"}"#),
+        (format!("{TOP}/{CORPUS}/examples/notepad/t2-wos.json"), r#"{"id": "t2", "instruction": "another"}"#),
+        (format!("{TOP}/{CORPUS}/examples_noctxt/notepad/t1-wos.json"), r#"{"id": "t1", "instruction": "hard"}"#),
+        (format!("{TOP}/{CORPUS}/test_all.json"), r#"{"notepad": ["t1-wos", "t2-wos"]}"#),
+        (format!("{TOP}/{CORPUS}/create_json.py"), "# not part of the corpus"),
+        (format!("{TOP}/{CORPUS}/settings/other.json"), "{}"),
+        (format!("{TOP}/src/win-arena-container/vm/setup.ps1"), "# not part of the corpus"),
+    ]
+}
+
+fn archive() -> Vec<u8> {
+    zip_of(&upstream_entries())
 }
 
 /// Serves `/good.zip`, `/truncated.zip` (the first half) and a 404 elsewhere.
@@ -64,11 +85,13 @@ async fn the_corpus_folder_is_extracted_and_nothing_else() {
     let base = serve(bytes).await;
     let work = tempfile::tempdir().expect("dir");
     let out = work.path().join("waa-tasks");
-    let written = fetch(&args(format!("{base}/good.zip"), &out, Some(sha))).await.expect("fetched");
+    let written = fetch(&args(format!("{base}/good.zip"), &out, Some(sha.clone()))).await.expect("fetched");
     assert_eq!((written.examples, written.examples_noctxt, written.indexes), (2, 1, 1));
-    assert_eq!(left_in(&out), ["examples", "examples_noctxt", "test_all.json"]);
+    assert_eq!(left_in(&out), ["PROVENANCE.txt", "examples", "examples_noctxt", "test_all.json"]);
     let task = std::fs::read_to_string(out.join("examples/notepad/t2-wos.json")).expect("task");
     assert!(task.contains("another"), "{task}");
+    let provenance = std::fs::read_to_string(out.join("PROVENANCE.txt")).expect("provenance");
+    assert!(provenance.contains(&format!("{base}/good.zip")) && provenance.contains(&sha), "{provenance}");
     assert_eq!(left_in(work.path()), ["waa-tasks"], "no temporary folder left");
 }
 
@@ -88,9 +111,10 @@ async fn a_wrong_hash_is_refused_before_anything_is_written() {
     let work = tempfile::tempdir().expect("dir");
     let out = work.path().join("waa-tasks");
     let wrong = "00".repeat(32);
+    let actual = hex::encode(Sha256::digest(archive()));
     let err = fetch(&args(format!("{base}/good.zip"), &out, Some(wrong.clone()))).await.expect_err("wrong hash");
     let text = format!("{err:#}");
-    assert!(text.contains("SHA-256") && text.contains(&wrong), "{text}");
+    assert!(text.contains("SHA-256") && text.contains(&wrong) && text.contains(&actual), "{text}");
     assert!(left_in(work.path()).is_empty(), "{:?}", left_in(work.path()));
 }
 
@@ -125,4 +149,22 @@ async fn an_archive_without_the_corpus_is_refused() {
     let err = fetch(&args(format!("{base}/good.zip"), &out, None)).await.expect_err("no corpus");
     assert!(format!("{err:#}").contains("holds no"), "{err:#}");
     assert!(left_in(work.path()).is_empty());
+}
+
+#[tokio::test]
+async fn an_entry_that_climbs_out_of_its_folder_refuses_the_whole_archive() {
+    // One stays inside the archive once resolved (it would become an index file), one
+    // climbs past the archive's top; both are crafted, and neither may be written.
+    for climbing in
+        [format!("{TOP}/{CORPUS}/examples/../test_extra.json"), format!("{TOP}/{CORPUS}/{}x.json", "../".repeat(8))]
+    {
+        let mut entries = upstream_entries();
+        entries.push((climbing.clone(), "{}"));
+        let base = serve(zip_of(&entries)).await;
+        let work = tempfile::tempdir().expect("dir");
+        let out = work.path().join("waa-tasks");
+        let err = fetch(&args(format!("{base}/good.zip"), &out, None)).await.expect_err(&climbing);
+        assert!(format!("{err:#}").contains("would land outside the corpus folder"), "{climbing}: {err:#}");
+        assert!(left_in(work.path()).is_empty(), "{climbing}: {:?}", left_in(work.path()));
+    }
 }

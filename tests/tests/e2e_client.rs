@@ -9,7 +9,7 @@ use arena_shared::action::{Action, ActionBatch};
 use arena_shared::exec::{ExecRequest, LaunchRequest};
 use arena_shared::health::{Component, Readiness};
 use arena_shared::observation::{A11yNode, A11yQuery, ScreenshotQuery, WindowTarget};
-use arena_tests::{workspace_binary, Served};
+use arena_test_support::{workspace_binary, Served};
 
 fn client(url: &str, token: Option<&str>) -> GuestClient {
     let config = ClientConfig { token: token.map(str::to_owned), timeout: Duration::from_secs(30), retries: 1 };

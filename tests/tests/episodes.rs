@@ -21,7 +21,7 @@ use arena_host::run::shard::Shard;
 use arena_host::run::{load_tasks, run_tasks, RunOptions, RunOutcome};
 use arena_host::setup::DownloadCache;
 use arena_host::task::{Difficulty, Task};
-use arena_tests::Served;
+use arena_test_support::Served;
 
 fn stub_tasks_dir() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../tasks/stub")

@@ -14,7 +14,7 @@ use arena_host::agent::exec::{execute_with, ExecOptions};
 use arena_host::agent::AgentAction;
 use arena_host::{ClientConfig, GuestClient};
 use arena_shared::script::ComputerState;
-use arena_tests::Served;
+use arena_test_support::Served;
 use serde_json::{json, Value};
 
 const FOLDER: &str = r"C:\Users\Docker\Desktop\eq";

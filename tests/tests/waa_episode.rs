@@ -7,7 +7,7 @@
 
 use std::time::Duration;
 
-use arena_tests::Served;
+use arena_test_support::Served;
 use base64::Engine;
 use serde_json::{json, Value};
 

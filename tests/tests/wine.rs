@@ -18,7 +18,7 @@ use arena_shared::exec::{ExecRequest, LaunchRequest};
 use arena_shared::health::Component;
 use arena_shared::observation::{A11yBackend, A11yNode, A11yQuery, ScreenshotQuery, WindowInfo, WindowTarget};
 use arena_shared::registry::{RegistryValue, RegistryWrite};
-use arena_tests::{wine_or_skip, Served, WineSetup};
+use arena_test_support::{wine_or_skip, Served, WineSetup};
 use base64::Engine;
 
 /// Finds Wine and the exe, or says loudly why the suite cannot run.

@@ -14,10 +14,10 @@ use std::time::Duration;
 use arena_host::client::{ClientConfig, GuestClient};
 use arena_host::error::ClientError;
 use arena_host::prep::{self, StageOptions};
-use arena_tests::Served;
+use arena_test_support::Served;
 
 fn setup() -> Option<(PathBuf, PathBuf)> {
-    arena_tests::wine_or_skip("the Wine prep test").map(|it| (it.wine, it.exe))
+    arena_test_support::wine_or_skip("the Wine prep test").map(|it| (it.wine, it.exe))
 }
 
 /// The Windows spelling of a Unix path under Wine's `Z:` drive.

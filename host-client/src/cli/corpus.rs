@@ -8,19 +8,23 @@
 //! The archive goes to a temporary folder beside `--out` and the corpus appears
 //! there by one rename at the end, so an interrupted or failed fetch (a network
 //! error, a truncated or tampered archive, an archive without the corpus) leaves
-//! no partial folder behind. It is not a general downloader: one archive, one folder.
+//! no partial folder behind. `PROVENANCE.txt` beside the corpus records the archive's
+//! URL and SHA-256. It is not a general downloader: one archive, one folder.
 
 use std::io::Write as _;
 use std::path::{Component, Path, PathBuf};
 
-use anyhow::{bail, Context};
+use anyhow::{bail, ensure, Context};
 use clap::{Args, Subcommand};
 use sha2::{Digest, Sha256};
 
-use super::emit;
+use super::{emit, with_spinner};
 
 /// The upstream commit the project's compatibility tests were written against.
 pub const DEFAULT_COMMIT: &str = "6d39ed88c545a0d40a7a02e39b928e278df7332b";
+
+/// The note a fetch leaves beside the corpus: where it came from.
+pub const PROVENANCE: &str = "PROVENANCE.txt";
 
 /// Where the corpus sits inside the repository.
 const CORPUS_FOLDER: &str = "src/win-arena-container/client/evaluation_examples_windows";
@@ -42,7 +46,7 @@ pub enum CorpusCommand {
 /// Arguments of `arena corpus fetch`.
 #[derive(Debug, Clone, Args)]
 pub struct FetchArgs {
-    /// Upstream commit to fetch.
+    /// Upstream commit (or tag) to fetch.
     #[arg(long, default_value = DEFAULT_COMMIT)]
     pub commit: String,
     /// Archive URL (default: the upstream repository's zip archive of --commit); for mirrors.
@@ -64,7 +68,7 @@ pub struct FetchArgs {
 pub async fn run(args: CorpusArgs) -> anyhow::Result<std::process::ExitCode> {
     match args.command {
         CorpusCommand::Fetch(args) => {
-            let counts = fetch(&args).await?;
+            let counts = with_spinner("fetching the WAA task corpus", fetch(&args)).await?;
             emit(&format!(
                 "corpus written to {}: {} tasks in examples, {} in examples_noctxt, {} index files\n",
                 args.out.display(),
@@ -104,6 +108,9 @@ pub fn archive_url(commit: &str) -> String {
 pub async fn fetch(args: &FetchArgs) -> anyhow::Result<Written> {
     let out = &args.out;
     let expected = args.sha256.as_deref().map(parse_sha256).transpose()?;
+    if args.url.is_none() {
+        check_commit(&args.commit)?;
+    }
     if out.exists() {
         let empty = std::fs::read_dir(out).map(|mut d| d.next().is_none()).unwrap_or(false);
         if !empty {
@@ -140,12 +147,30 @@ pub async fn fetch(args: &FetchArgs) -> anyhow::Result<Written> {
     .await
     .context("the extraction worker failed")?
     .with_context(|| format!("reading the archive from {url}"))?;
+    // Which upstream this is, for whoever finds the folder later (the archive is gone by then).
+    let provenance = format!(
+        "Source: {url}, {CORPUS_FOLDER}/ (examples/, examples_noctxt/, test_*.json).\n\
+         Archive SHA-256: {}. Fetched by `arena corpus fetch`; the task files are unchanged.\n",
+        hex::encode(digest)
+    );
+    std::fs::write(staged.join(PROVENANCE), provenance)
+        .with_context(|| format!("writing {}", staged.join(PROVENANCE).display()))?;
     if out.exists() {
         // Checked empty above; a folder cannot be renamed over on every platform.
         std::fs::remove_dir(out).with_context(|| format!("replacing the empty folder {}", out.display()))?;
     }
     std::fs::rename(&staged, out).with_context(|| format!("moving the corpus into {}", out.display()))?;
     Ok(written)
+}
+
+/// A commit or tag goes into the archive URL: nothing that would change its shape.
+fn check_commit(commit: &str) -> anyhow::Result<()> {
+    let plain = commit.chars().all(|c| c.is_ascii_alphanumeric() || matches!(c, '.' | '_' | '-'));
+    ensure!(
+        !commit.is_empty() && plain,
+        "--commit {commit:?} is not a commit hash or tag (letters, digits, '.', '_' and '-' only)"
+    );
+    Ok(())
 }
 
 fn parse_sha256(text: &str) -> anyhow::Result<[u8; 32]> {
@@ -157,6 +182,8 @@ fn parse_sha256(text: &str) -> anyhow::Result<[u8; 32]> {
 async fn download(url: &str, dest: &Path) -> anyhow::Result<[u8; 32]> {
     let client = reqwest::Client::builder()
         .connect_timeout(std::time::Duration::from_secs(30))
+        // A stalled transfer fails rather than hanging; a slow one may take as long as it needs.
+        .read_timeout(std::time::Duration::from_secs(60))
         .build()
         .context("building the HTTP client")?;
     let mut response = client.get(url).send().await.with_context(|| format!("downloading {url}"))?;
@@ -204,8 +231,11 @@ fn extract(archive: &Path, dest: &Path) -> anyhow::Result<Written> {
     let mut written = Written::default();
     for i in 0..zip.len() {
         let mut entry = zip.by_index(i).with_context(|| format!("reading entry {i} of the archive"))?;
-        let Some(inside) = entry.enclosed_name() else {
-            bail!("the archive entry {:?} would land outside the corpus folder", entry.name());
+        // `enclosed_name` resolves `..` inside the archive; a repository archive has none,
+        // so an entry with one (or an absolute path) is a crafted archive, refused whole.
+        let climbs = entry.name().split(['/', '\\']).any(|part| part == "..");
+        let Some(inside) = entry.enclosed_name().filter(|_| !climbs) else {
+            bail!("the archive entry {:?} would land outside the corpus folder; nothing was written", entry.name());
         };
         let Some(relative) = corpus_path(&inside) else { continue };
         let target = dest.join(&relative);
@@ -258,5 +288,15 @@ mod tests {
         assert!(parse_sha256(&"ab".repeat(32)).is_ok());
         assert!(parse_sha256("abc").is_err());
         assert!(parse_sha256(&"ab".repeat(31)).is_err());
+    }
+
+    #[test]
+    fn commits_are_plain_names() {
+        assert!(check_commit(DEFAULT_COMMIT).is_ok());
+        assert!(check_commit("v1.0-rc_2").is_ok());
+        for bad in ["", "main/../x", "abc?x=1", "a b", "abc#frag"] {
+            let err = check_commit(bad).expect_err(bad).to_string();
+            assert!(err.contains("--commit"), "{err}");
+        }
     }
 }

@@ -34,7 +34,7 @@ use arena_shared::clipboard::ClipboardContent;
 use arena_shared::exec::LaunchRequest;
 use arena_shared::observation::{A11yQuery, ImageFormat, ScreenshotQuery};
 use arena_shared::script::ComputerState;
-use arena_tests::Served;
+use arena_test_support::Served;
 
 const STEPS: usize = 40;
 const TASKS: usize = 20;
