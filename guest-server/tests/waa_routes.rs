@@ -877,6 +877,18 @@ async fn setup_upload_then_file_round_trips_binary_bytes() {
 }
 
 #[tokio::test]
+async fn setup_upload_takes_files_larger_than_the_in_memory_part_limit() {
+    // 5 MiB: the guest spools it to a temporary file on the way (see waa::body).
+    let app = app();
+    let bytes: Vec<u8> = (0..5u32 << 20).map(|i| (i % 253) as u8).collect();
+    let path = r"C:\Users\Docker\Downloads\big.bin";
+    app.post_multipart("/setup/upload", &[("file_path", path)], &[("file_data", "big.bin", &bytes)])
+        .await
+        .assert_text(StatusCode::OK, "File Uploaded");
+    assert!(std::fs::read(app.local(path)).expect("read") == bytes, "the 5 MiB upload arrived intact");
+}
+
+#[tokio::test]
 async fn setup_upload_overwrites_atomically() {
     let app = app();
     let path = r"C:\Users\Docker\Desktop\x.txt";

@@ -135,15 +135,38 @@ impl<'a> Data<'a> {
     }
 }
 
+/// File parts up to this size stay in memory; larger ones are spooled to an unnamed
+/// temporary file (Werkzeug spools above 500 KiB), so an upload's size costs disk, not RSS.
+pub(crate) const SPOOL_ABOVE: usize = 1 << 20;
+
+/// The content of an uploaded file part.
+#[derive(Debug)]
+pub(crate) enum FileData {
+    Memory(Bytes),
+    /// An unnamed temporary file (deleted by the OS when closed, even after a crash),
+    /// positioned at its start.
+    Spooled(std::fs::File),
+}
+
+impl FileData {
+    /// Copies the whole content into `out`. Blocking: call it off the async runtime.
+    pub(crate) fn copy_to(self, out: &mut impl std::io::Write) -> std::io::Result<u64> {
+        match self {
+            FileData::Memory(bytes) => out.write_all(&bytes).map(|()| bytes.len() as u64),
+            FileData::Spooled(mut file) => std::io::copy(&mut file, out),
+        }
+    }
+}
+
 /// An uploaded file part of a multipart body.
-#[derive(Debug, Clone)]
+#[derive(Debug)]
 pub(crate) struct FormFile {
     pub(crate) name: String,
-    pub(crate) data: Bytes,
+    pub(crate) data: FileData,
 }
 
 /// `request.form` and `request.files`.
-#[derive(Debug, Clone, Default)]
+#[derive(Debug, Default)]
 pub(crate) struct PyForm {
     fields: Vec<(String, String)>,
     files: Vec<FormFile>,
@@ -155,9 +178,10 @@ impl PyForm {
         self.fields.iter().find(|(k, _)| k == name).map(|(_, v)| v.as_str())
     }
 
-    /// `request.files[name]`: the first file part of that name.
-    pub(crate) fn file(&self, name: &str) -> Option<&FormFile> {
-        self.files.iter().find(|f| f.name == name)
+    /// `request.files[name]`: the first file part of that name, taken out of the form.
+    pub(crate) fn take_file(&mut self, name: &str) -> Option<FormFile> {
+        let index = self.files.iter().position(|f| f.name == name)?;
+        Some(self.files.swap_remove(index))
     }
 }
 
@@ -188,19 +212,60 @@ async fn parse_multipart<S: Send + Sync>(req: Request, state: &S) -> Result<PyFo
         match multipart.next_field().await {
             Ok(Some(field)) => {
                 let name = field.name().unwrap_or_default().to_owned();
-                let is_file = field.file_name().is_some();
-                let data = match field.bytes().await {
-                    Ok(data) => data,
-                    Err(err) => return multipart_failure(err),
-                };
-                if is_file {
+                if field.file_name().is_some() {
+                    let data = match spool(field).await {
+                        Ok(data) => data,
+                        Err(Spool::Body(err)) => return multipart_failure(err),
+                        Err(Spool::Disk(err)) => {
+                            return Err(WaaError::catch(format!("could not spool the uploaded file: {err}")))
+                        }
+                    };
                     form.files.push(FormFile { name, data });
                 } else {
+                    let data = match field.bytes().await {
+                        Ok(data) => data,
+                        Err(err) => return multipart_failure(err),
+                    };
                     form.fields.push((name, String::from_utf8_lossy(&data).into_owned()));
                 }
             }
             Ok(None) => return Ok(form),
             Err(err) => return multipart_failure(err),
+        }
+    }
+}
+
+enum Spool {
+    Body(axum::extract::multipart::MultipartError),
+    Disk(std::io::Error),
+}
+
+/// Reads a file part chunk by chunk: in memory up to [`SPOOL_ABOVE`], then into an
+/// unnamed temporary file written asynchronously.
+async fn spool(mut field: axum::extract::multipart::Field<'_>) -> Result<FileData, Spool> {
+    use tokio::io::AsyncWriteExt;
+    let mut memory = Vec::new();
+    let mut disk: Option<tokio::fs::File> = None;
+    while let Some(chunk) = field.chunk().await.map_err(Spool::Body)? {
+        if let Some(file) = disk.as_mut() {
+            file.write_all(&chunk).await.map_err(Spool::Disk)?;
+        } else if memory.len() + chunk.len() > SPOOL_ABOVE {
+            let mut file = tokio::fs::File::from_std(tempfile::tempfile().map_err(Spool::Disk)?);
+            file.write_all(&memory).await.map_err(Spool::Disk)?;
+            file.write_all(&chunk).await.map_err(Spool::Disk)?;
+            memory = Vec::new();
+            disk = Some(file);
+        } else {
+            memory.extend_from_slice(&chunk);
+        }
+    }
+    match disk {
+        None => Ok(FileData::Memory(memory.into())),
+        Some(mut file) => {
+            use tokio::io::AsyncSeekExt;
+            file.flush().await.map_err(Spool::Disk)?;
+            file.rewind().await.map_err(Spool::Disk)?;
+            Ok(FileData::Spooled(file.into_std().await))
         }
     }
 }
@@ -275,5 +340,38 @@ mod tests {
             "argument of type 'NoneType' is not iterable"
         );
         assert_eq!(message(Data(&obj).index("zz").unwrap_err()), "'zz'");
+    }
+
+    /// A multipart body with one text field and one file part of `size` bytes (under
+    /// axum's default 2 MB body limit, which applies without the router's own).
+    fn upload_request(size: usize) -> Request {
+        let mut body =
+            b"--XyZ\r\ncontent-disposition: form-data; name=\"file_data\"; filename=\"a.bin\"\r\n\r\n".to_vec();
+        body.extend((0..size).map(|i| (i % 251) as u8));
+        body.extend_from_slice(
+            b"\r\n--XyZ\r\ncontent-disposition: form-data; name=\"file_path\"\r\n\r\nC:\\a.bin\r\n--XyZ--\r\n",
+        );
+        Request::builder()
+            .method("POST")
+            .header(header::CONTENT_TYPE, "multipart/form-data; boundary=XyZ")
+            .body(axum::body::Body::from(body))
+            .expect("request")
+    }
+
+    #[tokio::test]
+    async fn file_parts_over_the_threshold_are_spooled_to_disk_and_read_back_whole() {
+        for (size, spooled) in
+            [(10, false), (SPOOL_ABOVE, false), (SPOOL_ABOVE + 1, true), (SPOOL_ABOVE + 300_007, true)]
+        {
+            let mut form = PyForm::from_request(upload_request(size), &()).await.expect("form");
+            // The file part came first; the field after it is still read.
+            assert_eq!(form.field("file_path"), Some(r"C:\a.bin"));
+            let file = form.take_file("file_data").expect("file part");
+            assert_eq!(matches!(file.data, FileData::Spooled(_)), spooled, "{size} bytes");
+            let mut out = Vec::new();
+            assert_eq!(file.data.copy_to(&mut out).expect("copy"), size as u64);
+            assert!(out.iter().enumerate().all(|(i, b)| *b == (i % 251) as u8), "{size} bytes read back intact");
+            assert!(form.take_file("file_data").is_none());
+        }
     }
 }

@@ -21,7 +21,7 @@ use crate::desktop::Desktop;
 use crate::error::WaaError;
 use crate::paths;
 use crate::state::AppState;
-use crate::waa::body::{Data, PyForm, PyJson};
+use crate::waa::body::{Data, FileData, PyForm, PyJson};
 use crate::waa::py::{self, OsCall};
 use crate::waa::{expand, json, json_err, on_backend, path_arg, text, text_err, WaaResult};
 use arena_shared::cmdline::truthy;
@@ -133,7 +133,7 @@ pub(crate) async fn file(State(state): State<AppState>, form: PyForm) -> WaaResu
 /// Writes `bytes` to `target` atomically (see [`arena_shared::atomic`]), so a failed
 /// upload never leaves a half-written file. Like upstream it does not create missing
 /// parent directories, and a folder in the way is Python's `PermissionError`.
-fn write_atomically(target: &Path, bytes: &[u8]) -> std::io::Result<()> {
+fn write_atomically(target: &Path, data: FileData) -> std::io::Result<()> {
     use std::io::ErrorKind;
     if !target.parent().is_some_and(Path::is_dir) {
         return Err(ErrorKind::NotFound.into());
@@ -141,18 +141,20 @@ fn write_atomically(target: &Path, bytes: &[u8]) -> std::io::Result<()> {
     if target.is_dir() {
         return Err(ErrorKind::PermissionDenied.into());
     }
-    arena_shared::atomic::write_atomic(target, bytes)
+    let mut out = arena_shared::atomic::AtomicFile::create(target)?;
+    data.copy_to(out.file())?;
+    out.commit()
 }
 
 /// `POST /setup/upload`: multipart `file_path` + `file_data`.
-pub(crate) async fn upload(State(state): State<AppState>, form: PyForm) -> WaaResult {
-    let (Some(raw), Some(file)) = (form.field("file_path").map(str::to_owned), form.file("file_data").cloned()) else {
+pub(crate) async fn upload(State(state): State<AppState>, mut form: PyForm) -> WaaResult {
+    let (Some(raw), Some(file)) = (form.field("file_path").map(str::to_owned), form.take_file("file_data")) else {
         return Err(json_err(StatusCode::BAD_REQUEST, json!({"error": "file_path and file_data are required"})));
     };
     on_backend(&state, "upload", move |desktop| {
         let path = expand(desktop, &raw);
         let local = desktop.map_path(&path)?;
-        write_atomically(&local, &file.data).map_err(|err| WaaError::catch(py::os_error(OsCall::Open, &err, &path)))?;
+        write_atomically(&local, file.data).map_err(|err| WaaError::catch(py::os_error(OsCall::Open, &err, &path)))?;
         Ok(text(StatusCode::OK, "File Uploaded"))
     })
     .await
@@ -506,6 +508,7 @@ pub(crate) async fn clear_task_files(State(state): State<AppState>) -> WaaResult
 #[cfg(test)]
 mod tests {
     use super::*;
+    use axum::body::Bytes;
 
     #[test]
     fn content_disposition_quotes_like_werkzeug() {
@@ -528,15 +531,18 @@ mod tests {
     fn atomic_write_replaces_and_leaves_nothing_on_failure() {
         let dir = tempfile::tempdir().unwrap();
         let target = dir.path().join("a.bin");
-        write_atomically(&target, b"one").unwrap();
-        write_atomically(&target, b"two").unwrap();
+        write_atomically(&target, FileData::Memory(Bytes::from_static(b"one"))).unwrap();
+        write_atomically(&target, FileData::Memory(Bytes::from_static(b"two"))).unwrap();
         assert_eq!(std::fs::read(&target).unwrap(), b"two");
         assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 1);
 
         let missing = dir.path().join("nope").join("a.bin");
-        assert_eq!(write_atomically(&missing, b"x").unwrap_err().kind(), std::io::ErrorKind::NotFound);
+        assert_eq!(
+            write_atomically(&missing, FileData::Memory(Bytes::from_static(b"x"))).unwrap_err().kind(),
+            std::io::ErrorKind::NotFound
+        );
         std::fs::create_dir(dir.path().join("sub")).unwrap();
-        assert!(write_atomically(&dir.path().join("sub"), b"x").is_err());
+        assert!(write_atomically(&dir.path().join("sub"), FileData::Memory(Bytes::from_static(b"x"))).is_err());
         assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 2);
     }
 }

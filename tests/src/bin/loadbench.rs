@@ -8,7 +8,7 @@
 //!   each: requests/s, p50/p99 and the number of errors;
 //! - the same 50 clients while 500 connections hold half-sent requests open;
 //! - resident memory: peak and settled, and the peak around a PNG bomb sent as a
-//!   clipboard image and a 1 GiB file read.
+//!   clipboard image (six at once), a 1 GiB file read and a 1 GiB upload.
 //!
 //! Memory figures read `/proc/self/status` (Linux); elsewhere they print as unknown.
 //! Run it in release mode: `cargo run --release -p arena-tests --bin loadbench`.
@@ -117,18 +117,27 @@ async fn run() -> anyhow::Result<()> {
 
     println!("resident memory after the load: peak {}, now {}", mib(memory("VmHWM:")), mib(memory("VmRSS:")));
 
-    // A PNG bomb: a header claiming 60 000 x 60 000 pixels, sent as a clipboard image.
+    // Six PNG bombs at once: headers claiming 60 000 x 60 000 pixels, sent as clipboard images.
     let before = memory("VmRSS:");
-    let client = GuestClient::new(&url, ClientConfig { token: None, timeout: Duration::from_secs(30), retries: 0 })?;
     let bomb = png_header(60_000, 60_000);
     let image = arena_shared::clipboard::ClipboardContent::Image {
         width: 60_000,
         height: 60_000,
         png_base64: base64::Engine::encode(&base64::engine::general_purpose::STANDARD, &bomb),
     };
-    let refused = client.clipboard_set(&image).await.is_err();
+    let mut bombs = tokio::task::JoinSet::new();
+    for _ in 0..6 {
+        let client =
+            GuestClient::new(&url, ClientConfig { token: None, timeout: Duration::from_secs(30), retries: 0 })?;
+        let image = image.clone();
+        bombs.spawn(async move { client.clipboard_set(&image).await.is_err() });
+    }
+    let mut refused = 0;
+    while let Some(done) = bombs.join_next().await {
+        refused += usize::from(done.context("a bomb task failed")?);
+    }
     println!(
-        "PNG bomb (60000x60000 claimed) as a clipboard image: refused {refused}, resident memory {} -> {}",
+        "6 concurrent PNG bombs (60000x60000 claimed) as clipboard images: {refused} of 6 refused, resident memory {} -> {}",
         mib(before),
         mib(memory("VmRSS:"))
     );
@@ -151,6 +160,33 @@ async fn run() -> anyhow::Result<()> {
         mib(memory("VmRSS:")),
         mib(memory("VmHWM:"))
     );
+
+    // The same 1 GiB sent to upstream's upload route as a multipart file part, streamed
+    // from disk by the client: the guest spools it to a temporary file, not to memory.
+    let before = memory("VmRSS:");
+    let started = Instant::now();
+    let source = tokio::fs::File::open(&big).await?;
+    let part = reqwest::multipart::Part::stream_with_length(
+        reqwest::Body::wrap_stream(tokio_util::io::ReaderStream::new(source)),
+        1 << 30,
+    )
+    .file_name("big.bin");
+    let form = reqwest::multipart::Form::new()
+        .text("file_path", r"C:\Users\Docker\Downloads\uploaded.bin")
+        .part("file_data", part);
+    let answer = reqwest::Client::new().post(format!("{url}/setup/upload")).multipart(form).send().await?;
+    let status = answer.status();
+    let stored = std::fs::metadata(stub.root().join("C/Users/Docker/Downloads/uploaded.bin")).map_or(0, |m| m.len());
+    println!(
+        "1 GiB /setup/upload: {status}, {stored} bytes stored in {:.1} s, resident memory {} -> {} (peak {})",
+        started.elapsed().as_secs_f64(),
+        mib(before),
+        mib(memory("VmRSS:")),
+        mib(memory("VmHWM:"))
+    );
+
+    tokio::time::sleep(Duration::from_secs(2)).await;
+    println!("resident memory settled (2 s after the last request): {}", mib(memory("VmRSS:")));
     drop(stub);
     Ok(())
 }
