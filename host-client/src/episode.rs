@@ -132,6 +132,7 @@ pub async fn run_attempt(
     let started = Instant::now();
     let mut ep = Episode {
         result: EpisodeResult {
+            score_is_int: false,
             task_id: task.id.clone(),
             task_name: task.name.clone(),
             domain: task.domain.clone(),
@@ -282,7 +283,11 @@ impl Episode {
                 return Err(infra("the guest stopped answering during evaluation", err));
             }
         }
+        if let Some(reason) = outcome.unfinished {
+            return Err(EpisodeStatus::EvalError(reason));
+        }
         self.result.score = outcome.score;
+        self.result.score_is_int = outcome.score_is_int;
         Ok(())
     }
 
@@ -329,6 +334,14 @@ impl Episode {
             Err(AgentError::Guest(err)) => {
                 self.push(out, record)?;
                 return Err(infra("the guest stopped answering", err));
+            }
+            Err(err @ AgentError::Model { .. }) => {
+                // Upstream's `predict` raises when the model cannot be had: the
+                // task is left unfinished, not scored.
+                record.error = Some(err.to_string());
+                record.done = true;
+                self.push(out, record)?;
+                return Err(EpisodeStatus::ModelError(err.to_string()));
             }
             Err(err) => {
                 let message = err.to_string();
@@ -516,6 +529,7 @@ impl TaskRunner for EpisodeRunner {
                 // Without an agent nothing can run anywhere: record it as the
                 // agent's failure so the run does not retry it on every guest.
                 let result = EpisodeResult {
+                    score_is_int: false,
                     task_id: task.id.clone(),
                     task_name: task.name.clone(),
                     domain: task.domain.clone(),
@@ -525,7 +539,7 @@ impl TaskRunner for EpisodeRunner {
                     guest: guest.base_url().to_owned(),
                     attempt,
                     score: 0.0,
-                    status: EpisodeStatus::AgentError(format!("cannot create the agent: {err}")),
+                    status: EpisodeStatus::ModelError(format!("cannot create the agent: {err}")),
                     steps: 0,
                     last_action: "none".into(),
                     elapsed_ms: 0,
@@ -648,16 +662,34 @@ mod tests {
     }
 
     #[tokio::test]
-    async fn a_model_that_stays_down_is_an_agent_error_and_the_task_is_still_scored() {
+    async fn a_model_that_stays_down_leaves_the_task_unfinished() {
         let (result, out, _tmp) =
             play(&task("exact_match"), vec![model_down(), model_down(), model_down()], false).await;
-        assert!(matches!(&result.status, EpisodeStatus::AgentError(m) if m.contains("503")), "{:?}", result.status);
-        // Notepad is still in front: the evaluation ran and counts.
-        assert_eq!(result.score, 1.0);
-        assert!(out.is_finished());
+        assert!(matches!(&result.status, EpisodeStatus::ModelError(m) if m.contains("503")), "{:?}", result.status);
+        // Upstream's predict raises: no result.txt, so the next run plays the task again.
+        assert!(!out.is_finished());
+        assert!(!out.path().join(RESULT_FILE).exists());
+        assert_eq!(out.read_episode().unwrap().status, result.status);
         let traj = out.read_trajectory().unwrap();
         assert_eq!(traj.len(), 1);
         assert!(traj[0].done && traj[0].error.as_deref().unwrap_or("").contains("503"));
+    }
+
+    #[tokio::test]
+    async fn an_evaluation_that_raises_upstream_leaves_the_task_unfinished() {
+        // The expected getter reads a guest file that does not exist.
+        let text = r#"{"id": "t", "instruction": "do it", "evaluator": {"func": "exact_match",
+            "result": {"type": "rule", "rules": "x"},
+            "expected": {"type": "vm_file", "path": "C:\\nope\\gold.txt", "dest": "gold.txt"}}}"#;
+        let task = Task::parse(text, &PathBuf::from("/tasks/notepad/t.json")).unwrap();
+        let (result, out, _tmp) = play(&task, vec![says(vec![AgentAction::Done])], false).await;
+        assert!(
+            matches!(&result.status, EpisodeStatus::EvalError(m) if m.contains("exact_match")),
+            "{:?}",
+            result.status
+        );
+        assert!(!out.is_finished(), "no result.txt for an evaluation upstream could not finish");
+        assert_eq!(out.read_episode().unwrap().status, result.status);
     }
 
     #[tokio::test]
@@ -693,8 +725,10 @@ mod tests {
 
     #[tokio::test]
     async fn fail_scores_an_infeasible_task() {
-        let (result, _out, _tmp) = play(&task("infeasible"), vec![says(vec![AgentAction::Fail])], false).await;
+        let (result, out, _tmp) = play(&task("infeasible"), vec![says(vec![AgentAction::Fail])], false).await;
         assert_eq!((result.score, result.last_action.as_str(), result.steps), (1.0, "fail", 1));
+        // Upstream's `evaluate` returns the int 1 here, so result.txt holds "1".
+        assert_eq!(std::fs::read_to_string(out.path().join(RESULT_FILE)).unwrap(), "1\n");
     }
 
     #[tokio::test]

@@ -228,7 +228,7 @@ pub enum Command {
     /// Load a task folder and report what each task needs and whether this build supports it.
     Validate(validate::ValidateArgs),
     /// Run tasks over a pool of guests and write result folders and a report.
-    Run(runs::RunArgs),
+    Run(Box<runs::RunArgs>),
     /// Merge shard result folders into one, with its summary and report.
     Merge(runs::MergeArgs),
     /// Rebuild summary.json, summary.md and report.html of a result folder.
@@ -542,7 +542,7 @@ pub async fn run(cli: Cli) -> anyhow::Result<ExitCode> {
         }
         Command::Demo(args) => demo::run(conn, args).await,
         Command::Validate(args) => validate::run(&args),
-        Command::Run(args) => runs::run(conn, args).await,
+        Command::Run(args) => runs::run(conn, *args).await,
         Command::Merge(args) => runs::merge(&args),
         Command::Report(args) => runs::report(&args),
         Command::Prep(args) => prep::run(conn, args).await,

@@ -113,6 +113,14 @@ pub struct RunArgs {
     /// The observation label of the result folders (upstream's --observation_type).
     #[arg(long, default_value = "a11y_tree")]
     pub observation: String,
+    /// The first folder level of the results (upstream's --action_space). Default:
+    /// `pyautogui` for Navi, as upstream files it; the agent's name for the
+    /// scripted and replay agents, which upstream does not have.
+    #[arg(long, value_name = "LABEL")]
+    pub action_space_label: Option<String>,
+    /// The trial folder level of the results (upstream's --trial_id).
+    #[arg(long, default_value = crate::results::DEFAULT_TRIAL_ID, value_name = "ID")]
+    pub trial_id: String,
 }
 
 /// Arguments of `arena merge`.
@@ -190,7 +198,7 @@ fn agent_factory(args: &RunArgs) -> anyhow::Result<(AgentFactory, String, String
             let factory: AgentFactory =
                 Arc::new(move || Ok(Box::new(NaviAgent::new(config.clone())?) as Box<dyn Agent>));
             // Upstream files Navi's results under its action space.
-            Ok((factory, "code_block".into(), model))
+            Ok((factory, crate::results::DEFAULT_ACTION_SPACE_LABEL.into(), model))
         }
     }
 }
@@ -237,7 +245,13 @@ pub async fn run(conn: &Connection, args: RunArgs) -> anyhow::Result<ExitCode> {
         config.settle = Settle::none();
         config.exec = ExecOptions::instant();
     }
-    let layout = RunLayout { root: args.out.clone(), agent: agent_label, observation: args.observation.clone(), model };
+    let layout = RunLayout {
+        root: args.out.clone(),
+        agent: args.action_space_label.clone().unwrap_or(agent_label),
+        observation: args.observation.clone(),
+        model,
+        trial: args.trial_id.clone(),
+    };
     let options = RunOptions {
         layout: layout.clone(),
         shard: args.shard,
@@ -264,11 +278,20 @@ pub async fn run(conn: &Connection, args: RunArgs) -> anyhow::Result<ExitCode> {
     ))?;
     emit(&outcome.summary.markdown())?;
     emit(&format!("\nreport: {}\n", outcome.report.display()))?;
-    let unfinished = outcome.pool.not_run.len() + outcome.pool.results.iter().filter(|r| r.status.is_infra()).count();
-    if unfinished > 0 {
-        emit(&format!(
-            "{unfinished} task(s) have no result (infrastructure errors); run the same command again to retry them\n"
-        ))?;
+    let unfinished: Vec<&crate::results::EpisodeResult> =
+        outcome.pool.results.iter().filter(|r| r.status.is_unfinished()).collect();
+    let count = outcome.pool.not_run.len() + unfinished.len();
+    if count > 0 {
+        let mut lines =
+            format!("{count} task(s) are unfinished (no result.txt); run the same command again to retry them:\n");
+        for r in &unfinished {
+            let why = r.status.message().unwrap_or_default();
+            lines.push_str(&format!("  {}/{}: {}: {why}\n", r.domain, r.task_name, r.status.kind()));
+        }
+        for task in &outcome.pool.not_run {
+            lines.push_str(&format!("  {task}: not run (no healthy guest left)\n"));
+        }
+        emit(&lines)?;
         return Ok(ExitCode::from(2));
     }
     Ok(ExitCode::SUCCESS)

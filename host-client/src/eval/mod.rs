@@ -75,6 +75,20 @@ impl LastAction {
     }
 }
 
+/// Where a metric's evaluation failed.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum FailedAt {
+    /// This build lacks the metric or one of its getters.
+    Missing,
+    /// The result getter.
+    Result,
+    /// The expected getter.
+    Expected,
+    /// The metric itself.
+    Metric,
+}
+
 /// The score of one metric and what it was computed from.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct MetricOutcome {
@@ -90,6 +104,9 @@ pub struct MetricOutcome {
     /// Why the metric scored 0 without comparing (a getter or metric failure).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub error: Option<String>,
+    /// Where it failed, when `error` is set.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub failed_at: Option<FailedAt>,
     /// Time spent in the getters and the metric.
     pub elapsed_ms: u64,
 }
@@ -108,13 +125,27 @@ pub struct EvalOutcome {
     /// Why nothing was measured, when the rules decided alone (a FAIL on a feasible task).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub note: Option<String>,
+    /// Set when upstream's `evaluate` would raise here instead of returning a
+    /// score: the task is then left unfinished (no `result.txt`) and played
+    /// again by the next run. See [`evaluate`] for the rules.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub unfinished: Option<String>,
+    /// Whether upstream's value is a Python `int` (`1`/`0` in `result.txt`).
+    #[serde(default)]
+    pub score_is_int: bool,
+}
+
+impl EvalOutcome {
+    fn decided(score: f64, metrics: Vec<MetricOutcome>, note: Option<String>) -> EvalOutcome {
+        EvalOutcome { score, metrics, error: None, note, unfinished: None, score_is_int: true }
+    }
 }
 
 /// Scores a task's evaluator after the episode (and after its `postconfig`).
 /// Never fails: see the module documentation.
 pub async fn evaluate(ctx: &EvalContext, evaluator: &Evaluator, last_action: Option<&LastAction>) -> EvalOutcome {
     let last = last_action.copied();
-    let (conj, calls) = match &evaluator.scoring {
+    let (conj, calls, listed) = match &evaluator.scoring {
         Scoring::Infeasible => {
             let score = if last == Some(LastAction::Fail) { 1.0 } else { 0.0 };
             let outcome = MetricOutcome {
@@ -123,19 +154,15 @@ pub async fn evaluate(ctx: &EvalContext, evaluator: &Evaluator, last_action: Opt
                 result: Some(serde_json::to_value(last).unwrap_or(Value::Null)),
                 expected: Some(Value::String("FAIL".into())),
                 error: None,
+                failed_at: None,
                 elapsed_ms: 0,
             };
-            return EvalOutcome { score, metrics: vec![outcome], error: None, note: None };
+            return EvalOutcome::decided(score, vec![outcome], None);
         }
-        Scoring::Metrics { conj, calls } => (*conj, calls),
+        Scoring::Metrics { conj, calls, listed } => (*conj, calls, *listed),
     };
     if last == Some(LastAction::Fail) {
-        return EvalOutcome {
-            score: 0.0,
-            metrics: Vec::new(),
-            error: None,
-            note: Some("the agent answered FAIL on a feasible task".into()),
-        };
+        return EvalOutcome::decided(0.0, Vec::new(), Some("the agent answered FAIL on a feasible task".into()));
     }
     if calls.is_empty() {
         return EvalOutcome {
@@ -143,26 +170,51 @@ pub async fn evaluate(ctx: &EvalContext, evaluator: &Evaluator, last_action: Opt
             metrics: Vec::new(),
             error: Some("the evaluator names no metric".into()),
             note: None,
+            unfinished: Some("the evaluator names no metric".into()),
+            score_is_int: false,
         };
     }
     let mut outcomes = Vec::with_capacity(calls.len());
     let mut stopped = None;
+    let mut unfinished = None;
+    let mut score_is_int = false;
     for call in calls {
         let outcome = run_metric(ctx, call, last).await;
         let score = outcome.score;
-        outcomes.push(outcome);
-        match conj {
-            Conj::And if score == 0.0 => stopped = Some(0.0),
-            Conj::Or if score == 1.0 => stopped = Some(1.0),
-            _ => {}
-        }
-        if stopped.is_some() {
+        if let Some(at) = outcome.failed_at {
+            let error = outcome.error.clone().unwrap_or_default();
+            // Upstream's one-metric path returns 0 when the result getter raises;
+            // everything else that raises (an expected getter, the metric, a result
+            // getter in the list path) leaves the task without a score.
+            if at == FailedAt::Result && !listed {
+                stopped = Some(0.0);
+                score_is_int = true;
+            } else {
+                unfinished = Some(format!("{}: {error}", outcome.metric));
+            }
+            outcomes.push(outcome);
             break;
         }
+        outcomes.push(outcome);
+        if listed {
+            match conj {
+                Conj::And if score == 0.0 => stopped = Some(0.0),
+                Conj::Or if score == 1.0 => stopped = Some(1.0),
+                _ => {}
+            }
+            if stopped.is_some() {
+                score_is_int = true;
+                break;
+            }
+        }
     }
-    let score = stopped.unwrap_or_else(|| combine(conj, outcomes.iter().map(|o| o.score)));
+    let score = if unfinished.is_some() {
+        0.0
+    } else {
+        stopped.unwrap_or_else(|| combine(conj, outcomes.iter().map(|o| o.score)))
+    };
     let error = outcomes.iter().find_map(|o| o.error.as_ref().map(|e| format!("{}: {e}", o.metric)));
-    EvalOutcome { score, metrics: outcomes, error, note: None }
+    EvalOutcome { score, metrics: outcomes, error, note: None, unfinished, score_is_int }
 }
 
 /// The mean (`and`) or the max (`or`) of the scores; 0 for none.
@@ -186,6 +238,7 @@ async fn run_metric(ctx: &EvalContext, call: &MetricCall, last: Option<LastActio
         result: None,
         expected: None,
         error: None,
+        failed_at: None,
         elapsed_ms: 0,
     };
     let finish = |mut outcome: MetricOutcome| {
@@ -197,6 +250,7 @@ async fn run_metric(ctx: &EvalContext, call: &MetricCall, last: Option<LastActio
     };
     let Some(metric) = metrics::lookup(&call.metric) else {
         outcome.error = Some(format!("metric {} is not implemented in this build", call.metric));
+        outcome.failed_at = Some(FailedAt::Missing);
         return finish(outcome);
     };
     let result = match &call.result {
@@ -204,6 +258,7 @@ async fn run_metric(ctx: &EvalContext, call: &MetricCall, last: Option<LastActio
         Some(spec) => match fetch(ctx, spec).await {
             Ok(value) => value,
             Err(err) => {
+                outcome.failed_at = Some(getter_failure(&err, FailedAt::Result));
                 outcome.error = Some(err.to_string());
                 return finish(outcome);
             }
@@ -215,6 +270,7 @@ async fn run_metric(ctx: &EvalContext, call: &MetricCall, last: Option<LastActio
         Some(spec) => match fetch(ctx, spec).await {
             Ok(value) => Some(value),
             Err(err) => {
+                outcome.failed_at = Some(getter_failure(&err, FailedAt::Expected));
                 outcome.error = Some(err.to_string());
                 return finish(outcome);
             }
@@ -225,12 +281,25 @@ async fn run_metric(ctx: &EvalContext, call: &MetricCall, last: Option<LastActio
     // Metrics parse files (spreadsheets, images, video); keep them off the async
     // workers, and turn a panic in one into that metric's error.
     match tokio::task::spawn_blocking(move || metric(&input)).await {
-        Ok(Ok(score)) if score.is_finite() => outcome.score = score.clamp(0.0, 1.0),
+        // Upstream writes what the metric returns, unclamped.
+        Ok(Ok(score)) if score.is_finite() => outcome.score = score,
         Ok(Ok(score)) => outcome.error = Some(format!("metric {} returned {score}, not a score", call.metric)),
         Ok(Err(err)) => outcome.error = Some(err.to_string()),
         Err(err) => outcome.error = Some(format!("metric {} crashed: {err}", call.metric)),
     }
+    if outcome.error.is_some() {
+        outcome.failed_at = Some(FailedAt::Metric);
+    }
     finish(outcome)
+}
+
+/// A getter this build lacks is [`FailedAt::Missing`] (upstream has it, so the
+/// failure is ours, never a score); any other failure is the getter's.
+fn getter_failure(err: &GetterError, stage: FailedAt) -> FailedAt {
+    match err {
+        GetterError::NotImplemented(_) => FailedAt::Missing,
+        _ => stage,
+    }
 }
 
 /// Runs one getter by name.

@@ -54,21 +54,27 @@ fn listed(conj: &str, metrics: &[Option<bool>]) -> Evaluator {
 async fn conjunctions_stop_early_and_combine() {
     let dir = tempfile::tempdir().unwrap();
     let ctx = offline_ctx(dir.path());
-    // (conj, metrics, score, how many ran)
-    let cases: &[(&str, &[Option<bool>], f64, usize)] = &[
-        ("and", &[Some(true), Some(true)], 1.0, 2),
-        ("and", &[Some(true), Some(false), Some(true)], 0.0, 2),
-        ("and", &[Some(false), None], 0.0, 1),
-        ("and", &[Some(true), None, Some(true)], 0.0, 2),
-        ("or", &[Some(false), Some(true), None], 1.0, 2),
-        ("or", &[Some(false), Some(false)], 0.0, 2),
-        ("or", &[None, Some(false), Some(true)], 1.0, 3),
-        ("or", &[Some(true), Some(false)], 1.0, 1),
+    // (conj, metrics, score, how many ran, unfinished). A metric whose getter this
+    // build lacks leaves the task unfinished where it is reached.
+    type Case<'a> = (&'a str, &'a [Option<bool>], f64, usize, bool);
+    let cases: &[Case] = &[
+        ("and", &[Some(true), Some(true)], 1.0, 2, false),
+        ("and", &[Some(true), Some(false), Some(true)], 0.0, 2, false),
+        ("and", &[Some(false), None], 0.0, 1, false),
+        ("and", &[Some(true), None, Some(true)], 0.0, 2, true),
+        ("or", &[Some(false), Some(true), None], 1.0, 2, false),
+        ("or", &[Some(false), Some(false)], 0.0, 2, false),
+        ("or", &[None, Some(false), Some(true)], 0.0, 1, true),
+        ("or", &[Some(true), Some(false)], 1.0, 1, false),
     ];
-    for (conj, metrics, score, ran) in cases {
+    for (conj, metrics, score, ran, unfinished) in cases {
         let outcome = evaluate(&ctx, &listed(conj, metrics), Some(&LastAction::Done)).await;
         assert_eq!(outcome.score, *score, "{conj} {metrics:?}: {outcome:?}");
         assert_eq!(outcome.metrics.len(), *ran, "{conj} {metrics:?}: {outcome:?}");
+        assert_eq!(outcome.unfinished.is_some(), *unfinished, "{conj} {metrics:?}: {outcome:?}");
+        // An early stop is upstream's `return 0` / `return 1`: an int; a mean or max is a float.
+        let early = !unfinished && *ran < metrics.len();
+        assert_eq!(outcome.score_is_int, early, "{conj} {metrics:?}: {outcome:?}");
     }
 }
 
@@ -117,17 +123,23 @@ async fn fail_on_a_feasible_task_scores_zero_without_fetching() {
 }
 
 #[tokio::test]
-async fn getter_failures_score_zero_with_the_reason() {
+async fn getter_failures_score_zero_or_leave_the_task_unfinished_as_upstream() {
     let dir = tempfile::tempdir().unwrap();
     let ctx = offline_ctx(dir.path());
     let expected = json!({"type": "rule", "rules": {"expected": true}});
+    // (result getter, reason, unfinished): upstream's one-metric path scores 0
+    // when the result getter raises; a getter this build lacks is our gap, not a score.
     let cases = [
-        (json!({"type": "vm_screen_size", "dest": "vlcrc"}), "getter vm_screen_size is not implemented in this build"),
-        (json!({"type": "vm_file", "path": r"C:\a.txt", "dest": "../a.txt"}), "relative file name"),
+        (
+            json!({"type": "vm_screen_size", "dest": "vlcrc"}),
+            "getter vm_screen_size is not implemented in this build",
+            true,
+        ),
+        (json!({"type": "vm_file", "path": r"C:\a.txt", "dest": "../a.txt"}), "relative file name", false),
         // Nothing listens on port 9: the reason names the guest and the call.
-        (json!({"type": "vm_file_exists_in_desktop", "file_name": "a.lnk"}), "http://127.0.0.1:9"),
+        (json!({"type": "vm_file_exists_in_desktop", "file_name": "a.lnk"}), "http://127.0.0.1:9", false),
     ];
-    for (result, reason) in cases {
+    for (result, reason, unfinished) in cases {
         let task = evaluator(json!({"func": "exact_match", "result": result, "expected": expected}));
         let outcome = evaluate(&ctx, &task, Some(&LastAction::Done)).await;
         assert_eq!(outcome.score, 0.0);
@@ -138,14 +150,36 @@ async fn getter_failures_score_zero_with_the_reason() {
             "{outcome:?}"
         );
         assert_eq!(outcome.metrics[0].result, None);
+        assert_eq!(outcome.unfinished.is_some(), unfinished, "{outcome:?}");
+        assert_eq!(outcome.score_is_int, !unfinished, "upstream's `return 0`: {outcome:?}");
     }
-    // A metric failure is recorded the same way.
+    // The same result getter failing in the list path raises upstream: unfinished.
+    let task = evaluator(json!({
+        "func": ["exact_match"],
+        "result": [{"type": "vm_file_exists_in_desktop", "file_name": "a.lnk"}],
+        "expected": [expected],
+    }));
+    let outcome = evaluate(&ctx, &task, Some(&LastAction::Done)).await;
+    assert!(outcome.unfinished.as_deref().is_some_and(|u| u.contains("127.0.0.1:9")), "{outcome:?}");
+    assert_eq!(outcome.metrics[0].failed_at, Some(FailedAt::Result));
+    // An expected getter that fails raises on both paths.
+    let task = evaluator(json!({
+        "func": "exact_match",
+        "result": {"type": "rule", "rules": true},
+        "expected": {"type": "vm_file", "path": r"C:\a.txt", "dest": "../a.txt"},
+    }));
+    let outcome = evaluate(&ctx, &task, Some(&LastAction::Done)).await;
+    assert!(outcome.unfinished.as_deref().is_some_and(|u| u.contains("relative file name")), "{outcome:?}");
+    assert_eq!(outcome.metrics[0].failed_at, Some(FailedAt::Expected));
+    // A metric that fails (here: rules without `expected`) raises too.
     let task = evaluator(
         json!({"func": "exact_match", "result": {"type": "rule", "rules": 1}, "expected": {"type": "rule", "rules": {"no": 1}}}),
     );
     let outcome = evaluate(&ctx, &task, Some(&LastAction::Done)).await;
     assert_eq!(outcome.score, 0.0);
     assert_eq!(outcome.metrics[0].error.as_deref(), Some("the rules have no `expected`"));
+    assert_eq!(outcome.metrics[0].failed_at, Some(FailedAt::Metric));
+    assert!(outcome.unfinished.is_some(), "{outcome:?}");
 }
 
 #[test]

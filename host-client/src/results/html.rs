@@ -74,12 +74,12 @@ pub fn render(summary: &Summary, found: &[FoundTask], title: &str) -> String {
     let o = &summary.overall;
     let _ = writeln!(
         html,
-        "<h1>{}</h1><p class=\"meta\" id=\"overall\">{} of {} finished tasks solved ({:.1}%), mean score {:.3}; {} unfinished.</p>",
+        "<h1>{}</h1><p class=\"meta\" id=\"overall\">Success rate {:.1}% (mean score × 100 over {} finished tasks, as upstream computes it); {} solved outright ({:.1}%); {} unfinished.</p>",
         escape(title),
-        o.successes,
-        o.tasks,
         o.success_rate,
-        o.mean_score,
+        o.tasks,
+        o.successes,
+        o.solved_rate,
         o.unfinished
     );
     html.push_str("<h2>Success per domain</h2>\n");
@@ -93,7 +93,7 @@ pub fn render(summary: &Summary, found: &[FoundTask], title: &str) -> String {
     html
 }
 
-/// A horizontal bar per domain and one for the total: the success rate, with `successes/tasks`.
+/// A horizontal bar per domain and one for the total: upstream's success rate, with `solved/tasks`.
 fn chart(domains: &[DomainRow], overall: &DomainRow) -> String {
     const LABEL: u32 = 170;
     const BAR: u32 = 360;
@@ -134,21 +134,25 @@ fn chart(domains: &[DomainRow], overall: &DomainRow) -> String {
 
 fn table(summary: &Summary) -> String {
     let mut t = String::from(
-        "<table id=\"summary\"><thead><tr><th>Domain</th><th>Tasks</th><th>Successes</th><th>Success rate</th><th>Mean score</th>\
+        "<table id=\"summary\"><thead><tr><th>Domain</th><th>Tasks</th><th>Success rate</th><th>Solved</th><th>Solved rate</th>\
          <th>Avg steps</th><th>Avg time (s)</th><th>Agent errors</th><th>Unfinished</th></tr></thead><tbody>\n",
     );
-    for (row, class) in
-        summary.domains.iter().map(|r| (r, "")).chain(std::iter::once((&summary.overall, " class=\"overall\"")))
+    for (row, class) in summary
+        .domains
+        .iter()
+        .map(|r| (r, ""))
+        .chain(std::iter::once((&summary.overall, " class=\"overall\"")))
+        .chain(summary.groups.iter().map(|r| (r, " class=\"group\"")))
     {
         let _ = writeln!(
             t,
-            "<tr{class}><td>{}</td><td class=\"num\">{}</td><td class=\"num\">{}</td><td class=\"num\">{:.1}%</td><td class=\"num\">{:.3}</td>\
+            "<tr{class}><td>{}</td><td class=\"num\">{}</td><td class=\"num\">{:.1}%</td><td class=\"num\">{}</td><td class=\"num\">{:.1}%</td>\
              <td class=\"num\">{:.1}</td><td class=\"num\">{:.1}</td><td class=\"num\">{}</td><td class=\"num\">{}</td></tr>",
             escape(&row.domain),
             row.tasks,
-            row.successes,
             row.success_rate,
-            row.mean_score,
+            row.successes,
+            row.solved_rate,
             row.avg_steps,
             row.avg_seconds,
             row.agent_errors,

@@ -5,7 +5,7 @@
 //! directory), so upstream's `show_result.py` reads it:
 //!
 //! ```text
-//! <out>/<agent>/<observation>/<model>/<domain>/<task name>/
+//! <out>/<action space>/<observation>/<model>/<trial>/<domain>/<task name>/
 //!     result.txt     the score as text ("1.0"), written LAST
 //!     traj.jsonl     one JSON object per step ([`StepRecord`])
 //!     step_<n>.png   the screenshot the agent saw at step n (1-based)
@@ -75,27 +75,42 @@ impl ResultsError {
 }
 
 /// How an episode ended.
+///
+/// Two kinds of ending leave the task **unfinished** as upstream leaves it when
+/// `run_single_example` raises: no `result.txt`, the reason in `episode.json`,
+/// and the next `arena run` of the folder plays the task again. The others are
+/// scored.
 #[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(tag = "kind", content = "message", rename_all = "snake_case")]
 pub enum EpisodeStatus {
     /// The loop ran to DONE, FAIL or the step cap, and the task was evaluated.
     Completed,
-    /// The agent failed (its model kept failing, its output could not be run);
-    /// the task was still evaluated and the score counts.
+    /// The agent could not go on for a reason of its own (a scripted plan used
+    /// up, output it cannot turn into actions); the task was still evaluated
+    /// and the score counts.
     AgentError(String),
-    /// The guest or the host's setup failed (unreachable guest, failed
-    /// download, reset that did not work): the score says nothing about the
-    /// agent, no `result.txt` is written, and the task is tried again.
+    /// Unfinished: the guest or the host's setup failed (unreachable guest,
+    /// failed download, reset that did not work). The pool tries it again on
+    /// another guest within the run.
     InfraError(String),
+    /// Unfinished: the model endpoint kept failing after the retries (upstream's
+    /// `predict` raises and the task is left without a result).
+    ModelError(String),
+    /// Unfinished: the evaluation failed where upstream's `evaluate` raises (an
+    /// expected getter, a metric that cannot read its input, a gold file that
+    /// cannot be downloaded).
+    EvalError(String),
 }
 
 impl EpisodeStatus {
-    /// `completed`, `agent_error` or `infra_error`.
+    /// `completed`, `agent_error`, `infra_error`, `model_error` or `eval_error`.
     pub fn kind(&self) -> &'static str {
         match self {
             EpisodeStatus::Completed => "completed",
             EpisodeStatus::AgentError(_) => "agent_error",
             EpisodeStatus::InfraError(_) => "infra_error",
+            EpisodeStatus::ModelError(_) => "model_error",
+            EpisodeStatus::EvalError(_) => "eval_error",
         }
     }
 
@@ -103,12 +118,21 @@ impl EpisodeStatus {
     pub fn message(&self) -> Option<&str> {
         match self {
             EpisodeStatus::Completed => None,
-            EpisodeStatus::AgentError(m) | EpisodeStatus::InfraError(m) => Some(m),
+            EpisodeStatus::AgentError(m)
+            | EpisodeStatus::InfraError(m)
+            | EpisodeStatus::ModelError(m)
+            | EpisodeStatus::EvalError(m) => Some(m),
         }
     }
 
+    /// An infrastructure error: the pool tries the task again on a healthy guest.
     pub fn is_infra(&self) -> bool {
         matches!(self, EpisodeStatus::InfraError(_))
+    }
+
+    /// No score: no `result.txt` is written and the next run plays the task again.
+    pub fn is_unfinished(&self) -> bool {
+        matches!(self, EpisodeStatus::InfraError(_) | EpisodeStatus::ModelError(_) | EpisodeStatus::EvalError(_))
     }
 }
 
@@ -181,8 +205,14 @@ pub struct EpisodeResult {
     /// 1 for the first try; higher when an infrastructure error made the run try again.
     #[serde(default = "one")]
     pub attempt: u32,
-    /// 0.0 to 1.0; 0.0 for an infrastructure error.
+    /// 0.0 to 1.0; 0.0 for an unfinished task.
     pub score: f64,
+    /// Whether upstream's `evaluate` gives the score as a Python `int` (or a
+    /// `bool`) rather than a `float`: the rules decided alone (infeasible, FAIL on
+    /// a feasible task, an `and` stopped at a 0, a result getter that failed).
+    /// `result.txt` then holds `1` or `0` instead of `1.0` or `0.0`.
+    #[serde(default)]
+    pub score_is_int: bool,
     pub status: EpisodeStatus,
     /// Steps the agent took.
     pub steps: u32,
@@ -216,9 +246,24 @@ fn one() -> u32 {
 }
 
 impl EpisodeResult {
+    /// What `result.txt` holds: Python's `str()` of upstream's value, `1`/`0`
+    /// for an int, else the float's repr (`1.0`, `0.5`, `0.3333333333333333`).
+    ///
+    /// Upstream writes a metric's `bool` as `True`/`False`, which its own
+    /// readers disagree on (`show_result.py` counts `False` as 1.0, `run.py`
+    /// counts `True` as 0.0); those are written as `1`/`0` here
+    /// (docs/compatibility.md, "result.txt").
+    pub fn score_text(&self) -> String {
+        if self.score_is_int && self.score.fract() == 0.0 {
+            format!("{}", self.score as i64)
+        } else {
+            python_float(self.score)
+        }
+    }
+
     /// Whether the task counts as solved: a score of 1 (within rounding).
     pub fn success(&self) -> bool {
-        !self.status.is_infra() && self.score >= 1.0 - 1e-9
+        !self.status.is_unfinished() && self.score >= 1.0 - 1e-9
     }
 }
 
@@ -235,24 +280,35 @@ pub fn safe_component(text: &str) -> String {
     }
 }
 
-/// Where a run writes: `<root>/<agent>/<observation>/<model>/`.
+/// Where a run writes: `<root>/<action space>/<observation>/<model>/<trial>/`,
+/// upstream's `<result_dir>/<action_space>/<observation_type>/<model>/<trial_id>/`,
+/// with a task in `<domain>/<task name>/` below it.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct RunLayout {
     pub root: PathBuf,
-    /// The action space or agent name (upstream's `--action_space`, e.g. `code_block`).
+    /// Upstream's `--action_space` as the folder name (default `pyautogui`, the
+    /// argument's default in `run.py`, whatever the agent).
     pub agent: String,
     /// Upstream's `--observation_type` (`a11y_tree`, `screenshot`, ...).
     pub observation: String,
     pub model: String,
+    /// Upstream's `--trial_id` (default `0`).
+    pub trial: String,
 }
 
+/// Upstream's default `--action_space`, the first folder level of its results.
+pub const DEFAULT_ACTION_SPACE_LABEL: &str = "pyautogui";
+/// Upstream's default `--trial_id`.
+pub const DEFAULT_TRIAL_ID: &str = "0";
+
 impl RunLayout {
-    /// The folder the domains go in.
+    /// The trial folder the domains go in (`show_result.py`'s target folder).
     pub fn base(&self) -> PathBuf {
         self.root
             .join(safe_component(&self.agent))
             .join(safe_component(&self.observation))
             .join(safe_component(&self.model))
+            .join(safe_component(&self.trial))
     }
 
     /// The folder of one task (not created).
@@ -355,14 +411,14 @@ impl TaskDir {
         write_atomic(&path, &text)
     }
 
-    /// Writes `result.txt` as upstream does (`f"{score}\n"`, so `1.0`, `0.0`,
-    /// `0.5`). Call it last: it marks the task finished.
+    /// Writes `result.txt` as upstream does, `f"{result}\n"` (see
+    /// [`EpisodeResult::score_text`]). Call it last: it marks the task finished.
     ///
     /// # Errors
     ///
     /// The file cannot be written.
-    pub fn write_result(&self, score: f64) -> Result<(), ResultsError> {
-        write_atomic(&self.path.join(RESULT_FILE), format!("{}\n", python_float(score)).as_bytes())
+    pub fn write_result(&self, text: &str) -> Result<(), ResultsError> {
+        write_atomic(&self.path.join(RESULT_FILE), format!("{text}\n").as_bytes())
     }
 
     /// Writes a whole episode's files in the order that keeps a crash harmless:
@@ -375,8 +431,8 @@ impl TaskDir {
     pub fn finish(&self, episode: &EpisodeResult, steps: &[StepRecord]) -> Result<(), ResultsError> {
         self.write_trajectory(steps)?;
         self.write_episode(episode)?;
-        if !episode.status.is_infra() {
-            self.write_result(episode.score)?;
+        if !episode.status.is_unfinished() {
+            self.write_result(&episode.score_text())?;
         }
         Ok(())
     }
@@ -554,8 +610,8 @@ pub fn scan(root: &Path) -> Result<Vec<FoundTask>, ResultsError> {
     Ok(found)
 }
 
-/// Upstream's layout is five levels deep; a little slack covers a root given one level up.
-const MAX_SCAN_DEPTH: usize = 8;
+/// Upstream's layout is six levels deep; a little slack covers a root given one level up.
+const MAX_SCAN_DEPTH: usize = 9;
 
 fn collect_task_dirs(dir: &Path, depth: usize, out: &mut Vec<PathBuf>) {
     if dir.join(RESULT_FILE).is_file() || dir.join(EPISODE_FILE).is_file() {

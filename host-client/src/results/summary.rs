@@ -1,14 +1,18 @@
-//! The run summary: success per domain and overall, as the WAA paper's table
-//! gives it, plus steps, time and errors per task; written as `summary.json`
-//! and `summary.md` at the root of a result folder.
+//! The run summary: the success rate per domain, per upstream group and
+//! overall, as the WAA paper's table gives it, plus steps, time and errors per
+//! task; written as `summary.json` and `summary.md` at the root of a result
+//! folder, with upstream's `all_result.json` and `missing.json` in each trial
+//! folder.
 //!
 //! A summary is computed from the folders on disk ([`super::scan`]), never
 //! from memory, so `arena report` rebuilds exactly what `arena run` wrote and a
-//! merged folder summarises like one run. Success is a score of 1, as upstream
-//! counts it; the mean score is given too since a few metrics give partial
-//! credit. Tasks that ended in an infrastructure error and were never finished
-//! are listed apart and are not in the success rate's denominator (upstream's
-//! `show_result.py` only counts folders with a `result.txt` too).
+//! merged folder summarises like one run.
+//!
+//! The success rate is upstream's figure: the **mean score × 100** over the
+//! finished tasks (folders with a `result.txt`), as `show_result.py` and
+//! `run.py` compute it, so partial credit counts. The strict count of tasks
+//! that scored 1 is given beside it as "solved". Unfinished tasks are listed
+//! apart and are in no denominator, as upstream's readers skip them.
 
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
@@ -18,6 +22,23 @@ use serde::{Deserialize, Serialize};
 
 use super::{scan, write_atomic, FoundTask, ResultsError, SUMMARY_JSON, SUMMARY_MD};
 
+/// Upstream's groups of domains, as `show_result.py` prints them, in its order.
+pub const GROUPS: &[(&str, &[&str])] = &[
+    ("Office", &["libreoffice_calc", "libreoffice_impress", "libreoffice_writer"]),
+    ("Daily", &["vlc", "thunderbird", "chrome"]),
+    ("Professional", &["gimp", "vs_code"]),
+    ("Web browser", &["chrome", "msedge"]),
+    ("Windows System", &["file_explorer", "settings"]),
+    ("Coding", &["vs_code"]),
+    ("Media", &["vlc"]),
+    ("Windows Utilities", &["windows_calc", "notepad", "clock", "microsoft_paint"]),
+];
+
+/// Upstream's per-trial files, written by `show_result.py` into the folder it reads.
+pub const ALL_RESULT_JSON: &str = "all_result.json";
+/// See [`ALL_RESULT_JSON`].
+pub const MISSING_JSON: &str = "missing.json";
+
 /// One row of the table: a domain, or the overall total.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct DomainRow {
@@ -26,8 +47,11 @@ pub struct DomainRow {
     pub tasks: u32,
     /// Finished tasks that scored 1.
     pub successes: u32,
-    /// `successes / tasks` in percent (0 when there are no tasks).
+    /// Upstream's success rate: mean score × 100 over the finished tasks (0 when there are none).
     pub success_rate: f64,
+    /// `successes / tasks` in percent: the strict solved rate.
+    #[serde(default)]
+    pub solved_rate: f64,
     /// Mean score of the finished tasks.
     pub mean_score: f64,
     /// Mean steps per finished task.
@@ -67,6 +91,9 @@ pub struct Summary {
     pub overall: DomainRow,
     /// By domain name.
     pub domains: Vec<DomainRow>,
+    /// Upstream's groups of domains (`show_result.py`), those with finished tasks.
+    #[serde(default)]
+    pub groups: Vec<DomainRow>,
     /// By domain, then name.
     pub tasks: Vec<TaskRow>,
 }
@@ -90,9 +117,17 @@ impl Summary {
             by_domain.entry(row.domain.as_str()).or_default().push(row);
         }
         let domains = by_domain.iter().map(|(domain, rows)| domain_row(domain, rows)).collect();
+        let groups = GROUPS
+            .iter()
+            .map(|(name, members)| {
+                let rows: Vec<&TaskRow> = tasks.iter().filter(|t| members.contains(&t.domain.as_str())).collect();
+                domain_row(name, &rows)
+            })
+            .filter(|row| row.tasks > 0)
+            .collect();
         let all: Vec<&TaskRow> = tasks.iter().collect();
         let overall = domain_row("Overall", &all);
-        Summary { overall, domains, tasks }
+        Summary { overall, domains, groups, tasks }
     }
 
     /// The tasks that have no score.
@@ -107,7 +142,7 @@ impl Summary {
         self.tasks.iter().map(|t| (t.domain.clone(), t.name.clone(), t.score, t.status.clone(), t.steps)).collect()
     }
 
-    /// The paper's table, without timings: (domain, tasks, successes, rate).
+    /// The paper's table, without timings: (domain, tasks, successes, upstream's rate).
     pub fn table(&self) -> Vec<(String, u32, u32, f64)> {
         self.domains
             .iter()
@@ -128,28 +163,63 @@ impl Summary {
         write_atomic(&json_path, &json)?;
         let md_path = root.join(SUMMARY_MD);
         write_atomic(&md_path, self.markdown().as_bytes())?;
+        self.write_trial_files(root)?;
         Ok((json_path, md_path))
+    }
+
+    /// Writes upstream's `all_result.json` (domain -> task -> score, finished
+    /// tasks) and `missing.json` (domain -> tasks without `result.txt`) into each
+    /// trial folder: the folder two levels above a task folder
+    /// (`<trial>/<domain>/<task>`), as `show_result.py` writes them.
+    ///
+    /// # Errors
+    ///
+    /// A file cannot be written.
+    pub fn write_trial_files(&self, root: &Path) -> Result<(), ResultsError> {
+        type PerDomain = BTreeMap<String, BTreeMap<String, serde_json::Value>>;
+        let mut trials: BTreeMap<PathBuf, (PerDomain, BTreeMap<String, Vec<String>>)> = BTreeMap::new();
+        for task in &self.tasks {
+            let relative: PathBuf = task.path.split('/').collect();
+            let (Some(task_dir), Some(domain_dir)) = (relative.file_name(), relative.parent()) else { continue };
+            let (Some(domain), Some(trial)) = (domain_dir.file_name(), domain_dir.parent()) else { continue };
+            let (domain, name) = (domain.to_string_lossy().into_owned(), task_dir.to_string_lossy().into_owned());
+            let entry = trials.entry(root.join(trial)).or_default();
+            match task.score {
+                Some(score) => {
+                    let value = serde_json::Number::from_f64(score).map_or(serde_json::Value::Null, Into::into);
+                    entry.0.entry(domain).or_default().insert(name, value);
+                }
+                None => entry.1.entry(domain).or_default().push(name),
+            }
+        }
+        for (trial, (results, missing)) in trials {
+            write_atomic(&trial.join(ALL_RESULT_JSON), python_json(&results).as_bytes())?;
+            write_atomic(&trial.join(MISSING_JSON), python_json(&missing).as_bytes())?;
+        }
+        Ok(())
     }
 
     /// The summary as Markdown: the domain table, then every task, then the errors.
     pub fn markdown(&self) -> String {
         let mut md = String::new();
         md.push_str("# Run summary\n\n");
-        md.push_str("| Domain | Tasks | Successes | Success rate | Mean score | Avg steps | Avg time (s) | Agent errors | Unfinished |\n");
+        md.push_str("Success rate as upstream computes it: mean score × 100 over the finished tasks. Solved: tasks that scored 1.\n\n");
+        md.push_str("| Domain | Tasks | Success rate | Solved | Solved rate | Avg steps | Avg time (s) | Agent errors | Unfinished |\n");
         md.push_str("|---|---:|---:|---:|---:|---:|---:|---:|---:|\n");
         let rows = self
             .domains
             .iter()
             .map(|row| (md_escape(&row.domain), row))
-            .chain(std::iter::once((format!("**{}**", self.overall.domain), &self.overall)));
+            .chain(std::iter::once((format!("**{}**", self.overall.domain), &self.overall)))
+            .chain(self.groups.iter().map(|row| (format!("*{}*", row.domain), row)));
         for (name, row) in rows {
             let _ = writeln!(
                 md,
-                "| {name} | {} | {} | {:.1}% | {:.3} | {:.1} | {:.1} | {} | {} |",
+                "| {name} | {} | {:.1}% | {} | {:.1}% | {:.1} | {:.1} | {} | {} |",
                 row.tasks,
-                row.successes,
                 row.success_rate,
-                row.mean_score,
+                row.successes,
+                row.solved_rate,
                 row.avg_steps,
                 row.avg_seconds,
                 row.agent_errors,
@@ -186,6 +256,17 @@ impl Summary {
         }
         md
     }
+}
+
+/// JSON as Python's `json.dump(value, f, indent=4)` lays it out.
+fn python_json(value: &impl Serialize) -> String {
+    let mut out = Vec::new();
+    let formatter = serde_json::ser::PrettyFormatter::with_indent(b"    ");
+    let mut serializer = serde_json::Serializer::with_formatter(&mut out, formatter);
+    if value.serialize(&mut serializer).is_err() {
+        return "{}".to_owned();
+    }
+    String::from_utf8(out).unwrap_or_default()
 }
 
 fn md_escape(text: &str) -> String {
@@ -231,7 +312,8 @@ fn domain_row(domain: &str, rows: &[&TaskRow]) -> DomainRow {
         domain: domain.to_owned(),
         tasks: n,
         successes,
-        success_rate: if n == 0 { 0.0 } else { 100.0 * f64::from(successes) / f64::from(n) },
+        success_rate: 100.0 * mean(&|r| r.score.unwrap_or(0.0)),
+        solved_rate: if n == 0 { 0.0 } else { 100.0 * f64::from(successes) / f64::from(n) },
         mean_score: mean(&|r| r.score.unwrap_or(0.0)),
         avg_steps: mean(&|r| f64::from(r.steps)),
         avg_seconds: mean(&|r| r.elapsed_ms as f64 / 1000.0),

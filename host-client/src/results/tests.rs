@@ -1,10 +1,13 @@
 //! Tests of result folders: layout, trajectories, scores, the summary and the report.
 
-use super::summary::Summary;
+use std::collections::BTreeMap;
+
+use super::summary::{self, Summary};
 use super::*;
 
 pub(crate) fn episode(domain: &str, name: &str, score: f64, status: EpisodeStatus, steps: u32) -> EpisodeResult {
     EpisodeResult {
+        score_is_int: false,
         task_id: format!("{name}-id"),
         task_name: name.to_owned(),
         domain: domain.to_owned(),
@@ -50,6 +53,7 @@ fn layout(root: &Path) -> RunLayout {
         agent: "scripted".into(),
         observation: "a11y_tree".into(),
         model: "meta/llama:3".into(),
+        trial: "0".into(),
     }
 }
 
@@ -113,7 +117,7 @@ fn folder_names_are_made_safe() {
 fn layout_mirrors_upstream() {
     let l = layout(Path::new("/out"));
     let dir = l.task_dir(&task("notepad", "draft"));
-    assert_eq!(dir.path(), Path::new("/out/scripted/a11y_tree/meta_llama_3/notepad/draft"));
+    assert_eq!(dir.path(), Path::new("/out/scripted/a11y_tree/meta_llama_3/0/notepad/draft"));
 }
 
 #[test]
@@ -176,39 +180,115 @@ pub(crate) fn write_task(root: &Path, domain: &str, name: &str, score: f64, stat
 fn the_summary_gives_the_papers_table() {
     let root = tempfile::tempdir().unwrap();
     write_task(root.path(), "notepad", "a", 1.0, EpisodeStatus::Completed);
-    write_task(root.path(), "notepad", "b", 0.0, EpisodeStatus::AgentError("model down".into()));
+    write_task(root.path(), "notepad", "b", 0.0, EpisodeStatus::AgentError("plan used up".into()));
     write_task(root.path(), "notepad", "c", 0.5, EpisodeStatus::Completed);
     write_task(root.path(), "file_explorer", "d", 1.0, EpisodeStatus::Completed);
     write_task(root.path(), "file_explorer", "e", 0.0, EpisodeStatus::InfraError("gone".into()));
+    write_task(root.path(), "file_explorer", "f", 0.0, EpisodeStatus::EvalError("expected getter".into()));
     let summary = Summary::from_dir(root.path()).unwrap();
+    // Upstream's rate: mean score x 100 over finished tasks; partial credit counts.
     assert_eq!(
         summary.table(),
         vec![
             ("file_explorer".to_owned(), 1, 1, 100.0),
-            ("notepad".to_owned(), 3, 1, 100.0 / 3.0),
-            ("Overall".to_owned(), 4, 2, 50.0),
+            ("notepad".to_owned(), 3, 1, 50.0),
+            ("Overall".to_owned(), 4, 2, 62.5),
         ]
     );
-    assert_eq!(summary.overall.unfinished, 1);
+    assert!((summary.domains[1].solved_rate - 100.0 / 3.0).abs() < 1e-9);
+    assert_eq!(summary.overall.solved_rate, 50.0);
+    assert_eq!(summary.overall.unfinished, 2);
     assert_eq!(summary.overall.agent_errors, 1);
     assert!((summary.overall.mean_score - 2.5 / 4.0).abs() < 1e-9);
     assert_eq!(summary.overall.avg_steps, 2.0);
-    assert_eq!(summary.unfinished().map(|t| t.name.as_str()).collect::<Vec<_>>(), ["e"]);
-    assert_eq!(summary.tasks[0].path, "scripted/a11y_tree/meta_llama_3/file_explorer/d");
+    assert_eq!(summary.unfinished().map(|t| t.name.as_str()).collect::<Vec<_>>(), ["e", "f"]);
+    assert_eq!(summary.tasks[0].path, "scripted/a11y_tree/meta_llama_3/0/file_explorer/d");
+    // Upstream's groups: file_explorer is "Windows System", notepad "Windows Utilities".
+    let groups: Vec<(&str, u32, f64)> =
+        summary.groups.iter().map(|g| (g.domain.as_str(), g.tasks, g.success_rate)).collect();
+    assert_eq!(groups, vec![("Windows System", 1, 100.0), ("Windows Utilities", 3, 50.0)]);
 
     let (json, md) = summary.write(root.path()).unwrap();
     let back: Summary = serde_json::from_slice(&std::fs::read(json).unwrap()).unwrap();
     assert_eq!(back, summary);
     let md = std::fs::read_to_string(md).unwrap();
-    assert!(md.contains("| notepad | 3 | 1 | 33.3% |"), "{md}");
-    assert!(md.contains("| **Overall** | 4 | 2 | 50.0% |"), "{md}");
-    assert!(md.contains("model down"), "{md}");
+    assert!(md.contains("| notepad | 3 | 50.0% | 1 | 33.3% |"), "{md}");
+    assert!(md.contains("| **Overall** | 4 | 62.5% | 2 | 50.0% |"), "{md}");
+    assert!(md.contains("| *Windows Utilities* | 3 | 50.0% |"), "{md}");
+    assert!(md.contains("plan used up"), "{md}");
+}
+
+/// (tasks, rate) of a set of tasks.
+type Rate = (usize, f64);
+
+/// Upstream's `show_result.py` rules, written here from their description:
+/// under the trial folder, each `<domain>/<task>` folder holding `result.txt`
+/// counts with `float(text)`, or `float(bool(text))` when that raises; the rate
+/// of a set of tasks is `sum / len * 100`. Answers (per domain, overall, and the
+/// folders without `result.txt`).
+fn upstream_show_result(trial: &Path) -> (BTreeMap<String, Rate>, Rate, Vec<String>) {
+    let mut per_domain: BTreeMap<String, Vec<f64>> = BTreeMap::new();
+    let mut missing = Vec::new();
+    for domain in std::fs::read_dir(trial).unwrap().flatten().filter(|e| e.path().is_dir()) {
+        let name = domain.file_name().to_string_lossy().into_owned();
+        for task in std::fs::read_dir(domain.path()).unwrap().flatten().filter(|e| e.path().is_dir()) {
+            match std::fs::read_to_string(task.path().join(RESULT_FILE)) {
+                Ok(text) => {
+                    let value = match text.trim().parse::<f64>() {
+                        Ok(v) => v,
+                        Err(_) => f64::from(u8::from(!text.is_empty())),
+                    };
+                    per_domain.entry(name.clone()).or_default().push(value);
+                }
+                Err(_) => missing.push(format!("{name}/{}", task.file_name().to_string_lossy())),
+            }
+        }
+    }
+    let rate = |v: &[f64]| v.iter().sum::<f64>() / v.len() as f64 * 100.0;
+    let all: Vec<f64> = per_domain.values().flatten().copied().collect();
+    missing.sort();
+    (per_domain.iter().map(|(d, v)| (d.clone(), (v.len(), rate(v)))).collect(), (all.len(), rate(&all)), missing)
+}
+
+#[test]
+fn upstreams_result_reading_rules_give_the_same_rates_as_the_report() {
+    let root = tempfile::tempdir().unwrap();
+    write_task(root.path(), "notepad", "a", 1.0, EpisodeStatus::Completed);
+    write_task(root.path(), "notepad", "b", 0.25, EpisodeStatus::Completed);
+    write_task(root.path(), "chrome", "c", 0.0, EpisodeStatus::AgentError("plan used up".into()));
+    write_task(root.path(), "chrome", "d", 1.0 / 3.0, EpisodeStatus::Completed);
+    write_task(root.path(), "vlc", "e", 0.0, EpisodeStatus::ModelError("503".into()));
+    write_task(root.path(), "vlc", "f", 1.0, EpisodeStatus::Completed);
+    let (html_summary, _) = html::write_report(root.path(), "run").unwrap();
+    let summary = Summary::from_dir(root.path()).unwrap();
+    assert_eq!(html_summary, summary);
+    let trial = layout(root.path()).base();
+    let (domains, overall, missing) = upstream_show_result(&trial);
+    let ours: BTreeMap<String, Rate> =
+        summary.domains.iter().map(|d| (d.domain.clone(), (d.tasks as usize, d.success_rate))).collect();
+    assert_eq!(domains.keys().collect::<Vec<_>>(), ours.keys().collect::<Vec<_>>());
+    for (domain, (n, rate)) in &domains {
+        let (our_n, our_rate) = ours[domain];
+        assert_eq!(*n, our_n, "{domain}");
+        assert!((rate - our_rate).abs() < 1e-9, "{domain}: upstream {rate}, ours {our_rate}");
+    }
+    assert_eq!(overall.0, summary.overall.tasks as usize);
+    assert!((overall.1 - summary.overall.success_rate).abs() < 1e-9, "{overall:?} vs {:?}", summary.overall);
+    assert_eq!(missing, vec!["vlc/e".to_owned()]);
+
+    // all_result.json and missing.json as show_result.py writes them, in the trial folder.
+    let all: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(trial.join(summary::ALL_RESULT_JSON)).unwrap()).unwrap();
+    assert_eq!(all["notepad"]["b"], serde_json::json!(0.25));
+    assert_eq!(all["vlc"].as_object().map(|m| m.len()), Some(1));
+    let text = std::fs::read_to_string(trial.join(summary::MISSING_JSON)).unwrap();
+    assert_eq!(text, "{\n    \"vlc\": [\n        \"e\"\n    ]\n}");
 }
 
 #[test]
 fn a_folder_without_a_record_still_counts_by_its_path() {
     let root = tempfile::tempdir().unwrap();
-    let dir = root.path().join("code_block/a11y_tree/gpt-4o/chrome/task-1");
+    let dir = root.path().join("code_block/a11y_tree/gpt-4o/0/chrome/task-1");
     std::fs::create_dir_all(&dir).unwrap();
     std::fs::write(dir.join(RESULT_FILE), "1.0\n").unwrap();
     let summary = Summary::from_dir(root.path()).unwrap();
@@ -230,7 +310,7 @@ fn the_report_holds_the_table_the_chart_and_escaped_trajectories() {
     assert!(!page.contains("<script>"), "task text is escaped");
     assert!(page.contains("&lt;b&gt;ok&lt;/b&gt;"), "model text is escaped");
     // Safe names keep spaces out of folders; links are relative and encoded.
-    assert!(page.contains("src=\"scripted/a11y_tree/meta_llama_3/notepad/a_b/step_1.png\""), "{page}");
+    assert!(page.contains("src=\"scripted/a11y_tree/meta_llama_3/0/notepad/a_b/step_1.png\""), "{page}");
     assert!(!page.contains("<link") && !page.contains("<script") && !page.contains("url("), "nothing is fetched");
     assert!(root.path().join(SUMMARY_JSON).is_file() && root.path().join(SUMMARY_MD).is_file());
 }

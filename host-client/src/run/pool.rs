@@ -261,6 +261,7 @@ async fn probe(guest: GuestClient, interval: Duration, timeout: Duration) -> Gue
 /// in this program, not the agent's doing), so it is tried again.
 fn panicked(task: &Task, guest: &str, attempt: u32, message: &str) -> EpisodeResult {
     EpisodeResult {
+        score_is_int: false,
         task_id: task.id.clone(),
         task_name: task.name.clone(),
         domain: task.domain.clone(),

@@ -198,6 +198,7 @@ fn the_plan_takes_the_shard_and_skips_finished_tasks() {
         agent: "scripted".into(),
         observation: "a11y_tree".into(),
         model: "meta/llama:3".into(),
+        trial: "0".into(),
     };
     let mut all = tasks(6);
     sort_tasks(&mut all);

@@ -188,8 +188,9 @@ pub enum Conj {
 pub enum Scoring {
     /// `func: "infeasible"`: 1 when the agent said FAIL, else 0.
     Infeasible,
-    /// One or more metrics.
-    Metrics { conj: Conj, calls: Vec<MetricCall> },
+    /// One or more metrics. `listed`: `func` was a list (upstream's `evaluate`
+    /// then takes its list path, whose failure rules differ from one metric's).
+    Metrics { conj: Conj, calls: Vec<MetricCall>, listed: bool },
 }
 
 /// The `evaluator` object.
@@ -540,7 +541,7 @@ fn evaluator(data: EvaluatorData) -> Result<Evaluator, String> {
         };
         calls.push(MetricCall { metric, result, expected, options });
     }
-    Ok(Evaluator { postconfig, scoring: Scoring::Metrics { conj, calls } })
+    Ok(Evaluator { postconfig, scoring: Scoring::Metrics { conj, calls, listed } })
 }
 
 fn getter(value: Value, known: &[&str]) -> Result<Option<GetterSpec>, String> {

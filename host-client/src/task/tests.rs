@@ -120,7 +120,7 @@ fn upstream_shapes_are_understood() {
         }
     );
     assert_eq!(task.config[1].kind(), "execute");
-    let Scoring::Metrics { conj, calls } = &task.evaluator.scoring else { panic!("metrics expected") };
+    let Scoring::Metrics { conj, calls, .. } = &task.evaluator.scoring else { panic!("metrics expected") };
     assert_eq!(*conj, Conj::Or);
     assert_eq!(calls.len(), 2);
     assert_eq!(calls[1].expected, None);
