@@ -51,6 +51,9 @@ pub use crate::results::{EpisodeResult, EpisodeStatus};
 
 /// Upstream's `--max_steps`.
 pub const DEFAULT_MAX_STEPS: u32 = 15;
+/// The screenshot taken after DONE or FAIL, in the task folder.
+pub const FINAL_SCREENSHOT: &str = "final.png";
+
 /// Upstream's `--sleep_after_execution`.
 pub const DEFAULT_SLEEP_AFTER_ACTION: Duration = Duration::from_secs(3);
 
@@ -59,8 +62,19 @@ pub const DEFAULT_SLEEP_AFTER_ACTION: Duration = Duration::from_secs(3);
 pub struct EpisodeConfig {
     /// Steps the agent gets (upstream: 15).
     pub max_steps: u32,
-    /// Pause after each action and for `WAIT` (upstream: 3 s; 0 against the stub).
+    /// Pause after each action, DONE and FAIL included (upstream's
+    /// `--sleep_after_execution`, 3 s in its scripts; 0 against the stub). `WAIT`
+    /// pauses twice this, as upstream's `env.step` sleeps for WAIT and then again.
     pub sleep_after_action: Duration,
+    /// Pause after closing the windows in the reset (upstream: 5 s).
+    pub pause_after_close_all: Duration,
+    /// Pause after the task's setup, before the first observation (upstream: 5 s).
+    pub pause_after_setup: Duration,
+    /// Where the pauses above go (a test's fake clock records them).
+    pub clock: Arc<dyn setup::Clock>,
+    /// The named options in force, recorded in `episode.json` and `summary.json`
+    /// (`pauses`, `order`, ...), so two runs can be compared honestly.
+    pub options: std::collections::BTreeMap<String, String>,
     /// Whether observations include the accessibility tree (upstream's `a11y_tree` observation).
     pub a11y: bool,
     /// Budget of one accessibility-tree walk.
@@ -86,6 +100,10 @@ impl EpisodeConfig {
         EpisodeConfig {
             max_steps: DEFAULT_MAX_STEPS,
             sleep_after_action: DEFAULT_SLEEP_AFTER_ACTION,
+            pause_after_close_all: setup::AFTER_CLOSE_ALL,
+            pause_after_setup: setup::AFTER_SETUP,
+            clock: Arc::new(setup::RealClock),
+            options: [("pauses".to_owned(), "upstream".to_owned())].into(),
             a11y: true,
             a11y_query: A11yQuery::default(),
             max_model_retries: 2,
@@ -101,6 +119,9 @@ impl EpisodeConfig {
     pub fn instant(cache: DownloadCache) -> EpisodeConfig {
         EpisodeConfig {
             sleep_after_action: Duration::ZERO,
+            pause_after_close_all: Duration::ZERO,
+            pause_after_setup: Duration::ZERO,
+            options: [("pauses".to_owned(), "fast".to_owned())].into(),
             settle: Settle::none(),
             exec: ExecOptions::instant(),
             ..EpisodeConfig::upstream(cache)
@@ -152,6 +173,7 @@ pub async fn run_attempt(
             setup: Vec::new(),
             eval: Value::Null,
             timings: Vec::new(),
+            options: config.options.clone(),
         },
         steps: Vec::new(),
     };
@@ -226,12 +248,15 @@ impl Episode {
         started: Instant,
     ) -> Result<(), EpisodeStatus> {
         agent.reset(task).await;
-        setup::reset(client).await.map_err(|err| infra("reset", err))?;
+        setup::reset(client, config.pause_after_close_all, config.clock.as_ref())
+            .await
+            .map_err(|err| infra("reset", err))?;
         let ctx = SetupContext {
             client: client.clone(),
             cache: config.cache.clone(),
             host_dir: out.setup_dir(),
             settle: config.settle,
+            activate_non_strict: config.options.get("activate_non_strict").is_some_and(|v| v == "on"),
         };
         let reports = setup::run_steps(&ctx, &task.config).await;
         self.result.setup.extend(reports.iter().map(|r| phase(r, "config")));
@@ -239,6 +264,7 @@ impl Episode {
             let detail = reports.last().map(|r| r.detail.clone()).unwrap_or_default();
             return Err(EpisodeStatus::InfraError(format!("setup {detail}")));
         }
+        config.clock.sleep(config.pause_after_setup, "after the setup").await;
         self.result.setup_ms = ms(started.elapsed());
 
         let screen = client.screen().await.map_err(|err| infra("reading the screen", err))?;
@@ -255,6 +281,13 @@ impl Episode {
             if stop {
                 break;
             }
+        }
+        if matches!(last, Some(LastAction::Done | LastAction::Fail)) {
+            // Upstream's env.step observes after DONE and FAIL too (after the
+            // pause the step already took); the frame is kept as `final.png`.
+            let obs = observe(client, task, config, &screen, self.result.steps + 1).await?;
+            out.write_file(FINAL_SCREENSHOT, &obs.screenshot_png)
+                .map_err(|err| infra("writing the screenshot", err))?;
         }
         self.result.last_action = match last {
             None => "none",
@@ -369,12 +402,15 @@ impl Episode {
                 AgentAction::Done | AgentAction::Fail => {
                     last = Some(if *action == AgentAction::Done { LastAction::Done } else { LastAction::Fail });
                     stop = true;
+                    pause += config.sleep_after_action;
+                    config.clock.sleep(config.sleep_after_action, "after DONE or FAIL").await;
                     break;
                 }
                 AgentAction::Wait => {
+                    // Upstream's env.step sleeps for WAIT, then again as after any action.
                     last = Some(LastAction::Wait);
-                    pause += config.sleep_after_action;
-                    tokio::time::sleep(config.sleep_after_action).await;
+                    pause += config.sleep_after_action * 2;
+                    config.clock.sleep(config.sleep_after_action * 2, "for WAIT").await;
                 }
                 _ => {
                     last = Some(LastAction::Other);
@@ -398,10 +434,8 @@ impl Episode {
                             record.outcomes.push(serde_json::json!({ "error": format!("the action took longer than {} s", config.step_timeout.as_secs()) }));
                         }
                     }
-                    if !config.sleep_after_action.is_zero() {
-                        pause += config.sleep_after_action;
-                        tokio::time::sleep(config.sleep_after_action).await;
-                    }
+                    pause += config.sleep_after_action;
+                    config.clock.sleep(config.sleep_after_action, "after an action").await;
                 }
             }
         }
@@ -549,6 +583,7 @@ impl TaskRunner for EpisodeRunner {
                     setup: Vec::new(),
                     eval: Value::Null,
                     timings: Vec::new(),
+                    options: self.config.options.clone(),
                 };
                 if let Err(err) = out.prepare().and_then(|()| out.finish(&result, &[])) {
                     tracing::error!(task = %task.name, error = %err, "cannot write the episode's results");
@@ -619,6 +654,56 @@ mod tests {
             r#"{{"id": "t", "instruction": "do it", "config": [{{"type": "launch", "parameters": {{"command": "notepad"}}}}], "evaluator": {evaluator}}}"#
         );
         Task::parse(&text, &PathBuf::from("/tasks/notepad/t.json")).unwrap()
+    }
+
+    /// A fake clock: records each pause and returns at once.
+    #[derive(Debug, Default)]
+    struct Recorded(std::sync::Mutex<Vec<(Duration, &'static str)>>);
+
+    #[async_trait::async_trait]
+    impl setup::Clock for Recorded {
+        async fn sleep(&self, d: Duration, why: &'static str) {
+            self.0.lock().unwrap().push((d, why));
+        }
+    }
+
+    #[tokio::test]
+    async fn pauses_fall_where_upstreams_fall() {
+        let stub = start(&StubArgs::default(), None).await.unwrap();
+        let client =
+            GuestClient::new(&stub.url(), ClientConfig { token: None, timeout: Duration::from_secs(5), retries: 1 })
+                .unwrap();
+        let tmp = tempfile::tempdir().unwrap();
+        let clock = Arc::new(Recorded::default());
+        let mut config = EpisodeConfig::upstream(DownloadCache::new(tmp.path().join("cache")).unwrap());
+        config.settle = Settle::none();
+        config.exec = ExecOptions::instant();
+        config.clock = clock.clone();
+        let script = vec![
+            says(vec![AgentAction::Wait]),
+            says(vec![AgentAction::Pyautogui("pyautogui.write('x')".into()), AgentAction::Done]),
+        ];
+        let mut agent = Fake { script: script.into(), stub: None };
+        let out = TaskDir::new(tmp.path().join("out"));
+        let result = run_episode(&client, &task("exact_match"), &mut agent, &config, &out).await;
+        stub.stop().await.unwrap();
+        assert_eq!(result.status, EpisodeStatus::Completed, "{result:?}");
+        let s = Duration::from_secs;
+        assert_eq!(
+            *clock.0.lock().unwrap(),
+            vec![
+                (s(5), "after closing the windows"),
+                (s(5), "after the setup"),
+                (s(6), "for WAIT"),
+                (s(3), "after an action"),
+                (s(3), "after DONE or FAIL"),
+            ]
+        );
+        let traj = out.read_trajectory().unwrap();
+        assert_eq!(traj.iter().map(|t| t.timings.pause_ms).collect::<Vec<_>>(), [6000, 6000]);
+        assert!(out.path().join(FINAL_SCREENSHOT).is_file(), "a fresh observation after DONE");
+        assert_eq!(result.options.get("pauses").map(String::as_str), Some("upstream"));
+        assert_eq!(out.read_episode().unwrap().options, result.options);
     }
 
     async fn play(

@@ -71,7 +71,13 @@ async fn start_guest_with(cdp_port: u16) -> Guest {
     let host_dir = tempfile::tempdir().expect("host dir");
     let cache_dir = tempfile::tempdir().expect("cache dir");
     let cache = DownloadCache::new(cache_dir.path()).expect("cache");
-    let ctx = SetupContext { client, cache, host_dir: host_dir.path().to_path_buf(), settle: Settle::none() };
+    let ctx = SetupContext {
+        client,
+        cache,
+        host_dir: host_dir.path().to_path_buf(),
+        settle: Settle::none(),
+        activate_non_strict: false,
+    };
     Guest { ctx, _stub: stub, host_dir, cache_dir }
 }
 
@@ -199,7 +205,15 @@ async fn activate_window_focuses_the_named_window_strict_or_not() {
     assert!(strict.detail.contains("strict"), "{}", strict.detail);
     assert_eq!(focused(ctx).await, "Untitled - Notepad");
 
-    step_ok(ctx, SetupStep::ActivateWindow { window_name: "calcul".into(), strict: false, by_class: false }).await;
+    // Non-strict finds the window and, as upstream, leaves the foreground alone...
+    let found =
+        step_ok(ctx, SetupStep::ActivateWindow { window_name: "calcul".into(), strict: false, by_class: false }).await;
+    assert!(found.detail.contains("not activated"), "{}", found.detail);
+    assert_eq!(focused(ctx).await, "Untitled - Notepad");
+    // ...unless the named deviation is on.
+    let deviating = SetupContext { activate_non_strict: true, ..ctx.clone() };
+    step_ok(&deviating, SetupStep::ActivateWindow { window_name: "calcul".into(), strict: false, by_class: false })
+        .await;
     assert_eq!(focused(ctx).await, "Calculator");
 
     let missing =
@@ -637,7 +651,7 @@ async fn reset_closes_windows_and_clears_downloads_but_keeps_folders_and_desktop
     }
     assert!(titles(ctx).await.len() > 1);
 
-    setup::reset(&ctx.client).await.expect("reset");
+    setup::reset(&ctx.client, Duration::ZERO, &setup::RealClock).await.expect("reset");
 
     assert_eq!(titles(ctx).await, vec!["Program Manager".to_owned()]);
     let mut left: Vec<String> =

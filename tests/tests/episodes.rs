@@ -53,6 +53,7 @@ fn layout(root: &Path) -> RunLayout {
         agent: "scripted".into(),
         observation: "a11y_tree".into(),
         model: "oracle".into(),
+        trial: "0".into(),
     }
 }
 
@@ -69,6 +70,7 @@ fn options(root: &Path, shard: Shard) -> RunOptions {
         },
         progress: false,
         title: "stub run".into(),
+        order: Default::default(),
     }
 }
 

@@ -31,7 +31,7 @@ use crate::results::summary::Summary;
 use crate::results::RunLayout;
 use crate::run::pool::PoolConfig;
 use crate::run::shard::Shard;
-use crate::run::{load_tasks, run_tasks, RunOptions};
+use crate::run::{load_tasks, run_tasks, RunOptions, TaskOrder};
 use crate::setup::{DownloadCache, Settle};
 use crate::task::Difficulty;
 
@@ -98,7 +98,7 @@ pub struct RunArgs {
     /// Pause after each action, in seconds (upstream: 3; --fast makes it 0).
     #[arg(long, value_name = "SECONDS")]
     pub sleep_after: Option<f64>,
-    /// No pauses at all (setup, actions, scripts): for stub guests, which need none.
+    /// The same as `--pauses fast` (the default with --stub-guests).
     #[arg(long)]
     pub fast: bool,
     /// Run every task of the shard again, even those with a result.txt.
@@ -118,9 +118,40 @@ pub struct RunArgs {
     /// scripted and replay agents, which upstream does not have.
     #[arg(long, value_name = "LABEL")]
     pub action_space_label: Option<String>,
+    /// The order tasks go to the guests in: `index` (the index file's, as
+    /// upstream runs them), `sorted` (by domain and name) or `shuffle` (with --seed).
+    #[arg(long, value_enum, default_value_t = OrderArg::Index)]
+    pub order: OrderArg,
+    /// The seed of `--order shuffle`.
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// `upstream`: upstream's pauses (5 s after closing windows and after setup,
+    /// --sleep-after after every action, DONE and FAIL included, twice that for
+    /// WAIT). `fast`: none, for the stub guest and tests. Recorded in the results.
+    #[arg(long, value_enum)]
+    pub pauses: Option<PausesArg>,
+    /// Bring the window of a non-strict `activate_window` setup step to the front
+    /// (upstream finds it and does nothing). Recorded in the results.
+    #[arg(long)]
+    pub activate_non_strict: bool,
     /// The trial folder level of the results (upstream's --trial_id).
     #[arg(long, default_value = crate::results::DEFAULT_TRIAL_ID, value_name = "ID")]
     pub trial_id: String,
+}
+
+/// `--order`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum OrderArg {
+    Index,
+    Sorted,
+    Shuffle,
+}
+
+/// `--pauses`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum PausesArg {
+    Upstream,
+    Fast,
 }
 
 /// Arguments of `arena merge`.
@@ -232,7 +263,11 @@ pub async fn run(conn: &Connection, args: RunArgs) -> anyhow::Result<ExitCode> {
     let cache_dir = args.cache.clone().unwrap_or_else(|| args.out.join("download-cache"));
     let cache = DownloadCache::new(&cache_dir)
         .with_context(|| format!("opening the download cache {}", cache_dir.display()))?;
-    let fast = args.fast || args.stub_guests.is_some();
+    let fast = match args.pauses {
+        Some(PausesArg::Fast) => true,
+        Some(PausesArg::Upstream) => false,
+        None => args.fast || args.stub_guests.is_some(),
+    };
     let mut config = if fast { EpisodeConfig::instant(cache) } else { EpisodeConfig::upstream(cache) };
     config.max_steps = args.max_steps;
     config.a11y = !args.no_a11y;
@@ -240,6 +275,16 @@ pub async fn run(conn: &Connection, args: RunArgs) -> anyhow::Result<ExitCode> {
     if let Some(secs) = args.sleep_after {
         config.sleep_after_action =
             Duration::try_from_secs_f64(secs).context("--sleep-after must be a number of seconds, 0 or more")?;
+        config.options.insert("sleep_after".into(), format!("{secs}"));
+    }
+    let order = match args.order {
+        OrderArg::Index => TaskOrder::Index,
+        OrderArg::Sorted => TaskOrder::Sorted,
+        OrderArg::Shuffle => TaskOrder::Shuffle { seed: args.seed },
+    };
+    config.options.insert("order".into(), order.to_string());
+    if args.activate_non_strict {
+        config.options.insert("activate_non_strict".into(), "on".into());
     }
     if fast {
         config.settle = Settle::none();
@@ -259,6 +304,7 @@ pub async fn run(conn: &Connection, args: RunArgs) -> anyhow::Result<ExitCode> {
         pool: PoolConfig { max_attempts: args.attempts.max(1), ..PoolConfig::default() },
         progress: progress_wanted(),
         title: format!("arena run: {} ({})", args.tasks.display(), layout.base().display()),
+        order,
     };
     let runner = EpisodeRunner { layout, config, agents };
     let outcome = run_tasks(tasks, guests, Arc::new(runner), &options).await?;

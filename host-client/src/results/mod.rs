@@ -239,6 +239,9 @@ pub struct EpisodeResult {
     /// The per-step timings, in step order (a copy of what `traj.jsonl` holds).
     #[serde(default)]
     pub timings: Vec<StepTimings>,
+    /// The named options in force (`pauses`, `order`, ...; docs/compatibility.md).
+    #[serde(default)]
+    pub options: std::collections::BTreeMap<String, String>,
 }
 
 fn one() -> u32 {
@@ -368,6 +371,15 @@ impl TaskDir {
     /// The screenshot file name of step `n`.
     pub fn screenshot_name(step: u32) -> String {
         format!("step_{step}.png")
+    }
+
+    /// Writes a file of the task folder (atomically).
+    ///
+    /// # Errors
+    ///
+    /// The file cannot be written.
+    pub fn write_file(&self, name: &str, bytes: &[u8]) -> Result<(), ResultsError> {
+        write_atomic(&self.path.join(name), bytes)
     }
 
     /// Writes the screenshot of step `step` and returns its file name.

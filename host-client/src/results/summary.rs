@@ -96,6 +96,10 @@ pub struct Summary {
     pub groups: Vec<DomainRow>,
     /// By domain, then name.
     pub tasks: Vec<TaskRow>,
+    /// Each named option in force and the values the tasks ran with (more than
+    /// one value means the folder mixes runs that are not comparable).
+    #[serde(default)]
+    pub options: BTreeMap<String, Vec<String>>,
 }
 
 impl Summary {
@@ -127,7 +131,17 @@ impl Summary {
             .collect();
         let all: Vec<&TaskRow> = tasks.iter().collect();
         let overall = domain_row("Overall", &all);
-        Summary { overall, domains, groups, tasks }
+        let mut options: BTreeMap<String, Vec<String>> = BTreeMap::new();
+        for episode in found.iter().filter_map(|f| f.episode.as_ref()) {
+            for (name, value) in &episode.options {
+                let values = options.entry(name.clone()).or_default();
+                if !values.contains(value) {
+                    values.push(value.clone());
+                    values.sort();
+                }
+            }
+        }
+        Summary { overall, domains, groups, tasks, options }
     }
 
     /// The tasks that have no score.
@@ -204,6 +218,10 @@ impl Summary {
         let mut md = String::new();
         md.push_str("# Run summary\n\n");
         md.push_str("Success rate as upstream computes it: mean score × 100 over the finished tasks. Solved: tasks that scored 1.\n\n");
+        if !self.options.is_empty() {
+            let list: Vec<String> = self.options.iter().map(|(k, v)| format!("{k}={}", v.join("|"))).collect();
+            let _ = writeln!(md, "Options in force: {}.\n", list.join(", "));
+        }
         md.push_str("| Domain | Tasks | Success rate | Solved | Solved rate | Avg steps | Avg time (s) | Agent errors | Unfinished |\n");
         md.push_str("|---|---:|---:|---:|---:|---:|---:|---:|---:|\n");
         let rows = self

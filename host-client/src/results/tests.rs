@@ -27,6 +27,7 @@ pub(crate) fn episode(domain: &str, name: &str, score: f64, status: EpisodeStatu
         setup: Vec::new(),
         eval: Value::Null,
         timings: Vec::new(),
+        options: Default::default(),
     }
 }
 

@@ -121,7 +121,11 @@ mod tests {
         assert_eq!(merged.duplicates.len(), 1);
         assert_eq!(
             merged.summary.table(),
-            vec![("chrome".into(), 1, 1, 100.0), ("notepad".into(), 3, 2, 200.0 / 3.0), ("Overall".into(), 4, 3, 75.0)]
+            vec![
+                ("chrome".into(), 1, 1, 100.0),
+                ("notepad".into(), 3, 2, 2.0 / 3.0 * 100.0),
+                ("Overall".into(), 4, 3, 75.0)
+            ]
         );
         assert!(out.join("report.html").is_file() && out.join("summary.json").is_file());
         // Merging again into the same output gives the same summary.

@@ -2,10 +2,13 @@
 //! guests, and the summary and report at the end.
 //!
 //! A run is: load the tasks (a folder, or an upstream index such as
-//! `test_all.json`) and sort them by domain and name; keep this machine's
-//! [`shard::Shard`]; drop the tasks whose folder already holds a `result.txt`
-//! (resuming is the default, so running the same command again after a crash
-//! finishes the job); spread the rest over the guests ([`pool`]); then write
+//! `test_all.json`, kept in the index's order); keep this machine's
+//! [`shard::Shard`] (chosen from the tasks sorted by domain and name, so every
+//! machine agrees whatever the order); drop the tasks whose folder already
+//! holds a `result.txt` (resuming is the default, so running the same command
+//! again after a crash finishes the job); put the rest in the [`TaskOrder`]
+//! asked for (upstream's: the index's) and hand them to the guests in that
+//! order ([`pool`]); then write
 //! `summary.json`, `summary.md` and `report.html` at the root of the output.
 //!
 //! It is not the episode (see [`crate::episode`]) and it does not parse the
@@ -54,10 +57,10 @@ fn list(errors: &[TaskError]) -> String {
     errors.iter().map(|e| format!("  {e}")).collect::<Vec<_>>().join("\n")
 }
 
-/// Loads the tasks of a folder (every task file below it) or an index file
-/// (`test_all.json`: domain -> names, resolved into
-/// `<index folder>/<examples or examples_noctxt>/<domain>/<name>.json`), sorted
-/// by domain and name so every machine sees the same order.
+/// Loads the tasks of a folder (every task file below it, by path) or an index
+/// file (`test_all.json`: domain -> names, resolved into
+/// `<index folder>/<examples or examples_noctxt>/<domain>/<name>.json`, in the
+/// index's order, which is the order upstream runs them in).
 ///
 /// # Errors
 ///
@@ -80,8 +83,32 @@ pub fn load_tasks(spec: &Path, difficulty: Difficulty) -> Result<Vec<Task>, Load
     if tasks.is_empty() {
         return Err(LoadError::Empty { path: spec.to_owned() });
     }
-    sort_tasks(&mut tasks);
+    if meta.is_dir() {
+        tasks.sort_by(|a, b| a.path.cmp(&b.path));
+    }
     Ok(tasks)
+}
+
+/// The order a shard's tasks are handed to the guests in (`--order`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum TaskOrder {
+    /// As loaded: an index file's order, as upstream's `run.py` runs it.
+    #[default]
+    Index,
+    /// By domain, then name.
+    Sorted,
+    /// A shuffle of the index order, the same for the same seed.
+    Shuffle { seed: u64 },
+}
+
+impl std::fmt::Display for TaskOrder {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            TaskOrder::Index => f.write_str("index"),
+            TaskOrder::Sorted => f.write_str("sorted"),
+            TaskOrder::Shuffle { seed } => write!(f, "shuffle:{seed}"),
+        }
+    }
 }
 
 /// Sorts by domain, then name (then path, for duplicates).
@@ -98,11 +125,27 @@ pub struct Plan {
     pub finished: Vec<Task>,
 }
 
-/// This shard's slice of `tasks` (sorted), split into to-do and already finished.
-/// With `resume` off every task of the shard is to do again.
-pub fn plan(tasks: Vec<Task>, shard: Shard, layout: &RunLayout, resume: bool) -> Plan {
+/// This shard's slice of `tasks`, split into to-do and already finished, each
+/// in `order`. The shard is chosen from the tasks sorted by domain and name,
+/// so shards agree across machines whatever the order. With `resume` off every
+/// task of the shard is to do again.
+pub fn plan(tasks: Vec<Task>, shard: Shard, layout: &RunLayout, resume: bool, order: TaskOrder) -> Plan {
+    let mut numbered: Vec<(usize, Task)> = tasks.into_iter().enumerate().collect();
+    numbered.sort_by(|(_, a), (_, b)| (&a.domain, &a.name, &a.path).cmp(&(&b.domain, &b.name, &b.path)));
+    let mut mine = shard.select(numbered);
+    match order {
+        TaskOrder::Sorted => {}
+        TaskOrder::Index => mine.sort_by_key(|(pos, _)| *pos),
+        TaskOrder::Shuffle { seed } => {
+            use rand::seq::SliceRandom;
+            use rand::SeedableRng;
+            // ChaCha8 by name: its stream is fixed, so a seed means the same order in every build.
+            mine.sort_by_key(|(pos, _)| *pos);
+            mine.shuffle(&mut rand_chacha::ChaCha8Rng::seed_from_u64(seed));
+        }
+    }
     let (finished, todo) =
-        shard.select(tasks).into_iter().partition(|task| resume && layout.task_dir(task).is_finished());
+        mine.into_iter().map(|(_, task)| task).partition(|task| resume && layout.task_dir(task).is_finished());
     Plan { todo, finished }
 }
 
@@ -118,6 +161,8 @@ pub struct RunOptions {
     pub progress: bool,
     /// The report's title.
     pub title: String,
+    /// The order tasks go to the guests in.
+    pub order: TaskOrder,
 }
 
 /// What a run did.
@@ -147,7 +192,7 @@ pub async fn run_tasks(
 ) -> Result<RunOutcome, ResultsError> {
     let root = &options.layout.root;
     std::fs::create_dir_all(root).map_err(|source| ResultsError::Io { path: root.clone(), source })?;
-    let plan = plan(tasks, options.shard, &options.layout, options.resume);
+    let plan = plan(tasks, options.shard, &options.layout, options.resume, options.order);
     let (todo, skipped) = (plan.todo.len(), plan.finished.len());
     tracing::info!(shard = %options.shard, todo, skipped, guests = guests.len(), "starting the run");
     let bar = if options.progress {

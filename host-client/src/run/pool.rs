@@ -281,5 +281,6 @@ fn panicked(task: &Task, guest: &str, attempt: u32, message: &str) -> EpisodeRes
         setup: Vec::new(),
         eval: serde_json::Value::Null,
         timings: Vec::new(),
+        options: Default::default(),
     }
 }

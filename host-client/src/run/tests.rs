@@ -207,13 +207,55 @@ fn the_plan_takes_the_shard_and_skips_finished_tasks() {
     // `write_task` uses the same layout as `layout`.
     write_task(root.path(), "chrome", "t01", 1.0, EpisodeStatus::Completed);
     write_task(root.path(), "notepad", "t02", 0.0, EpisodeStatus::InfraError("x".into()));
-    let p = plan(all.clone(), Shard::ALL, &layout, true);
+    let p = plan(all.clone(), Shard::ALL, &layout, true, TaskOrder::Sorted);
     assert_eq!(names(&p.finished), ["t01"]);
     assert_eq!(names(&p.todo), ["t03", "t05", "t00", "t02", "t04"], "an infrastructure error is not finished");
-    let p = plan(all.clone(), Shard::ALL, &layout, false);
+    let p = plan(all.clone(), Shard::ALL, &layout, false, TaskOrder::Sorted);
     assert_eq!(p.todo.len(), 6);
-    let p = plan(all, "2/2".parse().unwrap(), &layout, true);
+    let p = plan(all, "2/2".parse().unwrap(), &layout, true, TaskOrder::Sorted);
     assert_eq!(names(&p.todo), ["t03", "t00", "t04"]);
+}
+
+#[test]
+fn a_shard_runs_in_the_order_asked_for_and_shards_do_not_depend_on_it() {
+    let root = tempfile::tempdir().unwrap();
+    let layout = RunLayout {
+        root: root.path().to_owned(),
+        agent: "scripted".into(),
+        observation: "a11y_tree".into(),
+        model: "m".into(),
+        trial: "0".into(),
+    };
+    // As an index file lists them: not sorted.
+    let mut all = tasks(8);
+    all.reverse();
+    let names = |ts: &[Task]| ts.iter().map(|t| t.name.clone()).collect::<Vec<_>>();
+    let loaded = names(&all);
+    let index = plan(all.clone(), Shard::ALL, &layout, false, TaskOrder::Index);
+    assert_eq!(names(&index.todo), loaded, "upstream's order: the index's");
+    let sorted = plan(all.clone(), Shard::ALL, &layout, false, TaskOrder::Sorted);
+    let mut by_domain = all.clone();
+    sort_tasks(&mut by_domain);
+    assert_eq!(names(&sorted.todo), names(&by_domain));
+    let shuffled = |seed| names(&plan(all.clone(), Shard::ALL, &layout, false, TaskOrder::Shuffle { seed }).todo);
+    assert_eq!(shuffled(7), shuffled(7), "a seed gives one order");
+    assert_ne!(shuffled(7), shuffled(8));
+    let mut same = shuffled(7);
+    same.sort();
+    let mut every = loaded.clone();
+    every.sort();
+    assert_eq!(same, every, "a shuffle runs every task once");
+    // Shard membership is the same whatever the order; within it the order holds.
+    for order in [TaskOrder::Index, TaskOrder::Sorted, TaskOrder::Shuffle { seed: 3 }] {
+        let mut members = names(&plan(all.clone(), "1/3".parse().unwrap(), &layout, false, order).todo);
+        members.sort();
+        let mut expected = names(&plan(all.clone(), "1/3".parse().unwrap(), &layout, false, TaskOrder::Sorted).todo);
+        expected.sort();
+        assert_eq!(members, expected, "{order}");
+    }
+    let first = names(&plan(all.clone(), "1/3".parse().unwrap(), &layout, false, TaskOrder::Index).todo);
+    let positions: Vec<usize> = first.iter().map(|n| loaded.iter().position(|l| l == n).unwrap()).collect();
+    assert!(positions.windows(2).all(|w| w[0] < w[1]), "index order within the shard: {first:?}");
 }
 
 #[test]
@@ -232,9 +274,10 @@ fn task_lists_load_from_folders_and_indexes_and_report_every_broken_file() {
     let names = |ts: Vec<Task>| ts.into_iter().map(|t| format!("{}/{}", t.domain, t.name)).collect::<Vec<_>>();
     assert_eq!(names(load_tasks(root.path(), Difficulty::Normal).unwrap()), ["chrome/c", "notepad/a", "notepad/b"]);
     assert_eq!(names(load_tasks(&examples, Difficulty::Normal).unwrap()), ["chrome/c", "notepad/a", "notepad/b"]);
+    // An index keeps its own order, as upstream runs it.
     assert_eq!(
         names(load_tasks(&root.path().join("test_small.json"), Difficulty::Normal).unwrap()),
-        ["chrome/c", "notepad/b"]
+        ["notepad/b", "chrome/c"]
     );
     assert!(matches!(load_tasks(&root.path().join("test_small.json"), Difficulty::Hard), Err(LoadError::Tasks(_))));
     std::fs::write(examples.join("chrome/bad.json"), "{").unwrap();

@@ -68,7 +68,7 @@ pub enum SetupError {
 
 /// Scales the pauses upstream sleeps (after opening a file, between the steps of
 /// a strict window activation, between `until` retries and browser connection
-/// attempts, and `sleep` steps themselves).
+/// attempts, the pauses of the reset, and `sleep` steps themselves).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Settle {
     /// Multiplies every pause; 1.0 is upstream's timing, 0.0 skips them all.
@@ -126,6 +126,10 @@ pub struct SetupContext {
     /// Per-task host folder where `execute` writes its `stdout`/`stderr` files.
     pub host_dir: PathBuf,
     pub settle: Settle,
+    /// Bring the window of a non-strict `activate_window` to the front. Off by
+    /// default: upstream's non-strict activation does nothing (its code is
+    /// commented out), and 33 corpus steps rely on that. `--activate-non-strict`.
+    pub activate_non_strict: bool,
 }
 
 /// What one step did, for the trajectory.
@@ -192,10 +196,35 @@ pub fn aborted(reports: &[StepReport]) -> bool {
     reports.last().is_some_and(|r| !r.ok && r.detail.starts_with("aborted:"))
 }
 
+/// Where the episode's pauses go: the real clock, or a test's record of them.
+#[async_trait::async_trait]
+pub trait Clock: Send + Sync + std::fmt::Debug {
+    /// Sleeps `d` (nothing for zero); `why` names the pause for a test's record.
+    async fn sleep(&self, d: Duration, why: &'static str);
+}
+
+/// The real clock: `tokio::time::sleep`.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct RealClock;
+
+#[async_trait::async_trait]
+impl Clock for RealClock {
+    async fn sleep(&self, d: Duration, _why: &'static str) {
+        if !d.is_zero() {
+            tokio::time::sleep(d).await;
+        }
+    }
+}
+
+/// Upstream's `env.reset` sleeps this long after closing every window.
+pub const AFTER_CLOSE_ALL: Duration = Duration::from_secs(5);
+/// Upstream's `env.reset` sleeps this long after the task's setup, before the first observation.
+pub const AFTER_SETUP: Duration = Duration::from_secs(5);
+
 /// Resets the guest between episodes, as upstream's `env.reset` does: closes
 /// every window (but the desktop, upstream's server console and the guest
-/// server's own), waits until every component of the guest's staged health is
-/// up (instead of upstream's fixed 5 s sleep and `/probe` polling), and removes
+/// server's own), pauses `pause` on `clock` (upstream: [`AFTER_CLOSE_ALL`]), waits until every component of the guest's staged health is
+/// up (where upstream polls `/probe`), and removes
 /// the files in Downloads (not folders, not dot-files, not `desktop.ini`).
 ///
 /// Windows or files that refuse to go are logged, as upstream does, not errors.
@@ -204,8 +233,9 @@ pub fn aborted(reports: &[StepReport]) -> bool {
 ///
 /// [`SetupError::Guest`] when the windows cannot be listed, the guest does not
 /// become ready within 100 s, or Downloads cannot be found or listed.
-pub async fn reset(client: &GuestClient) -> Result<(), SetupError> {
+pub async fn reset(client: &GuestClient, pause: Duration, clock: &dyn Clock) -> Result<(), SetupError> {
     close_all(client).await?;
+    clock.sleep(pause, "after closing the windows").await;
     client.wait_ready(&[], READY_WAIT, READY_POLL).await?;
     clear_downloads(client).await?;
     Ok(())

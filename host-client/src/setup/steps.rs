@@ -231,9 +231,12 @@ async fn activate(ctx: &SetupContext, name: &str, strict: bool, by_class: bool) 
         return Outcome::failed(format!("Window {name} not found (empty results)"));
     };
     let id = window.id;
+    if !strict && !ctx.activate_non_strict {
+        // Upstream's non-strict mode finds the window and does nothing more.
+        return Outcome::done(format!("found {:?}; not activated (non-strict, as upstream)", window.title));
+    }
     if !strict {
-        // Upstream's non-strict mode did nothing at all (its activation code is
-        // commented out); activating makes the window the task names the one in front.
+        // The named deviation: make the window the task names the one in front.
         return match client.activate_window(&by_id(id)).await {
             Ok(_) => Outcome::done(format!("activated {:?}", window.title)),
             Err(err) => {

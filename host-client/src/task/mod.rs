@@ -569,13 +569,19 @@ fn getter(value: Value, known: &[&str]) -> Result<Option<GetterSpec>, String> {
 /// [`TaskError`] for an unreadable or malformed index.
 pub fn read_index(path: &Path) -> Result<Vec<(String, Vec<String>)>, TaskError> {
     let text = std::fs::read_to_string(path).map_err(|source| TaskError::Read { path: path.to_owned(), source })?;
+    let invalid = |message: String| TaskError::Invalid { path: path.to_owned(), message };
+    // Checked as JSON first, so a syntax error is reported as one.
     let value: Value = serde_json::from_str(&text)
         .map_err(|err| TaskError::Json { path: path.to_owned(), message: err.to_string() })?;
-    let invalid = |message: String| TaskError::Invalid { path: path.to_owned(), message };
-    let Value::Object(map) = value else {
+    if !value.is_object() {
         return Err(invalid("an index is an object of domain -> list of task ids".into()));
-    };
-    map.into_iter()
+    }
+    // Read again keeping the file's order of domains, as Python's json.load does
+    // (a `Value` object is sorted by key).
+    let InOrder(entries) = serde_json::from_str(&text)
+        .map_err(|err| TaskError::Json { path: path.to_owned(), message: err.to_string() })?;
+    entries
+        .into_iter()
         .map(|(domain, ids)| {
             let ids = ids
                 .as_array()
@@ -588,6 +594,29 @@ pub fn read_index(path: &Path) -> Result<Vec<(String, Vec<String>)>, TaskError> 
             Ok((domain, ids))
         })
         .collect()
+}
+
+/// A JSON object's entries in the order the text has them.
+struct InOrder(Vec<(String, Value)>);
+
+impl<'de> serde::Deserialize<'de> for InOrder {
+    fn deserialize<D: serde::Deserializer<'de>>(deserializer: D) -> Result<InOrder, D::Error> {
+        struct Entries;
+        impl<'de> serde::de::Visitor<'de> for Entries {
+            type Value = InOrder;
+            fn expecting(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+                f.write_str("an object")
+            }
+            fn visit_map<A: serde::de::MapAccess<'de>>(self, mut map: A) -> Result<InOrder, A::Error> {
+                let mut entries = Vec::new();
+                while let Some(entry) = map.next_entry::<String, Value>()? {
+                    entries.push(entry);
+                }
+                Ok(InOrder(entries))
+            }
+        }
+        deserializer.deserialize_map(Entries)
+    }
 }
 
 /// Loads the tasks an index names, from `root/<difficulty folder>/<domain>/<name>.json`.

@@ -139,6 +139,7 @@ async fn pool_run(guests: &[Served], pause: Duration) -> anyhow::Result<(Duratio
         agent: "scripted".into(),
         observation: "a11y_tree".into(),
         model: "oracle".into(),
+        trial: "0".into(),
     };
     let mut config = EpisodeConfig::instant(DownloadCache::new(tmp.path().join("cache"))?);
     config.sleep_after_action = pause;
@@ -151,6 +152,7 @@ async fn pool_run(guests: &[Served], pause: Duration) -> anyhow::Result<(Duratio
         pool: PoolConfig::default(),
         progress: false,
         title: "bench".into(),
+        order: Default::default(),
     };
     let clients = guests.iter().map(|g| client(&g.url)).collect::<anyhow::Result<Vec<_>>>()?;
     let started = Instant::now();
