@@ -112,9 +112,10 @@ fn check_qt_minimal_view(input: &MetricInput) -> Result<f64, MetricError> {
     vlc_setting_equals(input, "expected_qt_minimal_view", "qt-minimal-view=", "0")
 }
 
-/// `check_qt_video_resize`: `qt-video-autoresize` (default 1) equals `rules["qt-video-autoresize"]`.
+/// `check_qt_video_resize`: `qt-video-autoresize` equals `rules["qt-video-autoresize"]`.
+/// With no such line upstream starts from "0" (not VLC's own default of 1).
 fn check_qt_video_resize(input: &MetricInput) -> Result<f64, MetricError> {
-    vlc_setting_equals(input, "qt-video-autoresize", "qt-video-autoresize=", "1")
+    vlc_setting_equals(input, "qt-video-autoresize", "qt-video-autoresize=", "0")
 }
 
 /// `check_one_instance_when_started_from_file`: the setting (default 1)

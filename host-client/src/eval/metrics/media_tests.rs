@@ -113,6 +113,9 @@ fn vlc_settings_follow_upstreams_line_rules() {
             Score(1.0),
         ),
         ("check_qt_video_resize", defaults.clone(), json!({"qt-video-autoresize": 0}), Score(0.0)),
+        // A vlcrc without the line at all reads as upstream's starting value "0".
+        ("check_qt_video_resize", file(d, "noresize", b"[qt]\n"), json!({"qt-video-autoresize": 0}), Score(1.0)),
+        ("check_qt_video_resize", file(d, "noresize1", b"[qt]\n"), json!({"qt-video-autoresize": 1}), Score(0.0)),
         (
             "check_one_instance_when_started_from_file",
             file(d, "one0", &vlcrc("one-instance-when-started-from-file=0\n")),
