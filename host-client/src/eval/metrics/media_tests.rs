@@ -10,6 +10,7 @@ use serde_json::{json, Map, Value};
 
 use super::lookup;
 use super::video::{phash_of_gray32, same_video};
+use crate::eval::metrics::tests::pdf_bytes;
 use crate::eval::metrics::MetricInput;
 use crate::eval::value::Fetched;
 use crate::eval::LastAction;
@@ -351,6 +352,33 @@ fn zip_archives_compare_names_and_bytes() {
     ];
     for (result, options, want) in cases {
         check("compare_zip_files", input(result, Some(gold.clone()), options), want);
+    }
+}
+
+#[test]
+fn zip_pdf_entries_compare_by_extracted_text() {
+    use Want::*;
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let text = "Quarterly report for the northern region, all figures final";
+    let gold_pdf = pdf_bytes(text);
+    // Saved again: other bytes (a trailing comment), the same text.
+    let mut resaved = gold_pdf.clone();
+    resaved.extend_from_slice(b"% saved again\n");
+    assert_ne!(gold_pdf, resaved);
+    // One character changed in 60: the ratio stays above 0.95.
+    let near = pdf_bytes("Quarterly report for the northern region, all figures fina1");
+    let other = pdf_bytes("Minutes of the annual meeting");
+    let gold = file(d, "gold.zip", &zip_of(&[("Report.PDF", &gold_pdf), ("a.txt", b"x")]));
+    let cases = [
+        (file(d, "same.zip", &zip_of(&[("Report.PDF", &resaved), ("a.txt", b"x")])), Score(1.0)),
+        (file(d, "near.zip", &zip_of(&[("Report.PDF", &near), ("a.txt", b"x")])), Score(1.0)),
+        (file(d, "other.zip", &zip_of(&[("Report.PDF", &other), ("a.txt", b"x")])), Score(0.0)),
+        (file(d, "text.zip", &zip_of(&[("Report.PDF", &resaved), ("a.txt", b"y")])), Score(0.0)),
+        (file(d, "broken.zip", &zip_of(&[("Report.PDF", b"%PDF-1.4 nonsense"), ("a.txt", b"x")])), Error("Report.PDF")),
+    ];
+    for (result, want) in cases {
+        check("compare_zip_files", input(result, Some(gold.clone()), json!({})), want);
     }
 }
 

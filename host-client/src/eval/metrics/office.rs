@@ -26,6 +26,8 @@ mod tests;
 
 use super::MetricFn;
 
+pub(super) use pdf::pdf_text_of_bytes;
+
 /// The metric of this family named `name`, if implemented.
 pub(super) fn lookup(name: &str) -> Option<MetricFn> {
     let f: MetricFn = match name {
