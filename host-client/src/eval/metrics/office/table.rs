@@ -196,8 +196,14 @@ fn cell_style(book: &Workbook, sheet: &Sheet, coord: (u32, u32), prop: &str) -> 
     let opt = |v: Option<J>| v.unwrap_or(J::Null);
     let value = match prop {
         "number_format" => {
-            let numeric =
-                cell.is_some_and(|c| !c.has_formula && c.v.is_some() && matches!(c.kind.as_deref(), None | Some("n")));
+            // openpyxl's `data_type == "n"`: a plain number. A number under a
+            // date format is a date cell (`"d"`), so it has no number format here.
+            let numeric = cell.is_some_and(|c| {
+                !c.has_formula
+                    && c.v.is_some()
+                    && matches!(c.kind.as_deref(), None | Some("n"))
+                    && !styles.is_date(c.style)
+            });
             if numeric {
                 J::String(styles.number_format(style))
             } else {

@@ -257,6 +257,91 @@ fn compare_table_sheet_data_follows_pandas() {
     check("compare_table", broken, Some(gold), first, Error("not an Office document"));
 }
 
+/// A cell of [`column_book`]: a number with an optional number format, text, or nothing.
+enum Cell<'a> {
+    Num(f64, Option<&'a str>),
+    Text(&'a str),
+    Blank,
+}
+
+/// A one-column workbook: a header, then `cells` down column A.
+fn column_book(dir: &Path, name: &str, cells: &[Cell<'_>]) -> Fetched {
+    let mut book = XlsxBook::new();
+    let sheet = book.add_worksheet();
+    sheet.write_string(0, 0, "When").unwrap();
+    for (i, cell) in cells.iter().enumerate() {
+        let row = i as u32 + 1;
+        match cell {
+            Cell::Num(value, Some(format)) => {
+                sheet.write_number_with_format(row, 0, *value, &Format::new().set_num_format(*format)).unwrap();
+            }
+            Cell::Num(value, None) => {
+                sheet.write_number(row, 0, *value).unwrap();
+            }
+            Cell::Text(text) => {
+                sheet.write_string(row, 0, *text).unwrap();
+            }
+            Cell::Blank => {}
+        }
+    }
+    let path = dir.join(name);
+    book.save(&path).unwrap();
+    Fetched::File(path)
+}
+
+#[test]
+fn compare_table_dates_times_and_blank_rows_follow_pandas() {
+    use Cell::*;
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let day = Some("yyyy-mm-dd");
+    let clock = Some("hh:mm");
+    // 45293 is 2024-01-02.
+    let gold = column_book(d, "gold.xlsx", &[Num(45293.0, day), Num(45294.0, day)]);
+    let cases = [
+        // The same dates under another date format: equal datetimes.
+        (column_book(d, "same.xlsx", &[Num(45293.0, Some("dd/mm/yyyy")), Num(45294.0, day)]), Score(1.0)),
+        // Typed as plain numbers: an int64 column against datetime64.
+        (column_book(d, "number.xlsx", &[Num(45293.0, None), Num(45294.0, None)]), Score(0.0)),
+        // The same day at noon is another datetime, though the format hides the time.
+        (column_book(d, "noon.xlsx", &[Num(45293.5, day), Num(45294.0, day)]), Score(0.0)),
+        // A missing date is NaT in the same datetime64 column, not equal to a date.
+        (column_book(d, "gap.xlsx", &[Num(45293.0, day), Blank, Num(45294.0, day)]), Score(0.0)),
+    ];
+    let rule = json!({"rules": [{"type": "sheet_data", "sheet_idx0": 0, "sheet_idx1": "EI0"}]});
+    for (result, want) in cases {
+        check("compare_table", result, Some(gold.clone()), rule.clone(), want);
+    }
+    // Times of day are Python `time` objects compared exactly.
+    let half_past = column_book(d, "t1.xlsx", &[Num(0.354_166_666_666_666_7, clock)]);
+    let half_past_again = column_book(d, "t2.xlsx", &[Num(0.354_166_666_666_666_7, clock)]);
+    let nine = column_book(d, "t3.xlsx", &[Num(0.375, clock)]);
+    check("compare_table", half_past.clone(), Some(half_past_again), rule.clone(), Score(1.0));
+    check("compare_table", nine, Some(half_past), rule.clone(), Score(0.0));
+    // pandas keeps empty and whitespace-only rows of a one-column sheet.
+    let words = column_book(d, "w1.xlsx", &[Text("a"), Text("b")]);
+    let with_empty = column_book(d, "w2.xlsx", &[Text("a"), Blank, Text("b")]);
+    let with_space = column_book(d, "w3.xlsx", &[Text("a"), Text("  "), Text("b")]);
+    check("compare_table", with_empty.clone(), Some(words.clone()), rule.clone(), Score(0.0));
+    check("compare_table", with_space.clone(), Some(words), rule.clone(), Score(0.0));
+    check("compare_table", with_space, Some(with_empty), rule.clone(), Score(0.0));
+
+    // openpyxl gives a date cell no number format (its data type is "d", not "n").
+    let formats =
+        json!({"rules": [{"type": "style", "sheet_idx0": 0, "sheet_idx1": "EI0", "props": ["number_format"]}]});
+    let other_format = column_book(d, "fmt.xlsx", &[Num(45293.0, Some("dd/mm/yyyy")), Num(45294.0, day)]);
+    check("compare_table", other_format.clone(), Some(gold.clone()), formats.clone(), Score(1.0));
+    let numbers = column_book(d, "n1.xlsx", &[Num(3.0, Some("0.00"))]);
+    let numbers_other = column_book(d, "n2.xlsx", &[Num(3.0, Some("0.000"))]);
+    check("compare_table", numbers, Some(numbers_other), formats, Score(0.0));
+    let cell_format = |want: Value| {
+        json!({"rules": [{"type": "check_cell", "sheet_idx": 0, "coordinate": "A2",
+            "props": {"number_format": {"method": "eq", "ref": want}}}]})
+    };
+    check("compare_table", other_format.clone(), None, cell_format(json!(null)), Score(1.0));
+    check("compare_table", other_format, None, cell_format(json!("dd/mm/yyyy")), Score(0.0));
+}
+
 #[test]
 fn compare_table_sheet_names_styles_and_cells() {
     let dir = tempfile::tempdir().unwrap();
