@@ -12,6 +12,7 @@
 //! A file that cannot be parsed is an error (the run scores 0 and keeps the
 //! reason); a missing result (`None`) scores 0 as upstream does.
 
+mod cond;
 mod docs;
 mod docx;
 mod frame;

@@ -7,8 +7,8 @@ use std::io::Write;
 use std::path::Path;
 
 use rust_xlsxwriter::{
-    Chart, ChartLegendPosition, ChartType, ConditionalFormatCell, ConditionalFormatCellRule, Format, FormatPattern,
-    Formula, Workbook as XlsxBook,
+    Chart, ChartLegendPosition, ChartType, ConditionalFormatCell, ConditionalFormatCellRule, ConditionalFormatFormula,
+    Format, FormatPattern, Formula, Workbook as XlsxBook,
 };
 use serde_json::{json, Map, Value};
 
@@ -400,6 +400,59 @@ fn compare_table_sheet_names_styles_and_cells() {
     }
     let cond = conditional_book(d, "cond.xlsx");
     check("compare_table", cond.clone(), Some(cond), style(json!(["font_color"])), Error("conditional formatting"));
+}
+
+/// How [`rates_book`] marks a rate in green.
+enum Green<'a> {
+    /// A conditional format with this formula over C2:C5.
+    Rule(&'a str),
+    /// A direct green font on the cell in this row (from 0).
+    Direct(u32),
+}
+
+/// Task 21ab7b40's shape: rates in C2:C5 with a header, one marked green.
+fn rates_book(dir: &Path, name: &str, green: Green<'_>) -> Fetched {
+    let mut book = XlsxBook::new();
+    let sheet = book.add_worksheet();
+    sheet.write_string(0, 2, "Period Rate (%)").unwrap();
+    let font = Format::new().set_font_color(0x00FF00);
+    for (i, rate) in [1.5, 4.25, 2.0, 3.75].iter().enumerate() {
+        let row = i as u32 + 1;
+        match green {
+            Green::Direct(r) if r == row => sheet.write_number_with_format(row, 2, *rate, &font).unwrap(),
+            _ => sheet.write_number(row, 2, *rate).unwrap(),
+        };
+    }
+    if let Green::Rule(formula) = green {
+        let rule = ConditionalFormatFormula::new().set_rule(formula).set_format(&font);
+        sheet.add_conditional_format(1, 2, 4, 2, &rule).unwrap();
+    }
+    let path = dir.join(name);
+    book.save(&path).unwrap();
+    Fetched::File(path)
+}
+
+#[test]
+fn compare_table_style_evaluates_expression_conditional_formats() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let style = json!({"rules": [{"type": "style", "sheet_idx0": 0, "sheet_idx1": "EI0", "props": ["font_color"]}]});
+    let gold = rates_book(d, "gold.xlsx", Green::Rule("=C2=MAX($C$2:$C$5)"));
+    let cases = [
+        (rates_book(d, "same.xlsx", Green::Rule("=C2=MAX($C$2:$C$5)")), Score(1.0)),
+        // The highest rate (row 2) painted green by hand looks the same.
+        (rates_book(d, "direct.xlsx", Green::Direct(2)), Score(1.0)),
+        (rates_book(d, "wrong_cell.xlsx", Green::Direct(1)), Score(0.0)),
+        (rates_book(d, "lowest.xlsx", Green::Rule("=C2=MIN($C$2:$C$5)")), Score(0.0)),
+        // Written the other way round, the formula still binds the cell to C2.
+        (rates_book(d, "flipped.xlsx", Green::Rule("=MAX($C$2:$C$5)=C2")), Score(1.0)),
+        // An absolute single cell makes upstream fail.
+        (rates_book(d, "single.xlsx", Green::Rule("=C2>$C$1")), Error("single cell")),
+        (rates_book(d, "large.xlsx", Green::Rule("=C2=LARGE($C$2:$C$5,1)")), Error("LARGE")),
+    ];
+    for (result, want) in cases {
+        check("compare_table", result, Some(gold.clone()), style.clone(), want);
+    }
 }
 
 #[test]

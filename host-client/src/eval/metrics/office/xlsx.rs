@@ -113,9 +113,33 @@ pub(super) struct Sheet {
     pub(super) cells: BTreeMap<(u32, u32), Cell>,
     /// Merged ranges as (first row, first column, last row, last column).
     pub(super) merged: Vec<(u32, u32, u32, u32)>,
-    /// The `type` of every conditional-formatting rule.
-    pub(super) conditional_rules: Vec<String>,
+    /// The conditional formats, in document order.
+    pub(super) conditional: Vec<Conditional>,
     pub(super) part: String,
+}
+
+/// One `conditionalFormatting` element: the ranges it covers and its rules.
+#[derive(Debug, Clone, Default)]
+pub(super) struct Conditional {
+    /// The `sqref` ranges as (first row, first column, last row, last column).
+    pub(super) ranges: Vec<(u32, u32, u32, u32)>,
+    pub(super) rules: Vec<CfRule>,
+}
+
+/// A `cfRule`: its type, differential style and formulas.
+#[derive(Debug, Clone, Default)]
+pub(super) struct CfRule {
+    pub(super) kind: String,
+    pub(super) dxf: Option<usize>,
+    pub(super) formulas: Vec<String>,
+}
+
+/// A differential style (`dxf`): the parts it sets (`None` when absent).
+#[derive(Debug, Clone, Default)]
+pub(super) struct Dxf {
+    pub(super) font: Option<Font>,
+    pub(super) fill: Option<Fill>,
+    pub(super) num_fmt: Option<String>,
 }
 
 /// The decoded `styles.xml`.
@@ -127,6 +151,8 @@ pub(super) struct Styles {
     xfs: Vec<Xf>,
     /// Per cell format: whether its number format shows a date (decided once, not per cell).
     date_xfs: Vec<bool>,
+    /// The differential styles conditional formats point at.
+    pub(super) dxfs: Vec<Dxf>,
     /// Per cell format: whether it is an elapsed-time format (`[h]:mm`), read as a `timedelta`.
     elapsed_xfs: Vec<bool>,
 }
@@ -297,9 +323,15 @@ impl Workbook {
             }
         }
         for cf in children(root, "conditionalFormatting") {
-            for rule in children(cf, "cfRule") {
-                sheet.conditional_rules.push(attr(rule, "type").unwrap_or_default().to_owned());
-            }
+            let ranges = attr(cf, "sqref").unwrap_or_default().split_whitespace().filter_map(parse_range).collect();
+            let rules = children(cf, "cfRule")
+                .map(|rule| CfRule {
+                    kind: attr(rule, "type").unwrap_or_default().to_owned(),
+                    dxf: attr(rule, "dxfId").and_then(|v| v.parse().ok()),
+                    formulas: children(rule, "formula").map(|f| f.text().unwrap_or_default().to_owned()).collect(),
+                })
+                .collect();
+            sheet.conditional.push(Conditional { ranges, rules });
         }
         Ok(Some(sheet))
     }
@@ -426,6 +458,15 @@ impl Styles {
         }
         styles.fonts = child(root, "fonts").into_iter().flat_map(|f| children(f, "font")).map(parse_font).collect();
         styles.fills = child(root, "fills").into_iter().flat_map(|f| children(f, "fill")).map(parse_fill).collect();
+        styles.dxfs = child(root, "dxfs")
+            .into_iter()
+            .flat_map(|d| children(d, "dxf"))
+            .map(|dxf| Dxf {
+                font: child(dxf, "font").map(parse_font),
+                fill: child(dxf, "fill").map(parse_fill),
+                num_fmt: child(dxf, "numFmt").and_then(|n| attr(n, "formatCode")).map(str::to_owned),
+            })
+            .collect();
         styles.xfs = child(root, "cellXfs")
             .into_iter()
             .flat_map(|x| children(x, "xf"))
@@ -716,7 +757,7 @@ pub(super) fn parse_coordinate(text: &str) -> Option<(u32, u32)> {
     (row > 0).then_some((row, col))
 }
 
-fn parse_range(text: &str) -> Option<(u32, u32, u32, u32)> {
+pub(super) fn parse_range(text: &str) -> Option<(u32, u32, u32, u32)> {
     let (a, b) = text.split_once(':').unwrap_or((text, text));
     let (r1, c1) = parse_coordinate(a)?;
     let (r2, c2) = parse_coordinate(b)?;
