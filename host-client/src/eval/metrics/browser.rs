@@ -358,8 +358,9 @@ fn shortcuts(result: &Fetched) -> Result<Map<String, Value>, MetricError> {
 /// `is_shortcut_on_desktop(shortcuts, rule)`, rule types:
 /// - `name`: some shortcut holds the line `Name=<name>` (Linux `.desktop` files);
 /// - `description`: some `.lnk` shortcut's parsed `data.description` contains `description`;
-/// - `url`: some shortcut's parsed `data.url`, or its `URL=` line, equals `url`
-///   under `compare_urls` (WAA's addition); other types are errors.
+///
+/// every other type (`url` and `id` included) is an error, as upstream raises
+/// `TypeError` for them (`is_url_shortcut_on_desktop` is the URL check).
 pub(super) fn is_shortcut_on_desktop(input: &MetricInput) -> Result<f64, MetricError> {
     let shortcuts = shortcuts(&input.result)?;
     let contents: Vec<&str> = shortcuts.values().filter_map(Value::as_str).collect();
@@ -381,31 +382,7 @@ pub(super) fn is_shortcut_on_desktop(input: &MetricInput) -> Result<f64, MetricE
             });
             Ok(score(found))
         }
-        "url" => {
-            let wanted = input.rule("url")?;
-            for content in &contents {
-                if shortcut_points_at(content, wanted) {
-                    return Ok(1.0);
-                }
-            }
-            Ok(0.0)
-        }
         other => Err(unsupported(other)),
-    }
-}
-
-/// WAA's URL check of one shortcut: the parsed link's `data.url`, else its
-/// `URL=` line; when the content is not JSON, the first `URL=` line.
-fn shortcut_points_at(content: &str, wanted: &Value) -> bool {
-    let matches = |url: &str| compare_url_values(wanted, &Value::String(url.to_owned())).unwrap_or(false);
-    let url_line = || content.split('\n').find_map(|line| line.strip_prefix("URL="));
-    match serde_json::from_str::<Value>(content) {
-        Ok(parsed) => match parsed.get("data").and_then(|d| d.get("url")) {
-            Some(Value::String(url)) => matches(url),
-            Some(_) => false,
-            None => url_line().is_some_and(matches),
-        },
-        Err(_) => url_line().is_some_and(|line| matches(line.trim_end_matches('\r'))),
     }
 }
 

@@ -237,12 +237,7 @@ fn desktop_shortcuts() {
         (
             data(json!({"a.url": "[InternetShortcut]\r\nURL=https://www.mathsisfun.com/games/2048.html\r\n"})),
             json!({"type": "url", "url": "https://mathsisfun.com/games/2048.html"}),
-            Score(1.0),
-        ),
-        (
-            data(json!({"a.url": "[InternetShortcut]\r\nURL=https://www.mathsisfun.com/\r\n"})),
-            json!({"type": "url", "url": "https://mathsisfun.com/games/2048.html"}),
-            Score(0.0),
+            Error("not supported"),
         ),
         (data(json!({"a.lnk": lnk("x")})), json!({"type": "id", "id": "x"}), Error("not supported")),
         (data(json!(["a.lnk"])), description, Error("must be a dict")),

@@ -112,9 +112,10 @@ fn check_qt_minimal_view(input: &MetricInput) -> Result<f64, MetricError> {
     vlc_setting_equals(input, "expected_qt_minimal_view", "qt-minimal-view=", "0")
 }
 
-/// `check_qt_video_resize`: `qt-video-autoresize` (default 1) equals `rules["qt-video-autoresize"]`.
+/// `check_qt_video_resize`: `qt-video-autoresize` equals `rules["qt-video-autoresize"]`.
+/// With no such line upstream starts from "0" (not VLC's own default of 1).
 fn check_qt_video_resize(input: &MetricInput) -> Result<f64, MetricError> {
-    vlc_setting_equals(input, "qt-video-autoresize", "qt-video-autoresize=", "1")
+    vlc_setting_equals(input, "qt-video-autoresize", "qt-video-autoresize=", "0")
 }
 
 /// `check_one_instance_when_started_from_file`: the setting (default 1)
@@ -290,9 +291,12 @@ pub(crate) fn ssim(a: &image::GrayImage, b: &image::GrayImage) -> Result<f64, St
 // ----- archives -----
 
 /// `compare_zip_files(result, expected)`: 1 when both archives hold the same
-/// set of names and every entry has the same bytes. A missing result scores
-/// 0; a file that is not an archive is an error (upstream's `BadZipFile`).
-/// Besides zip, 7z archives are read too (with `options["password"]` when encrypted).
+/// set of names and every entry matches: a `.pdf` entry (any case) by its
+/// extracted text, whose `difflib.SequenceMatcher` ratio must reach
+/// [`PDF_TEXT_THRESHOLD`], any other entry by its bytes. A missing result
+/// scores 0; a file that is not an archive, or a PDF entry that cannot be
+/// read, is an error (upstream raises). Besides zip, 7z archives are read too
+/// (with `options["password"]` when encrypted), under the same rule.
 fn compare_zip_files(input: &MetricInput) -> Result<f64, MetricError> {
     let expected = input.expected()?;
     if missing(&input.result) {
@@ -301,8 +305,26 @@ fn compare_zip_files(input: &MetricInput) -> Result<f64, MetricError> {
     let password = input.options.get("password").and_then(Value::as_str);
     let actual = archive_entries(file_of(&input.result, "result")?, password)?;
     let wanted = archive_entries(file_of(expected, "expected")?, password)?;
-    Ok(score(actual == wanted))
+    if !actual.keys().eq(wanted.keys()) {
+        return Ok(0.0);
+    }
+    for ((name, a), b) in actual.iter().zip(wanted.values()) {
+        let same = if name.to_lowercase().ends_with(".pdf") {
+            let text_a = super::office::pdf_text_of_bytes(a, &format!("result entry {name}"))?;
+            let text_b = super::office::pdf_text_of_bytes(b, &format!("expected entry {name}"))?;
+            arena_shared::script::sequence_ratio(&text_a, &text_b) >= PDF_TEXT_THRESHOLD
+        } else {
+            a == b
+        };
+        if !same {
+            return Ok(0.0);
+        }
+    }
+    Ok(1.0)
 }
+
+/// Upstream's similarity bar for the text of two PDF entries.
+const PDF_TEXT_THRESHOLD: f64 = 0.95;
 
 /// The 7z signature.
 const SEVEN_ZIP_MAGIC: &[u8] = b"7z\xbc\xaf\x27\x1c";

@@ -75,8 +75,13 @@ pub(crate) fn decode_mono(path: &Path) -> Result<(Vec<f32>, u32), MetricError> {
     if let Some(ext) = path.extension().and_then(|e| e.to_str()) {
         hint.with_extension(ext);
     }
+    // Gapless: the encoder delay and padding an MP3's LAME/Xing header (or an
+    // MP4's edit list) declares are trimmed, as the decoders librosa ends up
+    // using (mpg123 through libsndfile, or ffmpeg) do; without it those silent
+    // frames shift and stretch the MFCC sequence.
+    let format_options = FormatOptions { enable_gapless: true, ..FormatOptions::default() };
     let probed = symphonia::default::get_probe()
-        .format(&hint, stream, &FormatOptions::default(), &MetadataOptions::default())
+        .format(&hint, stream, &format_options, &MetadataOptions::default())
         .map_err(|err| parse_error(path, format!("not a readable audio file: {err}")))?;
     let mut format = probed.format;
     let track = format

@@ -10,6 +10,7 @@ use serde_json::{json, Map, Value};
 
 use super::lookup;
 use super::video::{phash_of_gray32, same_video};
+use crate::eval::metrics::tests::pdf_bytes;
 use crate::eval::metrics::MetricInput;
 use crate::eval::value::Fetched;
 use crate::eval::LastAction;
@@ -113,6 +114,9 @@ fn vlc_settings_follow_upstreams_line_rules() {
             Score(1.0),
         ),
         ("check_qt_video_resize", defaults.clone(), json!({"qt-video-autoresize": 0}), Score(0.0)),
+        // A vlcrc without the line at all reads as upstream's starting value "0".
+        ("check_qt_video_resize", file(d, "noresize", b"[qt]\n"), json!({"qt-video-autoresize": 0}), Score(1.0)),
+        ("check_qt_video_resize", file(d, "noresize1", b"[qt]\n"), json!({"qt-video-autoresize": 1}), Score(0.0)),
         (
             "check_one_instance_when_started_from_file",
             file(d, "one0", &vlcrc("one-instance-when-started-from-file=0\n")),
@@ -351,6 +355,33 @@ fn zip_archives_compare_names_and_bytes() {
     }
 }
 
+#[test]
+fn zip_pdf_entries_compare_by_extracted_text() {
+    use Want::*;
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let text = "Quarterly report for the northern region, all figures final";
+    let gold_pdf = pdf_bytes(text);
+    // Saved again: other bytes (a trailing comment), the same text.
+    let mut resaved = gold_pdf.clone();
+    resaved.extend_from_slice(b"% saved again\n");
+    assert_ne!(gold_pdf, resaved);
+    // One character changed in 60: the ratio stays above 0.95.
+    let near = pdf_bytes("Quarterly report for the northern region, all figures fina1");
+    let other = pdf_bytes("Minutes of the annual meeting");
+    let gold = file(d, "gold.zip", &zip_of(&[("Report.PDF", &gold_pdf), ("a.txt", b"x")]));
+    let cases = [
+        (file(d, "same.zip", &zip_of(&[("Report.PDF", &resaved), ("a.txt", b"x")])), Score(1.0)),
+        (file(d, "near.zip", &zip_of(&[("Report.PDF", &near), ("a.txt", b"x")])), Score(1.0)),
+        (file(d, "other.zip", &zip_of(&[("Report.PDF", &other), ("a.txt", b"x")])), Score(0.0)),
+        (file(d, "text.zip", &zip_of(&[("Report.PDF", &resaved), ("a.txt", b"y")])), Score(0.0)),
+        (file(d, "broken.zip", &zip_of(&[("Report.PDF", b"%PDF-1.4 nonsense"), ("a.txt", b"x")])), Error("Report.PDF")),
+    ];
+    for (result, want) in cases {
+        check("compare_zip_files", input(result, Some(gold.clone()), json!({})), want);
+    }
+}
+
 /// A 16-bit PCM WAV file of `samples` (interleaved when `channels` is 2).
 fn wav(rate: u32, channels: u16, samples: &[f64]) -> Vec<u8> {
     let data: Vec<u8> = samples.iter().flat_map(|s| ((s.clamp(-1.0, 1.0) * 32_000.0) as i16).to_le_bytes()).collect();
@@ -406,6 +437,30 @@ fn compare_audios_scores_mfcc_dtw_similarity() {
     for (result, want) in cases {
         check("compare_audios", input(result, Some(gold.clone()), json!({})), want);
     }
+}
+
+/// `melody(22_050, TUNE)` as a 16-bit WAV, encoded by ffmpeg 5 with libmp3lame
+/// at 64 kb/s (`ffmpeg -i melody.wav -codec:a libmp3lame -b:a 64k melody.mp3`):
+/// its frames hold 1 408 samples of encoder delay and padding besides the
+/// 44 096 of the tune, which its LAME header declares.
+const MELODY_MP3: &[u8] = include_bytes!("testdata/melody.mp3");
+
+#[test]
+fn an_mp3_scores_against_its_source_wav_as_upstream_does() {
+    use Want::*;
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let tune = [262.0, 330.0, 392.0, 523.0, 392.0, 330.0, 262.0, 196.0];
+    let source = file(d, "melody.wav", &wav(22_050, 1, &melody(22_050, &tune)));
+    let mp3 = file(d, "melody.mp3", MELODY_MP3);
+    // Gapless decoding drops the encoder's delay and padding, so both decode to
+    // the same 44 096 samples, as librosa loads them.
+    let (samples, rate) = super::audio::decode_mono(mp3.as_path().unwrap()).unwrap();
+    assert_eq!((samples.len(), rate), (44_096, 22_050));
+    // Upstream (librosa 0.11, fastdtw) scores this pair 0.81431; without the
+    // trimming it scored 0.44 here.
+    check("compare_audios", input(mp3.clone(), Some(source.clone()), json!({})), Between(0.81, 0.82));
+    check("compare_audios", input(mp3.clone(), Some(mp3), json!({})), Between(0.999, 1.0));
 }
 
 #[test]

@@ -12,6 +12,7 @@
 //! A file that cannot be parsed is an error (the run scores 0 and keeps the
 //! reason); a missing result (`None`) scores 0 as upstream does.
 
+mod cond;
 mod docs;
 mod docx;
 mod frame;
@@ -25,6 +26,8 @@ mod xml;
 mod tests;
 
 use super::MetricFn;
+
+pub(super) use pdf::pdf_text_of_bytes;
 
 /// The metric of this family named `name`, if implemented.
 pub(super) fn lookup(name: &str) -> Option<MetricFn> {

@@ -34,8 +34,9 @@ fn single(input: &MetricInput) -> Result<Option<&Path>, MetricError> {
     file_of(&input.result, "result").map(Some)
 }
 
+/// Upstream's `path.endswith('.docx')`: case-sensitive, so `.DOCX` is not a docx.
 fn has_extension(path: &Path, ext: &str) -> bool {
-    path.extension().is_some_and(|e| e.eq_ignore_ascii_case(ext))
+    path.extension().is_some_and(|e| e == ext)
 }
 
 /// Python's `re.sub(r'\s+', ' ', text).strip()`.
@@ -342,7 +343,8 @@ pub(super) fn compare_subscript_contains(input: &MetricInput) -> Result<f64, Met
 
 /// `has_page_numbers_in_footers(result)`: every section's default footer
 /// (inherited from earlier sections when not its own) has a digit in its first
-/// paragraph. A page-number field counts through its displayed result.
+/// paragraph's python-docx text: a page number in a complex field's runs
+/// counts, one inside a `w:fldSimple` does not (python-docx skips it).
 pub(super) fn has_page_numbers_in_footers(input: &MetricInput) -> Result<f64, MetricError> {
     let Some(path) = single(input)? else { return Ok(0.0) };
     let doc = Document::open(path)?;

@@ -34,7 +34,7 @@ pub(super) struct Paragraph {
     pub(super) runs: Vec<Run>,
     /// `w:jc/@w:val`.
     pub(super) alignment: Option<String>,
-    /// python-docx's `line_spacing`: a multiple for `auto` spacing, else a length in EMU.
+    /// python-docx's `line_spacing`: a multiple for `auto` spacing (or no `lineRule`), else a length in EMU.
     pub(super) line_spacing: Option<f64>,
     pub(super) tab_stops: Vec<TabStop>,
 }
@@ -122,7 +122,7 @@ impl Document {
             let footer = own.or_else(|| previous_footer.clone());
             let footer_first_text = match &footer {
                 Some(part) => pkg.with_xml(part, |x| {
-                    Ok(children(x.root_element(), "p").next().map(|p| paragraph_text(p, true)).unwrap_or_default())
+                    Ok(children(x.root_element(), "p").next().map(paragraph_text).unwrap_or_default())
                 })?,
                 None => String::new(),
             };
@@ -154,8 +154,11 @@ fn paragraph(p: Node<'_, '_>) -> Paragraph {
     let line_spacing = ppr.and_then(|ppr| child(ppr, "spacing")).and_then(|spacing| {
         let line: f64 = attr(spacing, "line")?.parse().ok()?;
         let emu = line * EMU_PER_TWIP as f64;
-        // python-docx: `auto` spacing is a multiple of single (240 twips); other rules are lengths.
-        Some(if attr(spacing, "lineRule") == Some("auto") { emu / 152_400.0 } else { emu.trunc() })
+        // python-docx: `auto` spacing, which a missing `lineRule` means (the
+        // schema default), is a multiple of single (240 twips); `exact` and
+        // `atLeast` are lengths.
+        let multiple = attr(spacing, "lineRule").is_none_or(|rule| rule == "auto");
+        Some(if multiple { emu / 152_400.0 } else { emu.trunc() })
     });
     let tab_stops = ppr
         .and_then(|ppr| child(ppr, "tabs"))
@@ -167,7 +170,7 @@ fn paragraph(p: Node<'_, '_>) -> Paragraph {
         })
         .collect();
     Paragraph {
-        text: paragraph_text(p, false),
+        text: paragraph_text(p),
         runs: children(p, "r").map(run).collect(),
         alignment: ppr.and_then(|ppr| child_val(ppr, "jc")).map(str::to_owned),
         line_spacing,
@@ -175,15 +178,15 @@ fn paragraph(p: Node<'_, '_>) -> Paragraph {
     }
 }
 
-/// python-docx's paragraph text: runs and hyperlinks in order. With
-/// `with_fields`, simple fields' results count too (footers' `PAGE` fields).
-fn paragraph_text(p: Node<'_, '_>, with_fields: bool) -> String {
+/// python-docx's paragraph text: the `w:r` and `w:hyperlink` children in
+/// order. Anything else (a `w:fldSimple` page field's shown result, content
+/// controls, tracked insertions) is not part of it.
+fn paragraph_text(p: Node<'_, '_>) -> String {
     let mut text = String::new();
     for node in p.children().filter(Node::is_element) {
         match node.tag_name().name() {
             "r" => text.push_str(&run_text(node)),
             "hyperlink" => children(node, "r").for_each(|r| text.push_str(&run_text(r))),
-            "fldSimple" if with_fields => children(node, "r").for_each(|r| text.push_str(&run_text(r))),
             _ => {}
         }
     }
@@ -227,7 +230,7 @@ fn table(tbl: Node<'_, '_>) -> Table {
                 tcpr.and_then(|p| child_val(p, "gridSpan")).and_then(|v| v.parse::<usize>().ok()).unwrap_or(1).max(1);
             let continued =
                 tcpr.and_then(|p| child(p, "vMerge")).is_some_and(|m| attr(m, "val").is_none_or(|v| v == "continue"));
-            let text = children(tc, "p").map(|p| paragraph_text(p, false)).collect::<Vec<_>>().join("\n");
+            let text = children(tc, "p").map(paragraph_text).collect::<Vec<_>>().join("\n");
             for i in 0..span {
                 let value = if continued && columns > 0 && cells.len() >= columns {
                     cells[cells.len() - columns].clone()

@@ -1,16 +1,17 @@
-//! The part of pandas that upstream's `sheet_data` rule relies on:
-//! `pd.read_excel(book, sheet)` (first row as header, per-column type
-//! inference), WAA's conversion of date columns to Excel day numbers,
-//! `DataFrame.round(n)` and `DataFrame.equals`.
+//! The part of pandas (2.0, as upstream pins it) that upstream's `sheet_data`
+//! rule relies on: `pd.read_excel(book, sheet)` (first row as header,
+//! per-column type inference), `DataFrame.round(n)` and `DataFrame.equals`.
 //!
 //! What matters for equality is reproduced: the table's extent (trailing empty
 //! rows and columns trimmed, rows padded to the widest), header labels
 //! (`Unnamed: i`, `.1` suffixes for duplicates), column dtypes (`int64`,
-//! `float64`, `bool`, `object`: `equals` fails on a dtype mismatch even when
-//! values agree), NaN placement, and numeric strings becoming numbers. It is
-//! not a data-frame library.
+//! `float64`, `bool`, `datetime64`, `timedelta64`, `object`: `equals` fails
+//! on a dtype mismatch even when values agree), NaN placement, and numeric
+//! strings becoming numbers. Dates keep their exact value (to openpyxl's
+//! millisecond), so the same day at another time, or a date typed as a plain
+//! number, is a different value. It is not a data-frame library.
 
-use super::xlsx::Value;
+use super::xlsx::{Moment, Value};
 
 /// The strings pandas reads as NaN by default.
 const NA_STRINGS: &[&str] = &[
@@ -26,7 +27,8 @@ pub(super) enum PyObj {
     Float(f64),
     Bool(bool),
     Str(String),
-    Date(f64),
+    /// A Python `datetime`, `time` or `timedelta` (openpyxl's date cells).
+    Moment(Moment),
 }
 
 impl PartialEq for PyObj {
@@ -35,7 +37,8 @@ impl PartialEq for PyObj {
         match (self, other) {
             (NaN, NaN) => true,
             (Str(a), Str(b)) => a == b,
-            (Date(a), Date(b)) => a == b,
+            (Moment(a), Moment(b)) => a == b,
+            (Moment(_), _) | (_, Moment(_)) => false,
             (a, b) => match (a.number(), b.number()) {
                 (Some(x), Some(y)) => x == y,
                 _ => false,
@@ -61,7 +64,7 @@ impl PyObj {
             PyObj::Float(f) => format!("{f:?}"),
             PyObj::Bool(b) => if *b { "True" } else { "False" }.into(),
             PyObj::Str(s) => s.clone(),
-            PyObj::Date(d) => format!("{d}"),
+            PyObj::Moment(m) => moment_label(*m),
         }
     }
 }
@@ -73,6 +76,10 @@ pub(super) enum Column {
     /// NaN is a missing value.
     Float(Vec<f64>),
     Bool(Vec<bool>),
+    /// `datetime64[ns]`, milliseconds since 1899-12-30; `None` is NaT.
+    DateTime(Vec<Option<i64>>),
+    /// `timedelta64[ns]`, milliseconds; `None` is NaT.
+    Duration(Vec<Option<i64>>),
     Object(Vec<PyObj>),
 }
 
@@ -91,7 +98,7 @@ fn convert(value: &Value) -> PyObj {
         Value::Error => PyObj::NaN,
         Value::Bool(b) => PyObj::Bool(*b),
         Value::Text(s) => PyObj::Str(s.clone()),
-        Value::Date(d) => PyObj::Date(*d),
+        Value::Date(m) => PyObj::Moment(*m),
         Value::Number(n) => {
             // pandas returns an int when the float is integral.
             if n.fract() == 0.0 && n.abs() < 9.0e15 {
@@ -127,15 +134,8 @@ impl Frame {
         for row in &mut data {
             row.resize(width, PyObj::Str(String::new()));
         }
-        // The python parser drops blank lines, which after padding can only be
-        // rows of a one-column table (empty or whitespace-only text).
-        if width <= 1 {
-            data.retain(|row| match row.first() {
-                None => false,
-                Some(PyObj::Str(s)) => !s.trim().is_empty(),
-                Some(_) => true,
-            });
-        }
+        // Empty and whitespace-only rows inside the table stay rows (NaN and
+        // the text itself), one-column tables included: pandas keeps them.
         if data.is_empty() {
             return Frame { labels: Vec::new(), columns: Vec::new(), rows: 0 };
         }
@@ -176,6 +176,45 @@ impl Frame {
                 }
                 _ => a == b,
             })
+    }
+}
+
+/// Python's `str()` of a date header, which duplicate-label suffixes build on.
+fn moment_label(moment: Moment) -> String {
+    const DAY: i64 = 86_400_000;
+    let clock = |ms: i64| {
+        let (s, frac) = (ms / 1000, ms % 1000);
+        let text = format!("{:02}:{:02}:{:02}", s / 3600, s / 60 % 60, s % 60);
+        if frac == 0 {
+            text
+        } else {
+            format!("{text}.{:06}", frac * 1000)
+        }
+    };
+    match moment {
+        Moment::DateTime(ms) => {
+            // Civil date from days since 1899-12-30 (days since 1970 shifted by 25 569).
+            let z = ms.div_euclid(DAY) - 25_569 + 719_468;
+            let era = z.div_euclid(146_097);
+            let doe = z - era * 146_097;
+            let yoe = (doe - doe / 1460 + doe / 36_524 - doe / 146_096) / 365;
+            let doy = doe - (365 * yoe + yoe / 4 - yoe / 100);
+            let mp = (5 * doy + 2) / 153;
+            let d = doy - (153 * mp + 2) / 5 + 1;
+            let m = if mp < 10 { mp + 3 } else { mp - 9 };
+            let y = yoe + era * 400 + i64::from(m <= 2);
+            format!("{y:04}-{m:02}-{d:02} {}", clock(ms.rem_euclid(DAY)))
+        }
+        Moment::Time(ms) => clock(ms),
+        Moment::Duration(ms) => {
+            let days = ms.div_euclid(DAY);
+            let rest = clock(ms.rem_euclid(DAY));
+            match days {
+                0 => rest,
+                1 | -1 => format!("{days} day, {rest}"),
+                _ => format!("{days} days, {rest}"),
+            }
+        }
     }
 }
 
@@ -225,8 +264,8 @@ fn parse_numeric(s: &str) -> Option<PyObj> {
     t.parse::<f64>().ok().map(PyObj::Float)
 }
 
-/// Column type inference (`maybe_convert_numeric`, then booleans, then
-/// datetimes, else object), followed by WAA's date-to-day-number step.
+/// Column type inference (`maybe_convert_numeric`, then booleans, then the
+/// DataFrame constructor's datetime/timedelta inference, else object).
 fn infer_column(values: Vec<PyObj>) -> Column {
     if values.is_empty() {
         return Column::Object(values);
@@ -250,16 +289,28 @@ fn infer_column(values: Vec<PyObj>) -> Column {
     if let Some(bools) = values.iter().map(bool_of).collect::<Option<Vec<bool>>>() {
         return Column::Bool(bools);
     }
-    if values.iter().all(|v| matches!(v, PyObj::Date(_) | PyObj::NaN))
-        && values.iter().any(|v| matches!(v, PyObj::Date(_)))
-    {
-        // WAA converts datetime columns to whole days since 1899-12-30; NaT makes the column float.
-        if values.iter().any(|v| matches!(v, PyObj::NaN)) {
-            return Column::Float(
-                values.iter().map(|v| if let PyObj::Date(d) = v { d.floor() } else { f64::NAN }).collect(),
-            );
-        }
-        return Column::Int(values.iter().map(|v| if let PyObj::Date(d) = v { d.floor() as i64 } else { 0 }).collect());
+    // A column of datetimes (or of timedeltas) with only NaN besides becomes
+    // datetime64 (timedelta64) with NaT; times of day stay Python objects.
+    let moments = |want: fn(&Moment) -> Option<i64>| -> Option<Vec<Option<i64>>> {
+        let mut any = false;
+        let column = values
+            .iter()
+            .map(|v| match v {
+                PyObj::NaN => Some(None),
+                PyObj::Moment(m) => {
+                    any = true;
+                    want(m).map(Some)
+                }
+                _ => None,
+            })
+            .collect::<Option<Vec<_>>>()?;
+        any.then_some(column)
+    };
+    if let Some(column) = moments(|m| if let Moment::DateTime(ms) = m { Some(*ms) } else { None }) {
+        return Column::DateTime(column);
+    }
+    if let Some(column) = moments(|m| if let Moment::Duration(ms) = m { Some(*ms) } else { None }) {
+        return Column::Duration(column);
     }
     Column::Object(values)
 }
@@ -270,7 +321,7 @@ fn numeric_column(values: &[PyObj]) -> Option<Column> {
     for v in values {
         let p = match v {
             PyObj::Str(s) => parse_numeric(s)?,
-            PyObj::Date(_) => return None,
+            PyObj::Moment(_) => return None,
             other => other.clone(),
         };
         match p {
@@ -327,8 +378,23 @@ mod tests {
         assert_eq!(strings.columns[0], Column::Int(vec![1, 2]));
         let mixed = Frame::from_grid(&[vec![t("x")], vec![t("a")], vec![n(2.0)]]);
         assert_eq!(mixed.columns[0], Column::Object(vec![PyObj::Str("a".into()), PyObj::Int(2)]));
-        let dates = Frame::from_grid(&[vec![t("d")], vec![Value::Date(45000.75)]]);
-        assert_eq!(dates.columns[0], Column::Int(vec![45000]));
+        let date = |serial| Value::Date(Moment::from_serial(serial, false).unwrap());
+        let dates = Frame::from_grid(&[vec![t("d")], vec![date(45000.75)], vec![Value::Empty]]);
+        assert_eq!(dates.columns[0], Column::DateTime(vec![Some(45000 * 86_400_000 + 64_800_000)]));
+        let with_nat = Frame::from_grid(&[vec![t("d")], vec![date(45000.0)], vec![Value::Empty], vec![date(1.0)]]);
+        assert_eq!(with_nat.columns[0], Column::DateTime(vec![Some(45000 * 86_400_000), None, Some(2 * 86_400_000)]));
+        let times = Frame::from_grid(&[vec![t("t")], vec![date(0.5)]]);
+        assert_eq!(times.columns[0], Column::Object(vec![PyObj::Moment(Moment::Time(43_200_000))]));
+        let spans = Frame::from_grid(&[vec![t("t")], vec![Value::Date(Moment::from_serial(1.5, true).unwrap())]]);
+        assert_eq!(spans.columns[0], Column::Duration(vec![Some(129_600_000)]));
+        let label = Frame::from_grid(&[vec![date(45293.5), date(45293.5)], vec![n(1.0), n(2.0)]]);
+        assert_eq!(
+            label.labels,
+            vec![
+                PyObj::Moment(Moment::DateTime(45293 * 86_400_000 + 43_200_000)),
+                PyObj::Str("2024-01-02 12:00:00.1".into())
+            ]
+        );
     }
 
     #[test]

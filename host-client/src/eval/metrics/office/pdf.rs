@@ -18,12 +18,20 @@ use crate::eval::value::Fetched;
 /// [`MetricError::Parse`] when the file is not a readable PDF (the extractor's
 /// panics on malformed files are caught and reported the same way).
 fn pdf_text(path: &Path) -> Result<String, MetricError> {
-    let parse = |message: String| MetricError::Parse { what: path.display().to_string(), message };
     let bytes = std::fs::read(path).map_err(|source| MetricError::Io { path: path.to_owned(), source })?;
-    let extracted = std::panic::catch_unwind(|| pdf_extract::extract_text_from_mem(&bytes))
+    Ok(pdf_text_of_bytes(&bytes, &path.display().to_string())?.trim().to_owned())
+}
+
+/// The text of every page of a PDF held in memory; `what` names it in errors.
+///
+/// # Errors
+///
+/// [`MetricError::Parse`] when the bytes are not a readable PDF.
+pub(in crate::eval::metrics) fn pdf_text_of_bytes(bytes: &[u8], what: &str) -> Result<String, MetricError> {
+    let parse = |message: String| MetricError::Parse { what: what.to_owned(), message };
+    std::panic::catch_unwind(|| pdf_extract::extract_text_from_mem(bytes))
         .map_err(|_| parse("the PDF text extractor failed on this file".into()))?
-        .map_err(|err| parse(format!("not a readable PDF: {err}")))?;
-    Ok(extracted.trim().to_owned())
+        .map_err(|err| parse(format!("not a readable PDF: {err}")))
 }
 
 fn paths(value: &Fetched) -> Vec<Option<&Path>> {

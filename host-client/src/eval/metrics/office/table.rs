@@ -5,16 +5,16 @@
 //! Rules implemented (every type the corpus uses, plus their close kin):
 //! `sheet_name`, `sheet_data` (pandas semantics, see `frame.rs`), `style`
 //! (per-cell props over the sheet's used range), `check_cell`, `chart`,
-//! `pivot_table`. Conditional formatting inside a `style`
-//! rule is not evaluated: upstream evaluates formula expressions with the
-//! `formulas` package, which this build does not reproduce, so such a sheet
-//! is reported as an error rather than scored on a guess.
+//! `pivot_table`. Conditional formats inside a `style` rule are evaluated as
+//! upstream does (see `cond.rs`): cells an `expression` rule holds for take
+//! the rule's differential style.
 
 use serde_json::{json, Map, Value as J};
 use std::collections::{BTreeMap, BTreeSet};
 
+use super::cond::{Condition, V};
 use super::frame::Frame;
-use super::xlsx::{parse_coordinate, Sheet, Value, Workbook};
+use super::xlsx::{parse_coordinate, Dxf, Sheet, Value, Workbook};
 use crate::eval::metrics::{file_of, MetricError, MetricInput};
 use crate::eval::value::py_eq;
 
@@ -180,8 +180,16 @@ pub(super) fn frame_of(book: &Workbook, sheet: &Sheet) -> Frame {
     Frame::from_grid(&grid)
 }
 
-/// Upstream's `_read_cell_style` for one property of one cell.
-fn cell_style(book: &Workbook, sheet: &Sheet, coord: (u32, u32), prop: &str) -> Result<J, MetricError> {
+/// Upstream's `_read_cell_style` for one property of one cell, from the
+/// cell's own style, or from `dxf` (a conditional format's differential
+/// style) when given.
+fn cell_style(
+    book: &Workbook,
+    sheet: &Sheet,
+    coord: (u32, u32),
+    prop: &str,
+    dxf: Option<&Dxf>,
+) -> Result<J, MetricError> {
     let merged_away = sheet
         .merged
         .iter()
@@ -192,12 +200,21 @@ fn cell_style(book: &Workbook, sheet: &Sheet, coord: (u32, u32), prop: &str) -> 
     // openpyxl loads without data_only here, so a formula counts as a value.
     let has_value = cell.is_some_and(|c| c.has_formula || c.v.is_some() || c.inline.is_some());
     let styles = &book.styles;
+    if let Some(dxf) = dxf {
+        return dxf_style(book, cell, has_value, prop, dxf);
+    }
     let font = || styles.font(style);
     let opt = |v: Option<J>| v.unwrap_or(J::Null);
     let value = match prop {
         "number_format" => {
-            let numeric =
-                cell.is_some_and(|c| !c.has_formula && c.v.is_some() && matches!(c.kind.as_deref(), None | Some("n")));
+            // openpyxl's `data_type == "n"`: a plain number. A number under a
+            // date format is a date cell (`"d"`), so it has no number format here.
+            let numeric = cell.is_some_and(|c| {
+                !c.has_formula
+                    && c.v.is_some()
+                    && matches!(c.kind.as_deref(), None | Some("n"))
+                    && !styles.is_date(c.style)
+            });
             if numeric {
                 J::String(styles.number_format(style))
             } else {
@@ -222,15 +239,113 @@ fn cell_style(book: &Workbook, sheet: &Sheet, coord: (u32, u32), prop: &str) -> 
     Ok(value)
 }
 
-/// Every cell of the used range (A1 to the last row and column holding any
-/// cell, merged ranges included) mapped to its list of style values.
-fn sheet_styles(book: &Workbook, sheet: &Sheet, props: &[String]) -> Result<BTreeMap<(u32, u32), Vec<J>>, MetricError> {
-    if !sheet.conditional_rules.is_empty() {
-        return Err(MetricError::BadInput(format!(
-            "sheet has conditional formatting ({}), which this build does not evaluate",
-            sheet.conditional_rules.join(", ")
-        )));
+/// `_read_cell_style(prop, cell, diff_style)`: the property from the
+/// differential style. A font property of a cell with a value needs the dxf
+/// to have a font (upstream fails otherwise), a fill property is `None`
+/// without a fill, a number format needs the dxf's (plain numbers only).
+fn dxf_style(
+    book: &Workbook,
+    cell: Option<&super::xlsx::Cell>,
+    has_value: bool,
+    prop: &str,
+    dxf: &Dxf,
+) -> Result<J, MetricError> {
+    let no_font =
+        || MetricError::BadInput("a conditional format's style has no font, which upstream cannot read".into());
+    let opt = |v: Option<J>| v.unwrap_or(J::Null);
+    Ok(match prop {
+        "number_format" => {
+            let numeric = cell.is_some_and(|c| {
+                !c.has_formula
+                    && c.v.is_some()
+                    && matches!(c.kind.as_deref(), None | Some("n"))
+                    && !book.styles.is_date(c.style)
+            });
+            if !numeric {
+                J::Null
+            } else {
+                J::String(dxf.num_fmt.clone().ok_or_else(|| {
+                    MetricError::BadInput(
+                        "a conditional format's style has no number format, which upstream cannot read".into(),
+                    )
+                })?)
+            }
+        }
+        "font_name" | "font_family" | "font_color" | "font_bold" | "font_italic" | "font_underline" | "font_size"
+            if !has_value =>
+        {
+            J::Null
+        }
+        "font_name" => opt(dxf.font.as_ref().ok_or_else(no_font)?.name.clone().map(J::String)),
+        "font_family" => opt(dxf.font.as_ref().ok_or_else(no_font)?.family.map(J::from)),
+        "font_color" => opt(dxf.font.as_ref().ok_or_else(no_font)?.color.clone().map(J::String)),
+        "font_bold" => opt(dxf.font.as_ref().ok_or_else(no_font)?.bold.map(J::Bool)),
+        "font_italic" => opt(dxf.font.as_ref().ok_or_else(no_font)?.italic.map(J::Bool)),
+        "font_underline" => opt(dxf.font.as_ref().ok_or_else(no_font)?.underline.clone().map(J::String)),
+        "font_size" => opt(dxf.font.as_ref().ok_or_else(no_font)?.size.map(J::from)),
+        "fill_type" => opt(dxf.fill.as_ref().map(|f| J::String(f.tag.clone()))),
+        "bgcolor" => opt(dxf.fill.as_ref().and_then(|f| f.bg.clone()).map(J::String)),
+        "fgcolor" => opt(dxf.fill.as_ref().and_then(|f| f.fg.clone()).map(J::String)),
+        other => return Err(MetricError::BadInput(format!("unsupported style: {other}"))),
+    })
+}
+
+/// Upstream's conditional-format pass of `load_xlsx_styles`: for every
+/// `expression` rule, each covered cell the formula holds for gets its style
+/// list from the rule's differential style (later rules overwrite earlier
+/// ones). Any other rule type is an error, as upstream raises.
+fn conditional_styles(
+    book: &Workbook,
+    sheet: &Sheet,
+    props: &[String],
+    out: &mut BTreeMap<(u32, u32), Vec<J>>,
+) -> Result<(), MetricError> {
+    let raw = |coord: (u32, u32)| V::from_json(&book.raw_value(sheet.cells.get(&coord)));
+    for format in &sheet.conditional {
+        for rule in &format.rules {
+            if rule.kind != "expression" {
+                return Err(MetricError::BadInput(format!(
+                    "conditional formatting rule type {:?} is not evaluated (upstream raises NotImplementedError)",
+                    rule.kind
+                )));
+            }
+            let formula = rule
+                .formulas
+                .first()
+                .ok_or_else(|| MetricError::BadInput("a conditional formatting expression has no formula".into()))?;
+            let condition = Condition::compile(formula)?;
+            let ranges: Vec<V> = Condition::absolute_ranges(formula)?
+                .into_iter()
+                .map(|(r1, c1, r2, c2)| {
+                    V::List((r1..=r2).flat_map(|r| (c1..=c2).map(move |c| (r, c))).map(raw).collect())
+                })
+                .collect();
+            let dxf = rule.dxf.and_then(|i| book.styles.dxfs.get(i));
+            for &(r1, c1, r2, c2) in &format.ranges {
+                if u64::from(r2 - r1 + 1) * u64::from(c2 - c1 + 1) > MAX_STYLE_CELLS {
+                    return Err(MetricError::BadInput("a conditional format covers too many cells to evaluate".into()));
+                }
+                for row in r1..=r2 {
+                    for col in c1..=c2 {
+                        if condition.holds(raw((row, col)), &ranges)? {
+                            let values = props
+                                .iter()
+                                .map(|p| cell_style(book, sheet, (row, col), p, dxf))
+                                .collect::<Result<Vec<_>, _>>()?;
+                            out.insert((row, col), values);
+                        }
+                    }
+                }
+            }
+        }
     }
+    Ok(())
+}
+
+/// Every cell of the used range (A1 to the last row and column holding any
+/// cell, merged ranges included) mapped to its list of style values, then
+/// the conditional formats' styles of the cells they apply to.
+fn sheet_styles(book: &Workbook, sheet: &Sheet, props: &[String]) -> Result<BTreeMap<(u32, u32), Vec<J>>, MetricError> {
     let mut rows = 0;
     let mut cols = 0;
     for &(r, c) in sheet.cells.keys() {
@@ -249,10 +364,12 @@ fn sheet_styles(book: &Workbook, sheet: &Sheet, props: &[String]) -> Result<BTre
     let mut out = BTreeMap::new();
     for col in 1..=cols {
         for row in 1..=rows {
-            let values = props.iter().map(|p| cell_style(book, sheet, (row, col), p)).collect::<Result<Vec<_>, _>>()?;
+            let values =
+                props.iter().map(|p| cell_style(book, sheet, (row, col), p, None)).collect::<Result<Vec<_>, _>>()?;
             out.insert((row, col), values);
         }
     }
+    conditional_styles(book, sheet, props, &mut out)?;
     Ok(out)
 }
 
@@ -298,7 +415,7 @@ fn check_cell(books: &mut Books, rule: &Map<String, J>) -> Result<Option<bool>, 
         let value = if prop == "value" {
             book.raw_value(sheet.cells.get(&coord))
         } else {
-            cell_style(book, &sheet, coord, prop)?
+            cell_style(book, &sheet, coord, prop, None)?
         };
         if !match_value_to_rule(&value, matcher)? {
             return Ok(Some(false));

@@ -56,8 +56,54 @@ pub(super) enum Value {
     Text(String),
     Bool(bool),
     Error,
-    /// A number shown with a date format: the Excel serial (days since 1899-12-30).
-    Date(f64),
+    /// A number shown with a date or time format, as openpyxl converts it.
+    Date(Moment),
+}
+
+/// A date-formatted number as openpyxl's `from_excel` makes it a Python
+/// `datetime`, `time` or `timedelta`, in whole milliseconds (openpyxl rounds
+/// to them). Values of different kinds are never equal, as in Python.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(super) enum Moment {
+    /// A `datetime`: milliseconds since 1899-12-30 00:00.
+    DateTime(i64),
+    /// A `time` (a serial in `[0, 1)` under a date format): milliseconds since midnight.
+    Time(i64),
+    /// A `timedelta` (an elapsed-time format such as `[h]:mm`): milliseconds.
+    Duration(i64),
+}
+
+const MS_PER_DAY: i64 = 86_400_000;
+
+impl Moment {
+    /// `from_excel(serial, timedelta=elapsed)` with the 1900 date system.
+    /// `None` where openpyxl fails (a date outside years 1 to 9999, or not a
+    /// finite number), which makes the cell an error.
+    pub(super) fn from_serial(serial: f64, elapsed: bool) -> Option<Moment> {
+        if !serial.is_finite() || serial.abs() > 1e10 {
+            return None;
+        }
+        if elapsed {
+            // timedelta(days=v) keeps microseconds; openpyxl then rounds them to
+            // milliseconds (half to even) under whole seconds rounded down.
+            let micros = (serial * 86_400e6).round_ties_even() as i64;
+            let (seconds, rest) = (micros.div_euclid(1_000_000), micros.rem_euclid(1_000_000));
+            let millis = (rest as f64 / 1000.0).round_ties_even() as i64;
+            return Some(Moment::Duration(seconds * 1000 + millis));
+        }
+        let day = serial.floor();
+        let millis = ((serial - day) * MS_PER_DAY as f64).round_ties_even() as i64;
+        if (0.0..1.0).contains(&serial) && millis < MS_PER_DAY {
+            return Some(Moment::Time(millis));
+        }
+        // Excel's phantom 1900-02-29: serials below 60 are a day later in Python.
+        let day = day as i64 + i64::from(serial > 0.0 && serial < 60.0);
+        let total = day * MS_PER_DAY + millis;
+        // datetime covers 0001-01-01 to 9999-12-31.
+        let (first, last) = (days_from_civil(1, 1, 1), days_from_civil(10_000, 1, 1));
+        let epoch = days_from_civil(1899, 12, 30);
+        ((first - epoch) * MS_PER_DAY..(last - epoch) * MS_PER_DAY).contains(&total).then_some(Moment::DateTime(total))
+    }
 }
 
 /// One parsed worksheet.
@@ -67,9 +113,33 @@ pub(super) struct Sheet {
     pub(super) cells: BTreeMap<(u32, u32), Cell>,
     /// Merged ranges as (first row, first column, last row, last column).
     pub(super) merged: Vec<(u32, u32, u32, u32)>,
-    /// The `type` of every conditional-formatting rule.
-    pub(super) conditional_rules: Vec<String>,
+    /// The conditional formats, in document order.
+    pub(super) conditional: Vec<Conditional>,
     pub(super) part: String,
+}
+
+/// One `conditionalFormatting` element: the ranges it covers and its rules.
+#[derive(Debug, Clone, Default)]
+pub(super) struct Conditional {
+    /// The `sqref` ranges as (first row, first column, last row, last column).
+    pub(super) ranges: Vec<(u32, u32, u32, u32)>,
+    pub(super) rules: Vec<CfRule>,
+}
+
+/// A `cfRule`: its type, differential style and formulas.
+#[derive(Debug, Clone, Default)]
+pub(super) struct CfRule {
+    pub(super) kind: String,
+    pub(super) dxf: Option<usize>,
+    pub(super) formulas: Vec<String>,
+}
+
+/// A differential style (`dxf`): the parts it sets (`None` when absent).
+#[derive(Debug, Clone, Default)]
+pub(super) struct Dxf {
+    pub(super) font: Option<Font>,
+    pub(super) fill: Option<Fill>,
+    pub(super) num_fmt: Option<String>,
 }
 
 /// The decoded `styles.xml`.
@@ -81,6 +151,10 @@ pub(super) struct Styles {
     xfs: Vec<Xf>,
     /// Per cell format: whether its number format shows a date (decided once, not per cell).
     date_xfs: Vec<bool>,
+    /// The differential styles conditional formats point at.
+    pub(super) dxfs: Vec<Dxf>,
+    /// Per cell format: whether it is an elapsed-time format (`[h]:mm`), read as a `timedelta`.
+    elapsed_xfs: Vec<bool>,
 }
 
 #[derive(Debug, Clone, Copy, Default)]
@@ -249,9 +323,15 @@ impl Workbook {
             }
         }
         for cf in children(root, "conditionalFormatting") {
-            for rule in children(cf, "cfRule") {
-                sheet.conditional_rules.push(attr(rule, "type").unwrap_or_default().to_owned());
-            }
+            let ranges = attr(cf, "sqref").unwrap_or_default().split_whitespace().filter_map(parse_range).collect();
+            let rules = children(cf, "cfRule")
+                .map(|rule| CfRule {
+                    kind: attr(rule, "type").unwrap_or_default().to_owned(),
+                    dxf: attr(rule, "dxfId").and_then(|v| v.parse().ok()),
+                    formulas: children(rule, "formula").map(|f| f.text().unwrap_or_default().to_owned()).collect(),
+                })
+                .collect();
+            sheet.conditional.push(Conditional { ranges, rules });
         }
         Ok(Some(sheet))
     }
@@ -269,15 +349,16 @@ impl Workbook {
             Some("inlineStr") => cell.inline.clone().or_else(|| cell.v.clone()).map_or(Value::Empty, Value::Text),
             Some("b") => cell.v.as_deref().map_or(Value::Empty, |v| Value::Bool(v.trim() == "1" || v.trim() == "true")),
             Some("e") => Value::Error,
-            Some("d") => cell
-                .v
-                .as_deref()
-                .and_then(iso_to_serial)
-                .map_or_else(|| cell.v.clone().map_or(Value::Empty, Value::Text), Value::Date),
+            Some("d") => cell.v.as_deref().and_then(iso_to_millis).map_or_else(
+                || cell.v.clone().map_or(Value::Empty, Value::Text),
+                |ms| Value::Date(Moment::DateTime(ms)),
+            ),
             _ => match cell.v.as_deref().map(str::trim) {
                 None | Some("") => Value::Empty,
                 Some(v) => match v.parse::<f64>() {
-                    Ok(n) if self.styles.is_date(cell.style) => Value::Date(n),
+                    Ok(n) if self.styles.is_date(cell.style) => {
+                        Moment::from_serial(n, self.styles.is_elapsed(cell.style)).map_or(Value::Error, Value::Date)
+                    }
                     Ok(n) => Value::Number(n),
                     Err(_) => Value::Text(v.to_owned()),
                 },
@@ -377,6 +458,15 @@ impl Styles {
         }
         styles.fonts = child(root, "fonts").into_iter().flat_map(|f| children(f, "font")).map(parse_font).collect();
         styles.fills = child(root, "fills").into_iter().flat_map(|f| children(f, "fill")).map(parse_fill).collect();
+        styles.dxfs = child(root, "dxfs")
+            .into_iter()
+            .flat_map(|d| children(d, "dxf"))
+            .map(|dxf| Dxf {
+                font: child(dxf, "font").map(parse_font),
+                fill: child(dxf, "fill").map(parse_fill),
+                num_fmt: child(dxf, "numFmt").and_then(|n| attr(n, "formatCode")).map(str::to_owned),
+            })
+            .collect();
         styles.xfs = child(root, "cellXfs")
             .into_iter()
             .flat_map(|x| children(x, "xf"))
@@ -387,6 +477,7 @@ impl Styles {
             })
             .collect();
         styles.date_xfs = (0..styles.xfs.len()).map(|i| is_date_format(&styles.number_format(i))).collect();
+        styles.elapsed_xfs = (0..styles.xfs.len()).map(|i| is_elapsed_format(&styles.number_format(i))).collect();
         styles
     }
 
@@ -395,6 +486,14 @@ impl Styles {
         match self.date_xfs.get(style) {
             Some(date) => *date,
             None => is_date_format(&self.number_format(style)),
+        }
+    }
+
+    /// Whether cell format `style` is an elapsed-time format (openpyxl's `is_timedelta_format`).
+    pub(super) fn is_elapsed(&self, style: usize) -> bool {
+        match self.elapsed_xfs.get(style) {
+            Some(elapsed) => *elapsed,
+            None => is_elapsed_format(&self.number_format(style)),
         }
     }
 
@@ -635,6 +734,16 @@ pub(super) fn is_date_format(format: &str) -> bool {
     })
 }
 
+/// openpyxl's `is_timedelta_format`: the first section holds, anywhere and in
+/// any case, `[h]` or `[hh]` (optionally `:mm`, `:ss`, `.0…`), `[m]`/`[mm]`
+/// (optionally `:ss`…) or `[s]`/`[ss]`.
+pub(super) fn is_elapsed_format(format: &str) -> bool {
+    let first = format.split(';').next().unwrap_or_default().to_ascii_lowercase();
+    // Any of the alternatives matches as soon as its bracketed unit does; the
+    // optional tails never make a match fail.
+    ["[h]", "[hh]", "[m]", "[mm]", "[s]", "[ss]"].iter().any(|unit| first.contains(unit))
+}
+
 /// `A1` to (row, column), both from 1.
 pub(super) fn parse_coordinate(text: &str) -> Option<(u32, u32)> {
     let text = text.trim().replace('$', "");
@@ -648,15 +757,15 @@ pub(super) fn parse_coordinate(text: &str) -> Option<(u32, u32)> {
     (row > 0).then_some((row, col))
 }
 
-fn parse_range(text: &str) -> Option<(u32, u32, u32, u32)> {
+pub(super) fn parse_range(text: &str) -> Option<(u32, u32, u32, u32)> {
     let (a, b) = text.split_once(':').unwrap_or((text, text));
     let (r1, c1) = parse_coordinate(a)?;
     let (r2, c2) = parse_coordinate(b)?;
     Some((r1.min(r2), c1.min(c2), r1.max(r2), c1.max(c2)))
 }
 
-/// An ISO date or date-time (`t="d"` cells) to an Excel serial.
-fn iso_to_serial(text: &str) -> Option<f64> {
+/// An ISO date or date-time (`t="d"` cells) as milliseconds since 1899-12-30.
+fn iso_to_millis(text: &str) -> Option<i64> {
     let (date, time) = text.trim().split_once('T').unwrap_or((text.trim(), ""));
     let mut parts = date.split('-');
     let y: i64 = parts.next()?.parse().ok()?;
@@ -672,7 +781,7 @@ fn iso_to_serial(text: &str) -> Option<f64> {
         let s: f64 = hms.next().unwrap_or("0").parse().ok()?;
         seconds = h * 3600.0 + mi * 60.0 + s;
     }
-    Some(days as f64 + seconds / 86400.0)
+    Some(days * MS_PER_DAY + (seconds * 1000.0).round() as i64)
 }
 
 /// Days since 1970-01-01 of a proleptic Gregorian date.
@@ -712,7 +821,32 @@ mod tests {
         assert_eq!(parse_coordinate("A1"), Some((1, 1)));
         assert_eq!(parse_coordinate("$AB$12"), Some((12, 28)));
         assert_eq!(parse_coordinate("12"), None);
-        assert_eq!(iso_to_serial("1900-03-01"), Some(61.0));
-        assert_eq!(iso_to_serial("2024-01-01T12:00:00"), Some(45292.5));
+        assert_eq!(iso_to_millis("1900-03-01"), Some(61 * MS_PER_DAY));
+        assert_eq!(iso_to_millis("2024-01-01T12:00:00"), Some(45292 * MS_PER_DAY + MS_PER_DAY / 2));
+    }
+
+    #[test]
+    fn serials_convert_as_openpyxls_from_excel() {
+        use Moment::*;
+        // 2024-01-02 12:00 and the same day at midnight are different datetimes.
+        assert_eq!(Moment::from_serial(45293.5, false), Some(DateTime(45293 * MS_PER_DAY + MS_PER_DAY / 2)));
+        assert_eq!(Moment::from_serial(45293.0, false), Some(DateTime(45293 * MS_PER_DAY)));
+        // A serial below 1 is a time of day; below 60 a day later (Excel's 1900-02-29).
+        assert_eq!(Moment::from_serial(0.25, false), Some(Time(6 * 3_600_000)));
+        assert_eq!(Moment::from_serial(0.0, false), Some(Time(0)));
+        assert_eq!(Moment::from_serial(1.0, false), Some(DateTime(2 * MS_PER_DAY)));
+        assert_eq!(Moment::from_serial(61.0, false), Some(DateTime(61 * MS_PER_DAY)));
+        // Rounded to the millisecond.
+        assert_eq!(
+            Moment::from_serial(45293.0 + 1.0000004 / 86_400.0, false),
+            Some(DateTime(45293 * MS_PER_DAY + 1000))
+        );
+        // Elapsed-time formats give durations, past a day too.
+        assert_eq!(Moment::from_serial(1.25, true), Some(Duration(30 * 3_600_000)));
+        // Past year 9999 openpyxl gives up and the cell is an error.
+        assert_eq!(Moment::from_serial(3e6, false), None);
+        for (format, elapsed) in [("[h]:mm:ss", true), ("[MM]:ss", true), ("h:mm", false), ("0;[h]", false)] {
+            assert_eq!(is_elapsed_format(format), elapsed, "{format}");
+        }
     }
 }
