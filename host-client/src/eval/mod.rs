@@ -85,8 +85,11 @@ pub enum FailedAt {
     Result,
     /// The expected getter.
     Expected,
-    /// The metric itself.
+    /// The metric itself: its options or inputs are not what it takes, or it crashed.
     Metric,
+    /// The metric could not read or parse a file: scored 0, as most of upstream's
+    /// metrics catch that and return 0 (docs/compatibility.md, "Unreadable files").
+    Unreadable,
 }
 
 /// The score of one metric and what it was computed from.
@@ -181,7 +184,7 @@ pub async fn evaluate(ctx: &EvalContext, evaluator: &Evaluator, last_action: Opt
     for call in calls {
         let outcome = run_metric(ctx, call, last).await;
         let score = outcome.score;
-        if let Some(at) = outcome.failed_at {
+        if let Some(at) = outcome.failed_at.filter(|at| *at != FailedAt::Unreadable) {
             let error = outcome.error.clone().unwrap_or_default();
             // Upstream's one-metric path returns 0 when the result getter raises;
             // everything else that raises (an expected getter, the metric, a result
@@ -284,10 +287,14 @@ async fn run_metric(ctx: &EvalContext, call: &MetricCall, last: Option<LastActio
         // Upstream writes what the metric returns, unclamped.
         Ok(Ok(score)) if score.is_finite() => outcome.score = score,
         Ok(Ok(score)) => outcome.error = Some(format!("metric {} returned {score}, not a score", call.metric)),
+        Ok(Err(err @ (MetricError::Io { .. } | MetricError::Parse { .. }))) => {
+            outcome.error = Some(err.to_string());
+            outcome.failed_at = Some(FailedAt::Unreadable);
+        }
         Ok(Err(err)) => outcome.error = Some(err.to_string()),
         Err(err) => outcome.error = Some(format!("metric {} crashed: {err}", call.metric)),
     }
-    if outcome.error.is_some() {
+    if outcome.error.is_some() && outcome.failed_at.is_none() {
         outcome.failed_at = Some(FailedAt::Metric);
     }
     finish(outcome)
