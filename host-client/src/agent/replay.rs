@@ -31,18 +31,60 @@ pub struct TrajectoryStep {
 
 /// Parses a trajectory; `origin` names it in errors. Blank lines are skipped.
 ///
+/// Two formats are read, line by line:
+/// - ours: `{"step": n, "actions": [...]}`, one line per step;
+/// - upstream's `traj.jsonl` (`trajectory_recorder.py`): one line per action,
+///   `{"step_num": n, "action": "<code>" | "DONE" | "FAIL" | "WAIT", ...}`, where
+///   consecutive lines of one `step_num` form one step, the `step_num` 0 line is
+///   the reset (skipped), and `{"Error": ...}` lines that `run.py` appends after
+///   an exception are skipped with a warning. Upstream's code is Navi's
+///   `code_block` action space, so it replays as [`AgentAction::Computer`].
+///
 /// # Errors
 ///
-/// [`AgentError::Plan`] naming the line that is not a step.
+/// [`AgentError::Plan`] naming the line that is neither.
 pub fn parse_trajectory(text: &str, origin: &str) -> Result<Vec<TrajectoryStep>, AgentError> {
-    text.lines()
-        .enumerate()
-        .filter(|(_, l)| !l.trim().is_empty())
-        .map(|(i, line)| {
-            serde_json::from_str(line)
-                .map_err(|e| AgentError::Plan { path: origin.to_owned(), reason: format!("line {}: {e}", i + 1) })
-        })
-        .collect()
+    let bad = |i: usize, reason: String| AgentError::Plan {
+        path: origin.to_owned(),
+        reason: format!("line {}: {reason}", i + 1),
+    };
+    let mut steps: Vec<TrajectoryStep> = Vec::new();
+    let mut upstream_step: Option<u64> = None;
+    for (i, line) in text.lines().enumerate().filter(|(_, l)| !l.trim().is_empty()) {
+        let value: serde_json::Value = serde_json::from_str(line).map_err(|e| bad(i, e.to_string()))?;
+        if value.get("Error").is_some() {
+            tracing::warn!(origin, line = i + 1, error = %value["Error"], "skipping an error line of an upstream trajectory");
+            continue;
+        }
+        if value.get("step").is_some() {
+            steps.push(serde_json::from_value(value).map_err(|e| bad(i, e.to_string()))?);
+            continue;
+        }
+        let Some(number) = value.get("step_num").and_then(serde_json::Value::as_u64) else {
+            return Err(bad(i, "neither a step (`step`) nor an upstream trajectory line (`step_num`)".into()));
+        };
+        if number == 0 {
+            continue;
+        }
+        let action = match value.get("action") {
+            Some(serde_json::Value::String(code)) => match code.trim() {
+                "DONE" => AgentAction::Done,
+                "FAIL" => AgentAction::Fail,
+                "WAIT" => AgentAction::Wait,
+                _ => AgentAction::Computer(code.clone()),
+            },
+            other => return Err(bad(i, format!("`action` is not a string: {other:?}"))),
+        };
+        if upstream_step == Some(number) {
+            if let Some(last) = steps.last_mut() {
+                last.actions.push(action);
+                continue;
+            }
+        }
+        upstream_step = Some(number);
+        steps.push(TrajectoryStep { step: u32::try_from(number).unwrap_or(u32::MAX), actions: vec![action] });
+    }
+    Ok(steps)
 }
 
 /// Where a [`ReplayAgent`] finds the trajectory of a task.
@@ -126,5 +168,47 @@ impl Agent for ReplayAgent {
             raw_error: step.actions.is_empty().then(|| format!("recorded step {} had no actions", step.step)),
             actions: step.actions,
         })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn upstream_trajectories_replay_step_by_step() {
+        // Laid out as upstream's recorder and run.py write them (keys from
+        // trajectory_recorder.py; values made up here).
+        let text = [
+            r#"{"step_num": 0, "action_timestamp": "20261124@101500", "action": null, "screenshot": "screenshot-step_reset_20261124@101500.png"}"#,
+            r#"{"step_num": 1, "action_timestamp": "20261124@101510", "action": "computer.mouse.move_id(id=3)", "reward": 0, "done": false, "info": {}}"#,
+            r#"{"step_num": 1, "action_timestamp": "20261124@101512", "action": "computer.mouse.single_click()", "reward": 0, "done": false, "info": {}}"#,
+            r#"{"step_num": 2, "action_timestamp": "20261124@101520", "action": "WAIT", "reward": 0, "done": false, "info": {}}"#,
+            r#"{"Error": "Exception in notepad/t", "Exception": "boom", "Traceback": "..."}"#,
+            r#"{"step_num": 3, "action_timestamp": "20261124@101530", "action": "DONE", "reward": 0, "done": true, "info": {"done": true}}"#,
+        ]
+        .join("\n");
+        let steps = parse_trajectory(&text, "t").expect("an upstream trajectory reads");
+        assert_eq!(
+            steps,
+            vec![
+                TrajectoryStep {
+                    step: 1,
+                    actions: vec![
+                        AgentAction::Computer("computer.mouse.move_id(id=3)".into()),
+                        AgentAction::Computer("computer.mouse.single_click()".into()),
+                    ],
+                },
+                TrajectoryStep { step: 2, actions: vec![AgentAction::Wait] },
+                TrajectoryStep { step: 3, actions: vec![AgentAction::Done] },
+            ]
+        );
+        // Our own format still reads.
+        let ours = parse_trajectory(r#"{"step": 1, "actions": [{"kind": "done"}]}"#, "t").unwrap();
+        assert_eq!(ours, vec![TrajectoryStep { step: 1, actions: vec![AgentAction::Done] }]);
+        let err = parse_trajectory("{\"what\": 1}", "t").unwrap_err().to_string();
+        assert!(err.contains("line 1") && err.contains("step_num"), "{err}");
+        let err = parse_trajectory(r#"{"step_num": 1, "action": 3}"#, "t").unwrap_err().to_string();
+        assert!(err.contains("not a string"), "{err}");
     }
 }
