@@ -72,6 +72,9 @@ pub struct EpisodeConfig {
     pub pause_after_setup: Duration,
     /// Where the pauses above go (a test's fake clock records them).
     pub clock: Arc<dyn setup::Clock>,
+    /// Cancelled to stop the run (Ctrl-C): the episode ends at its next step
+    /// boundary as [`EpisodeStatus::Interrupted`], without evaluating.
+    pub stop: tokio_util::sync::CancellationToken,
     /// The named options in force, recorded in `episode.json` and `summary.json`
     /// (`pauses`, `order`, ...), so two runs can be compared honestly.
     pub options: std::collections::BTreeMap<String, String>,
@@ -103,6 +106,7 @@ impl EpisodeConfig {
             pause_after_close_all: setup::AFTER_CLOSE_ALL,
             pause_after_setup: setup::AFTER_SETUP,
             clock: Arc::new(setup::RealClock),
+            stop: tokio_util::sync::CancellationToken::new(),
             options: [("pauses".to_owned(), "upstream".to_owned())].into(),
             a11y: true,
             a11y_query: A11yQuery::default(),
@@ -223,6 +227,14 @@ fn unreachable(err: &ClientError) -> bool {
     )
 }
 
+/// Ends the episode as [`EpisodeStatus::Interrupted`] when the run is stopping.
+fn interrupted(config: &EpisodeConfig, at: &str) -> Result<(), EpisodeStatus> {
+    if config.stop.is_cancelled() {
+        return Err(EpisodeStatus::Interrupted(format!("the run was stopped {at}; nothing was evaluated")));
+    }
+    Ok(())
+}
+
 fn infra(what: &str, err: impl std::fmt::Display) -> EpisodeStatus {
     EpisodeStatus::InfraError(format!("{what}: {err}"))
 }
@@ -266,6 +278,7 @@ impl Episode {
         }
         config.clock.sleep(config.pause_after_setup, "after the setup").await;
         self.result.setup_ms = ms(started.elapsed());
+        interrupted(config, "after the setup")?;
 
         let screen = client.screen().await.map_err(|err| infra("reading the screen", err))?;
         let mut computer = ComputerState::for_screen(
@@ -274,6 +287,7 @@ impl Episode {
         );
         let mut last: Option<LastAction> = None;
         for step in 1..=config.max_steps {
+            interrupted(config, "between steps")?;
             let (stop, step_last) = self.step(client, task, agent, config, out, &screen, &mut computer, step).await?;
             if step_last.is_some() {
                 last = step_last;
@@ -282,6 +296,7 @@ impl Episode {
                 break;
             }
         }
+        interrupted(config, "before the evaluation")?;
         if matches!(last, Some(LastAction::Done | LastAction::Fail)) {
             // Upstream's env.step observes after DONE and FAIL too (after the
             // pause the step already took); the frame is kept as `final.png`.

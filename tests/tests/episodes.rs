@@ -67,6 +67,7 @@ fn options(root: &Path, shard: Shard) -> RunOptions {
             probe_interval: Duration::from_millis(200),
             health_timeout: Duration::from_secs(2),
             no_guest_timeout: Duration::from_secs(60),
+            ..PoolConfig::default()
         },
         progress: false,
         title: "stub run".into(),

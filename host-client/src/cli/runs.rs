@@ -306,8 +306,14 @@ pub async fn run(conn: &Connection, args: RunArgs) -> anyhow::Result<ExitCode> {
         title: format!("arena run: {} ({})", args.tasks.display(), layout.base().display()),
         order,
     };
+    // Ctrl-C: the first stops the run gently, the second abandons it.
+    let stop = options.pool.stop.clone();
+    config.stop = stop.clone();
+    let watcher = tokio::spawn(watch_interrupts(stop.clone()));
     let runner = EpisodeRunner { layout, config, agents };
-    let outcome = run_tasks(tasks, guests, Arc::new(runner), &options).await?;
+    let outcome = run_tasks(tasks, guests, Arc::new(runner), &options).await;
+    watcher.abort();
+    let outcome = outcome?;
     for stub in stubs {
         if let Err(err) = stub.stop().await {
             tracing::warn!(error = format!("{err:#}"), "stopping a stub guest");
@@ -338,9 +344,26 @@ pub async fn run(conn: &Connection, args: RunArgs) -> anyhow::Result<ExitCode> {
             lines.push_str(&format!("  {task}: not run (no healthy guest left)\n"));
         }
         emit(&lines)?;
-        return Ok(ExitCode::from(2));
+        return Ok(ExitCode::from(if stop.is_cancelled() { 130 } else { 2 }));
     }
     Ok(ExitCode::SUCCESS)
+}
+
+/// The first Ctrl-C cancels `stop`: no new task starts and running episodes end
+/// at their next step, unevaluated (they run again next time). The second exits
+/// at once with 130; every file already written stays, as each is written whole.
+async fn watch_interrupts(stop: tokio_util::sync::CancellationToken) {
+    if tokio::signal::ctrl_c().await.is_err() {
+        return;
+    }
+    eprintln!(
+        "\ninterrupted: no new task starts; running episodes stop at their next step (Ctrl-C again to abandon them now)"
+    );
+    stop.cancel();
+    if tokio::signal::ctrl_c().await.is_ok() {
+        eprintln!("abandoned: finished tasks are kept; the others run again with the same command");
+        std::process::exit(130);
+    }
 }
 
 /// `arena merge`.

@@ -97,13 +97,16 @@ pub enum EpisodeStatus {
     /// `predict` raises and the task is left without a result).
     ModelError(String),
     /// Unfinished: the evaluation failed where upstream's `evaluate` raises (an
-    /// expected getter, a metric that cannot read its input, a gold file that
+    /// expected getter, a metric given inputs it cannot take, a gold file that
     /// cannot be downloaded).
     EvalError(String),
+    /// Unfinished: the run was interrupted (Ctrl-C) before the episode ended;
+    /// nothing half-done was evaluated.
+    Interrupted(String),
 }
 
 impl EpisodeStatus {
-    /// `completed`, `agent_error`, `infra_error`, `model_error` or `eval_error`.
+    /// `completed`, `agent_error`, `infra_error`, `model_error`, `eval_error` or `interrupted`.
     pub fn kind(&self) -> &'static str {
         match self {
             EpisodeStatus::Completed => "completed",
@@ -111,6 +114,7 @@ impl EpisodeStatus {
             EpisodeStatus::InfraError(_) => "infra_error",
             EpisodeStatus::ModelError(_) => "model_error",
             EpisodeStatus::EvalError(_) => "eval_error",
+            EpisodeStatus::Interrupted(_) => "interrupted",
         }
     }
 
@@ -121,7 +125,8 @@ impl EpisodeStatus {
             EpisodeStatus::AgentError(m)
             | EpisodeStatus::InfraError(m)
             | EpisodeStatus::ModelError(m)
-            | EpisodeStatus::EvalError(m) => Some(m),
+            | EpisodeStatus::EvalError(m)
+            | EpisodeStatus::Interrupted(m) => Some(m),
         }
     }
 
@@ -132,7 +137,13 @@ impl EpisodeStatus {
 
     /// No score: no `result.txt` is written and the next run plays the task again.
     pub fn is_unfinished(&self) -> bool {
-        matches!(self, EpisodeStatus::InfraError(_) | EpisodeStatus::ModelError(_) | EpisodeStatus::EvalError(_))
+        matches!(
+            self,
+            EpisodeStatus::InfraError(_)
+                | EpisodeStatus::ModelError(_)
+                | EpisodeStatus::EvalError(_)
+                | EpisodeStatus::Interrupted(_)
+        )
     }
 }
 

@@ -17,6 +17,7 @@ use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use tokio::task::JoinSet;
+use tokio_util::sync::CancellationToken;
 
 use crate::client::GuestClient;
 use crate::results::{EpisodeResult, EpisodeStatus};
@@ -43,6 +44,9 @@ pub struct PoolConfig {
     /// How long the run waits with tasks left and no guest in the pool before
     /// it gives the remaining tasks up.
     pub no_guest_timeout: Duration,
+    /// Cancelled to stop the run (the first Ctrl-C): no new task starts, the
+    /// running episodes end at their next step, the rest are listed as not run.
+    pub stop: CancellationToken,
 }
 
 impl Default for PoolConfig {
@@ -52,6 +56,7 @@ impl Default for PoolConfig {
             probe_interval: Duration::from_secs(5),
             health_timeout: Duration::from_secs(5),
             no_guest_timeout: Duration::from_secs(600),
+            stop: CancellationToken::new(),
         }
     }
 }
@@ -96,7 +101,7 @@ pub struct PoolReport {
     pub episodes: u32,
     /// The last result of every task that ran, in completion order.
     pub results: Vec<EpisodeResult>,
-    /// Tasks that never got a result (no guest left), by `domain/name`.
+    /// Tasks that never started (no guest left, or the run was stopped), by `domain/name`.
     pub not_run: Vec<String>,
     /// Guests that were down when the run ended.
     pub guests_down: Vec<String>,
@@ -140,6 +145,11 @@ pub async fn run_pool(
     let mut idle_since: Option<Instant> = None;
 
     loop {
+        if config.stop.is_cancelled() {
+            for item in pending.drain(..) {
+                report.not_run.push(format!("{}/{}", item.task.domain, item.task.name));
+            }
+        }
         // Give every free guest a task.
         while !free.is_empty() && !pending.is_empty() {
             let Some(item) = pending.pop_front() else { break };
@@ -227,6 +237,7 @@ pub async fn run_pool(
                     free.push_back(guest);
                 }
             }
+            () = config.stop.cancelled(), if !config.stop.is_cancelled() => {}
             () = tokio::time::sleep(idle_deadline), if waiting_for_guests => {
                 let reason = format!("no guest answered for {} s", config.no_guest_timeout.as_secs());
                 for item in pending.drain(..) {

@@ -37,6 +37,7 @@ fn fast_pool() -> PoolConfig {
         probe_interval: Duration::from_millis(50),
         health_timeout: Duration::from_millis(500),
         no_guest_timeout: Duration::from_millis(400),
+        ..PoolConfig::default()
     }
 }
 
