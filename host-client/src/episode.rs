@@ -42,7 +42,7 @@ use crate::agent::{self, Agent, AgentAction, AgentError, ExecOptions, Observatio
 use crate::client::GuestClient;
 use crate::error::ClientError;
 use crate::eval::{self, EvalContext, LastAction};
-use crate::results::{timestamp_now, unix_now, RunLayout, StepRecord, StepTimings, TaskDir};
+use crate::results::{timestamp_now, unix_now, ActionRecord, ResetRecord, RunLayout, StepRecord, StepTimings, TaskDir};
 use crate::run::pool::TaskRunner;
 use crate::setup::{self, DownloadCache, Settle, SetupContext};
 use crate::task::Task;
@@ -51,9 +51,6 @@ pub use crate::results::{EpisodeResult, EpisodeStatus};
 
 /// Upstream's `--max_steps`.
 pub const DEFAULT_MAX_STEPS: u32 = 15;
-/// The screenshot taken after DONE or FAIL, in the task folder.
-pub const FINAL_SCREENSHOT: &str = "final.png";
-
 /// Upstream's `--sleep_after_execution`.
 pub const DEFAULT_SLEEP_AFTER_ACTION: Duration = Duration::from_secs(3);
 
@@ -179,6 +176,7 @@ pub async fn run_attempt(
             timings: Vec::new(),
             options: config.options.clone(),
         },
+        reset: None,
         steps: Vec::new(),
     };
     if let Err(err) = out.prepare() {
@@ -190,7 +188,7 @@ pub async fn run_attempt(
     }
     ep.result.elapsed_ms = ms(started.elapsed());
     ep.result.timings = ep.steps.iter().map(|s| s.timings).collect();
-    if let Err(err) = out.finish(&ep.result, &ep.steps) {
+    if let Err(err) = out.finish(&ep.result, ep.reset.as_ref(), &ep.steps) {
         tracing::error!(task = %task.name, error = %err, "cannot write the episode's results");
         ep.result.status = EpisodeStatus::InfraError(format!("cannot write the results: {err}"));
         ep.result.score = 0.0;
@@ -206,10 +204,38 @@ pub async fn run_attempt(
     ep.result
 }
 
-/// The episode being played: its record and its steps so far.
+/// The episode being played: its record and its trajectory so far.
 struct Episode {
     result: EpisodeResult,
+    reset: Option<ResetRecord>,
     steps: Vec<StepRecord>,
+}
+
+/// An observation and the file its screenshot was written to.
+struct Seen {
+    obs: Observation,
+    file: String,
+    observe_ms: u64,
+}
+
+/// The action as upstream's trajectory logs it: the code, or the control word.
+fn upstream_action(action: &AgentAction) -> String {
+    match action {
+        AgentAction::Computer(code) | AgentAction::Pyautogui(code) => code.clone(),
+        AgentAction::Wait => "WAIT".into(),
+        AgentAction::Done => "DONE".into(),
+        AgentAction::Fail => "FAIL".into(),
+        AgentAction::Typed(_) => action.summary(),
+    }
+}
+
+/// The observation keys of an upstream trajectory line.
+fn observed(record: &mut ActionRecord, seen: &Seen) {
+    record.screenshot = seen.file.clone();
+    record.instruction = seen.obs.instruction.clone();
+    record.window_title = seen.obs.foreground_title.clone();
+    record.window_names_str = seen.obs.window_titles.join("\n");
+    record.computer_clipboard = seen.obs.clipboard.clone().unwrap_or_default();
 }
 
 fn ms(d: Duration) -> u64 {
@@ -285,10 +311,25 @@ impl Episode {
             i32::try_from(screen.physical_width).unwrap_or(i32::MAX),
             i32::try_from(screen.physical_height).unwrap_or(i32::MAX),
         );
+        // The observation after the reset: upstream's step-0 line.
+        let timestamp = timestamp_now();
+        let mut seen = self.observe_into(client, task, config, &screen, out, 1, None, &timestamp).await?;
+        self.reset = Some(ResetRecord {
+            step_num: 0,
+            action_timestamp: timestamp,
+            action: None,
+            screenshot: seen.file.clone(),
+            instruction: seen.obs.instruction.clone(),
+            window_title: seen.obs.foreground_title.clone(),
+            window_names_str: seen.obs.window_titles.join("\n"),
+            computer_clipboard: seen.obs.clipboard.clone().unwrap_or_default(),
+        });
         let mut last: Option<LastAction> = None;
         for step in 1..=config.max_steps {
             interrupted(config, "between steps")?;
-            let (stop, step_last) = self.step(client, task, agent, config, out, &screen, &mut computer, step).await?;
+            let (stop, step_last, next) =
+                self.step(client, task, agent, config, out, &screen, &mut computer, step, seen).await?;
+            seen = next;
             if step_last.is_some() {
                 last = step_last;
             }
@@ -297,13 +338,6 @@ impl Episode {
             }
         }
         interrupted(config, "before the evaluation")?;
-        if matches!(last, Some(LastAction::Done | LastAction::Fail)) {
-            // Upstream's env.step observes after DONE and FAIL too (after the
-            // pause the step already took); the frame is kept as `final.png`.
-            let obs = observe(client, task, config, &screen, self.result.steps + 1).await?;
-            out.write_file(FINAL_SCREENSHOT, &obs.screenshot_png)
-                .map_err(|err| infra("writing the screenshot", err))?;
-        }
         self.result.last_action = match last {
             None => "none",
             Some(LastAction::Done) => "done",
@@ -339,8 +373,32 @@ impl Episode {
         Ok(())
     }
 
-    /// One step: observe, predict, act, record. Answers whether the episode
-    /// stops here and the step's last control word.
+    /// Observes, writes the screenshot under upstream's name and answers both.
+    #[allow(clippy::too_many_arguments)]
+    async fn observe_into(
+        &mut self,
+        client: &GuestClient,
+        task: &Task,
+        config: &EpisodeConfig,
+        screen: &arena_shared::observation::ScreenInfo,
+        out: &TaskDir,
+        for_step: u32,
+        index: Option<u32>,
+        timestamp: &str,
+    ) -> Result<Seen, EpisodeStatus> {
+        let started = Instant::now();
+        let obs = observe(client, task, config, screen, for_step).await?;
+        let observe_ms = ms(started.elapsed());
+        let file = out
+            .write_screenshot(index, timestamp, &obs.screenshot_png)
+            .map_err(|err| infra("writing the screenshot", err))?;
+        Ok(Seen { obs, file, observe_ms })
+    }
+
+    /// One step as upstream's loop makes it: predict from the latest observation,
+    /// then each action in turn, each followed by its pause and a fresh
+    /// observation (upstream's `env.step`). Answers whether the episode stops
+    /// here, the step's last control word and the latest observation.
     #[allow(clippy::too_many_arguments)]
     async fn step(
         &mut self,
@@ -352,30 +410,29 @@ impl Episode {
         screen: &arena_shared::observation::ScreenInfo,
         computer: &mut ComputerState,
         step: u32,
-    ) -> Result<(bool, Option<LastAction>), EpisodeStatus> {
-        let t_observe = Instant::now();
-        let obs = observe(client, task, config, screen, step).await?;
-        let observe_ms = ms(t_observe.elapsed());
-        let screenshot_file =
-            out.write_screenshot(step, &obs.screenshot_png).map_err(|err| infra("writing the screenshot", err))?;
+        seen: Seen,
+    ) -> Result<(bool, Option<LastAction>, Seen), EpisodeStatus> {
         let mut record = StepRecord {
-            step_num: step,
+            first: ActionRecord {
+                step_num: step,
+                action_timestamp: timestamp_now(),
+                info: serde_json::json!({}),
+                ..ActionRecord::default()
+            },
             step,
-            action_timestamp: timestamp_now(),
-            action: String::new(),
             response: String::new(),
             actions: Vec::new(),
-            done: false,
-            screenshot_file,
-            timings: StepTimings { observe_ms, ..StepTimings::default() },
-            window_title: obs.foreground_title.clone(),
+            ended: false,
+            screenshot_file: seen.file.clone(),
+            timings: StepTimings { observe_ms: seen.observe_ms, ..StepTimings::default() },
             error: None,
             outcomes: Vec::new(),
+            more: Vec::new(),
         };
         self.result.steps = step;
 
         let t_predict = Instant::now();
-        let prediction = predict(agent, &obs, config).await;
+        let prediction = predict(agent, &seen.obs, config).await;
         record.timings.predict_ms = ms(t_predict.elapsed());
         let prediction = match prediction {
             Ok(p) => p,
@@ -387,39 +444,47 @@ impl Episode {
                 // Upstream's `predict` raises when the model cannot be had: the
                 // task is left unfinished, not scored.
                 record.error = Some(err.to_string());
-                record.done = true;
+                record.ended = true;
                 self.push(out, record)?;
                 return Err(EpisodeStatus::ModelError(err.to_string()));
             }
             Err(err) => {
                 let message = err.to_string();
                 record.error = Some(message.clone());
-                record.done = true;
+                record.ended = true;
                 self.result.status = EpisodeStatus::AgentError(message);
                 self.push(out, record)?;
-                return Ok((true, None));
+                return Ok((true, None, seen));
             }
         };
         record.response = prediction.response.clone();
         record.actions = prediction.actions.clone();
-        record.action = prediction.actions.iter().map(AgentAction::summary).collect::<Vec<_>>().join("\n");
         if let Some(raw) = &prediction.raw_error {
             // The step is spent; the agent keeps the error to tell the model next time.
             record.error = Some(raw.clone());
         }
 
         let t_act = Instant::now();
-        let mut stop = false;
-        let mut last = None;
-        let mut pause = Duration::ZERO;
-        for action in &prediction.actions {
+        let (mut stop, mut last, mut pause, mut observing) = (false, None, Duration::ZERO, 0);
+        let mut latest = seen;
+        for (k, action) in prediction.actions.iter().enumerate() {
+            let mut line = if k == 0 {
+                record.first.clone()
+            } else {
+                ActionRecord { step_num: step, action_timestamp: timestamp_now(), ..ActionRecord::default() }
+            };
+            line.action = upstream_action(action);
+            line.info = serde_json::json!({});
             match action {
                 AgentAction::Done | AgentAction::Fail => {
-                    last = Some(if *action == AgentAction::Done { LastAction::Done } else { LastAction::Fail });
+                    let fail = *action == AgentAction::Fail;
+                    last = Some(if fail { LastAction::Fail } else { LastAction::Done });
                     stop = true;
+                    line.done = true;
+                    line.info =
+                        if fail { serde_json::json!({"fail": true}) } else { serde_json::json!({"done": true}) };
                     pause += config.sleep_after_action;
                     config.clock.sleep(config.sleep_after_action, "after DONE or FAIL").await;
-                    break;
                 }
                 AgentAction::Wait => {
                     // Upstream's env.step sleeps for WAIT, then again as after any action.
@@ -453,18 +518,34 @@ impl Episode {
                     config.clock.sleep(config.sleep_after_action, "after an action").await;
                 }
             }
+            // Upstream observes after every action, DONE and FAIL included.
+            let t_observe = Instant::now();
+            latest = self
+                .observe_into(client, task, config, screen, out, step + 1, Some(step - 1), &line.action_timestamp)
+                .await?;
+            observing += t_observe.elapsed().as_millis();
+            observed(&mut line, &latest);
+            if k == 0 {
+                record.first = line;
+            } else {
+                record.more.push(line);
+            }
+            if stop {
+                break;
+            }
         }
-        record.timings.act_ms = ms(t_act.elapsed().saturating_sub(pause));
+        let observing = Duration::from_millis(u64::try_from(observing).unwrap_or(u64::MAX));
+        record.timings.act_ms = ms(t_act.elapsed().saturating_sub(pause).saturating_sub(observing));
         record.timings.pause_ms = ms(pause);
-        record.done = stop || step == config.max_steps;
+        record.ended = stop || step == config.max_steps;
         self.push(out, record)?;
-        Ok((stop, last))
+        Ok((stop, last, latest))
     }
 
     /// Records a step and rewrites the trajectory, so a crash keeps every finished step.
     fn push(&mut self, out: &TaskDir, record: StepRecord) -> Result<(), EpisodeStatus> {
         self.steps.push(record);
-        out.write_trajectory(&self.steps).map_err(|err| infra("writing the trajectory", err))
+        out.write_trajectory(self.reset.as_ref(), &self.steps).map_err(|err| infra("writing the trajectory", err))
     }
 }
 
@@ -600,7 +681,7 @@ impl TaskRunner for EpisodeRunner {
                     timings: Vec::new(),
                     options: self.config.options.clone(),
                 };
-                if let Err(err) = out.prepare().and_then(|()| out.finish(&result, &[])) {
+                if let Err(err) = out.prepare().and_then(|()| out.finish(&result, None, &[])) {
                     tracing::error!(task = %task.name, error = %err, "cannot write the episode's results");
                 }
                 result
@@ -716,7 +797,31 @@ mod tests {
         );
         let traj = out.read_trajectory().unwrap();
         assert_eq!(traj.iter().map(|t| t.timings.pause_ms).collect::<Vec<_>>(), [6000, 6000]);
-        assert!(out.path().join(FINAL_SCREENSHOT).is_file(), "a fresh observation after DONE");
+        // Upstream observes after every action, DONE included: the step with two
+        // actions has two lines, each naming the screenshot taken after it.
+        assert_eq!(traj[1].more.len(), 0, "further lines are upstream's only, not read back");
+        let text = std::fs::read_to_string(out.path().join(crate::results::TRAJ_FILE)).unwrap();
+        let lines: Vec<Value> = text.lines().map(|l| serde_json::from_str(l).unwrap()).collect();
+        let actions: Vec<(u64, Value, bool)> = lines
+            .iter()
+            .map(|l| (l["step_num"].as_u64().unwrap(), l["action"].clone(), l["done"].as_bool().unwrap_or(false)))
+            .collect();
+        assert_eq!(
+            actions,
+            vec![
+                (0, Value::Null, false),
+                (1, "WAIT".into(), false),
+                (2, "pyautogui.write('x')".into(), false),
+                (2, "DONE".into(), true),
+            ]
+        );
+        assert_eq!(lines[3]["info"], serde_json::json!({"done": true}));
+        for line in &lines {
+            let shot = line["screenshot"].as_str().unwrap();
+            assert!(out.path().join(shot).is_file(), "{shot}");
+        }
+        assert!(lines[3]["screenshot"].as_str().unwrap().starts_with("screenshot-step_1_"));
+        assert_eq!(traj[1].screenshot_file, lines[1]["screenshot"].as_str().unwrap(), "what the agent saw at step 2");
         assert_eq!(result.options.get("pauses").map(String::as_str), Some("upstream"));
         assert_eq!(out.read_episode().unwrap().options, result.options);
     }
@@ -772,7 +877,7 @@ mod tests {
         assert_eq!(out.read_episode().unwrap().status, result.status);
         let traj = out.read_trajectory().unwrap();
         assert_eq!(traj.len(), 1);
-        assert!(traj[0].done && traj[0].error.as_deref().unwrap_or("").contains("503"));
+        assert!(traj[0].ended && traj[0].error.as_deref().unwrap_or("").contains("503"));
     }
 
     #[tokio::test]
@@ -815,7 +920,7 @@ mod tests {
         let traj = out.read_trajectory().unwrap();
         assert_eq!(traj.len(), 4);
         assert_eq!(traj[0].error.as_deref(), Some("no code block"));
-        assert!(traj[3].done && !traj[2].done);
+        assert!(traj[3].ended && !traj[2].ended);
         for (i, step) in traj.iter().enumerate() {
             assert_eq!(step.step, i as u32 + 1);
             assert!(out.path().join(&step.screenshot_file).is_file());

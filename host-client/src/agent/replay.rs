@@ -50,6 +50,7 @@ pub fn parse_trajectory(text: &str, origin: &str) -> Result<Vec<TrajectoryStep>,
     };
     let mut steps: Vec<TrajectoryStep> = Vec::new();
     let mut upstream_step: Option<u64> = None;
+    let mut ours: Option<u64> = None;
     for (i, line) in text.lines().enumerate().filter(|(_, l)| !l.trim().is_empty()) {
         let value: serde_json::Value = serde_json::from_str(line).map_err(|e| bad(i, e.to_string()))?;
         if value.get("Error").is_some() {
@@ -57,13 +58,17 @@ pub fn parse_trajectory(text: &str, origin: &str) -> Result<Vec<TrajectoryStep>,
             continue;
         }
         if value.get("step").is_some() {
-            steps.push(serde_json::from_value(value).map_err(|e| bad(i, e.to_string()))?);
+            let step: TrajectoryStep = serde_json::from_value(value).map_err(|e| bad(i, e.to_string()))?;
+            // Our line holds the whole step: the upstream lines after it for the
+            // step's further actions repeat what `actions` already has.
+            ours = Some(u64::from(step.step));
+            steps.push(step);
             continue;
         }
         let Some(number) = value.get("step_num").and_then(serde_json::Value::as_u64) else {
             return Err(bad(i, "neither a step (`step`) nor an upstream trajectory line (`step_num`)".into()));
         };
-        if number == 0 {
+        if number == 0 || ours == Some(number) {
             continue;
         }
         let action = match value.get("action") {
@@ -203,9 +208,16 @@ mod tests {
                 TrajectoryStep { step: 3, actions: vec![AgentAction::Done] },
             ]
         );
-        // Our own format still reads.
-        let ours = parse_trajectory(r#"{"step": 1, "actions": [{"kind": "done"}]}"#, "t").unwrap();
-        assert_eq!(ours, vec![TrajectoryStep { step: 1, actions: vec![AgentAction::Done] }]);
+        // Our own format still reads: a step's first line holds all its actions,
+        // and the upstream-only lines after it are not counted twice.
+        let ours = [
+            r#"{"step_num": 0, "action": null}"#,
+            r#"{"step_num": 1, "step": 1, "action": "WAIT", "actions": [{"kind": "wait"}, {"kind": "done"}]}"#,
+            r#"{"step_num": 1, "action": "DONE", "done": true}"#,
+        ]
+        .join("\n");
+        let ours = parse_trajectory(&ours, "t").unwrap();
+        assert_eq!(ours, vec![TrajectoryStep { step: 1, actions: vec![AgentAction::Wait, AgentAction::Done] }]);
         let err = parse_trajectory("{\"what\": 1}", "t").unwrap_err().to_string();
         assert!(err.contains("line 1") && err.contains("step_num"), "{err}");
         let err = parse_trajectory(r#"{"step_num": 1, "action": 3}"#, "t").unwrap_err().to_string();

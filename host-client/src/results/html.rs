@@ -193,6 +193,26 @@ fn relative_str(path: &Path) -> String {
     path.components().map(|c| c.as_os_str().to_string_lossy().into_owned()).collect::<Vec<_>>().join("/")
 }
 
+/// `traj.html` in a task folder: the task's own page (its record, evaluation and
+/// every step with the screenshot the agent saw), readable without the run's
+/// report, as upstream keeps one per task.
+///
+/// # Errors
+///
+/// The page cannot be written.
+pub fn write_task_page(dir: &super::TaskDir, episode: &super::EpisodeResult) -> Result<(), ResultsError> {
+    let score = (!episode.status.is_unfinished()).then_some(episode.score);
+    let task = FoundTask { dir: dir.clone(), relative: PathBuf::from("."), score, episode: Some(episode.clone()) };
+    let section = task_section(&task).replacen("<details id=", "<details open id=", 1);
+    let page = format!(
+        "<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\"><meta name=\"viewport\" content=\"width=device-width\">\
+         <title>{} / {}</title><style>{STYLE}</style></head><body>\n{section}</body></html>\n",
+        escape(&episode.domain),
+        escape(&episode.task_name)
+    );
+    write_atomic(&dir.path().join(super::TRAJ_HTML), page.as_bytes())
+}
+
 fn task_section(task: &FoundTask) -> String {
     let rel = relative_str(&task.relative);
     let mut s = String::new();
@@ -250,16 +270,16 @@ fn step_html(rel: &str, step: &StepRecord) -> String {
     let t = &step.timings;
     let mut s = format!(
         "<div class=\"step\"><a href=\"{src}\"><img loading=\"lazy\" src=\"{src}\" alt=\"step {n} screenshot\"></a><div>\
-         <p><b>Step {n}</b> <span class=\"meta\">{} &middot; window {} &middot; observe {} ms, predict {} ms, act {} ms</span></p>\
+         <p><b>Step {n}</b> <span class=\"meta\">{} &middot; then window {} &middot; observe {} ms, predict {} ms, act {} ms</span></p>\
          <pre>{}</pre><p class=\"meta\">response</p><pre>{}</pre>",
-        escape(&step.action_timestamp),
-        escape(&step.window_title),
+        escape(&step.first.action_timestamp),
+        escape(&step.first.window_title),
         t.observe_ms,
         t.predict_ms,
         t.act_ms,
-        escape(&step.action),
+        escape(&step.actions.iter().map(crate::agent::AgentAction::summary).collect::<Vec<_>>().join("\n")),
         escape(&step.response),
-        n = step.step_num
+        n = step.step
     );
     if let Some(error) = &step.error {
         let _ = write!(s, "<p class=\"bad\">{}</p>", escape(error));

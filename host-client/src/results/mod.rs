@@ -7,9 +7,12 @@
 //! ```text
 //! <out>/<action space>/<observation>/<model>/<trial>/<domain>/<task name>/
 //!     result.txt     the score as text ("1.0"), written LAST
-//!     traj.jsonl     one JSON object per step ([`StepRecord`])
-//!     step_<n>.png   the screenshot the agent saw at step n (1-based)
+//!     traj.jsonl     upstream's trajectory: a reset line, then a line per action
+//!                    ([`ResetRecord`], [`StepRecord`], [`ActionRecord`])
+//!     screenshot-step_reset_<time>.png, screenshot-step_<i>_<time>.png
+//!                    the observations, named as upstream's recorder names them
 //!     episode.json   our full record ([`EpisodeResult`])
+//!     traj.html      the task's own page
 //!     setup/, eval/  files setup steps and getters wrote
 //! ```
 //!
@@ -45,6 +48,8 @@ use crate::task::Task;
 pub const RESULT_FILE: &str = "result.txt";
 /// The trajectory, one JSON object per step.
 pub const TRAJ_FILE: &str = "traj.jsonl";
+/// The task's own page, beside its trajectory.
+pub const TRAJ_HTML: &str = "traj.html";
 /// Our full record of the episode.
 pub const EPISODE_FILE: &str = "episode.json";
 /// Machine-readable run summary, at the root of a result folder.
@@ -161,42 +166,90 @@ pub struct StepTimings {
     pub pause_ms: u64,
 }
 
-/// One line of `traj.jsonl`.
-///
-/// The first fields are upstream's (`step_num`, `action_timestamp`, `action`,
-/// `response`, `done`, `screenshot_file`); the rest are ours. `actions` holds
-/// the agent's actions in their serialised form, which is what the replay
-/// agent reads back.
+/// The first line of `traj.jsonl`: the observation after the reset, as
+/// upstream's `record_init` writes it (`step_num` 0, `action` null).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct StepRecord {
+pub struct ResetRecord {
+    pub step_num: u32,
+    pub action_timestamp: String,
+    pub action: Option<String>,
+    /// `screenshot-step_reset_<timestamp>.png`, in the task folder.
+    pub screenshot: String,
+    pub instruction: String,
+    pub window_title: String,
+    /// The visible windows' titles, one per line (upstream's `window_names_str`).
+    pub window_names_str: String,
+    /// The clipboard's text (`computer_clipboard`), empty when it holds none.
+    pub computer_clipboard: String,
+}
+
+/// The upstream part of a `traj.jsonl` line for one action, as upstream's
+/// `record_step` writes it: the action, `reward` (always 0 upstream), `done`
+/// (the action was DONE or FAIL), `info` (`{"done": true}`, `{"fail": true}`
+/// or `{}`) and the observation taken after the action.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, Default)]
+pub struct ActionRecord {
     /// 1-based step number.
     pub step_num: u32,
-    /// The same number under the name the replay agent reads ([`crate::agent::replay`]).
-    pub step: u32,
-    /// `YYYYMMDD@HHMMSS` (UTC) when the step's actions started, as upstream writes it.
+    /// `YYYYMMDD@HHMMSS` (UTC) when the action started, as upstream writes it.
     pub action_timestamp: String,
-    /// The actions as upstream logs them: code blocks and control words, one per line.
+    /// The action as upstream logs it: the code, or `DONE`, `FAIL`, `WAIT`.
     pub action: String,
+    #[serde(default)]
+    pub reward: f64,
+    /// Whether this action was DONE or FAIL.
+    pub done: bool,
+    #[serde(default)]
+    pub info: Value,
+    /// The screenshot taken after the action, `screenshot-step_<step - 1>_<timestamp>.png`.
+    #[serde(default)]
+    pub screenshot: String,
+    #[serde(default)]
+    pub instruction: String,
+    #[serde(default)]
+    pub window_title: String,
+    #[serde(default)]
+    pub window_names_str: String,
+    #[serde(default)]
+    pub computer_clipboard: String,
+}
+
+/// One step: the first `traj.jsonl` line of the step (upstream's line for its
+/// first action, [`ActionRecord`], with our keys beside them), followed by one
+/// upstream line per further action ([`StepRecord::more`]). A step whose model
+/// output held no action still gets its line (upstream writes none), with an
+/// empty `action`.
+///
+/// Our keys: `step` (what tells our lines from upstream-only lines), `response`,
+/// `actions` (what the replay agent reads back), `ended`, `screenshot_file`
+/// (what the agent saw), `timings`, `error`, `outcomes`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct StepRecord {
+    #[serde(flatten)]
+    pub first: ActionRecord,
+    /// The step number again, under the name the replay agent reads ([`crate::agent::replay`]).
+    pub step: u32,
     /// The agent's raw response (the model's text).
     pub response: String,
     /// The actions, tagged by kind (`{"kind": "computer", "code": "..."}`), as the replay agent reads them.
     #[serde(default)]
     pub actions: Vec<AgentAction>,
-    /// Whether the episode ended with this step (DONE, FAIL or an error).
-    pub done: bool,
-    /// The screenshot the agent saw (`step_<n>.png`), in the task folder.
+    /// Whether the episode ended with this step (DONE, FAIL, the step cap or an error).
+    #[serde(default)]
+    pub ended: bool,
+    /// The screenshot the agent saw when it chose this step's actions, in the task folder.
     pub screenshot_file: String,
     #[serde(default)]
     pub timings: StepTimings,
-    /// The foreground window's title when observed.
-    #[serde(default)]
-    pub window_title: String,
     /// What went wrong in this step: unparsable model output, a failed action.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub error: Option<String>,
     /// Per-action outcomes the agent's executor reported (free-form).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub outcomes: Vec<Value>,
+    /// Upstream's lines for the step's second and further actions.
+    #[serde(skip)]
+    pub more: Vec<ActionRecord>,
 }
 
 /// Everything about one episode; `episode.json`.
@@ -379,9 +432,14 @@ impl TaskDir {
         Ok(())
     }
 
-    /// The screenshot file name of step `n`.
-    pub fn screenshot_name(step: u32) -> String {
-        format!("step_{step}.png")
+    /// The screenshot file name upstream's recorder gives the observation after
+    /// the action of step index `index` (0-based; `None` for the reset) taken at
+    /// `timestamp`: `screenshot-step_<index>_<timestamp>.png`.
+    pub fn screenshot_name(index: Option<u32>, timestamp: &str) -> String {
+        match index {
+            Some(i) => format!("screenshot-step_{i}_{timestamp}.png"),
+            None => format!("screenshot-step_reset_{timestamp}.png"),
+        }
     }
 
     /// Writes a file of the task folder (atomically).
@@ -393,31 +451,38 @@ impl TaskDir {
         write_atomic(&self.path.join(name), bytes)
     }
 
-    /// Writes the screenshot of step `step` and returns its file name.
+    /// Writes a screenshot under [`TaskDir::screenshot_name`] and returns its file name.
     ///
     /// # Errors
     ///
     /// The file cannot be written.
-    pub fn write_screenshot(&self, step: u32, png: &[u8]) -> Result<String, ResultsError> {
-        let name = TaskDir::screenshot_name(step);
+    pub fn write_screenshot(&self, index: Option<u32>, timestamp: &str, png: &[u8]) -> Result<String, ResultsError> {
+        let name = TaskDir::screenshot_name(index, timestamp);
         write_atomic(&self.path.join(&name), png)?;
         Ok(name)
     }
 
-    /// Rewrites `traj.jsonl` with `steps` (atomically, so a crash leaves the
-    /// previous complete version, never a torn line).
+    /// Rewrites `traj.jsonl`: the reset line, then each step's lines
+    /// (atomically, so a crash leaves the previous complete version, never a torn line).
     ///
     /// # Errors
     ///
     /// The file cannot be written.
-    pub fn write_trajectory(&self, steps: &[StepRecord]) -> Result<(), ResultsError> {
+    pub fn write_trajectory(&self, reset: Option<&ResetRecord>, steps: &[StepRecord]) -> Result<(), ResultsError> {
         let path = self.path.join(TRAJ_FILE);
+        let format = |err: serde_json::Error| ResultsError::Format { path: path.clone(), message: err.to_string() };
         let mut text = String::new();
-        for step in steps {
-            let line = serde_json::to_string(step)
-                .map_err(|err| ResultsError::Format { path: path.clone(), message: err.to_string() })?;
-            text.push_str(&line);
+        if let Some(reset) = reset {
+            text.push_str(&serde_json::to_string(reset).map_err(format)?);
             text.push('\n');
+        }
+        for step in steps {
+            text.push_str(&serde_json::to_string(step).map_err(format)?);
+            text.push('\n');
+            for more in &step.more {
+                text.push_str(&serde_json::to_string(more).map_err(format)?);
+                text.push('\n');
+            }
         }
         write_atomic(&path, text.as_bytes())
     }
@@ -451,9 +516,15 @@ impl TaskDir {
     /// # Errors
     ///
     /// The first file that cannot be written.
-    pub fn finish(&self, episode: &EpisodeResult, steps: &[StepRecord]) -> Result<(), ResultsError> {
-        self.write_trajectory(steps)?;
+    pub fn finish(
+        &self,
+        episode: &EpisodeResult,
+        reset: Option<&ResetRecord>,
+        steps: &[StepRecord],
+    ) -> Result<(), ResultsError> {
+        self.write_trajectory(reset, steps)?;
         self.write_episode(episode)?;
+        html::write_task_page(self, episode)?;
         if !episode.status.is_unfinished() {
             self.write_result(&episode.score_text())?;
         }
@@ -529,27 +600,31 @@ pub fn read_episode(path: &Path) -> Result<EpisodeResult, ResultsError> {
         .map_err(|err| ResultsError::Format { path: path.to_owned(), message: err.to_string() })
 }
 
-/// Reads a `traj.jsonl` (an absent file is an empty trajectory; blank lines are skipped).
+/// Reads the steps of a `traj.jsonl` (an absent file is an empty trajectory):
+/// the lines that carry our `step` key; upstream-only lines (the reset line, a
+/// step's further actions, `run.py`'s error lines) and blank lines are skipped.
 ///
 /// # Errors
 ///
-/// A line that is not a [`StepRecord`], naming its number.
+/// A line that is not JSON, or a step line that is not a [`StepRecord`], naming its number.
 pub fn read_trajectory(path: &Path) -> Result<Vec<StepRecord>, ResultsError> {
     let text = match std::fs::read_to_string(path) {
         Ok(text) => text,
         Err(err) if err.kind() == std::io::ErrorKind::NotFound => return Ok(Vec::new()),
         Err(err) => return Err(ResultsError::io(path, err)),
     };
-    text.lines()
-        .enumerate()
-        .filter(|(_, line)| !line.trim().is_empty())
-        .map(|(idx, line)| {
-            serde_json::from_str(line).map_err(|err| ResultsError::Format {
-                path: path.to_owned(),
-                message: format!("line {}: {err}", idx + 1),
-            })
-        })
-        .collect()
+    let bad = |idx: usize, err: serde_json::Error| ResultsError::Format {
+        path: path.to_owned(),
+        message: format!("line {}: {err}", idx + 1),
+    };
+    let mut steps = Vec::new();
+    for (idx, line) in text.lines().enumerate().filter(|(_, line)| !line.trim().is_empty()) {
+        let value: Value = serde_json::from_str(line).map_err(|err| bad(idx, err))?;
+        if value.get("step").is_some() {
+            steps.push(serde_json::from_value(value).map_err(|err| bad(idx, err))?);
+        }
+    }
+    Ok(steps)
 }
 
 fn truncate(text: &str, max: usize) -> &str {

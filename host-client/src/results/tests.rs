@@ -32,19 +32,43 @@ pub(crate) fn episode(domain: &str, name: &str, score: f64, status: EpisodeStatu
 }
 
 fn step(n: u32) -> StepRecord {
+    let timestamp = format_timestamp(0);
     StepRecord {
-        step_num: n,
+        first: ActionRecord {
+            step_num: n,
+            action_timestamp: timestamp.clone(),
+            action: "DONE".into(),
+            reward: 0.0,
+            done: true,
+            info: serde_json::json!({"done": true}),
+            screenshot: TaskDir::screenshot_name(Some(n - 1), &timestamp),
+            instruction: "i".into(),
+            window_title: "Untitled - Notepad".into(),
+            window_names_str: "Untitled - Notepad".into(),
+            computer_clipboard: String::new(),
+        },
         step: n,
-        action_timestamp: format_timestamp(0),
-        action: "DONE".into(),
         response: "<b>ok</b>".into(),
         actions: vec![crate::agent::AgentAction::Done],
-        done: true,
-        screenshot_file: TaskDir::screenshot_name(n),
+        ended: true,
+        screenshot_file: TaskDir::screenshot_name(None, &timestamp),
         timings: StepTimings { observe_ms: 3, predict_ms: 1, act_ms: 2, pause_ms: 0 },
-        window_title: "Untitled - Notepad".into(),
         error: None,
         outcomes: Vec::new(),
+        more: Vec::new(),
+    }
+}
+
+fn reset() -> ResetRecord {
+    ResetRecord {
+        step_num: 0,
+        action_timestamp: format_timestamp(0),
+        action: None,
+        screenshot: TaskDir::screenshot_name(None, &format_timestamp(0)),
+        instruction: "i".into(),
+        window_title: "Program Manager".into(),
+        window_names_str: "Program Manager".into(),
+        computer_clipboard: String::new(),
     }
 }
 
@@ -128,10 +152,11 @@ fn result_txt_is_written_last_and_only_for_finished_episodes() {
     let dir = l.task_dir(&task("notepad", "draft"));
     dir.prepare().unwrap();
     assert!(!dir.is_finished());
-    dir.write_screenshot(1, b"png").unwrap();
-    let steps = vec![step(1)];
+    dir.write_screenshot(None, &format_timestamp(0), b"png").unwrap();
+    let mut steps = vec![step(1)];
+    steps[0].more.push(ActionRecord { step_num: 1, action: "WAIT".into(), ..ActionRecord::default() });
     let infra = episode("notepad", "draft", 0.0, EpisodeStatus::InfraError("guest gone".into()), 1);
-    dir.finish(&infra, &steps).unwrap();
+    dir.finish(&infra, Some(&reset()), &steps).unwrap();
     assert!(!dir.is_finished(), "an infrastructure error leaves the task to be run again");
     assert_eq!(dir.read_episode().unwrap(), infra);
 
@@ -140,15 +165,34 @@ fn result_txt_is_written_last_and_only_for_finished_episodes() {
     assert!(!dir.path().join(EPISODE_FILE).exists());
     assert!(dir.setup_dir().is_dir() && dir.eval_dir().is_dir());
     let done = episode("notepad", "draft", 1.0, EpisodeStatus::Completed, 1);
-    dir.finish(&done, &steps).unwrap();
+    dir.finish(&done, Some(&reset()), &steps).unwrap();
     assert!(dir.is_finished());
     assert_eq!(std::fs::read_to_string(dir.path().join(RESULT_FILE)).unwrap(), "1.0\n");
-    assert_eq!(dir.read_trajectory().unwrap(), steps);
-    let line = std::fs::read_to_string(dir.path().join(TRAJ_FILE)).unwrap();
-    let value: Value = serde_json::from_str(line.trim()).unwrap();
-    for key in ["step_num", "action_timestamp", "action", "response", "done", "screenshot_file", "actions", "timings"] {
-        assert!(value.get(key).is_some(), "traj.jsonl lacks {key}: {line}");
+    // Read back: the steps (their further upstream lines are not ours to read).
+    let mut back = steps.clone();
+    back[0].more.clear();
+    assert_eq!(dir.read_trajectory().unwrap(), back);
+    // Upstream's lines: the reset line (step 0, action null), then one line per action.
+    let text = std::fs::read_to_string(dir.path().join(TRAJ_FILE)).unwrap();
+    let lines: Vec<Value> = text.lines().map(|l| serde_json::from_str(l).unwrap()).collect();
+    assert_eq!(lines.len(), 3, "{text}");
+    assert_eq!((lines[0]["step_num"].clone(), lines[0]["action"].clone()), (serde_json::json!(0), Value::Null));
+    assert_eq!(lines[0]["screenshot"], "screenshot-step_reset_19700101@000000.png");
+    for key in ["step_num", "action_timestamp", "action", "reward", "done", "info", "screenshot", "window_title"] {
+        assert!(lines[1].get(key).is_some() && lines[2].get(key).is_some(), "traj.jsonl lacks {key}: {text}");
     }
+    assert_eq!(lines[1]["screenshot"], "screenshot-step_0_19700101@000000.png");
+    for key in ["step", "response", "actions", "ended", "screenshot_file", "timings"] {
+        assert!(lines[1].get(key).is_some(), "our key {key} is beside upstream's: {text}");
+    }
+    assert_eq!(
+        (lines[2]["step_num"].clone(), lines[2]["action"].clone()),
+        (serde_json::json!(1), serde_json::json!("WAIT"))
+    );
+    // The task's own page, with its screenshots linked relative to it.
+    let page = std::fs::read_to_string(dir.path().join(TRAJ_HTML)).unwrap();
+    assert!(page.starts_with("<!DOCTYPE html>") && page.contains("<details open"), "{page}");
+    assert!(page.contains("src=\"./screenshot-step_reset_19700101@000000.png\""), "{page}");
     // No temporary files are left behind.
     let leftovers: Vec<_> = std::fs::read_dir(dir.path())
         .unwrap()
@@ -163,7 +207,7 @@ fn a_bad_trajectory_line_is_named() {
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join(TRAJ_FILE);
     let good = serde_json::to_string(&step(1)).unwrap();
-    std::fs::write(&path, format!("{good}\n\n{{\"step_num\": \"x\"}}\n")).unwrap();
+    std::fs::write(&path, format!("{good}\n\n{{\"step\": \"x\"}}\n")).unwrap();
     let err = read_trajectory(&path).unwrap_err().to_string();
     assert!(err.contains("line 3"), "{err}");
     assert!(read_trajectory(&dir.path().join("absent.jsonl")).unwrap().is_empty());
@@ -173,8 +217,8 @@ fn a_bad_trajectory_line_is_named() {
 pub(crate) fn write_task(root: &Path, domain: &str, name: &str, score: f64, status: EpisodeStatus) {
     let dir = layout(root).task_dir(&task(domain, name));
     dir.prepare().unwrap();
-    dir.write_screenshot(1, b"png").unwrap();
-    dir.finish(&episode(domain, name, score, status, 2), &[step(1)]).unwrap();
+    dir.write_screenshot(None, &format_timestamp(0), b"png").unwrap();
+    dir.finish(&episode(domain, name, score, status, 2), Some(&reset()), &[step(1)]).unwrap();
 }
 
 #[test]
@@ -311,7 +355,12 @@ fn the_report_holds_the_table_the_chart_and_escaped_trajectories() {
     assert!(!page.contains("<script>"), "task text is escaped");
     assert!(page.contains("&lt;b&gt;ok&lt;/b&gt;"), "model text is escaped");
     // Safe names keep spaces out of folders; links are relative and encoded.
-    assert!(page.contains("src=\"scripted/a11y_tree/meta_llama_3/0/notepad/a_b/step_1.png\""), "{page}");
+    assert!(
+        page.contains(
+            "src=\"scripted/a11y_tree/meta_llama_3/0/notepad/a_b/screenshot-step_reset_19700101@000000.png\""
+        ),
+        "{page}"
+    );
     assert!(!page.contains("<link") && !page.contains("<script") && !page.contains("url("), "nothing is fetched");
     assert!(root.path().join(SUMMARY_JSON).is_file() && root.path().join(SUMMARY_MD).is_file());
 }
