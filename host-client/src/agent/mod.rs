@@ -20,6 +20,7 @@
 //! - [`replay`]: [`replay::ReplayAgent`], which repeats a recorded trajectory.
 
 pub mod exec;
+pub mod llm;
 pub mod navi;
 pub mod parse;
 pub mod replay;

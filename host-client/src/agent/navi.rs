@@ -20,6 +20,7 @@ use std::time::Duration;
 use base64::Engine as _;
 use serde_json::{json, Value};
 
+use super::llm::{self, ApiKind, ModelClient, RetryPolicy, TokensField};
 use super::parse::parse_reply;
 use super::{Agent, AgentAction, AgentError, Observation, Prediction};
 use crate::som::{annotate, Marks};
@@ -35,12 +36,20 @@ pub struct NaviConfig {
     /// `/chat/completions` is appended unless it is already there.
     pub base_url: String,
     pub model: String,
-    /// Bearer token; `None` reads [`KEY_VARS`], and no key at all sends no `Authorization` header.
+    /// The API key; `None` reads [`KEY_VARS`], and no key at all sends no auth header.
     pub api_key: Option<String>,
+    /// Sampling temperature (upstream's Navi: 1.0).
     pub temperature: f64,
+    /// Longest answer, in tokens (upstream's Navi: 4096).
     pub max_tokens: u32,
+    /// The request field of `max_tokens`; `None` chooses by the model's name.
+    pub tokens_field: Option<TokensField>,
+    /// Which API the endpoint speaks; `None` detects it from the URL.
+    pub api: Option<ApiKind>,
     /// Deadline of one chat-completions call.
     pub timeout: Duration,
+    /// How long a failing model is tried again before the task is left unfinished.
+    pub retry: RetryPolicy,
     /// How many previous steps the prompt's action history shows.
     pub max_history: usize,
 }
@@ -51,9 +60,12 @@ impl NaviConfig {
             base_url: base_url.to_owned(),
             model: model.to_owned(),
             api_key: None,
-            temperature: 0.0,
-            max_tokens: 1500,
+            temperature: 1.0,
+            max_tokens: 4096,
+            tokens_field: None,
+            api: None,
             timeout: Duration::from_secs(120),
+            retry: RetryPolicy::default(),
             max_history: 15,
         }
     }
@@ -66,14 +78,9 @@ impl NaviConfig {
             .or_else(|| KEY_VARS.iter().find_map(|var| std::env::var(var).ok().filter(|v| !v.trim().is_empty())))
     }
 
-    /// The chat-completions URL.
+    /// The chat-completions URL (the base URL when it does not parse; the agent refuses it then).
     pub fn endpoint(&self) -> String {
-        let base = self.base_url.trim_end_matches('/');
-        if base.ends_with("/chat/completions") {
-            base.to_owned()
-        } else {
-            format!("{base}/chat/completions")
-        }
+        llm::chat_endpoint(&self.base_url).unwrap_or_else(|_| self.base_url.clone())
     }
 }
 
@@ -116,8 +123,7 @@ struct Turn {
 #[derive(Debug)]
 pub struct NaviAgent {
     config: NaviConfig,
-    key: Option<String>,
-    http: reqwest::Client,
+    client: ModelClient,
     history: Vec<Turn>,
     memory: String,
     previous_png: Option<Vec<u8>>,
@@ -138,14 +144,11 @@ impl NaviAgent {
         if config.base_url.trim().is_empty() || config.model.trim().is_empty() {
             return Err(AgentError::Config("the model's base URL and name must not be empty".into()));
         }
-        let http = reqwest::Client::builder()
-            .timeout(config.timeout)
-            .build()
-            .map_err(|e| AgentError::Config(format!("cannot build the HTTP client: {e}")))?;
+        let api = config.api.unwrap_or_else(|| ApiKind::detect(&config.base_url));
+        let client = ModelClient::new(&config.base_url, api, config.resolved_key(), config.timeout, config.retry)?;
         Ok(NaviAgent {
-            key: config.resolved_key(),
             config,
-            http,
+            client,
             history: Vec::new(),
             memory: String::new(),
             previous_png: None,
@@ -212,53 +215,8 @@ impl NaviAgent {
                 {"role": "user", "content": content},
             ],
             "temperature": self.config.temperature,
-            "max_tokens": self.config.max_tokens,
+            self.config.tokens_field.unwrap_or_else(|| TokensField::for_model(&self.config.model)).name(): self.config.max_tokens,
         })
-    }
-
-    async fn complete(&self, body: &Value) -> Result<String, AgentError> {
-        let endpoint = self.config.endpoint();
-        let fail = |reason: String| AgentError::Model { endpoint: endpoint.clone(), reason };
-        let mut request = self.http.post(&endpoint).json(body);
-        if let Some(key) = &self.key {
-            request = request.bearer_auth(key);
-        }
-        let response = request.send().await.map_err(|e| fail(crate_error_text(&e)))?;
-        let status = response.status();
-        let text = response.text().await.map_err(|e| fail(crate_error_text(&e)))?;
-        if !status.is_success() {
-            let snippet: String = text.chars().take(300).collect();
-            return Err(fail(format!("HTTP {status}: {snippet}")));
-        }
-        let value: Value = serde_json::from_str(&text).map_err(|e| fail(format!("the answer is not JSON: {e}")))?;
-        reply_text(&value).ok_or_else(|| fail("the answer has no choices[0].message.content".into()))
-    }
-}
-
-/// An error and its sources on one line (reqwest hides the useful part in the chain).
-fn crate_error_text(err: &(dyn std::error::Error + 'static)) -> String {
-    let mut text = err.to_string();
-    let mut source = err.source();
-    while let Some(inner) = source {
-        let more = inner.to_string();
-        if !text.contains(&more) {
-            text.push_str(": ");
-            text.push_str(&more);
-        }
-        source = inner.source();
-    }
-    text
-}
-
-/// `choices[0].message.content`, as a string or as a list of text parts.
-fn reply_text(answer: &Value) -> Option<String> {
-    let content = answer.get("choices")?.get(0)?.get("message")?.get("content")?;
-    match content {
-        Value::String(s) => Some(s.clone()),
-        Value::Array(parts) => {
-            Some(parts.iter().filter_map(|p| p.get("text").and_then(Value::as_str)).collect::<Vec<_>>().join("\n"))
-        }
-        _ => None,
     }
 }
 
@@ -285,7 +243,7 @@ impl Agent for NaviAgent {
             None => obs.screenshot_png.clone(),
         };
         let body = self.request_body(obs, marks.as_ref(), &annotated);
-        let response = self.complete(&body).await?;
+        let response = self.client.complete(&body).await?;
         self.previous_png = Some(obs.screenshot_png.clone());
         let prediction = match parse_reply(&response) {
             Ok(parsed) => {
@@ -322,7 +280,7 @@ mod tests {
 
     #[test]
     fn reply_text_reads_strings_and_parts() {
-        let check = |answer: Value, expected: Option<&str>| assert_eq!(reply_text(&answer).as_deref(), expected);
+        let check = |answer: Value, expected: Option<&str>| assert_eq!(llm::reply_text(&answer).as_deref(), expected);
         check(json!({"choices": [{"message": {"content": "DONE"}}]}), Some("DONE"));
         check(
             json!({"choices": [{"message": {"content": [{"type": "text", "text": "a"}, {"type": "text", "text": "b"}]}}]}),
@@ -345,8 +303,9 @@ mod tests {
         // connecting, not because the build cannot speak https.
         let mut config = NaviConfig::new("https://127.0.0.1:9/v1", "m");
         config.timeout = Duration::from_secs(5);
+        config.retry = RetryPolicy { give_up_after: Duration::ZERO, ..RetryPolicy::default() };
         let agent = NaviAgent::new(config).expect("agent");
-        let err = agent.complete(&json!({})).await.expect_err("nothing listens");
+        let err = agent.client.complete(&json!({})).await.expect_err("nothing listens");
         let text = err.to_string();
         assert!(text.contains("https://127.0.0.1:9/v1/chat/completions"), "{text}");
         assert!(!text.contains("scheme is not http"), "{text}");
@@ -355,5 +314,33 @@ mod tests {
     #[test]
     fn empty_configuration_is_refused() {
         assert!(matches!(NaviAgent::new(NaviConfig::new("", "m")), Err(AgentError::Config(_))));
+    }
+
+    #[test]
+    fn requests_carry_upstreams_sampling_defaults_and_the_right_length_field() {
+        let obs = Observation {
+            step: 1,
+            instruction: "do it".into(),
+            screenshot_png: Vec::new(),
+            screen: arena_shared::observation::ScreenInfo {
+                physical_width: 1280,
+                physical_height: 800,
+                logical_width: 1280,
+                logical_height: 800,
+                scale_factor: 1.0,
+                monitors: Vec::new(),
+                coordinate_space: arena_shared::geometry::CoordinateSpace::Physical,
+            },
+            a11y: None,
+            window_titles: Vec::new(),
+            foreground_title: String::new(),
+            clipboard: None,
+        };
+        let agent = NaviAgent::new(NaviConfig::new("http://x/v1", "gpt-4o")).unwrap();
+        let body = agent.request_body(&obs, None, b"png");
+        assert_eq!((body["temperature"].clone(), body["max_tokens"].clone()), (json!(1.0), json!(4096)));
+        let agent = NaviAgent::new(NaviConfig::new("http://x/v1", "o3-mini")).unwrap();
+        let body = agent.request_body(&obs, None, b"png");
+        assert!(body.get("max_tokens").is_none() && body["max_completion_tokens"] == json!(4096), "{body}");
     }
 }

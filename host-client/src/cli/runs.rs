@@ -21,6 +21,7 @@ use anyhow::{bail, Context};
 use clap::{Args, ValueEnum};
 
 use super::{emit, stub, Connection};
+use crate::agent::llm::ApiKind;
 use crate::agent::navi::{NaviAgent, NaviConfig};
 use crate::agent::replay::{ReplayAgent, ReplaySource};
 use crate::agent::scripted::{PlanSource, ScriptedAgent};
@@ -65,15 +66,31 @@ pub struct RunArgs {
     /// (`<out>/<agent>/<observation>/<model>`) holding `<domain>/<task>/traj.jsonl`.
     #[arg(long, value_name = "PATH")]
     pub replay: Option<PathBuf>,
-    /// Navi agent: base URL of the OpenAI-compatible API (key from ARENA_LLM_KEY or OPENAI_API_KEY).
+    /// Navi agent: base URL of the API: OpenAI-compatible (`.../v1`) or a classic Azure
+    /// OpenAI deployment (`https://NAME.openai.azure.com/openai/deployments/D?api-version=V`).
+    /// The key comes from ARENA_LLM_KEY or OPENAI_API_KEY.
     #[arg(long, env = "ARENA_LLM_URL", value_name = "URL")]
     pub llm_url: Option<String>,
     /// Navi agent: the model name.
     #[arg(long, env = "ARENA_LLM_MODEL")]
     pub model: Option<String>,
-    /// Navi agent: sampling temperature.
-    #[arg(long, default_value_t = 0.0)]
+    /// Navi agent: sampling temperature (upstream's Navi: 1.0).
+    #[arg(long, default_value_t = 1.0)]
     pub temperature: f64,
+    /// Navi agent: longest answer in tokens (upstream's Navi: 4096); sent as
+    /// `max_completion_tokens` to reasoning models (o1, o3, o4, gpt-5), else `max_tokens`.
+    #[arg(long, default_value_t = 4096)]
+    pub max_tokens: u32,
+    /// Navi agent: which API the URL speaks; `auto` detects Azure by its host or `api-version`.
+    #[arg(long, value_enum, default_value_t = LlmApi::Auto)]
+    pub llm_api: LlmApi,
+    /// Navi agent: deadline of one model call, in seconds.
+    #[arg(long, default_value_t = 120.0, value_name = "SECONDS")]
+    pub llm_timeout: f64,
+    /// Navi agent: how long a failing model (429, 5xx, timeouts) is tried again,
+    /// in seconds of waiting, before the task is left unfinished.
+    #[arg(long, default_value_t = 300.0, value_name = "SECONDS")]
+    pub llm_retry: f64,
     /// Guests of the pool, comma-separated (repeatable); the global --guest is added to them.
     #[arg(long, value_delimiter = ',', value_name = "URL,...")]
     pub guests: Vec<String>,
@@ -137,6 +154,14 @@ pub struct RunArgs {
     /// The trial folder level of the results (upstream's --trial_id).
     #[arg(long, default_value = crate::results::DEFAULT_TRIAL_ID, value_name = "ID")]
     pub trial_id: String,
+}
+
+/// `--llm-api`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum LlmApi {
+    Auto,
+    Openai,
+    Azure,
 }
 
 /// `--order`.
@@ -224,6 +249,18 @@ fn agent_factory(args: &RunArgs) -> anyhow::Result<(AgentFactory, String, String
             };
             let mut config = NaviConfig::new(&url, &model);
             config.temperature = args.temperature;
+            config.max_tokens = args.max_tokens;
+            config.api = match args.llm_api {
+                LlmApi::Auto => None,
+                LlmApi::Openai => Some(ApiKind::OpenAi),
+                LlmApi::Azure => Some(ApiKind::Azure),
+            };
+            let seconds = |value: f64, flag: &str| {
+                Duration::try_from_secs_f64(value)
+                    .with_context(|| format!("{flag} must be a number of seconds, 0 or more"))
+            };
+            config.timeout = seconds(args.llm_timeout, "--llm-timeout")?;
+            config.retry.give_up_after = seconds(args.llm_retry, "--llm-retry")?;
             // Fail now, not once per task, when the configuration is unusable.
             NaviAgent::new(config.clone())?;
             let factory: AgentFactory =

@@ -1,0 +1,273 @@
+//! The chat-completions client agents use: OpenAI-compatible and classic Azure
+//! OpenAI endpoints, and retries that survive real endpoints.
+//!
+//! - **Endpoints.** [`ApiKind::OpenAi`]: `/chat/completions` is appended to the
+//!   base URL's path (before any query string) and the key goes in
+//!   `Authorization: Bearer`. [`ApiKind::Azure`] (a deployment URL such as
+//!   `https://NAME.openai.azure.com/openai/deployments/DEPLOYMENT?api-version=…`,
+//!   WAA's own set-up): the same path rule, the `api-version` query kept, the
+//!   key in the `api-key` header. [`ApiKind::detect`] tells them apart.
+//! - **Retries.** 408, 409, 429 and 5xx answers, timeouts, connection errors and
+//!   an answer cut short (a body that is not JSON) are tried again with
+//!   exponential backoff and full jitter, waiting at least what `Retry-After`
+//!   asks, until [`RetryPolicy::give_up_after`] has passed. Any other 4xx (a
+//!   bad key, a bad request) fails at once. A model that is still failing
+//!   then is an [`AgentError::Model`], which leaves the task unfinished.
+//! - **A refusal** (`message.refusal` with no content) is an answer: its text
+//!   comes back and the agent treats it as a reply without actions.
+//!
+//! The retry loop is written here rather than taken from a crate because its
+//! one unusual need, a per-error minimum delay from `Retry-After`, is most of
+//! its dozen lines.
+
+use std::time::Duration;
+
+use rand::Rng as _;
+use reqwest::header::{HeaderMap, RETRY_AFTER};
+use serde_json::Value;
+
+use super::AgentError;
+
+/// Which API the endpoint speaks.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ApiKind {
+    /// OpenAI and compatible servers (vLLM, llama.cpp, Ollama, ...): Bearer auth.
+    OpenAi,
+    /// Classic Azure OpenAI: a deployment URL with `api-version`, `api-key` auth.
+    Azure,
+}
+
+impl ApiKind {
+    /// Azure for a `*.openai.azure.com` host or a URL with an `api-version` query; OpenAI otherwise.
+    pub fn detect(base_url: &str) -> ApiKind {
+        match reqwest::Url::parse(base_url) {
+            Ok(url)
+                if url.host_str().is_some_and(|h| h.ends_with(".openai.azure.com"))
+                    || url.query_pairs().any(|(k, _)| k == "api-version") =>
+            {
+                ApiKind::Azure
+            }
+            _ => ApiKind::OpenAi,
+        }
+    }
+}
+
+/// How long and how often a failing call is tried again.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RetryPolicy {
+    /// The first pause; each later one doubles, up to `max_delay`.
+    pub initial_delay: Duration,
+    pub max_delay: Duration,
+    /// No new try starts once the pauses between tries would exceed this.
+    pub give_up_after: Duration,
+}
+
+impl Default for RetryPolicy {
+    /// 1 s doubling to 60 s, for up to 5 minutes (upstream retries about 30
+    /// times with 1 to 60 s pauses).
+    fn default() -> RetryPolicy {
+        RetryPolicy {
+            initial_delay: Duration::from_secs(1),
+            max_delay: Duration::from_secs(60),
+            give_up_after: Duration::from_secs(300),
+        }
+    }
+}
+
+/// Which request field carries the answer's length limit.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum TokensField {
+    /// `max_tokens`, what chat models take.
+    MaxTokens,
+    /// `max_completion_tokens`, what reasoning models (o1, o3, o4, gpt-5) require.
+    MaxCompletionTokens,
+}
+
+impl TokensField {
+    /// The field a model needs, judged by its name.
+    pub fn for_model(model: &str) -> TokensField {
+        let name = model.rsplit('/').next().unwrap_or(model).to_ascii_lowercase();
+        if ["o1", "o3", "o4", "gpt-5"].iter().any(|p| name.starts_with(p)) {
+            TokensField::MaxCompletionTokens
+        } else {
+            TokensField::MaxTokens
+        }
+    }
+
+    pub fn name(self) -> &'static str {
+        match self {
+            TokensField::MaxTokens => "max_tokens",
+            TokensField::MaxCompletionTokens => "max_completion_tokens",
+        }
+    }
+}
+
+/// A chat-completions endpoint and how to call it.
+#[derive(Debug, Clone)]
+pub struct ModelClient {
+    kind: ApiKind,
+    endpoint: String,
+    key: Option<String>,
+    http: reqwest::Client,
+    retry: RetryPolicy,
+    clock: std::sync::Arc<dyn crate::setup::Clock>,
+}
+
+/// Why one try failed, and whether another may succeed.
+struct Failure {
+    reason: String,
+    transient: bool,
+    /// The least the server asked us to wait (`Retry-After`).
+    wait_at_least: Option<Duration>,
+}
+
+impl ModelClient {
+    /// A client for `base_url` (see the module documentation for the two kinds).
+    ///
+    /// # Errors
+    ///
+    /// [`AgentError::Config`] for a URL that does not parse or an HTTP client that cannot be built.
+    pub fn new(
+        base_url: &str,
+        kind: ApiKind,
+        key: Option<String>,
+        timeout: Duration,
+        retry: RetryPolicy,
+    ) -> Result<ModelClient, AgentError> {
+        let endpoint = chat_endpoint(base_url)?;
+        let http = reqwest::Client::builder()
+            .timeout(timeout)
+            .build()
+            .map_err(|e| AgentError::Config(format!("cannot build the HTTP client: {e}")))?;
+        Ok(ModelClient { kind, endpoint, key, http, retry, clock: std::sync::Arc::new(crate::setup::RealClock) })
+    }
+
+    /// The same client with its pauses between tries on `clock` (a test's fake clock).
+    #[must_use]
+    pub fn with_clock(mut self, clock: std::sync::Arc<dyn crate::setup::Clock>) -> ModelClient {
+        self.clock = clock;
+        self
+    }
+
+    /// The URL requests go to.
+    pub fn endpoint(&self) -> &str {
+        &self.endpoint
+    }
+
+    /// Sends `body` and answers the reply's text, trying again as the policy says.
+    ///
+    /// # Errors
+    ///
+    /// [`AgentError::Model`] naming the last failure when no try succeeded.
+    pub async fn complete(&self, body: &Value) -> Result<String, AgentError> {
+        let mut waited = Duration::ZERO;
+        let mut delay = self.retry.initial_delay;
+        let mut tries = 0u32;
+        loop {
+            tries += 1;
+            let failure = match self.try_once(body).await {
+                Ok(text) => return Ok(text),
+                Err(failure) => failure,
+            };
+            let pause = rand::rng().random_range(Duration::ZERO..=delay).max(failure.wait_at_least.unwrap_or_default());
+            // Time spent waiting counts against the budget (the tries themselves are
+            // bounded by the call timeout), so a fake clock sees the same decisions.
+            if !failure.transient || waited + pause > self.retry.give_up_after {
+                let why = if failure.transient { format!(" (gave up after {tries} tries)") } else { String::new() };
+                return Err(AgentError::Model {
+                    endpoint: self.endpoint.clone(),
+                    reason: format!("{}{why}", failure.reason),
+                });
+            }
+            tracing::warn!(endpoint = %self.endpoint, reason = %failure.reason, tries, pause_ms = pause.as_millis() as u64, "model call failed; trying again");
+            self.clock.sleep(pause, "before trying the model again").await;
+            waited += pause;
+            delay = (delay * 2).min(self.retry.max_delay);
+        }
+    }
+
+    async fn try_once(&self, body: &Value) -> Result<String, Failure> {
+        let mut request = self.http.post(&self.endpoint).json(body);
+        if let Some(key) = &self.key {
+            request = match self.kind {
+                ApiKind::OpenAi => request.bearer_auth(key),
+                ApiKind::Azure => request.header("api-key", key),
+            };
+        }
+        let transient = |reason: String| Failure { reason, transient: true, wait_at_least: None };
+        let response = request.send().await.map_err(|e| transient(error_chain(&e)))?;
+        let status = response.status();
+        let wait_at_least = retry_after(response.headers());
+        let text = response.text().await.map_err(|e| transient(error_chain(&e)))?;
+        if !status.is_success() {
+            let snippet: String = text.chars().take(300).collect();
+            let code = status.as_u16();
+            return Err(Failure {
+                reason: format!("HTTP {status}: {snippet}"),
+                transient: matches!(code, 408 | 409 | 429) || status.is_server_error(),
+                wait_at_least,
+            });
+        }
+        let value: Value =
+            serde_json::from_str(&text).map_err(|e| transient(format!("the answer is not JSON (cut short?): {e}")))?;
+        reply_text(&value).ok_or_else(|| Failure {
+            reason: "the answer has no choices[0].message.content".into(),
+            transient: false,
+            wait_at_least: None,
+        })
+    }
+}
+
+/// The chat-completions URL of a base URL: `/chat/completions` added to the
+/// path unless it is there, any query string (Azure's `api-version`) kept.
+///
+/// # Errors
+///
+/// [`AgentError::Config`] when `base_url` is not a URL.
+pub fn chat_endpoint(base_url: &str) -> Result<String, AgentError> {
+    let mut url = reqwest::Url::parse(base_url.trim())
+        .map_err(|e| AgentError::Config(format!("the model's base URL {base_url:?} is not a URL: {e}")))?;
+    let path = url.path().trim_end_matches('/').to_owned();
+    if !path.ends_with("/chat/completions") {
+        url.set_path(&format!("{path}/chat/completions"));
+    }
+    Ok(url.to_string())
+}
+
+/// `Retry-After` in seconds (the HTTP-date form is rare from model APIs and is ignored).
+fn retry_after(headers: &HeaderMap) -> Option<Duration> {
+    let text = headers.get(RETRY_AFTER)?.to_str().ok()?;
+    let secs: f64 = text.trim().parse().ok()?;
+    Duration::try_from_secs_f64(secs).ok()
+}
+
+/// An error and its sources on one line (reqwest hides the useful part in the chain).
+pub(crate) fn error_chain(err: &(dyn std::error::Error + 'static)) -> String {
+    let mut text = err.to_string();
+    let mut source = err.source();
+    while let Some(inner) = source {
+        let more = inner.to_string();
+        if !text.contains(&more) {
+            text.push_str(": ");
+            text.push_str(&more);
+        }
+        source = inner.source();
+    }
+    text
+}
+
+/// `choices[0].message.content`, as a string or as a list of text parts; a
+/// refusal without content gives the refusal's text.
+pub(crate) fn reply_text(answer: &Value) -> Option<String> {
+    let message = answer.get("choices")?.get(0)?.get("message")?;
+    match message.get("content") {
+        Some(Value::String(s)) => Some(s.clone()),
+        Some(Value::Array(parts)) => {
+            Some(parts.iter().filter_map(|p| p.get("text").and_then(Value::as_str)).collect::<Vec<_>>().join("\n"))
+        }
+        _ => message.get("refusal").and_then(Value::as_str).map(str::to_owned),
+    }
+}
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,174 @@
+//! The model client against a local mock endpoint (a real HTTP server) that
+//! answers from a script: 429s with and without `Retry-After`, 500s, slow and
+//! cut-short answers, refusals, a bad key; and Azure's URL and header.
+
+use std::collections::VecDeque;
+use std::sync::{Arc, Mutex};
+
+use axum::extract::{Request, State};
+use axum::http::{HeaderMap, StatusCode};
+use axum::response::{IntoResponse, Response};
+use serde_json::json;
+
+use super::*;
+
+/// One scripted answer: status, `Retry-After`, body, and how long to wait first.
+#[derive(Clone)]
+struct Answer {
+    status: u16,
+    retry_after: Option<&'static str>,
+    body: String,
+    delay: Duration,
+}
+
+fn ok(text: &str) -> Answer {
+    let body = json!({"choices": [{"message": {"role": "assistant", "content": text}}]}).to_string();
+    Answer { status: 200, retry_after: None, body, delay: Duration::ZERO }
+}
+
+fn status(code: u16, retry_after: Option<&'static str>) -> Answer {
+    Answer { status: code, retry_after, body: format!("{{\"error\": \"{code}\"}}"), delay: Duration::ZERO }
+}
+
+#[derive(Default)]
+struct Mock {
+    script: Mutex<VecDeque<Answer>>,
+    /// (path and query, headers) of each request.
+    seen: Mutex<Vec<(String, HeaderMap)>>,
+}
+
+async fn answer(State(mock): State<Arc<Mock>>, request: Request) -> Response {
+    let target = request.uri().path_and_query().map(ToString::to_string).unwrap_or_default();
+    mock.seen.lock().unwrap().push((target, request.headers().clone()));
+    let next = mock.script.lock().unwrap().pop_front().unwrap_or_else(|| status(599, None));
+    tokio::time::sleep(next.delay).await;
+    let mut response = (StatusCode::from_u16(next.status).unwrap(), next.body).into_response();
+    if let Some(after) = next.retry_after {
+        response.headers_mut().insert("retry-after", after.parse().unwrap());
+    }
+    response
+}
+
+/// A mock endpoint answering `script`; its base URL (`http://127.0.0.1:PORT{path}`).
+async fn serve(script: Vec<Answer>, path: &str) -> (String, Arc<Mock>) {
+    let mock = Arc::new(Mock { script: Mutex::new(script.into()), seen: Mutex::default() });
+    let app = axum::Router::new().fallback(answer).with_state(Arc::clone(&mock));
+    let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
+    let addr = listener.local_addr().unwrap();
+    tokio::spawn(async move { axum::serve(listener, app).await.unwrap() });
+    (format!("http://{addr}{path}"), mock)
+}
+
+/// Records the pauses between tries instead of sleeping.
+#[derive(Debug, Default)]
+struct Pauses(Mutex<Vec<Duration>>);
+
+#[async_trait::async_trait]
+impl crate::setup::Clock for Pauses {
+    async fn sleep(&self, d: Duration, _why: &'static str) {
+        self.0.lock().unwrap().push(d);
+    }
+}
+
+fn model(base: &str, kind: ApiKind, timeout: Duration, retry: RetryPolicy) -> (ModelClient, Arc<Pauses>) {
+    let pauses = Arc::new(Pauses::default());
+    let client =
+        ModelClient::new(base, kind, Some("sk-test".into()), timeout, retry).unwrap().with_clock(pauses.clone());
+    (client, pauses)
+}
+
+fn body() -> Value {
+    json!({"model": "m", "messages": [{"role": "user", "content": "hi"}]})
+}
+
+#[test]
+fn endpoints_keep_the_query_and_add_the_path_once() {
+    let check = |base: &str, want: &str| assert_eq!(chat_endpoint(base).unwrap(), want, "{base}");
+    check("https://api.openai.com/v1", "https://api.openai.com/v1/chat/completions");
+    check("http://127.0.0.1:8000/v1/", "http://127.0.0.1:8000/v1/chat/completions");
+    check("http://h/v1/chat/completions", "http://h/v1/chat/completions");
+    check(
+        "https://lab.openai.azure.com/openai/deployments/gpt-4o?api-version=2024-02-01",
+        "https://lab.openai.azure.com/openai/deployments/gpt-4o/chat/completions?api-version=2024-02-01",
+    );
+    assert!(matches!(chat_endpoint("not a url"), Err(AgentError::Config(m)) if m.contains("not a URL")));
+    assert_eq!(ApiKind::detect("https://lab.openai.azure.com/openai/deployments/d"), ApiKind::Azure);
+    assert_eq!(ApiKind::detect("https://proxy.example/openai/deployments/d?api-version=2024-02-01"), ApiKind::Azure);
+    assert_eq!(ApiKind::detect("https://api.openai.com/v1"), ApiKind::OpenAi);
+    assert_eq!(TokensField::for_model("o3-mini"), TokensField::MaxCompletionTokens);
+    assert_eq!(TokensField::for_model("openai/gpt-5"), TokensField::MaxCompletionTokens);
+    assert_eq!(TokensField::for_model("gpt-4o"), TokensField::MaxTokens);
+}
+
+#[tokio::test]
+async fn rate_limits_and_server_errors_are_waited_out_honouring_retry_after() {
+    let script = vec![status(429, Some("7")), status(429, None), status(500, None), status(503, Some("2")), ok("fine")];
+    let (base, mock) = serve(script, "/v1").await;
+    let retry = RetryPolicy {
+        initial_delay: Duration::from_secs(1),
+        max_delay: Duration::from_secs(4),
+        ..RetryPolicy::default()
+    };
+    let (client, pauses) = model(&base, ApiKind::OpenAi, Duration::from_secs(10), retry);
+    assert_eq!(client.complete(&body()).await.unwrap(), "fine");
+    let pauses = pauses.0.lock().unwrap().clone();
+    assert_eq!(pauses.len(), 4, "{pauses:?}");
+    assert!(pauses[0] >= Duration::from_secs(7), "Retry-After: 7 is honoured: {pauses:?}");
+    // Full jitter under a doubling cap: at most 2 s, then 4 s (the cap).
+    assert!(pauses[1] <= Duration::from_secs(2) && pauses[2] <= Duration::from_secs(4), "{pauses:?}");
+    assert!(pauses[3] >= Duration::from_secs(2), "{pauses:?}");
+    let seen = mock.seen.lock().unwrap();
+    assert_eq!(seen.len(), 5);
+    assert_eq!(seen[0].0, "/v1/chat/completions");
+    assert_eq!(seen[0].1.get("authorization").unwrap(), "Bearer sk-test");
+}
+
+#[tokio::test]
+async fn slow_and_cut_short_answers_are_tried_again_and_a_refusal_is_an_answer() {
+    let slow = Answer { delay: Duration::from_secs(3), ..ok("late") };
+    let cut = Answer { body: r#"{"choices": [{"message": {"content": "par"#.into(), ..ok("") };
+    let refusal = Answer {
+        body: json!({"choices": [{"message": {"content": null, "refusal": "I can't help with that."}}]}).to_string(),
+        ..ok("")
+    };
+    let (base, mock) = serve(vec![slow, cut, refusal], "/v1").await;
+    let (client, pauses) = model(&base, ApiKind::OpenAi, Duration::from_millis(300), RetryPolicy::default());
+    assert_eq!(client.complete(&body()).await.unwrap(), "I can't help with that.");
+    assert_eq!(mock.seen.lock().unwrap().len(), 3);
+    assert_eq!(pauses.0.lock().unwrap().len(), 2);
+}
+
+#[tokio::test]
+async fn a_bad_key_fails_at_once_and_a_model_that_stays_down_gives_up_with_the_reason() {
+    let (base, mock) = serve(vec![status(401, None)], "/v1").await;
+    let (client, pauses) = model(&base, ApiKind::OpenAi, Duration::from_secs(5), RetryPolicy::default());
+    let err = client.complete(&body()).await.unwrap_err().to_string();
+    assert!(err.contains("401") && !err.contains("gave up"), "{err}");
+    assert_eq!((mock.seen.lock().unwrap().len(), pauses.0.lock().unwrap().len()), (1, 0));
+
+    let (base, mock) = serve(vec![status(503, None); 50], "/v1").await;
+    let retry = RetryPolicy {
+        initial_delay: Duration::from_secs(1),
+        max_delay: Duration::from_secs(60),
+        give_up_after: Duration::from_secs(30),
+    };
+    let (client, pauses) = model(&base, ApiKind::OpenAi, Duration::from_secs(5), retry);
+    let err = client.complete(&body()).await.unwrap_err();
+    let AgentError::Model { reason, .. } = &err else { panic!("{err:?}") };
+    assert!(reason.contains("503") && reason.contains("gave up after"), "{reason}");
+    let waited: Duration = pauses.0.lock().unwrap().iter().sum();
+    assert!(waited <= Duration::from_secs(30), "the budget holds: {waited:?}");
+    assert!(mock.seen.lock().unwrap().len() >= 2);
+}
+
+#[tokio::test]
+async fn azure_deployments_get_their_path_query_and_api_key_header() {
+    let (base, mock) = serve(vec![ok("azure")], "/openai/deployments/gpt-4o?api-version=2024-02-01").await;
+    assert_eq!(ApiKind::detect(&base), ApiKind::Azure);
+    let (client, _) = model(&base, ApiKind::detect(&base), Duration::from_secs(5), RetryPolicy::default());
+    assert_eq!(client.complete(&body()).await.unwrap(), "azure");
+    let seen = mock.seen.lock().unwrap();
+    assert_eq!(seen[0].0, "/openai/deployments/gpt-4o/chat/completions?api-version=2024-02-01");
+    assert_eq!(seen[0].1.get("api-key").unwrap(), "sk-test");
+    assert!(seen[0].1.get("authorization").is_none());
+}
