@@ -15,7 +15,8 @@ use base64::Engine as _;
 use serde_json::{json, Value};
 use tokio::net::TcpListener;
 
-use arena_host::agent::navi::{NaviAgent, NaviConfig};
+use arena_host::agent::llm::RetryPolicy;
+use arena_host::agent::navi::{NaviAgent, NaviConfig, NaviStyle};
 use arena_host::agent::replay::{ReplayAgent, ReplaySource, TrajectoryStep};
 use arena_host::agent::scripted::{PlanSource, ScriptedAgent};
 use arena_host::agent::{execute_with, Agent, AgentAction, AgentError, ExecOptions, Observation};
@@ -239,6 +240,9 @@ async fn navi_sends_the_annotated_screenshot_and_elements_and_retries_malformed_
     .await;
     let mut config = NaviConfig::new(&url, "mock-model");
     config.api_key = Some("test-key".into());
+    config.style = NaviStyle::Arena;
+    // The 500 at the end is reported at once, not tried again.
+    config.retry = RetryPolicy { give_up_after: Duration::ZERO, ..RetryPolicy::default() };
     let mut agent = NaviAgent::new(config).expect("agent");
     let dir = tempfile::tempdir().expect("dir");
     agent.reset(&task(dir.path(), "")).await;
@@ -304,6 +308,77 @@ async fn navi_sends_the_annotated_screenshot_and_elements_and_retries_malformed_
     // An HTTP failure of the endpoint is an error the caller sees.
     let err = agent.predict(&obs3).await.expect_err("HTTP 500");
     assert!(matches!(err, AgentError::Model { .. }) && err.to_string().contains("500"), "{err}");
+}
+
+#[tokio::test]
+async fn navi_in_upstreams_layout_reads_replies_by_upstreams_rules() {
+    let (_guest, c) = guest_with_notepad().await;
+    let (url, mock) = start_mock(&[
+        (200, "Focus the editor.\n```python\n    computer.mouse.move_id(id=ID)\n    computer.mouse.single_click()\n```\n```decision\nCOMMAND\n```\n```memory\nthe editor has focus\n```"),
+        (200, "Type it.\n```python\ncomputer.keyboard.write(\"hello\")\n```\n```python\ncomputer.keyboard.press(\"enter\")\n```"),
+        (200, "Typed.\n```python\ncomputer.keyboard.press(\"enter\")\n```\n```decision\nDONE\n```"),
+    ])
+    .await;
+    let mut agent = NaviAgent::new(NaviConfig::new(&url, "mock-model")).expect("agent");
+    let dir = tempfile::tempdir().expect("dir");
+    agent.reset(&task(dir.path(), "")).await;
+
+    let obs = Observation::capture(&c, 1, "Type hello in Notepad").await.expect("observe");
+    let doc_id = obs.marks().expect("marks").entities.iter().find(|m| m.text == "Text Editor").expect("mark").id;
+    {
+        let mut replies = mock.replies.lock().expect("lock");
+        let next = replies.front_mut().expect("reply");
+        next.1 = next.1.replace("ID", &doc_id.to_string());
+    }
+    let p = agent.predict(&obs).await.expect("prediction");
+    // The first python block, dedented; COMMAND keeps it.
+    let code = format!("computer.mouse.move_id(id={doc_id})\ncomputer.mouse.single_click()\n");
+    assert_eq!(p.actions, vec![AgentAction::Computer(code.clone())]);
+    let body = mock.requests.lock().expect("lock")[0].1.clone();
+    assert_eq!((body["temperature"].clone(), body["max_tokens"].clone()), (json!(1.0), json!(4096)));
+    let (images, text) = user_parts(&body);
+    assert_eq!(images.len(), 1, "no previous screen on the first step");
+    for label in [
+        "1. User objective: Type hello in Notepad",
+        "2. Window title: Untitled - Notepad",
+        "3. All window names:",
+        "4. Clipboard content.",
+        "6. Candidate elements:",
+        "8. History of previous actions",
+        "9. Textual memory:",
+    ] {
+        assert!(text.contains(label), "{label} missing from {text}");
+    }
+    assert!(body["messages"][0]["content"].as_str().is_some_and(|s| s.contains("```decision")));
+
+    let obs2 = Observation::capture(&c, 2, "Type hello in Notepad").await.expect("observe");
+    let p = agent.predict(&obs2).await.expect("prediction");
+    assert_eq!(
+        p.actions,
+        vec![AgentAction::Computer("computer.keyboard.write(\"hello\")\n".into())],
+        "only the first block"
+    );
+    let body = mock.requests.lock().expect("lock")[1].1.clone();
+    let content = body["messages"][1]["content"].as_array().expect("parts").clone();
+    let kinds: Vec<&str> = content.iter().map(|p| p["type"].as_str().unwrap_or("")).collect();
+    assert_eq!(kinds, ["text", "image_url", "image_url"], "the previous screen, then the current one");
+    let previous = content[1]["image_url"]["url"].as_str().unwrap().strip_prefix("data:image/png;base64,").unwrap();
+    assert_eq!(
+        base64::engine::general_purpose::STANDARD.decode(previous).unwrap(),
+        obs.screenshot_png,
+        "sent as it was"
+    );
+    let (_, text) = user_parts(&body);
+    assert!(text.contains("```memory\nthe editor has focus\n```"), "{text}");
+    assert!(text.contains(&code), "{text}");
+
+    let obs3 = Observation::capture(&c, 3, "Type hello in Notepad").await.expect("observe");
+    let p = agent.predict(&obs3).await.expect("prediction");
+    assert_eq!(p.actions, vec![AgentAction::Done], "the decision wins over the code");
+    let (_, text) = user_parts(&mock.requests.lock().expect("lock")[2].1);
+    let newest = text.find("computer.keyboard.write").expect("step 2 in the history");
+    let oldest = text.find("computer.mouse.single_click").expect("step 1 in the history");
+    assert!(newest < oldest, "the history is newest first: {text}");
 }
 
 #[tokio::test]

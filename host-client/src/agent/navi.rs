@@ -21,7 +21,7 @@ use base64::Engine as _;
 use serde_json::{json, Value};
 
 use super::llm::{self, ApiKind, ModelClient, RetryPolicy, TokensField};
-use super::parse::parse_reply;
+use super::parse::{parse_navi_reply, parse_reply};
 use super::{Agent, AgentAction, AgentError, Observation, Prediction};
 use crate::som::{annotate, Marks};
 use crate::task::Task;
@@ -50,8 +50,25 @@ pub struct NaviConfig {
     pub timeout: Duration,
     /// How long a failing model is tried again before the task is left unfinished.
     pub retry: RetryPolicy,
-    /// How many previous steps the prompt's action history shows.
+    /// How many previous steps the prompt's action history shows (upstream: 15).
     pub max_history: usize,
+    /// The message layout and reply rules.
+    pub style: NaviStyle,
+}
+
+/// Which Navi the agent is.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum NaviStyle {
+    /// Upstream's layout and rules: the user message's nine numbered inputs, the
+    /// history newest first, images as `[previous, current annotated]`, and the
+    /// reply's first ```` ```python ```` block, ```` ```decision ```` and
+    /// ```` ```memory ```` blocks read as upstream reads them
+    /// ([`super::parse::parse_navi_reply`]). The prompt's prose is our own wording.
+    #[default]
+    Waa,
+    /// This project's earlier agent: its own prompt and the lenient reply reader
+    /// ([`super::parse::parse_reply`]: every code block, control words anywhere, `Memory:` lines).
+    Arena,
 }
 
 impl NaviConfig {
@@ -67,6 +84,7 @@ impl NaviConfig {
             timeout: Duration::from_secs(120),
             retry: RetryPolicy::default(),
             max_history: 15,
+            style: NaviStyle::default(),
         }
     }
 
@@ -112,6 +130,40 @@ When the task is complete, answer DONE. If it cannot be done, answer FAIL. To wa
 You may keep notes for later turns: write a line starting with "Memory:" followed by what you want to remember;
 it replaces your previous notes. Think briefly first, then give the code block or the word."#;
 
+/// The system prompt of [`NaviStyle::Waa`]: the same `computer` API and the
+/// reply structure upstream's planner expects (a ```` ```python ```` block, a
+/// ```` ```decision ```` block and a ```` ```memory ```` block), in our words.
+pub const WAA_SYSTEM_PROMPT: &str = r#"You control a Windows 11 computer to reach the user's objective, one action per turn.
+Every turn brings the inputs listed in the user message and two pictures: the screen before your previous
+action, then the current screen with numbered boxes on the elements you can target.
+
+Your actions are Python run with a ready `computer` object:
+- computer.mouse.move_id(id=12)                      pointer to the centre of element 12
+- computer.mouse.move_abs(x=0.25, y=0.80)            pointer to a point given as fractions of the screen's width and height
+- computer.mouse.single_click(), double_click(), right_click()
+- computer.mouse.scroll(dir="down")                  "up" or "down", at the pointer
+- computer.mouse.drag(x=0.40, y=0.55)                press, move to that point, release
+- computer.keyboard.write("text"), computer.keyboard.press("ctrl+s")
+- computer.clipboard.copy_text("text"), computer.clipboard.copy_image(id=7, description="chart"), computer.clipboard.paste()
+- computer.os.open_program("notepad")
+- computer.window_manager.switch_to_application("Document - Word")
+
+Answer in this shape. First reason briefly about the screen and the objective. Then:
+```python
+# the code of this turn's single action
+```
+```decision
+COMMAND
+```
+where the decision is COMMAND to run the code, DONE when the objective is reached, FAIL when it cannot be
+reached, or WAIT to let the screen settle. Last, keep what later turns must know:
+```memory
+# your notes, which replace the previous ones
+```"#;
+
+/// The memory a [`NaviStyle::Waa`] agent starts each task with.
+const EMPTY_MEMORY_BLOCK: &str = "```memory\n# nothing noted yet\n```";
+
 /// One line of the action history.
 #[derive(Debug, Clone, PartialEq)]
 struct Turn {
@@ -126,6 +178,8 @@ pub struct NaviAgent {
     client: ModelClient,
     history: Vec<Turn>,
     memory: String,
+    /// [`NaviStyle::Waa`]: the memory block, fences included, as upstream keeps it.
+    memory_block: String,
     previous_png: Option<Vec<u8>>,
     last_error: Option<String>,
 }
@@ -151,12 +205,38 @@ impl NaviAgent {
             client,
             history: Vec::new(),
             memory: String::new(),
+            memory_block: EMPTY_MEMORY_BLOCK.to_owned(),
             previous_png: None,
             last_error: None,
         })
     }
 
-    /// The text part of the user message.
+    /// The text part of a [`NaviStyle::Waa`] user message: upstream's numbered
+    /// inputs, with our words where it has prose.
+    fn waa_prompt_text(&self, obs: &Observation, marks: Option<&Marks>) -> String {
+        let clipboard = obs.clipboard.as_deref().unwrap_or("(the clipboard holds no text)");
+        let candidates = marks.map_or_else(|| "(no element list this turn)".to_owned(), Marks::candidate_list);
+        // Newest first, as upstream's history reads back from time step T-1.
+        let skip = self.history.len().saturating_sub(self.config.max_history);
+        let history: Vec<String> = self.history[skip..]
+            .iter()
+            .rev()
+            .enumerate()
+            .map(|(i, turn)| format!("Action taken at step T-{} (now is T):\n{}\n", i + 1, turn.text))
+            .collect();
+        let history = if history.is_empty() { "(no actions yet)".to_owned() } else { history.join("\n") };
+        format!(
+            "Inputs:\n\n1. User objective: {}\n\n2. Window title: {}\n\n3. All window names:\n{}\n\n4. Clipboard content.\n{clipboard}\n\n\
+             5. Text rendering:\n(not provided)\n\n6. Candidate elements:\n{candidates}\n\n7. The two screens come as attached images.\n\n\
+             8. History of previous actions code blocks taken to reach the current screen.\n{history}\n\n9. Textual memory:\n{}\n\n",
+            obs.instruction,
+            obs.foreground_title,
+            obs.window_titles.join("\n"),
+            self.memory_block
+        )
+    }
+
+    /// The text part of an [`NaviStyle::Arena`] user message.
     fn prompt_text(&self, obs: &Observation, marks: Option<&Marks>) -> String {
         let mut t = String::new();
         t.push_str(&format!("Task: {}\n\nStep: {}\n\n", obs.instruction, obs.step));
@@ -199,19 +279,33 @@ impl NaviAgent {
 
     /// The chat-completions request body.
     fn request_body(&self, obs: &Observation, marks: Option<&Marks>, annotated: &[u8]) -> Value {
-        let mut content = vec![
-            json!({"type": "text", "text": self.prompt_text(obs, marks)}),
-            json!({"type": "text", "text": "The current screen, with the elements' numbers:"}),
-            json!({"type": "image_url", "image_url": {"url": data_uri(annotated)}}),
-        ];
-        if let Some(previous) = &self.previous_png {
-            content.push(json!({"type": "text", "text": "The screen before your last action:"}));
-            content.push(json!({"type": "image_url", "image_url": {"url": data_uri(previous)}}));
-        }
+        let (system, content) = match self.config.style {
+            NaviStyle::Waa => {
+                // Upstream's order: the previous screen as it was, then the current one annotated.
+                let mut content = vec![json!({"type": "text", "text": self.waa_prompt_text(obs, marks)})];
+                if let Some(previous) = &self.previous_png {
+                    content.push(json!({"type": "image_url", "image_url": {"url": data_uri(previous)}}));
+                }
+                content.push(json!({"type": "image_url", "image_url": {"url": data_uri(annotated)}}));
+                (WAA_SYSTEM_PROMPT, content)
+            }
+            NaviStyle::Arena => {
+                let mut content = vec![
+                    json!({"type": "text", "text": self.prompt_text(obs, marks)}),
+                    json!({"type": "text", "text": "The current screen, with the elements' numbers:"}),
+                    json!({"type": "image_url", "image_url": {"url": data_uri(annotated)}}),
+                ];
+                if let Some(previous) = &self.previous_png {
+                    content.push(json!({"type": "text", "text": "The screen before your last action:"}));
+                    content.push(json!({"type": "image_url", "image_url": {"url": data_uri(previous)}}));
+                }
+                (SYSTEM_PROMPT, content)
+            }
+        };
         json!({
             "model": self.config.model,
             "messages": [
-                {"role": "system", "content": SYSTEM_PROMPT},
+                {"role": "system", "content": system},
                 {"role": "user", "content": content},
             ],
             "temperature": self.config.temperature,
@@ -229,6 +323,7 @@ impl Agent for NaviAgent {
     async fn reset(&mut self, _task: &Task) {
         self.history.clear();
         self.memory.clear();
+        self.memory_block = EMPTY_MEMORY_BLOCK.to_owned();
         self.previous_png = None;
         self.last_error = None;
     }
@@ -245,6 +340,14 @@ impl Agent for NaviAgent {
         let body = self.request_body(obs, marks.as_ref(), &annotated);
         let response = self.client.complete(&body).await?;
         self.previous_png = Some(obs.screenshot_png.clone());
+        if self.config.style == NaviStyle::Waa {
+            let reply = parse_navi_reply(&response);
+            if let Some(block) = reply.memory_block {
+                self.memory_block = block;
+            }
+            self.history.push(Turn { step: obs.step, text: reply.code });
+            return Ok(Prediction { response, actions: reply.actions, marks, raw_error: None });
+        }
         let prediction = match parse_reply(&response) {
             Ok(parsed) => {
                 if let Some(memory) = parsed.memory {

@@ -142,9 +142,89 @@ pub fn parse_reply(text: &str) -> Result<Parsed, String> {
     Ok(Parsed { actions, memory: memory(text) })
 }
 
+/// The text between the first `` ```<label>\n `` and the next `` ``` `` after it,
+/// as upstream's non-greedy `re.search` finds it.
+fn fenced(text: &str, label: &str) -> Option<String> {
+    let open = format!("```{label}\n");
+    let start = text.find(&open)? + open.len();
+    let end = text[start..].find("```")?;
+    Some(text[start..start + end].to_owned())
+}
+
+/// Upstream's `remove_min_leading_spaces`: the smallest count of leading spaces
+/// over the non-empty lines is cut from every line. `None` when no line is
+/// non-empty (upstream's `min()` of nothing raises there).
+fn dedent(code: &str) -> Option<String> {
+    let lines: Vec<&str> = code.split('\n').collect();
+    let cut = lines.iter().filter(|l| !l.is_empty()).map(|l| l.len() - l.trim_start_matches(' ').len()).min()?;
+    Some(lines.iter().map(|l| l.get(cut..).unwrap_or("")).collect::<Vec<_>>().join("\n"))
+}
+
+/// The code action of a reply without a usable ```` ```python ```` block, as upstream logs and runs it.
+pub const PLAN_NOT_FOUND: &str = "# plan not found";
+
+/// A reply read with upstream Navi's rules.
+#[derive(Debug, Clone, PartialEq)]
+pub struct NaviReply {
+    /// One action: the code of the first ```` ```python ```` block ([`PLAN_NOT_FOUND`]
+    /// without one), replaced by `DONE`, `FAIL` or `WAIT` when a ```` ```decision ````
+    /// block names one (checked in that order, anywhere in the block).
+    pub actions: Vec<AgentAction>,
+    /// The code as the action history records it (the decision does not change it).
+    pub code: String,
+    /// `` ```memory\n…``` `` when the reply has a memory block: it replaces the agent's memory.
+    pub memory_block: Option<String>,
+}
+
+/// Reads a reply as upstream's Navi does: only the first ```` ```python ```` block
+/// counts (dedented), a ```` ```decision ```` block takes precedence over it, and a
+/// ```` ```memory ```` block replaces the memory. A python block with no
+/// non-empty line (which makes upstream's agent raise) counts as no block.
+pub fn parse_navi_reply(text: &str) -> NaviReply {
+    let memory_block = fenced(text, "memory").map(|inner| format!("```memory\n{inner}```"));
+    let code = fenced(text, "python").and_then(|c| dedent(&c)).unwrap_or_else(|| PLAN_NOT_FOUND.to_owned());
+    let mut actions = vec![AgentAction::Computer(code.clone())];
+    if let Some(decision) = fenced(text, "decision") {
+        if decision.contains("DONE") {
+            actions = vec![AgentAction::Done];
+        } else if decision.contains("FAIL") {
+            actions = vec![AgentAction::Fail];
+        } else if decision.contains("WAIT") {
+            actions = vec![AgentAction::Wait];
+        }
+    }
+    NaviReply { actions, code, memory_block }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn navi_replies_follow_upstreams_rules() {
+        let computer = |code: &str| vec![AgentAction::Computer(code.to_owned())];
+        // Only the first python block, dedented by its smallest indent.
+        let r = parse_navi_reply(
+            "Plan.\n```python\n    computer.mouse.move_id(id=3)\n      x = 1\n```\n```python\nother()\n```",
+        );
+        assert_eq!(r.actions, computer("computer.mouse.move_id(id=3)\n  x = 1\n"));
+        // A decision wins over code, DONE before FAIL before WAIT; the history keeps the code.
+        let r = parse_navi_reply("```python\ncomputer.keyboard.press(\"enter\")\n```\n```decision\nWAIT or DONE\n```");
+        assert_eq!(
+            (r.actions.clone(), r.code.as_str()),
+            (vec![AgentAction::Done], "computer.keyboard.press(\"enter\")\n")
+        );
+        assert_eq!(parse_navi_reply("```decision\nFAIL\n```").actions, vec![AgentAction::Fail]);
+        assert_eq!(parse_navi_reply("```decision\nCOMMAND\n```").actions, computer(PLAN_NOT_FOUND));
+        // No python block: upstream's placeholder, which runs as a comment.
+        let r = parse_navi_reply("DONE");
+        assert_eq!((r.actions, r.code.as_str(), r.memory_block), (computer(PLAN_NOT_FOUND), PLAN_NOT_FOUND, None));
+        assert_eq!(parse_navi_reply("```py\nx()\n```").actions, computer(PLAN_NOT_FOUND), "only ```python counts");
+        assert_eq!(parse_navi_reply("```python\n\n```").actions, computer(PLAN_NOT_FOUND));
+        // The memory block is kept whole, fences included.
+        let r = parse_navi_reply("```memory\nsaved file.txt\n```\n```python\nf()\n```");
+        assert_eq!(r.memory_block.as_deref(), Some("```memory\nsaved file.txt\n```"));
+    }
 
     fn check(reply: &str, expected: Result<Vec<AgentAction>, &str>) {
         match (parse_reply(reply), expected) {

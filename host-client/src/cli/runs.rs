@@ -22,7 +22,7 @@ use clap::{Args, ValueEnum};
 
 use super::{emit, stub, Connection};
 use crate::agent::llm::ApiKind;
-use crate::agent::navi::{NaviAgent, NaviConfig};
+use crate::agent::navi::{NaviAgent, NaviConfig, NaviStyle};
 use crate::agent::replay::{ReplayAgent, ReplaySource};
 use crate::agent::scripted::{PlanSource, ScriptedAgent};
 use crate::agent::{Agent, ExecOptions};
@@ -81,6 +81,10 @@ pub struct RunArgs {
     /// `max_completion_tokens` to reasoning models (o1, o3, o4, gpt-5), else `max_tokens`.
     #[arg(long, default_value_t = 4096)]
     pub max_tokens: u32,
+    /// Navi agent: `waa`, upstream's message layout and reply rules (our words for its
+    /// prose), or `arena`, this project's earlier prompt and lenient reply reader.
+    #[arg(long, value_enum, default_value_t = NaviStyleArg::Waa)]
+    pub navi_style: NaviStyleArg,
     /// Navi agent: which API the URL speaks; `auto` detects Azure by its host or `api-version`.
     #[arg(long, value_enum, default_value_t = LlmApi::Auto)]
     pub llm_api: LlmApi,
@@ -154,6 +158,13 @@ pub struct RunArgs {
     /// The trial folder level of the results (upstream's --trial_id).
     #[arg(long, default_value = crate::results::DEFAULT_TRIAL_ID, value_name = "ID")]
     pub trial_id: String,
+}
+
+/// `--navi-style`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum NaviStyleArg {
+    Waa,
+    Arena,
 }
 
 /// `--llm-api`.
@@ -250,6 +261,10 @@ fn agent_factory(args: &RunArgs) -> anyhow::Result<(AgentFactory, String, String
             let mut config = NaviConfig::new(&url, &model);
             config.temperature = args.temperature;
             config.max_tokens = args.max_tokens;
+            config.style = match args.navi_style {
+                NaviStyleArg::Waa => NaviStyle::Waa,
+                NaviStyleArg::Arena => NaviStyle::Arena,
+            };
             config.api = match args.llm_api {
                 LlmApi::Auto => None,
                 LlmApi::Openai => Some(ApiKind::OpenAi),
@@ -320,6 +335,17 @@ pub async fn run(conn: &Connection, args: RunArgs) -> anyhow::Result<ExitCode> {
         OrderArg::Shuffle => TaskOrder::Shuffle { seed: args.seed },
     };
     config.options.insert("order".into(), order.to_string());
+    if args.agent == AgentKind::Navi {
+        let style = match args.navi_style {
+            NaviStyleArg::Waa => "waa",
+            NaviStyleArg::Arena => "arena",
+        };
+        config.options.insert("navi_style".into(), style.into());
+        // No upstream checkout is read yet: the prompt's prose is this project's.
+        config.options.insert("prompt".into(), "arena".into());
+        config.options.insert("temperature".into(), format!("{}", args.temperature));
+        config.options.insert("max_tokens".into(), args.max_tokens.to_string());
+    }
     if args.activate_non_strict {
         config.options.insert("activate_non_strict".into(), "on".into());
     }
