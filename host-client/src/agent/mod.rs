@@ -25,6 +25,7 @@ pub mod navi;
 pub mod parse;
 pub mod replay;
 pub mod scripted;
+pub mod waa_prompts;
 
 use serde::{Deserialize, Serialize};
 

@@ -22,6 +22,7 @@ use serde_json::{json, Value};
 
 use super::llm::{self, ApiKind, ModelClient, RetryPolicy, TokensField};
 use super::parse::{parse_navi_reply, parse_reply};
+use super::waa_prompts::{UserInputs, WaaPrompts};
 use super::{Agent, AgentAction, AgentError, Observation, Prediction};
 use crate::som::{annotate, Marks};
 use crate::task::Task;
@@ -54,6 +55,9 @@ pub struct NaviConfig {
     pub max_history: usize,
     /// The message layout and reply rules.
     pub style: NaviStyle,
+    /// Upstream's prompt texts, read from the user's WAA checkout (`--waa-root`);
+    /// without them [`NaviStyle::Waa`] uses our own words in the same layout.
+    pub waa_prompts: Option<std::sync::Arc<WaaPrompts>>,
 }
 
 /// Which Navi the agent is.
@@ -85,6 +89,7 @@ impl NaviConfig {
             retry: RetryPolicy::default(),
             max_history: 15,
             style: NaviStyle::default(),
+            waa_prompts: None,
         }
     }
 
@@ -164,6 +169,11 @@ reached, or WAIT to let the screen settle. Last, keep what later turns must know
 /// The memory a [`NaviStyle::Waa`] agent starts each task with.
 const EMPTY_MEMORY_BLOCK: &str = "```memory\n# nothing noted yet\n```";
 
+/// The memory block a task starts with: upstream's when its prompts are loaded.
+fn empty_memory(config: &NaviConfig) -> String {
+    config.waa_prompts.as_ref().map_or_else(|| EMPTY_MEMORY_BLOCK.to_owned(), |p| p.empty_memory.clone())
+}
+
 /// One line of the action history.
 #[derive(Debug, Clone, PartialEq)]
 struct Turn {
@@ -200,12 +210,13 @@ impl NaviAgent {
         }
         let api = config.api.unwrap_or_else(|| ApiKind::detect(&config.base_url));
         let client = ModelClient::new(&config.base_url, api, config.resolved_key(), config.timeout, config.retry)?;
+        let memory = empty_memory(&config);
         Ok(NaviAgent {
             config,
             client,
             history: Vec::new(),
             memory: String::new(),
-            memory_block: EMPTY_MEMORY_BLOCK.to_owned(),
+            memory_block: memory,
             previous_png: None,
             last_error: None,
         })
@@ -214,6 +225,22 @@ impl NaviAgent {
     /// The text part of a [`NaviStyle::Waa`] user message: upstream's numbered
     /// inputs, with our words where it has prose.
     fn waa_prompt_text(&self, obs: &Observation, marks: Option<&Marks>) -> String {
+        if let Some(prompts) = &self.config.waa_prompts {
+            let candidates = marks.map(Marks::candidate_list).unwrap_or_default();
+            let codes: Vec<String> = self.history.iter().map(|t| t.text.clone()).collect();
+            let history = prompts.history_text(&codes, self.config.max_history);
+            let window_names = obs.window_titles.join("\n");
+            return prompts.user_message(&UserInputs {
+                objective: &obs.instruction,
+                window_title: &obs.foreground_title,
+                window_names: &window_names,
+                clipboard: obs.clipboard.as_deref(),
+                text_rendering: "N/A",
+                candidates: &candidates,
+                history: &history,
+                memory: &self.memory_block,
+            });
+        }
         let clipboard = obs.clipboard.as_deref().unwrap_or("(the clipboard holds no text)");
         let candidates = marks.map_or_else(|| "(no element list this turn)".to_owned(), Marks::candidate_list);
         // Newest first, as upstream's history reads back from time step T-1.
@@ -287,7 +314,8 @@ impl NaviAgent {
                     content.push(json!({"type": "image_url", "image_url": {"url": data_uri(previous)}}));
                 }
                 content.push(json!({"type": "image_url", "image_url": {"url": data_uri(annotated)}}));
-                (WAA_SYSTEM_PROMPT, content)
+                let system = self.config.waa_prompts.as_ref().map_or(WAA_SYSTEM_PROMPT, |p| p.system.as_str());
+                (system, content)
             }
             NaviStyle::Arena => {
                 let mut content = vec![
@@ -323,7 +351,7 @@ impl Agent for NaviAgent {
     async fn reset(&mut self, _task: &Task) {
         self.history.clear();
         self.memory.clear();
-        self.memory_block = EMPTY_MEMORY_BLOCK.to_owned();
+        self.memory_block = empty_memory(&self.config);
         self.previous_png = None;
         self.last_error = None;
     }
@@ -445,5 +473,24 @@ mod tests {
         let agent = NaviAgent::new(NaviConfig::new("http://x/v1", "o3-mini")).unwrap();
         let body = agent.request_body(&obs, None, b"png");
         assert!(body.get("max_tokens").is_none() && body["max_completion_tokens"] == json!(4096), "{body}");
+
+        // With a checkout's prompts, its texts are what is sent.
+        let root = tempfile::tempdir().unwrap();
+        crate::agent::waa_prompts::tests::fake_checkout(root.path());
+        let mut config = NaviConfig::new("http://x/v1", "gpt-4o");
+        config.waa_prompts = Some(std::sync::Arc::new(WaaPrompts::load(root.path()).unwrap()));
+        let agent = NaviAgent::new(config).unwrap();
+        let body = agent.request_body(&obs, None, b"png");
+        assert_eq!(
+            body["messages"][0]["content"],
+            "Fake system text for a test.\nIt spans lines, with a brace {kept}."
+        );
+        let text = body["messages"][1]["content"][0]["text"].as_str().unwrap();
+        assert!(
+            text.starts_with("Goal: do it\n")
+                && text.contains("Clip: nothing copied")
+                && text.contains("# blank notes"),
+            "{text}"
+        );
     }
 }

@@ -85,6 +85,11 @@ pub struct RunArgs {
     /// prose), or `arena`, this project's earlier prompt and lenient reply reader.
     #[arg(long, value_enum, default_value_t = NaviStyleArg::Waa)]
     pub navi_style: NaviStyleArg,
+    /// Navi agent: the user's WindowsAgentArena checkout, to send upstream's own
+    /// prompt texts (read from its mm_agents/navi files at start); without it the
+    /// prompts are this project's words in upstream's layout.
+    #[arg(long, env = "ARENA_WAA_ROOT", value_name = "PATH")]
+    pub waa_root: Option<PathBuf>,
     /// Navi agent: which API the URL speaks; `auto` detects Azure by its host or `api-version`.
     #[arg(long, value_enum, default_value_t = LlmApi::Auto)]
     pub llm_api: LlmApi,
@@ -265,6 +270,11 @@ fn agent_factory(args: &RunArgs) -> anyhow::Result<(AgentFactory, String, String
                 NaviStyleArg::Waa => NaviStyle::Waa,
                 NaviStyleArg::Arena => NaviStyle::Arena,
             };
+            if let Some(root) = &args.waa_root {
+                let prompts = crate::agent::waa_prompts::WaaPrompts::load(root)
+                    .with_context(|| format!("reading Navi's prompts from the WAA checkout {}", root.display()))?;
+                config.waa_prompts = Some(Arc::new(prompts));
+            }
             config.api = match args.llm_api {
                 LlmApi::Auto => None,
                 LlmApi::Openai => Some(ApiKind::OpenAi),
@@ -341,8 +351,14 @@ pub async fn run(conn: &Connection, args: RunArgs) -> anyhow::Result<ExitCode> {
             NaviStyleArg::Arena => "arena",
         };
         config.options.insert("navi_style".into(), style.into());
-        // No upstream checkout is read yet: the prompt's prose is this project's.
-        config.options.insert("prompt".into(), "arena".into());
+        // Which prompt text ran: upstream's from a checkout (`waa@<commit>`) or ours.
+        let prompt = match (&args.navi_style, &args.waa_root) {
+            (NaviStyleArg::Waa, Some(root)) => crate::agent::waa_prompts::WaaPrompts::load(root)
+                .map(|p| p.source)
+                .unwrap_or_else(|_| "waa@unreadable".into()),
+            _ => "arena".into(),
+        };
+        config.options.insert("prompt".into(), prompt);
         config.options.insert("temperature".into(), format!("{}", args.temperature));
         config.options.insert("max_tokens".into(), args.max_tokens.to_string());
     }

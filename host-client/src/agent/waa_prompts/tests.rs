@@ -1,0 +1,143 @@
+//! The prompt reader on fake checkouts the tests write themselves: laid out as
+//! upstream's files are (same paths, symbols and f-string shapes), with text of
+//! their own.
+
+use super::*;
+
+/// Writes a fake checkout under `root`: `planner` and `agent` are the two files' sources.
+fn checkout(root: &Path, planner: &str, agent: &str) {
+    let client = root.join("src/win-arena-container/client");
+    for (file, text) in [(PLANNER, planner), (AGENT, agent)] {
+        let path = client.join(file);
+        std::fs::create_dir_all(path.parent().unwrap()).unwrap();
+        std::fs::write(path, text).unwrap();
+    }
+    std::fs::create_dir_all(root.join(".git/refs/heads")).unwrap();
+    std::fs::write(root.join(".git/HEAD"), "ref: refs/heads/main\n").unwrap();
+    std::fs::write(root.join(".git/refs/heads/main"), "0123456789abcdef0123456789abcdef01234567\n").unwrap();
+}
+
+const PLANNER_TEXT: &str = r#"
+intro = "unused"
+
+planning_system_message_shortened_previmg = f"""\
+Fake system text for a test.
+It spans lines, with a brace {{kept}}."""
+
+def build_user_msg_visual(query, window_title, window_names_str, clipboard_content, text_rendering, candidates, prev_actions, textual_memory):
+    msg = f"""Goal: {query}
+Front: {window_title}
+All:
+{window_names_str}
+Clip: {"nothing copied" if clipboard_content==None else clipboard_content}
+Marks:
+{candidates}
+Past:
+{"nothing yet" if len(prev_actions)==0 else prev_actions}
+Notes:
+{textual_memory}
+"""
+    return msg
+"#;
+
+const AGENT_TEXT: &str = r#"
+def prev_actions_to_string(prev_actions, n_prev=3):
+    result = ""
+    n_prev = min(n_prev, len(prev_actions))
+    for i in range(1, n_prev + 1):
+        action = prev_actions[-i]
+        result += f"Back {i}:\n{action}\n\n"
+    return result
+
+class NaviAgent:
+    def __init__(self, server="azure"):
+        self.memory_block_text_empty = """
+```memory
+# blank notes
+```
+"""
+"#;
+
+/// A fake checkout with the texts above, for other modules' tests.
+pub(crate) fn fake_checkout(root: &Path) {
+    checkout(root, PLANNER_TEXT, AGENT_TEXT);
+}
+
+#[test]
+fn prompts_are_read_from_a_checkout_laid_out_as_upstreams() {
+    let root = tempfile::tempdir().unwrap();
+    checkout(root.path(), PLANNER_TEXT, AGENT_TEXT);
+    let prompts = WaaPrompts::load(root.path()).expect("the fake checkout reads");
+    assert_eq!(prompts.system, "Fake system text for a test.\nIt spans lines, with a brace {kept}.");
+    assert_eq!(prompts.empty_memory, "\n```memory\n# blank notes\n```\n");
+    assert_eq!(prompts.source, "waa@0123456789ab");
+
+    let history = prompts.history_text(&["first()".into(), "second()".into(), "third()".into()], 2);
+    assert_eq!(history, "Back 1:\nthird()\n\nBack 2:\nsecond()\n\n", "newest first, at most n");
+
+    let mut inputs = UserInputs {
+        objective: "Type hello",
+        window_title: "Untitled - Notepad",
+        window_names: "Untitled - Notepad\nProgram Manager",
+        clipboard: None,
+        text_rendering: "N/A",
+        candidates: "1 | a11y | Text Editor",
+        history: "",
+        memory: &prompts.empty_memory,
+    };
+    let text = prompts.user_message(&inputs);
+    assert!(
+        text.starts_with("Goal: Type hello\nFront: Untitled - Notepad\nAll:\nUntitled - Notepad\nProgram Manager\n"),
+        "{text}"
+    );
+    assert!(text.contains("Clip: nothing copied\n") && text.contains("Past:\nnothing yet\n"), "{text}");
+    assert!(text.contains("Marks:\n1 | a11y | Text Editor\n") && text.contains("# blank notes"), "{text}");
+    inputs.clipboard = Some("copied words");
+    inputs.history = &history;
+    let text = prompts.user_message(&inputs);
+    assert!(text.contains("Clip: copied words\n") && text.contains("Past:\nBack 1:\nthird()"), "{text}");
+
+    // The checkout's client folder may be given directly.
+    let client = WaaPrompts::load(&root.path().join("src/win-arena-container/client")).unwrap();
+    assert_eq!(client.system, prompts.system);
+}
+
+#[test]
+fn a_checkout_laid_out_differently_is_refused_naming_the_file_and_symbol() {
+    let root = tempfile::tempdir().unwrap();
+    checkout(root.path(), &PLANNER_TEXT.replace("build_user_msg_visual", "make_message"), AGENT_TEXT);
+    let err = WaaPrompts::load(root.path()).unwrap_err().to_string();
+    assert!(err.contains("planner_messages.py") && err.contains("build_user_msg_visual"), "{err}");
+
+    let odd_field = PLANNER_TEXT.replace("{query}", "{query.upper()}");
+    checkout(root.path(), &odd_field, AGENT_TEXT);
+    let err = WaaPrompts::load(root.path()).unwrap_err().to_string();
+    assert!(err.contains("build_user_msg_visual") && err.contains("field expression"), "{err}");
+
+    checkout(root.path(), PLANNER_TEXT, &AGENT_TEXT.replace("memory_block_text_empty", "notes"));
+    let err = WaaPrompts::load(root.path()).unwrap_err().to_string();
+    assert!(err.contains("agent.py") && err.contains("memory_block_text_empty"), "{err}");
+
+    checkout(root.path(), "def broken(:\n", AGENT_TEXT);
+    let err = WaaPrompts::load(root.path()).unwrap_err().to_string();
+    assert!(err.contains("planner_messages.py") && err.contains("not Python"), "{err}");
+
+    let empty = tempfile::tempdir().unwrap();
+    let err = WaaPrompts::load(empty.path()).unwrap_err().to_string();
+    assert!(err.contains("planner_messages.py") && err.contains("cannot read"), "{err}");
+}
+
+#[test]
+fn the_users_checkout_reads_when_one_is_given() {
+    let Some(root) = std::env::var_os("ARENA_WAA_ROOT") else {
+        eprintln!("SKIPPED: ARENA_WAA_ROOT is not set, so upstream's own prompt files were not read");
+        return;
+    };
+    let prompts = WaaPrompts::load(Path::new(&root)).expect("the checkout's prompts read");
+    assert!(prompts.system.len() > 200, "a system prompt: {} bytes", prompts.system.len());
+    let inputs = UserInputs { objective: "OBJECTIVE-MARK", candidates: "CANDIDATES-MARK", ..UserInputs::default() };
+    let text = prompts.user_message(&inputs);
+    assert!(text.contains("OBJECTIVE-MARK") && text.contains("CANDIDATES-MARK"), "{text}");
+    assert!(prompts.empty_memory.contains("```memory"), "{}", prompts.empty_memory);
+    assert!(prompts.history_text(&["ACTION-MARK".into()], 15).contains("ACTION-MARK"));
+}
