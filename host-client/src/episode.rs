@@ -38,7 +38,7 @@ use arena_shared::clipboard::ClipboardContent;
 use arena_shared::observation::{A11yQuery, ImageFormat, ScreenshotQuery};
 use arena_shared::script::ComputerState;
 
-use crate::agent::{self, Agent, AgentAction, AgentError, ExecOptions, Observation, Prediction};
+use crate::agent::{self, Agent, AgentAction, AgentError, ExecOptions, LogValue, Observation, Prediction, StepLog};
 use crate::client::GuestClient;
 use crate::error::ClientError;
 use crate::eval::{self, EvalContext, LastAction};
@@ -216,6 +216,20 @@ struct Seen {
     obs: Observation,
     file: String,
     observe_ms: u64,
+}
+
+/// Writes one of an agent's step logs as upstream's recorder names its files
+/// (`<key>-step_<step - 1>_<time>.<ext>`); answers what the trajectory line holds.
+fn write_log(out: &TaskDir, step: u32, timestamp: &str, log: &StepLog) -> Result<Value, crate::results::ResultsError> {
+    let name = |ext: &str| format!("{}-step_{}_{timestamp}.{ext}", crate::results::safe_component(&log.key), step - 1);
+    let (file, bytes) = match &log.value {
+        LogValue::Inline(value) => return Ok(value.clone()),
+        LogValue::Text(text) => (name("txt"), text.clone().into_bytes()),
+        LogValue::Png(png) => (name("png"), png.clone()),
+        LogValue::Json(value) => (name("json"), serde_json::to_vec_pretty(value).unwrap_or_default()),
+    };
+    out.write_file(&file, &bytes)?;
+    Ok(Value::String(file))
 }
 
 /// The action as upstream's trajectory logs it: the code, or the control word.
@@ -428,6 +442,7 @@ impl Episode {
             error: None,
             outcomes: Vec::new(),
             more: Vec::new(),
+            logs: std::collections::BTreeMap::new(),
         };
         self.result.steps = step;
 
@@ -459,6 +474,11 @@ impl Episode {
         };
         record.response = prediction.response.clone();
         record.actions = prediction.actions.clone();
+        let timestamp = record.first.action_timestamp.clone();
+        for log in &prediction.logs {
+            let value = write_log(out, step, &timestamp, log).map_err(|err| infra("writing the step's logs", err))?;
+            record.logs.insert(log.key.clone(), value);
+        }
         if let Some(raw) = &prediction.raw_error {
             // The step is spent; the agent keeps the error to tell the model next time.
             record.error = Some(raw.clone());
@@ -707,7 +727,7 @@ mod tests {
     }
 
     fn says(actions: Vec<AgentAction>) -> Option<Result<Prediction, AgentError>> {
-        Some(Ok(Prediction { response: "ok".into(), actions, marks: None, raw_error: None }))
+        Some(Ok(Prediction { response: "ok".into(), actions, marks: None, raw_error: None, logs: Vec::new() }))
     }
 
     fn model_down() -> Option<Result<Prediction, AgentError>> {
@@ -854,6 +874,38 @@ mod tests {
     }
 
     #[tokio::test]
+    async fn an_agents_step_logs_are_written_beside_the_trajectory_as_upstream_names_them() {
+        let logs = vec![
+            StepLog { key: "user_question".into(), value: LogValue::Text("what to do".into()) },
+            StepLog { key: "foreground_window_prompt".into(), value: LogValue::Png(b"png".to_vec()) },
+            StepLog { key: "entity_list".into(), value: LogValue::Json(serde_json::json!([{"id": 1}])) },
+            StepLog { key: "a11y_truncated".into(), value: LogValue::Inline(Value::Bool(false)) },
+        ];
+        let done =
+            Prediction { response: "ok".into(), actions: vec![AgentAction::Done], marks: None, raw_error: None, logs };
+        let (result, out, _tmp) = play(&task("exact_match"), vec![Some(Ok(done))], false).await;
+        assert_eq!(result.status, EpisodeStatus::Completed);
+        let text = std::fs::read_to_string(out.path().join(crate::results::TRAJ_FILE)).unwrap();
+        let line: Value = serde_json::from_str(text.lines().nth(1).unwrap()).unwrap();
+        let ts = line["action_timestamp"].as_str().unwrap();
+        assert_eq!(line["user_question"], format!("user_question-step_0_{ts}.txt"));
+        assert_eq!(
+            std::fs::read_to_string(out.path().join(format!("user_question-step_0_{ts}.txt"))).unwrap(),
+            "what to do"
+        );
+        assert_eq!(
+            std::fs::read(out.path().join(format!("foreground_window_prompt-step_0_{ts}.png"))).unwrap(),
+            b"png"
+        );
+        let list: Value =
+            serde_json::from_slice(&std::fs::read(out.path().join(format!("entity_list-step_0_{ts}.json"))).unwrap())
+                .unwrap();
+        assert_eq!(list, serde_json::json!([{"id": 1}]));
+        assert_eq!(line["a11y_truncated"], Value::Bool(false));
+        assert_eq!(out.read_trajectory().unwrap().len(), 1, "the logs do not disturb reading the steps back");
+    }
+
+    #[tokio::test]
     async fn model_failures_are_retried_within_the_step() {
         let (result, out, _tmp) =
             play(&task("exact_match"), vec![model_down(), model_down(), says(vec![AgentAction::Done])], false).await;
@@ -904,6 +956,7 @@ mod tests {
             actions: vec![],
             marks: None,
             raw_error: Some("no code block".into()),
+            logs: Vec::new(),
         }));
         let script = vec![
             malformed,

@@ -350,6 +350,11 @@ async fn navi_in_upstreams_layout_reads_replies_by_upstreams_rules() {
         assert!(text.contains(label), "{label} missing from {text}");
     }
     assert!(body["messages"][0]["content"].as_str().is_some_and(|s| s.contains("```decision")));
+    let keys: Vec<&str> = p.logs.iter().map(|l| l.key.as_str()).collect();
+    for key in ["user_question", "plan_result", "request", "foreground_window_prompt", "entity_list", "a11y_truncated"]
+    {
+        assert!(keys.contains(&key), "{key} not logged: {keys:?}");
+    }
 
     let obs2 = Observation::capture(&c, 2, "Type hello in Notepad").await.expect("observe");
     let p = agent.predict(&obs2).await.expect("prediction");

@@ -205,6 +205,32 @@ pub struct Prediction {
     /// to tell the model.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub raw_error: Option<String>,
+    /// What the agent wants kept about this step (the request it sent, the
+    /// annotated image, the element list), written beside the trajectory as
+    /// upstream's recorder writes an agent's `logs`.
+    #[serde(skip)]
+    pub logs: Vec<StepLog>,
+}
+
+/// One entry of an agent's per-step logs.
+#[derive(Debug, Clone, PartialEq)]
+pub struct StepLog {
+    /// The key, which names the file (`<key>-step_<i>_<time>.<ext>`) and the trajectory field.
+    pub key: String,
+    pub value: LogValue,
+}
+
+/// A log entry's value: how it is kept.
+#[derive(Debug, Clone, PartialEq)]
+pub enum LogValue {
+    /// A `.txt` file.
+    Text(String),
+    /// A `.png` file.
+    Png(Vec<u8>),
+    /// A `.json` file.
+    Json(serde_json::Value),
+    /// Inline in the trajectory line.
+    Inline(serde_json::Value),
 }
 
 /// Why an agent could not answer, or an action could not be carried out.

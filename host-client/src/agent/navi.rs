@@ -23,7 +23,7 @@ use serde_json::{json, Value};
 use super::llm::{self, ApiKind, ModelClient, RetryPolicy, TokensField};
 use super::parse::{parse_navi_reply, parse_reply};
 use super::waa_prompts::{UserInputs, WaaPrompts};
-use super::{Agent, AgentAction, AgentError, Observation, Prediction};
+use super::{Agent, AgentAction, AgentError, LogValue, Observation, Prediction, StepLog};
 use crate::som::{annotate, Marks};
 use crate::task::Task;
 
@@ -305,11 +305,20 @@ impl NaviAgent {
     }
 
     /// The chat-completions request body.
+    /// The text part of the user message, in the configured style.
+    fn user_text(&self, obs: &Observation, marks: Option<&Marks>) -> String {
+        match self.config.style {
+            NaviStyle::Waa => self.waa_prompt_text(obs, marks),
+            NaviStyle::Arena => self.prompt_text(obs, marks),
+        }
+    }
+
     fn request_body(&self, obs: &Observation, marks: Option<&Marks>, annotated: &[u8]) -> Value {
+        let text = self.user_text(obs, marks);
         let (system, content) = match self.config.style {
             NaviStyle::Waa => {
                 // Upstream's order: the previous screen as it was, then the current one annotated.
-                let mut content = vec![json!({"type": "text", "text": self.waa_prompt_text(obs, marks)})];
+                let mut content = vec![json!({"type": "text", "text": text})];
                 if let Some(previous) = &self.previous_png {
                     content.push(json!({"type": "image_url", "image_url": {"url": data_uri(previous)}}));
                 }
@@ -319,7 +328,7 @@ impl NaviAgent {
             }
             NaviStyle::Arena => {
                 let mut content = vec![
-                    json!({"type": "text", "text": self.prompt_text(obs, marks)}),
+                    json!({"type": "text", "text": text}),
                     json!({"type": "text", "text": "The current screen, with the elements' numbers:"}),
                     json!({"type": "image_url", "image_url": {"url": data_uri(annotated)}}),
                 ];
@@ -339,6 +348,43 @@ impl NaviAgent {
             "temperature": self.config.temperature,
             self.config.tokens_field.unwrap_or_else(|| TokensField::for_model(&self.config.model)).name(): self.config.max_tokens,
         })
+    }
+
+    /// What a step keeps beside the trajectory: the user message (upstream's
+    /// `user_question`), the reply (`plan_result`), the annotated image
+    /// (`foreground_window_prompt`), the element list with boxes, whether the
+    /// tree was cut short, and the request as sent with its images left out.
+    fn step_logs(
+        &self,
+        obs: &Observation,
+        marks: Option<&Marks>,
+        body: &Value,
+        annotated: &[u8],
+        response: &str,
+    ) -> Vec<StepLog> {
+        let log = |key: &str, value: LogValue| StepLog { key: key.to_owned(), value };
+        let mut request = body.clone();
+        if let Some(parts) = request.pointer_mut("/messages/1/content").and_then(Value::as_array_mut) {
+            for part in parts {
+                if let Some(url) = part.pointer_mut("/image_url/url") {
+                    let size = url.as_str().map_or(0, str::len);
+                    *url = Value::String(format!("(an image, {size} bytes of data URI, left out here)"));
+                }
+            }
+        }
+        let mut logs = vec![
+            log("user_question", LogValue::Text(self.user_text(obs, marks))),
+            log("plan_result", LogValue::Text(response.to_owned())),
+            log("request", LogValue::Json(request)),
+        ];
+        if let Some(marks) = marks {
+            logs.push(log("foreground_window_prompt", LogValue::Png(annotated.to_vec())));
+            logs.push(log("entity_list", LogValue::Json(serde_json::to_value(marks).unwrap_or(Value::Null))));
+        }
+        if let Some(tree) = &obs.a11y {
+            logs.push(log("a11y_truncated", LogValue::Inline(Value::Bool(tree.truncated))));
+        }
+        logs
     }
 }
 
@@ -367,6 +413,7 @@ impl Agent for NaviAgent {
         };
         let body = self.request_body(obs, marks.as_ref(), &annotated);
         let response = self.client.complete(&body).await?;
+        let logs = self.step_logs(obs, marks.as_ref(), &body, &annotated, &response);
         self.previous_png = Some(obs.screenshot_png.clone());
         if self.config.style == NaviStyle::Waa {
             let reply = parse_navi_reply(&response);
@@ -374,7 +421,7 @@ impl Agent for NaviAgent {
                 self.memory_block = block;
             }
             self.history.push(Turn { step: obs.step, text: reply.code });
-            return Ok(Prediction { response, actions: reply.actions, marks, raw_error: None });
+            return Ok(Prediction { response, actions: reply.actions, marks, raw_error: None, logs });
         }
         let prediction = match parse_reply(&response) {
             Ok(parsed) => {
@@ -384,13 +431,13 @@ impl Agent for NaviAgent {
                 let summary: Vec<String> = parsed.actions.iter().map(AgentAction::summary).collect();
                 self.history.push(Turn { step: obs.step, text: summary.join(" | ") });
                 self.last_error = None;
-                Prediction { response, actions: parsed.actions, marks, raw_error: None }
+                Prediction { response, actions: parsed.actions, marks, raw_error: None, logs }
             }
             Err(err) => {
                 tracing::info!(step = obs.step, error = %err, "unusable model reply");
                 self.history.push(Turn { step: obs.step, text: format!("(reply not usable: {err})") });
                 self.last_error = Some(err.clone());
-                Prediction { response, actions: Vec::new(), marks, raw_error: Some(err) }
+                Prediction { response, actions: Vec::new(), marks, raw_error: Some(err), logs }
             }
         };
         Ok(prediction)

@@ -172,6 +172,7 @@ impl Agent for ReplayAgent {
             marks: if uses_marks { obs.marks() } else { None },
             raw_error: step.actions.is_empty().then(|| format!("recorded step {} had no actions", step.step)),
             actions: step.actions,
+            logs: Vec::new(),
         })
     }
 }

@@ -233,6 +233,7 @@ impl Agent for ScriptedAgent {
             marks: if uses_marks { obs.marks() } else { None },
             actions: vec![action],
             raw_error: None,
+            logs: Vec::new(),
         })
     }
 }

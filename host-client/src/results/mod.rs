@@ -250,6 +250,11 @@ pub struct StepRecord {
     /// Upstream's lines for the step's second and further actions.
     #[serde(skip)]
     pub more: Vec<ActionRecord>,
+    /// The agent's logs of the step, as upstream's recorder adds them to the
+    /// line: a file name for text, images and JSON, the value itself otherwise.
+    /// Written, not read back.
+    #[serde(flatten, skip_deserializing)]
+    pub logs: std::collections::BTreeMap<String, Value>,
 }
 
 /// Everything about one episode; `episode.json`.

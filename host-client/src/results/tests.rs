@@ -56,6 +56,7 @@ fn step(n: u32) -> StepRecord {
         error: None,
         outcomes: Vec::new(),
         more: Vec::new(),
+        logs: Default::default(),
     }
 }
 
