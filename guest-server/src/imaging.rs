@@ -3,8 +3,10 @@
 
 use std::io::Cursor;
 
+use arena_shared::fastimg::{self, FastImgError, Layout};
 use arena_shared::geometry::Point;
 use arena_shared::observation::ImageFormat;
+use image::error::{EncodingError, ImageFormatHint};
 use image::{ImageEncoder, RgbaImage};
 
 /// An image could not be encoded or decoded.
@@ -18,19 +20,20 @@ pub struct ImagingError {
 
 /// Encodes `image` as PNG (fast compression) or JPEG at `quality` (1 to 100).
 ///
+/// JPEG goes through [`fastimg::encode_jpeg`] (SIMD, 4:2:0 like Pillow), which drops
+/// the alpha byte as converting to RGB first would.
+///
 /// # Errors
 ///
 /// [`ImagingError`] if the encoder fails.
 pub fn encode(image: &RgbaImage, format: ImageFormat, quality: u8) -> Result<Vec<u8>, ImagingError> {
-    let mut out = Vec::with_capacity(image.as_raw().len() / 4);
     match format {
         ImageFormat::Jpeg => {
-            let rgb = image::DynamicImage::ImageRgba8(image.clone()).to_rgb8();
-            image::codecs::jpeg::JpegEncoder::new_with_quality(&mut out, quality.clamp(1, 100))
-                .encode_image(&rgb)
-                .map_err(|source| ImagingError { what: "encoding JPEG", source })?;
+            fastimg::encode_jpeg(image.as_raw(), image.width(), image.height(), Layout::Rgba8, quality)
+                .map_err(|err| ImagingError { what: "encoding JPEG", source: jpeg_error(err) })
         }
         ImageFormat::Png | ImageFormat::Unknown => {
+            let mut out = Vec::with_capacity(image.as_raw().len() / 4);
             image::codecs::png::PngEncoder::new_with_quality(
                 &mut out,
                 image::codecs::png::CompressionType::Fast,
@@ -38,9 +41,14 @@ pub fn encode(image: &RgbaImage, format: ImageFormat, quality: u8) -> Result<Vec
             )
             .write_image(image.as_raw(), image.width(), image.height(), image::ExtendedColorType::Rgba8)
             .map_err(|source| ImagingError { what: "encoding PNG", source })?;
+            Ok(out)
         }
     }
-    Ok(out)
+}
+
+/// A [`fastimg`] JPEG failure as the `image` crate's error, so [`ImagingError`] keeps one source type.
+fn jpeg_error(err: FastImgError) -> image::ImageError {
+    image::ImageError::Encoding(EncodingError::new(ImageFormatHint::Exact(image::ImageFormat::Jpeg), err))
 }
 
 /// Largest image side accepted for decoding: four 4K screens side by side.
@@ -80,7 +88,10 @@ pub fn downscale_to_fit(image: RgbaImage, max_side: u32) -> (RgbaImage, f64) {
     let scale = f64::from(longest) / f64::from(max_side);
     let width = ((f64::from(image.width()) / scale).round() as u32).max(1);
     let height = ((f64::from(image.height()) / scale).round() as u32).max(1);
-    let resized = image::imageops::resize(&image, width, height, image::imageops::FilterType::Triangle);
+    // The bilinear (triangle) convolution the `image` crate's `Triangle` is, with SIMD; an
+    // image with a side of 0 (the one case the fast path refuses) takes the old path.
+    let resized = fastimg::resize_rgba(&image, width, height, fastimg::Filter::Bilinear)
+        .unwrap_or_else(|_| image::imageops::resize(&image, width, height, image::imageops::FilterType::Triangle));
     (resized, scale)
 }
 
@@ -211,6 +222,26 @@ mod tests {
         let img = RgbaImage::from_pixel(16, 16, image::Rgba([200, 0, 0, 255]));
         let bytes = encode(&img, ImageFormat::Jpeg, 80).unwrap();
         assert_eq!(&bytes[..2], &[0xFF, 0xD8]);
+        let back = decode(&bytes).unwrap();
+        assert_eq!(back.dimensions(), (16, 16));
+        let p = back.get_pixel(8, 8).0;
+        assert!(p[0] > 180 && p[1] < 30 && p[2] < 30, "{p:?}");
+    }
+
+    #[test]
+    fn downscale_keeps_colours_and_survives_an_empty_side() {
+        let img = RgbaImage::from_fn(1440, 900, |x, _| {
+            if x < 720 {
+                image::Rgba([0, 0, 255, 255])
+            } else {
+                image::Rgba([255, 255, 0, 255])
+            }
+        });
+        let (small, _) = downscale_to_fit(img, 720);
+        assert_eq!(small.get_pixel(100, 200).0, [0, 0, 255, 255]);
+        assert_eq!(small.get_pixel(600, 200).0, [255, 255, 0, 255]);
+        let (empty, _) = downscale_to_fit(RgbaImage::new(2000, 0), 720);
+        assert_eq!(empty.width(), 720);
     }
 
     #[test]

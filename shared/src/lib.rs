@@ -14,6 +14,7 @@
 //! - [`observation`]: screen, screenshot, window and accessibility types.
 //! - [`exec`], [`files`], [`clipboard`], [`registry`]: request and result types.
 //! - [`eval`]: the evaluation queries under `/v1/eval/`.
+//! - [`fastimg`]: upstream's model-image size, a SIMD resize and a SIMD JPEG encoder.
 //! - [`health`]: the staged readiness report.
 //! - [`error`]: the error body every native route answers with.
 //! - [`script`]: a safe interpreter for the pyautogui and WAA `computer.*` Python that hosts send.
@@ -32,6 +33,7 @@ pub mod cmdline;
 pub mod error;
 pub mod eval;
 pub mod exec;
+pub mod fastimg;
 pub mod files;
 pub mod geometry;
 pub mod health;
