@@ -337,7 +337,15 @@ async fn navi_in_upstreams_layout_reads_replies_by_upstreams_rules() {
     let body = mock.requests.lock().expect("lock")[0].1.clone();
     assert_eq!((body["temperature"].clone(), body["max_tokens"].clone()), (json!(1.0), json!(4096)));
     let (images, text) = user_parts(&body);
-    assert_eq!(images.len(), 1, "no previous screen on the first step");
+    assert_eq!(images.len(), 2, "on the first step the current screen stands in for the previous one");
+    let raw = image::load_from_memory(&obs.screenshot_png).expect("decodes");
+    let want = arena_shared::fastimg::model_size(raw.width(), raw.height());
+    for url in &images {
+        let jpeg = url.strip_prefix("data:image/jpeg;base64,").expect("a JPEG data URI");
+        let jpeg = base64::engine::general_purpose::STANDARD.decode(jpeg).expect("base64");
+        let sent = image::load_from_memory_with_format(&jpeg, image::ImageFormat::Jpeg).expect("a JPEG");
+        assert_eq!((sent.width(), sent.height()), (want.width, want.height), "upstream's model size");
+    }
     for label in [
         "1. User objective: Type hello in Notepad",
         "2. Window title: Untitled - Notepad",
@@ -367,12 +375,15 @@ async fn navi_in_upstreams_layout_reads_replies_by_upstreams_rules() {
     let content = body["messages"][1]["content"].as_array().expect("parts").clone();
     let kinds: Vec<&str> = content.iter().map(|p| p["type"].as_str().unwrap_or("")).collect();
     assert_eq!(kinds, ["text", "image_url", "image_url"], "the previous screen, then the current one");
-    let previous = content[1]["image_url"]["url"].as_str().unwrap().strip_prefix("data:image/png;base64,").unwrap();
-    assert_eq!(
-        base64::engine::general_purpose::STANDARD.decode(previous).unwrap(),
-        obs.screenshot_png,
-        "sent as it was"
-    );
+    assert_eq!(content[1]["image_url"]["detail"], "auto");
+    let previous = content[1]["image_url"]["url"].as_str().unwrap();
+    let expected =
+        arena_shared::fastimg::png_to_model_jpeg(&obs.screenshot_png, arena_shared::fastimg::PILLOW_JPEG_QUALITY)
+            .expect("jpeg")
+            .jpeg;
+    let previous =
+        base64::engine::general_purpose::STANDARD.decode(previous.strip_prefix("data:image/jpeg;base64,").unwrap());
+    assert_eq!(previous.unwrap(), expected, "the previous screen as it was, unannotated");
     let (_, text) = user_parts(&body);
     assert!(text.contains("```memory\nthe editor has focus\n```"), "{text}");
     assert!(text.contains(&code), "{text}");

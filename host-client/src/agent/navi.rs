@@ -194,6 +194,22 @@ pub struct NaviAgent {
     last_error: Option<String>,
 }
 
+/// An image part as upstream's client sends one: the screenshot at the model
+/// size as a JPEG (Pillow's default quality), `detail: auto`. A PNG that cannot
+/// be converted is sent as it is.
+fn jpeg_part(png: &[u8]) -> Value {
+    let url = match arena_shared::fastimg::png_to_model_jpeg(png, arena_shared::fastimg::PILLOW_JPEG_QUALITY) {
+        Ok(model) => {
+            format!("data:image/jpeg;base64,{}", base64::engine::general_purpose::STANDARD.encode(&model.jpeg))
+        }
+        Err(err) => {
+            tracing::warn!(error = %err, "cannot make the model's JPEG; sending the PNG");
+            data_uri(png)
+        }
+    };
+    json!({"type": "image_url", "image_url": {"url": url, "detail": "auto"}})
+}
+
 fn data_uri(png: &[u8]) -> String {
     format!("data:image/png;base64,{}", base64::engine::general_purpose::STANDARD.encode(png))
 }
@@ -317,12 +333,11 @@ impl NaviAgent {
         let text = self.user_text(obs, marks);
         let (system, content) = match self.config.style {
             NaviStyle::Waa => {
-                // Upstream's order: the previous screen as it was, then the current one annotated.
-                let mut content = vec![json!({"type": "text", "text": text})];
-                if let Some(previous) = &self.previous_png {
-                    content.push(json!({"type": "image_url", "image_url": {"url": data_uri(previous)}}));
-                }
-                content.push(json!({"type": "image_url", "image_url": {"url": data_uri(annotated)}}));
+                // Upstream's order and form: the previous screen as it was (the
+                // current one on the first step), then the current one annotated,
+                // each resized to the model size and sent as JPEG.
+                let previous = self.previous_png.as_deref().unwrap_or(&obs.screenshot_png);
+                let content = vec![json!({"type": "text", "text": text}), jpeg_part(previous), jpeg_part(annotated)];
                 let system = self.config.waa_prompts.as_ref().map_or(WAA_SYSTEM_PROMPT, |p| p.system.as_str());
                 (system, content)
             }
