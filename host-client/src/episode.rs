@@ -215,6 +215,8 @@ struct Episode {
 struct Seen {
     obs: Observation,
     file: String,
+    /// `accessibility_tree-step_<i>_<time>.txt`: the tree in upstream's XML.
+    tree_file: String,
     observe_ms: u64,
 }
 
@@ -246,6 +248,7 @@ fn upstream_action(action: &AgentAction) -> String {
 /// The observation keys of an upstream trajectory line.
 fn observed(record: &mut ActionRecord, seen: &Seen) {
     record.screenshot = seen.file.clone();
+    record.accessibility_tree = seen.tree_file.clone();
     record.instruction = seen.obs.instruction.clone();
     record.window_title = seen.obs.foreground_title.clone();
     record.window_names_str = seen.obs.window_titles.join("\n");
@@ -333,6 +336,7 @@ impl Episode {
             action_timestamp: timestamp,
             action: None,
             screenshot: seen.file.clone(),
+            accessibility_tree: seen.tree_file.clone(),
             instruction: seen.obs.instruction.clone(),
             window_title: seen.obs.foreground_title.clone(),
             window_names_str: seen.obs.window_titles.join("\n"),
@@ -406,7 +410,16 @@ impl Episode {
         let file = out
             .write_screenshot(index, timestamp, &obs.screenshot_png)
             .map_err(|err| infra("writing the screenshot", err))?;
-        Ok(Seen { obs, file, observe_ms })
+        // Upstream's recorder keeps each observation's tree as text, its XML, or
+        // "No data available" when there was none.
+        let step = index.map_or_else(|| "reset".to_owned(), |i| i.to_string());
+        let tree_file = format!("accessibility_tree-step_{step}_{timestamp}.txt");
+        let tree = obs.a11y.as_ref().map_or_else(
+            || "No data available".to_owned(),
+            |tree| arena_shared::a11y_xml::to_xml(tree, obs.foreground_id),
+        );
+        out.write_file(&tree_file, tree.as_bytes()).map_err(|err| infra("writing the accessibility tree", err))?;
+        Ok(Seen { obs, file, tree_file, observe_ms })
     }
 
     /// One step as upstream's loop makes it: predict from the latest observation,
@@ -635,6 +648,7 @@ async fn observe(
         }
     };
     let foreground_title = windows.iter().find(|w| w.focused).map(|w| w.title.clone()).unwrap_or_default();
+    let foreground_id = windows.iter().find(|w| w.focused).map(|w| w.id);
     let window_titles =
         windows.iter().filter(|w| w.visible && !w.minimized && !w.title.is_empty()).map(|w| w.title.clone()).collect();
     Ok(Observation {
@@ -645,6 +659,7 @@ async fn observe(
         a11y,
         window_titles,
         foreground_title,
+        foreground_id,
         clipboard,
     })
 }
@@ -841,6 +856,13 @@ mod tests {
             assert!(out.path().join(shot).is_file(), "{shot}");
         }
         assert!(lines[3]["screenshot"].as_str().unwrap().starts_with("screenshot-step_1_"));
+        // Each observation's tree is kept in upstream's XML, as its recorder keeps it.
+        for line in &lines {
+            let tree = line["accessibility_tree"].as_str().unwrap();
+            assert!(tree.starts_with("accessibility_tree-step_"), "{tree}");
+            let xml = std::fs::read_to_string(out.path().join(tree)).unwrap();
+            assert!(xml.starts_with('<') && xml.contains("Notepad"), "{xml}");
+        }
         assert_eq!(traj[1].screenshot_file, lines[1]["screenshot"].as_str().unwrap(), "what the agent saw at step 2");
         assert_eq!(result.options.get("pauses").map(String::as_str), Some("upstream"));
         assert_eq!(out.read_episode().unwrap().options, result.options);

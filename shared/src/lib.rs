@@ -25,6 +25,7 @@
 //! may extend carry an `Unknown` fallback, so an older host can talk to a newer
 //! guest and the other way round.
 
+pub mod a11y_xml;
 pub mod action;
 pub mod atomic;
 pub mod clipboard;

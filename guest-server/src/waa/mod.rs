@@ -16,7 +16,7 @@
 //! - [`setup`]: window activation and closing.
 //! - [`queries`]: the evaluator helpers over the foreground window's accessibility tree and the file system.
 //! - [`recording`]: screen recording and the snapshot stubs.
-//! - [`a11y_xml`]: the accessibility tree in upstream's XML.
+//! - the accessibility tree in upstream's XML is `arena_shared::a11y_xml`.
 //!
 //! # Errors
 //!
@@ -24,7 +24,6 @@
 //! (500, `{"status":"error","message":...}`); the 400/404/501 answers a view returns
 //! itself are rebuilt byte for byte as [`WaaError::Custom`] or plain responses.
 
-pub mod a11y_xml;
 mod body;
 pub mod execute;
 mod files;

@@ -17,7 +17,8 @@ use crate::error::WaaError;
 use crate::state::AppState;
 use crate::waa::body::{parse_urlencoded, PyForm};
 use crate::waa::WaaState;
-use crate::waa::{a11y_xml, json, json_err, on_backend, on_backend_within, text, text_err, WaaResult};
+use crate::waa::{json, json_err, on_backend, on_backend_within, text, text_err, WaaResult};
+use arena_shared::a11y_xml;
 use std::sync::Arc;
 
 /// `platform.platform()` of the Windows 11 guests WAA runs on; `/terminal` names it.

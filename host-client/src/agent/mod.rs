@@ -55,6 +55,8 @@ pub struct Observation {
     /// Titles of the visible top-level windows.
     pub window_titles: Vec<String>,
     pub foreground_title: String,
+    /// The foreground window's id, when there is one.
+    pub foreground_id: Option<u64>,
     /// The clipboard's text, when it holds text.
     pub clipboard: Option<String>,
 }
@@ -95,6 +97,7 @@ impl Observation {
             }
         }
         let foreground_title = windows.iter().find(|w| w.focused).map(|w| w.title.clone()).unwrap_or_default();
+        let foreground_id = windows.iter().find(|w| w.focused).map(|w| w.id);
         let clipboard = match client.clipboard_get().await {
             Ok(ClipboardContent::Text { text }) => Some(text),
             _ => None,
@@ -107,6 +110,7 @@ impl Observation {
             a11y,
             window_titles,
             foreground_title,
+            foreground_id,
             clipboard,
         })
     }

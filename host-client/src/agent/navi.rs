@@ -527,6 +527,7 @@ mod tests {
             a11y: None,
             window_titles: Vec::new(),
             foreground_title: String::new(),
+            foreground_id: None,
             clipboard: None,
         };
         let agent = NaviAgent::new(NaviConfig::new("http://x/v1", "gpt-4o")).unwrap();

@@ -175,6 +175,9 @@ pub struct ResetRecord {
     pub action: Option<String>,
     /// `screenshot-step_reset_<timestamp>.png`, in the task folder.
     pub screenshot: String,
+    /// `accessibility_tree-step_reset_<timestamp>.txt`: the tree in upstream's XML.
+    #[serde(default)]
+    pub accessibility_tree: String,
     pub instruction: String,
     pub window_title: String,
     /// The visible windows' titles, one per line (upstream's `window_names_str`).
@@ -204,6 +207,9 @@ pub struct ActionRecord {
     /// The screenshot taken after the action, `screenshot-step_<step - 1>_<timestamp>.png`.
     #[serde(default)]
     pub screenshot: String,
+    /// The tree observed after the action in upstream's XML, `accessibility_tree-step_<step - 1>_<timestamp>.txt`.
+    #[serde(default)]
+    pub accessibility_tree: String,
     #[serde(default)]
     pub instruction: String,
     #[serde(default)]

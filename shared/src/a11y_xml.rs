@@ -7,7 +7,7 @@
 //! never fails, and characters XML cannot carry are dropped instead of failing the
 //! request as lxml does.
 
-use arena_shared::observation::{A11yBackend, A11yNode, A11yTree};
+use crate::observation::{A11yBackend, A11yNode, A11yTree};
 
 /// Deepest level that gets children; top-level windows are depth 1 (upstream's `depth == 50`).
 pub const MAX_DEPTH: u32 = 50;
@@ -221,8 +221,8 @@ fn escape_into(out: &mut String, s: &str, attribute: bool) {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use arena_shared::geometry::{CoordinateSpace, Rect};
-    use arena_shared::observation::A11yStates;
+    use crate::geometry::{CoordinateSpace, Rect};
+    use crate::observation::A11yStates;
 
     const ST: &str = "uri:deskat:state.at-spi.gnome.org";
     const CP: &str = "uri:deskat:component.at-spi.gnome.org";
