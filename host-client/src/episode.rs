@@ -252,7 +252,7 @@ fn observed(record: &mut ActionRecord, seen: &Seen) {
     record.instruction = seen.obs.instruction.clone();
     record.window_title = seen.obs.foreground_title.clone();
     record.window_names_str = seen.obs.window_titles.join("\n");
-    record.computer_clipboard = seen.obs.clipboard.clone().unwrap_or_default();
+    record.computer_clipboard = seen.obs.tracked_clipboard.clone().unwrap_or_default();
 }
 
 fn ms(d: Duration) -> u64 {
@@ -330,7 +330,9 @@ impl Episode {
         );
         // The observation after the reset: upstream's step-0 line.
         let timestamp = timestamp_now();
-        let mut seen = self.observe_into(client, task, config, &screen, out, 1, None, &timestamp).await?;
+        let mut seen = self
+            .observe_into(client, task, config, &screen, out, 1, None, &timestamp, computer.clipboard_content.clone())
+            .await?;
         self.reset = Some(ResetRecord {
             step_num: 0,
             action_timestamp: timestamp,
@@ -340,7 +342,7 @@ impl Episode {
             instruction: seen.obs.instruction.clone(),
             window_title: seen.obs.foreground_title.clone(),
             window_names_str: seen.obs.window_titles.join("\n"),
-            computer_clipboard: seen.obs.clipboard.clone().unwrap_or_default(),
+            computer_clipboard: seen.obs.tracked_clipboard.clone().unwrap_or_default(),
         });
         let mut last: Option<LastAction> = None;
         for step in 1..=config.max_steps {
@@ -403,9 +405,11 @@ impl Episode {
         for_step: u32,
         index: Option<u32>,
         timestamp: &str,
+        tracked_clipboard: Option<String>,
     ) -> Result<Seen, EpisodeStatus> {
         let started = Instant::now();
-        let obs = observe(client, task, config, screen, for_step).await?;
+        let mut obs = observe(client, task, config, screen, for_step).await?;
+        obs.tracked_clipboard = tracked_clipboard;
         let observe_ms = ms(started.elapsed());
         let file = out
             .write_screenshot(index, timestamp, &obs.screenshot_png)
@@ -554,7 +558,17 @@ impl Episode {
             // Upstream observes after every action, DONE and FAIL included.
             let t_observe = Instant::now();
             latest = self
-                .observe_into(client, task, config, screen, out, step + 1, Some(step - 1), &line.action_timestamp)
+                .observe_into(
+                    client,
+                    task,
+                    config,
+                    screen,
+                    out,
+                    step + 1,
+                    Some(step - 1),
+                    &line.action_timestamp,
+                    computer.clipboard_content.clone(),
+                )
                 .await?;
             observing += t_observe.elapsed().as_millis();
             observed(&mut line, &latest);
@@ -660,6 +674,7 @@ async fn observe(
         window_titles,
         foreground_title,
         foreground_id,
+        tracked_clipboard: None,
         clipboard,
     })
 }
@@ -925,6 +940,19 @@ mod tests {
         assert_eq!(list, serde_json::json!([{"id": 1}]));
         assert_eq!(line["a11y_truncated"], Value::Bool(false));
         assert_eq!(out.read_trajectory().unwrap().len(), 1, "the logs do not disturb reading the steps back");
+    }
+
+    #[tokio::test]
+    async fn the_trajectory_shows_the_clipboard_the_agents_computer_tracks() {
+        let copy = AgentAction::Computer("computer.clipboard.copy_text(\"tracked words\")".into());
+        let script = vec![says(vec![copy, AgentAction::Done])];
+        let (result, out, _tmp) = play(&task("exact_match"), script, false).await;
+        assert_eq!(result.status, EpisodeStatus::Completed, "{result:?}");
+        let text = std::fs::read_to_string(out.path().join(crate::results::TRAJ_FILE)).unwrap();
+        let lines: Vec<Value> = text.lines().map(|l| serde_json::from_str(l).unwrap()).collect();
+        // Upstream's computer_clipboard is Navi's own copy: empty at the reset, then what the code copied.
+        let clipboards: Vec<&str> = lines.iter().map(|l| l["computer_clipboard"].as_str().unwrap()).collect();
+        assert_eq!(clipboards, ["", "tracked words", "tracked words"]);
     }
 
     #[tokio::test]

@@ -57,6 +57,10 @@ pub struct Observation {
     pub foreground_title: String,
     /// The foreground window's id, when there is one.
     pub foreground_id: Option<u64>,
+    /// The clipboard text the agent's `computer` object tracks (what its
+    /// `copy_text` put there), which upstream's Navi is shown as
+    /// `computer_clipboard`; `None` until its code copies something.
+    pub tracked_clipboard: Option<String>,
     /// The clipboard's text, when it holds text.
     pub clipboard: Option<String>,
 }
@@ -111,6 +115,7 @@ impl Observation {
             window_titles,
             foreground_title,
             foreground_id,
+            tracked_clipboard: None,
             clipboard,
         })
     }

@@ -250,14 +250,15 @@ impl NaviAgent {
                 objective: &obs.instruction,
                 window_title: &obs.foreground_title,
                 window_names: &window_names,
-                clipboard: obs.clipboard.as_deref(),
+                clipboard: obs.tracked_clipboard.as_deref(),
                 text_rendering: "N/A",
                 candidates: &candidates,
                 history: &history,
                 memory: &self.memory_block,
             });
         }
-        let clipboard = obs.clipboard.as_deref().unwrap_or("(the clipboard holds no text)");
+        // Upstream shows Navi's own tracked clipboard, not the system's.
+        let clipboard = obs.tracked_clipboard.as_deref().unwrap_or("(nothing copied yet)");
         let candidates = marks.map_or_else(|| "(no element list this turn)".to_owned(), Marks::candidate_list);
         // Newest first, as upstream's history reads back from time step T-1.
         let skip = self.history.len().saturating_sub(self.config.max_history);
@@ -528,6 +529,7 @@ mod tests {
             window_titles: Vec::new(),
             foreground_title: String::new(),
             foreground_id: None,
+            tracked_clipboard: None,
             clipboard: None,
         };
         let agent = NaviAgent::new(NaviConfig::new("http://x/v1", "gpt-4o")).unwrap();
@@ -555,5 +557,11 @@ mod tests {
                 && text.contains("# blank notes"),
             "{text}"
         );
+        // The clipboard shown is the one the agent's computer tracks, not the system's.
+        let tracked =
+            Observation { tracked_clipboard: Some("tracked".into()), clipboard: Some("system".into()), ..obs.clone() };
+        let body = agent.request_body(&tracked, None, b"png");
+        let text = body["messages"][1]["content"][0]["text"].as_str().unwrap();
+        assert!(text.contains("Clip: tracked\n") && !text.contains("system"), "{text}");
     }
 }
