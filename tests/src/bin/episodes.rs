@@ -41,13 +41,7 @@ const TASKS: usize = 20;
 
 #[tokio::main]
 async fn main() -> ExitCode {
-    match run().await {
-        Ok(()) => ExitCode::SUCCESS,
-        Err(err) => {
-            eprintln!("error: {err:#}");
-            ExitCode::FAILURE
-        }
-    }
+    arena_test_support::exit_code(run().await)
 }
 
 fn client(url: &str) -> anyhow::Result<GuestClient> {

@@ -33,13 +33,7 @@ const RUNS: usize = 40;
 const WARMUP: usize = 3;
 
 fn main() -> ExitCode {
-    match run() {
-        Ok(()) => ExitCode::SUCCESS,
-        Err(err) => {
-            eprintln!("error: {err:#}");
-            ExitCode::FAILURE
-        }
-    }
+    arena_test_support::exit_code(run())
 }
 
 /// Fills the rectangle at (x, y) of size w x h, clipped to the image.

@@ -27,13 +27,7 @@ const PHASE: Duration = Duration::from_secs(4);
 
 #[tokio::main]
 async fn main() -> ExitCode {
-    match run().await {
-        Ok(()) => ExitCode::SUCCESS,
-        Err(err) => {
-            eprintln!("error: {err:#}");
-            ExitCode::FAILURE
-        }
-    }
+    arena_test_support::exit_code(run().await)
 }
 
 /// A `/proc/self/status` field in MiB (`VmRSS`, `VmHWM`), when the platform has it.

@@ -27,13 +27,7 @@ const COLS: u16 = 20;
 const PARAGRAPHS: usize = 200;
 
 fn main() -> ExitCode {
-    match run() {
-        Ok(()) => ExitCode::SUCCESS,
-        Err(err) => {
-            eprintln!("error: {err:#}");
-            ExitCode::FAILURE
-        }
-    }
+    arena_test_support::exit_code(run())
 }
 
 fn run() -> anyhow::Result<()> {

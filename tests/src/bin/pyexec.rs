@@ -22,13 +22,7 @@ const PROCESS_RUNS: usize = 50;
 
 #[tokio::main]
 async fn main() -> ExitCode {
-    match run().await {
-        Ok(()) => ExitCode::SUCCESS,
-        Err(err) => {
-            eprintln!("error: {err:#}");
-            ExitCode::FAILURE
-        }
-    }
+    arena_test_support::exit_code(run().await)
 }
 
 /// Sorted samples with their median and mean.

@@ -18,13 +18,7 @@ use arena_shared::observation::{A11yQuery, ImageFormat, ScreenshotQuery};
 
 #[tokio::main]
 async fn main() -> ExitCode {
-    match run().await {
-        Ok(()) => ExitCode::SUCCESS,
-        Err(err) => {
-            eprintln!("error: {err:#}");
-            ExitCode::FAILURE
-        }
-    }
+    arena_test_support::exit_code(run().await)
 }
 
 struct Stats {
