@@ -231,8 +231,18 @@ fn guests_from_file(path: &Path) -> anyhow::Result<Vec<String>> {
         .collect())
 }
 
-/// The agent factory, the agent label and the model label of the result folders.
-fn agent_factory(args: &RunArgs) -> anyhow::Result<(AgentFactory, String, String)> {
+/// The agent a run plays with.
+struct ChosenAgent {
+    factory: AgentFactory,
+    /// The action-space level of the result folders.
+    label: String,
+    /// The model level of the result folders.
+    model: String,
+    /// The agent's named options, recorded in the results.
+    options: Vec<(String, String)>,
+}
+
+fn agent_factory(args: &RunArgs) -> anyhow::Result<ChosenAgent> {
     match args.agent {
         AgentKind::Scripted => {
             let default_dir = if args.tasks.is_dir() {
@@ -250,14 +260,14 @@ fn agent_factory(args: &RunArgs) -> anyhow::Result<(AgentFactory, String, String
             };
             let factory: AgentFactory =
                 Arc::new(move || Ok(Box::new(ScriptedAgent::new(source.clone())) as Box<dyn Agent>));
-            Ok((factory, "scripted".into(), "plan".into()))
+            Ok(ChosenAgent { factory, label: "scripted".into(), model: "plan".into(), options: Vec::new() })
         }
         AgentKind::Replay => {
             let Some(path) = args.replay.clone() else { bail!("--agent replay needs --replay FILE_OR_DIR") };
             let source = if path.is_dir() { ReplaySource::Dir(path) } else { ReplaySource::File(path) };
             let factory: AgentFactory =
                 Arc::new(move || Ok(Box::new(ReplayAgent::new(source.clone())) as Box<dyn Agent>));
-            Ok((factory, "replay".into(), "replay".into()))
+            Ok(ChosenAgent { factory, label: "replay".into(), model: "replay".into(), options: Vec::new() })
         }
         AgentKind::Navi => {
             let (Some(url), Some(model)) = (args.llm_url.clone(), args.model.clone()) else {
@@ -275,6 +285,18 @@ fn agent_factory(args: &RunArgs) -> anyhow::Result<(AgentFactory, String, String
                     .with_context(|| format!("reading Navi's prompts from the WAA checkout {}", root.display()))?;
                 config.waa_prompts = Some(Arc::new(prompts));
             }
+            // Which prompt text runs: upstream's from a checkout (`waa@<commit>`) or ours.
+            let (style, prompt) = match (config.style, &config.waa_prompts) {
+                (NaviStyle::Waa, Some(prompts)) => ("waa", prompts.source.clone()),
+                (NaviStyle::Waa, None) => ("waa", "arena".to_owned()),
+                (NaviStyle::Arena, _) => ("arena", "arena".to_owned()),
+            };
+            let options = vec![
+                ("navi_style".to_owned(), style.to_owned()),
+                ("prompt".to_owned(), prompt),
+                ("temperature".to_owned(), format!("{}", args.temperature)),
+                ("max_tokens".to_owned(), args.max_tokens.to_string()),
+            ];
             config.api = match args.llm_api {
                 LlmApi::Auto => None,
                 LlmApi::Openai => Some(ApiKind::OpenAi),
@@ -291,7 +313,7 @@ fn agent_factory(args: &RunArgs) -> anyhow::Result<(AgentFactory, String, String
             let factory: AgentFactory =
                 Arc::new(move || Ok(Box::new(NaviAgent::new(config.clone())?) as Box<dyn Agent>));
             // Upstream files Navi's results under its action space.
-            Ok((factory, crate::results::DEFAULT_ACTION_SPACE_LABEL.into(), model))
+            Ok(ChosenAgent { factory, label: crate::results::DEFAULT_ACTION_SPACE_LABEL.into(), model, options })
         }
     }
 }
@@ -303,7 +325,7 @@ fn agent_factory(args: &RunArgs) -> anyhow::Result<(AgentFactory, String, String
 /// Unusable arguments, tasks that do not load, no guest, or results that cannot be written.
 pub async fn run(conn: &Connection, args: RunArgs) -> anyhow::Result<ExitCode> {
     let tasks = load_tasks(&args.tasks, args.difficulty)?;
-    let (agents, agent_label, model) = agent_factory(&args)?;
+    let ChosenAgent { factory: agents, label: agent_label, model, options: agent_options } = agent_factory(&args)?;
 
     let mut urls: Vec<String> = conn.guest.iter().cloned().collect();
     urls.extend(args.guests.iter().map(|s| s.trim().to_owned()).filter(|s| !s.is_empty()));
@@ -345,23 +367,7 @@ pub async fn run(conn: &Connection, args: RunArgs) -> anyhow::Result<ExitCode> {
         OrderArg::Shuffle => TaskOrder::Shuffle { seed: args.seed },
     };
     config.options.insert("order".into(), order.to_string());
-    if args.agent == AgentKind::Navi {
-        let style = match args.navi_style {
-            NaviStyleArg::Waa => "waa",
-            NaviStyleArg::Arena => "arena",
-        };
-        config.options.insert("navi_style".into(), style.into());
-        // Which prompt text ran: upstream's from a checkout (`waa@<commit>`) or ours.
-        let prompt = match (&args.navi_style, &args.waa_root) {
-            (NaviStyleArg::Waa, Some(root)) => crate::agent::waa_prompts::WaaPrompts::load(root)
-                .map(|p| p.source)
-                .unwrap_or_else(|_| "waa@unreadable".into()),
-            _ => "arena".into(),
-        };
-        config.options.insert("prompt".into(), prompt);
-        config.options.insert("temperature".into(), format!("{}", args.temperature));
-        config.options.insert("max_tokens".into(), args.max_tokens.to_string());
-    }
+    config.options.extend(agent_options);
     if args.activate_non_strict {
         config.options.insert("activate_non_strict".into(), "on".into());
     }
