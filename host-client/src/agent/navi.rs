@@ -379,6 +379,8 @@ impl NaviAgent {
         response: &str,
     ) -> Vec<StepLog> {
         let log = |key: &str, value: LogValue| StepLog { key: key.to_owned(), value };
+        let user_question =
+            body.pointer("/messages/1/content/0/text").and_then(Value::as_str).unwrap_or_default().to_owned();
         let mut request = body.clone();
         if let Some(parts) = request.pointer_mut("/messages/1/content").and_then(Value::as_array_mut) {
             for part in parts {
@@ -389,7 +391,8 @@ impl NaviAgent {
             }
         }
         let mut logs = vec![
-            log("user_question", LogValue::Text(self.user_text(obs, marks))),
+            // The user message's text as sent, not built a second time.
+            log("user_question", LogValue::Text(user_question)),
             log("plan_result", LogValue::Text(response.to_owned())),
             log("request", LogValue::Json(request)),
         ];
