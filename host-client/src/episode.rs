@@ -42,7 +42,9 @@ use crate::agent::{self, Agent, AgentAction, AgentError, ExecOptions, LogValue, 
 use crate::client::GuestClient;
 use crate::error::ClientError;
 use crate::eval::{self, EvalContext, LastAction};
-use crate::results::{timestamp_now, unix_now, ActionRecord, ResetRecord, RunLayout, StepRecord, StepTimings, TaskDir};
+use crate::results::{
+    timestamp_now, unix_now, ActionRecord, ObservationKeys, ResetRecord, RunLayout, StepRecord, StepTimings, TaskDir,
+};
 use crate::run::pool::TaskRunner;
 use crate::setup::{self, DownloadCache, Settle, SetupContext};
 use crate::task::Task;
@@ -246,13 +248,15 @@ fn upstream_action(action: &AgentAction) -> String {
 }
 
 /// The observation keys of an upstream trajectory line.
-fn observed(record: &mut ActionRecord, seen: &Seen) {
-    record.screenshot = seen.file.clone();
-    record.accessibility_tree = seen.tree_file.clone();
-    record.instruction = seen.obs.instruction.clone();
-    record.window_title = seen.obs.foreground_title.clone();
-    record.window_names_str = seen.obs.window_titles.join("\n");
-    record.computer_clipboard = seen.obs.tracked_clipboard.clone().unwrap_or_default();
+fn observed(seen: &Seen) -> ObservationKeys {
+    ObservationKeys {
+        screenshot: seen.file.clone(),
+        accessibility_tree: seen.tree_file.clone(),
+        instruction: seen.obs.instruction.clone(),
+        window_title: seen.obs.foreground_title.clone(),
+        window_names_str: seen.obs.window_titles.join("\n"),
+        computer_clipboard: seen.obs.tracked_clipboard.clone().unwrap_or_default(),
+    }
 }
 
 fn ms(d: Duration) -> u64 {
@@ -333,17 +337,8 @@ impl Episode {
         let mut seen = self
             .observe_into(client, task, config, &screen, out, 1, None, &timestamp, computer.clipboard_content.clone())
             .await?;
-        self.reset = Some(ResetRecord {
-            step_num: 0,
-            action_timestamp: timestamp,
-            action: None,
-            screenshot: seen.file.clone(),
-            accessibility_tree: seen.tree_file.clone(),
-            instruction: seen.obs.instruction.clone(),
-            window_title: seen.obs.foreground_title.clone(),
-            window_names_str: seen.obs.window_titles.join("\n"),
-            computer_clipboard: seen.obs.tracked_clipboard.clone().unwrap_or_default(),
-        });
+        self.reset =
+            Some(ResetRecord { step_num: 0, action_timestamp: timestamp, action: None, observation: observed(&seen) });
         let mut last: Option<LastAction> = None;
         for step in 1..=config.max_steps {
             interrupted(config, "between steps")?;
@@ -571,7 +566,7 @@ impl Episode {
                 )
                 .await?;
             observing += t_observe.elapsed().as_millis();
-            observed(&mut line, &latest);
+            line.observation = observed(&latest);
             if k == 0 {
                 record.first = line;
             } else {
@@ -661,8 +656,9 @@ async fn observe(
             None
         }
     };
-    let foreground_title = windows.iter().find(|w| w.focused).map(|w| w.title.clone()).unwrap_or_default();
-    let foreground_id = windows.iter().find(|w| w.focused).map(|w| w.id);
+    let foreground = windows.iter().find(|w| w.focused);
+    let foreground_title = foreground.map(|w| w.title.clone()).unwrap_or_default();
+    let foreground_id = foreground.map(|w| w.id);
     let window_titles =
         windows.iter().filter(|w| w.visible && !w.minimized && !w.title.is_empty()).map(|w| w.title.clone()).collect();
     Ok(Observation {

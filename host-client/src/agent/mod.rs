@@ -100,8 +100,9 @@ impl Observation {
                 window_titles.push(w.title.clone());
             }
         }
-        let foreground_title = windows.iter().find(|w| w.focused).map(|w| w.title.clone()).unwrap_or_default();
-        let foreground_id = windows.iter().find(|w| w.focused).map(|w| w.id);
+        let foreground = windows.iter().find(|w| w.focused);
+        let foreground_title = foreground.map(|w| w.title.clone()).unwrap_or_default();
+        let foreground_id = foreground.map(|w| w.id);
         let clipboard = match client.clipboard_get().await {
             Ok(ClipboardContent::Text { text }) => Some(text),
             _ => None,

@@ -273,7 +273,7 @@ fn step_html(rel: &str, step: &StepRecord) -> String {
          <p><b>Step {n}</b> <span class=\"meta\">{} &middot; then window {} &middot; observe {} ms, predict {} ms, act {} ms</span></p>\
          <pre>{}</pre><p class=\"meta\">response</p><pre>{}</pre>",
         escape(&step.first.action_timestamp),
-        escape(&step.first.window_title),
+        escape(&step.first.observation.window_title),
         t.observe_ms,
         t.predict_ms,
         t.act_ms,

@@ -166,6 +166,28 @@ pub struct StepTimings {
     pub pause_ms: u64,
 }
 
+/// The observation keys of a `traj.jsonl` line, as upstream's recorder saves
+/// an observation: files for the screenshot and the tree, the rest inline.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, Default)]
+pub struct ObservationKeys {
+    /// `screenshot-step_<i>_<timestamp>.png` (`reset` for the first), in the task folder.
+    #[serde(default)]
+    pub screenshot: String,
+    /// `accessibility_tree-step_<i>_<timestamp>.txt`: the tree in upstream's XML.
+    #[serde(default)]
+    pub accessibility_tree: String,
+    #[serde(default)]
+    pub instruction: String,
+    #[serde(default)]
+    pub window_title: String,
+    /// The visible windows' titles, one per line (upstream's `window_names_str`).
+    #[serde(default)]
+    pub window_names_str: String,
+    /// The clipboard text the agent's `computer` tracks (`computer_clipboard`), empty when none.
+    #[serde(default)]
+    pub computer_clipboard: String,
+}
+
 /// The first line of `traj.jsonl`: the observation after the reset, as
 /// upstream's `record_init` writes it (`step_num` 0, `action` null).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -173,17 +195,8 @@ pub struct ResetRecord {
     pub step_num: u32,
     pub action_timestamp: String,
     pub action: Option<String>,
-    /// `screenshot-step_reset_<timestamp>.png`, in the task folder.
-    pub screenshot: String,
-    /// `accessibility_tree-step_reset_<timestamp>.txt`: the tree in upstream's XML.
-    #[serde(default)]
-    pub accessibility_tree: String,
-    pub instruction: String,
-    pub window_title: String,
-    /// The visible windows' titles, one per line (upstream's `window_names_str`).
-    pub window_names_str: String,
-    /// The clipboard's text (`computer_clipboard`), empty when it holds none.
-    pub computer_clipboard: String,
+    #[serde(flatten)]
+    pub observation: ObservationKeys,
 }
 
 /// The upstream part of a `traj.jsonl` line for one action, as upstream's
@@ -204,20 +217,9 @@ pub struct ActionRecord {
     pub done: bool,
     #[serde(default)]
     pub info: Value,
-    /// The screenshot taken after the action, `screenshot-step_<step - 1>_<timestamp>.png`.
-    #[serde(default)]
-    pub screenshot: String,
-    /// The tree observed after the action in upstream's XML, `accessibility_tree-step_<step - 1>_<timestamp>.txt`.
-    #[serde(default)]
-    pub accessibility_tree: String,
-    #[serde(default)]
-    pub instruction: String,
-    #[serde(default)]
-    pub window_title: String,
-    #[serde(default)]
-    pub window_names_str: String,
-    #[serde(default)]
-    pub computer_clipboard: String,
+    /// The observation taken after the action.
+    #[serde(flatten)]
+    pub observation: ObservationKeys,
 }
 
 /// One step: the first `traj.jsonl` line of the step (upstream's line for its

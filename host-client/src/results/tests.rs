@@ -41,12 +41,13 @@ fn step(n: u32) -> StepRecord {
             reward: 0.0,
             done: true,
             info: serde_json::json!({"done": true}),
-            screenshot: TaskDir::screenshot_name(Some(n - 1), &timestamp),
-            accessibility_tree: String::new(),
-            instruction: "i".into(),
-            window_title: "Untitled - Notepad".into(),
-            window_names_str: "Untitled - Notepad".into(),
-            computer_clipboard: String::new(),
+            observation: ObservationKeys {
+                screenshot: TaskDir::screenshot_name(Some(n - 1), &timestamp),
+                instruction: "i".into(),
+                window_title: "Untitled - Notepad".into(),
+                window_names_str: "Untitled - Notepad".into(),
+                ..ObservationKeys::default()
+            },
         },
         step: n,
         response: "<b>ok</b>".into(),
@@ -66,12 +67,13 @@ fn reset() -> ResetRecord {
         step_num: 0,
         action_timestamp: format_timestamp(0),
         action: None,
-        screenshot: TaskDir::screenshot_name(None, &format_timestamp(0)),
-        accessibility_tree: String::new(),
-        instruction: "i".into(),
-        window_title: "Program Manager".into(),
-        window_names_str: "Program Manager".into(),
-        computer_clipboard: String::new(),
+        observation: ObservationKeys {
+            screenshot: TaskDir::screenshot_name(None, &format_timestamp(0)),
+            instruction: "i".into(),
+            window_title: "Program Manager".into(),
+            window_names_str: "Program Manager".into(),
+            ..ObservationKeys::default()
+        },
     }
 }
 
