@@ -811,24 +811,18 @@ mod tests {
 
     #[tokio::test]
     async fn pauses_fall_where_upstreams_fall() {
-        let stub = start(&StubArgs::default(), None).await.unwrap();
-        let client =
-            GuestClient::new(&stub.url(), ClientConfig { token: None, timeout: Duration::from_secs(5), retries: 1 })
-                .unwrap();
-        let tmp = tempfile::tempdir().unwrap();
         let clock = Arc::new(Recorded::default());
-        let mut config = EpisodeConfig::upstream(DownloadCache::new(tmp.path().join("cache")).unwrap());
-        config.settle = Settle::none();
-        config.exec = ExecOptions::instant();
-        config.clock = clock.clone();
         let script = vec![
             says(vec![AgentAction::Wait]),
             says(vec![AgentAction::Pyautogui("pyautogui.write('x')".into()), AgentAction::Done]),
         ];
-        let mut agent = Fake { script: script.into(), stub: None };
-        let out = TaskDir::new(tmp.path().join("out"));
-        let result = run_episode(&client, &task("exact_match"), &mut agent, &config, &out).await;
-        stub.stop().await.unwrap();
+        let upstream = |cache| EpisodeConfig {
+            settle: Settle::none(),
+            exec: ExecOptions::instant(),
+            clock: clock.clone(),
+            ..EpisodeConfig::upstream(cache)
+        };
+        let (result, out, _tmp) = play_with(&task("exact_match"), script, false, upstream).await;
         assert_eq!(result.status, EpisodeStatus::Completed, "{result:?}");
         let s = Duration::from_secs;
         assert_eq!(
@@ -884,13 +878,23 @@ mod tests {
         script: Vec<Option<Result<Prediction, AgentError>>>,
         stop_guest: bool,
     ) -> (EpisodeResult, TaskDir, tempfile::TempDir) {
+        let instant = |cache| EpisodeConfig { max_steps: 4, ..EpisodeConfig::instant(cache) };
+        play_with(task, script, stop_guest, instant).await
+    }
+
+    /// [`play`] with the configuration `configure` makes from the download cache.
+    async fn play_with(
+        task: &Task,
+        script: Vec<Option<Result<Prediction, AgentError>>>,
+        stop_guest: bool,
+        configure: impl FnOnce(DownloadCache) -> EpisodeConfig,
+    ) -> (EpisodeResult, TaskDir, tempfile::TempDir) {
         let stub = start(&StubArgs::default(), None).await.unwrap();
         let client =
             GuestClient::new(&stub.url(), ClientConfig { token: None, timeout: Duration::from_secs(5), retries: 1 })
                 .unwrap();
         let tmp = tempfile::tempdir().unwrap();
-        let mut config = EpisodeConfig::instant(DownloadCache::new(tmp.path().join("cache")).unwrap());
-        config.max_steps = 4;
+        let config = configure(DownloadCache::new(tmp.path().join("cache")).unwrap());
         let mut agent = Fake { script: script.into(), stub: None };
         let keep = if stop_guest {
             agent.stub = Some(stub);

@@ -77,7 +77,7 @@ fn reset() -> ResetRecord {
     }
 }
 
-fn layout(root: &Path) -> RunLayout {
+pub(crate) fn layout(root: &Path) -> RunLayout {
     RunLayout {
         root: root.to_owned(),
         agent: "scripted".into(),

@@ -7,7 +7,7 @@ use std::time::Duration;
 use super::pool::*;
 use super::*;
 use crate::client::ClientConfig;
-use crate::results::tests::{episode, write_task};
+use crate::results::tests::{episode, layout, write_task};
 use crate::results::{EpisodeResult, EpisodeStatus};
 
 fn task(domain: &str, name: &str) -> Task {
@@ -194,13 +194,7 @@ async fn a_guest_that_comes_back_rejoins_the_pool() {
 #[test]
 fn the_plan_takes_the_shard_and_skips_finished_tasks() {
     let root = tempfile::tempdir().unwrap();
-    let layout = RunLayout {
-        root: root.path().to_owned(),
-        agent: "scripted".into(),
-        observation: "a11y_tree".into(),
-        model: "meta/llama:3".into(),
-        trial: "0".into(),
-    };
+    let layout = layout(root.path());
     let mut all = tasks(6);
     sort_tasks(&mut all);
     let names = |ts: &[Task]| ts.iter().map(|t| t.name.clone()).collect::<Vec<_>>();
@@ -220,13 +214,7 @@ fn the_plan_takes_the_shard_and_skips_finished_tasks() {
 #[test]
 fn a_shard_runs_in_the_order_asked_for_and_shards_do_not_depend_on_it() {
     let root = tempfile::tempdir().unwrap();
-    let layout = RunLayout {
-        root: root.path().to_owned(),
-        agent: "scripted".into(),
-        observation: "a11y_tree".into(),
-        model: "m".into(),
-        trial: "0".into(),
-    };
+    let layout = layout(root.path());
     // As an index file lists them: not sorted.
     let mut all = tasks(8);
     all.reverse();
