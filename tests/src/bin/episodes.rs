@@ -41,7 +41,13 @@ const TASKS: usize = 20;
 
 #[tokio::main]
 async fn main() -> ExitCode {
-    arena_test_support::exit_code(run().await)
+    match run().await {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(err) => {
+            eprintln!("error: {err:#}");
+            ExitCode::FAILURE
+        }
+    }
 }
 
 fn client(url: &str) -> anyhow::Result<GuestClient> {

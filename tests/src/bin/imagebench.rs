@@ -33,7 +33,13 @@ const RUNS: usize = 40;
 const WARMUP: usize = 3;
 
 fn main() -> ExitCode {
-    arena_test_support::exit_code(run())
+    match run() {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(err) => {
+            eprintln!("error: {err:#}");
+            ExitCode::FAILURE
+        }
+    }
 }
 
 /// Fills the rectangle at (x, y) of size w x h, clipped to the image.

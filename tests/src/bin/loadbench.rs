@@ -27,7 +27,13 @@ const PHASE: Duration = Duration::from_secs(4);
 
 #[tokio::main]
 async fn main() -> ExitCode {
-    arena_test_support::exit_code(run().await)
+    match run().await {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(err) => {
+            eprintln!("error: {err:#}");
+            ExitCode::FAILURE
+        }
+    }
 }
 
 /// A `/proc/self/status` field in MiB (`VmRSS`, `VmHWM`), when the platform has it.

@@ -27,7 +27,13 @@ const COLS: u16 = 20;
 const PARAGRAPHS: usize = 200;
 
 fn main() -> ExitCode {
-    arena_test_support::exit_code(run())
+    match run() {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(err) => {
+            eprintln!("error: {err:#}");
+            ExitCode::FAILURE
+        }
+    }
 }
 
 fn run() -> anyhow::Result<()> {

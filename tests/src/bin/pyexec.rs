@@ -22,7 +22,13 @@ const PROCESS_RUNS: usize = 50;
 
 #[tokio::main]
 async fn main() -> ExitCode {
-    arena_test_support::exit_code(run().await)
+    match run().await {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(err) => {
+            eprintln!("error: {err:#}");
+            ExitCode::FAILURE
+        }
+    }
 }
 
 /// Sorted samples with their median and mean.

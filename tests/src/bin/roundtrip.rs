@@ -18,7 +18,13 @@ use arena_shared::observation::{A11yQuery, ImageFormat, ScreenshotQuery};
 
 #[tokio::main]
 async fn main() -> ExitCode {
-    arena_test_support::exit_code(run().await)
+    match run().await {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(err) => {
+            eprintln!("error: {err:#}");
+            ExitCode::FAILURE
+        }
+    }
 }
 
 struct Stats {

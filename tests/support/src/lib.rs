@@ -27,15 +27,3 @@ pub use corpus::{waa_corpus, CORPUS_VAR, REQUIRE_CORPUS_VAR, SKIP_PREFIX};
 pub use guest::StubGuest;
 pub use process::{workspace_binary, Served};
 pub use wine::{wine_or_skip, WineSetup};
-
-/// The exit code of a bench or tool binary's `run()`: success, or the error
-/// with its causes on stderr and a failure code.
-pub fn exit_code(result: anyhow::Result<()>) -> std::process::ExitCode {
-    match result {
-        Ok(()) => std::process::ExitCode::SUCCESS,
-        Err(err) => {
-            eprintln!("error: {err:#}");
-            std::process::ExitCode::FAILURE
-        }
-    }
-}
