@@ -28,6 +28,7 @@ pub mod auth;
 pub mod call;
 pub mod config;
 pub mod desktop;
+pub mod doctor;
 pub mod error;
 pub mod imaging;
 pub mod inspect;

@@ -1,5 +1,6 @@
 //! `arena-guest`: parses the command line, sets up logging, and serves (the default)
-//! or runs a `service` / `logon-task` subcommand from [`arena_guest::service`].
+//! or runs a `service` / `logon-task` subcommand from [`arena_guest::service`], or the
+//! `doctor` ([`arena_guest::doctor`]).
 
 use std::net::SocketAddr;
 use std::process::ExitCode;
@@ -19,6 +20,7 @@ fn main() -> ExitCode {
             init_tracing(LogFormat::Text, false);
             arena_guest::service::execute_service(command)
         }
+        Some(Command::Doctor(args)) => return doctor(args),
         Some(Command::LogonTask(command)) => {
             init_tracing(LogFormat::Text, false);
             arena_guest::service::execute_logon_task(command)
@@ -35,6 +37,40 @@ fn main() -> ExitCode {
             eprintln!("error: {err}");
             ExitCode::from(err.exit_code())
         }
+    }
+}
+
+/// `arena-guest doctor`: builds the backend as the server would and checks it.
+fn doctor(args: &arena_guest::service::DoctorArgs) -> ExitCode {
+    init_tracing(LogFormat::Text, false);
+    let state = match arena_guest::build_state(args.serve.clone()) {
+        Ok(state) => state,
+        Err(err) => {
+            eprintln!("error: {err:#}");
+            return ExitCode::FAILURE;
+        }
+    };
+    let options = arena_guest::doctor::DoctorOptions {
+        bind: Some(SocketAddr::new(args.serve.bind, args.serve.port)),
+        token: state.token.is_some(),
+        window_wait: None,
+    };
+    let report = arena_guest::doctor::run(state.desktop.as_ref(), &options);
+    if args.json {
+        match serde_json::to_string_pretty(&report) {
+            Ok(json) => println!("{json}"),
+            Err(err) => {
+                eprintln!("error: writing the report as JSON: {err}");
+                return ExitCode::FAILURE;
+            }
+        }
+    } else {
+        print!("{}", report.render_text());
+    }
+    if report.passed() {
+        ExitCode::SUCCESS
+    } else {
+        ExitCode::FAILURE
     }
 }
 

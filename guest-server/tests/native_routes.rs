@@ -1296,3 +1296,49 @@ async fn large_files_stream_both_ways_and_an_oversized_body_writes_nothing() {
     assert_eq!(names, ["big.bin"], "no temporary file stays behind");
     assert_eq!(std::fs::read(downloads.join("big.bin")).unwrap(), bytes, "the old content is kept");
 }
+
+#[tokio::test]
+async fn doctor_needs_the_token_and_passes_every_check_on_the_stub() {
+    let app = app_with(Some(TOKEN));
+    app.get("/v1/doctor").await.assert_status(StatusCode::UNAUTHORIZED);
+    let request = Request::get("/v1/doctor")
+        .header(header::AUTHORIZATION, format!("Bearer {TOKEN}"))
+        .body(Body::empty())
+        .unwrap();
+    let answer = app.send(request).await;
+    answer.assert_status(StatusCode::OK);
+    let report: arena_shared::doctor::DoctorReport = answer.json();
+    assert_eq!(report.backend, "stub");
+    assert!(report.passed(), "{}", report.render_text());
+    use arena_shared::doctor::CheckStatus::{Info, Pass, Unavailable};
+    let expected = [
+        ("session", Info),
+        ("integrity", Unavailable),
+        ("screen", Pass),
+        ("capture", Pass),
+        ("cursor", Pass),
+        ("clipboard_text", Pass),
+        ("clipboard_image", Pass),
+        ("notepad_start", Pass),
+        ("activation", Pass),
+        ("notepad_typing", Pass),
+        ("read_back_uia", Pass),
+        ("read_back_win32", Pass),
+        ("uia_tree", Pass),
+        ("window_close", Pass),
+        ("exec_timeout", Pass),
+        ("files", Pass),
+        ("reachability", Info),
+    ];
+    let got: Vec<_> = report.checks.iter().map(|c| (c.name.as_str(), c.status)).collect();
+    assert_eq!(got, expected, "{}", report.render_text());
+    let close = report.check("window_close").unwrap();
+    assert!(close.detail.contains("closed"), "{close:?}");
+    // The doctor leaves the desktop as it found it: no Notepad, the clipboard as it was.
+    let windows: Vec<WindowInfo> = {
+        let request =
+            Request::get("/v1/windows").header(header::AUTHORIZATION, format!("Bearer {TOKEN}")).body(Body::empty());
+        app.send(request.unwrap()).await.json()
+    };
+    assert!(!windows.iter().any(|w| w.title.contains("Notepad")), "{windows:?}");
+}

@@ -50,6 +50,9 @@ pub const SCREENSHOT_META_HEADER: &str = "x-arena-screenshot";
 /// Header carrying the lowercase hex SHA-256 of a downloaded file.
 pub const SHA256_HEADER: &str = "x-arena-sha256";
 
+/// How long `doctor` may take: the guest gives itself 180 s.
+const DOCTOR_DEADLINE: Duration = Duration::from_secs(200);
+
 /// The guest's default `/v1/exec` timeout, used to size the deadline of an
 /// exec request that does not set its own.
 const GUEST_DEFAULT_EXEC_TIMEOUT: Duration = Duration::from_secs(120);
@@ -241,6 +244,14 @@ impl GuestClient {
     /// # Errors
     ///
     /// As [`GuestClient::health`].
+    /// `GET /v1/doctor`: every capability checked end to end on the guest's desktop.
+    /// It takes a minute or so (it starts Notepad and waits out a command's timeout),
+    /// so it has its own deadline, and it is never retried: it types and clicks.
+    pub async fn doctor(&self) -> Result<arena_shared::doctor::DoctorReport, ClientError> {
+        let call = Call { deadline: DOCTOR_DEADLINE, retry: Retry::Never, ..self.call(Method::GET, "/v1/doctor") };
+        self.json(call).await
+    }
+
     pub async fn health_once(&self, deadline: Duration) -> Result<HealthReport, ClientError> {
         self.health_with(deadline, Retry::Never).await
     }

@@ -54,3 +54,17 @@ async fn push_then_pull_round_trips_through_local_files() {
     assert_eq!(arena_host::run(health).await.expect("health"), ExitCode::SUCCESS);
     stub.stop().await.expect("stub stops");
 }
+
+#[tokio::test]
+async fn doctor_reports_a_healthy_stub_and_exits_zero() {
+    let stub = start(&StubArgs::default(), None).await.expect("stub");
+    let url = stub.url();
+    for words in [&["doctor", "--guest", &url][..], &["doctor", "--json", "--guest", &url][..]] {
+        assert_eq!(arena_host::run(cli(words)).await.expect("doctor"), ExitCode::SUCCESS, "{words:?}");
+    }
+    let client = arena_host::GuestClient::new(&url, arena_host::ClientConfig::default()).expect("client");
+    let report = client.doctor().await.expect("doctor report");
+    assert!(report.passed(), "{}", report.render_text());
+    assert!(report.check("notepad_typing").is_some(), "{}", report.render_text());
+    stub.stop().await.expect("stub stops");
+}

@@ -15,7 +15,7 @@
 //! - [`exec`], [`files`], [`clipboard`], [`registry`]: request and result types.
 //! - [`eval`]: the evaluation queries under `/v1/eval/`.
 //! - [`fastimg`]: upstream's model-image size, a SIMD resize and a SIMD JPEG encoder.
-//! - [`health`]: the staged readiness report.
+//! - [`health`]: the staged readiness report; [`doctor`]: the end-to-end capability report.
 //! - [`error`]: the error body every native route answers with.
 //! - [`script`]: a safe interpreter for the pyautogui and WAA `computer.*` Python that hosts send.
 //!
@@ -31,6 +31,7 @@ pub mod atomic;
 pub mod clipboard;
 pub mod close_all;
 pub mod cmdline;
+pub mod doctor;
 pub mod error;
 pub mod eval;
 pub mod exec;

@@ -474,6 +474,32 @@ async fn windows_backend_under_wine() {
     );
     println!("BENCH: action round trip (move_to) avg {:.1} ms over 20", avg(&moves));
     println!("BENCH: whole Wine suite {:.1} s", suite_started.elapsed().as_secs_f64());
+
+    // 12. `arena-guest doctor` on the same desktop, as a user runs it first in a new
+    // image: it finishes, says UI Automation is unavailable rather than failing, and
+    // passes what Wine can do.
+    let exe = setup.exe.to_str().expect("UTF-8 exe path");
+    let (code, output) = wine_run(&setup, exe, &["doctor", "--backend", "windows"]);
+    let report: Vec<&str> =
+        output.lines().filter(|l| ["PASS ", "FAIL ", "N/A  ", "INFO "].iter().any(|p| l.starts_with(p))).collect();
+    println!("DOCTOR: exit code {code}");
+    for line in &report {
+        println!("DOCTOR: {line}");
+    }
+    let status_of = |name: &str| {
+        report
+            .iter()
+            .find(|l| l.split_whitespace().nth(1) == Some(name))
+            .map(|l| l.split_whitespace().next().unwrap_or_default())
+            .unwrap_or_else(|| panic!("the doctor's report has no {name} line:\n{output}"))
+    };
+    for name in ["uia_tree", "read_back_uia"] {
+        assert_eq!(status_of(name), "N/A", "{name} under Wine:\n{output}");
+    }
+    for name in ["screen", "capture", "clipboard_text", "notepad_start", "notepad_typing", "read_back_win32", "files"] {
+        assert_eq!(status_of(name), "PASS", "{name} under Wine:\n{output}");
+    }
+    assert!(output.lines().any(|l| l.starts_with("ok: ") || l.starts_with("FAILED: ")), "no verdict line:\n{output}");
 }
 
 /// Runs `arena-guest.exe ARGS` (or any Wine program) to completion: exit code and output.

@@ -147,6 +147,16 @@ pub trait Desktop: Send + Sync + std::fmt::Debug {
         None
     }
 
+    /// The server process's integrity level and elevation, as the doctor and
+    /// health report it (`High, elevated (full token)`, `Medium, limited token`).
+    ///
+    /// # Errors
+    ///
+    /// [`DesktopError::Unsupported`] where the platform has no integrity levels.
+    fn integrity_level(&self) -> DesktopResult<String> {
+        Err(DesktopError::Unsupported(format!("the {} backend has no integrity levels", self.kind())))
+    }
+
     // ----- screen -----
 
     /// Screen size, scale and monitors.

@@ -14,12 +14,14 @@
 //!
 //! One private module per resource, each exposing its own `routes()`:
 //! `health`, `screen`, `input`, `a11y`, `windows`, `clipboard`, `files`,
-//! `exec` (exec, launch, open), `registry` (registry, wallpaper) and
+//! `exec` (exec, launch, open), `registry` (registry, wallpaper), `doctor`
+//! (every capability end to end) and
 //! `browser` (the browser's DevTools HTTP endpoint, forwarded).
 
 mod a11y;
 mod browser;
 mod clipboard;
+mod doctor;
 mod eval_queries;
 mod exec;
 mod files;
@@ -44,6 +46,7 @@ pub fn routes() -> Router<AppState> {
         .merge(a11y::routes())
         .merge(windows::routes())
         .merge(clipboard::routes())
+        .merge(doctor::routes())
         .merge(files::routes())
         .merge(exec::routes())
         .merge(registry::routes())

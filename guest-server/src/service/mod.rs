@@ -61,6 +61,20 @@ pub enum Command {
     /// Start the server at every logon through a scheduled task, as upstream WAA does (Windows only).
     #[command(subcommand)]
     LogonTask(LogonTaskCommand),
+    /// Check every capability end to end on this desktop (capture, cursor, typing into
+    /// Notepad, clipboard, trees, exec timeouts, files) and report pass or fail with timings.
+    Doctor(Box<DoctorArgs>),
+}
+
+/// `arena-guest doctor`: the backend options of the server, and the output format.
+#[derive(Debug, Clone, clap::Args)]
+pub struct DoctorArgs {
+    /// Print the report as JSON (the shape of `GET /v1/doctor`).
+    #[arg(long)]
+    pub json: bool,
+
+    #[command(flatten)]
+    pub serve: ServerConfig,
 }
 
 /// `arena-guest service ...`.

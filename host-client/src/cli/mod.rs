@@ -136,6 +136,13 @@ pub enum Command {
         #[arg(long)]
         json: bool,
     },
+    /// Check every capability of the guest's desktop end to end (capture, cursor, typing
+    /// into Notepad, clipboard, trees, exec timeouts, files); exits 0 when nothing failed.
+    Doctor {
+        /// Print the report as JSON.
+        #[arg(long)]
+        json: bool,
+    },
     /// Show screen size, scale and monitors (JSON).
     Screen,
     /// Save a screenshot and print its metadata.
@@ -380,6 +387,15 @@ pub async fn run(cli: Cli) -> anyhow::Result<ExitCode> {
             Ok(ExitCode::SUCCESS)
         }
         Command::Health { wait, json } => health(conn, wait, json).await,
+        Command::Doctor { json } => {
+            let report = with_spinner("the guest is checking its desktop", conn.client()?.doctor()).await?;
+            if json {
+                emit_json(&report)?;
+            } else {
+                emit(&report.render_text())?;
+            }
+            Ok(if report.passed() { ExitCode::SUCCESS } else { ExitCode::FAILURE })
+        }
         Command::Screen => {
             emit_json(&conn.client()?.screen().await?)?;
             Ok(ExitCode::SUCCESS)

@@ -187,6 +187,10 @@ impl Desktop for WindowsDesktop {
         self.session
     }
 
+    fn integrity_level(&self) -> DesktopResult<String> {
+        system::integrity_level()
+    }
+
     fn screen(&self) -> DesktopResult<ScreenInfo> {
         self.need_desktop("screen")?;
         capture::screen()

@@ -58,3 +58,51 @@ mod tests {
         assert!(refuse_session_zero(None, "capture", Needs::InteractiveDesktop).is_ok());
     }
 }
+
+/// The name of a mandatory integrity level, from the last sub-authority of the
+/// token's integrity SID (`S-1-16-<rid>`).
+pub fn integrity_name(rid: u32) -> String {
+    match rid {
+        0x0000 => "Untrusted".to_owned(),
+        0x1000 => "Low".to_owned(),
+        0x2000 => "Medium".to_owned(),
+        0x2100 => "Medium Plus".to_owned(),
+        0x3000 => "High".to_owned(),
+        0x4000 => "System".to_owned(),
+        0x5000 => "Protected Process".to_owned(),
+        other => format!("level 0x{other:04x}"),
+    }
+}
+
+/// What the token's `TOKEN_ELEVATION_TYPE` says: 1 default (UAC off, or not an
+/// administrator), 2 full (an elevated administrator), 3 limited (an
+/// administrator's filtered token: UAC on, not elevated).
+pub fn elevation_name(kind: i32) -> &'static str {
+    match kind {
+        1 => "default token (no split: UAC off or not an administrator)",
+        2 => "elevated (full administrator token)",
+        3 => "limited (filtered administrator token: not elevated)",
+        _ => "unknown elevation type",
+    }
+}
+
+/// The doctor's and health's one line: `High, elevated (full administrator token)`.
+pub fn describe_integrity(rid: u32, elevation: Option<i32>) -> String {
+    match elevation {
+        Some(kind) => format!("{}, {}", integrity_name(rid), elevation_name(kind)),
+        None => integrity_name(rid),
+    }
+}
+
+#[cfg(test)]
+mod integrity_tests {
+    use super::*;
+
+    #[test]
+    fn integrity_levels_and_elevation_read_as_words() {
+        assert_eq!(describe_integrity(0x3000, Some(2)), "High, elevated (full administrator token)");
+        assert_eq!(describe_integrity(0x2000, Some(3)), "Medium, limited (filtered administrator token: not elevated)");
+        assert_eq!(describe_integrity(0x4000, None), "System");
+        assert_eq!(integrity_name(0x2345), "level 0x2345");
+    }
+}

@@ -12,10 +12,11 @@ use windows::Win32::Foundation::{
 };
 use windows::Win32::Security::Authorization::{GetNamedSecurityInfoW, SE_FILE_OBJECT};
 use windows::Win32::Security::{
-    AclSizeInformation, AdjustTokenPrivileges, EqualSid, GetAce, GetAclInformation, LookupAccountNameW,
-    LookupPrivilegeValueW, ACCESS_ALLOWED_ACE, ACE_HEADER, ACL, ACL_SIZE_INFORMATION, DACL_SECURITY_INFORMATION,
+    AclSizeInformation, AdjustTokenPrivileges, EqualSid, GetAce, GetAclInformation, GetSidSubAuthority,
+    GetSidSubAuthorityCount, GetTokenInformation, LookupAccountNameW, LookupPrivilegeValueW, TokenElevationType,
+    TokenIntegrityLevel, ACCESS_ALLOWED_ACE, ACE_HEADER, ACL, ACL_SIZE_INFORMATION, DACL_SECURITY_INFORMATION,
     LUID_AND_ATTRIBUTES, PSECURITY_DESCRIPTOR, PSID, SE_PRIVILEGE_ENABLED, SE_SHUTDOWN_NAME, SID_NAME_USE,
-    TOKEN_ADJUST_PRIVILEGES, TOKEN_PRIVILEGES, TOKEN_QUERY,
+    TOKEN_ADJUST_PRIVILEGES, TOKEN_ELEVATION_TYPE, TOKEN_MANDATORY_LABEL, TOKEN_PRIVILEGES, TOKEN_QUERY,
 };
 use windows::Win32::System::Registry::{
     RegGetValueW, RegSetKeyValueW, HKEY, HKEY_CLASSES_ROOT, HKEY_CURRENT_CONFIG, HKEY_CURRENT_USER, HKEY_LOCAL_MACHINE,
@@ -46,6 +47,58 @@ pub(super) fn session_id() -> Option<u32> {
     let mut session = 0u32;
     // SAFETY: a valid out-pointer for our own process id.
     unsafe { ProcessIdToSessionId(GetCurrentProcessId(), &mut session) }.ok().map(|()| session)
+}
+
+/// The process token's integrity level and elevation type, in words.
+pub(super) fn integrity_level() -> DesktopResult<String> {
+    let mut token = windows::Win32::Foundation::HANDLE::default();
+    // SAFETY: a valid out-pointer; the token goes to a guard.
+    unsafe { OpenProcessToken(GetCurrentProcess(), TOKEN_QUERY, &mut token) }
+        .map_err(|err| os("OpenProcessToken", &err))?;
+    let token = OwnedHandle::new(token)
+        .ok_or_else(|| DesktopError::Os { op: "OpenProcessToken", message: "no token".into() })?;
+    // TOKEN_MANDATORY_LABEL plus its SID: 64 bytes hold any integrity SID, aligned for the struct.
+    let mut label = [0u64; 8];
+    let mut needed = 0u32;
+    // SAFETY: the buffer is writable for its full length and aligned for TOKEN_MANDATORY_LABEL.
+    unsafe {
+        GetTokenInformation(
+            token.raw(),
+            TokenIntegrityLevel,
+            Some(label.as_mut_ptr().cast()),
+            std::mem::size_of_val(&label) as u32,
+            &mut needed,
+        )
+    }
+    .map_err(|err| os("GetTokenInformation(TokenIntegrityLevel)", &err))?;
+    // SAFETY: the call succeeded, so the buffer starts with a TOKEN_MANDATORY_LABEL whose SID
+    // points into the same buffer, which outlives these reads.
+    let rid = unsafe {
+        let label = &*label.as_ptr().cast::<TOKEN_MANDATORY_LABEL>();
+        let sid = label.Label.Sid;
+        let count = *GetSidSubAuthorityCount(sid);
+        if count == 0 {
+            return Err(DesktopError::Os {
+                op: "GetSidSubAuthorityCount",
+                message: "the integrity SID is empty".into(),
+            });
+        }
+        *GetSidSubAuthority(sid, u32::from(count) - 1)
+    };
+    let mut elevation = TOKEN_ELEVATION_TYPE::default();
+    // SAFETY: `elevation` is a writable TOKEN_ELEVATION_TYPE of the size given.
+    let kind = unsafe {
+        GetTokenInformation(
+            token.raw(),
+            TokenElevationType,
+            Some((&raw mut elevation).cast()),
+            std::mem::size_of::<TOKEN_ELEVATION_TYPE>() as u32,
+            &mut needed,
+        )
+    }
+    .ok()
+    .map(|()| elevation.0);
+    Ok(crate::desktop::windows::session::describe_integrity(rid, kind))
 }
 
 /// The guest path of a known folder.

@@ -1,0 +1,504 @@
+//! The doctor: every capability checked end to end on the desktop the server
+//! drives, each with its timing and what it saw (see [`arena_shared::doctor`]).
+//!
+//! It runs against any [`Desktop`], so the same checks run on the stub (where
+//! they must all pass: the tests hold them to it), under Wine, and on a real
+//! Windows 11 image. A capability the platform has not got (UI Automation
+//! under Wine answers [`DesktopError::Unsupported`]) is reported unavailable,
+//! not failed. The checks run one after another because several of them use
+//! the one keyboard, cursor and clipboard; each leaves things as it found them
+//! where it can (the clipboard is restored, Notepad is closed).
+//!
+//! Entry points: [`run`] (the `arena-guest doctor` subcommand and
+//! `GET /v1/doctor` both call it; the route through a deadline).
+
+use std::time::{Duration, Instant};
+
+use arena_shared::action::Action;
+use arena_shared::doctor::{CheckStatus, DoctorCheck, DoctorReport};
+use arena_shared::files::KnownFolder;
+use arena_shared::geometry::Point;
+use arena_shared::observation::{A11yBackend, A11yNode, A11yTree, TreeBudget, WindowInfo};
+use arena_shared::registry::RegistryValue;
+
+use crate::desktop::{ClipboardData, CommandSpec, Desktop, DesktopError, ExecLimits};
+
+/// What the doctor needs to know beyond the desktop.
+#[derive(Debug, Clone, Default)]
+pub struct DoctorOptions {
+    /// The address the server listens on (or would), for the reachability hint.
+    pub bind: Option<std::net::SocketAddr>,
+    /// Whether requests need a token.
+    pub token: bool,
+    /// How long a window may take to appear after its program starts.
+    pub window_wait: Option<Duration>,
+}
+
+/// The text typed into Notepad and looked for afterwards.
+const TYPED: &str = "arena doctor 42";
+
+/// The tree budget of the tree check: upstream's caps, as a run uses them.
+const TREE_BUDGET: TreeBudget = TreeBudget::WAA;
+
+/// The command the exec check starts and must stop: `timeout_ms` is far shorter
+/// than the child and the grandchild it starts in the background.
+const EXEC_TIMEOUT_MS: u64 = 1500;
+
+/// An exec check passes when the command came back within this much of its timeout.
+const EXEC_SLACK: Duration = Duration::from_secs(10);
+
+/// Runs every check in order and returns the report.
+pub fn run(desktop: &dyn Desktop, options: &DoctorOptions) -> DoctorReport {
+    let started = Instant::now();
+    let mut checks = Vec::new();
+    let mut time = |name: &str, check: &mut dyn FnMut() -> Outcome| {
+        let began = Instant::now();
+        let (status, detail) = match check() {
+            Ok(pair) => pair,
+            Err(Problem::Unavailable(why)) => (CheckStatus::Unavailable, why),
+            Err(Problem::Failed(why)) => (CheckStatus::Fail, why),
+        };
+        checks.push(DoctorCheck { name: name.to_owned(), status, ms: millis(began.elapsed()), detail });
+    };
+    time("session", &mut || session(desktop));
+    time("integrity", &mut || integrity(desktop));
+    time("screen", &mut || screen(desktop));
+    time("capture", &mut || capture(desktop));
+    time("cursor", &mut || cursor(desktop));
+    time("clipboard_text", &mut || clipboard_text(desktop));
+    time("clipboard_image", &mut || clipboard_image(desktop));
+    let wait = options.window_wait.unwrap_or(Duration::from_secs(10));
+    let mut notepad: Option<WindowInfo> = None;
+    time("notepad_start", &mut || start_notepad(desktop, wait, &mut notepad));
+    time("activation", &mut || activation(desktop, notepad.as_ref()));
+    time("notepad_typing", &mut || typing(desktop, notepad.as_ref()));
+    time("read_back_uia", &mut || read_back(desktop, notepad.as_ref(), A11yBackend::Uia));
+    time("read_back_win32", &mut || read_back(desktop, notepad.as_ref(), A11yBackend::Win32));
+    time("uia_tree", &mut || tree(desktop));
+    time("window_close", &mut || close(desktop, notepad.as_ref()));
+    time("exec_timeout", &mut || exec_timeout(desktop));
+    time("files", &mut || files(desktop));
+    time("reachability", &mut || reachability(options));
+    DoctorReport {
+        backend: desktop.kind().to_owned(),
+        version: env!("CARGO_PKG_VERSION").to_owned(),
+        checks,
+        total_ms: millis(started.elapsed()),
+    }
+}
+
+/// Why a check did not pass.
+enum Problem {
+    Unavailable(String),
+    Failed(String),
+}
+
+type Outcome = Result<(CheckStatus, String), Problem>;
+
+impl From<DesktopError> for Problem {
+    fn from(err: DesktopError) -> Problem {
+        match err {
+            DesktopError::Unsupported(why) => Problem::Unavailable(why),
+            other => Problem::Failed(other.to_string()),
+        }
+    }
+}
+
+fn fail(why: impl Into<String>) -> Problem {
+    Problem::Failed(why.into())
+}
+
+fn pass(detail: impl Into<String>) -> Outcome {
+    Ok((CheckStatus::Pass, detail.into()))
+}
+
+fn millis(d: Duration) -> u64 {
+    u64::try_from(d.as_millis()).unwrap_or(u64::MAX)
+}
+
+fn session(desktop: &dyn Desktop) -> Outcome {
+    let session = desktop.session_id().map_or_else(|| "no session id".to_owned(), |id| format!("session {id}"));
+    // Session 0 has no interactive desktop: a service's own process lands there.
+    if desktop.session_id() == Some(0) {
+        return Err(fail(format!("{session}: the server runs in the services' session, which has no desktop")));
+    }
+    let uac = match desktop.registry_read(
+        r"HKEY_LOCAL_MACHINE\SOFTWARE\Microsoft\Windows\CurrentVersion\Policies\System",
+        Some("EnableLUA"),
+    ) {
+        Ok(RegistryValue::Dword(0)) => "UAC off (EnableLUA=0)".to_owned(),
+        Ok(RegistryValue::Dword(n)) => format!("UAC on (EnableLUA={n})"),
+        Ok(other) => format!("UAC unknown (EnableLUA is {other:?})"),
+        Err(err) => format!("UAC unknown ({err})"),
+    };
+    Ok((CheckStatus::Info, format!("{session}; {uac}")))
+}
+
+fn integrity(desktop: &dyn Desktop) -> Outcome {
+    let level = desktop.integrity_level()?;
+    Ok((CheckStatus::Info, level))
+}
+
+fn screen(desktop: &dyn Desktop) -> Outcome {
+    let s = desktop.screen()?;
+    if s.physical_width == 0 || s.physical_height == 0 {
+        return Err(fail(format!("the screen is {}x{}", s.physical_width, s.physical_height)));
+    }
+    pass(format!(
+        "{}x{} physical, {}x{} logical, scale {} ({} dpi), {} monitor(s)",
+        s.physical_width,
+        s.physical_height,
+        s.logical_width,
+        s.logical_height,
+        s.scale_factor,
+        (s.scale_factor * 96.0).round(),
+        s.monitors.len().max(1)
+    ))
+}
+
+fn capture(desktop: &dyn Desktop) -> Outcome {
+    let screen = desktop.screen()?;
+    let frame = desktop.capture(false)?;
+    let (w, h) = frame.image.dimensions();
+    if crate::imaging::is_black(&frame.image) {
+        return Err(fail(format!("the {w}x{h} frame is entirely black (locked, secure or disconnected desktop?)")));
+    }
+    if (w, h) != (screen.physical_width, screen.physical_height) {
+        return Err(fail(format!(
+            "the frame is {w}x{h} but the screen is {}x{}",
+            screen.physical_width, screen.physical_height
+        )));
+    }
+    pass(format!("{w}x{h}, not black"))
+}
+
+/// Where the cursor check moves to: a third of the way in, away from the taskbar and corners.
+fn cursor_target(width: u32, height: u32) -> Point {
+    Point { x: i32::try_from(width / 3).unwrap_or(0), y: i32::try_from(height / 3).unwrap_or(0) }
+}
+
+fn cursor(desktop: &dyn Desktop) -> Outcome {
+    let screen = desktop.screen()?;
+    let target = cursor_target(screen.physical_width, screen.physical_height);
+    desktop.perform(&Action::MoveTo { x: target.x, y: target.y })?;
+    let at = desktop.cursor_position()?;
+    if at != target {
+        return Err(fail(format!("moved to ({}, {}) but the cursor is at ({}, {})", target.x, target.y, at.x, at.y)));
+    }
+    let frame = desktop.capture(true)?;
+    if !frame.cursor_drawn {
+        return Err(fail("the capture with the cursor did not draw it"));
+    }
+    let bare = desktop.capture(false)?;
+    // The cursor sprite must change pixels right at its hot spot's neighbourhood.
+    let changed = pixels_differ_near(&frame.image, &bare.image, at, 24);
+    if !changed {
+        return Err(fail(format!("no cursor is visible near ({}, {}) in the capture", at.x, at.y)));
+    }
+    pass(format!("moved to ({}, {}); the capture shows it there", at.x, at.y))
+}
+
+/// Whether the two images differ anywhere in the `size`-pixel square right and below `at`.
+fn pixels_differ_near(a: &image::RgbaImage, b: &image::RgbaImage, at: Point, size: u32) -> bool {
+    if a.dimensions() != b.dimensions() {
+        return true;
+    }
+    let (w, h) = a.dimensions();
+    let x0 = u32::try_from(at.x.max(0)).unwrap_or(0);
+    let y0 = u32::try_from(at.y.max(0)).unwrap_or(0);
+    (y0..(y0 + size).min(h)).any(|y| (x0..(x0 + size).min(w)).any(|x| a.get_pixel(x, y) != b.get_pixel(x, y)))
+}
+
+/// Runs `check` with the clipboard as it was before put back afterwards.
+fn keeping_clipboard(desktop: &dyn Desktop, check: impl FnOnce() -> Outcome) -> Outcome {
+    let saved = desktop.clipboard_get()?;
+    let outcome = check();
+    if let Err(err) = desktop.clipboard_set(&saved) {
+        return Err(fail(format!("the check ran, but restoring the clipboard failed: {err}")));
+    }
+    outcome
+}
+
+fn clipboard_text(desktop: &dyn Desktop) -> Outcome {
+    keeping_clipboard(desktop, || {
+        let text = "arena doctor: ünïcode ✓ and a\nsecond line";
+        desktop.clipboard_set(&ClipboardData::Text(text.to_owned()))?;
+        match desktop.clipboard_get()? {
+            ClipboardData::Text(back) if back.replace("\r\n", "\n") == text => {
+                pass(format!("{} characters round-tripped", text.chars().count()))
+            }
+            ClipboardData::Text(back) => Err(fail(format!("set {text:?}, read back {back:?}"))),
+            other => Err(fail(format!("set text, read back {}", clipboard_kind(&other)))),
+        }
+    })
+}
+
+fn clipboard_image(desktop: &dyn Desktop) -> Outcome {
+    keeping_clipboard(desktop, || {
+        let image = image::RgbaImage::from_fn(17, 9, |x, y| image::Rgba([(x * 15) as u8, (y * 28) as u8, 200, 255]));
+        desktop.clipboard_set(&ClipboardData::Image(image.clone()))?;
+        match desktop.clipboard_get()? {
+            ClipboardData::Image(back) if back == image => pass("a 17x9 image round-tripped pixel for pixel"),
+            ClipboardData::Image(back) => {
+                Err(fail(format!("set a 17x9 image, read back a {}x{} one that differs", back.width(), back.height())))
+            }
+            other => Err(fail(format!("set an image, read back {}", clipboard_kind(&other)))),
+        }
+    })
+}
+
+fn clipboard_kind(data: &ClipboardData) -> &'static str {
+    match data {
+        ClipboardData::Empty => "an empty clipboard",
+        ClipboardData::Text(_) => "text",
+        ClipboardData::Image(_) => "an image",
+    }
+}
+
+fn is_notepad(w: &WindowInfo) -> bool {
+    w.process_name.eq_ignore_ascii_case("notepad.exe") || w.class_name.eq_ignore_ascii_case("Notepad")
+}
+
+fn start_notepad(desktop: &dyn Desktop, wait: Duration, found: &mut Option<WindowInfo>) -> Outcome {
+    let before: Vec<u64> = desktop.windows()?.iter().filter(|w| is_notepad(w)).map(|w| w.id).collect();
+    let pid = desktop.spawn(&CommandSpec::Argv(vec!["notepad.exe".to_owned()]))?;
+    let started = Instant::now();
+    loop {
+        let windows = desktop.windows()?;
+        if let Some(w) = windows.into_iter().find(|w| is_notepad(w) && w.visible && !before.contains(&w.id)) {
+            let detail = format!("pid {pid}; window {:?} appeared after {} ms", w.title, millis(started.elapsed()));
+            *found = Some(w);
+            return pass(detail);
+        }
+        if started.elapsed() >= wait {
+            return Err(fail(format!(
+                "started pid {pid} but no new Notepad window appeared within {} s",
+                wait.as_secs()
+            )));
+        }
+        std::thread::sleep(Duration::from_millis(200));
+    }
+}
+
+fn need(window: Option<&WindowInfo>) -> Result<&WindowInfo, Problem> {
+    window.ok_or_else(|| fail("skipped: Notepad did not start"))
+}
+
+fn activation(desktop: &dyn Desktop, notepad: Option<&WindowInfo>) -> Outcome {
+    let notepad = need(notepad)?;
+    desktop.activate_window(notepad.id)?;
+    let windows = desktop.windows()?;
+    match windows.iter().find(|w| w.focused) {
+        Some(w) if w.id == notepad.id => pass(format!("{:?} is the foreground window", w.title)),
+        Some(w) => Err(fail(format!("activated {:?} but {:?} is in the foreground", notepad.title, w.title))),
+        None => Err(fail(format!("activated {:?} but no window is in the foreground", notepad.title))),
+    }
+}
+
+fn typing(desktop: &dyn Desktop, notepad: Option<&WindowInfo>) -> Outcome {
+    let notepad = need(notepad)?;
+    desktop.activate_window(notepad.id)?;
+    desktop.perform(&Action::TypeText { text: TYPED.to_owned(), interval_ms: None })?;
+    pass(format!("typed {TYPED:?} into {:?}", notepad.title))
+}
+
+/// Whether `text` is the name, value or text of `node` or of a node below it.
+fn tree_holds(node: &A11yNode, text: &str) -> bool {
+    let here =
+        [Some(&node.name), node.value.as_ref(), node.text.as_ref()].into_iter().flatten().any(|s| s.contains(text));
+    here || node.children.iter().any(|c| tree_holds(c, text))
+}
+
+fn node_count(node: &A11yNode) -> usize {
+    1 + node.children.iter().map(node_count).sum::<usize>()
+}
+
+fn read_back(desktop: &dyn Desktop, notepad: Option<&WindowInfo>, backend: A11yBackend) -> Outcome {
+    let notepad = need(notepad)?;
+    let tree = desktop.accessibility(backend, &TREE_BUDGET, true)?;
+    let window = tree.windows.iter().find(|w| w.window_id == Some(notepad.id)).or(tree.windows.first());
+    match window {
+        Some(w) if tree_holds(w, TYPED) => pass(format!(
+            "the typed text is in the {:?} tree of {:?} ({} nodes, {} ms)",
+            backend,
+            notepad.title,
+            node_count(w),
+            tree.elapsed_ms
+        )),
+        Some(w) => {
+            Err(fail(format!("the {backend:?} tree of {:?} ({} nodes) does not hold {TYPED:?}", w.name, node_count(w))))
+        }
+        None => Err(fail(format!("the {backend:?} tree of the foreground window is empty"))),
+    }
+}
+
+/// One line per top-level window: its name, node count and whether it was cut short.
+fn per_window(tree: &A11yTree) -> String {
+    tree.windows.iter().map(|w| format!("{:?}: {}", w.name, node_count(w))).collect::<Vec<_>>().join(", ")
+}
+
+fn tree(desktop: &dyn Desktop) -> Outcome {
+    let tree = desktop.accessibility(A11yBackend::Uia, &TREE_BUDGET, false)?;
+    let detail = format!(
+        "{} windows, {} nodes in {} ms{} [{}]",
+        tree.windows.len(),
+        tree.node_count,
+        tree.elapsed_ms,
+        if tree.truncated { ", truncated by the budget" } else { "" },
+        per_window(&tree)
+    );
+    if tree.windows.is_empty() {
+        return Err(fail(format!("no window in the tree: {detail}")));
+    }
+    if tree.elapsed_ms > TREE_BUDGET.max_ms + 2000 {
+        return Err(fail(format!("the walk overran its {} ms budget: {detail}", TREE_BUDGET.max_ms)));
+    }
+    pass(detail)
+}
+
+fn still_open(desktop: &dyn Desktop, id: u64, within: Duration) -> Result<bool, Problem> {
+    let started = Instant::now();
+    loop {
+        if !desktop.windows()?.iter().any(|w| w.id == id) {
+            return Ok(false);
+        }
+        if started.elapsed() >= within {
+            return Ok(true);
+        }
+        std::thread::sleep(Duration::from_millis(100));
+    }
+}
+
+fn close(desktop: &dyn Desktop, notepad: Option<&WindowInfo>) -> Outcome {
+    let notepad = need(notepad)?;
+    desktop.close_window(notepad.id)?;
+    if !still_open(desktop, notepad.id, Duration::from_secs(3))? {
+        return pass("closed at once");
+    }
+    // Classic Notepad asks whether to save the typed text: "Don't Save" is Alt+N.
+    desktop.perform(&Action::Hotkey { keys: vec!["alt".to_owned(), "n".to_owned()] })?;
+    if !still_open(desktop, notepad.id, Duration::from_secs(3))? {
+        return pass("closed after answering the save prompt with Don't Save");
+    }
+    Err(fail(format!("{:?} is still open 6 s after WM_CLOSE", notepad.title)))
+}
+
+/// A shell line whose child outlives the timeout and starts a grandchild that
+/// holds the output pipe too: only killing the whole tree ends the call early.
+fn slow_shell_line() -> String {
+    if cfg!(windows) {
+        "start /b ping -n 60 127.0.0.1 >nul & ping -n 60 127.0.0.1".to_owned()
+    } else {
+        "sleep 60 & sleep 60".to_owned()
+    }
+}
+
+fn exec_timeout(desktop: &dyn Desktop) -> Outcome {
+    let limits = ExecLimits { timeout_ms: EXEC_TIMEOUT_MS, max_output_bytes: 1 << 16, cwd: None, stdin: None };
+    let started = Instant::now();
+    let out = desktop.run(&CommandSpec::Shell(slow_shell_line()), &limits)?;
+    let took = started.elapsed();
+    if !out.timed_out {
+        return Err(fail(format!(
+            "a 60 s command with a {EXEC_TIMEOUT_MS} ms timeout ended without timing out: {out:?}"
+        )));
+    }
+    if took > Duration::from_millis(EXEC_TIMEOUT_MS) + EXEC_SLACK {
+        return Err(fail(format!(
+            "the timeout was {EXEC_TIMEOUT_MS} ms but the call took {} ms: a grandchild kept the output open",
+            millis(took)
+        )));
+    }
+    pass(format!("timed out and returned after {} ms, child and grandchild stopped", millis(took)))
+}
+
+fn files(desktop: &dyn Desktop) -> Outcome {
+    let mut found = Vec::new();
+    for folder in [KnownFolder::Home, KnownFolder::Desktop, KnownFolder::Documents, KnownFolder::Downloads] {
+        found.push(format!("{folder:?}={}", desktop.known_folder(folder)?));
+    }
+    let documents = desktop.known_folder(KnownFolder::Documents)?;
+    let guest_path = format!("{}\\arena-doctor-{}.txt", documents.trim_end_matches('\\'), std::process::id());
+    let local = desktop.map_path(&guest_path)?;
+    let content = b"written by arena-guest doctor\n";
+    arena_shared::atomic::write_atomic(&local, content).map_err(|err| fail(format!("writing {guest_path}: {err}")))?;
+    let back = std::fs::read(&local).map_err(|err| fail(format!("reading {guest_path} back: {err}")));
+    let removed = std::fs::remove_file(&local);
+    if back? != content {
+        return Err(fail(format!("{guest_path} read back different bytes")));
+    }
+    removed.map_err(|err| fail(format!("deleting {guest_path}: {err}")))?;
+    pass(format!("wrote, read and deleted a file in Documents; {}", found.join(", ")))
+}
+
+fn reachability(options: &DoctorOptions) -> Outcome {
+    let Some(bind) = options.bind else {
+        return Ok((CheckStatus::Info, "not serving: no address to report".to_owned()));
+    };
+    let auth = if options.token { "with a token" } else { "without a token" };
+    if bind.port() == 0 {
+        return Ok((CheckStatus::Info, format!("would listen on a free port of {} {auth}", bind.ip())));
+    }
+    let hint = if bind.ip().is_loopback() {
+        format!(
+            "listening on {bind} {auth}: only programs in this machine can reach it (pass --bind 0.0.0.0 for the host)"
+        )
+    } else {
+        format!(
+            "listening on {bind} {auth}: the host reaches it if the firewall allows TCP {} in (not tested from here)",
+            bind.port()
+        )
+    };
+    Ok((CheckStatus::Info, hint))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_cursor_target_is_inside_the_screen_away_from_the_edges() {
+        assert_eq!(cursor_target(1440, 900), Point { x: 480, y: 300 });
+        assert_eq!(cursor_target(0, 0), Point { x: 0, y: 0 });
+    }
+
+    #[test]
+    fn differing_pixels_count_only_near_the_point() {
+        let a = image::RgbaImage::new(100, 100);
+        let mut b = a.clone();
+        b.put_pixel(90, 90, image::Rgba([255, 0, 0, 255]));
+        assert!(!pixels_differ_near(&a, &b, Point { x: 10, y: 10 }, 24));
+        assert!(pixels_differ_near(&a, &b, Point { x: 80, y: 80 }, 24));
+        assert!(pixels_differ_near(&a, &image::RgbaImage::new(5, 5), Point { x: 0, y: 0 }, 24));
+    }
+
+    #[test]
+    fn text_is_found_in_values_deep_in_the_tree() {
+        let leaf = A11yNode { value: Some(format!("x {TYPED} y")), ..A11yNode::default() };
+        let root = A11yNode {
+            children: vec![A11yNode { children: vec![leaf], ..A11yNode::default() }],
+            ..A11yNode::default()
+        };
+        assert!(tree_holds(&root, TYPED));
+        assert!(!tree_holds(&A11yNode::default(), TYPED));
+        assert_eq!(node_count(&root), 3);
+    }
+
+    #[test]
+    fn unsupported_means_unavailable_and_other_errors_fail() {
+        assert!(matches!(Problem::from(DesktopError::Unsupported("no UIA".into())), Problem::Unavailable(_)));
+        assert!(matches!(Problem::from(DesktopError::NotFound("x".into())), Problem::Failed(_)));
+    }
+
+    #[test]
+    fn reachability_is_a_hint_about_the_bind_address() {
+        let local = DoctorOptions { bind: Some("127.0.0.1:5000".parse().unwrap()), ..DoctorOptions::default() };
+        let (status, text) = reachability(&local).ok().unwrap();
+        assert_eq!(status, CheckStatus::Info);
+        assert!(text.contains("only programs in this machine"), "{text}");
+        let open =
+            DoctorOptions { bind: Some("0.0.0.0:5000".parse().unwrap()), token: true, ..DoctorOptions::default() };
+        let (_, text) = reachability(&open).ok().unwrap();
+        assert!(text.contains("with a token") && text.contains("TCP 5000"), "{text}");
+    }
+}
