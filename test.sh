@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # The one command that runs every test:
-#   1. formatting (`cargo fmt --check`), lints (`cargo clippy -D warnings`, every target)
-#      and a host built without the embedded guest (`--no-default-features`);
+#   1. formatting (`cargo fmt --check`), lints (`cargo clippy -D warnings`, every target),
+#      a host built without the embedded guest (`--no-default-features`), and the GitHub
+#      workflow files (scripts/lint-workflows.sh: linters from PyPI);
 #   2. the whole workspace (`cargo test --workspace`): unit, route, end-to-end and tidy
 #      tests on the stub guest; tests that need the upstream WAA corpus find it through
 #      ARENA_WAA_TASKS or ../shared/reference/waa-tasks, and say SKIPPED when it is
@@ -17,6 +18,7 @@ started=$(date +%s)
 cargo fmt --all --check
 cargo clippy --workspace --all-targets --locked -- -D warnings
 cargo clippy -p arena-host --no-default-features --locked -- -D warnings
+scripts/lint-workflows.sh
 echo "format and lint checks took $(( $(date +%s) - started )) s"
 
 started=$(date +%s)
@@ -25,7 +27,7 @@ log=target/test-output.log
 # The Wine test file is part of the workspace; it only runs for real in step 3,
 # which sets up the display, the prefix and the exe for it.
 env -u ARENA_REQUIRE_WINE -u ARENA_WINDOWS_EXE cargo test --workspace --locked "$@" 2>&1 | tee "$log"
-echo "workspace tests took $(( $(date +%s) - started )) s"
+echo "workspace tests took $(( $(date +%s) - started )) s; target/ holds $(du -sh target 2>/dev/null | cut -f1)"
 
 # Anywhere on a line: with one test thread libtest prints "test NAME ... " before the
 # test runs, so a skip's line can follow it on the same line.

@@ -1,0 +1,169 @@
+//! The live-desktop suite: the real `arena-guest` with its Windows backend on a
+//! real Windows desktop, driven by the real host client: Notepad, Calculator and
+//! Explorer through UI Automation, Set-of-Marks ids clicking where they should,
+//! activation, the clipboard, exec timeouts and the doctor.
+//!
+//! It only runs where `ARENA_LIVE_DESKTOP=1` is set, which the Windows workflow
+//! (`.github/workflows/windows.yml`) does on a Windows runner with an interactive
+//! desktop; anywhere else it prints a `SKIPPED:` line and passes, so it can never
+//! drive a developer's own desktop by accident. It is not counted among the corpus
+//! skips: Linux CI cannot run it at all (Wine has no UI Automation).
+
+use std::time::{Duration, Instant};
+
+use arena_host::client::{ClientConfig, GuestClient};
+use arena_shared::action::{Action, MouseButton};
+use arena_shared::clipboard::ClipboardContent;
+use arena_shared::exec::{ExecRequest, LaunchRequest};
+use arena_shared::observation::{A11yNode, A11yQuery, WindowInfo, WindowTarget};
+use arena_test_support::{workspace_binary, Served};
+
+/// Whether this machine asked for the suite.
+fn live() -> bool {
+    if std::env::var("ARENA_LIVE_DESKTOP").as_deref() == Ok("1") {
+        return true;
+    }
+    println!("SKIPPED: the live-desktop suite: ARENA_LIVE_DESKTOP is not 1 (it drives the real Windows desktop)");
+    false
+}
+
+fn client(url: &str) -> GuestClient {
+    GuestClient::new(url, ClientConfig { token: None, timeout: Duration::from_secs(60), retries: 1 })
+        .expect("valid url")
+}
+
+/// Polls `check` every 250 ms until it gives a value or `within` passes.
+async fn eventually<T, F, Fut>(what: &str, within: Duration, mut check: F) -> T
+where
+    F: FnMut() -> Fut,
+    Fut: std::future::Future<Output = Option<T>>,
+{
+    let deadline = Instant::now() + within;
+    loop {
+        if let Some(value) = check().await {
+            return value;
+        }
+        assert!(Instant::now() < deadline, "timed out after {within:?} waiting for: {what}");
+        tokio::time::sleep(Duration::from_millis(250)).await;
+    }
+}
+
+fn find<'a>(node: &'a A11yNode, pred: &dyn Fn(&A11yNode) -> bool) -> Option<&'a A11yNode> {
+    if pred(node) {
+        return Some(node);
+    }
+    node.children.iter().find_map(|child| find(child, pred))
+}
+
+/// Starts `argv` and waits for a new visible window whose title contains `title`.
+async fn open(c: &GuestClient, argv: &[&str], title: &str) -> WindowInfo {
+    let before: Vec<u64> = c.windows().await.expect("windows").iter().map(|w| w.id).collect();
+    c.launch(&LaunchRequest { shell: None, argv: argv.iter().map(|s| (*s).to_owned()).collect() })
+        .await
+        .unwrap_or_else(|err| panic!("launching {argv:?}: {err}"));
+    eventually(&format!("a window titled *{title}*"), Duration::from_secs(30), || async {
+        let windows = c.windows().await.ok()?;
+        windows.into_iter().find(|w| w.visible && w.title.contains(title) && !before.contains(&w.id))
+    })
+    .await
+}
+
+/// The UIA tree of the foreground window.
+async fn foreground_tree(c: &GuestClient) -> A11yNode {
+    let tree = c.a11y(&A11yQuery { foreground_only: true, ..A11yQuery::default() }).await.expect("the UIA tree");
+    tree.windows.into_iter().next().expect("a foreground window in the tree")
+}
+
+async fn notepad(c: &GuestClient) -> WindowInfo {
+    let window = open(c, &["notepad.exe"], "Notepad").await;
+    c.activate_window(&WindowTarget { id: Some(window.id), title: None }).await.expect("activate Notepad");
+    let typed = "typed by the live suite";
+    c.act_one(Action::TypeText { text: typed.into(), interval_ms: None }).await.expect("type");
+    let tree = foreground_tree(c).await;
+    let edit = find(&tree, &|n| {
+        matches!(n.role.as_str(), "Edit" | "Document") && n.value.as_deref().is_some_and(|v| v.contains(typed))
+    });
+    assert!(edit.is_some(), "Notepad's edit control does not hold {typed:?}: {tree:#?}");
+    window
+}
+
+/// Clicks Calculator's 7, +, 2, = through Set-of-Marks ids and reads 9 off its display.
+async fn calculator(c: &GuestClient) {
+    let window = open(c, &["calc.exe"], "Calculator").await;
+    c.activate_window(&WindowTarget { id: Some(window.id), title: None }).await.expect("activate Calculator");
+    let screen = c.screen().await.expect("screen");
+    for button in ["Seven", "Plus", "Two", "Equals"] {
+        let tree = c.a11y(&A11yQuery { foreground_only: true, ..A11yQuery::default() }).await.expect("tree");
+        let marks = arena_host::som::marks_from_tree(&tree, (screen.physical_width, screen.physical_height));
+        let mark = marks
+            .entities
+            .iter()
+            .find(|m| m.text == button)
+            .unwrap_or_else(|| panic!("no Set-of-Marks element named {button:?}: {}", marks.candidate_list()));
+        // What `computer.mouse.move_id(id)` targets: the centre of rects[id].
+        let [x1, y1, x2, y2] = marks.rects[mark.id];
+        let (x, y) = ((x1 + x2) / 2, (y1 + y2) / 2);
+        c.act_one(Action::Click { x: Some(x), y: Some(y), button: MouseButton::Left, count: 1 })
+            .await
+            .unwrap_or_else(|err| panic!("clicking {button} at ({x}, {y}): {err}"));
+    }
+    eventually("Calculator's display to read 9", Duration::from_secs(10), || async {
+        let tree = foreground_tree(c).await;
+        find(&tree, &|n| n.name.contains("Display is 9")).map(drop)
+    })
+    .await;
+    c.close_window(&WindowTarget { id: Some(window.id), title: None }).await.expect("close Calculator");
+}
+
+async fn explorer(c: &GuestClient) {
+    let window = open(c, &["explorer.exe", r"C:\Windows"], "Windows").await;
+    let tree = foreground_tree(c).await;
+    let count = |n: &A11yNode| -> usize {
+        fn walk(n: &A11yNode) -> usize {
+            1 + n.children.iter().map(walk).sum::<usize>()
+        }
+        walk(n)
+    };
+    assert!(count(&tree) > 20, "Explorer's tree is nearly empty: {tree:#?}");
+    assert!(find(&tree, &|n| n.name == "System32").is_some(), "no System32 item in Explorer's tree");
+    c.close_window(&WindowTarget { id: Some(window.id), title: None }).await.expect("close Explorer");
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_windows_backend_drives_a_real_desktop() {
+    if !live() {
+        return;
+    }
+    let exe = workspace_binary("arena-guest", "arena-guest").expect("the guest binary");
+    let served = Served::start(&exe, &["--backend", "windows", "--port", "0"], None).expect("the guest starts");
+    let c = client(&served.url);
+
+    let report = c.doctor().await.expect("the doctor's report");
+    println!("{}", report.render_text());
+    assert!(report.passed(), "the doctor failed on a live desktop:\n{}", report.render_text());
+
+    let pad = notepad(&c).await;
+    calculator(&c).await;
+    explorer(&c).await;
+
+    let active = c.activate_window(&WindowTarget { id: Some(pad.id), title: None }).await.expect("activate");
+    assert_eq!(active.id, pad.id);
+    let focused = c.windows().await.expect("windows").into_iter().find(|w| w.focused).expect("a foreground window");
+    assert_eq!(focused.id, pad.id, "Notepad is not in the foreground after activation");
+
+    let text = ClipboardContent::Text { text: "live clipboard ✓".into() };
+    c.clipboard_set(&text).await.expect("clipboard set");
+    assert_eq!(c.clipboard_get().await.expect("clipboard get"), text);
+
+    let started = Instant::now();
+    let slow = ExecRequest {
+        shell: Some("start /b ping -n 60 127.0.0.1 >nul & ping -n 60 127.0.0.1".into()),
+        timeout_ms: Some(2000),
+        ..ExecRequest::default()
+    };
+    let out = c.exec(&slow).await.expect("exec");
+    assert!(out.timed_out, "{out:?}");
+    assert!(started.elapsed() < Duration::from_secs(15), "a grandchild held the call for {:?}", started.elapsed());
+
+    c.close_window(&WindowTarget { id: Some(pad.id), title: None }).await.expect("close Notepad");
+}
