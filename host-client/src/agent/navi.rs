@@ -541,6 +541,17 @@ mod tests {
     }
 
     #[test]
+    fn a_pixel_som_origin_without_its_service_is_refused() {
+        let mut config = NaviConfig::new("http://x/v1", "gpt-4o");
+        assert_eq!(config.som.origin, crate::som::SomOrigin::A11y);
+        config.som.origin = crate::som::SomOrigin::Omni;
+        let Err(AgentError::Config(message)) = NaviAgent::new(config.clone()) else { panic!("accepted") };
+        assert!(message.contains("--omniparser-url"), "{message}");
+        config.som.omniparser_url = Some("http://127.0.0.1:8000".into());
+        assert!(NaviAgent::new(config).is_ok());
+    }
+
+    #[test]
     fn requests_carry_upstreams_sampling_defaults_and_the_right_length_field() {
         let obs = Observation {
             step: 1,

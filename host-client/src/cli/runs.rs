@@ -249,17 +249,17 @@ fn guests_from_file(path: &Path) -> anyhow::Result<Vec<String>> {
 }
 
 /// The agent a run plays with.
-struct ChosenAgent {
+pub(crate) struct ChosenAgent {
     factory: AgentFactory,
     /// The action-space level of the result folders.
     label: String,
     /// The model level of the result folders.
     model: String,
     /// The agent's named options, recorded in the results.
-    options: Vec<(String, String)>,
+    pub(crate) options: Vec<(String, String)>,
 }
 
-fn agent_factory(args: &RunArgs) -> anyhow::Result<ChosenAgent> {
+pub(crate) fn agent_factory(args: &RunArgs) -> anyhow::Result<ChosenAgent> {
     match args.agent {
         AgentKind::Scripted => {
             let default_dir = if args.tasks.is_dir() {
