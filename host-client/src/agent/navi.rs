@@ -12,6 +12,12 @@
 //! [`Prediction`] with no actions and [`Prediction::raw_error`] set; the model
 //! is told what was wrong on the next step.
 //!
+//! The Set-of-Marks boxes come from the configured source ([`NaviConfig::som`],
+//! upstream's `--som_origin`): the accessibility tree by default, or OCR, the
+//! icon detector and OmniParser through [`crate::som::SomSources`]. A source
+//! that fails (Tesseract missing, a service down) fails the step as a model
+//! failure does: it is asked again, then the task is left unfinished.
+//!
 //! It is not a client of any one vendor's API and keeps no conversation
 //! between steps beyond the history and memory it writes into the prompt.
 
@@ -24,7 +30,7 @@ use super::llm::{self, ApiKind, ModelClient, RetryPolicy, TokensField};
 use super::parse::{parse_navi_reply, parse_reply};
 use super::waa_prompts::{UserInputs, WaaPrompts};
 use super::{Agent, AgentAction, AgentError, LogValue, Observation, Prediction, StepLog};
-use crate::som::{annotate, Marks};
+use crate::som::{annotate, Marks, ProposedEntity, SomConfig, SomInput, SomSources};
 use crate::task::Task;
 
 /// Environment variables the API key is read from, in order, when the configuration has none.
@@ -58,6 +64,9 @@ pub struct NaviConfig {
     /// Upstream's prompt texts, read from the user's WAA checkout (`--waa-root`);
     /// without them [`NaviStyle::Waa`] uses our own words in the same layout.
     pub waa_prompts: Option<std::sync::Arc<WaaPrompts>>,
+    /// Where the Set-of-Marks entities come from (upstream's `--som_origin`,
+    /// default `a11y`) and how its services are reached.
+    pub som: SomConfig,
 }
 
 /// Which Navi the agent is.
@@ -90,6 +99,7 @@ impl NaviConfig {
             max_history: 15,
             style: NaviStyle::default(),
             waa_prompts: None,
+            som: SomConfig::default(),
         }
     }
 
@@ -192,6 +202,8 @@ pub struct NaviAgent {
     memory_block: String,
     previous_png: Option<Vec<u8>>,
     last_error: Option<String>,
+    /// The Set-of-Marks sources of [`NaviConfig::som`].
+    som: SomSources,
 }
 
 /// An image part as upstream's client sends one: the screenshot at the model
@@ -227,7 +239,9 @@ impl NaviAgent {
         let api = config.api.unwrap_or_else(|| ApiKind::detect(&config.base_url));
         let client = ModelClient::new(&config.base_url, api, config.resolved_key(), config.timeout, config.retry)?;
         let memory = empty_memory(&config);
+        let som = SomSources::new(config.som.clone()).map_err(|e| AgentError::Config(e.to_string()))?;
         Ok(NaviAgent {
+            som,
             config,
             client,
             history: Vec::new(),
@@ -235,6 +249,19 @@ impl NaviAgent {
             memory_block: memory,
             previous_png: None,
             last_error: None,
+        })
+    }
+
+    /// The Set-of-Marks of `obs` from the configured source.
+    async fn marks(&self, obs: &Observation) -> Result<Option<Marks>, AgentError> {
+        // The browser's DOM elements for `oss` and `mixed-oss`: none until
+        // observations carry them.
+        let dom: &[ProposedEntity] = &[];
+        let input =
+            SomInput { tree: obs.a11y.as_ref(), screenshot_png: &obs.screenshot_png, size: obs.screen_size(), dom };
+        self.som.marks(&input).await.map_err(|err| AgentError::Model {
+            endpoint: format!("the Set-of-Marks source `{}`", self.config.som.origin),
+            reason: err.to_string(),
         })
     }
 
@@ -422,7 +449,7 @@ impl Agent for NaviAgent {
     }
 
     async fn predict(&mut self, obs: &Observation) -> Result<Prediction, AgentError> {
-        let marks = obs.marks();
+        let marks = self.marks(obs).await?;
         let annotated = match &marks {
             Some(m) => annotate(&obs.screenshot_png, m).unwrap_or_else(|err| {
                 tracing::warn!(error = %err, "cannot annotate the screenshot; sending it unannotated");
@@ -511,6 +538,17 @@ mod tests {
     #[test]
     fn empty_configuration_is_refused() {
         assert!(matches!(NaviAgent::new(NaviConfig::new("", "m")), Err(AgentError::Config(_))));
+    }
+
+    #[test]
+    fn a_pixel_som_origin_without_its_service_is_refused() {
+        let mut config = NaviConfig::new("http://x/v1", "gpt-4o");
+        assert_eq!(config.som.origin, crate::som::SomOrigin::A11y);
+        config.som.origin = crate::som::SomOrigin::Omni;
+        let Err(AgentError::Config(message)) = NaviAgent::new(config.clone()) else { panic!("accepted") };
+        assert!(message.contains("--omniparser-url"), "{message}");
+        config.som.omniparser_url = Some("http://127.0.0.1:8000".into());
+        assert!(NaviAgent::new(config).is_ok());
     }
 
     #[test]

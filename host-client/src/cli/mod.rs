@@ -703,6 +703,55 @@ mod tests {
     }
 
     #[test]
+    fn som_origin_takes_upstreams_names_and_is_recorded() {
+        let cli = parse(&["run", "--tasks", "t", "--agent", "navi"]).unwrap();
+        let Command::Run(args) = cli.command else { panic!("not run") };
+        assert_eq!(args.som_origin, crate::som::SomOrigin::A11y);
+        let cli = parse(&[
+            "run",
+            "--tasks",
+            "t",
+            "--agent",
+            "navi",
+            "--llm-url",
+            "http://127.0.0.1:9/v1",
+            "--model",
+            "m",
+            "--som-origin",
+            "mixed-omni",
+            "--omniparser-url",
+            "http://127.0.0.1:8000",
+        ])
+        .unwrap();
+        let Command::Run(args) = cli.command else { panic!("not run") };
+        assert_eq!(args.som_origin, crate::som::SomOrigin::MixedOmni);
+        let chosen = runs::agent_factory(&args).unwrap();
+        assert!(chosen.options.contains(&("som_origin".to_owned(), "mixed-omni".to_owned())), "{:?}", chosen.options);
+        // The service a pixel origin needs is checked before the run starts.
+        let cli = parse(&[
+            "run",
+            "--tasks",
+            "t",
+            "--agent",
+            "navi",
+            "--llm-url",
+            "http://127.0.0.1:9/v1",
+            "--model",
+            "m",
+            "--som-origin",
+            "oss",
+        ])
+        .unwrap();
+        let Command::Run(args) = cli.command else { panic!("not run") };
+        if std::env::var_os("ARENA_DETECTOR_URL").is_none() {
+            let err = format!("{:#}", runs::agent_factory(&args).err().expect("refused"));
+            assert!(err.contains("--detector-url"), "{err}");
+        }
+        let err = parse(&["run", "--tasks", "t", "--som-origin", "mixed"]).unwrap_err().to_string();
+        assert!(err.contains("mixed-oss"), "{err}");
+    }
+
+    #[test]
     fn exit_codes_follow_the_program() {
         assert_eq!(exit_code(Some(0)), ExitCode::SUCCESS);
         assert_eq!(exit_code(Some(3)), ExitCode::from(3));

@@ -34,6 +34,7 @@ use crate::run::pool::PoolConfig;
 use crate::run::shard::Shard;
 use crate::run::{load_tasks, run_tasks, RunOptions, TaskOrder};
 use crate::setup::{DownloadCache, Settle};
+use crate::som::SomOrigin;
 use crate::task::Difficulty;
 
 /// Which agent plays.
@@ -85,6 +86,18 @@ pub struct RunArgs {
     /// prose), or `arena`, this project's earlier prompt and lenient reply reader.
     #[arg(long, value_enum, default_value_t = NaviStyleArg::Waa)]
     pub navi_style: NaviStyleArg,
+    /// Navi agent: where the Set-of-Marks boxes come from, upstream's --som_origin:
+    /// `a11y` (the accessibility tree), `oss` (OCR with Tesseract, the Grounding DINO
+    /// service and the browser's DOM), `omni` (OmniParser's server), `mixed-oss` or
+    /// `mixed-omni` (the tree, then what the other source adds). See docs/som.md.
+    #[arg(long, default_value = "a11y", value_parser = parse_som_origin, value_name = "ORIGIN")]
+    pub som_origin: SomOrigin,
+    /// Navi agent: base URL of the Grounding DINO service (`oss`, `mixed-oss`); see docs/som.md.
+    #[arg(long, env = "ARENA_DETECTOR_URL", value_name = "URL")]
+    pub detector_url: Option<String>,
+    /// Navi agent: base URL of OmniParser's server (`omni`, `mixed-omni`), e.g. http://127.0.0.1:8000.
+    #[arg(long, env = "ARENA_OMNIPARSER_URL", value_name = "URL")]
+    pub omniparser_url: Option<String>,
     /// Navi agent: the user's WindowsAgentArena checkout, to send upstream's own
     /// prompt texts (read from its mm_agents/navi files at start); without it the
     /// prompts are this project's words in upstream's layout.
@@ -216,6 +229,10 @@ fn parse_shard(text: &str) -> Result<Shard, String> {
     text.parse()
 }
 
+fn parse_som_origin(text: &str) -> Result<SomOrigin, String> {
+    text.parse()
+}
+
 /// Whether to draw a progress bar: on a terminal, and not in CI.
 fn progress_wanted() -> bool {
     std::io::stderr().is_terminal() && std::env::var_os("CI").is_none()
@@ -232,17 +249,17 @@ fn guests_from_file(path: &Path) -> anyhow::Result<Vec<String>> {
 }
 
 /// The agent a run plays with.
-struct ChosenAgent {
+pub(crate) struct ChosenAgent {
     factory: AgentFactory,
     /// The action-space level of the result folders.
     label: String,
     /// The model level of the result folders.
     model: String,
     /// The agent's named options, recorded in the results.
-    options: Vec<(String, String)>,
+    pub(crate) options: Vec<(String, String)>,
 }
 
-fn agent_factory(args: &RunArgs) -> anyhow::Result<ChosenAgent> {
+pub(crate) fn agent_factory(args: &RunArgs) -> anyhow::Result<ChosenAgent> {
     match args.agent {
         AgentKind::Scripted => {
             let default_dir = if args.tasks.is_dir() {
@@ -291,8 +308,12 @@ fn agent_factory(args: &RunArgs) -> anyhow::Result<ChosenAgent> {
                 (NaviStyle::Waa, None) => ("waa", "arena".to_owned()),
                 (NaviStyle::Arena, _) => ("arena", "arena".to_owned()),
             };
+            config.som.origin = args.som_origin;
+            config.som.detector_url = args.detector_url.clone();
+            config.som.omniparser_url = args.omniparser_url.clone();
             let options = vec![
                 ("navi_style".to_owned(), style.to_owned()),
+                ("som_origin".to_owned(), args.som_origin.name().to_owned()),
                 ("prompt".to_owned(), prompt),
                 ("temperature".to_owned(), format!("{}", args.temperature)),
                 ("max_tokens".to_owned(), args.max_tokens.to_string()),
