@@ -14,7 +14,7 @@
 //! - [`task`]: WAA task files, read in two layers (raw mirror, validated task).
 //! - [`setup`]: the tasks' setup steps over the guest API, and the download cache.
 //! - [`agent`]: the agent trait; Navi, scripted and replay agents; running agent code.
-//! - [`som`]: Set-of-Marks from the accessibility tree.
+//! - [`som`]: Set-of-Marks from every source of upstream's `--som_origin`: the accessibility tree, OCR, the DOM, a detector, OmniParser and their mixes.
 //! - [`pyaction`]: agents' pyautogui code translated into typed actions.
 //! - [`episode`]: one episode: reset, setup, the observe/act loop, evaluation.
 //! - [`eval`]: getters and metrics by closed registries.

@@ -336,7 +336,6 @@ impl NaviAgent {
             Some(marks) => {
                 t.push_str("Elements on the screen (the numbers drawn on the screenshot):\n");
                 t.push_str(&marks.candidate_list());
-                t.push('\n');
             }
             None => t.push_str("No element list is available this turn: use computer.mouse.move_abs.\n"),
         }

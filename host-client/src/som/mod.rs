@@ -239,18 +239,18 @@ impl Marks {
     }
 
     /// The candidate list of upstream's prompt: the header, then one row per
-    /// listed element, `id | type | text | [x1, y1, x2, y2]` with coordinates as
+    /// listed element, every line ending in a newline as upstream's does, `id | type | text | [x1, y1, x2, y2]` with coordinates as
     /// fractions of the screen rounded to two decimals. The text is printed as
     /// it is, an empty one as nothing, as upstream prints it; only an entity
     /// with no text at all (a detector's box) shows `-`.
     pub fn candidate_list(&self) -> String {
         let w = f64::from(self.size.0.max(1));
         let h = f64::from(self.size.1.max(1));
-        let mut out = String::from(CANDIDATE_HEADER);
+        let mut out = format!("{CANDIDATE_HEADER}\n");
         for m in &self.entities {
             let r = &m.rect;
             out.push_str(&format!(
-                "\n{} | {} | {} | [{}, {}, {}, {}]",
+                "{} | {} | {} | [{}, {}, {}, {}]\n",
                 m.id,
                 m.kind,
                 m.given_text().unwrap_or("-"),

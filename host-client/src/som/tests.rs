@@ -83,7 +83,7 @@ fn candidate_list_prints_empty_names_as_upstream_and_missing_text_as_a_dash() {
     let expected = "ID | Type | Text content or description | Normalized location [x1, y1, x2, y2]\n\
         0 | a11y | OK | [0.1, 0.1, 0.15, 0.15]\n\
         1 | a11y |  | [0.0, 0.0, 1.0, 1.0]\n\
-        2 | a11y | Half | [0.5, 0.5, 0.75, 0.75]";
+        2 | a11y | Half | [0.5, 0.5, 0.75, 0.75]\n";
     assert_eq!(marks.candidate_list(), expected);
 
     // A detector's box has no text key upstream: `-`. A DOM element without textContent: `None`.
