@@ -148,6 +148,55 @@ const ALIASES: &[(&str, &str)] = &[
     ("control", "ctrl"),
 ];
 
+/// The keys an agent pressed with `keyDown` and has not released, so they can be
+/// let go when its action ends.
+///
+/// pyautogui's `keyDown` leaves a key down until a `keyUp`; an agent that forgets
+/// the `keyUp` (or whose code stops at an error between the two) leaves Shift or
+/// Ctrl held for every later step, which then types capitals or opens menus.
+/// Both sides feed every action they perform through [`HeldKeys::track`] and
+/// send [`HeldKeys::releases`] when the agent's action (a code block, a typed
+/// batch) is over. Keys compare by their parsed name, so `Shift` and `shift`
+/// are one key and `shiftleft` another, as they are to the keyboard.
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct HeldKeys {
+    /// Oldest first.
+    held: Vec<Key>,
+}
+
+impl HeldKeys {
+    /// Notes what `action` does to the held keys: `KeyDown` holds, `KeyUp` releases.
+    /// Other actions, and names that do not parse (the backend refused those), change nothing.
+    pub fn track(&mut self, action: &crate::action::Action) {
+        match action {
+            crate::action::Action::KeyDown { key } => {
+                if let Ok(key) = Key::parse(key) {
+                    if !self.held.contains(&key) {
+                        self.held.push(key);
+                    }
+                }
+            }
+            crate::action::Action::KeyUp { key } => {
+                if let Ok(key) = Key::parse(key) {
+                    self.held.retain(|k| *k != key);
+                }
+            }
+            _ => {}
+        }
+    }
+
+    /// Whether no key is held.
+    pub fn is_empty(&self) -> bool {
+        self.held.is_empty()
+    }
+
+    /// The `KeyUp` actions that let every held key go, the most recently pressed
+    /// first (as a chord is released); afterwards nothing counts as held.
+    pub fn releases(&mut self) -> Vec<crate::action::Action> {
+        self.held.drain(..).rev().map(|key| crate::action::Action::KeyUp { key: key.to_string() }).collect()
+    }
+}
+
 /// A key name that pyautogui does not know.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
 #[error("unknown key name {0:?} (expected a pyautogui key name such as \"enter\", \"ctrl\" or \"a\")")]
@@ -288,5 +337,36 @@ mod tests {
         fn chord_parser_never_panics(s in "\\PC{0,12}") {
             let _ = parse_chord(&s);
         }
+    }
+
+    #[test]
+    fn held_keys_are_released_newest_first_and_only_once() {
+        use crate::action::Action;
+        let mut held = HeldKeys::default();
+        for action in [
+            Action::KeyDown { key: "Shift".into() },
+            Action::KeyDown { key: "ctrl".into() },
+            Action::KeyDown { key: "shift".into() },
+            Action::Click { x: None, y: None, button: crate::action::MouseButton::Left, count: 1 },
+            Action::KeyDown { key: "a".into() },
+            Action::KeyUp { key: "A".into() },
+            Action::KeyDown { key: "no-such-key".into() },
+        ] {
+            held.track(&action);
+        }
+        // `A` is not `a` (a character key keeps its case), so `a` stays held.
+        assert_eq!(
+            held.releases(),
+            vec![
+                Action::KeyUp { key: "a".into() },
+                Action::KeyUp { key: "ctrl".into() },
+                Action::KeyUp { key: "shift".into() },
+            ]
+        );
+        assert!(held.is_empty());
+        assert!(held.releases().is_empty());
+        held.track(&Action::KeyDown { key: "alt".into() });
+        held.track(&Action::KeyUp { key: "ALT".into() });
+        assert!(held.is_empty(), "{held:?}");
     }
 }

@@ -42,6 +42,7 @@ use arena_shared::exec::{ExecRequest, LaunchRequest};
 use arena_shared::files::FileKind;
 use arena_shared::geometry::Point;
 use arena_shared::imaging::crop_padded;
+use arena_shared::keys::HeldKeys;
 use arena_shared::observation::{ImageFormat as WireImageFormat, ScreenshotQuery, WindowInfo, WindowTarget};
 use arena_shared::registry::RegistryValue;
 use arena_shared::script::{
@@ -171,10 +172,17 @@ fn is_unreachable(err: &ClientError) -> bool {
 }
 
 async fn typed(client: &GuestClient, actions: &[Action]) -> Result<ActionOutcome, AgentError> {
-    match client.act(&ActionBatch { actions: actions.to_vec() }).await {
-        Ok(report) => {
-            Ok(ActionOutcome { cursor: Some(report.cursor), performed: report.executed, ..ActionOutcome::default() })
-        }
+    // Keys the batch holds and does not release are let go at its end, in the same batch.
+    let mut held = HeldKeys::default();
+    actions.iter().for_each(|a| held.track(a));
+    let mut batch = actions.to_vec();
+    batch.extend(held.releases());
+    match client.act(&ActionBatch { actions: batch }).await {
+        Ok(report) => Ok(ActionOutcome {
+            cursor: Some(report.cursor),
+            performed: report.executed.min(actions.len()),
+            ..ActionOutcome::default()
+        }),
         Err(err) if is_unreachable(&err) => Err(AgentError::Guest(err)),
         Err(err) => Ok(ActionOutcome { error: Some(err.to_string()), ..ActionOutcome::default() }),
     }
@@ -216,6 +224,17 @@ async fn run_script(
     .await
     .map_err(|err| AgentError::Worker(err.to_string()))?;
     *computer = state;
+    // A key the code left held (a keyDown without its keyUp, or code that stopped
+    // between the two) is let go now, so it does not modify every later step.
+    let releases = host.held.releases();
+    if !releases.is_empty() && host.unreachable.is_none() {
+        if let Err(err) = client.act(&ActionBatch { actions: releases }).await {
+            if is_unreachable(&err) {
+                return Err(AgentError::Guest(err));
+            }
+            tracing::warn!(error = %err, "releasing the keys the agent's code left held failed");
+        }
+    }
     if let Some(err) = host.unreachable {
         // The script stopped at the first call that found the guest gone
         // (`ErrorKind::Unreachable`); the client's error says how.
@@ -267,11 +286,22 @@ pub struct GuestHost {
     /// The first error that showed the guest unreachable. The script saw it as a
     /// [`HostError::Unreachable`] and stopped; the client error is kept for the caller.
     pub unreachable: Option<ClientError>,
+    /// Keys the script pressed with `keyDown` and has not released yet.
+    pub held: HeldKeys,
 }
 
 impl GuestHost {
     pub fn new(client: GuestClient, rt: Handle, options: ExecOptions) -> GuestHost {
-        GuestHost { client, rt, options, started: Instant::now(), cursor: None, performed: 0, unreachable: None }
+        GuestHost {
+            client,
+            rt,
+            options,
+            started: Instant::now(),
+            cursor: None,
+            performed: 0,
+            unreachable: None,
+            held: HeldKeys::default(),
+        }
     }
 
     /// Runs one client call to completion, remembering an unreachable guest.
@@ -350,7 +380,9 @@ fn encode(img: &image::RgbaImage, format: ImageFormat) -> HostResult<Vec<u8>> {
 
 impl ScriptHost for GuestHost {
     fn perform(&mut self, action: Action) -> HostResult<()> {
+        let tracked = action.clone();
         let report = self.call(|c| async move { c.act_one(action).await })?;
+        self.held.track(&tracked);
         self.cursor = Some(report.cursor);
         self.performed += 1;
         Ok(())
