@@ -164,6 +164,8 @@ async fn relay_route(
 
 /// Why a relay ended, for the log.
 type Ended = &'static str;
+/// A close frame to send one side (code and reason), if that side is still there.
+type Closing = Option<(u16, &'static str)>;
 
 /// Relays `host` ⇄ `browser` until one side closes, a message is over its bound,
 /// the relay is idle for [`IDLE`], or `stop` is cancelled; then closes both.
@@ -175,7 +177,7 @@ where
 {
     let (mut host_tx, mut host_rx) = host.split();
     let (mut browser_tx, mut browser_rx) = browser.split();
-    let (host_close, browser_close, why): (Option<(u16, &str)>, Option<(u16, &str)>, Ended) = loop {
+    let (host_close, browser_close, why): (Closing, Closing, Ended) = loop {
         tokio::select! {
             () = stop.cancelled() => {
                 break (Some((GOING_AWAY, "the guest server is shutting down")), Some((GOING_AWAY, "")), "server shutdown");
