@@ -12,7 +12,10 @@
 //!   router's own limits answer `414`/`431` with an error body well below it);
 //! - on shutdown no new connection is taken, requests in flight may finish, and after
 //!   `--shutdown-grace-ms` the connections still open (a half-sent request, a client
-//!   that does not read) are dropped, so the server always exits.
+//!   that does not read) are dropped, so the server always exits;
+//! - connections may be upgraded (the DevTools websocket relay): every request carries
+//!   a [`ConnContext`] whose slot an upgraded connection keeps until it ends, and whose
+//!   shutdown signal tells it to close.
 
 use std::future::Future;
 use std::pin::pin;
@@ -23,12 +26,23 @@ use axum::body::Body;
 use axum::Router;
 use hyper::body::Incoming;
 use hyper_util::rt::{TokioIo, TokioTimer};
-use hyper_util::server::graceful::GracefulShutdown;
 use hyper_util::service::TowerToHyperService;
 use tokio::net::{TcpListener, TcpStream};
-use tokio::sync::Semaphore;
+use tokio::sync::{OwnedSemaphorePermit, Semaphore};
 use tokio::task::JoinSet;
+use tokio_util::sync::CancellationToken;
 use tower::ServiceExt as _;
+
+/// What a request knows of its connection: the connection's slot among
+/// `--max-connections` (held as long as any clone lives, so a connection upgraded
+/// to a websocket keeps counting until its relay ends) and the server's shutdown
+/// signal. Every request served by [`serve`] carries one as an extension.
+#[derive(Debug, Clone)]
+pub struct ConnContext {
+    /// Cancelled when the server starts shutting down.
+    pub shutdown: CancellationToken,
+    _slot: Arc<OwnedSemaphorePermit>,
+}
 
 /// The connection limits of one server.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -52,8 +66,9 @@ pub async fn serve(
     limits: ConnLimits,
     shutdown: impl Future<Output = ()> + Send + 'static,
 ) -> std::io::Result<()> {
-    let permits = Arc::new(Semaphore::new(limits.max_connections.max(1)));
-    let graceful = GracefulShutdown::new();
+    let slots = limits.max_connections.max(1);
+    let permits = Arc::new(Semaphore::new(slots));
+    let stop = CancellationToken::new();
     let mut connections = JoinSet::new();
     let mut shutdown = pin!(shutdown);
     loop {
@@ -76,23 +91,41 @@ pub async fn serve(
             connections.spawn(refuse_busy(stream, limits.max_connections));
             continue;
         };
-        let service = TowerToHyperService::new(
-            app.clone().map_request(|request: hyper::Request<Incoming>| request.map(Body::new)),
-        );
+        let context = ConnContext { shutdown: stop.clone(), _slot: Arc::new(permit) };
+        let per_request = context.clone();
+        let service = TowerToHyperService::new(app.clone().map_request(move |request: hyper::Request<Incoming>| {
+            let mut request = request.map(Body::new);
+            request.extensions_mut().insert(per_request.clone());
+            request
+        }));
         let mut builder = hyper::server::conn::http1::Builder::new();
         builder.timer(TokioTimer::new()).header_read_timeout(limits.header_timeout).max_buf_size(limits.max_head_bytes);
-        let connection = builder.serve_connection(TokioIo::new(stream), service);
-        let connection = graceful.watch(connection);
+        let connection = builder.serve_connection(TokioIo::new(stream), service).with_upgrades();
         connections.spawn(async move {
-            let _permit = permit;
-            if let Err(err) = connection.await {
+            let ConnContext { shutdown, _slot } = context;
+            let mut connection = pin!(connection);
+            let ended = tokio::select! {
+                ended = connection.as_mut() => ended,
+                () = shutdown.cancelled() => {
+                    // Finish the request in flight, then close; an idle keep-alive closes at once.
+                    connection.as_mut().graceful_shutdown();
+                    connection.await
+                }
+            };
+            if let Err(err) = ended {
                 tracing::debug!(%peer, error = %err, "connection ended with an error");
             }
         });
     }
     drop(listener);
+    stop.cancel();
+    // Every slot back means every connection, upgraded ones included, has ended.
+    let all_back = async {
+        while connections.join_next().await.is_some() {}
+        let _ = permits.acquire_many(u32::try_from(slots).unwrap_or(u32::MAX)).await;
+    };
     tokio::select! {
-        () = graceful.shutdown() => tracing::info!("every connection finished"),
+        () = all_back => tracing::info!("every connection finished"),
         () = tokio::time::sleep(limits.shutdown_grace) => {
             tracing::warn!(
                 grace_ms = limits.shutdown_grace.as_millis() as u64,

@@ -180,6 +180,7 @@ pub async fn run_attempt(
         },
         reset: None,
         steps: Vec::new(),
+        wants_dom: agent.wants_dom(),
     };
     if let Err(err) = out.prepare() {
         ep.result.status = EpisodeStatus::InfraError(format!("cannot prepare the result folder: {err}"));
@@ -211,6 +212,8 @@ struct Episode {
     result: EpisodeResult,
     reset: Option<ResetRecord>,
     steps: Vec<StepRecord>,
+    /// Whether the agent wants the browser's DOM elements in each observation.
+    wants_dom: bool,
 }
 
 /// An observation and the file its screenshot was written to.
@@ -405,6 +408,9 @@ impl Episode {
         let started = Instant::now();
         let mut obs = observe(client, task, config, screen, for_step).await?;
         obs.tracked_clipboard = tracked_clipboard;
+        if self.wants_dom {
+            obs.dom = observe_dom(client, task, for_step).await;
+        }
         let observe_ms = ms(started.elapsed());
         let file = out
             .write_screenshot(index, timestamp, &obs.screenshot_png)
@@ -672,7 +678,20 @@ async fn observe(
         foreground_id,
         tracked_clipboard: None,
         clipboard,
+        dom: None,
     })
+}
+
+/// The browser's DOM elements for an agent that wants them; `None`, with a
+/// warning, when no browser answers (a task without a browser is no failure).
+async fn observe_dom(client: &GuestClient, task: &Task, step: u32) -> Option<Vec<crate::browser::DomElement>> {
+    match crate::browser::dom_elements(client).await {
+        Ok(elements) => Some(elements),
+        Err(err) => {
+            tracing::warn!(task = %task.name, step, error = %err, "no DOM elements this step");
+            None
+        }
+    }
 }
 
 /// Makes a fresh agent for each episode.

@@ -8,6 +8,7 @@
 //!
 //! # Layout
 //!
+//! - [`browser`]: the guest's browser over the DevTools protocol (DOM elements, page contents).
 //! - [`client`]: [`client::GuestClient`], one async method per `/v1/` route,
 //!   with deadlines, retries of idempotent calls and a readiness wait.
 //! - [`error`]: [`error::ClientError`], which always names the guest, the call and the cause.
@@ -24,6 +25,7 @@
 //! - [`cli`]: the `arena` command line (`main.rs` only parses and calls [`run`]).
 
 pub mod agent;
+pub mod browser;
 pub mod cli;
 pub mod client;
 pub mod episode;

@@ -15,11 +15,12 @@
 //! One private module per resource, each exposing its own `routes()`:
 //! `health`, `screen`, `input`, `a11y`, `windows`, `clipboard`, `files`,
 //! `exec` (exec, launch, open), `registry` (registry, wallpaper), `doctor`
-//! (every capability end to end) and
-//! `browser` (the browser's DevTools HTTP endpoint, forwarded).
+//! (every capability end to end), `browser` (the browser's DevTools HTTP endpoint,
+//! forwarded) and `browser_ws` (its DevTools websocket, relayed).
 
 mod a11y;
 mod browser;
+mod browser_ws;
 mod clipboard;
 mod doctor;
 mod eval_queries;
@@ -51,6 +52,7 @@ pub fn routes() -> Router<AppState> {
         .merge(exec::routes())
         .merge(registry::routes())
         .merge(browser::routes())
+        .merge(browser_ws::routes())
         .merge(eval_queries::routes())
 }
 

@@ -63,6 +63,10 @@ pub struct Observation {
     pub tracked_clipboard: Option<String>,
     /// The clipboard's text, when it holds text.
     pub clipboard: Option<String>,
+    /// The browser's front-page DOM elements in screen pixels (upstream Navi's
+    /// `webparse` proposals), read only for an agent whose [`Agent::wants_dom`]
+    /// is true; `None` otherwise or when no browser answers.
+    pub dom: Option<Vec<crate::browser::DomElement>>,
 }
 
 impl Observation {
@@ -118,6 +122,7 @@ impl Observation {
             foreground_id,
             tracked_clipboard: None,
             clipboard,
+            dom: None,
         })
     }
 }
@@ -285,6 +290,12 @@ pub trait Agent: Send {
     /// plan missing or used up). Malformed model output is not an error: it is a
     /// [`Prediction`] with no actions and [`Prediction::raw_error`] set.
     async fn predict(&mut self, obs: &Observation) -> Result<Prediction, AgentError>;
+
+    /// Whether each observation should carry the browser's DOM elements
+    /// ([`Observation::dom`]); reading them costs a DevTools round trip per step.
+    fn wants_dom(&self) -> bool {
+        false
+    }
 }
 
 #[cfg(test)]

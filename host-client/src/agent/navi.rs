@@ -571,6 +571,7 @@ mod tests {
             foreground_id: None,
             tracked_clipboard: None,
             clipboard: None,
+            dom: None,
         };
         let agent = NaviAgent::new(NaviConfig::new("http://x/v1", "gpt-4o")).unwrap();
         let body = agent.request_body(&obs, None, b"png");

@@ -8,17 +8,14 @@
 //! saved under the task's work folder as `dest` and queried on the host.
 //!
 //! Tabs: upstream drives Chrome through Playwright over the DevTools websocket.
-//! The guest forwards only the DevTools HTTP endpoints (`/v1/browser/...`), so
-//! tab lists come from `json/list`, a page is opened with `json/new`, and page
-//! text is read from the accessibility tree of the browser window (the DOM's
-//! HTML is out of reach without the websocket). The active tab's address is the
-//! value of the omnibox element named "Address and search bar" under a
-//! `Chrome_WidgetWin_1` window, exactly as upstream reads it.
+//! Tab lists come from the DevTools HTTP `json/list` (forwarded by the guest),
+//! and `page_info` and `active_tab_info` read title, address and HTML over the
+//! DevTools websocket the guest relays ([`crate::browser::page`]). The active
+//! tab's address is the value of the omnibox element named "Address and search
+//! bar" under a `Chrome_WidgetWin_1` window, exactly as upstream reads it.
 //!
 //! What it is not: it never scores, and it does not start a browser when none
 //! listens on the debugging port (upstream launches one; here that is an error).
-
-use std::time::Duration;
 
 use arena_shared::exec::ExecRequest;
 use arena_shared::files::{FileKind, KnownFolder};
@@ -27,6 +24,8 @@ use serde_json::{json, Map, Value};
 
 use super::explorer::known_folder;
 use super::{dest_path, guest_join, GetterError, Params};
+use crate::browser::cdp::CdpError;
+use crate::browser::page::{self, LoadState};
 use crate::error::ClientError;
 use crate::eval::value::{py_eq, py_truthy, Fetched};
 use crate::eval::EvalContext;
@@ -569,79 +568,22 @@ fn as_page(target: &Value) -> Option<Tab> {
     Some(Tab { id: text("id"), title: text("title"), url: text("url") })
 }
 
-/// `get_page_info`: opens `url` in a new tab, waits for it to settle, and
-/// returns `{title, url, content}`; the tab is closed afterwards.
-///
-/// `content` is the text of the page as the accessibility tree shows it (every
-/// name and value under the browser window's document), not the page's HTML,
-/// which needs the DevTools websocket the guest does not forward. Upstream's
-/// metrics search it for visible strings (cart items), which the tree holds.
+/// `get_page_info`: opens a new tab, navigates it to `url`, waits for
+/// `load_state` (Playwright's, default `load`) and returns `{title, url,
+/// content}` with the page's HTML, over the DevTools websocket as upstream's
+/// Playwright does (see [`crate::browser::page`]); the tab is closed
+/// afterwards. A page that does not load in time is read as it is, titled
+/// `Load timeout`, as upstream's.
 async fn page_info(ctx: &EvalContext, p: &Params<'_>) -> Result<Fetched, GetterError> {
     let url = p.string("url")?;
     let load_state = match p.map.get("load_state") {
         Some(_) => p.string("load_state")?,
         None => "load",
     };
-    let body = ctx.client.browser_put(&format!("json/new?{url}")).await.map_err(|err| p.guest(err))?;
-    let opened: Value =
-        serde_json::from_slice(&body).map_err(|err| p.failed(format!("json/new answered no target: {err}")))?;
-    let id = opened.get("id").and_then(Value::as_str).unwrap_or_default().to_owned();
-    let tab = wait_for_tab(ctx, p, &id, settle_time(load_state)).await;
-    let info = match tab {
-        Ok(tab) => {
-            let content = match ctx.client.a11y(&uia_query()).await {
-                Ok(tree) => browser_page_text(&tree, Some(&tab.title)),
-                Err(err) => {
-                    tracing::debug!(%err, "no accessibility tree for page_info");
-                    String::new()
-                }
-            };
-            Ok(json!({"title": tab.title, "url": tab.url, "content": content}))
-        }
-        Err(err) => Err(err),
-    };
-    if !id.is_empty() {
-        if let Err(err) = ctx.client.browser_get(&format!("json/close/{id}")).await {
-            tracing::debug!(%err, "could not close the page_info tab");
-        }
-    }
-    info.map(Fetched::Json)
-}
-
-/// How long a page gets after its title appears, by Playwright load state.
-fn settle_time(load_state: &str) -> Duration {
-    match load_state {
-        "domcontentloaded" => Duration::from_millis(250),
-        "networkidle" => Duration::from_millis(1500),
-        _ => Duration::from_millis(750),
-    }
-}
-
-/// Polls `json/list` until the tab `id` has a title other than its address
-/// (Chrome shows the URL as the title until the document names itself), at
-/// most ten seconds, then lets it settle.
-async fn wait_for_tab(ctx: &EvalContext, p: &Params<'_>, id: &str, settle: Duration) -> Result<Tab, GetterError> {
-    let deadline = tokio::time::Instant::now() + Duration::from_secs(10);
-    let mut last = None;
-    loop {
-        let tabs = page_targets(ctx, p).await?;
-        let tab = tabs.into_iter().find(|t| t.id == id);
-        let loaded = tab.as_ref().is_some_and(|t| !t.title.is_empty() && t.title != t.url && !t.url.contains(&t.title));
-        if let Some(tab) = tab {
-            last = Some(tab);
-        }
-        if loaded || tokio::time::Instant::now() >= deadline {
-            break;
-        }
-        tokio::time::sleep(Duration::from_millis(250)).await;
-    }
-    tokio::time::sleep(settle).await;
-    // Read once more after settling: redirects change the address and title.
-    let tabs = page_targets(ctx, p).await?;
-    tabs.into_iter()
-        .find(|t| t.id == id)
-        .or(last)
-        .ok_or_else(|| p.failed(format!("the browser did not keep the new tab {id:?}")))
+    let info = page::open_and_read(&ctx.client, url, LoadState::parse(load_state))
+        .await
+        .map_err(|err| p.failed(format!("reading {url} over DevTools: {err}")))?;
+    Ok(Fetched::Json(json!({"title": info.title, "url": info.url, "content": info.content})))
 }
 
 fn uia_query() -> A11yQuery {
@@ -703,79 +645,22 @@ fn address_bar_url(tree: &A11yTree, prefix: &str) -> Option<String> {
     }
 }
 
-/// `get_active_tab_info`: `{title, url, content}` of the active tab.
-///
-/// Upstream reloads the address-bar URL in a new tab to read it. Here the live
-/// tab is read instead: its URL is the address bar's (with `goto_prefix`), or
-/// the DevTools target's full URL when one matches it (the omnibox hides the
-/// scheme); the title comes from that target; the content is the page text of
-/// the accessibility tree. `None` when no address bar shows a URL.
+/// `get_active_tab_info`: `{title, url, content}` of the active tab, as
+/// upstream reads it: the address bar's URL (with `goto_prefix`) opened in a
+/// new tab, loaded, and read over the DevTools websocket (title, final
+/// address, HTML). `None` when no address bar shows a URL, when no browser
+/// answers on the debugging port, or when the page cannot be opened
+/// (upstream's `None` for each).
 async fn active_tab_info(ctx: &EvalContext, p: &Params<'_>) -> Result<Fetched, GetterError> {
-    let prefix = match p.map.get("goto_prefix") {
-        Some(_) => p.string("goto_prefix")?,
-        None => "https://",
-    };
-    let tree = ctx.client.a11y(&uia_query()).await.map_err(|err| p.guest(err))?;
-    let Some(url) = address_bar_url(&tree, prefix) else { return Ok(Fetched::None) };
-    let tabs = match page_targets(ctx, p).await {
-        Ok(tabs) => tabs,
-        Err(err) => {
-            tracing::debug!(%err, "no tab list; using the address bar alone");
-            Vec::new()
+    let Some(url) = active_tab_url(ctx, p).await? else { return Ok(Fetched::None) };
+    match page::open_and_read(&ctx.client, &url, LoadState::Load).await {
+        Ok(info) => Ok(Fetched::Json(json!({"title": info.title, "url": info.url, "content": info.content}))),
+        Err(err @ (CdpError::Http(_) | CdpError::Connect { .. } | CdpError::Protocol { .. })) => {
+            tracing::warn!(%err, %url, "active_tab_info: the active tab's page could not be opened");
+            Ok(Fetched::None)
         }
-    };
-    let matching = tabs.into_iter().find(|tab| same_address(&tab.url, &url));
-    let content = browser_page_text(&tree, matching.as_ref().map(|t| t.title.as_str()));
-    let (title, url) = match matching {
-        Some(tab) => (tab.title, tab.url),
-        None => (String::new(), url),
-    };
-    Ok(Fetched::Json(json!({"title": title, "url": url, "content": content})))
-}
-
-/// Whether two addresses name the same page once scheme, `www.`, a trailing
-/// slash and percent-encoding are set aside (the omnibox elides the first two).
-fn same_address(a: &str, b: &str) -> bool {
-    fn norm(url: &str) -> String {
-        let url = unquote(url.trim());
-        let rest = url.split_once("://").map_or(url.as_str(), |(_, rest)| rest);
-        let rest = rest.strip_prefix("www.").unwrap_or(rest);
-        rest.strip_suffix('/').unwrap_or(rest).to_owned()
+        Err(err) => Err(p.failed(format!("reading {url} over DevTools: {err}"))),
     }
-    norm(a) == norm(b)
-}
-
-/// The text of the browser page the tree shows: every name, value and text
-/// under `Document` nodes of the window holding the address bar (or of the
-/// first window whose title starts with `title`, or of any browser window),
-/// one per line. The whole window's text when it has no document node.
-fn browser_page_text(tree: &A11yTree, title: Option<&str>) -> String {
-    let by_bar = find_address_bar(tree).map(|(idx, _)| idx);
-    let by_title =
-        title.filter(|t| !t.is_empty()).and_then(|t| tree.windows.iter().position(|w| w.name.starts_with(t)));
-    let by_class = tree.windows.iter().position(|w| w.class_name.eq_ignore_ascii_case(CHROME_WINDOW_CLASS));
-    let Some(window) = by_title.or(by_bar).or(by_class).and_then(|idx| tree.windows.get(idx)) else {
-        return String::new();
-    };
-    fn collect(node: &A11yNode, in_document: bool, out: &mut Vec<String>) {
-        let in_document = in_document || node.role.eq_ignore_ascii_case("Document");
-        if in_document {
-            for text in [Some(&node.name), node.value.as_ref(), node.text.as_ref()].into_iter().flatten() {
-                if !text.trim().is_empty() {
-                    out.push(text.clone());
-                }
-            }
-        }
-        for child in &node.children {
-            collect(child, in_document, out);
-        }
-    }
-    let mut lines = Vec::new();
-    collect(window, false, &mut lines);
-    if lines.is_empty() {
-        collect(window, true, &mut lines);
-    }
-    lines.join("\n")
 }
 
 /// `get_active_tab_url_parse`: the first value of each of `parse_keys` in the

@@ -12,6 +12,7 @@ use serde_json::{json, Value};
 
 use super::super::tests::{start_guest_with, Guest};
 use super::{bare_home_page, headless_print_argv, parse_lnk, parse_qs, unquote};
+use crate::browser::fake::{FakeDevtools, FakePage};
 use crate::eval::fetch;
 use crate::eval::value::Fetched;
 use crate::task::GetterSpec;
@@ -423,16 +424,35 @@ async fn open_tabs_come_from_the_devtools_list() {
     check(&guest, json!({"type": "open_tabs_info"}), Err("debugging port")).await;
 }
 
+/// A fake browser speaking the DevTools protocol, showing `pages`, able to
+/// navigate to the cart page and the banter thread.
+async fn fake_browser(pages: Vec<FakePage>) -> FakeDevtools {
+    FakeDevtools::start(
+        pages,
+        &[
+            (
+                "https://store.steampowered.com/cart/",
+                "Shopping Cart",
+                "<!DOCTYPE html><html><body><div class=\"cart_item\">The Dota 2 Official Soundtrack</div></body></html>",
+            ),
+            (
+                "https://discussions.flightaware.com/t/the-banter-thread/4412",
+                "The Banter Thread - FlightAware Discussions",
+                "<html><body>Banter replies</body></html>",
+            ),
+        ],
+    )
+    .await
+}
+
+fn page(id: &str, title: &str, url: &str) -> FakePage {
+    FakePage { id: id.into(), title: title.into(), url: url.into(), ..FakePage::default() }
+}
+
 #[tokio::test]
 async fn page_info_opens_reads_and_closes_a_tab() {
-    let (port, tabs) = devtools(json!([tab("A", "Steam", "https://store.steampowered.com/")])).await;
-    let scenario = browser_scenario(
-        "Chrome_WidgetWin_1",
-        "Shopping Cart",
-        "store.steampowered.com/cart/",
-        "The Dota 2 Official Soundtrack",
-    );
-    let guest = start(Some(scenario), Some(port)).await;
+    let browser = fake_browser(vec![page("A", "Steam", "https://store.steampowered.com/")]).await;
+    let guest = start(None, Some(browser.port)).await;
     let getter =
         json!({"type": "page_info", "url": "https://store.steampowered.com/cart/", "load_state": "domcontentloaded"});
     let got = fetch(&guest.ctx, &spec(&getter)).await.expect("page_info");
@@ -440,33 +460,36 @@ async fn page_info_opens_reads_and_closes_a_tab() {
     assert_eq!(info["title"], json!("Shopping Cart"));
     assert_eq!(info["url"], json!("https://store.steampowered.com/cart/"));
     let content = info["content"].as_str().expect("content");
-    assert!(content.contains("The Dota 2 Official Soundtrack"), "{content}");
-    assert!(!content.contains("Address and search bar"), "only the page's text: {content}");
-    let left: Vec<Value> = tabs.lock().expect("tabs").iter().map(|t| t["id"].clone()).collect();
-    assert_eq!(left, [json!("A")], "the opened tab is closed again");
+    assert!(content.starts_with("<!DOCTYPE html>") && content.contains("The Dota 2 Official Soundtrack"), "{content}");
+    assert_eq!(browser.page_ids(), ["A"], "the opened tab is closed again");
+    let methods = browser.methods();
+    assert!(
+        methods.contains(&"Page.navigate".to_owned()) && methods.contains(&"Runtime.evaluate".to_owned()),
+        "{methods:?}"
+    );
     check(&guest, json!({"type": "page_info"}), Err("missing parameter `url`")).await;
+    // A navigation the browser cannot make is an error, as Playwright's `goto` raises.
+    check(&guest, json!({"type": "page_info", "url": "https://nowhere.invalid/"}), Err("ERR_NAME_NOT_RESOLVED")).await;
+    assert_eq!(browser.page_ids(), ["A"], "the failed tab is closed too");
+    // No browser on the debugging port is an error naming the port.
+    let guest = start(None, None).await;
+    check(&guest, json!({"type": "page_info", "url": "https://example.org/"}), Err("debugging port")).await;
 }
 
 #[tokio::test]
 async fn active_tab_getters_read_the_address_bar() {
-    let (port, _) = devtools(json!([
-        tab(
-            "T1",
-            "The Banter Thread - FlightAware Discussions",
-            "https://discussions.flightaware.com/t/the-banter-thread/4412"
-        ),
-        tab("T2", "Other", "https://example.org/"),
-    ]))
-    .await;
+    let browser = fake_browser(vec![page("T2", "Other", "https://example.org/")]).await;
     let address = "discussions.flightaware.com/t/the-banter-thread/4412";
     let scenario = browser_scenario("Chrome_WidgetWin_1", "The Banter Thread", address, "Banter replies");
-    let guest = start(Some(scenario), Some(port)).await;
+    let guest = start(Some(scenario), Some(browser.port)).await;
+    // Upstream opens the address bar's URL in a new tab and reads title, address and HTML.
     let want = json!({
         "title": "The Banter Thread - FlightAware Discussions",
         "url": "https://discussions.flightaware.com/t/the-banter-thread/4412",
-        "content": "The Banter Thread\nBanter replies",
+        "content": "<html><body>Banter replies</body></html>",
     });
     check(&guest, json!({"type": "active_tab_info", "goto_prefix": "https://"}), data(want)).await;
+    assert_eq!(browser.page_ids(), ["T2"], "the tab opened to read it is closed again");
     check(&guest, json!({"type": "url_dashPart", "goto_prefix": "https://www.", "partIndex": -1, "needDeleteId": false, "returnType": "string"}), text("4412")).await;
     check(
         &guest,
@@ -499,13 +522,8 @@ async fn active_tab_getters_read_the_address_bar() {
         text("Flights-Search"),
     )
     .await;
-    // Without the debugging port the active tab is still the address bar's.
-    check(
-        &guest,
-        json!({"type": "active_tab_info"}),
-        data(json!({"title": "", "url": format!("https://{address}"), "content": "Flights"})),
-    )
-    .await;
+    // Without a browser on the debugging port there is no tab to read: upstream's `None`.
+    check(&guest, json!({"type": "active_tab_info"}), Ok(Fetched::None)).await;
 
     // An "Address and search bar" outside a Chrome window is not the omnibox.
     let guest = start(Some(browser_scenario("Notepad", "Notes", "example.org", "")), None).await;
