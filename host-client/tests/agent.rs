@@ -501,3 +501,28 @@ async fn replay_repeats_a_recorded_trajectory() {
     let err = agent.predict(&obs).await.expect_err("broken trajectory");
     assert!(err.to_string().contains("line 2"), "{err}");
 }
+
+#[tokio::test]
+async fn a_key_left_held_is_released_when_the_agents_action_ends() {
+    let (_guest, c) = guest_with_notepad().await;
+    let obs = Observation::capture(&c, 1, "type").await.expect("observe");
+    let mut state = ComputerState::for_screen(1, 1);
+    // Code that holds Shift and never lets go: the capital is typed inside the action,
+    // and the next action's typing is lower case again.
+    let held = AgentAction::Pyautogui("pyautogui.keyDown('shift')\npyautogui.press('x')".into());
+    assert_eq!(run(&c, &held, &obs, &mut state).await.error, None);
+    let typed = AgentAction::Pyautogui("pyautogui.press('y')".into());
+    assert_eq!(run(&c, &typed, &obs, &mut state).await.error, None);
+    assert_eq!(notepad_text(&c).await, "Xy");
+
+    // A typed batch that holds a key gets its release appended.
+    let batch = AgentAction::Typed(vec![
+        Action::KeyDown { key: "shift".into() },
+        Action::KeyPress { key: "z".into(), presses: 1 },
+    ]);
+    let outcome = run(&c, &batch, &obs, &mut state).await;
+    assert_eq!((outcome.error, outcome.performed), (None, 2));
+    let after = AgentAction::Typed(vec![Action::KeyPress { key: "w".into(), presses: 1 }]);
+    run(&c, &after, &obs, &mut state).await;
+    assert_eq!(notepad_text(&c).await, "XyZw");
+}

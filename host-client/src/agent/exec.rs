@@ -210,7 +210,7 @@ async fn run_script(
     let mut host = GuestHost::new(client.clone(), Handle::current(), options.clone());
     let mut state = computer.clone();
     let delay = options.computer_action_delay;
-    let (result, state, host) = tokio::task::spawn_blocking(move || {
+    let (result, state, mut host) = tokio::task::spawn_blocking(move || {
         let globals = match lang {
             Lang::Computer => Globals { computer: Some(&mut state), computer_action_delay: delay, preimport: &[] },
             // Upstream runs pyautogui code as `python -c "import pyautogui; import time; ..."`.

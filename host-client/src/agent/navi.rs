@@ -30,7 +30,7 @@ use super::llm::{self, ApiKind, ModelClient, RetryPolicy, TokensField};
 use super::parse::{parse_navi_reply, parse_reply};
 use super::waa_prompts::{UserInputs, WaaPrompts};
 use super::{Agent, AgentAction, AgentError, LogValue, Observation, Prediction, StepLog};
-use crate::som::{annotate, Marks, ProposedEntity, SomConfig, SomInput, SomSources};
+use crate::som::{annotate, Marks, ProposedEntity, SomConfig, SomInput, SomOrigin, SomSources};
 use crate::task::Task;
 
 /// Environment variables the API key is read from, in order, when the configuration has none.
@@ -254,11 +254,15 @@ impl NaviAgent {
 
     /// The Set-of-Marks of `obs` from the configured source.
     async fn marks(&self, obs: &Observation) -> Result<Option<Marks>, AgentError> {
-        // The browser's DOM elements for `oss` and `mixed-oss`: none until
-        // observations carry them.
-        let dom: &[ProposedEntity] = &[];
-        let input =
-            SomInput { tree: obs.a11y.as_ref(), screenshot_png: &obs.screenshot_png, size: obs.screen_size(), dom };
+        // The browser's DOM elements for `oss` and `mixed-oss` (the episode reads
+        // them when `wants_dom` says so; none when no browser answered).
+        let dom = dom_entities(obs);
+        let input = SomInput {
+            tree: obs.a11y.as_ref(),
+            screenshot_png: &obs.screenshot_png,
+            size: obs.screen_size(),
+            dom: &dom,
+        };
         self.som.marks(&input).await.map_err(|err| AgentError::Model {
             endpoint: format!("the Set-of-Marks source `{}`", self.config.som.origin),
             reason: err.to_string(),
@@ -433,10 +437,25 @@ impl NaviAgent {
     }
 }
 
+/// The observation's DOM elements as Set-of-Marks entities (`text/html`; an
+/// element without text is listed as upstream lists it).
+fn dom_entities(obs: &Observation) -> Vec<ProposedEntity> {
+    obs.dom
+        .iter()
+        .flatten()
+        .map(|e| ProposedEntity::dom(e.rect, (!e.text.is_empty()).then(|| e.text.clone())))
+        .collect()
+}
+
 #[async_trait::async_trait]
 impl Agent for NaviAgent {
     fn name(&self) -> &str {
         "navi"
+    }
+
+    /// Upstream's `oss` pipelines start with the browser's DOM elements.
+    fn wants_dom(&self) -> bool {
+        matches!(self.config.som.origin, SomOrigin::Oss | SomOrigin::MixedOss)
     }
 
     async fn reset(&mut self, _task: &Task) {
@@ -551,8 +570,28 @@ mod tests {
     }
 
     #[test]
-    fn requests_carry_upstreams_sampling_defaults_and_the_right_length_field() {
-        let obs = Observation {
+    fn oss_origins_ask_for_the_dom_and_list_its_elements_as_upstream() {
+        let mut config = NaviConfig::new("http://x/v1", "gpt-4o");
+        assert!(!NaviAgent::new(config.clone()).unwrap().wants_dom());
+        config.som.detector_url = Some("http://127.0.0.1:9".into());
+        for (origin, wants) in [(SomOrigin::Oss, true), (SomOrigin::MixedOss, true), (SomOrigin::A11y, false)] {
+            config.som.origin = origin;
+            assert_eq!(NaviAgent::new(config.clone()).unwrap().wants_dom(), wants, "{origin}");
+        }
+        let mut obs = observation();
+        assert!(dom_entities(&obs).is_empty());
+        let rect = arena_shared::geometry::Rect::new(10, 20, 30, 40);
+        obs.dom = Some(vec![
+            crate::browser::DomElement { rect, text: "Sign in".into(), kind: "BUTTON".into() },
+            crate::browser::DomElement { rect, text: String::new(), kind: "A".into() },
+        ]);
+        let entities = dom_entities(&obs);
+        assert_eq!(entities, vec![ProposedEntity::dom(rect, Some("Sign in".into())), ProposedEntity::dom(rect, None)]);
+        assert_eq!(entities[1].text.as_deref(), Some("None"));
+    }
+
+    fn observation() -> Observation {
+        Observation {
             step: 1,
             instruction: "do it".into(),
             screenshot_png: Vec::new(),
@@ -572,7 +611,12 @@ mod tests {
             tracked_clipboard: None,
             clipboard: None,
             dom: None,
-        };
+        }
+    }
+
+    #[test]
+    fn requests_carry_upstreams_sampling_defaults_and_the_right_length_field() {
+        let obs = observation();
         let agent = NaviAgent::new(NaviConfig::new("http://x/v1", "gpt-4o")).unwrap();
         let body = agent.request_body(&obs, None, b"png");
         assert_eq!((body["temperature"].clone(), body["max_tokens"].clone()), (json!(1.0), json!(4096)));
