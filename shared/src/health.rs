@@ -70,6 +70,10 @@ pub struct HealthReport {
     /// Windows session id the server runs in, where known.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub session_id: Option<u32>,
+    /// The server process's integrity level and elevation (`High, elevated (full
+    /// administrator token)`), where the platform has them.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub integrity: Option<String>,
 }
 
 impl HealthReport {

@@ -321,6 +321,7 @@ fn health() {
             uptime_ms: 60_000,
             auth_required: true,
             session_id: Some(1),
+            integrity: Some("High, elevated (full administrator token)".into()),
         }
     );
 }

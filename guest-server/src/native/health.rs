@@ -63,6 +63,7 @@ fn redacted(mut report: HealthReport) -> HealthReport {
         component.detail = if component.ok { "up".into() } else { "down".into() };
     }
     report.session_id = None;
+    report.integrity = None;
     report
 }
 
@@ -84,6 +85,7 @@ async fn fresh_report(state: &AppState) -> HealthReport {
         uptime_ms: millis(state.started.elapsed()),
         auth_required: state.token.is_some(),
         session_id: state.desktop.session_id(),
+        integrity: state.desktop.integrity_level().ok(),
     }
 }
 

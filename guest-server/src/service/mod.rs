@@ -129,10 +129,48 @@ pub struct SupervisorOptions {
     #[arg(long)]
     pub allow_same_session: bool,
 
+    /// Which of the logged-on user's tokens the worker runs with. `elevated` (the
+    /// default): an administrator's full token when UAC splits it, so the worker can
+    /// read a token file only Administrators may read, drive elevated windows, and
+    /// start programs that need elevation. `user`: the token the session has (medium
+    /// integrity when UAC is on), as a program the user starts would get.
+    #[arg(long, value_enum, default_value_t = WorkerToken::Elevated)]
+    pub worker_token: WorkerToken,
+
     /// The serve options the worker gets, exactly as `arena-guest` takes them
     /// (e.g. `--bind 0.0.0.0 --port 5000 --token-file C:\arena\token`). They come last.
     #[arg(trailing_var_arg = true, allow_hyphen_values = true, value_name = "SERVE OPTIONS")]
     pub serve_args: Vec<String>,
+}
+
+/// `service install --worker-token`: which user token starts the worker.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, clap::ValueEnum)]
+pub enum WorkerToken {
+    /// The full administrator token when UAC gave the session a filtered one.
+    #[default]
+    Elevated,
+    /// The session's own token, filtered or not.
+    User,
+}
+
+/// What to start the worker with, given the session token's `TOKEN_ELEVATION_TYPE`
+/// (1 default, 2 full, 3 limited; `None` when it could not be read).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum TokenChoice {
+    /// The session's token as it is.
+    Session,
+    /// The token linked to it (`TokenLinkedToken`): the administrator's full token.
+    Linked,
+}
+
+/// Only a limited (filtered) administrator token has a linked full token worth
+/// taking; a default token (UAC off, or a standard user) and a full one are used
+/// as they are.
+pub fn choose_worker_token(wanted: WorkerToken, elevation_type: Option<i32>) -> TokenChoice {
+    match (wanted, elevation_type) {
+        (WorkerToken::Elevated, Some(3)) => TokenChoice::Linked,
+        _ => TokenChoice::Session,
+    }
 }
 
 /// The options of `logon-task install`.
@@ -224,6 +262,10 @@ pub fn service_run_args(options: &SupervisorOptions) -> Vec<String> {
     let mut args = vec!["service".to_owned(), "run".to_owned(), "--name".to_owned(), options.name.clone()];
     if options.allow_same_session {
         args.push("--allow-same-session".to_owned());
+    }
+    if options.worker_token != WorkerToken::default() {
+        args.push("--worker-token".to_owned());
+        args.push("user".to_owned());
     }
     args.push("--".to_owned());
     args.extend(options.serve_args.iter().cloned());
@@ -519,20 +561,48 @@ mod tests {
 
     #[test]
     fn the_service_command_line_parses_back_to_the_same_options() {
-        let options = SupervisorOptions {
+        let mut options = SupervisorOptions {
             name: "Arena Guest".into(),
             allow_same_session: true,
+            worker_token: WorkerToken::Elevated,
             // A serve option that looks like a supervisor option stays a serve option.
             serve_args: strings(&["--port", "5004", "--token-file", r"C:\Program Files\arena\token", "--name"]),
         };
         let args = service_run_args(&options);
         assert_eq!(
-            &args[..5],
-            strings(&["service", "run", "--name", "Arena Guest", "--allow-same-session"]).as_slice()
+            &args[..6],
+            strings(&["service", "run", "--name", "Arena Guest", "--allow-same-session", "--"]).as_slice()
         );
         let cli = Cli::try_parse_from(std::iter::once("arena-guest".to_owned()).chain(args)).unwrap();
         let Some(Command::Service(ServiceCommand::Run(back))) = cli.command else { panic!("not service run") };
         assert_eq!(back, options);
+
+        options.worker_token = WorkerToken::User;
+        let args = service_run_args(&options);
+        assert!(args.windows(2).any(|w| w == ["--worker-token", "user"]), "{args:?}");
+        let cli = Cli::try_parse_from(std::iter::once("arena-guest".to_owned()).chain(args)).unwrap();
+        let Some(Command::Service(ServiceCommand::Run(back))) = cli.command else { panic!("not service run") };
+        assert_eq!(back, options);
+    }
+
+    #[test]
+    fn only_a_filtered_administrator_token_is_swapped_for_its_linked_full_token() {
+        use TokenChoice::{Linked, Session};
+        // TOKEN_ELEVATION_TYPE: 1 default, 2 full, 3 limited.
+        let cases = [
+            (WorkerToken::Elevated, Some(3), Linked),
+            (WorkerToken::Elevated, Some(2), Session),
+            (WorkerToken::Elevated, Some(1), Session),
+            (WorkerToken::Elevated, None, Session),
+            (WorkerToken::User, Some(3), Session),
+        ];
+        for (wanted, kind, expected) in cases {
+            assert_eq!(choose_worker_token(wanted, kind), expected, "{wanted:?} {kind:?}");
+        }
+        let cli = parse(&["service", "install", "--worker-token", "user", "--port", "5000"]).unwrap();
+        let Some(Command::Service(ServiceCommand::Install(options))) = cli.command else { panic!("not install") };
+        assert_eq!(options.worker_token, WorkerToken::User);
+        assert!(parse(&["service", "install", "--worker-token", "root"]).is_err());
     }
 
     fn check_line(exe: &str, args: &[&str], expected: &str) {
@@ -650,6 +720,7 @@ mod tests {
         let install = ServiceCommand::Install(SupervisorOptions {
             name: DEFAULT_SERVICE_NAME.into(),
             allow_same_session: false,
+            worker_token: WorkerToken::Elevated,
             serve_args: strings(&["--port", "5000"]),
         });
         let err = execute_service(&install).unwrap_err();

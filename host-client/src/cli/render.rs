@@ -82,6 +82,9 @@ pub fn health(guest: &str, report: &HealthReport) -> String {
         })
         .collect();
     out.push_str(&table(&["COMPONENT", "STATE", "MS", "DETAIL"], &rows));
+    if let Some(integrity) = &report.integrity {
+        out.push_str(&format!("integrity: {integrity}\n"));
+    }
     out
 }
 
@@ -354,6 +357,7 @@ mod tests {
             uptime_ms: 1500,
             auth_required: true,
             session_id: None,
+            integrity: None,
         };
         let text = health("http://g:5000", &report);
         assert_eq!(
@@ -363,6 +367,8 @@ mod tests {
              capture        up     3   1440x900\n\
              accessibility  DOWN   12  no UIA\n"
         );
+        let elevated = HealthReport { integrity: Some("High, elevated (full administrator token)".into()), ..report };
+        assert!(health("g", &elevated).ends_with("integrity: High, elevated (full administrator token)\n"));
     }
 
     #[test]

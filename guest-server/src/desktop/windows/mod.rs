@@ -25,6 +25,7 @@
 
 pub mod pointer;
 pub mod session;
+pub mod shell;
 pub mod std_child;
 pub mod text;
 pub mod vk;

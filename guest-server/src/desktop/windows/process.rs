@@ -18,8 +18,7 @@ use std::time::{Duration, Instant};
 
 use windows::core::{PCWSTR, PWSTR};
 use windows::Win32::Foundation::{
-    SetHandleInformation, ERROR_BAD_EXE_FORMAT, ERROR_DIRECTORY, ERROR_FILE_NOT_FOUND, ERROR_PATH_NOT_FOUND, HANDLE,
-    HANDLE_FLAGS, HANDLE_FLAG_INHERIT, WAIT_OBJECT_0, WAIT_TIMEOUT,
+    SetHandleInformation, HANDLE, HANDLE_FLAGS, HANDLE_FLAG_INHERIT, WAIT_OBJECT_0, WAIT_TIMEOUT,
 };
 use windows::Win32::Globalization::{MultiByteToWideChar, CP_ACP, MULTI_BYTE_TO_WIDE_CHAR_FLAGS};
 use windows::Win32::Security::SECURITY_ATTRIBUTES;
@@ -35,7 +34,8 @@ use windows::Win32::System::Threading::{
 use windows::Win32::UI::Shell::ShellExecuteW;
 use windows::Win32::UI::WindowsAndMessaging::{SW_HIDE, SW_SHOWNORMAL};
 
-use super::sys::{is_win32, os, OwnedHandle};
+use super::sys::{os, OwnedHandle};
+use super::winsys;
 use crate::desktop::windows::text::{fold_newlines, wide_nul, CappedBuffer};
 use crate::desktop::{CommandSpec, DesktopError, DesktopResult, ExecLimits, ExecOutput};
 
@@ -78,15 +78,9 @@ fn program_name(cmd: &CommandSpec) -> String {
 }
 
 fn spawn_error(cmd: &CommandSpec, err: &windows::core::Error) -> DesktopError {
-    if is_win32(err, ERROR_FILE_NOT_FOUND) || is_win32(err, ERROR_PATH_NOT_FOUND) {
-        DesktopError::NotFound(format!("program {} not found", program_name(cmd)))
-    } else if is_win32(err, ERROR_DIRECTORY) {
-        DesktopError::NotFound(format!("working directory of {} not found", program_name(cmd)))
-    } else if is_win32(err, ERROR_BAD_EXE_FORMAT) {
-        DesktopError::InvalidInput(format!("{} is not a valid Windows program", program_name(cmd)))
-    } else {
-        os("CreateProcessW", err)
-    }
+    winsys::win32_code(err.code().0)
+        .and_then(|code| winsys::spawn_failure(code, &program_name(cmd)))
+        .unwrap_or_else(|| os("CreateProcessW", err))
 }
 
 /// One pipe: the end the child inherits and the end this process keeps.

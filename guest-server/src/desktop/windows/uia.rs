@@ -25,7 +25,6 @@ use windows::Win32::Foundation::HWND;
 use windows::Win32::System::Com::{CoCreateInstance, CLSCTX_INPROC_SERVER, COINIT_MULTITHREADED};
 use windows::Win32::System::Variant::{VariantClear, VARIANT, VT_BOOL, VT_BSTR, VT_I4};
 use windows::Win32::UI::Accessibility::*;
-use windows::Win32::UI::WindowsAndMessaging::IsWindowVisible;
 
 use super::sys::{ComApartment, Hwnd};
 use super::window;
@@ -265,8 +264,8 @@ impl TreeSource for UiaSource<'_> {
         let hwnds: Vec<HWND> = if foreground_only { vec![window::foreground()] } else { window::top_level() };
         let mut out = Vec::new();
         for hwnd in hwnds {
-            // SAFETY: IsWindowVisible accepts any handle.
-            if hwnd.is_invalid() || !unsafe { IsWindowVisible(hwnd) }.as_bool() {
+            // Hidden, cloaked (suspended UWP apps, Start and Search) and tool windows are not walked.
+            if !window::seen(hwnd) {
                 continue;
             }
             // SAFETY: a COM call on the worker's live automation object.

@@ -122,10 +122,8 @@ impl TreeSource for Win32Source {
     type Elem = HWND;
 
     fn roots(&mut self, foreground_only: bool) -> DesktopResult<Vec<(u64, HWND)>> {
-        let visible = |hwnd: &HWND| {
-            // SAFETY: IsWindowVisible accepts any handle.
-            unsafe { IsWindowVisible(*hwnd) }.as_bool()
-        };
+        // Hidden, cloaked (suspended UWP apps, Start and Search) and tool windows are not walked.
+        let visible = |hwnd: &HWND| window::seen(*hwnd);
         let roots: Vec<HWND> = if foreground_only {
             Some(self.foreground).filter(|h| !h.is_invalid() && visible(h)).into_iter().collect()
         } else {

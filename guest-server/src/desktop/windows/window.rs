@@ -7,19 +7,21 @@ use arena_shared::geometry::Rect;
 use arena_shared::observation::WindowInfo;
 use windows::core::PWSTR;
 use windows::Win32::Foundation::{HWND, LPARAM, RECT, WPARAM};
+use windows::Win32::Graphics::Dwm::{DwmGetWindowAttribute, DWMWA_CLOAKED};
 use windows::Win32::System::Threading::{
     AttachThreadInput, GetCurrentThreadId, OpenProcess, QueryFullProcessImageNameW, PROCESS_NAME_WIN32,
     PROCESS_QUERY_LIMITED_INFORMATION,
 };
 use windows::Win32::UI::Input::KeyboardAndMouse::{
-    SendInput, INPUT, INPUT_0, INPUT_KEYBOARD, KEYBDINPUT, KEYEVENTF_KEYUP, VK_MENU,
+    SendInput, INPUT, INPUT_0, INPUT_KEYBOARD, KEYBDINPUT, KEYEVENTF_KEYUP, VIRTUAL_KEY,
 };
 use windows::Win32::UI::WindowsAndMessaging::{
-    BringWindowToTop, EnumWindows, GetClassNameW, GetForegroundWindow, GetWindowRect, GetWindowTextW,
-    GetWindowThreadProcessId, IsIconic, IsWindow, IsWindowVisible, IsZoomed, PostMessageW, SetForegroundWindow,
-    ShowWindow, SW_MAXIMIZE, SW_MINIMIZE, SW_RESTORE, WM_CLOSE,
+    BringWindowToTop, EnumWindows, GetClassNameW, GetForegroundWindow, GetWindowLongPtrW, GetWindowRect,
+    GetWindowTextW, GetWindowThreadProcessId, IsIconic, IsWindow, IsWindowVisible, IsZoomed, PostMessageW,
+    SetForegroundWindow, ShowWindow, GWL_EXSTYLE, SW_MAXIMIZE, SW_MINIMIZE, SW_RESTORE, WM_CLOSE,
 };
 
+use super::shell;
 use super::sys::{os, Hwnd, OwnedHandle};
 use crate::desktop::{DesktopError, DesktopResult, WindowState};
 
@@ -121,8 +123,10 @@ pub(super) fn list() -> Vec<WindowInfo> {
             let (pid, _) = owner(hwnd);
             let process_name = names.entry(pid).or_insert_with(|| process_name(pid)).clone();
             // SAFETY: these queries accept any window handle and only read its state.
-            let (visible, minimized, maximized) =
-                unsafe { (IsWindowVisible(hwnd).as_bool(), IsIconic(hwnd).as_bool(), IsZoomed(hwnd).as_bool()) };
+            let (minimized, maximized) = unsafe { (IsIconic(hwnd).as_bool(), IsZoomed(hwnd).as_bool()) };
+            // A window DWM cloaks (a suspended UWP app, the closed Start menu) is never drawn.
+            let facts = facts(hwnd);
+            let visible = facts.visible && facts.cloaked == 0;
             WindowInfo {
                 id: Hwnd::id(hwnd),
                 title: title(hwnd),
@@ -140,16 +144,45 @@ pub(super) fn list() -> Vec<WindowInfo> {
         .collect()
 }
 
-/// Taps Alt: Windows lets a process take the foreground after it sent the last input
-/// event, which is the trick pyautogui users and WAA's `switch_to_application` rely on.
-fn tap_alt() {
-    let key = |flags| INPUT {
-        r#type: INPUT_KEYBOARD,
-        Anonymous: INPUT_0 { ki: KEYBDINPUT { wVk: VK_MENU, wScan: 0, dwFlags: flags, time: 0, dwExtraInfo: 0 } },
-    };
-    let inputs = [key(Default::default()), key(KEYEVENTF_KEYUP)];
-    // SAFETY: the slice holds two initialised INPUT structures of the size passed.
+/// Sends the keys that give this process the foreground right (see
+/// [`shell::foreground_unlock_keys`]: Alt with an unassigned key inside it, so no
+/// program enters menu mode), then lets them reach the input queue.
+fn unlock_foreground() {
+    let inputs: Vec<INPUT> = shell::foreground_unlock_keys()
+        .iter()
+        .map(|k| INPUT {
+            r#type: INPUT_KEYBOARD,
+            Anonymous: INPUT_0 {
+                ki: KEYBDINPUT {
+                    wVk: VIRTUAL_KEY(k.vk),
+                    wScan: 0,
+                    dwFlags: if k.up { KEYEVENTF_KEYUP } else { Default::default() },
+                    time: 0,
+                    dwExtraInfo: 0,
+                },
+            },
+        })
+        .collect();
+    // SAFETY: the slice holds initialised INPUT structures of the size passed.
     unsafe { SendInput(&inputs, std::mem::size_of::<INPUT>() as i32) };
+    std::thread::sleep(Duration::from_millis(shell::UNLOCK_SETTLE_MS));
+}
+
+/// What DWM and the window's styles say about `hwnd`.
+pub(super) fn facts(hwnd: HWND) -> shell::WindowFacts {
+    let mut cloaked = 0u32;
+    // SAFETY: `cloaked` is a writable u32 of the size passed; a failure leaves it 0 (not cloaked).
+    let _ = unsafe {
+        DwmGetWindowAttribute(hwnd, DWMWA_CLOAKED, (&raw mut cloaked).cast(), std::mem::size_of::<u32>() as u32)
+    };
+    // SAFETY: these queries accept any window handle and only read its state.
+    let (visible, ex_style) = unsafe { (IsWindowVisible(hwnd).as_bool(), GetWindowLongPtrW(hwnd, GWL_EXSTYLE) as u32) };
+    shell::WindowFacts { visible, cloaked, ex_style }
+}
+
+/// Whether a person could see `hwnd` as a window: the roots the trees walk.
+pub(super) fn seen(hwnd: HWND) -> bool {
+    !hwnd.is_invalid() && shell::seen_on_desktop(facts(hwnd))
 }
 
 fn wait_foreground(hwnd: HWND) -> bool {
@@ -180,7 +213,7 @@ pub(super) fn activate(id: u64) -> DesktopResult<()> {
             return Ok(());
         }
     }
-    tap_alt();
+    unlock_foreground();
     // SAFETY: as above.
     if unsafe { SetForegroundWindow(hwnd) }.as_bool() && wait_foreground(hwnd) {
         return Ok(());

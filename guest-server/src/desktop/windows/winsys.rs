@@ -264,3 +264,49 @@ mod tests {
         assert_eq!(decode_value(REG_SZ, &[b'h', 0, b'i', 0]), RegistryValue::String("hi".into()));
     }
 }
+
+/// The Win32 error code inside an `HRESULT_FROM_WIN32` value (`0x8007xxxx`), if it is one.
+pub fn win32_code(hresult: i32) -> Option<u32> {
+    let bits = hresult as u32;
+    (bits & 0xFFFF_0000 == 0x8007_0000).then_some(bits & 0xFFFF)
+}
+
+/// What starting `program` failing with Win32 error `code` means, in words a caller
+/// can act on; `None` for codes without a better message than the system's own.
+pub fn spawn_failure(code: u32, program: &str) -> Option<DesktopError> {
+    Some(match code {
+        // ERROR_FILE_NOT_FOUND, ERROR_PATH_NOT_FOUND
+        2 | 3 => DesktopError::NotFound(format!("program {program} not found")),
+        // ERROR_DIRECTORY
+        267 => DesktopError::NotFound(format!("working directory of {program} not found")),
+        // ERROR_BAD_EXE_FORMAT
+        193 => DesktopError::InvalidInput(format!("{program} is not a valid Windows program")),
+        // ERROR_ELEVATION_REQUIRED: the program's manifest asks for administrator rights.
+        740 => DesktopError::PermissionDenied(format!(
+            "{program} needs elevation (error 740) and the server is not elevated: install the service with \
+             --worker-token elevated (the default) or start arena-guest as administrator"
+        )),
+        // ERROR_ACCESS_DENIED
+        5 => DesktopError::PermissionDenied(format!(
+            "access denied starting {program} (error 5): the server's user may not run it, or it is blocked"
+        )),
+        _ => return None,
+    })
+}
+
+#[cfg(test)]
+mod spawn_tests {
+    use super::*;
+
+    #[test]
+    fn spawn_failures_name_the_program_and_what_to_do() {
+        assert_eq!(win32_code(0x8007_02E4_u32 as i32), Some(740));
+        assert_eq!(win32_code(0x8000_4005_u32 as i32), None);
+        let err = spawn_failure(740, "regedit.exe").unwrap();
+        assert!(matches!(err, DesktopError::PermissionDenied(_)), "{err:?}");
+        assert!(err.to_string().contains("regedit.exe needs elevation (error 740)"), "{err}");
+        assert!(matches!(spawn_failure(2, "x.exe"), Some(DesktopError::NotFound(m)) if m == "program x.exe not found"));
+        assert!(matches!(spawn_failure(5, "x.exe"), Some(DesktopError::PermissionDenied(_))));
+        assert!(spawn_failure(1455, "x.exe").is_none());
+    }
+}

@@ -26,7 +26,10 @@ use windows::Win32::Foundation::{
     SetHandleInformation, ERROR_FAILED_SERVICE_CONTROLLER_CONNECT, ERROR_NO_TOKEN, HANDLE, HANDLE_FLAGS,
     HANDLE_FLAG_INHERIT, WAIT_OBJECT_0,
 };
-use windows::Win32::Security::SECURITY_ATTRIBUTES;
+use windows::Win32::Security::{
+    DuplicateTokenEx, GetTokenInformation, SecurityImpersonation, TokenElevationType, TokenLinkedToken, TokenPrimary,
+    SECURITY_ATTRIBUTES, TOKEN_ALL_ACCESS, TOKEN_ELEVATION_TYPE, TOKEN_LINKED_TOKEN,
+};
 use windows::Win32::System::Environment::{CreateEnvironmentBlock, DestroyEnvironmentBlock};
 use windows::Win32::System::Pipes::CreatePipe;
 use windows::Win32::System::RemoteDesktop::{WTSGetActiveConsoleSessionId, WTSQueryUserToken};
@@ -47,8 +50,8 @@ use windows::Win32::UI::Shell::{FOLDERID_ProgramData, SHGetKnownFolderPath, KF_F
 
 use crate::desktop::windows::sys::{describe, CoTaskString, OwnedHandle};
 use crate::service::{
-    log_dir, rotate_log, service_run_args, supervisor_step, worker_command_line, Backoff, ServiceCliError,
-    ServiceCommand, SupervisorOptions, SupervisorStep, LOG_MAX_BYTES,
+    choose_worker_token, log_dir, rotate_log, service_run_args, supervisor_step, worker_command_line, Backoff,
+    ServiceCliError, ServiceCommand, SupervisorOptions, SupervisorStep, TokenChoice, WorkerToken, LOG_MAX_BYTES,
 };
 
 /// How long a worker gets to stop after its standard input closes, before it is terminated.
@@ -523,6 +526,64 @@ fn wide(s: &str) -> Vec<u16> {
     s.encode_utf16().chain(std::iter::once(0)).collect()
 }
 
+/// The token the worker starts with: the session's, or (when `--worker-token elevated`
+/// and UAC gave the session a filtered administrator token) the linked full token as a
+/// primary token. Any failure keeps the session's token and says so in the log.
+fn worker_token(session_token: OwnedHandle, wanted: WorkerToken) -> OwnedHandle {
+    let mut kind = TOKEN_ELEVATION_TYPE::default();
+    let mut needed = 0u32;
+    // SAFETY: `kind` is a writable TOKEN_ELEVATION_TYPE of the size passed; the token is live.
+    let read = unsafe {
+        GetTokenInformation(
+            session_token.raw(),
+            TokenElevationType,
+            Some((&raw mut kind).cast()),
+            size_of::<TOKEN_ELEVATION_TYPE>() as u32,
+            &mut needed,
+        )
+    }
+    .ok()
+    .map(|()| kind.0);
+    if choose_worker_token(wanted, read) == TokenChoice::Session {
+        tracing::info!(elevation_type = ?read, ?wanted, "the worker runs with the session's token");
+        return session_token;
+    }
+    let mut linked = TOKEN_LINKED_TOKEN::default();
+    // SAFETY: `linked` is a writable TOKEN_LINKED_TOKEN of the size passed; the token is live.
+    let got = unsafe {
+        GetTokenInformation(
+            session_token.raw(),
+            TokenLinkedToken,
+            Some((&raw mut linked).cast()),
+            size_of::<TOKEN_LINKED_TOKEN>() as u32,
+            &mut needed,
+        )
+    };
+    if let Err(err) = got {
+        tracing::warn!(err = %describe(&err), "no linked token: the worker runs with the filtered (medium) token");
+        return session_token;
+    }
+    let Some(linked) = OwnedHandle::new(linked.LinkedToken) else {
+        tracing::warn!("the linked token is empty: the worker runs with the filtered (medium) token");
+        return session_token;
+    };
+    let mut primary = HANDLE::default();
+    // SAFETY: the linked token is live; `primary` is a valid out-pointer owned right after.
+    let duplicated = unsafe {
+        DuplicateTokenEx(linked.raw(), TOKEN_ALL_ACCESS, None, SecurityImpersonation, TokenPrimary, &mut primary)
+    };
+    match duplicated.ok().and_then(|()| OwnedHandle::new(primary)) {
+        Some(primary) => {
+            tracing::info!("the worker runs with the user's full administrator token (high integrity)");
+            primary
+        }
+        None => {
+            tracing::warn!("could not make a primary token of the linked token: the worker runs with the filtered one");
+            session_token
+        }
+    }
+}
+
 /// Starts the worker in `session` as its logged-on user; or, when that user's token
 /// cannot be had and `--allow-same-session` was given, in this process's own session.
 ///
@@ -547,6 +608,7 @@ fn launch_worker(context: &RunContext, session: u32) -> Result<Worker, LaunchErr
         }
         Err(err) => return Err(failed("WTSQueryUserToken (the service must run as LocalSystem)", &err)),
     };
+    let token = token.map(|session_token| worker_token(session_token, context.options.worker_token));
 
     let environment = match &token {
         Some(token) => {
