@@ -231,6 +231,37 @@ pub struct A11yTree {
     pub elapsed_ms: u64,
     /// Rectangles are in this space.
     pub coordinate_space: CoordinateSpace,
+    /// How each top-level window's walk went, in the tree's window order (skipped
+    /// windows included): where the budget went and which windows came back partial.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub windows_walked: Vec<WindowWalk>,
+}
+
+/// One top-level window's walk.
+#[derive(Debug, Clone, PartialEq, Eq, Default, Serialize, Deserialize)]
+pub struct WindowWalk {
+    /// The window's id (the HWND on Windows).
+    pub window_id: u64,
+    /// Nodes kept from it.
+    pub nodes: u32,
+    /// Time spent on it.
+    pub ms: u64,
+    /// A budget, depth or width cap cut it.
+    #[serde(default)]
+    pub truncated: bool,
+    /// Its whole-subtree fetch failed and it was read element by element instead.
+    #[serde(default)]
+    pub partial: bool,
+    /// Why it was left out, when it was.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub skipped: Option<String>,
+}
+
+impl WindowWalk {
+    /// A window that was not walked, and why.
+    pub fn skipped(window_id: u64, why: &str) -> WindowWalk {
+        WindowWalk { window_id, skipped: Some(why.to_owned()), ..WindowWalk::default() }
+    }
 }
 
 /// Body of `POST /v1/windows/activate` and `/v1/windows/close`.

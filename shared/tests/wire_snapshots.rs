@@ -155,6 +155,7 @@ fn observations() {
             node_count: 2,
             elapsed_ms: 4,
             coordinate_space: CoordinateSpace::Physical,
+            windows_walked: Vec::new(),
         }
     );
     assert_json_snapshot!(

@@ -18,9 +18,9 @@
 use std::time::{Duration, Instant};
 
 use arena_shared::geometry::{CoordinateSpace, Rect};
-use arena_shared::observation::{A11yBackend, A11yNode, A11yStates, A11yTree, TreeBudget};
+use arena_shared::observation::{A11yBackend, A11yNode, A11yStates, A11yTree, TreeBudget, WindowWalk};
 
-use super::DesktopResult;
+use super::{DesktopError, DesktopResult};
 
 /// A window that gets less than this many milliseconds is still given this much, so
 /// a share never rounds down to nothing.
@@ -31,7 +31,7 @@ const MIN_WINDOW_NODES: u32 = 16;
 /// Where elements come from. `Elem` is whatever handle the source uses (an HWND, a
 /// cached UIA element); it never leaves the thread the walk runs on.
 pub trait TreeSource {
-    type Elem;
+    type Elem: Clone;
 
     /// The visible top-level windows, topmost first, with their window ids (HWNDs);
     /// only the foreground one when `foreground_only`.
@@ -41,14 +41,37 @@ pub trait TreeSource {
     /// The enumeration failing as a whole.
     fn roots(&mut self, foreground_only: bool) -> DesktopResult<Vec<(u64, Self::Elem)>>;
 
+    /// The foreground window's id, when the source knows it: that window is walked
+    /// first and with the larger share, since it is the one the agent works in.
+    fn foreground_id(&mut self) -> Option<u64> {
+        None
+    }
+
     /// Readies one window for reading, given the time it may take (UIA: one cached
-    /// subtree fetch). The default does nothing.
+    /// subtree fetch, all or nothing). The default does nothing.
     ///
     /// # Errors
     ///
-    /// The window being gone, hung or refusing; the walk skips it and flags the tree truncated.
-    fn prepare(&mut self, root: Self::Elem, _time: Duration) -> DesktopResult<Self::Elem> {
-        Ok(root)
+    /// The window being gone, hung or refusing; the walk then tries [`TreeSource::prepare_partial`].
+    fn prepare(&mut self, root: &Self::Elem, _time: Duration) -> DesktopResult<Self::Elem> {
+        Ok(root.clone())
+    }
+
+    /// A slower way to read a window whose [`TreeSource::prepare`] failed, element by
+    /// element, so that what can be read within `time` is kept (UIA: a small cache
+    /// request per element instead of the whole subtree at once). The default gives up
+    /// with `failed`, and the walk skips the window.
+    ///
+    /// # Errors
+    ///
+    /// The window cannot be read at all.
+    fn prepare_partial(
+        &mut self,
+        _root: &Self::Elem,
+        _time: Duration,
+        failed: DesktopError,
+    ) -> DesktopResult<Self::Elem> {
+        Err(failed)
     }
 
     /// The element's properties.
@@ -71,6 +94,24 @@ struct Walk {
 struct Share {
     nodes: u32,
     time: Duration,
+}
+
+/// Of what is left, the part the foreground window gets when other windows follow it.
+const FOREGROUND_PART: (u32, u32) = (3, 4);
+
+/// The foreground window's share: three quarters of what is left when other windows
+/// follow (they split the rest, plus whatever it leaves unused), all of it otherwise.
+fn foreground_share(nodes_left: u32, time_left: Duration, windows_left: usize) -> Share {
+    if windows_left <= 1 {
+        return share(nodes_left, time_left, 1);
+    }
+    let (num, den) = FOREGROUND_PART;
+    let nodes = u32::try_from(u64::from(nodes_left) * u64::from(num) / u64::from(den)).unwrap_or(nodes_left);
+    let ms = u64::try_from(time_left.as_millis()).unwrap_or(u64::MAX);
+    Share {
+        nodes: nodes.max(MIN_WINDOW_NODES).min(nodes_left),
+        time: Duration::from_millis((ms / u64::from(den) * u64::from(num)).max(MIN_WINDOW_MS).min(ms)),
+    }
 }
 
 /// A fair share of what is left for the next window, with `windows_left` windows
@@ -124,11 +165,16 @@ impl Walk {
     }
 }
 
-/// Walks `source` within `budget`: the shown top-level windows, topmost first.
+/// Walks `source` within `budget`: the shown top-level windows, listed topmost first.
 ///
-/// Each window gets a fair share of the nodes and time still left (see the module
-/// documentation), so one huge window cannot starve the others; a window that fails
-/// to prepare is skipped. Any cut flags the tree `truncated`.
+/// The foreground window is walked first with three quarters of the budget (see
+/// [`foreground_share`]); the others then get fair shares of the nodes and time
+/// still left (see the module documentation), so one huge window cannot starve the
+/// others. A window whose [`TreeSource::prepare`] fails is read element by element
+/// through [`TreeSource::prepare_partial`] and keeps what fits; one that cannot be
+/// read at all is skipped. Any cut flags the tree `truncated`, and
+/// [`A11yTree::windows_walked`] says per window how many nodes, how long, and whether
+/// it was cut, partial or skipped.
 ///
 /// # Errors
 ///
@@ -149,37 +195,74 @@ pub fn walk<S: TreeSource>(
         roots.truncate(keep);
     }
     let total = roots.len();
-    let mut windows = Vec::new();
-    for (index, (window_id, root)) in roots.into_iter().enumerate() {
+    // The order of walking: the foreground window first, then the others topmost first.
+    let foreground = source.foreground_id().and_then(|id| roots.iter().position(|(w, _)| *w == id));
+    let mut order: Vec<usize> = (0..total).collect();
+    if let Some(pos) = foreground {
+        order.remove(pos);
+        order.insert(0, pos);
+    }
+    let mut slots: Vec<Option<A11yNode>> = vec![None; total];
+    let mut walked: Vec<Option<WindowWalk>> = vec![None; total];
+    for (k, &i) in order.iter().enumerate() {
+        let (window_id, root) = &roots[i];
+        let window_id = *window_id;
         let time_left = total_time.saturating_sub(started.elapsed());
         let nodes_left = budget.max_nodes.saturating_sub(walk.count);
         if time_left.is_zero() || nodes_left == 0 {
             walk.truncated = true;
+            for &j in &order[k..] {
+                walked[j] = Some(WindowWalk::skipped(roots[j].0, "the tree's budget was spent"));
+            }
             break;
         }
-        let share = share(nodes_left, time_left, total - index);
+        let share = if Some(i) == foreground {
+            foreground_share(nodes_left, time_left, total - k)
+        } else {
+            share(nodes_left, time_left, total - k)
+        };
         let window_started = Instant::now();
-        let root = match source.prepare(root, share.time) {
+        let deadline = window_started + share.time;
+        let (prepared, partial) = match source.prepare(root, share.time) {
+            Ok(prepared) => (Ok(prepared), false),
+            Err(err) => {
+                tracing::debug!(window_id, %err, "the window's cached fetch failed; reading it element by element");
+                let left = deadline.saturating_duration_since(Instant::now());
+                (source.prepare_partial(root, left, err), true)
+            }
+        };
+        let root = match prepared {
             Ok(root) => root,
             Err(err) => {
                 tracing::debug!(window_id, %err, "skipping a window the accessibility source could not read");
                 walk.truncated = true;
+                walked[i] = Some(WindowWalk::skipped(window_id, &err.to_string()));
                 continue;
             }
         };
-        let deadline = window_started + share.time;
+        let (count_before, truncated_before) = (walk.count, walk.truncated);
+        walk.truncated = partial;
         let limit = walk.count.saturating_add(share.nodes);
-        if let Some(node) = walk.emit(source, &root, 1, window_id, limit, deadline) {
-            windows.push(node);
-        }
+        slots[i] = walk.emit(source, &root, 1, window_id, limit, deadline);
+        let cut = walk.truncated;
+        walk.truncated |= truncated_before;
+        walked[i] = Some(WindowWalk {
+            window_id,
+            nodes: walk.count - count_before,
+            ms: u64::try_from(window_started.elapsed().as_millis()).unwrap_or(u64::MAX),
+            truncated: cut,
+            partial,
+            skipped: None,
+        });
     }
     Ok(A11yTree {
         backend,
-        windows,
+        windows: slots.into_iter().flatten().collect(),
         truncated: walk.truncated,
         node_count: walk.count,
         elapsed_ms: u64::try_from(started.elapsed().as_millis()).unwrap_or(u64::MAX),
         coordinate_space: CoordinateSpace::Physical,
+        windows_walked: walked.into_iter().flatten().collect(),
     })
 }
 
@@ -388,6 +471,8 @@ pub(crate) mod fake {
         pub(crate) cost_ms: u64,
         /// `prepare` fails for this root.
         pub(crate) broken: bool,
+        /// `prepare` times out for this root but `prepare_partial` reads it.
+        pub(crate) partial: bool,
     }
 
     #[derive(Debug, Default)]
@@ -400,7 +485,7 @@ pub(crate) mod fake {
 
     impl FakeTree {
         pub(crate) fn add(&mut self, name: &str, children: Vec<usize>) -> usize {
-            self.nodes.push(FakeNode { name: name.to_owned(), children, cost_ms: 0, broken: false });
+            self.nodes.push(FakeNode { name: name.to_owned(), children, cost_ms: 0, broken: false, partial: false });
             self.nodes.len() - 1
         }
 
@@ -425,12 +510,24 @@ pub(crate) mod fake {
                 .collect())
         }
 
-        fn prepare(&mut self, root: usize, time: Duration) -> DesktopResult<usize> {
-            self.prepared.push((root, time));
-            if self.nodes[root].broken {
+        fn foreground_id(&mut self) -> Option<u64> {
+            self.foreground.map(|r| r as u64 + 100)
+        }
+
+        fn prepare(&mut self, root: &usize, time: Duration) -> DesktopResult<usize> {
+            self.prepared.push((*root, time));
+            if self.nodes[*root].broken || self.nodes[*root].partial {
                 return Err(crate::desktop::DesktopError::Timeout { op: "prepare", ms: 1 });
             }
-            Ok(root)
+            Ok(*root)
+        }
+
+        fn prepare_partial(&mut self, root: &usize, _time: Duration, failed: DesktopError) -> DesktopResult<usize> {
+            if self.nodes[*root].partial {
+                Ok(*root)
+            } else {
+                Err(failed)
+            }
         }
 
         fn record(&mut self, elem: &usize) -> A11yNode {
@@ -563,6 +660,55 @@ mod tests {
         // The first of two windows is offered half of the time.
         let offered = tree.prepared[0].1;
         assert!(offered <= Duration::from_millis(5_000) && offered >= Duration::from_millis(4_900), "{offered:?}");
+    }
+
+    #[test]
+    fn a_window_whose_cached_fetch_times_out_still_yields_a_partial_tree() {
+        let mut tree = FakeTree::default();
+        let heavy = tree.window("heavy", 5);
+        tree.nodes[heavy].partial = true;
+        let broken = tree.window("broken", 1);
+        tree.nodes[broken].broken = true;
+        tree.window("fine", 2);
+        let out = walk(&mut tree, A11yBackend::Uia, &TreeBudget::WAA, false).unwrap();
+        let listed: Vec<&str> = out.windows.iter().map(|w| w.name.as_str()).collect();
+        assert_eq!(listed, ["heavy", "fine"]);
+        assert_eq!(out.windows[0].children.len(), 5, "the partial read keeps what it reads");
+        assert!(out.truncated);
+        let stats: Vec<(u64, u32, bool, bool, bool)> = out
+            .windows_walked
+            .iter()
+            .map(|w| (w.window_id, w.nodes, w.partial, w.truncated, w.skipped.is_some()))
+            .collect();
+        assert_eq!(
+            stats,
+            [
+                (heavy as u64 + 100, 6, true, true, false),
+                (broken as u64 + 100, 0, false, false, true),
+                (tree.roots[2] as u64 + 100, 3, false, false, false),
+            ]
+        );
+    }
+
+    #[test]
+    fn the_foreground_window_is_walked_first_with_most_of_the_budget_and_listed_in_z_order() {
+        let mut tree = FakeTree::default();
+        tree.window("top", 200);
+        let fg = tree.window("working", 200);
+        tree.window("bottom", 200);
+        tree.foreground = Some(fg);
+        let out = walk(&mut tree, A11yBackend::Uia, &budget(50, 2048, 100, 10_000), false).unwrap();
+        // Walked (prepared) first, offered three quarters of the time.
+        assert_eq!(tree.prepared[0].0, fg);
+        let offered = tree.prepared[0].1;
+        assert!(offered >= Duration::from_millis(7_400) && offered <= Duration::from_millis(7_500), "{offered:?}");
+        // Listed in z-order all the same, and it got 75 of the 100 nodes.
+        let listed: Vec<&str> = out.windows.iter().map(|w| w.name.as_str()).collect();
+        assert_eq!(listed, ["top", "working", "bottom"]);
+        assert_eq!(out.windows[1].children.len(), 74);
+        assert!(out.windows[0].children.len() < 20, "{}", out.windows[0].children.len());
+        assert!(out.node_count <= 100);
+        assert_eq!(foreground_share(100, Duration::from_millis(1000), 1), share(100, Duration::from_millis(1000), 1));
     }
 
     #[test]

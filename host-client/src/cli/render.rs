@@ -330,6 +330,7 @@ mod tests {
             node_count: 2,
             elapsed_ms: 7,
             coordinate_space: CoordinateSpace::Physical,
+            windows_walked: Vec::new(),
         };
         assert_eq!(
             outline(&tree),

@@ -177,6 +177,7 @@ mod tests {
             node_count: 0,
             elapsed_ms: 0,
             coordinate_space: CoordinateSpace::Physical,
+            windows_walked: Vec::new(),
         }
     }
 

@@ -37,6 +37,7 @@ fn tree(rect: Rect, children: Vec<A11yNode>) -> A11yTree {
         node_count: 0,
         elapsed_ms: 0,
         coordinate_space: CoordinateSpace::Physical,
+        windows_walked: Vec::new(),
     }
 }
 

@@ -10,15 +10,15 @@ use arena_shared::geometry::{Point, Rect};
 use arena_shared::keys::{parse_chord, Key};
 use windows::Win32::Foundation::POINT;
 use windows::Win32::UI::Input::KeyboardAndMouse::{
-    MapVirtualKeyW, SendInput, VkKeyScanW, INPUT, INPUT_0, INPUT_KEYBOARD, INPUT_MOUSE, KEYBDINPUT, KEYBD_EVENT_FLAGS,
-    KEYEVENTF_EXTENDEDKEY, KEYEVENTF_KEYUP, KEYEVENTF_UNICODE, MAPVK_VK_TO_VSC, MOUSEEVENTF_ABSOLUTE,
-    MOUSEEVENTF_HWHEEL, MOUSEEVENTF_LEFTDOWN, MOUSEEVENTF_LEFTUP, MOUSEEVENTF_MIDDLEDOWN, MOUSEEVENTF_MIDDLEUP,
-    MOUSEEVENTF_MOVE, MOUSEEVENTF_RIGHTDOWN, MOUSEEVENTF_RIGHTUP, MOUSEEVENTF_VIRTUALDESK, MOUSEEVENTF_WHEEL,
-    MOUSEINPUT, MOUSE_EVENT_FLAGS, VIRTUAL_KEY,
+    GetKeyboardLayout, MapVirtualKeyW, SendInput, VkKeyScanExW, INPUT, INPUT_0, INPUT_KEYBOARD, INPUT_MOUSE,
+    KEYBDINPUT, KEYBD_EVENT_FLAGS, KEYEVENTF_EXTENDEDKEY, KEYEVENTF_KEYUP, KEYEVENTF_UNICODE, MAPVK_VK_TO_VSC,
+    MOUSEEVENTF_ABSOLUTE, MOUSEEVENTF_HWHEEL, MOUSEEVENTF_LEFTDOWN, MOUSEEVENTF_LEFTUP, MOUSEEVENTF_MIDDLEDOWN,
+    MOUSEEVENTF_MIDDLEUP, MOUSEEVENTF_MOVE, MOUSEEVENTF_RIGHTDOWN, MOUSEEVENTF_RIGHTUP, MOUSEEVENTF_VIRTUALDESK,
+    MOUSEEVENTF_WHEEL, MOUSEINPUT, MOUSE_EVENT_FLAGS, VIRTUAL_KEY,
 };
 use windows::Win32::UI::WindowsAndMessaging::{
-    GetCursorPos, GetSystemMetrics, SetCursorPos, SM_CXVIRTUALSCREEN, SM_CYVIRTUALSCREEN, SM_XVIRTUALSCREEN,
-    SM_YVIRTUALSCREEN,
+    GetCursorPos, GetForegroundWindow, GetSystemMetrics, GetWindowThreadProcessId, SetCursorPos, SM_CXVIRTUALSCREEN,
+    SM_CYVIRTUALSCREEN, SM_XVIRTUALSCREEN, SM_YVIRTUALSCREEN,
 };
 
 use super::sys::os;
@@ -129,11 +129,18 @@ fn check_repeat(what: &str, n: u32) -> DesktopResult<()> {
     Ok(())
 }
 
-/// What the current keyboard layout says about `c`.
+/// What the keyboard layout of the foreground window's thread says about `c`: what
+/// the keys the agent presses mean to the program that gets them (this thread's own
+/// layout may differ).
 fn layout(c: char) -> Option<CharKey> {
     let unit = u16::try_from(u32::from(c)).ok()?;
-    // SAFETY: VkKeyScanW takes any UTF-16 unit and reads the thread's layout.
-    CharKey::from_vk_scan(unsafe { VkKeyScanW(unit) })
+    // SAFETY: no preconditions; a missing foreground window gives thread 0, whose layout
+    // query answers the system default. VkKeyScanExW takes any UTF-16 unit and layout.
+    let scan = unsafe {
+        let thread = GetWindowThreadProcessId(GetForegroundWindow(), None);
+        VkKeyScanExW(unit, GetKeyboardLayout(thread))
+    };
+    CharKey::from_vk_scan(scan)
 }
 
 fn key_input(stroke: Stroke) -> INPUT {
@@ -256,7 +263,7 @@ pub(super) fn perform(action: &Action) -> DesktopResult<()> {
             send_strokes(&strokes, "key up")
         }
         Action::TypeText { text, interval_ms } => {
-            let groups = vk::type_text(text);
+            let groups = vk::type_text(text, &layout);
             match interval_ms.filter(|&ms| ms > 0) {
                 None => send_strokes(&groups.concat(), "type text"),
                 Some(ms) => {

@@ -5,7 +5,15 @@
 //! top-level window costs one cross-process call (`BuildUpdatedCache` with
 //! `TreeScope_Subtree` and every property the output needs); the walk then reads the
 //! cache. `IUIAutomation2`'s transaction timeout bounds that call by the window's share
-//! of the time budget.
+//! of the time budget. The tree is UIA's raw view (every element, as pywinauto's
+//! `backend="uia"`, which produced upstream's trees and marks, walks it), not the
+//! control view.
+//!
+//! That call is all or nothing: a heavy window (a browser page, LibreOffice, VS Code)
+//! that does not finish within its share adds nothing. So when it fails, the window is
+//! read element by element instead ([`TreeSource::prepare_partial`]): each element and
+//! then each child is fetched with a cache request for that element alone, through the
+//! raw-view walker, and the walk keeps whatever it reads before the window's deadline.
 //!
 //! If a request does not come back in time (a provider that hangs beyond the
 //! transaction timeout), the worker is abandoned: the next request starts a fresh
@@ -142,6 +150,10 @@ fn spawn_worker() -> DesktopResult<mpsc::Sender<Request>> {
 struct Uia {
     automation: IUIAutomation,
     cache: IUIAutomationCacheRequest,
+    /// The same properties for one element alone: the element-by-element fallback.
+    element_cache: IUIAutomationCacheRequest,
+    /// The raw-view walker the fallback moves through children with.
+    walker: IUIAutomationTreeWalker,
     /// For the per-window transaction timeout (Windows 8 and later).
     automation2: Option<IUIAutomation2>,
 }
@@ -160,18 +172,25 @@ fn setup() -> DesktopResult<Uia> {
         .or_else(|_| unsafe { CoCreateInstance(&CUIAutomation, None, CLSCTX_INPROC_SERVER) })
         .map_err(|err| unsupported("CoCreateInstance(CUIAutomation)", &err))?;
     // SAFETY: COM calls on live interfaces owned by this thread.
-    let cache = unsafe {
-        let cache = automation.CreateCacheRequest().map_err(|err| unsupported("CreateCacheRequest", &err))?;
-        for property in PROPERTIES {
-            cache.AddProperty(property).map_err(|err| unsupported("AddProperty", &err))?;
+    let request = |scope: TreeScope| -> DesktopResult<IUIAutomationCacheRequest> {
+        // SAFETY: COM calls on live interfaces owned by this thread.
+        unsafe {
+            let cache = automation.CreateCacheRequest().map_err(|err| unsupported("CreateCacheRequest", &err))?;
+            for property in PROPERTIES {
+                cache.AddProperty(property).map_err(|err| unsupported("AddProperty", &err))?;
+            }
+            cache.SetTreeScope(scope).map_err(|err| unsupported("SetTreeScope", &err))?;
+            let view = automation.RawViewCondition().map_err(|err| unsupported("RawViewCondition", &err))?;
+            cache.SetTreeFilter(&view).map_err(|err| unsupported("SetTreeFilter", &err))?;
+            Ok(cache)
         }
-        cache.SetTreeScope(TreeScope_Subtree).map_err(|err| unsupported("SetTreeScope", &err))?;
-        let view = automation.ControlViewCondition().map_err(|err| unsupported("ControlViewCondition", &err))?;
-        cache.SetTreeFilter(&view).map_err(|err| unsupported("SetTreeFilter", &err))?;
-        cache
     };
+    let cache = request(TreeScope_Subtree)?;
+    let element_cache = request(TreeScope_Element)?;
+    // SAFETY: a COM call on the live automation object.
+    let walker = unsafe { automation.RawViewWalker() }.map_err(|err| unsupported("RawViewWalker", &err))?;
     let automation2 = automation.cast::<IUIAutomation2>().ok();
-    Ok(Uia { automation, cache, automation2 })
+    Ok(Uia { automation, cache, element_cache, walker, automation2 })
 }
 
 fn worker_main(rx: &mpsc::Receiver<Request>) {
@@ -197,7 +216,7 @@ fn worker_main(rx: &mpsc::Receiver<Request>) {
         }
     };
     while let Ok(request) = rx.recv() {
-        let mut source = UiaSource { uia: &uia };
+        let mut source = UiaSource { uia: &uia, live: false };
         let result = a11y_walk::walk(&mut source, A11yBackend::Uia, &request.budget, request.foreground_only);
         let _ = request.reply.send(result);
     }
@@ -255,7 +274,12 @@ fn pattern<T>(elem: &IUIAutomationElement, available: UIA_PROPERTY_ID, read: imp
 
 struct UiaSource<'a> {
     uia: &'a Uia,
+    /// The window being walked is read element by element (its subtree fetch failed).
+    live: bool,
 }
+
+/// Longest one cross-process call of the element-by-element fallback may take.
+const LIVE_CALL_MS: u32 = 1_000;
 
 impl TreeSource for UiaSource<'_> {
     type Elem = IUIAutomationElement;
@@ -277,7 +301,33 @@ impl TreeSource for UiaSource<'_> {
         Ok(out)
     }
 
-    fn prepare(&mut self, root: IUIAutomationElement, time: Duration) -> DesktopResult<IUIAutomationElement> {
+    fn foreground_id(&mut self) -> Option<u64> {
+        let hwnd = window::foreground();
+        (!hwnd.is_invalid()).then(|| Hwnd::id(hwnd))
+    }
+
+    fn prepare_partial(
+        &mut self,
+        root: &IUIAutomationElement,
+        time: Duration,
+        _failed: DesktopError,
+    ) -> DesktopResult<IUIAutomationElement> {
+        self.live = true;
+        if let Some(a2) = &self.uia.automation2 {
+            let ms = u32::try_from(time.as_millis()).unwrap_or(u32::MAX).clamp(100, LIVE_CALL_MS);
+            // SAFETY: COM calls on the worker's live automation object.
+            unsafe {
+                let _ = a2.SetTransactionTimeout(ms);
+                let _ = a2.SetConnectionTimeout(ms);
+            }
+        }
+        // SAFETY: one cross-process call that fetches the root element's own properties.
+        unsafe { root.BuildUpdatedCache(&self.uia.element_cache) }
+            .map_err(|err| super::sys::os("BuildUpdatedCache(element)", &err))
+    }
+
+    fn prepare(&mut self, root: &IUIAutomationElement, time: Duration) -> DesktopResult<IUIAutomationElement> {
+        self.live = false;
         if let Some(a2) = &self.uia.automation2 {
             let ms = u32::try_from(time.as_millis()).unwrap_or(u32::MAX).max(100);
             // SAFETY: COM calls on the worker's live automation object.
@@ -337,6 +387,9 @@ impl TreeSource for UiaSource<'_> {
     }
 
     fn children(&mut self, elem: &IUIAutomationElement, limit: usize) -> Vec<IUIAutomationElement> {
+        if self.live {
+            return self.live_children(elem, limit);
+        }
         // SAFETY: reads the cached children array of a live element.
         let Ok(array) = (unsafe { elem.GetCachedChildren() }) else {
             return Vec::new();
@@ -347,5 +400,24 @@ impl TreeSource for UiaSource<'_> {
             // SAFETY: index < Length.
             .filter_map(|i| unsafe { array.GetElement(i as i32) }.ok())
             .collect()
+    }
+}
+
+impl UiaSource<'_> {
+    /// Up to `limit + 1` children of `elem` through the raw-view walker, each fetched
+    /// with its own properties cached (the fallback of a window whose subtree fetch failed).
+    fn live_children(&self, elem: &IUIAutomationElement, limit: usize) -> Vec<IUIAutomationElement> {
+        let mut out = Vec::new();
+        // SAFETY: cross-process calls on live elements, each bounded by the transaction timeout.
+        let mut next = unsafe { self.uia.walker.GetFirstChildElementBuildCache(elem, &self.uia.element_cache) };
+        while let Ok(child) = next {
+            if out.len() > limit {
+                break;
+            }
+            // SAFETY: as above.
+            next = unsafe { self.uia.walker.GetNextSiblingElementBuildCache(&child, &self.uia.element_cache) };
+            out.push(child);
+        }
+        out
     }
 }

@@ -9,11 +9,13 @@
 //! It is platform-neutral and tested natively; the `SendInput` and `MapVirtualKeyW`
 //! calls are in `desktop/windows/input.rs`.
 //!
-//! Differences from pyautogui, on purpose: a character the layout cannot type is sent
-//! as a Unicode keystroke (`KEYEVENTF_UNICODE`) instead of being dropped silently, and
-//! typed text ([`type_text`]) is always Unicode keystrokes, so it does not depend on
-//! the keyboard layout. Keys pyautogui knows but Windows has no key for (`fn`, `yen`)
-//! are no-ops, as in pyautogui.
+//! Typed text ([`type_text`]) goes as pyautogui's `write` sends it: every character the
+//! foreground window's layout has a key for is that key (with Shift when it needs it),
+//! so `keydown` handlers (a checkbox's Space, a web page, Calculator) see real keys.
+//! Differences from pyautogui, on purpose: a character the layout cannot type, or only
+//! with Ctrl or AltGr (which could fire a shortcut), is sent as a Unicode keystroke
+//! (`KEYEVENTF_UNICODE`) instead of being dropped silently. Keys pyautogui knows but
+//! Windows has no key for (`fn`, `yen`) are no-ops, as in pyautogui.
 
 use arena_shared::keys::Key;
 
@@ -257,10 +259,10 @@ pub fn chord(keys: &[Key], layout: &dyn Fn(char) -> Option<CharKey>) -> Vec<Stro
 }
 
 /// Strokes that type `text`, one group per character (so a caller can pause between
-/// characters): Unicode strokes for everything except line breaks (CRLF, CR or LF
-/// give one Enter) and tabs, which are sent as their keys because edit controls act on
-/// those keys rather than on the characters.
-pub fn type_text(text: &str) -> Vec<Vec<Stroke>> {
+/// characters, as pyautogui's `interval` does): line breaks (CRLF, CR or LF give one
+/// Enter) and tabs as their keys, a character the layout types plainly or with Shift
+/// as that key press, anything else as Unicode strokes.
+pub fn type_text(text: &str, layout: &dyn Fn(char) -> Option<CharKey>) -> Vec<Vec<Stroke>> {
     let mut groups = Vec::new();
     let mut chars = text.chars().peekable();
     while let Some(c) = chars.next() {
@@ -273,11 +275,14 @@ pub fn type_text(text: &str) -> Vec<Vec<Stroke>> {
             }
             '\n' => vec![vk(VK_RETURN, false), vk(VK_RETURN, true)],
             '\t' => vec![vk(VK_TAB, false), vk(VK_TAB, true)],
-            c => {
-                let mut g = unicode(c, false);
-                g.extend(unicode(c, true));
-                g
-            }
+            c => match layout(c) {
+                Some(key) if !key.ctrl && !key.alt => press(Key::Char(c), layout),
+                _ => {
+                    let mut g = unicode(c, false);
+                    g.extend(unicode(c, true));
+                    g
+                }
+            },
         };
         groups.push(group);
     }
@@ -397,16 +402,40 @@ mod tests {
 
     #[test]
     fn typed_text_is_unicode_with_enter_and_tab_as_keys() {
-        let groups = type_text("a\r\nb\tü\n");
+        let groups = type_text("a\r\nb\tü\n", &us);
         assert_eq!(groups.len(), 6);
-        assert_eq!(
-            groups[0],
-            vec![Stroke::Unicode { unit: 0x61, up: false }, Stroke::Unicode { unit: 0x61, up: true }]
-        );
+        // `a` is on the layout: its real key.
+        assert_eq!(groups[0], vec![Stroke::Vk { vk: 0x41, up: false }, Stroke::Vk { vk: 0x41, up: true }]);
         assert_eq!(groups[1], vec![Stroke::Vk { vk: VK_RETURN, up: false }, Stroke::Vk { vk: VK_RETURN, up: true }]);
         assert_eq!(groups[3], vec![Stroke::Vk { vk: VK_TAB, up: false }, Stroke::Vk { vk: VK_TAB, up: true }]);
-        assert_eq!(groups[4][0], Stroke::Unicode { unit: 0xFC, up: false });
-        assert_eq!(type_text("\r\r").len(), 2);
-        assert!(type_text("").is_empty());
+        // `ü` is not on a US layout: Unicode strokes.
+        assert_eq!(
+            groups[4],
+            vec![Stroke::Unicode { unit: 0xFC, up: false }, Stroke::Unicode { unit: 0xFC, up: true }]
+        );
+        assert_eq!(type_text("\r\r", &us).len(), 2);
+        assert!(type_text("", &us).is_empty());
+        // A capital holds Shift around its key.
+        let shifted = [
+            Stroke::Vk { vk: VK_SHIFT, up: false },
+            Stroke::Vk { vk: 0x48, up: false },
+            Stroke::Vk { vk: 0x48, up: true },
+            Stroke::Vk { vk: VK_SHIFT, up: true },
+        ];
+        assert_eq!(type_text("H", &us), vec![shifted.to_vec()]);
+        // On a German layout `ü` has its own key, and `@` needs AltGr (Ctrl+Alt): Unicode.
+        let de = |c: char| match c {
+            'ü' => Some(CharKey { vk: 0xBA, shift: false, ctrl: false, alt: false }),
+            '@' => Some(CharKey { vk: 0x51, shift: false, ctrl: true, alt: true }),
+            other => us(other),
+        };
+        assert_eq!(
+            type_text("ü", &de),
+            vec![vec![Stroke::Vk { vk: 0xBA, up: false }, Stroke::Vk { vk: 0xBA, up: true }]]
+        );
+        assert_eq!(
+            type_text("@", &de),
+            vec![vec![Stroke::Unicode { unit: 0x40, up: false }, Stroke::Unicode { unit: 0x40, up: true }]]
+        );
     }
 }

@@ -121,6 +121,10 @@ impl Win32Source {
 impl TreeSource for Win32Source {
     type Elem = HWND;
 
+    fn foreground_id(&mut self) -> Option<u64> {
+        (!self.foreground.is_invalid()).then(|| super::sys::Hwnd::id(self.foreground))
+    }
+
     fn roots(&mut self, foreground_only: bool) -> DesktopResult<Vec<(u64, HWND)>> {
         // Hidden, cloaked (suspended UWP apps, Start and Search) and tool windows are not walked.
         let visible = |hwnd: &HWND| window::seen(*hwnd);
