@@ -385,8 +385,8 @@ impl Interp<'_, '_> {
             None => items.clone(),
         };
         let order = merge_sort((0..items.len()).collect(), &mut |a, b| {
-            let (x, y) = if reverse { (&keys[a], &keys[b]) } else { (&keys[b], &keys[a]) };
-            // `b` goes first when it is strictly smaller (larger when reversed).
+            // `b` goes first when it is strictly smaller (strictly larger when reversed).
+            let (x, y) = if reverse { (&keys[b], &keys[a]) } else { (&keys[a], &keys[b]) };
             Ok(ops::compare(x, y)?.is_gt())
         })?;
         let mut slots: Vec<Option<Value>> = items.into_iter().map(Some).collect();

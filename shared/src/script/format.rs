@@ -358,7 +358,8 @@ pub(crate) fn percent(text: &str, args: &Value) -> Result<String, ScriptError> {
             's' | 'r' | 'a' => {
                 let text = if kind == 's' { arg.to_str() } else { arg.repr() };
                 spec.zero = false;
-                format_str(&text, &Spec { sign: None, ..spec }, "str")?
+                let align = Some(spec.align.unwrap_or('>'));
+                format_str(&text, &Spec { sign: None, align, ..spec }, "str")?
             }
             'd' | 'i' | 'u' | 'x' | 'X' | 'o' | 'c' => {
                 let i = match arg {

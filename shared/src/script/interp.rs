@@ -123,12 +123,13 @@ const REFUSED_BUILTINS: &[&str] = &[
 /// that no `except` catches.
 pub const MAX_STEPS: u64 = 100_000;
 
-/// How deeply user functions may call each other (CPython allows about 1000).
-pub const MAX_CALL_DEPTH: usize = 100;
+/// How deeply user functions may call each other (CPython allows about 1000; agent
+/// code rarely recurses, and every level costs the interpreter's own stack).
+pub const MAX_CALL_DEPTH: usize = 50;
 
 /// How deeply statements and expressions may nest while running, counting every
 /// call's own nesting, so the interpreter's stack stays small.
-const MAX_NESTING: usize = 1500;
+const MAX_NESTING: usize = 400;
 
 /// How many bytes (roughly) a run may allocate for values and printed text in total.
 const MAX_ALLOCATED: usize = 256 << 20;
@@ -484,141 +485,314 @@ impl Interp<'_, '_> {
         result
     }
 
+    /// Dispatches on the statement form; like [`Self::eval_uncharged`], every arm is
+    /// its own function to keep each nesting level's stack frame small.
     fn statement_inner(&mut self, stmt: &Stmt) -> Result<Flow, ScriptError> {
         match &stmt.kind {
-            StmtKind::Pass => {}
-            StmtKind::Break => return Ok(Flow::Break),
-            StmtKind::Continue => return Ok(Flow::Continue),
-            StmtKind::Expr(expr) => {
-                self.eval(expr)?;
-            }
-            StmtKind::Import(names) => {
-                for name in names {
-                    let module = find_module(&name.module)?;
-                    match &name.alias {
-                        Some(alias) => self.bind(alias, Value::Module(module)),
-                        None => {
-                            let top = name.module.split('.').next().unwrap_or(&name.module);
-                            let top = find_module(top)?;
-                            self.bind(top, Value::Module(top));
-                        }
-                    }
-                }
-            }
-            StmtKind::FromImport { module, names } => {
-                let module = find_module(module)?;
-                for (name, alias) in names {
-                    let full = format!("{module}.{name}");
-                    let value = match KNOWN_MODULES.iter().find(|m| **m == full) {
-                        Some(sub) => Value::Module(sub),
-                        None => self.module_attr(module, name).map_err(|_| {
-                            ScriptError::new(
-                                ErrorKind::Import,
-                                format!(
-                                    "cannot import name '{name}' from '{module}' (not supported by this interpreter)"
-                                ),
-                            )
-                        })?,
-                    };
-                    self.bind(alias.as_ref().unwrap_or(name), value);
-                }
-            }
-            StmtKind::Assign { targets, value } => {
-                let value = self.eval(value)?;
-                for target in targets {
-                    self.assign(target, value.clone(), false)?;
-                }
-            }
-            StmtKind::AugAssign { target, op, value } => self.aug_assign(target, *op, value)?,
-            StmtKind::If { test, body, orelse } => {
-                let branch = if self.eval(test)?.truthy() { body } else { orelse };
-                return self.block(branch);
-            }
-            StmtKind::While { test, body, orelse } => loop {
-                if !self.eval(test)?.truthy() {
-                    return self.block(orelse);
-                }
-                self.step()?;
-                match self.block(body)? {
-                    Flow::Break => return Ok(Flow::Normal),
-                    Flow::Normal | Flow::Continue => {}
-                    ret @ Flow::Return(_) => return Ok(ret),
-                }
-            },
-            StmtKind::For { target, iter, body, orelse } => {
-                let iterable = self.eval(iter)?;
-                let mut items = LoopIter::new(iterable)?;
-                while let Some(item) = items.next() {
-                    self.step()?;
-                    self.assign(target, item, false)?;
-                    match self.block(body)? {
-                        Flow::Break => return Ok(Flow::Normal),
-                        Flow::Normal | Flow::Continue => {}
-                        ret @ Flow::Return(_) => return Ok(ret),
-                    }
-                }
-                return self.block(orelse);
-            }
-            StmtKind::Try { body, handlers, orelse, finalbody } => {
-                let result = match self.block(body) {
-                    Err(err) if err.is_catchable() && !handlers.is_empty() => self.handle(err, handlers),
-                    Ok(Flow::Normal) => self.block(orelse),
-                    other => other,
-                };
-                if matches!(&result, Err(err) if !err.is_catchable()) || finalbody.is_empty() {
-                    return result;
-                }
-                return match self.block(finalbody)? {
-                    Flow::Normal => result,
-                    flow => Ok(flow),
-                };
-            }
-            StmtKind::Raise(exc) => {
-                let Some(exc) = exc else {
-                    return Err(self.handling.last().cloned().map_or_else(
-                        || ScriptError::new(ErrorKind::Runtime, "No active exception to reraise"),
-                        |mut e| {
-                            e.line = 0;
-                            e
-                        },
-                    ));
-                };
-                return Err(match self.eval(exc)? {
-                    Value::ExcType(kind) => ScriptError::new(kind, ""),
-                    Value::Exception(kind, message) => ScriptError::new(kind, message),
-                    _ => type_error("exceptions must derive from BaseException"),
-                });
-            }
-            StmtKind::Def(def) => {
-                let f = self.make_function(def)?;
-                self.bind(&def.name, f);
-            }
-            StmtKind::Return(value) => {
-                let value = match value {
-                    Some(v) => self.eval(v)?,
-                    None => Value::None,
-                };
-                return Ok(Flow::Return(value));
-            }
+            StmtKind::Pass => Ok(Flow::Normal),
+            StmtKind::Break => Ok(Flow::Break),
+            StmtKind::Continue => Ok(Flow::Continue),
+            StmtKind::Expr(expr) => self.run_expr(expr),
+            StmtKind::Import(names) => self.run_import(names),
+            StmtKind::FromImport { module, names } => self.run_from_import(module, names),
+            StmtKind::Assign { targets, value } => self.run_assign(targets, value),
+            StmtKind::AugAssign { target, op, value } => self.run_aug_assign(target, *op, value),
+            StmtKind::If { test, body, orelse } => self.run_if(test, body, orelse),
+            StmtKind::While { test, body, orelse } => self.run_while(test, body, orelse),
+            StmtKind::For { target, iter, body, orelse } => self.run_for(target, iter, body, orelse),
+            StmtKind::Try { body, handlers, orelse, finalbody } => self.run_try(body, handlers, orelse, finalbody),
+            StmtKind::Raise(exc) => self.run_raise(exc),
+            StmtKind::Def(def) => self.run_def(def),
+            StmtKind::Return(value) => self.run_return(value.as_ref()),
             StmtKind::Global(names) => {
                 if let Some(frame) = self.frames.last_mut() {
                     frame.global_names.extend(names.iter().cloned());
                 }
+                Ok(Flow::Normal)
             }
-            StmtKind::Assert { test, msg } => {
-                if !self.eval(test)?.truthy() {
-                    let message = match msg {
-                        Some(m) => self.eval(m)?.to_str(),
-                        None => String::new(),
-                    };
-                    return Err(ScriptError::new(ErrorKind::Assertion, message));
+            StmtKind::Assert { test, msg } => self.run_assert(test, msg),
+            StmtKind::Delete(targets) => self.run_delete(targets),
+        }
+    }
+
+    #[inline(never)]
+    fn run_expr(&mut self, expr: &Expr) -> Result<Flow, ScriptError> {
+        self.eval(expr)?;
+        Ok(Flow::Normal)
+    }
+
+    #[inline(never)]
+    fn run_assign(&mut self, targets: &[Target], value: &Expr) -> Result<Flow, ScriptError> {
+        let value = self.eval(value)?;
+        for target in targets {
+            self.assign(target, value.clone(), false)?;
+        }
+        Ok(Flow::Normal)
+    }
+
+    #[inline(never)]
+    fn run_aug_assign(&mut self, target: &Target, op: BinOp, value: &Expr) -> Result<Flow, ScriptError> {
+        self.aug_assign(target, op, value)?;
+        Ok(Flow::Normal)
+    }
+
+    #[inline(never)]
+    fn run_if(&mut self, test: &Expr, body: &[Stmt], orelse: &[Stmt]) -> Result<Flow, ScriptError> {
+        let branch = if self.eval(test)?.truthy() { body } else { orelse };
+        self.block(branch)
+    }
+
+    #[inline(never)]
+    fn run_def(&mut self, def: &Rc<Function>) -> Result<Flow, ScriptError> {
+        let f = self.make_function(def)?;
+        self.bind(&def.name, f);
+        Ok(Flow::Normal)
+    }
+
+    #[inline(never)]
+    fn run_return(&mut self, value: Option<&Expr>) -> Result<Flow, ScriptError> {
+        let value = match value {
+            Some(v) => self.eval(v)?,
+            None => Value::None,
+        };
+        Ok(Flow::Return(value))
+    }
+
+    #[inline(never)]
+    fn run_delete(&mut self, targets: &[Target]) -> Result<Flow, ScriptError> {
+        for target in targets {
+            self.delete(target)?;
+        }
+        Ok(Flow::Normal)
+    }
+
+    #[inline(never)]
+    fn eval_call(&mut self, func: &Expr, args: &[Expr], kwargs: &[(String, Expr)]) -> Result<Value, ScriptError> {
+        if let ExprKind::Attr(recv, method) = &func.kind {
+            if let Some(value) = self.call_mutating(recv, method, args, kwargs)? {
+                return Ok(value);
+            }
+        }
+        let func = self.eval(func)?;
+        let call_args = self.eval_args(args, kwargs)?;
+        self.call(func, call_args)
+    }
+
+    #[inline(never)]
+    fn eval_subscript(&mut self, obj: &Expr, index: &Expr) -> Result<Value, ScriptError> {
+        if let ExprKind::Slice { lower, upper, step } = &index.kind {
+            let obj = self.eval(obj)?;
+            let mut bound = |e: &Option<Box<Expr>>| -> Result<Option<i64>, ScriptError> {
+                match e {
+                    None => Ok(None),
+                    Some(e) => match self.eval(e)? {
+                        Value::None => Ok(None),
+                        Value::Int(i) => Ok(Some(i)),
+                        Value::Bool(b) => Ok(Some(i64::from(b))),
+                        _ => Err(type_error("slice indices must be integers or None or have an __index__ method")),
+                    },
+                }
+            };
+            let (lower, upper, step) = (bound(lower)?, bound(upper)?, bound(step)?);
+            return slice(&obj, lower, upper, step);
+        }
+        // Index a variable in place rather than copying all of it first.
+        if let ExprKind::Name(name) = &obj.kind {
+            if self.lookup_ref(name).is_some_and(|v| matches!(v, Value::List(_) | Value::Tuple(_) | Value::Dict(_))) {
+                let index = self.eval(index)?;
+                let container = self.lookup_ref(name).unwrap_or(&Value::None);
+                return index_value(container, &index);
+            }
+        }
+        let obj = self.eval(obj)?;
+        let index = self.eval(index)?;
+        self.subscript(&obj, &index)
+    }
+
+    #[inline(never)]
+    fn eval_dict(&mut self, items: &[(Expr, Expr)]) -> Result<Value, ScriptError> {
+        let mut entries: Vec<(Value, Value)> = Vec::new();
+        for (k, v) in items {
+            let key = self.eval(k)?;
+            let value = self.eval(v)?;
+            dict_insert(&mut entries, key, value)?;
+        }
+        Ok(Value::Dict(entries))
+    }
+
+    #[inline(never)]
+    fn eval_boolop(&mut self, and_: &bool, values: &[Expr]) -> Result<Value, ScriptError> {
+        let mut last = Value::None;
+        for v in values {
+            last = self.eval(v)?;
+            if last.truthy() != *and_ {
+                return Ok(last);
+            }
+        }
+        Ok(last)
+    }
+
+    #[inline(never)]
+    fn eval_compare(&mut self, left: &Expr, ops: &[(CmpOp, Expr)]) -> Result<Value, ScriptError> {
+        let mut left = self.eval(left)?;
+        for (op, right) in ops {
+            let right = self.eval(right)?;
+            if !self.compare(*op, &left, &right)? {
+                return Ok(Value::Bool(false));
+            }
+            left = right;
+        }
+        Ok(Value::Bool(true))
+    }
+
+    #[inline(never)]
+    fn eval_comp(
+        &mut self,
+        kind: &CompKind,
+        elt: &Expr,
+        value: &Option<Box<Expr>>,
+        generators: &[Generator],
+    ) -> Result<Value, ScriptError> {
+        if let Some(frame) = self.frames.last_mut() {
+            frame.comp.push(HashMap::new());
+        }
+        let mut items = Vec::new();
+        let result = self.comprehension(generators, elt, value.as_deref(), &mut items);
+        if let Some(frame) = self.frames.last_mut() {
+            frame.comp.pop();
+        }
+        result?;
+        Ok(match kind {
+            CompKind::List | CompKind::Generator => Value::List(items),
+            CompKind::Set => make_set(items)?,
+            CompKind::Dict => {
+                let mut entries = Vec::new();
+                for pair in items {
+                    if let Value::Tuple(mut kv) = pair {
+                        let v = kv.pop().unwrap_or(Value::None);
+                        let k = kv.pop().unwrap_or(Value::None);
+                        dict_insert(&mut entries, k, v)?;
+                    }
+                }
+                Value::Dict(entries)
+            }
+        })
+    }
+
+    #[inline(never)]
+    fn run_import(&mut self, names: &[super::ast::ImportName]) -> Result<Flow, ScriptError> {
+        for name in names {
+            let module = find_module(&name.module)?;
+            match &name.alias {
+                Some(alias) => self.bind(alias, Value::Module(module)),
+                None => {
+                    let top = name.module.split('.').next().unwrap_or(&name.module);
+                    let top = find_module(top)?;
+                    self.bind(top, Value::Module(top));
                 }
             }
-            StmtKind::Delete(targets) => {
-                for target in targets {
-                    self.delete(target)?;
-                }
+        }
+        Ok(Flow::Normal)
+    }
+
+    #[inline(never)]
+    fn run_from_import(&mut self, module: &str, names: &[(String, Option<String>)]) -> Result<Flow, ScriptError> {
+        let module = find_module(module)?;
+        for (name, alias) in names {
+            let full = format!("{module}.{name}");
+            let value = match KNOWN_MODULES.iter().find(|m| **m == full) {
+                Some(sub) => Value::Module(sub),
+                None => self.module_attr(module, name).map_err(|_| {
+                    ScriptError::new(
+                        ErrorKind::Import,
+                        format!("cannot import name '{name}' from '{module}' (not supported by this interpreter)"),
+                    )
+                })?,
+            };
+            self.bind(alias.as_ref().unwrap_or(name), value);
+        }
+        Ok(Flow::Normal)
+    }
+
+    #[inline(never)]
+    fn run_while(&mut self, test: &Expr, body: &[Stmt], orelse: &[Stmt]) -> Result<Flow, ScriptError> {
+        loop {
+            if !self.eval(test)?.truthy() {
+                return self.block(orelse);
             }
+            self.step()?;
+            match self.block(body)? {
+                Flow::Break => return Ok(Flow::Normal),
+                Flow::Normal | Flow::Continue => {}
+                ret @ Flow::Return(_) => return Ok(ret),
+            }
+        }
+    }
+
+    #[inline(never)]
+    fn run_for(&mut self, target: &Target, iter: &Expr, body: &[Stmt], orelse: &[Stmt]) -> Result<Flow, ScriptError> {
+        let iterable = self.eval(iter)?;
+        let mut items = LoopIter::new(iterable)?;
+        while let Some(item) = items.next() {
+            self.step()?;
+            self.assign(target, item, false)?;
+            match self.block(body)? {
+                Flow::Break => return Ok(Flow::Normal),
+                Flow::Normal | Flow::Continue => {}
+                ret @ Flow::Return(_) => return Ok(ret),
+            }
+        }
+        return self.block(orelse);
+    }
+
+    #[inline(never)]
+    fn run_try(
+        &mut self,
+        body: &[Stmt],
+        handlers: &[Handler],
+        orelse: &[Stmt],
+        finalbody: &[Stmt],
+    ) -> Result<Flow, ScriptError> {
+        let result = match self.block(body) {
+            Err(err) if err.is_catchable() && !handlers.is_empty() => self.handle(err, handlers),
+            Ok(Flow::Normal) => self.block(orelse),
+            other => other,
+        };
+        if matches!(&result, Err(err) if !err.is_catchable()) || finalbody.is_empty() {
+            return result;
+        }
+        return match self.block(finalbody)? {
+            Flow::Normal => result,
+            flow => Ok(flow),
+        };
+    }
+
+    #[inline(never)]
+    fn run_raise(&mut self, exc: &Option<Expr>) -> Result<Flow, ScriptError> {
+        let Some(exc) = exc else {
+            return Err(self.handling.last().cloned().map_or_else(
+                || ScriptError::new(ErrorKind::Runtime, "No active exception to reraise"),
+                |mut e| {
+                    e.line = 0;
+                    e
+                },
+            ));
+        };
+        return Err(match self.eval(exc)? {
+            Value::ExcType(kind) => ScriptError::new(kind, ""),
+            Value::Exception(kind, message) => ScriptError::new(kind, message),
+            _ => type_error("exceptions must derive from BaseException"),
+        });
+    }
+
+    #[inline(never)]
+    fn run_assert(&mut self, test: &Expr, msg: &Option<Expr>) -> Result<Flow, ScriptError> {
+        if !self.eval(test)?.truthy() {
+            let message = match msg {
+                Some(m) => self.eval(m)?.to_str(),
+                None => String::new(),
+            };
+            return Err(ScriptError::new(ErrorKind::Assertion, message));
         }
         Ok(Flow::Normal)
     }
@@ -1018,6 +1192,12 @@ impl Interp<'_, '_> {
         self.enter()?;
         let value = self.eval_uncharged(expr);
         self.depth -= 1;
+        self.charged(value)
+    }
+
+    /// `value`, once charged against the allocation budget.
+    #[inline(never)]
+    fn charged(&mut self, value: Result<Value, ScriptError>) -> Result<Value, ScriptError> {
         let value = value?;
         self.charge(&value)?;
         Ok(value)
@@ -1031,146 +1211,72 @@ impl Interp<'_, '_> {
         self.charge_bytes(weight)
     }
 
+    /// Dispatches on the expression form; every arm is its own function so that each
+    /// level of nesting costs the stack only this small frame and the arm it runs.
     fn eval_uncharged(&mut self, expr: &Expr) -> Result<Value, ScriptError> {
         match &expr.kind {
-            ExprKind::Const(c) => Ok(match c {
-                Const::None => Value::None,
-                Const::Bool(b) => Value::Bool(*b),
-                Const::Int(i) => Value::Int(*i),
-                Const::Float(f) => Value::Float(*f),
-                Const::Str(s) => Value::Str(s.clone()),
-            }),
+            ExprKind::Const(c) => Ok(const_value(c)),
             ExprKind::Name(name) => self.lookup(name),
-            ExprKind::Attr(obj, name) => {
-                let obj = self.eval(obj)?;
-                self.get_attr(obj, name)
-            }
-            ExprKind::Call { func, args, kwargs } => {
-                if let ExprKind::Attr(recv, method) = &func.kind {
-                    if let Some(value) = self.call_mutating(recv, method, args, kwargs)? {
-                        return Ok(value);
-                    }
-                }
-                let func = self.eval(func)?;
-                let call_args = self.eval_args(args, kwargs)?;
-                self.call(func, call_args)
-            }
-            ExprKind::Subscript(obj, index) => {
-                if let ExprKind::Slice { lower, upper, step } = &index.kind {
-                    let obj = self.eval(obj)?;
-                    let mut bound = |e: &Option<Box<Expr>>| -> Result<Option<i64>, ScriptError> {
-                        match e {
-                            None => Ok(None),
-                            Some(e) => match self.eval(e)? {
-                                Value::None => Ok(None),
-                                Value::Int(i) => Ok(Some(i)),
-                                Value::Bool(b) => Ok(Some(i64::from(b))),
-                                _ => Err(type_error(
-                                    "slice indices must be integers or None or have an __index__ method",
-                                )),
-                            },
-                        }
-                    };
-                    let (lower, upper, step) = (bound(lower)?, bound(upper)?, bound(step)?);
-                    return slice(&obj, lower, upper, step);
-                }
-                // Index a variable in place rather than copying all of it first.
-                if let ExprKind::Name(name) = &obj.kind {
-                    if self
-                        .lookup_ref(name)
-                        .is_some_and(|v| matches!(v, Value::List(_) | Value::Tuple(_) | Value::Dict(_)))
-                    {
-                        let index = self.eval(index)?;
-                        let container = self.lookup_ref(name).unwrap_or(&Value::None);
-                        return index_value(container, &index);
-                    }
-                }
-                let obj = self.eval(obj)?;
-                let index = self.eval(index)?;
-                self.subscript(&obj, &index)
-            }
+            ExprKind::Attr(obj, name) => self.eval_attr(obj, name),
+            ExprKind::Call { func, args, kwargs } => self.eval_call(func, args, kwargs),
+            ExprKind::Subscript(obj, index) => self.eval_subscript(obj, index),
             ExprKind::Slice { .. } => Err(not_supported("slice objects outside a subscript are not supported")),
-            ExprKind::List(items) => Ok(Value::List(self.eval_all(items)?)),
-            ExprKind::Tuple(items) => Ok(Value::Tuple(self.eval_all(items)?)),
-            ExprKind::Set(items) => {
-                let values = self.eval_all(items)?;
-                make_set(values)
-            }
-            ExprKind::Dict(items) => {
-                let mut entries: Vec<(Value, Value)> = Vec::new();
-                for (k, v) in items {
-                    let key = self.eval(k)?;
-                    let value = self.eval(v)?;
-                    dict_insert(&mut entries, key, value)?;
-                }
-                Ok(Value::Dict(entries))
-            }
-            ExprKind::Unary(op, operand) => {
-                let v = self.eval(operand)?;
-                ops::unary(*op, &v)
-            }
-            ExprKind::Binary(op, left, right) => {
-                let l = self.eval(left)?;
-                let r = self.eval(right)?;
-                ops::binary(*op, &l, &r)
-            }
-            ExprKind::BoolOp { and_, values } => {
-                let mut last = Value::None;
-                for v in values {
-                    last = self.eval(v)?;
-                    if last.truthy() != *and_ {
-                        return Ok(last);
-                    }
-                }
-                Ok(last)
-            }
-            ExprKind::Compare { left, ops } => {
-                let mut left = self.eval(left)?;
-                for (op, right) in ops {
-                    let right = self.eval(right)?;
-                    if !self.compare(*op, &left, &right)? {
-                        return Ok(Value::Bool(false));
-                    }
-                    left = right;
-                }
-                Ok(Value::Bool(true))
-            }
-            ExprKind::IfExp { test, body, orelse } => {
-                if self.eval(test)?.truthy() {
-                    self.eval(body)
-                } else {
-                    self.eval(orelse)
-                }
-            }
-            ExprKind::FString(parts) => Ok(Value::Str(self.fstring(parts)?)),
-            ExprKind::Comp { kind, elt, value, generators } => {
-                if let Some(frame) = self.frames.last_mut() {
-                    frame.comp.push(HashMap::new());
-                }
-                let mut items = Vec::new();
-                let result = self.comprehension(generators, elt, value.as_deref(), &mut items);
-                if let Some(frame) = self.frames.last_mut() {
-                    frame.comp.pop();
-                }
-                result?;
-                Ok(match kind {
-                    CompKind::List | CompKind::Generator => Value::List(items),
-                    CompKind::Set => make_set(items)?,
-                    CompKind::Dict => {
-                        let mut entries = Vec::new();
-                        for pair in items {
-                            if let Value::Tuple(mut kv) = pair {
-                                let v = kv.pop().unwrap_or(Value::None);
-                                let k = kv.pop().unwrap_or(Value::None);
-                                dict_insert(&mut entries, k, v)?;
-                            }
-                        }
-                        Value::Dict(entries)
-                    }
-                })
-            }
+            ExprKind::List(items) => self.eval_sequence(items, 'l'),
+            ExprKind::Tuple(items) => self.eval_sequence(items, 't'),
+            ExprKind::Set(items) => self.eval_sequence(items, 's'),
+            ExprKind::Dict(items) => self.eval_dict(items),
+            ExprKind::Unary(op, operand) => self.eval_unary(*op, operand),
+            ExprKind::Binary(op, left, right) => self.eval_binary(*op, left, right),
+            ExprKind::BoolOp { and_, values } => self.eval_boolop(and_, values),
+            ExprKind::Compare { left, ops } => self.eval_compare(left, ops),
+            ExprKind::IfExp { test, body, orelse } => self.eval_ifexp(test, body, orelse),
+            ExprKind::FString(parts) => self.eval_fstring(parts),
+            ExprKind::Comp { kind, elt, value, generators } => self.eval_comp(kind, elt, value, generators),
             ExprKind::Lambda(def) => self.make_function(def),
         }
+    }
+
+    #[inline(never)]
+    fn eval_attr(&mut self, obj: &Expr, name: &str) -> Result<Value, ScriptError> {
+        let obj = self.eval(obj)?;
+        self.get_attr(obj, name)
+    }
+
+    #[inline(never)]
+    fn eval_sequence(&mut self, items: &[Expr], kind: char) -> Result<Value, ScriptError> {
+        let values = self.eval_all(items)?;
+        match kind {
+            'l' => Ok(Value::List(values)),
+            't' => Ok(Value::Tuple(values)),
+            _ => make_set(values),
+        }
+    }
+
+    #[inline(never)]
+    fn eval_unary(&mut self, op: super::ast::UnaryOp, operand: &Expr) -> Result<Value, ScriptError> {
+        let v = self.eval(operand)?;
+        ops::unary(op, &v)
+    }
+
+    #[inline(never)]
+    fn eval_binary(&mut self, op: BinOp, left: &Expr, right: &Expr) -> Result<Value, ScriptError> {
+        let l = self.eval(left)?;
+        let r = self.eval(right)?;
+        ops::binary(op, &l, &r)
+    }
+
+    #[inline(never)]
+    fn eval_ifexp(&mut self, test: &Expr, body: &Expr, orelse: &Expr) -> Result<Value, ScriptError> {
+        if self.eval(test)?.truthy() {
+            self.eval(body)
+        } else {
+            self.eval(orelse)
+        }
+    }
+
+    #[inline(never)]
+    fn eval_fstring(&mut self, parts: &[FPart]) -> Result<Value, ScriptError> {
+        Ok(Value::Str(self.fstring(parts)?))
     }
 
     /// Runs the `for`/`if` clauses of a comprehension from `generators[0]`, pushing
@@ -1351,6 +1457,10 @@ impl Interp<'_, '_> {
             Value::List(_) => method(LIST_METHODS, &obj),
             Value::Tuple(_) => method(TUPLE_METHODS, &obj),
             Value::Set(_) => method(SET_METHODS, &obj),
+            Value::Type(t) if name == "__name__" => Some(Value::Str(t.rsplit('.').next().unwrap_or(t).to_owned())),
+            Value::ExcType(kind) if name == "__name__" => Some(Value::Str(kind.python_name().to_owned())),
+            Value::Function { name: f, .. } if name == "__name__" => Some(Value::Str((*f).to_owned())),
+            Value::UserFn(f) if name == "__name__" => Some(Value::Str(f.def.name.clone())),
             Value::Exception(_, message) => match name {
                 "args" => Some(Value::Tuple(vec![Value::Str(message.clone())])),
                 _ => None,
@@ -1734,5 +1844,16 @@ fn exception_matches(types: &Value, kind: ErrorKind) -> Result<bool, ScriptError
             Ok(false)
         }
         _ => Err(type_error("catching classes that do not inherit from BaseException is not allowed")),
+    }
+}
+
+/// A literal's value.
+fn const_value(c: &Const) -> Value {
+    match c {
+        Const::None => Value::None,
+        Const::Bool(b) => Value::Bool(*b),
+        Const::Int(i) => Value::Int(*i),
+        Const::Float(f) => Value::Float(*f),
+        Const::Str(s) => Value::Str(s.clone()),
     }
 }

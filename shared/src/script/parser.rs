@@ -30,7 +30,7 @@ pub const MAX_DEPTH: usize = 64;
 pub const MAX_BLOCK_DEPTH: usize = 32;
 
 /// The most tokens one logical line may hold.
-pub const MAX_LINE_TOKENS: usize = 5000;
+pub const MAX_LINE_TOKENS: usize = 2000;
 
 /// Parses `src` into a [`Program`].
 ///
