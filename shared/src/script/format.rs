@@ -546,7 +546,7 @@ mod tests {
         let check = |v: Value, spec: &str, expected: &str| {
             assert_eq!(format_value(&v, spec).unwrap(), expected, "{v:?} {spec}");
         };
-        check(Value::Float(3.14159), ".2f", "3.14");
+        check(Value::Float(2.34567), ".2f", "2.35");
         check(Value::Float(2.5), ".0f", "2");
         check(Value::Float(1234567.891), ",.2f", "1,234,567.89");
         check(Value::Float(0.256), ".1%", "25.6%");

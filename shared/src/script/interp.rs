@@ -742,7 +742,7 @@ impl Interp<'_, '_> {
                 ret @ Flow::Return(_) => return Ok(ret),
             }
         }
-        return self.block(orelse);
+        self.block(orelse)
     }
 
     #[inline(never)]
@@ -761,10 +761,10 @@ impl Interp<'_, '_> {
         if matches!(&result, Err(err) if !err.is_catchable()) || finalbody.is_empty() {
             return result;
         }
-        return match self.block(finalbody)? {
+        match self.block(finalbody)? {
             Flow::Normal => result,
             flow => Ok(flow),
-        };
+        }
     }
 
     #[inline(never)]
@@ -778,11 +778,11 @@ impl Interp<'_, '_> {
                 },
             ));
         };
-        return Err(match self.eval(exc)? {
+        Err(match self.eval(exc)? {
             Value::ExcType(kind) => ScriptError::new(kind, ""),
             Value::Exception(kind, message) => ScriptError::new(kind, message),
             _ => type_error("exceptions must derive from BaseException"),
-        });
+        })
     }
 
     #[inline(never)]
