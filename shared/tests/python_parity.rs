@@ -316,6 +316,26 @@ const CORPUS: &[(&str, &str, &str)] = &[
         "a = {3, 1, 2}\nb = {2, 3, 4}\na.add(10)\na.discard(1)\nprint(sorted(a | b), sorted(a & b), sorted(a - b), len(a), 10 in a, {1, 2} == {2, 1})\nd = {'x': 1} | {'y': 2}\nprint(d, dict(zip('ab', [1, 2])), dict([('k', 'v')]))\n",
         "ok",
     ),
+    (
+        "word_count_and_ranking",
+        "text = 'the cat and the hat and the bat'\ncounts = {}\nfor w in text.split():\n    counts[w] = counts.get(w, 0) + 1\nranked = sorted(counts.items(), key=lambda kv: (-kv[1], kv[0]))\nfor word, n in ranked[:3]:\n    print(f'{word:<5}{n:>3}')\nprint(max(counts, key=counts.get), len(counts))\n",
+        "ok",
+    ),
+    (
+        "retry_loop_with_sleep",
+        "import pyautogui, time\nattempts = 0\nwhile attempts < 5:\n    attempts += 1\n    pyautogui.press('f5')\n    time.sleep(0.25)\n    if attempts * 2 >= 6:\n        break\nprint('attempts', attempts)\n",
+        "ok",
+    ),
+    (
+        "finally_and_return_values",
+        "def f():\n    try:\n        return 'try'\n    finally:\n        print('cleanup')\ndef g(items):\n    result = []\n    for i, x in enumerate(items):\n        try:\n            result.append(10 // x)\n        except ZeroDivisionError:\n            result.append(None)\n            continue\n        finally:\n            result.append(i)\n    return result\nprint(f(), g([5, 0, 2]))\n",
+        "ok",
+    ),
+    (
+        "formatting_extras",
+        "vals = [3.14159, 2.0, 1234.5]\nfor v in vals:\n    print('|{:>10.3f}|{:<8.1e}|{:^9g}|'.format(v, v, v))\nprint('%-6s|%6.2f|%x|%c' % ('ab', 3.14159, 255, 65), str(1.0), str(10 / 4), repr('q'), f'{3!s:>3}', f\"{'x' * 3}\")\n",
+        "ok",
+    ),
 ];
 
 #[test]

@@ -579,9 +579,7 @@ fn str_method(s: &str, name: &str, args: Args) -> Result<Value, ScriptError> {
             let nonempty = !s.is_empty();
             let cased = s.chars().any(|c| c.is_uppercase() || c.is_lowercase());
             Ok(Value::Bool(match name {
-                "isdigit" | "isdecimal" => {
-                    nonempty && s.chars().all(|c| c.is_ascii_digit())
-                }
+                "isdigit" | "isdecimal" => nonempty && s.chars().all(|c| c.is_ascii_digit()),
                 "isnumeric" => nonempty && s.chars().all(char::is_numeric),
                 "isalpha" => nonempty && s.chars().all(char::is_alphabetic),
                 "isalnum" => nonempty && s.chars().all(char::is_alphanumeric),
