@@ -12,13 +12,19 @@
 //! comparisons, boolean operators and conditional expressions.
 //! Every node carries its 1-based source position for error messages.
 
-use std::rc::Rc;
+use std::sync::Arc;
 
-/// A parsed program: statements in source order.
+/// A parsed program: statements in source order. It is `Send` and `Sync`, so a
+/// caller may parse on one thread and run on another.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Program {
     pub statements: Vec<Stmt>,
 }
+
+const _: () = {
+    const fn send_and_sync<T: Send + Sync>() {}
+    send_and_sync::<Program>();
+};
 
 /// One statement and where it starts.
 #[derive(Debug, Clone, PartialEq)]
@@ -84,7 +90,7 @@ pub enum StmtKind {
     /// `raise` (re-raise) or `raise exc`.
     Raise(Option<Expr>),
     /// `def name(params): body`.
-    Def(Rc<Function>),
+    Def(Arc<Function>),
     /// `return` or `return value`.
     Return(Option<Expr>),
     /// `global a, b`.
@@ -214,7 +220,7 @@ pub enum ExprKind {
         value: Option<Box<Expr>>,
         generators: Vec<Generator>,
     },
-    Lambda(Rc<Function>),
+    Lambda(Arc<Function>),
 }
 
 /// One part of an f-string.

@@ -194,6 +194,10 @@ impl ScriptError {
 
     /// The last line of a Python traceback: `NameError: name 'x' is not defined`.
     pub fn python_message(&self) -> String {
+        if self.message.is_empty() {
+            // `raise ValueError` prints the class alone, as CPython does.
+            return self.kind.to_string();
+        }
         format!("{}: {}", self.kind, self.message)
     }
 

@@ -13,6 +13,7 @@
 
 use std::collections::HashMap;
 use std::rc::Rc;
+use std::sync::Arc;
 
 use super::ast::{
     BinOp, CmpOp, CompKind, Const, Expr, ExprKind, FPart, Function, FunctionBody, Generator, Handler, Program, Stmt,
@@ -543,7 +544,7 @@ impl Interp<'_, '_> {
     }
 
     #[inline(never)]
-    fn run_def(&mut self, def: &Rc<Function>) -> Result<Flow, ScriptError> {
+    fn run_def(&mut self, def: &Arc<Function>) -> Result<Flow, ScriptError> {
         let f = self.make_function(def)?;
         self.bind(&def.name, f);
         Ok(Flow::Normal)
@@ -825,7 +826,7 @@ impl Interp<'_, '_> {
 
     /// A `def` or `lambda` as a value: its defaults evaluated now, and a snapshot of
     /// the enclosing function's variables when it is defined inside one.
-    fn make_function(&mut self, def: &Rc<Function>) -> Result<Value, ScriptError> {
+    fn make_function(&mut self, def: &Arc<Function>) -> Result<Value, ScriptError> {
         let mut defaults = Vec::with_capacity(def.params.len());
         for p in &def.params {
             defaults.push(match &p.default {
@@ -846,7 +847,7 @@ impl Interp<'_, '_> {
             }
             _ => None,
         };
-        Ok(Value::UserFn(Rc::new(UserFn { def: Rc::clone(def), defaults, captured })))
+        Ok(Value::UserFn(Rc::new(UserFn { def: Arc::clone(def), defaults, captured })))
     }
 
     /// Calls a `def` or `lambda` function.

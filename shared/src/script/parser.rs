@@ -11,7 +11,7 @@
 //! than [`MAX_BLOCK_DEPTH`] and logical lines longer than [`MAX_LINE_TOKENS`]
 //! tokens, and the lowering caps expression nesting at [`MAX_DEPTH`].
 
-use std::rc::Rc;
+use std::sync::Arc;
 
 use rustpython_parser::ast::{self as py, Ranged};
 use rustpython_parser::lexer::lex;
@@ -319,7 +319,7 @@ impl Lower<'_, '_> {
                     (std::mem::replace(&mut self.in_function, true), std::mem::replace(&mut self.in_loop, false));
                 let body = self.block(&s.body);
                 (self.in_function, self.in_loop) = outer;
-                StmtKind::Def(Rc::new(Function { name: s.name.to_string(), params, body: FunctionBody::Block(body?) }))
+                StmtKind::Def(Arc::new(Function { name: s.name.to_string(), params, body: FunctionBody::Block(body?) }))
             }
             py::Stmt::Return(s) => {
                 if !self.in_function {
@@ -500,7 +500,7 @@ impl Lower<'_, '_> {
             py::Expr::Lambda(l) => {
                 let params = self.params(&l.args, expr)?;
                 let body = self.expr(&l.body)?;
-                ExprKind::Lambda(Rc::new(Function {
+                ExprKind::Lambda(Arc::new(Function {
                     name: "<lambda>".to_owned(),
                     params,
                     body: FunctionBody::Expr(body),

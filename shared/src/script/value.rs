@@ -10,6 +10,7 @@
 use std::collections::HashMap;
 use std::fmt::Write as _;
 use std::rc::Rc;
+use std::sync::Arc;
 
 use super::ast::Function;
 use super::error::ErrorKind;
@@ -59,7 +60,7 @@ pub(crate) enum Value {
 /// and, for a function defined inside another, the enclosing locals it saw.
 #[derive(Debug, PartialEq)]
 pub(crate) struct UserFn {
-    pub(crate) def: Rc<Function>,
+    pub(crate) def: Arc<Function>,
     pub(crate) defaults: Vec<Option<Value>>,
     pub(crate) captured: Option<Rc<HashMap<String, Value>>>,
 }
