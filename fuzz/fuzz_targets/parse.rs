@@ -1,5 +1,6 @@
-//! Fuzzes the Python-subset parser: on any UTF-8 input it must return (a program
-//! or a `ParseError` with a line and column inside the input), never panic, hang or
+//! Fuzzes the script parser (`rustpython-parser` and the lowering into the
+//! interpreter's tree): on any UTF-8 input it must return (a program or a
+//! `ParseError` with a line and column inside the input), never panic, hang or
 //! overflow the stack.
 
 #![no_main]

@@ -54,6 +54,20 @@ pub enum ErrorKind {
     CalledProcess,
     /// `sys.exit()`: [`super::run`] turns it into a normal end with an exit code and never returns it.
     SystemExit,
+    /// `raise Exception(...)`.
+    Exception,
+    /// `raise RuntimeError(...)`.
+    Runtime,
+    /// A failed `assert`.
+    Assertion,
+    /// `LookupError`, the parent of `IndexError` and `KeyError`.
+    Lookup,
+    /// `ArithmeticError`.
+    Arithmetic,
+    /// User functions called more deeply than the interpreter allows.
+    Recursion,
+    /// The program ran more loop iterations than the interpreter allows.
+    LoopLimit,
 }
 
 impl ErrorKind {
@@ -78,7 +92,49 @@ impl ErrorKind {
             ErrorKind::Unreachable => "ConnectionError",
             ErrorKind::CalledProcess => "subprocess.CalledProcessError",
             ErrorKind::SystemExit => "SystemExit",
+            ErrorKind::Exception => "Exception",
+            ErrorKind::Runtime | ErrorKind::LoopLimit => "RuntimeError",
+            ErrorKind::Assertion => "AssertionError",
+            ErrorKind::Lookup => "LookupError",
+            ErrorKind::Arithmetic => "ArithmeticError",
+            ErrorKind::Recursion => "RecursionError",
         }
+    }
+
+    /// The exception class a program may name (in `except` or `raise`), by its Python name.
+    pub(crate) fn from_python_name(name: &str) -> Option<ErrorKind> {
+        Some(match name {
+            "Exception" | "BaseException" => ErrorKind::Exception,
+            "NameError" => ErrorKind::Name,
+            "TypeError" => ErrorKind::Type,
+            "ValueError" => ErrorKind::Value,
+            "AttributeError" => ErrorKind::Attribute,
+            "IndexError" => ErrorKind::Index,
+            "KeyError" => ErrorKind::Key,
+            "LookupError" => ErrorKind::Lookup,
+            "ZeroDivisionError" => ErrorKind::ZeroDivision,
+            "ArithmeticError" => ErrorKind::Arithmetic,
+            "OverflowError" => ErrorKind::Overflow,
+            "OSError" | "IOError" | "EnvironmentError" => ErrorKind::Host,
+            "RuntimeError" => ErrorKind::Runtime,
+            "AssertionError" => ErrorKind::Assertion,
+            "ImportError" => ErrorKind::Import,
+            "ModuleNotFoundError" => ErrorKind::ModuleNotFound,
+            _ => return None,
+        })
+    }
+
+    /// Whether an `except` clause naming `class` catches an exception of this kind.
+    pub(crate) fn is_subclass_of(self, class: ErrorKind) -> bool {
+        self == class
+            || match class {
+                ErrorKind::Exception => true,
+                ErrorKind::Lookup => matches!(self, ErrorKind::Index | ErrorKind::Key),
+                ErrorKind::Arithmetic => matches!(self, ErrorKind::ZeroDivision | ErrorKind::Overflow),
+                ErrorKind::Import => self == ErrorKind::ModuleNotFound,
+                ErrorKind::Host => matches!(self, ErrorKind::Timeout | ErrorKind::Unreachable),
+                _ => false,
+            }
     }
 }
 
@@ -113,8 +169,35 @@ impl ScriptError {
         ScriptError { kind, line: 0, message: message.into(), stdout: String::new(), stderr: String::new() }
     }
 
+    /// Whether `try`/`except` may catch this failure.
+    ///
+    /// The interpreter's own limits (loop, recursion and allocation budgets), code
+    /// outside the subset, a host that timed out or went away, and `sys.exit` stop
+    /// the program whatever it catches, so that a broad `except Exception:` never
+    /// hides that the run was cut short or that the interpreter did something
+    /// other than what CPython would have done.
+    pub fn is_catchable(&self) -> bool {
+        match self.kind {
+            ErrorKind::Syntax
+            | ErrorKind::NotSupported
+            | ErrorKind::Memory
+            | ErrorKind::Recursion
+            | ErrorKind::LoopLimit
+            | ErrorKind::Timeout
+            | ErrorKind::Unreachable
+            | ErrorKind::SystemExit => false,
+            ErrorKind::ModuleNotFound | ErrorKind::Import => false,
+            ErrorKind::Attribute => !self.message.contains("not supported by this interpreter"),
+            _ => true,
+        }
+    }
+
     /// The last line of a Python traceback: `NameError: name 'x' is not defined`.
     pub fn python_message(&self) -> String {
+        if self.message.is_empty() {
+            // `raise ValueError` prints the class alone, as CPython does.
+            return self.kind.to_string();
+        }
         format!("{}: {}", self.kind, self.message)
     }
 

@@ -1,20 +1,29 @@
-//! The tree-walking interpreter: statements, expressions, names, builtins and
-//! the methods of plain values.
+//! The tree-walking interpreter: statements, control flow, user functions,
+//! expressions, names and scopes.
 //!
 //! Modules are interpreter objects, never real imports: `import` only binds
 //! names from a fixed list ([`KNOWN_MODULES`]); their functions live in
-//! [`super::pyautogui`], [`super::stdlib`] and [`super::computer`].
-//! The interpreter has no loops or user functions, so a run ends after at most
-//! one evaluation per syntax node; every effect goes through the [`ScriptHost`].
+//! [`super::pyautogui`], [`super::stdlib`] and [`super::computer`]; builtins
+//! live in [`super::builtins`] and the methods of plain values in [`super::methods`].
+//! Every effect goes through the [`ScriptHost`].
+//!
+//! A run always ends: loop iterations and function calls together are capped at
+//! [`MAX_STEPS`], calls nest at most [`MAX_CALL_DEPTH`] deep, and what the
+//! program builds and reads is charged against an allocation budget.
 
 use std::collections::HashMap;
+use std::rc::Rc;
+use std::sync::Arc;
 
-use super::ast::{Const, Expr, ExprKind, Program, Stmt, StmtKind, Target};
+use super::ast::{
+    BinOp, CmpOp, CompKind, Const, Expr, ExprKind, FPart, Function, FunctionBody, Generator, Handler, Program, Stmt,
+    StmtKind, Target,
+};
 use super::computer::ComputerState;
 use super::error::{not_supported, type_error, value_error, ErrorKind, ScriptError};
 use super::host::{HostResult, ScriptHost};
 use super::ops;
-use super::value::{Object, Value};
+use super::value::{Object, UserFn, Value};
 
 /// Modules a script may import.
 pub const KNOWN_MODULES: &[&str] = &[
@@ -32,9 +41,44 @@ pub const KNOWN_MODULES: &[&str] = &[
     "pyperclip",
 ];
 
-const BUILTINS: &[&str] = &[
-    "print", "type", "str", "int", "float", "len", "repr", "abs", "round", "min", "max", "bool", "list", "tuple",
-    "dict", "sum", "chr", "ord", "exit", "quit",
+pub(crate) const BUILTINS: &[&str] = &[
+    "print",
+    "type",
+    "str",
+    "int",
+    "float",
+    "len",
+    "repr",
+    "abs",
+    "round",
+    "min",
+    "max",
+    "bool",
+    "list",
+    "tuple",
+    "dict",
+    "sum",
+    "chr",
+    "ord",
+    "exit",
+    "quit",
+    "set",
+    "range",
+    "enumerate",
+    "zip",
+    "sorted",
+    "reversed",
+    "any",
+    "all",
+    "isinstance",
+    "map",
+    "filter",
+    "divmod",
+    "pow",
+    "format",
+    "hex",
+    "oct",
+    "bin",
 ];
 
 /// Builtins that exist in Python but that this interpreter refuses by design.
@@ -57,33 +101,16 @@ const REFUSED_BUILTINS: &[&str] = &[
     "memoryview",
     "bytearray",
     "bytes",
-    "range",
-    "enumerate",
-    "zip",
-    "map",
-    "filter",
-    "sorted",
-    "reversed",
-    "isinstance",
     "issubclass",
     "hasattr",
-    "set",
     "frozenset",
     "object",
     "super",
     "iter",
     "next",
-    "format",
-    "hex",
-    "oct",
-    "bin",
     "hash",
     "id",
     "callable",
-    "any",
-    "all",
-    "divmod",
-    "pow",
     "complex",
     "slice",
     "property",
@@ -91,6 +118,19 @@ const REFUSED_BUILTINS: &[&str] = &[
     "classmethod",
     "ascii",
 ];
+
+/// How many loop iterations (of `for`, `while` and comprehensions) and function
+/// calls one run may make in total; past it the run stops with a `RuntimeError`
+/// that no `except` catches.
+pub const MAX_STEPS: u64 = 100_000;
+
+/// How deeply user functions may call each other (CPython allows about 1000; agent
+/// code rarely recurses, and every level costs the interpreter's own stack).
+pub const MAX_CALL_DEPTH: usize = 50;
+
+/// How deeply statements and expressions may nest while running, counting every
+/// call's own nesting, so the interpreter's stack stays small.
+const MAX_NESTING: usize = 400;
 
 /// How many bytes (roughly) a run may allocate for values and printed text in total.
 const MAX_ALLOCATED: usize = 256 << 20;
@@ -151,10 +191,16 @@ pub fn run(program: &Program, host: &mut dyn ScriptHost, globals: Globals<'_>) -
         computer: globals.computer,
         action_delay: globals.computer_action_delay,
         vars: HashMap::new(),
+        frames: vec![Frame::default()],
         out: RunOutput::default(),
         exit: None,
         allocated: 0,
+        steps: 0,
+        calls: 0,
+        depth: 0,
+        handling: Vec::new(),
     };
+    interp.vars.insert("__name__".into(), Value::Str("__main__".into()));
     let preimport_line = program.statements.first().map_or(1, |s| s.line);
     for module in globals.preimport {
         let stmt = StmtKind::Import(vec![super::ast::ImportName { module: (*module).to_owned(), alias: None }]);
@@ -167,7 +213,7 @@ pub fn run(program: &Program, host: &mut dyn ScriptHost, globals: Globals<'_>) -
         interp.vars.insert("human".into(), Value::Object(Object::Human));
     }
     for stmt in &program.statements {
-        if let Err(err) = interp.statement(stmt) {
+        if let Err(err) = interp.block(std::slice::from_ref(stmt)) {
             if err.kind == ErrorKind::SystemExit {
                 break;
             }
@@ -279,6 +325,21 @@ pub(crate) fn iterate(v: &Value) -> Result<Vec<Value>, ScriptError> {
             Ok(s.chars().map(|c| Value::Str(c.to_string())).collect())
         }
         Value::Dict(entries) => Ok(entries.iter().map(|(k, _)| k.clone()).collect()),
+        Value::Set(items) => Ok(items.clone()),
+        Value::Range(start, stop, step) => {
+            if super::value::range_len(*start, *stop, *step) > ops::MAX_ITEMS as u64 {
+                return Err(ScriptError::new(
+                    ErrorKind::Memory,
+                    format!("result would exceed {} items", ops::MAX_ITEMS),
+                ));
+            }
+            let mut it = LoopIter::Range { next: *start, stop: *stop, step: *step };
+            let mut out = Vec::new();
+            while let Some(v) = it.next() {
+                out.push(v);
+            }
+            Ok(out)
+        }
         Value::Point(a, b) | Value::Size(a, b) => Ok(vec![Value::Int(*a), Value::Int(*b)]),
         other => Err(type_error(format!("'{}' object is not iterable", other.type_name()))),
     }
@@ -298,12 +359,23 @@ pub(crate) struct Interp<'h, 'c> {
     pub(crate) host: &'h mut dyn ScriptHost,
     pub(crate) computer: Option<&'c mut ComputerState>,
     pub(crate) action_delay: f64,
+    /// The module's globals.
     vars: HashMap<String, Value>,
+    /// The module frame, then one per active user function call.
+    frames: Vec<Frame>,
     pub(crate) out: RunOutput,
     /// Set by `sys.exit`.
     pub(crate) exit: Option<i32>,
     /// Bytes charged so far against [`MAX_ALLOCATED`].
     allocated: usize,
+    /// Loop iterations and calls so far, against [`MAX_STEPS`].
+    steps: u64,
+    /// User function calls in progress.
+    calls: usize,
+    /// Statement and expression nesting in progress, against [`MAX_NESTING`].
+    depth: usize,
+    /// The exceptions whose `except` clauses are running, for a bare `raise`.
+    handling: Vec<ScriptError>,
 }
 
 impl std::fmt::Debug for Interp<'_, '_> {
@@ -313,6 +385,7 @@ impl std::fmt::Debug for Interp<'_, '_> {
 }
 
 impl Interp<'_, '_> {
+    /// The error a failed statement becomes, with `line` filled in and the output so far attached.
     fn finish_error(&mut self, mut err: ScriptError, line: usize) -> ScriptError {
         if err.line == 0 {
             err.line = line;
@@ -363,61 +436,735 @@ impl Interp<'_, '_> {
         ScriptError::new(ErrorKind::SystemExit, "")
     }
 
-    fn statement(&mut self, stmt: &Stmt) -> Result<(), ScriptError> {
+    /// Counts one loop iteration or function call against [`MAX_STEPS`].
+    pub(crate) fn step(&mut self) -> Result<(), ScriptError> {
+        self.steps += 1;
+        if self.steps > MAX_STEPS {
+            return Err(ScriptError::new(
+                ErrorKind::LoopLimit,
+                format!(
+                    "the program ran more than {MAX_STEPS} loop iterations and function calls (this interpreter's limit)"
+                ),
+            ));
+        }
+        Ok(())
+    }
+
+    /// Enters one level of statement or expression nesting, so the interpreter's stack stays bounded.
+    fn enter(&mut self) -> Result<(), ScriptError> {
+        self.depth += 1;
+        if self.depth > MAX_NESTING {
+            self.depth -= 1;
+            return Err(ScriptError::new(
+                ErrorKind::Recursion,
+                format!("maximum recursion depth exceeded (this interpreter nests at most {MAX_NESTING} levels)"),
+            ));
+        }
+        Ok(())
+    }
+
+    /// Runs a block; a statement's failure carries that statement's line.
+    fn block(&mut self, stmts: &[Stmt]) -> Result<Flow, ScriptError> {
+        for stmt in stmts {
+            let flow = self.statement(stmt).map_err(|mut e| {
+                if e.line == 0 {
+                    e.line = stmt.line;
+                }
+                e
+            })?;
+            if !matches!(flow, Flow::Normal) {
+                return Ok(flow);
+            }
+        }
+        Ok(Flow::Normal)
+    }
+
+    fn statement(&mut self, stmt: &Stmt) -> Result<Flow, ScriptError> {
+        self.enter()?;
+        let result = self.statement_inner(stmt);
+        self.depth -= 1;
+        result
+    }
+
+    /// Dispatches on the statement form; like [`Self::eval_uncharged`], every arm is
+    /// its own function to keep each nesting level's stack frame small.
+    fn statement_inner(&mut self, stmt: &Stmt) -> Result<Flow, ScriptError> {
         match &stmt.kind {
-            StmtKind::Pass => Ok(()),
-            StmtKind::Expr(expr) => self.eval(expr).map(drop),
-            StmtKind::Import(names) => {
-                for name in names {
-                    let module = find_module(&name.module)?;
-                    match &name.alias {
-                        Some(alias) => {
-                            self.vars.insert(alias.clone(), Value::Module(module));
-                        }
-                        None => {
-                            let top = name.module.split('.').next().unwrap_or(&name.module);
-                            let top = find_module(top)?;
-                            self.vars.insert(top.to_owned(), Value::Module(top));
-                        }
+            StmtKind::Pass => Ok(Flow::Normal),
+            StmtKind::Break => Ok(Flow::Break),
+            StmtKind::Continue => Ok(Flow::Continue),
+            StmtKind::Expr(expr) => self.run_expr(expr),
+            StmtKind::Import(names) => self.run_import(names),
+            StmtKind::FromImport { module, names } => self.run_from_import(module, names),
+            StmtKind::Assign { targets, value } => self.run_assign(targets, value),
+            StmtKind::AugAssign { target, op, value } => self.run_aug_assign(target, *op, value),
+            StmtKind::If { test, body, orelse } => self.run_if(test, body, orelse),
+            StmtKind::While { test, body, orelse } => self.run_while(test, body, orelse),
+            StmtKind::For { target, iter, body, orelse } => self.run_for(target, iter, body, orelse),
+            StmtKind::Try { body, handlers, orelse, finalbody } => self.run_try(body, handlers, orelse, finalbody),
+            StmtKind::Raise(exc) => self.run_raise(exc),
+            StmtKind::Def(def) => self.run_def(def),
+            StmtKind::Return(value) => self.run_return(value.as_ref()),
+            StmtKind::Global(names) => {
+                if let Some(frame) = self.frames.last_mut() {
+                    frame.global_names.extend(names.iter().cloned());
+                }
+                Ok(Flow::Normal)
+            }
+            StmtKind::Assert { test, msg } => self.run_assert(test, msg),
+            StmtKind::Delete(targets) => self.run_delete(targets),
+        }
+    }
+
+    #[inline(never)]
+    fn run_expr(&mut self, expr: &Expr) -> Result<Flow, ScriptError> {
+        self.eval(expr)?;
+        Ok(Flow::Normal)
+    }
+
+    #[inline(never)]
+    fn run_assign(&mut self, targets: &[Target], value: &Expr) -> Result<Flow, ScriptError> {
+        let value = self.eval(value)?;
+        for target in targets {
+            self.assign(target, value.clone(), false)?;
+        }
+        Ok(Flow::Normal)
+    }
+
+    #[inline(never)]
+    fn run_aug_assign(&mut self, target: &Target, op: BinOp, value: &Expr) -> Result<Flow, ScriptError> {
+        self.aug_assign(target, op, value)?;
+        Ok(Flow::Normal)
+    }
+
+    #[inline(never)]
+    fn run_if(&mut self, test: &Expr, body: &[Stmt], orelse: &[Stmt]) -> Result<Flow, ScriptError> {
+        let branch = if self.eval(test)?.truthy() { body } else { orelse };
+        self.block(branch)
+    }
+
+    #[inline(never)]
+    fn run_def(&mut self, def: &Arc<Function>) -> Result<Flow, ScriptError> {
+        let f = self.make_function(def)?;
+        self.bind(&def.name, f);
+        Ok(Flow::Normal)
+    }
+
+    #[inline(never)]
+    fn run_return(&mut self, value: Option<&Expr>) -> Result<Flow, ScriptError> {
+        let value = match value {
+            Some(v) => self.eval(v)?,
+            None => Value::None,
+        };
+        Ok(Flow::Return(value))
+    }
+
+    #[inline(never)]
+    fn run_delete(&mut self, targets: &[Target]) -> Result<Flow, ScriptError> {
+        for target in targets {
+            self.delete(target)?;
+        }
+        Ok(Flow::Normal)
+    }
+
+    #[inline(never)]
+    fn eval_call(&mut self, func: &Expr, args: &[Expr], kwargs: &[(String, Expr)]) -> Result<Value, ScriptError> {
+        if let ExprKind::Attr(recv, method) = &func.kind {
+            if let Some(value) = self.call_mutating(recv, method, args, kwargs)? {
+                return Ok(value);
+            }
+        }
+        let func = self.eval(func)?;
+        let call_args = self.eval_args(args, kwargs)?;
+        self.call(func, call_args)
+    }
+
+    #[inline(never)]
+    fn eval_subscript(&mut self, obj: &Expr, index: &Expr) -> Result<Value, ScriptError> {
+        if let ExprKind::Slice { lower, upper, step } = &index.kind {
+            let obj = self.eval(obj)?;
+            let mut bound = |e: &Option<Box<Expr>>| -> Result<Option<i64>, ScriptError> {
+                match e {
+                    None => Ok(None),
+                    Some(e) => match self.eval(e)? {
+                        Value::None => Ok(None),
+                        Value::Int(i) => Ok(Some(i)),
+                        Value::Bool(b) => Ok(Some(i64::from(b))),
+                        _ => Err(type_error("slice indices must be integers or None or have an __index__ method")),
+                    },
+                }
+            };
+            let (lower, upper, step) = (bound(lower)?, bound(upper)?, bound(step)?);
+            return slice(&obj, lower, upper, step);
+        }
+        // Index a variable in place rather than copying all of it first.
+        if let ExprKind::Name(name) = &obj.kind {
+            if self.lookup_ref(name).is_some_and(|v| matches!(v, Value::List(_) | Value::Tuple(_) | Value::Dict(_))) {
+                let index = self.eval(index)?;
+                let container = self.lookup_ref(name).unwrap_or(&Value::None);
+                return index_value(container, &index);
+            }
+        }
+        let obj = self.eval(obj)?;
+        let index = self.eval(index)?;
+        self.subscript(&obj, &index)
+    }
+
+    #[inline(never)]
+    fn eval_dict(&mut self, items: &[(Expr, Expr)]) -> Result<Value, ScriptError> {
+        let mut entries: Vec<(Value, Value)> = Vec::new();
+        for (k, v) in items {
+            let key = self.eval(k)?;
+            let value = self.eval(v)?;
+            dict_insert(&mut entries, key, value)?;
+        }
+        Ok(Value::Dict(entries))
+    }
+
+    #[inline(never)]
+    fn eval_boolop(&mut self, and_: &bool, values: &[Expr]) -> Result<Value, ScriptError> {
+        let mut last = Value::None;
+        for v in values {
+            last = self.eval(v)?;
+            if last.truthy() != *and_ {
+                return Ok(last);
+            }
+        }
+        Ok(last)
+    }
+
+    #[inline(never)]
+    fn eval_compare(&mut self, left: &Expr, ops: &[(CmpOp, Expr)]) -> Result<Value, ScriptError> {
+        let mut left = self.eval(left)?;
+        for (op, right) in ops {
+            let right = self.eval(right)?;
+            if !self.compare(*op, &left, &right)? {
+                return Ok(Value::Bool(false));
+            }
+            left = right;
+        }
+        Ok(Value::Bool(true))
+    }
+
+    #[inline(never)]
+    fn eval_comp(
+        &mut self,
+        kind: &CompKind,
+        elt: &Expr,
+        value: &Option<Box<Expr>>,
+        generators: &[Generator],
+    ) -> Result<Value, ScriptError> {
+        if let Some(frame) = self.frames.last_mut() {
+            frame.comp.push(HashMap::new());
+        }
+        let mut items = Vec::new();
+        let result = self.comprehension(generators, elt, value.as_deref(), &mut items);
+        if let Some(frame) = self.frames.last_mut() {
+            frame.comp.pop();
+        }
+        result?;
+        Ok(match kind {
+            CompKind::List | CompKind::Generator => Value::List(items),
+            CompKind::Set => make_set(items)?,
+            CompKind::Dict => {
+                let mut entries = Vec::new();
+                for pair in items {
+                    if let Value::Tuple(mut kv) = pair {
+                        let v = kv.pop().unwrap_or(Value::None);
+                        let k = kv.pop().unwrap_or(Value::None);
+                        dict_insert(&mut entries, k, v)?;
                     }
+                }
+                Value::Dict(entries)
+            }
+        })
+    }
+
+    #[inline(never)]
+    fn run_import(&mut self, names: &[super::ast::ImportName]) -> Result<Flow, ScriptError> {
+        for name in names {
+            let module = find_module(&name.module)?;
+            match &name.alias {
+                Some(alias) => self.bind(alias, Value::Module(module)),
+                None => {
+                    let top = name.module.split('.').next().unwrap_or(&name.module);
+                    let top = find_module(top)?;
+                    self.bind(top, Value::Module(top));
+                }
+            }
+        }
+        Ok(Flow::Normal)
+    }
+
+    #[inline(never)]
+    fn run_from_import(&mut self, module: &str, names: &[(String, Option<String>)]) -> Result<Flow, ScriptError> {
+        let module = find_module(module)?;
+        for (name, alias) in names {
+            let full = format!("{module}.{name}");
+            let value = match KNOWN_MODULES.iter().find(|m| **m == full) {
+                Some(sub) => Value::Module(sub),
+                None => self.module_attr(module, name).map_err(|_| {
+                    ScriptError::new(
+                        ErrorKind::Import,
+                        format!("cannot import name '{name}' from '{module}' (not supported by this interpreter)"),
+                    )
+                })?,
+            };
+            self.bind(alias.as_ref().unwrap_or(name), value);
+        }
+        Ok(Flow::Normal)
+    }
+
+    #[inline(never)]
+    fn run_while(&mut self, test: &Expr, body: &[Stmt], orelse: &[Stmt]) -> Result<Flow, ScriptError> {
+        loop {
+            if !self.eval(test)?.truthy() {
+                return self.block(orelse);
+            }
+            self.step()?;
+            match self.block(body)? {
+                Flow::Break => return Ok(Flow::Normal),
+                Flow::Normal | Flow::Continue => {}
+                ret @ Flow::Return(_) => return Ok(ret),
+            }
+        }
+    }
+
+    #[inline(never)]
+    fn run_for(&mut self, target: &Target, iter: &Expr, body: &[Stmt], orelse: &[Stmt]) -> Result<Flow, ScriptError> {
+        let iterable = self.eval(iter)?;
+        let mut items = LoopIter::new(iterable)?;
+        while let Some(item) = items.next() {
+            self.step()?;
+            self.assign(target, item, false)?;
+            match self.block(body)? {
+                Flow::Break => return Ok(Flow::Normal),
+                Flow::Normal | Flow::Continue => {}
+                ret @ Flow::Return(_) => return Ok(ret),
+            }
+        }
+        self.block(orelse)
+    }
+
+    #[inline(never)]
+    fn run_try(
+        &mut self,
+        body: &[Stmt],
+        handlers: &[Handler],
+        orelse: &[Stmt],
+        finalbody: &[Stmt],
+    ) -> Result<Flow, ScriptError> {
+        let result = match self.block(body) {
+            Err(err) if err.is_catchable() && !handlers.is_empty() => self.handle(err, handlers),
+            Ok(Flow::Normal) => self.block(orelse),
+            other => other,
+        };
+        if matches!(&result, Err(err) if !err.is_catchable()) || finalbody.is_empty() {
+            return result;
+        }
+        match self.block(finalbody)? {
+            Flow::Normal => result,
+            flow => Ok(flow),
+        }
+    }
+
+    #[inline(never)]
+    fn run_raise(&mut self, exc: &Option<Expr>) -> Result<Flow, ScriptError> {
+        let Some(exc) = exc else {
+            return Err(self.handling.last().cloned().map_or_else(
+                || ScriptError::new(ErrorKind::Runtime, "No active exception to reraise"),
+                |mut e| {
+                    e.line = 0;
+                    e
+                },
+            ));
+        };
+        Err(match self.eval(exc)? {
+            Value::ExcType(kind) => ScriptError::new(kind, ""),
+            Value::Exception(kind, message) => ScriptError::new(kind, message),
+            _ => type_error("exceptions must derive from BaseException"),
+        })
+    }
+
+    #[inline(never)]
+    fn run_assert(&mut self, test: &Expr, msg: &Option<Expr>) -> Result<Flow, ScriptError> {
+        if !self.eval(test)?.truthy() {
+            let message = match msg {
+                Some(m) => self.eval(m)?.to_str(),
+                None => String::new(),
+            };
+            return Err(ScriptError::new(ErrorKind::Assertion, message));
+        }
+        Ok(Flow::Normal)
+    }
+
+    /// Runs the first `except` clause that matches `err`, or gives `err` back.
+    fn handle(&mut self, err: ScriptError, handlers: &[Handler]) -> Result<Flow, ScriptError> {
+        for h in handlers {
+            let matches = match &h.types {
+                None => true,
+                Some(types) => {
+                    let types = self.eval(types).map_err(|mut e| {
+                        e.line = h.line;
+                        e
+                    })?;
+                    exception_matches(&types, err.kind)?
+                }
+            };
+            if matches {
+                if let Some(name) = &h.name {
+                    self.bind(name, Value::Exception(err.kind, err.message.clone()));
+                }
+                self.handling.push(err);
+                let result = self.block(&h.body);
+                self.handling.pop();
+                return result;
+            }
+        }
+        Err(err)
+    }
+
+    /// A `def` or `lambda` as a value: its defaults evaluated now, and a snapshot of
+    /// the enclosing function's variables when it is defined inside one.
+    fn make_function(&mut self, def: &Arc<Function>) -> Result<Value, ScriptError> {
+        let mut defaults = Vec::with_capacity(def.params.len());
+        for p in &def.params {
+            defaults.push(match &p.default {
+                Some(d) => Some(self.eval(d)?),
+                None => None,
+            });
+        }
+        let captured = match self.frames.last() {
+            Some(frame) if frame.locals.is_some() || !frame.comp.is_empty() => {
+                let mut seen: HashMap<String, Value> = frame.captured.as_deref().cloned().unwrap_or_default();
+                if let Some(locals) = &frame.locals {
+                    seen.extend(locals.iter().map(|(k, v)| (k.clone(), v.clone())));
+                }
+                for scope in &frame.comp {
+                    seen.extend(scope.iter().map(|(k, v)| (k.clone(), v.clone())));
+                }
+                Some(Rc::new(seen))
+            }
+            _ => None,
+        };
+        Ok(Value::UserFn(Rc::new(UserFn { def: Arc::clone(def), defaults, captured })))
+    }
+
+    /// Calls a `def` or `lambda` function.
+    fn call_user(&mut self, f: &UserFn, args: Args) -> Result<Value, ScriptError> {
+        let name = f.def.name.as_str();
+        let params = &f.def.params;
+        if self.calls >= MAX_CALL_DEPTH {
+            return Err(ScriptError::new(
+                ErrorKind::Recursion,
+                format!("maximum recursion depth exceeded (this interpreter allows {MAX_CALL_DEPTH} nested calls)"),
+            ));
+        }
+        self.step()?;
+        if args.pos.len() > params.len() {
+            let required = f.defaults.iter().filter(|d| d.is_none()).count();
+            let n = params.len();
+            let takes = if required == n {
+                format!("{n} positional argument{}", if n == 1 { "" } else { "s" })
+            } else {
+                format!("from {required} to {n} positional arguments")
+            };
+            let given = args.pos.len();
+            let verb = if given == 1 { "was" } else { "were" };
+            return Err(type_error(format!("{name}() takes {takes} but {given} {verb} given")));
+        }
+        let mut slots: Vec<Option<Value>> = vec![None; params.len()];
+        for (slot, value) in slots.iter_mut().zip(args.pos) {
+            *slot = Some(value);
+        }
+        for (key, value) in args.kw {
+            let Some(i) = params.iter().position(|p| p.name == key) else {
+                return Err(type_error(format!("{name}() got an unexpected keyword argument '{key}'")));
+            };
+            if slots[i].is_some() {
+                return Err(type_error(format!("{name}() got multiple values for argument '{key}'")));
+            }
+            slots[i] = Some(value);
+        }
+        let mut missing = Vec::new();
+        let mut locals = HashMap::new();
+        for ((slot, param), default) in slots.into_iter().zip(params).zip(&f.defaults) {
+            match slot.or_else(|| default.clone()) {
+                Some(v) => {
+                    locals.insert(param.name.clone(), v);
+                }
+                None => missing.push(format!("'{}'", param.name)),
+            }
+        }
+        if !missing.is_empty() {
+            let list = match missing.len() {
+                1 => missing[0].clone(),
+                2 => format!("{} and {}", missing[0], missing[1]),
+                n => format!("{}, and {}", missing[..n - 1].join(", "), missing[n - 1]),
+            };
+            let plural = if missing.len() == 1 { "argument" } else { "arguments" };
+            return Err(type_error(format!("{name}() missing {} required positional {plural}: {list}", missing.len())));
+        }
+        self.frames.push(Frame {
+            locals: Some(locals),
+            comp: Vec::new(),
+            captured: f.captured.clone(),
+            global_names: Vec::new(),
+        });
+        self.calls += 1;
+        let result = match &f.def.body {
+            FunctionBody::Block(body) => self.block(body).map(|flow| match flow {
+                Flow::Return(v) => v,
+                _ => Value::None,
+            }),
+            FunctionBody::Expr(expr) => self.eval(expr),
+        };
+        self.calls -= 1;
+        self.frames.pop();
+        result
+    }
+
+    /// Binds `name` in the current scope (a function's locals unless declared
+    /// `global`, else the module's globals).
+    fn bind(&mut self, name: &str, value: Value) {
+        if let Some(frame) = self.frames.last_mut() {
+            if let Some(locals) = frame.locals.as_mut().filter(|_| !frame.global_names.iter().any(|g| g == name)) {
+                locals.insert(name.to_owned(), value);
+                return;
+            }
+        }
+        self.vars.insert(name.to_owned(), value);
+    }
+
+    /// Assigns `value` to `target`; `comp` binds names in the innermost comprehension scope.
+    fn assign(&mut self, target: &Target, value: Value, comp: bool) -> Result<(), ScriptError> {
+        match target {
+            Target::Name(name) => {
+                let scope = if comp { self.frames.last_mut().and_then(|f| f.comp.last_mut()) } else { None };
+                match scope {
+                    Some(scope) => {
+                        scope.insert(name.clone(), value);
+                    }
+                    None => self.bind(name, value),
                 }
                 Ok(())
             }
-            StmtKind::FromImport { module, names } => {
-                let module = find_module(module)?;
-                for (name, alias) in names {
-                    let full = format!("{module}.{name}");
-                    let value = match KNOWN_MODULES.iter().find(|m| **m == full) {
-                        Some(sub) => Value::Module(sub),
-                        None => self.module_attr(module, name).map_err(|_| {
-                            ScriptError::new(
-                                ErrorKind::Import,
-                                format!(
-                                    "cannot import name '{name}' from '{module}' (not supported by this interpreter)"
-                                ),
-                            )
-                        })?,
-                    };
-                    self.vars.insert(alias.clone().unwrap_or_else(|| name.clone()), value);
-                }
-                Ok(())
+            Target::Attr(obj, attr) => {
+                let obj = self.eval(obj)?;
+                self.set_attr(&obj, attr, &value)
             }
-            StmtKind::Assign { targets, value } => {
-                let value = self.eval(value)?;
-                for target in targets {
-                    match target {
-                        Target::Name(name) => {
-                            self.vars.insert(name.clone(), value.clone());
-                        }
-                        Target::Attr(obj, attr) => {
-                            let obj = self.eval(obj)?;
-                            self.set_attr(&obj, attr, &value)?;
-                        }
-                    }
+            Target::Subscript(obj, index) => {
+                let key = self.eval(index)?;
+                self.set_item(obj, key, value)
+            }
+            Target::Unpack(targets) => {
+                let items = iterate(&value)?;
+                if items.len() < targets.len() {
+                    return Err(value_error(format!(
+                        "not enough values to unpack (expected {}, got {})",
+                        targets.len(),
+                        items.len()
+                    )));
+                }
+                if items.len() > targets.len() {
+                    return Err(value_error(format!("too many values to unpack (expected {})", targets.len())));
+                }
+                for (t, v) in targets.iter().zip(items) {
+                    self.assign(t, v, comp)?;
                 }
                 Ok(())
             }
         }
+    }
+
+    fn aug_assign(&mut self, target: &Target, op: BinOp, value: &Expr) -> Result<(), ScriptError> {
+        match target {
+            Target::Name(name) => {
+                let current = self.lookup(name)?;
+                let rhs = self.eval(value)?;
+                let new = self.binary(op, &current, &rhs)?;
+                self.bind(name, new);
+                Ok(())
+            }
+            Target::Attr(obj, attr) => {
+                let obj = self.eval(obj)?;
+                let current = self.get_attr(obj.clone(), attr)?;
+                let rhs = self.eval(value)?;
+                let new = self.binary(op, &current, &rhs)?;
+                self.set_attr(&obj, attr, &new)
+            }
+            Target::Subscript(obj, index) => {
+                let container = self.eval(obj)?;
+                let key = self.eval(index)?;
+                let current = self.subscript(&container, &key)?;
+                let rhs = self.eval(value)?;
+                let new = self.binary(op, &current, &rhs)?;
+                self.set_item(obj, key, new)
+            }
+            Target::Unpack(_) => Err(type_error("illegal expression for augmented assignment")),
+        }
+    }
+
+    /// `left op right`, charging what it builds.
+    fn binary(&mut self, op: BinOp, left: &Value, right: &Value) -> Result<Value, ScriptError> {
+        let value = ops::binary(op, left, right)?;
+        self.charge(&value)?;
+        Ok(value)
+    }
+
+    /// `obj[key] = value`: changes the variable `obj` names (through any subscripts).
+    fn set_item(&mut self, obj: &Expr, key: Value, value: Value) -> Result<(), ScriptError> {
+        let Some(place) = self.place(obj)? else {
+            let container = self.eval(obj)?;
+            let mut scratch = container;
+            return store_item(&mut scratch, key, value);
+        };
+        match self.place_mut(&place)? {
+            Some(container) => store_item(container, key, value),
+            None => {
+                let mut scratch = self.eval(obj)?;
+                store_item(&mut scratch, key, value)
+            }
+        }
+    }
+
+    fn delete(&mut self, target: &Target) -> Result<(), ScriptError> {
+        match target {
+            Target::Name(name) => {
+                let frame = self.frames.last_mut();
+                let removed = match frame.and_then(|f| f.locals.as_mut()) {
+                    Some(locals) if locals.contains_key(name) => locals.remove(name),
+                    _ => self.vars.remove(name),
+                };
+                removed
+                    .map(drop)
+                    .ok_or_else(|| ScriptError::new(ErrorKind::Name, format!("name '{name}' is not defined")))
+            }
+            Target::Subscript(obj, index) => {
+                let key = self.eval(index)?;
+                let place = self.place(obj)?;
+                let container = match &place {
+                    Some(place) => self.place_mut(place)?,
+                    None => None,
+                };
+                let Some(container) = container else {
+                    let mut scratch = self.eval(obj)?;
+                    return remove_item(&mut scratch, &key);
+                };
+                remove_item(container, &key)
+            }
+            Target::Attr(..) => Err(not_supported("deleting attributes is not supported")),
+            Target::Unpack(targets) => {
+                for t in targets {
+                    self.delete(t)?;
+                }
+                Ok(())
+            }
+        }
+    }
+
+    /// The variable and the keys an expression like `a[1]['k']` names, if it names one.
+    fn place(&mut self, expr: &Expr) -> Result<Option<Place>, ScriptError> {
+        match &expr.kind {
+            ExprKind::Name(name) if self.lookup_ref(name).is_some() => {
+                Ok(Some(Place { root: name.clone(), keys: Vec::new() }))
+            }
+            ExprKind::Subscript(obj, index) if !matches!(index.kind, ExprKind::Slice { .. }) => {
+                let Some(mut place) = self.place(obj)? else { return Ok(None) };
+                place.keys.push(self.eval(index)?);
+                Ok(Some(place))
+            }
+            _ => Ok(None),
+        }
+    }
+
+    /// The value a [`Place`] names, to change it in place; `None` when it is not
+    /// reachable for writing (a variable captured by a closure, a string in the path).
+    fn place_mut(&mut self, place: &Place) -> Result<Option<&mut Value>, ScriptError> {
+        let frame_index = self.frames.len().checked_sub(1);
+        let mut current: Option<&mut Value> = None;
+        if let Some(i) = frame_index {
+            let in_comp = self.frames[i].comp.iter().rposition(|s| s.contains_key(&place.root));
+            let in_locals = self.frames[i].locals.as_ref().is_some_and(|l| l.contains_key(&place.root));
+            let frame = &mut self.frames[i];
+            if let Some(c) = in_comp {
+                current = frame.comp[c].get_mut(&place.root);
+            } else if in_locals {
+                current = frame.locals.as_mut().and_then(|l| l.get_mut(&place.root));
+            } else if frame.captured.as_ref().is_some_and(|c| c.contains_key(&place.root)) {
+                return Ok(None);
+            }
+        }
+        let mut current = match current {
+            Some(v) => v,
+            None => match self.vars.get_mut(&place.root) {
+                Some(v) => v,
+                None => return Ok(None),
+            },
+        };
+        for key in &place.keys {
+            current = match current {
+                Value::List(items) => {
+                    let i = seq_index(items.len(), key, "list")?;
+                    &mut items[i]
+                }
+                Value::Tuple(items) => {
+                    let i = seq_index(items.len(), key, "tuple")?;
+                    &mut items[i]
+                }
+                Value::Dict(entries) => match entries.iter_mut().find(|(k, _)| ops::equal(k, key)) {
+                    Some((_, v)) => v,
+                    None => return Err(ScriptError::new(ErrorKind::Key, key.repr())),
+                },
+                _ => return Ok(None),
+            };
+        }
+        Ok(Some(current))
+    }
+
+    /// Calls a list, dict or set method that changes its receiver, on the variable
+    /// the receiver expression names; `None` when the call is not such a method.
+    fn call_mutating(
+        &mut self,
+        recv: &Expr,
+        method: &str,
+        args: &[Expr],
+        kwargs: &[(String, Expr)],
+    ) -> Result<Option<Value>, ScriptError> {
+        if !super::methods::is_mutating(method) {
+            return Ok(None);
+        }
+        let Some(place) = self.place(recv)? else { return Ok(None) };
+        let applies = match self.place_mut(&place)? {
+            Some(target) => super::methods::mutates(target, method),
+            None => false,
+        };
+        if !applies {
+            return Ok(None);
+        }
+        let call_args = self.eval_args(args, kwargs)?;
+        // The receiver is taken out while the method runs, so that a key function may run code.
+        let Some(slot) = self.place_mut(&place)? else { return Ok(None) };
+        let mut target = std::mem::replace(slot, Value::None);
+        let result = self.mutate(&mut target, method, call_args);
+        if let Some(slot) = self.place_mut(&place)? {
+            *slot = target;
+        }
+        let value = result?;
+        self.charge(&value)?;
+        Ok(Some(value))
+    }
+
+    fn eval_args(&mut self, args: &[Expr], kwargs: &[(String, Expr)]) -> Result<Args, ScriptError> {
+        let mut call_args = Args::default();
+        for arg in args {
+            call_args.pos.push(self.eval(arg)?);
+        }
+        for (name, arg) in kwargs {
+            let value = self.eval(arg)?;
+            call_args.kw.push((name.clone(), value));
+        }
+        Ok(call_args)
     }
 
     fn set_attr(&mut self, obj: &Value, attr: &str, value: &Value) -> Result<(), ScriptError> {
@@ -443,82 +1190,236 @@ impl Interp<'_, '_> {
     /// Evaluates `expr`, charging the result against the allocation budget: values are
     /// copied when they are read, so every evaluation counts.
     pub(crate) fn eval(&mut self, expr: &Expr) -> Result<Value, ScriptError> {
-        let value = self.eval_uncharged(expr)?;
-        let weight = weight(&value, 0).ok_or_else(|| {
-            ScriptError::new(ErrorKind::Memory, format!("value nested more than {MAX_VALUE_DEPTH} levels deep"))
-        })?;
-        self.charge_bytes(weight)?;
+        self.enter()?;
+        let value = self.eval_uncharged(expr);
+        self.depth -= 1;
+        self.charged(value)
+    }
+
+    /// `value`, once charged against the allocation budget.
+    #[inline(never)]
+    fn charged(&mut self, value: Result<Value, ScriptError>) -> Result<Value, ScriptError> {
+        let value = value?;
+        self.charge(&value)?;
         Ok(value)
     }
 
+    /// Charges `value`'s size against the allocation budget.
+    pub(crate) fn charge(&mut self, value: &Value) -> Result<(), ScriptError> {
+        let weight = weight(value, 0).ok_or_else(|| {
+            ScriptError::new(ErrorKind::Memory, format!("value nested more than {MAX_VALUE_DEPTH} levels deep"))
+        })?;
+        self.charge_bytes(weight)
+    }
+
+    /// Dispatches on the expression form; every arm is its own function so that each
+    /// level of nesting costs the stack only this small frame and the arm it runs.
     fn eval_uncharged(&mut self, expr: &Expr) -> Result<Value, ScriptError> {
         match &expr.kind {
-            ExprKind::Const(c) => Ok(match c {
-                Const::None => Value::None,
-                Const::Bool(b) => Value::Bool(*b),
-                Const::Int(i) => Value::Int(*i),
-                Const::Float(f) => Value::Float(*f),
-                Const::Str(s) => Value::Str(s.clone()),
-            }),
+            ExprKind::Const(c) => Ok(const_value(c)),
             ExprKind::Name(name) => self.lookup(name),
-            ExprKind::Attr(obj, name) => {
-                let obj = self.eval(obj)?;
-                self.get_attr(obj, name)
+            ExprKind::Attr(obj, name) => self.eval_attr(obj, name),
+            ExprKind::Call { func, args, kwargs } => self.eval_call(func, args, kwargs),
+            ExprKind::Subscript(obj, index) => self.eval_subscript(obj, index),
+            ExprKind::Slice { .. } => Err(not_supported("slice objects outside a subscript are not supported")),
+            ExprKind::List(items) => self.eval_sequence(items, 'l'),
+            ExprKind::Tuple(items) => self.eval_sequence(items, 't'),
+            ExprKind::Set(items) => self.eval_sequence(items, 's'),
+            ExprKind::Dict(items) => self.eval_dict(items),
+            ExprKind::Unary(op, operand) => self.eval_unary(*op, operand),
+            ExprKind::Binary(op, left, right) => self.eval_binary(*op, left, right),
+            ExprKind::BoolOp { and_, values } => self.eval_boolop(and_, values),
+            ExprKind::Compare { left, ops } => self.eval_compare(left, ops),
+            ExprKind::IfExp { test, body, orelse } => self.eval_ifexp(test, body, orelse),
+            ExprKind::FString(parts) => self.eval_fstring(parts),
+            ExprKind::Comp { kind, elt, value, generators } => self.eval_comp(kind, elt, value, generators),
+            ExprKind::Lambda(def) => self.make_function(def),
+        }
+    }
+
+    #[inline(never)]
+    fn eval_attr(&mut self, obj: &Expr, name: &str) -> Result<Value, ScriptError> {
+        let obj = self.eval(obj)?;
+        self.get_attr(obj, name)
+    }
+
+    #[inline(never)]
+    fn eval_sequence(&mut self, items: &[Expr], kind: char) -> Result<Value, ScriptError> {
+        let values = self.eval_all(items)?;
+        match kind {
+            'l' => Ok(Value::List(values)),
+            't' => Ok(Value::Tuple(values)),
+            _ => make_set(values),
+        }
+    }
+
+    #[inline(never)]
+    fn eval_unary(&mut self, op: super::ast::UnaryOp, operand: &Expr) -> Result<Value, ScriptError> {
+        let v = self.eval(operand)?;
+        ops::unary(op, &v)
+    }
+
+    #[inline(never)]
+    fn eval_binary(&mut self, op: BinOp, left: &Expr, right: &Expr) -> Result<Value, ScriptError> {
+        let l = self.eval(left)?;
+        let r = self.eval(right)?;
+        ops::binary(op, &l, &r)
+    }
+
+    #[inline(never)]
+    fn eval_ifexp(&mut self, test: &Expr, body: &Expr, orelse: &Expr) -> Result<Value, ScriptError> {
+        if self.eval(test)?.truthy() {
+            self.eval(body)
+        } else {
+            self.eval(orelse)
+        }
+    }
+
+    #[inline(never)]
+    fn eval_fstring(&mut self, parts: &[FPart]) -> Result<Value, ScriptError> {
+        Ok(Value::Str(self.fstring(parts)?))
+    }
+
+    /// Runs the `for`/`if` clauses of a comprehension from `generators[0]`, pushing
+    /// each element (a `(key, value)` tuple for a dict) to `out`.
+    fn comprehension(
+        &mut self,
+        generators: &[Generator],
+        elt: &Expr,
+        value: Option<&Expr>,
+        out: &mut Vec<Value>,
+    ) -> Result<(), ScriptError> {
+        let Some((first, rest)) = generators.split_first() else {
+            let item = self.eval(elt)?;
+            let item = match value {
+                Some(v) => Value::Tuple(vec![item, self.eval(v)?]),
+                None => item,
+            };
+            if out.len() >= ops::MAX_ITEMS {
+                return Err(ScriptError::new(
+                    ErrorKind::Memory,
+                    format!("result would exceed {} items", ops::MAX_ITEMS),
+                ));
             }
-            ExprKind::Call { func, args, kwargs } => {
-                let func = self.eval(func)?;
-                let mut call_args = Args::default();
-                for arg in args {
-                    call_args.pos.push(self.eval(arg)?);
+            out.push(item);
+            return Ok(());
+        };
+        let iterable = self.eval(&first.iter)?;
+        let mut items = LoopIter::new(iterable)?;
+        'items: while let Some(item) = items.next() {
+            self.step()?;
+            self.assign(&first.target, item, true)?;
+            for cond in &first.ifs {
+                if !self.eval(cond)?.truthy() {
+                    continue 'items;
                 }
-                for (name, arg) in kwargs {
-                    let value = self.eval(arg)?;
-                    call_args.kw.push((name.clone(), value));
+            }
+            self.comprehension(rest, elt, value, out)?;
+        }
+        Ok(())
+    }
+
+    /// The text of an f-string.
+    fn fstring(&mut self, parts: &[FPart]) -> Result<String, ScriptError> {
+        let mut out = String::new();
+        for part in parts {
+            match part {
+                FPart::Lit(s) => out.push_str(s),
+                FPart::Field { expr, conversion, spec } => {
+                    let value = self.eval(expr)?;
+                    let value = match conversion {
+                        Some('r' | 'a') => Value::Str(value.repr()),
+                        Some(_) => Value::Str(value.to_str()),
+                        None => value,
+                    };
+                    let spec = self.fstring(spec)?;
+                    out.push_str(&super::format::format_value(&value, &spec)?);
                 }
-                self.call(func, call_args)
             }
-            ExprKind::Subscript(obj, index) => {
-                let obj = self.eval(obj)?;
-                let index = self.eval(index)?;
-                self.subscript(&obj, &index)
-            }
-            ExprKind::List(items) => Ok(Value::List(self.eval_all(items)?)),
-            ExprKind::Tuple(items) => Ok(Value::Tuple(self.eval_all(items)?)),
-            ExprKind::Dict(items) => {
-                let mut entries: Vec<(Value, Value)> = Vec::new();
-                for (k, v) in items {
-                    let key = self.eval(k)?;
-                    let value = self.eval(v)?;
-                    check_hashable(&key)?;
-                    match entries.iter_mut().find(|(existing, _)| ops::equal(existing, &key)) {
-                        Some(entry) => entry.1 = value,
-                        None => entries.push((key, value)),
-                    }
-                }
-                Ok(Value::Dict(entries))
-            }
-            ExprKind::Unary(op, operand) => {
-                let v = self.eval(operand)?;
-                ops::unary(*op, &v)
-            }
-            ExprKind::Binary(op, left, right) => {
-                let l = self.eval(left)?;
-                let r = self.eval(right)?;
-                ops::binary(*op, &l, &r)
+            if out.len() > ops::MAX_LEN {
+                return Err(ScriptError::new(ErrorKind::Memory, format!("result would exceed {} items", ops::MAX_LEN)));
             }
         }
+        Ok(out)
+    }
+
+    /// One comparison of a chain.
+    fn compare(&mut self, op: CmpOp, left: &Value, right: &Value) -> Result<bool, ScriptError> {
+        Ok(match op {
+            CmpOp::Eq => ops::equal(left, right),
+            CmpOp::NotEq => !ops::equal(left, right),
+            CmpOp::Lt | CmpOp::LtE | CmpOp::Gt | CmpOp::GtE => ops::ordered(op.symbol(), left, right)?,
+            CmpOp::In => self.contains(right, left)?,
+            CmpOp::NotIn => !self.contains(right, left)?,
+            CmpOp::Is => identical(left, right),
+            CmpOp::IsNot => !identical(left, right),
+        })
+    }
+
+    /// `item in container`.
+    pub(crate) fn contains(&mut self, container: &Value, item: &Value) -> Result<bool, ScriptError> {
+        Ok(match container {
+            Value::Str(s) => match item {
+                Value::Str(sub) => s.contains(sub.as_str()),
+                other => {
+                    return Err(type_error(format!(
+                        "'in <string>' requires string as left operand, not {}",
+                        other.type_name()
+                    )))
+                }
+            },
+            Value::List(items) | Value::Tuple(items) | Value::Set(items) => items.iter().any(|v| ops::equal(v, item)),
+            Value::Dict(entries) => entries.iter().any(|(k, _)| ops::equal(k, item)),
+            Value::Range(start, stop, step) => match item {
+                Value::Int(i) => {
+                    let inside = if *step > 0 { start <= i && i < stop } else { stop < i && i <= start };
+                    inside && (i128::from(*i) - i128::from(*start)) % i128::from(*step) == 0
+                }
+                _ => iterate(container)?.iter().any(|v| ops::equal(v, item)),
+            },
+            Value::Point(a, b) | Value::Size(a, b) => {
+                ops::equal(&Value::Int(*a), item) || ops::equal(&Value::Int(*b), item)
+            }
+            Value::Object(Object::Environ) => {
+                let name = to_str(item, "environment variable name")?;
+                self.host.env_var(name).is_some()
+            }
+            other => return Err(type_error(format!("argument of type '{}' is not iterable", other.type_name()))),
+        })
     }
 
     fn eval_all(&mut self, items: &[Expr]) -> Result<Vec<Value>, ScriptError> {
         items.iter().map(|e| self.eval(e)).collect()
     }
 
+    /// A variable's value without copying it: comprehension scopes, then the
+    /// function's locals and what its closure saw, then the globals.
+    fn lookup_ref(&self, name: &str) -> Option<&Value> {
+        if let Some(frame) = self.frames.last() {
+            for scope in frame.comp.iter().rev() {
+                if let Some(v) = scope.get(name) {
+                    return Some(v);
+                }
+            }
+            if let Some(v) = frame.locals.as_ref().and_then(|l| l.get(name)) {
+                return Some(v);
+            }
+            if let Some(v) = frame.captured.as_ref().and_then(|c| c.get(name)) {
+                return Some(v);
+            }
+        }
+        self.vars.get(name)
+    }
+
     fn lookup(&self, name: &str) -> Result<Value, ScriptError> {
-        if let Some(v) = self.vars.get(name) {
+        if let Some(v) = self.lookup_ref(name) {
             return Ok(v.clone());
         }
         if let Some(b) = static_name(BUILTINS, name) {
             return Ok(Value::Function { module: "", name: b });
+        }
+        if let Some(kind) = ErrorKind::from_python_name(name) {
+            return Ok(Value::ExcType(kind));
         }
         if REFUSED_BUILTINS.contains(&name) {
             return Err(not_supported(format!("{name}() is not supported by this interpreter")));
@@ -546,22 +1447,7 @@ impl Interp<'_, '_> {
     }
 
     fn get_attr(&mut self, obj: Value, name: &str) -> Result<Value, ScriptError> {
-        const STR_METHODS: &[&str] = &[
-            "lower",
-            "upper",
-            "strip",
-            "lstrip",
-            "rstrip",
-            "startswith",
-            "endswith",
-            "replace",
-            "split",
-            "join",
-            "find",
-            "count",
-            "splitlines",
-        ];
-        const DICT_METHODS: &[&str] = &["get", "keys", "values", "items"];
+        use super::methods::{DICT_METHODS, LIST_METHODS, SET_METHODS, STR_METHODS, TUPLE_METHODS};
         let method = |list: &[&'static str], obj: &Value| {
             static_name(list, name).map(|m| Value::Method(Box::new(obj.clone()), m))
         };
@@ -569,6 +1455,17 @@ impl Interp<'_, '_> {
             Value::Module(module) => return self.module_attr(module, name),
             Value::Str(_) => method(STR_METHODS, &obj),
             Value::Dict(_) => method(DICT_METHODS, &obj),
+            Value::List(_) => method(LIST_METHODS, &obj),
+            Value::Tuple(_) => method(TUPLE_METHODS, &obj),
+            Value::Set(_) => method(SET_METHODS, &obj),
+            Value::Type(t) if name == "__name__" => Some(Value::Str(t.rsplit('.').next().unwrap_or(t).to_owned())),
+            Value::ExcType(kind) if name == "__name__" => Some(Value::Str(kind.python_name().to_owned())),
+            Value::Function { name: f, .. } if name == "__name__" => Some(Value::Str((*f).to_owned())),
+            Value::UserFn(f) if name == "__name__" => Some(Value::Str(f.def.name.clone())),
+            Value::Exception(_, message) => match name {
+                "args" => Some(Value::Tuple(vec![Value::Str(message.clone())])),
+                _ => None,
+            },
             Value::Point(x, y) => match name {
                 "x" => Some(Value::Int(*x)),
                 "y" => Some(Value::Int(*y)),
@@ -617,42 +1514,12 @@ impl Interp<'_, '_> {
     }
 
     fn subscript(&mut self, obj: &Value, index: &Value) -> Result<Value, ScriptError> {
-        let seq_index = |len: usize, what: &str| -> Result<usize, ScriptError> {
-            let i = match index {
-                Value::Int(_) | Value::Bool(_) => to_i64(index, "index")?,
-                other => {
-                    return Err(type_error(format!(
-                        "{what} indices must be integers or slices, not {}",
-                        other.type_name()
-                    )))
-                }
-            };
-            let len_i = i64::try_from(len).unwrap_or(i64::MAX);
-            let resolved = if i < 0 { i + len_i } else { i };
-            if resolved < 0 || resolved >= len_i {
-                return Err(ScriptError::new(ErrorKind::Index, format!("{what} index out of range")));
-            }
-            Ok(usize::try_from(resolved).unwrap_or(0))
-        };
         match obj {
-            Value::List(items) => Ok(items[seq_index(items.len(), "list")?].clone()),
-            Value::Tuple(items) => Ok(items[seq_index(items.len(), "tuple")?].clone()),
-            Value::Point(a, b) | Value::Size(a, b) => Ok(Value::Int(if seq_index(2, "tuple")? == 0 { *a } else { *b })),
-            Value::Str(s) => {
-                let chars: Vec<char> = s.chars().collect();
-                let i = seq_index(chars.len(), "string")?;
-                Ok(Value::Str(chars[i].to_string()))
-            }
-            Value::Dict(entries) => entries
-                .iter()
-                .find(|(k, _)| ops::equal(k, index))
-                .map(|(_, v)| v.clone())
-                .ok_or_else(|| ScriptError::new(ErrorKind::Key, index.repr())),
             Value::Object(Object::Environ) => {
                 let name = to_str(index, "environment variable name")?;
                 self.host.env_var(name).map(Value::Str).ok_or_else(|| ScriptError::new(ErrorKind::Key, index.repr()))
             }
-            other => Err(type_error(format!("'{}' object is not subscriptable", other.type_name()))),
+            other => index_value(other, index),
         }
     }
 
@@ -662,221 +1529,21 @@ impl Interp<'_, '_> {
             Value::Function { module: "pyautogui", name } => super::pyautogui::call(self, name, args),
             Value::Function { module, name } => super::stdlib::call(self, module, name, args),
             Value::Method(recv, name) => self.call_method(*recv, name, args),
+            Value::UserFn(f) => self.call_user(&f, args),
+            Value::ExcType(kind) => {
+                if !args.kw.is_empty() {
+                    return Err(type_error(format!("{}() takes no keyword arguments", kind.python_name())));
+                }
+                let message = match args.pos.as_slice() {
+                    [] => String::new(),
+                    [one] if kind == ErrorKind::Key => one.repr(),
+                    [one] => one.to_str(),
+                    many => Value::Tuple(many.to_vec()).repr(),
+                };
+                Ok(Value::Exception(kind, message))
+            }
             Value::Marker(name) => Err(not_supported(format!("calling {name}() is not supported"))),
             other => Err(type_error(format!("'{}' object is not callable", other.type_name()))),
-        }
-    }
-
-    fn call_method(&mut self, recv: Value, name: &'static str, args: Args) -> Result<Value, ScriptError> {
-        match &recv {
-            Value::Str(s) => str_method(s, name, args),
-            Value::Dict(entries) => match name {
-                "get" => {
-                    let a = args.bind("get", &["key", "default"], 1)?;
-                    let key = a[0].clone().unwrap_or(Value::None);
-                    Ok(entries
-                        .iter()
-                        .find(|(k, _)| ops::equal(k, &key))
-                        .map(|(_, v)| v.clone())
-                        .unwrap_or_else(|| a[1].clone().unwrap_or(Value::None)))
-                }
-                "keys" => Ok(Value::List(entries.iter().map(|(k, _)| k.clone()).collect())),
-                "values" => Ok(Value::List(entries.iter().map(|(_, v)| v.clone()).collect())),
-                _ => Ok(Value::List(entries.iter().map(|(k, v)| Value::Tuple(vec![k.clone(), v.clone()])).collect())),
-            },
-            Value::Object(Object::Environ) => {
-                let a = args.bind("get", &["key", "default"], 1)?;
-                let key = a[0].clone().unwrap_or(Value::None);
-                let name = to_str(&key, "environment variable name")?;
-                Ok(self.host.env_var(name).map(Value::Str).unwrap_or_else(|| a[1].clone().unwrap_or(Value::None)))
-            }
-            Value::Object(Object::Image { region, .. }) => {
-                let a = args.bind("save", &["fp", "format"], 1)?;
-                let path = a[0].clone().unwrap_or(Value::None);
-                let path = to_str(&path, "save() path")?.to_owned();
-                let result = self.host.save_screenshot(&path, *region);
-                self.host(result)?;
-                Ok(Value::None)
-            }
-            Value::Object(Object::Completed { args: cmd, returncode, stdout, stderr }) => {
-                args.bind("check_returncode", &[], 0)?;
-                if *returncode != 0 {
-                    return Err(super::stdlib::called_process_error(cmd, *returncode, stdout.clone(), stderr.clone()));
-                }
-                Ok(Value::None)
-            }
-            Value::Object(object) => super::computer::call_method(self, object.clone(), name, args),
-            other => Err(no_attribute(other, name)),
-        }
-    }
-
-    fn builtin(&mut self, name: &str, args: Args) -> Result<Value, ScriptError> {
-        match name {
-            "print" => {
-                let mut sep = " ".to_owned();
-                let mut end = "\n".to_owned();
-                for (k, v) in &args.kw {
-                    match (k.as_str(), v) {
-                        ("sep", Value::None) | ("end", Value::None) | ("flush", _) => {}
-                        ("sep", Value::Str(s)) => sep = s.clone(),
-                        ("end", Value::Str(s)) => end = s.clone(),
-                        ("sep" | "end", other) => {
-                            return Err(type_error(format!("{k} must be None or a string, not {}", other.type_name())))
-                        }
-                        ("file", _) => return Err(not_supported("print(file=...) is not supported")),
-                        (other, _) => {
-                            return Err(type_error(format!("'{other}' is an invalid keyword argument for print()")))
-                        }
-                    }
-                }
-                let text: Vec<String> = args.pos.iter().map(Value::to_str).collect();
-                let line = format!("{}{end}", text.join(&sep));
-                self.print(&line)?;
-                Ok(Value::None)
-            }
-            "type" => {
-                let a = args.bind("type", &["object"], 1)?;
-                Ok(Value::Type(a[0].as_ref().map_or("NoneType", Value::class_name)))
-            }
-            "str" => {
-                let a = args.bind("str", &["object"], 0)?;
-                Ok(Value::Str(a[0].as_ref().map(Value::to_str).unwrap_or_default()))
-            }
-            "repr" => {
-                let a = args.bind("repr", &["obj"], 1)?;
-                Ok(Value::Str(a[0].as_ref().map(Value::repr).unwrap_or_default()))
-            }
-            "int" => builtin_int(args),
-            "float" => builtin_float(args),
-            "bool" => {
-                let a = args.bind("bool", &["x"], 0)?;
-                Ok(Value::Bool(a[0].as_ref().is_some_and(Value::truthy)))
-            }
-            "len" => {
-                let a = args.bind("len", &["obj"], 1)?;
-                let n = match a[0].as_ref().unwrap_or(&Value::None) {
-                    Value::Str(s) => s.chars().count(),
-                    Value::List(v) | Value::Tuple(v) => v.len(),
-                    Value::Dict(d) => d.len(),
-                    Value::Point(..) | Value::Size(..) => 2,
-                    other => return Err(type_error(format!("object of type '{}' has no len()", other.type_name()))),
-                };
-                Ok(Value::Int(i64::try_from(n).unwrap_or(i64::MAX)))
-            }
-            "abs" => {
-                let a = args.bind("abs", &["x"], 1)?;
-                match a[0].as_ref().unwrap_or(&Value::None) {
-                    Value::Float(f) => Ok(Value::Float(f.abs())),
-                    v @ (Value::Int(_) | Value::Bool(_)) => {
-                        let i = to_i64(v, "abs() argument")?;
-                        i.checked_abs().map(Value::Int).ok_or_else(|| {
-                            ScriptError::new(
-                                ErrorKind::Overflow,
-                                "integer overflow (this interpreter's integers are 64-bit)",
-                            )
-                        })
-                    }
-                    other => Err(type_error(format!("bad operand type for abs(): '{}'", other.type_name()))),
-                }
-            }
-            "round" => {
-                let a = args.bind("round", &["number", "ndigits"], 1)?;
-                let number = a[0].clone().unwrap_or(Value::None);
-                if is_none(&a[1]) {
-                    return match number {
-                        Value::Float(f) => ops::round_to_int(f).map(Value::Int),
-                        Value::Int(_) | Value::Bool(_) => Ok(Value::Int(to_i64(&number, "number")?)),
-                        other => Err(type_error(format!("type {} doesn't define __round__ method", other.type_name()))),
-                    };
-                }
-                let ndigits = to_i64(a[1].as_ref().unwrap_or(&Value::None), "ndigits")?;
-                ops::round_ndigits(&number, ndigits)
-            }
-            "min" | "max" => {
-                if let Some((k, _)) = args.kw.first() {
-                    return Err(not_supported(format!("{name}({k}=...) is not supported")));
-                }
-                let items = if args.pos.len() == 1 { iterate(&args.pos[0])? } else { args.pos };
-                let mut best: Option<Value> = None;
-                for item in items {
-                    best = Some(match best {
-                        None => item,
-                        Some(current) => {
-                            let ord = ops::compare(&item, &current)?;
-                            let better = if name == "min" { ord.is_lt() } else { ord.is_gt() };
-                            if better {
-                                item
-                            } else {
-                                current
-                            }
-                        }
-                    });
-                }
-                best.ok_or_else(|| value_error(format!("{name}() arg is an empty sequence")))
-            }
-            "sum" => {
-                let a = args.bind("sum", &["iterable", "start"], 1)?;
-                let mut total = a[1].clone().unwrap_or(Value::Int(0));
-                for item in iterate(a[0].as_ref().unwrap_or(&Value::None))? {
-                    if matches!(item, Value::Str(_)) {
-                        return Err(type_error("sum() can't sum strings [use ''.join(seq) instead]"));
-                    }
-                    if !matches!(item, Value::Int(_) | Value::Float(_) | Value::Bool(_)) {
-                        return Err(not_supported("sum() of non-numbers is not supported"));
-                    }
-                    total = ops::binary(super::ast::BinOp::Add, &total, &item)?;
-                }
-                Ok(total)
-            }
-            "list" | "tuple" => {
-                let a = args.bind(name, &["iterable"], 0)?;
-                let items = match &a[0] {
-                    Some(v) => iterate(v)?,
-                    None => Vec::new(),
-                };
-                Ok(if name == "list" { Value::List(items) } else { Value::Tuple(items) })
-            }
-            "dict" => {
-                let mut entries = Vec::new();
-                if let Some(first) = args.pos.first() {
-                    for item in iterate(first)? {
-                        match iterate(&item)?.as_slice() {
-                            [k, v] => entries.push((k.clone(), v.clone())),
-                            _ => return Err(value_error("dictionary update sequence element has the wrong length")),
-                        }
-                    }
-                }
-                for (k, v) in args.kw {
-                    entries.push((Value::Str(k), v));
-                }
-                Ok(Value::Dict(entries))
-            }
-            "chr" => {
-                let a = args.bind("chr", &["i"], 1)?;
-                let i = to_i64(a[0].as_ref().unwrap_or(&Value::None), "chr() argument")?;
-                u32::try_from(i)
-                    .ok()
-                    .and_then(char::from_u32)
-                    .map(|c| Value::Str(c.to_string()))
-                    .ok_or_else(|| value_error("chr() arg not in range(0x110000) or a surrogate"))
-            }
-            "ord" => {
-                let a = args.bind("ord", &["c"], 1)?;
-                let s = to_str(a[0].as_ref().unwrap_or(&Value::None), "ord() argument")?;
-                let mut chars = s.chars();
-                match (chars.next(), chars.next()) {
-                    (Some(c), None) => Ok(Value::Int(i64::from(u32::from(c)))),
-                    _ => Err(type_error(format!(
-                        "ord() expected a character, but string of length {} found",
-                        s.chars().count()
-                    ))),
-                }
-            }
-            "exit" | "quit" => {
-                let a = args.bind(name, &["code"], 0)?;
-                Err(super::stdlib::exit_with(self, a[0].clone()))
-            }
-            other => Err(not_supported(format!("{other}() is not supported by this interpreter"))),
         }
     }
 }
@@ -890,7 +1557,8 @@ fn weight(v: &Value, depth: usize) -> Option<usize> {
     let items = |items: &[Value]| items.iter().try_fold(SLOT, |acc, item| Some(acc + weight(item, depth + 1)?));
     match v {
         Value::Str(s) => Some(SLOT + s.len()),
-        Value::List(v) | Value::Tuple(v) => items(v),
+        Value::List(v) | Value::Tuple(v) | Value::Set(v) => items(v),
+        Value::Exception(_, message) => Some(SLOT + message.len()),
         Value::Dict(entries) => {
             entries.iter().try_fold(SLOT, |acc, (k, v)| Some(acc + weight(k, depth + 1)? + weight(v, depth + 1)?))
         }
@@ -916,215 +1584,277 @@ fn find_module(name: &str) -> Result<&'static str, ScriptError> {
 
 fn check_hashable(key: &Value) -> Result<(), ScriptError> {
     match key {
-        Value::List(_) | Value::Dict(_) => Err(type_error(format!("unhashable type: '{}'", key.type_name()))),
+        Value::List(_) | Value::Dict(_) | Value::Set(_) => {
+            Err(type_error(format!("unhashable type: '{}'", key.type_name())))
+        }
+        Value::Tuple(items) => items.iter().try_for_each(check_hashable),
         _ => Ok(()),
     }
 }
 
-fn builtin_int(args: Args) -> Result<Value, ScriptError> {
-    let a = args.bind("int", &["x", "base"], 0)?;
-    let Some(x) = &a[0] else { return Ok(Value::Int(0)) };
-    if let Some(base) = &a[1] {
-        let base = to_i64(base, "int() base")?;
-        let s = to_str(x, "int() can't convert non-string with explicit base; argument")?;
-        return parse_int(s, base);
-    }
-    match x {
-        Value::Bool(b) => Ok(Value::Int(i64::from(*b))),
-        Value::Int(i) => Ok(Value::Int(*i)),
-        Value::Float(f) => {
-            if f.is_nan() {
-                return Err(value_error("cannot convert float NaN to integer"));
-            }
-            if f.is_infinite() {
-                return Err(ScriptError::new(ErrorKind::Overflow, "cannot convert float infinity to integer"));
-            }
-            let t = f.trunc();
-            if !(-9.223_372_036_854_776e18..9.223_372_036_854_776e18).contains(&t) {
-                return Err(ScriptError::new(
-                    ErrorKind::Overflow,
-                    "integer overflow (this interpreter's integers are 64-bit)",
-                ));
-            }
-            Ok(Value::Int(t as i64))
-        }
-        Value::Str(s) => parse_int(s, 10),
-        other => Err(type_error(format!(
-            "int() argument must be a string, a bytes-like object or a real number, not '{}'",
-            other.type_name()
-        ))),
-    }
+/// How a statement ended.
+#[derive(Debug)]
+enum Flow {
+    Normal,
+    Break,
+    Continue,
+    Return(Value),
 }
 
-fn parse_int(s: &str, base: i64) -> Result<Value, ScriptError> {
-    let invalid = || value_error(format!("invalid literal for int() with base {base}: {}", super::value::str_repr(s)));
-    if !(base == 0 || (2..=36).contains(&base)) {
-        return Err(value_error("int() base must be >= 2 and <= 36, or 0"));
-    }
-    let t = s.trim();
-    let (neg, t) = match t.strip_prefix('-') {
-        Some(rest) => (true, rest),
-        None => (false, t.strip_prefix('+').unwrap_or(t)),
-    };
-    let lower = t.to_ascii_lowercase();
-    let (radix, digits) = match (base, lower.get(..2)) {
-        (0 | 16, Some("0x")) => (16, &t[2..]),
-        (0 | 8, Some("0o")) => (8, &t[2..]),
-        (0 | 2, Some("0b")) => (2, &t[2..]),
-        (0, _) => (10, t),
-        (b, _) => (u32::try_from(b).unwrap_or(10), t),
-    };
-    let digits = digits.strip_prefix('_').filter(|_| radix != 10 || base == 0).unwrap_or(digits);
-    if digits.is_empty() || digits.starts_with('_') || digits.ends_with('_') || digits.contains("__") {
-        return Err(invalid());
-    }
-    let clean: String = digits.chars().filter(|c| *c != '_').collect();
-    if !clean.chars().all(|c| c.is_digit(radix)) {
-        return Err(invalid());
-    }
-    let value = i64::from_str_radix(&clean, radix).map_err(|_| {
-        ScriptError::new(ErrorKind::Overflow, "integer overflow (this interpreter's integers are 64-bit)")
-    })?;
-    Ok(Value::Int(if neg { -value } else { value }))
+/// One function call's variables; the module level is a frame without locals.
+#[derive(Debug, Default)]
+struct Frame {
+    /// `None` at module level, where names bind in the globals.
+    locals: Option<HashMap<String, Value>>,
+    /// Comprehension variables, innermost last.
+    comp: Vec<HashMap<String, Value>>,
+    /// The enclosing function's variables when this function was defined, for closures.
+    captured: Option<Rc<HashMap<String, Value>>>,
+    /// Names declared `global` in this call.
+    global_names: Vec<String>,
 }
 
-fn builtin_float(args: Args) -> Result<Value, ScriptError> {
-    let a = args.bind("float", &["x"], 0)?;
-    match &a[0] {
-        None => Ok(Value::Float(0.0)),
-        Some(Value::Str(s)) => {
-            let t = s.trim();
-            let lower = t.to_ascii_lowercase();
-            let unsigned = lower.trim_start_matches(['+', '-']);
-            let special = matches!(unsigned, "inf" | "infinity" | "nan");
-            let valid_chars = t.chars().all(|c| c.is_ascii_digit() || matches!(c, '.' | 'e' | 'E' | '+' | '-' | '_'));
-            let parsed = if special || (valid_chars && !t.contains("__") && !t.starts_with('_') && !t.ends_with('_')) {
-                t.replace('_', "").parse::<f64>().ok()
-            } else {
-                None
-            };
-            parsed
-                .map(Value::Float)
-                .ok_or_else(|| value_error(format!("could not convert string to float: {}", super::value::str_repr(s))))
-        }
-        Some(v @ (Value::Int(_) | Value::Bool(_) | Value::Float(_))) => Ok(Value::Float(to_f64(v, "x")?)),
-        Some(other) => {
-            Err(type_error(format!("float() argument must be a string or a real number, not '{}'", other.type_name())))
-        }
-    }
+/// A variable and the keys of the subscripts applied to it: `a[1]['k']`.
+#[derive(Debug)]
+struct Place {
+    root: String,
+    keys: Vec<Value>,
 }
 
-fn str_method(s: &str, name: &str, args: Args) -> Result<Value, ScriptError> {
-    let text = |v: String| Ok(Value::Str(v));
-    match name {
-        "lower" => {
-            args.bind("lower", &[], 0)?;
-            text(s.to_lowercase())
-        }
-        "upper" => {
-            args.bind("upper", &[], 0)?;
-            text(s.to_uppercase())
-        }
-        "strip" | "lstrip" | "rstrip" => {
-            let a = args.bind(name, &["chars"], 0)?;
-            let chars: Option<Vec<char>> = match &a[0] {
-                None | Some(Value::None) => None,
-                Some(v) => Some(to_str(v, "strip arg")?.chars().collect()),
-            };
-            let pred = |c: char| chars.as_ref().map_or(c.is_whitespace(), |set| set.contains(&c));
-            text(match name {
-                "strip" => s.trim_matches(pred).to_owned(),
-                "lstrip" => s.trim_start_matches(pred).to_owned(),
-                _ => s.trim_end_matches(pred).to_owned(),
-            })
-        }
-        "startswith" | "endswith" => {
-            let a = args.bind(name, &["prefix"], 1)?;
-            let arg = a[0].clone().unwrap_or(Value::None);
-            let candidates = match &arg {
-                Value::Tuple(items) => items.clone(),
-                other => vec![other.clone()],
-            };
-            let mut hit = false;
-            for c in &candidates {
-                let c = to_str(c, &format!("{name} first arg"))?;
-                hit |= if name == "startswith" { s.starts_with(c) } else { s.ends_with(c) };
-            }
-            Ok(Value::Bool(hit))
-        }
-        "replace" => {
-            let a = args.bind("replace", &["old", "new", "count"], 2)?;
-            let old = to_str(a[0].as_ref().unwrap_or(&Value::None), "replace() argument 1")?;
-            let new = to_str(a[1].as_ref().unwrap_or(&Value::None), "replace() argument 2")?;
-            let count = match &a[2] {
-                Some(v) => to_i64(v, "count")?,
-                None => -1,
-            };
-            let occurrences = if old.is_empty() { s.chars().count() + 1 } else { s.matches(old).count() };
-            let occurrences =
-                if count < 0 { occurrences } else { occurrences.min(usize::try_from(count).unwrap_or(usize::MAX)) };
-            if occurrences.saturating_mul(new.len()).saturating_add(s.len()) > ops::MAX_LEN {
-                return Err(ScriptError::new(ErrorKind::Memory, "result too large"));
-            }
-            text(if count < 0 { s.replace(old, new) } else { s.replacen(old, new, occurrences) })
-        }
-        "split" => {
-            let a = args.bind("split", &["sep", "maxsplit"], 0)?;
-            if !is_none(&a[1]) {
-                return Err(not_supported("str.split(maxsplit=...) is not supported"));
-            }
-            if s.len() > ops::MAX_ITEMS {
-                return Err(ScriptError::new(ErrorKind::Memory, "string too long to split"));
-            }
-            let parts: Vec<Value> = match &a[0] {
-                None | Some(Value::None) => s.split_whitespace().map(|p| Value::Str(p.to_owned())).collect(),
-                Some(v) => {
-                    let sep = to_str(v, "must be str or None; sep")?;
-                    if sep.is_empty() {
-                        return Err(value_error("empty separator"));
-                    }
-                    s.split(sep).map(|p| Value::Str(p.to_owned())).collect()
+/// What a `for` loop or a comprehension walks: a copy of the items, or a range counted lazily.
+enum LoopIter {
+    Items(std::vec::IntoIter<Value>),
+    Range { next: i64, stop: i64, step: i64 },
+}
+
+impl LoopIter {
+    fn new(v: Value) -> Result<LoopIter, ScriptError> {
+        Ok(match v {
+            Value::Range(start, stop, step) => LoopIter::Range { next: start, stop, step },
+            Value::List(items) | Value::Tuple(items) | Value::Set(items) => LoopIter::Items(items.into_iter()),
+            other => LoopIter::Items(iterate(&other)?.into_iter()),
+        })
+    }
+
+    fn next(&mut self) -> Option<Value> {
+        match self {
+            LoopIter::Items(items) => items.next(),
+            LoopIter::Range { next, stop, step } => {
+                let more = if *step > 0 { *next < *stop } else { *next > *stop };
+                if !more {
+                    return None;
                 }
-            };
-            Ok(Value::List(parts))
-        }
-        "splitlines" => {
-            args.bind("splitlines", &[], 0)?;
-            if s.len() > ops::MAX_ITEMS {
-                return Err(ScriptError::new(ErrorKind::Memory, "string too long to split"));
+                let current = *next;
+                match next.checked_add(*step) {
+                    Some(n) => *next = n,
+                    None => *next = *stop,
+                }
+                Some(Value::Int(current))
             }
-            Ok(Value::List(s.lines().map(|p| Value::Str(p.to_owned())).collect()))
         }
-        "join" => {
-            let a = args.bind("join", &["iterable"], 1)?;
-            let mut parts = Vec::new();
-            for (i, item) in iterate(a[0].as_ref().unwrap_or(&Value::None))?.into_iter().enumerate() {
-                match item {
-                    Value::Str(p) => parts.push(p),
-                    other => {
-                        return Err(type_error(format!(
-                            "sequence item {i}: expected str instance, {} found",
-                            other.type_name()
-                        )))
-                    }
+    }
+}
+
+/// The position `index` names in a sequence of `len` items (negative counts from the end).
+pub(crate) fn seq_index(len: usize, index: &Value, what: &str) -> Result<usize, ScriptError> {
+    let i = match index {
+        Value::Int(_) | Value::Bool(_) => to_i64(index, "index")?,
+        other => {
+            return Err(type_error(format!("{what} indices must be integers or slices, not {}", other.type_name())))
+        }
+    };
+    let len_i = i64::try_from(len).unwrap_or(i64::MAX);
+    let resolved = if i < 0 { i + len_i } else { i };
+    if resolved < 0 || resolved >= len_i {
+        return Err(ScriptError::new(ErrorKind::Index, format!("{what} index out of range")));
+    }
+    Ok(usize::try_from(resolved).unwrap_or(0))
+}
+
+/// `container[index]` for plain values.
+fn index_value(container: &Value, index: &Value) -> Result<Value, ScriptError> {
+    match container {
+        Value::List(items) => Ok(items[seq_index(items.len(), index, "list")?].clone()),
+        Value::Tuple(items) => Ok(items[seq_index(items.len(), index, "tuple")?].clone()),
+        Value::Point(a, b) | Value::Size(a, b) => {
+            Ok(Value::Int(if seq_index(2, index, "tuple")? == 0 { *a } else { *b }))
+        }
+        Value::Str(s) => {
+            let chars: Vec<char> = s.chars().collect();
+            let i = seq_index(chars.len(), index, "string")?;
+            Ok(Value::Str(chars[i].to_string()))
+        }
+        Value::Range(start, stop, step) => {
+            let len = usize::try_from(super::value::range_len(*start, *stop, *step)).unwrap_or(usize::MAX);
+            let i = i64::try_from(seq_index(len, index, "range object")?).unwrap_or(0);
+            Ok(Value::Int(start + i * step))
+        }
+        Value::Dict(entries) => entries
+            .iter()
+            .find(|(k, _)| ops::equal(k, index))
+            .map(|(_, v)| v.clone())
+            .ok_or_else(|| ScriptError::new(ErrorKind::Key, index.repr())),
+        other => Err(type_error(format!("'{}' object is not subscriptable", other.type_name()))),
+    }
+}
+
+/// The positions `[lower:upper:step]` selects from a sequence of `len` items, as Python computes them.
+fn slice_indices(
+    len: usize,
+    lower: Option<i64>,
+    upper: Option<i64>,
+    step: Option<i64>,
+) -> Result<Vec<usize>, ScriptError> {
+    let step = step.unwrap_or(1);
+    if step == 0 {
+        return Err(value_error("slice step cannot be zero"));
+    }
+    let len = i64::try_from(len).unwrap_or(i64::MAX);
+    let clamp = |x: i64, low: i64, high: i64| {
+        let x = if x < 0 { x.saturating_add(len) } else { x };
+        x.clamp(low, high)
+    };
+    let mut out = Vec::new();
+    if step > 0 {
+        let start = lower.map_or(0, |x| clamp(x, 0, len));
+        let stop = upper.map_or(len, |x| clamp(x, 0, len));
+        let mut i = start;
+        while i < stop {
+            out.push(usize::try_from(i).unwrap_or(0));
+            i = i.saturating_add(step);
+        }
+    } else {
+        let start = lower.map_or(len - 1, |x| clamp(x, -1, len - 1));
+        let stop = upper.map_or(-1, |x| clamp(x, -1, len - 1));
+        let mut i = start;
+        while i > stop {
+            out.push(usize::try_from(i).unwrap_or(0));
+            i = i.saturating_add(step);
+        }
+    }
+    Ok(out)
+}
+
+/// `obj[lower:upper:step]`.
+fn slice(obj: &Value, lower: Option<i64>, upper: Option<i64>, step: Option<i64>) -> Result<Value, ScriptError> {
+    match obj {
+        Value::List(items) | Value::Tuple(items) => {
+            let picked =
+                slice_indices(items.len(), lower, upper, step)?.into_iter().map(|i| items[i].clone()).collect();
+            Ok(if matches!(obj, Value::List(_)) { Value::List(picked) } else { Value::Tuple(picked) })
+        }
+        Value::Str(s) => {
+            let chars: Vec<char> = s.chars().collect();
+            Ok(Value::Str(slice_indices(chars.len(), lower, upper, step)?.into_iter().map(|i| chars[i]).collect()))
+        }
+        Value::Point(a, b) | Value::Size(a, b) => {
+            slice(&Value::Tuple(vec![Value::Int(*a), Value::Int(*b)]), lower, upper, step)
+        }
+        other => Err(type_error(format!("'{}' object is not subscriptable", other.type_name()))),
+    }
+}
+
+/// `container[key] = value` on a value.
+fn store_item(container: &mut Value, key: Value, value: Value) -> Result<(), ScriptError> {
+    match container {
+        Value::List(items) => {
+            let i = seq_index(items.len(), &key, "list").map_err(|e| {
+                if e.kind == ErrorKind::Index {
+                    ScriptError::new(ErrorKind::Index, "list assignment index out of range")
+                } else {
+                    e
+                }
+            })?;
+            items[i] = value;
+            Ok(())
+        }
+        Value::Dict(entries) => dict_insert(entries, key, value),
+        Value::Object(Object::Environ) => Err(not_supported("setting os.environ entries is not supported")),
+        other => Err(type_error(format!("'{}' object does not support item assignment", other.type_name()))),
+    }
+}
+
+/// `del container[key]` on a value.
+fn remove_item(container: &mut Value, key: &Value) -> Result<(), ScriptError> {
+    match container {
+        Value::List(items) => {
+            let i = seq_index(items.len(), key, "list").map_err(|e| {
+                if e.kind == ErrorKind::Index {
+                    ScriptError::new(ErrorKind::Index, "list assignment index out of range")
+                } else {
+                    e
+                }
+            })?;
+            items.remove(i);
+            Ok(())
+        }
+        Value::Dict(entries) => match entries.iter().position(|(k, _)| ops::equal(k, key)) {
+            Some(i) => {
+                entries.remove(i);
+                Ok(())
+            }
+            None => Err(ScriptError::new(ErrorKind::Key, key.repr())),
+        },
+        other => Err(type_error(format!("'{}' object doesn't support item deletion", other.type_name()))),
+    }
+}
+
+/// Inserts or replaces `key` in a dict's entries.
+pub(crate) fn dict_insert(entries: &mut Vec<(Value, Value)>, key: Value, value: Value) -> Result<(), ScriptError> {
+    check_hashable(&key)?;
+    match entries.iter_mut().find(|(existing, _)| ops::equal(existing, &key)) {
+        Some(entry) => entry.1 = value,
+        None => entries.push((key, value)),
+    }
+    Ok(())
+}
+
+/// A set of `items`, first occurrences kept in order.
+pub(crate) fn make_set(items: Vec<Value>) -> Result<Value, ScriptError> {
+    let mut set: Vec<Value> = Vec::new();
+    for item in items {
+        check_hashable(&item)?;
+        if !set.iter().any(|v| ops::equal(v, &item)) {
+            set.push(item);
+        }
+    }
+    Ok(Value::Set(set))
+}
+
+/// `a is b`: the singletons and equal scalars, names and functions are identical;
+/// two containers never are, since values here are copies.
+fn identical(a: &Value, b: &Value) -> bool {
+    match (a, b) {
+        (Value::UserFn(x), Value::UserFn(y)) => Rc::ptr_eq(x, y),
+        (Value::List(_) | Value::Dict(_) | Value::Set(_), _) => false,
+        (Value::Float(_), Value::Float(_)) => false,
+        _ => std::mem::discriminant(a) == std::mem::discriminant(b) && a == b,
+    }
+}
+
+/// Whether an `except` clause's class (or tuple of classes) catches `kind`.
+fn exception_matches(types: &Value, kind: ErrorKind) -> Result<bool, ScriptError> {
+    match types {
+        Value::ExcType(class) => Ok(kind.is_subclass_of(*class)),
+        Value::Tuple(items) => {
+            for item in items {
+                if exception_matches(item, kind)? {
+                    return Ok(true);
                 }
             }
-            let total =
-                parts.iter().map(String::len).sum::<usize>().saturating_add(s.len().saturating_mul(parts.len()));
-            if total > ops::MAX_LEN {
-                return Err(ScriptError::new(ErrorKind::Memory, "result too large"));
-            }
-            text(parts.join(s))
+            Ok(false)
         }
-        "find" | "count" => {
-            let a = args.bind(name, &["sub"], 1)?;
-            let sub = to_str(a[0].as_ref().unwrap_or(&Value::None), "must be str; argument")?;
-            if name == "count" {
-                let n = if sub.is_empty() { s.chars().count() + 1 } else { s.matches(sub).count() };
-                return Ok(Value::Int(i64::try_from(n).unwrap_or(i64::MAX)));
-            }
-            Ok(Value::Int(s.find(sub).map_or(-1, |byte| i64::try_from(s[..byte].chars().count()).unwrap_or(i64::MAX))))
-        }
-        other => Err(not_supported(format!("str.{other} is not supported"))),
+        _ => Err(type_error("catching classes that do not inherit from BaseException is not allowed")),
+    }
+}
+
+/// A literal's value.
+fn const_value(c: &Const) -> Value {
+    match c {
+        Const::None => Value::None,
+        Const::Bool(b) => Value::Bool(*b),
+        Const::Int(i) => Value::Int(*i),
+        Const::Float(f) => Value::Float(*f),
+        Const::Str(s) => Value::Str(s.clone()),
     }
 }

@@ -3,19 +3,23 @@
 //! getters (`import os; print(os.path.join(os.getenv('LOCALAPPDATA'), ...))`)
 //! and Navi's `computer.*` actions for `/execute_windows`.
 //!
-//! It is not Python: it parses a small subset (imports, assignments, calls,
-//! literals, containers, attribute access, subscripts and arithmetic) and
-//! rejects everything else (loops, `if`, `def`, comparisons, f-strings, ...)
-//! with a precise [`ParseError`]. Modules are interpreter objects, never real
-//! imports, and every effect goes through a [`ScriptHost`], so this module does
-//! no I/O. Output is what CPython would print; failures are
+//! It is not CPython: a real Python parser reads the code and [`parser`] keeps
+//! the subset agents write (imports, assignments of every form, `if`/`for`/
+//! `while` with `break`/`continue`, `try`/`except`/`finally`/`raise`, `def` and
+//! `lambda`, comprehensions, f-strings, slices, comparisons and boolean logic),
+//! refusing the rest (classes, `with`, generators, star-arguments, ...) with a
+//! precise [`ParseError`] before anything runs. Modules are interpreter objects,
+//! never real imports, and every effect goes through a [`ScriptHost`], so this
+//! module does no I/O. Output is what CPython would print; failures are
 //! [`ScriptError`]s styled like Python exceptions.
 //!
 //! # Layout
 //!
-//! - `lexer` and [`parser`]: source to [`ast::Program`]; [`parse`].
-//! - `interp`: statements, expressions, builtins; [`run`], [`Globals`], [`RunOutput`].
-//! - `value` and `ops`: runtime values, `str`/`repr`, arithmetic with Python semantics.
+//! - [`parser`]: source to [`ast::Program`] through `rustpython-parser`; [`parse`].
+//! - `interp`: statements, control flow, scopes, user functions, expressions; [`run`], [`Globals`], [`RunOutput`].
+//! - `builtins` and `methods`: the builtin functions and the methods of `str`, `list`, `tuple`, `dict`, `set`.
+//! - `value`, `ops` and `format`: runtime values, `str`/`repr`, arithmetic and
+//!   comparisons with Python semantics, format specs, `%` and `str.format`.
 //! - `pyautogui`: the pyautogui 0.9.54 module mapped to [`Action`]s.
 //! - `stdlib`: `time`, `os`, `os.path` (ntpath), `subprocess`, `platform`, `sys`, `PIL`, `pyperclip`.
 //! - `computer`: the Navi `Computer` object over [`ComputerState`]; `difflib` for its fuzzy window match.
@@ -24,22 +28,27 @@
 //!
 //! # Safety properties
 //!
-//! Parsing never panics and always ends (every loop consumes input, nesting is
-//! capped at [`parser::MAX_DEPTH`]). Running ends after at most one evaluation
-//! per syntax node (there are no loops or user functions); integers are 64-bit
-//! with overflow errors; strings and lists are capped at 10 million items; sleeps,
-//! clicks and key presses go through the host, which may refuse them.
+//! Parsing never panics and always ends (nesting is capped at
+//! [`parser::MAX_DEPTH`] and [`parser::MAX_BLOCK_DEPTH`]). Running always ends:
+//! loop iterations and function calls together are capped at [`MAX_STEPS`],
+//! calls nest at most [`MAX_CALL_DEPTH`] deep, and what a program builds is
+//! charged against an allocation budget; these limits stop the run whatever it
+//! catches. Integers are 64-bit with overflow errors; strings and lists are
+//! capped at 10 million items; sleeps, clicks and key presses go through the
+//! host, which may refuse them.
 
 use crate::action::Action;
 
 mod argv;
 pub mod ast;
+mod builtins;
 mod computer;
 mod difflib;
 mod error;
+mod format;
 pub mod host;
 mod interp;
-mod lexer;
+mod methods;
 mod ops;
 pub mod parser;
 mod pyautogui;
@@ -54,7 +63,7 @@ pub use computer::ComputerState;
 pub use difflib::{get_close_matches, ratio as sequence_ratio};
 pub use error::{ErrorKind, ParseError, ScriptError};
 pub use host::{CommandArg, CommandOutput, HostError, HostResult, PathKind, RecordingHost, ScriptHost};
-pub use interp::{run, Globals, RunOutput, KNOWN_MODULES};
+pub use interp::{run, Globals, RunOutput, KNOWN_MODULES, MAX_CALL_DEPTH, MAX_STEPS};
 pub use parser::parse;
 pub use value::{float_repr, str_repr};
 

@@ -1,4 +1,4 @@
-//! Arithmetic, ordering and rounding with Python's semantics.
+//! Arithmetic, comparisons, ordering and rounding with Python's semantics.
 //!
 //! Integers are 64-bit and overflow raises `OverflowError` instead of
 //! growing; floor division and modulo round toward negative infinity; `/`
@@ -53,13 +53,16 @@ fn as_float(n: Num) -> f64 {
     }
 }
 
-/// `-x` and `+x`.
+/// `-x`, `+x`, `~x` and `not x`.
 pub(crate) fn unary(op: UnaryOp, v: &Value) -> Result<Value, ScriptError> {
     let symbol = match op {
         UnaryOp::Plus => "+",
         UnaryOp::Minus => "-",
+        UnaryOp::Invert => "~",
+        UnaryOp::Not => return Ok(Value::Bool(!v.truthy())),
     };
     match (op, num(v)) {
+        (UnaryOp::Invert, Some(Num::Int(i))) => Ok(Value::Int(!i)),
         (UnaryOp::Plus, Some(Num::Int(i))) => Ok(Value::Int(i)),
         (UnaryOp::Plus, Some(Num::Float(f))) => Ok(Value::Float(f)),
         (UnaryOp::Minus, Some(Num::Int(i))) => i.checked_neg().map(Value::Int).ok_or_else(overflow),
@@ -70,13 +73,43 @@ pub(crate) fn unary(op: UnaryOp, v: &Value) -> Result<Value, ScriptError> {
 
 /// `left op right`.
 pub(crate) fn binary(op: BinOp, left: &Value, right: &Value) -> Result<Value, ScriptError> {
+    if let (Value::Bool(a), Value::Bool(b)) = (left, right) {
+        match op {
+            BinOp::BitAnd => return Ok(Value::Bool(*a & *b)),
+            BinOp::BitOr => return Ok(Value::Bool(*a | *b)),
+            BinOp::BitXor => return Ok(Value::Bool(*a ^ *b)),
+            _ => {}
+        }
+    }
     if let (Some(a), Some(b)) = (num(left), num(right)) {
         return match (a, b) {
             (Num::Int(a), Num::Int(b)) => int_op(op, a, b),
+            (_, _) if is_bitwise(op) => Err(operand_error(op, left, right)),
             (a, b) => float_op(op, as_float(a), as_float(b)),
         };
     }
     match (op, left, right) {
+        (BinOp::Mod, Value::Str(text), args) => Ok(Value::Str(super::format::percent(text, args)?)),
+        (BinOp::BitOr | BinOp::BitAnd | BinOp::Sub | BinOp::BitXor, Value::Set(a), Value::Set(b)) => {
+            let has = |set: &[Value], v: &Value| set.iter().any(|x| equal(x, v));
+            let items: Vec<Value> = match op {
+                BinOp::BitOr => a.iter().chain(b.iter().filter(|v| !has(a, v))).cloned().collect(),
+                BinOp::BitAnd => a.iter().filter(|v| has(b, v)).cloned().collect(),
+                BinOp::Sub => a.iter().filter(|v| !has(b, v)).cloned().collect(),
+                _ => a.iter().filter(|v| !has(b, v)).chain(b.iter().filter(|v| !has(a, v))).cloned().collect(),
+            };
+            Ok(Value::Set(items))
+        }
+        (BinOp::BitOr, Value::Dict(a), Value::Dict(b)) => {
+            let mut merged = a.clone();
+            for (k, v) in b {
+                match merged.iter_mut().find(|(existing, _)| equal(existing, k)) {
+                    Some(entry) => entry.1 = v.clone(),
+                    None => merged.push((k.clone(), v.clone())),
+                }
+            }
+            Ok(Value::Dict(merged))
+        }
         (BinOp::Add, Value::Str(a), Value::Str(b)) => {
             if a.len() + b.len() > MAX_LEN {
                 return Err(too_big(MAX_LEN));
@@ -98,16 +131,21 @@ pub(crate) fn binary(op: BinOp, left: &Value, right: &Value) -> Result<Value, Sc
             };
             repeat(seq, times)
         }
-        (BinOp::Mod, Value::Str(_), _) => {
-            Err(ScriptError::new(ErrorKind::NotSupported, "printf-style string formatting (`%`) is not supported"))
-        }
-        _ => Err(type_error(format!(
-            "unsupported operand type(s) for {}: '{}' and '{}'",
-            op.symbol(),
-            left.type_name(),
-            right.type_name()
-        ))),
+        _ => Err(operand_error(op, left, right)),
     }
+}
+
+fn is_bitwise(op: BinOp) -> bool {
+    matches!(op, BinOp::BitAnd | BinOp::BitOr | BinOp::BitXor | BinOp::LShift | BinOp::RShift)
+}
+
+fn operand_error(op: BinOp, left: &Value, right: &Value) -> ScriptError {
+    type_error(format!(
+        "unsupported operand type(s) for {}: '{}' and '{}'",
+        op.symbol(),
+        left.type_name(),
+        right.type_name()
+    ))
 }
 
 fn concat(a: &[Value], b: &[Value]) -> Result<Vec<Value>, ScriptError> {
@@ -170,6 +208,33 @@ fn int_op(op: BinOp, a: i64, b: i64) -> Result<Value, ScriptError> {
             let exp = u32::try_from(b).map_err(|_| overflow())?;
             int(a.checked_pow(exp))
         }
+        BinOp::BitAnd => Ok(Value::Int(a & b)),
+        BinOp::BitOr => Ok(Value::Int(a | b)),
+        BinOp::BitXor => Ok(Value::Int(a ^ b)),
+        BinOp::LShift | BinOp::RShift => {
+            if b < 0 {
+                return Err(value_error("negative shift count"));
+            }
+            if op == BinOp::RShift {
+                return Ok(Value::Int(if b >= 64 {
+                    if a < 0 {
+                        -1
+                    } else {
+                        0
+                    }
+                } else {
+                    a >> b
+                }));
+            }
+            if a == 0 {
+                return Ok(Value::Int(0));
+            }
+            let shifted = u32::try_from(b).ok().filter(|b| *b < 63).map(|b| a.wrapping_shl(b));
+            match shifted {
+                Some(v) if v >> b == a => Ok(Value::Int(v)),
+                _ => Err(overflow()),
+            }
+        }
     }
 }
 
@@ -194,6 +259,9 @@ fn float_op(op: BinOp, a: f64, b: f64) -> Result<Value, ScriptError> {
             } else {
                 rem
             }
+        }
+        BinOp::BitAnd | BinOp::BitOr | BinOp::BitXor | BinOp::LShift | BinOp::RShift => {
+            return Err(type_error(format!("unsupported operand type(s) for {}: 'float' and 'float'", op.symbol())));
         }
         BinOp::Pow => {
             if a == 0.0 && b < 0.0 {
@@ -235,8 +303,14 @@ fn float_divmod(a: f64, b: f64) -> (f64, f64) {
     (floordiv, rem)
 }
 
-/// Orders two values for `min`/`max`: numbers with numbers, strings with strings.
+/// Orders two values for `min`/`max` and `sorted`: numbers with numbers, strings
+/// with strings, lists with lists and tuples with tuples (item by item).
 pub(crate) fn compare(a: &Value, b: &Value) -> Result<Ordering, ScriptError> {
+    compare_with("<", a, b)
+}
+
+/// [`compare`] with the operator named in the error message; `None` from a NaN is `Equal`.
+pub(crate) fn compare_with(symbol: &str, a: &Value, b: &Value) -> Result<Ordering, ScriptError> {
     match (num(a), num(b)) {
         (Some(Num::Int(x)), Some(Num::Int(y))) => return Ok(x.cmp(&y)),
         (Some(x), Some(y)) => return Ok(as_float(x).partial_cmp(&as_float(y)).unwrap_or(Ordering::Equal)),
@@ -244,19 +318,70 @@ pub(crate) fn compare(a: &Value, b: &Value) -> Result<Ordering, ScriptError> {
     }
     match (a, b) {
         (Value::Str(x), Value::Str(y)) => Ok(x.cmp(y)),
+        (Value::List(x), Value::List(y)) | (Value::Tuple(x), Value::Tuple(y)) => {
+            for (p, q) in x.iter().zip(y) {
+                if !equal(p, q) {
+                    return compare_with(symbol, p, q);
+                }
+            }
+            Ok(x.len().cmp(&y.len()))
+        }
         _ => Err(type_error(format!(
-            "'<' not supported between instances of '{}' and '{}'",
+            "'{symbol}' not supported between instances of '{}' and '{}'",
             a.type_name(),
             b.type_name()
         ))),
     }
 }
 
-/// Python equality for the values that can be dict keys or list items we look up.
+/// Whether `a < b` (or another ordering operator) holds; NaN compares false.
+pub(crate) fn ordered(symbol: &str, a: &Value, b: &Value) -> Result<bool, ScriptError> {
+    if let (Some(x), Some(y)) = (num(a), num(b)) {
+        if matches!(x, Num::Float(_)) || matches!(y, Num::Float(_)) {
+            let (x, y) = (as_float(x), as_float(y));
+            return Ok(match symbol {
+                "<" => x < y,
+                "<=" => x <= y,
+                ">" => x > y,
+                _ => x >= y,
+            });
+        }
+    }
+    let ord = compare_with(symbol, a, b)?;
+    Ok(match symbol {
+        "<" => ord.is_lt(),
+        "<=" => ord.is_le(),
+        ">" => ord.is_gt(),
+        _ => ord.is_ge(),
+    })
+}
+
+/// Python `==`: numbers by value across int, float and bool; containers item by
+/// item (dicts and sets regardless of order); everything else structurally.
 pub(crate) fn equal(a: &Value, b: &Value) -> bool {
     match (num(a), num(b)) {
-        (Some(Num::Int(x)), Some(Num::Int(y))) => x == y,
-        (Some(x), Some(y)) => as_float(x) == as_float(y),
+        (Some(Num::Int(x)), Some(Num::Int(y))) => return x == y,
+        (Some(x), Some(y)) => return as_float(x) == as_float(y),
+        (Some(_), None) | (None, Some(_)) => return false,
+        _ => {}
+    }
+    let seq = |x: &[Value], y: &[Value]| x.len() == y.len() && x.iter().zip(y).all(|(p, q)| equal(p, q));
+    match (a, b) {
+        (Value::List(x), Value::List(y)) | (Value::Tuple(x), Value::Tuple(y)) => seq(x, y),
+        (Value::Set(x), Value::Set(y)) => x.len() == y.len() && x.iter().all(|p| y.iter().any(|q| equal(p, q))),
+        (Value::Dict(x), Value::Dict(y)) => {
+            x.len() == y.len() && x.iter().all(|(k, v)| y.iter().any(|(k2, v2)| equal(k, k2) && equal(v, v2)))
+        }
+        (Value::Range(..), Value::Range(..)) => a == b,
+        (Value::Type(t), Value::Function { module: "", name })
+        | (Value::Function { module: "", name }, Value::Type(t)) => t == name,
+        (Value::Point(..) | Value::Size(..), Value::Tuple(y))
+        | (Value::Tuple(y), Value::Point(..) | Value::Size(..)) => {
+            let (Value::Point(p, q) | Value::Size(p, q)) = (if matches!(a, Value::Tuple(_)) { b } else { a }) else {
+                return false;
+            };
+            seq(&[Value::Int(*p), Value::Int(*q)], y)
+        }
         _ => a == b,
     }
 }

@@ -278,7 +278,11 @@ fn getter_programs_print_like_python() {
 fn hidden_file_getter_fails_precisely() {
     let src = r"import os; print(1 if os.path.basename(r'C:\x') .startswith('.') or (os.name == 'nt' and bool(os.stat(r'C:\x').st_file_attributes & 2)) else 0)";
     let err = python_err(src);
-    assert_eq!(err, "line 1: SyntaxError: column 20: conditional expressions (`a if cond else b`) are not supported");
+    // The conditional expression and the boolean logic run now; `os.stat` is what the interpreter lacks.
+    assert_eq!(
+        err,
+        "line 1: AttributeError: module 'os' has no attribute 'stat' (os.stat is not supported by this interpreter)"
+    );
 }
 
 #[test]
@@ -640,54 +644,48 @@ fn parse_errors_name_the_construct_and_position() {
         let err = parse(src).expect_err(src);
         assert_eq!((err.line, err.column, err.message.as_str()), (line, column, message), "{src}");
     };
-    check("for x in y: pass", 1, 1, "`for` loops are not supported");
-    check("import os\nwhile True: pass", 2, 1, "`while` loops are not supported");
-    check("x = 1; if x: pass", 1, 8, "`if` statements are not supported");
-    check("def f(): pass", 1, 1, "function definitions (`def`) are not supported");
     check("class A: pass", 1, 1, "class definitions (`class`) are not supported");
-    check("with open('x') as f: pass", 1, 1, "`with` statements are not supported");
-    check("try: pass", 1, 1, "`try` statements are not supported");
-    check("f = lambda: 1", 1, 5, "`lambda` expressions are not supported");
-    check("print(1 if x else 2)", 1, 9, "conditional expressions (`a if cond else b`) are not supported");
-    check("[x for x in y]", 1, 4, "comprehensions and generator expressions are not supported");
-    check("print(a == b)", 1, 9, "comparison operators (`==`) are not supported");
-    check("print(a and b)", 1, 9, "boolean operators (`and`) are not supported");
-    check("print(not a)", 1, 7, "boolean operators (`not`) are not supported");
-    check("x = f'{y}'", 1, 5, "f-strings are not supported");
+    check("import os\nwith open('x') as f: pass", 2, 1, "`with` statements are not supported");
+    check("def f(*args): pass", 1, 1, "`*args` and `**kwargs` parameters are not supported");
+    check("@dec\ndef f(): pass", 2, 1, "decorators are not supported");
+    check("def f():\n    yield 1", 2, 5, "generators (`yield`) are not supported");
+    check("async def f(): pass", 1, 1, "`async` code is not supported");
+    check("f(*args)", 1, 3, "unpacking (`*`) in calls is not supported");
+    check("f(**kw)", 1, 3, "unpacking (`**`) in calls is not supported");
+    check("a, *b = [1, 2]", 1, 4, "starred assignment targets (`a, *b = ...`) are not supported");
+    check("if (n := 3): pass", 1, 5, "assignment expressions (`:=`) are not supported");
     check("x = b'y'", 1, 5, "bytes literals (b'...') are not supported");
-    check("x += 1", 1, 3, "augmented assignment (`+=`) is not supported");
-    check("a, b = 1, 2", 1, 1, "unpacking assignments (`a, b = ...`) are not supported");
-    check("x[0] = 1", 1, 1, "item assignment (`x[i] = ...`) is not supported");
-    check("x = y[1:2]", 1, 8, "slices are not supported");
-    check("f(*args)", 1, 3, "unpacking (`*`) is not supported");
-    check("x = 'abc", 1, 5, "unterminated string literal (detected at line 1)");
-    check("x = '''abc\n", 1, 5, "unterminated triple-quoted string literal (detected at line 2)");
-    check("print('a'\n", 1, 6, "'(' was never closed");
-    check("print(1))", 1, 9, "unmatched ')'");
-    check("  x = 1", 1, 3, "unexpected indent");
-    check("x = 1 $", 1, 7, "invalid character '$' (U+0024)");
-    check("x = '\\N{DASH}'", 1, 6, "\\N{...} escapes are not supported");
-    check(r"x = 'C:\Users'", 1, 8, "(unicode error) truncated \\UXXXXXXXX escape");
-    check("x = 99999999999999999999", 1, 5, "integer literal too large (this interpreter's integers are 64-bit)");
-    check(
-        "x = 012",
-        1,
-        5,
-        "leading zeros in decimal integer literals are not permitted; use an 0o prefix for octal integers",
-    );
     check("x = 1j", 1, 5, "complex number literals are not supported");
-    check("f(a=1, a=2)", 1, 8, "keyword argument repeated: a");
-    check("f(a=1, 2)", 1, 8, "positional argument follows keyword argument");
-    check("from os import *", 1, 16, "`from ... import *` is not supported");
-    check("x = {1, 2}", 1, 7, "set literals are not supported");
-    check("x = 1 2", 1, 7, "invalid syntax: expected `;` or a new line after a statement, found number");
-    check("print(x for x in y)", 1, 9, "comprehensions and generator expressions are not supported");
-    check("x = a & b", 1, 7, "bitwise operators (`&`) are not supported");
+    check("x = 99999999999999999999", 1, 5, "integer literal too large (this interpreter's integers are 64-bit)");
+    check("from os import *", 1, 1, "`from ... import *` is not supported");
+    check("from . import x", 1, 1, "relative imports are not supported");
+    check("nonlocal x", 1, 1, "`nonlocal` statements are not supported");
+    check("x = a @ b", 1, 5, "the matrix operator (`@`) is not supported");
+    check("break", 1, 1, "'break' outside loop");
+    check("return 1", 1, 1, "'return' outside function");
+    check("raise ValueError('x') from None", 1, 1, "`raise ... from ...` is not supported");
+    // Syntax errors refuse the program with the position the parser reports.
+    let err = parse("x = 1\nfor i in range(3)\n    pass").unwrap_err();
+    assert_eq!((err.line, err.message.starts_with("invalid syntax")), (2, true), "{err}");
+    let err = parse("print('a'").unwrap_err();
+    assert_eq!(err.line, 1, "{err}");
+    let err = parse("x = 'abc").unwrap_err();
+    assert_eq!(err.line, 1, "{err}");
+    let err = parse("if x:\npass").unwrap_err();
+    assert_eq!(err.message, "expected an indented block", "{err}");
+    // Nesting limits keep hostile input from exhausting the stack.
     let deep = format!("x = {}1{}", "(".repeat(100), ")".repeat(100));
     assert!(parse(&deep).unwrap_err().message.contains("nested too deeply"));
-    let long_chain = format!("x = 1{}", " + 1".repeat(200));
-    assert!(parse(&long_chain).unwrap_err().message.contains("nested too deeply"));
+    let long_chain = format!("x = 1{}", " + 1".repeat(3000));
+    assert!(parse(&long_chain).unwrap_err().message.contains("line too long"));
+    let unary = format!("x = {}1", "-".repeat(200));
+    assert!(parse(&unary).unwrap_err().message.contains("nested too deeply"));
+    let blocks: String =
+        (0..40).map(|i| format!("{}if x:\n", "    ".repeat(i))).collect::<String>() + &"    ".repeat(40) + "pass";
+    assert!(parse(&blocks).unwrap_err().message.contains("blocks nested too deeply"));
     assert!(parse(&format!("x = 1{}", " + 1".repeat(40))).is_ok());
+    // Empty statements are accepted, as the WAA corpus's `...;;` needs.
+    assert!(parse("a = 1;; b = 2;").is_ok());
 }
 
 #[test]

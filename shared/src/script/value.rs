@@ -1,12 +1,19 @@
 //! Runtime values and how Python prints them.
 //!
-//! Values are plain data: containers are immutable copies (the subset has no
-//! mutating methods), modules and functions are names the interpreter
-//! dispatches on, and interpreter objects (a screenshot, the `Computer` parts,
+//! Values are plain data: containers are copies (a mutating method or an item
+//! assignment changes the variable it is called on, never an alias of it),
+//! modules and builtins are names the interpreter dispatches on, user functions
+//! share their definition, and interpreter objects (a screenshot, the `Computer` parts,
 //! a finished process) are small enums. `str` and `repr` follow CPython,
 //! including float formatting (`0.5`, `1.0`, `1e-05`, `inf`).
 
+use std::collections::HashMap;
 use std::fmt::Write as _;
+use std::rc::Rc;
+use std::sync::Arc;
+
+use super::ast::Function;
+use super::error::ErrorKind;
 
 /// A runtime value.
 #[derive(Debug, Clone, PartialEq)]
@@ -19,6 +26,16 @@ pub(crate) enum Value {
     List(Vec<Value>),
     Tuple(Vec<Value>),
     Dict(Vec<(Value, Value)>),
+    /// A set, in insertion order.
+    Set(Vec<Value>),
+    /// `range(start, stop, step)`.
+    Range(i64, i64, i64),
+    /// A `def` or `lambda` function.
+    UserFn(Rc<UserFn>),
+    /// An exception class (`ValueError`).
+    ExcType(ErrorKind),
+    /// An exception instance: its class and its `str()`.
+    Exception(ErrorKind, String),
     /// pyautogui's `Point(x, y)` named tuple.
     Point(i64, i64),
     /// pyautogui's `Size(width, height)` named tuple.
@@ -37,6 +54,15 @@ pub(crate) enum Value {
     /// A class object, by its qualified name (`PIL.Image.Image`), as `type(x)` returns.
     Type(&'static str),
     Object(Object),
+}
+
+/// A function defined by the program: its definition, its evaluated defaults
+/// and, for a function defined inside another, the enclosing locals it saw.
+#[derive(Debug, PartialEq)]
+pub(crate) struct UserFn {
+    pub(crate) def: Arc<Function>,
+    pub(crate) defaults: Vec<Option<Value>>,
+    pub(crate) captured: Option<Rc<HashMap<String, Value>>>,
 }
 
 /// Objects made by the interpreter.
@@ -102,6 +128,11 @@ impl Value {
             Value::List(_) => "list",
             Value::Tuple(_) => "tuple",
             Value::Dict(_) => "dict",
+            Value::Set(_) => "set",
+            Value::Range(..) => "range",
+            Value::UserFn(_) => "function",
+            Value::ExcType(_) => "type",
+            Value::Exception(kind, _) => kind.python_name(),
             Value::Point(..) => "Point",
             Value::Size(..) => "Size",
             Value::Module(_) => "module",
@@ -133,6 +164,8 @@ impl Value {
             Value::Str(s) => !s.is_empty(),
             Value::List(v) | Value::Tuple(v) => !v.is_empty(),
             Value::Dict(d) => !d.is_empty(),
+            Value::Set(v) => !v.is_empty(),
+            Value::Range(start, stop, step) => range_len(*start, *stop, *step) > 0,
             _ => true,
         }
     }
@@ -141,6 +174,7 @@ impl Value {
     pub(crate) fn to_str(&self) -> String {
         match self {
             Value::Str(s) => s.clone(),
+            Value::Exception(_, message) => message.clone(),
             other => other.repr(),
         }
     }
@@ -187,6 +221,31 @@ impl Value {
                 }
                 out.push('}');
             }
+            Value::Set(items) if items.is_empty() => out.push_str("set()"),
+            Value::Set(items) => {
+                out.push('{');
+                write_items(out, items);
+                out.push('}');
+            }
+            Value::Range(start, stop, step) => {
+                let _ = if *step == 1 {
+                    write!(out, "range({start}, {stop})")
+                } else {
+                    write!(out, "range({start}, {stop}, {step})")
+                };
+            }
+            Value::UserFn(f) => {
+                let _ = write!(out, "<function {}>", f.def.name);
+            }
+            Value::ExcType(kind) => {
+                let _ = write!(out, "<class '{}'>", kind.python_name());
+            }
+            Value::Exception(ErrorKind::Key, message) => {
+                let _ = write!(out, "KeyError({message})");
+            }
+            Value::Exception(kind, message) => {
+                let _ = write!(out, "{}({})", kind.python_name(), str_repr(message));
+            }
             Value::Point(x, y) => {
                 let _ = write!(out, "Point(x={x}, y={y})");
             }
@@ -229,6 +288,16 @@ impl Value {
             }
         }
     }
+}
+
+/// How many numbers `range(start, stop, step)` holds (`step` is never 0).
+pub(crate) fn range_len(start: i64, stop: i64, step: i64) -> u64 {
+    let (lo, hi, step) = if step > 0 { (start, stop, step) } else { (stop, start, step.saturating_neg()) };
+    if lo >= hi {
+        return 0;
+    }
+    let span = i128::from(hi) - i128::from(lo);
+    u64::try_from((span - 1) / i128::from(step) + 1).unwrap_or(u64::MAX)
 }
 
 fn write_items(out: &mut String, items: &[Value]) {
