@@ -52,26 +52,12 @@ pub struct DesktopHost<'a> {
     /// The `/update_computer` screenshot that `clipboard.copy_image` crops.
     screenshot: Option<&'a image::RgbaImage>,
     effects: usize,
-    /// Keys the program pressed with `keyDown` and has not released; let go on drop.
-    held: arena_shared::keys::HeldKeys,
-}
-
-impl Drop for DesktopHost<'_> {
-    /// The program is over (finished, failed or timed out): a key it left held is
-    /// released, so it does not modify the next program's input.
-    fn drop(&mut self) {
-        for release in self.held.releases() {
-            if let Err(err) = self.desktop.perform(&release) {
-                tracing::warn!(error = %err, ?release, "releasing a key the program left held failed");
-            }
-        }
-    }
 }
 
 impl<'a> DesktopHost<'a> {
     /// A host acting on `desktop` until `deadline`.
     pub fn new(desktop: &'a dyn Desktop, deadline: Instant) -> DesktopHost<'a> {
-        DesktopHost { desktop, deadline, screenshot: None, effects: 0, held: Default::default() }
+        DesktopHost { desktop, deadline, screenshot: None, effects: 0 }
     }
 
     /// Sets the screenshot `copy_image` crops (the one `/update_computer` stored).
@@ -175,9 +161,7 @@ impl ScriptHost for DesktopHost<'_> {
             return self.sleep(ms as f64 / 1000.0);
         }
         self.effect()?;
-        self.desktop.perform(&action).map_err(fail)?;
-        self.held.track(&action);
-        Ok(())
+        self.desktop.perform(&action).map_err(fail)
     }
 
     fn sleep(&mut self, seconds: f64) -> HostResult<()> {
@@ -408,29 +392,6 @@ mod tests {
         assert_eq!(out.stdout, "Size(width=1440, height=900) True\n");
         assert_eq!(host.effects(), 1);
         assert_eq!(stub.action_log().len(), 1);
-    }
-
-    #[test]
-    fn keys_a_program_leaves_held_are_released_when_it_ends() {
-        let (_dir, stub) = stub();
-        {
-            let mut host = DesktopHost::new(stub.as_ref(), far());
-            let code = "import pyautogui\npyautogui.keyDown('shift')\npyautogui.keyDown('ctrl')\npyautogui.keyUp('ctrl')\nnot_defined_stops_here()";
-            run_source(code, &mut host, Globals::python()).expect_err("the program raises");
-        }
-        let log = stub.action_log();
-        assert_eq!(log.last(), Some(&Action::KeyUp { key: "shift".into() }), "{log:?}");
-        assert_eq!(log.iter().filter(|a| matches!(a, Action::KeyUp { .. })).count(), 2, "{log:?}");
-        {
-            let mut host = DesktopHost::new(stub.as_ref(), far());
-            run_source(
-                "import pyautogui\npyautogui.keyDown('alt')\npyautogui.keyUp('alt')",
-                &mut host,
-                Globals::python(),
-            )
-            .expect("runs");
-        }
-        assert_eq!(stub.action_log().len(), log.len() + 2, "nothing more is released after a balanced program");
     }
 
     #[test]

@@ -34,6 +34,7 @@ use std::time::{Duration, Instant};
 
 use serde_json::Value;
 
+use arena_shared::action::{Action, ActionBatch};
 use arena_shared::clipboard::ClipboardContent;
 use arena_shared::observation::{A11yQuery, ImageFormat, ScreenshotQuery};
 use arena_shared::script::ComputerState;
@@ -181,6 +182,7 @@ pub async fn run_attempt(
         reset: None,
         steps: Vec::new(),
         wants_dom: agent.wants_dom(),
+        keys_down: Vec::new(),
     };
     if let Err(err) = out.prepare() {
         ep.result.status = EpisodeStatus::InfraError(format!("cannot prepare the result folder: {err}"));
@@ -214,6 +216,8 @@ struct Episode {
     steps: Vec<StepRecord>,
     /// Whether the agent wants the browser's DOM elements in each observation.
     wants_dom: bool,
+    /// Every key an action pressed with `keyDown`: let go when the episode ends.
+    keys_down: Vec<String>,
 }
 
 /// An observation and the file its screenshot was written to.
@@ -298,6 +302,28 @@ fn phase(report: &setup::StepReport, phase: &str) -> Value {
 }
 
 impl Episode {
+    /// Lets go of every key an action pressed with `keyDown`, after the evaluation
+    /// (so the score is the one upstream gives) and before the next task, which
+    /// upstream would start with the key still down. Reported as a `teardown` entry
+    /// of the episode's setup reports; a failure is logged, never fatal.
+    async fn release_keys(&mut self, client: &GuestClient) {
+        if self.keys_down.is_empty() {
+            return;
+        }
+        let started = Instant::now();
+        let actions: Vec<Action> = self.keys_down.iter().rev().map(|key| Action::KeyUp { key: key.clone() }).collect();
+        let names = self.keys_down.join(", ");
+        let (ok, detail) = match client.act(&ActionBatch { actions }).await {
+            Ok(_) => (true, format!("released {names}")),
+            Err(err) => {
+                tracing::warn!(error = %err, keys = %names, "releasing the keys the agent pressed failed");
+                (false, format!("releasing {names} failed: {err}"))
+            }
+        };
+        let report = setup::StepReport { kind: "release_held_keys", ok, detail, elapsed_ms: ms(started.elapsed()) };
+        self.result.setup.push(phase(&report, "teardown"));
+    }
+
     /// Steps 1 to 3 of the module documentation. `Err` is an infrastructure
     /// error that ends the episode where it happened.
     async fn play(
@@ -375,6 +401,7 @@ impl Episode {
         let ectx = EvalContext { client: client.clone(), cache: config.cache.clone(), work_dir: out.eval_dir() };
         let outcome = eval::evaluate(&ectx, &task.evaluator, last.as_ref()).await;
         self.result.eval_ms = ms(eval_started.elapsed());
+        self.release_keys(client).await;
         self.result.eval = serde_json::to_value(&outcome).unwrap_or(Value::Null);
         // A getter that failed because the guest went away scored 0 for the
         // wrong reason: find out before trusting the score.
@@ -537,6 +564,11 @@ impl Episode {
                         Ok(Ok(outcome)) => {
                             if let Some(error) = &outcome.error {
                                 tracing::debug!(task = %task.name, step, error, "an action failed");
+                            }
+                            for key in &outcome.keys_down {
+                                if !self.keys_down.contains(key) {
+                                    self.keys_down.push(key.clone());
+                                }
                             }
                             record.outcomes.push(serde_json::to_value(&outcome).unwrap_or(Value::Null));
                         }
@@ -972,6 +1004,23 @@ mod tests {
         // Upstream's computer_clipboard is Navi's own copy: empty at the reset, then what the code copied.
         let clipboards: Vec<&str> = lines.iter().map(|l| l["computer_clipboard"].as_str().unwrap()).collect();
         assert_eq!(clipboards, ["", "tracked words", "tracked words"]);
+    }
+
+    #[tokio::test]
+    async fn keys_the_agent_left_held_are_released_after_the_evaluation() {
+        let hold = AgentAction::Typed(vec![Action::KeyDown { key: "shift".into() }]);
+        let code = AgentAction::Pyautogui("pyautogui.keyDown('ctrl')".into());
+        let script = vec![says(vec![hold]), says(vec![code]), says(vec![AgentAction::Done])];
+        let (result, _out, _tmp) = play(&task("exact_match"), script, false).await;
+        assert_eq!(result.status, EpisodeStatus::Completed, "{result:?}");
+        let teardown: Vec<&Value> = result.setup.iter().filter(|r| r["phase"] == "teardown").collect();
+        assert_eq!(teardown.len(), 1, "{:?}", result.setup);
+        assert_eq!(teardown[0]["kind"], "release_held_keys");
+        assert_eq!(teardown[0]["ok"], true);
+        assert_eq!(teardown[0]["detail"], "released shift, ctrl");
+        // Nothing to release, nothing reported.
+        let (result, _out, _tmp) = play(&task("exact_match"), vec![says(vec![AgentAction::Done])], false).await;
+        assert!(result.setup.iter().all(|r| r["phase"] != "teardown"), "{:?}", result.setup);
     }
 
     #[tokio::test]

@@ -503,26 +503,33 @@ async fn replay_repeats_a_recorded_trajectory() {
 }
 
 #[tokio::test]
-async fn a_key_left_held_is_released_when_the_agents_action_ends() {
+async fn a_key_left_held_stays_down_across_steps_unless_actions_release_it() {
     let (_guest, c) = guest_with_notepad().await;
     let obs = Observation::capture(&c, 1, "type").await.expect("observe");
     let mut state = ComputerState::for_screen(1, 1);
-    // Code that holds Shift and never lets go: the capital is typed inside the action,
-    // and the next action's typing is lower case again.
+    // As upstream: Shift held by one step's code is still down in the next step.
     let held = AgentAction::Pyautogui("pyautogui.keyDown('shift')\npyautogui.press('x')".into());
-    assert_eq!(run(&c, &held, &obs, &mut state).await.error, None);
-    let typed = AgentAction::Pyautogui("pyautogui.press('y')".into());
+    let outcome = run(&c, &held, &obs, &mut state).await;
+    assert_eq!((outcome.error, outcome.keys_down), (None, vec!["shift".to_owned()]));
+    let typed = AgentAction::Pyautogui("pyautogui.press('y')\npyautogui.keyUp('shift')".into());
     assert_eq!(run(&c, &typed, &obs, &mut state).await.error, None);
-    assert_eq!(notepad_text(&c).await, "Xy");
+    assert_eq!(notepad_text(&c).await, "XY");
 
-    // A typed batch that holds a key gets its release appended.
-    let batch = AgentAction::Typed(vec![
-        Action::KeyDown { key: "shift".into() },
-        Action::KeyPress { key: "z".into(), presses: 1 },
-    ]);
-    let outcome = run(&c, &batch, &obs, &mut state).await;
+    // --held-keys action: the code block and the typed batch let go of what they hold.
+    let release = ExecOptions { release_held_keys: true, ..ExecOptions::instant() };
+    let go = |action: AgentAction| {
+        let c = c.clone();
+        let release = release.clone();
+        async move {
+            let mut state = ComputerState::for_screen(1, 1);
+            execute_with(&c, &action, None, &mut state, &release).await.expect("execute")
+        }
+    };
+    go(AgentAction::Pyautogui("pyautogui.keyDown('shift')\npyautogui.press('z')".into())).await;
+    go(AgentAction::Pyautogui("pyautogui.press('w')".into())).await;
+    let batch = vec![Action::KeyDown { key: "shift".into() }, Action::KeyPress { key: "v".into(), presses: 1 }];
+    let outcome = go(AgentAction::Typed(batch)).await;
     assert_eq!((outcome.error, outcome.performed), (None, 2));
-    let after = AgentAction::Typed(vec![Action::KeyPress { key: "w".into(), presses: 1 }]);
-    run(&c, &after, &obs, &mut state).await;
-    assert_eq!(notepad_text(&c).await, "XyZw");
+    go(AgentAction::Typed(vec![Action::KeyPress { key: "u".into(), presses: 1 }])).await;
+    assert_eq!(notepad_text(&c).await, "XYZwVu");
 }

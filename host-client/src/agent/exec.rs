@@ -73,11 +73,19 @@ pub struct ExecOptions {
     pub computer_action_delay: f64,
     /// Longest a script may run; a sleep past it stops the script (upstream's client gives up after 90 s).
     pub max_duration: Duration,
+    /// Let go of keys an action leaves held (`keyDown` without `keyUp`) when that
+    /// action ends, instead of at the end of the episode (`--held-keys action`).
+    pub release_held_keys: bool,
 }
 
 impl Default for ExecOptions {
     fn default() -> ExecOptions {
-        ExecOptions { sleep_scale: 1.0, computer_action_delay: 0.25, max_duration: Duration::from_secs(90) }
+        ExecOptions {
+            sleep_scale: 1.0,
+            computer_action_delay: 0.25,
+            max_duration: Duration::from_secs(90),
+            release_held_keys: false,
+        }
     }
 }
 
@@ -105,6 +113,9 @@ pub struct ActionOutcome {
     /// How many input actions were sent to the guest.
     pub performed: usize,
     pub elapsed_ms: u64,
+    /// Keys the action pressed with `keyDown` (the episode lets them all go at its end).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub keys_down: Vec<String>,
 }
 
 /// Carries out `action` on the guest with upstream's timings ([`ExecOptions::default`]).
@@ -146,7 +157,7 @@ pub async fn execute_with(
     }
     let mut outcome = match action {
         AgentAction::Wait | AgentAction::Done | AgentAction::Fail => ActionOutcome::default(),
-        AgentAction::Typed(actions) => typed(client, actions).await?,
+        AgentAction::Typed(actions) => typed(client, actions, options.release_held_keys).await?,
         AgentAction::Computer(code) => run_script(client, code, Lang::Computer, computer, options).await?,
         AgentAction::Pyautogui(code) => run_script(client, code, Lang::Pyautogui, computer, options).await?,
     };
@@ -171,16 +182,21 @@ fn is_unreachable(err: &ClientError) -> bool {
     matches!(err, ClientError::Connect { .. } | ClientError::Timeout { .. } | ClientError::Io { .. })
 }
 
-async fn typed(client: &GuestClient, actions: &[Action]) -> Result<ActionOutcome, AgentError> {
-    // Keys the batch holds and does not release are let go at its end, in the same batch.
+async fn typed(client: &GuestClient, actions: &[Action], release: bool) -> Result<ActionOutcome, AgentError> {
+    // By default a key a typed batch holds stays held into the next step (upstream's
+    // computer_13 KEY_DOWN, CLICK, KEY_UP are three steps) and the episode lets it go
+    // at its end; with `release` the batch lets go of it itself.
     let mut held = HeldKeys::default();
     actions.iter().for_each(|a| held.track(a));
     let mut batch = actions.to_vec();
-    batch.extend(held.releases());
+    if release {
+        batch.extend(held.releases());
+    }
     match client.act(&ActionBatch { actions: batch }).await {
         Ok(report) => Ok(ActionOutcome {
             cursor: Some(report.cursor),
             performed: report.executed.min(actions.len()),
+            keys_down: keys_down(&actions[..report.executed.min(actions.len())]),
             ..ActionOutcome::default()
         }),
         Err(err) if is_unreachable(&err) => Err(AgentError::Guest(err)),
@@ -224,9 +240,10 @@ async fn run_script(
     .await
     .map_err(|err| AgentError::Worker(err.to_string()))?;
     *computer = state;
-    // A key the code left held (a keyDown without its keyUp, or code that stopped
-    // between the two) is let go now, so it does not modify every later step.
-    let releases = host.held.releases();
+    // With --held-keys action, a key the code left held (a keyDown without its keyUp,
+    // or code that stopped between the two) is let go now; by default it stays held
+    // into the next step, as upstream's, and the episode lets it go at its end.
+    let releases = if options.release_held_keys { host.held.releases() } else { Vec::new() };
     if !releases.is_empty() && host.unreachable.is_none() {
         if let Err(err) = client.act(&ActionBatch { actions: releases }).await {
             if is_unreachable(&err) {
@@ -240,7 +257,12 @@ async fn run_script(
         // (`ErrorKind::Unreachable`); the client's error says how.
         return Err(AgentError::Guest(err));
     }
-    let mut outcome = ActionOutcome { cursor: host.cursor, performed: host.performed, ..ActionOutcome::default() };
+    let mut outcome = ActionOutcome {
+        cursor: host.cursor,
+        performed: host.performed,
+        keys_down: std::mem::take(&mut host.keys_down),
+        ..ActionOutcome::default()
+    };
     match result {
         Ok(out) => {
             // Upstream's /execute_windows fails a call whose printed output mentions
@@ -256,6 +278,19 @@ async fn run_script(
         }
     }
     Ok(outcome)
+}
+
+/// The keys `actions` press with `keyDown`, each once, in order.
+fn keys_down(actions: &[Action]) -> Vec<String> {
+    let mut out: Vec<String> = Vec::new();
+    for action in actions {
+        if let Action::KeyDown { key } = action {
+            if !out.contains(key) {
+                out.push(key.clone());
+            }
+        }
+    }
+    out
 }
 
 fn script_error(err: &ScriptError) -> String {
@@ -288,6 +323,8 @@ pub struct GuestHost {
     pub unreachable: Option<ClientError>,
     /// Keys the script pressed with `keyDown` and has not released yet.
     pub held: HeldKeys,
+    /// Every key the script pressed with `keyDown`, each once.
+    pub keys_down: Vec<String>,
 }
 
 impl GuestHost {
@@ -301,6 +338,7 @@ impl GuestHost {
             performed: 0,
             unreachable: None,
             held: HeldKeys::default(),
+            keys_down: Vec::new(),
         }
     }
 
@@ -383,6 +421,11 @@ impl ScriptHost for GuestHost {
         let tracked = action.clone();
         let report = self.call(|c| async move { c.act_one(action).await })?;
         self.held.track(&tracked);
+        for key in keys_down(std::slice::from_ref(&tracked)) {
+            if !self.keys_down.contains(&key) {
+                self.keys_down.push(key);
+            }
+        }
         self.cursor = Some(report.cursor);
         self.performed += 1;
         Ok(())

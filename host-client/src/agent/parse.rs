@@ -262,7 +262,7 @@ mod tests {
         ]));
         check("```json\n{\"a\": 1}\n```", Err("no ```python code block"));
         check("I am not sure what to do.", Err("no ```python code block"));
-        check("```python\nfor i in x:\n    pass\n```", Err("does not parse"));
+        check("```python\nclass A:\n    pass\n```", Err("does not parse"));
         check("```python\ncomputer.mouse.single_click(\n", Err("does not parse"));
     }
 

@@ -173,6 +173,12 @@ pub struct RunArgs {
     /// (upstream finds it and does nothing). Recorded in the results.
     #[arg(long)]
     pub activate_non_strict: bool,
+    /// When a key an agent pressed with keyDown and never released is let go:
+    /// `episode` (default, as upstream within a task: it stays down across steps)
+    /// releases it after the evaluation; `action` at the end of the action that pressed
+    /// it. Recorded in the results.
+    #[arg(long, value_enum, default_value_t = HeldKeysArg::Episode)]
+    pub held_keys: HeldKeysArg,
     /// The trial folder level of the results (upstream's --trial_id).
     #[arg(long, default_value = crate::results::DEFAULT_TRIAL_ID, value_name = "ID")]
     pub trial_id: String,
@@ -206,6 +212,15 @@ pub enum OrderArg {
 pub enum PausesArg {
     Upstream,
     Fast,
+}
+
+/// `--held-keys`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum HeldKeysArg {
+    /// Released after the evaluation.
+    Episode,
+    /// Released when the action that pressed them ends.
+    Action,
 }
 
 /// Arguments of `arena merge`.
@@ -395,6 +410,10 @@ pub async fn run(conn: &Connection, args: RunArgs) -> anyhow::Result<ExitCode> {
     if fast {
         config.settle = Settle::none();
         config.exec = ExecOptions::instant();
+    }
+    if args.held_keys == HeldKeysArg::Action {
+        config.exec.release_held_keys = true;
+        config.options.insert("held_keys".into(), "action".into());
     }
     let layout = RunLayout {
         root: args.out.clone(),
