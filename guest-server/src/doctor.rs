@@ -75,7 +75,10 @@ pub fn run(desktop: &dyn Desktop, options: &DoctorOptions) -> DoctorReport {
     time("read_back_uia", &mut || read_back(desktop, notepad.as_ref(), A11yBackend::Uia));
     time("read_back_win32", &mut || read_back(desktop, notepad.as_ref(), A11yBackend::Win32));
     time("uia_tree", &mut || tree(desktop));
-    time("window_close", &mut || close(desktop, notepad.as_ref()));
+    if let Some(typed_into) = &notepad {
+        remove(desktop, typed_into);
+    }
+    time("window_close", &mut || close(desktop, wait));
     time("exec_timeout", &mut || exec_timeout(desktop));
     time("files", &mut || files(desktop));
     time("reachability", &mut || reachability(options));
@@ -313,9 +316,21 @@ fn node_count(node: &A11yNode) -> usize {
     1 + node.children.iter().map(node_count).sum::<usize>()
 }
 
+/// How long typed text may take to show in a tree: `SendInput` returns before the
+/// program has handled the keys.
+const READ_BACK_WAIT: Duration = Duration::from_secs(5);
+
 fn read_back(desktop: &dyn Desktop, notepad: Option<&WindowInfo>, backend: A11yBackend) -> Outcome {
     let notepad = need(notepad)?;
-    let tree = desktop.accessibility(backend, &TREE_BUDGET, true)?;
+    let started = Instant::now();
+    let tree = loop {
+        let tree = desktop.accessibility(backend, &TREE_BUDGET, true)?;
+        let holds = tree.windows.iter().any(|w| tree_holds(w, TYPED));
+        if holds || started.elapsed() >= READ_BACK_WAIT {
+            break tree;
+        }
+        std::thread::sleep(Duration::from_millis(200));
+    };
     let window = tree.windows.iter().find(|w| w.window_id == Some(notepad.id)).or(tree.windows.first());
     match window {
         Some(w) if tree_holds(w, TYPED) => pass(format!(
@@ -369,18 +384,33 @@ fn still_open(desktop: &dyn Desktop, id: u64, within: Duration) -> Result<bool, 
     }
 }
 
-fn close(desktop: &dyn Desktop, notepad: Option<&WindowInfo>) -> Outcome {
-    let notepad = need(notepad)?;
-    desktop.close_window(notepad.id)?;
-    if !still_open(desktop, notepad.id, Duration::from_secs(3))? {
-        return pass("closed at once");
+/// Closes a Notepad of its own, with nothing typed in it (so no program asks to save):
+/// `WM_CLOSE` must make the window go away.
+fn close(desktop: &dyn Desktop, wait: Duration) -> Outcome {
+    let mut fresh = None;
+    start_notepad(desktop, wait, &mut fresh)?;
+    let fresh = need(fresh.as_ref())?;
+    desktop.close_window(fresh.id)?;
+    if still_open(desktop, fresh.id, Duration::from_secs(5))? {
+        remove(desktop, fresh);
+        return Err(fail(format!("{:?} is still open 5 s after WM_CLOSE", fresh.title)));
     }
-    // Classic Notepad asks whether to save the typed text: "Don't Save" is Alt+N.
-    desktop.perform(&Action::Hotkey { keys: vec!["alt".to_owned(), "n".to_owned()] })?;
-    if !still_open(desktop, notepad.id, Duration::from_secs(3))? {
-        return pass("closed after answering the save prompt with Don't Save");
+    pass(format!("{:?} closed on WM_CLOSE", fresh.title))
+}
+
+/// Leaves no doctor's Notepad behind: asks it to close, and on Windows ends its
+/// process when it waits on a save prompt (the typed text is the doctor's own). The
+/// stub's process ids are its own, never the host's, so nothing is killed there.
+fn remove(desktop: &dyn Desktop, notepad: &WindowInfo) {
+    let _ = desktop.close_window(notepad.id);
+    if !matches!(still_open(desktop, notepad.id, Duration::from_secs(2)), Ok(true)) {
+        return;
     }
-    Err(fail(format!("{:?} is still open 6 s after WM_CLOSE", notepad.title)))
+    if desktop.kind() == "windows" {
+        let limits = ExecLimits { timeout_ms: 10_000, max_output_bytes: 4096, cwd: None, stdin: None };
+        let kill = vec!["taskkill".to_owned(), "/F".to_owned(), "/PID".to_owned(), notepad.process_id.to_string()];
+        let _ = desktop.run(&CommandSpec::Argv(kill), &limits);
+    }
 }
 
 /// A shell line whose child outlives the timeout and starts a grandchild that

@@ -496,7 +496,17 @@ async fn windows_backend_under_wine() {
     for name in ["uia_tree", "read_back_uia"] {
         assert_eq!(status_of(name), "N/A", "{name} under Wine:\n{output}");
     }
-    for name in ["screen", "capture", "clipboard_text", "notepad_start", "notepad_typing", "read_back_win32", "files"] {
+    for name in [
+        "screen",
+        "capture",
+        "clipboard_text",
+        "notepad_start",
+        "notepad_typing",
+        "read_back_win32",
+        "window_close",
+        "exec_timeout",
+        "files",
+    ] {
         assert_eq!(status_of(name), "PASS", "{name} under Wine:\n{output}");
     }
     assert!(output.lines().any(|l| l.starts_with("ok: ") || l.starts_with("FAILED: ")), "no verdict line:\n{output}");
