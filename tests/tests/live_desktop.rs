@@ -16,7 +16,7 @@ use arena_shared::action::{Action, MouseButton};
 use arena_shared::clipboard::ClipboardContent;
 use arena_shared::exec::{ExecRequest, LaunchRequest};
 use arena_shared::observation::{A11yNode, A11yQuery, WindowInfo, WindowTarget};
-use arena_test_support::{workspace_binary, Served};
+use arena_test_support::{eventually, workspace_binary, Served};
 
 /// Whether this machine asked for the suite.
 fn live() -> bool {
@@ -30,22 +30,6 @@ fn live() -> bool {
 fn client(url: &str) -> GuestClient {
     GuestClient::new(url, ClientConfig { token: None, timeout: Duration::from_secs(60), retries: 1 })
         .expect("valid url")
-}
-
-/// Polls `check` every 250 ms until it gives a value or `within` passes.
-async fn eventually<T, F, Fut>(what: &str, within: Duration, mut check: F) -> T
-where
-    F: FnMut() -> Fut,
-    Fut: std::future::Future<Output = Option<T>>,
-{
-    let deadline = Instant::now() + within;
-    loop {
-        if let Some(value) = check().await {
-            return value;
-        }
-        assert!(Instant::now() < deadline, "timed out after {within:?} waiting for: {what}");
-        tokio::time::sleep(Duration::from_millis(250)).await;
-    }
 }
 
 fn find<'a>(node: &'a A11yNode, pred: &dyn Fn(&A11yNode) -> bool) -> Option<&'a A11yNode> {

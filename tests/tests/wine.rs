@@ -18,7 +18,7 @@ use arena_shared::exec::{ExecRequest, LaunchRequest};
 use arena_shared::health::Component;
 use arena_shared::observation::{A11yBackend, A11yNode, A11yQuery, ScreenshotQuery, WindowInfo, WindowTarget};
 use arena_shared::registry::{RegistryValue, RegistryWrite};
-use arena_test_support::{wine_or_skip, Served, WineSetup};
+use arena_test_support::{eventually, wine_or_skip, Served, WineSetup};
 use base64::Engine;
 
 /// Finds Wine and the exe, or says loudly why the suite cannot run.
@@ -36,22 +36,6 @@ fn start(setup: &WineSetup, backend: &str) -> Served {
 fn client(url: &str) -> GuestClient {
     GuestClient::new(url, ClientConfig { token: None, timeout: Duration::from_secs(30), retries: 1 })
         .expect("valid url")
-}
-
-/// Polls `check` every 100 ms until it gives a value or `within` passes.
-async fn eventually<T, F, Fut>(what: &str, within: Duration, mut check: F) -> T
-where
-    F: FnMut() -> Fut,
-    Fut: std::future::Future<Output = Option<T>>,
-{
-    let deadline = Instant::now() + within;
-    loop {
-        if let Some(value) = check().await {
-            return value;
-        }
-        assert!(Instant::now() < deadline, "timed out after {within:?} waiting for: {what}");
-        tokio::time::sleep(Duration::from_millis(100)).await;
-    }
 }
 
 fn find<'a>(node: &'a A11yNode, pred: &dyn Fn(&A11yNode) -> bool) -> Option<&'a A11yNode> {
