@@ -297,7 +297,7 @@ async fn computer_13_templates_and_code_blocks_run_natively() {
     check("pyautogui.doubleClick(x=10, y=20)", vec![Action::DoubleClick { x: Some(10), y: Some(20) }]).await;
     check(
         "pyautogui.dragTo(500, 400, duration=1.0, button='left', mouseDownUp=True)",
-        vec![Action::Drag { from: None, to: Point::new(500, 400), button: left }],
+        vec![Action::Drag { from: None, to: Point::new(500, 400), button: left, duration_ms: Some(1000) }],
     )
     .await;
     check("pyautogui.hscroll(-120)", vec![Action::Scroll { x: None, y: None, dx: -120, dy: 0 }]).await;
@@ -495,8 +495,8 @@ async fn computer_mouse_and_keyboard_act_on_the_desktop() {
             typed("hi"),
             hotkey(&["ctrl", "shift", "s"]),
             key("enter"),
-            Action::Drag { from: None, to: Point::new(500, 400), button: left },
-            Action::Drag { from: None, to: Point::new(720, 225), button: left },
+            Action::Drag { from: None, to: Point::new(500, 400), button: left, duration_ms: Some(1000) },
+            Action::Drag { from: None, to: Point::new(720, 225), button: left, duration_ms: Some(1000) },
             Action::MoveTo { x: 144, y: 180 },
             Action::Scroll { x: None, y: None, dx: 0, dy: 400 },
         ]

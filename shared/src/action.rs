@@ -94,12 +94,16 @@ pub enum Action {
         y: Option<i32>,
     },
     /// Presses `button` at the current position (or `from`), moves to `to`, releases.
+    /// With `duration_ms` (pyautogui's `duration`), the move is spread over that time
+    /// in small steps, as pyautogui's `dragTo` moves.
     Drag {
         #[serde(default, skip_serializing_if = "Option::is_none")]
         from: Option<crate::geometry::Point>,
         to: crate::geometry::Point,
         #[serde(default)]
         button: MouseButton,
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        duration_ms: Option<u64>,
     },
     /// Turns the wheel by raw wheel deltas (120 a notch), at `x`, `y` when given.
     Scroll {

@@ -24,11 +24,8 @@ fn action() -> impl Strategy<Value = Action> {
         (opt(), opt()).prop_map(|(x, y)| Action::RightClick { x, y }),
         (button(), opt(), opt()).prop_map(|(button, x, y)| Action::MouseDown { button, x, y }),
         (button(), opt(), opt()).prop_map(|(button, x, y)| Action::MouseUp { button, x, y }),
-        (proptest::option::of(point()), point(), button()).prop_map(|(from, to, button)| Action::Drag {
-            from,
-            to,
-            button
-        }),
+        (proptest::option::of(point()), point(), button(), proptest::option::of(0u64..10_000))
+            .prop_map(|(from, to, button, duration_ms)| Action::Drag { from, to, button, duration_ms },),
         (opt(), opt(), any::<i32>(), any::<i32>()).prop_map(|(x, y, dx, dy)| Action::Scroll { x, y, dx, dy }),
         (".{0,12}", 0u32..5).prop_map(|(key, presses)| Action::KeyPress { key, presses }),
         proptest::collection::vec(".{0,8}", 0..4).prop_map(|keys| Action::Hotkey { keys }),

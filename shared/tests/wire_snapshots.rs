@@ -42,7 +42,12 @@ fn actions() {
             Action::RightClick { x: None, y: None },
             Action::MouseDown { button: MouseButton::Middle, x: None, y: None },
             Action::MouseUp { button: MouseButton::Left, x: Some(3), y: Some(4) },
-            Action::Drag { from: Some(Point::new(1, 1)), to: Point::new(50, 60), button: MouseButton::Left },
+            Action::Drag {
+                from: Some(Point::new(1, 1)),
+                to: Point::new(50, 60),
+                button: MouseButton::Left,
+                duration_ms: Some(500),
+            },
             Action::Scroll { x: Some(700), y: Some(400), dx: 0, dy: -240 },
             Action::KeyPress { key: "enter".into(), presses: 1 },
             Action::KeyPress { key: "tab".into(), presses: 3 },

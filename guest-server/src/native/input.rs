@@ -69,6 +69,7 @@ fn planned_duration(action: &Action) -> Duration {
             let pauses = u64::try_from(text.chars().count().saturating_sub(1)).unwrap_or(u64::MAX);
             Duration::from_millis(pauses.saturating_mul((*ms).min(MAX_TYPING_PAUSE_MS)))
         }
+        Action::Drag { duration_ms: Some(ms), .. } => Duration::from_millis(*ms),
         _ => Duration::ZERO,
     }
 }
@@ -134,6 +135,9 @@ fn check_action(action: &Action) -> Result<(), String> {
         Action::MouseDown { button: b, x, y } | Action::MouseUp { button: b, x, y } => {
             coords(x, y)?;
             button(b)
+        }
+        Action::Drag { duration_ms: Some(ms), .. } if *ms > MAX_WAIT_MS => {
+            Err(format!("a drag lasts at most {MAX_WAIT_MS} ms (got {ms})"))
         }
         Action::Drag { button: b, .. } => button(b),
         Action::Scroll { x, y, .. } | Action::DoubleClick { x, y } | Action::RightClick { x, y } => coords(x, y),

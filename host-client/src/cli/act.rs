@@ -235,6 +235,7 @@ impl ActCommand {
                 from: from.as_deref().map(|text| parse_point(text).context("--from")).transpose()?,
                 to: Point::new(*x, *y),
                 button: button_named(button)?,
+                duration_ms: None,
             },
             ActCommand::Scroll { dy, dx, at } => {
                 let at = at.as_deref().map(|text| parse_point(text).context("--at")).transpose()?;
@@ -418,11 +419,16 @@ mod tests {
         check(&["right-click"], Action::RightClick { x: None, y: None });
         check(
             &["drag", "300", "400"],
-            Action::Drag { from: None, to: Point::new(300, 400), button: MouseButton::Left },
+            Action::Drag { from: None, to: Point::new(300, 400), button: MouseButton::Left, duration_ms: None },
         );
         check(
             &["drag", "300", "400", "--from", "1,2", "--button", "middle"],
-            Action::Drag { from: Some(Point::new(1, 2)), to: Point::new(300, 400), button: MouseButton::Middle },
+            Action::Drag {
+                from: Some(Point::new(1, 2)),
+                to: Point::new(300, 400),
+                button: MouseButton::Middle,
+                duration_ms: None,
+            },
         );
         check(&["scroll", "-240"], Action::Scroll { x: None, y: None, dx: 0, dy: -240 });
         check(

@@ -180,7 +180,9 @@ pub(crate) fn call_method(
         }
         (Object::Mouse, "drag") => {
             let (x, y) = drag_target(it, args)?;
-            perform(it, Action::Drag { from: None, to: Point::new(x, y), button: MouseButton::Left })?;
+            // Upstream's `Computer.mouse.drag` is `pyautogui.dragTo(x, y, button='left', duration=1)`.
+            let to = Point::new(x, y);
+            perform(it, Action::Drag { from: None, to, button: MouseButton::Left, duration_ms: Some(1000) })?;
             Value::None
         }
         (Object::Keyboard, "write") => {

@@ -201,21 +201,21 @@ fn dispatch(it: &mut Interp<'_, '_>, name: &'static str, args: Args) -> Result<V
         "dragTo" => {
             let a = args.bind(name, DRAG_TO, 0)?;
             let (x, y) = full_xy(it, &a[0], &a[1])?;
-            check_number(&a[2], "duration")?;
+            let duration = duration_ms(&a[2])?;
             let button = button(&a[4])?;
             let down_up = a[7].as_ref().is_none_or(Value::truthy);
-            drag_to(it, x, y, button, down_up)?;
+            drag_to(it, x, y, button, down_up, duration)?;
         }
         "dragRel" | "drag" => {
             let a = args.bind(name, DRAG_REL, 0)?;
             let (dx, dy) = offsets(&a[0], &a[1])?;
-            check_number(&a[2], "duration")?;
+            let duration = duration_ms(&a[2])?;
             let button = button(&a[4])?;
             let down_up = a[7].as_ref().is_none_or(Value::truthy);
             if (dx, dy) != (0, 0) {
                 let cursor = it.host.cursor_position();
                 let (cx, cy) = it.host(cursor)?;
-                drag_to(it, cx.saturating_add(dx), cy.saturating_add(dy), button, down_up)?;
+                drag_to(it, cx.saturating_add(dx), cy.saturating_add(dy), button, down_up, duration)?;
             }
         }
         "scroll" | "vscroll" | "hscroll" => {
@@ -605,10 +605,35 @@ fn clicks_at(
     perform(it, action)
 }
 
-fn drag_to(it: &mut Interp<'_, '_>, x: i32, y: i32, button: MouseButton, down_up: bool) -> Result<(), ScriptError> {
-    let action =
-        if down_up { Action::Drag { from: None, to: Point::new(x, y), button } } else { Action::MoveTo { x, y } };
+fn drag_to(
+    it: &mut Interp<'_, '_>,
+    x: i32,
+    y: i32,
+    button: MouseButton,
+    down_up: bool,
+    duration_ms: Option<u64>,
+) -> Result<(), ScriptError> {
+    let action = if down_up {
+        Action::Drag { from: None, to: Point::new(x, y), button, duration_ms }
+    } else {
+        Action::MoveTo { x, y }
+    };
     perform(it, action)
+}
+
+/// pyautogui's `duration` in milliseconds, `None` when there is none to spread the
+/// move over (none, zero, or negative, which pyautogui treats as instant); a value
+/// that is not a number is a `TypeError` as in pyautogui.
+fn duration_ms(v: &Option<Value>) -> Result<Option<u64>, ScriptError> {
+    match v {
+        None | Some(Value::None) => Ok(None),
+        Some(v) => {
+            let seconds = to_f64(v, "duration")?;
+            // At most an hour: the guest refuses longer actions anyway.
+            let ms = (seconds.clamp(0.0, 3600.0) * 1000.0).round() as u64;
+            Ok((ms > 0).then_some(ms))
+        }
+    }
 }
 
 /// Validates a key name and returns its canonical pyautogui name.

@@ -338,7 +338,7 @@ fn computer_13_templates_translate_to_actions() {
     check("pyautogui.doubleClick(x=7, y=8)", &[Action::DoubleClick { x: Some(7), y: Some(8) }]);
     check(
         "pyautogui.dragTo(500, 400, duration=1.0, button='left', mouseDownUp=True)",
-        &[Action::Drag { from: None, to: Point::new(500, 400), button: MouseButton::Left }],
+        &[Action::Drag { from: None, to: Point::new(500, 400), button: MouseButton::Left, duration_ms: Some(1000) }],
     );
     check("pyautogui.hscroll(-3)", &[Action::Scroll { x: None, y: None, dx: -3, dy: 0 }]);
     check("pyautogui.vscroll(120)", &[Action::Scroll { x: None, y: None, dx: 0, dy: 120 }]);
@@ -371,7 +371,7 @@ fn computer_13_templates_translate_to_actions() {
     check("pyautogui.move(None, 3)", &[Action::MoveRel { dx: 0, dy: 3 }]);
     check(
         "pyautogui.drag(30, 40, button='right')",
-        &[Action::Drag { from: None, to: Point::new(40, 60), button: MouseButton::Right }],
+        &[Action::Drag { from: None, to: Point::new(40, 60), button: MouseButton::Right, duration_ms: None }],
     );
     check("pyautogui.click((300, 400))", &[click_at(300, 400)]);
     check("pyautogui.click(x=300)", &[click_at(300, 20)]);
@@ -455,7 +455,8 @@ fn move_abs_and_both_drag_signatures() {
     // int(0.5 * 1440) + 5, int(0.25 * 900) + 7
     check(&mut state, "computer.mouse.move_abs(x=0.5, y=0.25)", Action::MoveTo { x: 725, y: 232 });
     check(&mut state, "computer.mouse.move_abs(0.999, 0.001)", Action::MoveTo { x: 1443, y: 7 });
-    let drag = |x, y| Action::Drag { from: None, to: Point::new(x, y), button: MouseButton::Left };
+    let drag =
+        |x, y| Action::Drag { from: None, to: Point::new(x, y), button: MouseButton::Left, duration_ms: Some(1000) };
     check(&mut state, "computer.mouse.drag(x=0.35, y=0.48)", drag(508, 439));
     check(&mut state, "computer.mouse.drag(screen_x=300, screen_y=200)", drag(300, 200));
     check(&mut state, "computer.mouse.drag(300, 200)", drag(300, 200));

@@ -68,7 +68,8 @@ pub(crate) fn perform(state: &mut State, action: &Action) -> DesktopResult<Vec<E
             move_opt(state, *x, *y);
             release(state, button)?;
         }
-        Action::Drag { from, to, button } => {
+        // The stub has no timing to model: the drag lands at once.
+        Action::Drag { from, to, button, duration_ms: _ } => {
             let button = known_button(*button)?;
             if let Some(from) = from {
                 move_to(state, *from);

@@ -176,13 +176,23 @@ fn clicks_focus_and_raise_windows() {
 fn dragging_a_title_bar_moves_the_window() {
     let d = stub_with(r#"{"windows": [{"title": "W", "rect": {"x": 100, "y": 100, "width": 400, "height": 300}}]}"#);
     let id = d.find_window("W").unwrap();
-    d.perform(&Action::Drag { from: Some(Point::new(150, 110)), to: Point::new(450, 310), button: MouseButton::Left })
-        .unwrap();
+    d.perform(&Action::Drag {
+        from: Some(Point::new(150, 110)),
+        to: Point::new(450, 310),
+        button: MouseButton::Left,
+        duration_ms: None,
+    })
+    .unwrap();
     let w = d.windows().unwrap().into_iter().find(|w| w.id == id).unwrap();
     assert_eq!(w.rect, Rect::new(400, 300, 400, 300));
     // Dragging the body moves only the cursor.
-    d.perform(&Action::Drag { from: Some(Point::new(500, 500)), to: Point::new(700, 600), button: MouseButton::Left })
-        .unwrap();
+    d.perform(&Action::Drag {
+        from: Some(Point::new(500, 500)),
+        to: Point::new(700, 600),
+        button: MouseButton::Left,
+        duration_ms: None,
+    })
+    .unwrap();
     let w = d.windows().unwrap().into_iter().find(|w| w.id == id).unwrap();
     assert_eq!(w.rect, Rect::new(400, 300, 400, 300));
     assert_eq!(d.cursor_position().unwrap(), Point::new(700, 600));

@@ -211,7 +211,7 @@ pub(super) fn perform(action: &Action) -> DesktopResult<()> {
             move_opt(*x, *y)?;
             send(&[mouse(up, 0, 0, 0)], "mouse up")
         }
-        Action::Drag { from, to, button } => {
+        Action::Drag { from, to, button, duration_ms } => {
             let (down, up) = button_flags(*button)?;
             if let Some(from) = from {
                 move_to(*from)?;
@@ -219,11 +219,26 @@ pub(super) fn perform(action: &Action) -> DesktopResult<()> {
             let start = cursor()?;
             send(&[mouse(down, 0, 0, 0)], "drag")?;
             std::thread::sleep(DRAG_STEP);
-            // A first step past the drag threshold, then the target, so programs start a drag.
-            let mid = Point::new(start.x + (to.x - start.x) / 2, start.y + (to.y - start.y) / 2);
-            move_to(mid)?;
-            std::thread::sleep(DRAG_STEP);
-            move_to(*to)?;
+            match duration_ms.filter(|&ms| ms > pointer::MINIMUM_DURATION_MS) {
+                // Spread over the duration as pyautogui's dragTo moves; stops between
+                // steps when the call was abandoned, and releases the button even then.
+                Some(ms) => {
+                    for (at, pause) in pointer::drag_path(start, *to, ms) {
+                        move_to(at)?;
+                        if let Err(err) = crate::desktop::cancel::sleep(Duration::from_millis(pause)) {
+                            let _ = send(&[mouse(up, 0, 0, 0)], "drag");
+                            return Err(err);
+                        }
+                    }
+                }
+                // A first step past the drag threshold, then the target, so programs start a drag.
+                None => {
+                    let mid = Point::new(start.x + (to.x - start.x) / 2, start.y + (to.y - start.y) / 2);
+                    move_to(mid)?;
+                    std::thread::sleep(DRAG_STEP);
+                    move_to(*to)?;
+                }
+            }
             std::thread::sleep(DRAG_STEP);
             send(&[mouse(up, 0, 0, 0)], "drag")
         }
