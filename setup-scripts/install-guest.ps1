@@ -216,7 +216,9 @@ try {
     # ---- 4. start in the user's session -------------------------------------
     $serveOptions = @('--bind', '0.0.0.0', '--port', "$Port", '--token-file', $TokenPath)
     if ($Mode -eq 'service') {
-        # The exe's own install is idempotent: it updates an existing registration.
+        # The exe's own install is idempotent: it updates an existing registration. Its worker
+        # runs with the user's full (elevated) token by default, which is what lets it read
+        # the token file above with UAC on; see README.md.
         Invoke-Guest $installedExe (@('service', 'install', '--name', $ServiceName) + $serveOptions)
         $service = Get-Service -Name $ServiceName
         if ($service.Status -ne 'Running') {
