@@ -861,49 +861,15 @@ impl Interp<'_, '_> {
             ));
         }
         self.step()?;
-        if args.pos.len() > params.len() {
-            let required = f.defaults.iter().filter(|d| d.is_none()).count();
-            let n = params.len();
-            let takes = if required == n {
-                format!("{n} positional argument{}", if n == 1 { "" } else { "s" })
-            } else {
-                format!("from {required} to {n} positional arguments")
-            };
-            let given = args.pos.len();
-            let verb = if given == 1 { "was" } else { "were" };
-            return Err(type_error(format!("{name}() takes {takes} but {given} {verb} given")));
-        }
-        let mut slots: Vec<Option<Value>> = vec![None; params.len()];
-        for (slot, value) in slots.iter_mut().zip(args.pos) {
-            *slot = Some(value);
-        }
-        for (key, value) in args.kw {
-            let Some(i) = params.iter().position(|p| p.name == key) else {
-                return Err(type_error(format!("{name}() got an unexpected keyword argument '{key}'")));
-            };
-            if slots[i].is_some() {
-                return Err(type_error(format!("{name}() got multiple values for argument '{key}'")));
-            }
-            slots[i] = Some(value);
-        }
-        let mut missing = Vec::new();
+        // Python's grammar puts parameters with defaults last, so the leading ones
+        // without a default are the required ones, as `Args::bind` takes them.
+        let names: Vec<&str> = params.iter().map(|p| p.name.as_str()).collect();
+        let required = f.defaults.iter().take_while(|d| d.is_none()).count();
+        let slots = args.bind(name, &names, required)?;
         let mut locals = HashMap::new();
         for ((slot, param), default) in slots.into_iter().zip(params).zip(&f.defaults) {
-            match slot.or_else(|| default.clone()) {
-                Some(v) => {
-                    locals.insert(param.name.clone(), v);
-                }
-                None => missing.push(format!("'{}'", param.name)),
-            }
-        }
-        if !missing.is_empty() {
-            let list = match missing.len() {
-                1 => missing[0].clone(),
-                2 => format!("{} and {}", missing[0], missing[1]),
-                n => format!("{}, and {}", missing[..n - 1].join(", "), missing[n - 1]),
-            };
-            let plural = if missing.len() == 1 { "argument" } else { "arguments" };
-            return Err(type_error(format!("{name}() missing {} required positional {plural}: {list}", missing.len())));
+            // A slot left empty is an optional parameter: bind refused missing required ones.
+            locals.insert(param.name.clone(), slot.or_else(|| default.clone()).unwrap_or(Value::None));
         }
         self.frames.push(Frame {
             locals: Some(locals),
