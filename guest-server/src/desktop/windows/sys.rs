@@ -39,6 +39,33 @@ pub(crate) fn is_win32(err: &windows::core::Error, code: WIN32_ERROR) -> bool {
     err.code() == code.to_hresult()
 }
 
+/// One fixed-size piece of a token's information (`TokenElevationType` as a
+/// `TOKEN_ELEVATION_TYPE`, `TokenLinkedToken` as a `TOKEN_LINKED_TOKEN`).
+///
+/// # Safety
+///
+/// `T` must be the structure Windows writes for `class`, and `token` a live token
+/// handle opened with `TOKEN_QUERY`.
+pub(crate) unsafe fn token_info<T: Default>(
+    token: HANDLE,
+    class: windows::Win32::Security::TOKEN_INFORMATION_CLASS,
+) -> windows::core::Result<T> {
+    let mut value = T::default();
+    let mut needed = 0u32;
+    // SAFETY: `value` is writable for the size passed, and the caller vouches that `T`
+    // is what Windows writes for `class`.
+    unsafe {
+        windows::Win32::Security::GetTokenInformation(
+            token,
+            class,
+            Some((&raw mut value).cast()),
+            std::mem::size_of::<T>() as u32,
+            &mut needed,
+        )
+    }?;
+    Ok(value)
+}
+
 /// An owned kernel handle (process, thread, job, pipe end, token), closed on drop.
 #[derive(Debug)]
 pub(crate) struct OwnedHandle(pub(crate) HANDLE);

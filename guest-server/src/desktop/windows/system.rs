@@ -37,7 +37,7 @@ use windows::Win32::UI::WindowsAndMessaging::{
     SYSTEM_PARAMETERS_INFO_UPDATE_FLAGS,
 };
 
-use super::sys::{os, CoTaskString, OwnedHandle};
+use super::sys::{os, token_info, CoTaskString, OwnedHandle};
 use crate::desktop::windows::text::{from_wide_until_nul, wide_multi, wide_nul};
 use crate::desktop::windows::winsys::{self, Hive};
 use crate::desktop::{DesktopError, DesktopResult};
@@ -85,19 +85,8 @@ pub(super) fn integrity_level() -> DesktopResult<String> {
         }
         *GetSidSubAuthority(sid, u32::from(count) - 1)
     };
-    let mut elevation = TOKEN_ELEVATION_TYPE::default();
-    // SAFETY: `elevation` is a writable TOKEN_ELEVATION_TYPE of the size given.
-    let kind = unsafe {
-        GetTokenInformation(
-            token.raw(),
-            TokenElevationType,
-            Some((&raw mut elevation).cast()),
-            std::mem::size_of::<TOKEN_ELEVATION_TYPE>() as u32,
-            &mut needed,
-        )
-    }
-    .ok()
-    .map(|()| elevation.0);
+    // SAFETY: TokenElevationType is written as a TOKEN_ELEVATION_TYPE; the token is live.
+    let kind = unsafe { token_info::<TOKEN_ELEVATION_TYPE>(token.raw(), TokenElevationType) }.ok().map(|e| e.0);
     Ok(crate::desktop::windows::session::describe_integrity(rid, kind))
 }
 

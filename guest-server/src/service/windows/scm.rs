@@ -27,8 +27,8 @@ use windows::Win32::Foundation::{
     HANDLE_FLAG_INHERIT, WAIT_OBJECT_0,
 };
 use windows::Win32::Security::{
-    DuplicateTokenEx, GetTokenInformation, SecurityImpersonation, TokenElevationType, TokenLinkedToken, TokenPrimary,
-    SECURITY_ATTRIBUTES, TOKEN_ALL_ACCESS, TOKEN_ELEVATION_TYPE, TOKEN_LINKED_TOKEN,
+    DuplicateTokenEx, SecurityImpersonation, TokenElevationType, TokenLinkedToken, TokenPrimary, SECURITY_ATTRIBUTES,
+    TOKEN_ALL_ACCESS, TOKEN_ELEVATION_TYPE, TOKEN_LINKED_TOKEN,
 };
 use windows::Win32::System::Environment::{CreateEnvironmentBlock, DestroyEnvironmentBlock};
 use windows::Win32::System::Pipes::CreatePipe;
@@ -48,7 +48,7 @@ use windows_service::service_manager::{ServiceManager, ServiceManagerAccess};
 
 use windows::Win32::UI::Shell::{FOLDERID_ProgramData, SHGetKnownFolderPath, KF_FLAG_DEFAULT};
 
-use crate::desktop::windows::sys::{describe, CoTaskString, OwnedHandle};
+use crate::desktop::windows::sys::{describe, token_info, CoTaskString, OwnedHandle};
 use crate::service::{
     choose_worker_token, log_dir, rotate_log, service_run_args, supervisor_step, worker_command_line, Backoff,
     ServiceCliError, ServiceCommand, SupervisorOptions, SupervisorStep, TokenChoice, WorkerToken, LOG_MAX_BYTES,
@@ -530,39 +530,20 @@ fn wide(s: &str) -> Vec<u16> {
 /// and UAC gave the session a filtered administrator token) the linked full token as a
 /// primary token. Any failure keeps the session's token and says so in the log.
 fn worker_token(session_token: OwnedHandle, wanted: WorkerToken) -> OwnedHandle {
-    let mut kind = TOKEN_ELEVATION_TYPE::default();
-    let mut needed = 0u32;
-    // SAFETY: `kind` is a writable TOKEN_ELEVATION_TYPE of the size passed; the token is live.
-    let read = unsafe {
-        GetTokenInformation(
-            session_token.raw(),
-            TokenElevationType,
-            Some((&raw mut kind).cast()),
-            size_of::<TOKEN_ELEVATION_TYPE>() as u32,
-            &mut needed,
-        )
-    }
-    .ok()
-    .map(|()| kind.0);
+    // SAFETY: TokenElevationType is written as a TOKEN_ELEVATION_TYPE; the token is live.
+    let read = unsafe { token_info::<TOKEN_ELEVATION_TYPE>(session_token.raw(), TokenElevationType) }.ok().map(|e| e.0);
     if choose_worker_token(wanted, read) == TokenChoice::Session {
         tracing::info!(elevation_type = ?read, ?wanted, "the worker runs with the session's token");
         return session_token;
     }
-    let mut linked = TOKEN_LINKED_TOKEN::default();
-    // SAFETY: `linked` is a writable TOKEN_LINKED_TOKEN of the size passed; the token is live.
-    let got = unsafe {
-        GetTokenInformation(
-            session_token.raw(),
-            TokenLinkedToken,
-            Some((&raw mut linked).cast()),
-            size_of::<TOKEN_LINKED_TOKEN>() as u32,
-            &mut needed,
-        )
+    // SAFETY: TokenLinkedToken is written as a TOKEN_LINKED_TOKEN; the token is live.
+    let linked = match unsafe { token_info::<TOKEN_LINKED_TOKEN>(session_token.raw(), TokenLinkedToken) } {
+        Ok(linked) => linked,
+        Err(err) => {
+            tracing::warn!(err = %describe(&err), "no linked token: the worker runs with the filtered (medium) token");
+            return session_token;
+        }
     };
-    if let Err(err) = got {
-        tracing::warn!(err = %describe(&err), "no linked token: the worker runs with the filtered (medium) token");
-        return session_token;
-    }
     let Some(linked) = OwnedHandle::new(linked.LinkedToken) else {
         tracing::warn!("the linked token is empty: the worker runs with the filtered (medium) token");
         return session_token;
