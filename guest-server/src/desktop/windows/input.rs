@@ -129,18 +129,18 @@ fn check_repeat(what: &str, n: u32) -> DesktopResult<()> {
     Ok(())
 }
 
-/// What the keyboard layout of the foreground window's thread says about `c`: what
-/// the keys the agent presses mean to the program that gets them (this thread's own
-/// layout may differ).
-fn layout(c: char) -> Option<CharKey> {
-    let unit = u16::try_from(u32::from(c)).ok()?;
+/// What the keyboard layout of the foreground window's thread says about each
+/// character: what the keys the agent presses mean to the program that gets them
+/// (this thread's own layout may differ). The layout is looked up once, here.
+fn foreground_layout() -> impl Fn(char) -> Option<CharKey> {
     // SAFETY: no preconditions; a missing foreground window gives thread 0, whose layout
-    // query answers the system default. VkKeyScanExW takes any UTF-16 unit and layout.
-    let scan = unsafe {
-        let thread = GetWindowThreadProcessId(GetForegroundWindow(), None);
-        VkKeyScanExW(unit, GetKeyboardLayout(thread))
-    };
-    CharKey::from_vk_scan(scan)
+    // query answers the system default.
+    let hkl = unsafe { GetKeyboardLayout(GetWindowThreadProcessId(GetForegroundWindow(), None)) };
+    move |c| {
+        let unit = u16::try_from(u32::from(c)).ok()?;
+        // SAFETY: VkKeyScanExW takes any UTF-16 unit and layout handle.
+        CharKey::from_vk_scan(unsafe { VkKeyScanExW(unit, hkl) })
+    }
 }
 
 fn key_input(stroke: Stroke) -> INPUT {
@@ -256,6 +256,7 @@ pub(super) fn perform(action: &Action) -> DesktopResult<()> {
         Action::KeyPress { key, presses } => {
             check_repeat("presses", *presses)?;
             let keys = parse_keys(key)?;
+            let layout = foreground_layout();
             let once =
                 if let [single] = keys.as_slice() { vk::press(*single, &layout) } else { vk::chord(&keys, &layout) };
             let strokes: Vec<Stroke> = (0..*presses).flat_map(|_| once.iter().copied()).collect();
@@ -266,19 +267,21 @@ pub(super) fn perform(action: &Action) -> DesktopResult<()> {
             for key in keys {
                 parsed.extend(parse_keys(key)?);
             }
-            send_strokes(&vk::chord(&parsed, &layout), "hotkey")
+            send_strokes(&vk::chord(&parsed, &foreground_layout()), "hotkey")
         }
         Action::KeyDown { key } => {
+            let layout = foreground_layout();
             let strokes: Vec<Stroke> = parse_keys(key)?.into_iter().flat_map(|k| vk::key_down(k, &layout)).collect();
             send_strokes(&strokes, "key down")
         }
         Action::KeyUp { key } => {
+            let layout = foreground_layout();
             let strokes: Vec<Stroke> =
                 parse_keys(key)?.into_iter().rev().flat_map(|k| vk::key_up(k, &layout)).collect();
             send_strokes(&strokes, "key up")
         }
         Action::TypeText { text, interval_ms } => {
-            let groups = vk::type_text(text, &layout);
+            let groups = vk::type_text(text, &foreground_layout());
             match interval_ms.filter(|&ms| ms > 0) {
                 None => send_strokes(&groups.concat(), "type text"),
                 Some(ms) => {
