@@ -34,6 +34,14 @@ pub struct DoctorOptions {
     pub window_wait: Option<Duration>,
 }
 
+impl DoctorOptions {
+    /// The options of a server configured with `config` (its bind address) and
+    /// `token` (whether one is in force).
+    pub fn for_server(config: &crate::config::ServerConfig, token: bool) -> DoctorOptions {
+        DoctorOptions { bind: Some(std::net::SocketAddr::new(config.bind, config.port)), token, window_wait: None }
+    }
+}
+
 /// The text typed into Notepad and looked for afterwards.
 const TYPED: &str = "arena doctor 42";
 

@@ -50,11 +50,7 @@ fn doctor(args: &arena_guest::service::DoctorArgs) -> ExitCode {
             return ExitCode::FAILURE;
         }
     };
-    let options = arena_guest::doctor::DoctorOptions {
-        bind: Some(SocketAddr::new(args.serve.bind, args.serve.port)),
-        token: state.token.is_some(),
-        window_wait: None,
-    };
+    let options = arena_guest::doctor::DoctorOptions::for_server(&args.serve, state.token.is_some());
     let report = arena_guest::doctor::run(state.desktop.as_ref(), &options);
     if args.json {
         match serde_json::to_string_pretty(&report) {

@@ -28,11 +28,7 @@ pub(crate) fn routes() -> Router<AppState> {
 async fn doctor(State(state): State<AppState>) -> Result<AppJson<DoctorReport>, ApiError> {
     static ONE_AT_A_TIME: tokio::sync::Mutex<()> = tokio::sync::Mutex::const_new(());
     let _turn = ONE_AT_A_TIME.lock().await;
-    let options = DoctorOptions {
-        bind: Some(std::net::SocketAddr::new(state.config.bind, state.config.port)),
-        token: state.token.is_some(),
-        window_wait: None,
-    };
+    let options = DoctorOptions::for_server(&state.config, state.token.is_some());
     let report = blocking(&state.desktop, "doctor", DEADLINE, move |d| Ok(run(d, &options))).await?;
     Ok(AppJson(report))
 }

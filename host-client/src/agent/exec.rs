@@ -186,19 +186,23 @@ async fn typed(client: &GuestClient, actions: &[Action], release: bool) -> Resul
     // By default a key a typed batch holds stays held into the next step (upstream's
     // computer_13 KEY_DOWN, CLICK, KEY_UP are three steps) and the episode lets it go
     // at its end; with `release` the batch lets go of it itself.
-    let mut held = HeldKeys::default();
-    actions.iter().for_each(|a| held.track(a));
     let mut batch = actions.to_vec();
     if release {
+        let mut held = HeldKeys::default();
+        actions.iter().for_each(|a| held.track(a));
         batch.extend(held.releases());
     }
     match client.act(&ActionBatch { actions: batch }).await {
-        Ok(report) => Ok(ActionOutcome {
-            cursor: Some(report.cursor),
-            performed: report.executed.min(actions.len()),
-            keys_down: keys_down(&actions[..report.executed.min(actions.len())]),
-            ..ActionOutcome::default()
-        }),
+        Ok(report) => {
+            // The releases appended above are not the agent's actions.
+            let performed = report.executed.min(actions.len());
+            Ok(ActionOutcome {
+                cursor: Some(report.cursor),
+                performed,
+                keys_down: keys_down(&actions[..performed]),
+                ..ActionOutcome::default()
+            })
+        }
         Err(err) if is_unreachable(&err) => Err(AgentError::Guest(err)),
         Err(err) => Ok(ActionOutcome { error: Some(err.to_string()), ..ActionOutcome::default() }),
     }
@@ -421,9 +425,9 @@ impl ScriptHost for GuestHost {
         let tracked = action.clone();
         let report = self.call(|c| async move { c.act_one(action).await })?;
         self.held.track(&tracked);
-        for key in keys_down(std::slice::from_ref(&tracked)) {
-            if !self.keys_down.contains(&key) {
-                self.keys_down.push(key);
+        if let Action::KeyDown { key } = &tracked {
+            if !self.keys_down.contains(key) {
+                self.keys_down.push(key.clone());
             }
         }
         self.cursor = Some(report.cursor);
