@@ -142,10 +142,11 @@ pub async fn run_episode(
     config: &EpisodeConfig,
     out: &TaskDir,
 ) -> EpisodeResult {
-    run_attempt(client, task, agent, config, out, 1).await
+    run_attempt(client, task, agent, config, out, 1, None).await
 }
 
-/// [`run_episode`] for try number `attempt` of the task (recorded in `episode.json`).
+/// [`run_episode`] for try number `attempt` of the task, in the VM that `vm`
+/// describes when the run owns its VMs (both recorded in `episode.json`).
 pub async fn run_attempt(
     client: &GuestClient,
     task: &Task,
@@ -153,6 +154,7 @@ pub async fn run_attempt(
     config: &EpisodeConfig,
     out: &TaskDir,
     attempt: u32,
+    vm: Option<crate::vm::VmStart>,
 ) -> EpisodeResult {
     let started = Instant::now();
     let mut ep = Episode {
@@ -178,6 +180,7 @@ pub async fn run_attempt(
             eval: Value::Null,
             timings: Vec::new(),
             options: config.options.clone(),
+            vm,
         },
         reset: None,
         steps: Vec::new(),
@@ -748,10 +751,16 @@ impl std::fmt::Debug for EpisodeRunner {
 
 #[async_trait::async_trait]
 impl TaskRunner for EpisodeRunner {
-    async fn run(&self, guest: &GuestClient, task: &Task, attempt: u32) -> EpisodeResult {
+    async fn run(
+        &self,
+        guest: &GuestClient,
+        task: &Task,
+        attempt: u32,
+        vm: Option<crate::vm::VmStart>,
+    ) -> EpisodeResult {
         let out = self.layout.task_dir(task);
         match (self.agents)() {
-            Ok(mut agent) => run_attempt(guest, task, agent.as_mut(), &self.config, &out, attempt).await,
+            Ok(mut agent) => run_attempt(guest, task, agent.as_mut(), &self.config, &out, attempt, vm).await,
             Err(err) => {
                 // Without an agent nothing can run anywhere: record it as the
                 // agent's failure so the run does not retry it on every guest.
@@ -777,6 +786,7 @@ impl TaskRunner for EpisodeRunner {
                     eval: Value::Null,
                     timings: Vec::new(),
                     options: self.config.options.clone(),
+                    vm: vm.clone(),
                 };
                 if let Err(err) = out.prepare().and_then(|()| out.finish(&result, None, &[])) {
                     tracing::error!(task = %task.name, error = %err, "cannot write the episode's results");

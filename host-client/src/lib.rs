@@ -22,6 +22,7 @@
 //! - [`results`]: result folders in upstream's layout, the summary and the HTML report.
 //! - [`run`]: task lists, shards, the pool of guests, merging shards.
 //! - [`prep`]: staging a Windows image's OEM folder and waiting for its guest.
+//! - [`vm`]: Windows VMs run with QEMU: overlays of a golden image, QMP, snapshots per task, screendumps, golden images from an ISO.
 //! - [`cli`]: the `arena` command line (`main.rs` only parses and calls [`run`]).
 
 pub mod agent;
@@ -38,6 +39,7 @@ pub mod run;
 pub mod setup;
 pub mod som;
 pub mod task;
+pub mod vm;
 
 pub use client::{ClientConfig, GuestClient};
 pub use error::ClientError;

@@ -23,6 +23,7 @@ pub mod render;
 pub mod runs;
 pub mod stub;
 pub mod validate;
+pub mod vm;
 
 use std::io::{IsTerminal, Write};
 use std::path::PathBuf;
@@ -244,6 +245,9 @@ pub enum Command {
     Prep(prep::PrepArgs),
     /// Get the upstream WAA task corpus without cloning WindowsAgentArena.
     Corpus(corpus::CorpusArgs),
+    /// Run Windows VMs with QEMU: start one on an overlay of a golden image, snapshot,
+    /// restore, screendump, stop, or prepare a golden image from an installer ISO.
+    Vm(vm::VmCommandArgs),
 }
 
 /// Arguments of `arena tree`.
@@ -563,6 +567,7 @@ pub async fn run(cli: Cli) -> anyhow::Result<ExitCode> {
         Command::Report(args) => runs::report(&args),
         Command::Prep(args) => prep::run(conn, args).await,
         Command::Corpus(args) => corpus::run(args).await,
+        Command::Vm(args) => vm::run(conn, args).await,
     }
 }
 

@@ -182,6 +182,22 @@ pub struct RunArgs {
     /// The trial folder level of the results (upstream's --trial_id).
     #[arg(long, default_value = crate::results::DEFAULT_TRIAL_ID, value_name = "ID")]
     pub trial_id: String,
+    /// Run the tasks in VMs this run starts with QEMU, each on an overlay of this
+    /// read-only golden image, restored to its `ready` snapshot as --reset says.
+    #[arg(long, value_name = "IMAGE")]
+    pub vm_image: Option<PathBuf>,
+    /// How many VMs --vm-image starts.
+    #[arg(long, default_value_t = 1, value_name = "N", requires = "vm_image")]
+    pub vms: usize,
+    /// When a VM goes back to its `ready` snapshot: `per-task`, `every:K` tasks, or
+    /// `never` (tasks meet what the ones before left, as upstream runs). Recorded.
+    #[arg(long, default_value = "per-task", value_parser = super::vm::parse_reset, value_name = "POLICY")]
+    pub reset: crate::vm::fleet::ResetPolicy,
+    /// The VMs' folders (overlays, QMP sockets, logs) [default: <out>/vms].
+    #[arg(long, value_name = "DIR")]
+    pub vm_dir: Option<PathBuf>,
+    #[command(flatten)]
+    pub vm: super::vm::VmArgs,
 }
 
 /// `--navi-style`.
@@ -368,6 +384,18 @@ pub async fn run(conn: &Connection, args: RunArgs) -> anyhow::Result<ExitCode> {
     if let Some(file) = &args.guests_file {
         urls.extend(guests_from_file(file)?);
     }
+    let fleet = match &args.vm_image {
+        Some(image) => {
+            let dir = args.vm_dir.clone().unwrap_or_else(|| args.out.join("vms"));
+            let template = args.vm.config(image, &dir, "vm", conn.resolve_token()?);
+            let configs = crate::vm::fleet::configs(&template, args.vms.max(1));
+            emit(&format!("booting {} VM(s) on {}\n", configs.len(), image.display()))?;
+            let fleet = crate::vm::fleet::VmFleet::boot(configs, args.reset).await?;
+            urls.extend(fleet.urls());
+            Some(Arc::new(fleet))
+        }
+        None => None,
+    };
     let mut stubs = Vec::new();
     for _ in 0..args.stub_guests.unwrap_or(0) {
         let running = stub::start(&stub::StubArgs::default(), conn.resolve_token()?).await?;
@@ -411,6 +439,9 @@ pub async fn run(conn: &Connection, args: RunArgs) -> anyhow::Result<ExitCode> {
         config.settle = Settle::none();
         config.exec = ExecOptions::instant();
     }
+    if fleet.is_some() {
+        config.options.insert("vm_reset".into(), args.reset.to_string());
+    }
     if args.held_keys == HeldKeysArg::Action {
         config.exec.release_held_keys = true;
         config.options.insert("held_keys".into(), "action".into());
@@ -426,7 +457,11 @@ pub async fn run(conn: &Connection, args: RunArgs) -> anyhow::Result<ExitCode> {
         layout: layout.clone(),
         shard: args.shard,
         resume: !args.no_resume,
-        pool: PoolConfig { max_attempts: args.attempts.max(1), ..PoolConfig::default() },
+        pool: PoolConfig {
+            max_attempts: args.attempts.max(1),
+            lifecycle: fleet.clone().map(|f| f as Arc<dyn crate::run::pool::GuestLifecycle>),
+            ..PoolConfig::default()
+        },
         progress: progress_wanted(),
         title: format!("arena run: {} ({})", args.tasks.display(), layout.base().display()),
         order,
@@ -438,6 +473,13 @@ pub async fn run(conn: &Connection, args: RunArgs) -> anyhow::Result<ExitCode> {
     let runner = EpisodeRunner { layout, config, agents };
     let outcome = run_tasks(tasks, guests, Arc::new(runner), &options).await;
     watcher.abort();
+    if let Some(fleet) = fleet {
+        drop(options);
+        match Arc::try_unwrap(fleet) {
+            Ok(fleet) => fleet.stop().await,
+            Err(_) => tracing::warn!("the VMs are still in use; they stop when this program ends"),
+        }
+    }
     let outcome = outcome?;
     for stub in stubs {
         if let Err(err) = stub.stop().await {

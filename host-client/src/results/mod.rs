@@ -319,6 +319,10 @@ pub struct EpisodeResult {
     /// The named options in force (`pauses`, `order`, ...; docs/compatibility.md).
     #[serde(default)]
     pub options: std::collections::BTreeMap<String, String>,
+    /// The VM the task ran in and the snapshot it started from, when the run
+    /// owns its VMs (`arena run --vm-image`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub vm: Option<crate::vm::VmStart>,
 }
 
 fn one() -> u32 {

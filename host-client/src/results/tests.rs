@@ -28,6 +28,7 @@ pub(crate) fn episode(domain: &str, name: &str, score: f64, status: EpisodeStatu
         eval: Value::Null,
         timings: Vec::new(),
         options: Default::default(),
+        vm: None,
     }
 }
 

@@ -22,14 +22,32 @@ use tokio_util::sync::CancellationToken;
 use crate::client::GuestClient;
 use crate::results::{EpisodeResult, EpisodeStatus};
 use crate::task::Task;
+use crate::vm::VmStart;
 
 /// Runs one task on one guest. Implemented by the episode runner; tests use fakes.
 #[async_trait::async_trait]
 pub trait TaskRunner: Send + Sync {
-    /// Runs `task` on `guest` (try number `attempt`, from 1) and returns what
-    /// happened. It never fails: an unreachable guest is an
-    /// [`EpisodeStatus::InfraError`] result.
-    async fn run(&self, guest: &GuestClient, task: &Task, attempt: u32) -> EpisodeResult;
+    /// Runs `task` on `guest` (try number `attempt`, from 1; in the VM `vm`
+    /// describes when the run owns its VMs) and returns what happened. It never
+    /// fails: an unreachable guest is an [`EpisodeStatus::InfraError`] result.
+    async fn run(&self, guest: &GuestClient, task: &Task, attempt: u32, vm: Option<VmStart>) -> EpisodeResult;
+}
+
+/// What the pool does to its guests besides running tasks on them, when it owns
+/// them (the VMs of `arena run --vm-image`).
+#[async_trait::async_trait]
+pub trait GuestLifecycle: Send + Sync {
+    /// Before a task on `guest`: restore its snapshot when the reset policy says
+    /// so. An error makes this try an infrastructure error and the guest is revived.
+    async fn before_task(&self, guest: &GuestClient) -> Result<Option<VmStart>, String>;
+    /// A guest that stopped answering: kill and rebuild it. `Ok` once it answers.
+    async fn revive(&self, guest: &GuestClient) -> Result<(), String>;
+}
+
+impl std::fmt::Debug for dyn GuestLifecycle {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("GuestLifecycle")
+    }
 }
 
 /// How the pool behaves.
@@ -47,6 +65,9 @@ pub struct PoolConfig {
     /// Cancelled to stop the run (the first Ctrl-C): no new task starts, the
     /// running episodes end at their next step, the rest are listed as not run.
     pub stop: CancellationToken,
+    /// Set when the pool owns its guests: snapshots restored before tasks, dead
+    /// guests rebuilt instead of waited for.
+    pub lifecycle: Option<Arc<dyn GuestLifecycle>>,
 }
 
 impl Default for PoolConfig {
@@ -57,6 +78,7 @@ impl Default for PoolConfig {
             health_timeout: Duration::from_secs(5),
             no_guest_timeout: Duration::from_secs(600),
             stop: CancellationToken::new(),
+            lifecycle: None,
         }
     }
 }
@@ -159,7 +181,24 @@ pub async fn run_pool(
             report.episodes += 1;
             let runner = Arc::clone(&runner);
             let health_timeout = config.health_timeout;
+            let lifecycle = config.lifecycle.clone();
             running.spawn(async move {
+                let vm = match &lifecycle {
+                    Some(lifecycle) => lifecycle.before_task(&guest).await,
+                    None => Ok(None),
+                };
+                let vm = match vm {
+                    Ok(vm) => vm,
+                    Err(error) => {
+                        let result = infra_error(
+                            &item.task,
+                            guest.base_url(),
+                            item.attempt,
+                            &format!("preparing the guest: {error}"),
+                        );
+                        return Finished { guest, item, result, healthy: false };
+                    }
+                };
                 // The episode runs in a task of its own so that a panic in it
                 // costs this one try, not the guest or the task record.
                 let inner = {
@@ -167,11 +206,16 @@ pub async fn run_pool(
                     let guest = guest.clone();
                     let task = item.task.clone();
                     let attempt = item.attempt;
-                    tokio::spawn(async move { runner.run(&guest, &task, attempt).await })
+                    tokio::spawn(async move { runner.run(&guest, &task, attempt, vm).await })
                 };
                 let result = match inner.await {
                     Ok(result) => result,
-                    Err(err) => panicked(&item.task, guest.base_url(), item.attempt, &err.to_string()),
+                    Err(err) => infra_error(
+                        &item.task,
+                        guest.base_url(),
+                        item.attempt,
+                        &format!("the episode task failed: {err}"),
+                    ),
                 };
                 // After an infrastructure error, find out here (not in the
                 // dispatcher, which must not wait) whether the guest still answers.
@@ -210,7 +254,7 @@ pub async fn run_pool(
                         } else {
                             on_event(PoolEvent::GuestDown { guest: guest.base_url(), error: &error });
                             down.push(guest.base_url().to_owned());
-                            probes.spawn(probe(guest.clone(), config.probe_interval, config.health_timeout));
+                            probes.spawn(probe(guest.clone(), config.probe_interval, config.health_timeout, config.lifecycle.clone()));
                         }
                         if item.attempt < config.max_attempts {
                             on_event(PoolEvent::Retrying { task: &item.task, attempt: item.attempt + 1, error: &error });
@@ -253,10 +297,22 @@ pub async fn run_pool(
     report
 }
 
-/// Asks `guest` for its health every `interval` until it answers, then returns it.
-async fn probe(guest: GuestClient, interval: Duration, timeout: Duration) -> GuestClient {
+/// Asks `guest` for its health every `interval` until it answers, then returns
+/// it. A guest the pool owns is rebuilt first, and again after each failure.
+async fn probe(
+    guest: GuestClient,
+    interval: Duration,
+    timeout: Duration,
+    lifecycle: Option<Arc<dyn GuestLifecycle>>,
+) -> GuestClient {
     let quick = guest.with_timeout(timeout);
     loop {
+        if let Some(lifecycle) = &lifecycle {
+            match lifecycle.revive(&guest).await {
+                Ok(()) => return guest,
+                Err(err) => tracing::warn!(guest = guest.base_url(), error = %err, "rebuilding the guest failed"),
+            }
+        }
         tokio::time::sleep(interval).await;
         match quick.health().await {
             Ok(_) => {
@@ -268,9 +324,10 @@ async fn probe(guest: GuestClient, interval: Duration, timeout: Duration) -> Gue
     }
 }
 
-/// The record of an episode whose task panicked: an infrastructure error (a bug
-/// in this program, not the agent's doing), so it is tried again.
-fn panicked(task: &Task, guest: &str, attempt: u32, message: &str) -> EpisodeResult {
+/// The record of a try that never reached the agent (the guest could not be
+/// prepared) or whose task panicked (a bug in this program, not the agent's
+/// doing): an infrastructure error, so it is tried again.
+fn infra_error(task: &Task, guest: &str, attempt: u32, message: &str) -> EpisodeResult {
     EpisodeResult {
         score_is_int: false,
         task_id: task.id.clone(),
@@ -282,7 +339,7 @@ fn panicked(task: &Task, guest: &str, attempt: u32, message: &str) -> EpisodeRes
         guest: guest.to_owned(),
         attempt,
         score: 0.0,
-        status: EpisodeStatus::InfraError(format!("the episode task failed: {message}")),
+        status: EpisodeStatus::InfraError(message.to_owned()),
         steps: 0,
         last_action: String::new(),
         elapsed_ms: 0,
@@ -293,5 +350,6 @@ fn panicked(task: &Task, guest: &str, attempt: u32, message: &str) -> EpisodeRes
         eval: serde_json::Value::Null,
         timings: Vec::new(),
         options: Default::default(),
+        vm: None,
     }
 }

@@ -53,7 +53,13 @@ struct Fake {
 
 #[async_trait::async_trait]
 impl TaskRunner for Fake {
-    async fn run(&self, guest: &GuestClient, task: &Task, attempt: u32) -> EpisodeResult {
+    async fn run(
+        &self,
+        guest: &GuestClient,
+        task: &Task,
+        attempt: u32,
+        _vm: Option<crate::vm::VmStart>,
+    ) -> EpisodeResult {
         let url = guest.base_url().to_owned();
         {
             let mut busy = self.busy.lock().unwrap();
@@ -162,7 +168,13 @@ async fn a_guest_that_comes_back_rejoins_the_pool() {
     }
     #[async_trait::async_trait]
     impl TaskRunner for FlakyOnce {
-        async fn run(&self, guest: &GuestClient, task: &Task, attempt: u32) -> EpisodeResult {
+        async fn run(
+            &self,
+            guest: &GuestClient,
+            task: &Task,
+            attempt: u32,
+            _vm: Option<crate::vm::VmStart>,
+        ) -> EpisodeResult {
             let first = !std::mem::replace(&mut *self.failed.lock().unwrap(), true);
             let status = if first { EpisodeStatus::InfraError("down".into()) } else { EpisodeStatus::Completed };
             let mut result = episode(&task.domain, &task.name, if first { 0.0 } else { 1.0 }, status, 1);

@@ -1,0 +1,572 @@
+//! Windows VMs this program runs itself with QEMU.
+//!
+//! Each VM runs on a copy-on-write overlay (qcow2 with a backing file) of a
+//! read-only golden image, with a QMP control socket, user-mode networking that
+//! forwards one host port to the guest server's port, and an optional VNC
+//! display. [`Vm`] is one such QEMU process; [`fleet`] keeps several for a run
+//! and restores each one's `ready` snapshot before every task; [`prepare`] makes
+//! a golden image from an installer ISO.
+//!
+//! - [`qemu`]: the command line, as data; where QEMU is; KVM or software emulation.
+//! - [`disk`]: `qemu-img`: image facts, golden-image checks, overlays.
+//! - [`qmp`]: the control socket (commands, monitor lines, events).
+//!
+//! It is not the guest: the server inside the VM is `arena-guest`, reached over
+//! HTTP like any other guest.
+
+pub mod disk;
+pub mod fleet;
+pub mod prepare;
+pub mod qemu;
+pub mod qmp;
+
+use std::net::{IpAddr, Ipv4Addr, SocketAddr, TcpListener};
+use std::path::{Path, PathBuf};
+use std::process::Stdio;
+use std::time::{Duration, Instant};
+
+use arena_shared::health::HealthReport;
+
+use crate::client::{ClientConfig, GuestClient};
+use crate::prep::{wait_healthy, PrepError, WaitEvent};
+use disk::{ImageInfo, QemuImg};
+use qemu::{Accel, DiskBus, Firmware, FolderDrive, NicModel, VmSpec};
+use qmp::Qmp;
+
+/// The QMP socket other `arena vm` commands use, in a VM's folder.
+pub const CONTROL_SOCKET: &str = "control.sock";
+
+/// The name of the snapshot a run restores before each task.
+pub const READY_SNAPSHOT: &str = "ready";
+
+/// Everything that can go wrong with a VM, each naming what and why.
+#[derive(Debug, thiserror::Error)]
+pub enum VmError {
+    #[error("{program} cannot be run: {hint}")]
+    Missing { program: String, hint: String },
+    #[error("golden image {path}: {message}")]
+    Golden { path: PathBuf, message: String },
+    #[error("overlay {path}: {message}")]
+    Overlay { path: PathBuf, message: String },
+    #[error("{what}: {message}")]
+    Image { what: String, message: String },
+    #[error("port {port} on {addr} is already in use (another VM or program holds it); choose another with --port or 0 for a free one")]
+    PortTaken { addr: IpAddr, port: u16 },
+    #[error("QMP {what}: {message}")]
+    Qmp { what: String, message: String },
+    #[error("snapshot {name:?} does not exist in {disk}{known}")]
+    NoSnapshot { name: String, disk: PathBuf, known: String },
+    #[error("VM {name}: QEMU exited ({status}){log}")]
+    Exited { name: String, status: String, log: String },
+    #[error("VM {name}: {source}")]
+    NotHealthy { name: String, source: PrepError },
+    #[error("{what}: {source}")]
+    Io { what: String, source: std::io::Error },
+    #[error("{0}")]
+    Invalid(String),
+}
+
+/// How to run one VM.
+#[derive(Debug, Clone)]
+pub struct VmConfig {
+    /// `qemu-system-x86_64` [default: on PATH].
+    pub qemu: Option<PathBuf>,
+    /// `qemu-img` [default: on PATH].
+    pub qemu_img: Option<PathBuf>,
+    /// The read-only golden image (qcow2, raw or any format QEMU reads).
+    pub golden: PathBuf,
+    /// This VM's folder: `overlay.qcow2`, `qmp.sock`, `serial.log`, `qemu.log`.
+    pub dir: PathBuf,
+    pub name: String,
+    pub memory_mib: u32,
+    pub cpus: u32,
+    pub machine: String,
+    pub disk_bus: DiskBus,
+    pub nic: NicModel,
+    /// `None`: OVMF is not used (SeaBIOS); `Some((code, vars template))`.
+    pub uefi: Option<(PathBuf, PathBuf)>,
+    /// `None`: KVM when it works, else software emulation.
+    pub accel: Option<Accel>,
+    pub host_addr: IpAddr,
+    /// 0 picks a free port.
+    pub host_port: u16,
+    pub guest_port: u16,
+    pub vnc: Option<u16>,
+    /// The guest's bearer token, when it has one.
+    pub token: Option<String>,
+    /// How long a boot (or a restore) may take to reach a healthy guest.
+    pub boot_timeout: Duration,
+}
+
+impl VmConfig {
+    /// Defaults for a Windows 11 guest on `golden`, in folder `dir`.
+    pub fn new(golden: &Path, dir: &Path, name: &str) -> VmConfig {
+        VmConfig {
+            qemu: None,
+            qemu_img: None,
+            golden: golden.to_owned(),
+            dir: dir.to_owned(),
+            name: name.to_owned(),
+            memory_mib: 8192,
+            cpus: 4,
+            machine: "q35".into(),
+            disk_bus: DiskBus::Ahci,
+            nic: NicModel::E1000e,
+            uefi: None,
+            accel: None,
+            host_addr: IpAddr::V4(Ipv4Addr::LOCALHOST),
+            host_port: 0,
+            guest_port: 5000,
+            vnc: None,
+            token: None,
+            boot_timeout: Duration::from_secs(900),
+        }
+    }
+
+    pub fn overlay(&self) -> PathBuf {
+        self.dir.join("overlay.qcow2")
+    }
+
+    fn qemu_img(&self) -> Result<QemuImg, VmError> {
+        Ok(QemuImg { program: qemu::find_qemu_img(self.qemu_img.as_deref())? })
+    }
+}
+
+/// Where a task's VM started from, recorded in `episode.json`.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct VmStart {
+    /// The VM's name.
+    pub vm: String,
+    /// The snapshot restored before the task, or `None` when the task found the
+    /// VM as the previous one left it (`--reset never`, or between resets).
+    pub snapshot: Option<String>,
+    /// Restoring the snapshot and waiting for the guest's health, in milliseconds.
+    pub restore_ms: u64,
+    /// Whether the VM was rebuilt (QEMU started again) before this task.
+    #[serde(default)]
+    pub rebuilt: bool,
+}
+
+/// One running QEMU process.
+#[derive(Debug)]
+pub struct Vm {
+    pub config: VmConfig,
+    pub spec: VmSpec,
+    child: tokio::process::Child,
+    pub qmp: Qmp,
+    client: GuestClient,
+    /// How the VM runs (`KVM (/dev/kvm)` or why it is software emulation).
+    pub accel_note: String,
+}
+
+/// How [`Vm::start`] treats the overlay.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Boot {
+    /// A new overlay of the golden image, booted from cold.
+    Fresh,
+    /// The existing overlay, booted from cold.
+    Existing,
+    /// The existing overlay, resumed from one of its snapshots.
+    FromSnapshot(String),
+}
+
+impl Vm {
+    /// Starts QEMU for `config` (it does not wait for the guest: see [`Vm::wait_healthy`]).
+    ///
+    /// # Errors
+    ///
+    /// QEMU or `qemu-img` is missing, the golden image is writable or missing, the
+    /// overlay's backing file moved, the port is taken, or QEMU exits at once.
+    pub async fn start(config: &VmConfig, boot: Boot) -> Result<Vm, VmError> {
+        let qemu = qemu::find_qemu(config.qemu.as_deref())?;
+        let img = config.qemu_img()?;
+        let info = img.check_golden(&config.golden)?;
+        std::fs::create_dir_all(&config.dir)
+            .map_err(|source| VmError::Io { what: format!("creating {}", config.dir.display()), source })?;
+        let overlay = config.overlay();
+        let mut loadvm = None;
+        match &boot {
+            Boot::Fresh => img.create_overlay(&config.golden, &info.format, &overlay)?,
+            Boot::Existing | Boot::FromSnapshot(_) => {
+                let o = img.check_overlay(&overlay)?;
+                if let Boot::FromSnapshot(name) = &boot {
+                    require_snapshot(&o, name, &overlay)?;
+                    loadvm = Some(name.clone());
+                }
+            }
+        }
+        let firmware = match &config.uefi {
+            None => Firmware::Bios,
+            Some((code, template)) => {
+                let vars = config.dir.join("uefi-vars.qcow2");
+                if !vars.exists() || boot == Boot::Fresh {
+                    img.convert_to_qcow2(template, &vars)?;
+                }
+                Firmware::Uefi { code: code.clone(), vars }
+            }
+        };
+        let host_port = pick_port(config.host_addr, config.host_port)?;
+        let (accel, accel_note) = match config.accel {
+            Some(accel) => (accel, format!("{accel:?} (chosen)")),
+            None => qemu::detect_accel(),
+        };
+        if accel == Accel::Tcg {
+            tracing::warn!(vm = %config.name, "{accel_note}; expect boots and tasks to be many times slower");
+        }
+        let qmp_socket = config.dir.join("qmp.sock");
+        let _ = std::fs::remove_file(&qmp_socket);
+        let _ = std::fs::remove_file(config.dir.join(CONTROL_SOCKET));
+        let spec = VmSpec {
+            qemu: qemu.clone(),
+            name: config.name.clone(),
+            disk: overlay,
+            disk_bus: config.disk_bus,
+            nic: config.nic,
+            machine: config.machine.clone(),
+            memory_mib: config.memory_mib,
+            cpus: config.cpus,
+            accel,
+            firmware,
+            host_addr: config.host_addr,
+            host_port,
+            guest_port: config.guest_port,
+            qmp_socket,
+            control_socket: config.dir.join(CONTROL_SOCKET),
+            serial_log: config.dir.join("serial.log"),
+            vnc: config.vnc,
+            cdrom: None,
+            folders: Vec::new(),
+            loadvm,
+        };
+        Vm::launch(config, spec, accel_note).await
+    }
+
+    /// Starts QEMU with `spec` as it is (used by [`Vm::start`] and by [`prepare`]).
+    ///
+    /// # Errors
+    ///
+    /// QEMU cannot be started or exits before its control socket answers.
+    pub async fn launch(config: &VmConfig, spec: VmSpec, accel_note: String) -> Result<Vm, VmError> {
+        let log_path = config.dir.join("qemu.log");
+        let log = std::fs::File::create(&log_path)
+            .map_err(|source| VmError::Io { what: format!("creating {}", log_path.display()), source })?;
+        let log_err = log
+            .try_clone()
+            .map_err(|source| VmError::Io { what: format!("opening {}", log_path.display()), source })?;
+        tracing::info!(vm = %config.name, port = spec.host_port, accel = %accel_note, "starting QEMU");
+        let mut command = tokio::process::Command::new(&spec.qemu);
+        command
+            .args(spec.args())
+            .stdin(Stdio::null())
+            .stdout(Stdio::from(log))
+            .stderr(Stdio::from(log_err))
+            .kill_on_drop(true);
+        // QEMU ends with this program even when it is killed outright, so no VM
+        // outlives the run that owns it. (The signal follows the thread that
+        // started QEMU: a runtime worker, which lives as long as the runtime.)
+        #[cfg(target_os = "linux")]
+        // SAFETY: the closure runs in the child between fork and exec and only
+        // calls prctl, which is async-signal-safe.
+        unsafe {
+            command.pre_exec(|| {
+                libc::prctl(libc::PR_SET_PDEATHSIG, libc::SIGKILL);
+                Ok(())
+            });
+        }
+        let mut child = command
+            .spawn()
+            .map_err(|source| VmError::Io { what: format!("starting {}", spec.qemu.display()), source })?;
+        let qmp = tokio::select! {
+            qmp = Qmp::connect(&spec.qmp_socket, Duration::from_secs(30)) => qmp,
+            status = child.wait() => {
+                let status = status.map(|s| s.to_string()).unwrap_or_else(|e| e.to_string());
+                return Err(VmError::Exited { name: config.name.clone(), status, log: log_tail(&log_path) });
+            }
+        };
+        let qmp = match qmp {
+            Ok(qmp) => qmp,
+            Err(err) => {
+                let _ = child.kill().await;
+                return Err(match child.try_wait() {
+                    Ok(Some(status)) => VmError::Exited {
+                        name: config.name.clone(),
+                        status: status.to_string(),
+                        log: log_tail(&log_path),
+                    },
+                    _ => err,
+                });
+            }
+        };
+        let url = format!("http://{}", SocketAddr::new(connect_addr(config.host_addr), spec.host_port));
+        let client = GuestClient::new(
+            &url,
+            ClientConfig { token: config.token.clone(), timeout: Duration::from_secs(10), retries: 0 },
+        )
+        .map_err(|err| VmError::Invalid(err.to_string()))?;
+        Ok(Vm { config: config.clone(), spec, child, qmp, client, accel_note })
+    }
+
+    /// The guest server's URL on this machine.
+    pub fn url(&self) -> &str {
+        self.client.base_url()
+    }
+
+    /// A client of the guest in this VM.
+    pub fn client(&self) -> &GuestClient {
+        &self.client
+    }
+
+    /// QEMU's process id.
+    pub fn pid(&self) -> Option<u32> {
+        self.child.id()
+    }
+
+    /// Whether QEMU has exited, and how.
+    pub fn exited(&mut self) -> Option<String> {
+        match self.child.try_wait() {
+            Ok(Some(status)) => Some(status.to_string()),
+            Ok(None) => None,
+            Err(err) => Some(err.to_string()),
+        }
+    }
+
+    /// Waits until the guest reports every component up, or `within` passes, or
+    /// QEMU exits.
+    ///
+    /// # Errors
+    ///
+    /// [`VmError::NotHealthy`] with what is still down, [`VmError::Exited`].
+    pub async fn wait_healthy(
+        &mut self,
+        within: Duration,
+        progress: impl FnMut(WaitEvent<'_>),
+    ) -> Result<HealthReport, VmError> {
+        let client = self.client.clone();
+        let poll = Duration::from_millis(250);
+        tokio::select! {
+            report = wait_healthy(&client, within, poll, progress) => {
+                report.map_err(|source| VmError::NotHealthy { name: self.config.name.clone(), source })
+            }
+            status = self.child.wait() => {
+                let status = status.map(|s| s.to_string()).unwrap_or_else(|e| e.to_string());
+                Err(VmError::Exited { name: self.config.name.clone(), status, log: log_tail(&self.config.dir.join("qemu.log")) })
+            }
+        }
+    }
+
+    /// Saves the running VM's memory and disk as snapshot `name` in its overlay
+    /// (replacing one of that name). Returns how long it took.
+    ///
+    /// # Errors
+    ///
+    /// [`VmError::Qmp`] with QEMU's reason.
+    pub async fn save_snapshot(&self, name: &str) -> Result<Duration, VmError> {
+        check_snapshot_name(name)?;
+        let started = Instant::now();
+        self.qmp.hmp(&format!("savevm {name}"), Duration::from_secs(600)).await?;
+        Ok(started.elapsed())
+    }
+
+    /// The snapshots in the VM's disk, by name.
+    ///
+    /// # Errors
+    ///
+    /// [`VmError::Qmp`].
+    pub async fn snapshots(&self) -> Result<Vec<String>, VmError> {
+        let text = self.qmp.hmp("info snapshots", self.qmp.timeout).await?;
+        Ok(parse_snapshot_list(&text))
+    }
+
+    /// Puts the VM back to snapshot `name` (memory and disk) and lets it run.
+    /// Returns how long the restore took (not counting the guest's health).
+    ///
+    /// # Errors
+    ///
+    /// [`VmError::NoSnapshot`] naming the snapshots there are, or [`VmError::Qmp`].
+    pub async fn restore_snapshot(&self, name: &str) -> Result<Duration, VmError> {
+        check_snapshot_name(name)?;
+        let known = self.snapshots().await?;
+        if !known.iter().any(|k| k == name) {
+            return Err(VmError::NoSnapshot {
+                name: name.to_owned(),
+                disk: self.spec.disk.clone(),
+                known: known_list(&known),
+            });
+        }
+        let started = Instant::now();
+        self.qmp.hmp(&format!("loadvm {name}"), Duration::from_secs(600)).await?;
+        let (running, _) = self.qmp.status().await?;
+        if !running {
+            self.qmp.cont().await?;
+        }
+        Ok(started.elapsed())
+    }
+
+    /// The VM's display as QEMU shows it (not the guest's own screenshot).
+    ///
+    /// # Errors
+    ///
+    /// [`VmError::Qmp`], or the PNG cannot be read.
+    pub async fn screendump(&self) -> Result<ScreenDump, VmError> {
+        let path = self.config.dir.join("screendump.png");
+        let _ = std::fs::remove_file(&path);
+        self.qmp.screendump(&path).await?;
+        let bytes = std::fs::read(&path)
+            .map_err(|source| VmError::Io { what: format!("reading {}", path.display()), source })?;
+        ScreenDump::from_png(bytes)
+    }
+
+    /// Shuts the VM down: the ACPI power button, then QEMU's `quit` after
+    /// `grace`, then a kill. Returns whether the guest shut down by itself.
+    pub async fn shutdown(mut self, grace: Duration) -> bool {
+        let _ = self.qmp.powerdown().await;
+        if tokio::time::timeout(grace, self.child.wait()).await.is_ok() {
+            return true;
+        }
+        tracing::warn!(vm = %self.config.name, "the guest did not shut down within {} s; stopping QEMU", grace.as_secs());
+        self.kill().await;
+        false
+    }
+
+    /// Stops QEMU at once (its overlay stays as it was).
+    pub async fn kill(&mut self) {
+        let _ = tokio::time::timeout(Duration::from_secs(2), self.qmp.quit()).await;
+        if tokio::time::timeout(Duration::from_secs(5), self.child.wait()).await.is_err() {
+            let _ = self.child.kill().await;
+        }
+    }
+}
+
+/// The address a client on this machine uses for a forward bound to `addr`.
+fn connect_addr(addr: IpAddr) -> IpAddr {
+    if addr.is_unspecified() {
+        IpAddr::V4(Ipv4Addr::LOCALHOST)
+    } else {
+        addr
+    }
+}
+
+/// `port` when it is free on `addr`, or a free one for 0.
+fn pick_port(addr: IpAddr, port: u16) -> Result<u16, VmError> {
+    match TcpListener::bind(SocketAddr::new(addr, port)) {
+        Ok(listener) => listener
+            .local_addr()
+            .map(|a| a.port())
+            .map_err(|source| VmError::Io { what: "reading a free port".into(), source }),
+        Err(err) if err.kind() == std::io::ErrorKind::AddrInUse => Err(VmError::PortTaken { addr, port }),
+        Err(source) => Err(VmError::Io { what: format!("binding {addr}:{port}"), source }),
+    }
+}
+
+fn check_snapshot_name(name: &str) -> Result<(), VmError> {
+    if name.is_empty() || !name.chars().all(|c| c.is_ascii_alphanumeric() || c == '-' || c == '_' || c == '.') {
+        return Err(VmError::Invalid(format!("snapshot name {name:?}: use letters, digits, '-', '_' and '.' only")));
+    }
+    Ok(())
+}
+
+fn require_snapshot(info: &ImageInfo, name: &str, disk: &Path) -> Result<(), VmError> {
+    if info.snapshots.iter().any(|s| s.name == name) {
+        return Ok(());
+    }
+    let known: Vec<String> = info.snapshots.iter().map(|s| s.name.clone()).collect();
+    Err(VmError::NoSnapshot { name: name.to_owned(), disk: disk.to_owned(), known: known_list(&known) })
+}
+
+fn known_list(known: &[String]) -> String {
+    if known.is_empty() {
+        " (it has none)".to_owned()
+    } else {
+        format!(" (it has: {})", known.join(", "))
+    }
+}
+
+/// The names in the monitor's `info snapshots` table.
+fn parse_snapshot_list(text: &str) -> Vec<String> {
+    // ID        TAG               VM SIZE                DATE     VM CLOCK     ICOUNT
+    // --        ready              45.2 MiB 2026-11-26 01:02:03 00:00:12.345
+    text.lines()
+        .filter_map(|line| {
+            let mut words = line.split_whitespace();
+            let id = words.next()?;
+            if id == "ID" || id.starts_with("--") || !id.chars().all(|c| c.is_ascii_digit() || c == '-') {
+                return None;
+            }
+            words.next().map(str::to_owned)
+        })
+        .collect()
+}
+
+/// The last lines QEMU wrote, for error messages.
+pub fn log_tail(path: &Path) -> String {
+    let text = std::fs::read_to_string(path).unwrap_or_default();
+    let lines: Vec<&str> = text.lines().filter(|l| !l.trim().is_empty()).collect();
+    if lines.is_empty() {
+        return String::new();
+    }
+    let start = lines.len().saturating_sub(5);
+    format!(": {}", lines[start..].join(" | "))
+}
+
+/// The VM's display as QEMU's `screendump` gives it.
+#[derive(Debug, Clone)]
+pub struct ScreenDump {
+    pub width: u32,
+    pub height: u32,
+    /// The PNG QEMU wrote.
+    pub png: Vec<u8>,
+    /// Whether every pixel is (nearly) black.
+    pub black: bool,
+}
+
+impl ScreenDump {
+    /// Decodes QEMU's PNG.
+    ///
+    /// # Errors
+    ///
+    /// [`VmError::Invalid`] when it is not a PNG.
+    pub fn from_png(png: Vec<u8>) -> Result<ScreenDump, VmError> {
+        let decoded = ::image::load_from_memory_with_format(&png, ::image::ImageFormat::Png)
+            .map_err(|err| VmError::Invalid(format!("QEMU's screendump is not a readable PNG: {err}")))?
+            .to_rgb8();
+        let black = decoded.pixels().all(|p| p.0.iter().all(|&c| c <= 16));
+        Ok(ScreenDump { width: decoded.width(), height: decoded.height(), png, black })
+    }
+}
+
+/// A folder the guest sees as a disk, for [`prepare`].
+pub fn folder_drive(folder: &Path, removable: bool) -> FolderDrive {
+    FolderDrive { folder: folder.to_owned(), removable }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_monitor_snapshot_table_gives_names() {
+        let text = "List of snapshots present on all disks:\r\nID        TAG               VM SIZE                DATE     VM CLOCK     ICOUNT\r\n--        ready              45.2 MiB 2026-11-26 01:02:03 00:00:12.345\r\n--        after-login        1 GiB 2026-11-26 01:05:03 00:03:12.345\r\n";
+        assert_eq!(parse_snapshot_list(text), vec!["ready", "after-login"]);
+        assert!(parse_snapshot_list("There is no snapshot available.\r\n").is_empty());
+    }
+
+    #[test]
+    fn a_taken_port_is_named() {
+        let held = TcpListener::bind("127.0.0.1:0").unwrap();
+        let port = held.local_addr().unwrap().port();
+        let err = pick_port(IpAddr::V4(Ipv4Addr::LOCALHOST), port).unwrap_err().to_string();
+        assert!(err.contains(&format!("port {port}")) && err.contains("already in use"), "{err}");
+        assert_ne!(pick_port(IpAddr::V4(Ipv4Addr::LOCALHOST), 0).unwrap(), 0);
+    }
+
+    #[test]
+    fn snapshot_names_are_checked_and_missing_ones_list_the_others() {
+        assert!(check_snapshot_name("ready").is_ok());
+        let err = check_snapshot_name("a b; quit").unwrap_err().to_string();
+        assert!(err.contains("letters, digits"), "{err}");
+        let info: ImageInfo =
+            serde_json::from_str(r#"{"format":"qcow2","virtual-size":1,"snapshots":[{"name":"boot"}]}"#).unwrap();
+        let err = require_snapshot(&info, "ready", Path::new("/v/o.qcow2")).unwrap_err().to_string();
+        assert_eq!(err, "snapshot \"ready\" does not exist in /v/o.qcow2 (it has: boot)");
+    }
+}

@@ -1,0 +1,395 @@
+//! The QEMU command line of one VM, built from a [`VmSpec`] as plain data so
+//! that every device choice is tested without starting QEMU; and where the
+//! QEMU programs are found.
+
+use std::ffi::OsString;
+use std::net::IpAddr;
+use std::path::{Path, PathBuf};
+
+use super::VmError;
+
+/// The Debian package that carries `qemu-system-x86_64`.
+pub const QEMU_PACKAGE: &str = "qemu-system-x86";
+/// The Debian package that carries `qemu-img`.
+pub const QEMU_IMG_PACKAGE: &str = "qemu-utils";
+
+/// How the system disk is attached. Windows needs drivers for the virtio
+/// buses (dockur's images have them); AHCI works on any Windows install.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum DiskBus {
+    /// SATA on the q35 machine's AHCI controller (IDE on `pc`).
+    Ahci,
+    VirtioBlk,
+    VirtioScsi,
+}
+
+/// The network card.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum NicModel {
+    /// Intel 82574, which Windows drives without extra drivers.
+    E1000e,
+    VirtioNet,
+}
+
+/// How the guest's code runs.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Accel {
+    Kvm,
+    /// Software emulation: everything works, many times slower.
+    Tcg,
+}
+
+/// The firmware the VM boots with.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Firmware {
+    /// SeaBIOS, QEMU's default.
+    Bios,
+    /// OVMF: `code` is read-only, `vars` is this VM's own copy (qcow2, so that
+    /// snapshots can include it).
+    Uefi { code: PathBuf, vars: PathBuf },
+}
+
+/// A folder shown to the guest as a read-only FAT disk (QEMU's vvfat).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct FolderDrive {
+    pub folder: PathBuf,
+    /// As removable USB media (where Windows Setup looks for `autounattend.xml`)
+    /// instead of a disk on the system disk's bus.
+    pub removable: bool,
+}
+
+/// Everything one QEMU process is started with.
+#[derive(Debug, Clone)]
+pub struct VmSpec {
+    pub qemu: PathBuf,
+    /// The VM's name (shown by QEMU, used in logs).
+    pub name: String,
+    /// The VM's writable disk: an overlay of the golden image.
+    pub disk: PathBuf,
+    pub disk_bus: DiskBus,
+    pub nic: NicModel,
+    pub machine: String,
+    pub memory_mib: u32,
+    pub cpus: u32,
+    pub accel: Accel,
+    pub firmware: Firmware,
+    /// Where the guest's port is forwarded from on this machine.
+    pub host_addr: IpAddr,
+    pub host_port: u16,
+    /// The guest server's port inside the VM.
+    pub guest_port: u16,
+    pub qmp_socket: PathBuf,
+    /// A second QMP monitor, for `arena vm snapshot|restore|screendump|stop`
+    /// while the owner holds the first (a monitor serves one client at a time).
+    pub control_socket: PathBuf,
+    /// The guest's first serial port is written here.
+    pub serial_log: PathBuf,
+    /// VNC display number (5900 + n), on `host_addr`.
+    pub vnc: Option<u16>,
+    /// An installer ISO as a CD-ROM, booted when the disk does not boot.
+    pub cdrom: Option<PathBuf>,
+    pub folders: Vec<FolderDrive>,
+    /// A snapshot to start from (`-loadvm`).
+    pub loadvm: Option<String>,
+}
+
+impl VmSpec {
+    /// The arguments after the program name.
+    pub fn args(&self) -> Vec<OsString> {
+        let mut a = Args::default();
+        a.push("-name").push(format!("{},process={}", self.name, self.name));
+        a.push("-machine").push(format!(
+            "{},accel={}",
+            self.machine,
+            match self.accel {
+                Accel::Kvm => "kvm",
+                Accel::Tcg => "tcg",
+            }
+        ));
+        if self.accel == Accel::Kvm {
+            a.push("-cpu").push("host");
+        }
+        a.push("-m").push(format!("{}M", self.memory_mib));
+        a.push("-smp").push(self.cpus.to_string());
+        a.push("-nodefaults");
+        a.push("-vga").push("std");
+        a.push("-rtc").push("base=localtime");
+        if let Firmware::Uefi { code, vars } = &self.firmware {
+            a.push("-drive").push(drive_opts("if=pflash,format=raw,readonly=on", code));
+            a.push("-drive").push(drive_opts("if=pflash,format=qcow2", vars));
+        }
+
+        // The system disk, first in the boot order.
+        a.push("-drive").push(drive_opts("if=none,id=disk0,format=qcow2,discard=unmap", &self.disk));
+        let ahci_bus =
+            |n: usize| if self.machine.starts_with("pc") { format!("ide.{}", n / 2) } else { format!("ide.{n}") };
+        let mut ahci_ports = 0usize;
+        match self.disk_bus {
+            DiskBus::Ahci => {
+                a.push("-device").push(format!("ide-hd,drive=disk0,bus={},bootindex=1", ahci_bus(ahci_ports)));
+                ahci_ports += 1;
+            }
+            DiskBus::VirtioBlk => {
+                a.push("-device").push("virtio-blk-pci,drive=disk0,bootindex=1");
+            }
+            DiskBus::VirtioScsi => {
+                a.push("-device").push("virtio-scsi-pci,id=scsi0");
+                a.push("-device").push("scsi-hd,drive=disk0,bus=scsi0.0,bootindex=1");
+            }
+        }
+        if let Some(iso) = &self.cdrom {
+            a.push("-drive").push(drive_opts("if=none,id=cd0,media=cdrom,readonly=on", iso));
+            // On the last port, away from the disks.
+            let bus = if self.machine.starts_with("pc") { "ide.1".to_owned() } else { "ide.5".to_owned() };
+            a.push("-device").push(format!("ide-cd,drive=cd0,bus={bus},bootindex=2"));
+        }
+        let mut usb = false;
+        for (i, drive) in self.folders.iter().enumerate() {
+            let id = format!("folder{i}");
+            a.push("-drive")
+                .push(format!("if=none,id={id},format=raw,readonly=on,file=fat:ro:{}", escape(&drive.folder)));
+            if drive.removable {
+                if !usb {
+                    a.push("-device").push("qemu-xhci,id=xhci");
+                    usb = true;
+                }
+                a.push("-device").push(format!("usb-storage,drive={id},removable=on"));
+                continue;
+            }
+            match self.disk_bus {
+                DiskBus::Ahci => {
+                    a.push("-device").push(format!("ide-hd,drive={id},bus={}", ahci_bus(ahci_ports)));
+                    ahci_ports += 1;
+                }
+                DiskBus::VirtioBlk => {
+                    a.push("-device").push(format!("virtio-blk-pci,drive={id}"));
+                }
+                DiskBus::VirtioScsi => {
+                    a.push("-device").push(format!("scsi-hd,drive={id},bus=scsi0.0"));
+                }
+            }
+        }
+
+        // User-mode networking: the guest reaches out, the host reaches the
+        // guest server through one forwarded port.
+        a.push("-netdev")
+            .push(format!("user,id=net0,hostfwd=tcp:{}:{}-:{}", self.host_addr, self.host_port, self.guest_port));
+        a.push("-device").push(match self.nic {
+            NicModel::E1000e => "e1000e,netdev=net0",
+            NicModel::VirtioNet => "virtio-net-pci,netdev=net0",
+        });
+
+        a.push("-qmp").push(format!("unix:{},server=on,wait=off", escape(&self.qmp_socket)));
+        a.push("-qmp").push(format!("unix:{},server=on,wait=off", escape(&self.control_socket)));
+        a.push("-serial").push(format!("file:{}", escape(&self.serial_log)));
+        match self.vnc {
+            Some(display) => a.push("-display").push(format!("vnc={}:{display}", self.host_addr)),
+            None => a.push("-display").push("none"),
+        };
+        if let Some(name) = &self.loadvm {
+            a.push("-loadvm").push(name.clone());
+        }
+        a.0
+    }
+}
+
+#[derive(Default)]
+struct Args(Vec<OsString>);
+
+impl Args {
+    fn push(&mut self, arg: impl Into<OsString>) -> &mut Args {
+        self.0.push(arg.into());
+        self
+    }
+}
+
+/// A QEMU option value holding a path: commas are doubled, as QEMU's option parser wants.
+fn escape(path: &Path) -> String {
+    path.display().to_string().replace(',', ",,")
+}
+
+fn drive_opts(opts: &str, file: &Path) -> String {
+    format!("{opts},file={}", escape(file))
+}
+
+/// Finds `name` on `PATH`.
+pub fn which(name: &str) -> Option<PathBuf> {
+    let path = std::env::var_os("PATH")?;
+    std::env::split_paths(&path).map(|dir| dir.join(name)).find(|p| is_executable(p))
+}
+
+fn is_executable(path: &Path) -> bool {
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::PermissionsExt;
+        std::fs::metadata(path).map(|m| m.is_file() && m.permissions().mode() & 0o111 != 0).unwrap_or(false)
+    }
+    #[cfg(not(unix))]
+    {
+        path.is_file()
+    }
+}
+
+/// The QEMU system emulator: `explicit`, or `qemu-system-x86_64` on `PATH`.
+///
+/// # Errors
+///
+/// [`VmError::Missing`] naming the package to install.
+pub fn find_qemu(explicit: Option<&Path>) -> Result<PathBuf, VmError> {
+    find_program(explicit, "qemu-system-x86_64", QEMU_PACKAGE)
+}
+
+/// `qemu-img`: `explicit`, or on `PATH`.
+///
+/// # Errors
+///
+/// [`VmError::Missing`] naming the package to install.
+pub fn find_qemu_img(explicit: Option<&Path>) -> Result<PathBuf, VmError> {
+    find_program(explicit, "qemu-img", QEMU_IMG_PACKAGE)
+}
+
+fn find_program(explicit: Option<&Path>, name: &str, package: &str) -> Result<PathBuf, VmError> {
+    match explicit {
+        Some(path) if is_executable(path) => Ok(path.to_owned()),
+        Some(path) => Err(VmError::Missing {
+            program: path.display().to_string(),
+            hint: format!("it is not an executable file; install Debian's {package} package or give the right path"),
+        }),
+        None => which(name).ok_or_else(|| VmError::Missing {
+            program: name.to_owned(),
+            hint: format!(
+                "it is not on PATH; install it with `apt-get install {package}` (Debian's {package} package)"
+            ),
+        }),
+    }
+}
+
+/// KVM when `/dev/kvm` opens for reading and writing, otherwise software
+/// emulation, with the reason.
+pub fn detect_accel() -> (Accel, String) {
+    match std::fs::OpenOptions::new().read(true).write(true).open("/dev/kvm") {
+        Ok(_) => (Accel::Kvm, "KVM (/dev/kvm)".to_owned()),
+        Err(err) => (Accel::Tcg, format!("software emulation (TCG): /dev/kvm cannot be used: {err}")),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn spec() -> VmSpec {
+        VmSpec {
+            qemu: "qemu-system-x86_64".into(),
+            name: "vm-1".into(),
+            disk: "/v/vm-1/disk,1.qcow2".into(),
+            disk_bus: DiskBus::Ahci,
+            nic: NicModel::E1000e,
+            machine: "q35".into(),
+            memory_mib: 4096,
+            cpus: 2,
+            accel: Accel::Kvm,
+            firmware: Firmware::Bios,
+            host_addr: "127.0.0.1".parse().unwrap(),
+            host_port: 5123,
+            guest_port: 5000,
+            qmp_socket: "/v/vm-1/qmp.sock".into(),
+            control_socket: "/v/vm-1/control.sock".into(),
+            serial_log: "/v/vm-1/serial.log".into(),
+            vnc: None,
+            cdrom: None,
+            folders: Vec::new(),
+            loadvm: None,
+        }
+    }
+
+    fn line(spec: &VmSpec) -> String {
+        spec.args().iter().map(|a| a.to_string_lossy().into_owned()).collect::<Vec<_>>().join(" ")
+    }
+
+    #[test]
+    fn a_plain_vm_forwards_one_port_and_has_no_display() {
+        let text = line(&spec());
+        assert!(text.contains("-machine q35,accel=kvm -cpu host -m 4096M -smp 2"), "{text}");
+        // Commas in paths are doubled for QEMU's option parser.
+        assert!(
+            text.contains("-drive if=none,id=disk0,format=qcow2,discard=unmap,file=/v/vm-1/disk,,1.qcow2"),
+            "{text}"
+        );
+        assert!(text.contains("-device ide-hd,drive=disk0,bus=ide.0,bootindex=1"), "{text}");
+        assert!(
+            text.contains("-netdev user,id=net0,hostfwd=tcp:127.0.0.1:5123-:5000 -device e1000e,netdev=net0"),
+            "{text}"
+        );
+        assert!(
+            text.contains(
+                "-qmp unix:/v/vm-1/qmp.sock,server=on,wait=off -qmp unix:/v/vm-1/control.sock,server=on,wait=off"
+            ),
+            "{text}"
+        );
+        assert!(text.contains("-display none"), "{text}");
+        assert!(!text.contains("-loadvm"), "{text}");
+    }
+
+    #[test]
+    fn software_emulation_uses_no_host_cpu() {
+        let mut s = spec();
+        s.accel = Accel::Tcg;
+        let text = line(&s);
+        assert!(text.contains("accel=tcg"), "{text}");
+        assert!(!text.contains("-cpu host"), "{text}");
+    }
+
+    #[test]
+    fn buses_cdrom_folders_vnc_and_snapshot() {
+        let mut s = spec();
+        s.disk_bus = DiskBus::VirtioScsi;
+        s.nic = NicModel::VirtioNet;
+        s.cdrom = Some("/isos/Win11.iso".into());
+        s.folders = vec![
+            FolderDrive { folder: "/stage/oem".into(), removable: false },
+            FolderDrive { folder: "/v/answer".into(), removable: true },
+        ];
+        s.vnc = Some(3);
+        s.loadvm = Some("ready".into());
+        let text = line(&s);
+        assert!(
+            text.contains("-device virtio-scsi-pci,id=scsi0 -device scsi-hd,drive=disk0,bus=scsi0.0,bootindex=1"),
+            "{text}"
+        );
+        assert!(text.contains("-device ide-cd,drive=cd0,bus=ide.5,bootindex=2"), "{text}");
+        assert!(text.contains("file=fat:ro:/stage/oem -device scsi-hd,drive=folder0,bus=scsi0.0"), "{text}");
+        assert!(text.contains("-device qemu-xhci,id=xhci -device usb-storage,drive=folder1,removable=on"), "{text}");
+        assert!(text.contains("virtio-net-pci,netdev=net0"), "{text}");
+        assert!(text.contains("-display vnc=127.0.0.1:3"), "{text}");
+        assert!(text.ends_with("-loadvm ready"), "{text}");
+    }
+
+    #[test]
+    fn the_pc_machine_puts_two_drives_on_each_ide_bus() {
+        let mut s = spec();
+        s.machine = "pc".into();
+        s.folders = vec![FolderDrive { folder: "/oem".into(), removable: false }];
+        s.cdrom = Some("/x.iso".into());
+        let text = line(&s);
+        assert!(text.contains("ide-hd,drive=disk0,bus=ide.0"), "{text}");
+        assert!(text.contains("ide-hd,drive=folder0,bus=ide.0"), "{text}");
+        assert!(text.contains("ide-cd,drive=cd0,bus=ide.1"), "{text}");
+    }
+
+    #[test]
+    fn uefi_vars_are_qcow2_so_snapshots_include_them() {
+        let mut s = spec();
+        s.firmware = Firmware::Uefi { code: "/fw/OVMF_CODE.fd".into(), vars: "/v/vm-1/vars.qcow2".into() };
+        let text = line(&s);
+        assert!(text.contains("-drive if=pflash,format=raw,readonly=on,file=/fw/OVMF_CODE.fd"), "{text}");
+        assert!(text.contains("-drive if=pflash,format=qcow2,file=/v/vm-1/vars.qcow2"), "{text}");
+    }
+
+    #[test]
+    fn a_missing_program_names_the_package() {
+        let err = find_program(None, "surely-not-a-program-here", QEMU_PACKAGE).unwrap_err().to_string();
+        assert!(err.contains("apt-get install qemu-system-x86"), "{err}");
+        let err = find_qemu(Some(Path::new("/nonexistent/qemu"))).unwrap_err().to_string();
+        assert!(err.contains("/nonexistent/qemu") && err.contains("qemu-system-x86"), "{err}");
+    }
+}

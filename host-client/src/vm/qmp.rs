@@ -1,0 +1,197 @@
+//! The QMP control socket of one VM, through the `qapi` crate: commands with
+//! deadlines, the monitor's text commands (`savevm`, `loadvm`), and the VM's
+//! events (reset, shutdown) as names on a broadcast channel.
+
+use std::path::Path;
+use std::time::Duration;
+
+use futures_util::StreamExt;
+use qapi::futures::{QapiService, QmpStreamTokio};
+use qapi::qmp;
+use tokio::io::WriteHalf;
+use tokio::net::UnixStream;
+use tokio::sync::broadcast;
+use tokio::time::Instant;
+
+use super::VmError;
+
+type Service = QapiService<QmpStreamTokio<WriteHalf<UnixStream>>>;
+
+/// One negotiated QMP connection.
+pub struct Qmp {
+    service: Service,
+    events: broadcast::Sender<String>,
+    reader: tokio::task::JoinHandle<()>,
+    /// Deadline of one command.
+    pub timeout: Duration,
+}
+
+impl std::fmt::Debug for Qmp {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Qmp").field("timeout", &self.timeout).finish_non_exhaustive()
+    }
+}
+
+impl Drop for Qmp {
+    fn drop(&mut self) {
+        self.reader.abort();
+    }
+}
+
+impl Qmp {
+    /// Connects to the socket at `path`, trying again until `within` has passed
+    /// (QEMU creates it a moment after it starts), and negotiates capabilities.
+    ///
+    /// # Errors
+    ///
+    /// [`VmError::Qmp`] when no connection is made in time.
+    pub async fn connect(path: &Path, within: Duration) -> Result<Qmp, VmError> {
+        let started = Instant::now();
+        // A monitor serves one client at a time and keeps later ones waiting
+        // for its greeting: the greeting and negotiation get a deadline.
+        let greeting = Duration::from_secs(10);
+        let stream = loop {
+            let attempt = async { QmpStreamTokio::open_uds(path).await?.negotiate().await };
+            match tokio::time::timeout(greeting, attempt).await {
+                Ok(Ok(stream)) => break stream,
+                Ok(Err(err)) if started.elapsed() < within => {
+                    tracing::trace!(socket = %path.display(), error = %err, "QMP socket not ready yet");
+                    tokio::time::sleep(Duration::from_millis(50)).await;
+                }
+                Ok(Err(err)) => return Err(qmp_error(&format!("connecting to {}", path.display()), err)),
+                Err(_) => {
+                    return Err(qmp_error(
+                        &format!("connecting to {}", path.display()),
+                        "no greeting in 10 s (another client holds this monitor?)",
+                    ))
+                }
+            }
+        };
+        let (service, mut events) = stream.into_parts();
+        let (tx, _) = broadcast::channel(64);
+        let sender = tx.clone();
+        // The reader delivers command answers to `service` and events to the channel.
+        let reader = tokio::spawn(async move {
+            while let Some(item) = events.next().await {
+                match item {
+                    Ok(event) => {
+                        let name = serde_json::to_value(&event)
+                            .ok()
+                            .and_then(|v| v.get("event").and_then(|e| e.as_str()).map(str::to_owned))
+                            .unwrap_or_else(|| "UNKNOWN".to_owned());
+                        tracing::debug!(event = %name, "QMP event");
+                        let _ = sender.send(name);
+                    }
+                    Err(err) => {
+                        tracing::debug!(error = %err, "QMP stream error");
+                        if err.kind() != std::io::ErrorKind::InvalidData {
+                            break;
+                        }
+                    }
+                }
+            }
+            let _ = sender.send(CLOSED.to_owned());
+        });
+        Ok(Qmp { service, events: tx, reader, timeout: Duration::from_secs(30) })
+    }
+
+    /// The VM's events from now on, by name (`RESET`, `SHUTDOWN`, `STOP`, ...;
+    /// [`CLOSED`] when the connection ends).
+    pub fn events(&self) -> broadcast::Receiver<String> {
+        self.events.subscribe()
+    }
+
+    async fn execute<C>(&self, command: C, timeout: Duration) -> Result<C::Ok, VmError>
+    where
+        C: qapi::qmp::QmpCommand + qapi::Command + Send + 'static,
+    {
+        let name = <C as qapi::Command>::NAME;
+        match tokio::time::timeout(timeout, self.service.execute(command)).await {
+            Ok(Ok(ok)) => Ok(ok),
+            Ok(Err(err)) => Err(qmp_error(name, err)),
+            Err(_) => Err(qmp_error(name, format!("no answer in {} s", timeout.as_secs()))),
+        }
+    }
+
+    /// A monitor (HMP) command line; its printed output. QEMU reports many
+    /// HMP failures only as text starting with `Error:`, which is an error here.
+    ///
+    /// # Errors
+    ///
+    /// [`VmError::Qmp`] on a failed command or an `Error:` output.
+    pub async fn hmp(&self, line: &str, timeout: Duration) -> Result<String, VmError> {
+        let out = self
+            .execute(qmp::human_monitor_command { command_line: line.to_owned(), cpu_index: None }, timeout)
+            .await?;
+        if let Some(error) = out.lines().find(|l| l.trim_start().starts_with("Error")) {
+            return Err(qmp_error(line, error.trim()));
+        }
+        Ok(out)
+    }
+
+    /// Whether the VM's CPUs run, and QEMU's name for its state.
+    ///
+    /// # Errors
+    ///
+    /// [`VmError::Qmp`].
+    pub async fn status(&self) -> Result<(bool, String), VmError> {
+        let info = self.execute(qmp::query_status {}, self.timeout).await?;
+        let state =
+            serde_json::to_value(info.status).ok().and_then(|v| v.as_str().map(str::to_owned)).unwrap_or_default();
+        Ok((info.running, state))
+    }
+
+    /// Writes the VM's display as a PNG file (QEMU 7.1 and later).
+    ///
+    /// # Errors
+    ///
+    /// [`VmError::Qmp`].
+    pub async fn screendump(&self, png: &Path) -> Result<(), VmError> {
+        let command = qmp::screendump {
+            filename: png.display().to_string(),
+            device: None,
+            head: None,
+            format: Some(qmp::ImageFormat::png),
+        };
+        self.execute(command, self.timeout).await?;
+        Ok(())
+    }
+
+    /// Presses the VM's power button (ACPI): the guest shuts itself down.
+    ///
+    /// # Errors
+    ///
+    /// [`VmError::Qmp`].
+    pub async fn powerdown(&self) -> Result<(), VmError> {
+        self.execute(qmp::system_powerdown {}, self.timeout).await?;
+        Ok(())
+    }
+
+    /// Ends QEMU at once.
+    ///
+    /// # Errors
+    ///
+    /// [`VmError::Qmp`] (the connection often closes before the answer; callers
+    /// wait for the process instead).
+    pub async fn quit(&self) -> Result<(), VmError> {
+        self.execute(qmp::quit {}, self.timeout).await?;
+        Ok(())
+    }
+
+    /// Resumes the VM's CPUs (after `loadvm` of a snapshot taken while paused).
+    ///
+    /// # Errors
+    ///
+    /// [`VmError::Qmp`].
+    pub async fn cont(&self) -> Result<(), VmError> {
+        self.execute(qmp::cont {}, self.timeout).await?;
+        Ok(())
+    }
+}
+
+/// The event name sent when the QMP connection ends.
+pub const CLOSED: &str = "QMP_CLOSED";
+
+fn qmp_error(what: &str, err: impl std::fmt::Display) -> VmError {
+    VmError::Qmp { what: what.to_owned(), message: err.to_string() }
+}
