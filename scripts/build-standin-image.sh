@@ -21,6 +21,8 @@
 # syslinux-common isolinux mtools dosfstools xorriso cpio gzip qemu-utils coreutils.
 # No root: the kernel package is unpacked with dpkg-deb -x, the disk is written with mtools.
 set -euo pipefail
+# mkfs.vfat lives in /usr/sbin, which a non-root user's PATH often lacks.
+export PATH=$PATH:/usr/sbin:/sbin
 
 cd "$(dirname "$0")/.."
 ROOT=$PWD
@@ -60,7 +62,6 @@ need ldd libc-bin
 need busybox busybox-static
 need syslinux syslinux
 need mcopy mtools
-need mmd mtools
 need mkfs.vfat dosfstools
 need xorriso xorriso
 need cpio cpio
