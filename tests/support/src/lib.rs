@@ -7,6 +7,8 @@
 //!   port 0, for end-to-end tests and bench binaries; [`workspace_binary`] builds it.
 //! - [`waa_corpus`]: where the upstream WAA task corpus is, or a loud, counted skip.
 //! - [`wine_or_skip`]: the Wine pieces the Windows-backend suite needs, or a loud skip.
+//! - [`standin_image`]: the QEMU stand-in guest image and `qemu-system-x86_64`, or a
+//!   loud, counted skip.
 //! - [`eventually`] (feature `guest`): polling a condition until it holds or a deadline passes.
 //!
 //! It is not product code, and it does not depend on `arena-host`: the host's own
@@ -15,12 +17,14 @@
 //! of the crate it tests.
 //!
 //! Layout: `guest.rs` (in-process launcher), `process.rs` (child-process launcher),
-//! `corpus.rs` (corpus locator), `wine.rs` (Wine locator), `wait.rs` (polling).
+//! `corpus.rs` (corpus locator), `wine.rs` (Wine locator), `standin.rs` (stand-in
+//! image locator), `wait.rs` (polling).
 
 mod corpus;
 #[cfg(feature = "guest")]
 mod guest;
 mod process;
+mod standin;
 #[cfg(feature = "guest")]
 mod wait;
 mod wine;
@@ -29,6 +33,7 @@ pub use corpus::{waa_corpus, CORPUS_VAR, REQUIRE_CORPUS_VAR, SKIP_PREFIX};
 #[cfg(feature = "guest")]
 pub use guest::StubGuest;
 pub use process::{workspace_binary, Served};
+pub use standin::{standin_image, StandinImage, REQUIRE_QEMU_VAR, STANDIN_DIR_VAR};
 #[cfg(feature = "guest")]
 pub use wait::eventually;
 pub use wine::{wine_or_skip, WineSetup};
