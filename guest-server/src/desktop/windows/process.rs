@@ -173,7 +173,6 @@ impl InheritList {
         .map_err(|err| os("UpdateProcThreadAttribute", &err))?;
         Ok(this)
     }
-
 }
 
 impl Drop for InheritList {
