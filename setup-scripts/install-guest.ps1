@@ -235,11 +235,13 @@ try {
             Invoke-Guest $installedExe @('service', 'uninstall', '--name', $ServiceName)
         }
         Invoke-Guest $installedExe (@('logon-task', 'install') + $serveOptions)
-        # The task runs at the next logon; this logon gets the guest now.
+        # The task runs at the next logon; this logon gets the guest now, started by the
+        # task itself so it runs exactly as it will then (no console window, no time
+        # limit, normal priority, output in C:\ProgramData\arena\logon-task.log).
         $running = Get-Process -Name 'arena-guest' -ErrorAction SilentlyContinue | Where-Object { $_.Path -eq $installedExe }
         if ($null -eq $running) {
-            Write-Step 'starting arena-guest.exe in this session'
-            Start-Process -FilePath $installedExe -ArgumentList $serveOptions -WindowStyle Hidden | Out-Null
+            Write-Step 'starting the logon task ArenaGuest in this session'
+            Start-ScheduledTask -TaskName 'ArenaGuest'
         }
         else {
             Write-Step 'arena-guest.exe is already running in this session'

@@ -13,6 +13,18 @@ pub enum BackendKind {
     Windows,
 }
 
+/// Which UI Automation view the Windows backend's `uia` tree walks.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, clap::ValueEnum)]
+pub enum UiaView {
+    /// Every element, as pywinauto's `backend="uia"` (which produced upstream's trees
+    /// and Set-of-Marks) walks it.
+    #[default]
+    Raw,
+    /// Only the elements UI Automation marks as controls (Narrator's view): smaller
+    /// trees, without the layout panes and text runs many programs expose.
+    Control,
+}
+
 /// Log output format.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
 pub enum LogFormat {
@@ -128,6 +140,17 @@ pub struct ServerConfig {
     #[arg(long, env = "ARENA_CDP_PORT", default_value_t = 1337)]
     pub cdp_port: u16,
 
+    /// Windows backend: the UI Automation view the `uia` tree walks (`raw`, as pywinauto
+    /// walks it for upstream, or `control`).
+    #[arg(long, env = "ARENA_UIA_VIEW", value_enum, default_value_t = UiaView::Raw)]
+    pub uia_view: UiaView,
+
+    /// Windows backend: capture the screen with `CAPTUREBLT`, as Pillow's
+    /// `ImageGrab.grab(include_layered_windows=True)` does. Off by default, as in
+    /// Pillow's plain `grab()`, which pyautogui's screenshots use.
+    #[arg(long, env = "ARENA_CAPTURE_LAYERED")]
+    pub capture_layered: bool,
+
     /// Log format.
     #[arg(long, env = "ARENA_LOG_FORMAT", value_enum, default_value_t = LogFormat::Text)]
     pub log_format: LogFormat,
@@ -181,6 +204,8 @@ impl ServerConfig {
             python: None,
             computer_action_delay_ms: 0,
             cdp_port: 1337,
+            uia_view: UiaView::Raw,
+            capture_layered: false,
             log_format: LogFormat::Text,
             worker: false,
         }

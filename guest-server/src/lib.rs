@@ -125,7 +125,7 @@ pub fn build_state(config: ServerConfig) -> anyhow::Result<AppState> {
             .context("starting the stub desktop")?;
             Arc::new(stub)
         }
-        BackendKind::Windows => crate::desktop::windows::start()?,
+        BackendKind::Windows => crate::desktop::windows::start(&config)?,
     };
     let sweep = Arc::clone(&desktop);
     std::thread::Builder::new()

@@ -3,20 +3,22 @@
 //! session from a Windows service or a logon task.
 //!
 //! What is here: the clap definitions ([`Cli`]), the checks on the serve options a
-//! service or task passes on, the command lines the supervisor and `schtasks.exe` are
-//! given (quoted with [`arena_shared::cmdline::list2cmdline`]), the worker's relaunch backoff,
-//! the log folder and log rotation, and the worker's stop signal (its standard input
-//! closing). All of it is tested natively.
+//! service or task passes on, the command lines the supervisor and the logon task run
+//! (quoted with [`arena_shared::cmdline::list2cmdline`]), the logon task's definition
+//! ([`task_xml`]) and the `schtasks.exe` arguments that register it, the worker's
+//! relaunch backoff, the log folder and log rotation, and the worker's stop signal (its
+//! standard input closing). All of it is tested natively.
 //!
 //! The supervisor's decisions ([`supervisor_step`]) are here too.
 //!
-//! What is not: the Service Control Manager, tokens and `CreateProcessAsUserW`; those
-//! are FFI glue in [`windows`] (compiled for Windows only), which follows
-//! [`supervisor_step`]. On other platforms [`execute_service`] answers
+//! What is not: the Service Control Manager, tokens and `CreateProcessAsUserW`, and
+//! the logon task's launcher detaching from its console; those are FFI glue in
+//! [`windows`] (compiled for Windows only), which follows [`supervisor_step`]. On other platforms [`execute_service`] answers
 //! [`ServiceCliError::OnlyOnWindows`].
 //! The service is not part of a desktop backend: it starts the server, whose
 //! backend then drives the desktop.
 
+pub mod task_xml;
 pub mod windows;
 
 use std::path::{Path, PathBuf};
@@ -33,8 +35,8 @@ pub const DEFAULT_SERVICE_NAME: &str = "ArenaGuest";
 /// The scheduled task name used when `--name` is not given.
 pub const DEFAULT_TASK_NAME: &str = "ArenaGuest";
 
-/// `schtasks /TR` accepts at most this many characters.
-pub const SCHTASKS_TR_MAX: usize = 261;
+/// The logon task's log file in [`log_dir`]: the launcher's lines and the server's output.
+pub const LOGON_TASK_LOG: &str = "logon-task.log";
 
 /// The whole command line: serve flags (no subcommand: serve, as before), or a subcommand.
 #[derive(Debug, Clone, clap::Parser)]
@@ -94,10 +96,22 @@ pub enum ServiceCommand {
 /// `arena-guest logon-task ...`.
 #[derive(Debug, Clone, clap::Subcommand)]
 pub enum LogonTaskCommand {
-    /// Create (or replace) a task that starts the server at every logon, elevated.
+    /// Create (or replace) a task that starts the server at every logon of this user,
+    /// elevated, with no time limit, at normal priority and without a console window.
     Install(TaskOptions),
     /// Delete the task.
     Uninstall(TaskNameOption),
+    /// What the task starts: detaches from its console window and runs the server
+    /// without one, restarting it if it dies. Not for interactive use.
+    Run(LauncherOptions),
+}
+
+/// The options of `logon-task run`.
+#[derive(Debug, Clone, PartialEq, Eq, clap::Args)]
+pub struct LauncherOptions {
+    /// The serve options the server gets, exactly as `arena-guest` takes them. They come last.
+    #[arg(trailing_var_arg = true, allow_hyphen_values = true, value_name = "SERVE OPTIONS")]
+    pub serve_args: Vec<String>,
 }
 
 /// Just a service name.
@@ -295,26 +309,54 @@ pub fn worker_command_line(exe: &Path, serve_args: &[String]) -> String {
     command_line(exe, &args)
 }
 
-/// The arguments of `schtasks.exe` that create the logon task: at every logon of any
-/// user, with the highest privileges, replacing a task of the same name.
-///
-/// # Errors
-///
-/// [`ServiceCliError::InvalidServeOptions`] when the command line is longer than
-/// `schtasks /TR` accepts ([`SCHTASKS_TR_MAX`] characters).
-pub fn schtasks_create_args(name: &str, exe: &Path, serve_args: &[String]) -> Result<Vec<String>, ServiceCliError> {
-    let run = command_line(exe, serve_args);
-    if run.chars().count() > SCHTASKS_TR_MAX {
-        return Err(ServiceCliError::InvalidServeOptions(format!(
-            "the task's command line is {} characters, more than the {SCHTASKS_TR_MAX} schtasks accepts; \
-             move the exe to a shorter path or use fewer options",
-            run.chars().count()
-        )));
-    }
-    Ok(["/Create", "/TN", name, "/SC", "ONLOGON", "/RL", "HIGHEST", "/TR", &run, "/F"]
-        .iter()
-        .map(|s| (*s).to_owned())
-        .collect())
+/// The arguments the logon task starts the exe with: `logon-task run -- SERVE OPTIONS`.
+pub fn logon_task_run_args(serve_args: &[String]) -> Vec<String> {
+    let mut args = vec!["logon-task".to_owned(), "run".to_owned(), "--".to_owned()];
+    args.extend(serve_args.iter().cloned());
+    args
+}
+
+/// The user a logon task is for, `DOMAIN\name`, from the installing shell's
+/// `USERDOMAIN` and `USERNAME`; `None` when the name is unknown.
+pub fn task_user(domain: Option<&str>, name: Option<&str>) -> Option<String> {
+    let name = name.map(str::trim).filter(|n| !n.is_empty())?;
+    Some(match domain.map(str::trim).filter(|d| !d.is_empty()) {
+        Some(domain) => format!("{domain}\\{name}"),
+        None => name.to_owned(),
+    })
+}
+
+/// The logon task's definition for `exe` and `serve_args` (see [`task_xml`]): the
+/// launcher, in the exe's folder, for `user`.
+pub fn logon_task_definition(exe: &Path, serve_args: &[String], user: Option<&str>) -> String {
+    let arguments = list2cmdline(&logon_task_run_args(serve_args));
+    task_xml::logon_task_xml(&task_xml::LogonTask {
+        user,
+        command: exe,
+        arguments: &arguments,
+        working_dir: exe_folder(exe).as_deref(),
+    })
+}
+
+/// The folder of a Windows program path (either separator, so tests of Windows paths
+/// run on every platform); `None` for a bare name.
+pub fn exe_folder(exe: &Path) -> Option<PathBuf> {
+    let text = exe.to_string_lossy();
+    let (folder, _) = text.rsplit_once(['\\', '/'])?;
+    // `C:\arena-guest.exe` lives in the drive's root, `C:\`.
+    let folder = if folder.ends_with(':') { format!("{folder}\\") } else { folder.to_owned() };
+    (!folder.is_empty()).then(|| PathBuf::from(folder))
+}
+
+/// The arguments of `schtasks.exe` that register the task defined in `xml_file` as
+/// `name`, replacing a task of that name.
+pub fn schtasks_create_args(name: &str, xml_file: &Path) -> Vec<String> {
+    ["/Create", "/XML", &xml_file.display().to_string(), "/TN", name, "/F"].iter().map(|s| (*s).to_owned()).collect()
+}
+
+/// The arguments of `schtasks.exe` that end the logon task's running instance.
+pub fn schtasks_end_args(name: &str) -> Vec<String> {
+    ["/End", "/TN", name].iter().map(|s| (*s).to_owned()).collect()
 }
 
 /// The arguments of `schtasks.exe` that delete the logon task.
@@ -447,41 +489,71 @@ pub fn execute_service(command: &ServiceCommand) -> Result<String, ServiceCliErr
     windows::execute(command)
 }
 
-/// Runs a `logon-task` subcommand through `schtasks.exe` and returns what to tell the user.
+/// Runs a `logon-task` subcommand and returns what to tell the user: `install` and
+/// `uninstall` through `schtasks.exe`, `run` (the launcher) in [`windows`].
 ///
 /// # Errors
 ///
 /// [`ServiceCliError::OnlyOnWindows`] on other platforms; invalid serve options;
 /// `schtasks.exe` missing or failing (its output is in the message).
 pub fn execute_logon_task(command: &LogonTaskCommand) -> Result<String, ServiceCliError> {
-    let args = match command {
+    match command {
         LogonTaskCommand::Install(options) => {
             validate_serve_args(&options.serve_args)?;
             let exe = current_exe()?;
-            schtasks_create_args(&options.name, &exe, &options.serve_args)?
+            let user =
+                task_user(std::env::var("USERDOMAIN").ok().as_deref(), std::env::var("USERNAME").ok().as_deref());
+            let xml = logon_task_definition(&exe, &options.serve_args, user.as_deref());
+            if !cfg!(windows) {
+                return Err(ServiceCliError::OnlyOnWindows("logon-task"));
+            }
+            let file = std::env::temp_dir().join(format!("arena-guest-task-{}.xml", std::process::id()));
+            std::fs::write(&file, task_xml::to_utf16_file(&xml))
+                .map_err(|source| ServiceCliError::Io { what: format!("writing {}", file.display()), source })?;
+            let outcome = schtasks(&schtasks_create_args(&options.name, &file));
+            let _ = std::fs::remove_file(&file);
+            let said = outcome?;
+            let logs = log_dir(std::env::var_os("ProgramData").as_deref()).join(LOGON_TASK_LOG);
+            Ok(format!(
+                "logon task {:?} created: at {}'s logon it runs {} (no time limit, normal priority, no console \
+                 window; output in {})\n{said}",
+                options.name,
+                user.as_deref().unwrap_or("the user"),
+                command_line(&exe, &logon_task_run_args(&options.serve_args)),
+                logs.display(),
+            ))
         }
-        LogonTaskCommand::Uninstall(name) => schtasks_delete_args(&name.name),
-    };
-    if !cfg!(windows) {
-        return Err(ServiceCliError::OnlyOnWindows("logon-task"));
+        LogonTaskCommand::Uninstall(name) => {
+            if !cfg!(windows) {
+                return Err(ServiceCliError::OnlyOnWindows("logon-task"));
+            }
+            // End a running launcher first: its server then stops through its closed
+            // input, and nothing restarts it. Not running is not an error.
+            let _ = schtasks(&schtasks_end_args(&name.name));
+            let said = schtasks(&schtasks_delete_args(&name.name))?;
+            Ok(format!("logon task {:?} deleted\n{said}", name.name))
+        }
+        LogonTaskCommand::Run(options) => {
+            validate_serve_args(&options.serve_args)?;
+            windows::run_logon_task(options)
+        }
     }
+}
+
+/// Runs `schtasks.exe` with `args`; its output when it succeeds.
+fn schtasks(args: &[String]) -> Result<String, ServiceCliError> {
     let output = std::process::Command::new("schtasks.exe")
-        .args(&args)
+        .args(args)
         .output()
         .map_err(|source| ServiceCliError::Io { what: "running schtasks.exe".into(), source })?;
     let text = format!("{}{}", String::from_utf8_lossy(&output.stdout), String::from_utf8_lossy(&output.stderr));
     let text = text.trim();
     if output.status.success() {
-        Ok(match command {
-            LogonTaskCommand::Install(options) => {
-                format!("logon task {:?} created: {}\n{text}", options.name, args[8])
-            }
-            LogonTaskCommand::Uninstall(name) => format!("logon task {:?} deleted\n{text}", name.name),
-        })
+        Ok(text.to_owned())
     } else {
         let code = output.status.code().map_or_else(|| "no exit code".to_owned(), |c| format!("exit code {c}"));
         let said = if text.is_empty() { "no output".to_owned() } else { text.to_owned() };
-        Err(ServiceCliError::Os { op: format!("schtasks {}", list2cmdline(&args)), message: format!("{code}: {said}") })
+        Err(ServiceCliError::Os { op: format!("schtasks {}", list2cmdline(args)), message: format!("{code}: {said}") })
     }
 }
 
@@ -647,30 +719,57 @@ mod tests {
     }
 
     #[test]
-    fn schtasks_gets_a_logon_task_with_the_serve_command_line() {
-        let exe = Path::new(r"C:\arena\arena-guest.exe");
-        let args = schtasks_create_args("ArenaGuest", exe, &strings(&["--port", "5000"])).unwrap();
+    fn schtasks_registers_the_launcher_from_an_xml_definition() {
+        let exe = Path::new(r"C:\Program Files\Arena\arena-guest.exe");
+        let serve = strings(&["--port", "5000", "--token-file", r"C:\ProgramData\arena\token"]);
         assert_eq!(
-            args,
-            strings(&[
-                "/Create",
-                "/TN",
-                "ArenaGuest",
-                "/SC",
-                "ONLOGON",
-                "/RL",
-                "HIGHEST",
-                "/TR",
-                r#""C:\arena\arena-guest.exe" --port 5000"#,
-                "/F"
-            ])
+            logon_task_run_args(&serve),
+            strings(&["logon-task", "run", "--", "--port", "5000", "--token-file", r"C:\ProgramData\arena\token"])
         );
+        let xml = logon_task_definition(exe, &serve, Some(r"VM\Docker"));
+        assert!(xml.contains(r"<Command>C:\Program Files\Arena\arena-guest.exe</Command>"), "{xml}");
+        assert!(
+            xml.contains(
+                r"<Arguments>logon-task run -- --port 5000 --token-file C:\ProgramData\arena\token</Arguments>"
+            ),
+            "{xml}"
+        );
+        assert!(xml.contains(r"<WorkingDirectory>C:\Program Files\Arena</WorkingDirectory>"), "{xml}");
+        assert!(xml.contains(r"<UserId>VM\Docker</UserId>"), "{xml}");
+        assert_eq!(exe_folder(Path::new(r"C:\arena-guest.exe")), Some(PathBuf::from(r"C:\")));
+        assert_eq!(exe_folder(Path::new("arena-guest.exe")), None);
+        // A long command line is fine: /TR's 261-character limit does not apply to XML.
         let long = vec!["--scenario".to_owned(), "x".repeat(300)];
-        assert!(matches!(
-            schtasks_create_args("ArenaGuest", exe, &long),
-            Err(ServiceCliError::InvalidServeOptions(why)) if why.contains("261")
-        ));
+        assert!(logon_task_definition(exe, &long, None).contains(&"x".repeat(300)));
+
+        assert_eq!(
+            schtasks_create_args("ArenaGuest", Path::new(r"C:\Temp\t.xml")),
+            strings(&["/Create", "/XML", r"C:\Temp\t.xml", "/TN", "ArenaGuest", "/F"])
+        );
         assert_eq!(schtasks_delete_args("T"), strings(&["/Delete", "/TN", "T", "/F"]));
+        assert_eq!(schtasks_end_args("T"), strings(&["/End", "/TN", "T"]));
+    }
+
+    #[test]
+    fn the_task_is_for_the_installing_user() {
+        assert_eq!(task_user(Some("VM"), Some("Docker")).as_deref(), Some(r"VM\Docker"));
+        assert_eq!(task_user(None, Some("Docker")).as_deref(), Some("Docker"));
+        assert_eq!(task_user(Some(" "), Some("Docker")).as_deref(), Some("Docker"));
+        assert_eq!(task_user(Some("VM"), None), None);
+        assert_eq!(task_user(Some("VM"), Some("")), None);
+    }
+
+    #[test]
+    fn the_launcher_takes_the_serve_options_as_they_are() {
+        let cli = parse(&["logon-task", "run", "--", "--port", "5000", "--name", "x"]).unwrap();
+        let Some(Command::LogonTask(LogonTaskCommand::Run(options))) = cli.command else { panic!("not run") };
+        assert_eq!(options.serve_args, strings(&["--port", "5000", "--name", "x"]));
+        let back = Cli::try_parse_from(
+            std::iter::once("arena-guest".to_owned()).chain(logon_task_run_args(&options.serve_args)),
+        )
+        .unwrap();
+        let Some(Command::LogonTask(LogonTaskCommand::Run(again))) = back.command else { panic!("not run") };
+        assert_eq!(again, options);
     }
 
     #[test]

@@ -36,6 +36,7 @@ use crate::desktop::{
 pub struct WindowsDesktop {
     session: Option<u32>,
     uia: uia::UiaWorker,
+    options: super::WindowsOptions,
 }
 
 /// Makes the process per-monitor DPI aware (v2, else v1, else system aware), so
@@ -74,21 +75,27 @@ fn wake_cursor() {
 }
 
 impl WindowsDesktop {
-    /// Starts the backend: DPI awareness, the session check and the cursor fix.
+    /// Starts the backend with `options`: DPI awareness, the session check and the cursor fix.
     ///
     /// # Errors
     ///
     /// None today; the signature leaves room for checks that can fail.
-    pub fn new() -> DesktopResult<WindowsDesktop> {
+    pub fn new(options: super::WindowsOptions) -> DesktopResult<WindowsDesktop> {
         let dpi = make_dpi_aware();
         let session = system::session_id();
-        tracing::info!(dpi_awareness = dpi, session = ?session, "windows backend started");
+        tracing::info!(
+            dpi_awareness = dpi,
+            session = ?session,
+            uia_view = ?options.uia_view,
+            capture_layered = options.capture_layered,
+            "windows backend started"
+        );
         if session == Some(super::session::SERVICE_SESSION) {
             tracing::warn!("running in session 0: screen, input, windows and clipboard calls will be refused");
         } else {
             wake_cursor();
         }
-        Ok(WindowsDesktop { session, uia: uia::UiaWorker::default() })
+        Ok(WindowsDesktop { session, uia: uia::UiaWorker::new(options.uia_view), options })
     }
 
     fn need_desktop(&self, op: &str) -> DesktopResult<()> {
@@ -100,7 +107,7 @@ impl WindowsDesktop {
             Component::Capture => {
                 self.need_desktop("capture")?;
                 let started = Instant::now();
-                let frame = capture::capture(false)?;
+                let frame = capture::capture(false, self.options.capture_layered)?;
                 let (w, h) = frame.image.dimensions();
                 if crate::imaging::is_black(&frame.image) {
                     return Err(DesktopError::Os {
@@ -198,7 +205,7 @@ impl Desktop for WindowsDesktop {
 
     fn capture(&self, draw_cursor: bool) -> DesktopResult<Frame> {
         self.need_desktop("capture")?;
-        capture::capture(draw_cursor)
+        capture::capture(draw_cursor, self.options.capture_layered)
     }
 
     fn cursor_position(&self) -> DesktopResult<Point> {

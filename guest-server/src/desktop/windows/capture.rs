@@ -112,10 +112,16 @@ fn draw_real_cursor(hdc: HDC, origin: Point) -> Option<Point> {
 /// Captures the primary monitor; draws the cursor (its real shape when Windows gives
 /// one, else the static arrow upstream pastes) when `draw_cursor`.
 ///
+/// The blit is `SRCCOPY` alone, as Pillow's `ImageGrab.grab()` (what pyautogui's
+/// screenshot calls) does by default; `layered` adds `CAPTUREBLT`, as Pillow's
+/// `include_layered_windows=True`. `CAPTUREBLT` makes GDI read windows drawn on top
+/// of the desktop through the screen DC's slower path and can make the cursor
+/// flicker while it runs.
+///
 /// # Errors
 ///
 /// [`DesktopError::Os`] when a GDI call fails (no desktop, out of memory).
-pub(super) fn capture(draw_cursor: bool) -> DesktopResult<Frame> {
+pub(super) fn capture(draw_cursor: bool, layered: bool) -> DesktopResult<Frame> {
     let area = primary_rect();
     if area.is_empty() {
         return Err(DesktopError::Os {
@@ -124,6 +130,7 @@ pub(super) fn capture(draw_cursor: bool) -> DesktopResult<Frame> {
         });
     }
     let (w, h) = (area.width, area.height);
+    let rop = if layered { SRCCOPY | CAPTUREBLT } else { SRCCOPY };
     let started = std::time::Instant::now();
     let screen =
         WindowDc::get(None).ok_or_else(|| DesktopError::Os { op: "capture", message: "GetDC(NULL) failed".into() })?;
@@ -158,7 +165,7 @@ pub(super) fn capture(draw_cursor: bool) -> DesktopResult<Frame> {
         // SAFETY: mem and dib are live and outlive the guard (declared before it).
         let _selected = unsafe { SelectGuard::select(mem.0, HGDIOBJ(dib.0 .0)) };
         // SAFETY: both DCs are live; the rectangle lies within the DIB.
-        unsafe { BitBlt(mem.0, 0, 0, w, h, Some(screen.hdc), area.x, area.y, SRCCOPY | CAPTUREBLT) }
+        unsafe { BitBlt(mem.0, 0, 0, w, h, Some(screen.hdc), area.x, area.y, rop) }
             .map_err(|err| os("BitBlt", &err))?;
         if draw_cursor {
             draw_real_cursor(mem.0, Point::new(area.x, area.y))

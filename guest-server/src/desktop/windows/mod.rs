@@ -55,20 +55,76 @@ mod window;
 #[cfg(windows)]
 pub use backend::WindowsDesktop;
 
-/// Starts the Windows backend.
+use crate::config::{ServerConfig, UiaView};
+
+/// The server options the Windows backend reads, taken from the configuration once
+/// at start-up (neutral, so the mapping is tested on every platform).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct WindowsOptions {
+    /// The UI Automation view the `uia` tree walks (condition of the cache requests and
+    /// the walker of the element-by-element fallback).
+    pub uia_view: UiaView,
+    /// Capture with `CAPTUREBLT` (Pillow's `include_layered_windows=True`); off by
+    /// default, as Pillow's plain `ImageGrab.grab()`.
+    pub capture_layered: bool,
+}
+
+impl WindowsOptions {
+    /// The backend's options from the server configuration.
+    pub fn from_config(config: &ServerConfig) -> WindowsOptions {
+        WindowsOptions { uia_view: config.uia_view, capture_layered: config.capture_layered }
+    }
+}
+
+impl Default for WindowsOptions {
+    fn default() -> WindowsOptions {
+        WindowsOptions::from_config(&ServerConfig::for_stub())
+    }
+}
+
+/// Starts the Windows backend with the options `config` gives it.
 ///
 /// # Errors
 ///
 /// The backend cannot start (no interactive session, COM refusing), or this is not a
 /// Windows build, which says to use the stub.
-pub fn start() -> anyhow::Result<std::sync::Arc<dyn crate::desktop::Desktop>> {
+pub fn start(config: &ServerConfig) -> anyhow::Result<std::sync::Arc<dyn crate::desktop::Desktop>> {
+    let options = WindowsOptions::from_config(config);
     #[cfg(windows)]
     {
         use anyhow::Context as _;
-        Ok(std::sync::Arc::new(WindowsDesktop::new().context("starting the windows desktop")?))
+        Ok(std::sync::Arc::new(WindowsDesktop::new(options).context("starting the windows desktop")?))
     }
     #[cfg(not(windows))]
     {
+        let _ = options;
         anyhow::bail!("the windows backend exists only in Windows builds; use --backend stub")
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::Parser as _;
+
+    fn options(args: &[&str]) -> WindowsOptions {
+        let config = ServerConfig::try_parse_from(std::iter::once("arena-guest").chain(args.iter().copied())).unwrap();
+        WindowsOptions::from_config(&config)
+    }
+
+    #[test]
+    fn the_raw_view_and_a_plain_blit_are_the_defaults() {
+        let defaults = options(&[]);
+        assert_eq!(defaults, WindowsOptions { uia_view: UiaView::Raw, capture_layered: false });
+        assert_eq!(defaults, WindowsOptions::default());
+    }
+
+    #[test]
+    fn the_control_view_and_layered_capture_are_options() {
+        let chosen = options(&["--uia-view", "control", "--capture-layered"]);
+        assert_eq!(chosen, WindowsOptions { uia_view: UiaView::Control, capture_layered: true });
+        assert_eq!(options(&["--uia-view", "raw"]).uia_view, UiaView::Raw);
+        let refused = ServerConfig::try_parse_from(["arena-guest", "--uia-view", "content"]);
+        assert!(refused.is_err(), "only raw and control are views the walker knows");
     }
 }

@@ -5,11 +5,21 @@
 //!   program exactly as for Python (the server's folder, the current folder, the
 //!   system folders, then `PATH`).
 //! - A shell line runs as `%COMSPEC% /c "<line>"` with a hidden window (`shell=True`).
+//! - With no working directory given, a shell line starts in `%SystemRoot%` and a
+//!   program in the server's folder: where upstream's commands end up
+//!   ([`winsys::default_exec_dir`]).
+//! - A child inherits its three standard handles and nothing else
+//!   (`PROC_THREAD_ATTRIBUTE_HANDLE_LIST`), not every inheritable handle the server
+//!   holds (the service worker's stop pipe and log file, other runs' pipes).
 //! - `run` puts the child in a job object; a timeout terminates the whole job, so
 //!   grandchildren die too. A child that exits in time leaves its background
 //!   programs running (`start notepad`), as with Python.
 //! - Output is read on threads up to the cap, decoded from the ANSI code page, and
-//!   CRLF/CR fold to LF.
+//!   CRLF/CR fold to LF: `text=True` on Windows. Bytes the code page does not define
+//!   get the system's substitute where Python would raise `UnicodeDecodeError`.
+//! - `open` (`os.startfile`) calls `ShellExecuteExW` with COM initialised
+//!   apartment-threaded on the calling thread, as the shell requires, and waits for
+//!   the shell to finish (`SEE_MASK_NOASYNC`) before COM is uninitialised.
 
 use std::io::Read;
 use std::os::windows::io::FromRawHandle;
@@ -22,26 +32,30 @@ use windows::Win32::Foundation::{
 };
 use windows::Win32::Globalization::{MultiByteToWideChar, CP_ACP, MULTI_BYTE_TO_WIDE_CHAR_FLAGS};
 use windows::Win32::Security::SECURITY_ATTRIBUTES;
+use windows::Win32::System::Com::{COINIT_APARTMENTTHREADED, COINIT_DISABLE_OLE1DDE};
 use windows::Win32::System::JobObjects::{
     AssignProcessToJobObject, CreateJobObjectW, JobObjectExtendedLimitInformation, SetInformationJobObject,
     TerminateJobObject, JOBOBJECT_EXTENDED_LIMIT_INFORMATION, JOB_OBJECT_LIMIT, JOB_OBJECT_LIMIT_KILL_ON_JOB_CLOSE,
 };
 use windows::Win32::System::Pipes::CreatePipe;
 use windows::Win32::System::Threading::{
-    CreateProcessW, GetExitCodeProcess, ResumeThread, TerminateProcess, WaitForSingleObject, CREATE_SUSPENDED,
-    PROCESS_CREATION_FLAGS, PROCESS_INFORMATION, STARTF_USESHOWWINDOW, STARTF_USESTDHANDLES, STARTUPINFOW,
+    CreateProcessW, DeleteProcThreadAttributeList, GetExitCodeProcess, InitializeProcThreadAttributeList, ResumeThread,
+    TerminateProcess, UpdateProcThreadAttribute, WaitForSingleObject, CREATE_SUSPENDED, EXTENDED_STARTUPINFO_PRESENT,
+    LPPROC_THREAD_ATTRIBUTE_LIST, PROCESS_CREATION_FLAGS, PROCESS_INFORMATION, PROC_THREAD_ATTRIBUTE_HANDLE_LIST,
+    STARTF_USESHOWWINDOW, STARTF_USESTDHANDLES, STARTUPINFOEXW, STARTUPINFOW,
 };
-use windows::Win32::UI::Shell::ShellExecuteW;
+use windows::Win32::UI::Shell::{ShellExecuteExW, SEE_MASK_NOASYNC, SHELLEXECUTEINFOW};
 use windows::Win32::UI::WindowsAndMessaging::{SW_HIDE, SW_SHOWNORMAL};
 
-use super::sys::{os, OwnedHandle};
+use super::sys::{os, ComApartment, OwnedHandle};
 use super::winsys;
 use crate::desktop::windows::text::{fold_newlines, wide_nul, CappedBuffer};
 use crate::desktop::{CommandSpec, DesktopError, DesktopResult, ExecLimits, ExecOutput};
 
 /// Creating inheritable pipe ends and the process that inherits them happens under
-/// this lock, so two concurrent runs never leak their pipe ends into each other's
-/// children (which would keep a pipe open and a reader waiting).
+/// this lock. With the handle list a child inherits only its own pipe ends anyway;
+/// the lock keeps that true where the list cannot be built and a child inherits
+/// every inheritable handle (a leaked pipe end would keep a reader waiting).
 static SPAWN_LOCK: Mutex<()> = Mutex::new(());
 
 /// How long to wait for the output readers after the process ended: a background
@@ -110,6 +124,72 @@ fn pipe(child_reads: bool) -> DesktopResult<Pipe> {
     Ok(Pipe { child, parent })
 }
 
+/// A `PROC_THREAD_ATTRIBUTE_HANDLE_LIST`: the only handles a child may inherit.
+/// The list points into `handles`, so both live together and the list is deleted first.
+struct InheritList {
+    /// The initialised list, inside `_storage`'s heap buffer (which a move of the Vec
+    /// leaves in place).
+    list: LPPROC_THREAD_ATTRIBUTE_LIST,
+    /// The attribute list's opaque storage (pointer-aligned).
+    _storage: Vec<usize>,
+    handles: Vec<HANDLE>,
+}
+
+impl InheritList {
+    /// A list of `handles` (which must be inheritable), without repeats, which
+    /// `CreateProcess` refuses.
+    fn new(handles: &[HANDLE]) -> DesktopResult<InheritList> {
+        let mut unique: Vec<HANDLE> = Vec::with_capacity(handles.len());
+        for handle in handles {
+            if !unique.contains(handle) {
+                unique.push(*handle);
+            }
+        }
+        let mut size = 0usize;
+        // SAFETY: a null list only measures; the expected "buffer too small" error is ignored.
+        let _ = unsafe { InitializeProcThreadAttributeList(None, 1, None, &mut size) };
+        if size == 0 {
+            return Err(super::sys::last_os("InitializeProcThreadAttributeList"));
+        }
+        let mut storage = vec![0usize; size.div_ceil(std::mem::size_of::<usize>())];
+        let list = LPPROC_THREAD_ATTRIBUTE_LIST(storage.as_mut_ptr().cast());
+        // SAFETY: `storage` has the measured size and is aligned for the list.
+        unsafe { InitializeProcThreadAttributeList(Some(list), 1, None, &mut size) }
+            .map_err(|err| os("InitializeProcThreadAttributeList", &err))?;
+        // From here on Drop deletes the list.
+        let this = InheritList { list, _storage: storage, handles: unique };
+        // SAFETY: the list is initialised; the handle array lives in `this` as long as the list.
+        unsafe {
+            UpdateProcThreadAttribute(
+                this.list,
+                0,
+                PROC_THREAD_ATTRIBUTE_HANDLE_LIST as usize,
+                Some(this.handles.as_ptr().cast()),
+                std::mem::size_of_val(this.handles.as_slice()),
+                None,
+                None,
+            )
+        }
+        .map_err(|err| os("UpdateProcThreadAttribute", &err))?;
+        Ok(this)
+    }
+}
+
+impl Drop for InheritList {
+    fn drop(&mut self) {
+        // SAFETY: the list was initialised in `new` (Self exists only after that) and is deleted once.
+        unsafe { DeleteProcThreadAttributeList(self.list) };
+    }
+}
+
+/// The working directory of `cmd` when the caller gives none: see [`winsys::default_exec_dir`].
+fn default_dir(cmd: &CommandSpec) -> Option<String> {
+    let system_root = std::env::var("SystemRoot").ok();
+    let exe = std::env::current_exe().ok();
+    let install_dir = exe.as_deref().and_then(std::path::Path::parent).map(|dir| dir.display().to_string());
+    winsys::default_exec_dir(matches!(cmd, CommandSpec::Shell(_)), system_root.as_deref(), install_dir.as_deref())
+}
+
 /// A started process.
 struct Started {
     process: OwnedHandle,
@@ -117,16 +197,27 @@ struct Started {
     pid: u32,
 }
 
-/// `CreateProcessW` with no application name and the command line of `cmd`.
+/// `CreateProcessW` with no application name and the command line of `cmd`, in `cwd`
+/// or the default folder; with `stdio`, the child inherits those three handles only.
 fn create(
     cmd: &CommandSpec,
     cwd: Option<&str>,
     stdio: Option<[HANDLE; 3]>,
-    flags: PROCESS_CREATION_FLAGS,
+    mut flags: PROCESS_CREATION_FLAGS,
 ) -> DesktopResult<Started> {
     let (line, hide) = command_line(cmd)?;
     let mut line = wide_nul(&line);
-    let cwd_wide = cwd.map(wide_nul);
+    let cwd_wide = cwd.map(str::to_owned).or_else(|| default_dir(cmd)).map(|dir| wide_nul(&dir));
+    let inherit = match stdio {
+        Some(handles) => match InheritList::new(&handles) {
+            Ok(list) => Some(list),
+            Err(err) => {
+                tracing::debug!(%err, "no handle list: the child inherits every inheritable handle");
+                None
+            }
+        },
+        None => None,
+    };
     let mut si = STARTUPINFOW { cb: std::mem::size_of::<STARTUPINFOW>() as u32, ..Default::default() };
     if hide {
         si.dwFlags |= STARTF_USESHOWWINDOW;
@@ -138,10 +229,18 @@ fn create(
         si.hStdOutput = stdout;
         si.hStdError = stderr;
     }
+    let mut si = STARTUPINFOEXW { StartupInfo: si, lpAttributeList: LPPROC_THREAD_ATTRIBUTE_LIST::default() };
+    if let Some(list) = &inherit {
+        si.StartupInfo.cb = std::mem::size_of::<STARTUPINFOEXW>() as u32;
+        si.lpAttributeList = list.list;
+        flags |= EXTENDED_STARTUPINFO_PRESENT;
+    }
     let mut pi = PROCESS_INFORMATION::default();
     let cwd_ptr = cwd_wide.as_ref().map_or(PCWSTR::null(), |w| PCWSTR(w.as_ptr()));
     // SAFETY: `line` is a mutable NUL-terminated buffer as CreateProcessW requires; the
-    // startup info and out-pointer are valid; the handles in `si` are live and inheritable.
+    // startup info (extended, with its cb and flag saying so, when a handle list is
+    // attached; the list outlives the call) and out-pointer are valid; the handles in
+    // `si` are live and inheritable.
     unsafe {
         CreateProcessW(
             PCWSTR::null(),
@@ -152,7 +251,7 @@ fn create(
             flags,
             None,
             cwd_ptr,
-            &si,
+            &si.StartupInfo,
             &mut pi,
         )
     }
@@ -359,26 +458,42 @@ pub(super) fn spawn(cmd: &CommandSpec) -> DesktopResult<u32> {
     Ok(started.pid)
 }
 
-/// Opens `path` with its associated program (`ShellExecuteW` "open", as `os.startfile`).
+/// Opens `path` with its associated program (`ShellExecuteExW` "open", as `os.startfile`),
+/// with COM initialised apartment-threaded on this thread for the call, as the shell
+/// requires (its handlers are COM objects); `SEE_MASK_NOASYNC` makes the shell finish
+/// before COM is uninitialised again.
 ///
 /// # Errors
 ///
-/// [`DesktopError::NotFound`] for a missing file, [`DesktopError::Os`] for no association.
+/// [`DesktopError::NotFound`] for a missing file, [`DesktopError::Os`] for no
+/// association (see [`winsys::open_failure`]).
 pub(super) fn open(path: &str) -> DesktopResult<()> {
+    // A thread already in the multithreaded apartment (another part of the server set
+    // it up) keeps it: the shell still works there, only without its preferred model.
+    let _com = match ComApartment::init(COINIT_APARTMENTTHREADED | COINIT_DISABLE_OLE1DDE) {
+        Ok(com) => Some(com),
+        Err(err) => {
+            tracing::debug!(%err, "COM is already initialised differently on this thread; opening anyway");
+            None
+        }
+    };
     let file = wide_nul(path);
     let verb = wide_nul("open");
-    // SAFETY: both strings are NUL-terminated and outlive the call.
-    let res = unsafe {
-        ShellExecuteW(None, PCWSTR(verb.as_ptr()), PCWSTR(file.as_ptr()), PCWSTR::null(), PCWSTR::null(), SW_SHOWNORMAL)
+    let mut info = SHELLEXECUTEINFOW {
+        cbSize: std::mem::size_of::<SHELLEXECUTEINFOW>() as u32,
+        fMask: SEE_MASK_NOASYNC,
+        lpVerb: PCWSTR(verb.as_ptr()),
+        lpFile: PCWSTR(file.as_ptr()),
+        nShow: SW_SHOWNORMAL.0,
+        ..Default::default()
     };
-    let code = res.0 as isize;
-    match code {
-        c if c > 32 => Ok(()),
-        2 | 3 => Err(DesktopError::NotFound(format!("{path}: not found"))),
-        31 => Err(DesktopError::Os {
-            op: "open",
-            message: format!("{path}: no application is associated with this file"),
+    // SAFETY: `info` is a SHELLEXECUTEINFOW whose cbSize says so; its strings are
+    // NUL-terminated and outlive the call.
+    match unsafe { ShellExecuteExW(&mut info) } {
+        Ok(()) => Ok(()),
+        Err(err) => Err(match winsys::win32_code(err.code().0) {
+            Some(code) => winsys::open_failure(code, path),
+            None => os("ShellExecuteExW", &err),
         }),
-        c => Err(DesktopError::Os { op: "open", message: format!("{path}: ShellExecuteW failed with code {c}") }),
     }
 }

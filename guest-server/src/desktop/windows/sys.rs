@@ -177,9 +177,10 @@ impl Drop for SelectGuard {
     }
 }
 
-/// COM initialised on the current thread; uninitialised on drop.
+/// COM initialised on the current thread; uninitialised on drop. Not `Send`: the
+/// uninitialisation must happen on the thread that initialised.
 #[derive(Debug)]
-pub(crate) struct ComApartment(());
+pub(crate) struct ComApartment(std::marker::PhantomData<*const ()>);
 
 impl ComApartment {
     /// Initialises COM on this thread with `model` (apartment or multithreaded).
@@ -191,14 +192,14 @@ impl ComApartment {
         // SAFETY: called at most once per guard; paired with CoUninitialize in Drop.
         let hr = unsafe { CoInitializeEx(None, model) };
         hr.ok().map_err(|err| os("CoInitializeEx", &err))?;
-        Ok(ComApartment(()))
+        Ok(ComApartment(std::marker::PhantomData))
     }
 }
 
 impl Drop for ComApartment {
     fn drop(&mut self) {
         // SAFETY: paired with the successful CoInitializeEx of this guard, on the same
-        // thread (the guard is neither Send nor shared: it lives on the thread's stack).
+        // thread (the guard is not Send, so it is dropped where it was made).
         unsafe { CoUninitialize() };
     }
 }

@@ -5,15 +5,16 @@
 //! top-level window costs one cross-process call (`BuildUpdatedCache` with
 //! `TreeScope_Subtree` and every property the output needs); the walk then reads the
 //! cache. `IUIAutomation2`'s transaction timeout bounds that call by the window's share
-//! of the time budget. The tree is UIA's raw view (every element, as pywinauto's
-//! `backend="uia"`, which produced upstream's trees and marks, walks it), not the
-//! control view.
+//! of the time budget. The tree is UIA's raw view by default (every element, as
+//! pywinauto's `backend="uia"`, which produced upstream's trees and marks, walks it);
+//! `--uia-view control` walks the control view instead ([`UiaView`]): both the cache
+//! requests' filter and the fallback's walker follow the choice.
 //!
 //! That call is all or nothing: a heavy window (a browser page, LibreOffice, VS Code)
 //! that does not finish within its share adds nothing. So when it fails, the window is
 //! read element by element instead ([`TreeSource::prepare_partial`]): each element and
 //! then each child is fetched with a cache request for that element alone, through the
-//! raw-view walker, and the walk keeps whatever it reads before the window's deadline.
+//! chosen view's walker, and the walk keeps whatever it reads before the window's deadline.
 //!
 //! If a request does not come back in time (a provider that hangs beyond the
 //! transaction timeout), the worker is abandoned: the next request starts a fresh
@@ -36,6 +37,7 @@ use windows::Win32::UI::Accessibility::*;
 
 use super::sys::{ComApartment, Hwnd};
 use super::window;
+use crate::config::UiaView;
 use crate::desktop::a11y_walk::{self, TreeSource, UiaProps};
 use crate::desktop::{DesktopError, DesktopResult};
 
@@ -72,6 +74,8 @@ struct Request {
 
 #[derive(Debug, Default)]
 struct State {
+    /// The view every worker walks.
+    view: UiaView,
     /// The running worker's request channel.
     worker: Option<mpsc::Sender<Request>>,
     /// Why UI Automation cannot be used here, once a worker found out.
@@ -85,6 +89,11 @@ pub(super) struct UiaWorker {
 }
 
 impl UiaWorker {
+    /// A worker (started on first use) that walks `view`.
+    pub(super) fn new(view: UiaView) -> UiaWorker {
+        UiaWorker { state: Mutex::new(State { view, ..State::default() }) }
+    }
+
     /// Walks the visible top-level windows with UI Automation.
     ///
     /// # Errors
@@ -100,7 +109,7 @@ impl UiaWorker {
             match &state.worker {
                 Some(tx) => tx.clone(),
                 None => {
-                    let tx = spawn_worker()?;
+                    let tx = spawn_worker(state.view)?;
                     state.worker = Some(tx.clone());
                     tx
                 }
@@ -137,11 +146,11 @@ impl UiaWorker {
     }
 }
 
-fn spawn_worker() -> DesktopResult<mpsc::Sender<Request>> {
+fn spawn_worker(view: UiaView) -> DesktopResult<mpsc::Sender<Request>> {
     let (tx, rx) = mpsc::channel::<Request>();
     std::thread::Builder::new()
         .name("uia".into())
-        .spawn(move || worker_main(&rx))
+        .spawn(move || worker_main(&rx, view))
         .map_err(|err| DesktopError::Os { op: "uia", message: format!("starting the UI Automation thread: {err}") })?;
     Ok(tx)
 }
@@ -152,7 +161,7 @@ struct Uia {
     cache: IUIAutomationCacheRequest,
     /// The same properties for one element alone: the element-by-element fallback.
     element_cache: IUIAutomationCacheRequest,
-    /// The raw-view walker the fallback moves through children with.
+    /// The walker of the chosen view, which the fallback moves through children with.
     walker: IUIAutomationTreeWalker,
     /// For the per-window transaction timeout (Windows 8 and later).
     automation2: Option<IUIAutomation2>,
@@ -165,7 +174,7 @@ fn unsupported(what: &str, err: &windows::core::Error) -> DesktopError {
     ))
 }
 
-fn setup() -> DesktopResult<Uia> {
+fn setup(view: UiaView) -> DesktopResult<Uia> {
     // SAFETY: creating the in-process UIA client object on a COM-initialised thread.
     let automation: IUIAutomation = unsafe { CoCreateInstance(&CUIAutomation8, None, CLSCTX_INPROC_SERVER) }
         // SAFETY: as above; CUIAutomation is the pre-Windows-8 class.
@@ -180,21 +189,32 @@ fn setup() -> DesktopResult<Uia> {
                 cache.AddProperty(property).map_err(|err| unsupported("AddProperty", &err))?;
             }
             cache.SetTreeScope(scope).map_err(|err| unsupported("SetTreeScope", &err))?;
-            let view = automation.RawViewCondition().map_err(|err| unsupported("RawViewCondition", &err))?;
-            cache.SetTreeFilter(&view).map_err(|err| unsupported("SetTreeFilter", &err))?;
+            let filter = match view {
+                UiaView::Raw => automation.RawViewCondition().map_err(|err| unsupported("RawViewCondition", &err))?,
+                UiaView::Control => {
+                    automation.ControlViewCondition().map_err(|err| unsupported("ControlViewCondition", &err))?
+                }
+            };
+            cache.SetTreeFilter(&filter).map_err(|err| unsupported("SetTreeFilter", &err))?;
             Ok(cache)
         }
     };
     let cache = request(TreeScope_Subtree)?;
     let element_cache = request(TreeScope_Element)?;
-    // SAFETY: a COM call on the live automation object.
-    let walker = unsafe { automation.RawViewWalker() }.map_err(|err| unsupported("RawViewWalker", &err))?;
+    let walker = match view {
+        // SAFETY: a COM call on the live automation object.
+        UiaView::Raw => unsafe { automation.RawViewWalker() }.map_err(|err| unsupported("RawViewWalker", &err))?,
+        // SAFETY: a COM call on the live automation object.
+        UiaView::Control => {
+            unsafe { automation.ControlViewWalker() }.map_err(|err| unsupported("ControlViewWalker", &err))?
+        }
+    };
     let automation2 = automation.cast::<IUIAutomation2>().ok();
     Ok(Uia { automation, cache, element_cache, walker, automation2 })
 }
 
-fn worker_main(rx: &mpsc::Receiver<Request>) {
-    let setup = ComApartment::init(COINIT_MULTITHREADED).and_then(|com| setup().map(|uia| (com, uia)));
+fn worker_main(rx: &mpsc::Receiver<Request>, view: UiaView) {
+    let setup = ComApartment::init(COINIT_MULTITHREADED).and_then(|com| setup(view).map(|uia| (com, uia)));
     let (_com, uia) = match setup {
         Ok(ok) => ok,
         Err(err) => {
@@ -404,7 +424,7 @@ impl TreeSource for UiaSource<'_> {
 }
 
 impl UiaSource<'_> {
-    /// Up to `limit + 1` children of `elem` through the raw-view walker, each fetched
+    /// Up to `limit + 1` children of `elem` through the chosen view's walker, each fetched
     /// with its own properties cached (the fallback of a window whose subtree fetch failed).
     fn live_children(&self, elem: &IUIAutomationElement, limit: usize) -> Vec<IUIAutomationElement> {
         let mut out = Vec::new();

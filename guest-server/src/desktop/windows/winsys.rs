@@ -310,3 +310,64 @@ mod spawn_tests {
         assert!(spawn_failure(1455, "x.exe").is_none());
     }
 }
+
+/// What opening `path` with its associated program (`ShellExecuteExW`, as Python's
+/// `os.startfile`) failing with Win32 error `code` means.
+pub fn open_failure(code: u32, path: &str) -> DesktopError {
+    match code {
+        // ERROR_FILE_NOT_FOUND, ERROR_PATH_NOT_FOUND
+        2 | 3 => DesktopError::NotFound(format!("{path}: not found")),
+        // ERROR_NO_ASSOCIATION
+        1155 => {
+            DesktopError::Os { op: "open", message: format!("{path}: no application is associated with this file") }
+        }
+        // ERROR_ACCESS_DENIED
+        5 => DesktopError::PermissionDenied(format!("{path}: access denied (error 5)")),
+        // ERROR_ELEVATION_REQUIRED
+        740 => DesktopError::PermissionDenied(format!(
+            "{path}: its program needs elevation (error 740) and the server is not elevated"
+        )),
+        // ERROR_CANCELLED: someone dismissed a prompt (an "open with" or elevation dialog).
+        1223 => DesktopError::Os { op: "open", message: format!("{path}: the operation was cancelled at a prompt") },
+        c => DesktopError::Os { op: "open", message: format!("{path}: ShellExecuteExW failed with error {c}") },
+    }
+}
+
+/// The working directory a command gets when its caller names none.
+///
+/// Upstream's server runs from a logon task whose working directory is the folder its
+/// script lives in (a share, `\\host.lan\Data`). A program started from an argument
+/// vector inherits that folder: here the server's own folder (`install_dir`, the one
+/// the service's worker and the logon task also start in). A shell line starts
+/// `cmd.exe`, which refuses a share as its current directory and falls back to the
+/// Windows folder: here `system_root` (`%SystemRoot%`) directly, without cmd's
+/// warning. Either missing leaves the choice to the process's own directory (`None`).
+pub fn default_exec_dir(shell: bool, system_root: Option<&str>, install_dir: Option<&str>) -> Option<String> {
+    let chosen = if shell { system_root } else { install_dir };
+    chosen.map(str::trim).filter(|dir| !dir.is_empty()).map(str::to_owned)
+}
+
+#[cfg(test)]
+mod exec_dir_tests {
+    use super::*;
+
+    #[test]
+    fn shell_lines_start_in_the_windows_folder_and_programs_in_the_servers() {
+        let root = Some(r"C:\Windows");
+        let install = Some(r"C:\arena");
+        assert_eq!(default_exec_dir(true, root, install).as_deref(), Some(r"C:\Windows"));
+        assert_eq!(default_exec_dir(false, root, install).as_deref(), Some(r"C:\arena"));
+        // Unknown folders leave the process's own directory in charge.
+        assert_eq!(default_exec_dir(true, None, install), None);
+        assert_eq!(default_exec_dir(false, root, Some("  ")), None);
+    }
+
+    #[test]
+    fn open_failures_say_what_went_wrong() {
+        assert!(matches!(open_failure(2, r"C:\x.txt"), DesktopError::NotFound(m) if m == r"C:\x.txt: not found"));
+        assert!(open_failure(1155, "a.xyz").to_string().contains("no application is associated"));
+        assert!(matches!(open_failure(740, "setup.exe"), DesktopError::PermissionDenied(_)));
+        assert!(open_failure(1223, "a").to_string().contains("cancelled"));
+        assert!(open_failure(31, "a").to_string().contains("error 31"));
+    }
+}
