@@ -23,6 +23,19 @@ echo "format and lint checks took $(( $(date +%s) - started )) s"
 
 started=$(date +%s)
 mkdir -p target
+# The stand-in guest image the VM tests boot under QEMU (docs/vm-standin.md):
+# the Linux guest binary in an initramfs beside a kernel from Debian's packages.
+# Without its tools the VM tests skip loudly (a failure with ARENA_REQUIRE_QEMU=1).
+cargo build -p arena-guest --bin arena-guest --locked
+if scripts/build-standin-image.sh >target/standin-build.log 2>&1; then
+    tail -1 target/standin-build.log
+else
+    echo "the stand-in VM image was not built (target/standin-build.log):" >&2
+    tail -3 target/standin-build.log >&2
+    if [ "${ARENA_REQUIRE_QEMU:-0}" = 1 ]; then
+        exit 1
+    fi
+fi
 log=target/test-output.log
 # The Wine test file is part of the workspace; it only runs for real in step 3,
 # which sets up the display, the prefix and the exe for it.
@@ -35,6 +48,12 @@ mapfile -t skipped < <(grep -ao 'SKIPPED: .*: WAA corpus not found' "$log" \
     | sed 's/^SKIPPED: \(.*\): WAA corpus not found$/\1/' || true)
 echo "corpus tests skipped: ${#skipped[@]}"
 for name in "${skipped[@]}"; do
+    echo "  $name"
+done
+mapfile -t vm_skipped < <(grep -ao 'SKIPPED: .*: QEMU stand-in image not found' "$log" \
+    | sed 's/^SKIPPED: \(.*\): QEMU stand-in image not found$/\1/' || true)
+echo "VM tests skipped: ${#vm_skipped[@]}"
+for name in "${vm_skipped[@]}"; do
     echo "  $name"
 done
 

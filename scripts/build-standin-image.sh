@@ -205,6 +205,8 @@ mcopy -m -i "$DISK" "$WORK/initrd.img" ::/initrd.img
 mcopy -m -i "$DISK" "$WORK/syslinux.cfg" ::/syslinux.cfg
 rm -f "$OUT/golden.qcow2"
 qemu-img convert -f raw -O qcow2 "$DISK" "$OUT/golden.qcow2"
+# A golden image is read-only: every VM's overlay depends on it unchanged.
+chmod a-w "$OUT/golden.qcow2"
 
 # --- installer CD ---------------------------------------------------------------------
 # install.img: a second initramfs archive holding the disk image, which the installer

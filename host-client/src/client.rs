@@ -206,6 +206,23 @@ impl GuestClient {
         Ok(GuestClient { base, guest: trimmed.to_owned(), http, config })
     }
 
+    /// A client of the same guest that opens a new connection for every call:
+    /// for a guest in a VM that is restored to snapshots, where a kept
+    /// connection belongs to a TCP state the restore has undone.
+    ///
+    /// # Errors
+    ///
+    /// [`ClientError::InvalidUrl`] when the HTTP client cannot be built.
+    pub fn without_kept_connections(&self) -> Result<GuestClient, ClientError> {
+        let http = reqwest::Client::builder()
+            .no_proxy()
+            .connect_timeout(self.config.timeout.min(Duration::from_secs(10)))
+            .pool_max_idle_per_host(0)
+            .build()
+            .map_err(|err| ClientError::InvalidUrl { url: self.guest.clone(), reason: flatten(&err) })?;
+        Ok(GuestClient { http, ..self.clone() })
+    }
+
     /// The guest's base URL as given.
     pub fn base_url(&self) -> &str {
         &self.guest

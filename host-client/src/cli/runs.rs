@@ -406,7 +406,15 @@ pub async fn run(conn: &Connection, args: RunArgs) -> anyhow::Result<ExitCode> {
     if urls.is_empty() {
         bail!("no guest: give --guest, --guests, --guests-file or --stub-guests");
     }
-    let guests = urls.iter().map(|u| conn.client_for(u)).collect::<anyhow::Result<Vec<_>>>()?;
+    let vm_urls = fleet.as_ref().map(|f| f.urls()).unwrap_or_default();
+    let guests = urls
+        .iter()
+        .map(|u| {
+            let client = conn.client_for(u)?;
+            // A VM restored to its snapshot has forgotten every connection made since.
+            Ok(if vm_urls.contains(u) { client.without_kept_connections()? } else { client })
+        })
+        .collect::<anyhow::Result<Vec<_>>>()?;
 
     let cache_dir = args.cache.clone().unwrap_or_else(|| args.out.join("download-cache"));
     let cache = DownloadCache::new(&cache_dir)

@@ -161,11 +161,11 @@ pub enum VmCommand {
     /// Make a golden image from an installer ISO and an OEM folder (`arena prep stage`);
     /// started again after an interruption, it goes on from its stage.
     Prepare {
-        #[arg(long, value_name = "ISO")]
-        iso: PathBuf,
+        #[arg(long, value_name = "ISO", required_unless_present = "status")]
+        iso: Option<PathBuf>,
         /// The folder `arena prep stage` filled.
-        #[arg(long, value_name = "DIR")]
-        oem: PathBuf,
+        #[arg(long, value_name = "DIR", required_unless_present = "status")]
+        oem: Option<PathBuf>,
         /// An answer file shown to the installer as autounattend.xml on removable media.
         #[arg(long, value_name = "FILE")]
         answer: Option<PathBuf>,
@@ -283,6 +283,7 @@ pub async fn run(conn: &Connection, args: VmCommandArgs) -> anyhow::Result<ExitC
                     }
                 });
             }
+            let (Some(iso), Some(oem)) = (iso, oem) else { anyhow::bail!("arena vm prepare needs --iso and --oem") };
             let token = match conn.resolve_token()? {
                 Some(token) => Some(token),
                 None => read_oem_token(&oem),
@@ -350,18 +351,28 @@ async fn start(
         emit(&format!("saved snapshot {READY_SNAPSHOT} in {:.1} s\n", took.as_secs_f64()))?;
     }
     emit(&format!("guest ready: {}\n", vm.url()))?;
-    // Watch: a QEMU that dies is started again from the ready snapshot.
+    // Watch: a QEMU that dies is started again from the ready snapshot; a
+    // guest that shuts down (the power button, `arena vm stop`) ends the watch.
     let mut term =
         tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate()).context("listening for SIGTERM")?;
+    let mut events = vm.qmp.events();
     loop {
         tokio::select! {
             _ = tokio::signal::ctrl_c() => break,
             _ = term.recv() => break,
+            Ok(name) = events.recv() => {
+                if name == "SHUTDOWN" {
+                    emit("the guest shut down\n")?;
+                    vm.kill().await;
+                    return Ok(ExitCode::SUCCESS);
+                }
+            }
             () = tokio::time::sleep(Duration::from_secs(2)) => {
                 if let Some(status) = vm.exited() {
                     tracing::warn!(%status, "QEMU exited; starting the VM again from its ready snapshot");
                     vm = Vm::start(&config, Boot::FromSnapshot(READY_SNAPSHOT.into())).await?;
                     vm.wait_healthy(config.boot_timeout, |_| {}).await?;
+                    events = vm.qmp.events();
                     emit(&format!("guest ready again: {}\n", vm.url()))?;
                 }
             }

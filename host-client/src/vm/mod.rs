@@ -302,6 +302,7 @@ impl Vm {
             &url,
             ClientConfig { token: config.token.clone(), timeout: Duration::from_secs(10), retries: 0 },
         )
+        .and_then(|c| c.without_kept_connections())
         .map_err(|err| VmError::Invalid(err.to_string()))?;
         Ok(Vm { config: config.clone(), spec, child, qmp, client, accel_note })
     }
@@ -488,8 +489,9 @@ fn parse_snapshot_list(text: &str) -> Vec<String> {
     text.lines()
         .filter_map(|line| {
             let mut words = line.split_whitespace();
+            // Data rows start with the snapshot's id, or `--` for one present on all disks.
             let id = words.next()?;
-            if id == "ID" || id.starts_with("--") || !id.chars().all(|c| c.is_ascii_digit() || c == '-') {
+            if id != "--" && !id.chars().all(|c| c.is_ascii_digit()) {
                 return None;
             }
             words.next().map(str::to_owned)
@@ -547,6 +549,9 @@ mod tests {
     fn the_monitor_snapshot_table_gives_names() {
         let text = "List of snapshots present on all disks:\r\nID        TAG               VM SIZE                DATE     VM CLOCK     ICOUNT\r\n--        ready              45.2 MiB 2026-11-26 01:02:03 00:00:12.345\r\n--        after-login        1 GiB 2026-11-26 01:05:03 00:03:12.345\r\n";
         assert_eq!(parse_snapshot_list(text), vec!["ready", "after-login"]);
+        // As QEMU 7.2 prints it (trailing blanks), and a numbered row.
+        let text = "List of snapshots present on all disks:\r\nID        TAG               VM SIZE                DATE     VM CLOCK     ICOUNT\r\n--        ready             128 MiB 2026-11-26 00:57:44 00:00:06.391           \r\n1         other  1 MiB 2026-11-26 00:57:44 00:00:06.391\r\n";
+        assert_eq!(parse_snapshot_list(text), vec!["ready", "other"]);
         assert!(parse_snapshot_list("There is no snapshot available.\r\n").is_empty());
     }
 

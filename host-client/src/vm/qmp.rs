@@ -72,6 +72,7 @@ impl Qmp {
         let sender = tx.clone();
         // The reader delivers command answers to `service` and events to the channel.
         let reader = tokio::spawn(async move {
+            let mut errors = 0u32;
             while let Some(item) = events.next().await {
                 match item {
                     Ok(event) => {
@@ -82,9 +83,12 @@ impl Qmp {
                         tracing::debug!(event = %name, "QMP event");
                         let _ = sender.send(name);
                     }
+                    // A message the schema does not know (an event of another QEMU
+                    // version) is skipped: the codec has consumed its line.
                     Err(err) => {
-                        tracing::debug!(error = %err, "QMP stream error");
-                        if err.kind() != std::io::ErrorKind::InvalidData {
+                        tracing::debug!(error = %err, kind = ?err.kind(), "QMP message not understood");
+                        errors += 1;
+                        if errors > 1000 {
                             break;
                         }
                     }
