@@ -25,8 +25,9 @@ param(
     [string]$InstallDir = (Join-Path $env:ProgramFiles 'Arena'),
     [ValidateRange(1, 65535)]
     [int]$Port = 5000,
-    # Who may reach the port: dockur's bridge is 20.20.20.0/24 (the host side is 20.20.20.1).
-    [string]$HostNetwork = '20.20.20.0/24',
+    # Who may reach the port, comma-separated: dockur's bridge is 20.20.20.0/24 (the host
+    # side is 20.20.20.1); a VM that `arena vm` runs on QEMU's user network is reached from 10.0.2.2.
+    [string]$HostNetwork = '20.20.20.0/24,10.0.2.2',
     [ValidateSet('service', 'logon-task')]
     [string]$Mode = 'service',
     [string]$ServiceName = 'ArenaGuest',
@@ -209,7 +210,7 @@ try {
     }
     else {
         New-NetFirewallRule -Name $FirewallRuleName -DisplayName "Arena guest (TCP $Port)" -Direction Inbound `
-            -Action Allow -Protocol TCP -LocalPort $Port -Program $installedExe -RemoteAddress $HostNetwork -Profile Any | Out-Null
+            -Action Allow -Protocol TCP -LocalPort $Port -Program $installedExe -RemoteAddress ($HostNetwork -split ',') -Profile Any | Out-Null
         Write-Step "firewall rule $FirewallRuleName allows TCP $Port to $installedExe from $HostNetwork"
     }
 

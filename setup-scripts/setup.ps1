@@ -25,7 +25,7 @@ param(
     [string]$LogPath = '',
     [ValidateRange(1, 65535)]
     [int]$Port = 5000,
-    [string]$HostNetwork = '20.20.20.0/24',
+    [string]$HostNetwork = '20.20.20.0/24,10.0.2.2',
     [ValidateSet('service', 'logon-task')]
     [string]$Mode = 'service',
     [string]$UserName = 'Docker',

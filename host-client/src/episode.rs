@@ -95,6 +95,23 @@ pub struct EpisodeConfig {
     pub cache: DownloadCache,
     /// The model's name, for the record.
     pub model: String,
+    /// The VMs' own displays, when the run owns its VMs: the observation's
+    /// screenshot when the guest's capture fails or is black.
+    pub screen_source: Option<Arc<dyn ScreenSource>>,
+}
+
+/// A guest's screen as seen from outside it (QEMU's screendump of its VM).
+#[async_trait::async_trait]
+pub trait ScreenSource: Send + Sync {
+    /// The display of the VM `guest` (its base URL) runs in, as PNG; `None`
+    /// when there is none or it cannot be read.
+    async fn screendump(&self, guest: &str) -> Option<Vec<u8>>;
+}
+
+impl std::fmt::Debug for dyn ScreenSource {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("ScreenSource")
+    }
 }
 
 impl EpisodeConfig {
@@ -116,6 +133,7 @@ impl EpisodeConfig {
             exec: ExecOptions::default(),
             cache,
             model: String::new(),
+            screen_source: None,
         }
     }
 
@@ -486,6 +504,7 @@ impl Episode {
             actions: Vec::new(),
             ended: false,
             screenshot_file: seen.file.clone(),
+            screenshot_source: seen.obs.screenshot_source.clone(),
             timings: StepTimings { observe_ms: seen.observe_ms, ..StepTimings::default() },
             error: None,
             outcomes: Vec::new(),
@@ -654,6 +673,18 @@ async fn predict(agent: &mut dyn Agent, obs: &Observation, config: &EpisodeConfi
     }
 }
 
+/// Why the guest's screenshot should give way to the VM's display, if it should:
+/// a black frame (a lock screen, UAC's secure desktop) or a failed capture of a
+/// guest that still answers.
+fn fallback_reason(shot: &Result<crate::client::Screenshot, ClientError>) -> Option<String> {
+    match shot {
+        Ok(shot) if shot.meta.black_frame => Some("the guest's screenshot was black".to_owned()),
+        Ok(_) => None,
+        Err(err) if unreachable(err) => None,
+        Err(err) => Some(format!("the guest's screenshot failed: {err}")),
+    }
+}
+
 /// Screenshot (required), windows (required), accessibility tree and clipboard
 /// (optional: a failure that is not an unreachable guest leaves them out).
 async fn observe(
@@ -677,7 +708,18 @@ async fn observe(
         },
         client.clipboard_get(),
     );
-    let shot = shot.map_err(|err| infra("taking the screenshot", err))?;
+    let fallback = match (&config.screen_source, fallback_reason(&shot)) {
+        (Some(source), Some(reason)) => source.screendump(client.base_url()).await.map(|png| (png, reason)),
+        _ => None,
+    };
+    let (screenshot_png, screenshot_source) = match (shot, fallback) {
+        (_, Some((png, reason))) => {
+            tracing::warn!(task = %task.name, step, %reason, "using the VM's display as the screenshot");
+            (png, Some(format!("vm-display: {reason}")))
+        }
+        (Ok(shot), None) => (shot.bytes, None),
+        (Err(err), None) => return Err(infra("taking the screenshot", err)),
+    };
     let windows = windows.map_err(|err| infra("listing windows", err))?;
     let a11y = match tree {
         None => None,
@@ -705,7 +747,8 @@ async fn observe(
     Ok(Observation {
         step,
         instruction: task.instruction.clone(),
-        screenshot_png: shot.bytes,
+        screenshot_png,
+        screenshot_source,
         screen: screen.clone(),
         a11y,
         window_titles,
@@ -969,6 +1012,45 @@ mod tests {
             stub.stop().await.unwrap();
         }
         (result, out, tmp)
+    }
+
+    #[test]
+    fn the_vm_display_stands_in_for_a_black_or_failed_capture_of_a_guest_that_answers() {
+        use crate::client::Screenshot;
+        use crate::error::CallSite;
+        use arena_shared::geometry::CoordinateSpace;
+        use arena_shared::observation::ScreenshotMeta;
+        let shot = |black: bool| -> Result<Screenshot, ClientError> {
+            Ok(Screenshot {
+                meta: ScreenshotMeta {
+                    width: 8,
+                    height: 8,
+                    physical_width: 8,
+                    physical_height: 8,
+                    scale: 1.0,
+                    format: ImageFormat::Png,
+                    coordinate_space: CoordinateSpace::Physical,
+                    cursor: None,
+                    cursor_drawn: false,
+                    black_frame: black,
+                    capture_ms: 1,
+                },
+                bytes: Vec::new(),
+            })
+        };
+        let site = || CallSite { guest: "http://127.0.0.1:1".into(), method: "GET", path: "/v1/screenshot".into() };
+        assert_eq!(fallback_reason(&shot(false)), None);
+        assert_eq!(fallback_reason(&shot(true)).as_deref(), Some("the guest's screenshot was black"));
+        let failed = Err(ClientError::Api {
+            call: site(),
+            status: 500,
+            code: arena_shared::error::ErrorCode::Internal,
+            message: "BitBlt failed".into(),
+        });
+        assert!(fallback_reason(&failed).unwrap().contains("BitBlt failed"));
+        // A guest that does not answer is an infrastructure error, not a screen problem.
+        let gone = Err(ClientError::Connect { call: site(), reason: "refused".into() });
+        assert_eq!(fallback_reason(&gone), None);
     }
 
     #[tokio::test]

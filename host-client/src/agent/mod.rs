@@ -49,6 +49,8 @@ pub struct Observation {
     pub instruction: String,
     /// The full-screen screenshot as PNG.
     pub screenshot_png: Vec<u8>,
+    /// Where the screenshot came from when not from the guest (`vm-display: why`).
+    pub screenshot_source: Option<String>,
     pub screen: ScreenInfo,
     /// The accessibility tree, when it could be read.
     pub a11y: Option<A11yTree>,
@@ -115,6 +117,7 @@ impl Observation {
             step,
             instruction: instruction.to_owned(),
             screenshot_png: shot.bytes,
+            screenshot_source: None,
             screen,
             a11y,
             window_titles,

@@ -595,6 +595,7 @@ mod tests {
             step: 1,
             instruction: "do it".into(),
             screenshot_png: Vec::new(),
+            screenshot_source: None,
             screen: arena_shared::observation::ScreenInfo {
                 physical_width: 1280,
                 physical_height: 800,

@@ -447,8 +447,9 @@ pub async fn run(conn: &Connection, args: RunArgs) -> anyhow::Result<ExitCode> {
         config.settle = Settle::none();
         config.exec = ExecOptions::instant();
     }
-    if fleet.is_some() {
+    if let Some(fleet) = &fleet {
         config.options.insert("vm_reset".into(), args.reset.to_string());
+        config.screen_source = Some(Arc::clone(fleet) as Arc<dyn crate::episode::ScreenSource>);
     }
     if args.held_keys == HeldKeysArg::Action {
         config.exec.release_held_keys = true;
@@ -528,8 +529,25 @@ pub async fn run(conn: &Connection, args: RunArgs) -> anyhow::Result<ExitCode> {
 /// at their next step, unevaluated (they run again next time). The second exits
 /// at once with 130; every file already written stays, as each is written whole.
 async fn watch_interrupts(stop: tokio_util::sync::CancellationToken) {
-    if tokio::signal::ctrl_c().await.is_err() {
-        return;
+    // SIGTERM (a pod being deleted, `docker stop`) counts as the first Ctrl-C.
+    let mut term = match tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate()) {
+        Ok(term) => Some(term),
+        Err(err) => {
+            tracing::warn!(error = %err, "cannot listen for SIGTERM");
+            None
+        }
+    };
+    let terminated = async {
+        match term.as_mut() {
+            Some(term) => {
+                term.recv().await;
+            }
+            None => std::future::pending::<()>().await,
+        }
+    };
+    tokio::select! {
+        signal = tokio::signal::ctrl_c() => if signal.is_err() { return },
+        () = terminated => {}
     }
     eprintln!(
         "\ninterrupted: no new task starts; running episodes stop at their next step (Ctrl-C again to abandon them now)"

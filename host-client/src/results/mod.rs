@@ -247,6 +247,10 @@ pub struct StepRecord {
     pub ended: bool,
     /// The screenshot the agent saw when it chose this step's actions, in the task folder.
     pub screenshot_file: String,
+    /// Where the step's screenshot came from when not from the guest: QEMU's
+    /// display of its VM (`vm-display: ...`), when the guest's capture failed or was black.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub screenshot_source: Option<String>,
     #[serde(default)]
     pub timings: StepTimings,
     /// What went wrong in this step: unparsable model output, a failed action.

@@ -54,6 +54,7 @@ fn step(n: u32) -> StepRecord {
         response: "<b>ok</b>".into(),
         actions: vec![crate::agent::AgentAction::Done],
         ended: true,
+        screenshot_source: None,
         screenshot_file: TaskDir::screenshot_name(None, &timestamp),
         timings: StepTimings { observe_ms: 3, predict_ms: 1, act_ms: 2, pause_ms: 0 },
         error: None,

@@ -232,13 +232,23 @@ impl GuestLifecycle for VmFleet {
         if let Some(status) = vm.exited() {
             return Err(format!("VM {name}: QEMU exited ({status})"));
         }
-        let mut start = VmStart { vm: name.clone(), snapshot: None, restore_ms: 0, rebuilt: state.rebuilt };
+        let mut start = VmStart { vm: name.clone(), snapshot: None, restore_ms: 0, rebuilt: state.rebuilt, screen: None };
         if self.reset.due(state.since_reset, state.first) {
             let started = Instant::now();
             vm.restore_snapshot(READY_SNAPSHOT).await.map_err(|e| e.to_string())?;
             vm.wait_healthy(state.config.boot_timeout, |_| {}).await.map_err(|e| e.to_string())?;
             start.snapshot = Some(READY_SNAPSHOT.to_owned());
             start.restore_ms = u64::try_from(started.elapsed().as_millis()).unwrap_or(u64::MAX);
+            // QEMU's view of the restored screen against the guest's own capture.
+            match check_screen(vm).await {
+                Ok(check) => {
+                    if let Some(problem) = &check.problem {
+                        tracing::warn!(vm = %name, %problem, "screen check after the restore");
+                    }
+                    start.screen = Some(check);
+                }
+                Err(err) => tracing::warn!(vm = %name, error = %err, "no screen check after the restore"),
+            }
             state.since_reset = 0;
             tracing::info!(vm = %name, restore_ms = start.restore_ms, "restored the ready snapshot");
         }
@@ -274,6 +284,21 @@ impl GuestLifecycle for VmFleet {
         state.first = true;
         state.rebuilt = true;
         Ok(())
+    }
+}
+
+#[async_trait::async_trait]
+impl crate::episode::ScreenSource for VmFleet {
+    async fn screendump(&self, guest: &str) -> Option<Vec<u8>> {
+        let slot = self.slots.iter().find(|s| s.url == guest)?;
+        let state = slot.state.lock().await;
+        match state.vm.as_ref()?.screendump().await {
+            Ok(dump) => Some(dump.png),
+            Err(err) => {
+                tracing::warn!(vm = %state.config.name, error = %err, "QEMU's screendump failed");
+                None
+            }
+        }
     }
 }
 

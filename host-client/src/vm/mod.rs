@@ -145,6 +145,9 @@ pub struct VmStart {
     /// Whether the VM was rebuilt (QEMU started again) before this task.
     #[serde(default)]
     pub rebuilt: bool,
+    /// QEMU's display against the guest's screenshot after the restore.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub screen: Option<fleet::ScreenCheck>,
 }
 
 /// One running QEMU process.
