@@ -345,7 +345,9 @@ impl Vm {
         within: Duration,
         progress: impl FnMut(WaitEvent<'_>),
     ) -> Result<HealthReport, VmError> {
-        let client = self.client.clone();
+        // QEMU's forwarder accepts connections before the guest listens, and such
+        // a call waits for its whole deadline: keep each question short.
+        let client = self.client.with_timeout(Duration::from_secs(2));
         let poll = Duration::from_millis(250);
         tokio::select! {
             report = wait_healthy(&client, within, poll, progress) => {
