@@ -232,7 +232,8 @@ impl GuestLifecycle for VmFleet {
         if let Some(status) = vm.exited() {
             return Err(format!("VM {name}: QEMU exited ({status})"));
         }
-        let mut start = VmStart { vm: name.clone(), snapshot: None, restore_ms: 0, rebuilt: state.rebuilt, screen: None };
+        let mut start =
+            VmStart { vm: name.clone(), snapshot: None, restore_ms: 0, rebuilt: state.rebuilt, screen: None };
         if self.reset.due(state.since_reset, state.first) {
             let started = Instant::now();
             vm.restore_snapshot(READY_SNAPSHOT).await.map_err(|e| e.to_string())?;
