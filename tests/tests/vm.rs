@@ -136,30 +136,8 @@ fn stub_index() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../tasks/stub/test_all.json")
 }
 
-/// The `result.txt` of every task under `root`, by `domain/task`.
-fn results(root: &Path) -> std::collections::BTreeMap<String, String> {
-    let mut found = std::collections::BTreeMap::new();
-    let mut stack = vec![root.to_owned()];
-    while let Some(dir) = stack.pop() {
-        for entry in std::fs::read_dir(&dir).into_iter().flatten().flatten() {
-            let path = entry.path();
-            if path.is_dir() {
-                stack.push(path);
-            } else if path.file_name().is_some_and(|n| n == RESULT_FILE) {
-                let task = path.parent().unwrap();
-                let key = format!(
-                    "{}/{}",
-                    task.parent().unwrap().file_name().unwrap().to_string_lossy(),
-                    task.file_name().unwrap().to_string_lossy()
-                );
-                found.insert(key, std::fs::read_to_string(&path).unwrap());
-            }
-        }
-    }
-    found
-}
-
-fn episodes(root: &Path) -> Vec<arena_host::results::EpisodeResult> {
+/// Every file named `name` below `root`.
+fn files_named(root: &Path, name: &str) -> Vec<PathBuf> {
     let mut found = Vec::new();
     let mut stack = vec![root.to_owned()];
     while let Some(dir) = stack.pop() {
@@ -167,12 +145,29 @@ fn episodes(root: &Path) -> Vec<arena_host::results::EpisodeResult> {
             let path = entry.path();
             if path.is_dir() {
                 stack.push(path);
-            } else if path.file_name().is_some_and(|n| n == EPISODE_FILE) {
-                found.push(read_episode(&path).unwrap());
+            } else if path.file_name().is_some_and(|n| n == name) {
+                found.push(path);
             }
         }
     }
     found
+}
+
+/// The `result.txt` of every task under `root`, by `domain/task`.
+fn results(root: &Path) -> std::collections::BTreeMap<String, String> {
+    files_named(root, RESULT_FILE)
+        .into_iter()
+        .map(|path| {
+            let task = path.parent().unwrap();
+            let domain = task.parent().unwrap().file_name().unwrap().to_string_lossy();
+            let key = format!("{domain}/{}", task.file_name().unwrap().to_string_lossy());
+            (key, std::fs::read_to_string(&path).unwrap())
+        })
+        .collect()
+}
+
+fn episodes(root: &Path) -> Vec<arena_host::results::EpisodeResult> {
+    files_named(root, EPISODE_FILE).iter().map(|path| read_episode(path).unwrap()).collect()
 }
 
 #[test]

@@ -130,6 +130,69 @@ impl VmConfig {
     fn qemu_img(&self) -> Result<QemuImg, VmError> {
         Ok(QemuImg { program: qemu::find_qemu_img(self.qemu_img.as_deref())? })
     }
+
+    /// The QEMU command line of this VM on `disk` (no CD-ROM, folders or
+    /// snapshot: callers add those), with a free or checked host port, the
+    /// accelerator (said in the log when it is software emulation) and, for UEFI,
+    /// this VM's copy of the variables (made again when `fresh_vars`).
+    ///
+    /// # Errors
+    ///
+    /// The port is taken, or the UEFI variables cannot be copied.
+    pub fn spec(
+        &self,
+        qemu: PathBuf,
+        disk: PathBuf,
+        img: &QemuImg,
+        fresh_vars: bool,
+    ) -> Result<(VmSpec, String), VmError> {
+        let firmware = match &self.uefi {
+            None => Firmware::Bios,
+            Some((code, template)) => {
+                let vars = self.dir.join("uefi-vars.qcow2");
+                if !vars.exists() || fresh_vars {
+                    img.convert_to_qcow2(template, &vars)?;
+                }
+                Firmware::Uefi { code: code.clone(), vars }
+            }
+        };
+        let host_port = pick_port(self.host_addr, self.host_port)?;
+        let (accel, accel_note) = match self.accel {
+            Some(accel) => (accel, format!("{accel:?} (chosen)")),
+            None => qemu::detect_accel(),
+        };
+        if accel == Accel::Tcg {
+            tracing::warn!(vm = %self.name, "{accel_note}; expect boots and tasks to be many times slower");
+        }
+        let qmp_socket = self.dir.join("qmp.sock");
+        let control_socket = self.dir.join(CONTROL_SOCKET);
+        for stale in [&qmp_socket, &control_socket] {
+            let _ = std::fs::remove_file(stale);
+        }
+        let spec = VmSpec {
+            qemu,
+            name: self.name.clone(),
+            disk,
+            disk_bus: self.disk_bus,
+            nic: self.nic,
+            machine: self.machine.clone(),
+            memory_mib: self.memory_mib,
+            cpus: self.cpus,
+            accel,
+            firmware,
+            host_addr: self.host_addr,
+            host_port,
+            guest_port: self.guest_port,
+            qmp_socket,
+            control_socket,
+            serial_log: self.dir.join("serial.log"),
+            vnc: self.vnc,
+            cdrom: None,
+            folders: Vec::new(),
+            loadvm: None,
+        };
+        Ok((spec, accel_note))
+    }
 }
 
 /// Where a task's VM started from, recorded in `episode.json`.
@@ -198,49 +261,8 @@ impl Vm {
                 }
             }
         }
-        let firmware = match &config.uefi {
-            None => Firmware::Bios,
-            Some((code, template)) => {
-                let vars = config.dir.join("uefi-vars.qcow2");
-                if !vars.exists() || boot == Boot::Fresh {
-                    img.convert_to_qcow2(template, &vars)?;
-                }
-                Firmware::Uefi { code: code.clone(), vars }
-            }
-        };
-        let host_port = pick_port(config.host_addr, config.host_port)?;
-        let (accel, accel_note) = match config.accel {
-            Some(accel) => (accel, format!("{accel:?} (chosen)")),
-            None => qemu::detect_accel(),
-        };
-        if accel == Accel::Tcg {
-            tracing::warn!(vm = %config.name, "{accel_note}; expect boots and tasks to be many times slower");
-        }
-        let qmp_socket = config.dir.join("qmp.sock");
-        let _ = std::fs::remove_file(&qmp_socket);
-        let _ = std::fs::remove_file(config.dir.join(CONTROL_SOCKET));
-        let spec = VmSpec {
-            qemu: qemu.clone(),
-            name: config.name.clone(),
-            disk: overlay,
-            disk_bus: config.disk_bus,
-            nic: config.nic,
-            machine: config.machine.clone(),
-            memory_mib: config.memory_mib,
-            cpus: config.cpus,
-            accel,
-            firmware,
-            host_addr: config.host_addr,
-            host_port,
-            guest_port: config.guest_port,
-            qmp_socket,
-            control_socket: config.dir.join(CONTROL_SOCKET),
-            serial_log: config.dir.join("serial.log"),
-            vnc: config.vnc,
-            cdrom: None,
-            folders: Vec::new(),
-            loadvm,
-        };
+        let (mut spec, accel_note) = config.spec(qemu, overlay, &img, boot == Boot::Fresh)?;
+        spec.loadvm = loadvm;
         Vm::launch(config, spec, accel_note).await
     }
 
@@ -282,7 +304,10 @@ impl Vm {
         let qmp = tokio::select! {
             qmp = Qmp::connect(&spec.qmp_socket, Duration::from_secs(30)) => qmp,
             status = child.wait() => {
-                let status = status.map(|s| s.to_string()).unwrap_or_else(|e| e.to_string());
+                let mut status = status.map(|s| s.to_string()).unwrap_or_else(|e| e.to_string());
+                if spec.accel == Accel::Kvm {
+                    status.push_str("; it ran with KVM: if KVM is broken here (nested virtualisation), try --vm-accel tcg");
+                }
                 return Err(VmError::Exited { name: config.name.clone(), status, log: log_tail(&log_path) });
             }
         };
@@ -356,6 +381,18 @@ impl Vm {
             status = self.child.wait() => {
                 let status = status.map(|s| s.to_string()).unwrap_or_else(|e| e.to_string());
                 Err(VmError::Exited { name: self.config.name.clone(), status, log: log_tail(&self.config.dir.join("qemu.log")) })
+            }
+            state = stopped(&self.qmp) => {
+                let hint = if self.spec.accel == Accel::Kvm {
+                    "; under KVM this is often a nested-virtualisation problem: try --vm-accel tcg"
+                } else {
+                    ""
+                };
+                Err(VmError::Invalid(format!(
+                    "VM {}: QEMU stopped the guest ({state}){hint}{}",
+                    self.config.name,
+                    log_tail(&self.config.dir.join("qemu.log"))
+                )))
             }
         }
     }
@@ -441,6 +478,24 @@ impl Vm {
             let _ = self.child.kill().await;
         }
     }
+}
+
+/// Returns once QEMU reports that the guest can no longer run (an emulation
+/// failure, a panic), with QEMU's name for the state; never otherwise.
+async fn stopped(qmp: &Qmp) -> String {
+    loop {
+        tokio::time::sleep(Duration::from_secs(2)).await;
+        if let Ok((false, state)) = qmp.status().await {
+            if is_dead_state(&state) {
+                return state;
+            }
+        }
+    }
+}
+
+/// QEMU run states a guest does not leave by itself.
+fn is_dead_state(state: &str) -> bool {
+    matches!(state, "internal-error" | "guest-panicked" | "io-error" | "shutdown")
 }
 
 /// The address a client on this machine uses for a forward bound to `addr`.
@@ -558,6 +613,17 @@ mod tests {
         let text = "List of snapshots present on all disks:\r\nID        TAG               VM SIZE                DATE     VM CLOCK     ICOUNT\r\n--        ready             128 MiB 2026-11-26 00:57:44 00:00:06.391           \r\n1         other  1 MiB 2026-11-26 00:57:44 00:00:06.391\r\n";
         assert_eq!(parse_snapshot_list(text), vec!["ready", "other"]);
         assert!(parse_snapshot_list("There is no snapshot available.\r\n").is_empty());
+    }
+
+    #[test]
+    fn only_states_a_guest_cannot_leave_end_the_wait() {
+        for dead in ["internal-error", "guest-panicked", "io-error", "shutdown"] {
+            assert!(is_dead_state(dead), "{dead}");
+        }
+        // Paused for a snapshot, starting, or loading one: the wait goes on.
+        for alive in ["paused", "running", "prelaunch", "restore-vm", "save-vm", "finish-migrate"] {
+            assert!(!is_dead_state(alive), "{alive}");
+        }
     }
 
     #[test]

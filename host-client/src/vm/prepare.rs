@@ -18,7 +18,7 @@ use std::time::{Duration, Instant};
 use serde::{Deserialize, Serialize};
 
 use super::disk::{make_read_only, QemuImg};
-use super::qemu::{self, Firmware, FolderDrive, VmSpec};
+use super::qemu::{self, FolderDrive};
 use super::{Vm, VmConfig, VmError};
 
 /// Where a prepare is.
@@ -262,21 +262,6 @@ async fn launch(options: &PrepareOptions, qemu: &Path, img: &QemuImg, dir: &Path
     config.dir = dir.to_owned();
     config.golden = disk.to_owned();
     config.name = "prepare".into();
-    let host_port = super::pick_port(config.host_addr, config.host_port)?;
-    let (accel, accel_note) = match config.accel {
-        Some(accel) => (accel, format!("{accel:?} (chosen)")),
-        None => qemu::detect_accel(),
-    };
-    let firmware = match &config.uefi {
-        None => Firmware::Bios,
-        Some((code, template)) => {
-            let vars = dir.join("uefi-vars.qcow2");
-            if !vars.exists() {
-                img.convert_to_qcow2(template, &vars)?;
-            }
-            Firmware::Uefi { code: code.clone(), vars }
-        }
-    };
     let mut folders = vec![FolderDrive { folder: options.oem.clone(), removable: false }];
     if let Some(answer) = &options.answer {
         let answer_dir = dir.join("answer");
@@ -286,31 +271,9 @@ async fn launch(options: &PrepareOptions, qemu: &Path, img: &QemuImg, dir: &Path
             .map_err(|source| VmError::Io { what: format!("copying {}", answer.display()), source })?;
         folders.push(FolderDrive { folder: answer_dir, removable: true });
     }
-    let qmp_socket = dir.join("qmp.sock");
-    let _ = std::fs::remove_file(&qmp_socket);
-    let _ = std::fs::remove_file(dir.join(super::CONTROL_SOCKET));
-    let spec = VmSpec {
-        qemu: qemu.to_owned(),
-        name: config.name.clone(),
-        disk: disk.to_owned(),
-        disk_bus: config.disk_bus,
-        nic: config.nic,
-        machine: config.machine.clone(),
-        memory_mib: config.memory_mib,
-        cpus: config.cpus,
-        accel,
-        firmware,
-        host_addr: config.host_addr,
-        host_port,
-        guest_port: config.guest_port,
-        qmp_socket,
-        control_socket: dir.join(super::CONTROL_SOCKET),
-        serial_log: dir.join("serial.log"),
-        vnc: config.vnc,
-        cdrom: Some(options.iso.clone()),
-        folders,
-        loadvm: None,
-    };
+    let (mut spec, accel_note) = config.spec(qemu.to_owned(), disk.to_owned(), img, false)?;
+    spec.cdrom = Some(options.iso.clone());
+    spec.folders = folders;
     Vm::launch(&config, spec, accel_note).await
 }
 
