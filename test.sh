@@ -42,20 +42,20 @@ log=target/test-output.log
 env -u ARENA_REQUIRE_WINE -u ARENA_WINDOWS_EXE cargo test --workspace --locked "$@" 2>&1 | tee "$log"
 echo "workspace tests took $(( $(date +%s) - started )) s; target/ holds $(du -sh target 2>/dev/null | cut -f1)"
 
+# Counts and names the tests whose skip line ends in REASON, under LABEL.
 # Anywhere on a line: with one test thread libtest prints "test NAME ... " before the
 # test runs, so a skip's line can follow it on the same line.
-mapfile -t skipped < <(grep -ao 'SKIPPED: .*: WAA corpus not found' "$log" \
-    | sed 's/^SKIPPED: \(.*\): WAA corpus not found$/\1/' || true)
-echo "corpus tests skipped: ${#skipped[@]}"
-for name in "${skipped[@]}"; do
-    echo "  $name"
-done
-mapfile -t vm_skipped < <(grep -ao 'SKIPPED: .*: QEMU stand-in image not found' "$log" \
-    | sed 's/^SKIPPED: \(.*\): QEMU stand-in image not found$/\1/' || true)
-echo "VM tests skipped: ${#vm_skipped[@]}"
-for name in "${vm_skipped[@]}"; do
-    echo "  $name"
-done
+count_skips() {
+    local label=$1 reason=$2 names
+    mapfile -t names < <(grep -ao "SKIPPED: .*: $reason" "$log" \
+        | sed "s/^SKIPPED: \(.*\): $reason\$/\1/" || true)
+    echo "$label skipped: ${#names[@]}"
+    for name in "${names[@]}"; do
+        echo "  $name"
+    done
+}
+count_skips "corpus tests" "WAA corpus not found"
+count_skips "VM tests" "QEMU stand-in image not found"
 
 if [ "${ARENA_SKIP_WINE:-0}" = 1 ]; then
     echo "SKIPPED: the Wine suite (ARENA_SKIP_WINE=1); the Windows backend was not tested" >&2
