@@ -214,24 +214,13 @@ pub async fn run(conn: &Connection, args: VmCommandArgs) -> anyhow::Result<ExitC
             start(conn, &image, &dir, port, bind, reuse, &vm).await
         }
         VmCommand::Snapshot { dir, name } => {
-            let qmp = qmp_of(&dir).await?;
-            let started = std::time::Instant::now();
-            qmp.hmp(&format!("savevm {name}"), Duration::from_secs(600)).await?;
-            emit(&format!("saved snapshot {name} in {:.1} s\n", started.elapsed().as_secs_f64()))?;
+            let took = qmp_of(&dir).await?.save_snapshot(&name).await?;
+            emit(&format!("saved snapshot {name} in {:.1} s\n", took.as_secs_f64()))?;
             Ok(ExitCode::SUCCESS)
         }
         VmCommand::Restore { dir, name } => {
-            let qmp = qmp_of(&dir).await?;
-            let list = qmp.hmp("info snapshots", Duration::from_secs(30)).await?;
-            if !list.lines().any(|l| l.split_whitespace().nth(1) == Some(name.as_str())) {
-                anyhow::bail!("snapshot {name:?} does not exist in the VM in {}:\n{}", dir.display(), list.trim());
-            }
-            let started = std::time::Instant::now();
-            qmp.hmp(&format!("loadvm {name}"), Duration::from_secs(600)).await?;
-            if !qmp.status().await?.0 {
-                qmp.cont().await?;
-            }
-            emit(&format!("restored snapshot {name} in {:.1} s\n", started.elapsed().as_secs_f64()))?;
+            let took = qmp_of(&dir).await?.restore_snapshot(&name, &dir.join(crate::vm::OVERLAY_FILE)).await?;
+            emit(&format!("restored snapshot {name} in {:.1} s\n", took.as_secs_f64()))?;
             Ok(ExitCode::SUCCESS)
         }
         VmCommand::Screendump { dir, output } => {

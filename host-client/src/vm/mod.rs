@@ -23,7 +23,7 @@ pub mod qmp;
 use std::net::{IpAddr, Ipv4Addr, SocketAddr, TcpListener};
 use std::path::{Path, PathBuf};
 use std::process::Stdio;
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 use arena_shared::health::HealthReport;
 
@@ -32,6 +32,9 @@ use crate::prep::{wait_healthy, PrepError, WaitEvent};
 use disk::{ImageInfo, QemuImg};
 use qemu::{Accel, DiskBus, Firmware, FolderDrive, NicModel, VmSpec};
 use qmp::Qmp;
+
+/// A VM's overlay of the golden image, in its folder.
+pub const OVERLAY_FILE: &str = "overlay.qcow2";
 
 /// The QMP socket other `arena vm` commands use, in a VM's folder.
 pub const CONTROL_SOCKET: &str = "control.sock";
@@ -124,7 +127,7 @@ impl VmConfig {
     }
 
     pub fn overlay(&self) -> PathBuf {
-        self.dir.join("overlay.qcow2")
+        self.dir.join(OVERLAY_FILE)
     }
 
     fn qemu_img(&self) -> Result<QemuImg, VmError> {
@@ -404,10 +407,7 @@ impl Vm {
     ///
     /// [`VmError::Qmp`] with QEMU's reason.
     pub async fn save_snapshot(&self, name: &str) -> Result<Duration, VmError> {
-        check_snapshot_name(name)?;
-        let started = Instant::now();
-        self.qmp.hmp(&format!("savevm {name}"), Duration::from_secs(600)).await?;
-        Ok(started.elapsed())
+        self.qmp.save_snapshot(name).await
     }
 
     /// The snapshots in the VM's disk, by name.
@@ -416,8 +416,7 @@ impl Vm {
     ///
     /// [`VmError::Qmp`].
     pub async fn snapshots(&self) -> Result<Vec<String>, VmError> {
-        let text = self.qmp.hmp("info snapshots", self.qmp.timeout).await?;
-        Ok(parse_snapshot_list(&text))
+        self.qmp.snapshots().await
     }
 
     /// Puts the VM back to snapshot `name` (memory and disk) and lets it run.
@@ -427,22 +426,7 @@ impl Vm {
     ///
     /// [`VmError::NoSnapshot`] naming the snapshots there are, or [`VmError::Qmp`].
     pub async fn restore_snapshot(&self, name: &str) -> Result<Duration, VmError> {
-        check_snapshot_name(name)?;
-        let known = self.snapshots().await?;
-        if !known.iter().any(|k| k == name) {
-            return Err(VmError::NoSnapshot {
-                name: name.to_owned(),
-                disk: self.spec.disk.clone(),
-                known: known_list(&known),
-            });
-        }
-        let started = Instant::now();
-        self.qmp.hmp(&format!("loadvm {name}"), Duration::from_secs(600)).await?;
-        let (running, _) = self.qmp.status().await?;
-        if !running {
-            self.qmp.cont().await?;
-        }
-        Ok(started.elapsed())
+        self.qmp.restore_snapshot(name, &self.spec.disk).await
     }
 
     /// The VM's display as QEMU shows it (not the guest's own screenshot).
@@ -519,7 +503,7 @@ fn pick_port(addr: IpAddr, port: u16) -> Result<u16, VmError> {
     }
 }
 
-fn check_snapshot_name(name: &str) -> Result<(), VmError> {
+pub(crate) fn check_snapshot_name(name: &str) -> Result<(), VmError> {
     if name.is_empty() || !name.chars().all(|c| c.is_ascii_alphanumeric() || c == '-' || c == '_' || c == '.') {
         return Err(VmError::Invalid(format!("snapshot name {name:?}: use letters, digits, '-', '_' and '.' only")));
     }
@@ -534,7 +518,7 @@ fn require_snapshot(info: &ImageInfo, name: &str, disk: &Path) -> Result<(), VmE
     Err(VmError::NoSnapshot { name: name.to_owned(), disk: disk.to_owned(), known: known_list(&known) })
 }
 
-fn known_list(known: &[String]) -> String {
+pub(crate) fn known_list(known: &[String]) -> String {
     if known.is_empty() {
         " (it has none)".to_owned()
     } else {
@@ -543,7 +527,7 @@ fn known_list(known: &[String]) -> String {
 }
 
 /// The names in the monitor's `info snapshots` table.
-fn parse_snapshot_list(text: &str) -> Vec<String> {
+pub(crate) fn parse_snapshot_list(text: &str) -> Vec<String> {
     // ID        TAG               VM SIZE                DATE     VM CLOCK     ICOUNT
     // --        ready              45.2 MiB 2026-11-26 01:02:03 00:00:12.345
     text.lines()

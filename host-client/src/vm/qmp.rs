@@ -13,7 +13,10 @@ use tokio::net::UnixStream;
 use tokio::sync::broadcast;
 use tokio::time::Instant;
 
-use super::VmError;
+use super::{check_snapshot_name, known_list, parse_snapshot_list, VmError};
+
+/// How long saving or loading a snapshot may take (memory of a large guest).
+const SNAPSHOT_TIMEOUT: Duration = Duration::from_secs(600);
 
 type Service = QapiService<QmpStreamTokio<WriteHalf<UnixStream>>>;
 
@@ -131,6 +134,52 @@ impl Qmp {
             return Err(qmp_error(line, error.trim()));
         }
         Ok(out)
+    }
+
+    /// Saves the running VM's memory and disk as snapshot `name` (replacing one
+    /// of that name); how long it took.
+    ///
+    /// # Errors
+    ///
+    /// A name QEMU's monitor cannot take, or [`VmError::Qmp`] with QEMU's reason.
+    pub async fn save_snapshot(&self, name: &str) -> Result<Duration, VmError> {
+        check_snapshot_name(name)?;
+        let started = Instant::now();
+        self.hmp(&format!("savevm {name}"), SNAPSHOT_TIMEOUT).await?;
+        Ok(started.elapsed())
+    }
+
+    /// The snapshots in the VM's disks, by name.
+    ///
+    /// # Errors
+    ///
+    /// [`VmError::Qmp`].
+    pub async fn snapshots(&self) -> Result<Vec<String>, VmError> {
+        Ok(parse_snapshot_list(&self.hmp("info snapshots", self.timeout).await?))
+    }
+
+    /// Puts the VM back to snapshot `name` (memory and disk) and lets it run;
+    /// how long the restore took. `disk` names the VM's disk in the error.
+    ///
+    /// # Errors
+    ///
+    /// [`VmError::NoSnapshot`] naming the snapshots there are, or [`VmError::Qmp`].
+    pub async fn restore_snapshot(&self, name: &str, disk: &Path) -> Result<Duration, VmError> {
+        check_snapshot_name(name)?;
+        let known = self.snapshots().await?;
+        if !known.iter().any(|k| k == name) {
+            return Err(VmError::NoSnapshot {
+                name: name.to_owned(),
+                disk: disk.to_owned(),
+                known: known_list(&known),
+            });
+        }
+        let started = Instant::now();
+        self.hmp(&format!("loadvm {name}"), SNAPSHOT_TIMEOUT).await?;
+        if !self.status().await?.0 {
+            self.cont().await?;
+        }
+        Ok(started.elapsed())
     }
 
     /// Whether the VM's CPUs run, and QEMU's name for its state.
