@@ -17,6 +17,7 @@
 //! - [`fastimg`]: upstream's model-image size, a SIMD resize and a SIMD JPEG encoder.
 //! - [`health`]: the staged readiness report; [`doctor`]: the end-to-end capability report.
 //! - [`error`]: the error body every native route answers with.
+//! - [`window_list`]: the window list and title the model is shown, as upstream builds them.
 //! - [`script`]: a safe interpreter for the pyautogui and WAA `computer.*` Python that hosts send.
 //!
 //! # Compatibility
@@ -46,6 +47,7 @@ pub mod observation;
 pub mod registry;
 pub mod script;
 pub mod token;
+pub mod window_list;
 
 /// The version of the native API spoken under `/v1/`.
 pub const API_VERSION: &str = "1";
