@@ -473,7 +473,7 @@ impl std::fmt::Display for WaitTimeout {
         if !self.reached {
             return write!(
                 f,
-                "it never answered ({}); is the VM up, did install-guest.ps1 finish (C:\\OEM\\arena-setup.log), and does the firewall rule let the host in?",
+                "it never answered ({}); is the VM up, did install-guest.ps1 finish (%ProgramData%\\arena\\logs\\setup.log), and does the firewall rule let the host in?",
                 self.last_error.as_deref().unwrap_or("no answer")
             );
         }
