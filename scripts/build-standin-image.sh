@@ -39,8 +39,9 @@ export SOURCE_DATE_EPOCH=${SOURCE_DATE_EPOCH:-1704067200}
 # Drivers the image loads at boot (their dependencies are added): virtio disks and
 # network, FAT with the code pages its mount needs, the ACPI power button and evdev to
 # read it.
+# The IDE CD-ROM and ISO 9660 (with Joliet) read the OEM media of `arena vm prepare`.
 MODULES=(virtio_pci virtio_blk virtio_scsi sd_mod virtio_net vfat nls_cp437 nls_ascii
-    nls_utf8 nls_iso8859-1 button evdev)
+    nls_utf8 nls_iso8859-1 button evdev ata_piix sr_mod isofs)
 
 die() {
     echo "build-standin-image: $*" >&2
@@ -191,9 +192,11 @@ make_cpio "$RD" | gzip -9 -n >"$WORK/initrd.img"
 
 # --- golden disk ----------------------------------------------------------------------
 # A FAT "superfloppy" (no partition table) with SYSLINUX in its boot sector: room for the
-# kernel, the initrd and 16 MiB spare (the installer adds the token).
+# kernel, the initrd and 1.5 GiB spare, for C:\OEM (the installer copies the OEM folder
+# there; a test stages 1 GiB). The spare is zeros: sparse in the qcow2 and in the gzip'd
+# copy the installer writes (and QEMU turns written zeros into unallocated clusters).
 kb() { echo $(( ($(stat -c %s "$1") + 1023) / 1024 )); }
-size_kb=$(( ($(kb "$VMLINUZ") + $(kb "$WORK/initrd.img") + 16384 + 1023) / 1024 * 1024 ))
+size_kb=$(( ($(kb "$VMLINUZ") + $(kb "$WORK/initrd.img") + 1536 * 1024 + 1023) / 1024 * 1024 ))
 DISK=$WORK/disk.img
 mkfs.vfat -C --invariant -i 41524e41 -n ARENA "$DISK" "$size_kb" >/dev/null
 touch -d "@$SOURCE_DATE_EPOCH" "$VMLINUZ" "$WORK/initrd.img"

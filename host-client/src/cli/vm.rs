@@ -438,10 +438,7 @@ async fn prepare_command(conn: &Connection, args: PrepareArgs) -> anyhow::Result
     if args.dry_run {
         let lines = prepare::dry_run(&options)?;
         let dir = prepare::work_dir(&out);
-        emit(&format!(
-            "# dry run: the answer file, the OEM media and the firmware variables are in {}\n",
-            dir.display()
-        ))?;
+        tracing::info!(dir = %dir.display(), "dry run: the answer file, the OEM media and the firmware variables are written");
         for line in lines {
             emit(&format!("{line}\n"))?;
         }

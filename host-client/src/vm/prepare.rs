@@ -377,7 +377,9 @@ pub fn media_args(answer: &Path, marker: &Path, oem: &Path, iso: &Path) -> Vec<O
 /// One command line as the user reads it: the program, then each argument,
 /// quoted for a POSIX shell where needed.
 pub fn shell_line(program: &Path, args: &[OsString]) -> String {
-    std::iter::once(program.as_os_str())
+    // A program found on PATH is shown by its name, as the user would type it.
+    let name = program.file_name().filter(|name| qemu::which(&name.to_string_lossy()).as_deref() == Some(program));
+    std::iter::once(name.unwrap_or(program.as_os_str()))
         .chain(args.iter().map(OsString::as_os_str))
         .map(|a| {
             let a = a.to_string_lossy();
@@ -440,6 +442,7 @@ pub async fn prepare(options: &PrepareOptions, mut progress: impl FnMut(PrepareE
     let qemu = qemu::find_qemu(options.vm.qemu.as_deref())?;
     let dir = work_dir(&options.out);
     let disk = dir.join("disk.qcow2");
+    let mut resumed = true;
     let mut state = match read_state(&options.out)? {
         Some(state) => {
             if state.iso != options.iso || state.oem != options.oem {
@@ -473,7 +476,7 @@ pub async fn prepare(options: &PrepareOptions, mut progress: impl FnMut(PrepareE
             write_media(options, &dir)?;
             img.create_blank(&disk, &options.size)?;
             write_state(&dir, &state)?;
-            progress(PrepareEvent::Stage { stage: Stage::Created, resumed: false, limit: None });
+            resumed = false;
             state
         }
     };
@@ -481,7 +484,8 @@ pub async fn prepare(options: &PrepareOptions, mut progress: impl FnMut(PrepareE
         end_leftover(pid, &disk);
     }
     let config = prepare_config(options, &dir);
-    let mut resumed = true;
+    // The stage last announced, so none is announced twice.
+    let mut announced = None;
     loop {
         // A resume in the middle of the install: Windows cannot go on from a disk
         // whose power was cut, so the install starts again from a blank disk.
@@ -502,7 +506,9 @@ pub async fn prepare(options: &PrepareOptions, mut progress: impl FnMut(PrepareE
         }
         let stage_started = Instant::now();
         let limit = TIMED_STAGES.contains(&state.stage).then(|| options.timeouts.get(state.stage));
-        progress(PrepareEvent::Stage { stage: state.stage, resumed, limit });
+        if announced != Some(state.stage) {
+            progress(PrepareEvent::Stage { stage: state.stage, resumed, limit });
+        }
         resumed = false;
         let next = match state.stage {
             Stage::Created => Stage::Setup,
@@ -527,6 +533,7 @@ pub async fn prepare(options: &PrepareOptions, mut progress: impl FnMut(PrepareE
                 }
                 state.stage = Stage::Healthy;
                 write_state(&dir, &state)?;
+                announced = Some(Stage::ShutDown);
                 shut_down(vm, options, &dir, &mut state, &mut progress).await?
             }
             Stage::Healthy => {
@@ -542,18 +549,25 @@ pub async fn prepare(options: &PrepareOptions, mut progress: impl FnMut(PrepareE
                     write_state(&dir, &state)?;
                     return Err(err);
                 }
+                announced = Some(Stage::ShutDown);
                 shut_down(vm, options, &dir, &mut state, &mut progress).await?
             }
+            Stage::ShutDown if !disk.exists() && options.out.exists() => Stage::Sealed,
             Stage::ShutDown => {
                 if has_snapshot(&img, &disk, HEALTHY_SNAPSHOT) {
                     img.delete_snapshot(&disk, HEALTHY_SNAPSHOT)?;
                 }
-                std::fs::rename(&disk, &options.out).map_err(io(format!(
+                // A fresh copy: qcow2 keeps the clusters of a deleted snapshot (the
+                // guest's whole memory), and the golden image should not carry them.
+                let sealing = dir.join("sealing.qcow2");
+                img.convert_to_qcow2(&disk, &sealing)?;
+                std::fs::rename(&sealing, &options.out).map_err(io(format!(
                     "moving {} to {}",
-                    disk.display(),
+                    sealing.display(),
                     options.out.display()
                 )))?;
                 make_read_only(&options.out)?;
+                let _ = std::fs::remove_file(&disk);
                 Stage::Sealed
             }
             Stage::Sealed => {
@@ -698,11 +712,13 @@ async fn follow(
                         stage_since = Instant::now();
                     }
                 } else if name == "SHUTDOWN" || name == super::qmp::CLOSED {
-                    return Err(VmError::Exited {
-                        name: "prepare".into(),
-                        status: format!("the VM powered off during stage {}", state.stage.name()),
-                        log: super::log_tail(&dir.join("qemu.log")),
-                    });
+                    // Setup powers off only when it cannot go on: its last words say why.
+                    let text = std::fs::read(&serial).unwrap_or_default();
+                    return Err(VmError::Invalid(format!(
+                        "the VM powered off during stage {}; {}",
+                        state.stage.name(),
+                        last_serial_lines(&String::from_utf8_lossy(&text))
+                    )));
                 }
             }
             _ = tick.tick() => {
@@ -754,7 +770,7 @@ fn last_serial_lines(text: &str) -> String {
     if lines.is_empty() {
         return "the serial port said nothing".into();
     }
-    format!("the serial port's last lines: {}", lines[lines.len().saturating_sub(3)..].join(" | "))
+    format!("the serial port's last lines: {}", lines[lines.len().saturating_sub(5)..].join(" | "))
 }
 
 /// Keeps the serial log, a screendump and the doctor's report of a failed

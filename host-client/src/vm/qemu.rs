@@ -174,7 +174,8 @@ impl VmSpec {
         }
 
         // The system disk, first in the boot order.
-        a.push("-drive").push(drive_opts("if=none,id=disk0,format=qcow2,discard=unmap", &self.disk));
+        a.push("-drive")
+            .push(drive_opts("if=none,id=disk0,format=qcow2,discard=unmap,detect-zeroes=unmap", &self.disk));
         let ahci_bus =
             |n: usize| if self.machine.starts_with("pc") { format!("ide.{}", n / 2) } else { format!("ide.{n}") };
         let mut ahci_ports = 0usize;
@@ -384,7 +385,9 @@ mod tests {
         assert!(!text.contains("smm=on") && !text.contains("tpm"), "{text}");
         // Commas in paths are doubled for QEMU's option parser.
         assert!(
-            text.contains("-drive if=none,id=disk0,format=qcow2,discard=unmap,file=/v/vm-1/disk,,1.qcow2"),
+            text.contains(
+                "-drive if=none,id=disk0,format=qcow2,discard=unmap,detect-zeroes=unmap,file=/v/vm-1/disk,,1.qcow2"
+            ),
             "{text}"
         );
         assert!(text.contains("-device ide-hd,drive=disk0,bus=ide.0,bootindex=1"), "{text}");
