@@ -247,6 +247,7 @@ fn a_run_on_two_vms_scores_as_on_stub_guests_and_rebuilds_a_killed_vm() {
 
 /// The VM options of a prepare of the stand-in: what Windows 11 Setup asks of a
 /// machine (4 GiB, 2 processors; the disk is --size), emulated.
+/// (`--vm-memory` third and fourth, so a test can give its own.)
 const PREPARE_FLAGS: &[&str] = &[
     "--vm-accel",
     "tcg",
@@ -280,7 +281,8 @@ fn prepare_command(image: &arena_test_support::StandinImage, oem: &Path, out: &P
         .arg(oem)
         .arg("--out")
         .arg(out)
-        .args(PREPARE_FLAGS)
+        .args(if extra.contains(&"--vm-memory") { &PREPARE_FLAGS[..2] } else { &PREPARE_FLAGS[..4] })
+        .args(&PREPARE_FLAGS[4..])
         .args(["--stage-timeout", "setup=10m", "--stage-timeout", "shut-down=120"])
         .args(extra)
         .env_remove("ARENA_TOKEN")

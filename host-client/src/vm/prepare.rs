@@ -533,6 +533,8 @@ pub async fn prepare(options: &PrepareOptions, mut progress: impl FnMut(PrepareE
                 }
                 state.stage = Stage::Healthy;
                 write_state(&dir, &state)?;
+                // Said once the snapshot is there: from here a resume goes on from it.
+                progress(PrepareEvent::Stage { stage: Stage::Healthy, resumed: false, limit: None });
                 announced = Some(Stage::ShutDown);
                 shut_down(vm, options, &dir, &mut state, &mut progress).await?
             }
@@ -694,10 +696,7 @@ async fn follow(
             result = &mut wait => {
                 *state.seconds.entry(state.stage.name().to_owned()).or_default() += stage_since.elapsed().as_secs_f64();
                 return match result {
-                    Ok(_) => {
-                        progress(PrepareEvent::Stage { stage: Stage::Healthy, resumed: false, limit: None });
-                        Ok(())
-                    }
+                    Ok(_) => Ok(()),
                     Err(source) => Err(VmError::NotHealthy { name: "prepare".into(), source }),
                 };
             }

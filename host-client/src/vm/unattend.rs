@@ -21,8 +21,9 @@
 //! - offlineServicing: UAC (`EnableLUA`), off by default as in upstream's images.
 //! - specialize: computer name, time zone, `BypassNRO` (a local account without
 //!   a network), and the copy of the OEM media to `C:\OEM`.
-//! - oobeSystem: locale, the local administrator account, auto-logon, OOBE's
-//!   pages hidden, and `C:\OEM\install.bat` as the first logon command.
+//! - oobeSystem: no automatic device encryption (each VM has its own TPM),
+//!   locale, the local administrator account, auto-logon, OOBE's pages hidden,
+//!   and `C:\OEM\install.bat` as the first logon command.
 
 use std::fmt::Write as _;
 
@@ -212,6 +213,7 @@ pub const DOCUMENTED: &[(&str, &str, &[&str])] = &[
     ("Microsoft-Windows-LUA-Settings", "offlineServicing", &["EnableLUA"]),
     ("Microsoft-Windows-Shell-Setup", "specialize", &["ComputerName", "TimeZone"]),
     ("Microsoft-Windows-Deployment", "specialize", &["RunSynchronous"]),
+    ("Microsoft-Windows-SecureStartup-FilterDriver", "oobeSystem", &["PreventDeviceEncryption"]),
     (
         "Microsoft-Windows-International-Core",
         "oobeSystem",
@@ -360,6 +362,11 @@ pub fn render(o: &AnswerOptions) -> String {
 
     // oobeSystem
     x.open_attrs("settings", &[("pass", "oobeSystem")]);
+    // No automatic device encryption: with a TPM attached Windows 11 may encrypt the
+    // disk against that TPM, and every VM made from the golden image has its own.
+    x.component("Microsoft-Windows-SecureStartup-FilterDriver");
+    x.leaf("PreventDeviceEncryption", "true");
+    x.close("component");
     x.component("Microsoft-Windows-International-Core");
     international(&mut x, o);
     x.close("component");

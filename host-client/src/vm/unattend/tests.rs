@@ -96,6 +96,7 @@ fn the_default_file_uses_only_documented_settings_and_answers_every_page() {
     assert_eq!(text_of(&doc, "windowsPE", &["ImageInstall", "OSImage", "InstallTo", "PartitionID"]), ["2"]);
     // UAC off, the local account, auto-logon as it, OOBE's pages hidden, the OEM install.
     assert_eq!(text_of(&doc, "offlineServicing", &["EnableLUA"]), ["false"]);
+    assert_eq!(text_of(&doc, "oobeSystem", &["PreventDeviceEncryption"]), ["true"]);
     assert_eq!(text_of(&doc, "oobeSystem", &["UserAccounts", "LocalAccounts", "LocalAccount", "Name"]), ["Docker"]);
     assert_eq!(text_of(&doc, "oobeSystem", &["AutoLogon", "Username"]), ["Docker"]);
     assert_eq!(text_of(&doc, "oobeSystem", &["AutoLogon", "Enabled"]), ["true"]);
