@@ -180,8 +180,9 @@ pub enum VmCommand {
         /// Boot the overlay already in DIR (from its `ready` snapshot when it has one) instead of a new one.
         #[arg(long)]
         reuse: bool,
+        /// (Boxed: the VM options make the variant large.)
         #[command(flatten)]
-        vm: VmArgs,
+        vm: Box<VmArgs>,
     },
     /// Save the running VM in DIR as snapshot NAME (memory and disk).
     Snapshot {

@@ -378,18 +378,7 @@ impl Vm {
             .stdout(Stdio::from(log))
             .stderr(Stdio::from(log_err))
             .kill_on_drop(true);
-        // QEMU ends with this program even when it is killed outright, so no VM
-        // outlives the run that owns it. (The signal follows the thread that
-        // started QEMU: a runtime worker, which lives as long as the runtime.)
-        #[cfg(target_os = "linux")]
-        // SAFETY: the closure runs in the child between fork and exec and only
-        // calls prctl, which is async-signal-safe.
-        unsafe {
-            command.pre_exec(|| {
-                libc::prctl(libc::PR_SET_PDEATHSIG, libc::SIGKILL);
-                Ok(())
-            });
-        }
+        die_with_this_process(&mut command);
         let mut child = command
             .spawn()
             .map_err(|source| VmError::Io { what: format!("starting {}", spec.qemu.display()), source })?;
@@ -554,6 +543,24 @@ impl Vm {
             tpm.stop().await;
         }
     }
+}
+
+/// Makes the child `command` starts (QEMU, swtpm) end with this program even
+/// when it is killed outright, so no VM outlives the run that owns it. (The
+/// signal follows the thread that started the child: a runtime worker, which
+/// lives as long as the runtime.)
+pub(crate) fn die_with_this_process(command: &mut tokio::process::Command) {
+    #[cfg(target_os = "linux")]
+    // SAFETY: the closure runs in the child between fork and exec and only
+    // calls prctl, which is async-signal-safe.
+    unsafe {
+        command.pre_exec(|| {
+            libc::prctl(libc::PR_SET_PDEATHSIG, libc::SIGKILL);
+            Ok(())
+        });
+    }
+    #[cfg(not(target_os = "linux"))]
+    let _ = command;
 }
 
 /// Returns once QEMU reports that the guest can no longer run (an emulation

@@ -90,15 +90,7 @@ impl Swtpm {
         let _ = std::fs::remove_file(&spec.socket);
         let mut command = tokio::process::Command::new(&spec.program);
         command.args(spec.args()).stdin(Stdio::null()).stdout(Stdio::null()).stderr(Stdio::null()).kill_on_drop(true);
-        #[cfg(target_os = "linux")]
-        // SAFETY: the closure runs in the child between fork and exec and only
-        // calls prctl, which is async-signal-safe.
-        unsafe {
-            command.pre_exec(|| {
-                libc::prctl(libc::PR_SET_PDEATHSIG, libc::SIGKILL);
-                Ok(())
-            });
-        }
+        super::die_with_this_process(&mut command);
         let mut child = command
             .spawn()
             .map_err(|source| VmError::Io { what: format!("starting {}", spec.program.display()), source })?;

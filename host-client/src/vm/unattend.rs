@@ -250,8 +250,11 @@ pub fn stage_command(name: &str) -> String {
     format!("cmd.exe /d /c echo arena-stage: {name}>COM1")
 }
 
-/// The `LabConfig` values Windows 11 Setup reads before its hardware checks.
-pub const LAB_CONFIG: &[&str] = &["BypassTPMCheck", "BypassSecureBootCheck", "BypassRAMCheck"];
+/// The `LabConfig` values Windows 11 Setup reads before its hardware checks:
+/// only for what the VM lacks without `--firmware uefi` (the TPM and Secure
+/// Boot). Memory, disk and processors are given as Setup wants them, so their
+/// checks stay on (WAA's and dockur's files also skip the memory check).
+pub const LAB_CONFIG: &[&str] = &["BypassTPMCheck", "BypassSecureBootCheck"];
 
 /// `BypassNRO`: OOBE offers a local account without a network.
 pub const BYPASS_NRO: &str =
@@ -559,19 +562,10 @@ impl Xml {
     }
 }
 
+/// XML text and attribute escaping: the five predefined entities (the
+/// apostrophe as a character reference), as the HTML report escapes.
 fn escape(text: &str) -> String {
-    let mut out = String::with_capacity(text.len());
-    for c in text.chars() {
-        match c {
-            '&' => out.push_str("&amp;"),
-            '<' => out.push_str("&lt;"),
-            '>' => out.push_str("&gt;"),
-            '"' => out.push_str("&quot;"),
-            '\'' => out.push_str("&apos;"),
-            c => out.push(c),
-        }
-    }
-    out
+    crate::results::html::escape(text)
 }
 
 #[cfg(test)]
