@@ -489,20 +489,12 @@ pub async fn prepare(options: &PrepareOptions, mut progress: impl FnMut(PrepareE
     loop {
         // A resume in the middle of the install: Windows cannot go on from a disk
         // whose power was cut, so the install starts again from a blank disk.
-        if resumed && state.stage.mid_install() {
-            let from = state.stage;
-            progress(PrepareEvent::StartOver {
-                from,
-                why: "the install was interrupted before the guest was healthy; Windows Setup cannot continue on a disk whose power was cut, so the install starts over from a blank disk",
-            });
-            start_over(options, &img, &dir, &disk, &mut state)?;
-        }
-        if resumed && state.stage == Stage::Healthy && !has_snapshot(&img, &disk, HEALTHY_SNAPSHOT) {
-            progress(PrepareEvent::StartOver {
-                from: Stage::Healthy,
-                why: "the healthy guest's snapshot is missing, so there is no safe point to shut down from",
-            });
-            start_over(options, &img, &dir, &disk, &mut state)?;
+        if resumed {
+            let snapshot = state.stage == Stage::Healthy && has_snapshot(&img, &disk, HEALTHY_SNAPSHOT);
+            if let Some(why) = start_over_reason(state.stage, snapshot) {
+                progress(PrepareEvent::StartOver { from: state.stage, why });
+                start_over(options, &img, &dir, &disk, &mut state)?;
+            }
         }
         let stage_started = Instant::now();
         let limit = TIMED_STAGES.contains(&state.stage).then(|| options.timeouts.get(state.stage));
@@ -583,6 +575,20 @@ pub async fn prepare(options: &PrepareOptions, mut progress: impl FnMut(PrepareE
         *state.seconds.entry(state.stage.name().to_owned()).or_default() += stage_started.elapsed().as_secs_f64();
         state.stage = next;
         write_state(&dir, &state)?;
+    }
+}
+
+/// Why a prepare resumed at `stage` must start the install over, or `None`
+/// when it goes on from there (`snapshot`: the healthy snapshot exists).
+pub fn start_over_reason(stage: Stage, snapshot: bool) -> Option<&'static str> {
+    if stage.mid_install() {
+        Some(
+            "the install was interrupted before the guest was healthy; Windows Setup cannot continue on a disk whose power was cut, so the install starts over from a blank disk",
+        )
+    } else if stage == Stage::Healthy && !snapshot {
+        Some("the healthy guest's snapshot is missing, so there is no safe point to shut down from")
+    } else {
+        None
     }
 }
 
@@ -831,6 +837,23 @@ mod tests {
         ] {
             let err = t.set(bad).unwrap_err();
             assert!(err.contains(needle), "{bad}: {err}");
+        }
+    }
+
+    /// A resume in every stage: before the guest is healthy the install starts
+    /// over (the VM tests kill a prepare in `setup` and at `healthy` for real).
+    #[test]
+    fn a_resume_in_each_stage_goes_on_only_from_a_safe_point() {
+        for stage in [Stage::Setup, Stage::Oobe, Stage::FirstLogon, Stage::OemInstall] {
+            for snapshot in [false, true] {
+                let why = start_over_reason(stage, snapshot).unwrap_or_else(|| panic!("{stage:?}"));
+                assert!(why.contains("starts over from a blank disk"), "{why}");
+            }
+        }
+        assert_eq!(start_over_reason(Stage::Healthy, true), None);
+        assert!(start_over_reason(Stage::Healthy, false).unwrap().contains("snapshot is missing"));
+        for stage in [Stage::Created, Stage::ShutDown, Stage::Sealed] {
+            assert_eq!(start_over_reason(stage, false), None, "{stage:?}");
         }
     }
 
