@@ -216,6 +216,14 @@ chmod a-w "$OUT/golden.qcow2"
 # writes onto the target disk.
 mkdir -p "$WORK/install-rd/install"
 gzip -9 -n -c "$DISK" >"$WORK/install-rd/install/disk.img.gz"
+# How many MiB from the start hold anything but zeros: the installer writes only those
+# onto its (blank) target, not the free space's zeros (minutes under emulation).
+used_mib=$(( $(stat -c %s "$DISK") / 1048576 ))
+while [ "$used_mib" -gt 1 ] \
+    && [ -z "$(dd if="$DISK" bs=1M skip=$((used_mib - 1)) count=1 2>/dev/null | tr -d '\0' | head -c1)" ]; do
+    used_mib=$((used_mib - 1))
+done
+echo "$used_mib" >"$WORK/install-rd/install/disk.mib"
 make_cpio "$WORK/install-rd" >"$WORK/install.img"
 ISO=$WORK/iso
 mkdir -p "$ISO/isolinux"
