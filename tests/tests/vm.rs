@@ -245,6 +245,14 @@ fn a_run_on_two_vms_scores_as_on_stub_guests_and_rebuilds_a_killed_vm() {
     assert!(qemus_naming(&vm_dir.display().to_string()).is_empty(), "QEMU still runs after the run");
 }
 
+/// The prepares run one at a time: each VM has the 4 GiB Windows 11 Setup asks
+/// for, and a restored snapshot of one holds all of it in QEMU's memory.
+static PREPARES: std::sync::Mutex<()> = std::sync::Mutex::new(());
+
+fn one_prepare_at_a_time() -> std::sync::MutexGuard<'static, ()> {
+    PREPARES.lock().unwrap_or_else(std::sync::PoisonError::into_inner)
+}
+
 /// The VM options of a prepare of the stand-in: what Windows 11 Setup asks of a
 /// machine (4 GiB, 2 processors; the disk is --size), emulated.
 /// (`--vm-memory` third and fourth, so a test can give its own.)
@@ -347,6 +355,7 @@ fn prepare_is_killed_in_setup_and_at_shutdown_and_the_reruns_seal_it() {
     let Some(image) = standin_image("prepare_is_killed_in_setup_and_at_shutdown_and_the_reruns_seal_it") else {
         return;
     };
+    let _one = one_prepare_at_a_time();
     let started = Instant::now();
     let dir = tempfile::tempdir().unwrap();
     let token = "7f".repeat(32);
@@ -441,6 +450,7 @@ fn sha256_of(path: &Path) -> String {
 #[test]
 fn the_stand_in_setup_refuses_what_windows_setup_refuses() {
     let Some(image) = standin_image("the_stand_in_setup_refuses_what_windows_setup_refuses") else { return };
+    let _one = one_prepare_at_a_time();
     let started = Instant::now();
     let dir = tempfile::tempdir().unwrap();
     let oem = oem_folder(dir.path(), &"7f".repeat(32));
