@@ -39,8 +39,9 @@ export SOURCE_DATE_EPOCH=${SOURCE_DATE_EPOCH:-1704067200}
 # Drivers the image loads at boot (their dependencies are added): virtio disks and
 # network, FAT with the code pages its mount needs, the ACPI power button and evdev to
 # read it.
+# The IDE CD-ROM and ISO 9660 (with Joliet) read the OEM media of `arena vm prepare`.
 MODULES=(virtio_pci virtio_blk virtio_scsi sd_mod virtio_net vfat nls_cp437 nls_ascii
-    nls_utf8 nls_iso8859-1 button evdev)
+    nls_utf8 nls_iso8859-1 button evdev ata_piix sr_mod isofs)
 
 die() {
     echo "build-standin-image: $*" >&2
@@ -191,9 +192,11 @@ make_cpio "$RD" | gzip -9 -n >"$WORK/initrd.img"
 
 # --- golden disk ----------------------------------------------------------------------
 # A FAT "superfloppy" (no partition table) with SYSLINUX in its boot sector: room for the
-# kernel, the initrd and 16 MiB spare (the installer adds the token).
+# kernel, the initrd and 1.5 GiB spare, for C:\OEM (the installer copies the OEM folder
+# there; a test stages 1 GiB). The spare is zeros: sparse in the qcow2 and in the gzip'd
+# copy the installer writes (and QEMU turns written zeros into unallocated clusters).
 kb() { echo $(( ($(stat -c %s "$1") + 1023) / 1024 )); }
-size_kb=$(( ($(kb "$VMLINUZ") + $(kb "$WORK/initrd.img") + 16384 + 1023) / 1024 * 1024 ))
+size_kb=$(( ($(kb "$VMLINUZ") + $(kb "$WORK/initrd.img") + 1536 * 1024 + 1023) / 1024 * 1024 ))
 DISK=$WORK/disk.img
 mkfs.vfat -C --invariant -i 41524e41 -n ARENA "$DISK" "$size_kb" >/dev/null
 touch -d "@$SOURCE_DATE_EPOCH" "$VMLINUZ" "$WORK/initrd.img"
@@ -213,6 +216,14 @@ chmod a-w "$OUT/golden.qcow2"
 # writes onto the target disk.
 mkdir -p "$WORK/install-rd/install"
 gzip -9 -n -c "$DISK" >"$WORK/install-rd/install/disk.img.gz"
+# How many MiB from the start hold anything but zeros: the installer writes only those
+# onto its (blank) target, not the free space's zeros (minutes under emulation).
+used_mib=$(( $(stat -c %s "$DISK") / 1048576 ))
+while [ "$used_mib" -gt 1 ] \
+    && [ -z "$(dd if="$DISK" bs=1M skip=$((used_mib - 1)) count=1 2>/dev/null | tr -d '\0' | head -c1)" ]; do
+    used_mib=$((used_mib - 1))
+done
+echo "$used_mib" >"$WORK/install-rd/install/disk.mib"
 make_cpio "$WORK/install-rd" >"$WORK/install.img"
 ISO=$WORK/iso
 mkdir -p "$ISO/isolinux"

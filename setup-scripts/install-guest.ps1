@@ -53,9 +53,7 @@ $FirewallRuleName = "ArenaGuest-TCP-$Port"
 $SystemSid = 'S-1-5-18'
 $AdministratorsSid = 'S-1-5-32-544'
 
-function Write-Step([string]$Message) {
-    Write-Host "[install-guest] $Message"
-}
+. (Join-Path $PSScriptRoot 'arena-common.ps1')
 
 function Stop-WithCode([int]$Code, [string]$Message) {
     Write-Host "[install-guest] ERROR: $Message"

@@ -29,9 +29,7 @@ $ErrorActionPreference = 'Stop'
 # The progress bar slows Invoke-WebRequest on Windows PowerShell 5.1 by an order of magnitude.
 $ProgressPreference = 'SilentlyContinue'
 
-function Write-Step([string]$Message) {
-    Write-Host "[prep-apps] $Message"
-}
+. (Join-Path $PSScriptRoot 'arena-common.ps1')
 
 # A field of a manifest entry, or $Default when the entry leaves it out (strict mode
 # makes a missing property an error).

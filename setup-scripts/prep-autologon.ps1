@@ -24,9 +24,7 @@ $ErrorActionPreference = 'Stop'
 
 $Winlogon = 'HKLM:\SOFTWARE\Microsoft\Windows NT\CurrentVersion\Winlogon'
 
-function Write-Step([string]$Message) {
-    Write-Host "[prep-autologon] $Message"
-}
+. (Join-Path $PSScriptRoot 'arena-common.ps1')
 
 # Sets a string value only when it differs, and says which it was.
 function Set-WinlogonValue([string]$Name, [string]$Value, [switch]$Secret) {

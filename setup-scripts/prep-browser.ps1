@@ -29,9 +29,7 @@ param(
 Set-StrictMode -Version Latest
 $ErrorActionPreference = 'Stop'
 
-function Write-Step([string]$Message) {
-    Write-Host "[prep-browser] $Message"
-}
+. (Join-Path $PSScriptRoot 'arena-common.ps1')
 
 # Writes a registry value only when it differs; creates the key when missing.
 function Set-RegistryValue([string]$Key, [string]$Name, $Value, [string]$Type = 'DWord') {

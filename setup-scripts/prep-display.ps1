@@ -9,23 +9,28 @@ through ChangeDisplaySettingsEx (tested first with CDS_TEST, then stored for
 every user with CDS_UPDATEREGISTRY | CDS_GLOBAL). Run it in the interactive
 session: a service in session 0 has no display to change.
 
-Exit codes: 0 the display has the size, 2 the size is not a mode of this display
-adapter (the modes it offers are listed), 3 the change failed.
+When the size is not a mode of the display adapter (OVMF's GOP-only display
+offers a few fixed ones), the nearest mode is set instead (least squared
+distance in width and height) and recorded in -RecordPath, so a run can say
+which size its screenshots have.
+
+Exit codes: 0 the display has the size (or the nearest one, recorded), 2 the
+adapter lists no mode at all, 3 the change failed.
 #>
 [CmdletBinding()]
 param(
     [ValidateRange(640, 7680)]
     [int]$Width = 1440,
     [ValidateRange(480, 4320)]
-    [int]$Height = 900
+    [int]$Height = 900,
+    # Where the size actually set is written ("WIDTHxHEIGHT", one line).
+    [string]$RecordPath = (Join-Path $env:ProgramData 'arena\display.txt')
 )
 
 Set-StrictMode -Version Latest
 $ErrorActionPreference = 'Stop'
 
-function Write-Step([string]$Message) {
-    Write-Host "[prep-display] $Message"
-}
+. (Join-Path $PSScriptRoot 'arena-common.ps1')
 
 # DEVMODEW as user32 declares it (display half of the unions), 220 bytes.
 $source = @'
@@ -114,16 +119,37 @@ if ($test -ne 0) {
     $modes = New-Object System.Collections.Generic.List[string]
     $mode = [ArenaDisplay]::Blank()
     $index = 0
+    $best = $null
+    $bestDistance = [long]::MaxValue
     while ([ArenaDisplay]::EnumDisplaySettingsW($null, $index, [ref]$mode)) {
         $name = "$($mode.dmPelsWidth)x$($mode.dmPelsHeight)"
         if (-not $modes.Contains($name)) {
             $modes.Add($name)
         }
+        $dw = [long]$mode.dmPelsWidth - $Width
+        $dh = [long]$mode.dmPelsHeight - $Height
+        $distance = $dw * $dw + $dh * $dh
+        if ($distance -lt $bestDistance) {
+            $bestDistance = $distance
+            $best = $mode
+        }
         $index++
     }
-    Write-Step "ERROR: ${Width}x${Height} is not a mode of this display (test answered $test); modes: $($modes -join ', ')"
-    exit 2
+    if ($null -eq $best) {
+        Write-Step "ERROR: ${Width}x${Height} is not a mode of this display (test answered $test) and it lists no modes"
+        exit 2
+    }
+    Write-Step "${Width}x${Height} is not a mode of this display (modes: $($modes -join ', ')); using the nearest, $($best.dmPelsWidth)x$($best.dmPelsHeight)"
+    $Width = [int]$best.dmPelsWidth
+    $Height = [int]$best.dmPelsHeight
+    $wanted.dmPelsWidth = $Width
+    $wanted.dmPelsHeight = $Height
 }
+$recordDir = Split-Path -Parent $RecordPath
+if (-not (Test-Path -LiteralPath $recordDir)) {
+    New-Item -ItemType Directory -Path $recordDir -Force | Out-Null
+}
+Set-Content -LiteralPath $RecordPath -Value "${Width}x${Height}"
 $flags = [ArenaDisplay]::CDS_UPDATEREGISTRY -bor [ArenaDisplay]::CDS_GLOBAL
 $result = [ArenaDisplay]::ChangeDisplaySettingsExW($null, [ref]$wanted, [IntPtr]::Zero, $flags, [IntPtr]::Zero)
 # 0 is DISP_CHANGE_SUCCESSFUL, 1 DISP_CHANGE_RESTART (applied after a reboot).

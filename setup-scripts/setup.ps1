@@ -1,23 +1,30 @@
 <#
 .SYNOPSIS
 Prepares a fresh Windows 11 image for the arena, step by step, logging to
-C:\OEM\arena-setup.log, and stops at the first step that fails.
+%ProgramData%\arena\logs\setup.log (never into the OEM folder, which may be
+read-only media).
 
 .DESCRIPTION
-The steps, in order (each its own script in this folder, run as a child
-PowerShell so its exit code is its own):
-  1. prep-autologon.ps1   the Docker user logs on at every boot
-  2. prep-automation.ps1  no updates, lock screen, screen saver, sleep, pop-ups
-  3. prep-display.ps1     1440x900
-  4. prep-apps.ps1        the apps the tasks use (skipped with -SkipApps)
-  5. prep-browser.ps1     DevTools on loopback for the guest to forward
-  6. install-guest.ps1    the guest itself, checked through its health endpoint
+The guest comes first, so that whatever fails later there is a guest that
+answers health and doctor. The steps, in order (each its own script in this
+folder, run as a child PowerShell so its exit code is its own):
+  1. prep-autologon.ps1   the Docker user logs on at every boot     (required)
+  2. install-guest.ps1    the guest itself, checked through its health endpoint (required)
+  3. prep-automation.ps1  no updates, lock screen, screen saver, sleep, pop-ups
+  4. prep-display.ps1     1440x900, or the nearest mode (recorded)
+  5. prep-apps.ps1        the apps the tasks use (skipped with -SkipApps)
+  6. prep-browser.ps1     DevTools on loopback for the guest to forward
+A required step that fails stops the setup; a later one is logged and
+reported at the end, and the rest still run.
 
+It writes "arena-stage: oem-install" to COM1 when it starts and
+"arena-stage: guest-installed" once the guest answers, for `arena vm prepare`.
 Rerunning it is safe: every step skips what is already done.
 
-Exit codes: 0 every step succeeded; otherwise the exit code of the first step
+Exit codes: 0 every step succeeded; otherwise the exit code of the required step
 that failed (2 missing input, 3 a step failed, 4 the guest not healthy in time),
-or 5 when a step's script is missing.
+5 when a step's script is missing, or 6 when only later steps failed (listed in
+the log's last line).
 #>
 [CmdletBinding()]
 param(
@@ -36,8 +43,13 @@ Set-StrictMode -Version Latest
 $ErrorActionPreference = 'Stop'
 
 if ([string]::IsNullOrEmpty($LogPath)) {
-    $LogPath = Join-Path $OemDir 'arena-setup.log'
+    $LogPath = Join-Path $env:ProgramData 'arena\logs\setup.log'
 }
+$logDir = Split-Path -Parent $LogPath
+if (-not (Test-Path -LiteralPath $logDir)) {
+    New-Item -ItemType Directory -Path $logDir -Force | Out-Null
+}
+. (Join-Path $PSScriptRoot 'arena-common.ps1')
 
 function Write-Log([string]$Message) {
     $line = "$(Get-Date -Format 'yyyy-MM-dd HH:mm:ss') $Message"
@@ -66,24 +78,36 @@ function Invoke-Step([string]$Script, [string[]]$Arguments) {
 }
 
 Write-Log "arena setup starting (OEM folder $OemDir, mode $Mode, port $Port, host network $HostNetwork)"
+Send-Stage 'oem-install'
 $steps = @(
-    @{ Script = 'prep-autologon.ps1'; Arguments = @('-UserName', $UserName) },
-    @{ Script = 'prep-automation.ps1'; Arguments = @() },
-    @{ Script = 'prep-display.ps1'; Arguments = @() },
-    @{ Script = 'prep-apps.ps1'; Arguments = @('-OemDir', $OemDir) },
-    @{ Script = 'prep-browser.ps1'; Arguments = @() },
-    @{ Script = 'install-guest.ps1'; Arguments = @('-OemDir', $OemDir, '-Port', "$Port", '-HostNetwork', $HostNetwork, '-Mode', $Mode) }
+    @{ Script = 'prep-autologon.ps1'; Required = $true; Arguments = @('-UserName', $UserName) },
+    @{ Script = 'install-guest.ps1'; Required = $true; Arguments = @('-OemDir', $OemDir, '-Port', "$Port", '-HostNetwork', $HostNetwork, '-Mode', $Mode) },
+    @{ Script = 'prep-automation.ps1'; Required = $false; Arguments = @() },
+    @{ Script = 'prep-display.ps1'; Required = $false; Arguments = @() },
+    @{ Script = 'prep-apps.ps1'; Required = $false; Arguments = @('-OemDir', $OemDir) },
+    @{ Script = 'prep-browser.ps1'; Required = $false; Arguments = @() }
 )
+$failed = New-Object System.Collections.Generic.List[string]
 foreach ($step in $steps) {
     if ($SkipApps -and $step.Script -eq 'prep-apps.ps1') {
         Write-Log '---- prep-apps.ps1 skipped (-SkipApps)'
         continue
     }
     $code = Invoke-Step $step.Script $step.Arguments
-    if ($code -ne 0) {
+    if ($code -ne 0 -and $step.Required) {
         Write-Log "arena setup FAILED at $($step.Script) with exit code $code"
         exit $code
     }
+    if ($code -ne 0) {
+        $failed.Add("$($step.Script) (exit code $code)")
+    }
+    if ($step.Script -eq 'install-guest.ps1') {
+        Send-Stage 'guest-installed'
+    }
+}
+if ($failed.Count -gt 0) {
+    Write-Log "arena setup finished with the guest installed and healthy, but these steps failed: $($failed -join ', ')"
+    exit 6
 }
 Write-Log 'arena setup finished: the guest is installed and healthy'
 exit 0

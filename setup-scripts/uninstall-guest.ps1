@@ -26,9 +26,7 @@ $ErrorActionPreference = 'Stop'
 
 $FirewallRuleName = "ArenaGuest-TCP-$Port"
 
-function Write-Step([string]$Message) {
-    Write-Host "[uninstall-guest] $Message"
-}
+. (Join-Path $PSScriptRoot 'arena-common.ps1')
 
 $identity = [Security.Principal.WindowsIdentity]::GetCurrent()
 if (-not (New-Object Security.Principal.WindowsPrincipal($identity)).IsInRole([Security.Principal.WindowsBuiltInRole]::Administrator)) {

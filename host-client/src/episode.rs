@@ -172,7 +172,7 @@ pub async fn run_attempt(
     config: &EpisodeConfig,
     out: &TaskDir,
     attempt: u32,
-    vm: Option<crate::vm::VmStart>,
+    vm: Option<crate::results::VmStart>,
 ) -> EpisodeResult {
     let started = Instant::now();
     let mut ep = Episode {
@@ -799,7 +799,7 @@ impl TaskRunner for EpisodeRunner {
         guest: &GuestClient,
         task: &Task,
         attempt: u32,
-        vm: Option<crate::vm::VmStart>,
+        vm: Option<crate::results::VmStart>,
     ) -> EpisodeResult {
         let out = self.layout.task_dir(task);
         match (self.agents)() {

@@ -221,8 +221,8 @@ fn create_private_dir(dir: &Path) -> Result<(), PrepError> {
 ///
 /// [`PrepError::NotEmpty`] for a non-empty folder without `force`,
 /// [`PrepError::NoExe`] or [`PrepError::NotWindowsExe`] for a missing or wrong exe,
-/// [`PrepError::MissingScript`] when the scripts lack `install.bat`, `setup.ps1` or
-/// `install-guest.ps1`, and [`PrepError::Io`] naming the file that failed.
+/// [`PrepError::MissingScript`] when the scripts lack `install.bat`, `setup.ps1`,
+/// `install-guest.ps1` or `arena-common.ps1` (which the others dot-source), and [`PrepError::Io`] naming the file that failed.
 pub fn stage(options: &StageOptions) -> Result<Staged, PrepError> {
     let out = &options.out;
     if out.exists() {
@@ -242,7 +242,7 @@ pub fn stage(options: &StageOptions) -> Result<Staged, PrepError> {
         })?,
     };
     check_windows_exe(&exe)?;
-    for name in ["install.bat", "setup.ps1", "install-guest.ps1"] {
+    for name in ["install.bat", "setup.ps1", "install-guest.ps1", "arena-common.ps1"] {
         if !options.scripts.join(name).is_file() {
             return Err(PrepError::MissingScript { dir: options.scripts.clone(), name });
         }
@@ -473,7 +473,7 @@ impl std::fmt::Display for WaitTimeout {
         if !self.reached {
             return write!(
                 f,
-                "it never answered ({}); is the VM up, did install-guest.ps1 finish (C:\\OEM\\arena-setup.log), and does the firewall rule let the host in?",
+                "it never answered ({}); is the VM up, did install-guest.ps1 finish (%ProgramData%\\arena\\logs\\setup.log), and does the firewall rule let the host in?",
                 self.last_error.as_deref().unwrap_or("no answer")
             );
         }

@@ -183,7 +183,9 @@ fn install_bat_runs_setup_with_the_policy_bypassed_and_logs_its_exit_code() {
         "{text}"
     );
     assert!(
-        text.contains("%ERRORLEVEL%") && text.contains("arena-setup.log") && text.contains("exit /b %RC%"),
+        text.contains("%ERRORLEVEL%")
+            && text.contains(r"%ProgramData%\arena\logs\install.log")
+            && text.contains("exit /b %RC%"),
         "{text}"
     );
 }

@@ -134,15 +134,33 @@ echo "boot to health (virtio-scsi): $(since "$started") s"
 qmp system_powerdown >/dev/null
 wait_exit 30
 
-echo "== installer: blank disk, installer.iso, OEM folder with a token, -boot order=cd"
-mkdir -p "$RUN/oem"
+echo "== installer: blank 64G disk, installer.iso, OEM media (answer file + token), -boot order=cd"
+# The stand-in Setup wants an answer file on removable media, 4 GB and 2 processors,
+# a 64 GB disk, and (without a TPM) the LabConfig bypass keys: a minimal answer file.
+mkdir -p "$RUN/media/OEM"
 TOKEN=$(python3 -c 'import secrets; print(secrets.token_hex(32))')
-echo "$TOKEN" >"$RUN/oem/arena-token"
-qemu-img create -q -f qcow2 "$RUN/disk.qcow2" 2G
+echo "$TOKEN" >"$RUN/media/OEM/arena-token"
+printf '@echo off\r\n' >"$RUN/media/OEM/install.bat"
+echo marker >"$RUN/media/ARENA-OEM.TXT"
+cat >"$RUN/media/autounattend.xml" <<'XML'
+<unattend xmlns="urn:schemas-microsoft-com:unattend"><settings pass="windowsPE"><component name="Microsoft-Windows-Setup">
+<ImageInstall><OSImage><InstallFrom><MetaData><Key>/IMAGE/INDEX</Key><Value>1</Value></MetaData></InstallFrom></OSImage></ImageInstall>
+<UserData><AcceptEula>true</AcceptEula></UserData><RunSynchronous>
+<RunSynchronousCommand><Path>reg.exe add "HKLM\SYSTEM\Setup\LabConfig" /v BypassTPMCheck /t REG_DWORD /d 1 /f</Path></RunSynchronousCommand>
+<RunSynchronousCommand><Path>reg.exe add "HKLM\SYSTEM\Setup\LabConfig" /v BypassSecureBootCheck /t REG_DWORD /d 1 /f</Path></RunSynchronousCommand>
+</RunSynchronous></component></settings><settings pass="specialize"><component name="Microsoft-Windows-Deployment"><RunSynchronous>
+<RunSynchronousCommand><Path>copy from the drive holding ARENA-OEM.TXT to C:\OEM</Path></RunSynchronousCommand>
+</RunSynchronous></component></settings><settings pass="oobeSystem"><component name="Microsoft-Windows-Shell-Setup">
+<AutoLogon><Username>Docker</Username></AutoLogon><FirstLogonCommands><SynchronousCommand><CommandLine>cmd.exe /c C:\OEM\install.bat</CommandLine></SynchronousCommand></FirstLogonCommands>
+</component></settings></unattend>
+XML
+xorriso -as mkisofs -quiet -J -r -V ARENA_OEM -o "$RUN/oem.iso" "$RUN/media"
+qemu-img create -q -f qcow2 "$RUN/disk.qcow2" 64G
 started=$(now)
-start_qemu 600 -drive "file=$RUN/disk.qcow2,format=qcow2,if=virtio" \
-    -drive "file=fat:ro:$RUN/oem,format=raw,if=virtio,readonly=on" \
-    -cdrom "$IMAGES/installer.iso" -boot order=cd
+start_qemu 600 -m 4096 -smp 2 -drive "file=$RUN/disk.qcow2,format=qcow2,if=virtio,detect-zeroes=unmap,discard=unmap" \
+    -drive "file=$IMAGES/installer.iso,media=cdrom,if=none,id=cd0,readonly=on" -device ide-cd,drive=cd0,bus=ide.1 \
+    -drive "file=$RUN/oem.iso,media=cdrom,if=none,id=cd1,readonly=on" -device ide-cd,drive=cd1,bus=ide.1 \
+    -boot order=cd
 wait_health 480
 echo "install end to end (power-on to health of the installed system): $(since "$started") s"
 grep -aq "stage install: done" "$RUN/serial.log" || fail "the installer did not run"

@@ -2,7 +2,10 @@
 //! software emulation: boot to healthy, snapshot, change, restore, screendump;
 //! a run on two VMs with per-task resets that scores as a run on plain stub
 //! guests while one VM's QEMU is killed mid-run; `vm prepare` from the
-//! stand-in installer, interrupted and resumed; and the errors bad input gets.
+//! stand-in installer (which enforces Windows 11 Setup's rules), killed in
+//! Setup and once healthy and resumed, with a 1 GiB OEM payload; Setup's
+//! refusals; `--dry-run`; the UEFI machine with swtpm; foreign VM folders;
+//! and the errors bad input gets.
 //!
 //! Without the image or QEMU each test says `SKIPPED:` (counted by test.sh;
 //! a failure with ARENA_REQUIRE_QEMU=1).
@@ -242,68 +245,181 @@ fn a_run_on_two_vms_scores_as_on_stub_guests_and_rebuilds_a_killed_vm() {
     assert!(qemus_naming(&vm_dir.display().to_string()).is_empty(), "QEMU still runs after the run");
 }
 
-#[test]
-fn prepare_from_the_installer_resumes_after_being_killed() {
-    let Some(image) = standin_image("prepare_from_the_installer_resumes_after_being_killed") else { return };
-    let dir = tempfile::tempdir().unwrap();
-    let oem = dir.path().join("oem");
-    std::fs::create_dir_all(&oem).unwrap();
-    let token = "7f".repeat(32);
-    std::fs::write(oem.join(arena_host::prep::TOKEN_NAME), format!("{token}\n")).unwrap();
-    let out = dir.path().join("golden2.qcow2");
-    let work = arena_host::vm::prepare::work_dir(&out);
-    let prepare = || {
-        let mut command = arena();
-        command
-            .args(["vm", "prepare", "--size", "256M", "--shutdown-timeout", "60", "--iso"])
-            .arg(&image.installer)
-            .arg("--oem")
-            .arg(&oem)
-            .arg("--out")
-            .arg(&out)
-            .args(VM_FLAGS)
-            .env_remove("ARENA_TOKEN")
-            .stdout(Stdio::piped())
-            .stderr(Stdio::piped());
-        command
-    };
+/// The prepares run one at a time: each VM has the 4 GiB Windows 11 Setup asks
+/// for, and a restored snapshot of one holds all of it in QEMU's memory.
+static PREPARES: std::sync::Mutex<()> = std::sync::Mutex::new(());
 
-    // The first prepare is killed once the installer runs.
-    let mut first = prepare().spawn().unwrap();
-    let deadline = Instant::now() + Duration::from_secs(120);
-    let pid = loop {
-        let state = arena_host::vm::prepare::read_state(&out).unwrap();
-        if let Some(pid) =
-            state.and_then(|s| (s.stage == arena_host::vm::prepare::Stage::Installing).then_some(s.qemu_pid).flatten())
-        {
-            let serial = std::fs::read_to_string(work.join("serial.log")).unwrap_or_default();
-            if serial.contains("arena-standin") {
-                break pid;
+fn one_prepare_at_a_time() -> std::sync::MutexGuard<'static, ()> {
+    PREPARES.lock().unwrap_or_else(std::sync::PoisonError::into_inner)
+}
+
+/// The VM options of a prepare of the stand-in: what Windows 11 Setup asks of a
+/// machine (4 GiB, 2 processors; the disk is --size), emulated.
+/// (`--vm-memory` third and fourth, so a test can give its own.)
+const PREPARE_FLAGS: &[&str] = &[
+    "--vm-accel",
+    "tcg",
+    "--vm-memory",
+    "4096",
+    "--vm-cpus",
+    "2",
+    "--vm-machine",
+    "pc",
+    "--vm-disk-bus",
+    "virtio-blk",
+    "--vm-nic",
+    "virtio-net",
+];
+
+/// An OEM folder as `arena prep stage` leaves it, as far as the stand-in reads it.
+fn oem_folder(root: &Path, token: &str) -> PathBuf {
+    let oem = root.join("oem");
+    std::fs::create_dir_all(&oem).unwrap();
+    std::fs::write(oem.join(arena_host::prep::TOKEN_NAME), format!("{token}\n")).unwrap();
+    std::fs::write(oem.join("install.bat"), "@echo off\r\n").unwrap();
+    oem
+}
+
+fn prepare_command(image: &arena_test_support::StandinImage, oem: &Path, out: &Path, extra: &[&str]) -> Command {
+    let mut command = arena();
+    command
+        .args(["vm", "prepare", "--iso"])
+        .arg(&image.installer)
+        .arg("--oem")
+        .arg(oem)
+        .arg("--out")
+        .arg(out)
+        .args(if extra.contains(&"--vm-memory") { &PREPARE_FLAGS[..2] } else { &PREPARE_FLAGS[..4] })
+        .args(&PREPARE_FLAGS[4..])
+        .args(["--stage-timeout", "setup=10m", "--stage-timeout", "shut-down=120"])
+        .args(extra)
+        .env_remove("ARENA_TOKEN")
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped());
+    command
+}
+
+/// Reads a child's stdout line by line until `stop` says so; returns what it read.
+fn read_until(child: &mut Child, mut stop: impl FnMut(&str) -> bool) -> String {
+    use std::io::BufRead;
+    let stdout = child.stdout.as_mut().unwrap();
+    let mut reader = std::io::BufReader::new(stdout);
+    let mut said = String::new();
+    let mut line = String::new();
+    while reader.read_line(&mut line).unwrap() > 0 {
+        said.push_str(&line);
+        if stop(&line) {
+            break;
+        }
+        line.clear();
+    }
+    said
+}
+
+fn kill_and_reap(child: &mut Child, work: &Path) {
+    child.kill().unwrap();
+    child.wait().unwrap();
+    // QEMU and swtpm go with it.
+    let gone = Instant::now() + Duration::from_secs(10);
+    while !qemus_naming(&work.display().to_string()).is_empty() {
+        assert!(Instant::now() < gone, "QEMU outlived the killed prepare");
+        std::thread::sleep(Duration::from_millis(100));
+    }
+}
+
+/// `name` copied out of the FAT volume of a (sealed) stand-in disk image; returns the copy.
+fn file_in_image(image: &Path, name: &str, scratch: &Path) -> PathBuf {
+    let raw = scratch.join("golden.raw");
+    let made = Command::new("qemu-img").args(["convert", "-O", "raw"]).arg(image).arg(&raw).status().unwrap();
+    assert!(made.success());
+    let out = scratch.join("extracted");
+    let copied = Command::new("mcopy")
+        .arg("-n")
+        .arg("-i")
+        .arg(&raw)
+        .arg(format!("::{name}"))
+        .arg(&out)
+        .output()
+        .expect("mcopy (mtools) runs");
+    assert!(copied.status.success(), "mcopy: {}", String::from_utf8_lossy(&copied.stderr));
+    let _ = std::fs::remove_file(&raw);
+    out
+}
+
+/// The whole install on the BIOS path with Setup's bypass keys, killed during
+/// Windows Setup (the rerun says it starts over from a blank disk) and again
+/// once the guest is healthy (the rerun goes on from the healthy snapshot), with
+/// a 1 GiB payload in the OEM folder that arrives in `C:\OEM` byte for byte.
+#[test]
+fn prepare_is_killed_in_setup_and_at_shutdown_and_the_reruns_seal_it() {
+    let Some(image) = standin_image("prepare_is_killed_in_setup_and_at_shutdown_and_the_reruns_seal_it") else {
+        return;
+    };
+    let _one = one_prepare_at_a_time();
+    let started = Instant::now();
+    let dir = tempfile::tempdir().unwrap();
+    let token = "7f".repeat(32);
+    let oem = oem_folder(dir.path(), &token);
+    // 1 GiB that is not all zeros (zeros would pass a broken copy of sparse files).
+    let payload = oem.join("payload.bin");
+    {
+        use std::io::Write;
+        let mut file = std::io::BufWriter::new(std::fs::File::create(&payload).unwrap());
+        let mut block = vec![0u8; 1 << 20];
+        for i in 0..1024u32 {
+            for (j, byte) in block.iter_mut().enumerate().step_by(4096) {
+                *byte = (i as usize ^ j) as u8;
             }
+            block[..4].copy_from_slice(&i.to_le_bytes());
+            file.write_all(&block).unwrap();
+        }
+    }
+    let expected = sha256_of(&payload);
+    let out = dir.path().join("golden.qcow2");
+    let work = arena_host::vm::prepare::work_dir(&out);
+
+    // 1. Killed while Windows Setup (the stand-in's installer) runs.
+    let mut first = prepare_command(&image, &oem, &out, &["--size", "64G"]).spawn().unwrap();
+    let deadline = Instant::now() + Duration::from_secs(300);
+    loop {
+        let serial = std::fs::read_to_string(work.join("serial.log")).unwrap_or_default();
+        if serial.contains("install: Windows Setup") {
+            break;
         }
         assert!(Instant::now() < deadline, "the installer never started");
         assert!(first.try_wait().unwrap().is_none(), "prepare ended early");
         std::thread::sleep(Duration::from_millis(200));
-    };
-    first.kill().unwrap();
-    first.wait().unwrap();
-    // QEMU goes with it.
-    let gone = Instant::now() + Duration::from_secs(10);
-    while Path::new(&format!("/proc/{pid}")).exists() {
-        assert!(Instant::now() < gone, "QEMU {pid} outlived the killed prepare");
-        std::thread::sleep(Duration::from_millis(100));
+    }
+    kill_and_reap(&mut first, &work);
+    let status = arena().args(["vm", "prepare", "--status", "--out"]).arg(&out).output().unwrap();
+    assert!(String::from_utf8_lossy(&status.stdout).contains("stage setup"), "{status:?}");
+
+    // 2. The rerun starts over, and is killed once the guest is healthy.
+    let mut second = prepare_command(&image, &oem, &out, &["--size", "64G"]).spawn().unwrap();
+    let said = read_until(&mut second, |line| line.starts_with("stage healthy") || line.starts_with("stage shut-down"));
+    kill_and_reap(&mut second, &work);
+    assert!(said.contains("starting over from stage setup") && said.contains("blank disk"), "{said}");
+    for stage in ["stage oobe", "stage first-logon", "stage oem-install"] {
+        assert!(said.contains(stage), "{stage} was not shown: {said}");
     }
 
-    let status = arena().args(["vm", "prepare", "--status", "--out"]).arg(&out).output().unwrap();
-    assert!(String::from_utf8_lossy(&status.stdout).contains("stage installing"), "{status:?}");
-
-    // The same command again goes on from there.
-    let second: Output = prepare().output().unwrap();
-    let said = String::from_utf8_lossy(&second.stdout);
-    assert!(second.status.success(), "{said}\n{}", String::from_utf8_lossy(&second.stderr));
-    assert!(said.contains("stage installing (resumed)"), "{said}");
+    // 3. The next rerun goes on from the healthy snapshot (or, if the guest had
+    // already powered off, from the shut-down stage) and seals the image.
+    let third: Output = prepare_command(&image, &oem, &out, &["--size", "64G"]).output().unwrap();
+    let said = String::from_utf8_lossy(&third.stdout);
+    assert!(third.status.success(), "{said}\n{}", String::from_utf8_lossy(&third.stderr));
+    assert!(said.contains("(resumed)") && !said.contains("starting over"), "{said}");
     assert!(said.contains("golden image ready"), "{said}");
     assert!(std::fs::metadata(&out).unwrap().permissions().readonly());
+    let info = Command::new("qemu-img").args(["info", "--output=json"]).arg(&out).output().unwrap();
+    assert!(!String::from_utf8_lossy(&info.stdout).contains("prepare-healthy"), "the snapshot was not dropped");
+
+    // The payload arrived in C:\OEM intact; the answer file was on the media.
+    assert_eq!(sha256_of(&file_in_image(&out, "OEM/payload.bin", dir.path())), expected);
+    std::fs::remove_file(dir.path().join("extracted")).unwrap();
+    let answer = std::fs::read_to_string(work.join("autounattend.xml")).unwrap();
+    assert!(answer.contains("BypassTPMCheck"), "BIOS without a TPM needs the bypass keys");
+    eprintln!("prepare (BIOS, two kills, 1 GiB OEM payload): {:.0} s", started.elapsed().as_secs_f64());
 
     // The golden image boots into the installed guest, which wants the OEM token.
     let rt = tokio::runtime::Builder::new_multi_thread().worker_threads(2).enable_all().build().unwrap();
@@ -320,6 +436,189 @@ fn prepare_from_the_installer_resumes_after_being_killed() {
         vm.client().folders().await.unwrap();
         vm.kill().await;
     });
+}
+
+/// `sha256sum` of a file (coreutils; the stand-in's build needs it too).
+fn sha256_of(path: &Path) -> String {
+    let out = Command::new("sha256sum").arg(path).output().expect("sha256sum runs");
+    assert!(out.status.success());
+    String::from_utf8_lossy(&out.stdout).split_whitespace().next().unwrap_or_default().to_owned()
+}
+
+/// What the stand-in's Windows Setup refuses, each with Setup's message, and
+/// before the disk is written (so each fails in one short boot, not on a timeout).
+#[test]
+fn the_stand_in_setup_refuses_what_windows_setup_refuses() {
+    let Some(image) = standin_image("the_stand_in_setup_refuses_what_windows_setup_refuses") else { return };
+    let _one = one_prepare_at_a_time();
+    let started = Instant::now();
+    let dir = tempfile::tempdir().unwrap();
+    let oem = oem_folder(dir.path(), &"7f".repeat(32));
+    // The generated answer file, as --dry-run writes it, for the edited copies.
+    let probe = dir.path().join("probe.qcow2");
+    let dry = prepare_command(&image, &oem, &probe, &["--dry-run"]).output().unwrap();
+    assert!(dry.status.success(), "{}", String::from_utf8_lossy(&dry.stderr));
+    let generated =
+        std::fs::read_to_string(arena_host::vm::prepare::work_dir(&probe).join("autounattend.xml")).unwrap();
+    let without =
+        |needle: &str| -> String { generated.lines().filter(|l| !l.contains(needle)).collect::<Vec<_>>().join("\n") };
+    let no_bypass = dir.path().join("no-bypass.xml");
+    std::fs::write(&no_bypass, without("LabConfig")).unwrap();
+    let no_image = dir.path().join("no-image.xml");
+    std::fs::write(&no_image, without("/IMAGE/INDEX")).unwrap();
+
+    let cases: [(&str, Vec<&str>, &str); 4] = [
+        ("no-tpm", vec!["--size", "64G", "--answer", no_bypass.to_str().unwrap()], "The PC must support TPM 2.0."),
+        ("small-ram", vec!["--size", "64G", "--vm-memory", "2048"], "The PC must have at least 4 GB of memory."),
+        ("small-disk", vec!["--size", "32G"], "The system disk must be 64 GB or larger."),
+        (
+            "no-image",
+            vec!["--size", "64G", "--answer", no_image.to_str().unwrap()],
+            "Select the operating system you want to install",
+        ),
+    ];
+    for (name, extra, message) in cases {
+        let out = dir.path().join(format!("{name}.qcow2"));
+        let run = prepare_command(&image, &oem, &out, &extra).output().unwrap();
+        let err = String::from_utf8_lossy(&run.stderr);
+        assert!(!run.status.success(), "{name}: the prepare succeeded");
+        assert!(err.contains("Windows Setup:") && err.contains(message), "{name}: {err}");
+        assert!(err.contains("powered off during stage setup"), "{name}: {err}");
+        assert!(!out.exists(), "{name}: an image was sealed");
+    }
+    eprintln!("four refusals: {:.0} s", started.elapsed().as_secs_f64());
+}
+
+/// `--dry-run` on any file named as an ISO: both command lines, each starting
+/// with its program, and with UEFI the secure-boot code, SMM and a TPM on the
+/// swtpm socket; everything it would attach is written, nothing runs.
+#[test]
+fn dry_run_writes_what_it_would_attach_and_prints_both_command_lines() {
+    let Some(_image) = standin_image("dry_run_writes_what_it_would_attach_and_prints_both_command_lines") else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let iso = dir.path().join("X.iso");
+    std::fs::write(&iso, b"not really an ISO").unwrap();
+    let oem = oem_folder(dir.path(), &"7f".repeat(32));
+    let out = dir.path().join("golden.qcow2");
+    let run = arena()
+        .args(["vm", "prepare", "--dry-run", "--firmware", "uefi", "--iso"])
+        .arg(&iso)
+        .arg("--oem")
+        .arg(&oem)
+        .arg("--out")
+        .arg(&out)
+        .output()
+        .unwrap();
+    let said = String::from_utf8_lossy(&run.stdout);
+    assert!(run.status.success(), "{said}\n{}", String::from_utf8_lossy(&run.stderr));
+    let lines: Vec<&str> = said.lines().collect();
+    assert_eq!(lines.len(), 2, "{said}");
+    assert!(lines[0].starts_with("swtpm socket --tpm2"), "{said}");
+    let swtpm_socket = arena_host::vm::prepare::work_dir(&out).join("swtpm.sock");
+    assert!(lines[0].contains(&format!("type=unixio,path={}", swtpm_socket.display())), "{said}");
+    let q = lines[1];
+    assert!(q.starts_with("qemu-system-x86_64 "), "{said}");
+    assert!(q.contains(",smm=on") && q.contains("OVMF_CODE_4M.secboot.fd") && q.contains("property=secure,value=on"));
+    assert!(q.contains(&format!("-chardev socket,id=chrtpm,path={}", swtpm_socket.display())), "{q}");
+    assert!(q.contains("-tpmdev emulator,id=tpm0,chardev=chrtpm -device tpm-tis,tpmdev=tpm0"), "{q}");
+    let work = arena_host::vm::prepare::work_dir(&out);
+    for file in ["autounattend.xml", "oem-media.iso", "uefi-vars.qcow2"] {
+        assert!(work.join(file).is_file(), "{file} was not written");
+    }
+    // With TPM and Secure Boot there are no bypass keys; the disk is GPT.
+    let answer = std::fs::read_to_string(work.join("autounattend.xml")).unwrap();
+    assert!(!answer.contains("LabConfig") && answer.contains("<Type>EFI</Type>"), "{answer}");
+    assert!(!out.exists() && qemus_naming(&dir.path().display().to_string()).is_empty());
+}
+
+/// The UEFI machine as prepare runs it (OVMF's secure-boot build with
+/// Microsoft's keys, SMM, locked flash, a TPM 2.0 from swtpm) starts under
+/// software emulation, the firmware draws, and QEMU reports the TPM on the
+/// emulator backend. (The stand-in boots with SYSLINUX only, so nothing is
+/// installed on this path: see docs/vm-standin.md.)
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_uefi_machine_starts_with_secure_boot_firmware_and_a_swtpm_tpm() {
+    let Some(image) = standin_image("the_uefi_machine_starts_with_secure_boot_firmware_and_a_swtpm_tpm") else {
+        return;
+    };
+    let uefi = match arena_host::vm::Uefi::debian_secure_boot() {
+        Ok(uefi) => uefi,
+        Err(err) => {
+            assert!(std::env::var("ARENA_REQUIRE_QEMU").as_deref() != Ok("1"), "{err}");
+            eprintln!("SKIPPED: the_uefi_machine_starts_with_secure_boot_firmware_and_a_swtpm_tpm: {err}");
+            return;
+        }
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let mut config = config(&image.golden, &dir.path().join("vm"), "t-uefi");
+    config.machine = "q35".into();
+    config.uefi = Some(uefi);
+    config.tpm = true;
+    let mut vm = Vm::start(&config, Boot::Fresh).await.unwrap();
+    assert!(vm.spec.args().iter().any(|a| a.to_string_lossy().contains("smm=on")));
+    let tpm = vm.qmp.hmp("info tpm", Duration::from_secs(10)).await.unwrap();
+    assert!(tpm.contains("tpm-tis") && tpm.contains("emulator"), "{tpm}");
+    // The firmware runs: its screen is drawn within a minute.
+    let deadline = Instant::now() + Duration::from_secs(60);
+    loop {
+        if vm.screendump().await.is_ok_and(|d| !d.black) {
+            break;
+        }
+        assert!(Instant::now() < deadline, "OVMF drew nothing in 60 s");
+        tokio::time::sleep(Duration::from_millis(500)).await;
+    }
+    assert!(vm.exited().is_none());
+    vm.kill().await;
+    assert!(dir.path().join("vm/tpm").is_dir() && dir.path().join("vm").join(arena_host::vm::UEFI_VARS_FILE).is_file());
+}
+
+/// A VM folder that holds anything and is not ours is refused before anything
+/// in it changes (`arena vm start --dir`, `arena run --vm-dir`).
+#[test]
+fn a_foreign_folder_is_never_used_as_a_vm_folder() {
+    let Some(image) = standin_image("a_foreign_folder_is_never_used_as_a_vm_folder") else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let foreign = dir.path().join("mine");
+    std::fs::create_dir_all(&foreign).unwrap();
+    for name in ["overlay.qcow2", "qmp.sock", "control.sock", "qemu.log", "serial.log"] {
+        std::fs::write(foreign.join(name), b"precious").unwrap();
+    }
+    let start = arena()
+        .args(["vm", "start", "--dir"])
+        .arg(&foreign)
+        .arg("--image")
+        .arg(&image.golden)
+        .args(VM_FLAGS)
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&start.stderr);
+    assert!(!start.status.success() && err.contains("is not a VM folder of arena's"), "{err}");
+    let run = arena()
+        .args(["run", "--vms", "1", "--tasks"])
+        .arg(stub_index())
+        .arg("--vm-image")
+        .arg(&image.golden)
+        .arg("--vm-dir")
+        .arg(&foreign)
+        .args(VM_FLAGS)
+        .arg("--out")
+        .arg(dir.path().join("out"))
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&run.stderr);
+    assert!(!run.status.success() && err.contains("is not a VM folder of arena's"), "{err}");
+    for name in ["overlay.qcow2", "qmp.sock", "control.sock", "qemu.log", "serial.log"] {
+        assert_eq!(std::fs::read(foreign.join(name)).unwrap(), b"precious", "{name} was changed");
+    }
+    assert!(!foreign.join(arena_host::vm::DIR_MARKER).exists());
+    // An empty folder becomes ours.
+    let empty = dir.path().join("empty");
+    std::fs::create_dir_all(&empty).unwrap();
+    arena_host::vm::claim_dir(&empty).unwrap();
+    assert!(empty.join(arena_host::vm::DIR_MARKER).is_file());
+    assert!(qemus_naming(&dir.path().display().to_string()).is_empty());
 }
 
 #[test]

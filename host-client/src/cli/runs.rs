@@ -387,7 +387,7 @@ pub async fn run(conn: &Connection, args: RunArgs) -> anyhow::Result<ExitCode> {
     let fleet = match &args.vm_image {
         Some(image) => {
             let dir = args.vm_dir.clone().unwrap_or_else(|| args.out.join("vms"));
-            let template = args.vm.config(image, &dir, "vm", conn.resolve_token()?);
+            let template = args.vm.config(image, &dir, "vm", conn.resolve_token()?)?;
             let configs = crate::vm::fleet::configs(&template, args.vms.max(1));
             emit(&format!("booting {} VM(s) on {}\n", configs.len(), image.display()))?;
             let fleet = crate::vm::fleet::VmFleet::boot(configs, args.reset).await?;

@@ -18,10 +18,11 @@ use clap::{Args, Subcommand, ValueEnum};
 
 use super::{emit, parse_seconds, Connection};
 use crate::vm::fleet::ResetPolicy;
-use crate::vm::prepare::{self, PrepareEvent, PrepareOptions};
+use crate::vm::prepare::{self, Answer, PrepareEvent, PrepareOptions, Stage, StageTimeouts};
 use crate::vm::qemu::{Accel, DiskBus, NicModel};
 use crate::vm::qmp::Qmp;
-use crate::vm::{Boot, Vm, VmConfig, READY_SNAPSHOT};
+use crate::vm::unattend::{AnswerOptions, FirmwareKind, ImageChoice, Uac};
+use crate::vm::{Boot, Uefi, Vm, VmConfig, READY_SNAPSHOT};
 
 /// `--vm-accel`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
@@ -53,12 +54,29 @@ pub struct VmArgs {
     pub vm_nic: NicModel,
     #[arg(long, value_enum, default_value_t = AccelArg::Auto)]
     pub vm_accel: AccelArg,
-    /// Boot with UEFI: OVMF's code file (read-only), e.g. Debian's ovmf package's OVMF_CODE_4M.fd.
+    /// The firmware: `bios` (SeaBIOS), or `uefi`: OVMF with Secure Boot
+    /// (Debian's ovmf: OVMF_CODE_4M.secboot.fd with SMM, OVMF_VARS_4M.ms.fd with Microsoft's keys).
+    #[arg(long, value_enum, default_value_t = FirmwareKind::Bios)]
+    pub vm_firmware: FirmwareKind,
+    /// UEFI with this OVMF code file instead of Debian's secure-boot build (implies --vm-firmware uefi).
     #[arg(long, value_name = "FILE", requires = "vm_uefi_vars")]
     pub vm_uefi_code: Option<PathBuf>,
     /// The UEFI variables template each VM copies (OVMF_VARS_4M.fd, or the one the image was installed with).
     #[arg(long, value_name = "FILE", requires = "vm_uefi_code")]
     pub vm_uefi_vars: Option<PathBuf>,
+    /// Whether --vm-uefi-code is a secure-boot build (it then runs with SMM and locked flash).
+    #[arg(long, requires = "vm_uefi_code")]
+    pub vm_uefi_secure_boot: bool,
+    /// A TPM 2.0 from swtpm (state in each VM's folder) [default: on with UEFI].
+    #[arg(long, value_name = "on|off")]
+    pub vm_tpm: Option<OnOff>,
+    /// Under KVM, show the processor's virtualisation extensions (VMX) to the guest
+    /// (hidden by default, so Windows does not turn on virtualisation-based security).
+    #[arg(long)]
+    pub vm_nested: bool,
+    /// swtpm [default: on PATH].
+    #[arg(long, value_name = "PATH")]
+    pub swtpm: Option<PathBuf>,
     /// The guest server's port inside the VM.
     #[arg(long, default_value_t = 5000, value_name = "PORT")]
     pub vm_guest_port: u16,
@@ -76,9 +94,35 @@ pub struct VmArgs {
     pub qemu_img: Option<PathBuf>,
 }
 
+/// `on` or `off`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum OnOff {
+    On,
+    Off,
+}
+
 impl VmArgs {
+    /// The UEFI firmware these options ask for, if any.
+    ///
+    /// # Errors
+    ///
+    /// `--vm-firmware uefi` without Debian's ovmf files.
+    pub fn uefi(&self) -> anyhow::Result<Option<Uefi>> {
+        Ok(match (&self.vm_uefi_code, &self.vm_uefi_vars) {
+            (Some(code), Some(vars)) => {
+                Some(Uefi { code: code.clone(), vars_template: vars.clone(), secure_boot: self.vm_uefi_secure_boot })
+            }
+            _ if self.vm_firmware == FirmwareKind::Uefi => Some(Uefi::debian_secure_boot()?),
+            _ => None,
+        })
+    }
+
     /// A VM config for `golden` in `dir`.
-    pub fn config(&self, golden: &Path, dir: &Path, name: &str, token: Option<String>) -> VmConfig {
+    ///
+    /// # Errors
+    ///
+    /// The firmware asked for is not installed.
+    pub fn config(&self, golden: &Path, dir: &Path, name: &str, token: Option<String>) -> anyhow::Result<VmConfig> {
         let mut config = VmConfig::new(golden, dir, name);
         config.qemu = self.qemu.clone();
         config.qemu_img = self.qemu_img.clone();
@@ -92,12 +136,19 @@ impl VmArgs {
             AccelArg::Kvm => Some(Accel::Kvm),
             AccelArg::Tcg => Some(Accel::Tcg),
         };
-        config.uefi = self.vm_uefi_code.clone().zip(self.vm_uefi_vars.clone());
+        config.uefi = self.uefi()?;
+        config.tpm = match self.vm_tpm {
+            Some(OnOff::On) => true,
+            Some(OnOff::Off) => false,
+            None => config.uefi.is_some(),
+        };
+        config.swtpm = self.swtpm.clone();
+        config.nested = self.vm_nested;
         config.guest_port = self.vm_guest_port;
         config.boot_timeout = self.vm_boot_timeout;
         config.vnc = self.vm_vnc;
         config.token = token;
-        config
+        Ok(config)
     }
 }
 
@@ -129,8 +180,9 @@ pub enum VmCommand {
         /// Boot the overlay already in DIR (from its `ready` snapshot when it has one) instead of a new one.
         #[arg(long)]
         reuse: bool,
+        /// (Boxed: the VM options make the variant large.)
         #[command(flatten)]
-        vm: VmArgs,
+        vm: Box<VmArgs>,
     },
     /// Save the running VM in DIR as snapshot NAME (memory and disk).
     Snapshot {
@@ -158,32 +210,105 @@ pub enum VmCommand {
         #[arg(long, default_value = "120", value_parser = parse_seconds, value_name = "SECONDS")]
         grace: Duration,
     },
-    /// Make a golden image from an installer ISO and an OEM folder (`arena prep stage`);
-    /// started again after an interruption, it goes on from its stage.
-    Prepare {
-        #[arg(long, value_name = "ISO", required_unless_present = "status")]
-        iso: Option<PathBuf>,
-        /// The folder `arena prep stage` filled.
-        #[arg(long, value_name = "DIR", required_unless_present = "status")]
-        oem: Option<PathBuf>,
-        /// An answer file shown to the installer as autounattend.xml on removable media.
-        #[arg(long, value_name = "FILE")]
-        answer: Option<PathBuf>,
-        /// The golden image to write (read-only when done).
-        #[arg(long, value_name = "IMAGE")]
-        out: PathBuf,
-        /// The disk's size.
-        #[arg(long, default_value = "64G")]
-        size: String,
-        /// How long the guest has to shut down after the power button.
-        #[arg(long, default_value = "300", value_parser = parse_seconds, value_name = "SECONDS")]
-        shutdown_timeout: Duration,
-        /// Only say which stage a prepare of --out is at.
-        #[arg(long)]
-        status: bool,
-        #[command(flatten)]
-        vm: VmArgs,
-    },
+    /// Make a golden image from an installer ISO and an OEM folder (`arena prep stage`),
+    /// with an answer file written from the options below; started again after an
+    /// interruption, it goes on from the last safe stage.
+    Prepare(Box<PrepareArgs>),
+}
+
+/// `arena vm prepare`.
+#[derive(Debug, Clone, Args)]
+pub struct PrepareArgs {
+    #[arg(long, value_name = "ISO", required_unless_present = "status")]
+    pub iso: Option<PathBuf>,
+    /// The folder `arena prep stage` filled.
+    #[arg(long, value_name = "DIR", required_unless_present = "status")]
+    pub oem: Option<PathBuf>,
+    /// Your own answer file instead of the generated one (put on the OEM media as autounattend.xml).
+    #[arg(long, value_name = "FILE")]
+    pub answer: Option<PathBuf>,
+    /// The golden image to write (read-only when done).
+    #[arg(long, value_name = "IMAGE")]
+    pub out: PathBuf,
+    /// The disk's size (Windows 11 Setup wants 64 GB at least).
+    #[arg(long, default_value = "64G")]
+    pub size: String,
+    /// The firmware: `uefi` is OVMF with Secure Boot and Microsoft's keys, SMM and a
+    /// TPM 2.0 from swtpm, as a Windows 11 PC; `bios` is SeaBIOS, with Setup's
+    /// LabConfig bypass keys in the answer file.
+    #[arg(long, value_enum, default_value_t = FirmwareKind::Bios)]
+    pub firmware: FirmwareKind,
+    /// The image to install, by edition name as the ISO lists it ("Windows 11 Pro").
+    #[arg(long, value_name = "NAME", conflicts_with = "image_index")]
+    pub edition: Option<String>,
+    /// The image to install, by index in install.wim/install.esd [default: 1].
+    #[arg(long, value_name = "N")]
+    pub image_index: Option<u32>,
+    /// A product key, for editions that need one (XXXXX-XXXXX-XXXXX-XXXXX-XXXXX).
+    #[arg(long, value_name = "KEY")]
+    pub product_key: Option<String>,
+    /// The local administrator account that logs on automatically (WAA's is Docker).
+    #[arg(long, default_value = "Docker")]
+    pub user: String,
+    /// Its password (WAA's is empty).
+    #[arg(long, default_value = "")]
+    pub password: String,
+    #[arg(long, default_value = "en-US", value_name = "TAG")]
+    pub locale: String,
+    /// The input locale (0409:00000409 is US English).
+    #[arg(long, default_value = "0409:00000409", value_name = "LOCALE")]
+    pub keyboard: String,
+    /// A Windows time zone name.
+    #[arg(long, default_value = "UTC", value_name = "NAME")]
+    pub timezone: String,
+    /// The computer's name (* lets Windows choose one).
+    #[arg(long, default_value = "*", value_name = "NAME")]
+    pub computer_name: String,
+    /// User Account Control: off as in WAA's and dockur's images (docs/compatibility.md).
+    #[arg(long, value_enum, default_value_t = Uac::Off)]
+    pub uac: Uac,
+    /// A stage's deadline, STAGE=DURATION (setup is per reboot; 90m, 2h, 300s); repeatable.
+    /// Stages: setup, oobe, first-logon, oem-install, healthy, shut-down.
+    #[arg(long, value_name = "STAGE=DURATION")]
+    pub stage_timeout: Vec<String>,
+    /// The same as --stage-timeout shut-down=SECONDS.
+    #[arg(long, value_parser = parse_seconds, value_name = "SECONDS")]
+    pub shutdown_timeout: Option<Duration>,
+    /// Write the answer file, the OEM media and the UEFI variables into <out>.prepare/,
+    /// print the swtpm and QEMU command lines, and stop.
+    #[arg(long)]
+    pub dry_run: bool,
+    /// Only say which stage a prepare of --out is at.
+    #[arg(long)]
+    pub status: bool,
+    /// xorriso, which builds the OEM media [default: on PATH].
+    #[arg(long, value_name = "PATH")]
+    pub xorriso: Option<PathBuf>,
+    #[command(flatten)]
+    pub vm: VmArgs,
+}
+
+impl PrepareArgs {
+    fn answer(&self, uefi: bool, tpm: bool) -> AnswerOptions {
+        let mut a = AnswerOptions::new();
+        a.image = match (&self.edition, self.image_index) {
+            (Some(name), _) => ImageChoice::Name(name.clone()),
+            (None, Some(n)) => ImageChoice::Index(n),
+            (None, None) => ImageChoice::Index(1),
+        };
+        a.product_key = self.product_key.clone();
+        a.user = self.user.clone();
+        a.password = self.password.clone();
+        a.locale = self.locale.clone();
+        a.keyboard = self.keyboard.clone();
+        a.timezone = self.timezone.clone();
+        a.computer_name = self.computer_name.clone();
+        a.uac = self.uac;
+        a.firmware = if uefi { FirmwareKind::Uefi } else { FirmwareKind::Bios };
+        // Setup checks for a TPM 2.0 and Secure Boot capable firmware; the keys only where they are absent.
+        a.bypass_checks = !(uefi && tpm);
+        a
+    }
 }
 
 /// `--reset` of `arena run`.
@@ -250,58 +375,95 @@ pub async fn run(conn: &Connection, args: VmCommandArgs) -> anyhow::Result<ExitC
             emit("the VM shut down\n")?;
             Ok(ExitCode::SUCCESS)
         }
-        VmCommand::Prepare { iso, oem, answer, out, size, shutdown_timeout, status, vm } => {
-            if status {
-                return Ok(match prepare::read_state(&out)? {
-                    Some(state) => {
-                        emit(&format!(
-                            "{}: stage {} ({} reboots so far)\n",
-                            out.display(),
-                            state.stage.name(),
-                            state.reboots
-                        ))?;
-                        ExitCode::SUCCESS
-                    }
-                    None if out.exists() => {
-                        emit(&format!("{}: no prepare in progress; the image exists\n", out.display()))?;
-                        ExitCode::SUCCESS
-                    }
-                    None => {
-                        emit(&format!("{}: no prepare was started\n", out.display()))?;
-                        ExitCode::from(1)
-                    }
-                });
-            }
-            let (Some(iso), Some(oem)) = (iso, oem) else { anyhow::bail!("arena vm prepare needs --iso and --oem") };
-            let token = match conn.resolve_token()? {
-                Some(token) => Some(token),
-                None => read_oem_token(&oem),
-            };
-            let options = PrepareOptions {
-                iso,
-                oem,
-                answer,
-                out: out.clone(),
-                size,
-                vm: vm.config(&out, &out, "prepare", token),
-                shutdown_timeout,
-            };
-            let golden = prepare::prepare(&options, |event| {
-                let line = match event {
-                    PrepareEvent::Stage { stage, resumed: true } => format!("stage {} (resumed)\n", stage.name()),
-                    PrepareEvent::Stage { stage, resumed: false } => format!("stage {}\n", stage.name()),
-                    PrepareEvent::QemuStarted { pid, accel } => {
-                        format!("QEMU started (pid {}, {accel})\n", pid.map(|p| p.to_string()).unwrap_or_default())
-                    }
-                    PrepareEvent::Reboot { count } => format!("the VM rebooted ({count})\n"),
-                };
-                let _ = emit(&line);
-            })
-            .await?;
-            emit(&format!("golden image ready: {}\n", golden.display()))?;
-            Ok(ExitCode::SUCCESS)
-        }
+        VmCommand::Prepare(args) => prepare_command(conn, *args).await,
     }
+}
+
+async fn prepare_command(conn: &Connection, args: PrepareArgs) -> anyhow::Result<ExitCode> {
+    let out = args.out.clone();
+    if args.status {
+        return Ok(match prepare::read_state(&out)? {
+            Some(state) => {
+                emit(&format!(
+                    "{}: stage {} ({} reboots, {} restarts so far)\n",
+                    out.display(),
+                    state.stage.name(),
+                    state.reboots,
+                    state.restarts
+                ))?;
+                ExitCode::SUCCESS
+            }
+            None if out.exists() => {
+                emit(&format!("{}: no prepare in progress; the image exists\n", out.display()))?;
+                ExitCode::SUCCESS
+            }
+            None => {
+                emit(&format!("{}: no prepare was started\n", out.display()))?;
+                ExitCode::from(1)
+            }
+        });
+    }
+    let (Some(iso), Some(oem)) = (args.iso.clone(), args.oem.clone()) else {
+        anyhow::bail!("arena vm prepare needs --iso and --oem")
+    };
+    let token = match conn.resolve_token()? {
+        Some(token) => Some(token),
+        None => read_oem_token(&oem),
+    };
+    let mut vm = args.vm.clone();
+    if args.firmware == FirmwareKind::Uefi {
+        vm.vm_firmware = FirmwareKind::Uefi;
+    }
+    let config = vm.config(&out, &out, "prepare", token)?;
+    let mut timeouts = StageTimeouts::default();
+    if let Some(grace) = args.shutdown_timeout {
+        timeouts.0.insert(Stage::ShutDown, grace);
+    }
+    for text in &args.stage_timeout {
+        timeouts.set(text).map_err(anyhow::Error::msg)?;
+    }
+    let answer = match &args.answer {
+        Some(file) => Answer::File(file.clone()),
+        None => Answer::Generated(args.answer(config.uefi.is_some(), config.tpm)),
+    };
+    let options = PrepareOptions {
+        iso,
+        oem,
+        answer,
+        out: out.clone(),
+        size: args.size.clone(),
+        vm: config,
+        timeouts,
+        xorriso: args.xorriso.clone(),
+    };
+    if args.dry_run {
+        let lines = prepare::dry_run(&options)?;
+        let dir = prepare::work_dir(&out);
+        tracing::info!(dir = %dir.display(), "dry run: the answer file, the OEM media and the firmware variables are written");
+        for line in lines {
+            emit(&format!("{line}\n"))?;
+        }
+        return Ok(ExitCode::SUCCESS);
+    }
+    let golden = prepare::prepare(&options, |event| {
+        let line = match event {
+            PrepareEvent::Stage { stage, resumed, limit } => format!(
+                "stage {}{}{}\n",
+                stage.name(),
+                if resumed { " (resumed)" } else { "" },
+                limit.map(|l| format!(" (deadline {} s)", l.as_secs())).unwrap_or_default()
+            ),
+            PrepareEvent::QemuStarted { pid, accel } => {
+                format!("QEMU started (pid {}, {accel})\n", pid.map(|p| p.to_string()).unwrap_or_default())
+            }
+            PrepareEvent::Reboot { count } => format!("the VM rebooted ({count})\n"),
+            PrepareEvent::StartOver { from, why } => format!("starting over from stage {}: {why}\n", from.name()),
+        };
+        let _ = emit(&line);
+    })
+    .await?;
+    emit(&format!("golden image ready: {}\n", golden.display()))?;
+    Ok(ExitCode::SUCCESS)
 }
 
 /// The token `arena prep stage` put in the OEM folder, for waiting on the guest it installs.
@@ -319,7 +481,7 @@ async fn start(
     reuse: bool,
     args: &VmArgs,
 ) -> anyhow::Result<ExitCode> {
-    let mut config = args.config(image, dir, "vm", conn.resolve_token()?);
+    let mut config = args.config(image, dir, "vm", conn.resolve_token()?)?;
     config.host_port = port;
     config.host_addr = bind;
     let has_ready = reuse

@@ -326,7 +326,41 @@ pub struct EpisodeResult {
     /// The VM the task ran in and the snapshot it started from, when the run
     /// owns its VMs (`arena run --vm-image`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub vm: Option<crate::vm::VmStart>,
+    pub vm: Option<VmStart>,
+}
+
+/// Where a task's VM started from, recorded in `episode.json`. A plain record
+/// of the results: the VM code (`crate::vm`) fills it, and neither the results
+/// nor the runner depend on the VM code.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct VmStart {
+    /// The VM's name.
+    pub vm: String,
+    /// The snapshot restored before the task, or `None` when the task found the
+    /// VM as the previous one left it (`--reset never`, or between resets).
+    pub snapshot: Option<String>,
+    /// Restoring the snapshot and waiting for the guest's health, in milliseconds.
+    pub restore_ms: u64,
+    /// Whether the VM was rebuilt (QEMU started again) before this task.
+    #[serde(default)]
+    pub rebuilt: bool,
+    /// QEMU's display against the guest's screenshot after the restore.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub screen: Option<ScreenCheck>,
+}
+
+/// How QEMU's own view of the screen compares with the guest's screenshot.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ScreenCheck {
+    pub dump_width: u32,
+    pub dump_height: u32,
+    pub dump_black: bool,
+    pub guest_width: u32,
+    pub guest_height: u32,
+    pub guest_black: bool,
+    /// What disagrees, when something does: a black guest capture over a lit
+    /// display is a lock screen, UAC's secure desktop or a capture failure.
+    pub problem: Option<String>,
 }
 
 fn one() -> u32 {

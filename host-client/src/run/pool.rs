@@ -20,9 +20,9 @@ use tokio::task::JoinSet;
 use tokio_util::sync::CancellationToken;
 
 use crate::client::GuestClient;
+use crate::results::VmStart;
 use crate::results::{EpisodeResult, EpisodeStatus};
 use crate::task::Task;
-use crate::vm::VmStart;
 
 /// Runs one task on one guest. Implemented by the episode runner; tests use fakes.
 #[async_trait::async_trait]

@@ -58,7 +58,7 @@ impl TaskRunner for Fake {
         guest: &GuestClient,
         task: &Task,
         attempt: u32,
-        _vm: Option<crate::vm::VmStart>,
+        _vm: Option<crate::results::VmStart>,
     ) -> EpisodeResult {
         let url = guest.base_url().to_owned();
         {
@@ -173,7 +173,7 @@ async fn a_guest_that_comes_back_rejoins_the_pool() {
             guest: &GuestClient,
             task: &Task,
             attempt: u32,
-            _vm: Option<crate::vm::VmStart>,
+            _vm: Option<crate::results::VmStart>,
         ) -> EpisodeResult {
             let first = !std::mem::replace(&mut *self.failed.lock().unwrap(), true);
             let status = if first { EpisodeStatus::InfraError("down".into()) } else { EpisodeStatus::Completed };

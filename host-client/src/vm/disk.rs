@@ -90,7 +90,7 @@ impl QemuImg {
         if !meta.is_file() {
             return Err(golden("is not a file".into()));
         }
-        if !meta.permissions().readonly() {
+        if !is_read_only(path, &meta) {
             return Err(golden(format!(
                 "is writable; every VM's overlay depends on it unchanged, so make it read-only first (chmod a-w {})",
                 path.display()
@@ -170,6 +170,19 @@ impl QemuImg {
         Ok(())
     }
 
+    /// Deletes internal snapshot `name` of the qcow2 image `path` (which no QEMU may hold).
+    ///
+    /// # Errors
+    ///
+    /// `qemu-img` fails (no such snapshot, the image is in use).
+    pub fn delete_snapshot(&self, path: &Path, name: &str) -> Result<(), VmError> {
+        self.run(
+            &["snapshot".as_ref(), "-d".as_ref(), name.as_ref(), path.as_os_str()],
+            &format!("deleting snapshot {name} of {}", path.display()),
+        )?;
+        Ok(())
+    }
+
     /// Copies `from` (any format QEMU reads) into a new qcow2 image at `to`.
     ///
     /// # Errors
@@ -181,6 +194,29 @@ impl QemuImg {
             &format!("converting {} to qcow2", from.display()),
         )?;
         Ok(())
+    }
+}
+
+/// Whether `path` cannot be written: it has no write bits, or the system
+/// refuses writing it (`access(W_OK)`: a read-only mount, as a Kubernetes
+/// `readOnly` volume, whose file CSI driver may still show write bits).
+pub fn is_read_only(path: &Path, meta: &std::fs::Metadata) -> bool {
+    if meta.permissions().readonly() {
+        return true;
+    }
+    #[cfg(unix)]
+    {
+        use std::os::unix::ffi::OsStrExt;
+        let Ok(c_path) = std::ffi::CString::new(path.as_os_str().as_bytes()) else { return false };
+        // SAFETY: c_path is a valid NUL-terminated string that lives across the call;
+        // access() only reads it.
+        let writable = unsafe { libc::access(c_path.as_ptr(), libc::W_OK) } == 0;
+        // root may write a file without write bits, but not on a read-only mount: EROFS is what counts.
+        !writable
+    }
+    #[cfg(not(unix))]
+    {
+        false
     }
 }
 

@@ -62,19 +62,7 @@ impl ResetPolicy {
     }
 }
 
-/// How QEMU's own view of the screen compares with the guest's screenshot.
-#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
-pub struct ScreenCheck {
-    pub dump_width: u32,
-    pub dump_height: u32,
-    pub dump_black: bool,
-    pub guest_width: u32,
-    pub guest_height: u32,
-    pub guest_black: bool,
-    /// What disagrees, when something does: a black guest capture over a lit
-    /// display is a lock screen, UAC's secure desktop or a capture failure.
-    pub problem: Option<String>,
-}
+pub use crate::results::ScreenCheck;
 
 /// Takes QEMU's screendump and the guest's own screenshot and compares them.
 ///
@@ -158,6 +146,10 @@ impl VmFleet {
     ///
     /// The first VM that fails (the others are stopped).
     pub async fn boot(configs: Vec<VmConfig>, reset: ResetPolicy) -> Result<VmFleet, VmError> {
+        // `--vm-dir` holds the VMs' folders: it must be ours too (or new, or empty).
+        if let Some(parent) = configs.first().and_then(|c| c.dir.parent()) {
+            super::claim_dir(parent)?;
+        }
         let mut set = tokio::task::JoinSet::new();
         for (i, mut config) in configs.into_iter().enumerate() {
             set.spawn(async move { (i, boot_ready(&mut config).await, config) });

@@ -19,6 +19,8 @@ pub mod fleet;
 pub mod prepare;
 pub mod qemu;
 pub mod qmp;
+pub mod tpm;
+pub mod unattend;
 
 use std::net::{IpAddr, Ipv4Addr, SocketAddr, TcpListener};
 use std::path::{Path, PathBuf};
@@ -32,6 +34,11 @@ use crate::prep::{wait_healthy, PrepError, WaitEvent};
 use disk::{ImageInfo, QemuImg};
 use qemu::{Accel, DiskBus, Firmware, FolderDrive, NicModel, VmSpec};
 use qmp::Qmp;
+
+/// The file that marks a folder as one of our VM folders. A folder without it
+/// that holds anything is refused: starting a VM replaces the overlay, sockets
+/// and logs in its folder, and those must never be someone else's files.
+pub const DIR_MARKER: &str = ".arena-vm";
 
 /// A VM's overlay of the golden image, in its folder.
 pub const OVERLAY_FILE: &str = "overlay.qcow2";
@@ -86,8 +93,14 @@ pub struct VmConfig {
     pub machine: String,
     pub disk_bus: DiskBus,
     pub nic: NicModel,
-    /// `None`: OVMF is not used (SeaBIOS); `Some((code, vars template))`.
-    pub uefi: Option<(PathBuf, PathBuf)>,
+    /// `None`: OVMF is not used (SeaBIOS).
+    pub uefi: Option<Uefi>,
+    /// A TPM 2.0 from swtpm, its state in the VM's folder.
+    pub tpm: bool,
+    /// `swtpm` [default: on PATH].
+    pub swtpm: Option<PathBuf>,
+    /// Expose VMX under KVM (nested virtualisation; Windows may then turn on VBS).
+    pub nested: bool,
     /// `None`: KVM when it works, else software emulation.
     pub accel: Option<Accel>,
     pub host_addr: IpAddr,
@@ -116,6 +129,9 @@ impl VmConfig {
             disk_bus: DiskBus::Ahci,
             nic: NicModel::E1000e,
             uefi: None,
+            tpm: false,
+            swtpm: None,
+            nested: false,
             accel: None,
             host_addr: IpAddr::V4(Ipv4Addr::LOCALHOST),
             host_port: 0,
@@ -151,14 +167,15 @@ impl VmConfig {
     ) -> Result<(VmSpec, String), VmError> {
         let firmware = match &self.uefi {
             None => Firmware::Bios,
-            Some((code, template)) => {
-                let vars = self.dir.join("uefi-vars.qcow2");
+            Some(uefi) => {
+                let vars = self.dir.join(UEFI_VARS_FILE);
                 if !vars.exists() || fresh_vars {
-                    img.convert_to_qcow2(template, &vars)?;
+                    img.convert_to_qcow2(&uefi.vars_template, &vars)?;
                 }
-                Firmware::Uefi { code: code.clone(), vars }
+                Firmware::Uefi { code: uefi.code.clone(), vars, secure_boot: uefi.secure_boot }
             }
         };
+        let tpm_socket = self.tpm.then(|| self.dir.join(tpm::SOCKET));
         let host_port = pick_port(self.host_addr, self.host_port)?;
         let (accel, accel_note) = match self.accel {
             Some(accel) => (accel, format!("{accel:?} (chosen)")),
@@ -182,7 +199,9 @@ impl VmConfig {
             memory_mib: self.memory_mib,
             cpus: self.cpus,
             accel,
+            nested: self.nested,
             firmware,
+            tpm_socket,
             host_addr: self.host_addr,
             host_port,
             guest_port: self.guest_port,
@@ -191,6 +210,7 @@ impl VmConfig {
             serial_log: self.dir.join("serial.log"),
             vnc: self.vnc,
             cdrom: None,
+            media: Vec::new(),
             folders: Vec::new(),
             loadvm: None,
         };
@@ -198,23 +218,76 @@ impl VmConfig {
     }
 }
 
-/// Where a task's VM started from, recorded in `episode.json`.
-#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
-pub struct VmStart {
-    /// The VM's name.
-    pub vm: String,
-    /// The snapshot restored before the task, or `None` when the task found the
-    /// VM as the previous one left it (`--reset never`, or between resets).
-    pub snapshot: Option<String>,
-    /// Restoring the snapshot and waiting for the guest's health, in milliseconds.
-    pub restore_ms: u64,
-    /// Whether the VM was rebuilt (QEMU started again) before this task.
-    #[serde(default)]
-    pub rebuilt: bool,
-    /// QEMU's display against the guest's screenshot after the restore.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub screen: Option<fleet::ScreenCheck>,
+/// OVMF for a VM: the firmware code and the variables each VM copies.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Uefi {
+    pub code: PathBuf,
+    pub vars_template: PathBuf,
+    /// The code is a secure-boot build (SMM on, flash locked to SMM).
+    pub secure_boot: bool,
 }
+
+/// Debian's `ovmf` package: the secure-boot build (it needs SMM).
+pub const OVMF_SECBOOT_CODE: &str = "/usr/share/OVMF/OVMF_CODE_4M.secboot.fd";
+/// Debian's `ovmf` package: variables with Microsoft's keys enrolled, so Secure
+/// Boot is on and Windows' boot loader, signed by Microsoft, is trusted.
+pub const OVMF_MS_VARS: &str = "/usr/share/OVMF/OVMF_VARS_4M.ms.fd";
+
+impl Uefi {
+    /// Secure Boot as a Windows 11 PC has it, from Debian's `ovmf`.
+    ///
+    /// # Errors
+    ///
+    /// [`VmError::Missing`] when the files are not there.
+    pub fn debian_secure_boot() -> Result<Uefi, VmError> {
+        for file in [OVMF_SECBOOT_CODE, OVMF_MS_VARS] {
+            if !Path::new(file).is_file() {
+                return Err(VmError::Missing {
+                    program: file.to_owned(),
+                    hint: "install Debian's ovmf package (apt-get install ovmf), or give --vm-uefi-code and --vm-uefi-vars"
+                        .into(),
+                });
+            }
+        }
+        Ok(Uefi { code: OVMF_SECBOOT_CODE.into(), vars_template: OVMF_MS_VARS.into(), secure_boot: true })
+    }
+}
+
+/// The VM's own copy of the UEFI variables (qcow2, so `savevm` includes it).
+pub const UEFI_VARS_FILE: &str = "uefi-vars.qcow2";
+
+/// Makes `dir` a VM folder of ours: creates it with the marker, marks it when
+/// it is empty, accepts it when marked.
+///
+/// # Errors
+///
+/// [`VmError::Invalid`] when it holds anything and has no marker (nothing in
+/// it is touched), or it cannot be created.
+pub fn claim_dir(dir: &Path) -> Result<(), VmError> {
+    let marker = dir.join(DIR_MARKER);
+    if marker.is_file() {
+        return Ok(());
+    }
+    match std::fs::read_dir(dir) {
+        Ok(mut entries) => {
+            if entries.next().is_some() {
+                return Err(VmError::Invalid(format!(
+                    "{} is not empty and is not a VM folder of arena's (it has no {DIR_MARKER}); a VM replaces the overlay, sockets and logs in its folder, so give a new or empty folder (nothing in this one was changed)",
+                    dir.display()
+                )));
+            }
+        }
+        Err(err) if err.kind() == std::io::ErrorKind::NotFound => {
+            std::fs::create_dir_all(dir)
+                .map_err(|source| VmError::Io { what: format!("creating {}", dir.display()), source })?;
+        }
+        Err(source) => return Err(VmError::Io { what: format!("reading {}", dir.display()), source }),
+    }
+    std::fs::write(&marker, b"a VM folder of arena (arena vm start, arena run --vm-dir, arena vm prepare)\n")
+        .map_err(|source| VmError::Io { what: format!("writing {}", marker.display()), source })
+}
+
+pub use crate::results::VmStart;
 
 /// One running QEMU process.
 #[derive(Debug)]
@@ -224,6 +297,8 @@ pub struct Vm {
     child: tokio::process::Child,
     pub qmp: Qmp,
     client: GuestClient,
+    /// The VM's TPM, when it has one.
+    tpm: Option<tpm::Swtpm>,
     /// How the VM runs (`KVM (/dev/kvm)` or why it is software emulation).
     pub accel_note: String,
 }
@@ -250,12 +325,19 @@ impl Vm {
         let qemu = qemu::find_qemu(config.qemu.as_deref())?;
         let img = config.qemu_img()?;
         let info = img.check_golden(&config.golden)?;
-        std::fs::create_dir_all(&config.dir)
-            .map_err(|source| VmError::Io { what: format!("creating {}", config.dir.display()), source })?;
+        claim_dir(&config.dir)?;
         let overlay = config.overlay();
         let mut loadvm = None;
         match &boot {
-            Boot::Fresh => img.create_overlay(&config.golden, &info.format, &overlay)?,
+            Boot::Fresh => {
+                img.create_overlay(&config.golden, &info.format, &overlay)?;
+                // A new machine gets a new TPM.
+                let state = config.dir.join(tpm::STATE_DIR);
+                if state.exists() {
+                    std::fs::remove_dir_all(&state)
+                        .map_err(|source| VmError::Io { what: format!("removing {}", state.display()), source })?;
+                }
+            }
             Boot::Existing | Boot::FromSnapshot(_) => {
                 let o = img.check_overlay(&overlay)?;
                 if let Boot::FromSnapshot(name) = &boot {
@@ -281,7 +363,14 @@ impl Vm {
         let log_err = log
             .try_clone()
             .map_err(|source| VmError::Io { what: format!("opening {}", log_path.display()), source })?;
-        tracing::info!(vm = %config.name, port = spec.host_port, accel = %accel_note, "starting QEMU");
+        let tpm = match &spec.tpm_socket {
+            Some(_) => {
+                let program = tpm::find_swtpm(config.swtpm.as_deref())?;
+                Some(tpm::Swtpm::start(&tpm::SwtpmSpec::in_dir(program, &config.dir)).await?)
+            }
+            None => None,
+        };
+        tracing::info!(vm = %config.name, port = spec.host_port, accel = %accel_note, tpm = tpm.is_some(), "starting QEMU");
         let mut command = tokio::process::Command::new(&spec.qemu);
         command
             .args(spec.args())
@@ -289,18 +378,7 @@ impl Vm {
             .stdout(Stdio::from(log))
             .stderr(Stdio::from(log_err))
             .kill_on_drop(true);
-        // QEMU ends with this program even when it is killed outright, so no VM
-        // outlives the run that owns it. (The signal follows the thread that
-        // started QEMU: a runtime worker, which lives as long as the runtime.)
-        #[cfg(target_os = "linux")]
-        // SAFETY: the closure runs in the child between fork and exec and only
-        // calls prctl, which is async-signal-safe.
-        unsafe {
-            command.pre_exec(|| {
-                libc::prctl(libc::PR_SET_PDEATHSIG, libc::SIGKILL);
-                Ok(())
-            });
-        }
+        die_with_this_process(&mut command);
         let mut child = command
             .spawn()
             .map_err(|source| VmError::Io { what: format!("starting {}", spec.qemu.display()), source })?;
@@ -335,7 +413,7 @@ impl Vm {
         )
         .and_then(|c| c.without_kept_connections())
         .map_err(|err| VmError::Invalid(err.to_string()))?;
-        Ok(Vm { config: config.clone(), spec, child, qmp, client, accel_note })
+        Ok(Vm { config: config.clone(), spec, child, qmp, client, tpm, accel_note })
     }
 
     /// The guest server's URL on this machine.
@@ -461,7 +539,28 @@ impl Vm {
         if tokio::time::timeout(Duration::from_secs(5), self.child.wait()).await.is_err() {
             let _ = self.child.kill().await;
         }
+        if let Some(tpm) = &mut self.tpm {
+            tpm.stop().await;
+        }
     }
+}
+
+/// Makes the child `command` starts (QEMU, swtpm) end with this program even
+/// when it is killed outright, so no VM outlives the run that owns it. (The
+/// signal follows the thread that started the child: a runtime worker, which
+/// lives as long as the runtime.)
+pub(crate) fn die_with_this_process(command: &mut tokio::process::Command) {
+    #[cfg(target_os = "linux")]
+    // SAFETY: the closure runs in the child between fork and exec and only
+    // calls prctl, which is async-signal-safe.
+    unsafe {
+        command.pre_exec(|| {
+            libc::prctl(libc::PR_SET_PDEATHSIG, libc::SIGKILL);
+            Ok(())
+        });
+    }
+    #[cfg(not(target_os = "linux"))]
+    let _ = command;
 }
 
 /// Returns once QEMU reports that the guest can no longer run (an emulation

@@ -1,35 +1,63 @@
 //! `arena vm prepare`: a golden image from an installer ISO.
 //!
 //! A blank disk is booted with the ISO as a CD-ROM (the disk first in the boot
-//! order, so once the installer has made it bootable every reboot lands there),
-//! the OEM folder of `arena prep stage` as a read-only FAT disk, and an
-//! answer file on removable media, where Windows Setup looks for
-//! `autounattend.xml`. The install is followed through QMP (the installer's
-//! reboots) and the guest's staged health; when every component is up the
-//! guest is shut down through ACPI, and the disk becomes the read-only golden
-//! image.
+//! order, so once Setup has made it bootable every reboot lands there) and the
+//! OEM media as a second CD-ROM: an ISO 9660 image (no size cap below what
+//! users stage; Joliet names for Windows) holding `autounattend.xml` at its
+//! root, where Windows Setup's implicit search looks on removable read-only
+//! media, the OEM folder as `OEM\`, and a marker file by which the answer
+//! file's specialize pass finds the drive and copies `OEM\` to `C:\OEM`
+//! ([`super::unattend`]). With `--firmware uefi` the VM has OVMF's secure-boot
+//! build with Microsoft's keys, SMM, and a TPM 2.0 from swtpm.
 //!
-//! Progress is kept in `<out>.prepare/state.json`, so an interrupted prepare
-//! started again with the same arguments goes on from its stage.
+//! The install goes through stages, each with its own deadline
+//! (`--stage-timeout STAGE=DURATION`): `setup` (per reboot, counted over QMP),
+//! `oobe`, `first-logon` and `oem-install` (told by lines `arena-stage: NAME`
+//! that the answer file's commands and `setup.ps1` write to the first serial
+//! port), `healthy` (the guest answers with every component up), then the
+//! guest is saved as a snapshot, shut down through ACPI (`shut-down`), the
+//! snapshot is dropped and the disk becomes the read-only golden image
+//! (`sealed`).
+//!
+//! Progress is kept in `<out>.prepare/state.json`. A resume goes on from the
+//! last boundary that is safe: after `healthy` from the saved snapshot; before
+//! it, Windows' disk is half-installed (a power cut there makes Windows say
+//! "The computer restarted unexpectedly"), so the install starts over from a
+//! blank disk, and says so.
+//!
+//! On every failure the serial log, a screendump and the guest's doctor report
+//! (when it answers) are kept in `<out>.prepare/failures/`.
 
+use std::collections::BTreeMap;
+use std::ffi::OsString;
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
 use serde::{Deserialize, Serialize};
 
 use super::disk::{make_read_only, QemuImg};
-use super::qemu::{self, FolderDrive};
-use super::{Vm, VmConfig, VmError};
+use super::qemu::{self, Accel};
+use super::tpm::{self, SwtpmSpec};
+use super::unattend::{self, AnswerOptions};
+use super::{claim_dir, Vm, VmConfig, VmError, UEFI_VARS_FILE};
 
 /// Where a prepare is.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum Stage {
-    /// The blank disk exists.
+    /// The blank disk and the OEM media exist.
     Created,
-    /// The installer runs (or the installed system's first boots).
-    Installing,
-    /// The guest answered with every component up; it still has to shut down.
+    /// Windows Setup runs (WinPE, then its reboots into the new system).
+    #[serde(alias = "installing")]
+    Setup,
+    /// The specialize pass is done; OOBE runs.
+    Oobe,
+    /// The user logged on; the first logon commands run.
+    FirstLogon,
+    /// `C:\OEM\install.bat` runs `setup.ps1`.
+    OemInstall,
+    /// The guest answered with every component up and was saved as a snapshot;
+    /// it still has to shut down.
     Healthy,
     /// The guest shut down cleanly; the disk has to become the golden image.
     ShutDown,
@@ -37,16 +65,110 @@ pub enum Stage {
     Sealed,
 }
 
+/// The stages a deadline can be set for, in order.
+pub const TIMED_STAGES: &[Stage] =
+    &[Stage::Setup, Stage::Oobe, Stage::FirstLogon, Stage::OemInstall, Stage::Healthy, Stage::ShutDown];
+
 impl Stage {
     pub fn name(self) -> &'static str {
         match self {
             Stage::Created => "created",
-            Stage::Installing => "installing",
+            Stage::Setup => "setup",
+            Stage::Oobe => "oobe",
+            Stage::FirstLogon => "first-logon",
+            Stage::OemInstall => "oem-install",
             Stage::Healthy => "healthy",
             Stage::ShutDown => "shut-down",
             Stage::Sealed => "sealed",
         }
     }
+
+    fn from_name(name: &str) -> Option<Stage> {
+        [
+            Stage::Created,
+            Stage::Setup,
+            Stage::Oobe,
+            Stage::FirstLogon,
+            Stage::OemInstall,
+            Stage::Healthy,
+            Stage::ShutDown,
+            Stage::Sealed,
+        ]
+        .into_iter()
+        .find(|s| s.name() == name)
+    }
+
+    /// Whether the disk is mid-install in this stage (a resume starts over).
+    fn mid_install(self) -> bool {
+        matches!(self, Stage::Setup | Stage::Oobe | Stage::FirstLogon | Stage::OemInstall)
+    }
+}
+
+/// The serial-port line prefix by which the guest tells its stage.
+pub const STAGE_LINE: &str = "arena-stage: ";
+
+/// The snapshot a prepare saves once the guest is healthy, dropped before sealing.
+pub const HEALTHY_SNAPSHOT: &str = "prepare-healthy";
+
+/// Each stage's deadline.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct StageTimeouts(pub BTreeMap<Stage, Duration>);
+
+impl Default for StageTimeouts {
+    /// Windows Setup takes 10-40 minutes per boot under KVM; OOBE a few; the
+    /// OEM install downloads the task apps (the longest part); a shutdown a minute.
+    fn default() -> StageTimeouts {
+        let m = |minutes: u64| Duration::from_secs(minutes * 60);
+        StageTimeouts(BTreeMap::from([
+            (Stage::Setup, m(60)),
+            (Stage::Oobe, m(30)),
+            (Stage::FirstLogon, m(20)),
+            (Stage::OemInstall, m(120)),
+            (Stage::Healthy, m(15)),
+            (Stage::ShutDown, m(5)),
+        ]))
+    }
+}
+
+impl StageTimeouts {
+    pub fn get(&self, stage: Stage) -> Duration {
+        self.0.get(&stage).copied().unwrap_or(Duration::from_secs(3600))
+    }
+
+    /// Sets one from `STAGE=DURATION` (`90m`, `2h`, `300s` or `300`).
+    ///
+    /// # Errors
+    ///
+    /// A message naming the stages or the duration's forms.
+    pub fn set(&mut self, text: &str) -> Result<(), String> {
+        let names: Vec<&str> = TIMED_STAGES.iter().map(|s| s.name()).collect();
+        let (stage, duration) = text
+            .split_once('=')
+            .ok_or_else(|| format!("--stage-timeout {text:?}: use STAGE=DURATION, e.g. setup=90m"))?;
+        let stage = Stage::from_name(stage.trim())
+            .filter(|s| TIMED_STAGES.contains(s))
+            .ok_or_else(|| format!("--stage-timeout {text:?}: the stages are {}", names.join(", ")))?;
+        let duration = parse_duration(duration.trim()).ok_or_else(|| {
+            format!("--stage-timeout {text:?}: a duration is a number with s, m or h (300s, 90m, 2h)")
+        })?;
+        self.0.insert(stage, duration);
+        Ok(())
+    }
+}
+
+fn parse_duration(text: &str) -> Option<Duration> {
+    let (number, unit) = match text.char_indices().find(|(_, c)| !c.is_ascii_digit()) {
+        Some((i, _)) => text.split_at(i),
+        None => (text, "s"),
+    };
+    let n: u64 = number.parse().ok()?;
+    let seconds = match unit {
+        "s" => n,
+        "m" => n.checked_mul(60)?,
+        "h" => n.checked_mul(3600)?,
+        _ => return None,
+    };
+    (seconds > 0).then(|| Duration::from_secs(seconds))
 }
 
 /// `state.json`.
@@ -62,9 +184,19 @@ pub struct State {
     /// Reboots seen so far.
     #[serde(default)]
     pub reboots: u32,
+    /// How often the install started over from a blank disk.
+    #[serde(default)]
+    pub restarts: u32,
     /// Seconds spent in each stage so far.
     #[serde(default)]
-    pub seconds: std::collections::BTreeMap<String, f64>,
+    pub seconds: BTreeMap<String, f64>,
+}
+
+/// The answer file: generated from options, or the user's own.
+#[derive(Debug, Clone)]
+pub enum Answer {
+    Generated(AnswerOptions),
+    File(PathBuf),
 }
 
 /// What `arena vm prepare` was given.
@@ -73,29 +205,30 @@ pub struct PrepareOptions {
     pub iso: PathBuf,
     /// The folder `arena prep stage` wrote.
     pub oem: PathBuf,
-    /// An answer file, shown to the installer as `autounattend.xml` on removable media.
-    pub answer: Option<PathBuf>,
+    pub answer: Answer,
     /// The golden image to make.
     pub out: PathBuf,
     /// The disk's size (`qemu-img` syntax: `64G`).
     pub size: String,
-    /// Memory, processors, buses, firmware, token and the boot timeout (the
-    /// install's limit); its `golden` and `dir` are not used.
+    /// Memory, processors, buses, firmware, TPM and token; its `golden` and `dir` are not used.
     pub vm: VmConfig,
-    /// How long the guest has to shut down after the power button.
-    pub shutdown_timeout: Duration,
+    pub timeouts: StageTimeouts,
+    /// `xorriso` [default: on PATH].
+    pub xorriso: Option<PathBuf>,
 }
 
 /// What a prepare tells as it goes.
 #[derive(Debug)]
 #[non_exhaustive]
 pub enum PrepareEvent<'a> {
-    /// Entering a stage (`resumed` when it was reached by an earlier run).
-    Stage { stage: Stage, resumed: bool },
+    /// Entering a stage (`resumed` when it was reached by an earlier run), with its deadline.
+    Stage { stage: Stage, resumed: bool, limit: Option<Duration> },
     /// QEMU started (the installer, or a reboot of the installed system).
     QemuStarted { pid: Option<u32>, accel: &'a str },
     /// The VM reset itself (the installer's reboots).
     Reboot { count: u32 },
+    /// An interrupted install starts over from a blank disk, and why.
+    StartOver { from: Stage, why: &'a str },
 }
 
 /// The folder a prepare keeps its disk, logs and state in: `<out>.prepare`.
@@ -104,6 +237,13 @@ pub fn work_dir(out: &Path) -> PathBuf {
     name.push(".prepare");
     out.with_file_name(name)
 }
+
+/// The answer file in the work folder (also on the OEM media's root).
+pub const ANSWER_FILE: &str = "autounattend.xml";
+/// The OEM media in the work folder.
+pub const MEDIA_FILE: &str = "oem-media.iso";
+/// The OEM media's volume label.
+pub const MEDIA_LABEL: &str = "ARENA_OEM";
 
 /// Reads the state of a prepare of `out`, if one was started.
 ///
@@ -128,6 +268,10 @@ fn write_state(dir: &Path, state: &State) -> Result<(), VmError> {
         .map_err(|err| VmError::Invalid(format!("writing {}: {err}", path.display())))
 }
 
+fn io(what: String) -> impl FnOnce(std::io::Error) -> VmError {
+    move |source| VmError::Io { what, source }
+}
+
 /// Ends a QEMU an interrupted prepare left running on this disk.
 fn end_leftover(pid: u32, disk: &Path) {
     let cmdline = std::fs::read(format!("/proc/{pid}/cmdline")).unwrap_or_default();
@@ -145,17 +289,160 @@ fn end_leftover(pid: u32, disk: &Path) {
     }
 }
 
+/// Checks the inputs of a new prepare.
+fn check_inputs(options: &PrepareOptions) -> Result<(), VmError> {
+    for (what, path) in [("--iso", &options.iso), ("--oem", &options.oem)] {
+        if !path.exists() {
+            return Err(VmError::Invalid(format!("{what} {}: no such file or folder", path.display())));
+        }
+    }
+    if !options.iso.is_file() {
+        return Err(VmError::Invalid(format!("--iso {} is not a file", options.iso.display())));
+    }
+    if !options.oem.is_dir() {
+        return Err(VmError::Invalid(format!("--oem {} is not a folder", options.oem.display())));
+    }
+    match &options.answer {
+        Answer::Generated(answer) => answer.check().map_err(VmError::Invalid)?,
+        Answer::File(path) => {
+            let text = std::fs::read_to_string(path).map_err(io(format!("reading --answer {}", path.display())))?;
+            roxmltree::Document::parse(&text)
+                .map_err(|err| VmError::Invalid(format!("--answer {}: not XML: {err}", path.display())))?;
+        }
+    }
+    Ok(())
+}
+
+/// Writes the answer file and the OEM media into `dir`.
+fn write_media(options: &PrepareOptions, dir: &Path) -> Result<PathBuf, VmError> {
+    let answer = dir.join(ANSWER_FILE);
+    let text = match &options.answer {
+        Answer::Generated(o) => unattend::render(o),
+        Answer::File(path) => {
+            std::fs::read_to_string(path).map_err(io(format!("reading --answer {}", path.display())))?
+        }
+    };
+    arena_shared::atomic::write_atomic(&answer, text.as_bytes())
+        .map_err(|err| VmError::Invalid(format!("writing {}: {err}", answer.display())))?;
+    let marker = dir.join(unattend::OEM_MARKER);
+    std::fs::write(&marker, "The arena's OEM media: OEM\\ becomes C:\\OEM.\r\n")
+        .map_err(io(format!("writing {}", marker.display())))?;
+    let iso = dir.join(MEDIA_FILE);
+    let xorriso = find_xorriso(options.xorriso.as_deref())?;
+    let args = media_args(&answer, &marker, &options.oem, &iso);
+    let out = std::process::Command::new(&xorriso)
+        .args(&args)
+        .output()
+        .map_err(io(format!("starting {}", xorriso.display())))?;
+    if !out.status.success() {
+        return Err(VmError::Image {
+            what: format!("building the OEM media {}", iso.display()),
+            message: String::from_utf8_lossy(&out.stderr).trim().to_owned(),
+        });
+    }
+    Ok(iso)
+}
+
+/// `xorriso`: `explicit`, or on `PATH`.
+///
+/// # Errors
+///
+/// [`VmError::Missing`] naming Debian's package.
+pub fn find_xorriso(explicit: Option<&Path>) -> Result<PathBuf, VmError> {
+    qemu::find_program(explicit, "xorriso", "xorriso")
+}
+
+/// xorriso's arguments for the OEM media: ISO 9660 level 3 (files over 4 GiB
+/// in several extents), Joliet with long names (what Windows reads), Rock
+/// Ridge (what Linux reads), the label, and the three parts grafted in place.
+pub fn media_args(answer: &Path, marker: &Path, oem: &Path, iso: &Path) -> Vec<OsString> {
+    let graft = |name: &str, path: &Path| {
+        let mut arg = OsString::from(format!("{name}="));
+        arg.push(path);
+        arg
+    };
+    let mut args: Vec<OsString> =
+        ["-as", "mkisofs", "-quiet", "-iso-level", "3", "-J", "-joliet-long", "-r", "-V", MEDIA_LABEL, "-o"]
+            .iter()
+            .map(OsString::from)
+            .collect();
+    args.push(iso.into());
+    args.push("-graft-points".into());
+    args.push(graft(ANSWER_FILE, answer));
+    args.push(graft(unattend::OEM_MARKER, marker));
+    args.push(graft(&format!("{}/", unattend::OEM_MEDIA_FOLDER), oem));
+    args
+}
+
+/// One command line as the user reads it: the program, then each argument,
+/// quoted for a POSIX shell where needed.
+pub fn shell_line(program: &Path, args: &[OsString]) -> String {
+    // A program found on PATH is shown by its name, as the user would type it.
+    let name = program.file_name().filter(|name| qemu::which(&name.to_string_lossy()).as_deref() == Some(program));
+    std::iter::once(name.unwrap_or(program.as_os_str()))
+        .chain(args.iter().map(OsString::as_os_str))
+        .map(|a| {
+            let a = a.to_string_lossy();
+            if !a.is_empty() && a.chars().all(|c| c.is_ascii_alphanumeric() || "-_=./:,+@%".contains(c)) {
+                a.into_owned()
+            } else {
+                format!("'{}'", a.replace('\'', r"'\''"))
+            }
+        })
+        .collect::<Vec<_>>()
+        .join(" ")
+}
+
+/// `--dry-run`: writes into `<out>.prepare/` everything the install would
+/// attach (the answer file, the OEM media, the UEFI variables) and returns the
+/// command lines it would run (xorriso's already ran), one per line, each
+/// starting with its program: swtpm's (with a TPM), then QEMU's.
+///
+/// # Errors
+///
+/// Bad inputs, a missing program, or a file that cannot be written.
+pub fn dry_run(options: &PrepareOptions) -> Result<Vec<String>, VmError> {
+    check_inputs(options)?;
+    let img = QemuImg { program: qemu::find_qemu_img(options.vm.qemu_img.as_deref())? };
+    let qemu = qemu::find_qemu(options.vm.qemu.as_deref())?;
+    let dir = work_dir(&options.out);
+    claim_dir(&dir)?;
+    let media = write_media(options, &dir)?;
+    let config = prepare_config(options, &dir);
+    let disk = dir.join("disk.qcow2");
+    let (mut spec, _) = config.spec(qemu.clone(), disk, &img, true)?;
+    spec.cdrom = Some(options.iso.clone());
+    spec.media = vec![media];
+    let mut lines = Vec::new();
+    if config.tpm {
+        let program = tpm::find_swtpm(config.swtpm.as_deref())?;
+        let swtpm = SwtpmSpec::in_dir(program.clone(), &dir);
+        lines.push(shell_line(&program, &swtpm.args()));
+    }
+    lines.push(shell_line(&qemu, &spec.args()));
+    Ok(lines)
+}
+
+fn prepare_config(options: &PrepareOptions, dir: &Path) -> VmConfig {
+    let mut config = options.vm.clone();
+    config.dir = dir.to_owned();
+    config.golden = dir.join("disk.qcow2");
+    config.name = "prepare".into();
+    config
+}
+
 /// Runs (or resumes) a prepare to the sealed golden image.
 ///
 /// # Errors
 ///
-/// Missing inputs, an `out` that already exists, a guest that never became
-/// healthy (with the doctor's report when the guest answers), or one that
-/// did not shut down.
+/// Missing inputs, an `out` that already exists, a stage past its deadline
+/// (with the evidence kept), or a guest that did not shut down.
 pub async fn prepare(options: &PrepareOptions, mut progress: impl FnMut(PrepareEvent<'_>)) -> Result<PathBuf, VmError> {
     let img = QemuImg { program: qemu::find_qemu_img(options.vm.qemu_img.as_deref())? };
     let qemu = qemu::find_qemu(options.vm.qemu.as_deref())?;
     let dir = work_dir(&options.out);
+    let disk = dir.join("disk.qcow2");
+    let mut resumed = true;
     let mut state = match read_state(&options.out)? {
         Some(state) => {
             if state.iso != options.iso || state.oem != options.oem {
@@ -175,79 +462,113 @@ pub async fn prepare(options: &PrepareOptions, mut progress: impl FnMut(PrepareE
                     options.out.display()
                 )));
             }
-            for (what, path) in [("--iso", &options.iso), ("--oem", &options.oem)] {
-                if !path.exists() {
-                    return Err(VmError::Invalid(format!("{what} {}: no such file or folder", path.display())));
-                }
-            }
-            if !options.oem.is_dir() {
-                return Err(VmError::Invalid(format!("--oem {} is not a folder", options.oem.display())));
-            }
-            std::fs::create_dir_all(&dir)
-                .map_err(|source| VmError::Io { what: format!("creating {}", dir.display()), source })?;
+            check_inputs(options)?;
+            claim_dir(&dir)?;
             let state = State {
                 stage: Stage::Created,
                 iso: options.iso.clone(),
                 oem: options.oem.clone(),
                 qemu_pid: None,
                 reboots: 0,
+                restarts: 0,
                 seconds: Default::default(),
             };
-            img.create_blank(&dir.join("disk.qcow2"), &options.size)?;
+            write_media(options, &dir)?;
+            img.create_blank(&disk, &options.size)?;
             write_state(&dir, &state)?;
-            progress(PrepareEvent::Stage { stage: Stage::Created, resumed: false });
+            resumed = false;
             state
         }
     };
-    let disk = dir.join("disk.qcow2");
     if let Some(pid) = state.qemu_pid.take() {
         end_leftover(pid, &disk);
     }
-    let mut resumed = true;
+    let config = prepare_config(options, &dir);
+    // The stage last announced, so none is announced twice.
+    let mut announced = None;
     loop {
+        // A resume in the middle of the install: Windows cannot go on from a disk
+        // whose power was cut, so the install starts again from a blank disk.
+        if resumed {
+            let snapshot = state.stage == Stage::Healthy && has_snapshot(&img, &disk, HEALTHY_SNAPSHOT);
+            if let Some(why) = start_over_reason(state.stage, snapshot) {
+                progress(PrepareEvent::StartOver { from: state.stage, why });
+                start_over(options, &img, &dir, &disk, &mut state)?;
+            }
+        }
         let stage_started = Instant::now();
-        progress(PrepareEvent::Stage { stage: state.stage, resumed });
+        let limit = TIMED_STAGES.contains(&state.stage).then(|| options.timeouts.get(state.stage));
+        if announced != Some(state.stage) {
+            progress(PrepareEvent::Stage { stage: state.stage, resumed, limit });
+        }
         resumed = false;
         let next = match state.stage {
-            Stage::Created => Stage::Installing,
-            Stage::Installing | Stage::Healthy => {
-                let mut vm = launch(options, &qemu, &img, &dir, &disk).await?;
+            Stage::Created => Stage::Setup,
+            Stage::Setup | Stage::Oobe | Stage::FirstLogon | Stage::OemInstall => {
+                let mut vm = launch(options, &config, &qemu, &img, &dir, &disk, None).await?;
                 state.qemu_pid = vm.pid();
                 write_state(&dir, &state)?;
                 progress(PrepareEvent::QemuStarted { pid: vm.pid(), accel: &vm.accel_note });
-                let outcome = follow(&mut vm, options, &mut state, &mut progress).await;
-                if let Err(err) = outcome {
+                if let Err(err) = follow(&mut vm, options, &dir, &mut state, &mut progress).await {
+                    let err = keep_evidence(&vm, &dir, state.stage, err).await;
                     vm.kill().await;
                     state.qemu_pid = None;
                     write_state(&dir, &state)?;
                     return Err(err);
                 }
-                // Healthy: now the clean shutdown.
-                state.stage = Stage::Healthy;
-                write_state(&dir, &state)?;
-                progress(PrepareEvent::Stage { stage: Stage::Healthy, resumed: false });
-                if !vm.shutdown(options.shutdown_timeout).await {
+                // Healthy: a safe point to come back to, then the shutdown.
+                if let Err(err) = vm.save_snapshot(HEALTHY_SNAPSHOT).await {
+                    vm.kill().await;
                     state.qemu_pid = None;
                     write_state(&dir, &state)?;
-                    return Err(VmError::Invalid(format!(
-                        "the guest did not shut down within {} s of the power button; the disk may not be clean, so it was not sealed (run the same command again to retry)",
-                        options.shutdown_timeout.as_secs()
-                    )));
+                    return Err(err);
                 }
-                state.qemu_pid = None;
-                Stage::ShutDown
+                state.stage = Stage::Healthy;
+                write_state(&dir, &state)?;
+                // Said once the snapshot is there: from here a resume goes on from it.
+                progress(PrepareEvent::Stage { stage: Stage::Healthy, resumed: false, limit: None });
+                announced = Some(Stage::ShutDown);
+                shut_down(vm, options, &dir, &mut state, &mut progress).await?
             }
+            Stage::Healthy => {
+                let mut vm = launch(options, &config, &qemu, &img, &dir, &disk, Some(HEALTHY_SNAPSHOT.into())).await?;
+                state.qemu_pid = vm.pid();
+                write_state(&dir, &state)?;
+                progress(PrepareEvent::QemuStarted { pid: vm.pid(), accel: &vm.accel_note });
+                let limit = options.timeouts.get(Stage::Healthy);
+                if let Err(err) = vm.wait_healthy(limit, |_| {}).await {
+                    let err = keep_evidence(&vm, &dir, Stage::Healthy, err).await;
+                    vm.kill().await;
+                    state.qemu_pid = None;
+                    write_state(&dir, &state)?;
+                    return Err(err);
+                }
+                announced = Some(Stage::ShutDown);
+                shut_down(vm, options, &dir, &mut state, &mut progress).await?
+            }
+            Stage::ShutDown if !disk.exists() && options.out.exists() => Stage::Sealed,
             Stage::ShutDown => {
-                std::fs::rename(&disk, &options.out).map_err(|source| VmError::Io {
-                    what: format!("moving {} to {}", disk.display(), options.out.display()),
-                    source,
-                })?;
+                if has_snapshot(&img, &disk, HEALTHY_SNAPSHOT) {
+                    img.delete_snapshot(&disk, HEALTHY_SNAPSHOT)?;
+                }
+                // A fresh copy: qcow2 keeps the clusters of a deleted snapshot (the
+                // guest's whole memory), and the golden image should not carry them.
+                let sealing = dir.join("sealing.qcow2");
+                img.convert_to_qcow2(&disk, &sealing)?;
+                std::fs::rename(&sealing, &options.out).map_err(io(format!(
+                    "moving {} to {}",
+                    sealing.display(),
+                    options.out.display()
+                )))?;
                 make_read_only(&options.out)?;
+                let _ = std::fs::remove_file(&disk);
                 Stage::Sealed
             }
             Stage::Sealed => {
-                // Done: the state folder has nothing left worth keeping but its logs.
-                let _ = std::fs::remove_file(dir.join("qmp.sock"));
+                // Done: the folder keeps its logs, the answer file and the media for review.
+                for file in ["qmp.sock", super::CONTROL_SOCKET, tpm::SOCKET] {
+                    let _ = std::fs::remove_file(dir.join(file));
+                }
                 return Ok(options.out.clone());
             }
         };
@@ -257,68 +578,310 @@ pub async fn prepare(options: &PrepareOptions, mut progress: impl FnMut(PrepareE
     }
 }
 
-async fn launch(options: &PrepareOptions, qemu: &Path, img: &QemuImg, dir: &Path, disk: &Path) -> Result<Vm, VmError> {
-    let mut config = options.vm.clone();
-    config.dir = dir.to_owned();
-    config.golden = disk.to_owned();
-    config.name = "prepare".into();
-    let mut folders = vec![FolderDrive { folder: options.oem.clone(), removable: false }];
-    if let Some(answer) = &options.answer {
-        let answer_dir = dir.join("answer");
-        std::fs::create_dir_all(&answer_dir)
-            .map_err(|source| VmError::Io { what: format!("creating {}", answer_dir.display()), source })?;
-        std::fs::copy(answer, answer_dir.join("autounattend.xml"))
-            .map_err(|source| VmError::Io { what: format!("copying {}", answer.display()), source })?;
-        folders.push(FolderDrive { folder: answer_dir, removable: true });
+/// Why a prepare resumed at `stage` must start the install over, or `None`
+/// when it goes on from there (`snapshot`: the healthy snapshot exists).
+pub fn start_over_reason(stage: Stage, snapshot: bool) -> Option<&'static str> {
+    if stage.mid_install() {
+        Some(
+            "the install was interrupted before the guest was healthy; Windows Setup cannot continue on a disk whose power was cut, so the install starts over from a blank disk",
+        )
+    } else if stage == Stage::Healthy && !snapshot {
+        Some("the healthy guest's snapshot is missing, so there is no safe point to shut down from")
+    } else {
+        None
     }
-    let (mut spec, accel_note) = config.spec(qemu.to_owned(), disk.to_owned(), img, false)?;
-    spec.cdrom = Some(options.iso.clone());
-    spec.folders = folders;
-    Vm::launch(&config, spec, accel_note).await
 }
 
-/// Waits for the guest to become healthy, counting the VM's resets.
+fn has_snapshot(img: &QemuImg, disk: &Path, name: &str) -> bool {
+    img.info(disk).is_ok_and(|info| info.snapshots.iter().any(|s| s.name == name))
+}
+
+/// A blank disk, a new TPM and new UEFI variables; the stage back to `setup`.
+fn start_over(
+    options: &PrepareOptions,
+    img: &QemuImg,
+    dir: &Path,
+    disk: &Path,
+    state: &mut State,
+) -> Result<(), VmError> {
+    let _ = std::fs::remove_file(disk);
+    img.create_blank(disk, &options.size)?;
+    let tpm_state = dir.join(tpm::STATE_DIR);
+    if tpm_state.exists() {
+        std::fs::remove_dir_all(&tpm_state).map_err(io(format!("removing {}", tpm_state.display())))?;
+    }
+    let _ = std::fs::remove_file(dir.join(UEFI_VARS_FILE));
+    if !dir.join(MEDIA_FILE).exists() {
+        write_media(options, dir)?;
+    }
+    state.stage = Stage::Setup;
+    state.restarts += 1;
+    state.reboots = 0;
+    write_state(dir, state)
+}
+
+async fn launch(
+    options: &PrepareOptions,
+    config: &VmConfig,
+    qemu: &Path,
+    img: &QemuImg,
+    dir: &Path,
+    disk: &Path,
+    loadvm: Option<String>,
+) -> Result<Vm, VmError> {
+    let fresh_vars = !dir.join(UEFI_VARS_FILE).exists();
+    let (mut spec, accel_note) = config.spec(qemu.to_owned(), disk.to_owned(), img, fresh_vars)?;
+    spec.cdrom = Some(options.iso.clone());
+    spec.media = vec![dir.join(MEDIA_FILE)];
+    spec.loadvm = loadvm;
+    Vm::launch(config, spec, accel_note).await
+}
+
+/// Shuts the healthy guest down within the `shut-down` deadline.
+async fn shut_down(
+    vm: Vm,
+    options: &PrepareOptions,
+    dir: &Path,
+    state: &mut State,
+    progress: &mut impl FnMut(PrepareEvent<'_>),
+) -> Result<Stage, VmError> {
+    let limit = options.timeouts.get(Stage::ShutDown);
+    progress(PrepareEvent::Stage { stage: Stage::ShutDown, resumed: false, limit: Some(limit) });
+    let clean = vm.shutdown(limit).await;
+    state.qemu_pid = None;
+    if !clean {
+        write_state(dir, state)?;
+        return Err(VmError::Invalid(format!(
+            "the guest did not shut down within {} s of the power button; the disk may not be clean, so it was not sealed (run the same command again: it goes on from the healthy snapshot)",
+            limit.as_secs()
+        )));
+    }
+    Ok(Stage::ShutDown)
+}
+
+/// Under UEFI, Windows' CD boot loader waits for a key ("Press any key to boot
+/// from CD or DVD") and otherwise falls through to the next boot option. The
+/// prepare presses the space bar over QMP about once a second on the first boot
+/// from the installer only (until its first reset), for this long: the prompt
+/// shows for a few seconds once the firmware has started, later under
+/// emulation. A remastered ISO with `efisys_noprompt.bin` would avoid the
+/// presses, but Windows ISOs keep their files in UDF, which xorriso does not
+/// write, so remastering needs the whole ISO unpacked and a UDF writer.
+fn keypress_window(accel: Accel) -> Duration {
+    match accel {
+        Accel::Kvm => Duration::from_secs(90),
+        Accel::Tcg => Duration::from_secs(600),
+    }
+}
+
+/// Follows the install from QEMU's start to a healthy guest, stage by stage,
+/// each within its deadline.
 async fn follow(
     vm: &mut Vm,
     options: &PrepareOptions,
+    dir: &Path,
     state: &mut State,
     progress: &mut impl FnMut(PrepareEvent<'_>),
 ) -> Result<(), VmError> {
     let mut events = vm.qmp.events();
-    let limit = options.vm.boot_timeout;
-    let client = vm.client().clone();
-    // Health events and resets interleave; both are reported as they come.
-    let (tx, mut rx) = tokio::sync::mpsc::unbounded_channel::<String>();
-    let wait = vm.wait_healthy(limit, move |event| {
-        let _ = tx.send(format!("{event:?}"));
-    });
+    let serial = dir.join("serial.log");
+    let started = Instant::now();
+    let press_keys = matches!(vm.spec.firmware, qemu::Firmware::Uefi { .. }) && state.reboots == 0;
+    let press_until = started + keypress_window(vm.spec.accel);
+    let mut first_boot = true;
+    let mut stage_since = Instant::now();
+    let mut seen_lines = 0usize;
+    // QEMU's forwarder accepts connections before the guest listens: short questions.
+    let client = vm.client().with_timeout(Duration::from_secs(2));
+    let overall: Duration = options.timeouts.0.values().sum();
+    let wait = crate::prep::wait_healthy(&client, overall, Duration::from_millis(500), |_| {});
     tokio::pin!(wait);
-    let result = loop {
+    let mut tick = tokio::time::interval(Duration::from_secs(1));
+    loop {
         tokio::select! {
-            result = &mut wait => break result,
+            result = &mut wait => {
+                *state.seconds.entry(state.stage.name().to_owned()).or_default() += stage_since.elapsed().as_secs_f64();
+                return match result {
+                    Ok(_) => Ok(()),
+                    Err(source) => Err(VmError::NotHealthy { name: "prepare".into(), source }),
+                };
+            }
             Ok(name) = events.recv() => {
                 if name == "RESET" {
                     state.reboots += 1;
+                    first_boot = false;
                     progress(PrepareEvent::Reboot { count: state.reboots });
+                    write_state(dir, state)?;
+                    // Setup's deadline is per boot.
+                    if state.stage == Stage::Setup {
+                        stage_since = Instant::now();
+                    }
+                } else if name == "SHUTDOWN" || name == super::qmp::CLOSED {
+                    // Setup powers off only when it cannot go on: its last words say why.
+                    let text = std::fs::read(&serial).unwrap_or_default();
+                    return Err(VmError::Invalid(format!(
+                        "the VM powered off during stage {}; {}",
+                        state.stage.name(),
+                        last_serial_lines(&String::from_utf8_lossy(&text))
+                    )));
                 }
             }
-            Some(line) = rx.recv() => tracing::info!(health = %line, "prepare"),
+            _ = tick.tick() => {
+                if press_keys && first_boot && Instant::now() < press_until {
+                    let _ = vm.qmp.hmp("sendkey spc", Duration::from_secs(2)).await;
+                }
+                // The guest's own stage lines on the serial port.
+                let text = std::fs::read(&serial).unwrap_or_default();
+                let text = String::from_utf8_lossy(&text);
+                let lines: Vec<&str> = text.lines().collect();
+                for line in lines.iter().skip(seen_lines) {
+                    let Some(name) = line.trim().strip_prefix(STAGE_LINE) else { continue };
+                    let Some(stage) = Stage::from_name(name.trim()) else { continue };
+                    if stage > state.stage && stage.mid_install() {
+                        *state.seconds.entry(state.stage.name().to_owned()).or_default() +=
+                            stage_since.elapsed().as_secs_f64();
+                        state.stage = stage;
+                        stage_since = Instant::now();
+                        write_state(dir, state)?;
+                        let limit = options.timeouts.get(stage);
+                        progress(PrepareEvent::Stage { stage, resumed: false, limit: Some(limit) });
+                    }
+                }
+                seen_lines = lines.len();
+                let limit = options.timeouts.get(state.stage);
+                if stage_since.elapsed() > limit {
+                    return Err(VmError::Invalid(format!(
+                        "stage {} took longer than its {} s (--stage-timeout {}=DURATION to allow more); {}",
+                        state.stage.name(),
+                        limit.as_secs(),
+                        state.stage.name(),
+                        last_serial_lines(&text)
+                    )));
+                }
+                if let Some(status) = vm.exited() {
+                    return Err(VmError::Exited {
+                        name: "prepare".into(),
+                        status,
+                        log: super::log_tail(&dir.join("qemu.log")),
+                    });
+                }
+            }
         }
+    }
+}
+
+fn last_serial_lines(text: &str) -> String {
+    let lines: Vec<&str> = text.lines().filter(|l| !l.trim().is_empty()).collect();
+    if lines.is_empty() {
+        return "the serial port said nothing".into();
+    }
+    format!("the serial port's last lines: {}", lines[lines.len().saturating_sub(5)..].join(" | "))
+}
+
+/// Keeps the serial log, a screendump and the doctor's report of a failed
+/// stage in `failures/<stage>-<n>/`, and names the folder in the error.
+async fn keep_evidence(vm: &Vm, dir: &Path, stage: Stage, err: VmError) -> VmError {
+    let failures = dir.join("failures");
+    let mut n = 1;
+    let folder = loop {
+        let candidate = failures.join(format!("{}-{n}", stage.name()));
+        if !candidate.exists() {
+            break candidate;
+        }
+        n += 1;
     };
-    match result {
-        Ok(_) => Ok(()),
-        Err(err) => {
-            // The doctor says why when the guest answers at all.
-            let doctor = match client.with_timeout(Duration::from_secs(120)).doctor().await {
-                Ok(report) => format!(
-                    "\nthe guest's doctor report:\n{}",
-                    serde_json::to_string_pretty(&report).unwrap_or_default()
-                ),
-                Err(_) => String::new(),
-            };
-            Err(VmError::Invalid(format!(
-                "{err}{doctor}\n(the prepare stays at stage installing; run the same command again to go on)"
-            )))
+    if std::fs::create_dir_all(&folder).is_err() {
+        return err;
+    }
+    let _ = std::fs::copy(dir.join("serial.log"), folder.join("serial.log"));
+    let _ = std::fs::copy(dir.join("qemu.log"), folder.join("qemu.log"));
+    let shot = folder.join("screendump.png");
+    let _ = tokio::time::timeout(Duration::from_secs(10), vm.qmp.screendump(&shot)).await;
+    let doctor = match tokio::time::timeout(
+        Duration::from_secs(150),
+        vm.client().with_timeout(Duration::from_secs(120)).doctor(),
+    )
+    .await
+    {
+        Ok(Ok(report)) => {
+            let text = serde_json::to_string_pretty(&report).unwrap_or_default();
+            let _ = std::fs::write(folder.join("doctor.json"), &text);
+            format!("\nthe guest's doctor report:\n{text}")
         }
+        _ => String::new(),
+    };
+    VmError::Invalid(format!(
+        "{err}{doctor}\n(the serial log, a screendump and what the guest said are in {}; run the same command again: the install starts over from a blank disk)",
+        folder.display()
+    ))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn stage_timeouts_parse_and_name_what_is_wrong() {
+        let mut t = StageTimeouts::default();
+        t.set("setup=90m").unwrap();
+        t.set("oem-install=2h").unwrap();
+        t.set("shut-down=300").unwrap();
+        assert_eq!(t.get(Stage::Setup), Duration::from_secs(5400));
+        assert_eq!(t.get(Stage::OemInstall), Duration::from_secs(7200));
+        assert_eq!(t.get(Stage::ShutDown), Duration::from_secs(300));
+        for (bad, needle) in [
+            ("setup", "STAGE=DURATION"),
+            ("sealed=1m", "the stages are"),
+            ("setup=1d", "a duration"),
+            ("oobe=0", "a duration"),
+        ] {
+            let err = t.set(bad).unwrap_err();
+            assert!(err.contains(needle), "{bad}: {err}");
+        }
+    }
+
+    /// A resume in every stage: before the guest is healthy the install starts
+    /// over (the VM tests kill a prepare in `setup` and at `healthy` for real).
+    #[test]
+    fn a_resume_in_each_stage_goes_on_only_from_a_safe_point() {
+        for stage in [Stage::Setup, Stage::Oobe, Stage::FirstLogon, Stage::OemInstall] {
+            for snapshot in [false, true] {
+                let why = start_over_reason(stage, snapshot).unwrap_or_else(|| panic!("{stage:?}"));
+                assert!(why.contains("starts over from a blank disk"), "{why}");
+            }
+        }
+        assert_eq!(start_over_reason(Stage::Healthy, true), None);
+        assert!(start_over_reason(Stage::Healthy, false).unwrap().contains("snapshot is missing"));
+        for stage in [Stage::Created, Stage::ShutDown, Stage::Sealed] {
+            assert_eq!(start_over_reason(stage, false), None, "{stage:?}");
+        }
+    }
+
+    #[test]
+    fn the_old_state_name_still_reads_and_stages_are_ordered() {
+        let state: State = serde_json::from_str(r#"{"stage":"installing","iso":"/a.iso","oem":"/oem"}"#).unwrap();
+        assert_eq!(state.stage, Stage::Setup);
+        assert!(Stage::Setup < Stage::Oobe && Stage::OemInstall < Stage::Healthy);
+        assert!(Stage::OemInstall.mid_install() && !Stage::Healthy.mid_install());
+        for stage in TIMED_STAGES {
+            assert_eq!(Stage::from_name(stage.name()), Some(*stage));
+        }
+    }
+
+    #[test]
+    fn media_and_command_lines_read_as_typed() {
+        let args = media_args(
+            Path::new("/w/autounattend.xml"),
+            Path::new("/w/ARENA-OEM.TXT"),
+            Path::new("/stage/oem"),
+            Path::new("/w/oem-media.iso"),
+        );
+        let line = shell_line(Path::new("xorriso"), &args);
+        assert_eq!(
+            line,
+            "xorriso -as mkisofs -quiet -iso-level 3 -J -joliet-long -r -V ARENA_OEM -o /w/oem-media.iso -graft-points autounattend.xml=/w/autounattend.xml ARENA-OEM.TXT=/w/ARENA-OEM.TXT OEM/=/stage/oem"
+        );
+        let quoted = shell_line(Path::new("qemu-system-x86_64"), &["a b".into(), "it's".into(), "".into()]);
+        assert_eq!(quoted, r"qemu-system-x86_64 'a b' 'it'\''s' ''");
     }
 }

@@ -45,9 +45,54 @@ pub enum Firmware {
     /// SeaBIOS, QEMU's default.
     Bios,
     /// OVMF: `code` is read-only, `vars` is this VM's own copy (qcow2, so that
-    /// snapshots can include it).
-    Uefi { code: PathBuf, vars: PathBuf },
+    /// snapshots can include it). `secure_boot`: the code is a secure-boot build
+    /// (Debian's `OVMF_CODE_4M.secboot.fd`), which needs SMM (`smm=on`) and its
+    /// flash locked to SMM (`cfi.pflash01` `secure=on`), as OVMF's README says.
+    Uefi { code: PathBuf, vars: PathBuf, secure_boot: bool },
 }
+
+/// The processor the guest sees.
+///
+/// - Software emulation: `Nehalem`, the oldest of QEMU's named models with
+///   SSE4.2 and POPCNT (x86-64-v2), which Windows 11 24H2's boot loader requires
+///   and QEMU's default `qemu64` lacks; every feature of it is one TCG
+///   implements, and a named model stays the same across QEMU versions, so
+///   snapshots load on the next QEMU too (`max` would change with it).
+/// - KVM: the host's processor with the Hyper-V enlightenments Windows uses
+///   when it finds a Hyper-V-compatible hypervisor (QEMU's docs/system/i386/hyperv.rst:
+///   relaxed timing, virtual APIC, spinlock hints, synthetic timers and clock,
+///   TLB flush and IPI hypercalls), so the guest neither crawls nor drifts after
+///   `loadvm`; VMX is hidden unless `nested`, so Windows does not turn on
+///   virtualisation-based security inside the VM.
+pub fn cpu_model(accel: Accel, nested: bool) -> String {
+    match accel {
+        Accel::Tcg => TCG_CPU.to_owned(),
+        Accel::Kvm => {
+            let mut cpu = format!("host,{}", HYPERV_ENLIGHTENMENTS.join(","));
+            cpu.push_str(if nested { ",vmx=on" } else { ",vmx=off" });
+            cpu
+        }
+    }
+}
+
+/// The processor model under software emulation (see [`cpu_model`]).
+pub const TCG_CPU: &str = "Nehalem";
+
+/// The Hyper-V enlightenments given under KVM (see [`cpu_model`]).
+pub const HYPERV_ENLIGHTENMENTS: &[&str] = &[
+    "hv-relaxed",
+    "hv-vapic",
+    "hv-spinlocks=0x1fff",
+    "hv-vpindex",
+    "hv-runtime",
+    "hv-time",
+    "hv-synic",
+    "hv-stimer",
+    "hv-frequencies",
+    "hv-reset",
+    "hv-tlbflush",
+    "hv-ipi",
+];
 
 /// A folder shown to the guest as a read-only FAT disk (QEMU's vvfat).
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -72,7 +117,11 @@ pub struct VmSpec {
     pub memory_mib: u32,
     pub cpus: u32,
     pub accel: Accel,
+    /// Expose VMX to the guest under KVM (nested virtualisation).
+    pub nested: bool,
     pub firmware: Firmware,
+    /// A TPM 2.0 (`tpm-tis`) backed by the swtpm whose control socket this is.
+    pub tpm_socket: Option<PathBuf>,
     /// Where the guest's port is forwarded from on this machine.
     pub host_addr: IpAddr,
     pub host_port: u16,
@@ -88,6 +137,8 @@ pub struct VmSpec {
     pub vnc: Option<u16>,
     /// An installer ISO as a CD-ROM, booted when the disk does not boot.
     pub cdrom: Option<PathBuf>,
+    /// More read-only CD-ROMs, never booted (the OEM media of a prepare).
+    pub media: Vec<PathBuf>,
     pub folders: Vec<FolderDrive>,
     /// A snapshot to start from (`-loadvm`).
     pub loadvm: Option<String>,
@@ -98,29 +149,33 @@ impl VmSpec {
     pub fn args(&self) -> Vec<OsString> {
         let mut a = Args::default();
         a.push("-name").push(format!("{},process={}", self.name, self.name));
+        let secure_boot = matches!(self.firmware, Firmware::Uefi { secure_boot: true, .. });
         a.push("-machine").push(format!(
-            "{},accel={}",
+            "{},accel={}{}",
             self.machine,
             match self.accel {
                 Accel::Kvm => "kvm",
                 Accel::Tcg => "tcg",
-            }
+            },
+            if secure_boot { ",smm=on" } else { "" }
         ));
-        if self.accel == Accel::Kvm {
-            a.push("-cpu").push("host");
-        }
+        a.push("-cpu").push(cpu_model(self.accel, self.nested));
         a.push("-m").push(format!("{}M", self.memory_mib));
         a.push("-smp").push(self.cpus.to_string());
         a.push("-nodefaults");
         a.push("-vga").push("std");
         a.push("-rtc").push("base=localtime");
-        if let Firmware::Uefi { code, vars } = &self.firmware {
+        if let Firmware::Uefi { code, vars, secure_boot } = &self.firmware {
+            if *secure_boot {
+                a.push("-global").push("driver=cfi.pflash01,property=secure,value=on");
+            }
             a.push("-drive").push(drive_opts("if=pflash,format=raw,readonly=on", code));
             a.push("-drive").push(drive_opts("if=pflash,format=qcow2", vars));
         }
 
         // The system disk, first in the boot order.
-        a.push("-drive").push(drive_opts("if=none,id=disk0,format=qcow2,discard=unmap", &self.disk));
+        a.push("-drive")
+            .push(drive_opts("if=none,id=disk0,format=qcow2,discard=unmap,detect-zeroes=unmap", &self.disk));
         let ahci_bus =
             |n: usize| if self.machine.starts_with("pc") { format!("ide.{}", n / 2) } else { format!("ide.{n}") };
         let mut ahci_ports = 0usize;
@@ -142,6 +197,13 @@ impl VmSpec {
             // On the last port, away from the disks.
             let bus = if self.machine.starts_with("pc") { "ide.1".to_owned() } else { "ide.5".to_owned() };
             a.push("-device").push(format!("ide-cd,drive=cd0,bus={bus},bootindex=2"));
+        }
+        for (i, iso) in self.media.iter().enumerate() {
+            let id = format!("media{i}");
+            a.push("-drive").push(drive_opts(&format!("if=none,id={id},media=cdrom,readonly=on"), iso));
+            // The ports below the installer's (q35), or the second IDE bus's free unit (pc).
+            let bus = if self.machine.starts_with("pc") { "ide.1".to_owned() } else { format!("ide.{}", 4 - i.min(3)) };
+            a.push("-device").push(format!("ide-cd,drive={id},bus={bus}"));
         }
         let mut usb = false;
         for (i, drive) in self.folders.iter().enumerate() {
@@ -168,6 +230,12 @@ impl VmSpec {
                     a.push("-device").push(format!("scsi-hd,drive={id},bus=scsi0.0"));
                 }
             }
+        }
+
+        if let Some(socket) = &self.tpm_socket {
+            a.push("-chardev").push(format!("socket,id=chrtpm,path={}", escape(socket)));
+            a.push("-tpmdev").push("emulator,id=tpm0,chardev=chrtpm");
+            a.push("-device").push("tpm-tis,tpmdev=tpm0");
         }
 
         // User-mode networking: the guest reaches out, the host reaches the
@@ -248,7 +316,7 @@ pub fn find_qemu_img(explicit: Option<&Path>) -> Result<PathBuf, VmError> {
     find_program(explicit, "qemu-img", QEMU_IMG_PACKAGE)
 }
 
-fn find_program(explicit: Option<&Path>, name: &str, package: &str) -> Result<PathBuf, VmError> {
+pub(crate) fn find_program(explicit: Option<&Path>, name: &str, package: &str) -> Result<PathBuf, VmError> {
     match explicit {
         Some(path) if is_executable(path) => Ok(path.to_owned()),
         Some(path) => Err(VmError::Missing {
@@ -288,7 +356,9 @@ mod tests {
             memory_mib: 4096,
             cpus: 2,
             accel: Accel::Kvm,
+            nested: false,
             firmware: Firmware::Bios,
+            tpm_socket: None,
             host_addr: "127.0.0.1".parse().unwrap(),
             host_port: 5123,
             guest_port: 5000,
@@ -297,6 +367,7 @@ mod tests {
             serial_log: "/v/vm-1/serial.log".into(),
             vnc: None,
             cdrom: None,
+            media: Vec::new(),
             folders: Vec::new(),
             loadvm: None,
         }
@@ -309,10 +380,14 @@ mod tests {
     #[test]
     fn a_plain_vm_forwards_one_port_and_has_no_display() {
         let text = line(&spec());
-        assert!(text.contains("-machine q35,accel=kvm -cpu host -m 4096M -smp 2"), "{text}");
+        assert!(text.contains("-machine q35,accel=kvm -cpu host,hv-relaxed,"), "{text}");
+        assert!(text.contains(",hv-ipi,vmx=off -m 4096M -smp 2"), "{text}");
+        assert!(!text.contains("smm=on") && !text.contains("tpm"), "{text}");
         // Commas in paths are doubled for QEMU's option parser.
         assert!(
-            text.contains("-drive if=none,id=disk0,format=qcow2,discard=unmap,file=/v/vm-1/disk,,1.qcow2"),
+            text.contains(
+                "-drive if=none,id=disk0,format=qcow2,discard=unmap,detect-zeroes=unmap,file=/v/vm-1/disk,,1.qcow2"
+            ),
             "{text}"
         );
         assert!(text.contains("-device ide-hd,drive=disk0,bus=ide.0,bootindex=1"), "{text}");
@@ -335,8 +410,33 @@ mod tests {
         let mut s = spec();
         s.accel = Accel::Tcg;
         let text = line(&s);
-        assert!(text.contains("accel=tcg"), "{text}");
+        assert!(text.contains("accel=tcg -cpu Nehalem -m"), "{text}");
         assert!(!text.contains("-cpu host"), "{text}");
+        // Nested virtualisation is asked for explicitly, and only means something under KVM.
+        s.accel = Accel::Kvm;
+        s.nested = true;
+        assert!(line(&s).contains(",vmx=on -m"), "{}", line(&s));
+    }
+
+    #[test]
+    fn secure_boot_needs_smm_locked_flash_and_a_tpm_device_on_the_swtpm_socket() {
+        let mut s = spec();
+        s.firmware = Firmware::Uefi {
+            code: "/usr/share/OVMF/OVMF_CODE_4M.secboot.fd".into(),
+            vars: "/v/vm-1/uefi-vars.qcow2".into(),
+            secure_boot: true,
+        };
+        s.tpm_socket = Some("/v/vm-1/swtpm.sock".into());
+        let text = line(&s);
+        assert!(text.contains("-machine q35,accel=kvm,smm=on "), "{text}");
+        assert!(
+            text.contains("-global driver=cfi.pflash01,property=secure,value=on -drive if=pflash,format=raw,readonly=on,file=/usr/share/OVMF/OVMF_CODE_4M.secboot.fd"),
+            "{text}"
+        );
+        assert!(
+            text.contains("-chardev socket,id=chrtpm,path=/v/vm-1/swtpm.sock -tpmdev emulator,id=tpm0,chardev=chrtpm -device tpm-tis,tpmdev=tpm0"),
+            "{text}"
+        );
     }
 
     #[test]
@@ -379,7 +479,8 @@ mod tests {
     #[test]
     fn uefi_vars_are_qcow2_so_snapshots_include_them() {
         let mut s = spec();
-        s.firmware = Firmware::Uefi { code: "/fw/OVMF_CODE.fd".into(), vars: "/v/vm-1/vars.qcow2".into() };
+        s.firmware =
+            Firmware::Uefi { code: "/fw/OVMF_CODE.fd".into(), vars: "/v/vm-1/vars.qcow2".into(), secure_boot: false };
         let text = line(&s);
         assert!(text.contains("-drive if=pflash,format=raw,readonly=on,file=/fw/OVMF_CODE.fd"), "{text}");
         assert!(text.contains("-drive if=pflash,format=qcow2,file=/v/vm-1/vars.qcow2"), "{text}");

@@ -123,6 +123,37 @@ async fn run() -> anyhow::Result<()> {
         copy_starts.push(copied + booted);
         vm.kill().await;
     }
+    // The UEFI machine of `arena vm prepare --firmware uefi`: secure-boot OVMF with
+    // SMM, a swtpm TPM 2.0; from QEMU's start to the firmware's first drawn screen,
+    // and a snapshot save and restore that carry the TPM's state.
+    let mut uefi_starts = Vec::new();
+    let mut uefi_snapshots = Vec::new();
+    match arena_host::vm::Uefi::debian_secure_boot() {
+        Ok(uefi) => {
+            for i in 0..RUNS {
+                let mut c = config(&golden, &work.path().join(format!("uefi-{i}")), accel);
+                c.machine = "q35".into();
+                c.uefi = Some(uefi.clone());
+                c.tpm = true;
+                let started = Instant::now();
+                let mut vm = Vm::start(&c, Boot::Fresh).await?;
+                loop {
+                    if vm.screendump().await.is_ok_and(|d| !d.black) {
+                        break;
+                    }
+                    anyhow::ensure!(started.elapsed() < Duration::from_secs(120), "OVMF drew nothing in 120 s");
+                    tokio::time::sleep(Duration::from_millis(200)).await;
+                }
+                uefi_starts.push(started.elapsed());
+                let started = Instant::now();
+                vm.save_snapshot("bench").await?;
+                vm.restore_snapshot("bench").await?;
+                uefi_snapshots.push(started.elapsed());
+                vm.kill().await;
+            }
+        }
+        Err(err) => println!("UEFI figures skipped: {err}"),
+    }
     let bytes = std::fs::metadata(&golden)?.len() as f64;
     let copy_secs = copies.iter().map(Duration::as_secs_f64).sum::<f64>() / copies.len() as f64;
     let rate = bytes / copy_secs.max(1e-9);
@@ -132,6 +163,13 @@ async fn run() -> anyhow::Result<()> {
     println!("{}", summary("restore of the ready snapshot to a healthy guest", &restores));
     println!("{}", summary("  of which loadvm itself", &loads));
     println!("saving the ready snapshot once: {:.2} s", saved.as_secs_f64());
+    if !uefi_starts.is_empty() {
+        println!(
+            "{}",
+            summary("UEFI (secure-boot OVMF, SMM, swtpm): QEMU start to the firmware's screen", &uefi_starts)
+        );
+        println!("{}", summary("UEFI: savevm + loadvm with the TPM's state", &uefi_snapshots));
+    }
     println!("{}", summary("pod start: overlay on the golden image + boot", &overlay_starts));
     println!("{}", summary("pod start: copy the golden image + boot (old manifests)", &copy_starts));
     println!(
