@@ -128,7 +128,7 @@ fn find(mut windows: Vec<WindowInfo>, selector: &Selector) -> DesktopResult<Wind
             windows
                 .into_iter()
                 .find(|w| w.visible && w.title.to_lowercase().contains(&needle))
-                .ok_or_else(|| DesktopError::NotFound(format!("no visible window whose title contains {title:?}")))
+                .ok_or_else(|| DesktopError::NotFound(format!("no visible window whose title contains {:?}", crate::error::clip(title))))
         }
     }
 }
