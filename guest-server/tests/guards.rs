@@ -356,3 +356,34 @@ async fn a_request_without_the_token_closes_its_connection() {
     assert_eq!(response.status(), StatusCode::UNAUTHORIZED);
     assert_eq!(response.headers().get(header::CONNECTION).map(|v| v.as_bytes()), Some(&b"close"[..]));
 }
+
+#[tokio::test]
+async fn the_doctor_waits_for_running_actions_and_puts_the_cursor_back() {
+    let _turn = SERIAL.lock().await;
+    let dir = tempfile::tempdir().expect("temp dir");
+    let stub = Arc::new(
+        StubDesktop::with_config(StubConfig { root: Some(dir.path().into()), screen: (1440, 900), scenario: None })
+            .expect("stub desktop"),
+    );
+    let state = AppState::new(stub.clone(), ServerConfig::for_stub(), None);
+    let input = state.input.clone();
+    let router = arena_guest::router(state);
+    stub.perform(&Action::MoveTo { x: 123, y: 456 }).unwrap();
+    // An action batch is running.
+    let batch = input.read().await;
+    let request = Request::get("/v1/doctor").header(header::HOST, "127.0.0.1").body(Body::empty()).unwrap();
+    let doctor = tokio::spawn(router.oneshot(request));
+    // The doctor queues for the input alone: new batches now wait too.
+    for _ in 0..3000 {
+        if input.try_read().is_err() {
+            break;
+        }
+        tokio::time::sleep(std::time::Duration::from_millis(10)).await;
+    }
+    assert!(input.try_read().is_err(), "the doctor asked for the input");
+    assert!(!doctor.is_finished(), "the doctor waits for the running batch");
+    drop(batch);
+    let response = doctor.await.expect("joined").expect("infallible");
+    assert_eq!(response.status(), StatusCode::OK);
+    assert_eq!(stub.cursor_position().unwrap(), arena_shared::geometry::Point::new(123, 456), "the cursor is back");
+}

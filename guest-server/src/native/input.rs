@@ -48,6 +48,8 @@ async fn actions(
     AppJson(batch): AppJson<ActionBatch>,
 ) -> Result<AppJson<ActionReport>, Response> {
     validate(&batch.actions, state.call_timeout()).map_err(IntoResponse::into_response)?;
+    // Batches share the input; a doctor run takes it alone (see `native::doctor`).
+    let _input = state.input.read().await;
     let started = Instant::now();
     let total = batch.actions.len();
     for (index, action) in batch.actions.into_iter().enumerate() {

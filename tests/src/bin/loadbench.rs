@@ -10,8 +10,17 @@
 //! - resident memory: peak and settled, and the peak around a PNG bomb sent as a
 //!   clipboard image (six at once), a 1 GiB file read and a 1023 MiB upload.
 //!
+//! - issue 25's hostile requests and two lockout scenarios (a slow body, reconnecting
+//!   idle sockets), against guest processes: what a legitimate client gets, the time to
+//!   each answer and the guest's peak memory, side by side with an older build when
+//!   `ARENA_LOADBENCH_BASELINE` names its binary (see [`guards`]).
+//!
 //! Memory figures read `/proc/self/status` (Linux); elsewhere they print as unknown.
-//! Run it in release mode: `cargo run --release -p arena-tests --bin loadbench`.
+//! Run it in release mode: `cargo run --release -p arena-tests --bin loadbench`
+//! (`-- guards` runs the guards section alone).
+
+#[path = "loadbench/guards.rs"]
+mod guards;
 
 use std::process::ExitCode;
 use std::time::{Duration, Instant};
@@ -97,6 +106,15 @@ async fn phase(url: &str, name: &str, clients: usize) -> anyhow::Result<()> {
 }
 
 async fn run() -> anyhow::Result<()> {
+    if std::env::args().nth(1).as_deref() != Some("guards") {
+        load().await?;
+    }
+    guards::probe_cases().await?;
+    guards::lockout().await
+}
+
+/// The load, memory and bomb figures of the in-process guest.
+async fn load() -> anyhow::Result<()> {
     let stub = arena_test_support::StubGuest::start().await;
     let url = stub.url().to_owned();
     println!("arena load bench: stub guest on {url} (in-process server, real HTTP on loopback)");
