@@ -81,11 +81,8 @@ pub async fn guard(State(state): State<AppState>, mut request: Request, next: Ne
             conn.authenticated();
         }
     } else if !OPEN_PATHS.contains(&path.as_str()) {
-        let mut res = refuse(
-            native,
-            StatusCode::UNAUTHORIZED,
-            "missing or wrong bearer token (Authorization: Bearer <token>)",
-        );
+        let mut res =
+            refuse(native, StatusCode::UNAUTHORIZED, "missing or wrong bearer token (Authorization: Bearer <token>)");
         res.headers_mut().insert(header::CONNECTION, axum::http::HeaderValue::from_static("close"));
         return res;
     }

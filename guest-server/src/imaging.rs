@@ -182,6 +182,7 @@ pub fn draw_cursor(image: &mut RgbaImage, at: Point) {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use arena_test_support::png_claiming as png_claiming_as;
 
     #[test]
     fn png_round_trips() {
@@ -193,40 +194,10 @@ mod tests {
         assert_eq!(back, img);
     }
 
-    /// A PNG of `width` x `height` whose header is all there is: what a decompression
-    /// bomb claims before a single pixel is read.
+    /// A PNG of `width` x `height` in RGBA whose header is all there is: what a
+    /// decompression bomb claims before a single pixel is read.
     fn png_claiming(width: u32, height: u32) -> Vec<u8> {
         png_claiming_as(width, height, 8, 6)
-    }
-
-    /// [`png_claiming`] with a bit depth and colour type (0 gray, 6 RGBA).
-    fn png_claiming_as(width: u32, height: u32, depth: u8, color: u8) -> Vec<u8> {
-        fn crc32(bytes: &[u8]) -> u32 {
-            let mut crc = !0u32;
-            for &b in bytes {
-                crc ^= u32::from(b);
-                for _ in 0..8 {
-                    crc = if crc & 1 == 1 { (crc >> 1) ^ 0xEDB8_8320 } else { crc >> 1 };
-                }
-            }
-            !crc
-        }
-        let chunk = |kind: &[u8], data: &[u8]| {
-            let mut body = kind.to_vec();
-            body.extend_from_slice(data);
-            let mut out = u32::try_from(data.len()).unwrap().to_be_bytes().to_vec();
-            out.extend_from_slice(&body);
-            out.extend_from_slice(&crc32(&body).to_be_bytes());
-            out
-        };
-        let mut ihdr = width.to_be_bytes().to_vec();
-        ihdr.extend_from_slice(&height.to_be_bytes());
-        ihdr.extend_from_slice(&[depth, color, 0, 0, 0]);
-        let mut png = b"\x89PNG\r\n\x1a\n".to_vec();
-        png.extend(chunk(b"IHDR", &ihdr));
-        png.extend(chunk(b"IDAT", &[0x78, 0x9c, 0x03, 0x00, 0x00, 0x00, 0x00, 0x01]));
-        png.extend(chunk(b"IEND", &[]));
-        png
     }
 
     #[test]

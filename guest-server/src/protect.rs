@@ -154,13 +154,7 @@ pub fn canonical(path: &str, resolver: &Resolver<'_>) -> String {
         }
         parts.push(trimmed.to_owned());
     }
-    let mut joined = root.clone();
-    for part in &parts {
-        if !joined.ends_with('\\') {
-            joined.push('\\');
-        }
-        joined.push_str(part);
-    }
+    let mut joined = join(&root, &parts);
     if parts.iter().any(|p| p.contains('~')) {
         joined = expand_short_names(&root, &parts, resolver).unwrap_or(joined);
     }
@@ -212,19 +206,9 @@ fn is_this_machine(host: &str, resolver: &Resolver<'_>) -> bool {
 
 /// `root` + `parts` with short names expanded: the longest prefix the resolver expands.
 fn expand_short_names(root: &str, parts: &[String], resolver: &Resolver<'_>) -> Option<String> {
-    let join = |parts: &[String]| {
-        let mut s = root.to_owned();
-        for part in parts {
-            if !s.ends_with('\\') {
-                s.push('\\');
-            }
-            s.push_str(part);
-        }
-        s
-    };
     let last_short = parts.iter().rposition(|p| p.contains('~'))?;
     for end in (last_short + 1..=parts.len()).rev() {
-        let Some(long) = (resolver.long_path)(&join(&parts[..end])) else { continue };
+        let Some(long) = (resolver.long_path)(&join(root, &parts[..end])) else { continue };
         let long = long.strip_prefix(r"\\?\").unwrap_or(&long).trim_end_matches('\\').to_owned();
         let mut full = long;
         for part in &parts[end..] {
@@ -234,6 +218,18 @@ fn expand_short_names(root: &str, parts: &[String], resolver: &Resolver<'_>) -> 
         return Some(full);
     }
     None
+}
+
+/// `root` and `parts` as one path, one separator between each.
+fn join(root: &str, parts: &[String]) -> String {
+    let mut joined = root.to_owned();
+    for part in parts {
+        if !joined.ends_with('\\') {
+            joined.push('\\');
+        }
+        joined.push_str(part);
+    }
+    joined
 }
 
 /// Whether a canonical path is a root: a drive's or a share's.

@@ -168,7 +168,11 @@ where
                 Poll::Ready(()) => {
                     let elapsed_ms = u64::try_from(this.started.elapsed().as_millis()).unwrap_or(u64::MAX);
                     tracing::warn!(received = this.received, elapsed_ms, "closing a request whose body trickles");
-                    Poll::Ready(Some(Err(Box::new(BodyTooSlow { rate: this.rate, received: this.received, elapsed_ms }))))
+                    Poll::Ready(Some(Err(Box::new(BodyTooSlow {
+                        rate: this.rate,
+                        received: this.received,
+                        elapsed_ms,
+                    }))))
                 }
                 Poll::Pending => Poll::Pending,
             },
@@ -226,7 +230,8 @@ pub async fn serve(
     let stop = CancellationToken::new();
     let mut connections = JoinSet::new();
     let mut shutdown = pin!(shutdown);
-    let probation = limits.probation_slots.map(|cap| Arc::new(Probation { cap: cap.max(1), waiting: Mutex::default() }));
+    let probation =
+        limits.probation_slots.map(|cap| Arc::new(Probation { cap: cap.max(1), waiting: Mutex::default() }));
     let mut next_id: u64 = 0;
     loop {
         let accepted = tokio::select! {

@@ -160,7 +160,8 @@ async fn rooted_spellings_of_protected_folders_are_refused_on_every_route() {
     let c = app.dir.path().join("C");
     std::fs::write(c.join("Users/Docker/Desktop/keep.txt"), b"mine").unwrap();
     // The probe's cases: each answered 204 or 200 and removed the folder before.
-    for path in ["/", "%5C", "%2F%2F", "%5CUsers%5CDocker", "/Users", "/Windows", "/Users/Docker/Desktop/.", "%5CUsers."]
+    for path in
+        ["/", "%5C", "%2F%2F", "%5CUsers%5CDocker", "/Users", "/Windows", "/Users/Docker/Desktop/.", "%5CUsers."]
     {
         let answer = app.empty(Method::DELETE, &format!("/v1/files?path={path}&recursive=true")).await;
         assert!(
@@ -290,38 +291,6 @@ async fn the_browser_forward_reads_no_body_when_no_browser_listens() {
     assert_eq!(polled.load(Ordering::Relaxed), 0, "not a byte of the body was read");
 }
 
-/// A PNG whose header claims `width` x `height` at `depth` bits of `color` (0 gray),
-/// with one valid, empty image-data chunk: what a decompression bomb looks like before
-/// its pixels are read.
-fn png_claiming(width: u32, height: u32, depth: u8, color: u8) -> Vec<u8> {
-    fn crc32(bytes: &[u8]) -> u32 {
-        let mut crc = !0u32;
-        for &b in bytes {
-            crc ^= u32::from(b);
-            for _ in 0..8 {
-                crc = if crc & 1 == 1 { (crc >> 1) ^ 0xEDB8_8320 } else { crc >> 1 };
-            }
-        }
-        !crc
-    }
-    let chunk = |kind: &[u8], data: &[u8]| {
-        let mut body = kind.to_vec();
-        body.extend_from_slice(data);
-        let mut out = u32::try_from(data.len()).unwrap().to_be_bytes().to_vec();
-        out.extend_from_slice(&body);
-        out.extend_from_slice(&crc32(&body).to_be_bytes());
-        out
-    };
-    let mut ihdr = width.to_be_bytes().to_vec();
-    ihdr.extend_from_slice(&height.to_be_bytes());
-    ihdr.extend_from_slice(&[depth, color, 0, 0, 0]);
-    let mut png = b"\x89PNG\r\n\x1a\n".to_vec();
-    png.extend(chunk(b"IHDR", &ihdr));
-    png.extend(chunk(b"IDAT", &[0x78, 0x9c, 0x03, 0x00, 0x00, 0x00, 0x00, 0x01]));
-    png.extend(chunk(b"IEND", &[]));
-    png
-}
-
 #[tokio::test]
 async fn gray_and_one_bit_png_bombs_are_refused_before_decoding() {
     let _turn = SERIAL.lock().await;
@@ -329,7 +298,7 @@ async fn gray_and_one_bit_png_bombs_are_refused_before_decoding() {
     // The probe's bomb (16384 x 16000 gray: 250 MiB natively, 1000 MiB as RGBA) and a
     // 1-bit one (32 MiB natively, 1 GiB as RGBA).
     for (width, height, depth) in [(16_384, 16_000, 8), (16_384, 16_384, 1)] {
-        let png = png_claiming(width, height, depth, 0);
+        let png = arena_test_support::png_claiming(width, height, depth, 0);
         let content = json!({
             "kind": "image",
             "width": width,
@@ -347,8 +316,9 @@ async fn gray_and_one_bit_png_bombs_are_refused_before_decoding() {
 async fn a_request_without_the_token_closes_its_connection() {
     let _turn = SERIAL.lock().await;
     let dir = tempfile::tempdir().expect("temp dir");
-    let stub = StubDesktop::with_config(StubConfig { root: Some(dir.path().into()), screen: (1440, 900), scenario: None })
-        .expect("stub desktop");
+    let stub =
+        StubDesktop::with_config(StubConfig { root: Some(dir.path().into()), screen: (1440, 900), scenario: None })
+            .expect("stub desktop");
     let state = AppState::new(Arc::new(stub), ServerConfig::for_stub(), Some("0123456789abcdef0123".into()));
     let router = arena_guest::router(state);
     let request = Request::builder().uri("/v1/screen").header(header::HOST, "127.0.0.1").body(Body::empty()).unwrap();

@@ -198,8 +198,9 @@ async fn sockets_without_the_token_hold_a_small_share_of_the_slots() {
     }
     // A client with the token gets in at once.
     let mut stream = TcpStream::connect(guest.addr).await.expect("connect");
-    let request =
-        format!("GET /v1/screen HTTP/1.1\r\nhost: 127.0.0.1\r\nauthorization: Bearer {TOKEN}\r\nconnection: close\r\n\r\n");
+    let request = format!(
+        "GET /v1/screen HTTP/1.1\r\nhost: 127.0.0.1\r\nauthorization: Bearer {TOKEN}\r\nconnection: close\r\n\r\n"
+    );
     stream.write_all(request.as_bytes()).await.expect("send");
     let answer = read_to_close(&mut stream).await;
     assert!(answer.starts_with("HTTP/1.1 200"), "{answer}");

@@ -76,7 +76,9 @@ fn no_browser(port: u16) -> Response {
     error_response(
         StatusCode::BAD_GATEWAY,
         ErrorCode::Internal,
-        format!("no browser is listening on the debugging port {port}: start Chrome with --remote-debugging-port={port}"),
+        format!(
+            "no browser is listening on the debugging port {port}: start Chrome with --remote-debugging-port={port}"
+        ),
     )
 }
 

@@ -44,8 +44,8 @@ use crate::state::AppState;
 
 /// The native API: every `/v1/` route.
 pub fn routes() -> Router<AppState> {
-    use axum::extract::DefaultBodyLimit;
     use crate::config::{CLIPBOARD_BODY_BYTES, JSON_BODY_BYTES};
+    use axum::extract::DefaultBodyLimit;
     let control = Router::new()
         .merge(health::routes())
         .merge(screen::routes())

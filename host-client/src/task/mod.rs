@@ -647,8 +647,7 @@ pub fn read_index(path: &Path) -> Result<Vec<(String, Vec<String>)>, TaskError> 
                 .ok_or_else(|| invalid(format!("`{domain}` must be a list of task ids")))?
                 .iter()
                 .map(|id| {
-                    let id =
-                        id.as_str().ok_or_else(|| invalid(format!("`{domain}` holds a non-string id")))?;
+                    let id = id.as_str().ok_or_else(|| invalid(format!("`{domain}` holds a non-string id")))?;
                     check_index_name(id, "task id").map_err(invalid)?;
                     Ok(id.to_owned())
                 })

@@ -161,9 +161,7 @@ fn oversize_task_files_and_instructions_are_refused_by_name() {
     let domain = dir.path().join("chrome");
     std::fs::create_dir_all(&domain).unwrap();
     let task = |instruction: &str| {
-        format!(
-            r#"{{"id": "t", "instruction": "{instruction}", "config": [], "evaluator": {{"func": "infeasible"}}}}"#
-        )
+        format!(r#"{{"id": "t", "instruction": "{instruction}", "config": [], "evaluator": {{"func": "infeasible"}}}}"#)
     };
     let ok = domain.join("ok.json");
     std::fs::write(&ok, task("Open Chrome.")).unwrap();

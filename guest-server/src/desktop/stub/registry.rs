@@ -183,10 +183,8 @@ impl Registry {
         // Creating a key creates its missing parents, as RegCreateKeyEx does.
         let mut parts = path.display.split('\\');
         let hive = parts.next().unwrap_or_default();
-        let mut entry = self
-            .hives
-            .entry(hive.to_owned())
-            .or_insert_with(|| Key { name: hive.to_owned(), ..Key::default() });
+        let mut entry =
+            self.hives.entry(hive.to_owned()).or_insert_with(|| Key { name: hive.to_owned(), ..Key::default() });
         for part in parts {
             entry = entry
                 .children

@@ -83,11 +83,7 @@ async fn probe_case(exe: &Path, request: &(dyn Fn(&str) -> reqwest::RequestBuild
     let took = started.elapsed();
     // Work that goes on after the answer (typing, decoding) shows in the peak a moment later.
     tokio::time::sleep(Duration::from_millis(500)).await;
-    Ok(format!(
-        "{outcome:<22} {:>7.2} s  peak RSS {:>9}",
-        took.as_secs_f64(),
-        mib(memory_of(guest.pid(), "VmHWM:"))
-    ))
+    Ok(format!("{outcome:<22} {:>7.2} s  peak RSS {:>9}", took.as_secs_f64(), mib(memory_of(guest.pid(), "VmHWM:"))))
 }
 
 /// A gray 16384 x 16000 PNG (the probe's bomb: 250 KB of file, 1000 MiB as RGBA).
@@ -106,7 +102,7 @@ fn gray_bomb() -> anyhow::Result<Vec<u8>> {
 }
 
 /// The probe's cases, on each build.
-pub async fn probe_cases() -> anyhow::Result<()> {
+pub(crate) async fn probe_cases() -> anyhow::Result<()> {
     let builds = builds()?;
     let client = reqwest::Client::builder().pool_max_idle_per_host(0).build()?;
     let bomb = gray_bomb()?;
@@ -117,7 +113,8 @@ pub async fn probe_cases() -> anyhow::Result<()> {
     .to_string();
     let typing = format!(r#"{{"actions": [{{"type": "type_text", "text": "{}"}}]}}"#, "x".repeat(BIG));
     let title = format!(r#"{{"title": "{}"}}"#, "t".repeat(BIG));
-    let waits = serde_json::json!({"actions": vec![serde_json::json!({"type": "wait", "ms": 60_000}); 1000]}).to_string();
+    let waits =
+        serde_json::json!({"actions": vec![serde_json::json!({"type": "wait", "ms": 60_000}); 1000]}).to_string();
     let filler = "x".repeat(BIG);
     println!();
     println!("issue 25 probe cases (each on a fresh stub guest; status, time to the answer, the guest's peak RSS):");
@@ -126,7 +123,10 @@ pub async fn probe_cases() -> anyhow::Result<()> {
         let body = body.to_owned();
         let client = client.clone();
         Box::new(move |url: &str| {
-            client.request(method.clone(), format!("{url}{path}")).header("content-type", "application/json").body(body.clone())
+            client
+                .request(method.clone(), format!("{url}{path}"))
+                .header("content-type", "application/json")
+                .body(body.clone())
         }) as Box<dyn Fn(&str) -> reqwest::RequestBuilder + Sync>
     };
     let cases: Vec<Case<'_>> = vec![
@@ -139,7 +139,10 @@ pub async fn probe_cases() -> anyhow::Result<()> {
             "DELETE /v1/files?path=/&recursive=true",
             Box::new(|url: &str| client.delete(format!("{url}/v1/files?path=/&recursive=true"))),
         ),
-        ("POST /setup/recycle {\"path\": \"/Users\"}", json(reqwest::Method::POST, "/setup/recycle", r#"{"path": "/Users"}"#)),
+        (
+            "POST /setup/recycle {\"path\": \"/Users\"}",
+            json(reqwest::Method::POST, "/setup/recycle", r#"{"path": "/Users"}"#),
+        ),
     ];
     for (name, request) in &cases {
         for (build, exe) in &builds {
@@ -151,8 +154,7 @@ pub async fn probe_cases() -> anyhow::Result<()> {
 
 /// What a legitimate client got during one lockout scenario.
 async fn legitimate_client(url: &str, token: Option<&str>, until: Instant) -> (usize, usize) {
-    let Ok(client) =
-        reqwest::Client::builder().pool_max_idle_per_host(0).timeout(Duration::from_secs(2)).build()
+    let Ok(client) = reqwest::Client::builder().pool_max_idle_per_host(0).timeout(Duration::from_secs(2)).build()
     else {
         return (0, 0);
     };
@@ -206,7 +208,7 @@ async fn idle(addr: String, stop: Arc<AtomicBool>) {
 }
 
 /// The two lockout scenarios, on each build.
-pub async fn lockout() -> anyhow::Result<()> {
+pub(crate) async fn lockout() -> anyhow::Result<()> {
     let builds = builds()?;
     let slots = SLOTS.to_string();
     println!();
