@@ -128,8 +128,7 @@ pub fn canonical(path: &str, resolver: &Resolver<'_>) -> String {
     let mut path = path.trim().replace('/', "\\");
     // Win32 device and verbatim prefixes, and the NT object-manager one, name the same
     // files: `\\?\C:\x`, `\\.\C:\x`, `\??\C:\x`; `\\?\UNC\h\s` is `\\h\s`.
-    loop {
-        let Some(prefix) = path.get(..4) else { break };
+    while let Some(prefix) = path.get(..4) {
         if !matches!(prefix, r"\\?\" | r"\\.\" | r"\??\") {
             break;
         }
