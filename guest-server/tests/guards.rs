@@ -41,6 +41,7 @@ fn grew(by: usize) {
 // arguments, so its contract is the system allocator's; the counters are only
 // arithmetic beside it.
 unsafe impl GlobalAlloc for Counting {
+    // SAFETY: as the system allocator's `alloc`.
     unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
         // SAFETY: the caller upholds `alloc`'s contract, which is passed on unchanged.
         let ptr = unsafe { System.alloc(layout) };
@@ -50,12 +51,14 @@ unsafe impl GlobalAlloc for Counting {
         ptr
     }
 
+    // SAFETY: as the system allocator's `dealloc`.
     unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
         // SAFETY: `ptr` came from this allocator (hence the system's) with `layout`.
         unsafe { System.dealloc(ptr, layout) };
         LIVE.fetch_sub(layout.size(), Ordering::Relaxed);
     }
 
+    // SAFETY: as the system allocator's `realloc`.
     unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
         // SAFETY: the caller upholds `realloc`'s contract, which is passed on unchanged.
         let new = unsafe { System.realloc(ptr, layout, new_size) };
