@@ -12,6 +12,9 @@
 //!   VM's browser that reaches the server through DNS rebinding sends its own domain
 //!   name as the host, so it is refused even for simple GETs (which carry no
 //!   `Origin`). An address cannot come from rebinding, so addresses are accepted.
+//! - With a token, a request that shows it takes its connection off probation
+//!   ([`crate::serve::ConnContext::authenticated`]); a 401 closes its connection, so
+//!   a client without the token cannot keep a slot by sending requests.
 
 use axum::extract::{Request, State};
 use axum::http::{header, HeaderMap, StatusCode};
@@ -73,12 +76,15 @@ pub async fn guard(State(state): State<AppState>, mut request: Request, next: Ne
         }
     }
     let authorized = state.token.as_deref().is_none_or(|token| token_matches(request.headers(), token));
-    if !authorized && !OPEN_PATHS.contains(&path.as_str()) {
-        return refuse(
-            native,
-            StatusCode::UNAUTHORIZED,
-            "missing or wrong bearer token (Authorization: Bearer <token>)",
-        );
+    if authorized {
+        if let Some(conn) = request.extensions().get::<crate::serve::ConnContext>() {
+            conn.authenticated();
+        }
+    } else if !OPEN_PATHS.contains(&path.as_str()) {
+        let mut res =
+            refuse(native, StatusCode::UNAUTHORIZED, "missing or wrong bearer token (Authorization: Bearer <token>)");
+        res.headers_mut().insert(header::CONNECTION, axum::http::HeaderValue::from_static("close"));
+        return res;
     }
     request.extensions_mut().insert(Authorized(authorized));
     next.run(request).await

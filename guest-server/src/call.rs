@@ -6,9 +6,13 @@
 //! server. The call itself is told to stop ([`crate::desktop::cancel`]): work
 //! that checks between its units (keystrokes, pauses) ends within one unit; a
 //! call stuck inside the operating system finishes (or not) on its own thread.
+//!
+//! When the server shuts down, [`cancel_all`] sets the same flag on every call still
+//! running against its backend (interpreter runs included, which run as backend
+//! calls), so a SIGTERM ends running work instead of waiting for it.
 
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::Arc;
+use std::sync::{Arc, Mutex, Weak};
 use std::time::Duration;
 
 use crate::desktop::cancel::Scope;
@@ -25,6 +29,34 @@ impl Drop for StopOnDrop {
     }
 }
 
+/// The cancel flags of the calls running now, by the address of their backend, so
+/// that shutting one server down stops its calls and no other's.
+static RUNNING: Mutex<Vec<(usize, Weak<AtomicBool>)>> = Mutex::new(Vec::new());
+
+fn backend_key(desktop: &Arc<dyn Desktop>) -> usize {
+    Arc::as_ptr(desktop).cast::<()>() as usize
+}
+
+fn register(desktop: &Arc<dyn Desktop>, flag: &Arc<AtomicBool>) {
+    let mut running = RUNNING.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
+    // Finished calls drop their flags; forget them as new ones come.
+    running.retain(|(_, flag)| flag.strong_count() > 0);
+    running.push((backend_key(desktop), Arc::downgrade(flag)));
+}
+
+/// Tells every call running against `desktop` to stop, as a timeout does; answers how
+/// many were told. The server calls it when it starts shutting down.
+pub fn cancel_all(desktop: &Arc<dyn Desktop>) -> usize {
+    let key = backend_key(desktop);
+    let running = RUNNING.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
+    let mut told = 0;
+    for flag in running.iter().filter(|(k, _)| *k == key).filter_map(|(_, flag)| flag.upgrade()) {
+        flag.store(true, Ordering::Relaxed);
+        told += 1;
+    }
+    told
+}
+
 /// Runs `f` against the backend on the blocking pool, failing after `deadline`.
 ///
 /// # Errors
@@ -38,6 +70,7 @@ where
 {
     let desktop = Arc::clone(desktop);
     let cancel = Arc::new(AtomicBool::new(false));
+    register(&desktop, &cancel);
     let ms = u64::try_from(deadline.as_millis()).unwrap_or(u64::MAX);
     let task = tokio::task::spawn_blocking({
         let cancel = Arc::clone(&cancel);
@@ -93,6 +126,35 @@ mod tests {
         assert!(matches!(res, Err(DesktopError::Timeout { op: "long", ms: 20 })), "{res:?}");
         let outcome = stopped.recv_timeout(Duration::from_secs(30)).expect("the work stopped instead of running on");
         assert!(matches!(outcome, Err(DesktopError::Timeout { op: "long", .. })), "{outcome:?}");
+    }
+
+    #[tokio::test]
+    async fn shutting_down_stops_the_calls_of_that_backend_only() {
+        let dir = tempfile::tempdir().unwrap();
+        let desktop: Arc<dyn Desktop> = Arc::new(StubDesktop::new(dir.path().to_path_buf()).unwrap());
+        let other: Arc<dyn Desktop> = Arc::new(StubDesktop::new(dir.path().join("other")).unwrap());
+        let (started, running) = std::sync::mpsc::channel();
+        let call = tokio::spawn({
+            let desktop = Arc::clone(&desktop);
+            async move {
+                blocking(&desktop, "long", Duration::from_secs(3600), move |_| {
+                    let _ = started.send(());
+                    crate::desktop::cancel::sleep(Duration::from_secs(3600))
+                })
+                .await
+            }
+        });
+        // Waited for without blocking the test's one runtime thread, which runs the call.
+        for _ in 0..3000 {
+            if running.try_recv().is_ok() {
+                break;
+            }
+            tokio::time::sleep(Duration::from_millis(10)).await;
+        }
+        assert_eq!(cancel_all(&other), 0, "another backend's shutdown leaves this call alone");
+        assert_eq!(cancel_all(&desktop), 1);
+        let res = call.await.expect("joined");
+        assert!(matches!(res, Err(DesktopError::Timeout { op: "long", .. })), "{res:?}");
     }
 
     #[tokio::test]

@@ -4,6 +4,21 @@ use std::net::{IpAddr, Ipv4Addr};
 use std::path::PathBuf;
 use std::time::Duration;
 
+/// Largest body of a JSON control route (windows, registry, exec, files' JSON routes,
+/// evaluator queries, the browser forward, and the WAA routes not named below): 1 MiB.
+/// Every route reads a small document; a bigger body is refused with 413 before it is
+/// buffered and parsed (the whole `--max-body`, 1 GiB, was buffered before).
+pub const JSON_BODY_BYTES: usize = 1 << 20;
+/// Largest body of `POST /v1/actions`, `/update_computer` and `/setup/create_file` (a
+/// 1 MiB `type_text` escaped as JSON; the Set-of-Marks boxes of a crowded screen; a
+/// task's seeded document): 8 MiB.
+pub const ACTIONS_BODY_BYTES: usize = 8 << 20;
+/// Largest body of `/execute`, `/setup/execute` and `/execute_windows`: 2 MiB, room for
+/// the interpreter's source cap written as a JSON string.
+pub const EXECUTE_BODY_BYTES: usize = 2 << 20;
+/// Largest body of `POST /v1/clipboard` (an image as base64): 64 MiB.
+pub const CLIPBOARD_BODY_BYTES: usize = 64 << 20;
+
 /// Which backend drives the desktop.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
 pub enum BackendKind {
@@ -101,7 +116,9 @@ pub struct ServerConfig {
     #[arg(long, env = "ARENA_HEALTH_CACHE_MS", default_value_t = 1000)]
     pub health_cache_ms: u64,
 
-    /// Largest request body accepted, in bytes (uploads included).
+    /// Largest request body accepted by the upload routes (`PUT /v1/files`,
+    /// `/setup/upload`), in bytes. The JSON routes have small limits of their own
+    /// (see `JSON_BODY_BYTES` and its neighbours in this module).
     #[arg(long, env = "ARENA_MAX_BODY", default_value_t = 1 << 30)]
     pub max_body_bytes: usize,
 

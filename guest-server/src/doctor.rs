@@ -7,7 +7,8 @@
 //! under Wine answers [`DesktopError::Unsupported`]) is reported unavailable,
 //! not failed. The checks run one after another because several of them use
 //! the one keyboard, cursor and clipboard; each leaves things as it found them
-//! where it can (the clipboard is restored, Notepad is closed).
+//! where it can (the clipboard is restored, Notepad is closed, the cursor goes back
+//! where it was).
 //!
 //! Entry points: [`run`] (the `arena-guest doctor` subcommand and
 //! `GET /v1/doctor` both call it; the route through a deadline).
@@ -58,6 +59,7 @@ const EXEC_SLACK: Duration = Duration::from_secs(10);
 /// Runs every check in order and returns the report.
 pub fn run(desktop: &dyn Desktop, options: &DoctorOptions) -> DoctorReport {
     let started = Instant::now();
+    let cursor_before = desktop.cursor_position().ok();
     let mut checks = Vec::new();
     let mut time = |name: &str, check: &mut dyn FnMut() -> Outcome| {
         let began = Instant::now();
@@ -90,6 +92,11 @@ pub fn run(desktop: &dyn Desktop, options: &DoctorOptions) -> DoctorReport {
     time("exec_timeout", &mut || exec_timeout(desktop));
     time("files", &mut || files(desktop));
     time("reachability", &mut || reachability(options));
+    if let Some(Point { x, y }) = cursor_before {
+        if let Err(err) = desktop.perform(&Action::MoveTo { x, y }) {
+            tracing::warn!(error = %err, "the doctor could not put the cursor back");
+        }
+    }
     DoctorReport {
         backend: desktop.kind().to_owned(),
         version: env!("CARGO_PKG_VERSION").to_owned(),

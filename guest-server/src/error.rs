@@ -5,7 +5,9 @@
 //!   with 500 for everything the catch-all handler would catch, or the exact
 //!   status and body a route returns itself (see [`WaaError::custom`]).
 //!
-//! Both log server-side failures once, here, and never panic.
+//! Both log server-side failures once, here, and never panic. Neither echoes more
+//! than a bounded prefix of what the client sent: input quoted in a message goes
+//! through [`clip`], and a whole message is cut at [`MAX_MESSAGE_BYTES`].
 
 use axum::extract::rejection::{JsonRejection, QueryRejection};
 use axum::http::StatusCode;
@@ -15,6 +17,28 @@ use axum::Json;
 use arena_shared::error::{ErrorBody, ErrorCode};
 
 use crate::desktop::DesktopError;
+
+/// Most bytes of client input quoted in one error message.
+pub const MAX_ECHO_BYTES: usize = 256;
+/// Most bytes of one error message (a message quoting several inputs, a chain of causes).
+pub const MAX_MESSAGE_BYTES: usize = 4096;
+
+/// `text` for quoting in a message: whole when short, else its first
+/// [`MAX_ECHO_BYTES`] (on a character boundary) and how long it was.
+pub fn clip(text: &str) -> std::borrow::Cow<'_, str> {
+    clip_to(text, MAX_ECHO_BYTES)
+}
+
+fn clip_to(text: &str, max: usize) -> std::borrow::Cow<'_, str> {
+    if text.len() <= max {
+        return std::borrow::Cow::Borrowed(text);
+    }
+    let mut end = max;
+    while !text.is_char_boundary(end) {
+        end -= 1;
+    }
+    std::borrow::Cow::Owned(format!("{}... ({} bytes in all)", &text[..end], text.len()))
+}
 
 /// An error from a native route.
 #[derive(Debug, thiserror::Error)]
@@ -65,7 +89,8 @@ impl IntoResponse for ApiError {
         } else {
             tracing::debug!(error = %self, "native request rejected");
         }
-        (status, Json(ErrorBody { error: code, message: self.to_string() })).into_response()
+        let message = clip_to(&self.to_string(), MAX_MESSAGE_BYTES).into_owned();
+        (status, Json(ErrorBody { error: code, message })).into_response()
     }
 }
 
@@ -185,6 +210,7 @@ impl IntoResponse for WaaError {
     fn into_response(self) -> Response {
         match self {
             WaaError::Catch(message) => {
+                let message = clip_to(&message, MAX_MESSAGE_BYTES).into_owned();
                 tracing::warn!(%message, "WAA request failed");
                 (StatusCode::INTERNAL_SERVER_ERROR, Json(serde_json::json!({"status": "error", "message": message})))
                     .into_response()

@@ -57,13 +57,20 @@ pub const MAX_DECODED_SIDE: u32 = 16_384;
 pub const MAX_DECODED_BYTES: u64 = 256 << 20;
 
 /// Decodes PNG, JPEG (or any format this build reads) into RGBA, refusing one that
-/// claims more than [`MAX_DECODED_SIDE`] pixels a
-/// side or [`MAX_DECODED_BYTES`] of memory before decoding it.
+/// claims more than [`MAX_DECODED_SIDE`] pixels a side, or whose RGBA form would take
+/// more than [`MAX_DECODED_BYTES`], from its header, before any pixel is decoded.
+///
+/// The size counted is the RGBA one every caller converts to, not the file's own
+/// pixel format: a gray or 1-bit PNG takes a quarter or a thirty-second of its RGBA
+/// size to decode, then is expanded, so counting its native size let a 250 KB gray
+/// PNG claim 1 GiB of RGBA. The native decode is bounded by the same figure, so one
+/// decode holds at most twice [`MAX_DECODED_BYTES`] at its peak (native and RGBA).
 ///
 /// # Errors
 ///
 /// The bytes are not an image this build decodes, or the image is over the limits.
 pub fn decode(bytes: &[u8]) -> Result<RgbaImage, ImagingError> {
+    use image::ImageDecoder as _;
     let mut reader = image::ImageReader::new(Cursor::new(bytes))
         .with_guessed_format()
         .map_err(|err| ImagingError { what: "reading image", source: image::ImageError::IoError(err) })?;
@@ -73,8 +80,22 @@ pub fn decode(bytes: &[u8]) -> Result<RgbaImage, ImagingError> {
     limits.max_image_width = Some(MAX_DECODED_SIDE);
     limits.max_image_height = Some(MAX_DECODED_SIDE);
     limits.max_alloc = Some(MAX_DECODED_BYTES);
-    reader.limits(limits);
-    reader.decode().map(|img| img.to_rgba8()).map_err(|source| ImagingError { what: "decoding image", source })
+    reader.limits(limits.clone());
+    let mut decoder = reader.into_decoder().map_err(|source| ImagingError { what: "decoding image", source })?;
+    let (width, height) = decoder.dimensions();
+    let rgba = u64::from(width) * u64::from(height) * 4;
+    if rgba > MAX_DECODED_BYTES {
+        return Err(ImagingError {
+            what: "decoding image",
+            source: image::ImageError::Limits(image::error::LimitError::from_kind(
+                image::error::LimitErrorKind::InsufficientMemory,
+            )),
+        });
+    }
+    decoder.set_limits(limits).map_err(|source| ImagingError { what: "decoding image", source })?;
+    image::DynamicImage::from_decoder(decoder)
+        .map(|img| img.into_rgba8())
+        .map_err(|source| ImagingError { what: "decoding image", source })
 }
 
 /// Downscales `image` so that its longer side is at most `max_side`, keeping the aspect ratio.
@@ -161,6 +182,7 @@ pub fn draw_cursor(image: &mut RgbaImage, at: Point) {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use arena_test_support::png_claiming as png_claiming_as;
 
     #[test]
     fn png_round_trips() {
@@ -172,35 +194,10 @@ mod tests {
         assert_eq!(back, img);
     }
 
-    /// A PNG of `width` x `height` whose header is all there is: what a decompression
-    /// bomb claims before a single pixel is read.
+    /// A PNG of `width` x `height` in RGBA whose header is all there is: what a
+    /// decompression bomb claims before a single pixel is read.
     fn png_claiming(width: u32, height: u32) -> Vec<u8> {
-        fn crc32(bytes: &[u8]) -> u32 {
-            let mut crc = !0u32;
-            for &b in bytes {
-                crc ^= u32::from(b);
-                for _ in 0..8 {
-                    crc = if crc & 1 == 1 { (crc >> 1) ^ 0xEDB8_8320 } else { crc >> 1 };
-                }
-            }
-            !crc
-        }
-        let chunk = |kind: &[u8], data: &[u8]| {
-            let mut body = kind.to_vec();
-            body.extend_from_slice(data);
-            let mut out = u32::try_from(data.len()).unwrap().to_be_bytes().to_vec();
-            out.extend_from_slice(&body);
-            out.extend_from_slice(&crc32(&body).to_be_bytes());
-            out
-        };
-        let mut ihdr = width.to_be_bytes().to_vec();
-        ihdr.extend_from_slice(&height.to_be_bytes());
-        ihdr.extend_from_slice(&[8, 6, 0, 0, 0]);
-        let mut png = b"\x89PNG\r\n\x1a\n".to_vec();
-        png.extend(chunk(b"IHDR", &ihdr));
-        png.extend(chunk(b"IDAT", &[0x78, 0x9c, 0x03, 0x00, 0x00, 0x00, 0x00, 0x01]));
-        png.extend(chunk(b"IEND", &[]));
-        png
+        png_claiming_as(width, height, 8, 6)
     }
 
     #[test]
@@ -215,6 +212,13 @@ mod tests {
         // A small claim passes the limits and fails on its (empty) pixel data instead.
         let small = decode(&png_claiming(4, 4));
         assert!(small.is_err() && !limited(small), "a 4x4 image is within the limits");
+        // Gray and 1-bit images are counted as the RGBA they become: 16384 x 16000 gray
+        // is 250 MiB natively, under the limit, but 1000 MiB as RGBA.
+        assert!(limited(decode(&png_claiming_as(16_384, 16_000, 8, 0))));
+        assert!(limited(decode(&png_claiming_as(16_384, 16_384, 1, 0))));
+        // 8000 x 8000 gray is 244 MiB as RGBA: within the limits.
+        let gray = decode(&png_claiming_as(8_000, 8_000, 8, 0));
+        assert!(gray.is_err() && !limited(gray), "8000 x 8000 gray is within the limits");
     }
 
     #[test]

@@ -209,6 +209,16 @@ pub async fn serve(
         header_timeout: std::time::Duration::from_millis(config.header_timeout_ms.max(1)),
         shutdown_grace: std::time::Duration::from_millis(config.shutdown_grace_ms),
         max_head_bytes: 256 << 10,
+        min_body_rate: serve::MIN_BODY_RATE,
+        probation_slots: state.token.is_some().then(|| serve::probation_slots(config.max_connections)),
+    };
+    let desktop = Arc::clone(&state.desktop);
+    let shutdown = async move {
+        shutdown.await;
+        // Running work (typing, interpreter runs, waits in a backend call) is told to
+        // stop now; requests in flight then answer within the grace period.
+        let told = call::cancel_all(&desktop);
+        tracing::info!(running_calls = told, "shutting down: running backend calls told to stop");
     };
     serve::serve(listener, router(state), limits, shutdown).await
 }

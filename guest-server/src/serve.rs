@@ -13,13 +13,24 @@
 //! - on shutdown no new connection is taken, requests in flight may finish, and after
 //!   `--shutdown-grace-ms` the connections still open (a half-sent request, a client
 //!   that does not read) are dropped, so the server always exits;
+//! - a request's body must keep arriving: after the header timeout's grace, at least
+//!   `min_body_rate` bytes a second on average ([`MinRateBody`]); a body that trickles
+//!   (one byte every few seconds, to hold a slot) fails, and its connection is closed;
+//! - with a token configured, connections that have not yet shown it are on probation:
+//!   at most `probation_slots` of them at once, and the oldest is closed when one more
+//!   arrives, so idle or reconnecting sockets without the token can never hold more than
+//!   that share of the slots, and a client that sends its token at once always gets in.
+//!   The auth guard marks a connection authenticated ([`ConnContext::authenticated`])
+//!   and closes it after a 401;
 //! - connections may be upgraded (the DevTools websocket relay): every request carries
 //!   a [`ConnContext`] whose slot an upgraded connection keeps until it ends, and whose
 //!   shutdown signal tells it to close.
 
+use std::collections::VecDeque;
 use std::future::Future;
-use std::pin::pin;
-use std::sync::Arc;
+use std::pin::{pin, Pin};
+use std::sync::{Arc, Mutex};
+use std::task::{Context, Poll};
 use std::time::Duration;
 
 use axum::body::Body;
@@ -42,6 +53,139 @@ pub struct ConnContext {
     /// Cancelled when the server starts shutting down.
     pub shutdown: CancellationToken,
     _slot: Arc<OwnedSemaphorePermit>,
+    /// This connection's place among those on probation, while it is on it.
+    probation: Option<(Arc<Probation>, u64)>,
+}
+
+impl ConnContext {
+    /// The connection showed the token: it leaves probation and is never evicted for
+    /// want of it.
+    pub fn authenticated(&self) {
+        if let Some((probation, id)) = &self.probation {
+            probation.leave(*id);
+        }
+    }
+}
+
+/// The connections that have not yet shown the token, oldest first, each with the
+/// signal that closes it.
+#[derive(Debug)]
+struct Probation {
+    cap: usize,
+    waiting: Mutex<VecDeque<(u64, CancellationToken)>>,
+}
+
+impl Probation {
+    fn lock(&self) -> std::sync::MutexGuard<'_, VecDeque<(u64, CancellationToken)>> {
+        self.waiting.lock().unwrap_or_else(std::sync::PoisonError::into_inner)
+    }
+
+    /// Puts connection `id` on probation, closing the oldest one when all places are taken.
+    fn enter(&self, id: u64, evict: CancellationToken) {
+        let mut waiting = self.lock();
+        while waiting.len() >= self.cap {
+            if let Some((old, token)) = waiting.pop_front() {
+                tracing::debug!(connection = old, "closing the oldest connection that has not shown the token");
+                token.cancel();
+            }
+        }
+        waiting.push_back((id, evict));
+    }
+
+    fn leave(&self, id: u64) {
+        self.lock().retain(|(waiting, _)| *waiting != id);
+    }
+}
+
+/// A request body that must keep arriving: it fails once less than `grace` plus one
+/// second per `rate` bytes received has passed without the body ending. A client that
+/// sends its body at `rate` bytes a second or faster never sees it; one that trickles a
+/// byte every few seconds to hold its connection is cut off after about `grace`.
+#[derive(Debug)]
+pub struct MinRateBody<B> {
+    inner: B,
+    started: tokio::time::Instant,
+    received: u64,
+    grace: Duration,
+    rate: u64,
+    deadline: Pin<Box<tokio::time::Sleep>>,
+}
+
+impl<B> MinRateBody<B> {
+    /// Wraps `inner`, whose headers arrived now.
+    pub fn new(inner: B, grace: Duration, rate: u64) -> MinRateBody<B> {
+        let started = tokio::time::Instant::now();
+        MinRateBody {
+            inner,
+            started,
+            received: 0,
+            grace,
+            rate: rate.max(1),
+            deadline: Box::pin(tokio::time::sleep_until(started + grace)),
+        }
+    }
+
+    fn next_deadline(&self) -> tokio::time::Instant {
+        let earned = Duration::from_secs_f64(self.received as f64 / self.rate as f64);
+        self.started + self.grace + earned
+    }
+}
+
+/// The error of a body that arrived too slowly.
+#[derive(Debug, thiserror::Error)]
+#[error("the request body arrived slower than {rate} bytes a second ({received} bytes in {elapsed_ms} ms)")]
+pub struct BodyTooSlow {
+    rate: u64,
+    received: u64,
+    elapsed_ms: u64,
+}
+
+impl<B> hyper::body::Body for MinRateBody<B>
+where
+    B: hyper::body::Body<Data = axum::body::Bytes> + Unpin,
+    B::Error: Into<axum::BoxError>,
+{
+    type Data = axum::body::Bytes;
+    type Error = axum::BoxError;
+
+    fn poll_frame(
+        self: Pin<&mut Self>,
+        cx: &mut Context<'_>,
+    ) -> Poll<Option<Result<hyper::body::Frame<Self::Data>, Self::Error>>> {
+        let this = self.get_mut();
+        match Pin::new(&mut this.inner).poll_frame(cx) {
+            Poll::Ready(Some(Ok(frame))) => {
+                if let Some(data) = frame.data_ref() {
+                    this.received += data.len() as u64;
+                    let next = this.next_deadline();
+                    this.deadline.as_mut().reset(next);
+                }
+                Poll::Ready(Some(Ok(frame)))
+            }
+            Poll::Ready(Some(Err(err))) => Poll::Ready(Some(Err(err.into()))),
+            Poll::Ready(None) => Poll::Ready(None),
+            Poll::Pending => match this.deadline.as_mut().poll(cx) {
+                Poll::Ready(()) => {
+                    let elapsed_ms = u64::try_from(this.started.elapsed().as_millis()).unwrap_or(u64::MAX);
+                    tracing::warn!(received = this.received, elapsed_ms, "closing a request whose body trickles");
+                    Poll::Ready(Some(Err(Box::new(BodyTooSlow {
+                        rate: this.rate,
+                        received: this.received,
+                        elapsed_ms,
+                    }))))
+                }
+                Poll::Pending => Poll::Pending,
+            },
+        }
+    }
+
+    fn is_end_stream(&self) -> bool {
+        self.inner.is_end_stream()
+    }
+
+    fn size_hint(&self) -> hyper::body::SizeHint {
+        self.inner.size_hint()
+    }
 }
 
 /// The connection limits of one server.
@@ -52,6 +196,21 @@ pub struct ConnLimits {
     pub shutdown_grace: Duration,
     /// hyper's read buffer, which bounds a request's head.
     pub max_head_bytes: usize,
+    /// Slowest average rate a request body may arrive at, in bytes a second, after a
+    /// grace of `header_timeout`.
+    pub min_body_rate: u64,
+    /// When a token is required: how many connections that have not shown it may be
+    /// open at once (the oldest is closed for a new one). `None`: no probation.
+    pub probation_slots: Option<usize>,
+}
+
+/// The slowest body rate served by default: 1 KiB a second, after the header timeout.
+pub const MIN_BODY_RATE: u64 = 1024;
+
+/// The share of the connection slots that connections without the token may hold:
+/// an eighth, and at least 4.
+pub fn probation_slots(max_connections: usize) -> usize {
+    (max_connections / 8).max(4)
 }
 
 /// Serves `app` on `listener` until `shutdown` completes, within `limits`.
@@ -71,6 +230,9 @@ pub async fn serve(
     let stop = CancellationToken::new();
     let mut connections = JoinSet::new();
     let mut shutdown = pin!(shutdown);
+    let probation =
+        limits.probation_slots.map(|cap| Arc::new(Probation { cap: cap.max(1), waiting: Mutex::default() }));
+    let mut next_id: u64 = 0;
     loop {
         let accepted = tokio::select! {
             accepted = listener.accept() => accepted,
@@ -91,10 +253,20 @@ pub async fn serve(
             connections.spawn(refuse_busy(stream, limits.max_connections));
             continue;
         };
-        let context = ConnContext { shutdown: stop.clone(), _slot: Arc::new(permit) };
+        next_id += 1;
+        let evict = CancellationToken::new();
+        if let Some(probation) = &probation {
+            probation.enter(next_id, evict.clone());
+        }
+        let context = ConnContext {
+            shutdown: stop.clone(),
+            _slot: Arc::new(permit),
+            probation: probation.as_ref().map(|p| (Arc::clone(p), next_id)),
+        };
         let per_request = context.clone();
+        let (grace, rate) = (limits.header_timeout, limits.min_body_rate);
         let service = TowerToHyperService::new(app.clone().map_request(move |request: hyper::Request<Incoming>| {
-            let mut request = request.map(Body::new);
+            let mut request = request.map(|body| Body::new(MinRateBody::new(body, grace, rate)));
             request.extensions_mut().insert(per_request.clone());
             request
         }));
@@ -102,16 +274,20 @@ pub async fn serve(
         builder.timer(TokioTimer::new()).header_read_timeout(limits.header_timeout).max_buf_size(limits.max_head_bytes);
         let connection = builder.serve_connection(TokioIo::new(stream), service).with_upgrades();
         connections.spawn(async move {
-            let ConnContext { shutdown, _slot } = context;
+            let ConnContext { shutdown, _slot, probation } = context;
             let mut connection = pin!(connection);
             let ended = tokio::select! {
                 ended = connection.as_mut() => ended,
+                () = evict.cancelled() => Ok(()),
                 () = shutdown.cancelled() => {
                     // Finish the request in flight, then close; an idle keep-alive closes at once.
                     connection.as_mut().graceful_shutdown();
                     connection.await
                 }
             };
+            if let Some((probation, id)) = probation {
+                probation.leave(id);
+            }
             if let Err(err) = ended {
                 tracing::debug!(%peer, error = %err, "connection ended with an error");
             }

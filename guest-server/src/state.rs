@@ -17,6 +17,10 @@ pub struct AppState {
     pub started: Instant,
     /// The last health report and when it was made, shared by concurrent polls.
     pub health: Arc<tokio::sync::Mutex<Option<(Instant, arena_shared::health::HealthReport)>>>,
+    /// Who drives the keyboard and mouse: action batches share it (read), the doctor
+    /// takes it alone (write), so it waits for running batches and none starts while
+    /// it types into its Notepad.
+    pub input: Arc<tokio::sync::RwLock<()>>,
 }
 
 impl AppState {
@@ -27,6 +31,7 @@ impl AppState {
             token: token.map(Arc::from),
             started: Instant::now(),
             health: Arc::default(),
+            input: Arc::default(),
         }
     }
 

@@ -1,6 +1,7 @@
 //! The server's connection limits, over real sockets on loopback: too many
-//! connections, idle and half-sent requests, oversized heads, and shutdown with
-//! connections that never finish. Every wait is bounded; none is measured.
+//! connections, idle and half-sent requests, bodies that trickle, sockets without the
+//! token, oversized heads, and shutdown with connections that never finish. Every wait
+//! is bounded; none is measured.
 
 use std::sync::Arc;
 use std::time::Duration;
@@ -21,13 +22,19 @@ struct Guest {
 }
 
 async fn start(configure: impl FnOnce(&mut ServerConfig)) -> Guest {
+    start_with(None, configure).await
+}
+
+const TOKEN: &str = "0123456789abcdef0123";
+
+async fn start_with(token: Option<&str>, configure: impl FnOnce(&mut ServerConfig)) -> Guest {
     let dir = tempfile::tempdir().expect("dir");
     let stub =
         StubDesktop::with_config(StubConfig { root: Some(dir.path().into()), screen: (1440, 900), scenario: None })
             .expect("stub");
     let mut config = ServerConfig::for_stub();
     configure(&mut config);
-    let state = AppState::new(Arc::new(stub), config, None);
+    let state = AppState::new(Arc::new(stub), config, token.map(str::to_owned));
     let listener = TcpListener::bind("127.0.0.1:0").await.expect("bind");
     let addr = listener.local_addr().expect("addr");
     let (stop, stopped) = tokio::sync::oneshot::channel::<()>();
@@ -132,4 +139,79 @@ async fn shutdown_ends_even_with_connections_that_never_finish() {
     assert!(matches!(served, Ok(Ok(()))), "{served:?}");
     read_to_close(&mut stuck).await;
     assert!(TcpStream::connect(guest.addr).await.is_err(), "no new connection after shutdown");
+}
+
+#[tokio::test]
+async fn a_body_that_trickles_is_cut_off_and_its_connection_closed() {
+    // hyper's header timer stops once the head is in: only the body's rate can close
+    // this connection, after the header timeout's grace.
+    let guest = start(|c| c.header_timeout_ms = 500).await;
+    let (mut read, mut write) = TcpStream::connect(guest.addr).await.expect("connect").into_split();
+    let head = "POST /v1/actions HTTP/1.1\r\nhost: 127.0.0.1\r\ncontent-type: application/json\r\n\
+                content-length: 1000000\r\n\r\n{";
+    write.write_all(head.as_bytes()).await.expect("send");
+    // The probe's client sent a byte every 5 s and was never closed; this one sends a
+    // byte every 50 ms, 20 bytes a second, far below the minimum rate.
+    let trickle = tokio::spawn(async move {
+        while write.write_all(b" ").await.is_ok() {
+            tokio::time::sleep(Duration::from_millis(50)).await;
+        }
+    });
+    let mut answer = Vec::new();
+    let read = tokio::time::timeout(Duration::from_secs(30), read.read_to_end(&mut answer)).await;
+    trickle.abort();
+    let answer = String::from_utf8_lossy(&answer);
+    assert!(read.is_ok(), "the server kept reading a trickling body; it had sent {answer:?}");
+    assert!(answer.is_empty() || answer.starts_with("HTTP/1.1 4"), "{answer}");
+}
+
+#[tokio::test]
+async fn a_body_sent_at_an_ordinary_pace_is_served() {
+    let guest = start(|c| c.header_timeout_ms = 200).await;
+    let mut stream = TcpStream::connect(guest.addr).await.expect("connect");
+    let body = br#"{"actions": [{"type": "move_to", "x": 5, "y": 5}]}"#;
+    let head = format!(
+        "POST /v1/actions HTTP/1.1\r\nhost: 127.0.0.1\r\ncontent-type: application/json\r\nconnection: close\r\n\
+         content-length: {}\r\n\r\n",
+        body.len()
+    );
+    stream.write_all(head.as_bytes()).await.expect("head");
+    stream.write_all(body).await.expect("body");
+    let answer = read_to_close(&mut stream).await;
+    assert!(answer.starts_with("HTTP/1.1 200"), "{answer}");
+}
+
+#[tokio::test]
+async fn sockets_without_the_token_hold_a_small_share_of_the_slots() {
+    // 32 slots, so at most 4 connections may be open without having shown the token; an
+    // hour's header timeout, so only that rule can close the idle ones.
+    let guest = start_with(Some(TOKEN), |c| {
+        c.max_connections = 32;
+        c.header_timeout_ms = 3_600_000;
+    })
+    .await;
+    let mut idle = Vec::new();
+    for _ in 0..10 {
+        idle.push(TcpStream::connect(guest.addr).await.expect("connect"));
+        // Accepted in order, so "oldest" is well defined.
+        tokio::time::sleep(Duration::from_millis(20)).await;
+    }
+    // A client with the token gets in at once.
+    let mut stream = TcpStream::connect(guest.addr).await.expect("connect");
+    let request = format!(
+        "GET /v1/screen HTTP/1.1\r\nhost: 127.0.0.1\r\nauthorization: Bearer {TOKEN}\r\nconnection: close\r\n\r\n"
+    );
+    stream.write_all(request.as_bytes()).await.expect("send");
+    let answer = read_to_close(&mut stream).await;
+    assert!(answer.starts_with("HTTP/1.1 200"), "{answer}");
+    // The oldest idle sockets were closed to make room, not left to hold their slots.
+    for socket in idle.iter_mut().take(6) {
+        let said = read_to_close(socket).await;
+        assert!(said.is_empty(), "{said}");
+    }
+    // A request without the token is answered 401 and its connection closed.
+    let mut stream = TcpStream::connect(guest.addr).await.expect("connect");
+    stream.write_all(b"GET /v1/screen HTTP/1.1\r\nhost: 127.0.0.1\r\n\r\n").await.expect("send");
+    let answer = read_to_close(&mut stream).await;
+    assert!(answer.starts_with("HTTP/1.1 401"), "{answer}");
 }

@@ -39,6 +39,11 @@ fn is_one(n: &u32) -> bool {
     *n == 1
 }
 
+/// Most bytes of UTF-8 text one `type_text` action types (1 MiB): a page of text is a
+/// few kilobytes, and typing is one keystroke per character, so more is a runaway, not
+/// an agent's intent. Both the guest's routes and its backends refuse more up front.
+pub const MAX_TYPE_TEXT_BYTES: usize = 1 << 20;
+
 /// One input action.
 ///
 /// Scroll amounts are raw wheel deltas, as pyautogui passes them on Windows:

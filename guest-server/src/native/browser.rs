@@ -16,6 +16,9 @@
 //! It reaches the configured DevTools port and nothing else: a redirect in the
 //! browser's answer is handed back as it is, never followed (to another host or
 //! port of the VM's network), and an answer is read up to [`MAX_ANSWER`] bytes.
+//! A request's body is read only once a browser is seen listening on the port (a
+//! body sent when no browser runs is never buffered), and up to
+//! [`crate::config::JSON_BODY_BYTES`] (the DevTools endpoints take no bodies).
 
 use std::sync::OnceLock;
 use std::time::Duration;
@@ -66,12 +69,25 @@ fn error_response(status: StatusCode, code: ErrorCode, message: String) -> Respo
     (status, Json(ErrorBody { error: code, message })).into_response()
 }
 
+/// How long the check that a browser listens may take (it is on loopback).
+const CONNECT_DEADLINE: Duration = Duration::from_secs(5);
+
+fn no_browser(port: u16) -> Response {
+    error_response(
+        StatusCode::BAD_GATEWAY,
+        ErrorCode::Internal,
+        format!(
+            "no browser is listening on the debugging port {port}: start Chrome with --remote-debugging-port={port}"
+        ),
+    )
+}
+
 async fn forward(
     State(state): State<AppState>,
     method: Method,
     Path(path): Path<String>,
     RawQuery(query): RawQuery,
-    body: Bytes,
+    body: axum::body::Body,
 ) -> Result<Response, ApiError> {
     let method = match method {
         Method::GET => reqwest::Method::GET,
@@ -84,6 +100,20 @@ async fn forward(
         }
     };
     let port = state.config.cdp_port;
+    // Before the body is read: is anyone listening?
+    let listening = tokio::time::timeout(CONNECT_DEADLINE, tokio::net::TcpStream::connect(("127.0.0.1", port))).await;
+    if !matches!(listening, Ok(Ok(_))) {
+        return Ok(no_browser(port));
+    }
+    let body: Bytes = match axum::body::to_bytes(body, crate::config::JSON_BODY_BYTES).await {
+        Ok(body) => body,
+        Err(err) => {
+            return Err(ApiError::PayloadTooLarge(format!(
+                "the body could not be read within {} bytes: {err}",
+                crate::config::JSON_BODY_BYTES
+            )))
+        }
+    };
     let mut url = reqwest::Url::parse(&format!("http://127.0.0.1:{port}/"))
         .map_err(|err| ApiError::BadRequest(format!("cannot build the DevTools URL: {err}")))?;
     // `set_path` percent-encodes what needs it; the query goes on as the host wrote it,
@@ -97,27 +127,23 @@ async fn forward(
     }
     let answer = match request.send().await {
         Ok(answer) => answer,
-        Err(err) if err.is_connect() => {
-            return Ok(error_response(
-                StatusCode::BAD_GATEWAY,
-                ErrorCode::Internal,
-                format!(
-                    "no browser is listening on the debugging port {port}: start Chrome with --remote-debugging-port={port}"
-                ),
-            ))
-        }
+        Err(err) if err.is_connect() => return Ok(no_browser(port)),
         Err(err) if err.is_timeout() => {
             return Ok(error_response(
                 StatusCode::GATEWAY_TIMEOUT,
                 ErrorCode::Timeout,
-                format!("the browser on port {port} did not answer {} within {} ms", url.path(), deadline.as_millis()),
+                format!(
+                    "the browser on port {port} did not answer {} within {} ms",
+                    crate::error::clip(url.path()),
+                    deadline.as_millis()
+                ),
             ))
         }
         Err(err) => {
             return Ok(error_response(
                 StatusCode::BAD_GATEWAY,
                 ErrorCode::Internal,
-                format!("the browser on port {port} failed on {}: {err}", url.path()),
+                format!("the browser on port {port} failed on {}: {err}", crate::error::clip(url.path())),
             ))
         }
     };
@@ -134,7 +160,10 @@ async fn forward(
                 return Ok(error_response(
                     StatusCode::BAD_GATEWAY,
                     ErrorCode::Internal,
-                    format!("the browser's answer to {} is over {MAX_ANSWER} bytes; it was not forwarded", url.path()),
+                    format!(
+                        "the browser's answer to {} is over {MAX_ANSWER} bytes; it was not forwarded",
+                        crate::error::clip(url.path())
+                    ),
                 ));
             }
             Ok(Some(chunk)) => bytes.extend_from_slice(&chunk),
@@ -143,7 +172,10 @@ async fn forward(
                 return Ok(error_response(
                     StatusCode::BAD_GATEWAY,
                     ErrorCode::Internal,
-                    format!("the browser on port {port} broke off its answer to {}: {err}", url.path()),
+                    format!(
+                        "the browser on port {port} broke off its answer to {}: {err}",
+                        crate::error::clip(url.path())
+                    ),
                 ))
             }
         }

@@ -166,6 +166,7 @@ async fn write(
     let limit = state.config.max_body_bytes;
     let (loc, mut temp) = run(&state, "write_file", move |d| {
         let loc = locate(d, &query.path)?;
+        crate::protect::refuse_destructive(d, "overwrite", &loc.guest)?;
         prepare_write(&loc, create_parents)?;
         let temp = AtomicFile::create(&loc.local).map_err(|err| io_error("write_file", &loc, err))?;
         Ok((loc, temp))

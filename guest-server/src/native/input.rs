@@ -1,7 +1,10 @@
 //! `POST /v1/actions`: a batch of typed input actions, executed in order.
 //!
 //! The whole batch is validated before anything runs, so a typo in the last
-//! key name never leaves the desktop half-driven. Then every action but
+//! key name never leaves the desktop half-driven, and so are its bounds: at most
+//! [`MAX_ACTIONS`] actions, a `type_text` of at most
+//! [`arena_shared::action::MAX_TYPE_TEXT_BYTES`] (1 MiB), and at most
+//! [`MAX_BATCH_MS`] (5 minutes) of waits, drags and typing pauses in all. Then every action but
 //! [`Action::Wait`] is one backend call; waits sleep asynchronously between
 //! calls and hold no blocking thread. The first failure stops the batch and
 //! the error says which action failed and how many ran before it.
@@ -30,9 +33,14 @@ const MAX_ACTIONS: usize = 1000;
 const MAX_WAIT_MS: u64 = 60_000;
 /// Most repetitions of one click or key press; more is a runaway loop, not an agent's intent.
 const MAX_REPEAT: u32 = 1000;
+/// Most time one batch may plan by its own waits, drags and typing pauses: 5 minutes.
+/// (A thousand one-minute waits were accepted before: 16.7 hours holding a connection.)
+pub(crate) const MAX_BATCH_MS: u64 = 300_000;
 
 pub(crate) fn routes() -> Router<AppState> {
-    Router::new().route("/v1/actions", post(actions))
+    Router::new()
+        .route("/v1/actions", post(actions))
+        .layer(axum::extract::DefaultBodyLimit::max(crate::config::ACTIONS_BODY_BYTES))
 }
 
 async fn actions(
@@ -40,6 +48,8 @@ async fn actions(
     AppJson(batch): AppJson<ActionBatch>,
 ) -> Result<AppJson<ActionReport>, Response> {
     validate(&batch.actions, state.call_timeout()).map_err(IntoResponse::into_response)?;
+    // Batches share the input; a doctor run takes it alone (see `native::doctor`).
+    let _input = state.input.read().await;
     let started = Instant::now();
     let total = batch.actions.len();
     for (index, action) in batch.actions.into_iter().enumerate() {
@@ -83,10 +93,22 @@ fn validate(actions: &[Action], call_deadline: Duration) -> Result<(), ApiError>
             actions.len()
         )));
     }
+    let mut total = Duration::ZERO;
     for (index, action) in actions.iter().enumerate() {
         check_action(action)
             .map_err(|why| ApiError::BadRequest(format!("action {index} ({}): {why}", action_name(action))))?;
         let planned = planned_duration(action);
+        total = total.saturating_add(match action {
+            Action::Wait { ms } => Duration::from_millis(*ms),
+            _ => planned,
+        });
+        if total > Duration::from_millis(MAX_BATCH_MS) {
+            return Err(ApiError::BadRequest(format!(
+                "the batch would take more than {} s by its waits and pauses (reached at action {index}); \
+                 send it in parts",
+                MAX_BATCH_MS / 1000
+            )));
+        }
         if planned >= call_deadline {
             return Err(ApiError::BadRequest(format!(
                 "action {index} ({}) would take {:.1} s by its own pauses, past the call deadline of {:.1} s \
@@ -142,6 +164,11 @@ fn check_action(action: &Action) -> Result<(), String> {
         Action::Drag { button: b, .. } => button(b),
         Action::Scroll { x, y, .. } | Action::DoubleClick { x, y } | Action::RightClick { x, y } => coords(x, y),
         Action::Wait { ms } if *ms > MAX_WAIT_MS => Err(format!("a wait lasts at most {MAX_WAIT_MS} ms (got {ms})")),
+        Action::TypeText { text, .. } if text.len() > arena_shared::action::MAX_TYPE_TEXT_BYTES => Err(format!(
+            "the text is {} bytes; at most {} are typed in one action",
+            text.len(),
+            arena_shared::action::MAX_TYPE_TEXT_BYTES
+        )),
         Action::Wait { .. } | Action::MoveTo { .. } | Action::MoveRel { .. } | Action::TypeText { .. } => Ok(()),
     }
 }
@@ -232,6 +259,21 @@ mod tests {
     }
 
     #[test]
+    fn texts_and_batch_durations_have_caps() {
+        let deadline = Duration::from_secs(30);
+        let max = arena_shared::action::MAX_TYPE_TEXT_BYTES;
+        let typing = |n: usize| vec![Action::TypeText { text: "x".repeat(n), interval_ms: None }];
+        assert!(validate(&typing(max), deadline).is_ok());
+        let err = validate(&typing(max + 1), deadline).expect_err("over the text cap");
+        assert!(err.to_string().contains("at most 1048576"), "{err}");
+        // 1000 one-minute waits (16.7 h) are refused before anything runs; five are not.
+        let waits = |n: usize| vec![Action::Wait { ms: 60_000 }; n];
+        assert!(validate(&waits(5), deadline).is_ok());
+        let err = validate(&waits(1000), deadline).expect_err("over the batch duration");
+        assert!(err.to_string().contains("300 s") && err.to_string().contains("action 5"), "{err}");
+    }
+
+    #[test]
     fn typing_planned_past_the_call_deadline_is_refused_up_front() {
         let deadline = Duration::from_secs(30);
         let typing = |text: &str, ms: u64| vec![Action::TypeText { text: text.into(), interval_ms: Some(ms) }];
@@ -243,7 +285,7 @@ mod tests {
             "{message}"
         );
         assert!(validate(&typing("abcde", 2000), deadline).is_ok(), "8 s fits");
-        assert!(validate(&typing(&"x".repeat(100_000), 0), deadline).is_ok(), "no pauses, no limit");
+        assert!(validate(&typing(&"x".repeat(100_000), 0), deadline).is_ok(), "no pauses, no time limit");
         assert_eq!(planned_duration(&typing("ab", u64::MAX)[0]), Duration::from_millis(MAX_TYPING_PAUSE_MS));
     }
 }

@@ -17,6 +17,10 @@
 //! `exec` (exec, launch, open), `registry` (registry, wallpaper), `doctor`
 //! (every capability end to end), `browser` (the browser's DevTools HTTP endpoint,
 //! forwarded) and `browser_ws` (its DevTools websocket, relayed).
+//!
+//! Body limits by route family: `/v1/actions` [`crate::config::ACTIONS_BODY_BYTES`],
+//! `/v1/clipboard` [`crate::config::CLIPBOARD_BODY_BYTES`], `PUT /v1/files` streams up
+//! to `--max-body`, and every other route [`crate::config::JSON_BODY_BYTES`].
 
 mod a11y;
 mod browser;
@@ -40,20 +44,27 @@ use crate::state::AppState;
 
 /// The native API: every `/v1/` route.
 pub fn routes() -> Router<AppState> {
-    Router::new()
+    use crate::config::{CLIPBOARD_BODY_BYTES, JSON_BODY_BYTES};
+    use axum::extract::DefaultBodyLimit;
+    let control = Router::new()
         .merge(health::routes())
         .merge(screen::routes())
-        .merge(input::routes())
         .merge(a11y::routes())
         .merge(windows::routes())
-        .merge(clipboard::routes())
         .merge(doctor::routes())
+        // `PUT /v1/files` reads its body as a stream, bounded by `--max-body` itself.
         .merge(files::routes())
         .merge(exec::routes())
         .merge(registry::routes())
         .merge(browser::routes())
         .merge(browser_ws::routes())
         .merge(eval_queries::routes())
+        .layer(DefaultBodyLimit::max(JSON_BODY_BYTES));
+    Router::new()
+        .merge(control)
+        // Its own limit, set in `input::routes`.
+        .merge(input::routes())
+        .merge(clipboard::routes().layer(DefaultBodyLimit::max(CLIPBOARD_BODY_BYTES)))
 }
 
 /// Milliseconds of `d`, saturating (a `u64` of milliseconds outlasts any uptime).

@@ -125,10 +125,12 @@ fn find(mut windows: Vec<WindowInfo>, selector: &Selector) -> DesktopResult<Wind
         Selector::Title(title) => {
             let needle = title.to_lowercase();
             windows.sort_by_key(|w| w.z_order);
-            windows
-                .into_iter()
-                .find(|w| w.visible && w.title.to_lowercase().contains(&needle))
-                .ok_or_else(|| DesktopError::NotFound(format!("no visible window whose title contains {title:?}")))
+            windows.into_iter().find(|w| w.visible && w.title.to_lowercase().contains(&needle)).ok_or_else(|| {
+                DesktopError::NotFound(format!(
+                    "no visible window whose title contains {:?}",
+                    crate::error::clip(title)
+                ))
+            })
         }
     }
 }

@@ -36,12 +36,13 @@ mod setup;
 use std::sync::{Arc, Mutex, MutexGuard};
 use std::time::Duration;
 
-use axum::extract::FromRef;
+use axum::extract::{DefaultBodyLimit, FromRef};
 use axum::http::{header, HeaderValue, StatusCode};
 use axum::response::{IntoResponse, Response};
 use axum::routing::{get, post, MethodRouter};
 use axum::{Json, Router};
 
+use crate::config::{ACTIONS_BODY_BYTES, EXECUTE_BODY_BYTES, JSON_BODY_BYTES};
 use crate::desktop::Desktop;
 use crate::error::WaaError;
 use crate::state::AppState;
@@ -116,11 +117,7 @@ impl FromRef<WaaContext> for Arc<WaaState> {
 /// with a fresh WAA session (no `/update_computer` yet, no recording).
 pub fn routes(state: &AppState) -> Router<AppState> {
     let ctx = WaaContext { app: state.clone(), session: Arc::new(WaaState::default()) };
-    Router::new()
-        .route("/update_computer", post_rule(execute::update_computer))
-        .route("/execute_windows", post_rule(execute::execute_windows))
-        .route("/setup/execute", post_rule(execute::execute))
-        .route("/execute", post_rule(execute::execute))
+    let small = Router::new()
         .route("/probe", get_rule(observe::probe))
         .route("/shutdown", post_rule(observe::shutdown))
         .route("/setup/launch", post_rule(execute::launch))
@@ -133,7 +130,6 @@ pub fn routes(state: &AppState) -> Router<AppState> {
         .route("/desktop_path", post_rule(observe::desktop_path))
         .route("/documents_path", post_rule(observe::documents_path))
         .route("/setup/create_folder", post_rule(files::create_folder))
-        .route("/setup/create_file", post_rule(files::create_file))
         .route("/setup/recycle", post_rule(files::recycle))
         .route("/folder_exists", post_rule(files::folder_exists))
         .route("/file_exists", post_rule(files::file_exists))
@@ -141,7 +137,6 @@ pub fn routes(state: &AppState) -> Router<AppState> {
         .route("/wallpaper", post_rule(files::wallpaper))
         .route("/list_directory", post_rule(files::list_directory))
         .route("/file", post_rule(files::file))
-        .route("/setup/upload", post_rule(files::upload))
         .route("/platform", get_rule(observe::platform))
         .route("/cursor_position", get_rule(observe::cursor_position))
         .route("/setup/change_wallpaper", post_rule(files::change_wallpaper))
@@ -161,7 +156,19 @@ pub fn routes(state: &AppState) -> Router<AppState> {
         .route("/library_folders", post_rule(queries::library_folders))
         .route("/check_if_timer_started", post_rule(queries::check_if_timer_started))
         .route("/check_if_world_clock_exists", post_rule(queries::check_if_world_clock_exists))
-        .with_state(ctx)
+        .layer(DefaultBodyLimit::max(JSON_BODY_BYTES));
+    let execute = Router::new()
+        .route("/execute_windows", post_rule(execute::execute_windows))
+        .route("/setup/execute", post_rule(execute::execute))
+        .route("/execute", post_rule(execute::execute))
+        .layer(DefaultBodyLimit::max(EXECUTE_BODY_BYTES));
+    let update = Router::new()
+        .route("/setup/create_file", post_rule(files::create_file))
+        .route("/update_computer", post_rule(execute::update_computer))
+        .layer(DefaultBodyLimit::max(ACTIONS_BODY_BYTES));
+    // `/setup/upload` keeps the router's `--max-body`.
+    let upload = Router::new().route("/setup/upload", post_rule(files::upload));
+    small.merge(execute).merge(update).merge(upload).with_state(ctx)
 }
 
 /// A `POST` rule; Flask also answers `OPTIONS` on it.

@@ -34,6 +34,55 @@ pub enum TaskError {
     Invalid { path: PathBuf, message: String },
 }
 
+/// Largest task file read (upstream's biggest is a few KB): 4 MiB.
+pub const MAX_TASK_FILE_BYTES: u64 = 4 << 20;
+/// Largest index file read (upstream's `test_all.json` is 12 KB): 16 MiB.
+pub const MAX_INDEX_FILE_BYTES: u64 = 16 << 20;
+/// Longest instruction, in bytes (upstream's longest is under 1 KB; it goes into every
+/// prompt and every result file): 64 KiB.
+pub const MAX_INSTRUCTION_BYTES: usize = 64 << 10;
+
+/// Reads `path` as text, refusing a file over `cap` bytes before reading it (and a
+/// file that grows past it while it is read).
+fn read_capped(path: &Path, cap: u64, what: &str) -> Result<String, TaskError> {
+    use std::io::Read as _;
+    let read_err = |source| TaskError::Read { path: path.to_owned(), source };
+    let file = std::fs::File::open(path).map_err(read_err)?;
+    let too_big = |size: u64| TaskError::Invalid {
+        path: path.to_owned(),
+        message: format!("the {what} is {size} bytes; at most {cap} are read"),
+    };
+    let size = file.metadata().map_err(read_err)?.len();
+    if size > cap {
+        return Err(too_big(size));
+    }
+    let mut text = String::new();
+    file.take(cap + 1).read_to_string(&mut text).map_err(read_err)?;
+    if text.len() as u64 > cap {
+        return Err(too_big(text.len() as u64));
+    }
+    Ok(text)
+}
+
+/// Checks that an index's domain or task id names one file in one folder: not empty,
+/// no path separator, no `..`, no drive or absolute path, no NUL.
+fn check_index_name(name: &str, what: &str) -> Result<(), String> {
+    let shown: String = name.chars().take(80).collect();
+    if name.trim().is_empty() {
+        return Err(format!("an index {what} is empty"));
+    }
+    if name.contains(['/', '\\', ':', '\0']) || name == "." || name == ".." || name.contains("..") {
+        return Err(format!(
+            "the index {what} {shown:?} is not a plain name (no path separators, drive letters or `..`); \
+             index entries are task ids, resolved inside the corpus"
+        ));
+    }
+    if Path::new(name).is_absolute() || Path::new(name).components().count() != 1 {
+        return Err(format!("the index {what} {shown:?} is not a plain name"));
+    }
+    Ok(())
+}
+
 /// Task difficulty: which folder of the corpus a task index resolves into.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default, clap::ValueEnum)]
 pub enum Difficulty {
@@ -227,7 +276,7 @@ impl Task {
     /// [`TaskError`] naming the file and what is wrong (unreadable, bad JSON,
     /// unknown step/getter/metric, missing or mistyped parameter).
     pub fn load(path: &Path) -> Result<Task, TaskError> {
-        let text = std::fs::read_to_string(path).map_err(|source| TaskError::Read { path: path.to_owned(), source })?;
+        let text = read_capped(path, MAX_TASK_FILE_BYTES, "task file")?;
         Task::parse(&text, path)
     }
 
@@ -243,6 +292,12 @@ impl Task {
     }
 
     fn from_data(data: TaskData, path: &Path) -> Result<Task, String> {
+        if data.instruction.len() > MAX_INSTRUCTION_BYTES {
+            return Err(format!(
+                "the instruction is {} bytes; at most {MAX_INSTRUCTION_BYTES} are accepted",
+                data.instruction.len()
+            ));
+        }
         let name = path.file_stem().and_then(|s| s.to_str()).unwrap_or(&data.id).to_owned();
         let domain = path.parent().and_then(|p| p.file_name()).and_then(|s| s.to_str()).unwrap_or("").to_owned();
         let config = steps(&data.config, "config")?;
@@ -562,13 +617,16 @@ fn getter(value: Value, known: &[&str]) -> Result<Option<GetterSpec>, String> {
     Ok(Some(GetterSpec { kind, params: map }))
 }
 
-/// A task index file (`test_all.json`): domain → task names.
+/// A task index file (`test_all.json`): domain → task names. Domains and names are
+/// plain names (no separators, no `..`), so an index only names files inside the
+/// corpus; the file is read up to [`MAX_INDEX_FILE_BYTES`].
 ///
 /// # Errors
 ///
-/// [`TaskError`] for an unreadable or malformed index.
+/// [`TaskError`] for an unreadable, oversize or malformed index, or an entry that is
+/// not a plain name.
 pub fn read_index(path: &Path) -> Result<Vec<(String, Vec<String>)>, TaskError> {
-    let text = std::fs::read_to_string(path).map_err(|source| TaskError::Read { path: path.to_owned(), source })?;
+    let text = read_capped(path, MAX_INDEX_FILE_BYTES, "index file")?;
     let invalid = |message: String| TaskError::Invalid { path: path.to_owned(), message };
     // Checked as JSON first, so a syntax error is reported as one.
     let value: Value = serde_json::from_str(&text)
@@ -583,12 +641,15 @@ pub fn read_index(path: &Path) -> Result<Vec<(String, Vec<String>)>, TaskError> 
     entries
         .into_iter()
         .map(|(domain, ids)| {
+            check_index_name(&domain, "domain").map_err(invalid)?;
             let ids = ids
                 .as_array()
                 .ok_or_else(|| invalid(format!("`{domain}` must be a list of task ids")))?
                 .iter()
                 .map(|id| {
-                    id.as_str().map(str::to_owned).ok_or_else(|| invalid(format!("`{domain}` holds a non-string id")))
+                    let id = id.as_str().ok_or_else(|| invalid(format!("`{domain}` holds a non-string id")))?;
+                    check_index_name(id, "task id").map_err(invalid)?;
+                    Ok(id.to_owned())
                 })
                 .collect::<Result<Vec<_>, _>>()?;
             Ok((domain, ids))

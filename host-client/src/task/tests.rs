@@ -129,3 +129,50 @@ fn upstream_shapes_are_understood() {
     assert_eq!(needs.steps, ["execute", "activate_window"]);
     assert_eq!(needs.getters, ["vm_file", "rule"]);
 }
+
+#[test]
+fn index_entries_are_task_ids_not_paths() {
+    let dir = tempfile::tempdir().unwrap();
+    let index = dir.path().join("test_x.json");
+    let check = |json: &str, needle: Option<&str>| {
+        std::fs::write(&index, json).unwrap();
+        match (read_index(&index), needle) {
+            (Ok(entries), None) => assert!(!entries.is_empty(), "{json}"),
+            (Err(err), Some(needle)) => {
+                let message = err.to_string();
+                assert!(message.contains(needle) && message.contains("test_x.json"), "{json}: {message}");
+            }
+            (got, want) => panic!("{json}: got {got:?}, expected an error with {want:?}"),
+        }
+    };
+    check(r#"{"chrome": ["0d8b7de3-e8de-4d86-b9fd-dd2dce58a217-WOS"]}"#, None);
+    check(r#"{"chrome": ["../../x/evil"]}"#, Some("not a plain name"));
+    check(r#"{"chrome": ["/etc/passwd"]}"#, Some("not a plain name"));
+    check(r#"{"chrome": ["C:\\x\\evil"]}"#, Some("not a plain name"));
+    check(r#"{"chrome": ["a\\b"]}"#, Some("not a plain name"));
+    check(r#"{"chrome": [".."]}"#, Some("not a plain name"));
+    check(r#"{"chrome": [""]}"#, Some("empty"));
+    check(r#"{"../examples": ["x"]}"#, Some("domain"));
+}
+
+#[test]
+fn oversize_task_files_and_instructions_are_refused_by_name() {
+    let dir = tempfile::tempdir().unwrap();
+    let domain = dir.path().join("chrome");
+    std::fs::create_dir_all(&domain).unwrap();
+    let task = |instruction: &str| {
+        format!(r#"{{"id": "t", "instruction": "{instruction}", "config": [], "evaluator": {{"func": "infeasible"}}}}"#)
+    };
+    let ok = domain.join("ok.json");
+    std::fs::write(&ok, task("Open Chrome.")).unwrap();
+    assert!(Task::load(&ok).is_ok());
+    let long = domain.join("long.json");
+    std::fs::write(&long, task(&"x".repeat(MAX_INSTRUCTION_BYTES + 1))).unwrap();
+    let err = Task::load(&long).unwrap_err().to_string();
+    assert!(err.contains("long.json") && err.contains("instruction") && err.contains("65536"), "{err}");
+    let huge = domain.join("huge.json");
+    let file = std::fs::File::create(&huge).unwrap();
+    file.set_len(MAX_TASK_FILE_BYTES + 1).unwrap();
+    let err = Task::load(&huge).unwrap_err().to_string();
+    assert!(err.contains("huge.json") && err.contains("at most 4194304"), "{err}");
+}

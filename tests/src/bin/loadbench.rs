@@ -10,8 +10,17 @@
 //! - resident memory: peak and settled, and the peak around a PNG bomb sent as a
 //!   clipboard image (six at once), a 1 GiB file read and a 1023 MiB upload.
 //!
+//! - issue 25's hostile requests and two lockout scenarios (a slow body, reconnecting
+//!   idle sockets), against guest processes: what a legitimate client gets, the time to
+//!   each answer and the guest's peak memory, side by side with an older build when
+//!   `ARENA_LOADBENCH_BASELINE` names its binary (see [`guards`]).
+//!
 //! Memory figures read `/proc/self/status` (Linux); elsewhere they print as unknown.
-//! Run it in release mode: `cargo run --release -p arena-tests --bin loadbench`.
+//! Run it in release mode: `cargo run --release -p arena-tests --bin loadbench`
+//! (`-- guards` runs the guards section alone).
+
+#[path = "loadbench/guards.rs"]
+mod guards;
 
 use std::process::ExitCode;
 use std::time::{Duration, Instant};
@@ -97,6 +106,15 @@ async fn phase(url: &str, name: &str, clients: usize) -> anyhow::Result<()> {
 }
 
 async fn run() -> anyhow::Result<()> {
+    if std::env::args().nth(1).as_deref() != Some("guards") {
+        load().await?;
+    }
+    guards::probe_cases().await?;
+    guards::lockout().await
+}
+
+/// The load, memory and bomb figures of the in-process guest.
+async fn load() -> anyhow::Result<()> {
     let stub = arena_test_support::StubGuest::start().await;
     let url = stub.url().to_owned();
     println!("arena load bench: stub guest on {url} (in-process server, real HTTP on loopback)");
@@ -119,7 +137,7 @@ async fn run() -> anyhow::Result<()> {
 
     // Six PNG bombs at once: headers claiming 60 000 x 60 000 pixels, sent as clipboard images.
     let before = memory("VmRSS:");
-    let bomb = png_header(60_000, 60_000);
+    let bomb = arena_test_support::png_claiming(60_000, 60_000, 8, 6);
     let image = arena_shared::clipboard::ClipboardContent::Image {
         width: 60_000,
         height: 60_000,
@@ -193,30 +211,4 @@ async fn run() -> anyhow::Result<()> {
     println!("resident memory settled (2 s after the last request): {}", mib(memory("VmRSS:")));
     drop(stub);
     Ok(())
-}
-
-/// A PNG whose header claims `width` x `height` and holds no pixels.
-fn png_header(width: u32, height: u32) -> Vec<u8> {
-    fn crc32(bytes: &[u8]) -> u32 {
-        let mut crc = !0u32;
-        for &b in bytes {
-            crc ^= u32::from(b);
-            for _ in 0..8 {
-                crc = if crc & 1 == 1 { (crc >> 1) ^ 0xEDB8_8320 } else { crc >> 1 };
-            }
-        }
-        !crc
-    }
-    let mut ihdr = b"IHDR".to_vec();
-    ihdr.extend_from_slice(&width.to_be_bytes());
-    ihdr.extend_from_slice(&height.to_be_bytes());
-    ihdr.extend_from_slice(&[8, 6, 0, 0, 0]);
-    let mut png = b"\x89PNG\r\n\x1a\n".to_vec();
-    png.extend_from_slice(&13u32.to_be_bytes());
-    png.extend_from_slice(&ihdr);
-    png.extend_from_slice(&crc32(&ihdr).to_be_bytes());
-    png.extend_from_slice(&[0, 0, 0, 0]);
-    png.extend_from_slice(b"IEND");
-    png.extend_from_slice(&crc32(b"IEND").to_be_bytes());
-    png
 }

@@ -10,6 +10,7 @@
 //! - [`standin_image`]: the QEMU stand-in guest image and `qemu-system-x86_64`, or a
 //!   loud, counted skip.
 //! - [`eventually`] (feature `guest`): polling a condition until it holds or a deadline passes.
+//! - [`png_claiming`]: a PNG header claiming any size, for the image guards.
 //!
 //! It is not product code, and it does not depend on `arena-host`: the host's own
 //! tests use it, and a dependency back on the host would build the host twice.
@@ -18,11 +19,12 @@
 //!
 //! Layout: `guest.rs` (in-process launcher), `process.rs` (child-process launcher),
 //! `corpus.rs` (corpus locator), `wine.rs` (Wine locator), `standin.rs` (stand-in
-//! image locator), `wait.rs` (polling).
+//! image locator), `wait.rs` (polling), `png.rs` (PNG bombs).
 
 mod corpus;
 #[cfg(feature = "guest")]
 mod guest;
+mod png;
 mod process;
 mod standin;
 #[cfg(feature = "guest")]
@@ -32,6 +34,7 @@ mod wine;
 pub use corpus::{waa_corpus, CORPUS_VAR, REQUIRE_CORPUS_VAR, SKIP_PREFIX};
 #[cfg(feature = "guest")]
 pub use guest::StubGuest;
+pub use png::png_claiming;
 pub use process::{workspace_binary, Served};
 pub use standin::{standin_image, StandinImage, REQUIRE_QEMU_VAR, STANDIN_DIR_VAR};
 #[cfg(feature = "guest")]

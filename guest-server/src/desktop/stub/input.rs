@@ -107,6 +107,13 @@ pub(crate) fn perform(state: &mut State, action: &Action) -> DesktopResult<Vec<E
             }
         }
         Action::TypeText { text, interval_ms: _ } => {
+            if text.len() > arena_shared::action::MAX_TYPE_TEXT_BYTES {
+                return Err(DesktopError::InvalidInput(format!(
+                    "type_text holds {} bytes; at most {} are typed in one action",
+                    text.len(),
+                    arena_shared::action::MAX_TYPE_TEXT_BYTES
+                )));
+            }
             let mods = state.mods;
             if !(mods.ctrl || mods.alt || mods.win) {
                 // Plain typing is one edit, not one per character: laying the text out
@@ -116,10 +123,16 @@ pub(crate) fn perform(state: &mut State, action: &Action) -> DesktopResult<Vec<E
                     .filter(|c| *c != '\r')
                     .map(|c| if mods.shift { c.to_uppercase().next().unwrap_or(c) } else { c })
                     .collect();
-                edit(state, |buf| buf.insert(&text));
+                // In slices, asking between them whether the call still stands: a call
+                // that timed out or whose client went away stops typing.
+                for slice in char_slices(&text, TYPE_SLICE_CHARS) {
+                    crate::desktop::cancel::checkpoint()?;
+                    edit(state, |buf| buf.insert(slice));
+                }
                 return Ok(effects);
             }
             for c in text.chars() {
+                crate::desktop::cancel::checkpoint()?;
                 let key = match c {
                     '\n' => Key::Named("enter"),
                     '\r' => continue,
@@ -135,6 +148,23 @@ pub(crate) fn perform(state: &mut State, action: &Action) -> DesktopResult<Vec<E
         Action::Unknown => return Err(DesktopError::InvalidInput("unknown action type".into())),
     }
     Ok(effects)
+}
+
+/// Characters typed in one edit of plain typing, between two cancellation checks.
+const TYPE_SLICE_CHARS: usize = 16 << 10;
+
+/// `text` in slices of at most `n` characters.
+fn char_slices(text: &str, n: usize) -> impl Iterator<Item = &str> {
+    let mut rest = text;
+    std::iter::from_fn(move || {
+        if rest.is_empty() {
+            return None;
+        }
+        let end = rest.char_indices().nth(n).map_or(rest.len(), |(i, _)| i);
+        let (slice, tail) = rest.split_at(end);
+        rest = tail;
+        Some(slice)
+    })
 }
 
 fn check_repeat(what: &str, n: u32) -> DesktopResult<()> {

@@ -2,6 +2,9 @@
 //! hive names fold onto their short forms (`HKEY_CURRENT_USER` is `HKCU`), as on Windows.
 //!
 //! It models values only; there are no security descriptors, links or volatile keys.
+//! Keys form a tree, each holding its own name, so a key's memory is linear in its
+//! path's length (storing every ancestor's full path made a 510-level key of 128 KB
+//! cost 63 MB).
 
 use std::collections::BTreeMap;
 
@@ -59,15 +62,19 @@ pub(crate) fn normalize_key(key: &str) -> Result<KeyPath, String> {
 
 #[derive(Debug, Default)]
 struct Key {
-    display: String,
+    /// The key's own name as first written.
+    name: String,
     /// Folded value name -> (name as written, data). The default value is the empty name.
     values: BTreeMap<String, (String, RegistryValue)>,
+    /// Folded subkey name -> subkey.
+    children: BTreeMap<String, Key>,
 }
 
 /// The registry.
 #[derive(Debug, Default)]
 pub(crate) struct Registry {
-    keys: BTreeMap<String, Key>,
+    /// Short hive name (`HKCU`) -> its root key.
+    hives: BTreeMap<String, Key>,
 }
 
 impl Registry {
@@ -118,6 +125,19 @@ impl Registry {
         reg
     }
 
+    /// The key at `path` and its display path as first written, if it exists.
+    fn find(&self, path: &KeyPath) -> Option<(&Key, String)> {
+        let mut parts = path.display.split('\\');
+        let mut key = self.hives.get(parts.next()?)?;
+        let mut display = key.name.clone();
+        for part in parts {
+            key = key.children.get(&part.to_lowercase())?;
+            display.push('\\');
+            display.push_str(&key.name);
+        }
+        Some((key, display))
+    }
+
     /// Reads a value; `None` is the default value.
     ///
     /// # Errors
@@ -126,16 +146,24 @@ impl Registry {
     /// naming the key or the value when either is missing.
     pub(crate) fn read(&self, key: &str, value: Option<&str>) -> DesktopResult<RegistryValue> {
         let path = normalize_key(key).map_err(DesktopError::InvalidInput)?;
-        let Some(entry) = self.keys.get(&path.folded) else {
-            return Err(DesktopError::NotFound(format!("registry key {} not found", path.display)));
+        let Some((entry, display)) = self.find(&path) else {
+            return Err(DesktopError::NotFound(format!(
+                "registry key {} not found",
+                crate::error::clip(&path.display)
+            )));
         };
         let name = value.unwrap_or("");
         match entry.values.get(&name.to_lowercase()) {
             Some((_, data)) => Ok(data.clone()),
-            None if name.is_empty() => {
-                Err(DesktopError::NotFound(format!("registry key {} has no default value", entry.display)))
-            }
-            None => Err(DesktopError::NotFound(format!("registry value {name:?} not found in {}", entry.display))),
+            None if name.is_empty() => Err(DesktopError::NotFound(format!(
+                "registry key {} has no default value",
+                crate::error::clip(&display)
+            ))),
+            None => Err(DesktopError::NotFound(format!(
+                "registry value {:?} not found in {}",
+                crate::error::clip(name),
+                crate::error::clip(&display)
+            ))),
         }
     }
 
@@ -149,25 +177,23 @@ impl Registry {
         if *data == RegistryValue::Unknown {
             return Err(DesktopError::InvalidInput(format!(
                 "cannot write a value of unknown type to {}",
-                path.display
+                crate::error::clip(&path.display)
             )));
         }
         // Creating a key creates its missing parents, as RegCreateKeyEx does.
-        for (i, c) in path.display.char_indices() {
-            if c == '\\' {
-                self.ensure_key(&path.display[..i]);
-            }
+        let mut parts = path.display.split('\\');
+        let hive = parts.next().unwrap_or_default();
+        let mut entry =
+            self.hives.entry(hive.to_owned()).or_insert_with(|| Key { name: hive.to_owned(), ..Key::default() });
+        for part in parts {
+            entry = entry
+                .children
+                .entry(part.to_lowercase())
+                .or_insert_with(|| Key { name: part.to_owned(), ..Key::default() });
         }
-        let entry = self.ensure_key(&path.display);
         let name = value.unwrap_or("").to_owned();
         entry.values.insert(name.to_lowercase(), (name, data.clone()));
         Ok(())
-    }
-
-    fn ensure_key(&mut self, display: &str) -> &mut Key {
-        self.keys
-            .entry(display.to_lowercase())
-            .or_insert_with(|| Key { display: display.to_owned(), values: BTreeMap::new() })
     }
 }
 
@@ -210,5 +236,27 @@ mod tests {
         assert!(matches!(reg.read(r"Bad\Key", None), Err(DesktopError::InvalidInput(_))));
         let mut reg = reg;
         assert!(matches!(reg.write(r"HKCU\x", None, &RegistryValue::Unknown), Err(DesktopError::InvalidInput(_))));
+    }
+
+    #[test]
+    fn a_deep_key_is_stored_once_and_keeps_its_spelling() {
+        let mut reg = Registry::seeded();
+        reg.write(r"HKCU\Software\Deep\A\b", Some("v"), &RegistryValue::Dword(1)).unwrap();
+        assert!(matches!(
+            reg.read(r"hkcu\software\DEEP\a\B", None),
+            Err(DesktopError::NotFound(m)) if m.contains(r"HKCU\Software\Deep\A\b")
+        ));
+        // Every level holds its own name only: the names stored add up to the path.
+        let stored = |reg: &Registry| {
+            fn walk(key: &Key) -> usize {
+                key.name.len() + key.children.values().map(walk).sum::<usize>()
+            }
+            reg.hives.values().map(walk).sum::<usize>()
+        };
+        let before = stored(&reg);
+        let level = "k".repeat(250);
+        let key = format!("HKCU\\{}", vec![level.as_str(); 500].join("\\"));
+        reg.write(&key, Some("v"), &RegistryValue::Dword(1)).unwrap();
+        assert_eq!(stored(&reg) - before, 500 * 250, "linear in the key's length");
     }
 }

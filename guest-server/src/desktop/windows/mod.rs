@@ -10,6 +10,8 @@
 //! - [`winsys`]: guest paths, registry hives and data;
 //! - [`text`]: UTF-16, ANSI and newline handling of program output;
 //! - [`session`]: the session-0 refusal;
+//! - [`longname`]: 8.3 short names expanded (`GetLongPathNameW` on Windows, nothing elsewhere),
+//!   for the protection rules;
 //! - [`std_child`]: how a program is started and killed with `std::process` (the
 //!   stub backend's runner, which also runs inside the Windows exe).
 //!
@@ -23,6 +25,7 @@
 //! The service mode, which starts this backend in the user's session, is not part
 //! of the backend: it lives in [`crate::service`].
 
+pub mod longname;
 pub mod pointer;
 pub mod session;
 pub mod shell;
