@@ -601,3 +601,49 @@ async fn ui_tars_errors_unreadable_replies_call_user_and_429() {
     assert!(err.contains("bad.txt") && err.contains("{instruction}"), "{err}");
     assert!(UiTarsConfig::read_prompt(&tmp.path().join("missing.txt")).unwrap_err().to_string().contains("missing.txt"));
 }
+
+// ---------------------------------------------------------------- the command line
+
+#[test]
+fn run_help_lists_the_agents_and_the_coordinate_conventions() {
+    use clap::Parser as _;
+    let err = arena_host::Cli::try_parse_from(["arena", "run", "--help"]).expect_err("help is printed as an error");
+    let help = err.to_string();
+    for needle in ["anthropic-cu", "openai-cu", "ui-tars", "--coords", "grid1000", "--safety-checks", "--prompt-file", "--keep-images"] {
+        assert!(help.contains(needle), "`arena run --help` lacks {needle}");
+    }
+}
+
+#[tokio::test]
+async fn arena_run_with_openai_cu_records_agent_model_action_space_and_coordinates() {
+    use clap::Parser as _;
+    let tmp = tempfile::tempdir().unwrap();
+    let domain = tmp.path().join("tasks").join("settings");
+    std::fs::create_dir_all(&domain).unwrap();
+    let source = Path::new(env!("CARGO_MANIFEST_DIR")).join("../tasks/stub/examples/settings/stub-settings-infeasible.json");
+    std::fs::copy(&source, domain.join("stub-settings-infeasible.json")).unwrap();
+    let mock = Mock::new(vec![ok(message("r1", json!({"type": "output_text", "text": "No such setting. FAIL"})))]);
+    let base = serve(mock.clone(), "/v1/responses", "/v1").await;
+    let out = tmp.path().join("out");
+    let tasks = tmp.path().join("tasks");
+    let words = [
+        "arena", "run", "--tasks", tasks.to_str().unwrap(), "--agent", "openai-cu", "--llm-url", &base,
+        "--model", "computer-use-preview", "--stub-guests", "1", "--out", out.to_str().unwrap(), "--safety-checks", "fail",
+    ];
+    let mut cli = arena_host::Cli::try_parse_from(words).expect("arguments parse");
+    cli.connection.token = None;
+    cli.connection.token_file = None;
+    cli.connection.guest = None;
+    let code = arena_host::run(cli).await.expect("the run runs");
+    assert_eq!(code, std::process::ExitCode::SUCCESS);
+    assert_eq!(mock.requests().len(), 1);
+    let summary: Value = serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
+    let options = &summary["options"];
+    assert_eq!(options["agent"], json!(["openai-cu"]), "{summary}");
+    assert_eq!(options["action_space"], json!(["openai_computer"]));
+    assert_eq!(options["coords"], json!(["pixels"]));
+    assert_eq!(options["model"], json!(["computer-use-preview"]));
+    assert_eq!(options["safety_checks"], json!(["fail"]));
+    let result = out.join("openai_computer/a11y_tree/computer-use-preview/0/settings/stub-settings-infeasible/result.txt");
+    assert!(result.is_file(), "the result is filed under the action space and the model");
+}

@@ -528,6 +528,7 @@ pub async fn run(conn: &Connection, args: RunArgs) -> anyhow::Result<ExitCode> {
     // Every run records who played, in which action space and coordinates.
     let agent_name = args.agent.to_possible_value().map(|v| v.get_name().to_owned()).unwrap_or_default();
     agent_options.push(("agent".into(), agent_name));
+    agent_options.push(("model".into(), model.clone()));
     if !agent_options.iter().any(|(k, _)| k == "action_space") {
         agent_options.push(("action_space".into(), agent_label.clone()));
         agent_options.push(("coords".into(), args.coords.name()));
