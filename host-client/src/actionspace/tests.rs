@@ -227,6 +227,8 @@ fn anthropic_every_action_of_both_versions() {
             (json!({"action": "key", "text": "ctrl+a BackSpace"}), vec![hotkey(&["ctrl", "a"]), key("backspace")]),
             (json!({"action": "key", "text": "super+Page_Down"}), vec![hotkey(&["win", "pagedown"])]),
             (json!({"action": "key", "text": "KP_0"}), vec![key("num0")]),
+            (json!({"action": "key", "text": "XF86AudioMute"}), vec![key("volumemute")]),
+            (json!({"action": "key", "text": "Escape"}), vec![key("esc")]),
             (
                 json!({"action": "hold_key", "text": "shift", "duration": 0.5}),
                 vec![
@@ -483,4 +485,19 @@ fn typed_actions_and_the_conversion_into_agent_actions() {
     assert_eq!(Coords::Fraction.from_screen(720, 450, SCREEN), (0.5, 0.5));
     assert_eq!("grid1000".parse::<Coords>(), Ok(Coords::Grid1000));
     assert!("inches".parse::<Coords>().unwrap_err().contains("inches"));
+}
+
+#[test]
+fn every_key_table_entry_names_a_guest_key() {
+    for (space, table) in [
+        (ActionSpace::Anthropic20250124, anthropic::KEYS),
+        (ActionSpace::OpenAi, openai::KEYS),
+        (ActionSpace::UiTars, uitars::KEYS),
+    ] {
+        for (from, to) in table {
+            assert_eq!(*from, from.to_lowercase(), "{space}: table names are matched lowercased");
+            assert!(arena_shared::keys::Key::parse(to).is_ok(), "{space}: {from} -> {to} is not a guest key");
+            assert!(key_name(space, table, from).is_ok(), "{space}: {from}");
+        }
+    }
 }
