@@ -72,9 +72,10 @@ async fn conform(space: ActionSpace, coords: Coords, oracles: Vec<(&str, Vec<Ans
     for (name, answers) in oracles {
         let task = tasks.iter().find(|t| t.name == name).unwrap_or_else(|| panic!("no stub task {name}"));
         let guest = StubGuest::start().await;
-        let client = GuestClient::new(guest.url(), ClientConfig { token: None, timeout: Duration::from_secs(20), retries: 1 })
-            .expect("client");
-        let mut config = EpisodeConfig::instant(DownloadCache::new(&tmp.path().join("cache")).expect("cache"));
+        let client =
+            GuestClient::new(guest.url(), ClientConfig { token: None, timeout: Duration::from_secs(20), retries: 1 })
+                .expect("client");
+        let mut config = EpisodeConfig::instant(DownloadCache::new(tmp.path().join("cache")).expect("cache"));
         config.max_steps = 10;
         let layout = RunLayout {
             root: tmp.path().to_owned(),
@@ -101,7 +102,9 @@ fn code(text: &str) -> Answer {
 
 #[tokio::test]
 async fn pyautogui_in_every_coordinate_convention_scores_the_stub_tasks() {
-    for (coords, centre) in [(Coords::Pixels, "720, 450"), (Coords::Fraction, "0.5, 0.5"), (Coords::Grid1000, "500, 500")] {
+    for (coords, centre) in
+        [(Coords::Pixels, "720, 450"), (Coords::Fraction, "0.5, 0.5"), (Coords::Grid1000, "500, 500")]
+    {
         let oracles = vec![
             (
                 "stub-notepad-draft",
@@ -226,7 +229,11 @@ async fn openai_actions_score_the_stub_tasks() {
         ),
         (
             "stub-notepad-count",
-            vec![a(json!({"type": "type", "text": "3"})), a(json!({"type": "keypress", "keys": ["ctrl", "s"]})), Answer::Done],
+            vec![
+                a(json!({"type": "type", "text": "3"})),
+                a(json!({"type": "keypress", "keys": ["ctrl", "s"]})),
+                Answer::Done,
+            ],
         ),
         (
             "stub-notepad-append",

@@ -117,7 +117,7 @@ fn client(url: &str) -> GuestClient {
 async fn episode(task: &Task, agent: &mut dyn Agent, root: &Path) -> (EpisodeResult, PathBuf) {
     let guest = StubGuest::start().await;
     let c = client(guest.url());
-    let mut config = EpisodeConfig::instant(DownloadCache::new(&root.join("cache")).expect("cache"));
+    let mut config = EpisodeConfig::instant(DownloadCache::new(root.join("cache")).expect("cache"));
     config.max_steps = 8;
     config.max_model_retries = 0;
     let layout = RunLayout {
@@ -318,10 +318,10 @@ async fn anthropic_cu_errors_malformed_refusal_429_and_bad_actions() {
     let p = agent.predict(&obs).await.expect("an answer after the 429");
     assert!(started.elapsed() >= Duration::from_secs(1), "Retry-After is honoured");
     assert_eq!(mock.requests().len(), 2);
-    assert_eq!(p.actions, [AgentAction::Typed(vec![arena_shared::action::Action::KeyPress {
-        key: "enter".into(),
-        presses: 1
-    }])]);
+    assert_eq!(
+        p.actions,
+        [AgentAction::Typed(vec![arena_shared::action::Action::KeyPress { key: "enter".into(), presses: 1 }])]
+    );
 
     // An endpoint that stays down: a model error once the retry budget is spent.
     let mock = Mock::new((0..500).map(|_| (503, Vec::new(), json!({"error": "overloaded"}))).collect());
@@ -522,10 +522,7 @@ fn check_uitars_requests(requests: &[(HeaderMap, Value)], replies: &[&str], inst
         assert_eq!(header(headers, "authorization"), format!("Bearer {KEY}"));
         assert_eq!(body["model"], "ui-tars-1.5-7b");
         let messages = body["messages"].as_array().unwrap();
-        assert_eq!(
-            messages[0]["content"][0]["text"],
-            format!("TEST TEMPLATE. Language: English. Task: {instruction}")
-        );
+        assert_eq!(messages[0]["content"][0]["text"], format!("TEST TEMPLATE. Language: English. Task: {instruction}"));
         let assistants: Vec<&str> =
             messages.iter().filter(|m| m["role"] == "assistant").map(|m| m["content"].as_str().unwrap()).collect();
         assert_eq!(assistants, replies[..n], "request {n}: the earlier replies, in order");
@@ -599,7 +596,10 @@ async fn ui_tars_errors_unreadable_replies_call_user_and_429() {
     std::fs::write(&path, "no placeholder").unwrap();
     let err = UiTarsConfig::read_prompt(&path).unwrap_err().to_string();
     assert!(err.contains("bad.txt") && err.contains("{instruction}"), "{err}");
-    assert!(UiTarsConfig::read_prompt(&tmp.path().join("missing.txt")).unwrap_err().to_string().contains("missing.txt"));
+    assert!(UiTarsConfig::read_prompt(&tmp.path().join("missing.txt"))
+        .unwrap_err()
+        .to_string()
+        .contains("missing.txt"));
 }
 
 // ---------------------------------------------------------------- the command line
@@ -609,7 +609,16 @@ fn run_help_lists_the_agents_and_the_coordinate_conventions() {
     use clap::Parser as _;
     let err = arena_host::Cli::try_parse_from(["arena", "run", "--help"]).expect_err("help is printed as an error");
     let help = err.to_string();
-    for needle in ["anthropic-cu", "openai-cu", "ui-tars", "--coords", "grid1000", "--safety-checks", "--prompt-file", "--keep-images"] {
+    for needle in [
+        "anthropic-cu",
+        "openai-cu",
+        "ui-tars",
+        "--coords",
+        "grid1000",
+        "--safety-checks",
+        "--prompt-file",
+        "--keep-images",
+    ] {
         assert!(help.contains(needle), "`arena run --help` lacks {needle}");
     }
 }
@@ -620,15 +629,30 @@ async fn arena_run_with_openai_cu_records_agent_model_action_space_and_coordinat
     let tmp = tempfile::tempdir().unwrap();
     let domain = tmp.path().join("tasks").join("settings");
     std::fs::create_dir_all(&domain).unwrap();
-    let source = Path::new(env!("CARGO_MANIFEST_DIR")).join("../tasks/stub/examples/settings/stub-settings-infeasible.json");
+    let source =
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../tasks/stub/examples/settings/stub-settings-infeasible.json");
     std::fs::copy(&source, domain.join("stub-settings-infeasible.json")).unwrap();
     let mock = Mock::new(vec![ok(message("r1", json!({"type": "output_text", "text": "No such setting. FAIL"})))]);
     let base = serve(mock.clone(), "/v1/responses", "/v1").await;
     let out = tmp.path().join("out");
     let tasks = tmp.path().join("tasks");
     let words = [
-        "arena", "run", "--tasks", tasks.to_str().unwrap(), "--agent", "openai-cu", "--llm-url", &base,
-        "--model", "computer-use-preview", "--stub-guests", "1", "--out", out.to_str().unwrap(), "--safety-checks", "fail",
+        "arena",
+        "run",
+        "--tasks",
+        tasks.to_str().unwrap(),
+        "--agent",
+        "openai-cu",
+        "--llm-url",
+        &base,
+        "--model",
+        "computer-use-preview",
+        "--stub-guests",
+        "1",
+        "--out",
+        out.to_str().unwrap(),
+        "--safety-checks",
+        "fail",
     ];
     let mut cli = arena_host::Cli::try_parse_from(words).expect("arguments parse");
     cli.connection.token = None;
@@ -644,6 +668,7 @@ async fn arena_run_with_openai_cu_records_agent_model_action_space_and_coordinat
     assert_eq!(options["coords"], json!(["pixels"]));
     assert_eq!(options["model"], json!(["computer-use-preview"]));
     assert_eq!(options["safety_checks"], json!(["fail"]));
-    let result = out.join("openai_computer/a11y_tree/computer-use-preview/0/settings/stub-settings-infeasible/result.txt");
+    let result =
+        out.join("openai_computer/a11y_tree/computer-use-preview/0/settings/stub-settings-infeasible/result.txt");
     assert!(result.is_file(), "the result is filed under the action space and the model");
 }

@@ -201,7 +201,8 @@ pub fn parse(space: ActionSpace, input: &Value, ctx: &Context) -> Result<Vec<Ste
             Some(other) => Err(ActionError::new(space, format!("`{key}` must be [x, y], got {other}"))),
         }
     };
-    let required = |key: &str| coordinate(key)?.ok_or_else(|| ActionError::new(space, format!("{action} needs `{key}`")));
+    let required =
+        |key: &str| coordinate(key)?.ok_or_else(|| ActionError::new(space, format!("{action} needs `{key}`")));
     // Modifier keys held during a click or scroll (`text` on those actions).
     let modifiers = || -> Result<Vec<String>, ActionError> {
         match input.get("text") {
@@ -298,7 +299,10 @@ pub fn parse(space: ActionSpace, input: &Value, ctx: &Context) -> Result<Vec<Ste
                     let (x1, y1) = ctx.point(n[0], n[1]);
                     let (x2, y2) = ctx.point(n[2], n[3]);
                     if x2 <= x1 || y2 <= y1 {
-                        return Err(ActionError::new(space, format!("`region` must have x2 > x1 and y2 > y1, got {n:?}")));
+                        return Err(ActionError::new(
+                            space,
+                            format!("`region` must have x2 > x1 and y2 > y1, got {n:?}"),
+                        ));
                     }
                     [x1, y1, x2, y2]
                 }

@@ -311,9 +311,7 @@ pub(crate) type KeyTable = &'static [(&'static str, &'static str)];
 pub(crate) fn key_name(space: ActionSpace, table: KeyTable, name: &str) -> Result<String, ActionError> {
     let lower = name.to_lowercase();
     let mapped = table.iter().find(|(from, _)| *from == lower).map_or(name, |(_, to)| *to);
-    Key::parse(mapped)
-        .map(|k| k.to_string())
-        .map_err(|_| ActionError::new(space, format!("unknown key {name:?}")))
+    Key::parse(mapped).map(|k| k.to_string()).map_err(|_| ActionError::new(space, format!("unknown key {name:?}")))
 }
 
 /// The actions that press `keys` as one chord: one key is a press, more a hotkey.

@@ -64,7 +64,9 @@ pub fn parse(action: &Value, ctx: &Context) -> Result<Vec<Step>, ActionError> {
     if !action.is_object() {
         return Err(ActionError::new(SPACE, format!("expected an action object, got {}", json_type(action))));
     }
-    let point = |v: &Value| -> Result<(i32, i32), ActionError> { Ok(ctx.point(number(SPACE, v, "x")?, number(SPACE, v, "y")?)) };
+    let point = |v: &Value| -> Result<(i32, i32), ActionError> {
+        Ok(ctx.point(number(SPACE, v, "x")?, number(SPACE, v, "y")?))
+    };
     let act = |a: Action| Ok(vec![Step::Act(a)]);
     match string(SPACE, action, "type")? {
         "click" => {
@@ -107,7 +109,8 @@ pub fn parse(action: &Value, ctx: &Context) -> Result<Vec<Step>, ActionError> {
                     duration_ms: None,
                 }),
                 [(fx, fy), middle @ .., (tx, ty)] => {
-                    let mut steps = vec![Step::Act(Action::MouseDown { button: MouseButton::Left, x: Some(*fx), y: Some(*fy) })];
+                    let mut steps =
+                        vec![Step::Act(Action::MouseDown { button: MouseButton::Left, x: Some(*fx), y: Some(*fy) })];
                     steps.extend(middle.iter().map(|&(x, y)| Step::Act(Action::MoveTo { x, y })));
                     steps.push(Step::Act(Action::MouseUp { button: MouseButton::Left, x: Some(*tx), y: Some(*ty) }));
                     Ok(steps)

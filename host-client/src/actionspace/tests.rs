@@ -96,10 +96,12 @@ fn pyautogui_as_osworld_agents_write_it() {
             act(Action::Scroll { x: None, y: None, dx: 4, dy: 0 }),
         ],
     );
-    check(p, px, json!("import pyperclip\npyperclip.copy('x')\npyautogui.write(pyperclip.paste())"), &[
-        Step::SetClipboard("x".into()),
-        act(Action::TypeText { text: "x".into(), interval_ms: None }),
-    ]);
+    check(
+        p,
+        px,
+        json!("import pyperclip\npyperclip.copy('x')\npyautogui.write(pyperclip.paste())"),
+        &[Step::SetClipboard("x".into()), act(Action::TypeText { text: "x".into(), interval_ms: None })],
+    );
 }
 
 #[test]
@@ -127,10 +129,12 @@ fn pyautogui_coordinates_in_each_convention() {
         ],
     );
     // Amounts and key names are never scaled.
-    check(p, Coords::Grid1000, json!("pyautogui.press('a', presses=2)"), &[act(Action::KeyPress {
-        key: "a".into(),
-        presses: 2,
-    })]);
+    check(
+        p,
+        Coords::Grid1000,
+        json!("pyautogui.press('a', presses=2)"),
+        &[act(Action::KeyPress { key: "a".into(), presses: 2 })],
+    );
 }
 
 #[test]
@@ -173,11 +177,19 @@ fn computer_13_every_type() {
             json!({"action_type": "MOUSE_UP"}),
             vec![act(Action::MouseUp { button: MouseButton::Left, x: None, y: None })],
         ),
-        (json!({"action_type": "RIGHT_CLICK", "x": 3, "y": 4}), vec![act(Action::RightClick { x: Some(3), y: Some(4) })]),
+        (
+            json!({"action_type": "RIGHT_CLICK", "x": 3, "y": 4}),
+            vec![act(Action::RightClick { x: Some(3), y: Some(4) })],
+        ),
         (json!({"action_type": "DOUBLE_CLICK"}), vec![act(Action::DoubleClick { x: None, y: None })]),
         (
             json!({"action_type": "DRAG_TO", "x": 7, "y": 8}),
-            vec![act(Action::Drag { from: None, to: Point { x: 7, y: 8 }, button: MouseButton::Left, duration_ms: Some(1000) })],
+            vec![act(Action::Drag {
+                from: None,
+                to: Point { x: 7, y: 8 },
+                button: MouseButton::Left,
+                duration_ms: Some(1000),
+            })],
         ),
         (
             json!({"action_type": "SCROLL", "dx": 2, "dy": -3}),
@@ -202,12 +214,12 @@ fn computer_13_every_type() {
         check(c, px, input, &expected);
     }
     assert_eq!(computer13::ACTION_TYPES.len(), 13);
-    check(c, Coords::Fraction, json!({"action_type": "CLICK", "x": 0.25, "y": 0.5}), &[click(
-        360,
-        450,
-        MouseButton::Left,
-        1,
-    )]);
+    check(
+        c,
+        Coords::Fraction,
+        json!({"action_type": "CLICK", "x": 0.25, "y": 0.5}),
+        &[click(360, 450, MouseButton::Left, 1)],
+    );
     check(c, px, json!([{"action_type": "PRESS", "key": "a"}, "DONE"]), &[key("a"), Step::Done]);
     check_err(c, json!({"action_type": "TELEPORT"}), &["unknown action_type \"TELEPORT\"", "MOVE_TO"]);
     check_err(c, json!({"action_type": "PRESS", "key": "entr"}), &["unknown key \"entr\""]);
@@ -237,7 +249,10 @@ fn anthropic_every_action_of_both_versions() {
                     act(Action::KeyUp { key: "shift".into() }),
                 ],
             ),
-            (json!({"action": "type", "text": "x y"}), vec![act(Action::TypeText { text: "x y".into(), interval_ms: None })]),
+            (
+                json!({"action": "type", "text": "x y"}),
+                vec![act(Action::TypeText { text: "x y".into(), interval_ms: None })],
+            ),
             (json!({"action": "cursor_position"}), vec![Step::CursorPosition]),
             (json!({"action": "mouse_move", "coordinate": [3, 4]}), vec![act(Action::MoveTo { x: 3, y: 4 })]),
             (
@@ -304,10 +319,17 @@ fn anthropic_every_action_of_both_versions() {
         json!({"action": "left_click", "coordinate": [640, 400]}),
         &[click(720, 450, MouseButton::Left, 1)],
     );
-    check(ActionSpace::Anthropic20251124, Coords::Pixels, json!({"action": "zoom", "region": [0, 0, 100, 50]}), &[
-        Step::Zoom([0, 0, 100, 50]),
-    ]);
-    check_err(ActionSpace::Anthropic20250124, json!({"action": "zoom", "region": [0, 0, 10, 10]}), &["unknown action \"zoom\""]);
+    check(
+        ActionSpace::Anthropic20251124,
+        Coords::Pixels,
+        json!({"action": "zoom", "region": [0, 0, 100, 50]}),
+        &[Step::Zoom([0, 0, 100, 50])],
+    );
+    check_err(
+        ActionSpace::Anthropic20250124,
+        json!({"action": "zoom", "region": [0, 0, 10, 10]}),
+        &["unknown action \"zoom\""],
+    );
     check_err(ActionSpace::Anthropic20251124, json!({"action": "zoom", "region": [10, 0, 0, 10]}), &["x2 > x1"]);
 }
 
@@ -355,7 +377,10 @@ fn openai_every_action() {
             json!({"type": "scroll", "x": 5, "y": 6, "scroll_x": 0, "scroll_y": 300}),
             vec![act(Action::Scroll { x: Some(5), y: Some(6), dx: 0, dy: -360 })],
         ),
-        (json!({"type": "type", "text": "hello"}), vec![act(Action::TypeText { text: "hello".into(), interval_ms: None })]),
+        (
+            json!({"type": "type", "text": "hello"}),
+            vec![act(Action::TypeText { text: "hello".into(), interval_ms: None })],
+        ),
         (json!({"type": "wait"}), vec![act(Action::Wait { ms: 1000 })]),
     ];
     for (input, expected) in table {
@@ -373,16 +398,33 @@ fn uitars_grammar_and_notations() {
     let u = ActionSpace::UiTars;
     let grid = Coords::Grid1000;
     let centre = click(720, 450, MouseButton::Left, 1);
-    check(u, grid, json!("Thought: Click the button\nAction: click(start_box='(500,500)')"), &[centre.clone()]);
-    check(u, grid, json!("Action: click(start_box='<|box_start|>(500,500)<|box_end|>')"), &[centre.clone()]);
-    check(u, grid, json!("Action: click(start_box='(400,400,600,600)')"), &[centre.clone()]);
-    check(u, grid, json!("Action: click(point='<point>500 500</point>')"), &[centre.clone()]);
+    check(
+        u,
+        grid,
+        json!("Thought: Click the button\nAction: click(start_box='(500,500)')"),
+        std::slice::from_ref(&centre),
+    );
+    check(
+        u,
+        grid,
+        json!("Action: click(start_box='<|box_start|>(500,500)<|box_end|>')"),
+        std::slice::from_ref(&centre),
+    );
+    check(u, grid, json!("Action: click(start_box='(400,400,600,600)')"), std::slice::from_ref(&centre));
+    check(u, grid, json!("Action: click(point='<point>500 500</point>')"), std::slice::from_ref(&centre));
     check(u, grid, json!("Action: left_single(start_box='<bbox>400 400 600 600</bbox>')"), &[centre]);
-    check(u, grid, json!("Action: left_double(start_box='(0,0)')"), &[act(Action::DoubleClick { x: Some(0), y: Some(0) })]);
-    check(u, grid, json!("Action: right_single(start_box='(1000,1000)')"), &[act(Action::RightClick {
-        x: Some(1440),
-        y: Some(900),
-    })]);
+    check(
+        u,
+        grid,
+        json!("Action: left_double(start_box='(0,0)')"),
+        &[act(Action::DoubleClick { x: Some(0), y: Some(0) })],
+    );
+    check(
+        u,
+        grid,
+        json!("Action: right_single(start_box='(1000,1000)')"),
+        &[act(Action::RightClick { x: Some(1440), y: Some(900) })],
+    );
     check(
         u,
         grid,
@@ -400,12 +442,7 @@ fn uitars_grammar_and_notations() {
         u,
         grid,
         json!("Action: type(content='it\\'s done\\n')"),
-        &[
-            Step::SetClipboard("it's done".into()),
-            hotkey(&["ctrl", "v"]),
-            act(Action::Wait { ms: 500 }),
-            key("enter"),
-        ],
+        &[Step::SetClipboard("it's done".into()), hotkey(&["ctrl", "v"]), act(Action::Wait { ms: 500 }), key("enter")],
     );
     check(
         u,
@@ -413,7 +450,12 @@ fn uitars_grammar_and_notations() {
         json!("Action: scroll(start_box='(500,500)', direction='down')"),
         &[act(Action::Scroll { x: Some(720), y: Some(450), dx: 0, dy: -5 })],
     );
-    check(u, grid, json!("Action: scroll(direction='left')"), &[act(Action::Scroll { x: None, y: None, dx: -5, dy: 0 })]);
+    check(
+        u,
+        grid,
+        json!("Action: scroll(direction='left')"),
+        &[act(Action::Scroll { x: None, y: None, dx: -5, dy: 0 })],
+    );
     check(u, grid, json!("Thought: loading\nAction: wait()"), &[Step::Wait]);
     check(u, grid, json!("Action: finished(content='all set')"), &[Step::Done]);
     check(u, grid, json!("Action: call_user()"), &[Step::Fail]);
@@ -447,20 +489,22 @@ fn uitars_versions_and_smart_resize() {
     let coords = uitars::UiTarsVersion::V1_5.coords(SCREEN);
     assert_eq!(coords, Coords::Image { width: 1428, height: 896 });
     // UI-TARS-1.5's pixels of the resized image land on the screen's.
-    check(ActionSpace::UiTars, coords, json!("Action: click(start_box='(714,448)')"), &[click(
-        720,
-        450,
-        MouseButton::Left,
-        1,
-    )]);
+    check(
+        ActionSpace::UiTars,
+        coords,
+        json!("Action: click(start_box='(714,448)')"),
+        &[click(720, 450, MouseButton::Left, 1)],
+    );
 }
 
 #[test]
 fn typed_actions_and_the_conversion_into_agent_actions() {
-    check(ActionSpace::Typed, Coords::Pixels, json!([{"type": "move_to", "x": 1, "y": 2}]), &[act(Action::MoveTo {
-        x: 1,
-        y: 2,
-    })]);
+    check(
+        ActionSpace::Typed,
+        Coords::Pixels,
+        json!([{"type": "move_to", "x": 1, "y": 2}]),
+        &[act(Action::MoveTo { x: 1, y: 2 })],
+    );
     check_err(ActionSpace::Typed, json!({"type": "teleport"}), &["not a typed action"]);
     let steps = [
         act(Action::MoveTo { x: 1, y: 2 }),

@@ -452,65 +452,66 @@ fn cu_endpoint(args: &RunArgs, name: &str) -> anyhow::Result<Endpoint> {
 /// an unusable configuration fails before any task starts.
 fn computer_use_agent(args: &RunArgs) -> anyhow::Result<ChosenAgent> {
     let option = |k: &str, v: String| (k.to_owned(), v);
-    let (factory, space, coords, mut options): (AgentFactory, ActionSpace, String, Vec<(String, String)>) =
-        match args.agent {
-            AgentKind::AnthropicCu => {
-                let mut config = AnthropicConfig::new("", "");
-                config.endpoint = cu_endpoint(args, "anthropic-cu")?;
-                config.tool = match args.computer_tool {
-                    ComputerTool::Computer20250124 => ActionSpace::Anthropic20250124,
-                    ComputerTool::Computer20251124 => ActionSpace::Anthropic20251124,
-                };
-                config.enable_zoom = args.zoom;
-                config.thinking_budget = args.thinking_budget;
-                config.prompt_caching = !args.no_prompt_cache;
-                config.keep_images = args.keep_images.unwrap_or(config.keep_images);
-                AnthropicAgent::new(config.clone())?;
-                let options = vec![
-                    option("keep_images", config.keep_images.to_string()),
-                    option("thinking_budget", config.thinking_budget.map_or("off".into(), |b| b.to_string())),
-                    option("prompt_caching", if config.prompt_caching { "on" } else { "off" }.into()),
-                    option("zoom", if config.enable_zoom { "on" } else { "off" }.into()),
-                ];
-                let space = config.tool;
-                let factory: AgentFactory =
-                    Arc::new(move || Ok(Box::new(AnthropicAgent::new(config.clone())?) as Box<dyn Agent>));
-                (factory, space, "image:recommended-size".into(), options)
-            }
-            AgentKind::OpenaiCu => {
-                let mut config = OpenAiConfig::new("", "");
-                config.endpoint = cu_endpoint(args, "openai-cu")?;
-                config.safety_checks = args.safety_checks;
-                OpenAiAgent::new(config.clone())?;
-                let options = vec![option("safety_checks", config.safety_checks.name().into())];
-                let factory: AgentFactory =
-                    Arc::new(move || Ok(Box::new(OpenAiAgent::new(config.clone())?) as Box<dyn Agent>));
-                (factory, ActionSpace::OpenAi, Coords::Pixels.name(), options)
-            }
-            _ => {
-                let Some(path) = &args.prompt_file else {
-                    bail!("--agent ui-tars needs --prompt-file: the UI-TARS prompt template, as its project publishes it");
-                };
-                let template = UiTarsConfig::read_prompt(path)?;
-                let mut config = UiTarsConfig::new("", "", &template);
-                config.endpoint = cu_endpoint(args, "ui-tars")?;
-                config.version = args.uitars_version;
-                config.history_images = args.keep_images.unwrap_or(config.history_images);
-                UiTarsAgent::new(config.clone())?;
-                let coords = match config.version {
-                    UiTarsVersion::V1 => Coords::Grid1000.name(),
-                    UiTarsVersion::V1_5 => "image:smart-resize".into(),
-                };
-                let options = vec![
-                    option("uitars_version", config.version.name().into()),
-                    option("keep_images", config.history_images.to_string()),
-                    option("prompt_file", path.display().to_string()),
-                ];
-                let factory: AgentFactory =
-                    Arc::new(move || Ok(Box::new(UiTarsAgent::new(config.clone())?) as Box<dyn Agent>));
-                (factory, ActionSpace::UiTars, coords, options)
-            }
-        };
+    let (factory, space, coords, mut options): (AgentFactory, ActionSpace, String, Vec<(String, String)>) = match args
+        .agent
+    {
+        AgentKind::AnthropicCu => {
+            let mut config = AnthropicConfig::new("", "");
+            config.endpoint = cu_endpoint(args, "anthropic-cu")?;
+            config.tool = match args.computer_tool {
+                ComputerTool::Computer20250124 => ActionSpace::Anthropic20250124,
+                ComputerTool::Computer20251124 => ActionSpace::Anthropic20251124,
+            };
+            config.enable_zoom = args.zoom;
+            config.thinking_budget = args.thinking_budget;
+            config.prompt_caching = !args.no_prompt_cache;
+            config.keep_images = args.keep_images.unwrap_or(config.keep_images);
+            AnthropicAgent::new(config.clone())?;
+            let options = vec![
+                option("keep_images", config.keep_images.to_string()),
+                option("thinking_budget", config.thinking_budget.map_or("off".into(), |b| b.to_string())),
+                option("prompt_caching", if config.prompt_caching { "on" } else { "off" }.into()),
+                option("zoom", if config.enable_zoom { "on" } else { "off" }.into()),
+            ];
+            let space = config.tool;
+            let factory: AgentFactory =
+                Arc::new(move || Ok(Box::new(AnthropicAgent::new(config.clone())?) as Box<dyn Agent>));
+            (factory, space, "image:recommended-size".into(), options)
+        }
+        AgentKind::OpenaiCu => {
+            let mut config = OpenAiConfig::new("", "");
+            config.endpoint = cu_endpoint(args, "openai-cu")?;
+            config.safety_checks = args.safety_checks;
+            OpenAiAgent::new(config.clone())?;
+            let options = vec![option("safety_checks", config.safety_checks.name().into())];
+            let factory: AgentFactory =
+                Arc::new(move || Ok(Box::new(OpenAiAgent::new(config.clone())?) as Box<dyn Agent>));
+            (factory, ActionSpace::OpenAi, Coords::Pixels.name(), options)
+        }
+        _ => {
+            let Some(path) = &args.prompt_file else {
+                bail!("--agent ui-tars needs --prompt-file: the UI-TARS prompt template, as its project publishes it");
+            };
+            let template = UiTarsConfig::read_prompt(path)?;
+            let mut config = UiTarsConfig::new("", "", &template);
+            config.endpoint = cu_endpoint(args, "ui-tars")?;
+            config.version = args.uitars_version;
+            config.history_images = args.keep_images.unwrap_or(config.history_images);
+            UiTarsAgent::new(config.clone())?;
+            let coords = match config.version {
+                UiTarsVersion::V1 => Coords::Grid1000.name(),
+                UiTarsVersion::V1_5 => "image:smart-resize".into(),
+            };
+            let options = vec![
+                option("uitars_version", config.version.name().into()),
+                option("keep_images", config.history_images.to_string()),
+                option("prompt_file", path.display().to_string()),
+            ];
+            let factory: AgentFactory =
+                Arc::new(move || Ok(Box::new(UiTarsAgent::new(config.clone())?) as Box<dyn Agent>));
+            (factory, ActionSpace::UiTars, coords, options)
+        }
+    };
     let model = args.model.clone().unwrap_or_default();
     options.push(option("action_space", space.name().into()));
     options.push(option("coords", coords));

@@ -44,7 +44,8 @@ pub const KEY_VARS: [&str; 2] = ["ARENA_LLM_KEY", "ANTHROPIC_API_KEY"];
 pub const API_VERSION: &str = "2023-06-01";
 
 /// The system prompt: how to finish, in this project's words.
-pub const SYSTEM_PROMPT: &str = "You are operating a Windows 11 desktop through the computer tool to complete the user's task. \
+pub const SYSTEM_PROMPT: &str =
+    "You are operating a Windows 11 desktop through the computer tool to complete the user's task. \
 Act step by step and look at each new screenshot before the next action. When the task is complete, reply without \
 a tool call and end your message with the word DONE. If the task cannot be done on this computer, reply without a \
 tool call and end your message with the word FAIL.";
@@ -114,8 +115,7 @@ pub fn recommended_size(screen: (u32, u32)) -> (u32, u32) {
     const TARGETS: [(u32, u32); 3] = [(1024, 768), (1280, 800), (1366, 768)];
     let (w, h) = (screen.0.max(1), screen.1.max(1));
     let ratio = f64::from(w) / f64::from(h);
-    if let Some(&t) =
-        TARGETS.iter().find(|(tw, th)| (f64::from(*tw) / f64::from(*th) - ratio).abs() < 0.02 && *tw < w)
+    if let Some(&t) = TARGETS.iter().find(|(tw, th)| (f64::from(*tw) / f64::from(*th) - ratio).abs() < 0.02 && *tw < w)
     {
         return t;
     }
@@ -176,10 +176,15 @@ impl AnthropicAgent {
             }
         }
         let key = config.endpoint.resolved_key(&KEY_VARS);
-        let client =
-            ModelClient::with_url(&config.url()?, ApiKind::Anthropic, key, config.endpoint.timeout, config.endpoint.retry)?
-                .with_header("anthropic-version", API_VERSION)
-                .with_header("anthropic-beta", config.beta());
+        let client = ModelClient::with_url(
+            &config.url()?,
+            ApiKind::Anthropic,
+            key,
+            config.endpoint.timeout,
+            config.endpoint.retry,
+        )?
+        .with_header("anthropic-version", API_VERSION)
+        .with_header("anthropic-beta", config.beta());
         Ok(AnthropicAgent { config, client, messages: Vec::new(), pending: Vec::new(), cursor: (0, 0) })
     }
 
@@ -437,9 +442,6 @@ mod tests {
         assert!(AnthropicAgent::new(config.clone()).is_err(), "a budget above max_tokens");
         config.tool = ActionSpace::OpenAi;
         assert!(AnthropicAgent::new(config).is_err());
-        assert_eq!(
-            AnthropicConfig::new("https://gw.example/v1", "m").url().unwrap(),
-            "https://gw.example/v1/messages"
-        );
+        assert_eq!(AnthropicConfig::new("https://gw.example/v1", "m").url().unwrap(), "https://gw.example/v1/messages");
     }
 }

@@ -195,7 +195,10 @@ mod tests {
     fn routes_are_added_once() {
         let url = |base: &str, route: &str| Endpoint::new(base, "m").url(route).unwrap();
         assert_eq!(url("https://api.anthropic.com", "/v1/messages"), "https://api.anthropic.com/v1/messages");
-        assert_eq!(url("https://api.anthropic.com/v1/messages", "/v1/messages"), "https://api.anthropic.com/v1/messages");
+        assert_eq!(
+            url("https://api.anthropic.com/v1/messages", "/v1/messages"),
+            "https://api.anthropic.com/v1/messages"
+        );
         assert_eq!(url("https://api.openai.com/v1/", "/responses"), "https://api.openai.com/v1/responses");
         assert!(Endpoint::new("not a url", "m").url("/x").is_err());
         assert!(Endpoint::new("http://h", " ").url("/x").is_err());

@@ -32,7 +32,8 @@ use crate::task::Task;
 pub const KEY_VARS: [&str; 2] = ["ARENA_LLM_KEY", "OPENAI_API_KEY"];
 
 /// The instructions: how to finish, in this project's words.
-pub const INSTRUCTIONS: &str = "You are operating a Windows 11 desktop with the computer tool to complete the user's task. \
+pub const INSTRUCTIONS: &str =
+    "You are operating a Windows 11 desktop with the computer tool to complete the user's task. \
 Do not ask for confirmation; act. When the task is complete, answer without a computer action and end with the word \
 DONE. If it cannot be done on this computer, answer without a computer action and end with the word FAIL.";
 
@@ -186,7 +187,8 @@ impl Agent for OpenAiAgent {
             self.pending = None;
             return Ok(Prediction { response, actions: vec![decision], marks: None, raw_error: None, logs });
         };
-        let call_id = call.get("call_id").and_then(Value::as_str).ok_or_else(|| malformed("a computer_call without call_id"))?;
+        let call_id =
+            call.get("call_id").and_then(Value::as_str).ok_or_else(|| malformed("a computer_call without call_id"))?;
         let action = call.get("action").cloned().unwrap_or(Value::Null);
         let checks: Vec<Value> =
             call.get("pending_safety_checks").and_then(Value::as_array).cloned().unwrap_or_default();
@@ -200,15 +202,24 @@ impl Agent for OpenAiAgent {
             if self.config.safety_checks == SafetyChecks::Fail {
                 self.previous_response_id = Some(id);
                 self.pending = None;
-                return Ok(Prediction { response, actions: vec![AgentAction::Fail], marks: None, raw_error: None, logs });
+                return Ok(Prediction {
+                    response,
+                    actions: vec![AgentAction::Fail],
+                    marks: None,
+                    raw_error: None,
+                    logs,
+                });
             }
         }
         // Screenshots go at the screen's size, so the model's pixels are the screen's.
         let ctx = Context { screen, cursor: (0, 0), coords: Coords::Pixels };
         let (actions, raw_error) = match actionspace::parse(ActionSpace::OpenAi, &action, &ctx) {
-            Ok(steps) => {
-                (actionspace::to_agent_actions(&steps.into_iter().filter(|s| *s != Step::Screenshot).collect::<Vec<_>>()), None)
-            }
+            Ok(steps) => (
+                actionspace::to_agent_actions(
+                    &steps.into_iter().filter(|s| *s != Step::Screenshot).collect::<Vec<_>>(),
+                ),
+                None,
+            ),
             Err(err) => (Vec::new(), Some(err.to_string())),
         };
         // Acknowledged checks are exactly the pending ones, with their id, code and message.
