@@ -28,7 +28,7 @@ use serde_json::Value;
 use arena_shared::action::{Action, MouseButton};
 use arena_shared::geometry::Point;
 
-use super::{chord, json_type, key_name, opt_number, string, ActionError, ActionSpace, Context, Step};
+use super::{chord, json_type, key_list, key_name, opt_number, string, ActionError, ActionSpace, Context, Step};
 
 const SPACE: ActionSpace = ActionSpace::Computer13;
 
@@ -145,19 +145,7 @@ pub fn parse(action: &Value, ctx: &Context) -> Result<Vec<Step>, ActionError> {
         "KEY_DOWN" => act(Action::KeyDown { key: key()? }),
         "KEY_UP" => act(Action::KeyUp { key: key()? }),
         "HOTKEY" => {
-            let Some(Value::Array(keys)) = params.get("keys") else {
-                return Err(ActionError::new(SPACE, "HOTKEY needs `keys`, a list of key names"));
-            };
-            let keys = keys
-                .iter()
-                .map(|k| match k {
-                    Value::String(k) => key_name(SPACE, KEYS, k),
-                    other => Err(ActionError::new(SPACE, format!("a key must be a string, got {other}"))),
-                })
-                .collect::<Result<Vec<_>, _>>()?;
-            if keys.is_empty() {
-                return Err(ActionError::new(SPACE, "HOTKEY needs at least one key"));
-            }
+            let keys = key_list(SPACE, KEYS, params.get("keys"), "HOTKEY")?;
             act(chord(keys))
         }
         other => Err(ActionError::new(

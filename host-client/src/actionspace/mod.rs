@@ -267,16 +267,7 @@ fn each(
 }
 
 /// A JSON value's type, for messages.
-pub(crate) fn json_type(v: &Value) -> &'static str {
-    match v {
-        Value::Null => "null",
-        Value::Bool(_) => "a boolean",
-        Value::Number(_) => "a number",
-        Value::String(_) => "a string",
-        Value::Array(_) => "a list",
-        Value::Object(_) => "an object",
-    }
-}
+pub(crate) use crate::task::kind_of as json_type;
 
 /// Turns steps into the actions an episode executes: runs of input actions
 /// become one typed batch, a clipboard write runs as `pyperclip.copy` in the
@@ -312,6 +303,30 @@ pub(crate) fn key_name(space: ActionSpace, table: KeyTable, name: &str) -> Resul
     let lower = name.to_lowercase();
     let mapped = table.iter().find(|(from, _)| *from == lower).map_or(name, |(_, to)| *to);
     Key::parse(mapped).map(|k| k.to_string()).map_err(|_| ActionError::new(space, format!("unknown key {name:?}")))
+}
+
+/// A JSON list of key names (`HOTKEY`'s `keys`, `keypress`'s `keys`) as guest
+/// key names, through `table`; `action` names the action in messages.
+pub(crate) fn key_list(
+    space: ActionSpace,
+    table: KeyTable,
+    keys: Option<&Value>,
+    action: &str,
+) -> Result<Vec<String>, ActionError> {
+    let Some(Value::Array(keys)) = keys else {
+        return Err(ActionError::new(space, format!("{action} needs `keys`, a list of key names")));
+    };
+    let keys = keys
+        .iter()
+        .map(|k| match k {
+            Value::String(k) => key_name(space, table, k),
+            other => Err(ActionError::new(space, format!("a key must be a string, got {other}"))),
+        })
+        .collect::<Result<Vec<_>, _>>()?;
+    if keys.is_empty() {
+        return Err(ActionError::new(space, format!("{action} needs at least one key")));
+    }
+    Ok(keys)
 }
 
 /// The actions that press `keys` as one chord: one key is a press, more a hotkey.

@@ -21,7 +21,7 @@ use serde_json::Value;
 use arena_shared::action::{Action, MouseButton};
 use arena_shared::geometry::Point;
 
-use super::{chord, json_type, key_name, number, string, ActionError, ActionSpace, Context, Step};
+use super::{chord, json_type, key_list, number, string, ActionError, ActionSpace, Context, Step};
 
 const SPACE: ActionSpace = ActionSpace::OpenAi;
 
@@ -118,19 +118,7 @@ pub fn parse(action: &Value, ctx: &Context) -> Result<Vec<Step>, ActionError> {
             }
         }
         "keypress" => {
-            let Some(Value::Array(keys)) = action.get("keys") else {
-                return Err(ActionError::new(SPACE, "keypress needs `keys`, a list of key names"));
-            };
-            let keys = keys
-                .iter()
-                .map(|k| match k {
-                    Value::String(k) => key_name(SPACE, KEYS, k),
-                    other => Err(ActionError::new(SPACE, format!("a key must be a string, got {other}"))),
-                })
-                .collect::<Result<Vec<_>, _>>()?;
-            if keys.is_empty() {
-                return Err(ActionError::new(SPACE, "keypress needs at least one key"));
-            }
+            let keys = key_list(SPACE, KEYS, action.get("keys"), "keypress")?;
             act(chord(keys))
         }
         "move" => {

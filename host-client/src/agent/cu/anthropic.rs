@@ -175,16 +175,11 @@ impl AnthropicAgent {
                 )));
             }
         }
-        let key = config.endpoint.resolved_key(&KEY_VARS);
-        let client = ModelClient::with_url(
-            &config.url()?,
-            ApiKind::Anthropic,
-            key,
-            config.endpoint.timeout,
-            config.endpoint.retry,
-        )?
-        .with_header("anthropic-version", API_VERSION)
-        .with_header("anthropic-beta", config.beta());
+        let client = config
+            .endpoint
+            .client(&config.url()?, ApiKind::Anthropic, &KEY_VARS)?
+            .with_header("anthropic-version", API_VERSION)
+            .with_header("anthropic-beta", config.beta());
         Ok(AnthropicAgent { config, client, messages: Vec::new(), pending: Vec::new(), cursor: (0, 0) })
     }
 

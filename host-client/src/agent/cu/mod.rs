@@ -23,7 +23,7 @@ use std::time::Duration;
 use base64::Engine as _;
 use serde_json::Value;
 
-use super::llm::RetryPolicy;
+use super::llm::{ApiKind, ModelClient, RetryPolicy};
 use super::{AgentError, LogValue, Observation, StepLog};
 
 /// What a computer-use agent takes from an observation: the screenshot as PNG
@@ -85,6 +85,18 @@ impl Endpoint {
             url.set_path(&format!("{path}{route}"));
         }
         Ok(url.to_string())
+    }
+}
+
+impl Endpoint {
+    /// The model client for `url`, with the key of `kind`'s header from the
+    /// configuration or the first of `key_vars` that is set.
+    ///
+    /// # Errors
+    ///
+    /// [`AgentError::Config`] for a URL that does not parse or an HTTP client that cannot be built.
+    pub fn client(&self, url: &str, kind: ApiKind, key_vars: &[&str]) -> Result<ModelClient, AgentError> {
+        ModelClient::with_url(url, kind, self.resolved_key(key_vars), self.timeout, self.retry)
     }
 }
 

@@ -92,14 +92,7 @@ impl OpenAiAgent {
     ///
     /// [`AgentError::Config`] for an unusable URL or model name.
     pub fn new(config: OpenAiConfig) -> Result<OpenAiAgent, AgentError> {
-        let key = config.endpoint.resolved_key(&KEY_VARS);
-        let client = ModelClient::with_url(
-            &config.endpoint.url("/responses")?,
-            ApiKind::OpenAi,
-            key,
-            config.endpoint.timeout,
-            config.endpoint.retry,
-        )?;
+        let client = config.endpoint.client(&config.endpoint.url("/responses")?, ApiKind::OpenAi, &KEY_VARS)?;
         Ok(OpenAiAgent { config, client, previous_response_id: None, pending: None })
     }
 }

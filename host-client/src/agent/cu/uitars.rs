@@ -93,14 +93,7 @@ impl UiTarsAgent {
         if !config.prompt_template.contains("{instruction}") {
             return Err(AgentError::Config("the UI-TARS prompt has no {instruction} placeholder".into()));
         }
-        let key = config.endpoint.resolved_key(&KEY_VARS);
-        let client = ModelClient::with_url(
-            &config.endpoint.url("/chat/completions")?,
-            ApiKind::OpenAi,
-            key,
-            config.endpoint.timeout,
-            config.endpoint.retry,
-        )?;
+        let client = config.endpoint.client(&config.endpoint.url("/chat/completions")?, ApiKind::OpenAi, &KEY_VARS)?;
         Ok(UiTarsAgent { config, client, history: Vec::new() })
     }
 
