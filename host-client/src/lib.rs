@@ -16,7 +16,7 @@
 //! - [`setup`]: the tasks' setup steps over the guest API, and the download cache.
 //! - [`agent`]: the agent trait; Navi, scripted and replay agents; running agent code.
 //! - [`som`]: Set-of-Marks from every source of upstream's `--som_origin`: the accessibility tree, OCR, the DOM, a detector, OmniParser and their mixes.
-//! - [`pyaction`]: agents' pyautogui code translated into typed actions.
+//! - [`actionspace`]: the grammars agents answer in (pyautogui, `computer_13`, Anthropic's and OpenAI's computer actions, UI-TARS) translated into typed actions.
 //! - [`episode`]: one episode: reset, setup, the observe/act loop, evaluation.
 //! - [`eval`]: getters and metrics by closed registries.
 //! - [`results`]: result folders in upstream's layout, the summary and the HTML report.
@@ -25,6 +25,7 @@
 //! - [`vm`]: Windows VMs run with QEMU: overlays of a golden image, QMP, snapshots per task, screendumps, golden images from an ISO.
 //! - [`cli`]: the `arena` command line (`main.rs` only parses and calls [`run`]).
 
+pub mod actionspace;
 pub mod agent;
 pub mod browser;
 pub mod cli;
@@ -33,7 +34,6 @@ pub mod episode;
 pub mod error;
 pub mod eval;
 pub mod prep;
-pub mod pyaction;
 pub mod results;
 pub mod run;
 pub mod setup;

@@ -15,6 +15,11 @@
 //!   then is an [`AgentError::Model`], which leaves the task unfinished.
 //! - **A refusal** (`message.refusal` with no content) is an answer: its text
 //!   comes back and the agent treats it as a reply without actions.
+//! - **Other JSON APIs.** [`ModelClient::with_url`] posts to a URL as given and
+//!   [`ModelClient::call`] answers the whole JSON reply with the same retries:
+//!   the computer-use agents speak Anthropic's Messages API ([`ApiKind::Anthropic`]:
+//!   the key in `x-api-key`, extra headers by [`ModelClient::with_header`]) and
+//!   OpenAI's Responses API through it.
 //!
 //! The retry loop is written here rather than taken from a crate because its
 //! one unusual need, a per-error minimum delay from `Retry-After`, is most of
@@ -35,6 +40,8 @@ pub enum ApiKind {
     OpenAi,
     /// Classic Azure OpenAI: a deployment URL with `api-version`, `api-key` auth.
     Azure,
+    /// Anthropic's API: the key in `x-api-key`.
+    Anthropic,
 }
 
 impl ApiKind {
@@ -111,6 +118,8 @@ pub struct ModelClient {
     http: reqwest::Client,
     retry: RetryPolicy,
     clock: std::sync::Arc<dyn crate::setup::Clock>,
+    /// Headers sent with every request besides the key (`anthropic-version`, `anthropic-beta`).
+    headers: Vec<(String, String)>,
 }
 
 /// Why one try failed, and whether another may succeed.
@@ -134,12 +143,44 @@ impl ModelClient {
         timeout: Duration,
         retry: RetryPolicy,
     ) -> Result<ModelClient, AgentError> {
-        let endpoint = chat_endpoint(base_url)?;
+        ModelClient::with_url(&chat_endpoint(base_url)?, kind, key, timeout, retry)
+    }
+
+    /// A client that posts to `url` as it is (no path added).
+    ///
+    /// # Errors
+    ///
+    /// [`AgentError::Config`] for a URL that does not parse or an HTTP client that cannot be built.
+    pub fn with_url(
+        url: &str,
+        kind: ApiKind,
+        key: Option<String>,
+        timeout: Duration,
+        retry: RetryPolicy,
+    ) -> Result<ModelClient, AgentError> {
+        let endpoint = reqwest::Url::parse(url.trim())
+            .map_err(|e| AgentError::Config(format!("the model's URL {url:?} is not a URL: {e}")))?
+            .to_string();
         let http = reqwest::Client::builder()
             .timeout(timeout)
             .build()
             .map_err(|e| AgentError::Config(format!("cannot build the HTTP client: {e}")))?;
-        Ok(ModelClient { kind, endpoint, key, http, retry, clock: std::sync::Arc::new(crate::setup::RealClock) })
+        Ok(ModelClient {
+            kind,
+            endpoint,
+            key,
+            http,
+            retry,
+            clock: std::sync::Arc::new(crate::setup::RealClock),
+            headers: Vec::new(),
+        })
+    }
+
+    /// The same client sending `name: value` with every request.
+    #[must_use]
+    pub fn with_header(mut self, name: &str, value: &str) -> ModelClient {
+        self.headers.push((name.to_owned(), value.to_owned()));
+        self
     }
 
     /// The same client with its pauses between tries on `clock` (a test's fake clock).
@@ -160,13 +201,26 @@ impl ModelClient {
     ///
     /// [`AgentError::Model`] naming the last failure when no try succeeded.
     pub async fn complete(&self, body: &Value) -> Result<String, AgentError> {
+        let answer = self.call(body).await?;
+        reply_text(&answer).ok_or_else(|| AgentError::Model {
+            endpoint: self.endpoint.clone(),
+            reason: "the answer has no choices[0].message.content".into(),
+        })
+    }
+
+    /// Sends `body` and answers the reply's JSON, trying again as the policy says.
+    ///
+    /// # Errors
+    ///
+    /// [`AgentError::Model`] naming the last failure when no try succeeded.
+    pub async fn call(&self, body: &Value) -> Result<Value, AgentError> {
         let mut waited = Duration::ZERO;
         let mut delay = self.retry.initial_delay;
         let mut tries = 0u32;
         loop {
             tries += 1;
             let failure = match self.try_once(body).await {
-                Ok(text) => return Ok(text),
+                Ok(answer) => return Ok(answer),
                 Err(failure) => failure,
             };
             let pause = rand::rng().random_range(Duration::ZERO..=delay).max(failure.wait_at_least.unwrap_or_default());
@@ -186,13 +240,17 @@ impl ModelClient {
         }
     }
 
-    async fn try_once(&self, body: &Value) -> Result<String, Failure> {
+    async fn try_once(&self, body: &Value) -> Result<Value, Failure> {
         let mut request = self.http.post(&self.endpoint).json(body);
         if let Some(key) = &self.key {
             request = match self.kind {
                 ApiKind::OpenAi => request.bearer_auth(key),
                 ApiKind::Azure => request.header("api-key", key),
+                ApiKind::Anthropic => request.header("x-api-key", key),
             };
+        }
+        for (name, value) in &self.headers {
+            request = request.header(name, value);
         }
         let transient = |reason: String| Failure { reason, transient: true, wait_at_least: None };
         let response = request.send().await.map_err(|e| transient(error_chain(&e)))?;
@@ -208,13 +266,7 @@ impl ModelClient {
                 wait_at_least,
             });
         }
-        let value: Value =
-            serde_json::from_str(&text).map_err(|e| transient(format!("the answer is not JSON (cut short?): {e}")))?;
-        reply_text(&value).ok_or_else(|| Failure {
-            reason: "the answer has no choices[0].message.content".into(),
-            transient: false,
-            wait_at_least: None,
-        })
+        serde_json::from_str(&text).map_err(|e| transient(format!("the answer is not JSON (cut short?): {e}")))
     }
 }
 

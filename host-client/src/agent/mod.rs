@@ -18,7 +18,9 @@
 //! - [`navi`]: [`navi::NaviAgent`], Navi-style prompting of any OpenAI-compatible chat endpoint.
 //! - [`scripted`]: [`scripted::ScriptedAgent`], which follows a plan file (oracle solutions, tests).
 //! - [`replay`]: [`replay::ReplayAgent`], which repeats a recorded trajectory.
+//! - [`cu`]: the computer-use agents (Anthropic's `computer` tool, OpenAI's Responses API, UI-TARS).
 
+pub mod cu;
 pub mod exec;
 pub mod llm;
 pub mod navi;

@@ -187,7 +187,7 @@ impl ActArgs {
     /// # Errors
     ///
     /// What [`ActArgs::to_batch`] refuses, the guest cannot be asked, or the code
-    /// cannot be translated (see [`crate::pyaction::actions_from_code`]).
+    /// cannot be translated (see [`crate::actionspace::pyautogui::actions_from_code`]).
     pub async fn batch_for(&self, client: &crate::GuestClient) -> anyhow::Result<ActionBatch> {
         let Some(code) = &self.pyautogui else {
             return self.to_batch();
@@ -195,7 +195,7 @@ impl ActArgs {
         let screen = client.screen().await?;
         // An empty wait performs nothing and reports where the cursor is.
         let cursor = client.act(&ActionBatch { actions: vec![Action::Wait { ms: 0 }] }).await?.cursor;
-        let actions = crate::pyaction::actions_from_code(
+        let actions = crate::actionspace::pyautogui::actions_from_code(
             code,
             (screen.physical_width, screen.physical_height),
             (cursor.x, cursor.y),

@@ -21,6 +21,12 @@ use anyhow::{bail, Context};
 use clap::{Args, ValueEnum};
 
 use super::{emit, stub, Connection};
+use crate::actionspace::uitars::UiTarsVersion;
+use crate::actionspace::{ActionSpace, Coords};
+use crate::agent::cu::anthropic::{AnthropicAgent, AnthropicConfig};
+use crate::agent::cu::openai::{OpenAiAgent, OpenAiConfig, SafetyChecks};
+use crate::agent::cu::uitars::{UiTarsAgent, UiTarsConfig};
+use crate::agent::cu::Endpoint;
 use crate::agent::llm::ApiKind;
 use crate::agent::navi::{NaviAgent, NaviConfig, NaviStyle};
 use crate::agent::replay::{ReplayAgent, ReplaySource};
@@ -46,6 +52,15 @@ pub enum AgentKind {
     Replay,
     /// Navi-style prompting of an OpenAI-compatible chat endpoint (`--llm-url`, `--model`).
     Navi,
+    /// Claude with Anthropic's computer tool over the Messages API (`--llm-url
+    /// https://api.anthropic.com`, `--model`; key from ARENA_LLM_KEY or ANTHROPIC_API_KEY).
+    AnthropicCu,
+    /// OpenAI's computer-use model over the Responses API (`--llm-url https://api.openai.com/v1`,
+    /// `--model computer-use-preview`; key from ARENA_LLM_KEY or OPENAI_API_KEY).
+    OpenaiCu,
+    /// UI-TARS over an OpenAI-compatible chat endpoint such as vLLM (`--llm-url`, `--model`,
+    /// `--prompt-file`).
+    UiTars,
 }
 
 /// Arguments of `arena run`.
@@ -113,6 +128,40 @@ pub struct RunArgs {
     /// in seconds of waiting, before the task is left unfinished.
     #[arg(long, default_value_t = 300.0, value_name = "SECONDS")]
     pub llm_retry: f64,
+    /// What the coordinates of agents that answer in pyautogui or `computer_13` are
+    /// measured in: `pixels`, `fraction` (0 to 1) or `grid1000` (0 to 1000). The
+    /// computer-use agents use their model's own convention. Recorded in the results.
+    #[arg(long, default_value = "pixels", value_parser = parse_coords, value_name = "CONVENTION")]
+    pub coords: Coords,
+    /// anthropic-cu: the computer tool's version.
+    #[arg(long, value_enum, default_value_t = ComputerTool::Computer20250124)]
+    pub computer_tool: ComputerTool,
+    /// anthropic-cu: offer the `zoom` action (computer_20251124 only).
+    #[arg(long)]
+    pub zoom: bool,
+    /// anthropic-cu: the extended-thinking budget in tokens (at least 1024, below --max-tokens),
+    /// for models that think.
+    #[arg(long, value_name = "TOKENS")]
+    pub thinking_budget: Option<u32>,
+    /// anthropic-cu: do not mark the system prompt and tools for prompt caching.
+    #[arg(long)]
+    pub no_prompt_cache: bool,
+    /// anthropic-cu and ui-tars: how many screenshots each request carries, the newest
+    /// [default: 3 for anthropic-cu, 5 for ui-tars].
+    #[arg(long, value_name = "N")]
+    pub keep_images: Option<usize>,
+    /// openai-cu: what to do with a call's pending safety checks: `ack` acknowledges them
+    /// and acts, `fail` ends the episode as FAIL. Recorded in the results.
+    #[arg(long, value_enum, default_value_t = SafetyChecks::Ack)]
+    pub safety_checks: SafetyChecks,
+    /// ui-tars: the prompt template, as the UI-TARS project publishes it, with
+    /// `{instruction}` (and `{language}`) placeholders; read at start.
+    #[arg(long, value_name = "FILE")]
+    pub prompt_file: Option<PathBuf>,
+    /// ui-tars: the model's coordinate convention: `1.0` (a 0..1000 grid, UI-TARS
+    /// 2B/7B/72B) or `1.5` (pixels of the smart-resized screenshot, UI-TARS-1.5).
+    #[arg(long, value_enum, default_value_t = UiTarsVersion::V1_5)]
+    pub uitars_version: UiTarsVersion,
     /// Guests of the pool, comma-separated (repeatable); the global --guest is added to them.
     #[arg(long, value_delimiter = ',', value_name = "URL,...")]
     pub guests: Vec<String>,
@@ -200,6 +249,15 @@ pub struct RunArgs {
     pub vm: super::vm::VmArgs,
 }
 
+/// `--computer-tool`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum ComputerTool {
+    #[value(name = "computer_20250124")]
+    Computer20250124,
+    #[value(name = "computer_20251124")]
+    Computer20251124,
+}
+
 /// `--navi-style`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
 pub enum NaviStyleArg {
@@ -261,6 +319,10 @@ fn parse_shard(text: &str) -> Result<Shard, String> {
 }
 
 fn parse_som_origin(text: &str) -> Result<SomOrigin, String> {
+    text.parse()
+}
+
+fn parse_coords(text: &str) -> Result<Coords, String> {
     text.parse()
 }
 
@@ -367,7 +429,93 @@ pub(crate) fn agent_factory(args: &RunArgs) -> anyhow::Result<ChosenAgent> {
             // Upstream files Navi's results under its action space.
             Ok(ChosenAgent { factory, label: crate::results::DEFAULT_ACTION_SPACE_LABEL.into(), model, options })
         }
+        AgentKind::AnthropicCu | AgentKind::OpenaiCu | AgentKind::UiTars => computer_use_agent(args),
     }
+}
+
+/// The endpoint options the computer-use agents share with Navi's.
+fn cu_endpoint(args: &RunArgs, name: &str) -> anyhow::Result<Endpoint> {
+    let (Some(url), Some(model)) = (args.llm_url.clone(), args.model.clone()) else {
+        bail!("--agent {name} needs --llm-url (or ARENA_LLM_URL) and --model (or ARENA_LLM_MODEL)");
+    };
+    let seconds = |value: f64, flag: &str| {
+        Duration::try_from_secs_f64(value).with_context(|| format!("{flag} must be a number of seconds, 0 or more"))
+    };
+    let mut endpoint = Endpoint::new(&url, &model);
+    endpoint.timeout = seconds(args.llm_timeout, "--llm-timeout")?;
+    endpoint.retry.give_up_after = seconds(args.llm_retry, "--llm-retry")?;
+    endpoint.max_tokens = args.max_tokens;
+    Ok(endpoint)
+}
+
+/// `--agent anthropic-cu`, `openai-cu` and `ui-tars`: each is checked once here, so
+/// an unusable configuration fails before any task starts.
+fn computer_use_agent(args: &RunArgs) -> anyhow::Result<ChosenAgent> {
+    let option = |k: &str, v: String| (k.to_owned(), v);
+    let (factory, space, coords, mut options): (AgentFactory, ActionSpace, String, Vec<(String, String)>) = match args
+        .agent
+    {
+        AgentKind::AnthropicCu => {
+            let mut config = AnthropicConfig::new("", "");
+            config.endpoint = cu_endpoint(args, "anthropic-cu")?;
+            config.tool = match args.computer_tool {
+                ComputerTool::Computer20250124 => ActionSpace::Anthropic20250124,
+                ComputerTool::Computer20251124 => ActionSpace::Anthropic20251124,
+            };
+            config.enable_zoom = args.zoom;
+            config.thinking_budget = args.thinking_budget;
+            config.prompt_caching = !args.no_prompt_cache;
+            config.keep_images = args.keep_images.unwrap_or(config.keep_images);
+            AnthropicAgent::new(config.clone())?;
+            let options = vec![
+                option("keep_images", config.keep_images.to_string()),
+                option("thinking_budget", config.thinking_budget.map_or("off".into(), |b| b.to_string())),
+                option("prompt_caching", if config.prompt_caching { "on" } else { "off" }.into()),
+                option("zoom", if config.enable_zoom { "on" } else { "off" }.into()),
+            ];
+            let space = config.tool;
+            let factory: AgentFactory =
+                Arc::new(move || Ok(Box::new(AnthropicAgent::new(config.clone())?) as Box<dyn Agent>));
+            (factory, space, "image:recommended-size".into(), options)
+        }
+        AgentKind::OpenaiCu => {
+            let mut config = OpenAiConfig::new("", "");
+            config.endpoint = cu_endpoint(args, "openai-cu")?;
+            config.safety_checks = args.safety_checks;
+            OpenAiAgent::new(config.clone())?;
+            let options = vec![option("safety_checks", config.safety_checks.name().into())];
+            let factory: AgentFactory =
+                Arc::new(move || Ok(Box::new(OpenAiAgent::new(config.clone())?) as Box<dyn Agent>));
+            (factory, ActionSpace::OpenAi, Coords::Pixels.name(), options)
+        }
+        _ => {
+            let Some(path) = &args.prompt_file else {
+                bail!("--agent ui-tars needs --prompt-file: the UI-TARS prompt template, as its project publishes it");
+            };
+            let template = UiTarsConfig::read_prompt(path)?;
+            let mut config = UiTarsConfig::new("", "", &template);
+            config.endpoint = cu_endpoint(args, "ui-tars")?;
+            config.version = args.uitars_version;
+            config.history_images = args.keep_images.unwrap_or(config.history_images);
+            UiTarsAgent::new(config.clone())?;
+            let coords = match config.version {
+                UiTarsVersion::V1 => Coords::Grid1000.name(),
+                UiTarsVersion::V1_5 => "image:smart-resize".into(),
+            };
+            let options = vec![
+                option("uitars_version", config.version.name().into()),
+                option("keep_images", config.history_images.to_string()),
+                option("prompt_file", path.display().to_string()),
+            ];
+            let factory: AgentFactory =
+                Arc::new(move || Ok(Box::new(UiTarsAgent::new(config.clone())?) as Box<dyn Agent>));
+            (factory, ActionSpace::UiTars, coords, options)
+        }
+    };
+    let model = args.model.clone().unwrap_or_default();
+    options.push(option("action_space", space.name().into()));
+    options.push(option("coords", coords));
+    Ok(ChosenAgent { factory, label: space.name().into(), model, options })
 }
 
 /// `arena run`.
@@ -377,7 +525,15 @@ pub(crate) fn agent_factory(args: &RunArgs) -> anyhow::Result<ChosenAgent> {
 /// Unusable arguments, tasks that do not load, no guest, or results that cannot be written.
 pub async fn run(conn: &Connection, args: RunArgs) -> anyhow::Result<ExitCode> {
     let tasks = load_tasks(&args.tasks, args.difficulty)?;
-    let ChosenAgent { factory: agents, label: agent_label, model, options: agent_options } = agent_factory(&args)?;
+    let ChosenAgent { factory: agents, label: agent_label, model, options: mut agent_options } = agent_factory(&args)?;
+    // Every run records who played, in which action space and coordinates.
+    let agent_name = args.agent.to_possible_value().map(|v| v.get_name().to_owned()).unwrap_or_default();
+    agent_options.push(("agent".into(), agent_name));
+    agent_options.push(("model".into(), model.clone()));
+    if !agent_options.iter().any(|(k, _)| k == "action_space") {
+        agent_options.push(("action_space".into(), agent_label.clone()));
+        agent_options.push(("coords".into(), args.coords.name()));
+    }
 
     let mut urls: Vec<String> = conn.guest.iter().cloned().collect();
     urls.extend(args.guests.iter().map(|s| s.trim().to_owned()).filter(|s| !s.is_empty()));

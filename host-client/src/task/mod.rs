@@ -532,7 +532,8 @@ impl Params<'_> {
     }
 }
 
-fn kind_of(value: &Value) -> &'static str {
+/// A JSON value's kind, for messages ("a string", "a list").
+pub(crate) fn kind_of(value: &Value) -> &'static str {
     match value {
         Value::Null => "null",
         Value::Bool(_) => "a boolean",

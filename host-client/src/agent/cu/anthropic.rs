@@ -1,0 +1,442 @@
+//! [`AnthropicAgent`]: Claude with Anthropic's `computer` tool, over the Messages API.
+//!
+//! The protocol is Anthropic's published one (Messages API and computer-use tool docs):
+//! `POST {base}/v1/messages` with `x-api-key`, `anthropic-version: 2023-06-01` and
+//! the tool's beta header (`computer-use-2025-01-24` for `computer_20250124`,
+//! `computer-use-2025-11-24` for `computer_20251124`); the tool is declared as
+//! `{"type": "computer_20250124", "name": "computer", "display_width_px", "display_height_px"}`
+//! (`"enable_zoom": true` with `computer_20251124` when zoom is on).
+//!
+//! - **One conversation per episode.** The first user message holds the task and
+//!   the screenshot; each later one holds a `tool_result` for every `tool_use` of
+//!   the previous answer, the last carrying the new screenshot (a `cursor_position`
+//!   result carries the position, a `zoom` result the region's crop, an action
+//!   that could not be read `is_error` and why).
+//! - **Screenshots** are scaled to the resolution the tool documentation recommends
+//!   ([`recommended_size`]: XGA, WXGA or FWXGA by aspect ratio, else within the
+//!   API's image limits), and the model's coordinates are scaled back.
+//! - **Images kept**: only the last `keep_images` screenshots stay in the
+//!   conversation; older ones become a short text.
+//! - **Prompt caching**: the system prompt (and the tool list before it) is
+//!   marked `cache_control: ephemeral`, the stable prefix.
+//! - **Thinking**: with a budget, `thinking: {type: enabled, budget_tokens}`; the
+//!   answer's thinking blocks are sent back unchanged, as the API requires.
+//! - **Decisions**: an answer without a tool call ends the episode: `FAIL` when its
+//!   text says FAIL (the system prompt asks for that word when the task cannot be
+//!   done), `DONE` otherwise. `stop_reason: "refusal"` is `FAIL`.
+//!
+//! The system prompt is this project's own wording.
+
+use serde_json::{json, Value};
+
+use arena_shared::script::host::cursor_after;
+
+use super::{base64_png, cropped_png, exchange_logs, resized_png, screen_of, Endpoint};
+use crate::actionspace::{self, ActionSpace, Context, Coords, Step};
+use crate::agent::llm::{ApiKind, ModelClient};
+use crate::agent::{Agent, AgentAction, AgentError, Observation, Prediction};
+use crate::task::Task;
+
+/// Environment variables the key is read from, in order.
+pub const KEY_VARS: [&str; 2] = ["ARENA_LLM_KEY", "ANTHROPIC_API_KEY"];
+
+/// The Messages API version header.
+pub const API_VERSION: &str = "2023-06-01";
+
+/// The system prompt: how to finish, in this project's words.
+pub const SYSTEM_PROMPT: &str =
+    "You are operating a Windows 11 desktop through the computer tool to complete the user's task. \
+Act step by step and look at each new screenshot before the next action. When the task is complete, reply without \
+a tool call and end your message with the word DONE. If the task cannot be done on this computer, reply without a \
+tool call and end your message with the word FAIL.";
+
+/// The Anthropic agent's settings.
+#[derive(Debug, Clone, PartialEq)]
+pub struct AnthropicConfig {
+    pub endpoint: Endpoint,
+    /// [`ActionSpace::Anthropic20250124`] or [`ActionSpace::Anthropic20251124`].
+    pub tool: ActionSpace,
+    /// How many screenshots stay in the conversation (`--keep-images`).
+    pub keep_images: usize,
+    /// Extended thinking's budget in tokens, for models that take one.
+    pub thinking_budget: Option<u32>,
+    /// Mark the stable prefix for prompt caching.
+    pub prompt_caching: bool,
+    /// Offer `zoom` (`computer_20251124` only).
+    pub enable_zoom: bool,
+}
+
+impl AnthropicConfig {
+    pub fn new(base_url: &str, model: &str) -> AnthropicConfig {
+        AnthropicConfig {
+            endpoint: Endpoint::new(base_url, model),
+            tool: ActionSpace::Anthropic20250124,
+            keep_images: 3,
+            thinking_budget: None,
+            prompt_caching: true,
+            enable_zoom: false,
+        }
+    }
+
+    /// The tool type, which is also the action space's name.
+    pub fn tool_type(&self) -> &'static str {
+        self.tool.name()
+    }
+
+    /// The beta header the tool version needs.
+    pub fn beta(&self) -> &'static str {
+        match self.tool {
+            ActionSpace::Anthropic20251124 => "computer-use-2025-11-24",
+            _ => "computer-use-2025-01-24",
+        }
+    }
+
+    /// The Messages URL: `/v1/messages` after the base (or `/messages` after a base ending in `/v1`).
+    ///
+    /// # Errors
+    ///
+    /// [`AgentError::Config`] for a URL that does not parse or an empty model name.
+    pub fn url(&self) -> Result<String, AgentError> {
+        let route = if self.endpoint.base_url.trim().trim_end_matches('/').ends_with("/v1") {
+            "/messages"
+        } else {
+            "/v1/messages"
+        };
+        self.endpoint.url(route)
+    }
+}
+
+/// The screenshot size the computer-use documentation recommends for a screen:
+/// the first of XGA (1024×768), WXGA (1280×800) and FWXGA (1366×768) whose aspect
+/// ratio is within 0.02 of the screen's and which is smaller; else the screen
+/// scaled to fit the API's image limits (1568 pixels on the long side, about 1.15
+/// megapixels), or left as it is when it fits.
+pub fn recommended_size(screen: (u32, u32)) -> (u32, u32) {
+    const TARGETS: [(u32, u32); 3] = [(1024, 768), (1280, 800), (1366, 768)];
+    let (w, h) = (screen.0.max(1), screen.1.max(1));
+    let ratio = f64::from(w) / f64::from(h);
+    if let Some(&t) = TARGETS.iter().find(|(tw, th)| (f64::from(*tw) / f64::from(*th) - ratio).abs() < 0.02 && *tw < w)
+    {
+        return t;
+    }
+    let long = f64::from(w.max(h));
+    let scale = (1568.0 / long).min((1_150_000.0 / (f64::from(w) * f64::from(h))).sqrt()).min(1.0);
+    (((f64::from(w) * scale) as u32).max(1), ((f64::from(h) * scale) as u32).max(1))
+}
+
+/// What the next message must answer about a `tool_use` of the last answer.
+#[derive(Debug, Clone, PartialEq)]
+enum Answer {
+    /// Carried out (or nothing to do): the screenshot, if it is the last.
+    Done,
+    /// The cursor position.
+    Cursor,
+    /// The crop of this region of the new screenshot.
+    Zoom([i32; 4]),
+    /// Not carried out, and why.
+    Error(String),
+}
+
+#[derive(Debug, Clone, PartialEq)]
+struct Pending {
+    id: String,
+    answer: Answer,
+}
+
+/// The Anthropic computer-use agent. See the module documentation.
+#[derive(Debug)]
+pub struct AnthropicAgent {
+    config: AnthropicConfig,
+    client: ModelClient,
+    messages: Vec<Value>,
+    pending: Vec<Pending>,
+    /// Where the agent's own actions left the cursor, in screen pixels.
+    cursor: (i32, i32),
+}
+
+impl AnthropicAgent {
+    /// An agent for `config`; the key is resolved now.
+    ///
+    /// # Errors
+    ///
+    /// [`AgentError::Config`] for an unusable URL, model, tool version or thinking budget.
+    pub fn new(config: AnthropicConfig) -> Result<AnthropicAgent, AgentError> {
+        if !matches!(config.tool, ActionSpace::Anthropic20250124 | ActionSpace::Anthropic20251124) {
+            return Err(AgentError::Config(format!("{} is not a version of Anthropic's computer tool", config.tool)));
+        }
+        if config.enable_zoom && config.tool != ActionSpace::Anthropic20251124 {
+            return Err(AgentError::Config("zoom needs the computer_20251124 tool".into()));
+        }
+        if let Some(budget) = config.thinking_budget {
+            if budget < 1024 || budget >= config.endpoint.max_tokens {
+                return Err(AgentError::Config(format!(
+                    "the thinking budget ({budget}) must be at least 1024 and below the answer's length limit ({})",
+                    config.endpoint.max_tokens
+                )));
+            }
+        }
+        let client = config
+            .endpoint
+            .client(&config.url()?, ApiKind::Anthropic, &KEY_VARS)?
+            .with_header("anthropic-version", API_VERSION)
+            .with_header("anthropic-beta", config.beta());
+        Ok(AnthropicAgent { config, client, messages: Vec::new(), pending: Vec::new(), cursor: (0, 0) })
+    }
+
+    fn body(&self, messages: &[Value], size: (u32, u32)) -> Value {
+        let mut tool = json!({
+            "type": self.config.tool_type(),
+            "name": "computer",
+            "display_width_px": size.0,
+            "display_height_px": size.1,
+        });
+        if self.config.enable_zoom {
+            tool["enable_zoom"] = json!(true);
+        }
+        let mut system = json!({"type": "text", "text": SYSTEM_PROMPT});
+        if self.config.prompt_caching {
+            system["cache_control"] = json!({"type": "ephemeral"});
+        }
+        let mut body = json!({
+            "model": self.config.endpoint.model,
+            "max_tokens": self.config.endpoint.max_tokens,
+            "system": [system],
+            "tools": [tool],
+            "messages": messages,
+        });
+        if let Some(budget) = self.config.thinking_budget {
+            body["thinking"] = json!({"type": "enabled", "budget_tokens": budget});
+        }
+        body
+    }
+}
+
+fn image_block(png: &[u8]) -> Value {
+    json!({"type": "image", "source": {"type": "base64", "media_type": "image/png", "data": base64_png(png)}})
+}
+
+fn text_block(text: &str) -> Value {
+    json!({"type": "text", "text": text})
+}
+
+/// Replaces all but the last `keep` images of the conversation with a short text.
+fn keep_last_images(messages: &mut [Value], keep: usize) {
+    let mut seen = 0;
+    for message in messages.iter_mut().rev() {
+        let Some(parts) = message.get_mut("content").and_then(Value::as_array_mut) else { continue };
+        for part in parts.iter_mut().rev() {
+            let nested = part.get_mut("content").and_then(Value::as_array_mut);
+            let blocks: Vec<&mut Value> = match nested {
+                Some(inner) => inner.iter_mut().rev().collect(),
+                None => vec![part],
+            };
+            for block in blocks {
+                if block.get("type").and_then(Value::as_str) == Some("image") {
+                    seen += 1;
+                    if seen > keep {
+                        *block = text_block("(an earlier screenshot, left out)");
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// The decision of an answer that calls no tool.
+pub(crate) fn final_decision(text: &str) -> AgentAction {
+    let said_fail = text.split(|c: char| !c.is_ascii_alphanumeric()).any(|w| w == "FAIL");
+    if said_fail {
+        AgentAction::Fail
+    } else {
+        AgentAction::Done
+    }
+}
+
+#[async_trait::async_trait]
+impl Agent for AnthropicAgent {
+    fn name(&self) -> &str {
+        "anthropic-cu"
+    }
+
+    async fn reset(&mut self, _task: &Task) {
+        self.messages.clear();
+        self.pending.clear();
+        self.cursor = (0, 0);
+    }
+
+    async fn predict(&mut self, obs: &Observation) -> Result<Prediction, AgentError> {
+        let (png, screen) = screen_of(obs);
+        let size = recommended_size(screen);
+        let coords = Coords::Image { width: size.0, height: size.1 };
+        let shot = image_block(&resized_png(png, size)?);
+
+        let mut messages = self.messages.clone();
+        if messages.is_empty() {
+            messages.push(json!({"role": "user", "content": [text_block(&obs.instruction), shot]}));
+        } else {
+            let mut results = Vec::new();
+            for (i, pending) in self.pending.iter().enumerate() {
+                let mut content = Vec::new();
+                let mut is_error = false;
+                match &pending.answer {
+                    Answer::Done => {}
+                    Answer::Cursor => {
+                        let (x, y) = coords.from_screen(self.cursor.0, self.cursor.1, screen);
+                        content.push(text_block(&format!("X={},Y={}", x.round(), y.round())));
+                    }
+                    Answer::Zoom(rect) => content.push(image_block(&cropped_png(png, *rect)?)),
+                    Answer::Error(why) => {
+                        is_error = true;
+                        content.push(text_block(why));
+                    }
+                }
+                if i + 1 == self.pending.len() {
+                    content.push(shot.clone());
+                }
+                let mut result = json!({"type": "tool_result", "tool_use_id": pending.id, "content": content});
+                if is_error {
+                    result["is_error"] = json!(true);
+                }
+                results.push(result);
+            }
+            if results.is_empty() {
+                results.push(shot);
+            }
+            messages.push(json!({"role": "user", "content": results}));
+        }
+        keep_last_images(&mut messages, self.config.keep_images.max(1));
+        let body = self.body(&messages, size);
+        let answer = self.client.call(&body).await?;
+        let logs = exchange_logs(&body, &answer);
+
+        let malformed = |why: &str| AgentError::Model {
+            endpoint: self.client.endpoint().to_owned(),
+            reason: format!("the answer is not a Messages API message: {why}"),
+        };
+        let content = answer.get("content").and_then(Value::as_array).ok_or_else(|| malformed("no `content` list"))?;
+        let text: Vec<&str> = content
+            .iter()
+            .filter(|b| b.get("type").and_then(Value::as_str) == Some("text"))
+            .filter_map(|b| b.get("text").and_then(Value::as_str))
+            .collect();
+        let text = text.join("\n");
+        messages.push(json!({"role": "assistant", "content": content}));
+
+        let stop_reason = answer.get("stop_reason").and_then(Value::as_str).unwrap_or_default();
+        let uses: Vec<&Value> =
+            content.iter().filter(|b| b.get("type").and_then(Value::as_str) == Some("tool_use")).collect();
+        let mut response = text.clone();
+        if stop_reason == "refusal" || uses.is_empty() {
+            let decision = if stop_reason == "refusal" { AgentAction::Fail } else { final_decision(&text) };
+            if stop_reason == "refusal" {
+                response = format!("(the model refused) {text}").trim().to_owned();
+            }
+            self.messages = messages;
+            self.pending.clear();
+            return Ok(Prediction { response, actions: vec![decision], marks: None, raw_error: None, logs });
+        }
+
+        let ctx = Context { screen, cursor: self.cursor, coords };
+        let mut pending = Vec::new();
+        let mut steps = Vec::new();
+        let mut errors = Vec::new();
+        for block in &uses {
+            let id = block.get("id").and_then(Value::as_str).ok_or_else(|| malformed("a tool_use without an id"))?;
+            let input = block.get("input").cloned().unwrap_or(Value::Null);
+            response.push_str(&format!("\n{input}"));
+            let parsed = match block.get("name").and_then(Value::as_str) {
+                Some("computer") => actionspace::parse(self.config.tool, &input, &ctx),
+                other => Err(actionspace::ActionError::new(self.config.tool, format!("unknown tool {other:?}"))),
+            };
+            let answer = match parsed {
+                Ok(s) => {
+                    let answer = match s.iter().find(|s| matches!(s, Step::CursorPosition | Step::Zoom(_))) {
+                        Some(Step::Zoom(rect)) => Answer::Zoom(*rect),
+                        Some(_) => Answer::Cursor,
+                        None => Answer::Done,
+                    };
+                    steps.extend(s);
+                    answer
+                }
+                Err(err) => {
+                    errors.push(err.to_string());
+                    Answer::Error(err.to_string())
+                }
+            };
+            pending.push(Pending { id: id.to_owned(), answer });
+        }
+        let raw_error = (!errors.is_empty()).then(|| errors.join("; "));
+        let actions = if raw_error.is_some() {
+            // Nothing of a turn with an unreadable action is done; every call is told so.
+            for p in &mut pending {
+                if !matches!(p.answer, Answer::Error(_)) {
+                    p.answer = Answer::Error("not carried out: another action of this turn could not be read".into());
+                }
+            }
+            Vec::new()
+        } else {
+            for step in &steps {
+                if let Step::Act(action) = step {
+                    self.cursor = cursor_after(action, self.cursor);
+                }
+            }
+            actionspace::to_agent_actions(&steps)
+        };
+        self.messages = messages;
+        self.pending = pending;
+        Ok(Prediction { response: response.trim().to_owned(), actions, marks: None, raw_error, logs })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_recommended_sizes_follow_the_aspect_ratio() {
+        assert_eq!(recommended_size((1920, 1080)), (1366, 768));
+        assert_eq!(recommended_size((1440, 900)), (1280, 800));
+        assert_eq!(recommended_size((2048, 1536)), (1024, 768));
+        assert_eq!(recommended_size((1024, 768)), (1024, 768));
+        assert_eq!(recommended_size((800, 600)), (800, 600));
+        let (w, h) = recommended_size((3440, 1440));
+        assert!(w <= 1568 && u64::from(w) * u64::from(h) <= 1_150_000, "{w}x{h}");
+    }
+
+    #[test]
+    fn only_the_last_images_are_kept() {
+        let img = || json!({"type": "image", "source": {"type": "base64", "media_type": "image/png", "data": "x"}});
+        let mut messages = vec![
+            json!({"role": "user", "content": [text_block("task"), img()]}),
+            json!({"role": "assistant", "content": [text_block("ok")]}),
+            json!({"role": "user", "content": [{"type": "tool_result", "tool_use_id": "a", "content": [img()]}]}),
+            json!({"role": "user", "content": [{"type": "tool_result", "tool_use_id": "b", "content": [img()]}]}),
+        ];
+        keep_last_images(&mut messages, 2);
+        let images = serde_json::to_string(&messages).unwrap().matches("\"image\"").count();
+        assert_eq!(images, 2);
+        assert_eq!(messages[0]["content"][1]["text"], "(an earlier screenshot, left out)");
+        assert_eq!(messages[3]["content"][0]["content"][0]["type"], "image");
+    }
+
+    #[test]
+    fn a_final_message_decides_by_its_words() {
+        assert_eq!(final_decision("The file is saved. DONE"), AgentAction::Done);
+        assert_eq!(final_decision("This setting does not exist here. FAIL"), AgentAction::Fail);
+        assert_eq!(final_decision("No failures. DONE"), AgentAction::Done);
+    }
+
+    #[test]
+    fn configurations_that_cannot_work_are_refused() {
+        let mut config = AnthropicConfig::new("https://api.anthropic.com", "claude");
+        config.enable_zoom = true;
+        assert!(AnthropicAgent::new(config.clone()).is_err());
+        config.tool = ActionSpace::Anthropic20251124;
+        assert!(AnthropicAgent::new(config.clone()).is_ok());
+        config.thinking_budget = Some(8192);
+        assert!(AnthropicAgent::new(config.clone()).is_err(), "a budget above max_tokens");
+        config.tool = ActionSpace::OpenAi;
+        assert!(AnthropicAgent::new(config).is_err());
+        assert_eq!(AnthropicConfig::new("https://gw.example/v1", "m").url().unwrap(), "https://gw.example/v1/messages");
+    }
+}

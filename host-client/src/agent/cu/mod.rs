@@ -1,0 +1,218 @@
+//! The computer-use agents: models that drive a desktop through their vendor's
+//! own tool protocol and action grammar, scored unchanged.
+//!
+//! - [`anthropic`]: [`anthropic::AnthropicAgent`], Anthropic's Messages API with the `computer` tool.
+//! - [`openai`]: [`openai::OpenAiAgent`], OpenAI's Responses API with `computer_use_preview`.
+//! - [`uitars`]: [`uitars::UiTarsAgent`], UI-TARS over an OpenAI-compatible chat endpoint (vLLM).
+//!
+//! All three call their endpoint through [`super::llm::ModelClient`] (backoff,
+//! `Retry-After`; a model that stays down is [`AgentError::Model`], which leaves
+//! the task unfinished), translate answers with [`crate::actionspace`], and keep
+//! each step's request (images left out) and response beside the trajectory as
+//! Navi does. A state change is committed only once an answer is read, so the
+//! episode may ask again after a failed call.
+//!
+//! What they see of an [`Observation`] goes through one adapter, [`screen_of`].
+
+pub mod anthropic;
+pub mod openai;
+pub mod uitars;
+
+use std::time::Duration;
+
+use base64::Engine as _;
+use serde_json::Value;
+
+use super::llm::{ApiKind, ModelClient, RetryPolicy};
+use super::{AgentError, LogValue, Observation, StepLog};
+
+/// What a computer-use agent takes from an observation: the screenshot as PNG
+/// and the screen's size in physical pixels (which typed actions use).
+pub fn screen_of(obs: &Observation) -> (&[u8], (u32, u32)) {
+    (&obs.screenshot_png, obs.screen_size())
+}
+
+/// How to reach a computer-use model (the options every vendor shares).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Endpoint {
+    /// The API's base URL (`https://api.anthropic.com`, `https://api.openai.com/v1`,
+    /// `http://127.0.0.1:8000/v1`); each agent adds its route.
+    pub base_url: String,
+    pub model: String,
+    /// The key; `None` reads the agent's variables ([`Endpoint::resolved_key`]).
+    pub api_key: Option<String>,
+    /// Deadline of one call.
+    pub timeout: Duration,
+    /// How long a failing model is tried again.
+    pub retry: RetryPolicy,
+    /// Longest answer, in tokens.
+    pub max_tokens: u32,
+}
+
+impl Endpoint {
+    pub fn new(base_url: &str, model: &str) -> Endpoint {
+        Endpoint {
+            base_url: base_url.to_owned(),
+            model: model.to_owned(),
+            api_key: None,
+            timeout: Duration::from_secs(120),
+            retry: RetryPolicy::default(),
+            max_tokens: 4096,
+        }
+    }
+
+    /// The configured key, else the first non-empty variable of `vars`.
+    pub fn resolved_key(&self, vars: &[&str]) -> Option<String> {
+        self.api_key
+            .clone()
+            .filter(|k| !k.is_empty())
+            .or_else(|| vars.iter().find_map(|var| std::env::var(var).ok().filter(|v| !v.trim().is_empty())))
+    }
+
+    /// `route` appended to the base URL's path unless it already ends with it.
+    ///
+    /// # Errors
+    ///
+    /// [`AgentError::Config`] for an empty model name or a base URL that is not a URL.
+    pub fn url(&self, route: &str) -> Result<String, AgentError> {
+        if self.model.trim().is_empty() {
+            return Err(AgentError::Config("the model name must not be empty".into()));
+        }
+        let mut url = reqwest::Url::parse(self.base_url.trim())
+            .map_err(|e| AgentError::Config(format!("the model's base URL {:?} is not a URL: {e}", self.base_url)))?;
+        let path = url.path().trim_end_matches('/').to_owned();
+        if !path.ends_with(route) {
+            url.set_path(&format!("{path}{route}"));
+        }
+        Ok(url.to_string())
+    }
+}
+
+impl Endpoint {
+    /// The model client for `url`, with the key of `kind`'s header from the
+    /// configuration or the first of `key_vars` that is set.
+    ///
+    /// # Errors
+    ///
+    /// [`AgentError::Config`] for a URL that does not parse or an HTTP client that cannot be built.
+    pub fn client(&self, url: &str, kind: ApiKind, key_vars: &[&str]) -> Result<ModelClient, AgentError> {
+        ModelClient::with_url(url, kind, self.resolved_key(key_vars), self.timeout, self.retry)
+    }
+}
+
+/// A PNG as base64.
+pub(crate) fn base64_png(png: &[u8]) -> String {
+    base64::engine::general_purpose::STANDARD.encode(png)
+}
+
+/// `png` resized to `size` (width, height), as PNG; the same bytes when it already is that size.
+///
+/// # Errors
+///
+/// [`AgentError::Config`] when the screenshot cannot be decoded or encoded (a guest fault the agent cannot fix).
+pub(crate) fn resized_png(png: &[u8], size: (u32, u32)) -> Result<Vec<u8>, AgentError> {
+    let bad = |e: String| AgentError::Config(format!("the screenshot: {e}"));
+    let image = image::load_from_memory_with_format(png, image::ImageFormat::Png).map_err(|e| bad(e.to_string()))?;
+    if (image.width(), image.height()) == size {
+        return Ok(png.to_vec());
+    }
+    let rgba = image.to_rgba8();
+    let scaled = arena_shared::fastimg::resize_rgba(&rgba, size.0, size.1, arena_shared::fastimg::Filter::Bilinear)
+        .map_err(|e| bad(e.to_string()))?;
+    encode_png(&scaled).map_err(bad)
+}
+
+/// The region `[x1, y1, x2, y2]` of `png`, as PNG (black where it leaves the image).
+///
+/// # Errors
+///
+/// [`AgentError::Config`] when the screenshot cannot be decoded or the crop is too large.
+pub(crate) fn cropped_png(png: &[u8], rect: [i32; 4]) -> Result<Vec<u8>, AgentError> {
+    let bad = |e: String| AgentError::Config(format!("the screenshot: {e}"));
+    let image = image::load_from_memory_with_format(png, image::ImageFormat::Png).map_err(|e| bad(e.to_string()))?;
+    let crop = arena_shared::imaging::crop_padded(
+        &image.to_rgba8(),
+        i64::from(rect[0]),
+        i64::from(rect[1]),
+        i64::from(rect[2]),
+        i64::from(rect[3]),
+    )
+    .map_err(|e| bad(e.to_string()))?;
+    encode_png(&crop).map_err(bad)
+}
+
+fn encode_png(image: &image::RgbaImage) -> Result<Vec<u8>, String> {
+    let mut out = std::io::Cursor::new(Vec::new());
+    image.write_to(&mut out, image::ImageFormat::Png).map_err(|e| e.to_string())?;
+    Ok(out.into_inner())
+}
+
+/// `value` with every embedded image (base64 `data` of an image source, `data:`
+/// URLs) replaced by a note of its size, for the step's logs.
+pub(crate) fn without_images(value: &Value) -> Value {
+    match value {
+        Value::Object(map) => {
+            let is_base64_source = map.get("type").and_then(Value::as_str) == Some("base64");
+            Value::Object(
+                map.iter()
+                    .map(|(k, v)| {
+                        let v = match v {
+                            Value::String(s) if (k == "data" && is_base64_source) || s.starts_with("data:image/") => {
+                                Value::String(format!("(an image, {} bytes of base64, left out here)", s.len()))
+                            }
+                            other => without_images(other),
+                        };
+                        (k.clone(), v)
+                    })
+                    .collect(),
+            )
+        }
+        Value::Array(items) => Value::Array(items.iter().map(without_images).collect()),
+        other => other.clone(),
+    }
+}
+
+/// The step's logs: the request as sent (images left out) and the response as received.
+pub(crate) fn exchange_logs(request: &Value, response: &Value) -> Vec<StepLog> {
+    vec![
+        StepLog { key: "request".into(), value: LogValue::Json(without_images(request)) },
+        StepLog { key: "response".into(), value: LogValue::Json(response.clone()) },
+    ]
+}
+
+#[cfg(test)]
+mod tests {
+    use serde_json::json;
+
+    use super::*;
+
+    #[test]
+    fn images_are_left_out_of_logs_and_the_rest_is_kept() {
+        let request = json!({
+            "messages": [{"content": [
+                {"type": "image", "source": {"type": "base64", "media_type": "image/png", "data": "AAAA"}},
+                {"type": "input_image", "image_url": "data:image/png;base64,BBBB"},
+                {"type": "text", "text": "data"},
+            ]}]
+        });
+        let logged = without_images(&request);
+        let parts = &logged["messages"][0]["content"];
+        assert_eq!(parts[0]["source"]["data"], "(an image, 4 bytes of base64, left out here)");
+        assert_eq!(parts[0]["source"]["media_type"], "image/png");
+        assert!(parts[1]["image_url"].as_str().unwrap().starts_with("(an image"));
+        assert_eq!(parts[2]["text"], "data");
+    }
+
+    #[test]
+    fn routes_are_added_once() {
+        let url = |base: &str, route: &str| Endpoint::new(base, "m").url(route).unwrap();
+        assert_eq!(url("https://api.anthropic.com", "/v1/messages"), "https://api.anthropic.com/v1/messages");
+        assert_eq!(
+            url("https://api.anthropic.com/v1/messages", "/v1/messages"),
+            "https://api.anthropic.com/v1/messages"
+        );
+        assert_eq!(url("https://api.openai.com/v1/", "/responses"), "https://api.openai.com/v1/responses");
+        assert!(Endpoint::new("not a url", "m").url("/x").is_err());
+        assert!(Endpoint::new("http://h", " ").url("/x").is_err());
+    }
+}

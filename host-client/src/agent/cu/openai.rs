@@ -1,0 +1,223 @@
+//! [`OpenAiAgent`]: OpenAI's computer-use model over the Responses API.
+//!
+//! The protocol is OpenAI's published one (the computer-use guide and the
+//! Responses API reference): `POST {base}/responses` with a Bearer key, the tool
+//! `{"type": "computer_use_preview", "display_width", "display_height", "environment": "windows"}`
+//! and `truncation: "auto"`.
+//!
+//! - The first request's input is the task and the screenshot; each later one
+//!   chains with `previous_response_id` and answers the last `computer_call` with a
+//!   `computer_call_output` holding the new screenshot (`computer_screenshot`).
+//! - `pending_safety_checks` on a call follow the policy ([`SafetyChecks`],
+//!   `--safety-checks`): `ack` carries out the action and acknowledges the checks
+//!   in the next `computer_call_output`; `fail` ends the episode as `FAIL`, the
+//!   checks recorded in the step's response.
+//! - An answer with no `computer_call` ends the episode: `FAIL` when its text says
+//!   FAIL (the instructions ask for that word), `DONE` otherwise; a `refusal`
+//!   content part is `FAIL`.
+//! - Screenshots go at the screen's own size, so coordinates are screen pixels.
+//!
+//! The instructions text is this project's own wording.
+
+use serde_json::{json, Value};
+
+use super::anthropic::final_decision;
+use super::{base64_png, exchange_logs, screen_of, Endpoint};
+use crate::actionspace::{self, ActionSpace, Context, Coords, Step};
+use crate::agent::llm::{ApiKind, ModelClient};
+use crate::agent::{Agent, AgentAction, AgentError, Observation, Prediction};
+use crate::task::Task;
+
+/// Environment variables the key is read from, in order.
+pub const KEY_VARS: [&str; 2] = ["ARENA_LLM_KEY", "OPENAI_API_KEY"];
+
+/// The instructions: how to finish, in this project's words.
+pub const INSTRUCTIONS: &str =
+    "You are operating a Windows 11 desktop with the computer tool to complete the user's task. \
+Do not ask for confirmation; act. When the task is complete, answer without a computer action and end with the word \
+DONE. If it cannot be done on this computer, answer without a computer action and end with the word FAIL.";
+
+/// What to do with a call's `pending_safety_checks`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, clap::ValueEnum)]
+pub enum SafetyChecks {
+    /// Acknowledge them and carry on.
+    #[default]
+    Ack,
+    /// End the episode as FAIL.
+    Fail,
+}
+
+impl SafetyChecks {
+    pub fn name(self) -> &'static str {
+        match self {
+            SafetyChecks::Ack => "ack",
+            SafetyChecks::Fail => "fail",
+        }
+    }
+}
+
+/// The OpenAI agent's settings.
+#[derive(Debug, Clone, PartialEq)]
+pub struct OpenAiConfig {
+    pub endpoint: Endpoint,
+    pub safety_checks: SafetyChecks,
+}
+
+impl OpenAiConfig {
+    pub fn new(base_url: &str, model: &str) -> OpenAiConfig {
+        OpenAiConfig { endpoint: Endpoint::new(base_url, model), safety_checks: SafetyChecks::default() }
+    }
+}
+
+/// The call the next request answers.
+#[derive(Debug, Clone, PartialEq)]
+struct PendingCall {
+    call_id: String,
+    acknowledged: Vec<Value>,
+}
+
+/// The OpenAI computer-use agent. See the module documentation.
+#[derive(Debug)]
+pub struct OpenAiAgent {
+    config: OpenAiConfig,
+    client: ModelClient,
+    previous_response_id: Option<String>,
+    pending: Option<PendingCall>,
+}
+
+impl OpenAiAgent {
+    /// An agent for `config`; the key is resolved now.
+    ///
+    /// # Errors
+    ///
+    /// [`AgentError::Config`] for an unusable URL or model name.
+    pub fn new(config: OpenAiConfig) -> Result<OpenAiAgent, AgentError> {
+        let client = config.endpoint.client(&config.endpoint.url("/responses")?, ApiKind::OpenAi, &KEY_VARS)?;
+        Ok(OpenAiAgent { config, client, previous_response_id: None, pending: None })
+    }
+}
+
+#[async_trait::async_trait]
+impl Agent for OpenAiAgent {
+    fn name(&self) -> &str {
+        "openai-cu"
+    }
+
+    async fn reset(&mut self, _task: &Task) {
+        self.previous_response_id = None;
+        self.pending = None;
+    }
+
+    async fn predict(&mut self, obs: &Observation) -> Result<Prediction, AgentError> {
+        let (png, screen) = screen_of(obs);
+        let image_url = format!("data:image/png;base64,{}", base64_png(png));
+        let input = match (&self.previous_response_id, &self.pending) {
+            (Some(_), Some(call)) => json!([{
+                "type": "computer_call_output",
+                "call_id": call.call_id,
+                "acknowledged_safety_checks": call.acknowledged,
+                "output": {"type": "computer_screenshot", "image_url": image_url},
+            }]),
+            _ => json!([{
+                "role": "user",
+                "content": [
+                    {"type": "input_text", "text": obs.instruction},
+                    {"type": "input_image", "image_url": image_url},
+                ],
+            }]),
+        };
+        let mut body = json!({
+            "model": self.config.endpoint.model,
+            "instructions": INSTRUCTIONS,
+            "tools": [{
+                "type": "computer_use_preview",
+                "display_width": screen.0,
+                "display_height": screen.1,
+                "environment": "windows",
+            }],
+            "input": input,
+            "truncation": "auto",
+            "max_output_tokens": self.config.endpoint.max_tokens,
+        });
+        if let (Some(id), Some(_)) = (&self.previous_response_id, &self.pending) {
+            body["previous_response_id"] = json!(id);
+        }
+        let answer = self.client.call(&body).await?;
+        let logs = exchange_logs(&body, &answer);
+        let malformed = |why: &str| AgentError::Model {
+            endpoint: self.client.endpoint().to_owned(),
+            reason: format!("the answer is not a Responses API response: {why}"),
+        };
+        if let Some(error) = answer.get("error").filter(|e| !e.is_null()) {
+            return Err(malformed(&format!("it reports an error: {error}")));
+        }
+        let id = answer.get("id").and_then(Value::as_str).ok_or_else(|| malformed("no `id`"))?.to_owned();
+        let output = answer.get("output").and_then(Value::as_array).ok_or_else(|| malformed("no `output` list"))?;
+
+        let mut text = Vec::new();
+        let mut refused = false;
+        for item in output.iter().filter(|i| i.get("type").and_then(Value::as_str) == Some("message")) {
+            for part in item.get("content").and_then(Value::as_array).into_iter().flatten() {
+                match part.get("type").and_then(Value::as_str) {
+                    Some("output_text") => text.extend(part.get("text").and_then(Value::as_str)),
+                    Some("refusal") => {
+                        refused = true;
+                        text.extend(part.get("refusal").and_then(Value::as_str));
+                    }
+                    _ => {}
+                }
+            }
+        }
+        let text = text.join("\n");
+        let call = output.iter().find(|i| i.get("type").and_then(Value::as_str) == Some("computer_call"));
+        let Some(call) = call.filter(|_| !refused) else {
+            let (decision, response) = if refused {
+                (AgentAction::Fail, format!("(the model refused) {text}").trim().to_owned())
+            } else {
+                (final_decision(&text), text)
+            };
+            self.previous_response_id = Some(id);
+            self.pending = None;
+            return Ok(Prediction { response, actions: vec![decision], marks: None, raw_error: None, logs });
+        };
+        let call_id =
+            call.get("call_id").and_then(Value::as_str).ok_or_else(|| malformed("a computer_call without call_id"))?;
+        let action = call.get("action").cloned().unwrap_or(Value::Null);
+        let checks: Vec<Value> =
+            call.get("pending_safety_checks").and_then(Value::as_array).cloned().unwrap_or_default();
+        let mut response = format!("{text}\n{action}").trim().to_owned();
+        if !checks.is_empty() {
+            response.push_str(&format!(
+                "\npending safety checks ({}): {}",
+                self.config.safety_checks.name(),
+                Value::Array(checks.clone())
+            ));
+            if self.config.safety_checks == SafetyChecks::Fail {
+                self.previous_response_id = Some(id);
+                self.pending = None;
+                return Ok(Prediction {
+                    response,
+                    actions: vec![AgentAction::Fail],
+                    marks: None,
+                    raw_error: None,
+                    logs,
+                });
+            }
+        }
+        // Screenshots go at the screen's size, so the model's pixels are the screen's.
+        let ctx = Context { screen, cursor: (0, 0), coords: Coords::Pixels };
+        let (actions, raw_error) = match actionspace::parse(ActionSpace::OpenAi, &action, &ctx) {
+            Ok(steps) => (
+                actionspace::to_agent_actions(
+                    &steps.into_iter().filter(|s| *s != Step::Screenshot).collect::<Vec<_>>(),
+                ),
+                None,
+            ),
+            Err(err) => (Vec::new(), Some(err.to_string())),
+        };
+        // Acknowledged checks are exactly the pending ones, with their id, code and message.
+        self.previous_response_id = Some(id);
+        self.pending = Some(PendingCall { call_id: call_id.to_owned(), acknowledged: checks });
+        Ok(Prediction { response, actions, marks: None, raw_error, logs })
+    }
+}

@@ -1,0 +1,674 @@
+//! The computer-use agents against local mocks of their vendors' APIs (real
+//! HTTP servers on 127.0.0.1:0): a Messages API, a Responses API and an
+//! OpenAI-compatible chat endpoint serving a UI-TARS reply script. Each mock
+//! records every request; the tests check the requests' shapes (headers, tool
+//! definitions, image blocks, ids and chaining) and each agent solves stub
+//! tasks end to end on an in-process stub guest. Malformed replies, refusals,
+//! 429 with `Retry-After`, an endpoint that stays down and safety checks are tested.
+
+use std::collections::VecDeque;
+use std::path::{Path, PathBuf};
+use std::sync::{Arc, Mutex};
+use std::time::Duration;
+
+use axum::extract::State;
+use axum::http::{HeaderMap, StatusCode};
+use axum::response::{IntoResponse, Response};
+use axum::routing::post;
+use axum::{Json, Router};
+use base64::Engine as _;
+use serde_json::{json, Value};
+use tokio::net::TcpListener;
+
+use arena_host::actionspace::uitars::UiTarsVersion;
+use arena_host::actionspace::ActionSpace;
+use arena_host::agent::cu::anthropic::{AnthropicAgent, AnthropicConfig};
+use arena_host::agent::cu::openai::{OpenAiAgent, OpenAiConfig, SafetyChecks};
+use arena_host::agent::cu::uitars::{UiTarsAgent, UiTarsConfig};
+use arena_host::agent::llm::RetryPolicy;
+use arena_host::agent::{Agent, AgentAction, AgentError, Observation};
+use arena_host::client::{ClientConfig, GuestClient};
+use arena_host::episode::{run_episode, EpisodeConfig};
+use arena_host::results::{EpisodeResult, EpisodeStatus, RunLayout};
+use arena_host::run::load_tasks;
+use arena_host::setup::DownloadCache;
+use arena_host::task::{Difficulty, Task};
+use arena_test_support::StubGuest;
+
+const KEY: &str = "test-key";
+
+/// One scripted answer: status, extra headers, body.
+type Reply = (u16, Vec<(&'static str, &'static str)>, Value);
+
+#[derive(Default)]
+struct Script {
+    replies: VecDeque<Reply>,
+    requests: Vec<(HeaderMap, Value)>,
+}
+
+#[derive(Clone, Default)]
+struct Mock(Arc<Mutex<Script>>);
+
+impl Mock {
+    fn new(replies: Vec<Reply>) -> Mock {
+        Mock(Arc::new(Mutex::new(Script { replies: replies.into(), requests: Vec::new() })))
+    }
+
+    fn requests(&self) -> Vec<(HeaderMap, Value)> {
+        self.0.lock().unwrap().requests.clone()
+    }
+
+    fn left(&self) -> usize {
+        self.0.lock().unwrap().replies.len()
+    }
+}
+
+async fn answer(State(mock): State<Mock>, headers: HeaderMap, Json(body): Json<Value>) -> Response {
+    let mut script = mock.0.lock().unwrap();
+    script.requests.push((headers, body));
+    match script.replies.pop_front() {
+        Some((status, extra, body)) => {
+            let mut response = (StatusCode::from_u16(status).unwrap(), Json(body)).into_response();
+            for (name, value) in extra {
+                response.headers_mut().insert(name, value.parse().unwrap());
+            }
+            response
+        }
+        None => (StatusCode::INTERNAL_SERVER_ERROR, "the mock's script is used up").into_response(),
+    }
+}
+
+/// Serves `mock` at `route` on 127.0.0.1:0 and answers the base URL.
+async fn serve(mock: Mock, route: &str, base_path: &str) -> String {
+    let app = Router::new().route(route, post(answer)).with_state(mock);
+    let listener = TcpListener::bind("127.0.0.1:0").await.unwrap();
+    let addr = listener.local_addr().unwrap();
+    tokio::spawn(async move { axum::serve(listener, app).await.unwrap() });
+    format!("http://{addr}{base_path}")
+}
+
+fn ok(body: Value) -> Reply {
+    (200, Vec::new(), body)
+}
+
+fn quick_retry() -> RetryPolicy {
+    RetryPolicy {
+        initial_delay: Duration::from_millis(10),
+        max_delay: Duration::from_millis(50),
+        give_up_after: Duration::from_secs(3),
+    }
+}
+
+fn stub_tasks() -> Vec<Task> {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../tasks/stub");
+    load_tasks(&dir, Difficulty::Normal).expect("the stub tasks load")
+}
+
+fn stub_task(name: &str) -> Task {
+    stub_tasks().into_iter().find(|t| t.name == name).unwrap_or_else(|| panic!("no stub task {name}"))
+}
+
+fn client(url: &str) -> GuestClient {
+    GuestClient::new(url, ClientConfig { token: None, timeout: Duration::from_secs(20), retries: 1 }).expect("client")
+}
+
+/// Runs one episode of `task` with `agent` on a fresh stub guest; answers the
+/// result and the task's result folder.
+async fn episode(task: &Task, agent: &mut dyn Agent, root: &Path) -> (EpisodeResult, PathBuf) {
+    let guest = StubGuest::start().await;
+    let c = client(guest.url());
+    let mut config = EpisodeConfig::instant(DownloadCache::new(root.join("cache")).expect("cache"));
+    config.max_steps = 8;
+    config.max_model_retries = 0;
+    let layout = RunLayout {
+        root: root.to_owned(),
+        agent: agent.name().to_owned(),
+        observation: "screenshot".into(),
+        model: "mock".into(),
+        trial: "0".into(),
+    };
+    let dir = layout.task_dir(task);
+    let result = run_episode(&c, task, agent, &config, &dir).await;
+    (result, dir.path().to_owned())
+}
+
+fn assert_solved(result: &EpisodeResult) {
+    assert_eq!(
+        (result.score, &result.status),
+        (1.0, &EpisodeStatus::Completed),
+        "{}: {}",
+        result.task_name,
+        serde_json::to_string_pretty(&result.eval).unwrap()
+    );
+}
+
+/// Each step kept its request and response beside the trajectory (the files
+/// count steps from 0, as upstream's recorder names them).
+fn assert_exchanges_recorded(dir: &Path, steps: usize) {
+    let names: Vec<String> =
+        std::fs::read_dir(dir).unwrap().map(|e| e.unwrap().file_name().to_string_lossy().into_owned()).collect();
+    for step in 0..steps {
+        for key in ["request", "response"] {
+            assert!(
+                names.iter().any(|n| n.starts_with(&format!("{key}-step_{step}_"))),
+                "no {key} log for step {step} in {names:?}"
+            );
+        }
+    }
+    let request = names.iter().find(|n| n.starts_with("request-step_0_")).unwrap();
+    let text = std::fs::read_to_string(dir.join(request)).unwrap();
+    assert!(text.contains("left out here") && !text.contains("iVBOR"), "images stay out of the logs");
+}
+
+fn header<'a>(headers: &'a HeaderMap, name: &str) -> &'a str {
+    headers.get(name).and_then(|v| v.to_str().ok()).unwrap_or_else(|| panic!("no {name} header"))
+}
+
+/// The (width, height) of a base64 PNG.
+fn png_size(b64: &str) -> (u32, u32) {
+    let bytes = base64::engine::general_purpose::STANDARD.decode(b64).expect("base64");
+    let image = image::load_from_memory(&bytes).expect("a PNG");
+    (image.width(), image.height())
+}
+
+// ---------------------------------------------------------------- Anthropic
+
+fn tool_use(id: &str, input: Value) -> Value {
+    json!({
+        "id": format!("msg_{id}"), "type": "message", "role": "assistant", "model": "claude-test",
+        "content": [
+            {"type": "text", "text": "Next I act."},
+            {"type": "tool_use", "id": id, "name": "computer", "input": input},
+        ],
+        "stop_reason": "tool_use", "usage": {"input_tokens": 1, "output_tokens": 1},
+    })
+}
+
+fn end_turn(text: &str) -> Value {
+    json!({
+        "id": "msg_end", "type": "message", "role": "assistant", "model": "claude-test",
+        "content": [{"type": "text", "text": text}],
+        "stop_reason": "end_turn", "usage": {"input_tokens": 1, "output_tokens": 1},
+    })
+}
+
+async fn anthropic_agent(mock: &Mock, tool: ActionSpace) -> AnthropicAgent {
+    let base = serve(mock.clone(), "/v1/messages", "").await;
+    let mut config = AnthropicConfig::new(&base, "claude-test");
+    config.endpoint.api_key = Some(KEY.into());
+    config.endpoint.retry = quick_retry();
+    config.tool = tool;
+    config.keep_images = 2;
+    AnthropicAgent::new(config).expect("agent")
+}
+
+/// Checks every request of an Anthropic conversation against the protocol.
+fn check_anthropic_requests(requests: &[(HeaderMap, Value)], replies: &[Value], instruction: &str, beta: &str) {
+    for (n, (headers, body)) in requests.iter().enumerate() {
+        assert_eq!(header(headers, "x-api-key"), KEY);
+        assert_eq!(header(headers, "anthropic-version"), "2023-06-01");
+        assert_eq!(header(headers, "anthropic-beta"), beta);
+        assert_eq!(body["model"], "claude-test");
+        assert!(body["max_tokens"].as_u64().unwrap() > 0);
+        assert_eq!(body["system"][0]["cache_control"], json!({"type": "ephemeral"}), "the stable prefix is cached");
+        let tool = &body["tools"][0];
+        assert_eq!(tool["name"], "computer");
+        // The stub's 1440x900 screen goes at WXGA, as the tool docs recommend.
+        assert_eq!((tool["display_width_px"].as_u64(), tool["display_height_px"].as_u64()), (Some(1280), Some(800)));
+        let messages = body["messages"].as_array().unwrap();
+        assert_eq!(messages.len(), 2 * n + 1, "request {n}: one user turn per step, answers in between");
+        assert_eq!(messages[0]["content"][0]["text"], instruction);
+        // Every image is a base64 PNG at the declared size, and at most two are kept.
+        let text = serde_json::to_string(messages).unwrap();
+        assert!(text.matches("\"type\":\"image\"").count() <= 2, "request {n}: --keep-images 2");
+        let last = messages.last().unwrap();
+        assert_eq!(last["role"], "user");
+        let image = if n == 0 {
+            &last["content"][1]
+        } else {
+            // The answer to the previous tool call, by its id, carrying the new screenshot.
+            assert_eq!(messages[2 * n - 1]["content"], replies[n - 1]["content"], "the answer is sent back as it was");
+            let id = replies[n - 1]["content"][1]["id"].as_str().unwrap();
+            let result = &last["content"][0];
+            assert_eq!((result["type"].as_str(), result["tool_use_id"].as_str()), (Some("tool_result"), Some(id)));
+            result["content"].as_array().unwrap().last().unwrap()
+        };
+        assert_eq!(image["type"], "image");
+        assert_eq!(image["source"]["media_type"], "image/png");
+        assert_eq!(png_size(image["source"]["data"].as_str().unwrap()), (1280, 800));
+    }
+}
+
+#[tokio::test]
+async fn anthropic_cu_solves_two_stub_tasks_and_every_request_is_well_formed() {
+    let tmp = tempfile::tempdir().unwrap();
+    // Draft: type, then save with xdotool's key syntax.
+    let draft = stub_task("stub-notepad-draft");
+    let replies = vec![
+        tool_use("toolu_1", json!({"action": "type", "text": "This is a draft."})),
+        tool_use("toolu_2", json!({"action": "key", "text": "ctrl+s"})),
+        end_turn("The draft is saved. DONE"),
+    ];
+    let mock = Mock::new(replies.iter().cloned().map(ok).collect());
+    let mut agent = anthropic_agent(&mock, ActionSpace::Anthropic20250124).await;
+    let (result, dir) = episode(&draft, &mut agent, tmp.path()).await;
+    assert_solved(&result);
+    assert_eq!(result.steps, 3);
+    check_anthropic_requests(&mock.requests(), &replies, &draft.instruction, "computer-use-2025-01-24");
+    assert_exchanges_recorded(&dir, 3);
+
+    // Count: a move in the model's coordinates, the cursor read back, then the answer, with computer_20251124.
+    let count = stub_task("stub-notepad-count");
+    let replies = vec![
+        tool_use("toolu_a", json!({"action": "mouse_move", "coordinate": [640, 400]})),
+        tool_use("toolu_b", json!({"action": "cursor_position"})),
+        tool_use("toolu_c", json!({"action": "type", "text": "3"})),
+        tool_use("toolu_d", json!({"action": "key", "text": "ctrl+s"})),
+        end_turn("Saved. DONE"),
+    ];
+    let mock = Mock::new(replies.iter().cloned().map(ok).collect());
+    let mut agent = anthropic_agent(&mock, ActionSpace::Anthropic20251124).await;
+    let (result, _) = episode(&count, &mut agent, tmp.path()).await;
+    assert_solved(&result);
+    let requests = mock.requests();
+    check_anthropic_requests(&requests, &replies, &count.instruction, "computer-use-2025-11-24");
+    assert_eq!(requests[0].1["tools"][0]["type"], "computer_20251124");
+    // The cursor comes back in the screenshot's coordinates: (720, 450) on the screen.
+    let cursor = &requests[2].1["messages"].as_array().unwrap().last().unwrap()["content"][0]["content"][0];
+    assert_eq!(cursor["text"], "X=640,Y=400");
+
+    // Infeasible: the model says FAIL in its last message.
+    let infeasible = stub_task("stub-settings-infeasible");
+    let mock = Mock::new(vec![ok(end_turn("This computer has no such setting. FAIL"))]);
+    let mut agent = anthropic_agent(&mock, ActionSpace::Anthropic20250124).await;
+    let (result, _) = episode(&infeasible, &mut agent, tmp.path()).await;
+    assert_solved(&result);
+}
+
+#[tokio::test]
+async fn anthropic_cu_errors_malformed_refusal_429_and_bad_actions() {
+    let guest = StubGuest::start().await;
+    let c = client(guest.url());
+    let obs = Observation::capture(&c, 1, "do it").await.expect("observe");
+
+    // A refusal ends the episode as FAIL.
+    let mock = Mock::new(vec![ok(json!({
+        "id": "msg_r", "type": "message", "role": "assistant", "content": [], "stop_reason": "refusal",
+    }))]);
+    let mut agent = anthropic_agent(&mock, ActionSpace::Anthropic20250124).await;
+    let p = agent.predict(&obs).await.expect("an answer");
+    assert_eq!(p.actions, [AgentAction::Fail]);
+    assert!(p.response.contains("refused"), "{}", p.response);
+
+    // A malformed reply is a model error (the task is left unfinished), naming what is wrong.
+    let mock = Mock::new(vec![ok(json!({"type": "message", "text": "hi"}))]);
+    let mut agent = anthropic_agent(&mock, ActionSpace::Anthropic20250124).await;
+    match agent.predict(&obs).await {
+        Err(AgentError::Model { reason, .. }) => assert!(reason.contains("no `content` list"), "{reason}"),
+        other => panic!("expected a model error, got {other:?}"),
+    }
+
+    // 429 with Retry-After: the agent waits and tries again; the answer then counts.
+    let mock = Mock::new(vec![
+        (429, vec![("retry-after", "1")], json!({"type": "error", "error": {"type": "rate_limit_error"}})),
+        ok(tool_use("toolu_1", json!({"action": "key", "text": "Return"}))),
+    ]);
+    let mut agent = anthropic_agent(&mock, ActionSpace::Anthropic20250124).await;
+    let started = std::time::Instant::now();
+    let p = agent.predict(&obs).await.expect("an answer after the 429");
+    assert!(started.elapsed() >= Duration::from_secs(1), "Retry-After is honoured");
+    assert_eq!(mock.requests().len(), 2);
+    assert_eq!(
+        p.actions,
+        [AgentAction::Typed(vec![arena_shared::action::Action::KeyPress { key: "enter".into(), presses: 1 }])]
+    );
+
+    // An endpoint that stays down: a model error once the retry budget is spent.
+    let mock = Mock::new((0..500).map(|_| (503, Vec::new(), json!({"error": "overloaded"}))).collect());
+    let mut agent = anthropic_agent(&mock, ActionSpace::Anthropic20250124).await;
+    match agent.predict(&obs).await {
+        Err(AgentError::Model { reason, .. }) => assert!(reason.contains("gave up"), "{reason}"),
+        other => panic!("expected a model error, got {other:?}"),
+    }
+
+    // An unknown action: no action this step, the error recorded, and the model told with is_error.
+    let mock = Mock::new(vec![
+        ok(tool_use("toolu_x", json!({"action": "teleport", "coordinate": [1, 1]}))),
+        ok(end_turn("DONE")),
+    ]);
+    let mut agent = anthropic_agent(&mock, ActionSpace::Anthropic20250124).await;
+    let p = agent.predict(&obs).await.expect("an answer");
+    assert!(p.actions.is_empty());
+    assert!(p.raw_error.as_deref().unwrap_or_default().contains("unknown action \"teleport\""), "{p:?}");
+    let p = agent.predict(&obs).await.expect("an answer");
+    assert_eq!(p.actions, [AgentAction::Done]);
+    let second = &mock.requests()[1].1;
+    let result = &second["messages"].as_array().unwrap().last().unwrap()["content"][0];
+    assert_eq!(result["is_error"], true);
+    assert!(result["content"][0]["text"].as_str().unwrap().contains("teleport"));
+}
+
+// ---------------------------------------------------------------- OpenAI
+
+fn computer_call(id: &str, call_id: &str, action: Value, checks: Value) -> Value {
+    json!({
+        "id": id, "object": "response", "status": "completed",
+        "output": [
+            {"type": "reasoning", "id": format!("rs_{id}"), "summary": []},
+            {"type": "computer_call", "id": format!("cu_{id}"), "call_id": call_id, "action": action,
+             "pending_safety_checks": checks, "status": "completed"},
+        ],
+    })
+}
+
+fn message(id: &str, part: Value) -> Value {
+    json!({
+        "id": id, "object": "response", "status": "completed",
+        "output": [{"type": "message", "id": format!("msg_{id}"), "role": "assistant", "content": [part]}],
+    })
+}
+
+async fn openai_agent(mock: &Mock, policy: SafetyChecks) -> OpenAiAgent {
+    let base = serve(mock.clone(), "/v1/responses", "/v1").await;
+    let mut config = OpenAiConfig::new(&base, "computer-use-preview");
+    config.endpoint.api_key = Some(KEY.into());
+    config.endpoint.retry = quick_retry();
+    config.safety_checks = policy;
+    OpenAiAgent::new(config).expect("agent")
+}
+
+/// Checks every request of a Responses conversation: the tool, truncation, the
+/// chaining by id and the screenshot answering each call.
+fn check_openai_requests(requests: &[(HeaderMap, Value)], replies: &[Value], instruction: &str) {
+    for (n, (headers, body)) in requests.iter().enumerate() {
+        assert_eq!(header(headers, "authorization"), format!("Bearer {KEY}"));
+        assert_eq!(body["model"], "computer-use-preview");
+        assert_eq!(body["truncation"], "auto");
+        assert_eq!(
+            body["tools"],
+            json!([{"type": "computer_use_preview", "display_width": 1440, "display_height": 900, "environment": "windows"}])
+        );
+        let input = &body["input"][0];
+        let url = if n == 0 {
+            assert!(body.get("previous_response_id").is_none());
+            assert_eq!(input["role"], "user");
+            assert_eq!(input["content"][0], json!({"type": "input_text", "text": instruction}));
+            input["content"][1]["image_url"].as_str().unwrap()
+        } else {
+            let previous = &replies[n - 1];
+            assert_eq!(body["previous_response_id"], previous["id"]);
+            assert_eq!(input["type"], "computer_call_output");
+            assert_eq!(input["call_id"], previous["output"][1]["call_id"]);
+            assert_eq!(input["acknowledged_safety_checks"], previous["output"][1]["pending_safety_checks"]);
+            assert_eq!(input["output"]["type"], "computer_screenshot");
+            input["output"]["image_url"].as_str().unwrap()
+        };
+        let b64 = url.strip_prefix("data:image/png;base64,").expect("a PNG data URL");
+        assert_eq!(png_size(b64), (1440, 900));
+    }
+}
+
+#[tokio::test]
+async fn openai_cu_solves_two_stub_tasks_with_chaining_and_acknowledged_safety_checks() {
+    let tmp = tempfile::tempdir().unwrap();
+    let draft = stub_task("stub-notepad-draft");
+    let check = json!([{"id": "sc_1", "code": "malicious_instructions", "message": "Check the screen."}]);
+    let replies = vec![
+        computer_call("resp_1", "call_1", json!({"type": "type", "text": "This is a draft."}), json!([])),
+        computer_call("resp_2", "call_2", json!({"type": "keypress", "keys": ["CTRL", "S"]}), check),
+        message("resp_3", json!({"type": "output_text", "text": "Saved. DONE", "annotations": []})),
+    ];
+    let mock = Mock::new(replies.iter().cloned().map(ok).collect());
+    let mut agent = openai_agent(&mock, SafetyChecks::Ack).await;
+    let (result, dir) = episode(&draft, &mut agent, tmp.path()).await;
+    assert_solved(&result);
+    let requests = mock.requests();
+    assert_eq!(requests.len(), 3);
+    check_openai_requests(&requests, &replies, &draft.instruction);
+    assert_eq!(requests[2].1["input"][0]["acknowledged_safety_checks"][0]["id"], "sc_1");
+    assert_exchanges_recorded(&dir, 3);
+
+    let append = stub_task("stub-notepad-append");
+    let replies = vec![
+        computer_call("r1", "c1", json!({"type": "keypress", "keys": ["CTRL", "END"]}), json!([])),
+        computer_call("r2", "c2", json!({"type": "type", "text": "buy eggs\n"}), json!([])),
+        computer_call("r3", "c3", json!({"type": "screenshot"}), json!([])),
+        computer_call("r4", "c4", json!({"type": "keypress", "keys": ["CTRL", "S"]}), json!([])),
+        message("r5", json!({"type": "output_text", "text": "DONE", "annotations": []})),
+    ];
+    let mock = Mock::new(replies.iter().cloned().map(ok).collect());
+    let mut agent = openai_agent(&mock, SafetyChecks::Ack).await;
+    let (result, _) = episode(&append, &mut agent, tmp.path()).await;
+    assert_solved(&result);
+    check_openai_requests(&mock.requests(), &replies, &append.instruction);
+}
+
+#[tokio::test]
+async fn openai_cu_errors_safety_fail_refusal_malformed_and_429() {
+    let guest = StubGuest::start().await;
+    let c = client(guest.url());
+    let obs = Observation::capture(&c, 1, "do it").await.expect("observe");
+
+    // `--safety-checks fail`: the episode ends as FAIL and the checks are recorded.
+    let check = json!([{"id": "sc_9", "code": "sensitive_domain", "message": "A bank."}]);
+    let mock = Mock::new(vec![ok(computer_call("r1", "c1", json!({"type": "move", "x": 1, "y": 1}), check))]);
+    let mut agent = openai_agent(&mock, SafetyChecks::Fail).await;
+    let p = agent.predict(&obs).await.expect("an answer");
+    assert_eq!(p.actions, [AgentAction::Fail]);
+    assert!(p.response.contains("sensitive_domain") && p.response.contains("(fail)"), "{}", p.response);
+
+    // A refusal is FAIL.
+    let mock = Mock::new(vec![ok(message("r1", json!({"type": "refusal", "refusal": "I can't help with that."})))]);
+    let mut agent = openai_agent(&mock, SafetyChecks::Ack).await;
+    let p = agent.predict(&obs).await.expect("an answer");
+    assert_eq!(p.actions, [AgentAction::Fail]);
+    assert!(p.response.contains("can't help"), "{}", p.response);
+
+    // Malformed: no output list.
+    let mock = Mock::new(vec![ok(json!({"id": "r1", "object": "response"}))]);
+    let mut agent = openai_agent(&mock, SafetyChecks::Ack).await;
+    match agent.predict(&obs).await {
+        Err(AgentError::Model { reason, .. }) => assert!(reason.contains("no `output` list"), "{reason}"),
+        other => panic!("expected a model error, got {other:?}"),
+    }
+
+    // 429 with Retry-After, then an unknown action: recorded, nothing done, the chain goes on.
+    let mock = Mock::new(vec![
+        (429, vec![("retry-after", "1")], json!({"error": {"message": "slow down"}})),
+        ok(computer_call("r1", "c1", json!({"type": "teleport"}), json!([]))),
+        ok(message("r2", json!({"type": "output_text", "text": "DONE"}))),
+    ]);
+    let mut agent = openai_agent(&mock, SafetyChecks::Ack).await;
+    let started = std::time::Instant::now();
+    let p = agent.predict(&obs).await.expect("an answer after the 429");
+    assert!(started.elapsed() >= Duration::from_secs(1));
+    assert!(p.actions.is_empty());
+    assert!(p.raw_error.unwrap().contains("unknown action type \"teleport\""));
+    let p = agent.predict(&obs).await.expect("an answer");
+    assert_eq!(p.actions, [AgentAction::Done]);
+    let requests = mock.requests();
+    assert_eq!(requests[2].1["previous_response_id"], "r1");
+    assert_eq!(requests[2].1["input"][0]["call_id"], "c1");
+}
+
+// ---------------------------------------------------------------- UI-TARS
+
+/// A template of our own with the published placeholders (the real one is the user's file).
+const TEMPLATE: &str = "TEST TEMPLATE. Language: {language}. Task: {instruction}";
+
+fn chat(content: &str) -> Reply {
+    ok(json!({
+        "id": "chatcmpl-1", "object": "chat.completion",
+        "choices": [{"index": 0, "message": {"role": "assistant", "content": content}, "finish_reason": "stop"}],
+    }))
+}
+
+async fn uitars_agent(mock: &Mock, version: UiTarsVersion, history_images: usize) -> UiTarsAgent {
+    let base = serve(mock.clone(), "/v1/chat/completions", "/v1").await;
+    let tmp = tempfile::tempdir().unwrap();
+    let path = tmp.path().join("prompt.txt");
+    std::fs::write(&path, TEMPLATE).unwrap();
+    let template = UiTarsConfig::read_prompt(&path).expect("the prompt file reads");
+    let mut config = UiTarsConfig::new(&base, "ui-tars-1.5-7b", &template);
+    config.endpoint.api_key = Some(KEY.into());
+    config.endpoint.retry = quick_retry();
+    config.version = version;
+    config.history_images = history_images;
+    UiTarsAgent::new(config).expect("agent")
+}
+
+fn check_uitars_requests(requests: &[(HeaderMap, Value)], replies: &[&str], instruction: &str, keep: usize) {
+    for (n, (headers, body)) in requests.iter().enumerate() {
+        assert_eq!(header(headers, "authorization"), format!("Bearer {KEY}"));
+        assert_eq!(body["model"], "ui-tars-1.5-7b");
+        let messages = body["messages"].as_array().unwrap();
+        assert_eq!(messages[0]["content"][0]["text"], format!("TEST TEMPLATE. Language: English. Task: {instruction}"));
+        let assistants: Vec<&str> =
+            messages.iter().filter(|m| m["role"] == "assistant").map(|m| m["content"].as_str().unwrap()).collect();
+        assert_eq!(assistants, replies[..n], "request {n}: the earlier replies, in order");
+        let images: Vec<&Value> = messages.iter().filter(|m| m["content"][0]["type"] == "image_url").collect();
+        assert_eq!(images.len(), (n + 1).min(keep), "request {n}: the last {keep} screenshots");
+        let last = messages.last().unwrap();
+        let url = last["content"][0]["image_url"]["url"].as_str().expect("the current screenshot is last");
+        assert_eq!(png_size(url.strip_prefix("data:image/png;base64,").unwrap()), (1440, 900));
+    }
+}
+
+#[tokio::test]
+async fn ui_tars_solves_two_stub_tasks_with_history_and_both_coordinate_versions() {
+    let tmp = tempfile::tempdir().unwrap();
+    let draft = stub_task("stub-notepad-draft");
+    // Typing goes by the clipboard and ctrl+v, as the published parser does.
+    let replies = [
+        "Thought: I type the sentence.\nAction: type(content='This is a draft.')",
+        "Thought: Save it.\nAction: hotkey(key='ctrl s')",
+        "Thought: Done.\nAction: finished(content='saved')",
+    ];
+    let mock = Mock::new(replies.iter().map(|r| chat(r)).collect());
+    let mut agent = uitars_agent(&mock, UiTarsVersion::V1_5, 2).await;
+    let (result, dir) = episode(&draft, &mut agent, tmp.path()).await;
+    assert_solved(&result);
+    check_uitars_requests(&mock.requests(), &replies, &draft.instruction, 2);
+    assert_exchanges_recorded(&dir, 3);
+
+    // UI-TARS 1.0's 0..1000 grid: a hover at the centre, then the answer and a save.
+    let count = stub_task("stub-notepad-count");
+    let replies = [
+        "Thought: Look.\nAction: hover(start_box='<|box_start|>(500,500)<|box_end|>')",
+        "Action: type(content='3')",
+        "Action: hotkey(key='ctrl s')\n\nfinished(content='3')",
+    ];
+    let mock = Mock::new(replies.iter().map(|r| chat(r)).collect());
+    let mut agent = uitars_agent(&mock, UiTarsVersion::V1, 5).await;
+    let (result, dir) = episode(&count, &mut agent, tmp.path()).await;
+    assert_solved(&result);
+    check_uitars_requests(&mock.requests(), &replies, &count.instruction, 5);
+    let traj = std::fs::read_to_string(dir.join("traj.jsonl")).unwrap();
+    assert!(traj.contains("\"x\":720") && traj.contains("\"y\":450"), "the grid's centre is the screen's: {traj}");
+}
+
+#[tokio::test]
+async fn ui_tars_errors_unreadable_replies_call_user_and_429() {
+    let guest = StubGuest::start().await;
+    let c = client(guest.url());
+    let obs = Observation::capture(&c, 1, "do it").await.expect("observe");
+    let mock = Mock::new(vec![
+        (429, vec![("retry-after", "1")], json!({"error": "busy"})),
+        chat("Thought: I am not sure."),
+        chat("Action: click(start_box='(1,2,3)')"),
+        chat("Thought: I need the password.\nAction: call_user()"),
+    ]);
+    let mut agent = uitars_agent(&mock, UiTarsVersion::V1_5, 5).await;
+    let started = std::time::Instant::now();
+    let p = agent.predict(&obs).await.expect("an answer after the 429");
+    assert!(started.elapsed() >= Duration::from_secs(1));
+    assert!(p.actions.is_empty());
+    assert!(p.raw_error.unwrap().contains("no `Action:`"));
+    let p = agent.predict(&obs).await.expect("an answer");
+    assert!(p.raw_error.unwrap().contains("(x,y) or (x1,y1,x2,y2)"));
+    let p = agent.predict(&obs).await.expect("an answer");
+    assert_eq!(p.actions, [AgentAction::Fail]);
+    assert_eq!(mock.left(), 0);
+
+    // A prompt file without the placeholder, or missing, is refused naming the file.
+    let tmp = tempfile::tempdir().unwrap();
+    let path = tmp.path().join("bad.txt");
+    std::fs::write(&path, "no placeholder").unwrap();
+    let err = UiTarsConfig::read_prompt(&path).unwrap_err().to_string();
+    assert!(err.contains("bad.txt") && err.contains("{instruction}"), "{err}");
+    assert!(UiTarsConfig::read_prompt(&tmp.path().join("missing.txt"))
+        .unwrap_err()
+        .to_string()
+        .contains("missing.txt"));
+}
+
+// ---------------------------------------------------------------- the command line
+
+#[test]
+fn run_help_lists_the_agents_and_the_coordinate_conventions() {
+    use clap::Parser as _;
+    let err = arena_host::Cli::try_parse_from(["arena", "run", "--help"]).expect_err("help is printed as an error");
+    let help = err.to_string();
+    for needle in [
+        "anthropic-cu",
+        "openai-cu",
+        "ui-tars",
+        "--coords",
+        "grid1000",
+        "--safety-checks",
+        "--prompt-file",
+        "--keep-images",
+    ] {
+        assert!(help.contains(needle), "`arena run --help` lacks {needle}");
+    }
+}
+
+#[tokio::test]
+async fn arena_run_with_openai_cu_records_agent_model_action_space_and_coordinates() {
+    use clap::Parser as _;
+    let tmp = tempfile::tempdir().unwrap();
+    let domain = tmp.path().join("tasks").join("settings");
+    std::fs::create_dir_all(&domain).unwrap();
+    let source =
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../tasks/stub/examples/settings/stub-settings-infeasible.json");
+    std::fs::copy(&source, domain.join("stub-settings-infeasible.json")).unwrap();
+    let mock = Mock::new(vec![ok(message("r1", json!({"type": "output_text", "text": "No such setting. FAIL"})))]);
+    let base = serve(mock.clone(), "/v1/responses", "/v1").await;
+    let out = tmp.path().join("out");
+    let tasks = tmp.path().join("tasks");
+    let words = [
+        "arena",
+        "run",
+        "--tasks",
+        tasks.to_str().unwrap(),
+        "--agent",
+        "openai-cu",
+        "--llm-url",
+        &base,
+        "--model",
+        "computer-use-preview",
+        "--stub-guests",
+        "1",
+        "--out",
+        out.to_str().unwrap(),
+        "--safety-checks",
+        "fail",
+    ];
+    let mut cli = arena_host::Cli::try_parse_from(words).expect("arguments parse");
+    cli.connection.token = None;
+    cli.connection.token_file = None;
+    cli.connection.guest = None;
+    let code = arena_host::run(cli).await.expect("the run runs");
+    assert_eq!(code, std::process::ExitCode::SUCCESS);
+    assert_eq!(mock.requests().len(), 1);
+    let summary: Value = serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
+    let options = &summary["options"];
+    assert_eq!(options["agent"], json!(["openai-cu"]), "{summary}");
+    assert_eq!(options["action_space"], json!(["openai_computer"]));
+    assert_eq!(options["coords"], json!(["pixels"]));
+    assert_eq!(options["model"], json!(["computer-use-preview"]));
+    assert_eq!(options["safety_checks"], json!(["fail"]));
+    let result =
+        out.join("openai_computer/a11y_tree/computer-use-preview/0/settings/stub-settings-infeasible/result.txt");
+    assert!(result.is_file(), "the result is filed under the action space and the model");
+}
