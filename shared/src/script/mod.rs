@@ -46,6 +46,7 @@ mod computer;
 mod difflib;
 mod error;
 mod format;
+mod heap;
 pub mod host;
 mod interp;
 mod methods;
@@ -53,6 +54,7 @@ mod ops;
 pub mod parser;
 mod pyautogui;
 mod stdlib;
+mod stop;
 mod value;
 
 #[cfg(test)]
@@ -63,7 +65,8 @@ pub use computer::ComputerState;
 pub use difflib::{get_close_matches, ratio as sequence_ratio};
 pub use error::{ErrorKind, ParseError, ScriptError};
 pub use host::{CommandArg, CommandOutput, HostError, HostResult, PathKind, RecordingHost, ScriptHost};
-pub use interp::{run, Globals, RunOutput, KNOWN_MODULES, MAX_CALL_DEPTH, MAX_STEPS};
+pub use interp::{run, run_measured, Globals, RunOutput, RunStats, KNOWN_MODULES, MAX_CALL_DEPTH, MAX_MEMORY, MAX_STEPS};
+pub use stop::Stop;
 pub use parser::parse;
 pub use value::{float_repr, str_repr};
 
@@ -92,7 +95,7 @@ pub fn run_source(src: &str, host: &mut dyn ScriptHost, globals: Globals<'_>) ->
 pub fn actions_from_pyautogui(code: &str, screen: (u32, u32), cursor: (i32, i32)) -> Result<Vec<Action>, ScriptError> {
     let program = parse(code)?;
     let mut host = RecordingHost::new(screen, cursor);
-    let globals = Globals { computer: None, computer_action_delay: 0.25, preimport: &["pyautogui", "time"] };
+    let globals = Globals { preimport: &["pyautogui", "time"], ..Globals::python() };
     run(&program, &mut host, globals)?;
     Ok(host.actions)
 }
