@@ -741,6 +741,17 @@ fn resource_limits_stop_hostile_programs() {
 
 // ---- Memory and time bounds (issue 25, items 1 and 2) ----------------------------------------
 
+#[test]
+fn a_program_over_the_source_cap_is_refused_before_parsing() {
+    let at_cap = format!("x = 1\n{}", "#".repeat(parser::MAX_SOURCE_BYTES - 6));
+    assert_eq!(at_cap.len(), parser::MAX_SOURCE_BYTES);
+    assert!(parse(&at_cap).is_ok());
+    let over = format!("{at_cap}#");
+    let err = parse(&over).unwrap_err();
+    assert_eq!((err.line, err.column), (1, 1));
+    assert_eq!(err.message, "the program is 262145 bytes long; this interpreter reads programs of at most 256 KiB");
+}
+
 /// Runs `src` as `python -c`, stopping as `stop` says, with what it cost.
 fn measured(src: &str, stop: Stop) -> (Result<RunOutput, ScriptError>, RunStats) {
     let program = parse(src).unwrap_or_else(|e| panic!("{src}\n{e}"));
