@@ -4,8 +4,8 @@
 
 use super::ast::BinOp;
 use super::error::{not_supported, type_error, value_error, ErrorKind, ScriptError};
-use super::interp::{dict_insert, is_none, iterate, make_set, to_f64, to_i64, to_str, Args, Interp};
 use super::heap::{self, DictMap, SetMap};
+use super::interp::{dict_insert, is_none, iterate, make_set, to_f64, to_i64, to_str, Args, Interp};
 use super::ops;
 use super::stop;
 use super::value::Value;

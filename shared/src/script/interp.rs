@@ -21,9 +21,9 @@ use super::ast::{
 };
 use super::computer::ComputerState;
 use super::error::{not_supported, type_error, value_error, ErrorKind, ScriptError};
+use super::heap::{self, DictMap, Heap, Key, SetMap};
 use super::host::{HostResult, ScriptHost};
 use super::ops;
-use super::heap::{self, DictMap, Heap, Key, SetMap};
 use super::stop::{self, Stop};
 use super::value::{Object, UserFn, Value};
 
@@ -163,7 +163,6 @@ impl Globals<'static> {
     pub fn python() -> Globals<'static> {
         Globals { computer: None, computer_action_delay: 0.25, preimport: &[], stop: Stop::never() }
     }
-
 }
 
 impl<'a> Globals<'a> {

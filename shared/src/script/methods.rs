@@ -584,11 +584,8 @@ fn str_method(s: &str, name: &str, args: Args) -> Result<Value, ScriptError> {
                     }
                 }
             }
-            let total = parts
-                .iter()
-                .map(|p| p.len())
-                .sum::<usize>()
-                .saturating_add(s.len().saturating_mul(parts.len()));
+            let total =
+                parts.iter().map(|p| p.len()).sum::<usize>().saturating_add(s.len().saturating_mul(parts.len()));
             if total > ops::MAX_LEN {
                 return Err(ScriptError::new(ErrorKind::Memory, "result too large"));
             }

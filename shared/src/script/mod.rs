@@ -71,9 +71,11 @@ pub use computer::ComputerState;
 pub use difflib::{get_close_matches, ratio as sequence_ratio};
 pub use error::{ErrorKind, ParseError, ScriptError};
 pub use host::{CommandArg, CommandOutput, HostError, HostResult, PathKind, RecordingHost, ScriptHost};
-pub use interp::{run, run_measured, Globals, RunOutput, RunStats, KNOWN_MODULES, MAX_CALL_DEPTH, MAX_MEMORY, MAX_STEPS};
-pub use stop::Stop;
+pub use interp::{
+    run, run_measured, Globals, RunOutput, RunStats, KNOWN_MODULES, MAX_CALL_DEPTH, MAX_MEMORY, MAX_STEPS,
+};
 pub use parser::parse;
+pub use stop::Stop;
 pub use value::{float_repr, str_repr};
 
 /// Parses and runs `src` in one step.

@@ -97,7 +97,9 @@ pub(crate) fn binary(op: BinOp, left: &Value, right: &Value) -> Result<Value, Sc
                 BinOp::BitOr => a.iter().chain(b.iter()).cloned().collect(),
                 BinOp::BitAnd => a.iter().filter(|v| b.contains(*v)).cloned().collect(),
                 BinOp::Sub => a.iter().filter(|v| !b.contains(*v)).cloned().collect(),
-                _ => a.iter().filter(|v| !b.contains(*v)).chain(b.iter().filter(|v| !a.contains(*v))).cloned().collect(),
+                _ => {
+                    a.iter().filter(|v| !b.contains(*v)).chain(b.iter().filter(|v| !a.contains(*v))).cloned().collect()
+                }
             };
             Ok(Value::set(items))
         }

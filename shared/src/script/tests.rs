@@ -829,8 +829,14 @@ fn dicts_and_sets_are_hash_tables_in_insertion_order() {
     assert_eq!(result.unwrap().stdout, "99999 77777 True [0, 1, 2] 99998\n");
     // The probe's case, whose linear lists did 5 * 10**9 comparisons, is a bounded amount of work now.
     assert!(stats.work < 1_000, "work {}", stats.work);
-    assert_eq!(printed("d = {1: 'a', True: 'b', 1.0: 'c', (1, 2): 'd'}\nprint(d, {(1, 2)} == {(1.0, 2)})"), "{1: 'c', (1, 2): 'd'} True\n");
-    assert_eq!(printed("d = {'b': 1, 'a': 2}\nd['c'] = 3\ndel d['b']\nd['b'] = 4\nprint(d)"), "{'a': 2, 'c': 3, 'b': 4}\n");
+    assert_eq!(
+        printed("d = {1: 'a', True: 'b', 1.0: 'c', (1, 2): 'd'}\nprint(d, {(1, 2)} == {(1.0, 2)})"),
+        "{1: 'c', (1, 2): 'd'} True\n"
+    );
+    assert_eq!(
+        printed("d = {'b': 1, 'a': 2}\nd['c'] = 3\ndel d['b']\nd['b'] = 4\nprint(d)"),
+        "{'a': 2, 'c': 3, 'b': 4}\n"
+    );
     assert_eq!(printed("s = {3, 1, 2, 1}\ns.discard(1)\ns.add(0)\nprint(s, s.pop(), s)"), "{3, 2, 0} 3 {2, 0}\n");
     assert!(python_err("d = {[1]: 2}").contains("TypeError: unhashable type: 'list'"));
     assert!(python_err("print([1] in {1: 2})").contains("TypeError: unhashable type: 'list'"));
