@@ -197,6 +197,21 @@ const CORPUS: &[(&str, &str, &str)] = &[
         "ok",
     ),
     (
+        "big_dicts_and_sets_keep_insertion_order",
+        "d = {}\nfor i in range(20000):\n    d[(i * 7919) % 20011] = i\nd[1.0] = 'one'\nd[True] = 'true'\ndel d[5]\nd[5] = 'back'\ns = set(d.values()) - {0}\nprint(len(d), list(d)[:5], list(d)[-3:], d[1], 19999 in s, len(s), sum(k for k in d if isinstance(k, int)))\n",
+        "ok",
+    ),
+    (
+        "repetition_shares_one_string",
+        "x = ['a' * 10**6] * 10**6\ny = [[0] * 1000] * 1000\nprint(len(x), len(x[999999]), len(y), sum(y[0]), x[0] == x[-1])\n",
+        "ok",
+    ),
+    (
+        "copies_and_membership_in_loops",
+        "x = list(range(3000))\nn = 0\nfor i in range(200):\n    s = 'a' * 3000\n    n += (-1 in x) + x.count(7) + len(s) + sum(x[:10])\nc = x.copy()\nc.append(1)\nprint(n, len(x), len(c))\n",
+        "ok",
+    ),
+    (
         "try_except_value_error",
         "values = ['1', 'x', '3']\ngood = []\nfor v in values:\n    try:\n        good.append(int(v))\n    except ValueError as e:\n        print('bad:', e)\nprint(good)\n",
         "ok",

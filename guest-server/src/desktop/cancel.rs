@@ -38,6 +38,12 @@ impl Drop for Scope {
     }
 }
 
+/// The cancel flag of the call running on this thread, for work that checks it
+/// itself (the script interpreter); `None` outside a call.
+pub fn flag() -> Option<Arc<AtomicBool>> {
+    CURRENT.with(|c| c.borrow().as_ref().map(|(_, _, flag)| Arc::clone(flag)))
+}
+
 /// Whether the call running on this thread has been cancelled.
 pub fn cancelled() -> bool {
     CURRENT.with(|c| c.borrow().as_ref().is_some_and(|(_, _, flag)| flag.load(Ordering::Relaxed)))

@@ -236,6 +236,13 @@ fn unsupported_runtime(err: &ScriptError) -> String {
     format!("unsupported Python at line {}: {}: {}", err.line, err.kind, err.message)
 }
 
+/// When code run natively must stop: at its deadline, or when its backend call is
+/// cancelled (the route's deadline passed or the request went away; see
+/// [`crate::desktop::cancel`]), so a timed-out program does not run on.
+fn code_stop(deadline: Instant) -> script::Stop {
+    script::Stop::new(Some(deadline), crate::desktop::cancel::flag())
+}
+
 /// Runs `python -c` code natively and answers like upstream's `subprocess.run` would:
 /// 200 with stdout, stderr and the exit code (1 and a traceback for an exception).
 fn run_python(desktop: &dyn Desktop, code: &str, command: &Value, timeout_ms: u64) -> Native {
@@ -243,8 +250,10 @@ fn run_python(desktop: &dyn Desktop, code: &str, command: &Value, timeout_ms: u6
         Ok(program) => program,
         Err(err) => return Native::Unsupported(unsupported_parse(&err)),
     };
-    let mut host = DesktopHost::new(desktop, Instant::now() + Duration::from_millis(timeout_ms));
-    let (stdout, stderr, returncode) = match script::run(&program, &mut host, Globals::python()) {
+    let deadline = Instant::now() + Duration::from_millis(timeout_ms);
+    let mut host = DesktopHost::new(desktop, deadline);
+    let globals = Globals::python().with_stop(code_stop(deadline));
+    let (stdout, stderr, returncode) = match script::run(&program, &mut host, globals) {
         Ok(out) => (out.stdout, out.stderr, out.exit_code),
         Err(err) if err.kind == ErrorKind::Timeout => {
             return Native::Answer(Err(WaaError::catch(timeout_message(command, timeout_ms))))
@@ -476,7 +485,7 @@ pub fn run_computer_code(
             return fail(format!("'NoneType' object has no attribute '{attribute}'"));
         }
         let mut host = DesktopHost::new(desktop, deadline);
-        let globals = Globals { computer: None, computer_action_delay: 0.0, preimport: &[] };
+        let globals = Globals { computer_action_delay: 0.0, ..Globals::python() }.with_stop(code_stop(deadline));
         let result = script::run(&program, &mut host, globals);
         return ComputerRun { result: code_result(result, options), state: None };
     };
@@ -490,6 +499,7 @@ pub fn run_computer_code(
         computer: Some(&mut state),
         computer_action_delay: options.action_delay.as_secs_f64(),
         preimport: &[],
+        stop: code_stop(deadline),
     };
     let result = script::run(&program, &mut host, globals);
     let result = code_result(result, options);

@@ -28,6 +28,8 @@
 
 use std::future::Future;
 use std::io::Cursor;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use base64::Engine as _;
@@ -47,7 +49,7 @@ use arena_shared::observation::{ImageFormat as WireImageFormat, ScreenshotQuery,
 use arena_shared::registry::RegistryValue;
 use arena_shared::script::{
     parse, run, CommandArg, CommandOutput, ComputerState, Globals, HostError, HostResult, PathKind, ScriptError,
-    ScriptHost,
+    ScriptHost, Stop,
 };
 
 use super::{AgentAction, AgentError};
@@ -208,6 +210,15 @@ async fn typed(client: &GuestClient, actions: &[Action], release: bool) -> Resul
     }
 }
 
+/// Sets a script's cancel flag when dropped (see `run_script`).
+struct CancelOnDrop(Arc<AtomicBool>);
+
+impl Drop for CancelOnDrop {
+    fn drop(&mut self) {
+        self.0.store(true, Ordering::Relaxed);
+    }
+}
+
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum Lang {
     Computer,
@@ -230,12 +241,19 @@ async fn run_script(
     let mut host = GuestHost::new(client.clone(), Handle::current(), options.clone());
     let mut state = computer.clone();
     let delay = options.computer_action_delay;
+    // The interpreter stops at the script's deadline, and when this step is dropped
+    // (the episode cancelled) the flag stops the code still running on its thread.
+    let cancel = Arc::new(AtomicBool::new(false));
+    let stop = Stop::new(Some(Instant::now() + options.max_duration), Some(Arc::clone(&cancel)));
+    let _cancel_on_drop = CancelOnDrop(cancel);
     let (result, state, mut host) = tokio::task::spawn_blocking(move || {
         let globals = match lang {
-            Lang::Computer => Globals { computer: Some(&mut state), computer_action_delay: delay, preimport: &[] },
+            Lang::Computer => {
+                Globals { computer: Some(&mut state), computer_action_delay: delay, preimport: &[], stop }
+            }
             // Upstream runs pyautogui code as `python -c "import pyautogui; import time; ..."`.
             Lang::Pyautogui => {
-                Globals { computer: None, computer_action_delay: delay, preimport: &["pyautogui", "time"] }
+                Globals { computer: None, computer_action_delay: delay, preimport: &["pyautogui", "time"], stop }
             }
         };
         let result = run(&program, &mut host, globals);

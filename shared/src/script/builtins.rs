@@ -4,8 +4,10 @@
 
 use super::ast::BinOp;
 use super::error::{not_supported, type_error, value_error, ErrorKind, ScriptError};
+use super::heap::{self, DictMap, SetMap};
 use super::interp::{dict_insert, is_none, iterate, make_set, to_f64, to_i64, to_str, Args, Interp};
 use super::ops;
+use super::stop;
 use super::value::Value;
 
 impl Interp<'_, '_> {
@@ -17,8 +19,8 @@ impl Interp<'_, '_> {
                 for (k, v) in &args.kw {
                     match (k.as_str(), v) {
                         ("sep", Value::None) | ("end", Value::None) | ("flush", _) => {}
-                        ("sep", Value::Str(s)) => sep = s.clone(),
-                        ("end", Value::Str(s)) => end = s.clone(),
+                        ("sep", Value::Str(s)) => sep = s.to_string(),
+                        ("end", Value::Str(s)) => end = s.to_string(),
                         ("sep" | "end", other) => {
                             return Err(type_error(format!("{k} must be None or a string, not {}", other.type_name())))
                         }
@@ -28,7 +30,7 @@ impl Interp<'_, '_> {
                         }
                     }
                 }
-                let text: Vec<String> = args.pos.iter().map(Value::to_str).collect();
+                let text: Vec<String> = args.pos.iter().map(Value::try_to_str).collect::<Result<_, _>>()?;
                 let line = format!("{}{end}", text.join(&sep));
                 self.print(&line)?;
                 Ok(Value::None)
@@ -39,11 +41,11 @@ impl Interp<'_, '_> {
             }
             "str" => {
                 let a = args.bind("str", &["object"], 0)?;
-                Ok(Value::Str(a[0].as_ref().map(Value::to_str).unwrap_or_default()))
+                Ok(Value::str(a[0].as_ref().map(Value::try_to_str).transpose()?.unwrap_or_default()))
             }
             "repr" => {
                 let a = args.bind("repr", &["obj"], 1)?;
-                Ok(Value::Str(a[0].as_ref().map(Value::repr).unwrap_or_default()))
+                Ok(Value::str(a[0].as_ref().map(Value::try_repr).transpose()?.unwrap_or_default()))
             }
             "int" => builtin_int(args),
             "float" => builtin_float(args),
@@ -140,15 +142,19 @@ impl Interp<'_, '_> {
             "sum" => {
                 let a = args.bind("sum", &["iterable", "start"], 1)?;
                 let mut total = a[1].clone().unwrap_or(Value::Int(0));
-                for item in iterate(a[0].as_ref().unwrap_or(&Value::None))? {
-                    if matches!(item, Value::Str(_)) {
-                        return Err(type_error("sum() can't sum strings [use ''.join(seq) instead]"));
+                with_items(a[0].as_ref().unwrap_or(&Value::None), |items| {
+                    for item in items {
+                        stop::work(1)?;
+                        if matches!(item, Value::Str(_)) {
+                            return Err(type_error("sum() can't sum strings [use ''.join(seq) instead]"));
+                        }
+                        if !matches!(item, Value::Int(_) | Value::Float(_) | Value::Bool(_)) {
+                            return Err(not_supported("sum() of non-numbers is not supported"));
+                        }
+                        total = ops::binary(super::ast::BinOp::Add, &total, item)?;
                     }
-                    if !matches!(item, Value::Int(_) | Value::Float(_) | Value::Bool(_)) {
-                        return Err(not_supported("sum() of non-numbers is not supported"));
-                    }
-                    total = ops::binary(super::ast::BinOp::Add, &total, &item)?;
-                }
+                    Ok(())
+                })?;
                 Ok(total)
             }
             "list" | "tuple" => {
@@ -157,32 +163,36 @@ impl Interp<'_, '_> {
                     Some(v) => iterate(v)?,
                     None => Vec::new(),
                 };
-                Ok(if name == "list" { Value::List(items) } else { Value::Tuple(items) })
+                Ok(if name == "list" { Value::list(items) } else { Value::tuple(items) })
             }
             "dict" => {
                 if args.pos.len() > 1 {
                     return Err(type_error(format!("dict expected at most 1 argument, got {}", args.pos.len())));
                 }
-                let mut entries = Vec::new();
-                if let Some(first) = args.pos.first() {
-                    let pairs = match first {
-                        Value::Dict(pairs) => pairs.clone(),
-                        other => super::methods::pairs_of(other)?,
-                    };
-                    for (k, v) in pairs {
-                        dict_insert(&mut entries, k, v)?;
+                let mut entries = match args.pos.first() {
+                    Some(Value::Dict(pairs)) => {
+                        heap::reserve_items(pairs.len().saturating_mul(2))?;
+                        DictMap::clone(pairs)
                     }
-                }
+                    Some(other) => {
+                        let mut entries = DictMap::new();
+                        for (k, v) in super::methods::pairs_of(other)? {
+                            dict_insert(&mut entries, k, v)?;
+                        }
+                        entries
+                    }
+                    None => DictMap::new(),
+                };
                 for (k, v) in args.kw {
-                    dict_insert(&mut entries, Value::Str(k), v)?;
+                    dict_insert(&mut entries, Value::str(k), v)?;
                 }
-                Ok(Value::Dict(entries))
+                Ok(Value::dict(entries))
             }
             "set" => {
                 let a = args.bind("set", &["iterable"], 0)?;
                 match &a[0] {
                     Some(v) => make_set(iterate(v)?),
-                    None => Ok(Value::Set(Vec::new())),
+                    None => Ok(Value::set(SetMap::new())),
                 }
             }
             "range" => {
@@ -217,9 +227,9 @@ impl Interp<'_, '_> {
                             "integer overflow (this interpreter's integers are 64-bit)",
                         )
                     })?;
-                    out.push(Value::Tuple(vec![Value::Int(n), item]));
+                    out.push(Value::tuple(vec![Value::Int(n), item]));
                 }
-                Ok(Value::List(out))
+                Ok(Value::list(out))
             }
             "zip" => {
                 if let Some((k, _)) = args.kw.first() {
@@ -227,7 +237,7 @@ impl Interp<'_, '_> {
                 }
                 let columns: Vec<Vec<Value>> = args.pos.iter().map(iterate).collect::<Result<_, _>>()?;
                 let n = columns.iter().map(Vec::len).min().unwrap_or(0);
-                Ok(Value::List((0..n).map(|i| Value::Tuple(columns.iter().map(|c| c[i].clone()).collect())).collect()))
+                Ok(Value::list((0..n).map(|i| Value::tuple(columns.iter().map(|c| c[i].clone()).collect())).collect()))
             }
             "sorted" => {
                 if args.pos.len() != 1 {
@@ -245,7 +255,7 @@ impl Interp<'_, '_> {
                     }
                 }
                 let items = iterate(&args.pos[0])?;
-                Ok(Value::List(self.sorted(items, key, reverse)?))
+                Ok(Value::list(self.sorted(items, key, reverse)?))
             }
             "reversed" => {
                 let a = args.bind("reversed", &["sequence"], 1)?;
@@ -255,16 +265,18 @@ impl Interp<'_, '_> {
                 }
                 let mut items = iterate(&seq)?;
                 items.reverse();
-                Ok(Value::List(items))
+                Ok(Value::list(items))
             }
             "any" | "all" => {
                 let a = args.bind(name, &["iterable"], 1)?;
-                let items = iterate(a[0].as_ref().unwrap_or(&Value::None))?;
-                Ok(Value::Bool(if name == "any" {
-                    items.iter().any(Value::truthy)
-                } else {
-                    items.iter().all(Value::truthy)
-                }))
+                with_items(a[0].as_ref().unwrap_or(&Value::None), |items| {
+                    stop::work(items.len() as u64)?;
+                    Ok(Value::Bool(if name == "any" {
+                        items.iter().any(Value::truthy)
+                    } else {
+                        items.iter().all(Value::truthy)
+                    }))
+                })
             }
             "isinstance" => {
                 let a = args.bind("isinstance", &["obj", "class_or_tuple"], 2)?;
@@ -285,7 +297,7 @@ impl Interp<'_, '_> {
                     let call_args = Args { pos: columns.iter().map(|c| c[i].clone()).collect(), kw: Vec::new() };
                     out.push(self.call(f.clone(), call_args)?);
                 }
-                Ok(Value::List(out))
+                Ok(Value::list(out))
             }
             "filter" => {
                 let a = args.bind("filter", &["function", "iterable"], 2)?;
@@ -301,12 +313,12 @@ impl Interp<'_, '_> {
                         out.push(item);
                     }
                 }
-                Ok(Value::List(out))
+                Ok(Value::list(out))
             }
             "divmod" => {
                 let a = args.bind("divmod", &["x", "y"], 2)?;
                 let (x, y) = (a[0].clone().unwrap_or(Value::None), a[1].clone().unwrap_or(Value::None));
-                Ok(Value::Tuple(vec![ops::binary(BinOp::FloorDiv, &x, &y)?, ops::binary(BinOp::Mod, &x, &y)?]))
+                Ok(Value::tuple(vec![ops::binary(BinOp::FloorDiv, &x, &y)?, ops::binary(BinOp::Mod, &x, &y)?]))
             }
             "pow" => {
                 let a = args.bind("pow", &["base", "exp", "mod"], 2)?;
@@ -321,7 +333,7 @@ impl Interp<'_, '_> {
                     Some(v) => to_str(v, "format() argument 2")?.to_owned(),
                     None => String::new(),
                 };
-                Ok(Value::Str(super::format::format_value(a[0].as_ref().unwrap_or(&Value::None), &spec)?))
+                Ok(Value::str(super::format::format_value(a[0].as_ref().unwrap_or(&Value::None), &spec)?))
             }
             "hex" | "oct" | "bin" => {
                 let a = args.bind(name, &["number"], 1)?;
@@ -334,7 +346,7 @@ impl Interp<'_, '_> {
                     "oct" => "#o",
                     _ => "#b",
                 };
-                Ok(Value::Str(super::format::format_value(&v, spec)?))
+                Ok(Value::str(super::format::format_value(&v, spec)?))
             }
             "chr" => {
                 let a = args.bind("chr", &["i"], 1)?;
@@ -342,7 +354,7 @@ impl Interp<'_, '_> {
                 u32::try_from(i)
                     .ok()
                     .and_then(char::from_u32)
-                    .map(|c| Value::Str(c.to_string()))
+                    .map(|c| Value::str(c.to_string()))
                     .ok_or_else(|| value_error("chr() arg not in range(0x110000) or a surrogate"))
             }
             "ord" => {
@@ -382,9 +394,13 @@ impl Interp<'_, '_> {
                 }
                 keys
             }
-            None => items.clone(),
+            None => {
+                heap::reserve_items(items.len())?;
+                items.clone()
+            }
         };
         let order = merge_sort((0..items.len()).collect(), &mut |a, b| {
+            stop::work(1)?;
             // `b` goes first when it is strictly smaller (strictly larger when reversed).
             let (x, y) = if reverse { (&keys[b], &keys[a]) } else { (&keys[a], &keys[b]) };
             Ok(ops::compare(x, y)?.is_gt())
@@ -426,7 +442,7 @@ fn merge_sort(
 fn is_instance(obj: &Value, class: &Value) -> Result<bool, ScriptError> {
     match class {
         Value::Tuple(classes) => {
-            for c in classes {
+            for c in classes.iter() {
                 if is_instance(obj, c)? {
                     return Ok(true);
                 }
@@ -537,5 +553,14 @@ fn builtin_float(args: Args) -> Result<Value, ScriptError> {
         Some(other) => {
             Err(type_error(format!("float() argument must be a string or a real number, not '{}'", other.type_name())))
         }
+    }
+}
+
+/// Runs `f` over the items of an iterable: a list's or tuple's own items, without
+/// copying them, or the items [`iterate`] makes of anything else.
+fn with_items<T>(v: &Value, f: impl FnOnce(&[Value]) -> Result<T, ScriptError>) -> Result<T, ScriptError> {
+    match v {
+        Value::List(items) | Value::Tuple(items) => f(items),
+        other => f(&iterate(other)?),
     }
 }

@@ -92,22 +92,22 @@ pub(crate) fn attr(it: &mut Interp<'_, '_>, object: &Object, name: &str) -> Resu
                     return Ok(s.current_id.map_or(Value::None, |i| Value::Int(i64::try_from(i).unwrap_or(i64::MAX))))
                 }
                 "rects" => {
-                    return Ok(Value::List(
+                    return Ok(Value::list(
                         s.rects
                             .iter()
-                            .map(|r| Value::List(r.iter().map(|v| Value::Int(i64::from(*v))).collect()))
+                            .map(|r| Value::list(r.iter().map(|v| Value::Int(i64::from(*v))).collect()))
                             .collect(),
                     ))
                 }
                 "window_rect" => {
-                    return Ok(Value::List(s.window_rect.iter().map(|v| Value::Int(i64::from(*v))).collect()))
+                    return Ok(Value::list(s.window_rect.iter().map(|v| Value::Int(i64::from(*v))).collect()))
                 }
-                "scale" => return Ok(Value::List(vec![Value::Float(s.scale.0), Value::Float(s.scale.1)])),
+                "scale" => return Ok(Value::list(vec![Value::Float(s.scale.0), Value::Float(s.scale.1)])),
                 _ => MOUSE,
             }
         }
         Object::Clipboard if name == "clipboard_content" => {
-            return Ok(state(it)?.clipboard_content.clone().map_or(Value::None, Value::Str));
+            return Ok(state(it)?.clipboard_content.clone().map_or(Value::None, Value::str));
         }
         Object::Keyboard => KEYBOARD,
         Object::Clipboard => CLIPBOARD,
@@ -251,7 +251,7 @@ pub(crate) fn call_method(
         (Object::Clipboard, "view_clipboard") => {
             args.bind("view_clipboard", &[], 0)?;
             let text = it.host.clipboard_get_text();
-            return Ok(Value::Str(it.host(text)?));
+            return Ok(Value::str(it.host(text)?));
         }
         (Object::ComputerOs, "open_program") => {
             let a = args.bind("open_program", &["program"], 1)?;
@@ -287,7 +287,7 @@ pub(crate) fn call_method(
         (Object::WindowManager, "find_open_applications") => {
             args.bind(name, &[], 0)?;
             let titles = it.host.window_titles();
-            return Ok(Value::List(it.host(titles)?.into_iter().map(Value::Str).collect()));
+            return Ok(Value::list(it.host(titles)?.into_iter().map(Value::str).collect()));
         }
         (Object::WindowManager, "switch_to_application") => {
             let a = args.bind(name, &["app_name"], 1)?;

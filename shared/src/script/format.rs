@@ -291,7 +291,7 @@ fn format_float(f: f64, s: &Spec) -> Result<String, ScriptError> {
 /// `text % args`: printf-style formatting.
 pub(crate) fn percent(text: &str, args: &Value) -> Result<String, ScriptError> {
     let items: Vec<Value> = match args {
-        Value::Tuple(items) => items.clone(),
+        Value::Tuple(items) => items.to_vec(),
         other => vec![other.clone()],
     };
     let mut next = items.iter();
@@ -471,8 +471,8 @@ fn format_fields(
                 let value = field_value(name, pos, kw, auto)?;
                 let value = match conversion {
                     None => value,
-                    Some("r" | "a") => Value::Str(value.repr()),
-                    Some("s") => Value::Str(value.to_str()),
+                    Some("r" | "a") => Value::str(value.repr()),
+                    Some("s") => Value::str(value.to_str()),
                     Some(_) => return Err(value_error("Unknown conversion specifier")),
                 };
                 let spec =
@@ -524,9 +524,8 @@ fn field_value(name: &str, pos: &[Value], kw: &[(String, Value)], auto: &mut usi
                 items.get(i).cloned().ok_or_else(|| ScriptError::new(ErrorKind::Index, "list index out of range"))?
             }
             (Value::Dict(entries), _) => entries
-                .iter()
-                .find(|(k, _)| matches!(k, Value::Str(s) if s == key))
-                .map(|(_, v)| v.clone())
+                .get(&super::heap::Key(Value::str(key)))
+                .cloned()
                 .ok_or_else(|| ScriptError::new(ErrorKind::Key, super::value::str_repr(key)))?,
             (other, _) => return Err(type_error(format!("'{}' object is not subscriptable", other.type_name()))),
         };
@@ -560,19 +559,19 @@ mod tests {
         check(Value::Int(1234567), ",", "1,234,567");
         check(Value::Int(7), ">4", "   7");
         check(Value::Int(7), "*^5", "**7**");
-        check(Value::Str("ab".into()), "<4", "ab  ");
-        check(Value::Str("abcdef".into()), ".3", "abc");
+        check(Value::str("ab"), "<4", "ab  ");
+        check(Value::str("abcdef"), ".3", "abc");
         check(Value::Int(3), ".2f", "3.00");
     }
 
     #[test]
     fn percent_and_format_like_python() {
-        let tuple = Value::Tuple(vec![Value::Str("a".into()), Value::Int(5), Value::Float(2.0 / 3.0)]);
+        let tuple = Value::tuple(vec![Value::str("a"), Value::Int(5), Value::Float(2.0 / 3.0)]);
         assert_eq!(percent("%s=%03d (%.2f) 100%%", &tuple).unwrap(), "a=005 (0.67) 100%");
-        assert_eq!(percent("%-4s|%r", &Value::Tuple(vec![Value::Int(1), Value::Str("x".into())])).unwrap(), "1   |'x'");
+        assert_eq!(percent("%-4s|%r", &Value::tuple(vec![Value::Int(1), Value::str("x")])).unwrap(), "1   |'x'");
         assert_eq!(percent("%d items", &Value::Int(3)).unwrap(), "3 items");
         assert!(percent("%s %s", &Value::Int(3)).is_err());
-        let pos = [Value::Int(1), Value::Str("b".into())];
+        let pos = [Value::Int(1), Value::str("b")];
         let kw = [("n".to_owned(), Value::Float(0.5))];
         assert_eq!(str_format("{} {}|{0}{1!r}|{n:.1f}|{{x}}", &pos, &kw).unwrap(), "1 b|1'b'|0.5|{x}");
     }

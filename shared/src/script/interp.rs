@@ -21,8 +21,10 @@ use super::ast::{
 };
 use super::computer::ComputerState;
 use super::error::{not_supported, type_error, value_error, ErrorKind, ScriptError};
+use super::heap::{self, DictMap, Heap, Key, SetMap};
 use super::host::{HostResult, ScriptHost};
 use super::ops;
+use super::stop::{self, Stop};
 use super::value::{Object, UserFn, Value};
 
 /// Modules a script may import.
@@ -132,8 +134,11 @@ pub const MAX_CALL_DEPTH: usize = 50;
 /// call's own nesting, so the interpreter's stack stays small.
 const MAX_NESTING: usize = 400;
 
-/// How many bytes (roughly) a run may allocate for values and printed text in total.
-const MAX_ALLOCATED: usize = 256 << 20;
+/// How many bytes a run may hold at once in values and printed text (live, not
+/// cumulative: a value that is dropped gives its bytes back). 256 MiB leaves a
+/// guest with the 2 GB upstream's VMs are given room for several runs and the
+/// desktop, and is far above what agent code holds (kilobytes).
+pub const MAX_MEMORY: usize = 256 << 20;
 
 /// How deeply values may nest (`a = [a]` repeated), so printing and dropping them stays shallow.
 const MAX_VALUE_DEPTH: usize = 100;
@@ -148,19 +153,29 @@ pub struct Globals<'a> {
     /// Modules imported before the program runs, as the upstream host's
     /// `import pyautogui; import time; ...` prefix does.
     pub preimport: &'a [&'a str],
+    /// The request's deadline and cancel flag: the run stops with `TimeoutError`
+    /// within a bounded amount of work once either fires.
+    pub stop: Stop,
 }
 
 impl Globals<'static> {
     /// Plain `python -c`: nothing is bound.
     pub fn python() -> Globals<'static> {
-        Globals { computer: None, computer_action_delay: 0.25, preimport: &[] }
+        Globals { computer: None, computer_action_delay: 0.25, preimport: &[], stop: Stop::never() }
     }
 }
 
 impl<'a> Globals<'a> {
     /// `/execute_windows`: `computer` and `human` are bound to `state`.
+    /// These globals, stopping as `stop` says.
+    #[must_use]
+    pub fn with_stop(mut self, stop: Stop) -> Globals<'a> {
+        self.stop = stop;
+        self
+    }
+
     pub fn computer(state: &'a mut ComputerState) -> Globals<'a> {
-        Globals { computer: Some(state), computer_action_delay: 0.25, preimport: &[] }
+        Globals { computer: Some(state), computer_action_delay: 0.25, preimport: &[], stop: Stop::never() }
     }
 }
 
@@ -179,6 +194,22 @@ pub struct RunOutput {
     pub pause: Option<f64>,
 }
 
+/// What a run cost, by the interpreter's own accounting.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct RunStats {
+    /// The most bytes the program held at once (values and printed text).
+    pub peak_bytes: usize,
+    /// The bytes still counted once the run's values were dropped (0 unless
+    /// something leaked).
+    pub live_bytes_after: usize,
+    /// Loop iterations and calls.
+    pub steps: u64,
+    /// Units of work counted inside built-ins.
+    pub work: u64,
+    /// Deadline and cancel checks made.
+    pub stop_checks: u64,
+}
+
 /// Runs `program` against `host`.
 ///
 /// # Errors
@@ -186,6 +217,30 @@ pub struct RunOutput {
 /// [`ScriptError`] for the first exception, carrying what was printed before it.
 /// Effects performed before the failure are not undone.
 pub fn run(program: &Program, host: &mut dyn ScriptHost, globals: Globals<'_>) -> Result<RunOutput, ScriptError> {
+    run_measured(program, host, globals).0
+}
+
+/// [`run`], with what the run cost.
+pub fn run_measured(
+    program: &Program,
+    host: &mut dyn ScriptHost,
+    globals: Globals<'_>,
+) -> (Result<RunOutput, ScriptError>, RunStats) {
+    let _meter = heap::MeterScope::enter(MAX_MEMORY);
+    let _stop = stop::StopScope::enter(globals.stop.clone());
+    let mut steps = 0;
+    let result = run_in_scope(program, host, globals, &mut steps);
+    let (work, stop_checks) = stop::counters();
+    let stats = RunStats { peak_bytes: heap::peak(), live_bytes_after: heap::live(), steps, work, stop_checks };
+    (result, stats)
+}
+
+fn run_in_scope(
+    program: &Program,
+    host: &mut dyn ScriptHost,
+    globals: Globals<'_>,
+    steps: &mut u64,
+) -> Result<RunOutput, ScriptError> {
     let mut interp = Interp {
         host,
         computer: globals.computer,
@@ -194,13 +249,13 @@ pub fn run(program: &Program, host: &mut dyn ScriptHost, globals: Globals<'_>) -
         frames: vec![Frame::default()],
         out: RunOutput::default(),
         exit: None,
-        allocated: 0,
+        printed: 0,
         steps: 0,
         calls: 0,
         depth: 0,
         handling: Vec::new(),
     };
-    interp.vars.insert("__name__".into(), Value::Str("__main__".into()));
+    interp.vars.insert("__name__".into(), Value::str("__main__"));
     let preimport_line = program.statements.first().map_or(1, |s| s.line);
     for module in globals.preimport {
         let stmt = StmtKind::Import(vec![super::ast::ImportName { module: (*module).to_owned(), alias: None }]);
@@ -217,13 +272,15 @@ pub fn run(program: &Program, host: &mut dyn ScriptHost, globals: Globals<'_>) -
             if err.kind == ErrorKind::SystemExit {
                 break;
             }
+            *steps = interp.steps;
             return Err(interp.finish_error(err, stmt.line));
         }
     }
+    *steps = interp.steps;
     if let Some(code) = interp.exit {
         interp.out.exit_code = code;
     }
-    Ok(interp.out)
+    Ok(std::mem::take(&mut interp.out))
 }
 
 /// Positional and keyword arguments of one call.
@@ -311,10 +368,14 @@ pub(crate) fn to_str<'v>(v: &'v Value, what: &str) -> Result<&'v str, ScriptErro
     }
 }
 
-/// The items of an iterable value.
+/// The items of an iterable value, sharing their payloads; the list of them is
+/// reserved against the memory budget before it is built.
 pub(crate) fn iterate(v: &Value) -> Result<Vec<Value>, ScriptError> {
     match v {
-        Value::List(items) | Value::Tuple(items) => Ok(items.clone()),
+        Value::List(items) | Value::Tuple(items) => {
+            heap::reserve_items(items.len())?;
+            Ok(items.to_vec())
+        }
         Value::Str(s) => {
             if s.len() > ops::MAX_ITEMS {
                 return Err(ScriptError::new(
@@ -322,21 +383,34 @@ pub(crate) fn iterate(v: &Value) -> Result<Vec<Value>, ScriptError> {
                     format!("result would exceed {} items", ops::MAX_ITEMS),
                 ));
             }
-            Ok(s.chars().map(|c| Value::Str(c.to_string())).collect())
+            // Each character becomes a string of its own.
+            heap::reserve_items(s.len().saturating_mul(2))?;
+            Ok(s.chars().map(|c| Value::str(c.to_string())).collect())
         }
-        Value::Dict(entries) => Ok(entries.iter().map(|(k, _)| k.clone()).collect()),
-        Value::Set(items) => Ok(items.clone()),
+        Value::Dict(entries) => {
+            heap::reserve_items(entries.len())?;
+            Ok(entries.keys().map(|k| k.0.clone()).collect())
+        }
+        Value::Set(items) => {
+            heap::reserve_items(items.len())?;
+            Ok(items.iter().map(|k| k.0.clone()).collect())
+        }
         Value::Range(start, stop, step) => {
-            if super::value::range_len(*start, *stop, *step) > ops::MAX_ITEMS as u64 {
+            let len = super::value::range_len(*start, *stop, *step);
+            if len > ops::MAX_ITEMS as u64 {
                 return Err(ScriptError::new(
                     ErrorKind::Memory,
                     format!("result would exceed {} items", ops::MAX_ITEMS),
                 ));
             }
+            heap::reserve_items(usize::try_from(len).unwrap_or(usize::MAX))?;
             let mut it = LoopIter::Range { next: *start, stop: *stop, step: *step };
-            let mut out = Vec::new();
+            let mut out = Vec::with_capacity(usize::try_from(len).unwrap_or(0));
             while let Some(v) = it.next() {
                 out.push(v);
+                if out.len() % 1024 == 0 {
+                    stop::work(1024)?;
+                }
             }
             Ok(out)
         }
@@ -366,8 +440,8 @@ pub(crate) struct Interp<'h, 'c> {
     pub(crate) out: RunOutput,
     /// Set by `sys.exit`.
     pub(crate) exit: Option<i32>,
-    /// Bytes charged so far against [`MAX_ALLOCATED`].
-    allocated: usize,
+    /// Bytes printed, held against the memory budget until the run ends.
+    printed: usize,
     /// Loop iterations and calls so far, against [`MAX_STEPS`].
     steps: u64,
     /// User function calls in progress.
@@ -376,6 +450,12 @@ pub(crate) struct Interp<'h, 'c> {
     depth: usize,
     /// The exceptions whose `except` clauses are running, for a bare `raise`.
     handling: Vec<ScriptError>,
+}
+
+impl Drop for Interp<'_, '_> {
+    fn drop(&mut self) {
+        heap::release(self.printed);
+    }
 }
 
 impl std::fmt::Debug for Interp<'_, '_> {
@@ -402,20 +482,9 @@ impl Interp<'_, '_> {
     }
 
     pub(crate) fn print(&mut self, text: &str) -> Result<(), ScriptError> {
-        self.charge_bytes(text.len())?;
+        heap::hold(text.len())?;
+        self.printed += text.len();
         self.out.stdout.push_str(text);
-        Ok(())
-    }
-
-    /// Counts `bytes` against the run's allocation budget.
-    fn charge_bytes(&mut self, bytes: usize) -> Result<(), ScriptError> {
-        self.allocated = self.allocated.saturating_add(bytes);
-        if self.allocated > MAX_ALLOCATED {
-            return Err(ScriptError::new(
-                ErrorKind::Memory,
-                format!("the program allocated more than {} MiB", MAX_ALLOCATED >> 20),
-            ));
-        }
         Ok(())
     }
 
@@ -438,6 +507,7 @@ impl Interp<'_, '_> {
 
     /// Counts one loop iteration or function call against [`MAX_STEPS`].
     pub(crate) fn step(&mut self) -> Result<(), ScriptError> {
+        stop::check()?;
         self.steps += 1;
         if self.steps > MAX_STEPS {
             return Err(ScriptError::new(
@@ -612,13 +682,13 @@ impl Interp<'_, '_> {
 
     #[inline(never)]
     fn eval_dict(&mut self, items: &[(Expr, Expr)]) -> Result<Value, ScriptError> {
-        let mut entries: Vec<(Value, Value)> = Vec::new();
+        let mut entries = DictMap::new();
         for (k, v) in items {
             let key = self.eval(k)?;
             let value = self.eval(v)?;
             dict_insert(&mut entries, key, value)?;
         }
-        Ok(Value::Dict(entries))
+        Ok(Value::dict(entries))
     }
 
     #[inline(never)]
@@ -664,18 +734,19 @@ impl Interp<'_, '_> {
         }
         result?;
         Ok(match kind {
-            CompKind::List | CompKind::Generator => Value::List(items),
+            CompKind::List | CompKind::Generator => Value::list(items),
             CompKind::Set => make_set(items)?,
             CompKind::Dict => {
-                let mut entries = Vec::new();
+                let mut entries = DictMap::new();
                 for pair in items {
-                    if let Value::Tuple(mut kv) = pair {
+                    if let Value::Tuple(kv) = pair {
+                        let mut kv = kv.into_inner();
                         let v = kv.pop().unwrap_or(Value::None);
                         let k = kv.pop().unwrap_or(Value::None);
                         dict_insert(&mut entries, k, v)?;
                     }
                 }
-                Value::Dict(entries)
+                Value::dict(entries)
             }
         })
     }
@@ -985,13 +1056,16 @@ impl Interp<'_, '_> {
             let mut scratch = container;
             return store_item(&mut scratch, key, value);
         };
+        let inserted = value.depth().max(key.depth());
+        Self::guard_depth(&place, inserted)?;
         match self.place_mut(&place)? {
-            Some(container) => store_item(container, key, value),
+            Some(container) => store_item(container, key, value)?,
             None => {
                 let mut scratch = self.eval(obj)?;
-                store_item(&mut scratch, key, value)
+                return store_item(&mut scratch, key, value);
             }
         }
+        self.settle(&place, inserted)
     }
 
     fn delete(&mut self, target: &Target) -> Result<(), ScriptError> {
@@ -1047,6 +1121,31 @@ impl Interp<'_, '_> {
     /// The value a [`Place`] names, to change it in place; `None` when it is not
     /// reachable for writing (a variable captured by a closure, a string in the path).
     fn place_mut(&mut self, place: &Place) -> Result<Option<&mut Value>, ScriptError> {
+        self.place_mut_raising(place, None)
+    }
+
+    /// Notes that a value nesting `inserted` levels was put into the container a
+    /// [`Place`] names, so that it and every container on the way record their depth.
+    fn settle(&mut self, place: &Place, inserted: u32) -> Result<(), ScriptError> {
+        if let Some(leaf) = self.place_mut_raising(place, Some(inserted))? {
+            raise_depth(leaf, inserted);
+        }
+        Ok(())
+    }
+
+    /// Refuses to put a value nesting `inserted` levels into the container a
+    /// [`Place`] names when the variable would then nest too deeply.
+    fn guard_depth(place: &Place, inserted: u32) -> Result<(), ScriptError> {
+        let total = usize::try_from(inserted).unwrap_or(usize::MAX).saturating_add(place.keys.len() + 1);
+        if total > MAX_VALUE_DEPTH {
+            return Err(too_deep());
+        }
+        Ok(())
+    }
+
+    /// [`Self::place_mut`]; with `raise`, each container on the way notes that an
+    /// item below it now nests `raise` levels more than the leaf's position.
+    fn place_mut_raising(&mut self, place: &Place, raise: Option<u32>) -> Result<Option<&mut Value>, ScriptError> {
         let frame_index = self.frames.len().checked_sub(1);
         let mut current: Option<&mut Value> = None;
         if let Some(i) = frame_index {
@@ -1068,18 +1167,23 @@ impl Interp<'_, '_> {
                 None => return Ok(None),
             },
         };
-        for key in &place.keys {
+        let levels = place.keys.len();
+        for (i, key) in place.keys.iter().enumerate() {
+            if let Some(inserted) = raise {
+                let below = u32::try_from(levels - i).unwrap_or(u32::MAX);
+                raise_depth(current, inserted.saturating_add(below));
+            }
             current = match current {
                 Value::List(items) => {
                     let i = seq_index(items.len(), key, "list")?;
-                    &mut items[i]
+                    &mut items.items_mut()[i]
                 }
                 Value::Tuple(items) => {
                     let i = seq_index(items.len(), key, "tuple")?;
-                    &mut items[i]
+                    &mut items.items_mut()[i]
                 }
-                Value::Dict(entries) => match entries.iter_mut().find(|(k, _)| ops::equal(k, key)) {
-                    Some((_, v)) => v,
+                Value::Dict(entries) => match entries.items_mut().get_mut(&Key(key.clone())) {
+                    Some(v) => v,
                     None => return Err(ScriptError::new(ErrorKind::Key, key.repr())),
                 },
                 _ => return Ok(None),
@@ -1109,6 +1213,9 @@ impl Interp<'_, '_> {
             return Ok(None);
         }
         let call_args = self.eval_args(args, kwargs)?;
+        let inserted = call_args.pos.iter().chain(call_args.kw.iter().map(|(_, v)| v)).map(Value::depth).max();
+        let inserted = inserted.unwrap_or(0).saturating_add(1);
+        Self::guard_depth(&place, inserted)?;
         // The receiver is taken out while the method runs, so that a key function may run code.
         let Some(slot) = self.place_mut(&place)? else { return Ok(None) };
         let mut target = std::mem::replace(slot, Value::None);
@@ -1116,6 +1223,7 @@ impl Interp<'_, '_> {
         if let Some(slot) = self.place_mut(&place)? {
             *slot = target;
         }
+        self.settle(&place, inserted)?;
         let value = result?;
         self.charge(&value)?;
         Ok(Some(value))
@@ -1162,7 +1270,7 @@ impl Interp<'_, '_> {
         self.charged(value)
     }
 
-    /// `value`, once charged against the allocation budget.
+    /// `value`, once checked against the memory budget and the nesting cap.
     #[inline(never)]
     fn charged(&mut self, value: Result<Value, ScriptError>) -> Result<Value, ScriptError> {
         let value = value?;
@@ -1170,12 +1278,14 @@ impl Interp<'_, '_> {
         Ok(value)
     }
 
-    /// Charges `value`'s size against the allocation budget.
+    /// Checks, right after `value` was made, that the run still holds no more than
+    /// its memory budget (values that were sized beforehand were refused before
+    /// they were built) and that `value` does not nest too deeply.
     pub(crate) fn charge(&mut self, value: &Value) -> Result<(), ScriptError> {
-        let weight = weight(value, 0).ok_or_else(|| {
-            ScriptError::new(ErrorKind::Memory, format!("value nested more than {MAX_VALUE_DEPTH} levels deep"))
-        })?;
-        self.charge_bytes(weight)
+        if usize::try_from(value.depth()).unwrap_or(usize::MAX) > MAX_VALUE_DEPTH {
+            return Err(too_deep());
+        }
+        heap::check()
     }
 
     /// Dispatches on the expression form; every arm is its own function so that each
@@ -1213,8 +1323,8 @@ impl Interp<'_, '_> {
     fn eval_sequence(&mut self, items: &[Expr], kind: char) -> Result<Value, ScriptError> {
         let values = self.eval_all(items)?;
         match kind {
-            'l' => Ok(Value::List(values)),
-            't' => Ok(Value::Tuple(values)),
+            'l' => Ok(Value::list(values)),
+            't' => Ok(Value::tuple(values)),
             _ => make_set(values),
         }
     }
@@ -1243,7 +1353,7 @@ impl Interp<'_, '_> {
 
     #[inline(never)]
     fn eval_fstring(&mut self, parts: &[FPart]) -> Result<Value, ScriptError> {
-        Ok(Value::Str(self.fstring(parts)?))
+        Ok(Value::str(self.fstring(parts)?))
     }
 
     /// Runs the `for`/`if` clauses of a comprehension from `generators[0]`, pushing
@@ -1258,7 +1368,7 @@ impl Interp<'_, '_> {
         let Some((first, rest)) = generators.split_first() else {
             let item = self.eval(elt)?;
             let item = match value {
-                Some(v) => Value::Tuple(vec![item, self.eval(v)?]),
+                Some(v) => Value::tuple(vec![item, self.eval(v)?]),
                 None => item,
             };
             if out.len() >= ops::MAX_ITEMS {
@@ -1294,8 +1404,8 @@ impl Interp<'_, '_> {
                 FPart::Field { expr, conversion, spec } => {
                     let value = self.eval(expr)?;
                     let value = match conversion {
-                        Some('r' | 'a') => Value::Str(value.repr()),
-                        Some(_) => Value::Str(value.to_str()),
+                        Some('r' | 'a') => Value::str(value.repr()),
+                        Some(_) => Value::str(value.to_str()),
                         None => value,
                     };
                     let spec = self.fstring(spec)?;
@@ -1334,8 +1444,18 @@ impl Interp<'_, '_> {
                     )))
                 }
             },
-            Value::List(items) | Value::Tuple(items) | Value::Set(items) => items.iter().any(|v| ops::equal(v, item)),
-            Value::Dict(entries) => entries.iter().any(|(k, _)| ops::equal(k, item)),
+            Value::List(items) | Value::Tuple(items) => {
+                stop::work(items.len() as u64)?;
+                items.iter().any(|v| ops::equal(v, item))
+            }
+            Value::Set(items) => {
+                check_hashable(item)?;
+                items.contains(&Key(item.clone()))
+            }
+            Value::Dict(entries) => {
+                check_hashable(item)?;
+                entries.contains_key(&Key(item.clone()))
+            }
             Value::Range(start, stop, step) => match item {
                 Value::Int(i) => {
                     let inside = if *step > 0 { start <= i && i < stop } else { stop < i && i <= start };
@@ -1424,12 +1544,12 @@ impl Interp<'_, '_> {
             Value::List(_) => method(LIST_METHODS, &obj),
             Value::Tuple(_) => method(TUPLE_METHODS, &obj),
             Value::Set(_) => method(SET_METHODS, &obj),
-            Value::Type(t) if name == "__name__" => Some(Value::Str(t.rsplit('.').next().unwrap_or(t).to_owned())),
-            Value::ExcType(kind) if name == "__name__" => Some(Value::Str(kind.python_name().to_owned())),
-            Value::Function { name: f, .. } if name == "__name__" => Some(Value::Str((*f).to_owned())),
-            Value::UserFn(f) if name == "__name__" => Some(Value::Str(f.def.name.clone())),
+            Value::Type(t) if name == "__name__" => Some(Value::str(t.rsplit('.').next().unwrap_or(t).to_owned())),
+            Value::ExcType(kind) if name == "__name__" => Some(Value::str(kind.python_name().to_owned())),
+            Value::Function { name: f, .. } if name == "__name__" => Some(Value::str((*f).to_owned())),
+            Value::UserFn(f) if name == "__name__" => Some(Value::str(f.def.name.clone())),
             Value::Exception(_, message) => match name {
-                "args" => Some(Value::Tuple(vec![Value::Str(message.clone())])),
+                "args" => Some(Value::tuple(vec![Value::str(message.clone())])),
                 _ => None,
             },
             Value::Point(x, y) => match name {
@@ -1444,10 +1564,10 @@ impl Interp<'_, '_> {
             },
             Value::Object(object) => match object {
                 Object::Image { width, height, .. } => match name {
-                    "size" => Some(Value::Tuple(vec![Value::Int(*width), Value::Int(*height)])),
+                    "size" => Some(Value::tuple(vec![Value::Int(*width), Value::Int(*height)])),
                     "width" => Some(Value::Int(*width)),
                     "height" => Some(Value::Int(*height)),
-                    "mode" => Some(Value::Str("RGB".into())),
+                    "mode" => Some(Value::str("RGB")),
                     "save" => method(&["save"], &obj),
                     _ => {
                         return Err(not_supported(format!("Image.{name} is not supported by this interpreter")));
@@ -1457,8 +1577,8 @@ impl Interp<'_, '_> {
                 Object::Completed { args, returncode, stdout, stderr } => match name {
                     "args" => Some((**args).clone()),
                     "returncode" => Some(Value::Int(*returncode)),
-                    "stdout" => Some(stdout.clone().map_or(Value::None, Value::Str)),
-                    "stderr" => Some(stderr.clone().map_or(Value::None, Value::Str)),
+                    "stdout" => Some(stdout.clone().map_or(Value::None, Value::str)),
+                    "stderr" => Some(stderr.clone().map_or(Value::None, Value::str)),
                     "check_returncode" => method(&["check_returncode"], &obj),
                     _ => None,
                 },
@@ -1483,7 +1603,7 @@ impl Interp<'_, '_> {
         match obj {
             Value::Object(Object::Environ) => {
                 let name = to_str(index, "environment variable name")?;
-                self.host.env_var(name).map(Value::Str).ok_or_else(|| ScriptError::new(ErrorKind::Key, index.repr()))
+                self.host.env_var(name).map(Value::str).ok_or_else(|| ScriptError::new(ErrorKind::Key, index.repr()))
             }
             other => index_value(other, index),
         }
@@ -1504,7 +1624,7 @@ impl Interp<'_, '_> {
                     [] => String::new(),
                     [one] if kind == ErrorKind::Key => one.repr(),
                     [one] => one.to_str(),
-                    many => Value::Tuple(many.to_vec()).repr(),
+                    many => Value::tuple(many.to_vec()).repr(),
                 };
                 Ok(Value::Exception(kind, message))
             }
@@ -1514,28 +1634,18 @@ impl Interp<'_, '_> {
     }
 }
 
-/// Roughly how many bytes `v` occupies, or `None` when it nests too deeply.
-fn weight(v: &Value, depth: usize) -> Option<usize> {
-    const SLOT: usize = std::mem::size_of::<Value>();
-    if depth > MAX_VALUE_DEPTH {
-        return None;
-    }
-    let items = |items: &[Value]| items.iter().try_fold(SLOT, |acc, item| Some(acc + weight(item, depth + 1)?));
+/// A value nested deeper than [`MAX_VALUE_DEPTH`].
+fn too_deep() -> ScriptError {
+    ScriptError::new(ErrorKind::Memory, format!("value nested more than {MAX_VALUE_DEPTH} levels deep"))
+}
+
+/// Notes on a container that an item of it now nests `child` levels.
+fn raise_depth(v: &mut Value, child: u32) {
     match v {
-        Value::Str(s) => Some(SLOT + s.len()),
-        Value::List(v) | Value::Tuple(v) | Value::Set(v) => items(v),
-        Value::Exception(_, message) => Some(SLOT + message.len()),
-        Value::Dict(entries) => {
-            entries.iter().try_fold(SLOT, |acc, (k, v)| Some(acc + weight(k, depth + 1)? + weight(v, depth + 1)?))
-        }
-        Value::Method(recv, _) => Some(SLOT + weight(recv, depth + 1)?),
-        Value::Object(Object::Completed { args, stdout, stderr, .. }) => Some(
-            SLOT + weight(args, depth + 1)?
-                + stdout.as_ref().map_or(0, String::len)
-                + stderr.as_ref().map_or(0, String::len),
-        ),
-        Value::Object(Object::Popen { args, .. }) => Some(SLOT + weight(args, depth + 1)?),
-        _ => Some(SLOT),
+        Value::List(h) | Value::Tuple(h) => h.raise_depth(child),
+        Value::Dict(h) => h.raise_depth(child),
+        Value::Set(h) => h.raise_depth(child),
+        _ => {}
     }
 }
 
@@ -1548,7 +1658,7 @@ fn find_module(name: &str) -> Result<&'static str, ScriptError> {
     })
 }
 
-fn check_hashable(key: &Value) -> Result<(), ScriptError> {
+pub(crate) fn check_hashable(key: &Value) -> Result<(), ScriptError> {
     match key {
         Value::List(_) | Value::Dict(_) | Value::Set(_) => {
             Err(type_error(format!("unhashable type: '{}'", key.type_name())))
@@ -1587,8 +1697,13 @@ struct Place {
     keys: Vec<Value>,
 }
 
-/// What a `for` loop or a comprehension walks: a copy of the items, or a range counted lazily.
+/// What a `for` loop or a comprehension walks: the items of a list, tuple, dict or
+/// set, shared with the value looped over (a change to the variable during the
+/// loop changes a copy), a range counted lazily, or the items of anything else.
 enum LoopIter {
+    Seq(Heap<Vec<Value>>, usize),
+    Keys(Heap<DictMap>, usize),
+    Set(Heap<SetMap>, usize),
     Items(std::vec::IntoIter<Value>),
     Range { next: i64, stop: i64, step: i64 },
 }
@@ -1597,13 +1712,30 @@ impl LoopIter {
     fn new(v: Value) -> Result<LoopIter, ScriptError> {
         Ok(match v {
             Value::Range(start, stop, step) => LoopIter::Range { next: start, stop, step },
-            Value::List(items) | Value::Tuple(items) | Value::Set(items) => LoopIter::Items(items.into_iter()),
+            Value::List(items) | Value::Tuple(items) => LoopIter::Seq(items, 0),
+            Value::Dict(entries) => LoopIter::Keys(entries, 0),
+            Value::Set(items) => LoopIter::Set(items, 0),
             other => LoopIter::Items(iterate(&other)?.into_iter()),
         })
     }
 
     fn next(&mut self) -> Option<Value> {
         match self {
+            LoopIter::Seq(items, i) => {
+                let item = items.get(*i).cloned();
+                *i += 1;
+                item
+            }
+            LoopIter::Keys(entries, i) => {
+                let key = entries.get_index(*i).map(|(k, _)| k.0.clone());
+                *i += 1;
+                key
+            }
+            LoopIter::Set(items, i) => {
+                let item = items.get_index(*i).map(|k| k.0.clone());
+                *i += 1;
+                item
+            }
             LoopIter::Items(items) => items.next(),
             LoopIter::Range { next, stop, step } => {
                 let more = if *step > 0 { *next < *stop } else { *next > *stop };
@@ -1645,21 +1777,23 @@ fn index_value(container: &Value, index: &Value) -> Result<Value, ScriptError> {
         Value::Point(a, b) | Value::Size(a, b) => {
             Ok(Value::Int(if seq_index(2, index, "tuple")? == 0 { *a } else { *b }))
         }
+        Value::Str(s) if s.is_ascii() => {
+            let i = seq_index(s.len(), index, "string")?;
+            Ok(Value::str(&s[i..=i]))
+        }
         Value::Str(s) => {
-            let chars: Vec<char> = s.chars().collect();
-            let i = seq_index(chars.len(), index, "string")?;
-            Ok(Value::Str(chars[i].to_string()))
+            let i = seq_index(s.chars().count(), index, "string")?;
+            Ok(Value::str(s.chars().nth(i).map(String::from).unwrap_or_default()))
         }
         Value::Range(start, stop, step) => {
             let len = usize::try_from(super::value::range_len(*start, *stop, *step)).unwrap_or(usize::MAX);
             let i = i64::try_from(seq_index(len, index, "range object")?).unwrap_or(0);
             Ok(Value::Int(start + i * step))
         }
-        Value::Dict(entries) => entries
-            .iter()
-            .find(|(k, _)| ops::equal(k, index))
-            .map(|(_, v)| v.clone())
-            .ok_or_else(|| ScriptError::new(ErrorKind::Key, index.repr())),
+        Value::Dict(entries) => {
+            check_hashable(index)?;
+            entries.get(&Key(index.clone())).cloned().ok_or_else(|| ScriptError::new(ErrorKind::Key, index.repr()))
+        }
         other => Err(type_error(format!("'{}' object is not subscriptable", other.type_name()))),
     }
 }
@@ -1705,16 +1839,25 @@ fn slice_indices(
 fn slice(obj: &Value, lower: Option<i64>, upper: Option<i64>, step: Option<i64>) -> Result<Value, ScriptError> {
     match obj {
         Value::List(items) | Value::Tuple(items) => {
-            let picked =
-                slice_indices(items.len(), lower, upper, step)?.into_iter().map(|i| items[i].clone()).collect();
-            Ok(if matches!(obj, Value::List(_)) { Value::List(picked) } else { Value::Tuple(picked) })
+            let indices = slice_indices(items.len(), lower, upper, step)?;
+            heap::reserve_items(indices.len())?;
+            let picked = indices.into_iter().map(|i| items[i].clone()).collect();
+            Ok(if matches!(obj, Value::List(_)) { Value::list(picked) } else { Value::tuple(picked) })
+        }
+        Value::Str(s) if s.is_ascii() => {
+            let indices = slice_indices(s.len(), lower, upper, step)?;
+            heap::reserve_text(indices.len())?;
+            let bytes = s.as_bytes();
+            Ok(Value::str(indices.into_iter().map(|i| char::from(bytes[i])).collect::<String>()))
         }
         Value::Str(s) => {
             let chars: Vec<char> = s.chars().collect();
-            Ok(Value::Str(slice_indices(chars.len(), lower, upper, step)?.into_iter().map(|i| chars[i]).collect()))
+            let indices = slice_indices(chars.len(), lower, upper, step)?;
+            heap::reserve_text(indices.len().saturating_mul(4))?;
+            Ok(Value::str(indices.into_iter().map(|i| chars[i]).collect::<String>()))
         }
         Value::Point(a, b) | Value::Size(a, b) => {
-            slice(&Value::Tuple(vec![Value::Int(*a), Value::Int(*b)]), lower, upper, step)
+            slice(&Value::tuple(vec![Value::Int(*a), Value::Int(*b)]), lower, upper, step)
         }
         other => Err(type_error(format!("'{}' object is not subscriptable", other.type_name()))),
     }
@@ -1731,10 +1874,10 @@ fn store_item(container: &mut Value, key: Value, value: Value) -> Result<(), Scr
                     e
                 }
             })?;
-            items[i] = value;
+            items.items_mut()[i] = value;
             Ok(())
         }
-        Value::Dict(entries) => dict_insert(entries, key, value),
+        Value::Dict(entries) => dict_insert(&mut entries.make_mut(), key, value),
         Value::Object(Object::Environ) => Err(not_supported("setting os.environ entries is not supported")),
         other => Err(type_error(format!("'{}' object does not support item assignment", other.type_name()))),
     }
@@ -1751,40 +1894,42 @@ fn remove_item(container: &mut Value, key: &Value) -> Result<(), ScriptError> {
                     e
                 }
             })?;
-            items.remove(i);
+            items.make_mut().remove(i);
             Ok(())
         }
-        Value::Dict(entries) => match entries.iter().position(|(k, _)| ops::equal(k, key)) {
-            Some(i) => {
-                entries.remove(i);
-                Ok(())
+        Value::Dict(entries) => {
+            check_hashable(key)?;
+            match entries.make_mut().shift_remove(&Key(key.clone())) {
+                Some(_) => Ok(()),
+                None => Err(ScriptError::new(ErrorKind::Key, key.repr())),
             }
-            None => Err(ScriptError::new(ErrorKind::Key, key.repr())),
-        },
+        }
         other => Err(type_error(format!("'{}' object doesn't support item deletion", other.type_name()))),
     }
 }
 
 /// Inserts or replaces `key` in a dict's entries.
-pub(crate) fn dict_insert(entries: &mut Vec<(Value, Value)>, key: Value, value: Value) -> Result<(), ScriptError> {
+pub(crate) fn dict_insert(entries: &mut DictMap, key: Value, value: Value) -> Result<(), ScriptError> {
     check_hashable(&key)?;
-    match entries.iter_mut().find(|(existing, _)| ops::equal(existing, &key)) {
-        Some(entry) => entry.1 = value,
-        None => entries.push((key, value)),
+    super::methods::grow_table(entries.len(), entries.capacity(), 2 * heap::SLOT + 2 * std::mem::size_of::<usize>())?;
+    // Python keeps the first key of equal ones (`{1: 'a', 1.0: 'b'}` is `{1: 'b'}`).
+    match entries.get_mut(&Key(key.clone())) {
+        Some(slot) => *slot = value,
+        None => {
+            entries.insert(Key(key), value);
+        }
     }
     Ok(())
 }
 
 /// A set of `items`, first occurrences kept in order.
 pub(crate) fn make_set(items: Vec<Value>) -> Result<Value, ScriptError> {
-    let mut set: Vec<Value> = Vec::new();
+    let mut set = SetMap::with_capacity(items.len());
     for item in items {
         check_hashable(&item)?;
-        if !set.iter().any(|v| ops::equal(v, &item)) {
-            set.push(item);
-        }
+        set.insert(Key(item));
     }
-    Ok(Value::Set(set))
+    Ok(Value::set(set))
 }
 
 /// `a is b`: the singletons and equal scalars, names and functions are identical;
@@ -1803,7 +1948,7 @@ fn exception_matches(types: &Value, kind: ErrorKind) -> Result<bool, ScriptError
     match types {
         Value::ExcType(class) => Ok(kind.is_subclass_of(*class)),
         Value::Tuple(items) => {
-            for item in items {
+            for item in items.iter() {
                 if exception_matches(item, kind)? {
                     return Ok(true);
                 }
@@ -1821,6 +1966,6 @@ fn const_value(c: &Const) -> Value {
         Const::Bool(b) => Value::Bool(*b),
         Const::Int(i) => Value::Int(*i),
         Const::Float(f) => Value::Float(*f),
-        Const::Str(s) => Value::Str(s.clone()),
+        Const::Str(s) => Value::str(s.clone()),
     }
 }

@@ -6,8 +6,10 @@
 //! called on a temporary value they change only that copy.
 
 use super::error::{not_supported, type_error, value_error, ErrorKind, ScriptError};
-use super::interp::{dict_insert, iterate, make_set, no_attribute, to_i64, to_str, Args, Interp};
+use super::heap::{self, Key};
+use super::interp::{check_hashable, dict_insert, iterate, make_set, no_attribute, to_i64, to_str, Args, Interp};
 use super::ops;
+use super::stop;
 use super::value::{Object, Value};
 
 pub(crate) const STR_METHODS: &[&str] = &[
@@ -123,7 +125,7 @@ impl Interp<'_, '_> {
                 let a = args.bind("get", &["key", "default"], 1)?;
                 let key = a[0].clone().unwrap_or(Value::None);
                 let name = to_str(&key, "environment variable name")?;
-                Ok(self.host.env_var(name).map(Value::Str).unwrap_or_else(|| a[1].clone().unwrap_or(Value::None)))
+                Ok(self.host.env_var(name).map(Value::str).unwrap_or_else(|| a[1].clone().unwrap_or(Value::None)))
             }
             Value::Object(Object::Image { region, .. }) => {
                 let a = args.bind("save", &["fp", "format"], 1)?;
@@ -151,6 +153,7 @@ impl Interp<'_, '_> {
             (Value::List(items) | Value::Tuple(items), "index") => {
                 let a = args.bind("index", &["value"], 1)?;
                 let v = a[0].clone().unwrap_or(Value::None);
+                stop::work(items.len() as u64)?;
                 items.iter().position(|x| ops::equal(x, &v)).map(int_value).ok_or_else(|| {
                     let what = if matches!(recv, Value::List(_)) {
                         "list.index(x): x not in list"
@@ -163,6 +166,7 @@ impl Interp<'_, '_> {
             (Value::List(items) | Value::Tuple(items), "count") => {
                 let a = args.bind("count", &["value"], 1)?;
                 let v = a[0].clone().unwrap_or(Value::None);
+                stop::work(items.len() as u64)?;
                 Ok(int_value(items.iter().filter(|x| ops::equal(x, &v)).count()))
             }
             (Value::List(_) | Value::Dict(_) | Value::Set(_), "copy") => {
@@ -172,35 +176,39 @@ impl Interp<'_, '_> {
             (Value::Dict(entries), "get") => {
                 let a = args.bind("get", &["key", "default"], 1)?;
                 let key = a[0].clone().unwrap_or(Value::None);
-                Ok(entries
-                    .iter()
-                    .find(|(k, _)| ops::equal(k, &key))
-                    .map(|(_, v)| v.clone())
-                    .unwrap_or_else(|| a[1].clone().unwrap_or(Value::None)))
+                check_hashable(&key)?;
+                Ok(entries.get(&Key(key)).cloned().unwrap_or_else(|| a[1].clone().unwrap_or(Value::None)))
             }
             (Value::Dict(entries), "keys") => {
                 args.bind("keys", &[], 0)?;
-                Ok(Value::List(entries.iter().map(|(k, _)| k.clone()).collect()))
+                heap::reserve_items(entries.len())?;
+                Ok(Value::list(entries.keys().map(|k| k.0.clone()).collect()))
             }
             (Value::Dict(entries), "values") => {
                 args.bind("values", &[], 0)?;
-                Ok(Value::List(entries.iter().map(|(_, v)| v.clone()).collect()))
+                heap::reserve_items(entries.len())?;
+                Ok(Value::list(entries.values().cloned().collect()))
             }
             (Value::Dict(entries), "items") => {
                 args.bind("items", &[], 0)?;
-                Ok(Value::List(entries.iter().map(|(k, v)| Value::Tuple(vec![k.clone(), v.clone()])).collect()))
+                // A list of two-item tuples.
+                heap::reserve_items(entries.len().saturating_mul(3))?;
+                Ok(Value::list(entries.iter().map(|(k, v)| Value::tuple(vec![k.0.clone(), v.clone()])).collect()))
             }
             (Value::Set(items), "union" | "intersection" | "difference" | "issubset" | "issuperset" | "isdisjoint") => {
                 let a = args.bind(name, &["other"], 1)?;
-                let other = iterate(a[0].as_ref().unwrap_or(&Value::None))?;
-                let has = |set: &[Value], v: &Value| set.iter().any(|x| ops::equal(x, v));
+                let other = match make_set(iterate(a[0].as_ref().unwrap_or(&Value::None))?)? {
+                    Value::Set(other) => other,
+                    _ => return Err(type_error("a set was expected")),
+                };
+                heap::reserve_items(items.len().saturating_add(other.len()))?;
                 Ok(match name {
-                    "union" => make_set(items.iter().chain(&other).cloned().collect())?,
-                    "intersection" => Value::Set(items.iter().filter(|v| has(&other, v)).cloned().collect()),
-                    "difference" => Value::Set(items.iter().filter(|v| !has(&other, v)).cloned().collect()),
-                    "issubset" => Value::Bool(items.iter().all(|v| has(&other, v))),
-                    "issuperset" => Value::Bool(other.iter().all(|v| has(items, v))),
-                    _ => Value::Bool(!items.iter().any(|v| has(&other, v))),
+                    "union" => Value::set(items.iter().chain(other.iter()).cloned().collect()),
+                    "intersection" => Value::set(items.iter().filter(|v| other.contains(*v)).cloned().collect()),
+                    "difference" => Value::set(items.iter().filter(|v| !other.contains(*v)).cloned().collect()),
+                    "issubset" => Value::Bool(items.iter().all(|v| other.contains(v))),
+                    "issuperset" => Value::Bool(other.iter().all(|v| items.contains(v))),
+                    _ => Value::Bool(!items.iter().any(|v| other.contains(v))),
                 })
             }
             (other, _) => Err(no_attribute(other, name)),
@@ -208,61 +216,87 @@ impl Interp<'_, '_> {
     }
 
     /// A method that changes `target` in place; returns what the method returns.
+    /// A payload shared with another value is copied first (see `heap`).
     pub(crate) fn mutate(&mut self, target: &mut Value, name: &str, args: Args) -> Result<Value, ScriptError> {
         match target {
-            Value::List(items) => match name {
+            Value::List(heap) => match name {
                 "append" => {
                     let a = args.bind("append", &["object"], 1)?;
-                    check_len(items.len() + 1)?;
-                    items.push(a[0].clone().unwrap_or(Value::None));
+                    check_len(heap.len() + 1)?;
+                    let item = a[0].clone().unwrap_or(Value::None);
+                    let mut items = heap.make_mut();
+                    grow(&items, items.capacity(), 1)?;
+                    items.adopt(&item);
+                    items.push(item);
                     Ok(Value::None)
                 }
                 "extend" => {
                     let a = args.bind("extend", &["iterable"], 1)?;
                     let more = iterate(a[0].as_ref().unwrap_or(&Value::None))?;
-                    check_len(items.len() + more.len())?;
+                    check_len(heap.len() + more.len())?;
+                    let mut items = heap.make_mut();
+                    grow(&items, items.capacity(), more.len())?;
+                    for item in &more {
+                        items.adopt(item);
+                    }
                     items.extend(more);
                     Ok(Value::None)
                 }
                 "insert" => {
                     let a = args.bind("insert", &["index", "object"], 2)?;
                     let i = to_i64(a[0].as_ref().unwrap_or(&Value::None), "insert() index")?;
-                    let len = i64::try_from(items.len()).unwrap_or(i64::MAX);
+                    let len = i64::try_from(heap.len()).unwrap_or(i64::MAX);
                     let at = if i < 0 { (i + len).max(0) } else { i.min(len) };
-                    check_len(items.len() + 1)?;
-                    items.insert(usize::try_from(at).unwrap_or(0), a[1].clone().unwrap_or(Value::None));
+                    check_len(heap.len() + 1)?;
+                    let item = a[1].clone().unwrap_or(Value::None);
+                    let mut items = heap.make_mut();
+                    grow(&items, items.capacity(), 1)?;
+                    items.adopt(&item);
+                    items.insert(usize::try_from(at).unwrap_or(0), item);
                     Ok(Value::None)
                 }
                 "pop" => {
                     let a = args.bind("pop", &["index"], 0)?;
-                    if items.is_empty() {
+                    if heap.is_empty() {
                         return Err(ScriptError::new(ErrorKind::Index, "pop from empty list"));
                     }
                     let i = match &a[0] {
-                        None => items.len() - 1,
-                        Some(index) => super::interp::seq_index(items.len(), index, "list")
+                        None => heap.len() - 1,
+                        Some(index) => super::interp::seq_index(heap.len(), index, "list")
                             .map_err(|_| ScriptError::new(ErrorKind::Index, "pop index out of range"))?,
                     };
-                    Ok(items.remove(i))
+                    Ok(heap.make_mut().remove(i))
                 }
                 "remove" => {
                     let a = args.bind("remove", &["value"], 1)?;
                     let v = a[0].clone().unwrap_or(Value::None);
-                    let i = items
+                    stop::work(heap.len() as u64)?;
+                    let i = heap
                         .iter()
                         .position(|x| ops::equal(x, &v))
                         .ok_or_else(|| value_error("list.remove(x): x not in list"))?;
-                    items.remove(i);
+                    heap.make_mut().remove(i);
                     Ok(Value::None)
                 }
                 "clear" => {
                     args.bind("clear", &[], 0)?;
-                    items.clear();
+                    heap.make_mut().clear();
                     Ok(Value::None)
                 }
                 "reverse" => {
                     args.bind("reverse", &[], 0)?;
-                    items.reverse();
+                    let mut items = heap.make_mut();
+                    // In slices, so that a long reversal stops at its deadline.
+                    let len = items.len();
+                    let mut done = 0;
+                    while done < len / 2 {
+                        let chunk = (len / 2 - done).min(super::stop::WORK_SLICE as usize);
+                        for i in done..done + chunk {
+                            items.swap(i, len - 1 - i);
+                        }
+                        done += chunk;
+                        stop::work(chunk as u64)?;
+                    }
                     Ok(Value::None)
                 }
                 "sort" => {
@@ -270,29 +304,37 @@ impl Interp<'_, '_> {
                         return Err(type_error("sort() takes no positional arguments"));
                     }
                     let a = args.bind("sort", &["key", "reverse"], 0)?;
-                    let taken = std::mem::take(items);
-                    *items = self.sorted(taken, a[0].clone(), a[1].as_ref().is_some_and(Value::truthy))?;
+                    let taken = std::mem::take(&mut *heap.make_mut());
+                    let sorted = self.sorted(taken, a[0].clone(), a[1].as_ref().is_some_and(Value::truthy))?;
+                    *heap.make_mut() = sorted;
                     Ok(Value::None)
                 }
                 _ => Err(no_attribute(target, name)),
             },
-            Value::Dict(entries) => match name {
+            Value::Dict(heap) => match name {
                 "update" => {
                     if args.pos.len() > 1 {
                         return Err(type_error(format!("update expected at most 1 argument, got {}", args.pos.len())));
                     }
                     let a = (args.pos.into_iter().next(), args.kw);
+                    let mut entries = heap.make_mut();
                     if let Some(other) = a.0 {
-                        let pairs = match other {
-                            Value::Dict(pairs) => pairs,
+                        let pairs: Vec<(Value, Value)> = match other {
+                            Value::Dict(pairs) => {
+                                heap::reserve_items(pairs.len().saturating_mul(2))?;
+                                pairs.iter().map(|(k, v)| (k.0.clone(), v.clone())).collect()
+                            }
                             other => pairs_of(&other)?,
                         };
                         for (k, v) in pairs {
-                            dict_insert(entries, k, v)?;
+                            entries.adopt(&k);
+                            entries.adopt(&v);
+                            dict_insert(&mut entries, k, v)?;
                         }
                     }
                     for (k, v) in a.1 {
-                        dict_insert(entries, Value::Str(k), v)?;
+                        entries.adopt(&v);
+                        dict_insert(&mut entries, Value::str(k), v)?;
                     }
                     Ok(Value::None)
                 }
@@ -300,50 +342,61 @@ impl Interp<'_, '_> {
                     let has_default = args.pos.len() > 1;
                     let a = args.bind("pop", &["key", "default"], 1)?;
                     let key = a[0].clone().unwrap_or(Value::None);
-                    match entries.iter().position(|(k, _)| ops::equal(k, &key)) {
-                        Some(i) => Ok(entries.remove(i).1),
-                        None if has_default => Ok(a[1].clone().unwrap_or(Value::None)),
-                        None => Err(ScriptError::new(ErrorKind::Key, key.repr())),
+                    check_hashable(&key)?;
+                    if !heap.contains_key(&Key(key.clone())) {
+                        return match has_default {
+                            true => Ok(a[1].clone().unwrap_or(Value::None)),
+                            false => Err(ScriptError::new(ErrorKind::Key, key.repr())),
+                        };
                     }
+                    Ok(heap.make_mut().shift_remove(&Key(key)).unwrap_or(Value::None))
                 }
                 "setdefault" => {
                     let a = args.bind("setdefault", &["key", "default"], 1)?;
                     let key = a[0].clone().unwrap_or(Value::None);
-                    if let Some((_, v)) = entries.iter().find(|(k, _)| ops::equal(k, &key)) {
+                    check_hashable(&key)?;
+                    if let Some(v) = heap.get(&Key(key.clone())) {
                         return Ok(v.clone());
                     }
                     let default = a[1].clone().unwrap_or(Value::None);
-                    dict_insert(entries, key, default.clone())?;
+                    let mut entries = heap.make_mut();
+                    entries.adopt(&key);
+                    entries.adopt(&default);
+                    dict_insert(&mut entries, key, default.clone())?;
                     Ok(default)
                 }
                 "popitem" => {
                     args.bind("popitem", &[], 0)?;
-                    let (k, v) = entries
+                    let (k, v) = heap
+                        .make_mut()
                         .pop()
                         .ok_or_else(|| ScriptError::new(ErrorKind::Key, "'popitem(): dictionary is empty'"))?;
-                    Ok(Value::Tuple(vec![k, v]))
+                    Ok(Value::tuple(vec![k.0, v]))
                 }
                 "clear" => {
                     args.bind("clear", &[], 0)?;
-                    entries.clear();
+                    heap.make_mut().clear();
                     Ok(Value::None)
                 }
                 _ => Err(no_attribute(target, name)),
             },
-            Value::Set(items) => match name {
+            Value::Set(heap) => match name {
                 "add" | "discard" | "remove" => {
                     let a = args.bind(name, &["elem"], 1)?;
                     let v = a[0].clone().unwrap_or(Value::None);
-                    let at = items.iter().position(|x| ops::equal(x, &v));
-                    match (name, at) {
-                        ("add", None) => {
-                            let Value::Set(added) = make_set(vec![v])? else { return Ok(Value::None) };
-                            items.extend(added);
+                    check_hashable(&v)?;
+                    let present = heap.contains(&Key(v.clone()));
+                    match (name, present) {
+                        ("add", false) => {
+                            let mut items = heap.make_mut();
+                            grow_table(items.len(), items.capacity(), SET_ENTRY)?;
+                            items.adopt(&v);
+                            items.insert(Key(v));
                         }
-                        ("discard" | "remove", Some(i)) => {
-                            items.remove(i);
+                        ("discard" | "remove", true) => {
+                            heap.make_mut().shift_remove(&Key(v));
                         }
-                        ("remove", None) => return Err(ScriptError::new(ErrorKind::Key, v.repr())),
+                        ("remove", false) => return Err(ScriptError::new(ErrorKind::Key, v.repr())),
                         _ => {}
                     }
                     Ok(Value::None)
@@ -351,23 +404,27 @@ impl Interp<'_, '_> {
                 "update" => {
                     let a = args.bind("update", &["other"], 1)?;
                     let more = iterate(a[0].as_ref().unwrap_or(&Value::None))?;
-                    let mut all = std::mem::take(items);
-                    all.extend(more);
-                    if let Value::Set(merged) = make_set(all)? {
-                        *items = merged;
+                    for item in &more {
+                        check_hashable(item)?;
+                    }
+                    let mut items = heap.make_mut();
+                    grow_table(items.len() + more.len(), items.capacity(), SET_ENTRY)?;
+                    for item in more {
+                        items.adopt(&item);
+                        items.insert(Key(item));
                     }
                     Ok(Value::None)
                 }
                 "pop" => {
                     args.bind("pop", &[], 0)?;
-                    if items.is_empty() {
+                    if heap.is_empty() {
                         return Err(ScriptError::new(ErrorKind::Key, "'pop from an empty set'"));
                     }
-                    Ok(items.remove(0))
+                    Ok(heap.make_mut().shift_remove_index(0).map_or(Value::None, |k| k.0))
                 }
                 "clear" => {
                     args.bind("clear", &[], 0)?;
-                    items.clear();
+                    heap.make_mut().clear();
                     Ok(Value::None)
                 }
                 _ => Err(no_attribute(target, name)),
@@ -375,6 +432,27 @@ impl Interp<'_, '_> {
             other => Err(no_attribute(other, name)),
         }
     }
+}
+
+/// What one set entry weighs besides its slot (see `heap`).
+const SET_ENTRY: usize = heap::SLOT + 2 * std::mem::size_of::<usize>();
+
+/// Reserves, against the memory budget, what `more` items pushed onto `items` would
+/// make it grow by (a vector doubles its room when it is full).
+fn grow(items: &[Value], capacity: usize, more: usize) -> Result<(), ScriptError> {
+    let needed = items.len().saturating_add(more);
+    if needed <= capacity {
+        return Ok(());
+    }
+    heap::reserve_items(needed.max(capacity.saturating_mul(2)) - capacity)
+}
+
+/// Reserves what a table of `capacity` entries grows by to hold `len` entries.
+pub(crate) fn grow_table(len: usize, capacity: usize, entry: usize) -> Result<(), ScriptError> {
+    if len < capacity {
+        return Ok(());
+    }
+    heap::reserve(capacity.max(len).max(4).saturating_mul(entry))
 }
 
 fn check_len(len: usize) -> Result<(), ScriptError> {
@@ -402,7 +480,7 @@ pub(crate) fn pairs_of(v: &Value) -> Result<Vec<(Value, Value)>, ScriptError> {
 }
 
 fn str_method(s: &str, name: &str, args: Args) -> Result<Value, ScriptError> {
-    let text = |v: String| Ok(Value::Str(v));
+    let text = |v: String| Ok(Value::str(v));
     match name {
         "lower" => {
             args.bind("lower", &[], 0)?;
@@ -429,7 +507,7 @@ fn str_method(s: &str, name: &str, args: Args) -> Result<Value, ScriptError> {
             let a = args.bind(name, &["prefix"], 1)?;
             let arg = a[0].clone().unwrap_or(Value::None);
             let candidates = match &arg {
-                Value::Tuple(items) => items.clone(),
+                Value::Tuple(items) => items.to_vec(),
                 other => vec![other.clone()],
             };
             let mut hit = false;
@@ -483,14 +561,14 @@ fn str_method(s: &str, name: &str, args: Args) -> Result<Value, ScriptError> {
                     }
                 }
             };
-            Ok(Value::List(parts.into_iter().map(Value::Str).collect()))
+            Ok(Value::list(parts.into_iter().map(Value::str).collect()))
         }
         "splitlines" => {
             args.bind("splitlines", &[], 0)?;
             if s.len() > ops::MAX_ITEMS {
                 return Err(ScriptError::new(ErrorKind::Memory, "string too long to split"));
             }
-            Ok(Value::List(s.lines().map(|p| Value::Str(p.to_owned())).collect()))
+            Ok(Value::list(s.lines().map(|p| Value::str(p.to_owned())).collect()))
         }
         "join" => {
             let a = args.bind("join", &["iterable"], 1)?;
@@ -507,11 +585,20 @@ fn str_method(s: &str, name: &str, args: Args) -> Result<Value, ScriptError> {
                 }
             }
             let total =
-                parts.iter().map(String::len).sum::<usize>().saturating_add(s.len().saturating_mul(parts.len()));
+                parts.iter().map(|p| p.len()).sum::<usize>().saturating_add(s.len().saturating_mul(parts.len()));
             if total > ops::MAX_LEN {
                 return Err(ScriptError::new(ErrorKind::Memory, "result too large"));
             }
-            text(parts.join(s))
+            heap::reserve_text(total)?;
+            let mut joined = String::with_capacity(total);
+            for (i, part) in parts.iter().enumerate() {
+                if i > 0 {
+                    joined.push_str(s);
+                }
+                joined.push_str(part);
+                stop::work(1)?;
+            }
+            text(joined)
         }
         "find" | "rfind" | "index" | "rindex" | "count" => {
             let a = args.bind(name, &["sub", "start", "end"], 1)?;
@@ -589,7 +676,7 @@ fn str_method(s: &str, name: &str, args: Args) -> Result<Value, ScriptError> {
                 _ => cased && title_case(s) == s,
             }))
         }
-        "format" => Ok(Value::Str(super::format::str_format(s, &args.pos, &args.kw)?)),
+        "format" => Ok(Value::str(super::format::str_format(s, &args.pos, &args.kw)?)),
         "zfill" => {
             let a = args.bind("zfill", &["width"], 1)?;
             let width = usize::try_from(to_i64(a[0].as_ref().unwrap_or(&Value::None), "width")?).unwrap_or(0);
@@ -648,7 +735,7 @@ fn str_method(s: &str, name: &str, args: Args) -> Result<Value, ScriptError> {
                 None if name == "partition" => [s, "", ""],
                 None => ["", "", s],
             };
-            Ok(Value::Tuple(parts.iter().map(|p| Value::Str((*p).to_owned())).collect()))
+            Ok(Value::tuple(parts.iter().map(|p| Value::str((*p).to_owned())).collect()))
         }
         "removeprefix" | "removesuffix" => {
             let a = args.bind(name, &["affix"], 1)?;

@@ -20,6 +20,9 @@
 //! - `builtins` and `methods`: the builtin functions and the methods of `str`, `list`, `tuple`, `dict`, `set`.
 //! - `value`, `ops` and `format`: runtime values, `str`/`repr`, arithmetic and
 //!   comparisons with Python semantics, format specs, `%` and `str.format`.
+//! - `heap`: the shared, copy-on-write payloads of strings and containers, the
+//!   live memory meter they are counted on, and the hash-table keys of dicts and sets.
+//! - `stop`: the deadline and cancel flag ([`Stop`]) a run checks as it works.
 //! - `pyautogui`: the pyautogui 0.9.54 module mapped to [`Action`]s.
 //! - `stdlib`: `time`, `os`, `os.path` (ntpath), `subprocess`, `platform`, `sys`, `PIL`, `pyperclip`.
 //! - `computer`: the Navi `Computer` object over [`ComputerState`]; `difflib` for its fuzzy window match.
@@ -28,14 +31,17 @@
 //!
 //! # Safety properties
 //!
-//! Parsing never panics and always ends (nesting is capped at
-//! [`parser::MAX_DEPTH`] and [`parser::MAX_BLOCK_DEPTH`]). Running always ends:
-//! loop iterations and function calls together are capped at [`MAX_STEPS`],
-//! calls nest at most [`MAX_CALL_DEPTH`] deep, and what a program builds is
-//! charged against an allocation budget; these limits stop the run whatever it
-//! catches. Integers are 64-bit with overflow errors; strings and lists are
-//! capped at 10 million items; sleeps, clicks and key presses go through the
-//! host, which may refuse them.
+//! Parsing never panics and always ends (programs are capped at
+//! [`parser::MAX_SOURCE_BYTES`], nesting at [`parser::MAX_DEPTH`] and
+//! [`parser::MAX_BLOCK_DEPTH`]). Running always ends: loop iterations and
+//! function calls together are capped at [`MAX_STEPS`], calls nest at most
+//! [`MAX_CALL_DEPTH`] deep, what a program holds at once is counted live against
+//! [`MAX_MEMORY`] (sized results are refused before they are built), and a
+//! [`Stop`] (the request's deadline and cancel flag) is checked at every step and
+//! every slice of work inside long built-ins; these limits stop the run whatever
+//! it catches. Integers are 64-bit with overflow errors; strings are capped at
+//! 10 million bytes and lists at a million items; sleeps, clicks and key presses
+//! go through the host, which may refuse them.
 
 use crate::action::Action;
 
@@ -46,6 +52,7 @@ mod computer;
 mod difflib;
 mod error;
 mod format;
+mod heap;
 pub mod host;
 mod interp;
 mod methods;
@@ -53,6 +60,7 @@ mod ops;
 pub mod parser;
 mod pyautogui;
 mod stdlib;
+mod stop;
 mod value;
 
 #[cfg(test)]
@@ -63,8 +71,11 @@ pub use computer::ComputerState;
 pub use difflib::{get_close_matches, ratio as sequence_ratio};
 pub use error::{ErrorKind, ParseError, ScriptError};
 pub use host::{CommandArg, CommandOutput, HostError, HostResult, PathKind, RecordingHost, ScriptHost};
-pub use interp::{run, Globals, RunOutput, KNOWN_MODULES, MAX_CALL_DEPTH, MAX_STEPS};
+pub use interp::{
+    run, run_measured, Globals, RunOutput, RunStats, KNOWN_MODULES, MAX_CALL_DEPTH, MAX_MEMORY, MAX_STEPS,
+};
 pub use parser::parse;
+pub use stop::Stop;
 pub use value::{float_repr, str_repr};
 
 /// Parses and runs `src` in one step.
@@ -92,7 +103,7 @@ pub fn run_source(src: &str, host: &mut dyn ScriptHost, globals: Globals<'_>) ->
 pub fn actions_from_pyautogui(code: &str, screen: (u32, u32), cursor: (i32, i32)) -> Result<Vec<Action>, ScriptError> {
     let program = parse(code)?;
     let mut host = RecordingHost::new(screen, cursor);
-    let globals = Globals { computer: None, computer_action_delay: 0.25, preimport: &["pyautogui", "time"] };
+    let globals = Globals { preimport: &["pyautogui", "time"], ..Globals::python() };
     run(&program, &mut host, globals)?;
     Ok(host.actions)
 }

@@ -9,6 +9,7 @@ use std::cmp::Ordering;
 
 use super::ast::{BinOp, UnaryOp};
 use super::error::{type_error, value_error, ErrorKind, ScriptError};
+use super::heap::{self, reserve_items, Heap, SetMap};
 use super::value::Value;
 
 /// The longest string (in bytes) an operation may build.
@@ -89,35 +90,41 @@ pub(crate) fn binary(op: BinOp, left: &Value, right: &Value) -> Result<Value, Sc
         };
     }
     match (op, left, right) {
-        (BinOp::Mod, Value::Str(text), args) => Ok(Value::Str(super::format::percent(text, args)?)),
+        (BinOp::Mod, Value::Str(text), args) => Ok(Value::str(super::format::percent(text, args)?)),
         (BinOp::BitOr | BinOp::BitAnd | BinOp::Sub | BinOp::BitXor, Value::Set(a), Value::Set(b)) => {
-            let has = |set: &[Value], v: &Value| set.iter().any(|x| equal(x, v));
-            let items: Vec<Value> = match op {
-                BinOp::BitOr => a.iter().chain(b.iter().filter(|v| !has(a, v))).cloned().collect(),
-                BinOp::BitAnd => a.iter().filter(|v| has(b, v)).cloned().collect(),
-                BinOp::Sub => a.iter().filter(|v| !has(b, v)).cloned().collect(),
-                _ => a.iter().filter(|v| !has(b, v)).chain(b.iter().filter(|v| !has(a, v))).cloned().collect(),
+            reserve_items(a.len().saturating_add(b.len()))?;
+            let items: SetMap = match op {
+                BinOp::BitOr => a.iter().chain(b.iter()).cloned().collect(),
+                BinOp::BitAnd => a.iter().filter(|v| b.contains(*v)).cloned().collect(),
+                BinOp::Sub => a.iter().filter(|v| !b.contains(*v)).cloned().collect(),
+                _ => {
+                    a.iter().filter(|v| !b.contains(*v)).chain(b.iter().filter(|v| !a.contains(*v))).cloned().collect()
+                }
             };
-            Ok(Value::Set(items))
+            Ok(Value::set(items))
         }
         (BinOp::BitOr, Value::Dict(a), Value::Dict(b)) => {
+            reserve_items(a.len().saturating_add(b.len()).saturating_mul(2))?;
             let mut merged = a.clone();
-            for (k, v) in b {
-                match merged.iter_mut().find(|(existing, _)| equal(existing, k)) {
-                    Some(entry) => entry.1 = v.clone(),
-                    None => merged.push((k.clone(), v.clone())),
-                }
+            let mut table = merged.make_mut();
+            for (k, v) in b.iter() {
+                table.insert(k.clone(), v.clone());
             }
+            drop(table);
             Ok(Value::Dict(merged))
         }
         (BinOp::Add, Value::Str(a), Value::Str(b)) => {
             if a.len() + b.len() > MAX_LEN {
                 return Err(too_big(MAX_LEN));
             }
-            Ok(Value::Str(format!("{a}{b}")))
+            heap::reserve_text(a.len() + b.len())?;
+            let mut text = String::with_capacity(a.len() + b.len());
+            text.push_str(a);
+            text.push_str(b);
+            Ok(Value::str(text))
         }
-        (BinOp::Add, Value::List(a), Value::List(b)) => Ok(Value::List(concat(a, b)?)),
-        (BinOp::Add, Value::Tuple(a), Value::Tuple(b)) => Ok(Value::Tuple(concat(a, b)?)),
+        (BinOp::Add, Value::List(a), Value::List(b)) => Ok(Value::list(concat(a, b)?)),
+        (BinOp::Add, Value::Tuple(a), Value::Tuple(b)) => Ok(Value::tuple(concat(a, b)?)),
         (BinOp::Add, Value::Str(_), other) => {
             Err(type_error(format!("can only concatenate str (not \"{}\") to str", other.type_name())))
         }
@@ -148,32 +155,49 @@ fn operand_error(op: BinOp, left: &Value, right: &Value) -> ScriptError {
     ))
 }
 
+/// `a + b` for lists and tuples: the items are shared, not copied.
 fn concat(a: &[Value], b: &[Value]) -> Result<Vec<Value>, ScriptError> {
     if a.len() + b.len() > MAX_ITEMS {
         return Err(too_big(MAX_ITEMS));
     }
+    reserve_items(a.len() + b.len())?;
     Ok(a.iter().chain(b).cloned().collect())
 }
 
+/// `seq * times`: the result's size is checked against the item caps and the memory
+/// budget before it is built, and its items share their payloads.
 fn repeat(seq: &Value, times: usize) -> Result<Value, ScriptError> {
     let (len, limit) = match seq {
         Value::Str(s) => (s.len(), MAX_LEN),
         Value::List(v) | Value::Tuple(v) => (v.len(), MAX_ITEMS),
         _ => (0, 0),
     };
-    if len.checked_mul(times).is_none_or(|total| total > limit) {
+    let Some(total) = len.checked_mul(times).filter(|total| *total <= limit) else {
         return Err(too_big(limit));
-    }
+    };
     Ok(match seq {
-        Value::Str(s) => Value::Str(s.repeat(times)),
-        Value::List(v) => Value::List(repeat_items(v, times)),
-        Value::Tuple(v) => Value::Tuple(repeat_items(v, times)),
+        Value::Str(s) => {
+            heap::reserve_text(total)?;
+            Value::str(s.repeat(times))
+        }
+        Value::List(v) => Value::list(repeat_items(v, times, total)?),
+        Value::Tuple(v) => Value::tuple(repeat_items(v, times, total)?),
         other => other.clone(),
     })
 }
 
-fn repeat_items(items: &[Value], times: usize) -> Vec<Value> {
-    (0..times).flat_map(|_| items.iter().cloned()).collect()
+fn repeat_items(items: &[Value], times: usize, total: usize) -> Result<Vec<Value>, ScriptError> {
+    reserve_items(total)?;
+    if items.is_empty() {
+        // `[] * 10**18` is empty at once, not after 10**18 rounds of nothing.
+        return Ok(Vec::new());
+    }
+    let mut out = Vec::with_capacity(total);
+    for _ in 0..times {
+        out.extend(items.iter().cloned());
+        super::stop::work(items.len() as u64)?;
+    }
+    Ok(out)
 }
 
 fn int_op(op: BinOp, a: i64, b: i64) -> Result<Value, ScriptError> {
@@ -319,7 +343,7 @@ pub(crate) fn compare_with(symbol: &str, a: &Value, b: &Value) -> Result<Orderin
     match (a, b) {
         (Value::Str(x), Value::Str(y)) => Ok(x.cmp(y)),
         (Value::List(x), Value::List(y)) | (Value::Tuple(x), Value::Tuple(y)) => {
-            for (p, q) in x.iter().zip(y) {
+            for (p, q) in x.iter().zip(y.iter()) {
                 if !equal(p, q) {
                     return compare_with(symbol, p, q);
                 }
@@ -367,11 +391,12 @@ pub(crate) fn equal(a: &Value, b: &Value) -> bool {
     }
     let seq = |x: &[Value], y: &[Value]| x.len() == y.len() && x.iter().zip(y).all(|(p, q)| equal(p, q));
     match (a, b) {
-        (Value::List(x), Value::List(y)) | (Value::Tuple(x), Value::Tuple(y)) => seq(x, y),
-        (Value::Set(x), Value::Set(y)) => x.len() == y.len() && x.iter().all(|p| y.iter().any(|q| equal(p, q))),
+        (Value::List(x), Value::List(y)) | (Value::Tuple(x), Value::Tuple(y)) => Heap::ptr_eq(x, y) || seq(x, y),
+        (Value::Set(x), Value::Set(y)) => x.len() == y.len() && x.iter().all(|p| y.contains(p)),
         (Value::Dict(x), Value::Dict(y)) => {
-            x.len() == y.len() && x.iter().all(|(k, v)| y.iter().any(|(k2, v2)| equal(k, k2) && equal(v, v2)))
+            x.len() == y.len() && x.iter().all(|(k, v)| y.get(k).is_some_and(|v2| equal(v, v2)))
         }
+        (Value::Str(x), Value::Str(y)) => x.as_str() == y.as_str(),
         (Value::Range(..), Value::Range(..)) => a == b,
         (Value::Type(t), Value::Function { module: "", name })
         | (Value::Function { module: "", name }, Value::Type(t)) => t == name,
@@ -459,9 +484,9 @@ mod tests {
         check(BinOp::Pow, I(2), I(10), I(1024));
         check(BinOp::Pow, I(2), I(-1), F(0.5));
         check(BinOp::Add, Value::Bool(true), I(1), I(2));
-        check(BinOp::Mul, Value::Str("ab".into()), I(3), Value::Str("ababab".into()));
-        check(BinOp::Mul, I(-1), Value::Str("ab".into()), Value::Str(String::new()));
-        check(BinOp::Add, Value::Str("a".into()), Value::Str("b".into()), Value::Str("ab".into()));
+        check(BinOp::Mul, Value::str("ab"), I(3), Value::str("ababab"));
+        check(BinOp::Mul, I(-1), Value::str("ab"), Value::str(""));
+        check(BinOp::Add, Value::str("a"), Value::str("b"), Value::str("ab"));
     }
 
     #[test]
@@ -469,15 +494,15 @@ mod tests {
         let err = |op, a, b| binary(op, &a, &b).unwrap_err().python_message();
         assert_eq!(err(BinOp::Div, Value::Int(1), Value::Int(0)), "ZeroDivisionError: division by zero");
         assert_eq!(
-            err(BinOp::Add, Value::Str("a".into()), Value::Int(1)),
+            err(BinOp::Add, Value::str("a"), Value::Int(1)),
             "TypeError: can only concatenate str (not \"int\") to str"
         );
         assert_eq!(
-            err(BinOp::Sub, Value::Str("a".into()), Value::Int(1)),
+            err(BinOp::Sub, Value::str("a"), Value::Int(1)),
             "TypeError: unsupported operand type(s) for -: 'str' and 'int'"
         );
         assert!(err(BinOp::Mul, Value::Int(i64::MAX), Value::Int(2)).starts_with("OverflowError"));
-        assert!(err(BinOp::Mul, Value::Str("ab".into()), Value::Int(1 << 40)).starts_with("MemoryError"));
+        assert!(err(BinOp::Mul, Value::str("ab"), Value::Int(1 << 40)).starts_with("MemoryError"));
     }
 
     #[test]

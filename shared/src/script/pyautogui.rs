@@ -107,15 +107,15 @@ pub(crate) fn attr(name: &str, out: &RunOutput) -> Option<Value> {
         "PAUSE" => Value::Float(out.pause.unwrap_or(0.0)),
         "MINIMUM_DURATION" => Value::Float(0.1),
         "MINIMUM_SLEEP" => Value::Float(0.05),
-        "LEFT" => Value::Str("left".into()),
-        "MIDDLE" => Value::Str("middle".into()),
-        "RIGHT" => Value::Str("right".into()),
-        "PRIMARY" => Value::Str("primary".into()),
-        "SECONDARY" => Value::Str("secondary".into()),
+        "LEFT" => Value::str("left"),
+        "MIDDLE" => Value::str("middle"),
+        "RIGHT" => Value::str("right"),
+        "PRIMARY" => Value::str("primary"),
+        "SECONDARY" => Value::str("secondary"),
         "KEYBOARD_KEYS" | "KEY_NAMES" => {
-            let chars = (' '..='~').chain(['\t', '\n', '\r']).map(|c| Value::Str(c.to_string()));
-            let named = crate::keys::NAMED_KEYS.iter().map(|k| Value::Str((*k).to_owned()));
-            Value::List(chars.chain(named).collect())
+            let chars = (' '..='~').chain(['\t', '\n', '\r']).map(|c| Value::str(c.to_string()));
+            let named = crate::keys::NAMED_KEYS.iter().map(|k| Value::str((*k).to_owned()));
+            Value::list(chars.chain(named).collect())
         }
         _ => return None,
     })
@@ -282,7 +282,7 @@ fn dispatch(it: &mut Interp<'_, '_>, name: &'static str, args: Args) -> Result<V
             // A single list argument is accepted too, as later pyautogui versions do.
             let keys = match args.pos.as_slice() {
                 [seq @ (Value::List(_) | Value::Tuple(_))] => key_list(name, seq)?,
-                pos => key_list(name, &Value::Tuple(pos.to_vec()))?,
+                pos => key_list(name, &Value::tuple(pos.to_vec()))?,
             };
             hotkey(it, keys, interval)?;
         }
@@ -330,12 +330,12 @@ fn dispatch(it: &mut Interp<'_, '_>, name: &'static str, args: Args) -> Result<V
         "getActiveWindowTitle" => {
             args.bind(name, &[], 0)?;
             let title = it.host.active_window_title();
-            return Ok(Value::Str(it.host(title)?));
+            return Ok(Value::str(it.host(title)?));
         }
         "getAllTitles" => {
             args.bind(name, &[], 0)?;
             let titles = it.host.window_titles();
-            return Ok(Value::List(it.host(titles)?.into_iter().map(Value::Str).collect()));
+            return Ok(Value::list(it.host(titles)?.into_iter().map(Value::str).collect()));
         }
         "sleep" => {
             let a = args.bind(name, &["seconds"], 1)?;

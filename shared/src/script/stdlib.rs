@@ -60,7 +60,7 @@ pub(crate) fn attr(module: &'static str, name: &str) -> Option<Value> {
         let module = if module == "ntpath" { "os.path" } else { module };
         return Some(Value::Function { module, name: f });
     }
-    let s = |v: &str| Some(Value::Str(v.to_owned()));
+    let s = |v: &str| Some(Value::str(v.to_owned()));
     match (module, name) {
         ("os", "path") => Some(Value::Module("os.path")),
         ("os", "environ") => Some(Value::Object(Object::Environ)),
@@ -77,7 +77,7 @@ pub(crate) fn attr(module: &'static str, name: &str) -> Option<Value> {
         ("subprocess", "CREATE_NO_WINDOW") => Some(Value::Int(0x0800_0000)),
         ("subprocess", "DETACHED_PROCESS") => Some(Value::Int(0x8)),
         ("sys", "platform") => s("win32"),
-        ("sys", "argv") => Some(Value::List(vec![Value::Str("-c".into())])),
+        ("sys", "argv") => Some(Value::list(vec![Value::str("-c")])),
         ("sys", "maxsize") => Some(Value::Int(i64::MAX)),
         ("PIL", "Image") => Some(Value::Module("PIL.Image")),
         ("PIL", "ImageGrab") => Some(Value::Module("PIL.ImageGrab")),
@@ -135,7 +135,7 @@ fn misc(it: &mut Interp<'_, '_>, module: &str, name: &str, args: Args) -> Result
         ("pyperclip", "paste") => {
             args.bind("paste", &[], 0)?;
             let text = it.host.clipboard_get_text();
-            Ok(Value::Str(it.host(text)?))
+            Ok(Value::str(it.host(text)?))
         }
         ("sys", "exit") => {
             let a = args.bind("exit", &["status"], 0)?;
@@ -143,7 +143,7 @@ fn misc(it: &mut Interp<'_, '_>, module: &str, name: &str, args: Args) -> Result
         }
         ("platform", _) => {
             args.bind(name, &[], 0)?;
-            Ok(Value::Str(match name {
+            Ok(Value::str(match name {
                 "system" => "Windows".to_owned(),
                 "release" => "10".to_owned(),
                 "machine" => "AMD64".to_owned(),
@@ -169,7 +169,7 @@ fn misc(it: &mut Interp<'_, '_>, module: &str, name: &str, args: Args) -> Result
                     };
                     let (l, t) = (to_i64(l, "left")?, to_i64(t, "top")?);
                     let (r, b) = (to_i64(r, "right")?, to_i64(b, "bottom")?);
-                    Some(Value::Tuple(vec![Value::Int(l), Value::Int(t), Value::Int(r - l), Value::Int(b - t)]))
+                    Some(Value::tuple(vec![Value::Int(l), Value::Int(t), Value::Int(r - l), Value::Int(b - t)]))
                 }
             };
             super::pyautogui::screenshot_image(it, &region)
@@ -201,7 +201,7 @@ fn os(it: &mut Interp<'_, '_>, name: &str, args: Args) -> Result<Value, ScriptEr
                 Value::Str(s) => s,
                 other => return Err(type_error(format!("str expected, not {}", other.type_name()))),
             };
-            Ok(it.host.env_var(key).map(Value::Str).unwrap_or_else(|| arg(&a, 1).clone()))
+            Ok(it.host.env_var(key).map(Value::str).unwrap_or_else(|| arg(&a, 1).clone()))
         }
         "system" => {
             let a = args.bind("system", &["command"], 1)?;
@@ -220,7 +220,7 @@ fn os(it: &mut Interp<'_, '_>, name: &str, args: Args) -> Result<Value, ScriptEr
             }
             .to_owned();
             let names = it.host.list_dir(&path);
-            Ok(Value::List(it.host(names)?.into_iter().map(Value::Str).collect()))
+            Ok(Value::list(it.host(names)?.into_iter().map(Value::str).collect()))
         }
         "startfile" => {
             let a = args.bind("startfile", &["path", "operation"], 1)?;
@@ -241,8 +241,8 @@ fn os(it: &mut Interp<'_, '_>, name: &str, args: Args) -> Result<Value, ScriptEr
 }
 
 fn os_path(it: &mut Interp<'_, '_>, name: &str, args: Args) -> Result<Value, ScriptError> {
-    let s = |v: String| Ok(Value::Str(v));
-    let pair = |(a, b): (String, String)| Ok(Value::Tuple(vec![Value::Str(a), Value::Str(b)]));
+    let s = |v: String| Ok(Value::str(v));
+    let pair = |(a, b): (String, String)| Ok(Value::tuple(vec![Value::str(a), Value::str(b)]));
     if name == "join" {
         if !args.kw.is_empty() {
             return Err(type_error("join() takes no keyword arguments"));
@@ -308,11 +308,11 @@ fn stream(v: Option<&Value>, what: &str) -> Result<Stream, ScriptError> {
 
 fn command_arg(v: &Value) -> Result<CommandArg, ScriptError> {
     match v {
-        Value::Str(s) => Ok(CommandArg::Line(s.clone())),
+        Value::Str(s) => Ok(CommandArg::Line(s.to_string())),
         Value::List(items) | Value::Tuple(items) => items
             .iter()
             .map(|item| match item {
-                Value::Str(s) => Ok(s.clone()),
+                Value::Str(s) => Ok(s.to_string()),
                 other => {
                     Err(type_error(format!("expected str, bytes or os.PathLike object, not {}", other.type_name())))
                 }
@@ -406,7 +406,7 @@ fn subprocess(it: &mut Interp<'_, '_>, name: &str, args: Args) -> Result<Value, 
             stdout: captured_out,
             stderr: captured_err,
         }),
-        "check_output" => Value::Str(captured_out.unwrap_or_default()),
+        "check_output" => Value::str(captured_out.unwrap_or_default()),
         "check_call" => Value::Int(0),
         _ => Value::Int(code),
     })

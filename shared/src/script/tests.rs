@@ -418,7 +418,7 @@ fn computer_state() -> ComputerState {
 }
 
 fn navi(state: &mut ComputerState, host: &mut FakeHost, src: &str) -> Result<RunOutput, ScriptError> {
-    let globals = Globals { computer: Some(state), computer_action_delay: 0.25, preimport: &[] };
+    let globals = Globals::computer(state);
     run_source(src, host, globals)
 }
 
@@ -726,14 +726,192 @@ fn runtime_errors_are_python_exceptions() {
 fn resource_limits_stop_hostile_programs() {
     let nested = format!("a = 1\n{}", "a = [a]\n".repeat(150));
     assert_eq!(python_err(&nested), "line 102: MemoryError: value nested more than 100 levels deep");
-    let copies = format!("x = 'a' * 10000000\ny = [{}]", vec!["x"; 40].join(", "));
-    assert_eq!(python_err(&copies), "line 2: MemoryError: the program allocated more than 256 MiB");
-    let prints = "x = 'a' * 5000000\n".to_owned() + &"print(x)\n".repeat(40);
-    assert!(python_err(&prints).contains("MemoryError: the program allocated more than 256 MiB"));
+    let appended = "a = []\nfor i in range(500):\n    a.append(a)\n";
+    assert!(python_err(appended).contains("MemoryError: value nested more than 100 levels deep"));
+    let inner = "a = [[]]\nfor i in range(500):\n    a[0].append(a)\n";
+    assert!(python_err(inner).contains("MemoryError: value nested more than 100 levels deep"));
+    let prints = "x = 'a' * 5000000\n".to_owned() + &"print(x)\n".repeat(60);
+    assert!(python_err(&prints).contains("MemoryError: the program would hold more than 256 MiB"));
     assert!(python_err("x = ('ab' * 1000000).replace('a', 'aaaaaaaaaa')").contains("MemoryError"));
     assert!(python_err("x = list('a' * 2000000)").contains("MemoryError"));
     assert!(python_err("x = [1] * 2000000").contains("MemoryError"));
     assert!(python_err("x = sum([[1]] * 1000, [])").contains("NotImplementedError"));
+    assert_eq!(printed("print(len([] * 10**18), len('' * 10**18))"), "0 0\n");
+}
+
+// ---- Memory and time bounds (issue 25, items 1 and 2) ----------------------------------------
+
+#[test]
+fn a_program_over_the_source_cap_is_refused_before_parsing() {
+    let at_cap = format!("x = 1\n{}", "#".repeat(parser::MAX_SOURCE_BYTES - 6));
+    assert_eq!(at_cap.len(), parser::MAX_SOURCE_BYTES);
+    assert!(parse(&at_cap).is_ok());
+    let over = format!("{at_cap}#");
+    let err = parse(&over).unwrap_err();
+    assert_eq!((err.line, err.column), (1, 1));
+    assert_eq!(err.message, "the program is 262145 bytes long; this interpreter reads programs of at most 256 KiB");
+}
+
+/// Runs `src` as `python -c`, stopping as `stop` says, with what it cost.
+fn measured(src: &str, stop: Stop) -> (Result<RunOutput, ScriptError>, RunStats) {
+    let program = parse(src).unwrap_or_else(|e| panic!("{src}\n{e}"));
+    let mut host = FakeHost::new();
+    run_measured(&program, &mut host, Globals::python().with_stop(stop))
+}
+
+const MIB: usize = 1 << 20;
+
+/// The bytes a list of `n` items holds (one value slot each, as the interpreter counts them).
+fn list_bytes(n: usize) -> usize {
+    n * std::mem::size_of::<super::value::Value>()
+}
+
+#[test]
+fn repetition_shares_its_items_instead_of_copying_them() {
+    // The probe's 35-byte program: a million references to one 1 MB string, as in CPython.
+    let (result, stats) = measured("x = ['a' * 10**6] * 10**6\nprint(len(x), len(x[5]))", Stop::never());
+    assert_eq!(result.map(|o| o.stdout).unwrap(), "1000000 1000000\n");
+    assert!(stats.peak_bytes < MIB + list_bytes(1_000_000) + MIB, "peak {}", stats.peak_bytes);
+    assert_eq!(stats.live_bytes_after, 0, "everything the program held was given back");
+    for src in ["x = [[0] * 10**6] * 10**6", "x = (('a' * 10**6,) * 10**6)", "x = [{'k': 'a' * 10**6}] * 10**6"] {
+        let (result, stats) = measured(src, Stop::never());
+        assert!(result.is_ok(), "{src}: {result:?}");
+        assert!(stats.peak_bytes < 2 * list_bytes(1_000_000) + 2 * MIB, "{src}: peak {}", stats.peak_bytes);
+    }
+}
+
+#[test]
+fn an_allocation_past_the_budget_fails_before_it_happens() {
+    // Joining the shared strings would make 10**12 bytes: refused before anything is built.
+    let (result, stats) = measured("x = ['a' * 10**6] * 10**6\ny = ''.join(x)", Stop::never());
+    let err = result.unwrap_err();
+    assert_eq!(err.kind, ErrorKind::Memory, "{err}");
+    assert!(stats.peak_bytes < MIB + list_bytes(1_000_000) * 2 + MIB, "peak {}", stats.peak_bytes);
+    // Distinct values: the run stops at the budget, never far past it.
+    for src in [
+        "x = ['a' * 10**6 + str(i) for i in range(10**6)]",
+        "d = {i: 'a' * 10**6 + str(i) for i in range(10**6)}",
+        "x = []\nfor i in range(10**5):\n    x.append('b' * 10**6 + str(i))",
+        "x = [list(range(10**5)) for i in range(10**4)]",
+    ] {
+        let (result, stats) = measured(src, Stop::never());
+        let err = result.unwrap_err();
+        assert_eq!(err.kind, ErrorKind::Memory, "{src}: {err}");
+        assert_eq!(err.message, "the program would hold more than 256 MiB", "{src}");
+        assert!(stats.peak_bytes <= MAX_MEMORY + 4 * MIB, "{src}: peak {}", stats.peak_bytes);
+        assert_eq!(stats.live_bytes_after, 0, "{src}");
+    }
+}
+
+#[test]
+fn the_budget_counts_what_is_held_now_not_what_was_ever_made() {
+    // CPython runs these; each iteration's value replaces the last.
+    let (result, stats) = measured("for i in range(99999):\n    s = 'a' * 3000\nprint(len(s))", Stop::never());
+    assert_eq!(result.unwrap().stdout, "3000\n");
+    assert!(stats.peak_bytes < 64 * 1024, "peak {}", stats.peak_bytes);
+    assert_eq!(stats.live_bytes_after, 0);
+    // Membership, sums and counts read the items in place.
+    let src = "x = list(range(10000))\nn = 0\nfor i in range(300):\n    n += (-1 in x) + sum(x) + x.count(-1) + x.index(9999)\nprint(n)";
+    let (result, stats) = measured(src, Stop::never());
+    assert_eq!(result.unwrap().stdout, format!("{}\n", 300_u64 * (49_995_000 + 9999)));
+    assert!(stats.peak_bytes < 3 * list_bytes(10_000), "peak {}", stats.peak_bytes);
+    // A big string reassigned in a loop is given back each time.
+    let src = "for i in range(1000):\n    s = 'x' * (10**7 - 1)\n    t = s + 'y'";
+    let (result, stats) = measured(src, Stop::never());
+    assert!(result.is_ok(), "{result:?}");
+    assert!(stats.peak_bytes < 3 * 10_000_000 + MIB, "peak {}", stats.peak_bytes);
+}
+
+#[test]
+fn dicts_and_sets_are_hash_tables_in_insertion_order() {
+    let src = "d = {}\nfor i in range(99999):\n    d[i] = i\ns = set(d)\nprint(len(d), d[77777], 5 in s, list(d)[:3], d.get(99998.0))";
+    let (result, stats) = measured(src, Stop::never());
+    assert_eq!(result.unwrap().stdout, "99999 77777 True [0, 1, 2] 99998\n");
+    // The probe's case, whose linear lists did 5 * 10**9 comparisons, is a bounded amount of work now.
+    assert!(stats.work < 1_000, "work {}", stats.work);
+    assert_eq!(
+        printed("d = {1: 'a', True: 'b', 1.0: 'c', (1, 2): 'd'}\nprint(d, {(1, 2)} == {(1.0, 2)})"),
+        "{1: 'c', (1, 2): 'd'} True\n"
+    );
+    assert_eq!(
+        printed("d = {'b': 1, 'a': 2}\nd['c'] = 3\ndel d['b']\nd['b'] = 4\nprint(d)"),
+        "{'a': 2, 'c': 3, 'b': 4}\n"
+    );
+    assert_eq!(printed("s = {3, 1, 2, 1}\ns.discard(1)\ns.add(0)\nprint(s, s.pop(), s)"), "{3, 2, 0} 3 {2, 0}\n");
+    assert!(python_err("d = {[1]: 2}").contains("TypeError: unhashable type: 'list'"));
+    assert!(python_err("print([1] in {1: 2})").contains("TypeError: unhashable type: 'list'"));
+}
+
+#[test]
+fn values_stay_values_when_shared() {
+    // Copy on write: changing a shared list copies it, so the other name keeps its value.
+    let src = "a = b = [1]\nb.append(2)\nc = a\nc[0] = 9\nd = {'k': a}\nd['k'].append(3)\nprint(a, b, c, d)";
+    assert_eq!(printed(src), "[1] [1, 2] [9] {'k': [1, 3]}\n");
+    let src = "x = [1, 2]\nfor v in x:\n    x.append(v)\nprint(x)";
+    assert_eq!(printed(src), "[1, 2, 1, 2]\n");
+}
+
+#[test]
+fn a_passed_deadline_stops_loops_and_long_builtins_within_one_slice() {
+    let passed = Stop::new(Some(std::time::Instant::now()), None);
+    for src in [
+        "while True:\n    pass",
+        "def f():\n    return f()\nf()",
+        "x = list(range(10**6))",
+        "x = [0] * 10**6",
+        "x = sorted([3, 1, 2] * 300000)",
+        "x = [1] * 10**6\nx.reverse()",
+        "x = ','.join(['a'] * 10**6)",
+        "x = sum([1] * 10**6)",
+        "x = ([1] * 10**6).count(2)",
+    ] {
+        let (result, stats) = measured(src, passed.clone());
+        let err = result.unwrap_err();
+        assert_eq!(err.kind, ErrorKind::Timeout, "{src}: {err}");
+        assert_eq!(err.message, "the program ran past its deadline", "{src}");
+        assert!(!err.is_catchable());
+        // Nothing ran on past the first check: at most one loop step and one slice of work.
+        assert!(stats.steps <= 1, "{src}: {} steps", stats.steps);
+        assert!(stats.work <= 2 * super::stop::WORK_SLICE + 1_000_000, "{src}: {} units", stats.work);
+        assert_eq!(stats.live_bytes_after, 0, "{src}: the run holds nothing afterwards");
+    }
+    // `try` does not catch it.
+    let (result, _) = measured("try:\n    while True:\n        pass\nexcept Exception:\n    print('caught')", passed);
+    assert_eq!(result.unwrap_err().kind, ErrorKind::Timeout);
+}
+
+#[test]
+fn a_cancel_flag_set_from_another_thread_stops_a_busy_program() {
+    use std::sync::atomic::{AtomicBool, Ordering};
+    use std::sync::Arc;
+    let flag = Arc::new(AtomicBool::new(false));
+    let setter = {
+        let flag = Arc::clone(&flag);
+        std::thread::spawn(move || flag.store(true, Ordering::Relaxed))
+    };
+    // The probe's CPU-bound loop: a million-item list reversed again and again.
+    let src = "x = list(range(999999))\nfor i in range(99999):\n    x.reverse()";
+    let (result, stats) = measured(src, Stop::new(None, Some(Arc::clone(&flag))));
+    setter.join().unwrap();
+    let err = result.unwrap_err();
+    assert_eq!(err.kind, ErrorKind::Timeout, "{err}");
+    assert!(err.message.contains("cancelled"), "{err}");
+    assert!(stats.steps < 99_999, "it stopped early: {} steps", stats.steps);
+    assert_eq!(stats.live_bytes_after, 0);
+    // Checks come at a bounded interval of work: one per step and one per slice.
+    assert!(stats.stop_checks >= stats.steps + stats.work / super::stop::WORK_SLICE, "{stats:?}");
+}
+
+#[test]
+fn a_set_cancel_flag_stops_a_program_before_its_first_step() {
+    use std::sync::atomic::AtomicBool;
+    use std::sync::Arc;
+    let (result, stats) =
+        measured("for i in range(10):\n    print(i)", Stop::new(None, Some(Arc::new(AtomicBool::new(true)))));
+    let err = result.unwrap_err();
+    assert_eq!(err.kind, ErrorKind::Timeout);
+    assert_eq!(err.stdout, "", "nothing ran");
+    assert_eq!(stats.steps, 0);
 }
 
 #[test]

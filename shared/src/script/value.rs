@@ -1,11 +1,13 @@
 //! Runtime values and how Python prints them.
 //!
-//! Values are plain data: containers are copies (a mutating method or an item
-//! assignment changes the variable it is called on, never an alias of it),
-//! modules and builtins are names the interpreter dispatches on, user functions
-//! share their definition, and interpreter objects (a screenshot, the `Computer` parts,
-//! a finished process) are small enums. `str` and `repr` follow CPython,
-//! including float formatting (`0.5`, `1.0`, `1e-05`, `inf`).
+//! Values behave as plain data: strings and containers share their payload
+//! ([`Heap`], counted against the run's memory budget) and copy it only when a
+//! shared one is changed, so a mutating method or an item assignment changes the
+//! variable it is called on, never an alias of it. Modules and builtins are names
+//! the interpreter dispatches on, user functions share their definition, and
+//! interpreter objects (a screenshot, the `Computer` parts, a finished process) are
+//! small enums. `str` and `repr` follow CPython, including float formatting
+//! (`0.5`, `1.0`, `1e-05`, `inf`), and never build more text than the budget holds.
 
 use std::collections::HashMap;
 use std::fmt::Write as _;
@@ -13,7 +15,8 @@ use std::rc::Rc;
 use std::sync::Arc;
 
 use super::ast::Function;
-use super::error::ErrorKind;
+use super::error::{ErrorKind, ScriptError};
+use super::heap::{self, DictMap, Heap, SetMap};
 
 /// A runtime value.
 #[derive(Debug, Clone, PartialEq)]
@@ -22,12 +25,13 @@ pub(crate) enum Value {
     Bool(bool),
     Int(i64),
     Float(f64),
-    Str(String),
-    List(Vec<Value>),
-    Tuple(Vec<Value>),
-    Dict(Vec<(Value, Value)>),
+    Str(Heap<String>),
+    List(Heap<Vec<Value>>),
+    Tuple(Heap<Vec<Value>>),
+    /// A dict, in insertion order.
+    Dict(Heap<DictMap>),
     /// A set, in insertion order.
-    Set(Vec<Value>),
+    Set(Heap<SetMap>),
     /// `range(start, stop, step)`.
     Range(i64, i64, i64),
     /// A `def` or `lambda` function.
@@ -117,6 +121,45 @@ impl Object {
 }
 
 impl Value {
+    /// A `str`.
+    pub(crate) fn str(text: impl Into<String>) -> Value {
+        Value::Str(Heap::new(text.into()))
+    }
+
+    /// A `list`.
+    pub(crate) fn list(items: Vec<Value>) -> Value {
+        Value::List(Heap::new(items))
+    }
+
+    /// A `tuple`.
+    pub(crate) fn tuple(items: Vec<Value>) -> Value {
+        Value::Tuple(Heap::new(items))
+    }
+
+    /// A `dict`.
+    pub(crate) fn dict(entries: DictMap) -> Value {
+        Value::Dict(Heap::new(entries))
+    }
+
+    /// A `set`.
+    pub(crate) fn set(items: SetMap) -> Value {
+        Value::Set(Heap::new(items))
+    }
+
+    /// How deeply it nests containers (0 for scalars and text).
+    pub(crate) fn depth(&self) -> u32 {
+        match self {
+            Value::List(v) | Value::Tuple(v) => v.depth(),
+            Value::Dict(d) => d.depth(),
+            Value::Set(s) => s.depth(),
+            Value::Method(recv, _) => recv.depth().saturating_add(1),
+            Value::Object(Object::Completed { args, .. } | Object::Popen { args, .. }) => {
+                args.depth().saturating_add(1)
+            }
+            _ => 0,
+        }
+    }
+
     /// The short type name used in error messages (`int`, `str`, `NoneType`).
     pub(crate) fn type_name(&self) -> &'static str {
         match self {
@@ -170,23 +213,54 @@ impl Value {
         }
     }
 
-    /// `str(value)`.
+    /// `str(value)`; see [`Value::repr`] for the budget.
     pub(crate) fn to_str(&self) -> String {
         match self {
-            Value::Str(s) => s.clone(),
+            Value::Str(s) => s.as_str().to_owned(),
             Value::Exception(_, message) => message.clone(),
             other => other.repr(),
         }
     }
 
-    /// `repr(value)`.
+    /// `repr(value)`, cut where it would pass the memory budget; the cut is noted
+    /// and fails the run at its next check. Where a `MemoryError` can be raised
+    /// on the spot, [`Value::try_repr`] is better.
     pub(crate) fn repr(&self) -> String {
         let mut out = String::new();
-        self.write_repr(&mut out);
+        if self.write_repr(&mut out, heap::room()).is_err() {
+            heap::overflowed();
+        }
         out
     }
 
-    fn write_repr(&self, out: &mut String) {
+    /// `repr(value)`, or `MemoryError` when the text would pass the memory budget.
+    pub(crate) fn try_repr(&self) -> Result<String, ScriptError> {
+        let mut out = String::new();
+        self.write_repr(&mut out, heap::room()).map_err(|Overflow| {
+            heap::overflowed();
+            let _ = heap::check();
+            ScriptError::new(ErrorKind::Memory, "the text of this value would pass the memory budget")
+        })?;
+        Ok(out)
+    }
+
+    /// `str(value)`, or `MemoryError` as [`Value::try_repr`].
+    pub(crate) fn try_to_str(&self) -> Result<String, ScriptError> {
+        match self {
+            Value::Str(_) | Value::Exception(..) => {
+                let text = self.to_str();
+                heap::reserve_text(text.len())?;
+                Ok(text)
+            }
+            other => other.try_repr(),
+        }
+    }
+
+    /// Writes `repr(self)` to `out`, failing once `out` passes `cap` bytes.
+    fn write_repr(&self, out: &mut String, cap: usize) -> Result<(), Overflow> {
+        if out.len() > cap {
+            return Err(Overflow);
+        }
         match self {
             Value::None => out.push_str("None"),
             Value::Bool(true) => out.push_str("True"),
@@ -195,15 +269,20 @@ impl Value {
                 let _ = write!(out, "{i}");
             }
             Value::Float(f) => out.push_str(&float_repr(*f)),
-            Value::Str(s) => out.push_str(&str_repr(s)),
+            Value::Str(s) => {
+                if s.len() > cap.saturating_sub(out.len()) {
+                    return Err(Overflow);
+                }
+                out.push_str(&str_repr(s));
+            }
             Value::List(items) => {
                 out.push('[');
-                write_items(out, items);
+                write_items(out, items, cap)?;
                 out.push(']');
             }
             Value::Tuple(items) => {
                 out.push('(');
-                write_items(out, items);
+                write_items(out, items, cap)?;
                 if items.len() == 1 {
                     out.push(',');
                 }
@@ -215,16 +294,21 @@ impl Value {
                     if i > 0 {
                         out.push_str(", ");
                     }
-                    k.write_repr(out);
+                    k.0.write_repr(out, cap)?;
                     out.push_str(": ");
-                    v.write_repr(out);
+                    v.write_repr(out, cap)?;
                 }
                 out.push('}');
             }
             Value::Set(items) if items.is_empty() => out.push_str("set()"),
             Value::Set(items) => {
                 out.push('{');
-                write_items(out, items);
+                for (i, item) in items.iter().enumerate() {
+                    if i > 0 {
+                        out.push_str(", ");
+                    }
+                    item.0.write_repr(out, cap)?;
+                }
                 out.push('}');
             }
             Value::Range(start, stop, step) => {
@@ -271,7 +355,9 @@ impl Value {
                 let _ = write!(out, "<PIL.Image.Image image mode=RGB size={width}x{height}>");
             }
             Value::Object(Object::Completed { args, returncode, stdout, stderr }) => {
-                let _ = write!(out, "CompletedProcess(args={}, returncode={returncode}", args.repr());
+                out.push_str("CompletedProcess(args=");
+                args.write_repr(out, cap)?;
+                let _ = write!(out, ", returncode={returncode}");
                 if let Some(s) = stdout {
                     let _ = write!(out, ", stdout={}", str_repr(s));
                 }
@@ -281,14 +367,24 @@ impl Value {
                 out.push(')');
             }
             Value::Object(Object::Popen { args, pid }) => {
-                let _ = write!(out, "<Popen: pid={pid} args={}>", args.repr());
+                let _ = write!(out, "<Popen: pid={pid} args=");
+                args.write_repr(out, cap)?;
+                out.push('>');
             }
             Value::Object(obj) => {
                 let _ = write!(out, "<{} object>", obj.class_name());
             }
         }
+        if out.len() > cap {
+            return Err(Overflow);
+        }
+        Ok(())
     }
 }
+
+/// Text that would pass the memory budget.
+#[derive(Debug)]
+struct Overflow;
 
 /// How many numbers `range(start, stop, step)` holds (`step` is never 0).
 pub(crate) fn range_len(start: i64, stop: i64, step: i64) -> u64 {
@@ -300,13 +396,14 @@ pub(crate) fn range_len(start: i64, stop: i64, step: i64) -> u64 {
     u64::try_from((span - 1) / i128::from(step) + 1).unwrap_or(u64::MAX)
 }
 
-fn write_items(out: &mut String, items: &[Value]) {
+fn write_items(out: &mut String, items: &[Value], cap: usize) -> Result<(), Overflow> {
     for (i, item) in items.iter().enumerate() {
         if i > 0 {
             out.push_str(", ");
         }
-        item.write_repr(out);
+        item.write_repr(out, cap)?;
     }
+    Ok(())
 }
 
 /// Python's `repr(float)`: the shortest digits that round-trip, in positional
@@ -430,18 +527,20 @@ mod tests {
 
     #[test]
     fn containers_repr_like_python() {
-        let v = Value::List(vec![
+        let mut dict = DictMap::new();
+        dict.insert(heap::Key(Value::str("k")), Value::Float(0.5));
+        let v = Value::list(vec![
             Value::Int(1),
-            Value::Str("a".into()),
+            Value::str("a"),
             Value::None,
-            Value::Tuple(vec![Value::Bool(true)]),
-            Value::Tuple(vec![]),
-            Value::Dict(vec![(Value::Str("k".into()), Value::Float(0.5))]),
+            Value::tuple(vec![Value::Bool(true)]),
+            Value::tuple(vec![]),
+            Value::dict(dict),
         ]);
         assert_eq!(v.to_str(), "[1, 'a', None, (True,), (), {'k': 0.5}]");
         assert_eq!(Value::Point(10, 20).to_str(), "Point(x=10, y=20)");
         assert_eq!(Value::Size(1440, 900).to_str(), "Size(width=1440, height=900)");
         assert_eq!(Value::Type("PIL.Image.Image").to_str(), "<class 'PIL.Image.Image'>");
-        assert_eq!(Value::Str("x".into()).to_str(), "x");
+        assert_eq!(Value::str("x").to_str(), "x");
     }
 }

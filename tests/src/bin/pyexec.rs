@@ -7,6 +7,9 @@
 //! `POST /execute` with the upstream host's exact body, so the native figure
 //! includes HTTP, JSON, parsing, interpreting and the stub's click. The process
 //! figure is only the spawn-and-wait of a bare interpreter on this machine.
+//! It then runs the probe programs of issue 25 (memory and time bounds) in this
+//! process through the interpreter and prints, for each, its answer, the peak bytes
+//! by the interpreter's own accounting and the time to that answer.
 //! Run it in release mode: `cargo run --release -p arena-tests --bin pyexec`.
 
 use std::process::ExitCode;
@@ -142,5 +145,55 @@ async fn run() -> anyhow::Result<()> {
     }
 
     drop(stub);
+    probes();
     Ok(())
+}
+
+/// Issue 25's probe programs (items 1 and 2).
+const PROBES: &[(&str, &str)] = &[
+    ("shared repetition", "x = ['a' * 10**6] * 10**6"),
+    ("nested repetition", "x = [[0] * 10**6] * 10**6"),
+    ("join past the budget", "x = ['a' * 10**6] * 10**6\ny = ''.join(x)"),
+    ("distinct strings past the budget", "x = ['a' * 10**6 + str(i) for i in range(10**6)]"),
+    ("3 KB string reassigned 99999 times", "for i in range(99999):\n    s = 'a' * 3000"),
+    (
+        "in/sum/count over 10**5 items, 300 times",
+        "x = list(range(10**5))\nfor i in range(300):\n    n = (-1 in x) + sum(x) + x.count(-1)",
+    ),
+    ("dict of 99999 ints", "d = {}\nfor i in range(99999):\n    d[i] = i"),
+    (
+        "reverse 999999 items 99999 times, 2 s deadline",
+        "x = list(range(999999))\nfor i in range(99999):\n    x.reverse()",
+    ),
+];
+
+/// Runs each probe with a 2 s deadline and prints what it answered and cost.
+fn probes() {
+    use arena_shared::script::{parse, run_measured, Globals, RecordingHost, Stop};
+    println!("issue 25 probes, in process (peak = the interpreter's own accounting):");
+    for (name, src) in PROBES {
+        let program = match parse(src) {
+            Ok(program) => program,
+            Err(err) => {
+                println!("{name:<46} does not parse: {err}");
+                continue;
+            }
+        };
+        let mut host = RecordingHost::new((1920, 1080), (0, 0));
+        let start = Instant::now();
+        let stop = Stop::new(Some(start + Duration::from_secs(2)), None);
+        let (result, stats) = run_measured(&program, &mut host, Globals::python().with_stop(stop));
+        let elapsed = start.elapsed();
+        let answer = match result {
+            Ok(_) => "ok".to_owned(),
+            Err(err) => format!("{}: {}", err.kind, err.message),
+        };
+        println!(
+            "{name:<46} {:>9.1} ms  peak {:>8.1} MiB  steps {:>6}  held after {} B  {answer}",
+            ms(elapsed),
+            stats.peak_bytes as f64 / f64::from(1 << 20),
+            stats.steps,
+            stats.live_bytes_after
+        );
+    }
 }
