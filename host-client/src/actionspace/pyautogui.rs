@@ -20,7 +20,9 @@ use arena_shared::script::ast::{BinOp, Const, Expr, ExprKind, FunctionBody, Prog
 use arena_shared::script::host::cursor_after;
 use arena_shared::script::{
     run, CommandArg, CommandOutput, ErrorKind, Globals, HostError, HostResult, PathKind, RecordingHost, ScriptHost,
+    Stop,
 };
+use std::time::{Duration, Instant};
 
 use super::{ActionError, ActionSpace, Context, Coords, Step};
 
@@ -57,8 +59,14 @@ pub fn parse(code: &str, ctx: &Context) -> Result<Vec<Step>, ActionError> {
     Ok(host.steps)
 }
 
+/// How long translating one reply may take.
+const TRANSLATE_TIME: Duration = Duration::from_secs(5);
+
 fn run_program(program: &Program, host: &mut StepHost) -> Result<(), arena_shared::script::ScriptError> {
-    let globals = Globals { computer: None, computer_action_delay: 0.25, preimport: &["pyautogui", "time"] };
+    // Translating runs no effects, only the program's own work: a few seconds bound a
+    // reply that loops, besides the interpreter's loop budget.
+    let stop = Stop::new(Some(Instant::now() + TRANSLATE_TIME), None);
+    let globals = Globals { computer: None, computer_action_delay: 0.25, preimport: &["pyautogui", "time"], stop };
     run(program, host, globals).map(|_| ())
 }
 

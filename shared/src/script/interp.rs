@@ -166,7 +166,6 @@ impl Globals<'static> {
 }
 
 impl<'a> Globals<'a> {
-    /// `/execute_windows`: `computer` and `human` are bound to `state`.
     /// These globals, stopping as `stop` says.
     #[must_use]
     pub fn with_stop(mut self, stop: Stop) -> Globals<'a> {
@@ -174,6 +173,7 @@ impl<'a> Globals<'a> {
         self
     }
 
+    /// `/execute_windows`: `computer` and `human` are bound to `state`.
     pub fn computer(state: &'a mut ComputerState) -> Globals<'a> {
         Globals { computer: Some(state), computer_action_delay: 0.25, preimport: &[], stop: Stop::never() }
     }
