@@ -160,18 +160,19 @@ pub trait Composed: ScriptHost {
         let mut parts = Vec::with_capacity(VERSION_VALUES.len());
         for value in VERSION_VALUES {
             let not_a_number = |shown: String| format!(r"{CURRENT_VERSION}\{value} is not a number: {shown}");
-            let number = match self.registry_read(CURRENT_VERSION, Some(value))? {
-                Some(RegistryValue::Dword(n)) => u64::from(n),
-                Some(RegistryValue::Qword(n)) => n,
-                Some(RegistryValue::String(s)) => s.trim().parse::<u64>().map_err(|_| not_a_number(format!("{s:?}")))?,
-                Some(other) => return Err(not_a_number(format!("{other:?}")).into()),
-                None => {
-                    return Err(format!(
+            let number =
+                match self.registry_read(CURRENT_VERSION, Some(value))? {
+                    Some(RegistryValue::Dword(n)) => u64::from(n),
+                    Some(RegistryValue::Qword(n)) => n,
+                    Some(RegistryValue::String(s)) => {
+                        s.trim().parse::<u64>().map_err(|_| not_a_number(format!("{s:?}")))?
+                    }
+                    Some(other) => return Err(not_a_number(format!("{other:?}")).into()),
+                    None => return Err(format!(
                         r"the Windows version is not recorded on this desktop: {CURRENT_VERSION}\{value} does not exist"
                     )
-                    .into())
-                }
-            };
+                    .into()),
+                };
             parts.push(number.to_string());
         }
         Ok(parts.join("."))

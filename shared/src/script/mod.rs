@@ -64,10 +64,10 @@ mod value;
 mod tests;
 
 pub use argv::{is_python_program, python_code_from_argv, python_code_from_command_line};
+pub use compose::Composed;
 pub use computer::ComputerState;
 pub use difflib::{get_close_matches, ratio as sequence_ratio};
 pub use error::{ErrorKind, ParseError, ScriptError};
-pub use compose::Composed;
 pub use host::{CommandArg, CommandOutput, HostError, HostResult, PathKind, RecordingHost, ScriptHost, WindowChange};
 pub use interp::{run, Globals, RunOutput, KNOWN_MODULES, MAX_CALL_DEPTH, MAX_STEPS};
 pub use parser::parse;

@@ -129,11 +129,7 @@ impl ScriptHost for FakeHost {
         self.calls.push(format!("launch {command:?}"));
         Ok(Some(4242))
     }
-    fn registry_read(
-        &mut self,
-        key: &str,
-        value: Option<&str>,
-    ) -> HostResult<Option<crate::registry::RegistryValue>> {
+    fn registry_read(&mut self, key: &str, value: Option<&str>) -> HostResult<Option<crate::registry::RegistryValue>> {
         use crate::registry::RegistryValue;
         if key == compose::CURRENT_VERSION {
             return Ok(match value {
@@ -334,11 +330,7 @@ fn subprocess_and_os_system() {
     assert_eq!(out.stderr, "err\n");
     assert_eq!(
         host.calls,
-        [
-            r#"run Argv(["cmd", "/c", "ver"])"#,
-            r#"run Shell("dir")"#,
-            r#"launch Shell("notepad.exe")"#,
-        ]
+        [r#"run Argv(["cmd", "/c", "ver"])"#, r#"run Shell("dir")"#, r#"launch Shell("notepad.exe")"#,]
     );
     let err = run_python(&mut host, "import subprocess\nsubprocess.check_output(['x', 'y'])").unwrap_err();
     assert_eq!(
