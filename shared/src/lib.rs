@@ -29,6 +29,7 @@
 pub mod a11y_xml;
 pub mod action;
 pub mod atomic;
+pub mod calendar;
 pub mod clipboard;
 pub mod close_all;
 pub mod cmdline;
