@@ -166,7 +166,11 @@ pub struct ServerConfig {
 impl ServerConfig {
     /// The backend to use, defaulting by platform.
     pub fn backend_kind(&self) -> BackendKind {
-        self.backend.unwrap_or(if cfg!(windows) { BackendKind::Windows } else { BackendKind::Stub })
+        self.backend.unwrap_or(if crate::desktop::windows::target::IS_WINDOWS {
+            BackendKind::Windows
+        } else {
+            BackendKind::Stub
+        })
     }
 
     pub fn call_timeout(&self) -> Duration {

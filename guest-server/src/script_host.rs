@@ -16,7 +16,7 @@
 //! [`DesktopHost::effects`] counts the effects performed, so a route knows whether
 //! re-running the code with a real Python would repeat something.
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::time::{Duration, Instant};
 
 use arena_shared::action::Action;
@@ -87,21 +87,6 @@ fn fail(err: DesktopError) -> HostError {
         DesktopError::Timeout { .. } => HostError::TimedOut(err.to_string()),
         other => HostError::Failed(other.to_string()),
     }
-}
-
-/// Whether `program` is a Python that can be started: an existing file, or a bare
-/// name found on `PATH` (with `.exe` on Windows).
-pub fn python_available(program: &Path) -> bool {
-    if program.components().count() > 1 || program.is_absolute() {
-        return program.is_file();
-    }
-    let Some(path) = std::env::var_os("PATH") else {
-        return false;
-    };
-    std::env::split_paths(&path).any(|dir| {
-        let candidate: PathBuf = dir.join(program);
-        candidate.is_file() || (cfg!(windows) && candidate.with_extension("exe").is_file())
-    })
 }
 
 impl ScriptHost for DesktopHost<'_> {
@@ -321,11 +306,5 @@ mod tests {
         stub.registry_write(key, Some("CurrentBuildNumber"), &RegistryValue::Binary(vec![1])).expect("written");
         let err = host.os_version().expect_err("not a number");
         assert!(err.to_string().contains(r"CurrentVersion\CurrentBuildNumber is not a number"), "{err}");
-    }
-
-    #[test]
-    fn a_missing_python_is_not_available() {
-        assert!(!python_available(Path::new("/definitely/not/python3")));
-        assert!(!python_available(Path::new("arena-no-such-python-xyz")));
     }
 }

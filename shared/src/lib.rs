@@ -43,10 +43,12 @@ pub mod geometry;
 pub mod health;
 pub mod imaging;
 pub mod keys;
+pub mod markup;
 pub mod ntfs;
 pub mod observation;
 pub mod registry;
 pub mod script;
+pub mod search_path;
 pub mod token;
 pub mod window_list;
 
