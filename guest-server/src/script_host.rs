@@ -5,7 +5,7 @@
 //! primitives (the window list, `open_program`, `platform.version()`, saved
 //! screenshots) is `arena_shared::script::compose`'s, the same code the host runs.
 //!
-//! It is not the interpreter (that lives in `arena_shared::script` and does no I/O)
+//! It is not the interpreter (that lives in `arena_shared::script`, whose only I/O is its host)
 //! and not a route: `waa::execute` decides which requests run code and how the
 //! answers look.
 //!
