@@ -219,7 +219,7 @@ impl ScriptHost for RecordingHost {
     }
 
     fn capture(&mut self) -> HostResult<RgbaImage> {
-        not_an_action("taking a screenshot")
+        not_an_action("saving a screenshot")
     }
 
     fn observed_screenshot(&mut self) -> HostResult<RgbaImage> {

@@ -424,7 +424,7 @@ fn computer_13_templates_translate_to_actions() {
 #[test]
 fn translation_refuses_io() {
     let err = actions_from_pyautogui("pyautogui.screenshot('a.png')", (100, 100), (0, 0)).unwrap_err();
-    assert_eq!(err.to_string(), "line 1: OSError: taking a screenshot cannot be translated into input actions");
+    assert_eq!(err.to_string(), "line 1: OSError: saving a screenshot cannot be translated into input actions");
 }
 
 #[test]
