@@ -7,7 +7,7 @@ use std::time::Duration;
 /// Largest body of a JSON control route (windows, registry, exec, files' JSON routes,
 /// evaluator queries, the browser forward, and the WAA routes not named below): 1 MiB.
 /// Every route reads a small document; a bigger body is refused with 413 before it is
-/// buffered and parsed (the whole `--max-body`, 1 GiB, was buffered before).
+/// buffered and parsed (the whole `--max-body-bytes`, 1 GiB, was buffered before).
 pub const JSON_BODY_BYTES: usize = 1 << 20;
 /// Largest body of `POST /v1/actions`, `/update_computer` and `/setup/create_file` (a
 /// 1 MiB `type_text` escaped as JSON; the Set-of-Marks boxes of a crowded screen; a
@@ -183,7 +183,11 @@ pub struct ServerConfig {
 impl ServerConfig {
     /// The backend to use, defaulting by platform.
     pub fn backend_kind(&self) -> BackendKind {
-        self.backend.unwrap_or(if cfg!(windows) { BackendKind::Windows } else { BackendKind::Stub })
+        self.backend.unwrap_or(if crate::desktop::windows::target::IS_WINDOWS {
+            BackendKind::Windows
+        } else {
+            BackendKind::Stub
+        })
     }
 
     pub fn call_timeout(&self) -> Duration {

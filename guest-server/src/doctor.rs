@@ -431,11 +431,7 @@ fn remove(desktop: &dyn Desktop, notepad: &WindowInfo) {
 /// A shell line whose child outlives the timeout and starts a grandchild that
 /// holds the output pipe too: only killing the whole tree ends the call early.
 fn slow_shell_line() -> String {
-    if cfg!(windows) {
-        "start /b ping -n 60 127.0.0.1 >nul & ping -n 60 127.0.0.1".to_owned()
-    } else {
-        "sleep 60 & sleep 60".to_owned()
-    }
+    crate::desktop::windows::target::SLOW_SHELL_LINE.to_owned()
 }
 
 fn exec_timeout(desktop: &dyn Desktop) -> Outcome {

@@ -3,11 +3,10 @@
 
 use std::io::Cursor;
 
-use arena_shared::fastimg::{self, FastImgError, Layout};
+use arena_shared::fastimg;
 use arena_shared::geometry::Point;
 use arena_shared::observation::ImageFormat;
-use image::error::{EncodingError, ImageFormatHint};
-use image::{ImageEncoder, RgbaImage};
+use image::RgbaImage;
 
 /// An image could not be encoded or decoded.
 #[derive(Debug, thiserror::Error)]
@@ -27,28 +26,8 @@ pub struct ImagingError {
 ///
 /// [`ImagingError`] if the encoder fails.
 pub fn encode(image: &RgbaImage, format: ImageFormat, quality: u8) -> Result<Vec<u8>, ImagingError> {
-    match format {
-        ImageFormat::Jpeg => {
-            fastimg::encode_jpeg(image.as_raw(), image.width(), image.height(), Layout::Rgba8, quality)
-                .map_err(|err| ImagingError { what: "encoding JPEG", source: jpeg_error(err) })
-        }
-        ImageFormat::Png | ImageFormat::Unknown => {
-            let mut out = Vec::with_capacity(image.as_raw().len() / 4);
-            image::codecs::png::PngEncoder::new_with_quality(
-                &mut out,
-                image::codecs::png::CompressionType::Fast,
-                image::codecs::png::FilterType::Adaptive,
-            )
-            .write_image(image.as_raw(), image.width(), image.height(), image::ExtendedColorType::Rgba8)
-            .map_err(|source| ImagingError { what: "encoding PNG", source })?;
-            Ok(out)
-        }
-    }
-}
-
-/// A [`fastimg`] JPEG failure as the `image` crate's error, so [`ImagingError`] keeps one source type.
-fn jpeg_error(err: FastImgError) -> image::ImageError {
-    image::ImageError::Encoding(EncodingError::new(ImageFormatHint::Exact(image::ImageFormat::Jpeg), err))
+    let what = if format == ImageFormat::Jpeg { "encoding JPEG" } else { "encoding PNG" };
+    arena_shared::imaging::encode(image, format, quality).map_err(|source| ImagingError { what, source })
 }
 
 /// Largest image side accepted for decoding: four 4K screens side by side.

@@ -1,9 +1,11 @@
 //! The guest's [`ScriptHost`]: what the native Python-subset interpreter
 //! (`arena_shared::script`) does when `/execute` or `/execute_windows` code acts on
-//! the world. Every effect becomes a call on the one [`Desktop`] backend, so the
-//! interpreter works the same over the stub and the Windows backend.
+//! the world. Every primitive becomes a call on the one [`Desktop`] backend, so the
+//! interpreter works the same over the stub and the Windows backend; what is made of
+//! primitives (the window list, `open_program`, `platform.version()`, saved
+//! screenshots) is `arena_shared::script::compose`'s, the same code the host runs.
 //!
-//! It is not the interpreter (that lives in `arena_shared::script` and does no I/O)
+//! It is not the interpreter (that lives in `arena_shared::script`, whose only I/O is its host)
 //! and not a route: `waa::execute` decides which requests run code and how the
 //! answers look.
 //!
@@ -14,35 +16,20 @@
 //! [`DesktopHost::effects`] counts the effects performed, so a route knows whether
 //! re-running the code with a real Python would repeat something.
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::time::{Duration, Instant};
 
 use arena_shared::action::Action;
-use arena_shared::cmdline::subprocess_command;
-use arena_shared::imaging::crop_padded;
-use arena_shared::observation::{ImageFormat, WindowInfo};
+use arena_shared::observation::WindowInfo;
 use arena_shared::registry::RegistryValue;
-use arena_shared::script::{CommandArg, CommandOutput, HostError, HostResult, PathKind, ScriptHost};
+use arena_shared::script::compose::PROGRAM_NOT_FOUND;
+use arena_shared::script::{CommandOutput, HostError, HostResult, PathKind, ScriptHost, WindowChange};
+use image::RgbaImage;
 
 use crate::desktop::{ClipboardData, CommandSpec, Desktop, DesktopError, ExecLimits, WindowState};
 
 /// Output kept per stream of a command a script runs (as `/execute` keeps).
 const MAX_OUTPUT_BYTES: u64 = 64 << 20;
-
-/// Python's `FileNotFoundError` text when `CreateProcess` cannot find a program.
-const PROGRAM_NOT_FOUND: &str = "[WinError 2] The system cannot find the file specified";
-
-/// JPEG quality of `screenshot().save("x.jpg")`: Pillow's default.
-const PIL_JPEG_QUALITY: u8 = 75;
-
-/// Where `Computer.os.open_program` looks first, as upstream's `is_installed` does.
-const APP_PATHS: [&str; 2] = [
-    r"HKLM\SOFTWARE\Microsoft\Windows\CurrentVersion\App Paths",
-    r"HKLM\SOFTWARE\Wow6432Node\Microsoft\Windows\CurrentVersion\App Paths",
-];
-
-/// Where Windows keeps the version numbers `platform.version()` prints.
-const CURRENT_VERSION: &str = r"HKLM\SOFTWARE\Microsoft\Windows NT\CurrentVersion";
 
 /// A [`ScriptHost`] over a [`Desktop`], with a deadline.
 #[derive(Debug)]
@@ -91,22 +78,6 @@ impl<'a> DesktopHost<'a> {
         self.effects += 1;
         Ok(())
     }
-
-    fn windows(&self) -> HostResult<Vec<WindowInfo>> {
-        self.desktop.windows().map_err(fail)
-    }
-
-    fn foreground(&self) -> HostResult<Option<WindowInfo>> {
-        Ok(self.windows()?.into_iter().find(|w| w.focused))
-    }
-}
-
-/// A backend failure in the words Python's `OSError` would use where they differ.
-fn os_error(err: DesktopError) -> HostError {
-    match err {
-        DesktopError::NotFound(_) => HostError::Failed(PROGRAM_NOT_FOUND.to_owned()),
-        other => fail(other),
-    }
 }
 
 /// A backend failure as the script sees it: a backend deadline stops the script,
@@ -116,42 +87,6 @@ fn fail(err: DesktopError) -> HostError {
         DesktopError::Timeout { .. } => HostError::TimedOut(err.to_string()),
         other => HostError::Failed(other.to_string()),
     }
-}
-
-/// Whether `program` is a Python that can be started: an existing file, or a bare
-/// name found on `PATH` (with `.exe` on Windows).
-pub fn python_available(program: &Path) -> bool {
-    if program.components().count() > 1 || program.is_absolute() {
-        return program.is_file();
-    }
-    let Some(path) = std::env::var_os("PATH") else {
-        return false;
-    };
-    std::env::split_paths(&path).any(|dir| {
-        let candidate: PathBuf = dir.join(program);
-        candidate.is_file() || (cfg!(windows) && candidate.with_extension("exe").is_file())
-    })
-}
-
-/// The image format a file name asks for, as Pillow picks it from the extension.
-fn format_for(path: &str) -> HostResult<ImageFormat> {
-    let name = crate::paths::basename(path);
-    let ext = name.rsplit_once('.').map(|(_, e)| e.to_ascii_lowercase()).unwrap_or_default();
-    match ext.as_str() {
-        "png" => Ok(ImageFormat::Png),
-        "jpg" | "jpeg" | "jpe" | "jfif" => Ok(ImageFormat::Jpeg),
-        "" => Err(format!("unknown file extension: {name} (this guest saves .png and .jpg screenshots)").into()),
-        other => Err(format!("unknown file extension: .{other} (this guest saves .png and .jpg screenshots)").into()),
-    }
-}
-
-/// Writes `bytes` to `local` atomically, so a reader never sees half an image; like
-/// Pillow's `save`, it does not create missing folders.
-fn write_file(local: &Path, guest: &str, bytes: &[u8]) -> HostResult<()> {
-    if !local.parent().is_some_and(Path::is_dir) {
-        return Err(format!("[Errno 2] No such file or directory: '{guest}'").into());
-    }
-    arena_shared::atomic::write_atomic(local, bytes).map_err(|err| format!("{guest}: {err}").into())
 }
 
 impl ScriptHost for DesktopHost<'_> {
@@ -190,30 +125,28 @@ impl ScriptHost for DesktopHost<'_> {
         Ok((screen.physical_width, screen.physical_height))
     }
 
-    fn active_window_title(&mut self) -> HostResult<String> {
-        Ok(self.foreground()?.map(|w| w.title).unwrap_or_default())
-    }
-
-    fn save_screenshot(&mut self, path: &str, region: Option<[i32; 4]>) -> HostResult<()> {
-        let format = format_for(path)?;
-        self.effect()?;
-        let local = self.desktop.map_path(path).map_err(fail)?;
+    fn capture(&mut self) -> HostResult<RgbaImage> {
+        self.check_deadline()?;
         // pyautogui's screenshots never show the cursor.
-        let frame = self.desktop.capture(false).map_err(fail)?;
-        let image = match region {
-            None => frame.image,
-            Some([left, top, width, height]) => {
-                let (l, t) = (i64::from(left), i64::from(top));
-                crop_padded(&frame.image, l, t, l + i64::from(width), t + i64::from(height))
-                    .map_err(|e| e.to_string())?
-            }
-        };
-        let bytes = crate::imaging::encode(&image, format, PIL_JPEG_QUALITY).map_err(|err| err.to_string())?;
-        write_file(&local, path, &bytes)
+        Ok(self.desktop.capture(false).map_err(fail)?.image)
     }
 
-    fn env_var(&mut self, name: &str) -> Option<String> {
-        self.desktop.env_var(name)
+    fn observed_screenshot(&mut self) -> HostResult<RgbaImage> {
+        self.screenshot.cloned().ok_or_else(|| "there is no /update_computer screenshot to copy from".into())
+    }
+
+    fn windows(&mut self) -> HostResult<Vec<WindowInfo>> {
+        self.desktop.windows().map_err(fail)
+    }
+
+    fn change_window(&mut self, id: u64, change: WindowChange) -> HostResult<()> {
+        self.effect()?;
+        match change {
+            WindowChange::Restore => self.desktop.set_window_state(id, WindowState::Normal),
+            WindowChange::Maximize => self.desktop.set_window_state(id, WindowState::Maximized),
+            WindowChange::Activate => self.desktop.activate_window(id),
+        }
+        .map_err(fail)
     }
 
     fn path_kind(&mut self, path: &str) -> Option<PathKind> {
@@ -232,38 +165,44 @@ impl ScriptHost for DesktopHost<'_> {
         Ok(names)
     }
 
-    fn run_command(&mut self, cmd: &CommandArg, shell: bool) -> HostResult<CommandOutput> {
+    fn write_file(&mut self, path: &str, bytes: Vec<u8>) -> HostResult<()> {
         self.effect()?;
-        let spec = subprocess_command(cmd, shell);
+        let local = self.desktop.map_path(path).map_err(fail)?;
+        // Like Python's `open(path, "wb")`, it does not create missing folders.
+        if !local.parent().is_some_and(Path::is_dir) {
+            return Err(format!("[Errno 2] No such file or directory: '{path}'").into());
+        }
+        // Atomically, so a reader never sees half a file.
+        arena_shared::atomic::write_atomic(&local, &bytes).map_err(|err| format!("{path}: {err}").into())
+    }
+
+    fn run(&mut self, command: &CommandSpec) -> HostResult<CommandOutput> {
+        self.effect()?;
         let timeout_ms = u64::try_from(self.remaining().as_millis()).unwrap_or(u64::MAX).max(1);
         let limits = ExecLimits { timeout_ms, max_output_bytes: MAX_OUTPUT_BYTES, cwd: None, stdin: None };
-        match self.desktop.run(&spec, &limits) {
+        match self.desktop.run(command, &limits) {
             Ok(out) if out.timed_out => Err(HostError::TimedOut("the command ran out of time".to_owned())),
             Ok(out) => Ok(CommandOutput { code: out.exit_code.unwrap_or(-1), stdout: out.stdout, stderr: out.stderr }),
             Err(DesktopError::Timeout { .. }) => Err(HostError::TimedOut("the command ran out of time".to_owned())),
-            Err(err) => Err(os_error(err)),
+            Err(DesktopError::NotFound(_)) => Err(HostError::Failed(PROGRAM_NOT_FOUND.to_owned())),
+            Err(err) => Err(fail(err)),
         }
     }
 
-    fn spawn_command(&mut self, cmd: &CommandArg, shell: bool) -> HostResult<u32> {
+    fn launch(&mut self, command: &CommandSpec) -> HostResult<Option<u32>> {
         self.effect()?;
-        self.desktop.spawn(&subprocess_command(cmd, shell)).map_err(os_error)
+        match self.desktop.spawn(command) {
+            Ok(pid) => Ok(Some(pid)),
+            Err(DesktopError::NotFound(_)) => Ok(None),
+            Err(err) => Err(fail(err)),
+        }
     }
 
-    fn os_version(&mut self) -> HostResult<String> {
-        let read = |value: &str| self.desktop.registry_read(CURRENT_VERSION, Some(value)).ok();
-        let number = |v: Option<RegistryValue>| match v {
-            Some(RegistryValue::Dword(n)) => Some(n.to_string()),
-            Some(RegistryValue::String(s)) => Some(s),
-            _ => None,
-        };
-        match (
-            number(read("CurrentMajorVersionNumber")),
-            number(read("CurrentMinorVersionNumber")),
-            number(read("CurrentBuildNumber")),
-        ) {
-            (Some(major), Some(minor), Some(build)) => Ok(format!("{major}.{minor}.{build}")),
-            _ => Err(format!("the Windows version is not recorded under {CURRENT_VERSION} on this desktop").into()),
+    fn registry_read(&mut self, key: &str, value: Option<&str>) -> HostResult<Option<RegistryValue>> {
+        match self.desktop.registry_read(key, value) {
+            Ok(read) => Ok(Some(read)),
+            Err(DesktopError::NotFound(_)) => Ok(None),
+            Err(err) => Err(fail(err)),
         }
     }
 
@@ -280,65 +219,13 @@ impl ScriptHost for DesktopHost<'_> {
         }
     }
 
-    fn clipboard_set_image_from_screenshot_crop(&mut self, rect: [i32; 4]) -> HostResult<()> {
-        let screenshot =
-            self.screenshot.ok_or_else(|| "there is no /update_computer screenshot to copy from".to_owned())?;
-        let [x1, y1, x2, y2] = rect.map(i64::from);
-        let crop = crop_padded(screenshot, x1, y1, x2, y2).map_err(|e| e.to_string())?;
+    fn clipboard_set_image(&mut self, image: RgbaImage) -> HostResult<()> {
         self.effect()?;
-        self.desktop.clipboard_set(&ClipboardData::Image(crop)).map_err(fail)
+        self.desktop.clipboard_set(&ClipboardData::Image(image)).map_err(fail)
     }
 
-    fn open_program(&mut self, name: &str) -> HostResult<bool> {
-        // Upstream runs `os.system(f"start {program}")`; a name with cmd.exe syntax in it
-        // would run more than a program, so it is refused instead.
-        if name.trim().is_empty() || name.contains(['&', '|', '<', '>', '^', '%', '"', '\n', '\r']) {
-            return Err(format!("{name:?} is not a program name").into());
-        }
-        self.effect()?;
-        let registered =
-            APP_PATHS.iter().any(|key| self.desktop.registry_read(&format!(r"{key}\{name}.exe"), None).is_ok());
-        if registered {
-            self.desktop.spawn(&CommandSpec::Shell(format!("start {name}"))).map_err(fail)?;
-            return Ok(true);
-        }
-        // Upstream's fallback check starts the program (`Popen([program])`); starting it is
-        // also the launch here, and it is never waited for (upstream's Q10).
-        match self.desktop.spawn(&CommandSpec::Argv(vec![name.to_owned()])) {
-            Ok(_) => Ok(true),
-            Err(DesktopError::NotFound(_)) => Ok(false),
-            Err(err) => Err(fail(err)),
-        }
-    }
-
-    fn maximize_foreground(&mut self) -> HostResult<()> {
-        let Some(window) = self.foreground()? else {
-            return Ok(());
-        };
-        self.effect()?;
-        self.desktop.set_window_state(window.id, WindowState::Maximized).map_err(fail)
-    }
-
-    fn window_titles(&mut self) -> HostResult<Vec<String>> {
-        let mut titles: Vec<String> = Vec::new();
-        for window in self.windows()? {
-            if window.visible && !window.title.is_empty() && !titles.contains(&window.title) {
-                titles.push(window.title);
-            }
-        }
-        Ok(titles)
-    }
-
-    fn switch_to_window(&mut self, title: &str) -> HostResult<()> {
-        let window = self
-            .windows()?
-            .into_iter()
-            .find(|w| w.visible && w.title == title)
-            .ok_or_else(|| format!("no visible window is titled {title:?}"))?;
-        self.effect()?;
-        self.desktop.set_window_state(window.id, WindowState::Normal).map_err(fail)?;
-        self.desktop.set_window_state(window.id, WindowState::Maximized).map_err(fail)?;
-        self.desktop.activate_window(window.id).map_err(fail)
+    fn env_var(&mut self, name: &str) -> Option<String> {
+        self.desktop.env_var(name)
     }
 }
 
@@ -346,7 +233,7 @@ impl ScriptHost for DesktopHost<'_> {
 mod tests {
     use std::sync::Arc;
 
-    use arena_shared::script::{run_source, Globals};
+    use arena_shared::script::{run_source, Composed as _, Globals};
 
     use super::*;
     use crate::desktop::stub::StubDesktop;
@@ -359,14 +246,6 @@ mod tests {
 
     fn far() -> Instant {
         Instant::now() + Duration::from_secs(60)
-    }
-
-    #[test]
-    fn image_formats_follow_the_extension() {
-        assert_eq!(format_for(r"C:\a\b.PNG"), Ok(ImageFormat::Png));
-        assert_eq!(format_for("x.jpeg"), Ok(ImageFormat::Jpeg));
-        let err = format_for("x.bmp").expect_err("bmp is not encoded here");
-        assert!(err.to_string().contains(".bmp"), "{err}");
     }
 
     #[test]
@@ -398,11 +277,11 @@ mod tests {
     fn screenshots_are_saved_as_png_files() {
         let (_dir, stub) = stub();
         let mut host = DesktopHost::new(stub.as_ref(), far());
-        host.save_screenshot(r"C:\Users\Docker\Downloads\s.png", Some([0, 0, 30, 20])).expect("saved");
+        host.save_screenshot(r"C:\Users\Docker\Downloads\s.png", Some([0, 0, 30, 20]), None).expect("saved");
         let bytes = std::fs::read(stub.map_path(r"C:\Users\Docker\Downloads\s.png").expect("maps")).expect("file");
         let image = crate::imaging::decode(&bytes).expect("png");
         assert_eq!(image.dimensions(), (30, 20));
-        let err = host.save_screenshot(r"C:\Users\Docker\Nope\s.png", None).expect_err("no folder");
+        let err = host.save_screenshot(r"C:\Users\Docker\Nope\s.png", None, None).expect_err("no folder");
         assert!(err.to_string().contains("No such file or directory"), "{err}");
     }
 
@@ -419,8 +298,13 @@ mod tests {
     }
 
     #[test]
-    fn a_missing_python_is_not_available() {
-        assert!(!python_available(Path::new("/definitely/not/python3")));
-        assert!(!python_available(Path::new("arena-no-such-python-xyz")));
+    fn the_os_version_is_read_from_the_registry_as_platform_version_prints_it() {
+        let (_dir, stub) = stub();
+        let mut host = DesktopHost::new(stub.as_ref(), far());
+        assert_eq!(host.os_version().as_deref(), Ok("10.0.22631"));
+        let key = arena_shared::script::compose::CURRENT_VERSION;
+        stub.registry_write(key, Some("CurrentBuildNumber"), &RegistryValue::Binary(vec![1])).expect("written");
+        let err = host.os_version().expect_err("not a number");
+        assert!(err.to_string().contains(r"CurrentVersion\CurrentBuildNumber is not a number"), "{err}");
     }
 }

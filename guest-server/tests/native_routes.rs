@@ -1289,7 +1289,7 @@ async fn large_files_stream_both_ways_and_an_oversized_body_writes_nothing() {
 
     let too_big = vec![1u8; 4 << 20];
     let over = app.send(Request::put(uri).body(Body::from(too_big)).unwrap()).await;
-    over.assert_error(StatusCode::PAYLOAD_TOO_LARGE, ErrorCode::PayloadTooLarge, "--max-body");
+    over.assert_error(StatusCode::PAYLOAD_TOO_LARGE, ErrorCode::PayloadTooLarge, "--max-body-bytes");
     let downloads = app.dir.path().join("C/Users/Docker/Downloads");
     let names: Vec<String> =
         std::fs::read_dir(&downloads).unwrap().map(|e| e.unwrap().file_name().to_string_lossy().into_owned()).collect();

@@ -9,7 +9,14 @@
 //! Platform-neutral and free of I/O. It is not a shell: nothing here expands
 //! variables, globs or redirections.
 
-use crate::script::CommandArg;
+/// A command as a Python caller wrote it for `subprocess` or `os.system`: one
+/// string or an argument list. (The interpreter and the `/execute` routes build it;
+/// this module owns the type so that it imports nothing from the interpreter.)
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum CommandArg {
+    Line(String),
+    Args(Vec<String>),
+}
 
 /// How to start a program.
 #[derive(Debug, Clone, PartialEq, Eq)]

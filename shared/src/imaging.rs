@@ -1,4 +1,4 @@
-//! Cropping as Pillow crops, the one crop both sides use.
+//! Cropping as Pillow crops, the one crop both sides use, and the one image encoder.
 //!
 //! Agent code asks for regions of screenshots (`pyautogui.screenshot(region=...)`,
 //! `computer.clipboard.copy_image`), and upstream's guest answers them with
@@ -6,8 +6,16 @@
 //! The guest's script host, the WAA observation route and the host's agent
 //! executor all crop through [`crop_padded`], so the same code gives the same
 //! pixels wherever it runs.
+//!
+//! [`encode`] is the one way either side turns pixels into PNG or JPEG bytes: the
+//! guest's screenshot routes and both script hosts' saved screenshots and clipboard
+//! images; JPEG goes through [`crate::fastimg::encode_jpeg`].
 
-use image::{Rgba, RgbaImage};
+use image::error::{EncodingError, ImageFormatHint};
+use image::{ImageEncoder, Rgba, RgbaImage};
+
+use crate::fastimg::{self, Layout};
+use crate::observation::ImageFormat;
 
 /// Largest crop in pixels (256 Mpx): a bigger box is refused rather than allocated.
 pub const MAX_CROP_PIXELS: u64 = 1 << 28;
@@ -60,6 +68,34 @@ pub fn crop_padded(image: &RgbaImage, left: i64, top: i64, right: i64, bottom: i
         }
     }
     Ok(out)
+}
+
+/// Encodes `image` as PNG (fast compression) or JPEG at `quality` (1 to 100).
+///
+/// JPEG goes through [`fastimg::encode_jpeg`] (SIMD, 4:2:0 like Pillow), which drops
+/// the alpha byte as converting to RGB first would. [`ImageFormat::Unknown`] is PNG.
+///
+/// # Errors
+///
+/// The encoder's error, for example a JPEG side over 65 535 pixels.
+pub fn encode(image: &RgbaImage, format: ImageFormat, quality: u8) -> Result<Vec<u8>, image::ImageError> {
+    match format {
+        ImageFormat::Jpeg => {
+            fastimg::encode_jpeg(image.as_raw(), image.width(), image.height(), Layout::Rgba8, quality).map_err(|err| {
+                image::ImageError::Encoding(EncodingError::new(ImageFormatHint::Exact(image::ImageFormat::Jpeg), err))
+            })
+        }
+        ImageFormat::Png | ImageFormat::Unknown => {
+            let mut out = Vec::with_capacity(image.as_raw().len() / 4);
+            image::codecs::png::PngEncoder::new_with_quality(
+                &mut out,
+                image::codecs::png::CompressionType::Fast,
+                image::codecs::png::FilterType::Adaptive,
+            )
+            .write_image(image.as_raw(), image.width(), image.height(), image::ExtendedColorType::Rgba8)?;
+            Ok(out)
+        }
+    }
 }
 
 #[cfg(test)]

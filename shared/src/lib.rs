@@ -4,7 +4,10 @@
 //! guest/host boundary: typed input actions, observations (screen, windows,
 //! accessibility), exec requests and results, file operations, the staged
 //! health report and the one error body.
-//! It does no I/O and knows nothing of HTTP, Windows or tokio.
+//! Its only I/O is on the local file system and environment, where both sides must
+//! behave alike: [`atomic`] writes files, [`ntfs`] lists folders, [`token`] reads a
+//! token file, [`search_path`] looks for a program on `PATH`. It knows nothing of
+//! HTTP, Windows APIs or tokio.
 //!
 //! # Layout
 //!
@@ -18,7 +21,13 @@
 //! - [`health`]: the staged readiness report; [`doctor`]: the end-to-end capability report.
 //! - [`error`]: the error body every native route answers with.
 //! - [`window_list`]: the window list and title the model is shown, as upstream builds them.
-//! - [`script`]: a safe interpreter for the pyautogui and WAA `computer.*` Python that hosts send.
+//! - [`script`]: a safe interpreter for the pyautogui and WAA `computer.*` Python that hosts
+//!   send, over a trait of primitives, with the `computer` behaviours composed once.
+//! - [`cmdline`], [`ntfs`], [`imaging`], [`atomic`], [`close_all`], [`token`], [`a11y_xml`]:
+//!   decisions both sides share (command lines, listing order, crop and encode, atomic
+//!   writes, which windows a reset spares, bearer tokens, upstream's accessibility XML).
+//! - [`calendar`] (day counts to dates), [`markup`] (XML/HTML escaping), [`search_path`]
+//!   (the `PATH` lookup): the one copy of each small utility.
 //!
 //! # Compatibility
 //!
@@ -29,6 +38,7 @@
 pub mod a11y_xml;
 pub mod action;
 pub mod atomic;
+pub mod calendar;
 pub mod clipboard;
 pub mod close_all;
 pub mod cmdline;
@@ -42,10 +52,12 @@ pub mod geometry;
 pub mod health;
 pub mod imaging;
 pub mod keys;
+pub mod markup;
 pub mod ntfs;
 pub mod observation;
 pub mod registry;
 pub mod script;
+pub mod search_path;
 pub mod token;
 pub mod window_list;
 

@@ -10,7 +10,10 @@
 //!   `main.rs`, the `arena` CLI and test code print on purpose; libraries emit tracing events);
 //! - every `unsafe` block, function or impl has a `SAFETY:` comment (or a `# Safety`
 //!   section) just before it, and nothing is `unsafe impl Send` or `Sync`;
-//! - `cfg(windows)` is written only inside folders named `windows/`;
+//! - `cfg(windows)`, as an attribute or as the `cfg!(windows)` macro, is written only
+//!   inside folders named `windows/`;
+//! - every source folder and every module a crate root or a folder's `mod.rs` declares
+//!   is named in `ARCHITECTURE.md` (in a code span), so the code map stays whole;
 //! - every Rust file under a `src/` folder opens with a `//!` doc;
 //! - docs and comments name no machine paths (`/work/`, `/tmp/`, `/root/`, `/home/`,
 //!   `C:\Users\<someone>` other than the benchmark's `Docker` user or a placeholder);
@@ -141,13 +144,78 @@ fn cfg_windows_in_windows_folders(path: &str, text: &str) -> Vec<Violation> {
     if !path.ends_with(".rs") || !path.contains("/src/") || path.split('/').any(|part| part == "windows") {
         return Vec::new();
     }
+    let names_windows = |cfg: &str| cfg.contains("windows");
     code_lines(text)
         .filter(|(_, line)| {
-            let line = line.trim_start();
-            line.starts_with("#[cfg") && (line.contains("windows") || line.contains("target_os = \"windows\""))
+            let trimmed = line.trim_start();
+            let attribute = trimmed.starts_with("#[cfg") && names_windows(trimmed);
+            // A `cfg!` outside string literals, whose argument (read with its strings, for
+            // `target_os = "windows"`) names Windows.
+            let mac = strip_strings(line).contains("cfg!(")
+                && line.match_indices("cfg!(").any(|(i, _)| names_windows(line[i..].split(')').next().unwrap_or("")));
+            attribute || mac
         })
         .map(|(n, _)| at(n, "cfg(windows) outside a windows/ folder (move the code into the Windows backend's folder)"))
         .collect()
+}
+
+/// The words inside the code spans (`` `...` ``) of a Markdown text.
+fn code_span_words(markdown: &str) -> std::collections::HashSet<&str> {
+    markdown
+        .split('`')
+        .skip(1)
+        .step_by(2)
+        .flat_map(|span| span.split(|c: char| !(c.is_alphanumeric() || c == '_')))
+        .filter(|w| !w.is_empty())
+        .collect()
+}
+
+/// The modules a crate root or a folder's `mod.rs` declares with `mod NAME;` (test
+/// modules aside), with their lines.
+fn declared_modules(text: &str) -> Vec<(usize, &str)> {
+    let mut out = Vec::new();
+    let mut previous = "";
+    for (n, line) in code_lines(text) {
+        let trimmed = line.trim();
+        let rest =
+            ["pub mod ", "pub(crate) mod ", "pub(super) mod ", "mod "].iter().find_map(|p| trimmed.strip_prefix(p));
+        if let Some(name) = rest.and_then(|r| r.strip_suffix(';')) {
+            if name != "tests" && !previous.contains("cfg(test)") {
+                out.push((n, name.trim()));
+            }
+        }
+        previous = trimmed;
+    }
+    out
+}
+
+/// Whether `path` is a crate root or a folder's `mod.rs` under a `src/` folder.
+fn declares_top_level_modules(path: &str) -> bool {
+    let Some((_, inside)) = path.split_once("/src/") else { return false };
+    inside == "lib.rs" || inside == "main.rs" || inside.ends_with("/mod.rs")
+}
+
+/// Every module declared in a crate root or a folder's `mod.rs`, and every folder of a
+/// module file, is named in a code span of `architecture`.
+fn modules_in_the_code_map(path: &str, text: &str, architecture: &str) -> Vec<Violation> {
+    if !path.ends_with(".rs") || !path.contains("/src/") {
+        return Vec::new();
+    }
+    let named = code_span_words(architecture);
+    let mut out = Vec::new();
+    if declares_top_level_modules(path) {
+        for (n, module) in declared_modules(text) {
+            if !named.contains(module) {
+                out.push(at(n, "a module missing from ARCHITECTURE.md (name it in the code map)"));
+            }
+        }
+    }
+    let (_, inside) = path.split_once("/src/").unwrap_or(("", ""));
+    let folders: Vec<&str> = inside.split('/').collect();
+    if folders[..folders.len() - 1].iter().any(|folder| !folder.is_empty() && !named.contains(folder)) {
+        out.push(at(1, "a source folder missing from ARCHITECTURE.md (name it in the code map)"));
+    }
+    out
 }
 
 fn opens_with_module_doc(path: &str, text: &str) -> Vec<Violation> {
@@ -267,6 +335,7 @@ fn the_repository_is_tidy() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
     let files = tracked_files(&root);
     assert!(files.iter().any(|f| f == "shared/src/lib.rs"), "the repository's files were not found under {root:?}");
+    let architecture = std::fs::read_to_string(root.join("ARCHITECTURE.md")).expect("ARCHITECTURE.md");
     let mut problems = Vec::new();
     let mut checked = 0;
     for file in &files {
@@ -281,6 +350,8 @@ fn the_repository_is_tidy() {
         for rule in rules {
             problems.extend(rule(file, &text).into_iter().map(|v| format!("{file}:{}: {}", v.line, v.rule)));
         }
+        let mapped = modules_in_the_code_map(file, &text, &architecture);
+        problems.extend(mapped.into_iter().map(|v| format!("{file}:{}: {}", v.line, v.rule)));
     }
     assert!(checked > 100, "only {checked} files were checked");
     assert!(problems.is_empty(), "{} tidy problems:\n{}", problems.len(), problems.join("\n"));
@@ -321,11 +392,31 @@ fn unsafe_needs_a_safety_comment() {
 #[test]
 fn cfg_windows_belongs_in_windows_folders() {
     let text = "//! A module.\n#[cfg(windows)]\nfn a() {}\n#[cfg(not(windows))]\nfn b() {}\n#[cfg(unix)]\nfn c() {}\nlet d = cfg!(windows);\n";
-    assert_eq!(lines_of(cfg_windows_in_windows_folders("guest-server/src/lib.rs", text)), [2, 4]);
+    assert_eq!(lines_of(cfg_windows_in_windows_folders("guest-server/src/lib.rs", text)), [2, 4, 8]);
+    let mac = "//! A module.\nlet shell = if cfg!(windows) { \"cmd\" } else { \"sh\" };\nlet u = cfg!(unix);\nlet s = \"cfg!(windows)\";\nif !cfg!(target_os = \"windows\") {}\n";
+    assert_eq!(lines_of(cfg_windows_in_windows_folders("host-client/src/cli/demo.rs", mac)), [2, 5]);
+    assert!(cfg_windows_in_windows_folders("guest-server/src/desktop/windows/target.rs", mac).is_empty());
     assert!(cfg_windows_in_windows_folders("guest-server/src/desktop/windows/mod.rs", text).is_empty());
     assert!(cfg_windows_in_windows_folders("guest-server/src/service/windows/scm.rs", text).is_empty());
     let any = "#[cfg(any(windows, target_os = \"macos\"))]\n";
     assert_eq!(lines_of(cfg_windows_in_windows_folders("x/src/a.rs", any)), [1]);
+}
+
+#[test]
+fn modules_and_folders_must_be_in_the_code_map() {
+    let architecture =
+        "| `shared/` | `action`, `script::{host, compose}` |\n| `desktop/stub/` | the stub |\nnot code: missing\n";
+    let root = "//! The crate.\npub mod action;\nmod missing;\npub(crate) mod script;\n#[cfg(test)]\nmod helpers;\nmod tests;\n";
+    assert_eq!(lines_of(modules_in_the_code_map("shared/src/lib.rs", root, architecture)), [3]);
+    let folder = "//! A folder.\nmod host;\nmod compose;\nmod extra;\n";
+    assert_eq!(lines_of(modules_in_the_code_map("shared/src/script/mod.rs", folder, architecture)), [4]);
+    // A file's folders must be named too; a file that is not a root declares nothing checked.
+    assert_eq!(
+        lines_of(modules_in_the_code_map("guest-server/src/desktop/stub/a.rs", "mod z;\n", architecture)),
+        Vec::<usize>::new()
+    );
+    assert_eq!(lines_of(modules_in_the_code_map("guest-server/src/unmapped/a.rs", "", architecture)), [1]);
+    assert!(modules_in_the_code_map("docs/x.md", root, architecture).is_empty());
 }
 
 #[test]

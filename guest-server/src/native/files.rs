@@ -181,7 +181,7 @@ async fn write(
         size += chunk.len();
         if size > limit {
             return Err(ApiError::PayloadTooLarge(format!(
-                "the body is over {limit} bytes (--max-body); nothing was written"
+                "the body is over {limit} bytes (--max-body-bytes); nothing was written"
             )));
         }
         hasher.update(&chunk);

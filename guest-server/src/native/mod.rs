@@ -20,7 +20,7 @@
 //!
 //! Body limits by route family: `/v1/actions` [`crate::config::ACTIONS_BODY_BYTES`],
 //! `/v1/clipboard` [`crate::config::CLIPBOARD_BODY_BYTES`], `PUT /v1/files` streams up
-//! to `--max-body`, and every other route [`crate::config::JSON_BODY_BYTES`].
+//! to `--max-body-bytes`, and every other route [`crate::config::JSON_BODY_BYTES`].
 
 mod a11y;
 mod browser;
@@ -52,7 +52,7 @@ pub fn routes() -> Router<AppState> {
         .merge(a11y::routes())
         .merge(windows::routes())
         .merge(doctor::routes())
-        // `PUT /v1/files` reads its body as a stream, bounded by `--max-body` itself.
+        // `PUT /v1/files` reads its body as a stream, bounded by `--max-body-bytes` itself.
         .merge(files::routes())
         .merge(exec::routes())
         .merge(registry::routes())

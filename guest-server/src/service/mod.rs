@@ -504,7 +504,7 @@ pub fn execute_logon_task(command: &LogonTaskCommand) -> Result<String, ServiceC
             let user =
                 task_user(std::env::var("USERDOMAIN").ok().as_deref(), std::env::var("USERNAME").ok().as_deref());
             let xml = logon_task_definition(&exe, &options.serve_args, user.as_deref());
-            if !cfg!(windows) {
+            if !crate::desktop::windows::target::IS_WINDOWS {
                 return Err(ServiceCliError::OnlyOnWindows("logon-task"));
             }
             let file = std::env::temp_dir().join(format!("arena-guest-task-{}.xml", std::process::id()));
@@ -524,7 +524,7 @@ pub fn execute_logon_task(command: &LogonTaskCommand) -> Result<String, ServiceC
             ))
         }
         LogonTaskCommand::Uninstall(name) => {
-            if !cfg!(windows) {
+            if !crate::desktop::windows::target::IS_WINDOWS {
                 return Err(ServiceCliError::OnlyOnWindows("logon-task"));
             }
             // End a running launcher first: its server then stops through its closed
@@ -813,7 +813,7 @@ mod tests {
 
     #[test]
     fn other_platforms_say_windows_only() {
-        if cfg!(windows) {
+        if crate::desktop::windows::target::IS_WINDOWS {
             return;
         }
         let install = ServiceCommand::Install(SupervisorOptions {

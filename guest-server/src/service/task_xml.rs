@@ -19,6 +19,8 @@
 use std::fmt::Write as _;
 use std::path::Path;
 
+use arena_shared::markup::escape;
+
 /// Task Scheduler's `Priority` for a normal process (`NORMAL_PRIORITY_CLASS`): 4 to 6
 /// are normal, 7 (the default) and 8 below normal, 0 to 3 above.
 pub const NORMAL_PRIORITY: u8 = 4;
@@ -38,22 +40,6 @@ pub struct LogonTask<'a> {
     pub arguments: &'a str,
     /// Its working directory.
     pub working_dir: Option<&'a Path>,
-}
-
-/// Escapes `text` for an XML element's content.
-fn escape(text: &str) -> String {
-    let mut out = String::with_capacity(text.len());
-    for c in text.chars() {
-        match c {
-            '&' => out.push_str("&amp;"),
-            '<' => out.push_str("&lt;"),
-            '>' => out.push_str("&gt;"),
-            '"' => out.push_str("&quot;"),
-            '\'' => out.push_str("&apos;"),
-            c => out.push(c),
-        }
-    }
-    out
 }
 
 /// The task definition (schema 1.2, Windows 7 and later): a logon trigger; the user's
@@ -198,7 +184,7 @@ mod tests {
         assert_eq!(element(&xml, "Exec", "WorkingDirectory"), r"C:\Program Files\Arena");
         let bare = logon_task_xml(&bare_task());
         assert!(!bare.contains("<Arguments>") && !bare.contains("<WorkingDirectory>"), "{bare}");
-        assert_eq!(escape("<a & 'b'>"), "&lt;a &amp; &apos;b&apos;&gt;");
+        assert_eq!(escape("<a & 'b'>"), "&lt;a &amp; &#39;b&#39;&gt;");
     }
 
     #[test]

@@ -25,7 +25,7 @@ use arena_shared::script::{self, ErrorKind, Globals, ParseError, ScriptError};
 
 use crate::desktop::{CommandSpec, Desktop, DesktopError, ExecLimits};
 use crate::error::WaaError;
-use crate::script_host::{python_available, DesktopHost};
+use crate::script_host::DesktopHost;
 use crate::state::AppState;
 use crate::waa::body::{Data, PyJson};
 use crate::waa::WaaState;
@@ -147,7 +147,7 @@ pub(crate) async fn execute(State(state): State<AppState>, PyJson(body): PyJson)
         if let Some(code) = python_code(&spec) {
             match run_python(desktop, &code, &command, timeout_ms) {
                 Native::Answer(answer) => return answer,
-                Native::Unsupported(message) => match python.as_deref().filter(|p| python_available(p)) {
+                Native::Unsupported(message) => match python.as_deref().filter(|p| arena_shared::search_path::find_program(p).is_some()) {
                     Some(program) => {
                         tracing::info!(%message, python = %program.display(), "running code outside the native subset with a real Python");
                         spec = with_program(spec, program);

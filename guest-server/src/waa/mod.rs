@@ -166,7 +166,7 @@ pub fn routes(state: &AppState) -> Router<AppState> {
         .route("/setup/create_file", post_rule(files::create_file))
         .route("/update_computer", post_rule(execute::update_computer))
         .layer(DefaultBodyLimit::max(ACTIONS_BODY_BYTES));
-    // `/setup/upload` keeps the router's `--max-body`.
+    // `/setup/upload` keeps the router's `--max-body-bytes`.
     let upload = Router::new().route("/setup/upload", post_rule(files::upload));
     small.merge(execute).merge(update).merge(upload).with_state(ctx)
 }

@@ -21,50 +21,42 @@
 //! - Environment variables are read by running `cmd.exe /d /c echo %NAME%` on the
 //!   guest, so they need a Windows guest; on the stub they are unset.
 //!
-//! What a command, a crop or a listing becomes is decided in `arena_shared`
-//! ([`arena_shared::cmdline`], [`arena_shared::imaging`], [`arena_shared::ntfs`]),
-//! the same modules the guest's own script host uses, so code gives the same
-//! result whether it runs here or in the guest's `/execute`.
+//! [`GuestHost`] implements only the primitives (capture, input, windows, files,
+//! processes, registry, clipboard, environment); every behaviour made of them (the
+//! window list, `switch_to_application`, `open_program`, `platform.version()`, saved
+//! screenshots, crops, command lines) is `arena_shared::script::compose`'s, the same
+//! code the guest's own script host runs, so code gives the same result whether it
+//! runs here or in the guest's `/execute`.
 
 use std::future::Future;
-use std::io::Cursor;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use base64::Engine as _;
-use image::ImageFormat;
+use image::RgbaImage;
 use serde::{Deserialize, Serialize};
 use tokio::runtime::Handle;
 
 use arena_shared::action::{Action, ActionBatch};
 use arena_shared::clipboard::ClipboardContent;
-use arena_shared::cmdline::{subprocess_command, CommandSpec};
+use arena_shared::cmdline::CommandSpec;
 use arena_shared::exec::{ExecRequest, LaunchRequest};
 use arena_shared::files::FileKind;
 use arena_shared::geometry::Point;
-use arena_shared::imaging::crop_padded;
+use arena_shared::imaging::encode;
 use arena_shared::keys::HeldKeys;
-use arena_shared::observation::{ImageFormat as WireImageFormat, ScreenshotQuery, WindowInfo, WindowTarget};
+use arena_shared::observation::{ImageFormat, ScreenshotQuery, WindowInfo, WindowTarget};
 use arena_shared::registry::RegistryValue;
 use arena_shared::script::{
-    parse, run, CommandArg, CommandOutput, ComputerState, Globals, HostError, HostResult, PathKind, ScriptError,
-    ScriptHost, Stop,
+    parse, run, CommandOutput, ComputerState, Globals, HostError, HostResult, PathKind, ScriptError, ScriptHost,
+    Stop, WindowChange,
 };
 
 use super::{AgentAction, AgentError};
 use crate::client::GuestClient;
 use crate::error::ClientError;
 use crate::som::Marks;
-
-/// Where `Computer.os.open_program` looks first, as upstream's `is_installed` does.
-const APP_PATHS: [&str; 2] = [
-    r"HKLM\SOFTWARE\Microsoft\Windows\CurrentVersion\App Paths",
-    r"HKLM\SOFTWARE\Wow6432Node\Microsoft\Windows\CurrentVersion\App Paths",
-];
-
-/// Where Windows keeps the version numbers `platform.version()` prints.
-const CURRENT_VERSION: &str = r"HKLM\SOFTWARE\Microsoft\Windows NT\CurrentVersion";
 
 /// How scripts are run.
 #[derive(Debug, Clone, PartialEq)]
@@ -389,53 +381,6 @@ impl GuestHost {
     fn remaining(&self) -> Duration {
         self.options.max_duration.saturating_sub(self.started.elapsed())
     }
-
-    fn windows(&mut self) -> HostResult<Vec<WindowInfo>> {
-        self.call(|c| async move { c.windows().await })
-    }
-
-    fn foreground(&mut self) -> HostResult<Option<WindowInfo>> {
-        Ok(self.windows()?.into_iter().find(|w| w.focused))
-    }
-
-    /// A screenshot without the cursor, decoded.
-    fn capture(&mut self) -> HostResult<image::RgbaImage> {
-        let query = ScreenshotQuery { format: WireImageFormat::Png, cursor: Some(false), ..ScreenshotQuery::default() };
-        let shot = self.call(|c| async move { c.screenshot(&query).await })?;
-        image::load_from_memory(&shot.bytes)
-            .map(|i| i.to_rgba8())
-            .map_err(|e| HostError::Failed(format!("cannot decode the screenshot: {e}")))
-    }
-
-    fn exec(&mut self, command: CommandSpec) -> HostResult<CommandOutput> {
-        let timeout_ms = u64::try_from(self.remaining().as_millis()).unwrap_or(u64::MAX).max(1);
-        let request = ExecRequest { timeout_ms: Some(timeout_ms), ..ExecRequest::new(command) };
-        let result = self.call(|c| async move { c.exec(&request).await })?;
-        if result.timed_out {
-            return Err(HostError::TimedOut("the command ran out of time".to_owned()));
-        }
-        Ok(CommandOutput { code: result.exit_code.unwrap_or(-1), stdout: result.stdout, stderr: result.stderr })
-    }
-
-    fn target(id: u64) -> WindowTarget {
-        WindowTarget { id: Some(id), title: None }
-    }
-}
-
-/// Crops `[x1, y1, x2, y2]` out of `img` as Pillow does (see [`crop_padded`]).
-fn crop(img: &image::RgbaImage, [x1, y1, x2, y2]: [i64; 4]) -> HostResult<image::RgbaImage> {
-    crop_padded(img, x1, y1, x2, y2).map_err(|err| HostError::Failed(err.to_string()))
-}
-
-fn encode(img: &image::RgbaImage, format: ImageFormat) -> HostResult<Vec<u8>> {
-    let mut out = Cursor::new(Vec::new());
-    let result = if format == ImageFormat::Jpeg {
-        image::DynamicImage::ImageRgba8(img.clone()).to_rgb8().write_to(&mut out, format)
-    } else {
-        img.write_to(&mut out, format)
-    };
-    result.map_err(|e| format!("cannot encode the image: {e}"))?;
-    Ok(out.into_inner())
 }
 
 impl ScriptHost for GuestHost {
@@ -478,35 +423,33 @@ impl ScriptHost for GuestHost {
         Ok((screen.physical_width, screen.physical_height))
     }
 
-    fn active_window_title(&mut self) -> HostResult<String> {
-        Ok(self.foreground()?.map(|w| w.title).unwrap_or_default())
+    fn capture(&mut self) -> HostResult<RgbaImage> {
+        let query = ScreenshotQuery { format: ImageFormat::Png, cursor: Some(false), ..ScreenshotQuery::default() };
+        let shot = self.call(|c| async move { c.screenshot(&query).await })?;
+        image::load_from_memory(&shot.bytes)
+            .map(|i| i.to_rgba8())
+            .map_err(|e| HostError::Failed(format!("cannot decode the screenshot: {e}")))
     }
 
-    fn save_screenshot(&mut self, path: &str, region: Option<[i32; 4]>) -> HostResult<()> {
-        let img = self.capture()?;
-        let img = match region {
-            None => img,
-            Some([left, top, width, height]) => {
-                let (l, t) = (i64::from(left), i64::from(top));
-                crop(&img, [l, t, l + i64::from(width), t + i64::from(height)])?
+    fn observed_screenshot(&mut self) -> HostResult<RgbaImage> {
+        // The agent's own observation is not kept here (see the module doc).
+        self.capture()
+    }
+
+    fn windows(&mut self) -> HostResult<Vec<WindowInfo>> {
+        self.call(|c| async move { c.windows().await })
+    }
+
+    fn change_window(&mut self, id: u64, change: WindowChange) -> HostResult<()> {
+        let target = WindowTarget { id: Some(id), title: None };
+        self.call(|c| async move {
+            match change {
+                WindowChange::Restore => c.restore_window(&target).await,
+                WindowChange::Maximize => c.maximize_window(&target).await,
+                WindowChange::Activate => c.activate_window(&target).await,
             }
-        };
-        let lower = path.to_ascii_lowercase();
-        let format =
-            if lower.ends_with(".jpg") || lower.ends_with(".jpeg") { ImageFormat::Jpeg } else { ImageFormat::Png };
-        let bytes = encode(&img, format)?;
-        let path = path.to_owned();
-        self.call(|c| async move { c.push_file(&path, bytes, Some(true)).await }).map(drop)
-    }
-
-    fn env_var(&mut self, name: &str) -> Option<String> {
-        if name.is_empty() || !name.chars().all(|c| c.is_ascii_alphanumeric() || "_()".contains(c)) {
-            return None;
-        }
-        let out = self.exec(CommandSpec::Shell(format!("echo %{name}%"))).ok()?;
-        let value = out.stdout.trim_end_matches(['\r', '\n']).to_owned();
-        // cmd.exe echoes an undefined variable's reference unchanged.
-        (out.code == 0 && value != format!("%{name}%")).then_some(value)
+        })
+        .map(drop)
     }
 
     fn path_kind(&mut self, path: &str) -> Option<PathKind> {
@@ -529,27 +472,45 @@ impl ScriptHost for GuestHost {
         Ok(names)
     }
 
-    fn run_command(&mut self, cmd: &CommandArg, shell: bool) -> HostResult<CommandOutput> {
-        self.exec(subprocess_command(cmd, shell))
+    fn write_file(&mut self, path: &str, bytes: Vec<u8>) -> HostResult<()> {
+        let path = path.to_owned();
+        // As Python's `open(path, "wb")`: no missing folder is created.
+        self.call(|c| async move { c.push_file(&path, bytes, Some(false)).await }).map(drop)
     }
 
-    fn spawn_command(&mut self, cmd: &CommandArg, shell: bool) -> HostResult<u32> {
-        let request = LaunchRequest::new(subprocess_command(cmd, shell));
-        Ok(self.call(|c| async move { c.launch(&request).await })?.pid)
-    }
-
-    fn os_version(&mut self) -> HostResult<String> {
-        let mut parts = Vec::new();
-        for value in ["CurrentMajorVersionNumber", "CurrentMinorVersionNumber", "CurrentBuildNumber"] {
-            let read = self.call(|c| async move { c.registry_get(CURRENT_VERSION, Some(value)).await })?;
-            parts.push(match read.data {
-                RegistryValue::Dword(n) => n.to_string(),
-                RegistryValue::Qword(n) => n.to_string(),
-                RegistryValue::String(s) => s,
-                other => return Err(format!("{CURRENT_VERSION}\\{value} is not a number: {other:?}").into()),
-            });
+    fn run(&mut self, command: &CommandSpec) -> HostResult<CommandOutput> {
+        let timeout_ms = u64::try_from(self.remaining().as_millis()).unwrap_or(u64::MAX).max(1);
+        let request = ExecRequest { timeout_ms: Some(timeout_ms), ..ExecRequest::new(command.clone()) };
+        let result = self.call(|c| async move { c.exec(&request).await })?;
+        if result.timed_out {
+            return Err(HostError::TimedOut("the command ran out of time".to_owned()));
         }
-        Ok(parts.join("."))
+        Ok(CommandOutput { code: result.exit_code.unwrap_or(-1), stdout: result.stdout, stderr: result.stderr })
+    }
+
+    fn launch(&mut self, command: &CommandSpec) -> HostResult<Option<u32>> {
+        if let Some(err) = &self.unreachable {
+            return Err(HostError::Unreachable(format!("the guest is unreachable: {err}")));
+        }
+        let request = LaunchRequest::new(command.clone());
+        match self.rt.block_on(self.client.launch(&request)) {
+            Ok(launched) => Ok(Some(launched.pid)),
+            // The guest answers 404 when the program does not exist.
+            Err(err) if err.status() == Some(404) => Ok(None),
+            Err(err) => Err(self.client_error(err)),
+        }
+    }
+
+    fn registry_read(&mut self, key: &str, value: Option<&str>) -> HostResult<Option<RegistryValue>> {
+        if let Some(err) = &self.unreachable {
+            return Err(HostError::Unreachable(format!("the guest is unreachable: {err}")));
+        }
+        match self.rt.block_on(self.client.registry_get(key, value)) {
+            Ok(read) => Ok(Some(read.data)),
+            // The guest answers 404 when the key or the value does not exist.
+            Err(err) if err.status() == Some(404) => Ok(None),
+            Err(err) => Err(self.client_error(err)),
+        }
     }
 
     fn clipboard_set_text(&mut self, text: &str) -> HostResult<()> {
@@ -565,74 +526,24 @@ impl ScriptHost for GuestHost {
         }
     }
 
-    fn clipboard_set_image_from_screenshot_crop(&mut self, rect: [i32; 4]) -> HostResult<()> {
-        let img = crop(&self.capture()?, rect.map(i64::from))?;
-        let png = encode(&img, ImageFormat::Png)?;
+    fn clipboard_set_image(&mut self, image: RgbaImage) -> HostResult<()> {
+        let png = encode(&image, ImageFormat::Png, 100).map_err(|e| format!("cannot encode the image: {e}"))?;
         let content = ClipboardContent::Image {
-            width: img.width(),
-            height: img.height(),
+            width: image.width(),
+            height: image.height(),
             png_base64: base64::engine::general_purpose::STANDARD.encode(png),
         };
         self.call(|c| async move { c.clipboard_set(&content).await })
     }
 
-    fn open_program(&mut self, name: &str) -> HostResult<bool> {
-        // Upstream runs `os.system(f"start {program}")`; a name with cmd.exe syntax in it
-        // would run more than a program, so it is refused instead.
-        if name.trim().is_empty() || name.contains(['&', '|', '<', '>', '^', '%', '"', '\n', '\r']) {
-            return Err(format!("{name:?} is not a program name").into());
+    fn env_var(&mut self, name: &str) -> Option<String> {
+        if name.is_empty() || !name.chars().all(|c| c.is_ascii_alphanumeric() || "_()".contains(c)) {
+            return None;
         }
-        let mut registered = false;
-        for key in APP_PATHS {
-            let key = format!(r"{key}\{name}.exe");
-            if self.call(|c| async move { c.registry_get(&key, None).await }).is_ok() {
-                registered = true;
-                break;
-            }
-        }
-        // As the guest's own script host starts it: `start NAME` through the shell.
-        let command = if registered {
-            CommandSpec::Shell(format!("start {name}"))
-        } else {
-            CommandSpec::Argv(vec![name.to_owned()])
-        };
-        let request = LaunchRequest::new(command);
-        let launched = self.rt.block_on(self.client.launch(&request));
-        match launched {
-            Ok(_) => Ok(true),
-            // Upstream's fallback check is "does starting it raise OSError".
-            Err(err) if err.status() == Some(404) => Ok(false),
-            Err(err) => Err(self.client_error(err)),
-        }
-    }
-
-    fn maximize_foreground(&mut self) -> HostResult<()> {
-        let Some(window) = self.foreground()? else {
-            return Ok(());
-        };
-        self.call(|c| async move { c.maximize_window(&GuestHost::target(window.id)).await }).map(drop)
-    }
-
-    fn window_titles(&mut self) -> HostResult<Vec<String>> {
-        let mut titles: Vec<String> = Vec::new();
-        for window in self.windows()? {
-            if window.visible && !window.title.is_empty() && !titles.contains(&window.title) {
-                titles.push(window.title);
-            }
-        }
-        Ok(titles)
-    }
-
-    fn switch_to_window(&mut self, title: &str) -> HostResult<()> {
-        let window = self
-            .windows()?
-            .into_iter()
-            .find(|w| w.visible && w.title == title)
-            .ok_or_else(|| format!("no visible window is titled {title:?}"))?;
-        let id = window.id;
-        self.call(|c| async move { c.restore_window(&GuestHost::target(id)).await })?;
-        self.call(|c| async move { c.maximize_window(&GuestHost::target(id)).await })?;
-        self.call(|c| async move { c.activate_window(&GuestHost::target(id)).await }).map(drop)
+        let out = self.run(&CommandSpec::Shell(format!("echo %{name}%"))).ok()?;
+        let value = out.stdout.trim_end_matches(['\r', '\n']).to_owned();
+        // cmd.exe echoes an undefined variable's reference unchanged.
+        (out.code == 0 && value != format!("%{name}%")).then_some(value)
     }
 }
 

@@ -19,6 +19,7 @@ use anyhow::{bail, Context};
 use clap::Args;
 
 use arena_shared::action::Action;
+use arena_shared::cmdline::CommandSpec;
 use arena_shared::exec::{ExecRequest, LaunchRequest};
 use arena_shared::files::KnownFolder;
 use arena_shared::observation::{A11yNode, A11yQuery, ScreenshotQuery, WindowInfo, WindowTarget};
@@ -148,11 +149,11 @@ pub async fn run(conn: &Connection, args: DemoArgs) -> anyhow::Result<ExitCode> 
         })
         .await;
     // Without a ready guest every further step would only repeat the connection error.
-    let Some(backend) = backend else {
+    if backend.is_none() {
         finish(stub).await;
         emit(&report.render(started.elapsed()))?;
         return Ok(ExitCode::FAILURE);
-    };
+    }
 
     report.step("launch notepad", launch_notepad(&client)).await;
 
@@ -183,22 +184,12 @@ pub async fn run(conn: &Connection, args: DemoArgs) -> anyhow::Result<ExitCode> 
 
     report
         .step("run a command", async {
-            let argv: Vec<String> = if backend == "windows" || cfg!(windows) {
-                ["cmd", "/c", "echo", GREETING].map(str::to_owned).to_vec()
-            } else {
-                ["echo", GREETING].map(str::to_owned).to_vec()
-            };
-            let shown = argv.join(" ");
-            let result = client
-                .exec(&ExecRequest {
-                    shell: None,
-                    argv,
-                    timeout_ms: Some(30_000),
-                    max_output_bytes: None,
-                    cwd: None,
-                    stdin: None,
-                })
-                .await?;
+            // A shell line: `echo` is a built-in of cmd.exe and of sh alike, so the same
+            // request works whatever the guest runs on.
+            let shown = format!("echo {GREETING}");
+            let request =
+                ExecRequest { timeout_ms: Some(30_000), ..ExecRequest::new(CommandSpec::Shell(shown.clone())) };
+            let result = client.exec(&request).await?;
             if result.exit_code != Some(0) {
                 bail!("`{shown}` exited with {:?}: {}", result.exit_code, result.stderr.trim());
             }

@@ -18,20 +18,7 @@ use super::summary::{DomainRow, Summary};
 use super::{read_trajectory, scan, write_atomic, FoundTask, ResultsError, StepRecord, REPORT_HTML, TRAJ_FILE};
 
 /// Escapes text for HTML element content and attribute values.
-pub fn escape(text: &str) -> String {
-    let mut out = String::with_capacity(text.len());
-    for c in text.chars() {
-        match c {
-            '&' => out.push_str("&amp;"),
-            '<' => out.push_str("&lt;"),
-            '>' => out.push_str("&gt;"),
-            '"' => out.push_str("&quot;"),
-            '\'' => out.push_str("&#39;"),
-            _ => out.push(c),
-        }
-    }
-    out
-}
+pub use arena_shared::markup::escape;
 
 /// Percent-encodes a relative path for an `href`/`src`, keeping `/`.
 fn url_path(path: &str) -> String {

@@ -14,7 +14,7 @@ use std::time::Duration;
 
 use serde::Deserialize;
 
-use super::steps::Outcome;
+use super::outcome::Outcome;
 use super::SetupContext;
 
 /// Connection attempts before giving up (upstream: 15).

@@ -24,12 +24,14 @@
 //! - `command`: command lines for `launch` and `execute` (pure, unit-tested).
 //! - [`cache`] holds [`DownloadCache`].
 //! - `cdp`: tab steps over the DevTools HTTP endpoint; [`compare_urls`].
+//! - `outcome`: what one step did, shared by `steps` and `cdp` (so neither imports the other).
 //! - [`history`] builds Chrome's `History` database.
 
 pub mod cache;
 mod cdp;
 mod command;
 pub mod history;
+mod outcome;
 mod steps;
 
 use std::path::PathBuf;

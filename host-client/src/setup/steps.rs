@@ -17,10 +17,10 @@ use arena_shared::observation::{WindowInfo, WindowTarget};
 use arena_shared::script::actions_from_pyautogui;
 
 use crate::client::GuestClient;
-use crate::error::ClientError;
 use crate::task::{CommandArg, DownloadFile, SetupStep, Until};
 
 use super::command::{self, ExecPlan};
+use super::outcome::Outcome;
 use super::{cdp, history, SetupContext, SetupError};
 
 /// Upstream's pause after opening a file: the guest route sleeps 5 s and the host 2 s more.
@@ -33,31 +33,6 @@ const UNTIL_PAUSE: Duration = Duration::from_millis(300);
 const UNTIL_FAILURES: u32 = 5;
 /// Upstream's `/execute` timeout.
 const EXEC_TIMEOUT_MS: u64 = 120_000;
-
-/// What a step did.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub(super) struct Outcome {
-    pub(super) ok: bool,
-    pub(super) detail: String,
-}
-
-impl Outcome {
-    pub(super) fn done(detail: impl Into<String>) -> Outcome {
-        Outcome { ok: true, detail: detail.into() }
-    }
-
-    pub(super) fn failed(detail: impl Into<String>) -> Outcome {
-        Outcome { ok: false, detail: detail.into() }
-    }
-
-    /// Done with `detail` when `result` is `Ok`, failed with the error otherwise.
-    fn of<T>(result: Result<T, ClientError>, detail: impl Into<String>) -> Outcome {
-        match result {
-            Ok(_) => Outcome::done(detail),
-            Err(err) => Outcome::failed(err.to_string()),
-        }
-    }
-}
 
 /// Runs one step.
 ///

@@ -280,24 +280,6 @@ fn drive_opts(opts: &str, file: &Path) -> String {
     format!("{opts},file={}", escape(file))
 }
 
-/// Finds `name` on `PATH`.
-pub fn which(name: &str) -> Option<PathBuf> {
-    let path = std::env::var_os("PATH")?;
-    std::env::split_paths(&path).map(|dir| dir.join(name)).find(|p| is_executable(p))
-}
-
-fn is_executable(path: &Path) -> bool {
-    #[cfg(unix)]
-    {
-        use std::os::unix::fs::PermissionsExt;
-        std::fs::metadata(path).map(|m| m.is_file() && m.permissions().mode() & 0o111 != 0).unwrap_or(false)
-    }
-    #[cfg(not(unix))]
-    {
-        path.is_file()
-    }
-}
-
 /// The QEMU system emulator: `explicit`, or `qemu-system-x86_64` on `PATH`.
 ///
 /// # Errors
@@ -318,12 +300,13 @@ pub fn find_qemu_img(explicit: Option<&Path>) -> Result<PathBuf, VmError> {
 
 pub(crate) fn find_program(explicit: Option<&Path>, name: &str, package: &str) -> Result<PathBuf, VmError> {
     match explicit {
-        Some(path) if is_executable(path) => Ok(path.to_owned()),
+        // A bare name is looked up on PATH; a path is checked as given.
+        Some(path) if arena_shared::search_path::find_program(path).is_some() => Ok(path.to_owned()),
         Some(path) => Err(VmError::Missing {
             program: path.display().to_string(),
             hint: format!("it is not an executable file; install Debian's {package} package or give the right path"),
         }),
-        None => which(name).ok_or_else(|| VmError::Missing {
+        None => arena_shared::search_path::find_program(Path::new(name)).ok_or_else(|| VmError::Missing {
             program: name.to_owned(),
             hint: format!(
                 "it is not on PATH; install it with `apt-get install {package}` (Debian's {package} package)"

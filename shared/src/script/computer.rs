@@ -17,6 +17,7 @@
 
 use crate::keys::parse_chord;
 
+use super::compose::Composed as _;
 use super::difflib::get_close_matches;
 use super::error::{not_supported, type_error, value_error, ErrorKind, ScriptError};
 use super::interp::{is_none, no_attribute, static_name, to_f64, to_i64, to_str, Args, Interp};
@@ -237,7 +238,7 @@ pub(crate) fn call_method(
                 Some(v) => to_str(v, "description")?.to_owned(),
             };
             let (_, rect) = element(state(it)?, a[0].as_ref().unwrap_or(&Value::None))?;
-            let result = it.host.clipboard_set_image_from_screenshot_crop(rect);
+            let result = it.host.copy_image(rect);
             it.host(result)?;
             state(it)?.clipboard_content = Some(description);
             return Ok(Value::None);

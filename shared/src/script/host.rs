@@ -1,23 +1,24 @@
-//! The interpreter's only way to touch the world: the [`ScriptHost`] trait.
+//! The interpreter's only way to touch the world: the [`ScriptHost`] trait of primitives.
 //!
-//! Every effect a script can have (input, sleeping, screenshots, the
-//! environment, files, processes, the clipboard, windows) is one method here,
-//! so this crate stays free of I/O and a host decides what each effect means:
-//! the guest performs them on the desktop, [`RecordingHost`] turns them into
-//! [`Action`]s for the host client.
+//! Every primitive effect a script can have (input, sleeping, capture, windows,
+//! files, processes, the registry, the clipboard, the environment) is one method
+//! here, so the interpreter does no I/O of its own and a host decides what each
+//! primitive means: the guest's `DesktopHost` calls its `Desktop` backend, the host's
+//! `GuestHost` calls the guest's `/v1` API, and [`RecordingHost`] turns input into
+//! [`Action`]s. What is composed of primitives is written once in [`super::compose`].
 //! Methods fail with a [`HostError`]: an ordinary failure the interpreter raises as
 //! an `OSError` with its message, or one that stops the script (the deadline
 //! passed, the desktop is out of reach), which the caller tells apart by the
 //! error's [`ErrorKind`](super::ErrorKind), with no state on the side.
 
-use crate::action::Action;
+use image::RgbaImage;
 
-/// A command for `subprocess` or `os.system`: one string or an argument list, as written.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub enum CommandArg {
-    Line(String),
-    Args(Vec<String>),
-}
+use crate::action::Action;
+use crate::cmdline::CommandSpec;
+use crate::observation::WindowInfo;
+use crate::registry::RegistryValue;
+
+pub use crate::cmdline::CommandArg;
 
 /// Why a host could not carry out an effect.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
@@ -66,10 +67,30 @@ pub enum PathKind {
     Dir,
 }
 
-/// Everything a running script can do to the outside world.
+/// A change to a top-level window, by its id (`POST /v1/windows/{op}` on the host,
+/// `Desktop::set_window_state` and `activate_window` in the guest).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum WindowChange {
+    /// Restore from minimised or maximised (pygetwindow's `restore`).
+    Restore,
+    /// Maximise (`ShowWindow(SW_MAXIMIZE)`).
+    Maximize,
+    /// Bring to the foreground (`SetForegroundWindow`).
+    Activate,
+}
+
+/// The primitives a running script needs from the outside world: the calls that
+/// really differ between the guest (a `Desktop` backend) and the host (the guest's
+/// `/v1` API).
+///
+/// Everything a script does that is made of these calls (the window list, switching
+/// windows, opening a program, the OS version, saving a screenshot, `subprocess`)
+/// is written once, over this trait, in [`super::compose`].
 ///
 /// Object-safe and synchronous; the interpreter calls it on the thread that runs the script.
 pub trait ScriptHost {
+    // ----- input -----
+
     /// Performs one input action.
     fn perform(&mut self, action: Action) -> HostResult<()>;
 
@@ -83,15 +104,24 @@ pub trait ScriptHost {
     /// The primary screen's size in physical pixels.
     fn screen_size(&mut self) -> HostResult<(u32, u32)>;
 
-    /// The foreground window's title (`""` when there is none).
-    fn active_window_title(&mut self) -> HostResult<String>;
+    // ----- capture -----
 
-    /// Captures the screen (or `region` as left, top, width, height) and saves it as an
-    /// image file at the guest path `path`; the format follows the extension.
-    fn save_screenshot(&mut self, path: &str, region: Option<[i32; 4]>) -> HostResult<()>;
+    /// The whole screen now, without the cursor (pyautogui's screenshots never show it).
+    fn capture(&mut self) -> HostResult<RgbaImage>;
 
-    /// An environment variable of the guest session (case-insensitive on Windows).
-    fn env_var(&mut self, name: &str) -> Option<String>;
+    /// The screenshot `computer.clipboard.copy_image` crops: in the guest, the one the
+    /// last `/update_computer` stored; on the host, a fresh [`capture`](Self::capture).
+    fn observed_screenshot(&mut self) -> HostResult<RgbaImage>;
+
+    // ----- windows -----
+
+    /// Every top-level window, with its title, visibility, focus and z-order.
+    fn windows(&mut self) -> HostResult<Vec<WindowInfo>>;
+
+    /// Changes one window's state.
+    fn change_window(&mut self, id: u64, change: WindowChange) -> HostResult<()>;
+
+    // ----- files -----
 
     /// Whether `path` exists and what it is.
     fn path_kind(&mut self, path: &str) -> Option<PathKind>;
@@ -99,38 +129,31 @@ pub trait ScriptHost {
     /// The names in a directory, like `os.listdir`.
     fn list_dir(&mut self, path: &str) -> HostResult<Vec<String>>;
 
-    /// Runs a command to completion (`subprocess.run/call`, `os.system`).
-    /// `shell` runs it through `cmd.exe /c`.
-    fn run_command(&mut self, cmd: &CommandArg, shell: bool) -> HostResult<CommandOutput>;
+    /// Writes `bytes` to the file `path` (atomically), in a folder that exists.
+    fn write_file(&mut self, path: &str, bytes: Vec<u8>) -> HostResult<()>;
 
-    /// Starts a command without waiting (`subprocess.Popen`, `os.startfile`); returns its pid.
-    fn spawn_command(&mut self, cmd: &CommandArg, shell: bool) -> HostResult<u32>;
+    // ----- processes -----
 
-    /// The Windows version as `platform.version()` prints it, e.g. `10.0.22631`.
-    fn os_version(&mut self) -> HostResult<String>;
+    /// Runs a command to completion.
+    fn run(&mut self, command: &CommandSpec) -> HostResult<CommandOutput>;
+
+    /// Starts a command without waiting; `Ok(None)` when its program does not exist.
+    fn launch(&mut self, command: &CommandSpec) -> HostResult<Option<u32>>;
+
+    // ----- registry, clipboard, environment -----
+
+    /// Reads a registry value (`value: None` is the key's default value); `Ok(None)`
+    /// when the key or the value does not exist.
+    fn registry_read(&mut self, key: &str, value: Option<&str>) -> HostResult<Option<RegistryValue>>;
 
     fn clipboard_set_text(&mut self, text: &str) -> HostResult<()>;
 
     fn clipboard_get_text(&mut self) -> HostResult<String>;
 
-    /// Puts the crop `[x1, y1, x2, y2]` of the screenshot last given to
-    /// `/update_computer` on the clipboard as an image (`Computer.clipboard.copy_image`).
-    fn clipboard_set_image_from_screenshot_crop(&mut self, rect: [i32; 4]) -> HostResult<()>;
+    fn clipboard_set_image(&mut self, image: RgbaImage) -> HostResult<()>;
 
-    /// `Computer.os.open_program`: if `name` is installed (App Paths or on the search
-    /// path), starts it with `start NAME` and returns `true`; returns `false` when it is
-    /// not installed. Never waits for the program to exit (upstream's Q10 is fixed).
-    fn open_program(&mut self, name: &str) -> HostResult<bool>;
-
-    /// Moves the foreground window to (0, 0) and maximizes it.
-    fn maximize_foreground(&mut self) -> HostResult<()>;
-
-    /// Titles of the visible top-level windows with a non-empty title, de-duplicated.
-    fn window_titles(&mut self) -> HostResult<Vec<String>>;
-
-    /// Restores, maximizes and brings to the foreground the first visible window with
-    /// exactly this title.
-    fn switch_to_window(&mut self, title: &str) -> HostResult<()>;
+    /// An environment variable of the guest session (case-insensitive on Windows).
+    fn env_var(&mut self, name: &str) -> Option<String>;
 }
 
 /// The cursor position after `action`, starting from `cursor`, for hosts that simulate it.
@@ -195,16 +218,20 @@ impl ScriptHost for RecordingHost {
         Ok(self.screen)
     }
 
-    fn active_window_title(&mut self) -> HostResult<String> {
-        not_an_action("reading the active window title")
-    }
-
-    fn save_screenshot(&mut self, _path: &str, _region: Option<[i32; 4]>) -> HostResult<()> {
+    fn capture(&mut self) -> HostResult<RgbaImage> {
         not_an_action("saving a screenshot")
     }
 
-    fn env_var(&mut self, _name: &str) -> Option<String> {
-        None
+    fn observed_screenshot(&mut self) -> HostResult<RgbaImage> {
+        not_an_action("copying an image")
+    }
+
+    fn windows(&mut self) -> HostResult<Vec<WindowInfo>> {
+        not_an_action("listing windows")
+    }
+
+    fn change_window(&mut self, _id: u64, _change: WindowChange) -> HostResult<()> {
+        not_an_action("changing a window")
     }
 
     fn path_kind(&mut self, _path: &str) -> Option<PathKind> {
@@ -215,16 +242,20 @@ impl ScriptHost for RecordingHost {
         not_an_action("listing a directory")
     }
 
-    fn run_command(&mut self, _cmd: &CommandArg, _shell: bool) -> HostResult<CommandOutput> {
+    fn write_file(&mut self, _path: &str, _bytes: Vec<u8>) -> HostResult<()> {
+        not_an_action("writing a file")
+    }
+
+    fn run(&mut self, _command: &CommandSpec) -> HostResult<CommandOutput> {
         not_an_action("running a command")
     }
 
-    fn spawn_command(&mut self, _cmd: &CommandArg, _shell: bool) -> HostResult<u32> {
+    fn launch(&mut self, _command: &CommandSpec) -> HostResult<Option<u32>> {
         not_an_action("starting a process")
     }
 
-    fn os_version(&mut self) -> HostResult<String> {
-        not_an_action("reading the OS version")
+    fn registry_read(&mut self, _key: &str, _value: Option<&str>) -> HostResult<Option<RegistryValue>> {
+        not_an_action("reading the registry")
     }
 
     fn clipboard_set_text(&mut self, _text: &str) -> HostResult<()> {
@@ -235,23 +266,11 @@ impl ScriptHost for RecordingHost {
         not_an_action("reading the clipboard")
     }
 
-    fn clipboard_set_image_from_screenshot_crop(&mut self, _rect: [i32; 4]) -> HostResult<()> {
+    fn clipboard_set_image(&mut self, _image: RgbaImage) -> HostResult<()> {
         not_an_action("copying an image")
     }
 
-    fn open_program(&mut self, _name: &str) -> HostResult<bool> {
-        not_an_action("opening a program")
-    }
-
-    fn maximize_foreground(&mut self) -> HostResult<()> {
-        not_an_action("maximizing a window")
-    }
-
-    fn window_titles(&mut self) -> HostResult<Vec<String>> {
-        not_an_action("listing windows")
-    }
-
-    fn switch_to_window(&mut self, _title: &str) -> HostResult<()> {
-        not_an_action("switching windows")
+    fn env_var(&mut self, _name: &str) -> Option<String> {
+        None
     }
 }

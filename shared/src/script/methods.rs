@@ -5,6 +5,7 @@
 //! the variable the receiver expression names (see `Interp::call_mutating`);
 //! called on a temporary value they change only that copy.
 
+use super::compose::Composed as _;
 use super::error::{not_supported, type_error, value_error, ErrorKind, ScriptError};
 use super::heap::{self, Key};
 use super::interp::{check_hashable, dict_insert, iterate, make_set, no_attribute, to_i64, to_str, Args, Interp};
@@ -131,7 +132,11 @@ impl Interp<'_, '_> {
                 let a = args.bind("save", &["fp", "format"], 1)?;
                 let path = a[0].clone().unwrap_or(Value::None);
                 let path = to_str(&path, "save() path")?.to_owned();
-                let result = self.host.save_screenshot(&path, *region);
+                let format = match &a[1] {
+                    None | Some(Value::None) => None,
+                    Some(format) => Some(to_str(format, "save() format")?.to_owned()),
+                };
+                let result = self.host.save_screenshot(&path, *region, format.as_deref());
                 self.host(result)?;
                 Ok(Value::None)
             }

@@ -10,7 +10,7 @@
 //! refusing the rest (classes, `with`, generators, star-arguments, ...) with a
 //! precise [`ParseError`] before anything runs. Modules are interpreter objects,
 //! never real imports, and every effect goes through a [`ScriptHost`], so this
-//! module does no I/O. Output is what CPython would print; failures are
+//! module does no I/O of its own. Output is what CPython would print; failures are
 //! [`ScriptError`]s styled like Python exceptions.
 //!
 //! # Layout
@@ -26,7 +26,11 @@
 //! - `pyautogui`: the pyautogui 0.9.54 module mapped to [`Action`]s.
 //! - `stdlib`: `time`, `os`, `os.path` (ntpath), `subprocess`, `platform`, `sys`, `PIL`, `pyperclip`.
 //! - `computer`: the Navi `Computer` object over [`ComputerState`]; `difflib` for its fuzzy window match.
-//! - [`host`]: the [`ScriptHost`] trait and the I/O-free [`RecordingHost`].
+//! - [`host`]: the [`ScriptHost`] trait of primitives (input, capture, windows, files,
+//!   processes, registry, clipboard, environment) and the I/O-free [`RecordingHost`].
+//! - [`compose`]: the behaviours made of primitives ([`Composed`]: the window list,
+//!   switching windows, opening a program, the OS version, saving a screenshot,
+//!   `subprocess`), written once for the guest and the host.
 //! - `argv`: recognising `python -c CODE` command lines.
 //!
 //! # Safety properties
@@ -48,6 +52,7 @@ use crate::action::Action;
 mod argv;
 pub mod ast;
 mod builtins;
+pub mod compose;
 mod computer;
 mod difflib;
 mod error;
@@ -67,10 +72,11 @@ mod value;
 mod tests;
 
 pub use argv::{is_python_program, python_code_from_argv, python_code_from_command_line};
+pub use compose::Composed;
 pub use computer::ComputerState;
 pub use difflib::{get_close_matches, ratio as sequence_ratio};
 pub use error::{ErrorKind, ParseError, ScriptError};
-pub use host::{CommandArg, CommandOutput, HostError, HostResult, PathKind, RecordingHost, ScriptHost};
+pub use host::{CommandArg, CommandOutput, HostError, HostResult, PathKind, RecordingHost, ScriptHost, WindowChange};
 pub use interp::{
     run, run_measured, Globals, RunOutput, RunStats, KNOWN_MODULES, MAX_CALL_DEPTH, MAX_MEMORY, MAX_STEPS,
 };

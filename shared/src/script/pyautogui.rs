@@ -21,6 +21,7 @@ use crate::action::{Action, MouseButton};
 use crate::geometry::Point;
 use crate::keys::Key;
 
+use super::compose::Composed as _;
 use super::error::{not_supported, type_error, value_error, ScriptError};
 use super::interp::{is_none, iterate, static_name, to_f64, to_str, Args, Interp, RunOutput};
 use super::value::{Object, Value};
@@ -322,7 +323,7 @@ fn dispatch(it: &mut Interp<'_, '_>, name: &'static str, args: Args) -> Result<V
                     Value::Object(Object::Image { region, .. }) => *region,
                     _ => None,
                 };
-                let saved = it.host.save_screenshot(&path, region);
+                let saved = it.host.save_screenshot(&path, region, None);
                 it.host(saved)?;
             }
             return Ok(image);

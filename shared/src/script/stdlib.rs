@@ -9,6 +9,7 @@
 //! Python would not capture is appended to the script's own stdout/stderr, as
 //! it would appear in a real `python -c` run.
 
+use super::compose::Composed as _;
 use super::error::{not_supported, type_error, value_error, ErrorKind, ScriptError};
 use super::host::{CommandArg, CommandOutput, PathKind};
 use super::interp::{is_none, static_name, to_f64, to_i64, to_str, Args, Interp};

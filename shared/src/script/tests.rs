@@ -8,7 +8,7 @@ use super::*;
 use crate::action::{Action, MouseButton};
 use crate::geometry::Point;
 
-/// A scripted host: it records actions (sleeps as `Wait`) and every other call.
+/// A scripted host: it records actions (sleeps as `Wait`) and every other effect.
 #[derive(Debug)]
 struct FakeHost {
     actions: Vec<Action>,
@@ -16,9 +16,14 @@ struct FakeHost {
     cursor: (i32, i32),
     screen: (u32, u32),
     env: HashMap<String, String>,
+    /// Titles of unfocused windows, topmost first (ids 1, 2, ...).
     windows: Vec<String>,
+    /// The focused window's title (id 100); none when empty.
     active_title: String,
+    /// Programs with an `App Paths` entry.
     installed: Vec<String>,
+    /// Programs that do not exist at all.
+    missing: Vec<String>,
     paths: Vec<(String, PathKind)>,
     command: CommandOutput,
     clipboard: String,
@@ -41,8 +46,10 @@ impl FakeHost {
             windows: Vec::new(),
             active_title: "Untitled - Paint".to_owned(),
             installed: vec!["msedge".to_owned(), "notepad".to_owned()],
+            missing: vec!["gimp".to_owned()],
             paths: vec![
                 (r"C:\Users\Docker\Desktop".to_owned(), PathKind::Dir),
+                (r"C:\Users\Docker\Downloads".to_owned(), PathKind::Dir),
                 (r"C:\x.txt".to_owned(), PathKind::File),
             ],
             command: CommandOutput { code: 0, stdout: String::new(), stderr: String::new() },
@@ -67,15 +74,35 @@ impl ScriptHost for FakeHost {
     fn screen_size(&mut self) -> HostResult<(u32, u32)> {
         Ok(self.screen)
     }
-    fn active_window_title(&mut self) -> HostResult<String> {
-        Ok(self.active_title.clone())
+    fn capture(&mut self) -> HostResult<image::RgbaImage> {
+        Ok(image::RgbaImage::new(self.screen.0, self.screen.1))
     }
-    fn save_screenshot(&mut self, path: &str, region: Option<[i32; 4]>) -> HostResult<()> {
-        self.calls.push(format!("save_screenshot {path} {region:?}"));
+    fn observed_screenshot(&mut self) -> HostResult<image::RgbaImage> {
+        self.capture()
+    }
+    fn windows(&mut self) -> HostResult<Vec<crate::observation::WindowInfo>> {
+        let window = |id: u64, title: &str, z_order: u32, focused: bool| crate::observation::WindowInfo {
+            id,
+            title: title.to_owned(),
+            class_name: "C".to_owned(),
+            process_id: 1,
+            process_name: "p.exe".to_owned(),
+            rect: crate::geometry::Rect::new(0, 0, 10, 10),
+            visible: true,
+            minimized: false,
+            maximized: false,
+            focused,
+            z_order,
+        };
+        let mut out: Vec<_> = (1..).zip(&self.windows).map(|(id, t)| window(id, t, id as u32 + 1, false)).collect();
+        if !self.active_title.is_empty() {
+            out.push(window(100, &self.active_title, 0, true));
+        }
+        Ok(out)
+    }
+    fn change_window(&mut self, id: u64, change: WindowChange) -> HostResult<()> {
+        self.calls.push(format!("change_window {id} {change:?}"));
         Ok(())
-    }
-    fn env_var(&mut self, name: &str) -> Option<String> {
-        self.env.iter().find(|(k, _)| k.eq_ignore_ascii_case(name)).map(|(_, v)| v.clone())
     }
     fn path_kind(&mut self, path: &str) -> Option<PathKind> {
         self.paths.iter().find(|(p, _)| p.eq_ignore_ascii_case(path)).map(|(_, k)| *k)
@@ -84,16 +111,36 @@ impl ScriptHost for FakeHost {
         self.calls.push(format!("list_dir {path}"));
         Ok(vec!["a.txt".to_owned(), "b".to_owned()])
     }
-    fn run_command(&mut self, cmd: &CommandArg, shell: bool) -> HostResult<CommandOutput> {
-        self.calls.push(format!("run_command {cmd:?} shell={shell}"));
+    fn write_file(&mut self, path: &str, bytes: Vec<u8>) -> HostResult<()> {
+        assert!(!bytes.is_empty(), "an encoded image");
+        self.calls.push(format!("write_file {path}"));
+        Ok(())
+    }
+    fn run(&mut self, command: &crate::cmdline::CommandSpec) -> HostResult<CommandOutput> {
+        self.calls.push(format!("run {command:?}"));
         Ok(self.command.clone())
     }
-    fn spawn_command(&mut self, cmd: &CommandArg, shell: bool) -> HostResult<u32> {
-        self.calls.push(format!("spawn_command {cmd:?} shell={shell}"));
-        Ok(4242)
+    fn launch(&mut self, command: &crate::cmdline::CommandSpec) -> HostResult<Option<u32>> {
+        if let crate::cmdline::CommandSpec::Argv(argv) = command {
+            if self.missing.contains(&argv[0]) {
+                return Ok(None);
+            }
+        }
+        self.calls.push(format!("launch {command:?}"));
+        Ok(Some(4242))
     }
-    fn os_version(&mut self) -> HostResult<String> {
-        Ok("10.0.22631".to_owned())
+    fn registry_read(&mut self, key: &str, value: Option<&str>) -> HostResult<Option<crate::registry::RegistryValue>> {
+        use crate::registry::RegistryValue;
+        if key == compose::CURRENT_VERSION {
+            return Ok(match value {
+                Some("CurrentMajorVersionNumber") => Some(RegistryValue::Dword(10)),
+                Some("CurrentMinorVersionNumber") => Some(RegistryValue::Qword(0)),
+                Some("CurrentBuildNumber") => Some(RegistryValue::String("22631".to_owned())),
+                _ => None,
+            });
+        }
+        let installed = self.installed.iter().any(|p| key == format!(r"{}\{p}.exe", compose::APP_PATHS[0]));
+        Ok(installed.then(|| RegistryValue::String(format!(r"C:\Program Files\{key}"))))
     }
     fn clipboard_set_text(&mut self, text: &str) -> HostResult<()> {
         self.calls.push(format!("clipboard_set_text {text}"));
@@ -103,24 +150,12 @@ impl ScriptHost for FakeHost {
     fn clipboard_get_text(&mut self) -> HostResult<String> {
         Ok(self.clipboard.clone())
     }
-    fn clipboard_set_image_from_screenshot_crop(&mut self, rect: [i32; 4]) -> HostResult<()> {
-        self.calls.push(format!("clipboard_set_image {rect:?}"));
+    fn clipboard_set_image(&mut self, image: image::RgbaImage) -> HostResult<()> {
+        self.calls.push(format!("clipboard_set_image {}x{}", image.width(), image.height()));
         Ok(())
     }
-    fn open_program(&mut self, name: &str) -> HostResult<bool> {
-        self.calls.push(format!("open_program {name}"));
-        Ok(self.installed.iter().any(|p| p == name))
-    }
-    fn maximize_foreground(&mut self) -> HostResult<()> {
-        self.calls.push("maximize_foreground".to_owned());
-        Ok(())
-    }
-    fn window_titles(&mut self) -> HostResult<Vec<String>> {
-        Ok(self.windows.clone())
-    }
-    fn switch_to_window(&mut self, title: &str) -> HostResult<()> {
-        self.calls.push(format!("switch_to_window {title}"));
-        Ok(())
+    fn env_var(&mut self, name: &str) -> Option<String> {
+        self.env.iter().find(|(k, _)| k.eq_ignore_ascii_case(name)).map(|(_, v)| v.clone())
     }
 }
 
@@ -210,7 +245,7 @@ fn corpus_paint_save_and_kill() {
             wait(2000),
         ]
     );
-    assert_eq!(host.calls, [r#"run_command Line("taskkill /f /im mspaint.exe") shell=false"#]);
+    assert_eq!(host.calls, [r#"run Argv(["taskkill", "/f", "/im", "mspaint.exe"])"#]);
     // The child's output is not captured by subprocess.call, so it lands in ours.
     assert_eq!(out.stdout, host.command.stdout);
 }
@@ -224,8 +259,8 @@ fn corpus_screenshot_type_and_save() {
     assert_eq!(
         calls,
         [
-            r"save_screenshot C:\Users\Docker\Downloads\Screenshot.png None".to_owned(),
-            r#"run_command Line("taskkill /f /im mspaint.exe") shell=false"#.to_owned(),
+            r"write_file C:\Users\Docker\Downloads\Screenshot.png".to_owned(),
+            r#"run Argv(["taskkill", "/f", "/im", "mspaint.exe"])"#.to_owned(),
         ]
     );
 }
@@ -295,11 +330,7 @@ fn subprocess_and_os_system() {
     assert_eq!(out.stderr, "err\n");
     assert_eq!(
         host.calls,
-        [
-            r#"run_command Args(["cmd", "/c", "ver"]) shell=false"#,
-            r#"run_command Line("dir") shell=true"#,
-            r#"spawn_command Line("notepad.exe") shell=true"#,
-        ]
+        [r#"run Argv(["cmd", "/c", "ver"])"#, r#"run Shell("dir")"#, r#"launch Shell("notepad.exe")"#,]
     );
     let err = run_python(&mut host, "import subprocess\nsubprocess.check_output(['x', 'y'])").unwrap_err();
     assert_eq!(
@@ -514,7 +545,7 @@ fn clipboard_copy_text_prints_and_paste_swaps() {
         "computer.clipboard.copy_image(id=1, description='logo')\nprint(computer.clipboard.view_clipboard())",
     )
     .unwrap();
-    assert_eq!(host.calls, ["clipboard_set_image [100, 50, 201, 151]"]);
+    assert_eq!(host.calls, ["clipboard_set_image 101x101"]);
     assert_eq!(state.clipboard_content.as_deref(), Some("logo"));
     assert_eq!(out.stdout, "clip\n");
 }
@@ -529,7 +560,7 @@ fn open_program_prints_upstream_error_when_missing() {
 
     let mut host = FakeHost::new();
     navi(&mut state, &mut host, "computer.os.open_program('msedge')").unwrap();
-    assert_eq!(host.calls, ["open_program msedge", "maximize_foreground"]);
+    assert_eq!(host.calls, [r#"launch Shell("start msedge")"#, "change_window 100 Maximize"]);
     assert_eq!(
         host.actions,
         [wait(2000), key("esc"), key("esc"), wait(1000), key("esc"), wait(1000), key("esc"), wait(250)]
@@ -543,11 +574,14 @@ fn switch_to_application_matches_like_difflib() {
         let mut state = computer_state();
         let mut host = FakeHost::new();
         host.windows = windows.iter().map(|w| (*w).to_owned()).collect();
+        host.active_title.clear();
         let out =
             navi(&mut state, &mut host, &format!("computer.window_manager.switch_to_application({name:?})")).unwrap();
         match expected {
             Some(title) => {
-                assert_eq!(host.calls, [format!("switch_to_window {title}")], "{name}");
+                let id = windows.iter().position(|w| w == &title).expect("listed") + 1;
+                let changes = ["Restore", "Maximize", "Activate"].map(|c| format!("change_window {id} {c}"));
+                assert_eq!(host.calls, changes, "{name}");
                 assert_eq!(host.actions, [key("esc"), wait(250)], "{name}");
                 assert_eq!(out.stdout, "");
             }

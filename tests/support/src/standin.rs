@@ -32,11 +32,6 @@ fn default_dir() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../../target/standin")
 }
 
-/// The first `name` on `path` (a `PATH`-style list) that is a file.
-fn on_path(name: &str, path: Option<&std::ffi::OsStr>) -> Option<PathBuf> {
-    std::env::split_paths(path?).map(|dir| dir.join(name)).find(|candidate| candidate.is_file())
-}
-
 /// The stand-in image for `test`: from `ARENA_STANDIN_DIR` when set, else
 /// `target/standin` of the workspace, with `qemu-system-x86_64` found on `PATH`.
 ///
@@ -50,7 +45,7 @@ fn on_path(name: &str, path: Option<&std::ffi::OsStr>) -> Option<PathBuf> {
 /// into a quiet skip), and when the image or QEMU is missing while `ARENA_REQUIRE_QEMU=1`.
 pub fn standin_image(test: &str) -> Option<StandinImage> {
     let required = std::env::var(REQUIRE_QEMU_VAR).is_ok_and(|v| v == "1");
-    let qemu = on_path(QEMU, std::env::var_os("PATH").as_deref());
+    let qemu = arena_shared::search_path::find_program(Path::new(QEMU));
     locate(
         test,
         std::env::var_os(STANDIN_DIR_VAR).map(PathBuf::from),
@@ -169,15 +164,5 @@ mod tests {
         let result = std::panic::catch_unwind(|| run(Some(typo), dir.path().into(), None, false));
         let message = *result.expect_err("fails").downcast::<String>().expect("message");
         assert!(message.contains("is not a folder"), "{message}");
-    }
-
-    #[test]
-    fn qemu_is_looked_up_on_the_path() {
-        let a = tempfile::tempdir().expect("dir");
-        let b = tempfile::tempdir().expect("dir");
-        std::fs::write(b.path().join("qemu-system-x86_64"), b"").expect("write");
-        let path = std::env::join_paths([a.path(), b.path()]).expect("join");
-        assert_eq!(on_path("qemu-system-x86_64", Some(&path)), Some(b.path().join("qemu-system-x86_64")));
-        assert_eq!(on_path("qemu-system-x86_64", None), None);
     }
 }

@@ -44,6 +44,7 @@ use self::window::{NewWindow, State, WallpaperCache};
 use super::{
     ClipboardData, CommandSpec, Desktop, DesktopError, DesktopResult, ExecLimits, ExecOutput, Frame, WindowState,
 };
+use crate::desktop::windows::target;
 
 /// Files larger than this open without their text in the window.
 const MAX_DOCUMENT_BYTES: u64 = 1024 * 1024;
@@ -472,8 +473,8 @@ impl Desktop for StubDesktop {
                 Ok(format!("wrote, read back and deleted a file under {}", self.root.display()))
             }
             Component::Exec => {
-                let shell = if cfg!(windows) { "cmd.exe" } else { "sh" };
-                if cfg!(windows) || process::on_path(shell) {
+                let shell = target::SHELL;
+                if target::SHELL_REPORTS_MISSING_PROGRAMS || process::on_path(shell) {
                     Ok(format!("{shell} is available"))
                 } else {
                     Err(DesktopError::NotFound(format!("{shell} is not on PATH")))

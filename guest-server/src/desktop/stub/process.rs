@@ -270,8 +270,7 @@ const SHELL_BUILTINS: &[&str] = &[
 /// Whether the program a shell line starts with can be found, so that `spawn`
 /// can report a missing program instead of a shell that fails in the background.
 fn shell_program_exists(line: &str) -> bool {
-    if cfg!(windows) {
-        // cmd.exe has too many built-ins to tell; it reports a missing program itself.
+    if crate::desktop::windows::target::SHELL_REPORTS_MISSING_PROGRAMS {
         return true;
     }
     let tokens = tokenize(line);
@@ -288,15 +287,9 @@ fn shell_program_exists(line: &str) -> bool {
     on_path(word)
 }
 
-/// Whether `name` is an executable file in a `PATH` directory.
+/// Whether `name` is a program on `PATH`.
 pub(crate) fn on_path(name: &str) -> bool {
-    let Some(path) = std::env::var_os("PATH") else {
-        return false;
-    };
-    std::env::split_paths(&path).any(|dir| {
-        let candidate = dir.join(name);
-        candidate.is_file() || (cfg!(windows) && dir.join(format!("{name}.exe")).is_file())
-    })
+    arena_shared::search_path::find_program(Path::new(name)).is_some()
 }
 
 /// Starts a real host process without waiting; a background thread reaps it.

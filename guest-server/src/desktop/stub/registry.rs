@@ -107,6 +107,22 @@ impl Registry {
                 "ProductName",
                 RegistryValue::String("Windows 10 Enterprise".into()),
             ),
+            // Windows 11 23H2's version numbers, which `platform.version()` prints as 10.0.22631.
+            (
+                r"HKLM\SOFTWARE\Microsoft\Windows NT\CurrentVersion",
+                "CurrentMajorVersionNumber",
+                RegistryValue::Dword(10),
+            ),
+            (
+                r"HKLM\SOFTWARE\Microsoft\Windows NT\CurrentVersion",
+                "CurrentMinorVersionNumber",
+                RegistryValue::Dword(0),
+            ),
+            (
+                r"HKLM\SOFTWARE\Microsoft\Windows NT\CurrentVersion",
+                "CurrentBuildNumber",
+                RegistryValue::String("22631".into()),
+            ),
             (
                 r"HKLM\SOFTWARE\Microsoft\Windows NT\CurrentVersion",
                 "CurrentBuild",

@@ -13,7 +13,10 @@
 //! - [`longname`]: 8.3 short names expanded (`GetLongPathNameW` on Windows, nothing elsewhere),
 //!   for the protection rules;
 //! - [`std_child`]: how a program is started and killed with `std::process` (the
-//!   stub backend's runner, which also runs inside the Windows exe).
+//!   stub backend's runner, which also runs inside the Windows exe);
+//! - [`target`]: what the build's platform decides for neutral code elsewhere (the
+//!   default backend, the shell, the service subcommands), so no `cfg!(windows)` is
+//!   written outside `windows/` folders.
 //!
 //! FFI glue, compiled only for Windows (`cfg(windows)`): `backend` (the
 //! [`Desktop`](crate::desktop::Desktop) implementation), `sys` (handle guards,
@@ -30,6 +33,7 @@ pub mod pointer;
 pub mod session;
 pub mod shell;
 pub mod std_child;
+pub mod target;
 pub mod text;
 pub mod vk;
 pub mod winsys;

@@ -4,6 +4,7 @@
 
 use std::time::{SystemTime, UNIX_EPOCH};
 
+use arena_shared::calendar::{civil_from_days, days_from_civil};
 use arena_shared::files::FileKind;
 
 use super::{dest_path, guest_join, one_or_list, GetterError, Params};
@@ -158,31 +159,6 @@ fn strftime_utc(format: &str, now: SystemTime) -> String {
     out
 }
 
-/// Days since 1970-01-01 to a proleptic Gregorian date (Howard Hinnant's algorithm).
-pub(super) fn civil_from_days(days: i64) -> (i64, u32, u32) {
-    let z = days + 719_468;
-    let era = z.div_euclid(146_097);
-    let doe = z.rem_euclid(146_097);
-    let yoe = (doe - doe / 1460 + doe / 36_524 - doe / 146_096) / 365;
-    let doy = doe - (365 * yoe + yoe / 4 - yoe / 100);
-    let mp = (5 * doy + 2) / 153;
-    let day = (doy - (153 * mp + 2) / 5 + 1) as u32;
-    let month = if mp < 10 { mp + 3 } else { mp - 9 } as u32;
-    let year = yoe + era * 400 + i64::from(month <= 2);
-    (year, month, day)
-}
-
-/// The inverse of [`civil_from_days`].
-fn days_from_civil(year: i64, month: u32, day: u32) -> i64 {
-    let year = if month <= 2 { year - 1 } else { year };
-    let era = year.div_euclid(400);
-    let yoe = year.rem_euclid(400);
-    let month = i64::from(month);
-    let doy = (153 * (if month > 2 { month - 3 } else { month + 9 }) + 2) / 5 + i64::from(day) - 1;
-    let doe = yoe * 365 + yoe / 4 - yoe / 100 + doy;
-    era * 146_097 + doe - 719_468
-}
-
 #[cfg(test)]
 mod tests {
     use std::time::Duration;
@@ -196,10 +172,6 @@ mod tests {
         assert_eq!(strftime_utc("%Y_%m_%d", at), "2024_02_29");
         assert_eq!(strftime_utc("%y%m%d-%H%M%S %j %% %Q", at), "240229-130509 060 % %Q");
         assert_eq!(strftime_utc("%Y-%m-%d", UNIX_EPOCH), "1970-01-01");
-        for days in [-1000, 0, 59, 60, 365, 10_956, 20_000, 60_000] {
-            let (y, m, d) = civil_from_days(days);
-            assert_eq!(days_from_civil(y, m, d), days, "{y}-{m}-{d}");
-        }
     }
 
     #[test]

@@ -25,11 +25,11 @@ use arena_shared::registry::RegistryValue;
 use serde_json::{Map, Value};
 
 use super::explorer::known_folder;
-use super::file::civil_from_days;
 use super::{dest_path, guest_join, GetterError, Params};
 use crate::error::ClientError;
 use crate::eval::value::{json_kind, Fetched};
 use crate::eval::EvalContext;
+use arena_shared::calendar::civil_from_days;
 
 #[cfg(test)]
 #[path = "system_tests.rs"]

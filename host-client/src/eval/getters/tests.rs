@@ -152,7 +152,7 @@ async fn vm_file_time_suffix_renames_both_paths() {
     // so push the file under both days' names.
     let stamp_now = || {
         let secs = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).unwrap().as_secs();
-        let (y, m, d) = super::file::civil_from_days(i64::try_from(secs / 86_400).unwrap());
+        let (y, m, d) = arena_shared::calendar::civil_from_days(i64::try_from(secs / 86_400).unwrap());
         format!("{y:04}{m:02}{d:02}")
     };
     let before = stamp_now();

@@ -193,16 +193,8 @@ fn moment_label(moment: Moment) -> String {
     };
     match moment {
         Moment::DateTime(ms) => {
-            // Civil date from days since 1899-12-30 (days since 1970 shifted by 25 569).
-            let z = ms.div_euclid(DAY) - 25_569 + 719_468;
-            let era = z.div_euclid(146_097);
-            let doe = z - era * 146_097;
-            let yoe = (doe - doe / 1460 + doe / 36_524 - doe / 146_096) / 365;
-            let doy = doe - (365 * yoe + yoe / 4 - yoe / 100);
-            let mp = (5 * doy + 2) / 153;
-            let d = doy - (153 * mp + 2) / 5 + 1;
-            let m = if mp < 10 { mp + 3 } else { mp - 9 };
-            let y = yoe + era * 400 + i64::from(m <= 2);
+            // Days since 1899-12-30 are days since 1970 shifted by 25 569.
+            let (y, m, d) = arena_shared::calendar::civil_from_days(ms.div_euclid(DAY) - 25_569);
             format!("{y:04}-{m:02}-{d:02} {}", clock(ms.rem_euclid(DAY)))
         }
         Moment::Time(ms) => clock(ms),

@@ -13,6 +13,8 @@ use std::path::Path;
 
 use roxmltree::Node;
 
+use arena_shared::calendar::days_from_civil;
+
 use super::package::{parse_xml, Package};
 use super::xml::{attr, child, child_val, children, descendants, joined_text, rel_id, toggle, truthy};
 use crate::eval::metrics::MetricError;
@@ -769,8 +771,8 @@ fn iso_to_millis(text: &str) -> Option<i64> {
     let (date, time) = text.trim().split_once('T').unwrap_or((text.trim(), ""));
     let mut parts = date.split('-');
     let y: i64 = parts.next()?.parse().ok()?;
-    let m: i64 = parts.next()?.parse().ok()?;
-    let d: i64 = parts.next()?.parse().ok()?;
+    let m: u32 = parts.next()?.parse().ok()?;
+    let d: u32 = parts.next()?.parse().ok()?;
     let days = days_from_civil(y, m, d) - days_from_civil(1899, 12, 30);
     let mut seconds = 0.0;
     if !time.is_empty() {
@@ -782,17 +784,6 @@ fn iso_to_millis(text: &str) -> Option<i64> {
         seconds = h * 3600.0 + mi * 60.0 + s;
     }
     Some(days * MS_PER_DAY + (seconds * 1000.0).round() as i64)
-}
-
-/// Days since 1970-01-01 of a proleptic Gregorian date.
-fn days_from_civil(y: i64, m: i64, d: i64) -> i64 {
-    let y = if m <= 2 { y - 1 } else { y };
-    let era = y.div_euclid(400);
-    let yoe = y - era * 400;
-    let mp = (m + 9) % 12;
-    let doy = (153 * mp + 2) / 5 + d - 1;
-    let doe = yoe * 365 + yoe / 4 - yoe / 100 + doy;
-    era * 146_097 + doe - 719_468
 }
 
 #[cfg(test)]
