@@ -555,7 +555,7 @@ pub fn win32_role(class_name: &str) -> &str {
         "button" => "Button",
         "static" => "Static",
         "combobox" | "comboboxex32" => "ComboBox",
-        "listbox" => "ListBox",
+        "listbox" | "combolbox" => "ListBox",
         "syslistview32" => "ListView",
         "systreeview32" => "TreeView",
         "systabcontrol32" => "TabControl",
@@ -566,6 +566,8 @@ pub fn win32_role(class_name: &str) -> &str {
         "msctls_updown32" => "UpDown",
         "sysheader32" => "Header",
         "#32770" => "Dialog",
+        "#32768" => "PopupMenu",
+        "tooltips_class32" => "ToolTips",
         "" => "Window",
         _ => class_name,
     }
@@ -920,7 +922,10 @@ mod tests {
         assert!(out.truncated);
         assert_eq!(out.windows.len(), 1);
         let last = out.windows_walked.last().unwrap();
-        assert_eq!((last.window_id, last.skipped.as_deref()), (0xBEEF, Some("ElementFromHandle timed out after 500 ms")));
+        assert_eq!(
+            (last.window_id, last.skipped.as_deref()),
+            (0xBEEF, Some("ElementFromHandle timed out after 500 ms"))
+        );
     }
 
     #[test]
@@ -1064,6 +1069,8 @@ mod tests {
         assert_eq!((button.role.as_str(), button.name.as_str(), button.value), ("Button", "OK", None));
         assert_eq!(button.states.checked, Some(false));
         assert_eq!(win32_role("#32770"), "Dialog");
+        assert_eq!(win32_role("#32768"), "PopupMenu");
+        assert_eq!(win32_role("ComboLBox"), "ListBox");
         assert_eq!(win32_role("Notepad"), "Notepad");
     }
 }
