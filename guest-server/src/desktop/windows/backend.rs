@@ -98,6 +98,19 @@ impl WindowsDesktop {
         Ok(WindowsDesktop { session, uia: uia::UiaWorker::new(options.uia_view), options })
     }
 
+    /// The title of the window in front, when a person would see one over a lit
+    /// screen: the foreground window passes the trees' root filter, is not minimised,
+    /// and the screen is not black (a locked or disconnected desktop). `None` otherwise.
+    fn window_in_front(&self) -> Option<String> {
+        let hwnd = window::foreground();
+        if hwnd.is_invalid() || !window::seen(hwnd) || window::is_minimized(hwnd) {
+            return None;
+        }
+        let lit = capture::capture(false, self.options.capture_layered)
+            .is_ok_and(|frame| !crate::imaging::is_black(&frame.image));
+        lit.then(|| window::title(hwnd))
+    }
+
     fn need_desktop(&self, op: &str) -> DesktopResult<()> {
         refuse_session_zero(self.session, op, Needs::InteractiveDesktop)
     }
@@ -136,6 +149,19 @@ impl WindowsDesktop {
                     "walked the foreground window's win32 tree: {} nodes in {} ms",
                     tree.node_count, tree.elapsed_ms
                 ))
+            }
+            Component::Uia => {
+                self.need_desktop("ui automation")?;
+                let in_front = self.window_in_front();
+                let budget = crate::desktop::uia_health::HEALTH_BUDGET;
+                crate::desktop::uia_health::check(
+                    in_front.as_deref(),
+                    &mut || self.uia.tree(&budget, true),
+                    &mut || {
+                        self.uia.recreate();
+                        Ok(())
+                    },
+                )
             }
             Component::Clipboard => {
                 self.need_desktop("clipboard")?;

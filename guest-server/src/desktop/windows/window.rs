@@ -76,6 +76,12 @@ pub(super) fn owner(hwnd: HWND) -> (u32, u32) {
     (pid, tid)
 }
 
+/// Whether `hwnd` is minimised.
+pub(super) fn is_minimized(hwnd: HWND) -> bool {
+    // SAFETY: IsIconic accepts any window handle and only reads its state.
+    unsafe { IsIconic(hwnd).as_bool() }
+}
+
 pub(super) fn foreground() -> HWND {
     // SAFETY: no preconditions.
     unsafe { GetForegroundWindow() }
