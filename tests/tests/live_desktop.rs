@@ -119,7 +119,9 @@ async fn testpad(c: &GuestClient) {
     // Right-click the window's free area below the notes box: its context menu opens.
     let r = window.rect;
     let (x, y) = (r.x + r.width / 2, r.y + r.height - 20);
-    c.act_one(Action::Click { x: Some(x), y: Some(y), button: MouseButton::Right, count: 1 }).await.expect("right click");
+    c.act_one(Action::Click { x: Some(x), y: Some(y), button: MouseButton::Right, count: 1 })
+        .await
+        .expect("right click");
     let screen = c.screen().await.expect("screen");
     eventually("the context menu's items in the tree and in Set-of-Marks", Duration::from_secs(10), || async {
         let tree = c.a11y(&A11yQuery::default()).await.ok()?;
