@@ -68,9 +68,12 @@ fn wake_cursor() {
         },
     };
     // SAFETY: ShowCursor only changes this thread's display counter; SendInput gets two initialised records.
-    unsafe {
+    let sent = unsafe {
         ShowCursor(true);
-        SendInput(&[nudge(1), nudge(-1)], std::mem::size_of::<INPUT>() as i32);
+        SendInput(&[nudge(1), nudge(-1)], std::mem::size_of::<INPUT>() as i32)
+    };
+    if sent != 2 {
+        tracing::warn!(sent, of = 2, "the cursor nudge was not accepted in full (a secure desktop or UIPI)");
     }
 }
 
@@ -241,7 +244,7 @@ impl Desktop for WindowsDesktop {
 
     fn perform(&self, action: &Action) -> DesktopResult<()> {
         self.need_desktop("input")?;
-        input::perform(action)
+        input::perform(action, std::time::Duration::from_millis(self.options.drag_step_ms))
     }
 
     fn windows(&self) -> DesktopResult<Vec<WindowInfo>> {

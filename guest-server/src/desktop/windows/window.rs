@@ -170,7 +170,11 @@ fn unlock_foreground() {
         })
         .collect();
     // SAFETY: the slice holds initialised INPUT structures of the size passed.
-    unsafe { SendInput(&inputs, std::mem::size_of::<INPUT>() as i32) };
+    let sent = unsafe { SendInput(&inputs, std::mem::size_of::<INPUT>() as i32) };
+    if sent as usize != inputs.len() {
+        // Activation goes on with its other ways; say why this one may not have helped.
+        tracing::warn!(sent, of = inputs.len(), "the foreground unlock keys were not accepted in full");
+    }
     std::thread::sleep(Duration::from_millis(shell::UNLOCK_SETTLE_MS));
 }
 
