@@ -352,8 +352,14 @@ mod tests {
 
     #[test]
     fn vk_scan_answers_decode() {
-        assert_eq!(CharKey::from_vk_scan(0x0141), Some(CharKey { vk: 0x41, shift: true, ctrl: false, alt: false, dead: false }));
-        assert_eq!(CharKey::from_vk_scan(0x0641), Some(CharKey { vk: 0x41, shift: false, ctrl: true, alt: true, dead: false }));
+        assert_eq!(
+            CharKey::from_vk_scan(0x0141),
+            Some(CharKey { vk: 0x41, shift: true, ctrl: false, alt: false, dead: false })
+        );
+        assert_eq!(
+            CharKey::from_vk_scan(0x0641),
+            Some(CharKey { vk: 0x41, shift: false, ctrl: true, alt: true, dead: false })
+        );
         assert_eq!(CharKey::from_vk_scan(-1), None);
         assert_eq!(CharKey::from_vk_scan(0x00FF), None);
     }
@@ -478,6 +484,9 @@ mod tests {
         assert_eq!(&typed[9..12], &[unicode('^'), unicode('~'), unicode('`')]);
         assert_eq!(typed[12], unicode('é'));
         // A key press of a dead key is still the key, as a person pressing it gets.
-        assert_eq!(press(Key::Char('\''), &intl), vec![Stroke::Vk { vk: 0xDE, up: false }, Stroke::Vk { vk: 0xDE, up: true }]);
+        assert_eq!(
+            press(Key::Char('\''), &intl),
+            vec![Stroke::Vk { vk: 0xDE, up: false }, Stroke::Vk { vk: 0xDE, up: true }]
+        );
     }
 }
