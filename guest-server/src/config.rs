@@ -168,6 +168,15 @@ pub struct ServerConfig {
     #[arg(long, env = "ARENA_CAPTURE_LAYERED")]
     pub capture_layered: bool,
 
+    /// Windows backend: how long each phase of a drag lasts (after the press, at the
+    /// midpoint, at the target before the release), in milliseconds. The default is OLE's
+    /// drag delay (`DD_DEFDRAGDELAY`, 200 ms, in the SDK's `oleidl.h`): a drag source that
+    /// waits it out has started its drag before the pointer moves on, and the target has
+    /// seen the pointer over it before the button comes up (OLE and HTML5 drag and drop
+    /// lose faster drags).
+    #[arg(long, env = "ARENA_DRAG_STEP_MS", default_value_t = 200, value_parser = clap::value_parser!(u64).range(0..=5_000))]
+    pub drag_step_ms: u64,
+
     /// Log format.
     #[arg(long, env = "ARENA_LOG_FORMAT", value_enum, default_value_t = LogFormat::Text)]
     pub log_format: LogFormat,
@@ -227,6 +236,7 @@ impl ServerConfig {
             cdp_port: 1337,
             uia_view: UiaView::Raw,
             capture_layered: false,
+            drag_step_ms: 200,
             log_format: LogFormat::Text,
             worker: false,
         }

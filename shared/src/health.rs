@@ -15,18 +15,24 @@ pub enum Component {
     Clipboard,
     Files,
     Exec,
+    /// UI Automation itself: a bounded walk of the foreground window that must
+    /// return nodes when a window is in front (the `accessibility` stage walks the
+    /// win32 source, which stays up when UI Automation answers empty trees, as it
+    /// can after a snapshot restore).
+    Uia,
     #[serde(other)]
     Unknown,
 }
 
 impl Component {
-    pub const ALL: [Component; 6] = [
+    pub const ALL: [Component; 7] = [
         Component::Capture,
         Component::Input,
         Component::Accessibility,
         Component::Clipboard,
         Component::Files,
         Component::Exec,
+        Component::Uia,
     ];
 }
 

@@ -255,6 +255,10 @@ pub struct WindowWalk {
     /// Why it was left out, when it was.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub skipped: Option<String>,
+    /// Why it is `truncated` or `partial` (which cap or budget cut it, why its
+    /// subtree fetch failed, how many node texts were cut), when it is.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub reason: Option<String>,
 }
 
 impl WindowWalk {

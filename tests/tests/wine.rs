@@ -93,6 +93,9 @@ async fn windows_backend_under_wine() {
     for part in [Component::Input, Component::Accessibility, Component::Clipboard, Component::Files, Component::Exec] {
         assert!(health.is_up(part), "{part:?} is down: {:?}", health.components);
     }
+    // Wine has no UI Automation: its stage is down, and says so (not a timeout).
+    let uia = health.components.iter().find(|s| s.component == Component::Uia).expect("the uia stage");
+    assert!(!uia.ok && uia.detail.contains("UI Automation is not available"), "{uia:?}");
 
     let screen = c.screen().await.expect("screen");
     assert!(screen.physical_width >= 640 && screen.physical_height >= 480, "{screen:?}");

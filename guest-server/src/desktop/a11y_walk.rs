@@ -28,6 +28,56 @@ const MIN_WINDOW_MS: u64 = 50;
 /// Likewise for nodes.
 const MIN_WINDOW_NODES: u32 = 16;
 
+/// Of a window's time share, the part its all-or-nothing bulk fetch
+/// ([`TreeSource::prepare`]) may use: one half. The other half is kept for the
+/// element-by-element read ([`TreeSource::prepare_partial`]) when the bulk fetch fails.
+///
+/// Why a half: a bulk fetch that has not finished in half the share is a heavy
+/// window (a browser page, LibreOffice, VS Code) that would rarely finish in the
+/// whole share either, while the element-by-element read keeps what it reads, top
+/// levels first, so the time left to it turns straight into nodes. A window that
+/// fetches in time loses nothing: the read after a bulk fetch comes from the cache
+/// and costs no cross-process calls.
+const BULK_PART: (u32, u32) = (1, 2);
+
+/// The longest text kept in one node's `name`, `value` or `text`, in characters.
+///
+/// An edit control or a document can hold megabytes (one 100-node tree came back
+/// at 100 MB); a longer text is cut here and ends with [`text_cut_marker`], and the
+/// window's [`WindowWalk::reason`] counts the cuts. Upstream's trees have no cap
+/// (a deliberate deviation: `docs/compatibility.md`).
+pub const MAX_NODE_TEXT_CHARS: usize = 4096;
+
+/// What ends a text cut at [`MAX_NODE_TEXT_CHARS`]: says how much was left out, so
+/// neither an agent nor a reader takes the cut text for the whole.
+pub fn text_cut_marker(left_out: usize) -> String {
+    format!("\u{2026} [cut: {left_out} more characters]")
+}
+
+/// Cuts `text` to [`MAX_NODE_TEXT_CHARS`] characters plus the marker; whether it cut.
+fn cap_text(text: &mut String) -> bool {
+    // Fast path: a text of at most the cap in bytes is at most the cap in characters.
+    if text.len() <= MAX_NODE_TEXT_CHARS {
+        return false;
+    }
+    let Some((at, _)) = text.char_indices().nth(MAX_NODE_TEXT_CHARS) else {
+        return false;
+    };
+    let left_out = text[at..].chars().count();
+    text.truncate(at);
+    text.push_str(&text_cut_marker(left_out));
+    true
+}
+
+/// Caps a node's `name`, `value` and `text`; whether any was cut.
+fn cap_node_text(node: &mut A11yNode) -> bool {
+    let mut cut = cap_text(&mut node.name);
+    for text in [&mut node.value, &mut node.text].into_iter().flatten() {
+        cut |= cap_text(text);
+    }
+    cut
+}
+
 /// Where elements come from. `Elem` is whatever handle the source uses (an HWND, a
 /// cached UIA element); it never leaves the thread the walk runs on.
 pub trait TreeSource {
@@ -41,6 +91,13 @@ pub trait TreeSource {
     /// The enumeration failing as a whole.
     fn roots(&mut self, foreground_only: bool) -> DesktopResult<Vec<(u64, Self::Elem)>>;
 
+    /// Windows [`TreeSource::roots`] saw but could not open (UIA: `ElementFromHandle`
+    /// failing on a busy window), with the reason: the walk lists them as skipped, so
+    /// no window a person sees is dropped without a word.
+    fn root_failures(&mut self) -> Vec<(u64, String)> {
+        Vec::new()
+    }
+
     /// The foreground window's id, when the source knows it: that window is walked
     /// first and with the larger share, since it is the one the agent works in.
     fn foreground_id(&mut self) -> Option<u64> {
@@ -48,7 +105,8 @@ pub trait TreeSource {
     }
 
     /// Readies one window for reading, given the time it may take (UIA: one cached
-    /// subtree fetch, all or nothing). The default does nothing.
+    /// subtree fetch, all or nothing). The walk offers it [`BULK_PART`] of the
+    /// window's share. The default does nothing.
     ///
     /// # Errors
     ///
@@ -82,11 +140,49 @@ pub trait TreeSource {
     fn children(&mut self, elem: &Self::Elem, limit: usize) -> Vec<Self::Elem>;
 }
 
+/// Which caps cut one window, for its [`WindowWalk::reason`].
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+struct Cuts {
+    depth: bool,
+    width: bool,
+    nodes: bool,
+    time: bool,
+    /// Node texts cut at [`MAX_NODE_TEXT_CHARS`].
+    texts: u32,
+}
+
+impl Cuts {
+    fn any(&self) -> bool {
+        self.depth || self.width || self.nodes || self.time || self.texts > 0
+    }
+
+    fn describe(&self, share: Share) -> Vec<String> {
+        let mut out = Vec::new();
+        if self.nodes {
+            out.push(format!("its share of {} nodes was used up", share.nodes));
+        }
+        if self.time {
+            out.push(format!("its share of {} ms ran out", share.time.as_millis()));
+        }
+        if self.depth {
+            out.push("the depth cap cut it".to_owned());
+        }
+        if self.width {
+            out.push("the children cap cut it".to_owned());
+        }
+        if self.texts > 0 {
+            out.push(format!("{} node texts were cut at {MAX_NODE_TEXT_CHARS} characters", self.texts));
+        }
+        out
+    }
+}
+
 /// The running counts and limits of one walk.
 struct Walk {
     budget: TreeBudget,
     count: u32,
-    truncated: bool,
+    /// The cuts of the window being walked.
+    cuts: Cuts,
 }
 
 /// The share of one window: the node count and the instant it must stop at.
@@ -124,9 +220,17 @@ fn share(nodes_left: u32, time_left: Duration, windows_left: usize) -> Share {
     Share { nodes, time: Duration::from_millis(time_ms) }
 }
 
+/// The part of a window's time share its bulk fetch may use ([`BULK_PART`]).
+fn bulk_time(share_time: Duration) -> Duration {
+    let (num, den) = BULK_PART;
+    share_time * num / den
+}
+
 impl Walk {
     /// Emits `elem` at `depth` (top-level windows are 1) with as much of its subtree as
-    /// fits in `limit` nodes before `deadline`; `None` when nothing fits.
+    /// fits in `limit` nodes before `deadline`; `None` when nothing fits. A window's
+    /// own node (depth 1) is kept even past the deadline, so a window the source could
+    /// open is never listed with nothing.
     fn emit<S: TreeSource>(
         &mut self,
         source: &mut S,
@@ -137,23 +241,34 @@ impl Walk {
         deadline: Instant,
     ) -> Option<A11yNode> {
         // A depth cap of 0 keeps nothing, not even the windows.
-        if depth > self.budget.max_depth || self.count >= limit || Instant::now() >= deadline {
-            self.truncated = true;
+        if depth > self.budget.max_depth {
+            self.cuts.depth = true;
+            return None;
+        }
+        if self.count >= limit {
+            self.cuts.nodes = true;
+            return None;
+        }
+        if depth > 1 && Instant::now() >= deadline {
+            self.cuts.time = true;
             return None;
         }
         self.count += 1;
         let mut node = source.record(elem);
         node.window_id = Some(window_id);
         node.children.clear();
+        if cap_node_text(&mut node) {
+            self.cuts.texts += 1;
+        }
         let keep = self.budget.max_children as usize;
         if depth >= self.budget.max_depth {
             // Upstream silently drops what is below the depth cap; say the tree is partial.
-            self.truncated |= !source.children(elem, 0).is_empty();
+            self.cuts.depth |= !source.children(elem, 0).is_empty();
             return Some(node);
         }
         let children = source.children(elem, keep);
         if children.len() > keep {
-            self.truncated = true;
+            self.cuts.width = true;
         }
         for child in children.iter().take(keep) {
             match self.emit(source, child, depth + 1, window_id, limit, deadline) {
@@ -165,16 +280,22 @@ impl Walk {
     }
 }
 
+fn millis(d: Duration) -> u64 {
+    u64::try_from(d.as_millis()).unwrap_or(u64::MAX)
+}
+
 /// Walks `source` within `budget`: the shown top-level windows, listed topmost first.
 ///
 /// The foreground window is walked first with three quarters of the budget (see
 /// [`foreground_share`]); the others then get fair shares of the nodes and time
 /// still left (see the module documentation), so one huge window cannot starve the
-/// others. A window whose [`TreeSource::prepare`] fails is read element by element
-/// through [`TreeSource::prepare_partial`] and keeps what fits; one that cannot be
+/// others. Each window's bulk fetch ([`TreeSource::prepare`]) may use half of its
+/// time share ([`BULK_PART`]); when it fails, the window is read element by element
+/// through [`TreeSource::prepare_partial`] in the time left and keeps what fits, so a
+/// heavy window comes back partial with nodes instead of empty. One that cannot be
 /// read at all is skipped. Any cut flags the tree `truncated`, and
-/// [`A11yTree::windows_walked`] says per window how many nodes, how long, and whether
-/// it was cut, partial or skipped.
+/// [`A11yTree::windows_walked`] says per window how many nodes, how long, whether it
+/// was cut, partial or skipped, and why.
 ///
 /// # Errors
 ///
@@ -187,12 +308,16 @@ pub fn walk<S: TreeSource>(
 ) -> DesktopResult<A11yTree> {
     let started = Instant::now();
     let total_time = Duration::from_millis(budget.max_ms);
-    let mut walk = Walk { budget: *budget, count: 0, truncated: false };
+    let walk_end = started + total_time;
+    let mut walk = Walk { budget: *budget, count: 0, cuts: Cuts::default() };
+    let mut truncated = false;
     let mut roots = source.roots(foreground_only)?;
+    let failures = source.root_failures();
     let keep = budget.max_children as usize;
+    let mut over_width = Vec::new();
     if roots.len() > keep {
-        walk.truncated = true;
-        roots.truncate(keep);
+        truncated = true;
+        over_width = roots.split_off(keep).into_iter().map(|(id, _)| id).collect();
     }
     let total = roots.len();
     // The order of walking: the foreground window first, then the others topmost first.
@@ -210,7 +335,7 @@ pub fn walk<S: TreeSource>(
         let time_left = total_time.saturating_sub(started.elapsed());
         let nodes_left = budget.max_nodes.saturating_sub(walk.count);
         if time_left.is_zero() || nodes_left == 0 {
-            walk.truncated = true;
+            truncated = true;
             for &j in &order[k..] {
                 walked[j] = Some(WindowWalk::skipped(roots[j].0, "the tree's budget was spent"));
             }
@@ -222,47 +347,69 @@ pub fn walk<S: TreeSource>(
             share(nodes_left, time_left, total - k)
         };
         let window_started = Instant::now();
-        let deadline = window_started + share.time;
-        let (prepared, partial) = match source.prepare(root, share.time) {
-            Ok(prepared) => (Ok(prepared), false),
+        let mut deadline = window_started + share.time;
+        let bulk = bulk_time(share.time);
+        let mut partial_reason = None;
+        let prepared = match source.prepare(root, bulk) {
+            Ok(prepared) => Ok(prepared),
             Err(err) => {
-                tracing::debug!(window_id, %err, "the window's cached fetch failed; reading it element by element");
+                tracing::debug!(window_id, %err, "the window's bulk fetch failed; reading it element by element");
+                partial_reason = Some(format!(
+                    "its subtree fetch failed after {} ms of the {} ms it was offered ({err}), so it was read element by element",
+                    millis(window_started.elapsed()),
+                    bulk.as_millis()
+                ));
+                // A bulk fetch that overran its part still leaves the element-by-element
+                // read a minimum, within the walk's own end.
+                deadline = deadline.max((Instant::now() + Duration::from_millis(MIN_WINDOW_MS)).min(walk_end));
                 let left = deadline.saturating_duration_since(Instant::now());
-                (source.prepare_partial(root, left, err), true)
+                source.prepare_partial(root, left, err)
             }
         };
         let root = match prepared {
             Ok(root) => root,
             Err(err) => {
                 tracing::debug!(window_id, %err, "skipping a window the accessibility source could not read");
-                walk.truncated = true;
+                truncated = true;
                 walked[i] = Some(WindowWalk::skipped(window_id, &err.to_string()));
                 continue;
             }
         };
-        let (count_before, truncated_before) = (walk.count, walk.truncated);
-        walk.truncated = partial;
+        let count_before = walk.count;
+        walk.cuts = Cuts::default();
         let limit = walk.count.saturating_add(share.nodes);
         slots[i] = walk.emit(source, &root, 1, window_id, limit, deadline);
-        let cut = walk.truncated;
-        walk.truncated |= truncated_before;
+        let cut = walk.cuts.any();
+        let partial = partial_reason.is_some();
+        truncated |= cut || partial;
+        let mut reasons: Vec<String> = partial_reason.into_iter().collect();
+        reasons.extend(walk.cuts.describe(share));
         walked[i] = Some(WindowWalk {
             window_id,
             nodes: walk.count - count_before,
-            ms: u64::try_from(window_started.elapsed().as_millis()).unwrap_or(u64::MAX),
+            ms: millis(window_started.elapsed()),
             truncated: cut,
             partial,
             skipped: None,
+            reason: (!reasons.is_empty()).then(|| reasons.join("; ")),
         });
+    }
+    let mut windows_walked: Vec<WindowWalk> = walked.into_iter().flatten().collect();
+    for id in over_width {
+        windows_walked.push(WindowWalk::skipped(id, "more top-level windows than the children cap"));
+    }
+    for (id, why) in failures {
+        truncated = true;
+        windows_walked.push(WindowWalk::skipped(id, &why));
     }
     Ok(A11yTree {
         backend,
         windows: slots.into_iter().flatten().collect(),
-        truncated: walk.truncated,
+        truncated,
         node_count: walk.count,
-        elapsed_ms: u64::try_from(started.elapsed().as_millis()).unwrap_or(u64::MAX),
+        elapsed_ms: millis(started.elapsed()),
         coordinate_space: CoordinateSpace::Physical,
-        windows_walked: walked.into_iter().flatten().collect(),
+        windows_walked,
     })
 }
 
@@ -408,7 +555,7 @@ pub fn win32_role(class_name: &str) -> &str {
         "button" => "Button",
         "static" => "Static",
         "combobox" | "comboboxex32" => "ComboBox",
-        "listbox" => "ListBox",
+        "listbox" | "combolbox" => "ListBox",
         "syslistview32" => "ListView",
         "systreeview32" => "TreeView",
         "systabcontrol32" => "TabControl",
@@ -419,6 +566,8 @@ pub fn win32_role(class_name: &str) -> &str {
         "msctls_updown32" => "UpDown",
         "sysheader32" => "Header",
         "#32770" => "Dialog",
+        "#32768" => "PopupMenu",
+        "tooltips_class32" => "ToolTips",
         "" => "Window",
         _ => class_name,
     }
@@ -473,6 +622,11 @@ pub(crate) mod fake {
         pub(crate) broken: bool,
         /// `prepare` times out for this root but `prepare_partial` reads it.
         pub(crate) partial: bool,
+        /// `prepare` sleeps the whole time it is offered, then times out (as a UIA
+        /// transaction timeout would); `prepare_partial` reads it.
+        pub(crate) slow_bulk: bool,
+        /// Text `record` gives as the node's value.
+        pub(crate) value: Option<String>,
     }
 
     #[derive(Debug, Default)]
@@ -481,11 +635,21 @@ pub(crate) mod fake {
         pub(crate) roots: Vec<usize>,
         pub(crate) foreground: Option<usize>,
         pub(crate) prepared: Vec<(usize, Duration)>,
+        /// Windows `roots` saw but could not open, with the reason.
+        pub(crate) failures: Vec<(u64, String)>,
     }
 
     impl FakeTree {
         pub(crate) fn add(&mut self, name: &str, children: Vec<usize>) -> usize {
-            self.nodes.push(FakeNode { name: name.to_owned(), children, cost_ms: 0, broken: false, partial: false });
+            self.nodes.push(FakeNode {
+                name: name.to_owned(),
+                children,
+                cost_ms: 0,
+                broken: false,
+                partial: false,
+                slow_bulk: false,
+                value: None,
+            });
             self.nodes.len() - 1
         }
 
@@ -510,12 +674,20 @@ pub(crate) mod fake {
                 .collect())
         }
 
+        fn root_failures(&mut self) -> Vec<(u64, String)> {
+            std::mem::take(&mut self.failures)
+        }
+
         fn foreground_id(&mut self) -> Option<u64> {
             self.foreground.map(|r| r as u64 + 100)
         }
 
         fn prepare(&mut self, root: &usize, time: Duration) -> DesktopResult<usize> {
             self.prepared.push((*root, time));
+            if self.nodes[*root].slow_bulk {
+                std::thread::sleep(time);
+                return Err(crate::desktop::DesktopError::Timeout { op: "BuildUpdatedCache", ms: millis(time) });
+            }
             if self.nodes[*root].broken || self.nodes[*root].partial {
                 return Err(crate::desktop::DesktopError::Timeout { op: "prepare", ms: 1 });
             }
@@ -523,7 +695,7 @@ pub(crate) mod fake {
         }
 
         fn prepare_partial(&mut self, root: &usize, _time: Duration, failed: DesktopError) -> DesktopResult<usize> {
-            if self.nodes[*root].partial {
+            if self.nodes[*root].partial || self.nodes[*root].slow_bulk {
                 Ok(*root)
             } else {
                 Err(failed)
@@ -538,6 +710,7 @@ pub(crate) mod fake {
             A11yNode {
                 role: "Pane".into(),
                 name: node.name.clone(),
+                value: node.value.clone(),
                 enabled: true,
                 visible: true,
                 ..A11yNode::default()
@@ -657,9 +830,10 @@ mod tests {
         assert!(out.truncated);
         assert_eq!(out.windows.len(), 1);
         assert_eq!(out.windows[0].name, "fine");
-        // The first of two windows is offered half of the time.
+        // The first of two windows gets half of the time, and its bulk fetch half of that.
         let offered = tree.prepared[0].1;
-        assert!(offered <= Duration::from_millis(5_000) && offered >= Duration::from_millis(4_900), "{offered:?}");
+        assert!(offered <= Duration::from_millis(2_500) && offered >= Duration::from_millis(2_450), "{offered:?}");
+        assert_eq!(out.windows_walked[0].skipped.as_deref(), Some("prepare timed out after 1 ms"));
     }
 
     #[test]
@@ -683,11 +857,97 @@ mod tests {
         assert_eq!(
             stats,
             [
-                (heavy as u64 + 100, 6, true, true, false),
+                // Read whole element by element: partial, but no cap cut it.
+                (heavy as u64 + 100, 6, true, false, false),
                 (broken as u64 + 100, 0, false, false, true),
                 (tree.roots[2] as u64 + 100, 3, false, false, false),
             ]
         );
+    }
+
+    #[test]
+    fn a_heavy_window_whose_bulk_fetch_sleeps_its_whole_part_keeps_nodes_within_the_deadline() {
+        let mut tree = FakeTree::default();
+        let heavy = tree.window("heavy", 400);
+        tree.nodes[heavy].slow_bulk = true;
+        for i in 0..400 {
+            let child = tree.nodes[heavy].children[i];
+            tree.nodes[child].cost_ms = 2;
+        }
+        tree.foreground = Some(heavy);
+        let small = tree.window("small", 2);
+        let max_ms = 400;
+        let started = Instant::now();
+        let out = walk(&mut tree, A11yBackend::Uia, &budget(50, 2048, 10_000, max_ms), false).unwrap();
+        let elapsed = started.elapsed();
+        // The bulk fetch slept all it was offered: half of the window's 300 ms share.
+        assert_eq!(tree.prepared[0].0, heavy);
+        let offered = tree.prepared[0].1;
+        assert!(offered >= Duration::from_millis(140) && offered <= Duration::from_millis(150), "{offered:?}");
+        // The window is listed with nodes read in the other half, marked partial, with the reason.
+        assert_eq!(out.windows[0].name, "heavy");
+        let kept = out.windows[0].children.len();
+        assert!(kept > 10 && kept < 400, "{kept} children kept");
+        let stats = &out.windows_walked[0];
+        assert!(stats.partial && stats.truncated, "{stats:?}");
+        assert_eq!(stats.nodes as usize, kept + 1);
+        let reason = stats.reason.as_deref().unwrap();
+        assert!(reason.contains("subtree fetch failed") && reason.contains("BuildUpdatedCache timed out"), "{reason}");
+        assert!(reason.contains("ms ran out"), "{reason}");
+        assert!(out.truncated);
+        // The next window still gets its turn, and the walk keeps to the request's deadline.
+        assert_eq!(out.windows[1].name, "small");
+        assert_eq!(out.windows_walked[1].window_id, small as u64 + 100);
+        assert!(elapsed < Duration::from_millis(max_ms + 200), "{elapsed:?}");
+    }
+
+    #[test]
+    fn a_window_that_the_bulk_part_leaves_no_time_still_lists_its_own_node() {
+        let mut tree = FakeTree::default();
+        let heavy = tree.window("heavy", 3);
+        tree.nodes[heavy].slow_bulk = true;
+        tree.nodes[heavy].cost_ms = 60;
+        let out = walk(&mut tree, A11yBackend::Uia, &budget(50, 2048, 100, 60), false).unwrap();
+        assert_eq!(out.windows.len(), 1);
+        assert_eq!(out.windows[0].name, "heavy");
+        assert!(out.windows_walked[0].partial);
+    }
+
+    #[test]
+    fn windows_the_source_could_not_open_are_listed_as_skipped() {
+        let mut tree = FakeTree::default();
+        tree.window("fine", 1);
+        tree.failures.push((0xBEEF, "ElementFromHandle timed out after 500 ms".into()));
+        let out = walk(&mut tree, A11yBackend::Uia, &TreeBudget::WAA, false).unwrap();
+        assert!(out.truncated);
+        assert_eq!(out.windows.len(), 1);
+        let last = out.windows_walked.last().unwrap();
+        assert_eq!(
+            (last.window_id, last.skipped.as_deref()),
+            (0xBEEF, Some("ElementFromHandle timed out after 500 ms"))
+        );
+    }
+
+    #[test]
+    fn long_node_texts_are_cut_and_the_cut_is_marked() {
+        let mut tree = FakeTree::default();
+        let w = tree.window("w", 2);
+        let big = tree.nodes[w].children[0];
+        tree.nodes[big].value = Some("é".repeat(MAX_NODE_TEXT_CHARS + 10));
+        tree.nodes[big].name = "n".repeat(100_000);
+        let exact = tree.nodes[w].children[1];
+        tree.nodes[exact].value = Some("x".repeat(MAX_NODE_TEXT_CHARS));
+        let out = walk(&mut tree, A11yBackend::Uia, &budget(50, 2048, 100, 10_000), false).unwrap();
+        let node = &out.windows[0].children[0];
+        let value = node.value.as_deref().unwrap();
+        assert_eq!(value, format!("{}{}", "é".repeat(MAX_NODE_TEXT_CHARS), text_cut_marker(10)));
+        assert!(node.name.starts_with(&"n".repeat(MAX_NODE_TEXT_CHARS)));
+        assert!(node.name.ends_with(&text_cut_marker(100_000 - MAX_NODE_TEXT_CHARS)));
+        // Exactly at the cap is whole.
+        assert_eq!(out.windows[0].children[1].value.as_deref().map(str::len), Some(MAX_NODE_TEXT_CHARS));
+        assert!(out.truncated);
+        let reason = out.windows_walked[0].reason.as_deref().unwrap();
+        assert!(reason.contains("1 node texts were cut at 4096 characters"), "{reason}");
     }
 
     #[test]
@@ -698,10 +958,10 @@ mod tests {
         tree.window("bottom", 200);
         tree.foreground = Some(fg);
         let out = walk(&mut tree, A11yBackend::Uia, &budget(50, 2048, 100, 10_000), false).unwrap();
-        // Walked (prepared) first, offered three quarters of the time.
+        // Walked (prepared) first with three quarters of the time, half of it for the bulk fetch.
         assert_eq!(tree.prepared[0].0, fg);
         let offered = tree.prepared[0].1;
-        assert!(offered >= Duration::from_millis(7_400) && offered <= Duration::from_millis(7_500), "{offered:?}");
+        assert!(offered >= Duration::from_millis(3_700) && offered <= Duration::from_millis(3_750), "{offered:?}");
         // Listed in z-order all the same, and it got 75 of the 100 nodes.
         let listed: Vec<&str> = out.windows.iter().map(|w| w.name.as_str()).collect();
         assert_eq!(listed, ["top", "working", "bottom"]);
@@ -809,6 +1069,8 @@ mod tests {
         assert_eq!((button.role.as_str(), button.name.as_str(), button.value), ("Button", "OK", None));
         assert_eq!(button.states.checked, Some(false));
         assert_eq!(win32_role("#32770"), "Dialog");
+        assert_eq!(win32_role("#32768"), "PopupMenu");
+        assert_eq!(win32_role("ComboLBox"), "ListBox");
         assert_eq!(win32_role("Notepad"), "Notepad");
     }
 }

@@ -6,7 +6,8 @@
 //! Backends are chosen at run time: [`stub`] builds everywhere (and runs inside
 //! the Windows exe too); [`windows`] holds the Windows backend, whose FFI glue is
 //! compiled only for Windows and whose neutral halves everywhere.
-//! [`a11y_walk`] is the accessibility walker every backend feeds its trees through.
+//! [`a11y_walk`] is the accessibility walker every backend feeds its trees through;
+//! [`uia_health`] decides the UI Automation health stage (and re-creation) for both.
 //!
 //! # Coordinates
 //!
@@ -16,6 +17,7 @@
 pub mod a11y_walk;
 pub mod cancel;
 pub mod stub;
+pub mod uia_health;
 pub mod windows;
 
 use std::path::PathBuf;

@@ -1,21 +1,29 @@
 //! The stub's accessibility tree, derived from its windows, and the budget pruning.
 //!
-//! Each shown window becomes a node (UIA: role `Window` with a `TitleBar` of caption
-//! buttons; Win32: roles from window classes, no title bar), then the scenario's
-//! `elements`, then a document node when the window holds text. Program Manager comes
+//! Each window a person sees (the Windows backend's root filter,
+//! [`shell::seen_on_desktop`], over the scenario's styles) becomes a node (UIA: role
+//! `Window` with a `TitleBar` of caption buttons; Win32: roles from window classes, no
+//! title bar), then the scenario's `elements`, then a document node when the window
+//! holds text. A popup menu is a `Menu` (UIA) or `PopupMenu` (win32) of its items. Program Manager comes
 //! last, as UIA lists it, with its Desktop icon list. This is a model of the shapes
 //! agents read, not a UI Automation provider.
 //!
 //! The budget pruning is not the stub's own: the windows' trees are fed through the
 //! same walker as the Windows backend's ([`crate::desktop::a11y_walk`]), so fair
-//! shares, caps and the `truncated` flag behave the same in every stub run.
+//! shares, caps, the bulk fetch's part of a window's time and the `truncated` flag
+//! behave the same in every stub run. A scenario can make UI Automation slow per
+//! window (`bulk_fetch_ms`, `element_ms`) or empty ([`UiaModel`]).
+
+use std::time::Duration;
 
 use arena_shared::geometry::Rect;
 use arena_shared::observation::{A11yBackend, A11yNode, A11yStates, A11yTree, TreeBudget};
 
 use super::input::ICON_PITCH;
-use super::window::{Caption, State, Window};
+use super::window::{Caption, State, Window, WindowModel};
 use crate::desktop::a11y_walk::{self, TreeSource};
+use crate::desktop::cancel;
+use crate::desktop::windows::shell;
 use crate::desktop::{DesktopError, DesktopResult};
 
 /// The Win32 role (pywinauto's friendly class name) of a window class, or `fallback`
@@ -50,7 +58,8 @@ fn window_node(window: &Window, focused: bool, backend: A11yBackend, desktop_ite
                 win32_role(&window.class_name, "Pane")
             }
         } else if uia {
-            "Window".to_owned()
+            // UI Automation's HWND proxy gives a popup menu (`#32768`) the Menu control type.
+            if window.model.popup && window.class_name == "#32768" { "Menu" } else { "Window" }.to_owned()
         } else {
             win32_role(&window.class_name, "Window")
         },
@@ -74,6 +83,14 @@ fn window_node(window: &Window, focused: bool, backend: A11yBackend, desktop_ite
             })
             .collect();
         node.children.push(list);
+        return node;
+    }
+    if window.model.popup {
+        // A popup has no caption and no window states: just its items.
+        node.children = window.elements.clone();
+        if !uia {
+            node.children.iter_mut().for_each(to_win32_roles);
+        }
         return node;
     }
     node.states =
@@ -119,21 +136,135 @@ fn to_win32_roles(node: &mut A11yNode) {
     }
 }
 
-/// The stub's windows as a [`TreeSource`]: each shown window's full tree is built
-/// first, and the walker reads it by reference.
+/// The modelled UI Automation client: whether it answers empty trees, and how often
+/// it was re-created (see the scenario's `uia_empty_until_recreated` and `uia_empty`).
+#[derive(Debug, Default)]
+pub(crate) struct UiaModel {
+    /// Empty trees until the next re-creation.
+    empty_until_recreated: bool,
+    /// Empty trees whatever happens.
+    always_empty: bool,
+    pub(crate) recreations: u32,
+}
+
+impl UiaModel {
+    pub(crate) fn new(empty_until_recreated: bool, always_empty: bool) -> UiaModel {
+        UiaModel { empty_until_recreated, always_empty, recreations: 0 }
+    }
+
+    pub(crate) fn answers_empty(&self) -> bool {
+        self.always_empty || self.empty_until_recreated
+    }
+
+    /// A new automation client: the fault a re-creation cures is gone.
+    pub(crate) fn recreate(&mut self) {
+        self.recreations += 1;
+        self.empty_until_recreated = false;
+    }
+}
+
+/// One window a tree may walk: its full tree, copied out of the desktop's state,
+/// and what its scenario says UI Automation costs.
+#[derive(Debug)]
+pub(crate) struct StubRoot {
+    id: u64,
+    node: A11yNode,
+    model: WindowModel,
+    focused: bool,
+}
+
+/// The windows the trees walk, topmost first: those the shell's own rule
+/// ([`shell::seen_on_desktop`], the Windows backend's root filter) says a person sees,
+/// minimised ones left out; only the focused one when `foreground_only`.
+///
+/// # Errors
+///
+/// [`DesktopError::InvalidInput`] for [`A11yBackend::Unknown`].
+pub(crate) fn roots(
+    state: &State,
+    backend: A11yBackend,
+    foreground_only: bool,
+    desktop_items: &[String],
+) -> DesktopResult<Vec<StubRoot>> {
+    if backend == A11yBackend::Unknown {
+        return Err(DesktopError::InvalidInput("unknown accessibility backend".into()));
+    }
+    let foreground_pid = state.window(state.focus).map_or(0, |w| w.pid);
+    Ok(state
+        .windows
+        .iter()
+        .filter(|w| !w.minimized && shell::seen_on_desktop(w.facts(foreground_pid)))
+        .filter(|w| !foreground_only || w.id == state.focus)
+        .map(|w| StubRoot {
+            id: w.id,
+            node: window_node(w, w.id == state.focus, backend, desktop_items),
+            model: w.model,
+            focused: w.id == state.focus,
+        })
+        .collect())
+}
+
+/// The stub's windows as a [`TreeSource`]: the walker reads the copied trees by
+/// reference, and each window's modelled costs are paid as UI Automation would
+/// charge them: `bulk_fetch_ms` in [`TreeSource::prepare`] (UIA only: the win32
+/// source has no bulk fetch), `element_ms` per element read one by one (win32
+/// always, UIA after a failed bulk fetch; a bulk fetch that worked reads a cache).
 struct StubSource<'a> {
-    windows: &'a [(u64, A11yNode)],
+    windows: &'a [StubRoot],
+    backend: A11yBackend,
+    /// The costs of the window being read.
+    current: WindowModel,
+    /// Elements are being read one by one.
+    live: bool,
 }
 
 impl<'a> TreeSource for StubSource<'a> {
     type Elem = &'a A11yNode;
 
     fn roots(&mut self, _foreground_only: bool) -> DesktopResult<Vec<(u64, &'a A11yNode)>> {
-        // `tree` already kept only the foreground window when asked to.
-        Ok(self.windows.iter().map(|(id, node)| (*id, node)).collect())
+        // `roots` above already kept only the foreground window when asked to.
+        Ok(self.windows.iter().map(|root| (root.id, &root.node)).collect())
+    }
+
+    fn foreground_id(&mut self) -> Option<u64> {
+        self.windows.iter().find(|root| root.focused).map(|root| root.id)
+    }
+
+    fn prepare(&mut self, root: &&'a A11yNode, time: Duration) -> DesktopResult<&'a A11yNode> {
+        self.current =
+            self.windows.iter().find(|w| std::ptr::eq(&w.node, *root)).map_or_else(WindowModel::default, |w| w.model);
+        self.live = self.backend == A11yBackend::Win32;
+        let bulk = self.current.bulk_fetch_ms;
+        if self.backend == A11yBackend::Uia && bulk > 0 {
+            let offered = u64::try_from(time.as_millis()).unwrap_or(u64::MAX);
+            if bulk > offered {
+                // As a UIA transaction timeout: the whole time offered, then a failure.
+                cancel::sleep(time)?;
+                return Err(DesktopError::Timeout {
+                    op: "BuildUpdatedCache (the scenario's bulk_fetch_ms)",
+                    ms: offered,
+                });
+            }
+            cancel::sleep(Duration::from_millis(bulk))?;
+        }
+        Ok(*root)
+    }
+
+    fn prepare_partial(
+        &mut self,
+        root: &&'a A11yNode,
+        _time: Duration,
+        _failed: DesktopError,
+    ) -> DesktopResult<&'a A11yNode> {
+        self.live = true;
+        Ok(*root)
     }
 
     fn record(&mut self, elem: &&'a A11yNode) -> A11yNode {
+        if self.live && self.current.element_ms > 0 {
+            // A cancelled call stops paying; the walker's deadline ends the walk.
+            let _ = cancel::sleep(Duration::from_millis(self.current.element_ms));
+        }
         let A11yNode {
             role, class_name, name, value, text, rect, enabled, visible, focused, states, window_id, ..
         } = *elem;
@@ -158,26 +289,16 @@ impl<'a> TreeSource for StubSource<'a> {
     }
 }
 
-/// Walks the shown windows, topmost first, within `budget`.
-///
-/// # Errors
-///
-/// [`DesktopError::InvalidInput`] for [`A11yBackend::Unknown`].
-pub(crate) fn tree(
-    state: &State,
+/// Walks `roots` within `budget` through the shared walker; `uia_empty` models a UI
+/// Automation that answers empty trees (no top-level windows at all).
+pub(crate) fn walk(
+    roots: Vec<StubRoot>,
     backend: A11yBackend,
     budget: &TreeBudget,
     foreground_only: bool,
-    desktop_items: &[String],
+    uia_empty: bool,
 ) -> DesktopResult<A11yTree> {
-    if backend == A11yBackend::Unknown {
-        return Err(DesktopError::InvalidInput("unknown accessibility backend".into()));
-    }
-    let windows: Vec<(u64, A11yNode)> = state
-        .windows
-        .iter()
-        .filter(|w| w.shown() && (!foreground_only || w.id == state.focus))
-        .map(|w| (w.id, window_node(w, w.id == state.focus, backend, desktop_items)))
-        .collect();
-    a11y_walk::walk(&mut StubSource { windows: &windows }, backend, budget, foreground_only)
+    let windows = if uia_empty { Vec::new() } else { roots };
+    let mut source = StubSource { windows: &windows, backend, current: WindowModel::default(), live: false };
+    a11y_walk::walk(&mut source, backend, budget, foreground_only)
 }

@@ -40,7 +40,7 @@ use arena_shared::registry::RegistryValue;
 
 use self::process::Program;
 pub use self::scenario::{Scenario, ScenarioError};
-use self::window::{NewWindow, State, WallpaperCache};
+use self::window::{NewWindow, State, WallpaperCache, WindowModel};
 use super::{
     ClipboardData, CommandSpec, Desktop, DesktopError, DesktopResult, ExecLimits, ExecOutput, Frame, WindowState,
 };
@@ -78,6 +78,8 @@ pub struct StubDesktop {
     /// Folded guest folder -> upper-case user -> mask.
     acls: BTreeMap<String, BTreeMap<String, u32>>,
     state: Mutex<State>,
+    /// The modelled UI Automation client's faults and re-creations.
+    uia: Mutex<a11y::UiaModel>,
 }
 
 impl StubDesktop {
@@ -146,8 +148,17 @@ impl StubDesktop {
             acls.insert(key, users.iter().map(|(u, m)| (u.to_uppercase(), *m)).collect());
         }
 
-        let stub =
-            StubDesktop { root, _temp: temp, env, programs, associations, acls, state: Mutex::new(State::new(screen)) };
+        let uia = a11y::UiaModel::new(scenario.uia_empty_until_recreated, scenario.uia_empty);
+        let stub = StubDesktop {
+            root,
+            _temp: temp,
+            env,
+            programs,
+            associations,
+            acls,
+            state: Mutex::new(State::new(screen)),
+            uia: Mutex::new(uia),
+        };
         stub.apply_scenario(&scenario)?;
         Ok(stub)
     }
@@ -219,6 +230,16 @@ impl StubDesktop {
             });
             let work = state.work_area();
             if let Some(window) = state.window_mut(id) {
+                window.model = WindowModel {
+                    tool_window: spec.tool_window,
+                    popup: spec.popup,
+                    cloaked: spec.cloaked,
+                    bulk_fetch_ms: spec.bulk_fetch_ms,
+                    element_ms: spec.element_ms,
+                };
+                if spec.popup && window.class_name.is_empty() {
+                    window.class_name = "#32768".into();
+                }
                 window.visible = spec.visible;
                 window.minimized = spec.minimized;
                 if spec.maximized {
@@ -235,6 +256,15 @@ impl StubDesktop {
             None => state.refocus(),
         }
         Ok(())
+    }
+
+    fn uia_model(&self) -> MutexGuard<'_, a11y::UiaModel> {
+        self.uia.lock().unwrap_or_else(std::sync::PoisonError::into_inner)
+    }
+
+    /// How often the modelled UI Automation client was re-created (by the health stage).
+    pub fn uia_recreations(&self) -> u32 {
+        self.uia_model().recreations
     }
 
     fn lock(&self) -> MutexGuard<'_, State> {
@@ -447,8 +477,24 @@ impl Desktop for StubDesktop {
                 Ok(format!("cursor at {},{}", p.x, p.y))
             }
             Component::Accessibility => {
-                let tree = self.accessibility(A11yBackend::Uia, &TreeBudget::WAA, false)?;
+                let tree = self.accessibility(A11yBackend::Win32, &TreeBudget::WAA, false)?;
                 Ok(format!("walked {} windows, {} nodes", tree.windows.len(), tree.node_count))
+            }
+            Component::Uia => {
+                // As on Windows: a window in front over a lit screen (the stub's is always lit).
+                let in_front = {
+                    let state = self.lock();
+                    state.window(state.focus).filter(|w| !w.is_desktop && w.shown()).map(|w| w.title.clone())
+                };
+                let budget = crate::desktop::uia_health::HEALTH_BUDGET;
+                crate::desktop::uia_health::check(
+                    in_front.as_deref(),
+                    &mut || self.accessibility(A11yBackend::Uia, &budget, true),
+                    &mut || {
+                        self.uia_model().recreate();
+                        Ok(())
+                    },
+                )
             }
             Component::Clipboard => Ok(match self.clipboard_get()? {
                 ClipboardData::Empty => "clipboard is empty".to_owned(),
@@ -562,8 +608,11 @@ impl Desktop for StubDesktop {
         foreground_only: bool,
     ) -> DesktopResult<A11yTree> {
         let items = self.desktop_items();
-        let state = self.lock();
-        a11y::tree(&state, backend, budget, foreground_only, &items)
+        // The windows' trees are copied under the lock and walked without it, so a
+        // scenario's slow UI Automation does not hold up the rest of the desktop.
+        let roots = a11y::roots(&self.lock(), backend, foreground_only, &items)?;
+        let empty = backend == A11yBackend::Uia && self.uia_model().answers_empty();
+        a11y::walk(roots, backend, budget, foreground_only, empty)
     }
 
     fn clipboard_get(&self) -> DesktopResult<ClipboardData> {

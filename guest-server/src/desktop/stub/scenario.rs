@@ -17,6 +17,8 @@
 //! | `associations` | map `.ext` → program name | which program `open_path` uses for an extension; overrides the built-in ones |
 //! | `env` | map name → value | environment variables; override the built-in ones (names are case-insensitive) |
 //! | `acls` | map guest folder → map user → mask | access masks `directory_access_mask` reports instead of deriving one |
+//! | `uia_empty_until_recreated` | bool | UI Automation answers empty trees until the automation client is re-created (the health stage does that), as reported after a snapshot restore |
+//! | `uia_empty` | bool | UI Automation answers empty trees even after it is re-created (the health stage reports it down) |
 //!
 //! A window ([`ScenarioWindow`]) has `title` (required), `class_name`, `process_name`,
 //! `rect` `{x, y, width, height}`, `text` (its document), `file` (guest path `ctrl+s` saves
@@ -24,6 +26,14 @@
 //! one; default: the topmost visible, non-minimised window), `refuse_close` (the window stays
 //! on `close_window` and `alt+f4`, modelling an unsaved-changes prompt) and `elements`
 //! (accessibility subtrees, `arena_shared::observation::A11yNode` JSON, shown under the window).
+//! What the trees see of it, through the same walker and root filter as the Windows backend:
+//! `bulk_fetch_ms` (UI Automation's whole-subtree fetch of the window takes this long, and
+//! fails as a UIA timeout does when that is more than the time it is offered), `element_ms`
+//! (each element read one by one takes this long), `tool_window` (`WS_EX_TOOLWINDOW`: left
+//! out of the trees unless it belongs to the foreground window's process), `popup` (a popup
+//! menu or drop-down owned by another window: class `#32768` unless `class_name` says
+//! otherwise, `WS_POPUP`, topmost, never focused, its `elements` are its items) and
+//! `cloaked` (DWM hides it: never drawn, clicked or walked).
 //!
 //! A program ([`ScenarioProgram`]) has `title` (required), `class_name`, `process_name`,
 //! `text` (initial document; `null` for a window without one) and `app_name` (the suffix of
@@ -69,6 +79,10 @@ pub struct Scenario {
     pub env: BTreeMap<String, String>,
     #[serde(default)]
     pub acls: BTreeMap<String, BTreeMap<String, u32>>,
+    #[serde(default)]
+    pub uia_empty_until_recreated: bool,
+    #[serde(default)]
+    pub uia_empty: bool,
 }
 
 /// Screen size in physical pixels.
@@ -108,11 +122,24 @@ pub struct ScenarioWindow {
     pub refuse_close: bool,
     #[serde(default)]
     pub elements: Vec<A11yNode>,
+    #[serde(default)]
+    pub bulk_fetch_ms: u64,
+    #[serde(default)]
+    pub element_ms: u64,
+    #[serde(default)]
+    pub tool_window: bool,
+    #[serde(default)]
+    pub popup: bool,
+    #[serde(default)]
+    pub cloaked: bool,
 }
 
 fn yes() -> bool {
     true
 }
+
+/// The longest modelled UI Automation delay (`bulk_fetch_ms`, `element_ms`): a minute.
+const MAX_MODEL_MS: u64 = 60_000;
 
 /// Content of a seeded file.
 #[derive(Debug, Clone, PartialEq, Eq, Deserialize)]
@@ -255,6 +282,17 @@ impl Scenario {
                     return Err(format!("windows[{i}] ({:?}): rect must have a positive size", window.title));
                 }
             }
+            for (field, ms) in [("bulk_fetch_ms", window.bulk_fetch_ms), ("element_ms", window.element_ms)] {
+                if ms > MAX_MODEL_MS {
+                    return Err(format!(
+                        "windows[{i}] ({:?}): {field} {ms} is more than {MAX_MODEL_MS} ms",
+                        window.title
+                    ));
+                }
+            }
+            if window.popup && window.focused {
+                return Err(format!("windows[{i}] ({:?}): a popup is never focused", window.title));
+            }
         }
         let focused = self.windows.iter().filter(|w| w.focused).count();
         if focused > 1 {
@@ -325,6 +363,9 @@ mod tests {
         );
         check_error(r#"{"associations": {"txt": "notepad"}}"#, &["dot"]);
         check_error("{} {}", &["trailing"]);
+        check_error(r#"{"windows": [{"title": "a", "element_ms": 600000}]}"#, &["windows[0]", "element_ms", "60000"]);
+        check_error(r#"{"windows": [{"title": "m", "popup": true, "focused": true}]}"#, &["popup is never focused"]);
+        check_error(r#"{"windows": [{"title": "a", "bulk_fetch_ms": -1}]}"#, &["windows[0].bulk_fetch_ms"]);
     }
 
     #[test]

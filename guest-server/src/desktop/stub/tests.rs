@@ -711,3 +711,39 @@ fn starting_a_document_opens_it() {
     assert_eq!(out.exit_code, Some(0));
     assert_eq!(titles(&d)[0], "Desktop");
 }
+
+#[test]
+fn the_uia_stage_recreates_an_empty_ui_automation_exactly_once_per_check() {
+    let window = r#"{"title": "Untitled - Notepad", "class_name": "Notepad", "text": "x"}"#;
+    let cured = stub_with(&format!(r#"{{"uia_empty_until_recreated": true, "windows": [{window}]}}"#));
+    assert!(cured.probe(Component::Uia).unwrap().contains("re-created"));
+    assert_eq!(cured.uia_recreations(), 1);
+    // Cured: the next check reads nodes at once and re-creates nothing.
+    assert!(cured.probe(Component::Uia).unwrap().contains("nodes of the foreground window"));
+    assert_eq!(cured.uia_recreations(), 1);
+
+    let broken = stub_with(&format!(r#"{{"uia_empty": true, "windows": [{window}]}}"#));
+    let err = broken.probe(Component::Uia).unwrap_err().to_string();
+    assert!(err.contains("after re-creating"), "{err}");
+    assert_eq!(broken.uia_recreations(), 1);
+
+    // Nothing in front: an empty tree is the right answer, and nothing is re-created.
+    let desktop_only = stub_with(r#"{"uia_empty": true}"#);
+    assert!(desktop_only.probe(Component::Uia).unwrap().contains("no window in front"));
+    assert_eq!(desktop_only.uia_recreations(), 0);
+}
+
+#[test]
+fn a_slow_bulk_fetch_is_paid_only_by_uia_and_element_costs_by_both() {
+    let d = stub_with(
+        r#"{"windows": [{"title": "Slow", "bulk_fetch_ms": 5000, "elements": [
+            {"role": "Button", "class_name": "", "name": "b", "enabled": true, "visible": true}]}]}"#,
+    );
+    let budget = TreeBudget { max_ms: 400, ..TreeBudget::WAA };
+    let uia = d.accessibility(A11yBackend::Uia, &budget, false).unwrap();
+    let walked = &uia.windows_walked[0];
+    assert!(walked.partial, "{walked:?}");
+    let win32 = d.accessibility(A11yBackend::Win32, &budget, false).unwrap();
+    assert!(!win32.windows_walked[0].partial, "the win32 source has no bulk fetch");
+    assert!(!win32.truncated);
+}

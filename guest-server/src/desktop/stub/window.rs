@@ -11,6 +11,7 @@ use arena_shared::geometry::{Point, Rect};
 use arena_shared::observation::{A11yNode, WindowInfo};
 
 use super::registry::Registry;
+use crate::desktop::windows::shell;
 use crate::desktop::{ClipboardData, DesktopError, DesktopResult, WindowState};
 
 /// Height of a window's title bar, inside its 1-pixel border.
@@ -231,12 +232,49 @@ pub(crate) struct Window {
     pub(crate) file: Option<PathBuf>,
     /// Accessibility subtrees from the scenario.
     pub(crate) elements: Vec<A11yNode>,
+    /// What the shell and UI Automation make of it (the scenario's window fields).
+    pub(crate) model: WindowModel,
+}
+
+/// A window's shell styles and UI Automation costs, as a scenario sets them.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub(crate) struct WindowModel {
+    /// `WS_EX_TOOLWINDOW`.
+    pub(crate) tool_window: bool,
+    /// A popup menu or drop-down owned by another window: `WS_POPUP`, topmost, never focused.
+    pub(crate) popup: bool,
+    /// DWM cloaks it: never drawn, clicked or walked.
+    pub(crate) cloaked: bool,
+    /// How long UI Automation's whole-subtree fetch of it takes.
+    pub(crate) bulk_fetch_ms: u64,
+    /// How long reading one of its elements by itself takes.
+    pub(crate) element_ms: u64,
 }
 
 impl Window {
     /// Whether it is drawn and can be clicked.
     pub(crate) fn shown(&self) -> bool {
-        self.visible && !self.minimized
+        self.visible && !self.minimized && !self.model.cloaked
+    }
+
+    /// What the shell would say about it, for [`crate::desktop::windows::shell::seen_on_desktop`];
+    /// `foreground_pid` is the process of the focused window.
+    pub(crate) fn facts(&self, foreground_pid: u32) -> shell::WindowFacts {
+        let mut ex_style = 0;
+        if self.model.tool_window || self.model.popup {
+            ex_style |= shell::WS_EX_TOOLWINDOW;
+        }
+        if self.model.popup {
+            ex_style |= shell::WS_EX_TOPMOST;
+        }
+        shell::WindowFacts {
+            visible: self.visible,
+            cloaked: u32::from(self.model.cloaked),
+            ex_style,
+            style: if self.model.popup { shell::WS_POPUP } else { 0 },
+            foreground_process: self.pid == foreground_pid,
+            shell_class: shell::shell_class(&self.class_name),
+        }
     }
 
     pub(crate) fn title_bar(&self) -> Rect {
@@ -424,6 +462,7 @@ impl State {
             scroll: 0,
             file: None,
             elements: Vec::new(),
+            model: WindowModel::default(),
         });
         state.focus = id;
         state
@@ -500,6 +539,7 @@ impl State {
                 scroll: 0,
                 file: new.file,
                 elements: new.elements,
+                model: WindowModel::default(),
             },
         );
         self.focus = id;
@@ -529,8 +569,11 @@ impl State {
 
     /// Gives focus to the topmost shown window, or the desktop, after the focused one went away.
     pub(crate) fn refocus(&mut self) {
-        self.focus =
-            self.windows.iter().find(|w| w.shown() && !w.is_desktop).map_or_else(|| self.desktop_id(), |w| w.id);
+        self.focus = self
+            .windows
+            .iter()
+            .find(|w| w.shown() && !w.is_desktop && !w.model.popup)
+            .map_or_else(|| self.desktop_id(), |w| w.id);
     }
 
     /// The topmost shown window under `p`.

@@ -68,9 +68,12 @@ fn wake_cursor() {
         },
     };
     // SAFETY: ShowCursor only changes this thread's display counter; SendInput gets two initialised records.
-    unsafe {
+    let sent = unsafe {
         ShowCursor(true);
-        SendInput(&[nudge(1), nudge(-1)], std::mem::size_of::<INPUT>() as i32);
+        SendInput(&[nudge(1), nudge(-1)], std::mem::size_of::<INPUT>() as i32)
+    };
+    if sent != 2 {
+        tracing::warn!(sent, of = 2, "the cursor nudge was not accepted in full (a secure desktop or UIPI)");
     }
 }
 
@@ -96,6 +99,19 @@ impl WindowsDesktop {
             wake_cursor();
         }
         Ok(WindowsDesktop { session, uia: uia::UiaWorker::new(options.uia_view), options })
+    }
+
+    /// The title of the window in front, when a person would see one over a lit
+    /// screen: the foreground window passes the trees' root filter, is not minimised,
+    /// and the screen is not black (a locked or disconnected desktop). `None` otherwise.
+    fn window_in_front(&self) -> Option<String> {
+        let hwnd = window::foreground();
+        if hwnd.is_invalid() || !window::seen(hwnd) || window::is_minimized(hwnd) {
+            return None;
+        }
+        let lit = capture::capture(false, self.options.capture_layered)
+            .is_ok_and(|frame| !crate::imaging::is_black(&frame.image));
+        lit.then(|| window::title(hwnd))
     }
 
     fn need_desktop(&self, op: &str) -> DesktopResult<()> {
@@ -136,6 +152,19 @@ impl WindowsDesktop {
                     "walked the foreground window's win32 tree: {} nodes in {} ms",
                     tree.node_count, tree.elapsed_ms
                 ))
+            }
+            Component::Uia => {
+                self.need_desktop("ui automation")?;
+                let in_front = self.window_in_front();
+                let budget = crate::desktop::uia_health::HEALTH_BUDGET;
+                crate::desktop::uia_health::check(
+                    in_front.as_deref(),
+                    &mut || self.uia.tree(&budget, true),
+                    &mut || {
+                        self.uia.recreate();
+                        Ok(())
+                    },
+                )
             }
             Component::Clipboard => {
                 self.need_desktop("clipboard")?;
@@ -215,7 +244,7 @@ impl Desktop for WindowsDesktop {
 
     fn perform(&self, action: &Action) -> DesktopResult<()> {
         self.need_desktop("input")?;
-        input::perform(action)
+        input::perform(action, std::time::Duration::from_millis(self.options.drag_step_ms))
     }
 
     fn windows(&self) -> DesktopResult<Vec<WindowInfo>> {

@@ -10,11 +10,12 @@ use arena_shared::geometry::{Point, Rect};
 use arena_shared::keys::{parse_chord, Key};
 use windows::Win32::Foundation::POINT;
 use windows::Win32::UI::Input::KeyboardAndMouse::{
-    GetKeyboardLayout, MapVirtualKeyW, SendInput, VkKeyScanExW, INPUT, INPUT_0, INPUT_KEYBOARD, INPUT_MOUSE,
-    KEYBDINPUT, KEYBD_EVENT_FLAGS, KEYEVENTF_EXTENDEDKEY, KEYEVENTF_KEYUP, KEYEVENTF_UNICODE, MAPVK_VK_TO_VSC,
-    MOUSEEVENTF_ABSOLUTE, MOUSEEVENTF_HWHEEL, MOUSEEVENTF_LEFTDOWN, MOUSEEVENTF_LEFTUP, MOUSEEVENTF_MIDDLEDOWN,
-    MOUSEEVENTF_MIDDLEUP, MOUSEEVENTF_MOVE, MOUSEEVENTF_RIGHTDOWN, MOUSEEVENTF_RIGHTUP, MOUSEEVENTF_VIRTUALDESK,
-    MOUSEEVENTF_WHEEL, MOUSEINPUT, MOUSE_EVENT_FLAGS, VIRTUAL_KEY,
+    GetKeyboardLayout, MapVirtualKeyExW, SendInput, ToUnicodeEx, VkKeyScanExW, HKL, INPUT, INPUT_0, INPUT_KEYBOARD,
+    INPUT_MOUSE, KEYBDINPUT, KEYBD_EVENT_FLAGS, KEYEVENTF_EXTENDEDKEY, KEYEVENTF_KEYUP, KEYEVENTF_UNICODE,
+    MAPVK_VK_TO_VSC, MOUSEEVENTF_ABSOLUTE, MOUSEEVENTF_HWHEEL, MOUSEEVENTF_LEFTDOWN, MOUSEEVENTF_LEFTUP,
+    MOUSEEVENTF_MIDDLEDOWN, MOUSEEVENTF_MIDDLEUP, MOUSEEVENTF_MOVE, MOUSEEVENTF_RIGHTDOWN, MOUSEEVENTF_RIGHTUP,
+    MOUSEEVENTF_VIRTUALDESK, MOUSEEVENTF_WHEEL, MOUSEINPUT, MOUSE_EVENT_FLAGS, VIRTUAL_KEY, VK_CONTROL, VK_MENU,
+    VK_SHIFT,
 };
 use windows::Win32::UI::WindowsAndMessaging::{
     GetCursorPos, GetForegroundWindow, GetSystemMetrics, GetWindowThreadProcessId, SetCursorPos, SM_CXVIRTUALSCREEN,
@@ -28,8 +29,6 @@ use crate::desktop::{DesktopError, DesktopResult};
 
 /// The most clicks or key presses one action may ask for (as the stub).
 const MAX_REPEAT: u32 = 1000;
-/// Pause between the steps of a drag, so programs see the press, the motion and the release apart.
-const DRAG_STEP: Duration = Duration::from_millis(20);
 
 /// The virtual screen: all monitors, in physical pixels.
 pub(super) fn virtual_screen() -> Rect {
@@ -129,25 +128,55 @@ fn check_repeat(what: &str, n: u32) -> DesktopResult<()> {
     Ok(())
 }
 
-/// What the keyboard layout of the foreground window's thread says about each
-/// character: what the keys the agent presses mean to the program that gets them
-/// (this thread's own layout may differ). The layout is looked up once, here.
-fn foreground_layout() -> impl Fn(char) -> Option<CharKey> {
+/// The keyboard layout of the foreground window's thread: what the keys the agent
+/// presses mean to the program that gets them (this thread's own layout may differ).
+fn foreground_hkl() -> HKL {
     // SAFETY: no preconditions; a missing foreground window gives thread 0, whose layout
     // query answers the system default.
-    let hkl = unsafe { GetKeyboardLayout(GetWindowThreadProcessId(GetForegroundWindow(), None)) };
+    unsafe { GetKeyboardLayout(GetWindowThreadProcessId(GetForegroundWindow(), None)) }
+}
+
+/// What layout `hkl` says about each character: its key, modifiers, and whether the key
+/// is a dead key there.
+fn layout(hkl: HKL) -> impl Fn(char) -> Option<CharKey> {
     move |c| {
         let unit = u16::try_from(u32::from(c)).ok()?;
         // SAFETY: VkKeyScanExW takes any UTF-16 unit and layout handle.
-        CharKey::from_vk_scan(unsafe { VkKeyScanExW(unit, hkl) })
+        let key = CharKey::from_vk_scan(unsafe { VkKeyScanExW(unit, hkl) })?;
+        Some(CharKey { dead: is_dead_key(key, hkl), ..key })
     }
 }
 
-fn key_input(stroke: Stroke) -> INPUT {
+/// `ToUnicodeEx`'s "do not change the keyboard state" flag (Windows 10 1607 and later;
+/// older systems ignore it, and this thread takes no keyboard input whose state it could
+/// disturb).
+const TO_UNICODE_KEEP_STATE: u32 = 0x4;
+
+/// Whether `key`, with its modifiers held, is a dead key on `hkl`: `ToUnicodeEx` answers
+/// a negative count for one.
+fn is_dead_key(key: CharKey, hkl: HKL) -> bool {
+    let mut state = [0u8; 256];
+    for (held, vk) in [(key.shift, VK_SHIFT), (key.ctrl, VK_CONTROL), (key.alt, VK_MENU)] {
+        if held {
+            state[usize::from(vk.0)] = 0x80;
+        }
+    }
+    let mut out = [0u16; 8];
+    // SAFETY: MapVirtualKeyExW and ToUnicodeEx take any key and layout; the state and
+    // output buffers are valid for the sizes the bindings pass.
+    unsafe {
+        let scan = MapVirtualKeyExW(u32::from(key.vk), MAPVK_VK_TO_VSC, Some(hkl));
+        ToUnicodeEx(u32::from(key.vk), scan, &state, &mut out, TO_UNICODE_KEEP_STATE, Some(hkl)) < 0
+    }
+}
+
+/// One keyboard record. Scan codes come from the target's layout `hkl`, which is what
+/// the program that reads them (games, remote desktops, some editors) expects.
+fn key_input(stroke: Stroke, hkl: HKL) -> INPUT {
     let ki = match stroke {
         Stroke::Vk { vk: code, up } => {
-            // SAFETY: MapVirtualKeyW has no preconditions.
-            let scan = unsafe { MapVirtualKeyW(u32::from(code), MAPVK_VK_TO_VSC) } as u16;
+            // SAFETY: MapVirtualKeyExW has no preconditions.
+            let scan = unsafe { MapVirtualKeyExW(u32::from(code), MAPVK_VK_TO_VSC, Some(hkl)) } as u16;
             let mut flags = KEYBD_EVENT_FLAGS(0);
             if vk::is_extended(code) {
                 flags |= KEYEVENTF_EXTENDEDKEY;
@@ -165,8 +194,8 @@ fn key_input(stroke: Stroke) -> INPUT {
     INPUT { r#type: INPUT_KEYBOARD, Anonymous: INPUT_0 { ki } }
 }
 
-fn send_strokes(strokes: &[Stroke], what: &str) -> DesktopResult<()> {
-    let inputs: Vec<INPUT> = strokes.iter().map(|&s| key_input(s)).collect();
+fn send_strokes(strokes: &[Stroke], what: &str, hkl: HKL) -> DesktopResult<()> {
+    let inputs: Vec<INPUT> = strokes.iter().map(|&s| key_input(s, hkl)).collect();
     send(&inputs, what)
 }
 
@@ -179,8 +208,10 @@ fn parse_keys(name: &str) -> DesktopResult<Vec<Key>> {
 /// # Errors
 ///
 /// [`DesktopError::InvalidInput`] for unknown key names, buttons or action types and
-/// counts above 1000; [`DesktopError::Os`] when Windows refused the input.
-pub(super) fn perform(action: &Action) -> DesktopResult<()> {
+/// counts above 1000; [`DesktopError::Os`] when Windows refused the input. `drag_step`
+/// is how long each phase of a drag lasts (`--drag-step-ms`), so programs see the
+/// press, the motion and the release apart.
+pub(super) fn perform(action: &Action, drag_step: Duration) -> DesktopResult<()> {
     match action {
         Action::MoveTo { x, y } => move_to(Point::new(*x, *y)),
         Action::MoveRel { dx, dy } => {
@@ -218,7 +249,7 @@ pub(super) fn perform(action: &Action) -> DesktopResult<()> {
             }
             let start = cursor()?;
             send(&[mouse(down, 0, 0, 0)], "drag")?;
-            std::thread::sleep(DRAG_STEP);
+            std::thread::sleep(drag_step);
             match duration_ms.filter(|&ms| ms > pointer::MINIMUM_DURATION_MS) {
                 // Spread over the duration as pyautogui's dragTo moves; stops between
                 // steps when the call was abandoned, and releases the button even then.
@@ -235,11 +266,11 @@ pub(super) fn perform(action: &Action) -> DesktopResult<()> {
                 None => {
                     let mid = Point::new(start.x + (to.x - start.x) / 2, start.y + (to.y - start.y) / 2);
                     move_to(mid)?;
-                    std::thread::sleep(DRAG_STEP);
+                    std::thread::sleep(drag_step);
                     move_to(*to)?;
                 }
             }
-            std::thread::sleep(DRAG_STEP);
+            std::thread::sleep(drag_step);
             send(&[mouse(up, 0, 0, 0)], "drag")
         }
         Action::Scroll { x, y, dx, dy } => {
@@ -256,34 +287,39 @@ pub(super) fn perform(action: &Action) -> DesktopResult<()> {
         Action::KeyPress { key, presses } => {
             check_repeat("presses", *presses)?;
             let keys = parse_keys(key)?;
-            let layout = foreground_layout();
+            let hkl = foreground_hkl();
+            let layout = layout(hkl);
             let once =
                 if let [single] = keys.as_slice() { vk::press(*single, &layout) } else { vk::chord(&keys, &layout) };
             let strokes: Vec<Stroke> = (0..*presses).flat_map(|_| once.iter().copied()).collect();
-            send_strokes(&strokes, "key press")
+            send_strokes(&strokes, "key press", hkl)
         }
         Action::Hotkey { keys } => {
             let mut parsed = Vec::new();
             for key in keys {
                 parsed.extend(parse_keys(key)?);
             }
-            send_strokes(&vk::chord(&parsed, &foreground_layout()), "hotkey")
+            let hkl = foreground_hkl();
+            send_strokes(&vk::chord(&parsed, &layout(hkl)), "hotkey", hkl)
         }
         Action::KeyDown { key } => {
-            let layout = foreground_layout();
+            let hkl = foreground_hkl();
+            let layout = layout(hkl);
             let strokes: Vec<Stroke> = parse_keys(key)?.into_iter().flat_map(|k| vk::key_down(k, &layout)).collect();
-            send_strokes(&strokes, "key down")
+            send_strokes(&strokes, "key down", hkl)
         }
         Action::KeyUp { key } => {
-            let layout = foreground_layout();
+            let hkl = foreground_hkl();
+            let layout = layout(hkl);
             let strokes: Vec<Stroke> =
                 parse_keys(key)?.into_iter().rev().flat_map(|k| vk::key_up(k, &layout)).collect();
-            send_strokes(&strokes, "key up")
+            send_strokes(&strokes, "key up", hkl)
         }
         Action::TypeText { text, interval_ms } => {
-            let groups = vk::type_text(text, &foreground_layout());
+            let hkl = foreground_hkl();
+            let groups = vk::type_text(text, &layout(hkl));
             match interval_ms.filter(|&ms| ms > 0) {
-                None => send_strokes(&groups.concat(), "type text"),
+                None => send_strokes(&groups.concat(), "type text", hkl),
                 Some(ms) => {
                     let pause = Duration::from_millis(ms.min(10_000));
                     for (i, group) in groups.iter().enumerate() {
@@ -291,7 +327,7 @@ pub(super) fn perform(action: &Action) -> DesktopResult<()> {
                             // Stops here when the call timed out: no keys after the answer.
                             crate::desktop::cancel::sleep(pause)?;
                         }
-                        send_strokes(group, "type text")?;
+                        send_strokes(group, "type text", hkl)?;
                     }
                     Ok(())
                 }

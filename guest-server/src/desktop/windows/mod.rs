@@ -74,12 +74,18 @@ pub struct WindowsOptions {
     /// Capture with `CAPTUREBLT` (Pillow's `include_layered_windows=True`); off by
     /// default, as Pillow's plain `ImageGrab.grab()`.
     pub capture_layered: bool,
+    /// How long each phase of a drag lasts (`--drag-step-ms`).
+    pub drag_step_ms: u64,
 }
 
 impl WindowsOptions {
     /// The backend's options from the server configuration.
     pub fn from_config(config: &ServerConfig) -> WindowsOptions {
-        WindowsOptions { uia_view: config.uia_view, capture_layered: config.capture_layered }
+        WindowsOptions {
+            uia_view: config.uia_view,
+            capture_layered: config.capture_layered,
+            drag_step_ms: config.drag_step_ms,
+        }
     }
 }
 
@@ -122,14 +128,15 @@ mod tests {
     #[test]
     fn the_raw_view_and_a_plain_blit_are_the_defaults() {
         let defaults = options(&[]);
-        assert_eq!(defaults, WindowsOptions { uia_view: UiaView::Raw, capture_layered: false });
+        assert_eq!(defaults, WindowsOptions { uia_view: UiaView::Raw, capture_layered: false, drag_step_ms: 200 });
         assert_eq!(defaults, WindowsOptions::default());
     }
 
     #[test]
     fn the_control_view_and_layered_capture_are_options() {
-        let chosen = options(&["--uia-view", "control", "--capture-layered"]);
-        assert_eq!(chosen, WindowsOptions { uia_view: UiaView::Control, capture_layered: true });
+        let chosen = options(&["--uia-view", "control", "--capture-layered", "--drag-step-ms", "60"]);
+        assert_eq!(chosen, WindowsOptions { uia_view: UiaView::Control, capture_layered: true, drag_step_ms: 60 });
+        assert!(ServerConfig::try_parse_from(["arena-guest", "--drag-step-ms", "60000"]).is_err());
         assert_eq!(options(&["--uia-view", "raw"]).uia_view, UiaView::Raw);
         let refused = ServerConfig::try_parse_from(["arena-guest", "--uia-view", "content"]);
         assert!(refused.is_err(), "only raw and control are views the walker knows");

@@ -63,11 +63,10 @@ pub(crate) fn kill_tree(child: &mut Child) {
     let _ = child.kill();
 }
 
-#[cfg(test)]
+#[cfg(all(test, unix))]
 mod tests {
     use super::*;
 
-    #[cfg(unix)]
     #[test]
     fn shell_lines_keep_their_quotes() {
         let out = shell_command(r#"printf '%s|' "a b" c"#).output().expect("sh runs");

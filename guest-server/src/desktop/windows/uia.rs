@@ -16,9 +16,16 @@
 //! then each child is fetched with a cache request for that element alone, through the
 //! chosen view's walker, and the walk keeps whatever it reads before the window's deadline.
 //!
+//! Each window's opening (`ElementFromHandleBuildCache`, which also caches the
+//! window's own properties) runs with connection and transaction timeouts set just
+//! before it; a window that fails to open is listed in `windows_walked` with the reason.
+//!
 //! If a request does not come back in time (a provider that hangs beyond the
 //! transaction timeout), the worker is abandoned: the next request starts a fresh
-//! thread, and the stuck one ends on its own when its call returns.
+//! thread, and the stuck one ends on its own when its call returns. At most
+//! [`MAX_UIA_THREADS`] threads are alive at once ([`ThreadCap`]); past that, requests
+//! are refused with a clear error until a stuck one returns. [`UiaWorker::recreate`]
+//! drops the automation client (the health stage's revival).
 //!
 //! Where UI Automation is missing (Wine), creating `CUIAutomation` fails: the worker
 //! says so once, and every later request is answered at once with
@@ -26,7 +33,7 @@
 
 use std::sync::mpsc;
 use std::sync::Mutex;
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
 use arena_shared::observation::{A11yBackend, A11yNode, A11yTree, TreeBudget};
 use windows::core::Interface;
@@ -39,6 +46,7 @@ use super::sys::{ComApartment, Hwnd};
 use super::window;
 use crate::config::UiaView;
 use crate::desktop::a11y_walk::{self, TreeSource, UiaProps};
+use crate::desktop::uia_health::{ThreadCap, ThreadPermit};
 use crate::desktop::{DesktopError, DesktopResult};
 
 /// Extra time the caller waits beyond the walk's own budget before abandoning the worker.
@@ -72,7 +80,13 @@ struct Request {
     reply: mpsc::SyncSender<DesktopResult<A11yTree>>,
 }
 
-#[derive(Debug, Default)]
+/// Most UI Automation worker threads alive at once: the running one plus those
+/// abandoned while stuck in a provider that does not answer. A hung provider can
+/// hold this many threads (and their COM objects), never more; requests past it are
+/// refused until one of them returns.
+const MAX_UIA_THREADS: usize = 4;
+
+#[derive(Debug)]
 struct State {
     /// The view every worker walks.
     view: UiaView,
@@ -80,10 +94,12 @@ struct State {
     worker: Option<mpsc::Sender<Request>>,
     /// Why UI Automation cannot be used here, once a worker found out.
     unavailable: Option<String>,
+    /// The worker threads alive, running or abandoned.
+    threads: ThreadCap,
 }
 
 /// The handle the backend keeps: starts the worker thread on first use.
-#[derive(Debug, Default)]
+#[derive(Debug)]
 pub(super) struct UiaWorker {
     state: Mutex<State>,
 }
@@ -91,7 +107,14 @@ pub(super) struct UiaWorker {
 impl UiaWorker {
     /// A worker (started on first use) that walks `view`.
     pub(super) fn new(view: UiaView) -> UiaWorker {
-        UiaWorker { state: Mutex::new(State { view, ..State::default() }) }
+        UiaWorker {
+            state: Mutex::new(State {
+                view,
+                worker: None,
+                unavailable: None,
+                threads: ThreadCap::new(MAX_UIA_THREADS),
+            }),
+        }
     }
 
     /// Walks the visible top-level windows with UI Automation.
@@ -99,17 +122,28 @@ impl UiaWorker {
     /// # Errors
     ///
     /// [`DesktopError::Unsupported`] where UI Automation does not exist,
-    /// [`DesktopError::Timeout`] when the worker does not answer in time.
+    /// [`DesktopError::Timeout`] when the worker does not answer in time, and
+    /// [`DesktopError::Os`] when [`MAX_UIA_THREADS`] workers are stuck.
     pub(super) fn tree(&self, budget: &TreeBudget, foreground_only: bool) -> DesktopResult<A11yTree> {
         let tx = {
-            let mut state = self.state.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
+            let mut state = self.lock();
             if let Some(why) = &state.unavailable {
                 return Err(DesktopError::Unsupported(why.clone()));
             }
             match &state.worker {
                 Some(tx) => tx.clone(),
                 None => {
-                    let tx = spawn_worker(state.view)?;
+                    let Some(permit) = state.threads.try_acquire() else {
+                        return Err(DesktopError::Os {
+                            op: "uia",
+                            message: format!(
+                                "{} UI Automation threads are stuck in providers that do not answer; no new one \
+                                 starts until one of them returns",
+                                state.threads.max()
+                            ),
+                        });
+                    };
+                    let tx = spawn_worker(state.view, permit)?;
                     state.worker = Some(tx.clone());
                     tx
                 }
@@ -123,7 +157,7 @@ impl UiaWorker {
         let wait = Duration::from_millis(budget.max_ms) + REPLY_GRACE;
         match answer.recv_timeout(wait) {
             Ok(Err(DesktopError::Unsupported(why))) => {
-                let mut state = self.state.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
+                let mut state = self.lock();
                 state.unavailable = Some(why.clone());
                 state.worker = None;
                 Err(DesktopError::Unsupported(why))
@@ -141,16 +175,32 @@ impl UiaWorker {
         }
     }
 
+    /// Drops the automation client: the worker thread ends (releasing its
+    /// `CUIAutomation`, cache requests and COM apartment) once its queue is empty, and
+    /// the next request starts a new one with new objects.
+    pub(super) fn recreate(&self) {
+        tracing::info!("re-creating the UI Automation client");
+        self.forget_worker();
+    }
+
+    fn lock(&self) -> std::sync::MutexGuard<'_, State> {
+        self.state.lock().unwrap_or_else(std::sync::PoisonError::into_inner)
+    }
+
     fn forget_worker(&self) {
-        self.state.lock().unwrap_or_else(std::sync::PoisonError::into_inner).worker = None;
+        self.lock().worker = None;
     }
 }
 
-fn spawn_worker(view: UiaView) -> DesktopResult<mpsc::Sender<Request>> {
+fn spawn_worker(view: UiaView, permit: ThreadPermit) -> DesktopResult<mpsc::Sender<Request>> {
     let (tx, rx) = mpsc::channel::<Request>();
     std::thread::Builder::new()
         .name("uia".into())
-        .spawn(move || worker_main(&rx, view))
+        .spawn(move || {
+            // The thread's place under the cap is given back when it ends.
+            let _permit = permit;
+            worker_main(&rx, view);
+        })
         .map_err(|err| DesktopError::Os { op: "uia", message: format!("starting the UI Automation thread: {err}") })?;
     Ok(tx)
 }
@@ -236,7 +286,7 @@ fn worker_main(rx: &mpsc::Receiver<Request>, view: UiaView) {
         }
     };
     while let Ok(request) = rx.recv() {
-        let mut source = UiaSource { uia: &uia, live: false };
+        let mut source = UiaSource { uia: &uia, live: false, budget_ms: request.budget.max_ms, failures: Vec::new() };
         let result = a11y_walk::walk(&mut source, A11yBackend::Uia, &request.budget, request.foreground_only);
         let _ = request.reply.send(result);
     }
@@ -296,6 +346,10 @@ struct UiaSource<'a> {
     uia: &'a Uia,
     /// The window being walked is read element by element (its subtree fetch failed).
     live: bool,
+    /// The request's time budget, which bounds opening the windows.
+    budget_ms: u64,
+    /// Windows seen but not opened, with the reason (for `windows_walked`).
+    failures: Vec<(u64, String)>,
 }
 
 /// Longest one cross-process call of the element-by-element fallback may take.
@@ -306,19 +360,42 @@ impl TreeSource for UiaSource<'_> {
 
     fn roots(&mut self, foreground_only: bool) -> DesktopResult<Vec<(u64, IUIAutomationElement)>> {
         let hwnds: Vec<HWND> = if foreground_only { vec![window::foreground()] } else { window::top_level() };
+        let call_ms = root_call_ms(self.budget_ms);
+        // Opening the windows may take at most a quarter of the budget; the rest is the walk's.
+        let open_until = Instant::now() + Duration::from_millis(self.budget_ms / 4);
         let mut out = Vec::new();
         for hwnd in hwnds {
-            // Hidden, cloaked (suspended UWP apps, Start and Search) and tool windows are not walked.
+            // Hidden and cloaked windows, and tool windows nobody sees, are not walked
+            // (`shell::seen_on_desktop`).
             if !window::seen(hwnd) {
                 continue;
             }
-            // SAFETY: a COM call on the worker's live automation object.
-            match unsafe { self.uia.automation.ElementFromHandle(hwnd) } {
+            if Instant::now() >= open_until {
+                self.failures.push((Hwnd::id(hwnd), "not opened: the time for opening windows ran out".into()));
+                continue;
+            }
+            // Timeouts are set before every call, never inherited from whatever the last
+            // window or request left (a partial read sets them as low as 100 ms).
+            self.set_timeouts(call_ms, call_ms);
+            // SAFETY: a COM call on the worker's live automation object; the root's own
+            // properties come back cached, so a window whose subtree fetch fails later
+            // is still listed with its own node without another cross-process call.
+            match unsafe { self.uia.automation.ElementFromHandleBuildCache(hwnd, &self.uia.element_cache) } {
                 Ok(elem) => out.push((Hwnd::id(hwnd), elem)),
-                Err(err) => tracing::debug!(%err, "no UIA element for a window"),
+                Err(err) => {
+                    tracing::debug!(%err, "no UIA element for a window");
+                    self.failures.push((
+                        Hwnd::id(hwnd),
+                        format!("ElementFromHandle failed within {call_ms} ms: {}", super::sys::describe(&err)),
+                    ));
+                }
             }
         }
         Ok(out)
+    }
+
+    fn root_failures(&mut self) -> Vec<(u64, String)> {
+        std::mem::take(&mut self.failures)
     }
 
     fn foreground_id(&mut self) -> Option<u64> {
@@ -333,29 +410,18 @@ impl TreeSource for UiaSource<'_> {
         _failed: DesktopError,
     ) -> DesktopResult<IUIAutomationElement> {
         self.live = true;
-        if let Some(a2) = &self.uia.automation2 {
-            let ms = u32::try_from(time.as_millis()).unwrap_or(u32::MAX).clamp(100, LIVE_CALL_MS);
-            // SAFETY: COM calls on the worker's live automation object.
-            unsafe {
-                let _ = a2.SetTransactionTimeout(ms);
-                let _ = a2.SetConnectionTimeout(ms);
-            }
-        }
-        // SAFETY: one cross-process call that fetches the root element's own properties.
-        unsafe { root.BuildUpdatedCache(&self.uia.element_cache) }
-            .map_err(|err| super::sys::os("BuildUpdatedCache(element)", &err))
+        let ms = u32::try_from(time.as_millis()).unwrap_or(u32::MAX).clamp(100, LIVE_CALL_MS);
+        self.set_timeouts(ms, ms);
+        // The root's own properties were cached when it was opened (`roots`): nothing to
+        // fetch, so an abandoned subtree fetch the provider is still busy with costs the
+        // root nothing, and its children are read one by one, each call bounded.
+        Ok(root.clone())
     }
 
     fn prepare(&mut self, root: &IUIAutomationElement, time: Duration) -> DesktopResult<IUIAutomationElement> {
         self.live = false;
-        if let Some(a2) = &self.uia.automation2 {
-            let ms = u32::try_from(time.as_millis()).unwrap_or(u32::MAX).max(100);
-            // SAFETY: COM calls on the worker's live automation object.
-            unsafe {
-                let _ = a2.SetTransactionTimeout(ms);
-                let _ = a2.SetConnectionTimeout(ms.min(2_000));
-            }
-        }
+        let ms = u32::try_from(time.as_millis()).unwrap_or(u32::MAX).max(100);
+        self.set_timeouts(ms.min(2_000), ms);
         // SAFETY: one cross-process call that fetches the window's whole cached subtree.
         unsafe { root.BuildUpdatedCache(&self.uia.cache) }.map_err(|err| super::sys::os("BuildUpdatedCache", &err))
     }
@@ -423,7 +489,25 @@ impl TreeSource for UiaSource<'_> {
     }
 }
 
+/// The connection and transaction timeout of opening one window (`ElementFromHandle`):
+/// an eighth of the request's budget, between 100 ms and 1 s.
+fn root_call_ms(budget_ms: u64) -> u32 {
+    u32::try_from((budget_ms / 8).clamp(100, 1_000)).unwrap_or(1_000)
+}
+
 impl UiaSource<'_> {
+    /// Sets `IUIAutomation2`'s connection and transaction timeouts (Windows 8 and later;
+    /// without it, UIA's defaults apply).
+    fn set_timeouts(&self, connection_ms: u32, transaction_ms: u32) {
+        if let Some(a2) = &self.uia.automation2 {
+            // SAFETY: COM calls on the worker's live automation object.
+            unsafe {
+                let _ = a2.SetConnectionTimeout(connection_ms);
+                let _ = a2.SetTransactionTimeout(transaction_ms);
+            }
+        }
+    }
+
     /// Up to `limit + 1` children of `elem` through the chosen view's walker, each fetched
     /// with its own properties cached (the fallback of a window whose subtree fetch failed).
     fn live_children(&self, elem: &IUIAutomationElement, limit: usize) -> Vec<IUIAutomationElement> {

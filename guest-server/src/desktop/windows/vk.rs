@@ -136,6 +136,10 @@ pub struct CharKey {
     pub shift: bool,
     pub ctrl: bool,
     pub alt: bool,
+    /// A dead key on this layout (US-International's `'`, `"`, `` ` ``, `~`, `^`):
+    /// pressing it types nothing until the next key, which it may turn into an
+    /// accented letter (`'` then `e` is `é`). [`type_text`] types these as Unicode.
+    pub dead: bool,
 }
 
 impl CharKey {
@@ -148,7 +152,7 @@ impl CharKey {
         if value == -1 || vk == 0xFF || state & !0x7 != 0 {
             return None;
         }
-        Some(CharKey { vk, shift: state & 1 != 0, ctrl: state & 2 != 0, alt: state & 4 != 0 })
+        Some(CharKey { vk, shift: state & 1 != 0, ctrl: state & 2 != 0, alt: state & 4 != 0, dead: false })
     }
 
     fn modifiers(&self) -> Vec<u16> {
@@ -276,7 +280,10 @@ pub fn type_text(text: &str, layout: &dyn Fn(char) -> Option<CharKey>) -> Vec<Ve
             '\n' => vec![vk(VK_RETURN, false), vk(VK_RETURN, true)],
             '\t' => vec![vk(VK_TAB, false), vk(VK_TAB, true)],
             c => match layout(c) {
-                Some(key) if !key.ctrl && !key.alt => press(Key::Char(c), layout),
+                // A dead key would wait for the next character and may merge with it
+                // (`'` then `e` typing `é` on US-International): a Unicode packet types
+                // the character itself, whatever the layout.
+                Some(key) if !key.ctrl && !key.alt && !key.dead => press(Key::Char(c), layout),
                 _ => {
                     let mut g = unicode(c, false);
                     g.extend(unicode(c, true));
@@ -296,8 +303,8 @@ mod tests {
 
     /// A US layout for the characters the tests use.
     fn us(c: char) -> Option<CharKey> {
-        let plain = |vk| Some(CharKey { vk, shift: false, ctrl: false, alt: false });
-        let shifted = |vk| Some(CharKey { vk, shift: true, ctrl: false, alt: false });
+        let plain = |vk| Some(CharKey { vk, shift: false, ctrl: false, alt: false, dead: false });
+        let shifted = |vk| Some(CharKey { vk, shift: true, ctrl: false, alt: false, dead: false });
         match c {
             'a'..='z' => plain(c.to_ascii_uppercase() as u16),
             'A'..='Z' => shifted(c as u16),
@@ -345,8 +352,14 @@ mod tests {
 
     #[test]
     fn vk_scan_answers_decode() {
-        assert_eq!(CharKey::from_vk_scan(0x0141), Some(CharKey { vk: 0x41, shift: true, ctrl: false, alt: false }));
-        assert_eq!(CharKey::from_vk_scan(0x0641), Some(CharKey { vk: 0x41, shift: false, ctrl: true, alt: true }));
+        assert_eq!(
+            CharKey::from_vk_scan(0x0141),
+            Some(CharKey { vk: 0x41, shift: true, ctrl: false, alt: false, dead: false })
+        );
+        assert_eq!(
+            CharKey::from_vk_scan(0x0641),
+            Some(CharKey { vk: 0x41, shift: false, ctrl: true, alt: true, dead: false })
+        );
         assert_eq!(CharKey::from_vk_scan(-1), None);
         assert_eq!(CharKey::from_vk_scan(0x00FF), None);
     }
@@ -425,8 +438,8 @@ mod tests {
         assert_eq!(type_text("H", &us), vec![shifted.to_vec()]);
         // On a German layout `ü` has its own key, and `@` needs AltGr (Ctrl+Alt): Unicode.
         let de = |c: char| match c {
-            'ü' => Some(CharKey { vk: 0xBA, shift: false, ctrl: false, alt: false }),
-            '@' => Some(CharKey { vk: 0x51, shift: false, ctrl: true, alt: true }),
+            'ü' => Some(CharKey { vk: 0xBA, shift: false, ctrl: false, alt: false, dead: false }),
+            '@' => Some(CharKey { vk: 0x51, shift: false, ctrl: true, alt: true, dead: false }),
             other => us(other),
         };
         assert_eq!(
@@ -436,6 +449,44 @@ mod tests {
         assert_eq!(
             type_text("@", &de),
             vec![vec![Stroke::Unicode { unit: 0x40, up: false }, Stroke::Unicode { unit: 0x40, up: true }]]
+        );
+    }
+
+    #[test]
+    fn dead_keys_of_us_international_are_typed_as_unicode() {
+        // US-International (KBDUSX): `'` and `"` (VK_OEM_7), `` ` `` and `~` (VK_OEM_3) and
+        // `^` (Shift+6) are dead keys; `é` is AltGr+E.
+        let intl = |c: char| {
+            let dead = |vk, shift| Some(CharKey { vk, shift, ctrl: false, alt: false, dead: true });
+            match c {
+                '\'' => dead(0xDE, false),
+                '"' => dead(0xDE, true),
+                '`' => dead(0xC0, false),
+                '~' => dead(0xC0, true),
+                '^' => dead(0x36, true),
+                'é' => Some(CharKey { vk: 0x45, shift: false, ctrl: true, alt: true, dead: false }),
+                other => us(other),
+            }
+        };
+        let typed = type_text("it's \"e\" ^~`é", &intl);
+        let unicode = |c: char| {
+            let unit = u16::try_from(u32::from(c)).unwrap();
+            vec![Stroke::Unicode { unit, up: false }, Stroke::Unicode { unit, up: true }]
+        };
+        // Letters keep their keys; every dead-key character is its own Unicode packet, so
+        // `'` before `s` and `"` before `e` cannot merge into accents.
+        assert_eq!(typed[0], press(Key::Char('i'), &intl));
+        assert_eq!(typed[2], unicode('\''));
+        assert_eq!(typed[3], press(Key::Char('s'), &intl));
+        assert_eq!(typed[5], unicode('"'));
+        assert_eq!(typed[6], press(Key::Char('e'), &intl));
+        assert_eq!(typed[7], unicode('"'));
+        assert_eq!(&typed[9..12], &[unicode('^'), unicode('~'), unicode('`')]);
+        assert_eq!(typed[12], unicode('é'));
+        // A key press of a dead key is still the key, as a person pressing it gets.
+        assert_eq!(
+            press(Key::Char('\''), &intl),
+            vec![Stroke::Vk { vk: 0xDE, up: false }, Stroke::Vk { vk: 0xDE, up: true }]
         );
     }
 }

@@ -18,7 +18,7 @@ use windows::Win32::UI::Input::KeyboardAndMouse::{
 use windows::Win32::UI::WindowsAndMessaging::{
     BringWindowToTop, EnumWindows, GetClassNameW, GetForegroundWindow, GetWindowLongPtrW, GetWindowRect,
     GetWindowTextW, GetWindowThreadProcessId, IsIconic, IsWindow, IsWindowVisible, IsZoomed, PostMessageW,
-    SetForegroundWindow, ShowWindow, GWL_EXSTYLE, SW_MAXIMIZE, SW_MINIMIZE, SW_RESTORE, WM_CLOSE,
+    SetForegroundWindow, ShowWindow, GWL_EXSTYLE, GWL_STYLE, SW_MAXIMIZE, SW_MINIMIZE, SW_RESTORE, WM_CLOSE,
 };
 
 use super::shell;
@@ -76,6 +76,12 @@ pub(super) fn owner(hwnd: HWND) -> (u32, u32) {
     (pid, tid)
 }
 
+/// Whether `hwnd` is minimised.
+pub(super) fn is_minimized(hwnd: HWND) -> bool {
+    // SAFETY: IsIconic accepts any window handle and only reads its state.
+    unsafe { IsIconic(hwnd).as_bool() }
+}
+
 pub(super) fn foreground() -> HWND {
     // SAFETY: no preconditions.
     unsafe { GetForegroundWindow() }
@@ -125,7 +131,7 @@ pub(super) fn list() -> Vec<WindowInfo> {
             // SAFETY: these queries accept any window handle and only read its state.
             let (minimized, maximized) = unsafe { (IsIconic(hwnd).as_bool(), IsZoomed(hwnd).as_bool()) };
             // A window DWM cloaks (a suspended UWP app, the closed Start menu) is never drawn.
-            let facts = facts(hwnd);
+            let facts = facts(hwnd, 0);
             let visible = facts.visible && facts.cloaked == 0;
             WindowInfo {
                 id: Hwnd::id(hwnd),
@@ -164,25 +170,45 @@ fn unlock_foreground() {
         })
         .collect();
     // SAFETY: the slice holds initialised INPUT structures of the size passed.
-    unsafe { SendInput(&inputs, std::mem::size_of::<INPUT>() as i32) };
+    let sent = unsafe { SendInput(&inputs, std::mem::size_of::<INPUT>() as i32) };
+    if sent as usize != inputs.len() {
+        // Activation goes on with its other ways; say why this one may not have helped.
+        tracing::warn!(sent, of = inputs.len(), "the foreground unlock keys were not accepted in full");
+    }
     std::thread::sleep(Duration::from_millis(shell::UNLOCK_SETTLE_MS));
 }
 
-/// What DWM and the window's styles say about `hwnd`.
-pub(super) fn facts(hwnd: HWND) -> shell::WindowFacts {
+/// What DWM and the window's styles say about `hwnd`; `foreground_pid` is the
+/// process of the foreground window.
+pub(super) fn facts(hwnd: HWND, foreground_pid: u32) -> shell::WindowFacts {
     let mut cloaked = 0u32;
     // SAFETY: `cloaked` is a writable u32 of the size passed; a failure leaves it 0 (not cloaked).
     let _ = unsafe {
         DwmGetWindowAttribute(hwnd, DWMWA_CLOAKED, (&raw mut cloaked).cast(), std::mem::size_of::<u32>() as u32)
     };
     // SAFETY: these queries accept any window handle and only read its state.
-    let (visible, ex_style) = unsafe { (IsWindowVisible(hwnd).as_bool(), GetWindowLongPtrW(hwnd, GWL_EXSTYLE) as u32) };
-    shell::WindowFacts { visible, cloaked, ex_style }
+    let (visible, ex_style, style) = unsafe {
+        (
+            IsWindowVisible(hwnd).as_bool(),
+            GetWindowLongPtrW(hwnd, GWL_EXSTYLE) as u32,
+            GetWindowLongPtrW(hwnd, GWL_STYLE) as u32,
+        )
+    };
+    let (pid, _) = owner(hwnd);
+    shell::WindowFacts {
+        visible,
+        cloaked,
+        ex_style,
+        style,
+        foreground_process: pid != 0 && pid == foreground_pid,
+        shell_class: shell::shell_class(&class_name(hwnd)),
+    }
 }
 
-/// Whether a person could see `hwnd` as a window: the roots the trees walk.
+/// Whether a person could see `hwnd`: the roots the trees walk ([`shell::seen_on_desktop`]).
 pub(super) fn seen(hwnd: HWND) -> bool {
-    !hwnd.is_invalid() && shell::seen_on_desktop(facts(hwnd))
+    let (foreground_pid, _) = owner(foreground());
+    !hwnd.is_invalid() && shell::seen_on_desktop(facts(hwnd, foreground_pid))
 }
 
 fn wait_foreground(hwnd: HWND) -> bool {
