@@ -18,8 +18,10 @@
 //! - [`navi`]: [`navi::NaviAgent`], Navi-style prompting of any OpenAI-compatible chat endpoint.
 //! - [`scripted`]: [`scripted::ScriptedAgent`], which follows a plan file (oracle solutions, tests).
 //! - [`replay`]: [`replay::ReplayAgent`], which repeats a recorded trajectory.
+//! - [`external`]: [`external::ExternalAgent`], an agent in another program over the step protocol.
 
 pub mod exec;
+pub mod external;
 pub mod llm;
 pub mod navi;
 pub mod parse;
@@ -274,6 +276,10 @@ pub enum AgentError {
     /// The worker thread that ran a script died.
     #[error("the script worker failed: {0}")]
     Worker(String),
+    /// An outside agent broke the step protocol, did not answer in time, gave
+    /// up, or its process died (`--agent exec`, `--agent http`, `--agent mcp`).
+    #[error("agent {agent}: {reason}")]
+    External { agent: String, reason: String },
 }
 
 /// Something that picks actions from observations.

@@ -46,6 +46,10 @@ pub enum AgentKind {
     Replay,
     /// Navi-style prompting of an OpenAI-compatible chat endpoint (`--llm-url`, `--model`).
     Navi,
+    /// An agent program speaking the step protocol on its stdin/stdout (`--agent-cmd`).
+    Exec,
+    /// An agent server taking the step protocol as HTTP POSTs (`--agent-url`).
+    Http,
 }
 
 /// Arguments of `arena run`.
@@ -59,6 +63,8 @@ pub struct RunArgs {
     pub difficulty: Difficulty,
     #[arg(long, value_enum, default_value_t = AgentKind::Scripted)]
     pub agent: AgentKind,
+    #[command(flatten)]
+    pub external: super::external::ExternalArgs,
     /// Scripted agent: one plan file for every task, or a folder of `<task name>.json`
     /// plans [default: `<tasks>/plans` when it exists, else each task's `plan` key].
     #[arg(long, value_name = "PATH")]
@@ -366,6 +372,11 @@ pub(crate) fn agent_factory(args: &RunArgs) -> anyhow::Result<ChosenAgent> {
                 Arc::new(move || Ok(Box::new(NaviAgent::new(config.clone())?) as Box<dyn Agent>));
             // Upstream files Navi's results under its action space.
             Ok(ChosenAgent { factory, label: crate::results::DEFAULT_ACTION_SPACE_LABEL.into(), model, options })
+        }
+        AgentKind::Exec | AgentKind::Http => {
+            let built = super::external::exec_or_http(&args.external, args.agent == AgentKind::Http)?;
+            let model = args.model.clone().unwrap_or_else(|| "external".to_owned());
+            Ok(ChosenAgent { factory: built.factory, label: built.label, model, options: built.options })
         }
     }
 }
