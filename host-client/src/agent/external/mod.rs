@@ -173,7 +173,11 @@ impl ExternalAgent {
         let answer = match tokio::time::timeout(timeout, transport.call(message)).await {
             Ok(Ok(answer)) => Ok(answer),
             Ok(Err(reason)) => Err(reason),
-            Err(_) => Err(format!("no answer to {} within {} s", message["type"], timeout.as_secs_f64())),
+            Err(_) => Err(format!(
+                "no answer to {} within {} s",
+                message["type"].as_str().unwrap_or("a message"),
+                timeout.as_secs_f64()
+            )),
         };
         answer.map_err(|reason| {
             if let Some(transport) = self.transport.as_mut() {

@@ -1,0 +1,246 @@
+//! The step protocol end to end: `arena run --agent exec` and `--agent http`
+//! over the six stub tasks with a Python oracle agent (one action space per
+//! task, through the `python/` package's runner), every message both ways
+//! checked against `schemas/agent-protocol/`, and agents that print garbage,
+//! hang or exit mid-run, each ending its task as a recorded agent error while
+//! the other tasks finish.
+//!
+//! Needs `python3`: without it each test prints `SKIPPED: <test>: python3 not
+//! found` and returns, unless `ARENA_REQUIRE_PYTHON` is set.
+
+#![cfg(unix)]
+
+use std::collections::BTreeMap;
+use std::io::{BufRead, BufReader};
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+use arena_host::agent::external::COMPUTER13_WIRED;
+use arena_host::results::summary::{Summary, TaskRow};
+use arena_test_support::workspace_binary;
+use serde_json::Value;
+
+const VICTIM: &str = "stub-notepad-append";
+const COMPUTER13_TASK: &str = "stub-notepad-draft";
+
+fn repo() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
+}
+
+fn here() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/agent_protocol")
+}
+
+/// Whether `python3` runs here; without it, a loud skip (or a failure when required).
+fn python_available(test: &str) -> bool {
+    if Command::new("python3").arg("--version").output().is_ok_and(|o| o.status.success()) {
+        return true;
+    }
+    assert!(
+        std::env::var_os("ARENA_REQUIRE_PYTHON").is_none(),
+        "{test}: python3 not found and ARENA_REQUIRE_PYTHON is set"
+    );
+    println!("SKIPPED: {test}: python3 not found");
+    false
+}
+
+/// PYTHONPATH with the package and the test's agents.
+fn pythonpath() -> String {
+    format!("{}:{}", repo().join("python").display(), here().display())
+}
+
+/// `arena run` over the stub tasks on two stub guests with `agent_args`; answers its stderr.
+fn arena_run(out: &Path, agent_args: &[&str]) -> String {
+    let exe = workspace_binary("arena-host", "arena").expect("the arena binary");
+    let mut child = Command::new(exe)
+        .args(["run", "--stub-guests", "2", "--pauses", "fast", "--tasks"])
+        .arg(repo().join("tasks/stub"))
+        .arg("--out")
+        .arg(out)
+        .args(agent_args)
+        .env("PYTHONPATH", pythonpath())
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("arena run starts");
+    let mut err = String::new();
+    if let Some(mut pipe) = child.stderr.take() {
+        let _ = std::io::Read::read_to_string(&mut pipe, &mut err);
+    }
+    let _ = child.wait();
+    err
+}
+
+fn rows(out: &Path) -> BTreeMap<String, TaskRow> {
+    let summary = Summary::from_dir(out).expect("the run's summary");
+    summary.tasks.into_iter().map(|t| (t.name.clone(), t)).collect()
+}
+
+fn trajectory(out: &Path, row: &TaskRow) -> Vec<Value> {
+    let text = std::fs::read_to_string(out.join(&row.path).join("traj.jsonl")).expect("traj.jsonl");
+    text.lines().map(|l| serde_json::from_str(l).expect("a JSON line")).collect()
+}
+
+/// The oracle's scores: every task solved, except the `computer_13` one while
+/// that action space is not wired in, which is then a recorded agent error.
+fn assert_oracle_scores(out: &Path, stderr: &str) {
+    let rows = rows(out);
+    assert_eq!(rows.len(), 6, "six stub tasks\n{stderr}");
+    for (name, row) in &rows {
+        if name == COMPUTER13_TASK && !COMPUTER13_WIRED {
+            println!("SKIPPED: {name}: computer_13 not wired yet (the action-space parsers are not merged)");
+            assert_eq!(row.status, "agent_error", "{row:?}");
+            assert!(row.error.as_deref().unwrap_or("").contains("computer_13 not wired yet"), "{row:?}");
+            continue;
+        }
+        assert_eq!(row.status, "completed", "{name}: {row:?}\n{stderr}");
+        assert_eq!(row.score, Some(1.0), "{name} solved: {row:?}\n{stderr}");
+    }
+    // The free-form fields of each answer are in the trajectory.
+    let count = &rows["stub-notepad-count"];
+    let traj = trajectory(out, count);
+    let first = traj.iter().find(|l| l.get("step_num") == Some(&Value::from(1))).expect("step 1");
+    assert_eq!(first["oracle_step"], Value::from(1), "{first}");
+    assert_eq!(first["action_space"], Value::from("typed"), "{first}");
+}
+
+fn schema(name: &str) -> jsonschema::Validator {
+    let path = repo().join("schemas/agent-protocol").join(name);
+    let text = std::fs::read_to_string(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    let value: Value = serde_json::from_str(&text).expect("a schema is JSON");
+    jsonschema::validator_for(&value).unwrap_or_else(|e| panic!("{name} is a valid schema: {e}"))
+}
+
+/// Checks every logged message against its schema; answers how many were checked per direction.
+fn validate_logs(dir: &Path) -> (usize, usize, usize) {
+    let to_agent: BTreeMap<&str, jsonschema::Validator> =
+        [("hello", schema("hello.json")), ("reset", schema("reset.json")), ("observe", schema("observe.json"))].into();
+    let to_harness: BTreeMap<&str, jsonschema::Validator> = [
+        ("hello", schema("agent-hello.json")),
+        ("ready", schema("ready.json")),
+        ("act", schema("act.json")),
+        ("error", schema("error.json")),
+    ]
+    .into();
+    let (mut sent, mut answered, mut files) = (0, 0, 0);
+    for entry in std::fs::read_dir(dir).expect("the log folder") {
+        files += 1;
+        let text = std::fs::read_to_string(entry.expect("entry").path()).expect("a log");
+        for line in text.lines() {
+            let logged: Value = serde_json::from_str(line).expect("a log line");
+            let message: Value = serde_json::from_str(logged["line"].as_str().expect("line")).expect("JSON message");
+            let kind = message["type"].as_str().expect("a type");
+            let (table, counter) =
+                if logged["dir"] == "to_agent" { (&to_agent, &mut sent) } else { (&to_harness, &mut answered) };
+            let validator = table.get(kind).unwrap_or_else(|| panic!("no schema for {kind} {}", logged["dir"]));
+            let errors: Vec<String> = validator.iter_errors(&message).map(|e| e.to_string()).collect();
+            assert!(errors.is_empty(), "{kind} {} does not match its schema: {errors:?}\n{message}", logged["dir"]);
+            *counter += 1;
+        }
+    }
+    (sent, answered, files)
+}
+
+#[test]
+fn the_stub_tasks_through_an_exec_agent_in_four_action_spaces() {
+    if !python_available("the_stub_tasks_through_an_exec_agent_in_four_action_spaces") {
+        return;
+    }
+    let tmp = tempfile::tempdir().expect("tmp");
+    let (out, logs) = (tmp.path().join("out"), tmp.path().join("logs"));
+    std::fs::create_dir_all(&logs).expect("logs");
+    let cmd = format!("python3 {} {} python3 -m arena_agent oracle_agent:Oracle", here().join("tee.py").display(), logs.display());
+    let stderr = arena_run(&out, &["--agent", "exec", "--agent-cmd", &cmd, "--agent-timeout", "60"]);
+    assert_oracle_scores(&out, &stderr);
+    assert!(stderr.contains("oracle: stub-notepad-count step 1"), "the agent's stderr is in the log:\n{stderr}");
+    let (sent, answered, processes) = validate_logs(&logs);
+    assert!(sent >= 6 * 2 + 2 && sent == answered, "{sent} messages sent, {answered} answered");
+    // One process per guest worker, kept across episodes (a computer_13 refusal
+    // is the agent's answer, not a broken protocol, so nothing is restarted).
+    assert!(processes <= 2, "{processes} agent processes for two guests");
+}
+
+/// `python -m arena_agent --http 127.0.0.1:0 ...`, and the URL it listens on.
+fn http_agent(class: &str) -> (Child, String) {
+    let mut child = Command::new("python3")
+        .args(["-m", "arena_agent", "--http", "127.0.0.1:0", class])
+        .env("PYTHONPATH", pythonpath())
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("the HTTP agent starts");
+    let mut lines = BufReader::new(child.stderr.take().expect("stderr")).lines();
+    let deadline = Instant::now() + Duration::from_secs(30);
+    let url = loop {
+        assert!(Instant::now() < deadline, "the HTTP agent did not say where it listens");
+        let line = lines.next().expect("a line").expect("text");
+        if let Some(url) = line.strip_prefix("arena_agent: listening on ") {
+            break url.trim().to_owned();
+        }
+    };
+    // Keep draining its log so it never blocks on a full pipe.
+    std::thread::spawn(move || lines.for_each(drop));
+    (child, url)
+}
+
+#[test]
+fn the_stub_tasks_through_an_http_agent() {
+    if !python_available("the_stub_tasks_through_an_http_agent") {
+        return;
+    }
+    let tmp = tempfile::tempdir().expect("tmp");
+    let out = tmp.path().join("out");
+    let (mut agent, url) = http_agent("oracle_agent:Oracle");
+    let stderr = arena_run(&out, &["--agent", "http", "--agent-url", &url, "--agent-timeout", "60"]);
+    let _ = agent.kill();
+    let _ = agent.wait();
+    assert_oracle_scores(&out, &stderr);
+}
+
+/// A run with an agent that breaks on [`VICTIM`]: that task is a recorded agent
+/// error naming `cause`; the others finish as the oracle's do.
+fn misbehaving(class: &str, cause: &str) {
+    let tmp = tempfile::tempdir().expect("tmp");
+    let out = tmp.path().join("out");
+    let cmd = format!("python3 -m arena_agent oracle_agent:{class}");
+    let stderr = arena_run(&out, &["--agent", "exec", "--agent-cmd", &cmd, "--agent-timeout", "3"]);
+    let rows = rows(&out);
+    assert_eq!(rows.len(), 6, "every task has a result\n{stderr}");
+    let victim = &rows[VICTIM];
+    assert_eq!(victim.status, "agent_error", "{victim:?}\n{stderr}");
+    let error = victim.error.clone().unwrap_or_default();
+    assert!(error.contains(cause), "the error says {cause:?}: {error}");
+    let traj = trajectory(&out, victim);
+    assert!(
+        traj.iter().any(|l| l["error"].as_str().is_some_and(|e| e.contains(cause))),
+        "the step with the error is in the trajectory: {traj:?}"
+    );
+    for (name, row) in &rows {
+        if name == VICTIM || (name == COMPUTER13_TASK && !COMPUTER13_WIRED) {
+            continue;
+        }
+        assert_eq!((row.status.as_str(), row.score), ("completed", Some(1.0)), "{name}: {row:?}\n{stderr}");
+    }
+}
+
+#[test]
+fn an_agent_that_prints_garbage_is_an_agent_error_and_the_run_goes_on() {
+    if python_available("an_agent_that_prints_garbage_is_an_agent_error_and_the_run_goes_on") {
+        misbehaving("Garbage", "not JSON");
+    }
+}
+
+#[test]
+fn an_agent_that_hangs_is_an_agent_error_and_the_run_goes_on() {
+    if python_available("an_agent_that_hangs_is_an_agent_error_and_the_run_goes_on") {
+        misbehaving("Hang", "no answer to observe within 3 s");
+    }
+}
+
+#[test]
+fn an_agent_that_exits_is_an_agent_error_and_the_run_goes_on() {
+    if python_available("an_agent_that_exits_is_an_agent_error_and_the_run_goes_on") {
+        misbehaving("Exit", "the agent process exited");
+    }
+}
