@@ -79,3 +79,56 @@ pub(crate) fn exec_or_http(args: &ExternalArgs, http: bool) -> anyhow::Result<Bu
         Arc::new(move || Ok(Box::new(ExternalAgent::new(label, Arc::clone(&connector), timeout)) as Box<dyn Agent>));
     Ok(Built { factory, label: label.to_owned(), options })
 }
+
+/// The MCP endpoint of a run: its hub, where it listens and its token.
+pub(crate) struct McpEndpoint {
+    pub(crate) hub: Arc<crate::mcp::Hub>,
+    pub(crate) listener: tokio::net::TcpListener,
+    pub(crate) token: String,
+}
+
+impl std::fmt::Debug for McpEndpoint {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("McpEndpoint").field("listener", &self.listener.local_addr().ok()).finish_non_exhaustive()
+    }
+}
+
+/// `--agent mcp`: binds `--mcp-listen`, settles the token (given, or generated,
+/// printed and written to `<out>/mcp-token`), and answers the agent factory.
+///
+/// # Errors
+///
+/// No `--mcp-listen`, an address that cannot be bound, a token file that cannot be written.
+pub(crate) async fn mcp(args: &ExternalArgs, max_steps: u32, out: &std::path::Path) -> anyhow::Result<(Built, McpEndpoint)> {
+    let timeout = timeout(args)?;
+    let Some(listen) = &args.mcp_listen else { bail!("--agent mcp needs --mcp-listen ADDR (e.g. 127.0.0.1:8765)") };
+    let listener = tokio::net::TcpListener::bind(listen.as_str())
+        .await
+        .with_context(|| format!("binding --mcp-listen {listen}"))?;
+    let addr = listener.local_addr().context("the MCP listener's address")?;
+    let token = match &args.mcp_token {
+        Some(token) => arena_shared::token::parse(token).map_err(|err| anyhow::anyhow!("--mcp-token: {err}"))?,
+        None => {
+            let token = crate::mcp::generate_token();
+            std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
+            let file = out.join("mcp-token");
+            arena_shared::atomic::write_atomic(&file, token.as_bytes())
+                .with_context(|| format!("writing {}", file.display()))?;
+            #[cfg(unix)]
+            {
+                use std::os::unix::fs::PermissionsExt as _;
+                let _ = std::fs::set_permissions(&file, std::fs::Permissions::from_mode(0o600));
+            }
+            super::emit(&format!("MCP token (also in {}): {token}\n", file.display()))?;
+            token
+        }
+    };
+    super::emit(&format!("MCP endpoint: http://{addr}/mcp\n"))?;
+    let hub = crate::mcp::Hub::new();
+    let agent_hub = Arc::clone(&hub);
+    let factory: AgentFactory = Arc::new(move || {
+        Ok(Box::new(crate::mcp::McpAgent::new(Arc::clone(&agent_hub), max_steps, timeout)) as Box<dyn Agent>)
+    });
+    let options = vec![("mcp_listen".to_owned(), addr.to_string()), ("agent_timeout".to_owned(), format!("{}", args.agent_timeout))];
+    Ok((Built { factory, label: "mcp".to_owned(), options }, McpEndpoint { hub, listener, token }))
+}

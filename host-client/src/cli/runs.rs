@@ -19,6 +19,7 @@ use std::time::Duration;
 
 use anyhow::{bail, Context};
 use clap::{Args, ValueEnum};
+use tokio_util::sync::CancellationToken;
 
 use super::{emit, stub, Connection};
 use crate::agent::llm::ApiKind;
@@ -50,6 +51,8 @@ pub enum AgentKind {
     Exec,
     /// An agent server taking the step protocol as HTTP POSTs (`--agent-url`).
     Http,
+    /// An MCP client driving each episode through the tools served at `--mcp-listen`.
+    Mcp,
 }
 
 /// Arguments of `arena run`.
@@ -373,6 +376,7 @@ pub(crate) fn agent_factory(args: &RunArgs) -> anyhow::Result<ChosenAgent> {
             // Upstream files Navi's results under its action space.
             Ok(ChosenAgent { factory, label: crate::results::DEFAULT_ACTION_SPACE_LABEL.into(), model, options })
         }
+        AgentKind::Mcp => bail!("--agent mcp is set up by `arena run` itself"),
         AgentKind::Exec | AgentKind::Http => {
             let built = super::external::exec_or_http(&args.external, args.agent == AgentKind::Http)?;
             let model = args.model.clone().unwrap_or_else(|| "external".to_owned());
@@ -388,7 +392,14 @@ pub(crate) fn agent_factory(args: &RunArgs) -> anyhow::Result<ChosenAgent> {
 /// Unusable arguments, tasks that do not load, no guest, or results that cannot be written.
 pub async fn run(conn: &Connection, args: RunArgs) -> anyhow::Result<ExitCode> {
     let tasks = load_tasks(&args.tasks, args.difficulty)?;
-    let ChosenAgent { factory: agents, label: agent_label, model, options: agent_options } = agent_factory(&args)?;
+    let (chosen, mcp) = if args.agent == AgentKind::Mcp {
+        let (built, endpoint) = super::external::mcp(&args.external, args.max_steps, &args.out).await?;
+        let model = args.model.clone().unwrap_or_else(|| "external".to_owned());
+        (ChosenAgent { factory: built.factory, label: built.label, model, options: built.options }, Some(endpoint))
+    } else {
+        (agent_factory(&args)?, None)
+    };
+    let ChosenAgent { factory: agents, label: agent_label, model, options: agent_options } = chosen;
 
     let mut urls: Vec<String> = conn.guest.iter().cloned().collect();
     urls.extend(args.guests.iter().map(|s| s.trim().to_owned()).filter(|s| !s.is_empty()));
@@ -491,7 +502,26 @@ pub async fn run(conn: &Connection, args: RunArgs) -> anyhow::Result<ExitCode> {
     config.stop = stop.clone();
     let watcher = tokio::spawn(watch_interrupts(stop.clone()));
     let runner = EpisodeRunner { layout, config, agents };
-    let outcome = run_tasks(tasks, guests, Arc::new(runner), &options).await;
+    let outcome = match mcp {
+        Some(endpoint) => {
+            let served = CancellationToken::new();
+            let server = tokio::spawn(crate::mcp::server::serve(
+                endpoint.listener,
+                Arc::clone(&endpoint.hub),
+                endpoint.token.clone(),
+                served.clone(),
+            ));
+            let runner = crate::mcp::McpRunner { inner: runner, hub: Arc::clone(&endpoint.hub) };
+            let outcome = run_tasks(tasks, guests, Arc::new(runner), &options).await;
+            // Sessions waiting for a task are told there is none, then the server stops.
+            endpoint.hub.close();
+            tokio::time::sleep(Duration::from_millis(200)).await;
+            served.cancel();
+            let _ = server.await;
+            outcome
+        }
+        None => run_tasks(tasks, guests, Arc::new(runner), &options).await,
+    };
     watcher.abort();
     if let Some(fleet) = fleet {
         drop(options);
