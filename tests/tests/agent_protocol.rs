@@ -244,3 +244,33 @@ fn an_agent_that_exits_is_an_agent_error_and_the_run_goes_on() {
         misbehaving("Exit", "the agent process exited");
     }
 }
+
+#[test]
+fn the_step_protocol_example_agent_runs() {
+    if !python_available("the_step_protocol_example_agent_runs") {
+        return;
+    }
+    let tmp = tempfile::tempdir().expect("tmp");
+    let tasks = tmp.path().join("tasks/mixed");
+    std::fs::create_dir_all(&tasks).expect("tasks");
+    for file in ["notepad/stub-notepad-draft.json", "settings/stub-settings-infeasible.json"] {
+        let from = repo().join("tasks/stub/examples").join(file);
+        std::fs::copy(&from, tasks.join(from.file_name().expect("name"))).expect("copy");
+    }
+    let out = tmp.path().join("out");
+    let exe = workspace_binary("arena-host", "arena").expect("the arena binary");
+    let cmd = format!("python3 {}", repo().join("examples/step_agent.py").display());
+    let status = Command::new(exe)
+        .args(["run", "--stub-guests", "1", "--pauses", "fast", "--agent", "exec", "--agent-cmd", &cmd, "--tasks"])
+        .arg(tmp.path().join("tasks"))
+        .arg("--out")
+        .arg(&out)
+        .env("PYTHONPATH", repo().join("python"))
+        .stdout(Stdio::null())
+        .status()
+        .expect("arena run");
+    assert!(status.success(), "{status:?}");
+    let rows = rows(&out);
+    assert_eq!(rows.len(), 2);
+    assert!(rows.values().all(|r| r.score == Some(1.0)), "{rows:?}");
+}

@@ -188,3 +188,44 @@ async fn an_rmcp_client_plays_two_stub_tasks() {
         assert_eq!(task.steps, 3, "{task:?}");
     }
 }
+
+/// A Python with the official MCP SDK: `ARENA_MCP_PYTHON`, else `python3` when
+/// it imports `mcp`; without one, a loud skip (a failure with `ARENA_REQUIRE_MCP_SDK=1`).
+fn python_with_mcp(test: &str) -> Option<String> {
+    let candidate = std::env::var("ARENA_MCP_PYTHON").unwrap_or_else(|_| "python3".to_owned());
+    let ok = Command::new(&candidate).args(["-c", "import mcp, httpx2"]).output().is_ok_and(|o| o.status.success());
+    if ok {
+        return Some(candidate);
+    }
+    assert!(
+        std::env::var("ARENA_REQUIRE_MCP_SDK").as_deref() != Ok("1"),
+        "{test}: no Python with the MCP SDK ({candidate}) and ARENA_REQUIRE_MCP_SDK=1"
+    );
+    println!("SKIPPED: {test}: no Python with the MCP SDK (set ARENA_MCP_PYTHON to one)");
+    None
+}
+
+#[test]
+fn the_python_mcp_example_plays_two_stub_tasks() {
+    let Some(python) = python_with_mcp("the_python_mcp_example_plays_two_stub_tasks") else { return };
+    let tmp = tempfile::tempdir().expect("tmp");
+    let tasks = tmp.path().join("tasks/mixed");
+    std::fs::create_dir_all(&tasks).expect("tasks");
+    for file in ["notepad/stub-notepad-draft.json", "settings/stub-settings-infeasible.json"] {
+        let from = repo().join("tasks/stub/examples").join(file);
+        std::fs::copy(&from, tasks.join(from.file_name().expect("name"))).expect("copy");
+    }
+    let out = tmp.path().join("out");
+    let (child, url) = start_run(&tmp.path().join("tasks"), &out);
+    let played = Command::new(python)
+        .arg(repo().join("examples/mcp_agent.py"))
+        .args([url.as_str(), TOKEN])
+        .output()
+        .expect("the example runs");
+    let said = String::from_utf8_lossy(&played.stdout);
+    assert!(played.status.success(), "{said}\n{}", String::from_utf8_lossy(&played.stderr));
+    assert!(said.contains("stub-notepad-draft: 1.0") && said.contains("stub-settings-infeasible: 1.0"), "{said}");
+    assert!(wait_exit(child, Duration::from_secs(60)).success());
+    let summary = Summary::from_dir(&out).expect("summary");
+    assert!(summary.tasks.iter().all(|t| t.score == Some(1.0)), "{:?}", summary.tasks);
+}

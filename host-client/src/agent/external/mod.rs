@@ -259,12 +259,9 @@ impl Agent for ExternalAgent {
             other => return Err(self.error(format!("expected an act answer to observe, got {}", kind(&other)))),
         };
         let default_space = self.transport.as_ref().map(|t| t.hello().action_space.clone()).unwrap_or_default();
-        prediction(act, &default_space, marks, obs.screen_size()).map_err(|reason| {
-            if let Some(transport) = self.transport.as_mut() {
-                transport.poison();
-            }
-            self.error(reason)
-        })
+        // An action outside its space is the agent's mistake, not a broken
+        // exchange: the episode ends, and the process serves the next one.
+        prediction(act, &default_space, marks, obs.screen_size()).map_err(|reason| self.error(reason))
     }
 }
 
