@@ -42,6 +42,7 @@ pub mod geometry;
 pub mod health;
 pub mod imaging;
 pub mod keys;
+pub mod mcp_tools;
 pub mod ntfs;
 pub mod observation;
 pub mod registry;

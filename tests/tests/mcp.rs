@@ -1,7 +1,8 @@
 //! `arena run --agent mcp` end to end: the real binary serves MCP, a client
 //! written with the official Rust SDK (`rmcp`) plays two stub tasks through the
 //! tools, a bad argument is a tool error on a session that lives on, the tool
-//! list has the documented names, and a request without the token is refused.
+//! list has the documented names, and a request without the token is refused;
+//! and `arena-guest --mcp`, the guest as an MCP server on its own.
 
 #![cfg(unix)]
 
@@ -63,8 +64,12 @@ pub(crate) fn start_run(tasks: &Path, out: &Path) -> (Child, String) {
 }
 
 async fn connect(url: &str) -> RunningService<RoleClient, ClientConfig> {
+    connect_with(url, TOKEN).await
+}
+
+async fn connect_with(url: &str, token: &str) -> RunningService<RoleClient, ClientConfig> {
     let transport =
-        StreamableHttpClientTransport::from_config(StreamableHttpClientTransportConfig::with_uri(url).auth_header(TOKEN));
+        StreamableHttpClientTransport::from_config(StreamableHttpClientTransportConfig::with_uri(url).auth_header(token));
     ClientConfig::default()
         .with_protocol_version(ProtocolVersion::V_2025_06_18)
         .serve(transport)
@@ -228,4 +233,45 @@ fn the_python_mcp_example_plays_two_stub_tasks() {
     assert!(wait_exit(child, Duration::from_secs(60)).success());
     let summary = Summary::from_dir(&out).expect("summary");
     assert!(summary.tasks.iter().all(|t| t.score == Some(1.0)), "{:?}", summary.tasks);
+}
+
+#[tokio::test(flavor = "multi_thread")]
+async fn the_guest_serves_mcp_behind_its_token() {
+    let guest = arena_test_support::Served::guest(&["--mcp", "--token", "guest-secret-token-0123"]).expect("arena-guest --mcp");
+    let url = format!("{}/mcp", guest.url.trim_end_matches('/'));
+
+    let refused = reqwest::Client::new()
+        .post(&url)
+        .header("Content-Type", "application/json")
+        .header("Accept", "application/json, text/event-stream")
+        .body(r#"{"jsonrpc":"2.0","id":1,"method":"tools/list"}"#)
+        .send()
+        .await
+        .expect("an answer");
+    assert_eq!(refused.status().as_u16(), 401, "no token, no MCP");
+
+    let client = connect_with(&url, "guest-secret-token-0123").await;
+    let names: Vec<String> =
+        client.list_all_tools().await.expect("tools/list").iter().map(|t| t.name.to_string()).collect();
+    assert_eq!(
+        names,
+        [
+            "screenshot", "accessibility_tree", "list_windows", "click", "double_click", "move", "drag", "scroll",
+            "type_text", "press_keys", "run_python", "wait"
+        ],
+        "the desktop tools, without the task and decision tools"
+    );
+    let shot = call(&client, "screenshot", json!({})).await;
+    let image = serde_json::to_value(&shot.content[0]).expect("content");
+    assert_eq!((image["type"].as_str(), image["mimeType"].as_str()), (Some("image"), Some("image/png")), "{image}");
+    let png = base64::Engine::decode(&base64::engine::general_purpose::STANDARD, image["data"].as_str().expect("data"))
+        .expect("base64");
+    assert!(png.starts_with(b"\x89PNG"), "a PNG");
+    let typed = call(&client, "type_text", json!({"text": "hello"})).await;
+    assert_ne!(typed.is_error, Some(true), "{typed:?}");
+    let bad = call(&client, "get_task", json!({})).await;
+    assert_eq!(bad.is_error, Some(true), "no task tools on the guest: {bad:?}");
+    let ran = json_of(&call(&client, "run_python", json!({"code": "print(pyautogui.size())"})).await);
+    assert_eq!(ran["exit_code"], json!(0), "{ran}");
+    let _ = client.cancel().await;
 }

@@ -9,14 +9,14 @@
 //! `predict` waits for the session's next action tool call (that call is the
 //! step, recorded in `traj.jsonl` as any agent's); [`McpRunner`], which runs
 //! the episodes and hands each result to the hub; [`server`], the rmcp
-//! handler and the HTTP server; [`tools`], the tools' names and arguments.
+//! handler and the HTTP server. The tools' names and arguments are
+//! `arena_shared::mcp_tools`, which the guest's own MCP server shares.
 //!
 //! Reading tools (`screenshot`, `accessibility_tree`, `list_windows`) answer
 //! from the step's observation, which the episode records, and spend no step;
 //! every other tool is one step, so `--max-steps` counts actions as for any agent.
 
 pub mod server;
-pub mod tools;
 
 use std::collections::{HashMap, VecDeque};
 use std::sync::{Arc, Mutex};
@@ -296,6 +296,20 @@ impl<R: TaskRunner> TaskRunner for McpRunner<R> {
         let result = self.inner.run(guest, task, attempt, vm).await;
         self.hub.publish(&task.name, &result);
         result
+    }
+}
+
+/// What an action tool call does in an episode: input as a typed action, code
+/// as Navi's `computer` code when it names the `computer` object, else as pyautogui code.
+pub fn agent_action(call: arena_shared::mcp_tools::ToolCall) -> Option<AgentAction> {
+    use arena_shared::mcp_tools::ToolCall;
+    match call {
+        ToolCall::Input(action) => Some(AgentAction::Typed(vec![action])),
+        ToolCall::RunPython(code) if code.contains("computer.") => Some(AgentAction::Computer(code)),
+        ToolCall::RunPython(code) => Some(AgentAction::Pyautogui(code)),
+        ToolCall::Done => Some(AgentAction::Done),
+        ToolCall::Fail => Some(AgentAction::Fail),
+        _ => None,
     }
 }
 

@@ -24,7 +24,7 @@ use rmcp::{ErrorData, RoleServer, ServerHandler};
 use serde_json::{json, Value};
 use tokio_util::sync::CancellationToken;
 
-use super::tools::{self, ToolCall};
+use arena_shared::mcp_tools::{self as tools, ToolCall};
 use super::{ended_text, EpisodeLink, Hub, Pending, Reply};
 
 /// The newest protocol version served: sessions (`Mcp-Session-Id`) carry the
@@ -102,7 +102,7 @@ impl ArenaSession {
             Err(_) => return tool_error("the episode's observation is unavailable"),
         };
         let action = match call {
-            ToolCall::GetTask => unreachable!("answered above"),
+            ToolCall::GetTask => return tool_error("get_task: answered above"),
             ToolCall::Screenshot => {
                 let b64 = base64::engine::general_purpose::STANDARD.encode(&latest.png);
                 return CallToolResult::success(vec![ContentBlock::image(b64, "image/png")]).into();
@@ -121,9 +121,10 @@ impl ArenaSession {
             ToolCall::ListWindows => {
                 return text(json!({"windows": latest.windows, "foreground": latest.foreground}).to_string());
             }
-            ToolCall::Act(action) => action,
-            ToolCall::Done => crate::agent::AgentAction::Done,
-            ToolCall::Fail => crate::agent::AgentAction::Fail,
+            other => match super::agent_action(other) {
+                Some(action) => action,
+                None => return tool_error(format!("{}: not a step", request.name)),
+            },
         };
         let (reply, answer) = tokio::sync::oneshot::channel();
         let pending = Pending { tool: request.name.to_string(), arguments, action, reply };

@@ -1,14 +1,15 @@
-//! The MCP tools: their names, argument names and input schemas, and each
-//! call's arguments checked and turned into what the harness does. The names
-//! and argument names are part of the interface (docs/agents.md): any client
-//! may rely on them.
+//! The MCP desktop tools both MCP servers offer (the host's `arena run --agent
+//! mcp` endpoint and the guest's `arena-guest --mcp`): their names, argument
+//! names and input schemas, and each call's arguments checked and turned into
+//! what is done. The names and argument names are part of the interface
+//! (docs/agents.md): any client may rely on them. No MCP transport here: the
+//! servers speak it with the `rmcp` SDK.
 
 use serde_json::{json, Map, Value};
 
-use arena_shared::action::{Action, MouseButton};
-use arena_shared::geometry::Point;
+use crate::action::{Action, MouseButton};
+use crate::geometry::Point;
 
-use crate::agent::AgentAction;
 
 /// What a tool call asks for.
 #[derive(Debug, Clone, PartialEq)]
@@ -21,8 +22,10 @@ pub enum ToolCall {
     AccessibilityTree { win32: bool },
     /// The visible windows' titles and the foreground one.
     ListWindows,
-    /// One step: this action.
-    Act(AgentAction),
+    /// One input action.
+    Input(Action),
+    /// WAA `computer` code or pyautogui code, for the script interpreter.
+    RunPython(String),
     /// The agent says the task is done.
     Done,
     /// The agent says the task cannot be done.
@@ -208,7 +211,7 @@ pub fn parse(
     with_task: bool,
 ) -> Result<ToolCall, String> {
     let mut args = Args { tool, map: arguments.unwrap_or_default() };
-    let typed = |a: Action| ToolCall::Act(AgentAction::Typed(vec![a]));
+    let typed = ToolCall::Input;
     let call = match tool {
         "get_task" if with_task => ToolCall::GetTask,
         "done" if with_task => ToolCall::Done,
@@ -278,19 +281,11 @@ pub fn parse(
                 Some(v) => return Err(args.bad(format!("keys must be a list of key names, not {v}"))),
             };
             for key in &keys {
-                arena_shared::keys::Key::parse(key).map_err(|err| args.bad(err))?;
+                crate::keys::Key::parse(key).map_err(|err| args.bad(err))?;
             }
             typed(Action::Hotkey { keys })
         }
-        "run_python" => {
-            let code = args.string("code")?;
-            // Navi's code names the `computer` object; anything else is pyautogui code.
-            if code.contains("computer.") {
-                ToolCall::Act(AgentAction::Computer(code))
-            } else {
-                ToolCall::Act(AgentAction::Pyautogui(code))
-            }
-        }
+        "run_python" => ToolCall::RunPython(args.string("code")?),
         "wait" => {
             let seconds = args.number("seconds")?.ok_or_else(|| args.bad("missing argument \"seconds\""))?;
             if seconds > MAX_WAIT_SECONDS {
@@ -331,20 +326,15 @@ mod tests {
     fn calls_become_actions() {
         assert_eq!(
             call("click", json!({"x": 10, "y": 20, "button": "right", "clicks": 2})),
-            Ok(ToolCall::Act(AgentAction::Typed(vec![Action::Click {
-                x: Some(10),
-                y: Some(20),
-                button: MouseButton::Right,
-                count: 2
-            }])))
+            Ok(ToolCall::Input(Action::Click { x: Some(10), y: Some(20), button: MouseButton::Right, count: 2 }))
         );
         assert_eq!(
             call("press_keys", json!({"keys": ["ctrl", "s"]})),
-            Ok(ToolCall::Act(AgentAction::Typed(vec![Action::Hotkey { keys: vec!["ctrl".into(), "s".into()] }])))
+            Ok(ToolCall::Input(Action::Hotkey { keys: vec!["ctrl".into(), "s".into()] }))
         );
         assert_eq!(
             call("run_python", json!({"code": "computer.keyboard.write('x')"})),
-            Ok(ToolCall::Act(AgentAction::Computer("computer.keyboard.write('x')".into())))
+            Ok(ToolCall::RunPython("computer.keyboard.write('x')".into()))
         );
         assert_eq!(call("done", json!({})), Ok(ToolCall::Done));
     }
