@@ -10,7 +10,6 @@ use serde_json::{json, Map, Value};
 use crate::action::{Action, MouseButton};
 use crate::geometry::Point;
 
-
 /// What a tool call asks for.
 #[derive(Debug, Clone, PartialEq)]
 pub enum ToolCall {
@@ -275,7 +274,9 @@ pub fn parse(
             let keys = match args.take("keys") {
                 Some(Value::Array(items)) if !items.is_empty() => items
                     .iter()
-                    .map(|k| k.as_str().map(str::to_owned).ok_or_else(|| args.bad(format!("keys must be strings, not {k}"))))
+                    .map(|k| {
+                        k.as_str().map(str::to_owned).ok_or_else(|| args.bad(format!("keys must be strings, not {k}")))
+                    })
                     .collect::<Result<Vec<String>, String>>()?,
                 None => return Err(args.bad("missing argument \"keys\"")),
                 Some(v) => return Err(args.bad(format!("keys must be a list of key names, not {v}"))),
@@ -314,8 +315,21 @@ mod tests {
         assert_eq!(
             names,
             [
-                "get_task", "screenshot", "accessibility_tree", "list_windows", "click", "double_click", "move",
-                "drag", "scroll", "type_text", "press_keys", "run_python", "wait", "done", "fail"
+                "get_task",
+                "screenshot",
+                "accessibility_tree",
+                "list_windows",
+                "click",
+                "double_click",
+                "move",
+                "drag",
+                "scroll",
+                "type_text",
+                "press_keys",
+                "run_python",
+                "wait",
+                "done",
+                "fail"
             ]
         );
         let desktop: Vec<&str> = tool_list(false).iter().map(|t| t.0).collect();

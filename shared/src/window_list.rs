@@ -81,10 +81,7 @@ mod tests {
             hidden,
             window(6, "", 5),
         ];
-        assert_eq!(
-            window_names(&windows),
-            ["Report.docx - Word", "Untitled - Notepad", PROGRAM_MANAGER]
-        );
+        assert_eq!(window_names(&windows), ["Report.docx - Word", "Untitled - Notepad", PROGRAM_MANAGER]);
     }
 
     #[test]

@@ -5,6 +5,11 @@
 //! hang or exit mid-run, each ending its task as a recorded agent error while
 //! the other tasks finish.
 //!
+//! Where `ARENA_WAA_ROOT` names a WindowsAgentArena checkout (with its Python
+//! requirements installed), upstream's own Navi runs through the runner against a
+//! mock model, and its first request must equal the built-in Navi's with
+//! `--waa-root`; without a checkout that test prints `SKIPPED: ...`.
+//!
 //! Needs `python3`: without it each test prints `SKIPPED: <test>: python3 not
 //! found` and returns, unless `ARENA_REQUIRE_PYTHON` is set.
 
@@ -20,6 +25,9 @@ use arena_host::agent::external::COMPUTER13_WIRED;
 use arena_host::results::summary::{Summary, TaskRow};
 use arena_test_support::workspace_binary;
 use serde_json::Value;
+
+#[path = "agent_protocol/mock_model.rs"]
+mod mock_model;
 
 const VICTIM: &str = "stub-notepad-append";
 const COMPUTER13_TASK: &str = "stub-notepad-draft";
@@ -150,7 +158,11 @@ fn the_stub_tasks_through_an_exec_agent_in_four_action_spaces() {
     let tmp = tempfile::tempdir().expect("tmp");
     let (out, logs) = (tmp.path().join("out"), tmp.path().join("logs"));
     std::fs::create_dir_all(&logs).expect("logs");
-    let cmd = format!("python3 {} {} python3 -m arena_agent oracle_agent:Oracle", here().join("tee.py").display(), logs.display());
+    let cmd = format!(
+        "python3 {} {} python3 -m arena_agent oracle_agent:Oracle",
+        here().join("tee.py").display(),
+        logs.display()
+    );
     let stderr = arena_run(&out, &["--agent", "exec", "--agent-cmd", &cmd, "--agent-timeout", "60"]);
     assert_oracle_scores(&out, &stderr);
     assert!(stderr.contains("oracle: stub-notepad-count step 1"), "the agent's stderr is in the log:\n{stderr}");
@@ -273,4 +285,65 @@ fn the_step_protocol_example_agent_runs() {
     let rows = rows(&out);
     assert_eq!(rows.len(), 2);
     assert!(rows.values().all(|r| r.score == Some(1.0)), "{rows:?}");
+}
+
+/// The first request a mock model was sent for `arena run ARGS` on the draft task, one step.
+fn first_request(tmp: &Path, label: &str, args: &[&str], env: &[(&str, String)]) -> Value {
+    let model = mock_model::start("Saving.\n```decision\nDONE\n```").expect("a mock model");
+    let tasks = tmp.join(label).join("tasks/notepad");
+    std::fs::create_dir_all(&tasks).expect("tasks");
+    std::fs::copy(
+        repo().join("tasks/stub/examples/notepad/stub-notepad-draft.json"),
+        tasks.join("stub-notepad-draft.json"),
+    )
+    .expect("copy");
+    let exe = workspace_binary("arena-host", "arena").expect("the arena binary");
+    let mut cmd = Command::new(exe);
+    cmd.args(["run", "--stub-guests", "1", "--pauses", "fast", "--max-steps", "1", "--tasks"])
+        .arg(tmp.join(label).join("tasks"))
+        .arg("--out")
+        .arg(tmp.join(label).join("out"))
+        .args(args)
+        .env("PYTHONPATH", pythonpath())
+        .env("OPENAI_BASE_URL", &model.url)
+        .env("OPENAI_API_KEY", "sk-mock")
+        .env("ARENA_LLM_KEY", "sk-mock")
+        .args(["--llm-url", &model.url])
+        .stdout(Stdio::null());
+    for (k, v) in env {
+        cmd.env(k, v);
+    }
+    let status = cmd.status().expect("arena run");
+    assert!(status.success(), "{label}: {status:?}");
+    let requests = model.requests.lock().expect("requests");
+    requests.first().cloned().unwrap_or_else(|| panic!("{label}: the model was never asked"))
+}
+
+#[test]
+fn upstream_navi_through_the_runner_asks_what_the_built_in_navi_asks() {
+    let test = "upstream_navi_through_the_runner_asks_what_the_built_in_navi_asks";
+    let Some(root) = std::env::var_os("ARENA_WAA_ROOT").map(PathBuf::from) else {
+        println!("SKIPPED: {test}: ARENA_WAA_ROOT does not name a WindowsAgentArena checkout");
+        return;
+    };
+    if !python_available(test) {
+        return;
+    }
+    let tmp = tempfile::tempdir().expect("tmp");
+    let client = root.join("src/win-arena-container/client");
+    let root_text = root.display().to_string();
+    let built_in = first_request(
+        tmp.path(),
+        "built-in",
+        &["--agent", "navi", "--model", "gpt-4o", "--som-origin", "a11y", "--waa-root", &root_text],
+        &[],
+    );
+    let kwargs = r#"{"server": "oai", "model": "gpt-4o", "som_origin": "a11y", "temperature": 1.0}"#;
+    let cmd = format!(
+        "python3 -m arena_agent --adapter waa --path {} --kwargs '{kwargs}' mm_agents.navi.agent:NaviAgent",
+        client.display()
+    );
+    let upstream = first_request(tmp.path(), "upstream", &["--agent", "exec", "--agent-cmd", &cmd], &[]);
+    assert_eq!(upstream["messages"], built_in["messages"], "the step-1 messages differ");
+    assert_eq!(upstream["model"], built_in["model"]);
 }

@@ -68,8 +68,9 @@ async fn connect(url: &str) -> RunningService<RoleClient, ClientConfig> {
 }
 
 async fn connect_with(url: &str, token: &str) -> RunningService<RoleClient, ClientConfig> {
-    let transport =
-        StreamableHttpClientTransport::from_config(StreamableHttpClientTransportConfig::with_uri(url).auth_header(token));
+    let transport = StreamableHttpClientTransport::from_config(
+        StreamableHttpClientTransportConfig::with_uri(url).auth_header(token),
+    );
     ClientConfig::default()
         .with_protocol_version(ProtocolVersion::V_2025_06_18)
         .serve(transport)
@@ -136,8 +137,21 @@ async fn an_rmcp_client_plays_two_stub_tasks() {
     assert_eq!(
         names,
         [
-            "get_task", "screenshot", "accessibility_tree", "list_windows", "click", "double_click", "move", "drag",
-            "scroll", "type_text", "press_keys", "run_python", "wait", "done", "fail"
+            "get_task",
+            "screenshot",
+            "accessibility_tree",
+            "list_windows",
+            "click",
+            "double_click",
+            "move",
+            "drag",
+            "scroll",
+            "type_text",
+            "press_keys",
+            "run_python",
+            "wait",
+            "done",
+            "fail"
         ]
     );
 
@@ -237,7 +251,8 @@ fn the_python_mcp_example_plays_two_stub_tasks() {
 
 #[tokio::test(flavor = "multi_thread")]
 async fn the_guest_serves_mcp_behind_its_token() {
-    let guest = arena_test_support::Served::guest(&["--mcp", "--token", "guest-secret-token-0123"]).expect("arena-guest --mcp");
+    let guest =
+        arena_test_support::Served::guest(&["--mcp", "--token", "guest-secret-token-0123"]).expect("arena-guest --mcp");
     let url = format!("{}/mcp", guest.url.trim_end_matches('/'));
 
     let refused = reqwest::Client::new()
@@ -256,8 +271,18 @@ async fn the_guest_serves_mcp_behind_its_token() {
     assert_eq!(
         names,
         [
-            "screenshot", "accessibility_tree", "list_windows", "click", "double_click", "move", "drag", "scroll",
-            "type_text", "press_keys", "run_python", "wait"
+            "screenshot",
+            "accessibility_tree",
+            "list_windows",
+            "click",
+            "double_click",
+            "move",
+            "drag",
+            "scroll",
+            "type_text",
+            "press_keys",
+            "run_python",
+            "wait"
         ],
         "the desktop tools, without the task and decision tools"
     );

@@ -142,10 +142,8 @@ impl GuestMcp {
         let (w, h) = screen.unwrap_or((0, 0));
         let ran = blocking(&self.state.desktop, "run_python", timeout, move |d| {
             let mut host = DesktopHost::new(d, Instant::now() + timeout);
-            let mut computer = ComputerState::for_screen(
-                i32::try_from(w).unwrap_or(i32::MAX),
-                i32::try_from(h).unwrap_or(i32::MAX),
-            );
+            let mut computer =
+                ComputerState::for_screen(i32::try_from(w).unwrap_or(i32::MAX), i32::try_from(h).unwrap_or(i32::MAX));
             let globals = if code.contains("computer.") {
                 Globals { computer: Some(&mut computer), computer_action_delay: 0.0, preimport: &[] }
             } else {
@@ -155,7 +153,9 @@ impl GuestMcp {
         })
         .await;
         match ran {
-            Ok(Ok(out)) => text(json!({"stdout": out.stdout, "stderr": out.stderr, "exit_code": out.exit_code}).to_string()),
+            Ok(Ok(out)) => {
+                text(json!({"stdout": out.stdout, "stderr": out.stderr, "exit_code": out.exit_code}).to_string())
+            }
             Ok(Err(err)) => tool_error(format!("{tool}: {}{}", err.stderr, err.traceback())),
             Err(err) => failed(tool, &err),
         }
@@ -167,7 +167,9 @@ impl ServerHandler for GuestMcp {
         ServerConfig::new(ServerCapabilities::builder().enable_tools().build())
             .with_protocol_version(MAX_PROTOCOL)
             .with_server_info(Implementation::new("arena-guest", env!("CARGO_PKG_VERSION")))
-            .with_instructions("The desktop of this machine: screenshot, accessibility tree, windows, mouse and keyboard.")
+            .with_instructions(
+                "The desktop of this machine: screenshot, accessibility tree, windows, mouse and keyboard.",
+            )
     }
 
     fn supported_protocol_versions(&self) -> Cow<'static, [ProtocolVersion]> {

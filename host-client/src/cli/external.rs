@@ -99,7 +99,11 @@ impl std::fmt::Debug for McpEndpoint {
 /// # Errors
 ///
 /// No `--mcp-listen`, an address that cannot be bound, a token file that cannot be written.
-pub(crate) async fn mcp(args: &ExternalArgs, max_steps: u32, out: &std::path::Path) -> anyhow::Result<(Built, McpEndpoint)> {
+pub(crate) async fn mcp(
+    args: &ExternalArgs,
+    max_steps: u32,
+    out: &std::path::Path,
+) -> anyhow::Result<(Built, McpEndpoint)> {
     let timeout = timeout(args)?;
     let Some(listen) = &args.mcp_listen else { bail!("--agent mcp needs --mcp-listen ADDR (e.g. 127.0.0.1:8765)") };
     let listener = tokio::net::TcpListener::bind(listen.as_str())
@@ -129,6 +133,9 @@ pub(crate) async fn mcp(args: &ExternalArgs, max_steps: u32, out: &std::path::Pa
     let factory: AgentFactory = Arc::new(move || {
         Ok(Box::new(crate::mcp::McpAgent::new(Arc::clone(&agent_hub), max_steps, timeout)) as Box<dyn Agent>)
     });
-    let options = vec![("mcp_listen".to_owned(), addr.to_string()), ("agent_timeout".to_owned(), format!("{}", args.agent_timeout))];
+    let options = vec![
+        ("mcp_listen".to_owned(), addr.to_string()),
+        ("agent_timeout".to_owned(), format!("{}", args.agent_timeout)),
+    ];
     Ok((Built { factory, label: "mcp".to_owned(), options }, McpEndpoint { hub, listener, token }))
 }

@@ -24,8 +24,8 @@ use rmcp::{ErrorData, RoleServer, ServerHandler};
 use serde_json::{json, Value};
 use tokio_util::sync::CancellationToken;
 
-use arena_shared::mcp_tools::{self as tools, ToolCall};
 use super::{ended_text, EpisodeLink, Hub, Pending, Reply};
+use arena_shared::mcp_tools::{self as tools, ToolCall};
 
 /// The newest protocol version served: sessions (`Mcp-Session-Id`) carry the
 /// episode a client is bound to, and the 2026 revision has none.

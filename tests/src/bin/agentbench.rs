@@ -14,8 +14,7 @@
 //!
 //! Run: `cargo run -p arena-tests --bin agentbench` (needs `python3`).
 
-use std::io::{BufRead, BufReader, Read, Write};
-use std::net::TcpListener;
+use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, ExitCode, Stdio};
 use std::time::{Duration, Instant};
@@ -27,6 +26,9 @@ use rmcp::transport::streamable_http_client::StreamableHttpClientTransportConfig
 use rmcp::transport::StreamableHttpClientTransport;
 use rmcp::ServiceExt;
 use serde_json::{json, Value};
+
+#[path = "../../tests/agent_protocol/mock_model.rs"]
+mod mock_model;
 
 const MAX_STEPS: &str = "8";
 const TOKEN: &str = "agentbench-token-0123456789";
@@ -72,7 +74,9 @@ fn timings(out: &Path) -> Vec<(f64, f64)> {
                 let text = std::fs::read_to_string(&path).unwrap_or_default();
                 for line in text.lines() {
                     let Ok(v) = serde_json::from_str::<Value>(line) else { continue };
-                    if let (Some(p), Some(o)) = (v["timings"]["predict_ms"].as_f64(), v["timings"]["observe_ms"].as_f64()) {
+                    if let (Some(p), Some(o)) =
+                        (v["timings"]["predict_ms"].as_f64(), v["timings"]["observe_ms"].as_f64())
+                    {
                         acc.push((p, o));
                     }
                 }
@@ -105,59 +109,11 @@ fn finish(mut child: Child) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// A chat-completions endpoint that always answers a WAIT decision.
-fn mock_model() -> anyhow::Result<String> {
-    let listener = TcpListener::bind("127.0.0.1:0")?;
-    let url = format!("http://{}/v1", listener.local_addr()?);
-    std::thread::spawn(move || {
-        for stream in listener.incoming().flatten() {
-            std::thread::spawn(move || {
-                let mut reader = BufReader::new(stream);
-                loop {
-                    let mut length = 0usize;
-                    let mut line = String::new();
-                    loop {
-                        line.clear();
-                        if reader.read_line(&mut line).unwrap_or(0) == 0 {
-                            return;
-                        }
-                        let lower = line.to_ascii_lowercase();
-                        if let Some(v) = lower.strip_prefix("content-length:") {
-                            length = v.trim().parse().unwrap_or(0);
-                        }
-                        if line == "\r\n" {
-                            break;
-                        }
-                    }
-                    let mut body = vec![0; length];
-                    if reader.read_exact(&mut body).is_err() {
-                        return;
-                    }
-                    let answer = json!({
-                        "id": "mock", "object": "chat.completion", "model": "mock",
-                        "choices": [{"index": 0, "finish_reason": "stop",
-                            "message": {"role": "assistant", "content": "Waiting.\n```decision\nWAIT\n```"}}],
-                        "usage": {"prompt_tokens": 1, "completion_tokens": 1, "total_tokens": 2}
-                    })
-                    .to_string();
-                    let response = format!(
-                        "HTTP/1.1 200 OK\r\nContent-Type: application/json\r\nContent-Length: {}\r\n\r\n{answer}",
-                        answer.len()
-                    );
-                    if reader.get_mut().write_all(response.as_bytes()).is_err() {
-                        return;
-                    }
-                }
-            });
-        }
-    });
-    Ok(url)
-}
-
 /// Plays every task over MCP, calling `wait` until each episode ends.
 async fn mcp_client(url: &str) -> anyhow::Result<()> {
-    let transport =
-        StreamableHttpClientTransport::from_config(StreamableHttpClientTransportConfig::with_uri(url).auth_header(TOKEN));
+    let transport = StreamableHttpClientTransport::from_config(
+        StreamableHttpClientTransportConfig::with_uri(url).auth_header(TOKEN),
+    );
     let client = ClientConfig::default().with_protocol_version(ProtocolVersion::V_2025_06_18).serve(transport).await?;
     let text = |r: &rmcp::model::CallToolResult| -> Value {
         let content = serde_json::to_value(&r.content[0]).unwrap_or(Value::Null);
@@ -189,9 +145,11 @@ async fn bench() -> anyhow::Result<()> {
 
     let out = tmp.path().join("navi");
     let started = Instant::now();
-    let model = mock_model()?;
-    finish(arena(&out, &["--agent", "navi", "--llm-url", &model, "--model", "mock"], &[])?)?;
+    let model = mock_model::start("Waiting.\n```decision\nWAIT\n```")?;
+    finish(arena(&out, &["--agent", "navi", "--llm-url", &model.url, "--model", "mock"], &[])?)?;
     report("navi", &out, started.elapsed());
+    let asked = model.requests.lock().map(|r| r.len()).unwrap_or(0);
+    println!("       (navi asked the mock model {asked} times)");
 
     let out = tmp.path().join("exec");
     let started = Instant::now();

@@ -286,11 +286,7 @@ pub fn prediction(
         None => {}
     }
     let marks = match act.computer_update {
-        Some(update) => Some(Marks {
-            entities: Vec::new(),
-            rects: update.screen_rects(),
-            size: screen,
-        }),
+        Some(update) => Some(Marks { entities: Vec::new(), rects: update.screen_rects(), size: screen }),
         None => marks,
     };
     let mut logs: Vec<StepLog> =

@@ -37,7 +37,10 @@ pub fn check_space(space: &str) -> Result<(), String> {
     if super::protocol::ACTION_SPACES.contains(&space) {
         Ok(())
     } else {
-        Err(format!("unknown action space {space:?}; this harness accepts {}", super::protocol::ACTION_SPACES.join(", ")))
+        Err(format!(
+            "unknown action space {space:?}; this harness accepts {}",
+            super::protocol::ACTION_SPACES.join(", ")
+        ))
     }
 }
 
@@ -128,7 +131,10 @@ mod tests {
         if COMPUTER13_WIRED {
             assert!(got.is_ok(), "{got:?}");
         } else {
-            assert_eq!(got.expect_err("placeholder"), "actions[0] in action space computer_13: computer_13 not wired yet");
+            assert_eq!(
+                got.expect_err("placeholder"),
+                "actions[0] in action space computer_13: computer_13 not wired yet"
+            );
         }
     }
 }

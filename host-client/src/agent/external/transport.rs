@@ -41,8 +41,8 @@ impl ProcessPool {
     ///
     /// An empty or unbalanced command line, or no temporary folder.
     pub fn new(command: &str) -> Result<ProcessPool, String> {
-        let argv = arena_shared::cmdline::shlex_split(command)
-            .map_err(|err| format!("--agent-cmd {command:?}: {err}"))?;
+        let argv =
+            arena_shared::cmdline::shlex_split(command).map_err(|err| format!("--agent-cmd {command:?}: {err}"))?;
         if argv.is_empty() {
             return Err("--agent-cmd is empty".to_owned());
         }
@@ -83,14 +83,8 @@ impl ProcessPool {
         let (Some(stdin), Some(stdout)) = (child.stdin.take(), child.stdout.take()) else {
             return Err("the agent process has no pipes".to_owned());
         };
-        let mut process = AgentProcess {
-            child,
-            stdin,
-            stdout: BufReader::new(stdout),
-            hello: None,
-            dir,
-            poisoned: false,
-        };
+        let mut process =
+            AgentProcess { child, stdin, stdout: BufReader::new(stdout), hello: None, dir, poisoned: false };
         let answer = process.exchange(&hello_message()).await?;
         process.hello = Some(check_hello(answer)?);
         Ok(process)
@@ -260,10 +254,8 @@ impl HttpAgent {
         if !matches!(parsed.scheme(), "http" | "https") {
             return Err(format!("--agent-url {url:?}: expected an http or https URL"));
         }
-        let client = reqwest::Client::builder()
-            .timeout(timeout)
-            .build()
-            .map_err(|err| format!("an HTTP client: {err}"))?;
+        let client =
+            reqwest::Client::builder().timeout(timeout).build().map_err(|err| format!("an HTTP client: {err}"))?;
         Ok(HttpAgent { url: url.to_owned(), client })
     }
 
