@@ -344,6 +344,49 @@ fn upstream_navi_through_the_runner_asks_what_the_built_in_navi_asks() {
         client.display()
     );
     let upstream = first_request(tmp.path(), "upstream", &["--agent", "exec", "--agent-cmd", &cmd], &[]);
-    assert_eq!(upstream["messages"], built_in["messages"], "the step-1 messages differ");
+    if let Some(dir) = std::env::var_os("ARENA_TEST_DUMP") {
+        let dir = PathBuf::from(dir);
+        std::fs::write(dir.join("upstream.json"), upstream.to_string()).expect("dump");
+        std::fs::write(dir.join("built-in.json"), built_in.to_string()).expect("dump");
+    }
     assert_eq!(upstream["model"], built_in["model"]);
+    assert_eq!(upstream["temperature"], built_in["temperature"]);
+    assert_eq!(upstream["max_tokens"], built_in["max_tokens"]);
+    same_messages(&upstream["messages"], &built_in["messages"]);
+}
+
+/// The same messages: every text part byte for byte; every image of the same
+/// size and, decoded, within 1 level on average (upstream encodes its JPEGs
+/// with Pillow's libjpeg, the harness with its own encoder, and the
+/// Set-of-Marks labels are drawn with different fonts).
+fn same_messages(upstream: &Value, built_in: &Value) {
+    let (a, b) = (upstream.as_array().expect("messages"), built_in.as_array().expect("messages"));
+    assert_eq!(a.len(), b.len(), "as many messages");
+    for (i, (x, y)) in a.iter().zip(b).enumerate() {
+        assert_eq!(x["role"], y["role"], "message {i}");
+        let parts = |m: &Value| match &m["content"] {
+            Value::Array(parts) => parts.clone(),
+            text => vec![serde_json::json!({"type": "text", "text": text})],
+        };
+        let (px, py) = (parts(x), parts(y));
+        assert_eq!(px.len(), py.len(), "message {i}: as many parts");
+        for (j, (p, q)) in px.iter().zip(&py).enumerate() {
+            if p["type"] != "image_url" {
+                assert_eq!(p, q, "message {i} part {j}");
+                continue;
+            }
+            let decode = |v: &Value| {
+                let url = v["image_url"]["url"].as_str().expect("a data URL");
+                let b64 = url.split_once(',').expect("data URL").1;
+                let bytes = base64::Engine::decode(&base64::engine::general_purpose::STANDARD, b64).expect("base64");
+                image::load_from_memory(&bytes).expect("an image").to_rgb8()
+            };
+            let (ip, iq) = (decode(p), decode(q));
+            assert_eq!(ip.dimensions(), iq.dimensions(), "message {i} part {j}: image size");
+            let total: u64 = ip.as_raw().iter().zip(iq.as_raw()).map(|(a, b)| u64::from(a.abs_diff(*b))).sum();
+            let mean = total as f64 / ip.as_raw().len().max(1) as f64;
+            assert!(mean <= 1.0, "message {i} part {j}: images differ by {mean:.3} levels on average");
+            assert_eq!(p["image_url"]["detail"], q["image_url"]["detail"], "message {i} part {j}: detail");
+        }
+    }
 }
