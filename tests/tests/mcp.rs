@@ -86,6 +86,48 @@ async fn call(client: &RunningService<RoleClient, ClientConfig>, tool: &str, arg
         .unwrap_or_else(|e| panic!("{tool}: {e}"))
 }
 
+/// The desktop tools, in the order `tools/list` gives them.
+const DESKTOP_TOOLS: [&str; 12] = [
+    "screenshot",
+    "accessibility_tree",
+    "list_windows",
+    "click",
+    "double_click",
+    "move",
+    "drag",
+    "scroll",
+    "type_text",
+    "press_keys",
+    "run_python",
+    "wait",
+];
+
+/// Asserts that `url` refuses an MCP request without the token.
+async fn assert_refused_without_token(url: &str) {
+    let refused = reqwest::Client::new()
+        .post(url)
+        .header("Content-Type", "application/json")
+        .header("Accept", "application/json, text/event-stream")
+        .body(r#"{"jsonrpc":"2.0","id":1,"method":"tools/list"}"#)
+        .send()
+        .await
+        .expect("an answer");
+    assert_eq!(refused.status().as_u16(), 401, "no token, no MCP");
+}
+
+async fn tool_names(client: &RunningService<RoleClient, ClientConfig>) -> Vec<String> {
+    client.list_all_tools().await.expect("tools/list").iter().map(|t| t.name.to_string()).collect()
+}
+
+/// Asserts that a `screenshot` answer is one PNG image.
+fn assert_png(shot: &CallToolResult) {
+    let image = serde_json::to_value(&shot.content[0]).expect("content");
+    assert_eq!((image["type"].as_str(), image["mimeType"].as_str()), (Some("image"), Some("image/png")), "{image}");
+    let png = base64::Engine::decode(&base64::engine::general_purpose::STANDARD, image["data"].as_str().expect("data"))
+        .expect("base64");
+    assert!(png.starts_with(b"\x89PNG"), "a PNG");
+}
+
 fn text_of(result: &CallToolResult) -> String {
     result
         .content
@@ -120,40 +162,13 @@ async fn an_rmcp_client_plays_two_stub_tasks() {
     let (tasks, out) = (two_tasks(tmp.path()), tmp.path().join("out"));
     let (child, url) = start_run(&tasks, &out);
 
-    // Without the token: refused.
-    let refused = reqwest::Client::new()
-        .post(&url)
-        .header("Content-Type", "application/json")
-        .header("Accept", "application/json, text/event-stream")
-        .body(r#"{"jsonrpc":"2.0","id":1,"method":"tools/list"}"#)
-        .send()
-        .await
-        .expect("an answer");
-    assert_eq!(refused.status().as_u16(), 401);
+    assert_refused_without_token(&url).await;
 
     let client = connect(&url).await;
-    let names: Vec<String> =
-        client.list_all_tools().await.expect("tools/list").iter().map(|t| t.name.to_string()).collect();
-    assert_eq!(
-        names,
-        [
-            "get_task",
-            "screenshot",
-            "accessibility_tree",
-            "list_windows",
-            "click",
-            "double_click",
-            "move",
-            "drag",
-            "scroll",
-            "type_text",
-            "press_keys",
-            "run_python",
-            "wait",
-            "done",
-            "fail"
-        ]
-    );
+    let mut expected = vec!["get_task"];
+    expected.extend(DESKTOP_TOOLS);
+    expected.extend(["done", "fail"]);
+    assert_eq!(tool_names(&client).await, expected);
 
     // An action before any task is a tool error.
     let early = call(&client, "type_text", json!({"text": "x"})).await;
@@ -166,10 +181,7 @@ async fn an_rmcp_client_plays_two_stub_tasks() {
         assert!(task["instruction"].as_str().is_some_and(|s| !s.is_empty()), "{task}");
         assert!(task["screen_width"].as_u64().is_some_and(|w| w > 0) && task["steps_left"] == json!(15), "{task}");
 
-        let shot = call(&client, "screenshot", json!({})).await;
-        let image = serde_json::to_value(&shot.content[0]).expect("content");
-        assert_eq!(image["type"], "image", "{image}");
-        assert_eq!(image["mimeType"], "image/png", "{image}");
+        assert_png(&call(&client, "screenshot", json!({})).await);
         let tree = call(&client, "accessibility_tree", json!({"backend": "uia"})).await;
         assert!(text_of(&tree).starts_with("<desktop"), "{tree:?}");
         let windows = json_of(&call(&client, "list_windows", json!({})).await);
@@ -255,43 +267,11 @@ async fn the_guest_serves_mcp_behind_its_token() {
         arena_test_support::Served::guest(&["--mcp", "--token", "guest-secret-token-0123"]).expect("arena-guest --mcp");
     let url = format!("{}/mcp", guest.url.trim_end_matches('/'));
 
-    let refused = reqwest::Client::new()
-        .post(&url)
-        .header("Content-Type", "application/json")
-        .header("Accept", "application/json, text/event-stream")
-        .body(r#"{"jsonrpc":"2.0","id":1,"method":"tools/list"}"#)
-        .send()
-        .await
-        .expect("an answer");
-    assert_eq!(refused.status().as_u16(), 401, "no token, no MCP");
+    assert_refused_without_token(&url).await;
 
     let client = connect_with(&url, "guest-secret-token-0123").await;
-    let names: Vec<String> =
-        client.list_all_tools().await.expect("tools/list").iter().map(|t| t.name.to_string()).collect();
-    assert_eq!(
-        names,
-        [
-            "screenshot",
-            "accessibility_tree",
-            "list_windows",
-            "click",
-            "double_click",
-            "move",
-            "drag",
-            "scroll",
-            "type_text",
-            "press_keys",
-            "run_python",
-            "wait"
-        ],
-        "the desktop tools, without the task and decision tools"
-    );
-    let shot = call(&client, "screenshot", json!({})).await;
-    let image = serde_json::to_value(&shot.content[0]).expect("content");
-    assert_eq!((image["type"].as_str(), image["mimeType"].as_str()), (Some("image"), Some("image/png")), "{image}");
-    let png = base64::Engine::decode(&base64::engine::general_purpose::STANDARD, image["data"].as_str().expect("data"))
-        .expect("base64");
-    assert!(png.starts_with(b"\x89PNG"), "a PNG");
+    assert_eq!(tool_names(&client).await, DESKTOP_TOOLS, "the desktop tools, without the task and decision tools");
+    assert_png(&call(&client, "screenshot", json!({})).await);
     let typed = call(&client, "type_text", json!({"text": "hello"})).await;
     assert_ne!(typed.is_error, Some(true), "{typed:?}");
     let bad = call(&client, "get_task", json!({})).await;
