@@ -181,6 +181,11 @@ pub struct ServerConfig {
     #[arg(long, env = "ARENA_LOG_FORMAT", value_enum, default_value_t = LogFormat::Text)]
     pub log_format: LogFormat,
 
+    /// Also serve the Model Context Protocol at `/mcp` (streamable HTTP), with the
+    /// desktop tools, behind the same token and guards as every route.
+    #[arg(long, env = "ARENA_MCP")]
+    pub mcp: bool,
+
     /// Set by the Windows service's supervisor on the worker it starts: the worker shuts
     /// down gracefully when its standard input closes (the supervisor's stop signal, which
     /// also fires when the supervisor dies) and logs without colours, since its output
@@ -238,6 +243,7 @@ impl ServerConfig {
             capture_layered: false,
             drag_step_ms: 200,
             log_format: LogFormat::Text,
+            mcp: false,
             worker: false,
         }
     }

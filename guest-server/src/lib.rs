@@ -21,6 +21,7 @@
 //! - [`inspect`]: the logic of the evaluator queries both APIs answer.
 //! - [`protect`]: what no route may delete, move or recycle.
 //! - [`script_host`]: the desktop side of the native Python-subset interpreter.
+//! - [`mcp`]: `--mcp`, the desktop tools over the Model Context Protocol at `/mcp`.
 //! - [`service`]: the `service` and `logon-task` subcommands (running in the user's session), with the
 //!   Windows service supervisor in `service/windows/`.
 
@@ -32,6 +33,7 @@ pub mod doctor;
 pub mod error;
 pub mod imaging;
 pub mod inspect;
+pub mod mcp;
 pub mod native;
 pub mod paths;
 pub mod protect;
@@ -60,10 +62,11 @@ use crate::state::AppState;
 /// Builds the whole application: both APIs, the guards and the limits.
 pub fn router(state: AppState) -> Router {
     let max_body = state.config.max_body_bytes;
-    Router::new()
-        .merge(native::routes())
-        .merge(waa::routes(&state))
-        .fallback(fallback)
+    let mut app = Router::new().merge(native::routes()).merge(waa::routes(&state));
+    if state.config.mcp {
+        app = app.nest_service("/mcp", mcp::service(state.clone()));
+    }
+    app.fallback(fallback)
         .method_not_allowed_fallback(method_not_allowed)
         .layer(axum::middleware::from_fn_with_state(state.clone(), auth::guard))
         .layer(DefaultBodyLimit::max(max_body))

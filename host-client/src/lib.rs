@@ -14,7 +14,8 @@
 //! - [`error`]: [`error::ClientError`], which always names the guest, the call and the cause.
 //! - [`task`]: WAA task files, read in two layers (raw mirror, validated task).
 //! - [`setup`]: the tasks' setup steps over the guest API, and the download cache.
-//! - [`agent`]: the agent trait; Navi, scripted and replay agents; running agent code.
+//! - [`agent`]: the agent trait; Navi, scripted and replay agents; outside agents over the step protocol; running agent code.
+//! - [`mcp`]: the MCP endpoint of `arena run --agent mcp`, where an outside agent drives each episode.
 //! - [`som`]: Set-of-Marks from every source of upstream's `--som_origin`: the accessibility tree, OCR, the DOM, a detector, OmniParser and their mixes.
 //! - [`actionspace`]: the grammars agents answer in (pyautogui, `computer_13`, Anthropic's and OpenAI's computer actions, UI-TARS) translated into typed actions.
 //! - [`episode`]: one episode: reset, setup, the observe/act loop, evaluation.
@@ -33,6 +34,7 @@ pub mod client;
 pub mod episode;
 pub mod error;
 pub mod eval;
+pub mod mcp;
 pub mod prep;
 pub mod results;
 pub mod run;

@@ -53,6 +53,7 @@ pub mod health;
 pub mod imaging;
 pub mod keys;
 pub mod markup;
+pub mod mcp_tools;
 pub mod ntfs;
 pub mod observation;
 pub mod registry;

@@ -19,9 +19,11 @@
 //! - [`scripted`]: [`scripted::ScriptedAgent`], which follows a plan file (oracle solutions, tests).
 //! - [`replay`]: [`replay::ReplayAgent`], which repeats a recorded trajectory.
 //! - [`cu`]: the computer-use agents (Anthropic's `computer` tool, OpenAI's Responses API, UI-TARS).
+//! - [`external`]: [`external::ExternalAgent`], an agent in another program over the step protocol.
 
 pub mod cu;
 pub mod exec;
+pub mod external;
 pub mod llm;
 pub mod navi;
 pub mod parse;
@@ -276,6 +278,10 @@ pub enum AgentError {
     /// The worker thread that ran a script died.
     #[error("the script worker failed: {0}")]
     Worker(String),
+    /// An outside agent broke the step protocol, did not answer in time, gave
+    /// up, or its process died (`--agent exec`, `--agent http`, `--agent mcp`).
+    #[error("agent {agent}: {reason}")]
+    External { agent: String, reason: String },
 }
 
 /// Something that picks actions from observations.

@@ -17,6 +17,7 @@
 pub mod act;
 pub mod corpus;
 pub mod demo;
+pub mod external;
 pub mod local;
 pub mod prep;
 pub mod render;

@@ -19,6 +19,7 @@ use std::time::Duration;
 
 use anyhow::{bail, Context};
 use clap::{Args, ValueEnum};
+use tokio_util::sync::CancellationToken;
 
 use super::{emit, stub, Connection};
 use crate::actionspace::uitars::UiTarsVersion;
@@ -61,6 +62,12 @@ pub enum AgentKind {
     /// UI-TARS over an OpenAI-compatible chat endpoint such as vLLM (`--llm-url`, `--model`,
     /// `--prompt-file`).
     UiTars,
+    /// An agent program speaking the step protocol on its stdin/stdout (`--agent-cmd`).
+    Exec,
+    /// An agent server taking the step protocol as HTTP POSTs (`--agent-url`).
+    Http,
+    /// An MCP client driving each episode through the tools served at `--mcp-listen`.
+    Mcp,
 }
 
 /// Arguments of `arena run`.
@@ -74,6 +81,8 @@ pub struct RunArgs {
     pub difficulty: Difficulty,
     #[arg(long, value_enum, default_value_t = AgentKind::Scripted)]
     pub agent: AgentKind,
+    #[command(flatten)]
+    pub external: super::external::ExternalArgs,
     /// Scripted agent: one plan file for every task, or a folder of `<task name>.json`
     /// plans [default: `<tasks>/plans` when it exists, else each task's `plan` key].
     #[arg(long, value_name = "PATH")]
@@ -430,6 +439,12 @@ pub(crate) fn agent_factory(args: &RunArgs) -> anyhow::Result<ChosenAgent> {
             Ok(ChosenAgent { factory, label: crate::results::DEFAULT_ACTION_SPACE_LABEL.into(), model, options })
         }
         AgentKind::AnthropicCu | AgentKind::OpenaiCu | AgentKind::UiTars => computer_use_agent(args),
+        AgentKind::Mcp => bail!("--agent mcp is set up by `arena run` itself"),
+        AgentKind::Exec | AgentKind::Http => {
+            let built = super::external::exec_or_http(&args.external, args.agent == AgentKind::Http)?;
+            let model = args.model.clone().unwrap_or_else(|| "external".to_owned());
+            Ok(ChosenAgent { factory: built.factory, label: built.label, model, options: built.options })
+        }
     }
 }
 
@@ -525,7 +540,14 @@ fn computer_use_agent(args: &RunArgs) -> anyhow::Result<ChosenAgent> {
 /// Unusable arguments, tasks that do not load, no guest, or results that cannot be written.
 pub async fn run(conn: &Connection, args: RunArgs) -> anyhow::Result<ExitCode> {
     let tasks = load_tasks(&args.tasks, args.difficulty)?;
-    let ChosenAgent { factory: agents, label: agent_label, model, options: mut agent_options } = agent_factory(&args)?;
+    let (chosen, mcp) = if args.agent == AgentKind::Mcp {
+        let (built, endpoint) = super::external::mcp(&args.external, args.max_steps, &args.out).await?;
+        let model = args.model.clone().unwrap_or_else(|| "external".to_owned());
+        (ChosenAgent { factory: built.factory, label: built.label, model, options: built.options }, Some(endpoint))
+    } else {
+        (agent_factory(&args)?, None)
+    };
+    let ChosenAgent { factory: agents, label: agent_label, model, options: mut agent_options } = chosen;
     // Every run records who played, in which action space and coordinates.
     let agent_name = args.agent.to_possible_value().map(|v| v.get_name().to_owned()).unwrap_or_default();
     agent_options.push(("agent".into(), agent_name));
@@ -636,7 +658,26 @@ pub async fn run(conn: &Connection, args: RunArgs) -> anyhow::Result<ExitCode> {
     config.stop = stop.clone();
     let watcher = tokio::spawn(watch_interrupts(stop.clone()));
     let runner = EpisodeRunner { layout, config, agents };
-    let outcome = run_tasks(tasks, guests, Arc::new(runner), &options).await;
+    let outcome = match mcp {
+        Some(endpoint) => {
+            let served = CancellationToken::new();
+            let server = tokio::spawn(crate::mcp::server::serve(
+                endpoint.listener,
+                Arc::clone(&endpoint.hub),
+                endpoint.token.clone(),
+                served.clone(),
+            ));
+            let runner = crate::mcp::McpRunner { inner: runner, hub: Arc::clone(&endpoint.hub) };
+            let outcome = run_tasks(tasks, guests, Arc::new(runner), &options).await;
+            // Sessions waiting for a task are told there is none, then the server stops.
+            endpoint.hub.close();
+            tokio::time::sleep(Duration::from_millis(200)).await;
+            served.cancel();
+            let _ = server.await;
+            outcome
+        }
+        None => run_tasks(tasks, guests, Arc::new(runner), &options).await,
+    };
     watcher.abort();
     if let Some(fleet) = fleet {
         drop(options);

@@ -1,0 +1,201 @@
+//! `arena-guest --mcp`: the guest as an MCP server on its own, so that a person
+//! can drive the desktop from any MCP client outside a benchmark. Served at
+//! `/mcp` on the server's own port (streamable HTTP, with the `rmcp` SDK),
+//! behind the same token, `Host` and `Origin` guards as every other route.
+//!
+//! The tools are the desktop tools of `arena_shared::mcp_tools` (the same names
+//! and arguments as the host's benchmark endpoint), without `get_task`, `done`
+//! and `fail`. Each calls the [`Desktop`] through [`crate::call::blocking`], as
+//! the native routes do; `run_python` runs in the shared interpreter.
+
+use std::borrow::Cow;
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+use base64::Engine as _;
+use rmcp::model::{
+    CallToolRequestParams, CallToolResponse, CallToolResult, ContentBlock, Implementation, ListToolsResult,
+    PaginatedRequestParams, ProtocolVersion, ServerCapabilities, ServerConfig, Tool,
+};
+use rmcp::service::RequestContext;
+use rmcp::transport::streamable_http_server::session::local::LocalSessionManager;
+use rmcp::transport::streamable_http_server::{StreamableHttpServerConfig, StreamableHttpService};
+use rmcp::{ErrorData, RoleServer, ServerHandler};
+use serde_json::{json, Value};
+
+use arena_shared::action::Action;
+use arena_shared::mcp_tools::{self, ToolCall};
+use arena_shared::observation::{A11yBackend, ImageFormat, TreeBudget};
+use arena_shared::script::{self, ComputerState, Globals};
+
+use crate::call::blocking;
+use crate::desktop::DesktopError;
+use crate::script_host::DesktopHost;
+use crate::state::AppState;
+
+/// The newest MCP revision served (sessions, as the host's endpoint).
+const MAX_PROTOCOL: ProtocolVersion = ProtocolVersion::V_2025_11_25;
+
+/// The `/mcp` service: one [`GuestMcp`] per session. rmcp's own `Host` check
+/// is off because [`crate::auth::guard`] in front of it already makes that
+/// decision for every route (loopback names, `--allow-host`).
+pub fn service(state: AppState) -> StreamableHttpService<GuestMcp, LocalSessionManager> {
+    let config = StreamableHttpServerConfig::default()
+        .with_sse_keep_alive(Some(Duration::from_secs(15)))
+        .disable_allowed_hosts()
+        .enforce_origin_validation();
+    StreamableHttpService::new(move || Ok(GuestMcp { state: state.clone() }), Default::default(), config)
+}
+
+/// One MCP session over the guest's desktop.
+#[derive(Debug, Clone)]
+pub struct GuestMcp {
+    state: AppState,
+}
+
+fn text(text: impl Into<String>) -> CallToolResponse {
+    CallToolResult::success(vec![ContentBlock::text(text)]).into()
+}
+
+fn tool_error(message: impl Into<String>) -> CallToolResponse {
+    CallToolResult::error(vec![ContentBlock::text(message)]).into()
+}
+
+fn failed(tool: &str, err: &DesktopError) -> CallToolResponse {
+    tool_error(format!("{tool}: {err}"))
+}
+
+impl GuestMcp {
+    async fn call(&self, request: CallToolRequestParams) -> CallToolResponse {
+        let tool = request.name.to_string();
+        let desktop = &self.state.desktop;
+        let timeout = self.state.call_timeout();
+        let screen = match blocking(desktop, "screen", timeout, |d| d.screen()).await {
+            Ok(info) => Some((info.physical_width, info.physical_height)),
+            Err(err) => return failed(&tool, &err),
+        };
+        let call = match mcp_tools::parse(&tool, request.arguments, screen, false) {
+            Ok(call) => call,
+            Err(message) => return tool_error(message),
+        };
+        match call {
+            ToolCall::Screenshot => {
+                let png = blocking(desktop, "screenshot", timeout, |d| {
+                    let frame = d.capture(false)?;
+                    crate::imaging::encode(&frame.image, ImageFormat::Png, 100)
+                        .map_err(|err| DesktopError::Os { op: "screenshot", message: err.to_string() })
+                })
+                .await;
+                match png {
+                    Ok(png) => {
+                        let b64 = base64::engine::general_purpose::STANDARD.encode(png);
+                        CallToolResult::success(vec![ContentBlock::image(b64, "image/png")]).into()
+                    }
+                    Err(err) => failed(&tool, &err),
+                }
+            }
+            ToolCall::AccessibilityTree { win32 } => {
+                let backend = if win32 { A11yBackend::Win32 } else { A11yBackend::Uia };
+                let deadline = self.state.config.a11y_timeout();
+                let xml = blocking(desktop, "accessibility", deadline, move |d| {
+                    let foreground = d.windows()?.iter().find(|w| w.focused).map(|w| w.id);
+                    let tree = d.accessibility(backend, &TreeBudget::WAA, false)?;
+                    Ok(arena_shared::a11y_xml::to_xml(&tree, foreground))
+                })
+                .await;
+                match xml {
+                    Ok(xml) => text(xml),
+                    Err(err) => failed(&tool, &err),
+                }
+            }
+            ToolCall::ListWindows => match blocking(desktop, "windows", timeout, |d| d.windows()).await {
+                Ok(windows) => text(
+                    json!({
+                        "windows": arena_shared::window_list::window_names(&windows),
+                        "foreground": arena_shared::window_list::foreground_title_of(&windows),
+                    })
+                    .to_string(),
+                ),
+                Err(err) => failed(&tool, &err),
+            },
+            ToolCall::Input(Action::Wait { ms }) => {
+                tokio::time::sleep(Duration::from_millis(ms)).await;
+                text(json!({"ok": true}).to_string())
+            }
+            ToolCall::Input(action) => match blocking(desktop, "perform", timeout, move |d| d.perform(&action)).await {
+                Ok(()) => text(json!({"ok": true}).to_string()),
+                Err(err) => failed(&tool, &err),
+            },
+            ToolCall::RunPython(code) => self.run_python(&tool, code, screen).await,
+            ToolCall::GetTask | ToolCall::Done | ToolCall::Fail => tool_error(format!("unknown tool {tool:?}")),
+        }
+    }
+
+    /// `computer` code (when it names the object, with a fresh `computer` for
+    /// the screen) or pyautogui code (with `pyautogui` and `time` imported).
+    async fn run_python(&self, tool: &str, code: String, screen: Option<(u32, u32)>) -> CallToolResponse {
+        let program = match script::parse(&code) {
+            Ok(program) => program,
+            Err(err) => return tool_error(format!("{tool}: SyntaxError: {err}")),
+        };
+        let timeout = self.state.call_timeout();
+        let (w, h) = screen.unwrap_or((0, 0));
+        let ran = blocking(&self.state.desktop, "run_python", timeout, move |d| {
+            let mut host = DesktopHost::new(d, Instant::now() + timeout);
+            let mut computer =
+                ComputerState::for_screen(i32::try_from(w).unwrap_or(i32::MAX), i32::try_from(h).unwrap_or(i32::MAX));
+            let globals = if code.contains("computer.") {
+                Globals { computer: Some(&mut computer), computer_action_delay: 0.0, preimport: &[] }
+            } else {
+                Globals { computer: None, computer_action_delay: 0.0, preimport: &["pyautogui", "time"] }
+            };
+            Ok(script::run(&program, &mut host, globals))
+        })
+        .await;
+        match ran {
+            Ok(Ok(out)) => {
+                text(json!({"stdout": out.stdout, "stderr": out.stderr, "exit_code": out.exit_code}).to_string())
+            }
+            Ok(Err(err)) => tool_error(format!("{tool}: {}{}", err.stderr, err.traceback())),
+            Err(err) => failed(tool, &err),
+        }
+    }
+}
+
+impl ServerHandler for GuestMcp {
+    fn get_info(&self) -> ServerConfig {
+        ServerConfig::new(ServerCapabilities::builder().enable_tools().build())
+            .with_protocol_version(MAX_PROTOCOL)
+            .with_server_info(Implementation::new("arena-guest", env!("CARGO_PKG_VERSION")))
+            .with_instructions(
+                "The desktop of this machine: screenshot, accessibility tree, windows, mouse and keyboard.",
+            )
+    }
+
+    fn supported_protocol_versions(&self) -> Cow<'static, [ProtocolVersion]> {
+        Cow::Borrowed(ProtocolVersion::known_up_to(&MAX_PROTOCOL))
+    }
+
+    async fn list_tools(
+        &self,
+        _request: Option<PaginatedRequestParams>,
+        _context: RequestContext<RoleServer>,
+    ) -> Result<ListToolsResult, ErrorData> {
+        let tools = mcp_tools::tool_list(false)
+            .into_iter()
+            .filter_map(|(name, description, schema)| match schema {
+                Value::Object(schema) => Some(Tool::new(name, description, Arc::new(schema))),
+                _ => None,
+            })
+            .collect();
+        Ok(ListToolsResult::with_all_items(tools))
+    }
+
+    async fn call_tool(
+        &self,
+        request: CallToolRequestParams,
+        _context: RequestContext<RoleServer>,
+    ) -> Result<CallToolResponse, ErrorData> {
+        Ok(self.call(request).await)
+    }
+}

@@ -1,0 +1,295 @@
+//! Agents outside this program, in any language: the step protocol, in which
+//! the harness drives and the agent answers (`--agent exec` over a child
+//! process's stdin/stdout, `--agent http` as POSTs to an agent served elsewhere).
+//!
+//! [`ExternalAgent`] implements [`Agent`] over a [`Transport`]. Per episode it
+//! sends `reset` (with the first observation, which is when the screen size is
+//! known) and then, per step, `observe`; each `act` answer becomes a
+//! [`Prediction`]. A malformed answer, a timeout, an `error` message or a dead
+//! agent process is an [`AgentError::External`]: the episode records the step and
+//! ends as an agent error; the process is replaced before the next episode.
+//!
+//! It is not the MCP endpoint (the agent drives there: `crate::mcp`), nor the
+//! action spaces themselves: code runs through [`crate::agent::exec`] and
+//! `computer_13` goes through [`spaces`].
+//!
+//! # Layout
+//!
+//! - [`protocol`]: the messages and [`protocol::PROTOCOL_VERSION`].
+//! - [`transport`]: [`transport::ProcessPool`] (one process per guest worker,
+//!   its stderr into the log) and [`transport::HttpAgent`].
+//! - [`observe`]: the one adapter from an [`Observation`] to an `observe` message.
+//! - [`spaces`]: answers' actions to [`AgentAction`]s, with the `computer_13` seam.
+
+pub mod observe;
+pub mod protocol;
+pub mod spaces;
+pub mod transport;
+
+use std::time::Duration;
+
+use serde_json::{json, Value};
+
+use crate::agent::{Agent, AgentAction, AgentError, LogValue, Observation, Prediction, StepLog};
+use crate::som::Marks;
+use crate::task::Task;
+
+use protocol::{AgentHello, AgentMessage, Decision, PROTOCOL_VERSION};
+
+
+/// One exchange with an outside agent: a message out, one answer back.
+#[async_trait::async_trait]
+pub trait Transport: Send {
+    /// Sends `message` and answers the agent's reply as JSON.
+    ///
+    /// # Errors
+    ///
+    /// A message naming what went wrong: no answer in time, a dead process, an
+    /// answer that is not one JSON object.
+    async fn call(&mut self, message: &Value) -> Result<Value, String>;
+
+    /// What the agent said in its `hello` (the transport shakes hands when it
+    /// connects, so a process kept between episodes does so once).
+    fn hello(&self) -> &AgentHello;
+
+    /// Whether observations may name files on this machine (`screenshot: path`).
+    fn local(&self) -> bool;
+
+    /// A folder for this episode's screenshot files, for `screenshot: path`.
+    fn files(&self) -> Option<&std::path::Path> {
+        None
+    }
+
+    /// Marks the connection unusable after a protocol error, so that it is not
+    /// reused for another episode.
+    fn poison(&mut self) {}
+
+    /// The transport as `Any`, for a connector to take back its own kind.
+    fn into_any(self: Box<Self>) -> Box<dyn std::any::Any + Send>;
+}
+
+/// The harness's `hello`.
+pub fn hello_message() -> Value {
+    json!({
+        "type": "hello",
+        "protocol": PROTOCOL_VERSION,
+        "harness": format!("arena {}", env!("CARGO_PKG_VERSION")),
+        "action_spaces": protocol::ACTION_SPACES,
+    })
+}
+
+/// Checks the agent's answer to `hello`.
+///
+/// # Errors
+///
+/// A message naming what is wrong (not a `hello`, another protocol version, an unknown action space).
+pub fn check_hello(answer: Value) -> Result<AgentHello, String> {
+    let hello = match parse_message(answer)? {
+        AgentMessage::Hello(hello) => hello,
+        AgentMessage::Error { message } => return Err(format!("the agent refused the handshake: {message}")),
+        other => return Err(format!("expected a hello answer, got {}", kind(&other))),
+    };
+    if hello.protocol != PROTOCOL_VERSION {
+        return Err(format!(
+            "the agent speaks protocol version {}, this harness version {PROTOCOL_VERSION}",
+            hello.protocol
+        ));
+    }
+    spaces::check_space(&hello.action_space)?;
+    Ok(hello)
+}
+
+/// Reads one agent message, naming what was wrong with it.
+fn parse_message(answer: Value) -> Result<AgentMessage, String> {
+    let shown = short(&answer);
+    serde_json::from_value(answer).map_err(|err| format!("malformed message {shown}: {err}"))
+}
+
+fn kind(message: &AgentMessage) -> &'static str {
+    match message {
+        AgentMessage::Hello(_) => "hello",
+        AgentMessage::Ready {} => "ready",
+        AgentMessage::Act(_) => "act",
+        AgentMessage::Error { .. } => "error",
+    }
+}
+
+/// A message cut to a readable length for an error.
+pub(crate) fn short(value: &Value) -> String {
+    let text = value.to_string();
+    if text.chars().count() > 200 {
+        format!("{}...", text.chars().take(200).collect::<String>())
+    } else {
+        text
+    }
+}
+
+/// How an [`ExternalAgent`] reaches its agent: a fresh transport per episode
+/// (a process taken from the pool, or an HTTP client).
+#[async_trait::async_trait]
+pub trait Connector: Send + Sync {
+    /// A transport that has shaken hands.
+    ///
+    /// # Errors
+    ///
+    /// The agent cannot be started or reached, or its handshake is refused.
+    async fn connect(&self) -> Result<Box<dyn Transport>, String>;
+
+    /// Takes back a transport at the end of an episode (a process goes back to the pool).
+    fn release(&self, _transport: Box<dyn Transport>) {}
+
+    /// The agent's label for errors (`exec: CMD`, `http: URL`).
+    fn label(&self) -> String;
+}
+
+/// An outside agent driven by the step protocol.
+pub struct ExternalAgent {
+    name: String,
+    connector: std::sync::Arc<dyn Connector>,
+    transport: Option<Box<dyn Transport>>,
+    /// The task of this episode, sent as `reset` with the first observation.
+    task: Option<Task>,
+    /// Whether `reset` went out this episode.
+    reset_sent: bool,
+    /// Longest wait for one answer.
+    timeout: Duration,
+}
+
+impl ExternalAgent {
+    /// An agent reached through `connector`, waiting at most `timeout` for each answer.
+    pub fn new(name: &str, connector: std::sync::Arc<dyn Connector>, timeout: Duration) -> ExternalAgent {
+        ExternalAgent { name: name.to_owned(), connector, transport: None, task: None, reset_sent: false, timeout }
+    }
+
+    fn error(&self, reason: impl Into<String>) -> AgentError {
+        AgentError::External { agent: self.connector.label(), reason: reason.into() }
+    }
+
+    /// One exchange under the timeout; any failure poisons the transport.
+    async fn exchange(&mut self, message: &Value) -> Result<Value, AgentError> {
+        let timeout = self.timeout;
+        let Some(transport) = self.transport.as_mut() else { return Err(self.error("not connected")) };
+        let answer = match tokio::time::timeout(timeout, transport.call(message)).await {
+            Ok(Ok(answer)) => Ok(answer),
+            Ok(Err(reason)) => Err(reason),
+            Err(_) => Err(format!(
+                "no answer to {} within {} s",
+                message["type"].as_str().unwrap_or("a message"),
+                timeout.as_secs_f64()
+            )),
+        };
+        answer.map_err(|reason| {
+            if let Some(transport) = self.transport.as_mut() {
+                transport.poison();
+            }
+            self.error(reason)
+        })
+    }
+
+    async fn ensure_connected(&mut self) -> Result<(), AgentError> {
+        if self.transport.is_none() {
+            let connect = self.connector.connect();
+            let transport = match tokio::time::timeout(self.timeout, connect).await {
+                Ok(Ok(transport)) => transport,
+                Ok(Err(reason)) => return Err(self.error(reason)),
+                Err(_) => return Err(self.error(format!("no handshake within {} s", self.timeout.as_secs_f64()))),
+            };
+            self.transport = Some(transport);
+        }
+        Ok(())
+    }
+
+    async fn send_reset(&mut self, obs: &Observation) -> Result<(), AgentError> {
+        let Some(task) = self.task.as_ref() else { return Ok(()) };
+        let message = observe::reset_message(task, obs);
+        let answer = self.exchange(&message).await?;
+        match parse_message(answer).map_err(|reason| self.error(reason))? {
+            AgentMessage::Ready {} => Ok(()),
+            AgentMessage::Error { message } => Err(self.error(format!("the agent refused the task: {message}"))),
+            other => Err(self.error(format!("expected a ready answer to reset, got {}", kind(&other)))),
+        }
+    }
+}
+
+impl std::fmt::Debug for ExternalAgent {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("ExternalAgent")
+            .field("agent", &self.connector.label())
+            .field("connected", &self.transport.is_some())
+            .field("timeout", &self.timeout)
+            .finish_non_exhaustive()
+    }
+}
+
+impl Drop for ExternalAgent {
+    fn drop(&mut self) {
+        if let Some(transport) = self.transport.take() {
+            self.connector.release(transport);
+        }
+    }
+}
+
+#[async_trait::async_trait]
+impl Agent for ExternalAgent {
+    fn name(&self) -> &str {
+        &self.name
+    }
+
+    async fn reset(&mut self, task: &Task) {
+        self.task = Some(task.clone());
+        self.reset_sent = false;
+    }
+
+    async fn predict(&mut self, obs: &Observation) -> Result<Prediction, AgentError> {
+        self.ensure_connected().await?;
+        if !self.reset_sent {
+            self.send_reset(obs).await?;
+            self.reset_sent = true;
+        }
+        let (message, marks) = {
+            let Some(transport) = self.transport.as_ref() else { return Err(self.error("not connected")) };
+            observe::observe_message(obs, transport.hello(), transport.local(), transport.files())
+                .map_err(|reason| AgentError::External { agent: self.connector.label(), reason })?
+        };
+        let answer = self.exchange(&message).await?;
+        let act = match parse_message(answer).map_err(|reason| self.error(reason))? {
+            AgentMessage::Act(act) => act,
+            AgentMessage::Error { message } => return Err(self.error(format!("the agent gave up: {message}"))),
+            other => return Err(self.error(format!("expected an act answer to observe, got {}", kind(&other)))),
+        };
+        let default_space = self.transport.as_ref().map(|t| t.hello().action_space.clone()).unwrap_or_default();
+        // An action outside its space is the agent's mistake, not a broken
+        // exchange: the episode ends, and the process serves the next one.
+        prediction(act, &default_space, marks, obs.screen_size()).map_err(|reason| self.error(reason))
+    }
+}
+
+/// An `act` answer as the episode's [`Prediction`]: actions in order, then the
+/// decision; each `record` field becomes a field of the step's trajectory line.
+///
+/// # Errors
+///
+/// An unknown action space, or an action that does not belong to its space.
+pub fn prediction(
+    act: protocol::Act,
+    default_space: &str,
+    marks: Option<Marks>,
+    screen: (u32, u32),
+) -> Result<Prediction, String> {
+    let space = act.action_space.as_deref().unwrap_or(default_space);
+    let mut actions = spaces::to_actions(space, &act.actions, screen)?;
+    match act.decision {
+        Some(Decision::Done) => actions.push(AgentAction::Done),
+        Some(Decision::Fail) => actions.push(AgentAction::Fail),
+        Some(Decision::Wait) => actions.push(AgentAction::Wait),
+        None => {}
+    }
+    let marks = match act.computer_update {
+        Some(update) => Some(Marks { entities: Vec::new(), rects: update.screen_rects(), size: screen }),
+        None => marks,
+    };
+    let mut logs: Vec<StepLog> =
+        act.record.into_iter().map(|(key, value)| StepLog { key, value: LogValue::Inline(value) }).collect();
+    logs.push(StepLog { key: "action_space".into(), value: LogValue::Inline(Value::String(space.to_owned())) });
+    Ok(Prediction { response: act.response, actions, marks, raw_error: None, logs })
+}

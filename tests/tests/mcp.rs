@@ -1,0 +1,282 @@
+//! `arena run --agent mcp` end to end: the real binary serves MCP, a client
+//! written with the official Rust SDK (`rmcp`) plays two stub tasks through the
+//! tools, a bad argument is a tool error on a session that lives on, the tool
+//! list has the documented names, and a request without the token is refused;
+//! and `arena-guest --mcp`, the guest as an MCP server on its own.
+
+#![cfg(unix)]
+
+use std::io::{BufRead, BufReader};
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+use arena_host::results::summary::Summary;
+use arena_test_support::workspace_binary;
+use rmcp::model::{CallToolRequestParams, CallToolResult, ClientConfig, ProtocolVersion};
+use rmcp::service::RunningService;
+use rmcp::transport::streamable_http_client::StreamableHttpClientTransportConfig;
+use rmcp::transport::StreamableHttpClientTransport;
+use rmcp::{RoleClient, ServiceExt};
+use serde_json::{json, Value};
+
+const TOKEN: &str = "mcp-test-token";
+
+fn repo() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
+}
+
+/// Two stub tasks in a task folder of their own.
+fn two_tasks(root: &Path) -> PathBuf {
+    let dir = root.join("tasks/notepad");
+    std::fs::create_dir_all(&dir).expect("task folder");
+    for name in ["stub-notepad-count", "stub-notepad-draft"] {
+        let from = repo().join(format!("tasks/stub/examples/notepad/{name}.json"));
+        std::fs::copy(&from, dir.join(format!("{name}.json"))).expect("copy a stub task");
+    }
+    root.join("tasks")
+}
+
+/// `arena run --agent mcp` on one stub guest; answers the child and its MCP URL.
+pub(crate) fn start_run(tasks: &Path, out: &Path) -> (Child, String) {
+    let exe = workspace_binary("arena-host", "arena").expect("the arena binary");
+    let mut child = Command::new(exe)
+        .args(["run", "--stub-guests", "1", "--pauses", "fast", "--agent", "mcp", "--mcp-listen", "127.0.0.1:0"])
+        .args(["--mcp-token", TOKEN, "--agent-timeout", "60", "--tasks"])
+        .arg(tasks)
+        .arg("--out")
+        .arg(out)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::inherit())
+        .spawn()
+        .expect("arena run starts");
+    let mut lines = BufReader::new(child.stdout.take().expect("stdout")).lines();
+    let deadline = Instant::now() + Duration::from_secs(60);
+    let url = loop {
+        assert!(Instant::now() < deadline, "arena run did not say where MCP is served");
+        let line = lines.next().expect("a line").expect("text");
+        if let Some(url) = line.strip_prefix("MCP endpoint: ") {
+            break url.trim().to_owned();
+        }
+    };
+    std::thread::spawn(move || lines.for_each(drop));
+    (child, url)
+}
+
+async fn connect(url: &str) -> RunningService<RoleClient, ClientConfig> {
+    connect_with(url, TOKEN).await
+}
+
+async fn connect_with(url: &str, token: &str) -> RunningService<RoleClient, ClientConfig> {
+    let transport = StreamableHttpClientTransport::from_config(
+        StreamableHttpClientTransportConfig::with_uri(url).auth_header(token),
+    );
+    ClientConfig::default()
+        .with_protocol_version(ProtocolVersion::V_2025_06_18)
+        .serve(transport)
+        .await
+        .expect("the MCP session starts")
+}
+
+async fn call(client: &RunningService<RoleClient, ClientConfig>, tool: &str, args: Value) -> CallToolResult {
+    let Value::Object(args) = args else { panic!("arguments are an object") };
+    client
+        .call_tool(CallToolRequestParams::new(tool.to_owned()).with_arguments(args))
+        .await
+        .unwrap_or_else(|e| panic!("{tool}: {e}"))
+}
+
+/// The desktop tools, in the order `tools/list` gives them.
+const DESKTOP_TOOLS: [&str; 12] = [
+    "screenshot",
+    "accessibility_tree",
+    "list_windows",
+    "click",
+    "double_click",
+    "move",
+    "drag",
+    "scroll",
+    "type_text",
+    "press_keys",
+    "run_python",
+    "wait",
+];
+
+/// Asserts that `url` refuses an MCP request without the token.
+async fn assert_refused_without_token(url: &str) {
+    let refused = reqwest::Client::new()
+        .post(url)
+        .header("Content-Type", "application/json")
+        .header("Accept", "application/json, text/event-stream")
+        .body(r#"{"jsonrpc":"2.0","id":1,"method":"tools/list"}"#)
+        .send()
+        .await
+        .expect("an answer");
+    assert_eq!(refused.status().as_u16(), 401, "no token, no MCP");
+}
+
+async fn tool_names(client: &RunningService<RoleClient, ClientConfig>) -> Vec<String> {
+    client.list_all_tools().await.expect("tools/list").iter().map(|t| t.name.to_string()).collect()
+}
+
+/// Asserts that a `screenshot` answer is one PNG image.
+fn assert_png(shot: &CallToolResult) {
+    let image = serde_json::to_value(&shot.content[0]).expect("content");
+    assert_eq!((image["type"].as_str(), image["mimeType"].as_str()), (Some("image"), Some("image/png")), "{image}");
+    let png = base64::Engine::decode(&base64::engine::general_purpose::STANDARD, image["data"].as_str().expect("data"))
+        .expect("base64");
+    assert!(png.starts_with(b"\x89PNG"), "a PNG");
+}
+
+fn text_of(result: &CallToolResult) -> String {
+    result
+        .content
+        .iter()
+        .filter_map(|c| serde_json::to_value(c).ok())
+        .filter_map(|c| c["text"].as_str().map(str::to_owned))
+        .collect::<Vec<_>>()
+        .join("\n")
+}
+
+fn json_of(result: &CallToolResult) -> Value {
+    serde_json::from_str(&text_of(result)).unwrap_or_else(|e| panic!("JSON text: {e}: {result:?}"))
+}
+
+fn wait_exit(mut child: Child, within: Duration) -> std::process::ExitStatus {
+    let deadline = Instant::now() + within;
+    loop {
+        if let Some(status) = child.try_wait().expect("wait") {
+            return status;
+        }
+        if Instant::now() > deadline {
+            let _ = child.kill();
+            panic!("arena run did not finish within {within:?}");
+        }
+        std::thread::sleep(Duration::from_millis(50));
+    }
+}
+
+#[tokio::test(flavor = "multi_thread")]
+async fn an_rmcp_client_plays_two_stub_tasks() {
+    let tmp = tempfile::tempdir().expect("tmp");
+    let (tasks, out) = (two_tasks(tmp.path()), tmp.path().join("out"));
+    let (child, url) = start_run(&tasks, &out);
+
+    assert_refused_without_token(&url).await;
+
+    let client = connect(&url).await;
+    let mut expected = vec!["get_task"];
+    expected.extend(DESKTOP_TOOLS);
+    expected.extend(["done", "fail"]);
+    assert_eq!(tool_names(&client).await, expected);
+
+    // An action before any task is a tool error.
+    let early = call(&client, "type_text", json!({"text": "x"})).await;
+    assert_eq!(early.is_error, Some(true), "{early:?}");
+
+    let mut played = Vec::new();
+    loop {
+        let task = json_of(&call(&client, "get_task", json!({})).await);
+        let Some(name) = task["task_id"].as_str().map(str::to_owned) else { break };
+        assert!(task["instruction"].as_str().is_some_and(|s| !s.is_empty()), "{task}");
+        assert!(task["screen_width"].as_u64().is_some_and(|w| w > 0) && task["steps_left"] == json!(15), "{task}");
+
+        assert_png(&call(&client, "screenshot", json!({})).await);
+        let tree = call(&client, "accessibility_tree", json!({"backend": "uia"})).await;
+        assert!(text_of(&tree).starts_with("<desktop"), "{tree:?}");
+        let windows = json_of(&call(&client, "list_windows", json!({})).await);
+        assert!(windows["windows"].as_array().is_some_and(|w| !w.is_empty()), "{windows}");
+
+        // A bad argument is a tool error naming it, and the session goes on.
+        let bad = call(&client, "click", json!({"x": "left", "y": 3})).await;
+        assert_eq!(bad.is_error, Some(true), "{bad:?}");
+        assert!(text_of(&bad).contains("x must be an integer"), "{bad:?}");
+
+        let text = if name.contains("count") || task["instruction"].as_str().unwrap_or("").contains("count") {
+            "3"
+        } else {
+            "This is a draft."
+        };
+        let typed = json_of(&call(&client, "type_text", json!({"text": text})).await);
+        assert_eq!(typed["ok"], json!(true), "{typed}");
+        let saved = json_of(&call(&client, "press_keys", json!({"keys": ["ctrl", "s"]})).await);
+        assert_eq!(saved["steps_left"], json!(13), "{saved}");
+        let ended = json_of(&call(&client, "done", json!({})).await);
+        assert_eq!(ended["episode_ended"], json!(true), "{ended}");
+        assert_eq!(ended["result"]["score"], json!(1.0), "the task is solved: {ended}");
+        played.push(name);
+    }
+    assert_eq!(played.len(), 2, "two tasks played: {played:?}");
+    let _ = client.cancel().await;
+
+    let status = wait_exit(child, Duration::from_secs(60));
+    assert!(status.success(), "arena run: {status:?}");
+    let summary = Summary::from_dir(&out).expect("summary");
+    assert_eq!(summary.tasks.len(), 2);
+    for task in &summary.tasks {
+        assert_eq!((task.status.as_str(), task.score), ("completed", Some(1.0)), "{task:?}");
+        // Each action tool call is a step (reading tools are not).
+        assert_eq!(task.steps, 3, "{task:?}");
+    }
+}
+
+/// A Python with the official MCP SDK: `ARENA_MCP_PYTHON`, else `python3` when
+/// it imports `mcp`; without one, a loud skip (a failure with `ARENA_REQUIRE_MCP_SDK=1`).
+fn python_with_mcp(test: &str) -> Option<String> {
+    let candidate = std::env::var("ARENA_MCP_PYTHON").unwrap_or_else(|_| "python3".to_owned());
+    let ok = Command::new(&candidate).args(["-c", "import mcp, httpx2"]).output().is_ok_and(|o| o.status.success());
+    if ok {
+        return Some(candidate);
+    }
+    assert!(
+        std::env::var("ARENA_REQUIRE_MCP_SDK").as_deref() != Ok("1"),
+        "{test}: no Python with the MCP SDK ({candidate}) and ARENA_REQUIRE_MCP_SDK=1"
+    );
+    println!("SKIPPED: {test}: no Python with the MCP SDK (set ARENA_MCP_PYTHON to one)");
+    None
+}
+
+#[test]
+fn the_python_mcp_example_plays_two_stub_tasks() {
+    let Some(python) = python_with_mcp("the_python_mcp_example_plays_two_stub_tasks") else { return };
+    let tmp = tempfile::tempdir().expect("tmp");
+    let tasks = tmp.path().join("tasks/mixed");
+    std::fs::create_dir_all(&tasks).expect("tasks");
+    for file in ["notepad/stub-notepad-draft.json", "settings/stub-settings-infeasible.json"] {
+        let from = repo().join("tasks/stub/examples").join(file);
+        std::fs::copy(&from, tasks.join(from.file_name().expect("name"))).expect("copy");
+    }
+    let out = tmp.path().join("out");
+    let (child, url) = start_run(&tmp.path().join("tasks"), &out);
+    let played = Command::new(python)
+        .arg(repo().join("examples/mcp_agent.py"))
+        .args([url.as_str(), TOKEN])
+        .output()
+        .expect("the example runs");
+    let said = String::from_utf8_lossy(&played.stdout);
+    assert!(played.status.success(), "{said}\n{}", String::from_utf8_lossy(&played.stderr));
+    assert!(said.contains("stub-notepad-draft: 1.0") && said.contains("stub-settings-infeasible: 1.0"), "{said}");
+    assert!(wait_exit(child, Duration::from_secs(60)).success());
+    let summary = Summary::from_dir(&out).expect("summary");
+    assert!(summary.tasks.iter().all(|t| t.score == Some(1.0)), "{:?}", summary.tasks);
+}
+
+#[tokio::test(flavor = "multi_thread")]
+async fn the_guest_serves_mcp_behind_its_token() {
+    let guest =
+        arena_test_support::Served::guest(&["--mcp", "--token", "guest-secret-token-0123"]).expect("arena-guest --mcp");
+    let url = format!("{}/mcp", guest.url.trim_end_matches('/'));
+
+    assert_refused_without_token(&url).await;
+
+    let client = connect_with(&url, "guest-secret-token-0123").await;
+    assert_eq!(tool_names(&client).await, DESKTOP_TOOLS, "the desktop tools, without the task and decision tools");
+    assert_png(&call(&client, "screenshot", json!({})).await);
+    let typed = call(&client, "type_text", json!({"text": "hello"})).await;
+    assert_ne!(typed.is_error, Some(true), "{typed:?}");
+    let bad = call(&client, "get_task", json!({})).await;
+    assert_eq!(bad.is_error, Some(true), "no task tools on the guest: {bad:?}");
+    let ran = json_of(&call(&client, "run_python", json!({"code": "print(pyautogui.size())"})).await);
+    assert_eq!(ran["exit_code"], json!(0), "{ran}");
+    let _ = client.cancel().await;
+}
