@@ -141,13 +141,16 @@ impl GuestMcp {
         let timeout = self.state.call_timeout();
         let (w, h) = screen.unwrap_or((0, 0));
         let ran = blocking(&self.state.desktop, "run_python", timeout, move |d| {
-            let mut host = DesktopHost::new(d, Instant::now() + timeout);
+            let deadline = Instant::now() + timeout;
+            let mut host = DesktopHost::new(d, deadline);
             let mut computer =
                 ComputerState::for_screen(i32::try_from(w).unwrap_or(i32::MAX), i32::try_from(h).unwrap_or(i32::MAX));
+            // The call's deadline and its cancel flag (set on timeout, a dropped request or shutdown).
+            let stop = script::Stop::new(Some(deadline), crate::desktop::cancel::flag());
             let globals = if code.contains("computer.") {
-                Globals { computer: Some(&mut computer), computer_action_delay: 0.0, preimport: &[] }
+                Globals { computer: Some(&mut computer), computer_action_delay: 0.0, preimport: &[], stop }
             } else {
-                Globals { computer: None, computer_action_delay: 0.0, preimport: &["pyautogui", "time"] }
+                Globals { computer: None, computer_action_delay: 0.0, preimport: &["pyautogui", "time"], stop }
             };
             Ok(script::run(&program, &mut host, globals))
         })

@@ -16,12 +16,16 @@
 //! pixels. With [`Coords::Pixels`] nothing is rewritten.
 
 use arena_shared::action::Action;
+use arena_shared::cmdline::CommandSpec;
+use arena_shared::observation::WindowInfo;
+use arena_shared::registry::RegistryValue;
 use arena_shared::script::ast::{BinOp, Const, Expr, ExprKind, FunctionBody, Program, Stmt, StmtKind};
 use arena_shared::script::host::cursor_after;
 use arena_shared::script::{
-    run, CommandArg, CommandOutput, ErrorKind, Globals, HostError, HostResult, PathKind, RecordingHost, ScriptHost,
-    Stop,
+    run, CommandOutput, ErrorKind, Globals, HostError, HostResult, PathKind, RecordingHost, ScriptHost, Stop,
+    WindowChange,
 };
+use image::RgbaImage;
 use std::time::{Duration, Instant};
 
 use super::{ActionError, ActionSpace, Context, Coords, Step};
@@ -234,16 +238,20 @@ impl ScriptHost for StepHost {
         self.rec.screen_size()
     }
 
-    fn active_window_title(&mut self) -> HostResult<String> {
-        self.rec.active_window_title()
+    fn capture(&mut self) -> HostResult<RgbaImage> {
+        self.rec.capture()
     }
 
-    fn save_screenshot(&mut self, path: &str, region: Option<[i32; 4]>) -> HostResult<()> {
-        self.rec.save_screenshot(path, region)
+    fn observed_screenshot(&mut self) -> HostResult<RgbaImage> {
+        self.rec.observed_screenshot()
     }
 
-    fn env_var(&mut self, name: &str) -> Option<String> {
-        self.rec.env_var(name)
+    fn windows(&mut self) -> HostResult<Vec<WindowInfo>> {
+        self.rec.windows()
+    }
+
+    fn change_window(&mut self, id: u64, change: WindowChange) -> HostResult<()> {
+        self.rec.change_window(id, change)
     }
 
     fn path_kind(&mut self, path: &str) -> Option<PathKind> {
@@ -254,16 +262,20 @@ impl ScriptHost for StepHost {
         self.rec.list_dir(path)
     }
 
-    fn run_command(&mut self, cmd: &CommandArg, shell: bool) -> HostResult<CommandOutput> {
-        self.rec.run_command(cmd, shell)
+    fn write_file(&mut self, path: &str, bytes: Vec<u8>) -> HostResult<()> {
+        self.rec.write_file(path, bytes)
     }
 
-    fn spawn_command(&mut self, cmd: &CommandArg, shell: bool) -> HostResult<u32> {
-        self.rec.spawn_command(cmd, shell)
+    fn run(&mut self, command: &CommandSpec) -> HostResult<CommandOutput> {
+        self.rec.run(command)
     }
 
-    fn os_version(&mut self) -> HostResult<String> {
-        self.rec.os_version()
+    fn launch(&mut self, command: &CommandSpec) -> HostResult<Option<u32>> {
+        self.rec.launch(command)
+    }
+
+    fn registry_read(&mut self, key: &str, value: Option<&str>) -> HostResult<Option<RegistryValue>> {
+        self.rec.registry_read(key, value)
     }
 
     fn clipboard_set_text(&mut self, text: &str) -> HostResult<()> {
@@ -278,23 +290,11 @@ impl ScriptHost for StepHost {
         })
     }
 
-    fn clipboard_set_image_from_screenshot_crop(&mut self, rect: [i32; 4]) -> HostResult<()> {
-        self.rec.clipboard_set_image_from_screenshot_crop(rect)
+    fn clipboard_set_image(&mut self, image: RgbaImage) -> HostResult<()> {
+        self.rec.clipboard_set_image(image)
     }
 
-    fn open_program(&mut self, name: &str) -> HostResult<bool> {
-        self.rec.open_program(name)
-    }
-
-    fn maximize_foreground(&mut self) -> HostResult<()> {
-        self.rec.maximize_foreground()
-    }
-
-    fn window_titles(&mut self) -> HostResult<Vec<String>> {
-        self.rec.window_titles()
-    }
-
-    fn switch_to_window(&mut self, title: &str) -> HostResult<()> {
-        self.rec.switch_to_window(title)
+    fn env_var(&mut self, name: &str) -> Option<String> {
+        self.rec.env_var(name)
     }
 }

@@ -49,8 +49,8 @@ use arena_shared::keys::HeldKeys;
 use arena_shared::observation::{ImageFormat, ScreenshotQuery, WindowInfo, WindowTarget};
 use arena_shared::registry::RegistryValue;
 use arena_shared::script::{
-    parse, run, CommandOutput, ComputerState, Globals, HostError, HostResult, PathKind, ScriptError, ScriptHost,
-    Stop, WindowChange,
+    parse, run, CommandOutput, ComputerState, Globals, HostError, HostResult, PathKind, ScriptError, ScriptHost, Stop,
+    WindowChange,
 };
 
 use super::{AgentAction, AgentError};

@@ -378,7 +378,9 @@ pub fn media_args(answer: &Path, marker: &Path, oem: &Path, iso: &Path) -> Vec<O
 /// quoted for a POSIX shell where needed.
 pub fn shell_line(program: &Path, args: &[OsString]) -> String {
     // A program found on PATH is shown by its name, as the user would type it.
-    let name = program.file_name().filter(|name| qemu::which(&name.to_string_lossy()).as_deref() == Some(program));
+    let name = program
+        .file_name()
+        .filter(|name| arena_shared::search_path::find_program(Path::new(name)).as_deref() == Some(program));
     std::iter::once(name.unwrap_or(program.as_os_str()))
         .chain(args.iter().map(OsString::as_os_str))
         .map(|a| {

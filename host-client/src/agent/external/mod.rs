@@ -36,7 +36,6 @@ use crate::task::Task;
 
 use protocol::{AgentHello, AgentMessage, Decision, PROTOCOL_VERSION};
 
-
 /// One exchange with an outside agent: a message out, one answer back.
 #[async_trait::async_trait]
 pub trait Transport: Send {

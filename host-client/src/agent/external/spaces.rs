@@ -105,14 +105,16 @@ mod tests {
             vec![AgentAction::Computer("computer.keyboard.write('x')".into())]
         );
         assert_eq!(
-            to_actions("typed", &[json!({"type": "type_text", "text": "3"}), json!("WAIT")], (1440, 900)).expect("typed"),
+            to_actions("typed", &[json!({"type": "type_text", "text": "3"}), json!("WAIT")], (1440, 900))
+                .expect("typed"),
             vec![AgentAction::Typed(vec![Action::TypeText { text: "3".into(), interval_ms: None }]), AgentAction::Wait]
         );
     }
 
     #[test]
     fn bad_actions_are_named_by_index_and_space() {
-        let err = to_actions("pyautogui", &[json!("DONE"), json!({"x": 1})], (1440, 900)).expect_err("an object is no code");
+        let err =
+            to_actions("pyautogui", &[json!("DONE"), json!({"x": 1})], (1440, 900)).expect_err("an object is no code");
         assert!(err.starts_with("actions[1] in action space pyautogui: expected a code string"), "{err}");
         let err = to_actions("typed", &[json!({"type": "teleport"})], (1440, 900)).expect_err("unknown typed action");
         assert!(err.contains("actions[0]") && err.contains("teleport"), "{err}");
@@ -122,8 +124,9 @@ mod tests {
 
     #[test]
     fn computer_13_goes_through_the_action_space_parser() {
-        let got = to_actions("computer_13", &[json!({"action_type": "TYPING", "parameters": {"text": "3"}})], (1440, 900))
-            .expect("computer_13");
+        let got =
+            to_actions("computer_13", &[json!({"action_type": "TYPING", "parameters": {"text": "3"}})], (1440, 900))
+                .expect("computer_13");
         assert_eq!(got, vec![AgentAction::Typed(vec![Action::TypeText { text: "3".into(), interval_ms: None }])]);
         let err = to_actions("computer_13", &[json!({"action_type": "TELEPORT"})], (1440, 900)).expect_err("unknown");
         assert!(err.contains("actions[0] in action space computer_13"), "{err}");
