@@ -13,8 +13,11 @@
 //!   asks, until [`RetryPolicy::give_up_after`] has passed. Any other 4xx (a
 //!   bad key, a bad request) fails at once. A model that is still failing
 //!   then is an [`AgentError::Model`], which leaves the task unfinished.
-//! - **A refusal** (`message.refusal` with no content) is an answer: its text
-//!   comes back and the agent treats it as a reply without actions.
+//! - **A refusal** (`message.refusal` with no content) leaves the task
+//!   unfinished by default ([`Refusals::Unfinished`], [`AgentError::Refused`]),
+//!   as upstream's Navi, which reads only `content`, cannot go on without one.
+//!   [`Refusals::Answer`] (`--refusals answer`, recorded in the results) takes its
+//!   text as a reply without actions instead, so the task is scored.
 //!
 //! The retry loop is written here rather than taken from a crate because its
 //! one unusual need, a per-error minimum delay from `Retry-After`, is most of
@@ -102,9 +105,30 @@ impl TokensField {
     }
 }
 
+/// What a refusal (`message.refusal` without content) does.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Refusals {
+    /// The task is left unfinished, as upstream leaves it.
+    #[default]
+    Unfinished,
+    /// The refusal's text is the reply: the step has no action and the task is scored.
+    Answer,
+}
+
+impl Refusals {
+    /// The name recorded in the results (`unfinished`, `answer`).
+    pub fn name(self) -> &'static str {
+        match self {
+            Refusals::Unfinished => "unfinished",
+            Refusals::Answer => "answer",
+        }
+    }
+}
+
 /// A chat-completions endpoint and how to call it.
 #[derive(Debug, Clone)]
 pub struct ModelClient {
+    refusals: Refusals,
     kind: ApiKind,
     endpoint: String,
     key: Option<String>,
@@ -119,6 +143,8 @@ struct Failure {
     transient: bool,
     /// The least the server asked us to wait (`Retry-After`).
     wait_at_least: Option<Duration>,
+    /// The model refused, with this text ([`Refusals::Unfinished`]).
+    refused: Option<String>,
 }
 
 impl ModelClient {
@@ -139,7 +165,22 @@ impl ModelClient {
             .timeout(timeout)
             .build()
             .map_err(|e| AgentError::Config(format!("cannot build the HTTP client: {e}")))?;
-        Ok(ModelClient { kind, endpoint, key, http, retry, clock: std::sync::Arc::new(crate::setup::RealClock) })
+        Ok(ModelClient {
+            refusals: Refusals::default(),
+            kind,
+            endpoint,
+            key,
+            http,
+            retry,
+            clock: std::sync::Arc::new(crate::setup::RealClock),
+        })
+    }
+
+    /// The same client with refusals handled as `refusals` says.
+    #[must_use]
+    pub fn with_refusals(mut self, refusals: Refusals) -> ModelClient {
+        self.refusals = refusals;
+        self
     }
 
     /// The same client with its pauses between tries on `clock` (a test's fake clock).
@@ -160,15 +201,28 @@ impl ModelClient {
     ///
     /// [`AgentError::Model`] naming the last failure when no try succeeded.
     pub async fn complete(&self, body: &Value) -> Result<String, AgentError> {
+        self.complete_counted(body).await.map(|(text, _)| text)
+    }
+
+    /// [`ModelClient::complete`], with the number of tries it took.
+    ///
+    /// # Errors
+    ///
+    /// [`AgentError::Model`] naming the last failure when no try succeeded;
+    /// [`AgentError::Refused`] for a refusal under [`Refusals::Unfinished`].
+    pub async fn complete_counted(&self, body: &Value) -> Result<(String, u32), AgentError> {
         let mut waited = Duration::ZERO;
         let mut delay = self.retry.initial_delay;
         let mut tries = 0u32;
         loop {
             tries += 1;
             let failure = match self.try_once(body).await {
-                Ok(text) => return Ok(text),
+                Ok(text) => return Ok((text, tries)),
                 Err(failure) => failure,
             };
+            if let Some(text) = failure.refused {
+                return Err(AgentError::Refused { endpoint: self.endpoint.clone(), text });
+            }
             let pause = rand::rng().random_range(Duration::ZERO..=delay).max(failure.wait_at_least.unwrap_or_default());
             // Time spent waiting counts against the budget (the tries themselves are
             // bounded by the call timeout), so a fake clock sees the same decisions.
@@ -194,7 +248,7 @@ impl ModelClient {
                 ApiKind::Azure => request.header("api-key", key),
             };
         }
-        let transient = |reason: String| Failure { reason, transient: true, wait_at_least: None };
+        let transient = |reason: String| Failure { reason, transient: true, wait_at_least: None, refused: None };
         let response = request.send().await.map_err(|e| transient(error_chain(&e)))?;
         let status = response.status();
         let wait_at_least = retry_after(response.headers());
@@ -206,14 +260,21 @@ impl ModelClient {
                 reason: format!("HTTP {status}: {snippet}"),
                 transient: matches!(code, 408 | 409 | 429) || status.is_server_error(),
                 wait_at_least,
+                refused: None,
             });
         }
         let value: Value =
             serde_json::from_str(&text).map_err(|e| transient(format!("the answer is not JSON (cut short?): {e}")))?;
+        if self.refusals == Refusals::Unfinished {
+            if let Some(text) = refusal(&value) {
+                return Err(Failure { reason: format!("refused: {text}"), transient: false, wait_at_least: None, refused: Some(text) });
+            }
+        }
         reply_text(&value).ok_or_else(|| Failure {
             reason: "the answer has no choices[0].message.content".into(),
             transient: false,
             wait_at_least: None,
+            refused: None,
         })
     }
 }
@@ -254,6 +315,15 @@ pub(crate) fn error_chain(err: &(dyn std::error::Error + 'static)) -> String {
         source = inner.source();
     }
     text
+}
+
+/// The refusal's text when `choices[0].message` holds a refusal and no content.
+fn refusal(answer: &Value) -> Option<String> {
+    let message = answer.get("choices")?.get(0)?.get("message")?;
+    match message.get("content") {
+        Some(Value::String(_) | Value::Array(_)) => None,
+        _ => message.get("refusal").and_then(Value::as_str).map(str::to_owned),
+    }
 }
 
 /// `choices[0].message.content`, as a string or as a list of text parts; a

@@ -21,7 +21,7 @@ use anyhow::{bail, Context};
 use clap::{Args, ValueEnum};
 
 use super::{emit, stub, Connection};
-use crate::agent::llm::ApiKind;
+use crate::agent::llm::{ApiKind, Refusals};
 use crate::agent::navi::{NaviAgent, NaviConfig, NaviStyle};
 use crate::agent::replay::{ReplayAgent, ReplaySource};
 use crate::agent::scripted::{PlanSource, ScriptedAgent};
@@ -59,6 +59,18 @@ pub struct RunArgs {
     pub difficulty: Difficulty,
     #[arg(long, value_enum, default_value_t = AgentKind::Scripted)]
     pub agent: AgentKind,
+    /// Navi agent: reproduce one row of the WAA paper's Navi table (upstream's
+    /// README, "Available Configurations"): that row's Set-of-Marks origin and
+    /// accessibility backend, upstream's model parameters, step cap and pauses, and
+    /// upstream's prompts from --waa-root (required). Recorded in the results.
+    /// The model is still --model. See docs/compatibility.md, "Presets".
+    #[arg(
+        long,
+        value_enum,
+        value_name = "PRESET",
+        conflicts_with_all = ["som_origin", "a11y_backend", "temperature", "max_tokens", "navi_style", "max_steps", "sleep_after", "fast", "pauses", "no_a11y"]
+    )]
+    pub preset: Option<Preset>,
     /// Scripted agent: one plan file for every task, or a folder of `<task name>.json`
     /// plans [default: `<tasks>/plans` when it exists, else each task's `plan` key].
     #[arg(long, value_name = "PATH")]
@@ -92,6 +104,15 @@ pub struct RunArgs {
     /// `mixed-omni` (the tree, then what the other source adds). See docs/som.md.
     #[arg(long, default_value = "a11y", value_parser = parse_som_origin, value_name = "ORIGIN")]
     pub som_origin: SomOrigin,
+    /// Which accessibility tree is read, upstream's --a11y_backend: `uia` (UI
+    /// Automation, upstream's default) or `win32` (window enumeration, faster).
+    #[arg(long, value_enum, default_value_t = A11yBackendArg::Uia)]
+    pub a11y_backend: A11yBackendArg,
+    /// Navi agent: what a model refusal (`message.refusal` without content) does:
+    /// `unfinished` (upstream: the task is left without a result) or `answer` (its
+    /// text is a reply without actions and the task is scored). Recorded in the results.
+    #[arg(long, value_enum, default_value_t = RefusalsArg::Unfinished)]
+    pub refusals: RefusalsArg,
     /// Navi agent: base URL of the Grounding DINO service (`oss`, `mixed-oss`); see docs/som.md.
     #[arg(long, env = "ARENA_DETECTOR_URL", value_name = "URL")]
     pub detector_url: Option<String>,
@@ -200,6 +221,147 @@ pub struct RunArgs {
     pub vm: super::vm::VmArgs,
 }
 
+/// `--a11y-backend`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum A11yBackendArg {
+    Uia,
+    Win32,
+}
+
+/// `--refusals`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum RefusalsArg {
+    Unfinished,
+    Answer,
+}
+
+/// `--preset`: the rows of the WAA paper's Navi comparison that this project
+/// can run, as upstream's README lists them ("Available Configurations",
+/// microsoft/WindowsAgentArena at 6d39ed88, whose `run-local.sh` takes
+/// `--som-origin` and `--a11y-backend` and passes them to `run.py`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum Preset {
+    /// `--som-origin mixed-omni --a11y-backend uia`: OmniParser with the UIA tree, the paper's best row.
+    PaperMixedOmni,
+    /// `--som-origin omni`: OmniParser alone.
+    PaperOmni,
+    /// `--som-origin oss`: webparse, Grounding DINO and Tesseract OCR, the baseline.
+    PaperOss,
+    /// `--som-origin a11y --a11y-backend uia`: the UIA tree.
+    PaperA11yUia,
+    /// `--som-origin a11y --a11y-backend win32`: the win32 tree, the fastest.
+    PaperA11yWin32,
+    /// `--som-origin mixed-oss --a11y-backend uia`: the `oss` sources with the UIA tree.
+    PaperMixedOss,
+}
+
+/// Upstream's default run, the reference a non-preset Navi run is compared with:
+/// `run.py` and `start_client.sh` at 6d39ed88 (`--som_origin oss`, `--a11y_backend uia`,
+/// `--temperature 1.0`, `--max_steps 15`, `--sleep_after_execution 3`), Navi's
+/// `max_tokens` of 4096 (its planner's request), and the prompts of the checkout.
+pub mod upstream_default {
+    use super::SomOrigin;
+    pub const SOM_ORIGIN: SomOrigin = SomOrigin::Oss;
+    pub const A11Y_BACKEND: &str = "uia";
+    pub const TEMPERATURE: f64 = 1.0;
+    pub const MAX_TOKENS: u32 = 4096;
+    pub const MAX_STEPS: u32 = crate::episode::DEFAULT_MAX_STEPS;
+    pub const SLEEP_AFTER_SECONDS: f64 = 3.0;
+}
+
+impl Preset {
+    /// `paper-mixed-omni`, ...
+    pub fn name(self) -> &'static str {
+        match self {
+            Preset::PaperMixedOmni => "paper-mixed-omni",
+            Preset::PaperOmni => "paper-omni",
+            Preset::PaperOss => "paper-oss",
+            Preset::PaperA11yUia => "paper-a11y-uia",
+            Preset::PaperA11yWin32 => "paper-a11y-win32",
+            Preset::PaperMixedOss => "paper-mixed-oss",
+        }
+    }
+
+    /// The row's Set-of-Marks origin and accessibility backend.
+    pub fn row(self) -> (SomOrigin, A11yBackendArg) {
+        match self {
+            Preset::PaperMixedOmni => (SomOrigin::MixedOmni, A11yBackendArg::Uia),
+            // Upstream's default backend is uia; the row does not change it.
+            Preset::PaperOmni => (SomOrigin::Omni, A11yBackendArg::Uia),
+            Preset::PaperOss => (SomOrigin::Oss, A11yBackendArg::Uia),
+            Preset::PaperA11yUia => (SomOrigin::A11y, A11yBackendArg::Uia),
+            Preset::PaperA11yWin32 => (SomOrigin::A11y, A11yBackendArg::Win32),
+            Preset::PaperMixedOss => (SomOrigin::MixedOss, A11yBackendArg::Uia),
+        }
+    }
+
+    /// `args` with the row's settings and upstream's model parameters, step cap and pauses.
+    ///
+    /// # Errors
+    ///
+    /// Without --waa-root (a reproduction sends upstream's own prompts), or with an agent other than Navi.
+    pub fn apply(self, args: &RunArgs) -> anyhow::Result<RunArgs> {
+        if args.agent != AgentKind::Navi {
+            bail!("--preset {} is a Navi configuration: give --agent navi", self.name());
+        }
+        if args.waa_root.is_none() {
+            bail!(
+                "--preset {} reproduces upstream's run and needs upstream's prompts: give --waa-root (or ARENA_WAA_ROOT), a WindowsAgentArena checkout",
+                self.name()
+            );
+        }
+        let (som_origin, a11y_backend) = self.row();
+        Ok(RunArgs {
+            som_origin,
+            a11y_backend,
+            temperature: upstream_default::TEMPERATURE,
+            max_tokens: upstream_default::MAX_TOKENS,
+            navi_style: NaviStyleArg::Waa,
+            max_steps: upstream_default::MAX_STEPS,
+            sleep_after: None,
+            fast: false,
+            pauses: Some(PausesArg::Upstream),
+            no_a11y: false,
+            ..args.clone()
+        })
+    }
+}
+
+/// What a Navi run that is no preset changes from upstream's default run, one
+/// `name=ours (upstream theirs)` item each; empty when nothing differs.
+pub fn differences_from_upstream(args: &RunArgs, fast: bool) -> Vec<String> {
+    let mut out = Vec::new();
+    let mut differs = |name: &str, ours: String, theirs: String| {
+        if ours != theirs {
+            out.push(format!("{name}={ours} (upstream {theirs})"));
+        }
+    };
+    differs("som_origin", args.som_origin.name().to_owned(), upstream_default::SOM_ORIGIN.name().to_owned());
+    let backend = if args.a11y_backend == A11yBackendArg::Win32 { "win32" } else { "uia" };
+    differs("a11y_backend", backend.to_owned(), upstream_default::A11Y_BACKEND.to_owned());
+    let prompt = match (args.navi_style, &args.waa_root) {
+        (NaviStyleArg::Arena, _) => "arena (this project's prompt and reply reader)",
+        (NaviStyleArg::Waa, None) => "ours (no --waa-root: our words in upstream's layout)",
+        (NaviStyleArg::Waa, Some(_)) => "upstream's",
+    };
+    differs("prompt", prompt.to_owned(), "upstream's".to_owned());
+    differs("temperature", format!("{}", args.temperature), format!("{}", upstream_default::TEMPERATURE));
+    differs("max_tokens", args.max_tokens.to_string(), upstream_default::MAX_TOKENS.to_string());
+    differs("max_steps", args.max_steps.to_string(), upstream_default::MAX_STEPS.to_string());
+    let pauses = if fast { "fast".to_owned() } else { "upstream".to_owned() };
+    differs("pauses", pauses, "upstream".to_owned());
+    if let Some(secs) = args.sleep_after {
+        differs("sleep_after", format!("{secs}"), format!("{}", upstream_default::SLEEP_AFTER_SECONDS));
+    }
+    if args.no_a11y {
+        differs("a11y", "off".to_owned(), "on".to_owned());
+    }
+    if args.refusals == RefusalsArg::Answer {
+        differs("refusals", "answer".to_owned(), "unfinished".to_owned());
+    }
+    out
+}
+
 /// `--navi-style`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
 pub enum NaviStyleArg {
@@ -279,6 +441,11 @@ fn guests_from_file(path: &Path) -> anyhow::Result<Vec<String>> {
         .collect())
 }
 
+/// Where the behaviour constants a run uses come from, whatever --waa-root says:
+/// this project's code, written from upstream at 6d39ed88 (docs/compatibility.md,
+/// "Provenance").
+pub const BEHAVIOUR_CONSTANTS: &str = "arena (compiled in, from upstream 6d39ed88; not read from --waa-root)";
+
 /// The agent a run plays with.
 pub(crate) struct ChosenAgent {
     factory: AgentFactory,
@@ -342,12 +509,20 @@ pub(crate) fn agent_factory(args: &RunArgs) -> anyhow::Result<ChosenAgent> {
             config.som.origin = args.som_origin;
             config.som.detector_url = args.detector_url.clone();
             config.som.omniparser_url = args.omniparser_url.clone();
+            config.refusals = match args.refusals {
+                RefusalsArg::Unfinished => Refusals::Unfinished,
+                RefusalsArg::Answer => Refusals::Answer,
+            };
             let options = vec![
                 ("navi_style".to_owned(), style.to_owned()),
                 ("som_origin".to_owned(), args.som_origin.name().to_owned()),
                 ("prompt".to_owned(), prompt),
+                // Only the prompt texts follow --waa-root; every behaviour constant
+                // (pauses, step cap, budgets, image sizes, colours) is compiled in.
+                ("behaviour_constants".to_owned(), BEHAVIOUR_CONSTANTS.to_owned()),
                 ("temperature".to_owned(), format!("{}", args.temperature)),
                 ("max_tokens".to_owned(), args.max_tokens.to_string()),
+                ("refusals".to_owned(), config.refusals.name().to_owned()),
             ];
             config.api = match args.llm_api {
                 LlmApi::Auto => None,
@@ -376,6 +551,10 @@ pub(crate) fn agent_factory(args: &RunArgs) -> anyhow::Result<ChosenAgent> {
 ///
 /// Unusable arguments, tasks that do not load, no guest, or results that cannot be written.
 pub async fn run(conn: &Connection, args: RunArgs) -> anyhow::Result<ExitCode> {
+    let args = match args.preset {
+        Some(preset) => preset.apply(&args)?,
+        None => args,
+    };
     let tasks = load_tasks(&args.tasks, args.difficulty)?;
     let ChosenAgent { factory: agents, label: agent_label, model, options: agent_options } = agent_factory(&args)?;
 
@@ -427,6 +606,11 @@ pub async fn run(conn: &Connection, args: RunArgs) -> anyhow::Result<ExitCode> {
     let mut config = if fast { EpisodeConfig::instant(cache) } else { EpisodeConfig::upstream(cache) };
     config.max_steps = args.max_steps;
     config.a11y = !args.no_a11y;
+    if args.a11y_backend == A11yBackendArg::Win32 {
+        config.a11y_query.backend = arena_shared::observation::A11yBackend::Win32;
+        config.options.insert("a11y_backend".into(), "win32".into());
+    }
+    config.options.extend(reproduction(&args, fast)?);
     config.model = model.clone();
     if let Some(secs) = args.sleep_after {
         config.sleep_after_action =
@@ -523,6 +707,23 @@ pub async fn run(conn: &Connection, args: RunArgs) -> anyhow::Result<ExitCode> {
         return Ok(ExitCode::from(if stop.is_cancelled() { 130 } else { 2 }));
     }
     Ok(ExitCode::SUCCESS)
+}
+
+/// How the run stands to upstream's, as named options: `preset` for a preset,
+/// else, for Navi, `differs_from_upstream` listing what differs, announced in one
+/// line now (and shown by the report, which lists the options).
+fn reproduction(args: &RunArgs, fast: bool) -> anyhow::Result<Vec<(String, String)>> {
+    if let Some(preset) = args.preset {
+        emit(&format!("preset {}: reproducing that row of upstream's Navi table\n", preset.name()))?;
+        return Ok(vec![("preset".into(), preset.name().into())]);
+    }
+    if args.agent != AgentKind::Navi {
+        return Ok(Vec::new());
+    }
+    let differences = differences_from_upstream(args, fast);
+    let text = if differences.is_empty() { "none".to_owned() } else { differences.join("; ") };
+    emit(&format!("not a reproduction: differs from upstream's default Navi run in {text}\n"))?;
+    Ok(vec![("differs_from_upstream".into(), text)])
 }
 
 /// The first Ctrl-C cancels `stop`: no new task starts and running episodes end
