@@ -341,7 +341,7 @@ async fn the_detector_client_speaks_the_documented_shape_and_post_processes_as_u
     let shot = frame(1000, 600);
     let http = reqwest::Client::new();
     let params = detector::DetectorParams::default();
-    let entities = detector::detect_all(&http, &format!("{url}/"), &shot, (1000, 600), &params).await.expect("detect");
+    let entities = detector::detect_all(&http, &format!("{url}/"), &shot.encoded, (1000, 600), &params).await.expect("detect");
     let got: Vec<(&str, Rect, Option<&str>)> =
         entities.iter().map(|e| (e.kind.as_str(), e.rect, e.text.as_deref())).collect();
     assert_eq!(
@@ -360,7 +360,7 @@ async fn the_detector_client_speaks_the_documented_shape_and_post_processes_as_u
         (Some(0.03), Some(0.4))
     );
     let image = base64::engine::general_purpose::STANDARD.decode(requests[0]["image"].as_str().unwrap()).unwrap();
-    assert_eq!(image, shot);
+    assert_eq!(image, *shot.encoded);
 }
 
 #[tokio::test]
@@ -402,7 +402,7 @@ async fn the_omniparser_client_speaks_its_servers_shape() {
     let seen = Arc::new(Seen::default());
     let url = fake_omniparser(Arc::clone(&seen)).await;
     let shot = frame(1000, 600);
-    let entities = omni::parse(&reqwest::Client::new(), &url, &shot, (1000, 600)).await.expect("parse");
+    let entities = omni::parse(&reqwest::Client::new(), &url, &shot.encoded, (1000, 600)).await.expect("parse");
     let got: Vec<(&str, Rect, Option<&str>)> =
         entities.iter().map(|e| (e.kind.as_str(), e.rect, e.text.as_deref())).collect();
     assert_eq!(
@@ -416,7 +416,7 @@ async fn the_omniparser_client_speaks_its_servers_shape() {
     );
     let body = seen.0.lock().unwrap()[0].clone();
     let image = base64::engine::general_purpose::STANDARD.decode(body["base64_image"].as_str().unwrap()).unwrap();
-    assert_eq!(image, shot);
+    assert_eq!(image, *shot.encoded);
 }
 
 // ---- the origins end to end ----
