@@ -788,7 +788,7 @@ mod tests {
             clock: clock.clone(),
             ..EpisodeConfig::upstream(cache)
         };
-        let (result, out, _tmp) = play_with(&task("exact_match"), script, false, upstream).await;
+        let (result, out, _tmp) = play_with(&task("exact_match"), script, false, upstream, None).await;
         assert_eq!(result.status, EpisodeStatus::Completed, "{result:?}");
         let s = Duration::from_secs;
         assert_eq!(
@@ -845,15 +845,17 @@ mod tests {
         stop_guest: bool,
     ) -> (EpisodeResult, TaskDir, tempfile::TempDir) {
         let instant = |cache| EpisodeConfig { max_steps: 4, ..EpisodeConfig::instant(cache) };
-        play_with(task, script, stop_guest, instant).await
+        play_with(task, script, stop_guest, instant, None).await
     }
 
-    /// [`play`] with the configuration `configure` makes from the download cache.
+    /// [`play`] with the configuration `configure` makes from the download cache,
+    /// into the task folder `out` (default: `out` in the answered temporary folder).
     async fn play_with(
         task: &Task,
         script: Vec<Option<Result<Prediction, AgentError>>>,
         stop_guest: bool,
         configure: impl FnOnce(DownloadCache) -> EpisodeConfig,
+        out: Option<TaskDir>,
     ) -> (EpisodeResult, TaskDir, tempfile::TempDir) {
         let stub = start(&StubArgs::default(), None).await.unwrap();
         let client =
@@ -868,7 +870,7 @@ mod tests {
         } else {
             Some(stub)
         };
-        let out = TaskDir::new(tmp.path().join("out"));
+        let out = out.unwrap_or_else(|| TaskDir::new(tmp.path().join("out")));
         let result = run_episode(&client, task, &mut agent, &config, &out).await;
         if let Some(stub) = keep {
             stub.stop().await.unwrap();
@@ -988,6 +990,70 @@ mod tests {
         );
         assert_eq!(result.last_action, "done");
         assert_eq!(std::fs::read_to_string(out.path().join(RESULT_FILE)).unwrap(), "1.0\n");
+        // The retries are in the step's line of traj.jsonl.
+        let text = std::fs::read_to_string(out.path().join(crate::results::TRAJ_FILE)).unwrap();
+        let line: Value = serde_json::from_str(text.lines().nth(1).unwrap()).unwrap();
+        assert_eq!(line["timings"]["predict_retries"], 2, "{line}");
+    }
+
+    #[tokio::test]
+    async fn every_step_line_times_each_part_of_the_observation_and_the_prediction() {
+        let (result, out, _tmp) = play(&task("exact_match"), vec![says(vec![AgentAction::Done])], false).await;
+        assert_eq!(result.status, EpisodeStatus::Completed, "{result:?}");
+        let text = std::fs::read_to_string(out.path().join(crate::results::TRAJ_FILE)).unwrap();
+        let line: Value = serde_json::from_str(text.lines().nth(1).unwrap()).unwrap();
+        let timings = &line["timings"];
+        for part in ["screenshot_ms", "decode_ms", "tree_ms", "windows_ms", "clipboard_ms", "total_ms"] {
+            assert!(timings["observe"][part].is_u64(), "{part} missing: {timings}");
+        }
+        for part in ["observe_ms", "predict_ms", "act_ms", "pause_ms"] {
+            assert!(timings[part].is_u64(), "{part} missing: {timings}");
+        }
+        assert!(timings["observe"].get("dom_ms").is_none(), "no DOM read for an agent that wants none");
+        assert_eq!(timings["observe_ms"], timings["observe"]["total_ms"]);
+        // The fake agent has no model: its parts are absent, not zero.
+        assert_eq!(timings["predict"], serde_json::json!({}));
+        // The episode's record copies them.
+        assert_eq!(serde_json::to_value(&result.timings[0]).unwrap(), *timings);
+    }
+
+    #[tokio::test]
+    async fn the_report_tells_environment_failures_from_the_agents() {
+        use crate::results::summary::Summary;
+        let root = tempfile::tempdir().unwrap();
+        let named = |name: &str| {
+            let text = r#"{"id": "t", "instruction": "do it", "config": [{"type": "launch", "parameters": {"command": "notepad"}}],
+                "evaluator": {"func": "exact_match", "result": {"type": "vm_active_window_title"}, "expected": {"type": "rule", "rules": {"expected": "Untitled - Notepad"}}}}"#;
+            Task::parse(text, &PathBuf::from(format!("/tasks/notepad/{name}.json"))).unwrap()
+        };
+        let at = |name: &str| Some(TaskDir::new(root.path().join("navi/a11y_tree/m/0/notepad").join(name)));
+        let instant = |cache| EpisodeConfig { max_steps: 4, ..EpisodeConfig::instant(cache) };
+        // A guest that dies mid-run.
+        let script = vec![says(vec![AgentAction::Wait]), None];
+        let (dies, _, _t1) = play_with(&named("guest-dies"), script, true, instant, at("guest-dies")).await;
+        // A model endpoint that stays down.
+        let (down, _, _t2) =
+            play_with(&named("model-down"), vec![model_down(), model_down(), model_down()], false, instant, at("model-down")).await;
+        // An agent that gives up on a feasible task.
+        let (gives_up, _, _t3) =
+            play_with(&named("gives-up"), vec![says(vec![AgentAction::Fail])], false, instant, at("gives-up")).await;
+        // And one that solves it.
+        let (solves, _, _t4) =
+            play_with(&named("solves"), vec![says(vec![AgentAction::Done])], false, instant, at("solves")).await;
+        let blames: Vec<&str> = [&dies, &down, &gives_up, &solves].iter().map(|r| r.blame().name()).collect();
+        assert_eq!(blames, ["guest", "model", "agent", "passed"]);
+
+        let summary = Summary::from_dir(root.path()).unwrap();
+        let by_name = |n: &str| summary.tasks.iter().find(|t| t.name == n).unwrap();
+        assert_eq!((by_name("guest-dies").failed_by.as_str(), by_name("guest-dies").blame.as_str()), ("environment", "guest"));
+        assert_eq!((by_name("model-down").failed_by.as_str(), by_name("model-down").blame.as_str()), ("environment", "model"));
+        assert_eq!(by_name("gives-up").failed_by, "agent");
+        assert_eq!(by_name("solves").failed_by, "passed");
+        assert_eq!(summary.failures(), (1, 2));
+        let md = summary.markdown();
+        assert!(md.contains("Failures: 1 the agent's, 2 the environment's (guest 1, model 1)."), "{md}");
+        assert!(md.contains("| environment (guest) |") && md.contains("| environment (model) |"), "{md}");
+        assert!(md.contains("| notepad | gives-up | 0.0 | completed | agent |"), "{md}");
     }
 
     #[tokio::test]
