@@ -328,12 +328,12 @@ impl Preset {
 }
 
 /// What a Navi run that is no preset changes from upstream's default run, one
-/// `name=ours (upstream theirs)` item each; empty when nothing differs.
+/// `name=ours (upstream: theirs)` item each; empty when nothing differs.
 pub fn differences_from_upstream(args: &RunArgs, fast: bool) -> Vec<String> {
     let mut out = Vec::new();
     let mut differs = |name: &str, ours: String, theirs: String| {
         if ours != theirs {
-            out.push(format!("{name}={ours} (upstream {theirs})"));
+            out.push(format!("{name}={ours} (upstream: {theirs})"));
         }
     };
     differs("som_origin", args.som_origin.name().to_owned(), upstream_default::SOM_ORIGIN.name().to_owned());
@@ -341,15 +341,16 @@ pub fn differences_from_upstream(args: &RunArgs, fast: bool) -> Vec<String> {
     differs("a11y_backend", backend.to_owned(), upstream_default::A11Y_BACKEND.to_owned());
     let prompt = match (args.navi_style, &args.waa_root) {
         (NaviStyleArg::Arena, _) => "arena (this project's prompt and reply reader)",
-        (NaviStyleArg::Waa, None) => "ours (no --waa-root: our words in upstream's layout)",
-        (NaviStyleArg::Waa, Some(_)) => "upstream's",
+        (NaviStyleArg::Waa, None) => "ours (no --waa-root)",
+        (NaviStyleArg::Waa, Some(_)) => "the checkout's",
     };
-    differs("prompt", prompt.to_owned(), "upstream's".to_owned());
+    differs("prompt", prompt.to_owned(), "the checkout's".to_owned());
     differs("temperature", format!("{}", args.temperature), format!("{}", upstream_default::TEMPERATURE));
     differs("max_tokens", args.max_tokens.to_string(), upstream_default::MAX_TOKENS.to_string());
     differs("max_steps", args.max_steps.to_string(), upstream_default::MAX_STEPS.to_string());
-    let pauses = if fast { "fast".to_owned() } else { "upstream".to_owned() };
-    differs("pauses", pauses, "upstream".to_owned());
+    let upstream_pauses = "5 s after the reset and the setup, 3 s after each action";
+    let pauses = if fast { "fast (none)" } else { upstream_pauses };
+    differs("pauses", pauses.to_owned(), upstream_pauses.to_owned());
     if let Some(secs) = args.sleep_after {
         differs("sleep_after", format!("{secs}"), format!("{}", upstream_default::SLEEP_AFTER_SECONDS));
     }
@@ -793,4 +794,89 @@ pub fn report(args: &ReportArgs) -> anyhow::Result<ExitCode> {
     emit(&summary.markdown())?;
     emit(&format!("\nreport: {}\n", path.display()))?;
     Ok(ExitCode::SUCCESS)
+}
+
+#[cfg(test)]
+mod tests {
+    use clap::Parser;
+
+    use super::*;
+
+    #[derive(Parser)]
+    struct Cli {
+        #[command(flatten)]
+        run: RunArgs,
+    }
+
+    fn parse(args: &[&str]) -> Result<RunArgs, clap::Error> {
+        Cli::try_parse_from(["arena", "--tasks", "t"].iter().chain(args)).map(|c| c.run)
+    }
+
+    const NAVI: [&str; 6] = ["--agent", "navi", "--llm-url", "http://127.0.0.1:9/v1", "--model", "m"];
+
+    #[test]
+    fn each_preset_sets_its_rows_origin_and_backend_and_upstreams_parameters_and_pauses() {
+        let rows = [
+            ("paper-mixed-omni", SomOrigin::MixedOmni, A11yBackendArg::Uia),
+            ("paper-omni", SomOrigin::Omni, A11yBackendArg::Uia),
+            ("paper-oss", SomOrigin::Oss, A11yBackendArg::Uia),
+            ("paper-a11y-uia", SomOrigin::A11y, A11yBackendArg::Uia),
+            ("paper-a11y-win32", SomOrigin::A11y, A11yBackendArg::Win32),
+            ("paper-mixed-oss", SomOrigin::MixedOss, A11yBackendArg::Uia),
+        ];
+        for (name, origin, backend) in rows {
+            let mut args = NAVI.to_vec();
+            args.extend(["--preset", name, "--waa-root", "/waa", "--stub-guests", "1"]);
+            let parsed = parse(&args).unwrap();
+            let preset = parsed.preset.expect("a preset");
+            assert_eq!(preset.name(), name);
+            let applied = preset.apply(&parsed).unwrap();
+            assert_eq!((applied.som_origin, applied.a11y_backend), (origin, backend), "{name}");
+            assert_eq!((applied.temperature, applied.max_tokens, applied.max_steps), (1.0, 4096, 15), "{name}");
+            assert_eq!(applied.navi_style, NaviStyleArg::Waa, "{name}");
+            // Upstream's pauses even against stub guests, which would otherwise run fast.
+            assert_eq!(applied.pauses, Some(PausesArg::Upstream), "{name}");
+            // Only the prompt source and the refusal rule could still differ; neither does.
+            let differences = differences_from_upstream(&applied, false);
+            let allowed = ["som_origin=", "a11y_backend="];
+            assert!(differences.iter().all(|d| allowed.iter().any(|a| d.starts_with(a))), "{name}: {differences:?}");
+
+            // A preset needs the checkout's prompts and the Navi agent.
+            let without_root: Vec<&str> = NAVI.iter().copied().chain(["--preset", name]).collect();
+            let err = preset.apply(&parse(&without_root).unwrap()).unwrap_err().to_string();
+            assert!(err.contains("--waa-root") && err.contains(name), "{err}");
+            let scripted = parse(&["--preset", name, "--waa-root", "/waa"]).unwrap();
+            assert!(preset.apply(&scripted).unwrap_err().to_string().contains("--agent navi"));
+        }
+    }
+
+    #[test]
+    fn a_preset_refuses_settings_that_would_change_its_row() {
+        for extra in [["--som-origin", "oss"], ["--temperature", "0.5"], ["--max-steps", "30"], ["--pauses", "fast"]] {
+            let mut args = NAVI.to_vec();
+            args.extend(["--preset", "paper-oss", "--waa-root", "/waa"]);
+            args.extend(extra);
+            let err = parse(&args).err().unwrap_or_else(|| panic!("{extra:?} accepted"));
+            assert_eq!(err.kind(), clap::error::ErrorKind::ArgumentConflict, "{extra:?}");
+        }
+    }
+
+    #[test]
+    fn a_default_navi_run_names_every_difference_from_upstreams_default_run() {
+        let args = parse(&NAVI).unwrap();
+        assert_eq!(
+            differences_from_upstream(&args, true),
+            [
+                "som_origin=a11y (upstream: oss)",
+                "prompt=ours (no --waa-root) (upstream: the checkout's)",
+                "pauses=fast (none) (upstream: 5 s after the reset and the setup, 3 s after each action)",
+            ]
+        );
+        let mut close = NAVI.to_vec();
+        close.extend(["--som-origin", "oss", "--waa-root", "/waa", "--refusals", "answer", "--a11y-backend", "win32"]);
+        assert_eq!(
+            differences_from_upstream(&parse(&close).unwrap(), false),
+            ["a11y_backend=win32 (upstream: uia)", "refusals=answer (upstream: unfinished)"]
+        );
+    }
 }
