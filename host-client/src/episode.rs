@@ -707,10 +707,10 @@ mod tests {
     use super::*;
     use crate::agent::observe::fallback_reason;
     use crate::cli::stub::{start, RunningStub, StubArgs};
-    use crate::error::ClientError;
-    use arena_shared::observation::ImageFormat;
     use crate::client::ClientConfig;
+    use crate::error::ClientError;
     use crate::results::RESULT_FILE;
+    use arena_shared::observation::ImageFormat;
 
     /// Answers from a script of results; a `None` entry stops the guest first.
     struct Fake {
@@ -1032,8 +1032,14 @@ mod tests {
         let script = vec![says(vec![AgentAction::Wait]), None];
         let (dies, _, _t1) = play_with(&named("guest-dies"), script, true, instant, at("guest-dies")).await;
         // A model endpoint that stays down.
-        let (down, _, _t2) =
-            play_with(&named("model-down"), vec![model_down(), model_down(), model_down()], false, instant, at("model-down")).await;
+        let (down, _, _t2) = play_with(
+            &named("model-down"),
+            vec![model_down(), model_down(), model_down()],
+            false,
+            instant,
+            at("model-down"),
+        )
+        .await;
         // An agent that gives up on a feasible task.
         let (gives_up, _, _t3) =
             play_with(&named("gives-up"), vec![says(vec![AgentAction::Fail])], false, instant, at("gives-up")).await;
@@ -1045,8 +1051,14 @@ mod tests {
 
         let summary = Summary::from_dir(root.path()).unwrap();
         let by_name = |n: &str| summary.tasks.iter().find(|t| t.name == n).unwrap();
-        assert_eq!((by_name("guest-dies").failed_by.as_str(), by_name("guest-dies").blame.as_str()), ("environment", "guest"));
-        assert_eq!((by_name("model-down").failed_by.as_str(), by_name("model-down").blame.as_str()), ("environment", "model"));
+        assert_eq!(
+            (by_name("guest-dies").failed_by.as_str(), by_name("guest-dies").blame.as_str()),
+            ("environment", "guest")
+        );
+        assert_eq!(
+            (by_name("model-down").failed_by.as_str(), by_name("model-down").blame.as_str()),
+            ("environment", "model")
+        );
         assert_eq!(by_name("gives-up").failed_by, "agent");
         assert_eq!(by_name("solves").failed_by, "passed");
         assert_eq!(summary.failures(), (1, 2));

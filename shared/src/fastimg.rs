@@ -296,8 +296,9 @@ pub fn png_to_model_jpeg(png: &[u8], quality: u8) -> Result<ModelJpeg, FastImgEr
 ///
 /// The bytes are not an image this build decodes, or are over the limits.
 pub fn decode_rgba(bytes: &[u8]) -> Result<RgbaImage, FastImgError> {
-    let mut reader =
-        image::ImageReader::new(std::io::Cursor::new(bytes)).with_guessed_format().map_err(image::ImageError::IoError)?;
+    let mut reader = image::ImageReader::new(std::io::Cursor::new(bytes))
+        .with_guessed_format()
+        .map_err(image::ImageError::IoError)?;
     let mut limits = image::Limits::default();
     limits.max_image_width = Some(MAX_DECODED_SIDE);
     limits.max_image_height = Some(MAX_DECODED_SIDE);

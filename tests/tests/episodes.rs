@@ -309,8 +309,11 @@ fn a_navi_run_that_is_no_preset_says_how_it_differs_from_upstream_and_the_report
     let dir = tempfile::tempdir().expect("dir");
     let tasks = dir.path().join("tasks/notepad");
     std::fs::create_dir_all(&tasks).expect("tasks");
-    std::fs::write(tasks.join("t.json"), r#"{"id": "t", "instruction": "do it", "config": [], "evaluator": {"func": "infeasible"}}"#)
-        .expect("task");
+    std::fs::write(
+        tasks.join("t.json"),
+        r#"{"id": "t", "instruction": "do it", "config": [], "evaluator": {"func": "infeasible"}}"#,
+    )
+    .expect("task");
     let out = dir.path().join("out");
     let (tasks, out_arg) = (dir.path().join("tasks"), out.to_str().expect("utf-8").to_owned());
     // Nothing listens on port 9: the model stays down and the task is left unfinished.

@@ -267,7 +267,12 @@ impl ModelClient {
             serde_json::from_str(&text).map_err(|e| transient(format!("the answer is not JSON (cut short?): {e}")))?;
         if self.refusals == Refusals::Unfinished {
             if let Some(text) = refusal(&value) {
-                return Err(Failure { reason: format!("refused: {text}"), transient: false, wait_at_least: None, refused: Some(text) });
+                return Err(Failure {
+                    reason: format!("refused: {text}"),
+                    transient: false,
+                    wait_at_least: None,
+                    refused: Some(text),
+                });
             }
         }
         reply_text(&value).ok_or_else(|| Failure {

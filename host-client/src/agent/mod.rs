@@ -95,8 +95,10 @@ impl Observation {
     ///
     /// [`ObserveError`] when the screen, the screenshot or the window list cannot be read.
     pub async fn capture(client: &GuestClient, step: u32, instruction: &str) -> Result<Observation, ObserveError> {
-        let screen =
-            client.screen().await.map_err(|err| ObserveError { what: "reading the screen", reason: err.to_string() })?;
+        let screen = client
+            .screen()
+            .await
+            .map_err(|err| ObserveError { what: "reading the screen", reason: err.to_string() })?;
         observe::observe(client, &ObserveConfig::default(), &screen, step, instruction).await
     }
 }

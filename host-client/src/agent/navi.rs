@@ -29,9 +29,9 @@ use image::RgbaImage;
 use serde_json::{json, Value};
 
 use super::llm::{self, ApiKind, ModelClient, Refusals, RetryPolicy, TokensField};
+use super::observe::encode_png;
 use super::parse::{parse_navi_reply, parse_reply};
 use super::waa_prompts::{UserInputs, WaaPrompts};
-use super::observe::encode_png;
 use super::{Agent, AgentAction, AgentError, LogValue, Observation, PredictTimings, Prediction, StepLog};
 use crate::som::{annotate, Marks, ProposedEntity, SomConfig, SomInput, SomSources};
 use crate::task::Task;
@@ -266,12 +266,8 @@ impl NaviAgent {
         // The browser's DOM elements for `oss` and `mixed-oss` (the episode reads
         // them when `wants_dom` says so; none when no browser answered).
         let dom = dom_entities(obs);
-        let input = SomInput {
-            tree: obs.a11y.as_ref(),
-            screenshot: &obs.screenshot,
-            size: obs.screen_size(),
-            dom: &dom,
-        };
+        let input =
+            SomInput { tree: obs.a11y.as_ref(), screenshot: &obs.screenshot, size: obs.screen_size(), dom: &dom };
         self.som.marks(&input).await.map_err(|err| AgentError::Model {
             endpoint: format!("the Set-of-Marks source `{}`", self.config.som.origin),
             reason: err.to_string(),

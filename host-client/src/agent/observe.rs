@@ -180,7 +180,10 @@ fn ms(d: Duration) -> u64 {
 pub(crate) fn unreachable(err: &ClientError) -> bool {
     matches!(
         err,
-        ClientError::Connect { .. } | ClientError::Timeout { .. } | ClientError::Io { .. } | ClientError::NotReady { .. }
+        ClientError::Connect { .. }
+            | ClientError::Timeout { .. }
+            | ClientError::Io { .. }
+            | ClientError::NotReady { .. }
     )
 }
 

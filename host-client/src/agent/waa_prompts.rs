@@ -318,8 +318,7 @@ pub fn git_head(root: &Path) -> String {
         Some(dir.join(target))
     });
     let Some(git) = found else { return "unknown".into() };
-    let common = std::fs::read_to_string(git.join("commondir"))
-        .map_or_else(|_| git.clone(), |c| git.join(c.trim()));
+    let common = std::fs::read_to_string(git.join("commondir")).map_or_else(|_| git.clone(), |c| git.join(c.trim()));
     let short = |id: &str| id.trim().chars().take(12).collect::<String>();
     let Ok(head) = std::fs::read_to_string(git.join("HEAD")) else { return "unknown".into() };
     let head = head.trim();

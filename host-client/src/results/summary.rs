@@ -155,10 +155,8 @@ impl Summary {
                 }
             }
         }
-        let mut trials: Vec<String> = tasks
-            .iter()
-            .filter_map(|t| t.path.rsplitn(3, '/').nth(2).map(str::to_owned))
-            .collect();
+        let mut trials: Vec<String> =
+            tasks.iter().filter_map(|t| t.path.rsplitn(3, '/').nth(2).map(str::to_owned)).collect();
         trials.sort();
         trials.dedup();
         Summary { overall, domains, groups, tasks, options, trials }

@@ -341,7 +341,8 @@ async fn the_detector_client_speaks_the_documented_shape_and_post_processes_as_u
     let shot = frame(1000, 600);
     let http = reqwest::Client::new();
     let params = detector::DetectorParams::default();
-    let entities = detector::detect_all(&http, &format!("{url}/"), &shot.encoded, (1000, 600), &params).await.expect("detect");
+    let entities =
+        detector::detect_all(&http, &format!("{url}/"), &shot.encoded, (1000, 600), &params).await.expect("detect");
     let got: Vec<(&str, Rect, Option<&str>)> =
         entities.iter().map(|e| (e.kind.as_str(), e.rect, e.text.as_deref())).collect();
     assert_eq!(
@@ -370,9 +371,10 @@ async fn a_failing_detector_names_itself_and_its_url() {
         axum::routing::post(|| async { (axum::http::StatusCode::INTERNAL_SERVER_ERROR, "CUDA out of memory") }),
     ))
     .await;
-    let err = detector::detect_all(&reqwest::Client::new(), &url, &frame(10, 10).encoded, (10, 10), &Default::default())
-        .await
-        .unwrap_err();
+    let err =
+        detector::detect_all(&reqwest::Client::new(), &url, &frame(10, 10).encoded, (10, 10), &Default::default())
+            .await
+            .unwrap_err();
     let text = err.to_string();
     assert!(
         text.contains("Grounding DINO") && text.contains("/detect") && text.contains("CUDA out of memory"),

@@ -157,7 +157,11 @@ fn provenance_names_the_commit_of_a_client_folder_root_and_of_a_worktree_git_fil
     std::fs::create_dir_all(&wt_git).unwrap();
     std::fs::write(wt_git.join("HEAD"), "ref: refs/heads/feature\n").unwrap();
     std::fs::write(wt_git.join("commondir"), "../..\n").unwrap();
-    std::fs::write(main_git.join("packed-refs"), "# pack-refs with: peeled\nfedcba9876543210fedcba9876543210fedcba98 refs/heads/feature\n").unwrap();
+    std::fs::write(
+        main_git.join("packed-refs"),
+        "# pack-refs with: peeled\nfedcba9876543210fedcba9876543210fedcba98 refs/heads/feature\n",
+    )
+    .unwrap();
     let worktree = tempfile::tempdir().unwrap();
     checkout(worktree.path(), PLANNER_TEXT, AGENT_TEXT);
     std::fs::remove_dir_all(worktree.path().join(".git")).unwrap();
