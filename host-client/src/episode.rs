@@ -35,21 +35,21 @@ use std::time::{Duration, Instant};
 use serde_json::Value;
 
 use arena_shared::action::{Action, ActionBatch};
-use arena_shared::clipboard::ClipboardContent;
-use arena_shared::observation::{A11yQuery, ImageFormat, ScreenshotQuery};
+use arena_shared::observation::A11yQuery;
 use arena_shared::script::ComputerState;
 
+use crate::agent::observe::{self, ObserveConfig};
 use crate::agent::{self, Agent, AgentAction, AgentError, ExecOptions, LogValue, Observation, Prediction, StepLog};
 use crate::client::GuestClient;
-use crate::error::ClientError;
 use crate::eval::{self, EvalContext, LastAction};
 use crate::results::{
-    timestamp_now, unix_now, ActionRecord, ObservationKeys, ResetRecord, RunLayout, StepRecord, StepTimings, TaskDir,
+    timestamp_now, ActionRecord, ObservationKeys, ResetRecord, RunLayout, StepRecord, StepTimings, TaskDir,
 };
 use crate::run::pool::TaskRunner;
 use crate::setup::{self, DownloadCache, Settle, SetupContext};
 use crate::task::Task;
 
+pub use crate::agent::observe::ScreenSource;
 pub use crate::results::{EpisodeResult, EpisodeStatus};
 
 /// Upstream's `--max_steps`.
@@ -98,20 +98,6 @@ pub struct EpisodeConfig {
     /// The VMs' own displays, when the run owns its VMs: the observation's
     /// screenshot when the guest's capture fails or is black.
     pub screen_source: Option<Arc<dyn ScreenSource>>,
-}
-
-/// A guest's screen as seen from outside it (QEMU's screendump of its VM).
-#[async_trait::async_trait]
-pub trait ScreenSource: Send + Sync {
-    /// The display of the VM `guest` (its base URL) runs in, as PNG; `None`
-    /// when there is none or it cannot be read.
-    async fn screendump(&self, guest: &str) -> Option<Vec<u8>>;
-}
-
-impl std::fmt::Debug for dyn ScreenSource {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str("ScreenSource")
-    }
 }
 
 impl EpisodeConfig {
@@ -177,32 +163,20 @@ pub async fn run_attempt(
     let started = Instant::now();
     let mut ep = Episode {
         result: EpisodeResult {
-            score_is_int: false,
-            task_id: task.id.clone(),
-            task_name: task.name.clone(),
-            domain: task.domain.clone(),
-            instruction: task.instruction.clone(),
             agent: agent.name().to_owned(),
             model: config.model.clone(),
-            guest: client.base_url().to_owned(),
-            attempt,
-            score: 0.0,
-            status: EpisodeStatus::Completed,
-            steps: 0,
-            last_action: "none".into(),
-            elapsed_ms: 0,
-            setup_ms: 0,
-            eval_ms: 0,
-            started_unix: unix_now(),
-            setup: Vec::new(),
-            eval: Value::Null,
-            timings: Vec::new(),
             options: config.options.clone(),
             vm,
+            ..EpisodeResult::start(task, client.base_url(), attempt, EpisodeStatus::Completed)
         },
         reset: None,
         steps: Vec::new(),
-        wants_dom: agent.wants_dom(),
+        observe: ObserveConfig {
+            a11y: config.a11y,
+            a11y_query: config.a11y_query.clone(),
+            dom: agent.wants_dom(),
+            screen_source: config.screen_source.clone(),
+        },
         keys_down: Vec::new(),
     };
     if let Err(err) = out.prepare() {
@@ -213,7 +187,7 @@ pub async fn run_attempt(
         ep.result.status = status;
     }
     ep.result.elapsed_ms = ms(started.elapsed());
-    ep.result.timings = ep.steps.iter().map(|s| s.timings).collect();
+    ep.result.timings = ep.steps.iter().map(|s| s.timings.clone()).collect();
     if let Err(err) = out.finish(&ep.result, ep.reset.as_ref(), &ep.steps) {
         tracing::error!(task = %task.name, error = %err, "cannot write the episode's results");
         ep.result.status = EpisodeStatus::InfraError(format!("cannot write the results: {err}"));
@@ -235,8 +209,8 @@ struct Episode {
     result: EpisodeResult,
     reset: Option<ResetRecord>,
     steps: Vec<StepRecord>,
-    /// Whether the agent wants the browser's DOM elements in each observation.
-    wants_dom: bool,
+    /// What each observation reads (the DOM when the agent wants it).
+    observe: ObserveConfig,
     /// Every key an action pressed with `keyDown`: let go when the episode ends.
     keys_down: Vec<String>,
 }
@@ -247,7 +221,6 @@ struct Seen {
     file: String,
     /// `accessibility_tree-step_<i>_<time>.txt`: the tree in upstream's XML.
     tree_file: String,
-    observe_ms: u64,
 }
 
 /// Writes one of an agent's step logs as upstream's recorder names its files
@@ -258,6 +231,7 @@ fn write_log(out: &TaskDir, step: u32, timestamp: &str, log: &StepLog) -> Result
         LogValue::Inline(value) => return Ok(value.clone()),
         LogValue::Text(text) => (name("txt"), text.clone().into_bytes()),
         LogValue::Png(png) => (name("png"), png.clone()),
+        LogValue::Image(pixels) => (name("png"), observe::encode_png(pixels)),
         LogValue::Json(value) => (name("json"), serde_json::to_vec_pretty(value).unwrap_or_default()),
     };
     out.write_file(&file, &bytes)?;
@@ -289,17 +263,6 @@ fn observed(seen: &Seen) -> ObservationKeys {
 
 fn ms(d: Duration) -> u64 {
     u64::try_from(d.as_millis()).unwrap_or(u64::MAX)
-}
-
-/// Whether a client error means the guest is out of reach (rather than refusing one call).
-fn unreachable(err: &ClientError) -> bool {
-    matches!(
-        err,
-        ClientError::Connect { .. }
-            | ClientError::Timeout { .. }
-            | ClientError::Io { .. }
-            | ClientError::NotReady { .. }
-    )
 }
 
 /// Ends the episode as [`EpisodeStatus::Interrupted`] when the run is stopping.
@@ -385,7 +348,7 @@ impl Episode {
         // The observation after the reset: upstream's step-0 line.
         let timestamp = timestamp_now();
         let mut seen = self
-            .observe_into(client, task, config, &screen, out, 1, None, &timestamp, computer.clipboard_content.clone())
+            .observe_into(client, task, &screen, out, 1, None, &timestamp, computer.clipboard_content.clone())
             .await?;
         self.reset =
             Some(ResetRecord { step_num: 0, action_timestamp: timestamp, action: None, observation: observed(&seen) });
@@ -439,13 +402,14 @@ impl Episode {
         Ok(())
     }
 
-    /// Observes, writes the screenshot under upstream's name and answers both.
+    /// Observes with the one builder ([`observe::observe`]), writes the
+    /// screenshot (the guest's bytes, not re-encoded) and the tree under
+    /// upstream's names and answers all three.
     #[allow(clippy::too_many_arguments)]
     async fn observe_into(
         &mut self,
         client: &GuestClient,
         task: &Task,
-        config: &EpisodeConfig,
         screen: &arena_shared::observation::ScreenInfo,
         out: &TaskDir,
         for_step: u32,
@@ -453,15 +417,12 @@ impl Episode {
         timestamp: &str,
         tracked_clipboard: Option<String>,
     ) -> Result<Seen, EpisodeStatus> {
-        let started = Instant::now();
-        let mut obs = observe(client, task, config, screen, for_step).await?;
+        let mut obs = observe::observe(client, &self.observe, screen, for_step, &task.instruction)
+            .await
+            .map_err(|err| EpisodeStatus::InfraError(err.to_string()))?;
         obs.tracked_clipboard = tracked_clipboard;
-        if self.wants_dom {
-            obs.dom = observe_dom(client, task, for_step).await;
-        }
-        let observe_ms = ms(started.elapsed());
         let file = out
-            .write_screenshot(index, timestamp, &obs.screenshot_png)
+            .write_screenshot(index, timestamp, &obs.screenshot.encoded)
             .map_err(|err| infra("writing the screenshot", err))?;
         // Upstream's recorder keeps each observation's tree as text, its XML, or
         // "No data available" when there was none.
@@ -472,7 +433,7 @@ impl Episode {
             |tree| arena_shared::a11y_xml::to_xml(tree, obs.foreground_id),
         );
         out.write_file(&tree_file, tree.as_bytes()).map_err(|err| infra("writing the accessibility tree", err))?;
-        Ok(Seen { obs, file, tree_file, observe_ms })
+        Ok(Seen { obs, file, tree_file })
     }
 
     /// One step as upstream's loop makes it: predict from the latest observation,
@@ -505,7 +466,11 @@ impl Episode {
             ended: false,
             screenshot_file: seen.file.clone(),
             screenshot_source: seen.obs.screenshot_source.clone(),
-            timings: StepTimings { observe_ms: seen.observe_ms, ..StepTimings::default() },
+            timings: StepTimings {
+                observe_ms: seen.obs.timings.total_ms,
+                observe: seen.obs.timings,
+                ..StepTimings::default()
+            },
             error: None,
             outcomes: Vec::new(),
             more: Vec::new(),
@@ -514,7 +479,7 @@ impl Episode {
         self.result.steps = step;
 
         let t_predict = Instant::now();
-        let prediction = predict(agent, &seen.obs, config).await;
+        let prediction = predict(agent, &seen.obs, config, &mut record.timings).await;
         record.timings.predict_ms = ms(t_predict.elapsed());
         let prediction = match prediction {
             Ok(p) => p,
@@ -522,7 +487,7 @@ impl Episode {
                 self.push(out, record)?;
                 return Err(infra("the guest stopped answering", err));
             }
-            Err(err @ AgentError::Model { .. }) => {
+            Err(err @ (AgentError::Model { .. } | AgentError::Refused { .. })) => {
                 // Upstream's `predict` raises when the model cannot be had: the
                 // task is left unfinished, not scored.
                 record.error = Some(err.to_string());
@@ -539,6 +504,7 @@ impl Episode {
                 return Ok((true, None, seen));
             }
         };
+        record.timings.predict = prediction.timings;
         record.response = prediction.response.clone();
         record.actions = prediction.actions.clone();
         let timestamp = record.first.action_timestamp.clone();
@@ -603,7 +569,9 @@ impl Episode {
                             record.outcomes.push(serde_json::json!({ "error": err.to_string() }));
                         }
                         Err(_) => {
-                            record.outcomes.push(serde_json::json!({ "error": format!("the action took longer than {} s", config.step_timeout.as_secs()) }));
+                            let message = format!("the action took longer than {} s", config.step_timeout.as_secs());
+                            record.timings.timeouts.push(format!("action {}: {message}", k + 1));
+                            record.outcomes.push(serde_json::json!({ "error": message }));
                         }
                     }
                     pause += config.sleep_after_action;
@@ -616,7 +584,6 @@ impl Episode {
                 .observe_into(
                     client,
                     task,
-                    config,
                     screen,
                     out,
                     step + 1,
@@ -651,123 +618,32 @@ impl Episode {
     }
 }
 
-/// Asks the agent, retrying model failures within the step as configured.
-async fn predict(agent: &mut dyn Agent, obs: &Observation, config: &EpisodeConfig) -> Result<Prediction, AgentError> {
+/// Asks the agent, retrying model failures within the step as configured;
+/// the retries and timeouts go into the step's `timings`.
+async fn predict(
+    agent: &mut dyn Agent,
+    obs: &Observation,
+    config: &EpisodeConfig,
+    timings: &mut StepTimings,
+) -> Result<Prediction, AgentError> {
     let mut tries = 0;
     loop {
         tries += 1;
         let answer = match tokio::time::timeout(config.step_timeout, agent.predict(obs)).await {
             Ok(answer) => answer,
-            Err(_) => Err(AgentError::Model {
-                endpoint: agent.name().to_owned(),
-                reason: format!("no answer within {} s", config.step_timeout.as_secs()),
-            }),
+            Err(_) => {
+                let reason = format!("no answer within {} s", config.step_timeout.as_secs());
+                timings.timeouts.push(format!("predict: {reason}"));
+                Err(AgentError::Model { endpoint: agent.name().to_owned(), reason })
+            }
         };
         match answer {
             Err(AgentError::Model { endpoint, reason }) if tries <= config.max_model_retries => {
                 tracing::warn!(%endpoint, %reason, tries, "the model failed; asking again");
+                timings.predict_retries += 1;
                 tokio::time::sleep(Duration::from_millis(500 * u64::from(tries))).await;
             }
             other => return other,
-        }
-    }
-}
-
-/// Why the guest's screenshot should give way to the VM's display, if it should:
-/// a black frame (a lock screen, UAC's secure desktop) or a failed capture of a
-/// guest that still answers.
-fn fallback_reason(shot: &Result<crate::client::Screenshot, ClientError>) -> Option<String> {
-    match shot {
-        Ok(shot) if shot.meta.black_frame => Some("the guest's screenshot was black".to_owned()),
-        Ok(_) => None,
-        Err(err) if unreachable(err) => None,
-        Err(err) => Some(format!("the guest's screenshot failed: {err}")),
-    }
-}
-
-/// Screenshot (required), windows (required), accessibility tree and clipboard
-/// (optional: a failure that is not an unreachable guest leaves them out).
-async fn observe(
-    client: &GuestClient,
-    task: &Task,
-    config: &EpisodeConfig,
-    screen: &arena_shared::observation::ScreenInfo,
-    step: u32,
-) -> Result<Observation, EpisodeStatus> {
-    // Upstream's full-screen frames come from QEMU and carry no cursor.
-    let query = ScreenshotQuery { format: ImageFormat::Png, cursor: Some(false), ..ScreenshotQuery::default() };
-    let (shot, windows, tree, clipboard) = tokio::join!(
-        client.screenshot(&query),
-        client.windows(),
-        async {
-            if config.a11y {
-                Some(client.a11y(&config.a11y_query).await)
-            } else {
-                None
-            }
-        },
-        client.clipboard_get(),
-    );
-    let fallback = match (&config.screen_source, fallback_reason(&shot)) {
-        (Some(source), Some(reason)) => source.screendump(client.base_url()).await.map(|png| (png, reason)),
-        _ => None,
-    };
-    let (screenshot_png, screenshot_source) = match (shot, fallback) {
-        (_, Some((png, reason))) => {
-            tracing::warn!(task = %task.name, step, %reason, "using the VM's display as the screenshot");
-            (png, Some(format!("vm-display: {reason}")))
-        }
-        (Ok(shot), None) => (shot.bytes, None),
-        (Err(err), None) => return Err(infra("taking the screenshot", err)),
-    };
-    let windows = windows.map_err(|err| infra("listing windows", err))?;
-    let a11y = match tree {
-        None => None,
-        Some(Ok(tree)) => Some(tree),
-        Some(Err(err)) if unreachable(&err) => return Err(infra("reading the accessibility tree", err)),
-        Some(Err(err)) => {
-            tracing::warn!(task = %task.name, step, error = %err, "no accessibility tree this step");
-            None
-        }
-    };
-    let clipboard = match clipboard {
-        Ok(ClipboardContent::Text { text }) => Some(text),
-        Ok(_) => None,
-        Err(err) if unreachable(&err) => return Err(infra("reading the clipboard", err)),
-        Err(err) => {
-            tracing::debug!(error = %err, "no clipboard this step");
-            None
-        }
-    };
-    let foreground = windows.iter().find(|w| w.focused);
-    let foreground_title = foreground.map(|w| w.title.clone()).unwrap_or_default();
-    let foreground_id = foreground.map(|w| w.id);
-    let window_titles =
-        windows.iter().filter(|w| w.visible && !w.minimized && !w.title.is_empty()).map(|w| w.title.clone()).collect();
-    Ok(Observation {
-        step,
-        instruction: task.instruction.clone(),
-        screenshot_png,
-        screenshot_source,
-        screen: screen.clone(),
-        a11y,
-        window_titles,
-        foreground_title,
-        foreground_id,
-        tracked_clipboard: None,
-        clipboard,
-        dom: None,
-    })
-}
-
-/// The browser's DOM elements for an agent that wants them; `None`, with a
-/// warning, when no browser answers (a task without a browser is no failure).
-async fn observe_dom(client: &GuestClient, task: &Task, step: u32) -> Option<Vec<crate::browser::DomElement>> {
-    match crate::browser::dom_elements(client).await {
-        Ok(elements) => Some(elements),
-        Err(err) => {
-            tracing::warn!(task = %task.name, step, error = %err, "no DOM elements this step");
-            None
         }
     }
 }
@@ -807,29 +683,12 @@ impl TaskRunner for EpisodeRunner {
             Err(err) => {
                 // Without an agent nothing can run anywhere: record it as the
                 // agent's failure so the run does not retry it on every guest.
+                let status = EpisodeStatus::ModelError(format!("cannot create the agent: {err}"));
                 let result = EpisodeResult {
-                    score_is_int: false,
-                    task_id: task.id.clone(),
-                    task_name: task.name.clone(),
-                    domain: task.domain.clone(),
-                    instruction: task.instruction.clone(),
-                    agent: String::new(),
                     model: self.config.model.clone(),
-                    guest: guest.base_url().to_owned(),
-                    attempt,
-                    score: 0.0,
-                    status: EpisodeStatus::ModelError(format!("cannot create the agent: {err}")),
-                    steps: 0,
-                    last_action: "none".into(),
-                    elapsed_ms: 0,
-                    setup_ms: 0,
-                    eval_ms: 0,
-                    started_unix: unix_now(),
-                    setup: Vec::new(),
-                    eval: Value::Null,
-                    timings: Vec::new(),
                     options: self.config.options.clone(),
                     vm: vm.clone(),
+                    ..EpisodeResult::start(task, guest.base_url(), attempt, status)
                 };
                 if let Err(err) = out.prepare().and_then(|()| out.finish(&result, None, &[])) {
                     tracing::error!(task = %task.name, error = %err, "cannot write the episode's results");
@@ -846,9 +705,12 @@ mod tests {
     use std::path::PathBuf;
 
     use super::*;
+    use crate::agent::observe::fallback_reason;
     use crate::cli::stub::{start, RunningStub, StubArgs};
     use crate::client::ClientConfig;
+    use crate::error::ClientError;
     use crate::results::RESULT_FILE;
+    use arena_shared::observation::ImageFormat;
 
     /// Answers from a script of results; a `None` entry stops the guest first.
     struct Fake {
@@ -857,7 +719,7 @@ mod tests {
     }
 
     fn says(actions: Vec<AgentAction>) -> Option<Result<Prediction, AgentError>> {
-        Some(Ok(Prediction { response: "ok".into(), actions, marks: None, raw_error: None, logs: Vec::new() }))
+        Some(Ok(Prediction { response: "ok".into(), actions, ..Prediction::default() }))
     }
 
     fn model_down() -> Option<Result<Prediction, AgentError>> {
@@ -926,7 +788,7 @@ mod tests {
             clock: clock.clone(),
             ..EpisodeConfig::upstream(cache)
         };
-        let (result, out, _tmp) = play_with(&task("exact_match"), script, false, upstream).await;
+        let (result, out, _tmp) = play_with(&task("exact_match"), script, false, upstream, None).await;
         assert_eq!(result.status, EpisodeStatus::Completed, "{result:?}");
         let s = Duration::from_secs;
         assert_eq!(
@@ -983,15 +845,17 @@ mod tests {
         stop_guest: bool,
     ) -> (EpisodeResult, TaskDir, tempfile::TempDir) {
         let instant = |cache| EpisodeConfig { max_steps: 4, ..EpisodeConfig::instant(cache) };
-        play_with(task, script, stop_guest, instant).await
+        play_with(task, script, stop_guest, instant, None).await
     }
 
-    /// [`play`] with the configuration `configure` makes from the download cache.
+    /// [`play`] with the configuration `configure` makes from the download cache,
+    /// into the task folder `out` (default: `out` in the answered temporary folder).
     async fn play_with(
         task: &Task,
         script: Vec<Option<Result<Prediction, AgentError>>>,
         stop_guest: bool,
         configure: impl FnOnce(DownloadCache) -> EpisodeConfig,
+        out: Option<TaskDir>,
     ) -> (EpisodeResult, TaskDir, tempfile::TempDir) {
         let stub = start(&StubArgs::default(), None).await.unwrap();
         let client =
@@ -1006,7 +870,7 @@ mod tests {
         } else {
             Some(stub)
         };
-        let out = TaskDir::new(tmp.path().join("out"));
+        let out = out.unwrap_or_else(|| TaskDir::new(tmp.path().join("out")));
         let result = run_episode(&client, task, &mut agent, &config, &out).await;
         if let Some(stub) = keep {
             stub.stop().await.unwrap();
@@ -1062,7 +926,7 @@ mod tests {
             StepLog { key: "a11y_truncated".into(), value: LogValue::Inline(Value::Bool(false)) },
         ];
         let done =
-            Prediction { response: "ok".into(), actions: vec![AgentAction::Done], marks: None, raw_error: None, logs };
+            Prediction { response: "ok".into(), actions: vec![AgentAction::Done], logs, ..Prediction::default() };
         let (result, out, _tmp) = play(&task("exact_match"), vec![Some(Ok(done))], false).await;
         assert_eq!(result.status, EpisodeStatus::Completed);
         let text = std::fs::read_to_string(out.path().join(crate::results::TRAJ_FILE)).unwrap();
@@ -1126,6 +990,82 @@ mod tests {
         );
         assert_eq!(result.last_action, "done");
         assert_eq!(std::fs::read_to_string(out.path().join(RESULT_FILE)).unwrap(), "1.0\n");
+        // The retries are in the step's line of traj.jsonl.
+        let text = std::fs::read_to_string(out.path().join(crate::results::TRAJ_FILE)).unwrap();
+        let line: Value = serde_json::from_str(text.lines().nth(1).unwrap()).unwrap();
+        assert_eq!(line["timings"]["predict_retries"], 2, "{line}");
+    }
+
+    #[tokio::test]
+    async fn every_step_line_times_each_part_of_the_observation_and_the_prediction() {
+        let (result, out, _tmp) = play(&task("exact_match"), vec![says(vec![AgentAction::Done])], false).await;
+        assert_eq!(result.status, EpisodeStatus::Completed, "{result:?}");
+        let text = std::fs::read_to_string(out.path().join(crate::results::TRAJ_FILE)).unwrap();
+        let line: Value = serde_json::from_str(text.lines().nth(1).unwrap()).unwrap();
+        let timings = &line["timings"];
+        for part in ["screenshot_ms", "decode_ms", "tree_ms", "windows_ms", "clipboard_ms", "total_ms"] {
+            assert!(timings["observe"][part].is_u64(), "{part} missing: {timings}");
+        }
+        for part in ["observe_ms", "predict_ms", "act_ms", "pause_ms"] {
+            assert!(timings[part].is_u64(), "{part} missing: {timings}");
+        }
+        assert!(timings["observe"].get("dom_ms").is_none(), "no DOM read for an agent that wants none");
+        assert_eq!(timings["observe_ms"], timings["observe"]["total_ms"]);
+        // The fake agent has no model: its parts are absent, not zero.
+        assert_eq!(timings["predict"], serde_json::json!({}));
+        // The episode's record copies them.
+        assert_eq!(serde_json::to_value(&result.timings[0]).unwrap(), *timings);
+    }
+
+    #[tokio::test]
+    async fn the_report_tells_environment_failures_from_the_agents() {
+        use crate::results::summary::Summary;
+        let root = tempfile::tempdir().unwrap();
+        let named = |name: &str| {
+            let text = r#"{"id": "t", "instruction": "do it", "config": [{"type": "launch", "parameters": {"command": "notepad"}}],
+                "evaluator": {"func": "exact_match", "result": {"type": "vm_active_window_title"}, "expected": {"type": "rule", "rules": {"expected": "Untitled - Notepad"}}}}"#;
+            Task::parse(text, &PathBuf::from(format!("/tasks/notepad/{name}.json"))).unwrap()
+        };
+        let at = |name: &str| Some(TaskDir::new(root.path().join("navi/a11y_tree/m/0/notepad").join(name)));
+        let instant = |cache| EpisodeConfig { max_steps: 4, ..EpisodeConfig::instant(cache) };
+        // A guest that dies mid-run.
+        let script = vec![says(vec![AgentAction::Wait]), None];
+        let (dies, _, _t1) = play_with(&named("guest-dies"), script, true, instant, at("guest-dies")).await;
+        // A model endpoint that stays down.
+        let (down, _, _t2) = play_with(
+            &named("model-down"),
+            vec![model_down(), model_down(), model_down()],
+            false,
+            instant,
+            at("model-down"),
+        )
+        .await;
+        // An agent that gives up on a feasible task.
+        let (gives_up, _, _t3) =
+            play_with(&named("gives-up"), vec![says(vec![AgentAction::Fail])], false, instant, at("gives-up")).await;
+        // And one that solves it.
+        let (solves, _, _t4) =
+            play_with(&named("solves"), vec![says(vec![AgentAction::Done])], false, instant, at("solves")).await;
+        let blames: Vec<&str> = [&dies, &down, &gives_up, &solves].iter().map(|r| r.blame().name()).collect();
+        assert_eq!(blames, ["guest", "model", "agent", "passed"]);
+
+        let summary = Summary::from_dir(root.path()).unwrap();
+        let by_name = |n: &str| summary.tasks.iter().find(|t| t.name == n).unwrap();
+        assert_eq!(
+            (by_name("guest-dies").failed_by.as_str(), by_name("guest-dies").blame.as_str()),
+            ("environment", "guest")
+        );
+        assert_eq!(
+            (by_name("model-down").failed_by.as_str(), by_name("model-down").blame.as_str()),
+            ("environment", "model")
+        );
+        assert_eq!(by_name("gives-up").failed_by, "agent");
+        assert_eq!(by_name("solves").failed_by, "passed");
+        assert_eq!(summary.failures(), (1, 2));
+        let md = summary.markdown();
+        assert!(md.contains("Failures: 1 the agent's, 2 the environment's (guest 1, model 1)."), "{md}");
+        assert!(md.contains("| environment (guest) |") && md.contains("| environment (model) |"), "{md}");
+        assert!(md.contains("| notepad | gives-up | 0.0 | completed | agent |"), "{md}");
     }
 
     #[tokio::test]
@@ -1167,6 +1107,7 @@ mod tests {
             marks: None,
             raw_error: Some("no code block".into()),
             logs: Vec::new(),
+            timings: Default::default(),
         }));
         let script = vec![
             malformed,

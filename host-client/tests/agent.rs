@@ -25,7 +25,7 @@ use arena_host::task::Task;
 use arena_shared::action::Action;
 use arena_shared::clipboard::ClipboardContent;
 use arena_shared::exec::LaunchRequest;
-use arena_shared::observation::{A11yNode, A11yQuery};
+use arena_shared::observation::{A11yNode, A11yQuery, WindowTarget};
 use arena_shared::script::ComputerState;
 use arena_test_support::StubGuest;
 
@@ -264,9 +264,9 @@ async fn navi_sends_the_annotated_screenshot_and_elements_and_retries_malformed_
     assert_eq!(images.len(), 1, "no previous screenshot on the first step");
     let annotated = images[0].strip_prefix("data:image/png;base64,").expect("a PNG data URI");
     let annotated = base64::engine::general_purpose::STANDARD.decode(annotated).expect("base64");
-    assert_ne!(annotated, obs.screenshot_png, "the screenshot sent is annotated");
     let sent = image::load_from_memory(&annotated).expect("decodes").to_rgba8();
-    let raw = image::load_from_memory(&obs.screenshot_png).expect("decodes").to_rgba8();
+    let raw = obs.screenshot.pixels.as_ref();
+    assert_ne!(&sent, raw, "the screenshot sent is annotated");
     assert_eq!(sent.dimensions(), raw.dimensions());
     let r = marks.rects[doc_id];
     let (x, y) = (r[0] as u32 + 1, r[3] as u32 - 1);
@@ -338,8 +338,8 @@ async fn navi_in_upstreams_layout_reads_replies_by_upstreams_rules() {
     assert_eq!((body["temperature"].clone(), body["max_tokens"].clone()), (json!(1.0), json!(4096)));
     let (images, text) = user_parts(&body);
     assert_eq!(images.len(), 2, "on the first step the current screen stands in for the previous one");
-    let raw = image::load_from_memory(&obs.screenshot_png).expect("decodes");
-    let want = arena_shared::fastimg::model_size(raw.width(), raw.height());
+    let (width, height) = obs.screenshot.size();
+    let want = arena_shared::fastimg::model_size(width, height);
     for url in &images {
         let jpeg = url.strip_prefix("data:image/jpeg;base64,").expect("a JPEG data URI");
         let jpeg = base64::engine::general_purpose::STANDARD.decode(jpeg).expect("base64");
@@ -378,7 +378,7 @@ async fn navi_in_upstreams_layout_reads_replies_by_upstreams_rules() {
     assert_eq!(content[1]["image_url"]["detail"], "auto");
     let previous = content[1]["image_url"]["url"].as_str().unwrap();
     let expected =
-        arena_shared::fastimg::png_to_model_jpeg(&obs.screenshot_png, arena_shared::fastimg::PILLOW_JPEG_QUALITY)
+        arena_shared::fastimg::rgba_to_model_jpeg(&obs.screenshot.pixels, arena_shared::fastimg::PILLOW_JPEG_QUALITY)
             .expect("jpeg")
             .jpeg;
     let previous =
@@ -532,4 +532,54 @@ async fn a_key_left_held_stays_down_across_steps_unless_actions_release_it() {
     assert_eq!((outcome.error, outcome.performed), (None, 2));
     go(AgentAction::Typed(vec![Action::KeyPress { key: "u".into(), presses: 1 }])).await;
     assert_eq!(notepad_text(&c).await, "XYZwVu");
+}
+
+#[tokio::test]
+async fn the_observation_lists_windows_and_names_the_foreground_as_upstream() {
+    let guest = start_guest().await;
+    let c = client(guest.url());
+    // Two windows of the same title, and Paint, minimised.
+    for program in ["notepad.exe", "notepad.exe", "mspaint.exe"] {
+        c.launch(&LaunchRequest { shell: None, argv: vec![program.into()] }).await.expect("launch");
+    }
+    let paint = WindowTarget { title: Some("Untitled - Paint".into()), id: None };
+    assert!(c.minimize_window(&paint).await.expect("minimise").minimized);
+    // The desktop itself in front.
+    c.activate_window(&WindowTarget { title: Some("Program Manager".into()), id: None }).await.expect("activate");
+    let raw = c.windows().await.expect("windows");
+    assert_eq!(raw.iter().filter(|w| w.title == "Untitled - Notepad").count(), 2, "{raw:?}");
+    assert!(raw.iter().any(|w| w.title == "Program Manager" && w.focused), "{raw:?}");
+
+    let obs = Observation::capture(&c, 1, "look").await.expect("observe");
+    // Upstream: every visible titled window, minimised ones included, each title once, topmost
+    // first (the desktop stays at the bottom of the z-order even when it has the focus).
+    assert_eq!(obs.window_titles, ["Untitled - Paint", "Untitled - Notepad", "Program Manager"]);
+    // Upstream's window title for the desktop in front.
+    assert_eq!(obs.foreground_title, "Desktop");
+    assert!(obs.a11y.as_ref().is_some_and(|t| !t.truncated), "the tree and its truncated flag");
+    let t = obs.timings;
+    assert!(t.total_ms >= t.screenshot_ms && t.tree_ms.is_some() && t.dom_ms.is_none(), "{t:?}");
+}
+
+#[tokio::test]
+async fn one_navi_step_decodes_each_screenshot_once() {
+    use arena_host::agent::observe::decodes_on_this_thread;
+    let (_guest, c) = guest_with_notepad().await;
+    let reply = "Look.\n```python\ncomputer.mouse.move_abs(x=0.5, y=0.5)\n```\n```decision\nCOMMAND\n```";
+    let (url, _mock) = start_mock(&[(200, reply), (200, reply)]).await;
+    let mut agent = NaviAgent::new(NaviConfig::new(&url, "mock-model")).expect("agent");
+    let dir = tempfile::tempdir().expect("dir");
+    agent.reset(&task(dir.path(), "")).await;
+    for step in 1..=2 {
+        // The test's runtime runs on this thread, so every decode of the step is counted.
+        let before = decodes_on_this_thread();
+        let obs = Observation::capture(&c, step, "Type hello in Notepad").await.expect("observe");
+        let p = agent.predict(&obs).await.expect("prediction");
+        assert_eq!(p.actions.len(), 1);
+        // Set-of-Marks, the annotation, both model images (the previous one included) and
+        // the logs all use the observation's pixels.
+        assert_eq!(decodes_on_this_thread() - before, 1, "step {step}");
+        assert!(p.timings.som_ms.is_some() && p.timings.model_ms.is_some(), "{:?}", p.timings);
+        assert_eq!(p.timings.model_tries, 1);
+    }
 }

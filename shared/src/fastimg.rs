@@ -285,15 +285,26 @@ pub fn rgba_to_model_jpeg(image: &RgbaImage, quality: u8) -> Result<ModelJpeg, F
 ///
 /// The bytes are not an image this build decodes, are over the limits, or encoding fails.
 pub fn png_to_model_jpeg(png: &[u8], quality: u8) -> Result<ModelJpeg, FastImgError> {
-    let mut reader =
-        image::ImageReader::new(std::io::Cursor::new(png)).with_guessed_format().map_err(image::ImageError::IoError)?;
+    rgba_to_model_jpeg(&decode_rgba(png)?, quality)
+}
+
+/// Decodes a screenshot (PNG, or any format this build reads) into RGBA pixels,
+/// refusing from its header an image over [`MAX_DECODED_SIDE`] pixels a side or
+/// [`MAX_DECODED_BYTES`] of memory.
+///
+/// # Errors
+///
+/// The bytes are not an image this build decodes, or are over the limits.
+pub fn decode_rgba(bytes: &[u8]) -> Result<RgbaImage, FastImgError> {
+    let mut reader = image::ImageReader::new(std::io::Cursor::new(bytes))
+        .with_guessed_format()
+        .map_err(image::ImageError::IoError)?;
     let mut limits = image::Limits::default();
     limits.max_image_width = Some(MAX_DECODED_SIDE);
     limits.max_image_height = Some(MAX_DECODED_SIDE);
     limits.max_alloc = Some(MAX_DECODED_BYTES);
     reader.limits(limits);
-    let image = reader.decode()?.into_rgba8();
-    rgba_to_model_jpeg(&image, quality)
+    Ok(reader.decode()?.into_rgba8())
 }
 
 #[cfg(test)]

@@ -297,3 +297,77 @@ async fn the_report_opens_in_headless_chromium_and_shows_the_table() {
         );
     }
 }
+
+/// `arena run` as a user types it.
+fn arena(args: &[&str]) -> std::process::Output {
+    let exe = arena_test_support::workspace_binary("arena-host", "arena").expect("the arena binary");
+    std::process::Command::new(exe).args(args).output().expect("arena runs")
+}
+
+#[test]
+fn a_navi_run_that_is_no_preset_says_how_it_differs_from_upstream_and_the_report_carries_it() {
+    let dir = tempfile::tempdir().expect("dir");
+    let tasks = dir.path().join("tasks/notepad");
+    std::fs::create_dir_all(&tasks).expect("tasks");
+    std::fs::write(
+        tasks.join("t.json"),
+        r#"{"id": "t", "instruction": "do it", "config": [], "evaluator": {"func": "infeasible"}}"#,
+    )
+    .expect("task");
+    let out = dir.path().join("out");
+    let (tasks, out_arg) = (dir.path().join("tasks"), out.to_str().expect("utf-8").to_owned());
+    // Nothing listens on port 9: the model stays down and the task is left unfinished.
+    let run = arena(&[
+        "run",
+        "--agent",
+        "navi",
+        "--llm-url",
+        "http://127.0.0.1:9/v1",
+        "--model",
+        "m",
+        "--llm-retry",
+        "0",
+        "--stub-guests",
+        "1",
+        "--max-steps",
+        "1",
+        "--tasks",
+        tasks.to_str().expect("utf-8"),
+        "--out",
+        &out_arg,
+    ]);
+    let stdout = String::from_utf8_lossy(&run.stdout);
+    let first = stdout.lines().next().unwrap_or_default();
+    assert!(
+        first.starts_with("not a reproduction: differs from upstream's default Navi run in som_origin=a11y (upstream: oss); prompt=ours"),
+        "{stdout}\n{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    assert!(first.contains("max_steps=1 (upstream: 15)") && first.contains("pauses=fast"), "{first}");
+    let summary = Summary::from_dir(&out).expect("summary");
+    let recorded = summary.options.get("differs_from_upstream").expect("recorded in the results");
+    assert_eq!(format!("not a reproduction: differs from upstream's default Navi run in {}", recorded[0]), first);
+    let report = std::fs::read_to_string(out.join("summary.md")).expect("summary.md");
+    assert!(report.contains("differs_from_upstream=som_origin=a11y"), "{report}");
+    assert!(summary.tasks.iter().all(|t| t.failed_by == "environment" && t.blame == "model"), "{:?}", summary.tasks);
+
+    // A preset without the checkout's prompts is refused before anything runs.
+    let preset = arena(&[
+        "run",
+        "--agent",
+        "navi",
+        "--llm-url",
+        "http://127.0.0.1:9/v1",
+        "--model",
+        "m",
+        "--preset",
+        "paper-a11y-uia",
+        "--tasks",
+        tasks.to_str().expect("utf-8"),
+        "--out",
+        &out_arg,
+    ]);
+    assert!(!preset.status.success());
+    let stderr = String::from_utf8_lossy(&preset.stderr);
+    assert!(stderr.contains("--preset paper-a11y-uia") && stderr.contains("--waa-root"), "{stderr}");
+}

@@ -18,7 +18,7 @@ use crate::state::AppState;
 use crate::waa::body::{parse_urlencoded, PyForm};
 use crate::waa::WaaState;
 use crate::waa::{json, json_err, on_backend, on_backend_within, text, text_err, WaaResult};
-use arena_shared::a11y_xml;
+use arena_shared::{a11y_xml, window_list};
 use std::sync::Arc;
 
 /// `platform.platform()` of the Windows 11 guests WAA runs on; `/terminal` names it.
@@ -112,28 +112,18 @@ fn crop_window(image: &image::RgbaImage, rect: Rect) -> image::RgbaImage {
     arena_shared::imaging::crop_padded(image, left, top, right, bottom).unwrap_or_else(|_| black())
 }
 
-/// `window_names_str`: visible windows' non-empty titles in z-order, first occurrence kept.
-pub(crate) fn window_names(windows: &[WindowInfo]) -> Vec<String> {
-    let mut names: Vec<String> = Vec::new();
-    for w in windows {
-        if !w.title.is_empty() && !names.contains(&w.title) {
-            names.push(w.title.clone());
-        }
-    }
-    names
-}
-
 /// `GET /obs_winagent`.
 pub(crate) async fn obs_winagent(State(state): State<AppState>, State(session): State<Arc<WaaState>>) -> WaaResult {
     let clipboard = session.computer().map_or(Value::Null, |c| c.clipboard_content.clone());
     let human_input = session.human_input();
     let (image, title, rect, names) = on_backend(&state, "obs_winagent", |desktop| {
         let all = desktop.windows()?;
-        let foreground = all.iter().find(|w| w.focused).cloned();
-        let windows = sorted_visible(all);
-        let title = foreground.as_ref().map(|w| w.title.clone()).unwrap_or_default();
-        let (title, rect, crop) = match &foreground {
-            Some(w) if !title.is_empty() && title != "Program Manager" => {
+        let foreground = all.iter().find(|w| w.focused);
+        // One rule for the title and the list, shared with the host's observation.
+        let title = window_list::foreground_title(foreground.map(|w| w.title.as_str()));
+        let names = window_list::window_names(&all).join("\n");
+        let (title, rect, crop) = match foreground {
+            Some(w) if !w.title.is_empty() && w.title != window_list::PROGRAM_MANAGER => {
                 let r = w.rect;
                 (title, json!([r.x, r.y, r.right(), r.bottom()]), r)
             }
@@ -146,13 +136,13 @@ pub(crate) async fn obs_winagent(State(state): State<AppState>, State(session): 
                     screen.physical_width as i32,
                     screen.physical_height as i32,
                 ));
-                ("Desktop".to_owned(), json!([primary.x, primary.y, primary.width, primary.height]), primary)
+                (title, json!([primary.x, primary.y, primary.width, primary.height]), primary)
             }
         };
         let frame = desktop.capture(false)?;
         let png = crate::imaging::encode(&crop_window(&frame.image, crop), ImageFormat::Png, 0)
             .map_err(|err| WaaError::catch(err.to_string()))?;
-        Ok((base64::engine::general_purpose::STANDARD.encode(png), title, rect, window_names(&windows).join("\n")))
+        Ok((base64::engine::general_purpose::STANDARD.encode(png), title, rect, names))
     })
     .await?;
     Ok(json(
@@ -241,23 +231,5 @@ mod tests {
         let padded = crop_window(&img, Rect::new(90, 40, 50, 50));
         assert_eq!(padded.get_pixel(0, 0).0, [1, 2, 3, 255]);
         assert_eq!(padded.get_pixel(20, 20).0, [0, 0, 0, 255]);
-    }
-
-    #[test]
-    fn window_names_keep_the_first_of_duplicates() {
-        let w = |title: &str| WindowInfo {
-            id: 1,
-            title: title.to_owned(),
-            class_name: String::new(),
-            process_id: 1,
-            process_name: String::new(),
-            rect: Rect::new(0, 0, 1, 1),
-            visible: true,
-            minimized: false,
-            maximized: false,
-            focused: false,
-            z_order: 0,
-        };
-        assert_eq!(window_names(&[w("A"), w(""), w("B"), w("A")]), vec!["A".to_owned(), "B".to_owned()]);
     }
 }

@@ -13,8 +13,11 @@
 //!   asks, until [`RetryPolicy::give_up_after`] has passed. Any other 4xx (a
 //!   bad key, a bad request) fails at once. A model that is still failing
 //!   then is an [`AgentError::Model`], which leaves the task unfinished.
-//! - **A refusal** (`message.refusal` with no content) is an answer: its text
-//!   comes back and the agent treats it as a reply without actions.
+//! - **A refusal** (`message.refusal` with no content) leaves the task
+//!   unfinished by default ([`Refusals::Unfinished`], [`AgentError::Refused`]),
+//!   as upstream's Navi, which reads only `content`, cannot go on without one.
+//!   [`Refusals::Answer`] (`--refusals answer`, recorded in the results) takes its
+//!   text as a reply without actions instead, so the task is scored.
 //! - **Other JSON APIs.** [`ModelClient::with_url`] posts to a URL as given and
 //!   [`ModelClient::call`] answers the whole JSON reply with the same retries:
 //!   the computer-use agents speak Anthropic's Messages API ([`ApiKind::Anthropic`]:
@@ -109,9 +112,30 @@ impl TokensField {
     }
 }
 
+/// What a refusal (`message.refusal` without content) does.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Refusals {
+    /// The task is left unfinished, as upstream leaves it.
+    #[default]
+    Unfinished,
+    /// The refusal's text is the reply: the step has no action and the task is scored.
+    Answer,
+}
+
+impl Refusals {
+    /// The name recorded in the results (`unfinished`, `answer`).
+    pub fn name(self) -> &'static str {
+        match self {
+            Refusals::Unfinished => "unfinished",
+            Refusals::Answer => "answer",
+        }
+    }
+}
+
 /// A chat-completions endpoint and how to call it.
 #[derive(Debug, Clone)]
 pub struct ModelClient {
+    refusals: Refusals,
     kind: ApiKind,
     endpoint: String,
     key: Option<String>,
@@ -128,6 +152,8 @@ struct Failure {
     transient: bool,
     /// The least the server asked us to wait (`Retry-After`).
     wait_at_least: Option<Duration>,
+    /// The model refused, with this text ([`Refusals::Unfinished`]).
+    refused: Option<String>,
 }
 
 impl ModelClient {
@@ -166,6 +192,7 @@ impl ModelClient {
             .build()
             .map_err(|e| AgentError::Config(format!("cannot build the HTTP client: {e}")))?;
         Ok(ModelClient {
+            refusals: Refusals::default(),
             kind,
             endpoint,
             key,
@@ -180,6 +207,13 @@ impl ModelClient {
     #[must_use]
     pub fn with_header(mut self, name: &str, value: &str) -> ModelClient {
         self.headers.push((name.to_owned(), value.to_owned()));
+        self
+    }
+
+    /// The same client with refusals handled as `refusals` says.
+    #[must_use]
+    pub fn with_refusals(mut self, refusals: Refusals) -> ModelClient {
+        self.refusals = refusals;
         self
     }
 
@@ -201,28 +235,46 @@ impl ModelClient {
     ///
     /// [`AgentError::Model`] naming the last failure when no try succeeded.
     pub async fn complete(&self, body: &Value) -> Result<String, AgentError> {
-        let answer = self.call(body).await?;
-        reply_text(&answer).ok_or_else(|| AgentError::Model {
-            endpoint: self.endpoint.clone(),
-            reason: "the answer has no choices[0].message.content".into(),
-        })
+        self.complete_counted(body).await.map(|(text, _)| text)
     }
 
-    /// Sends `body` and answers the reply's JSON, trying again as the policy says.
+    /// [`ModelClient::complete`], with the number of tries it took.
+    ///
+    /// # Errors
+    ///
+    /// [`AgentError::Model`] naming the last failure when no try succeeded;
+    /// [`AgentError::Refused`] for a refusal under [`Refusals::Unfinished`].
+    pub async fn complete_counted(&self, body: &Value) -> Result<(String, u32), AgentError> {
+        let (answer, tries) = self.call_counted(body, true).await?;
+        // A chat answer without its text is refused by `try_once`, so this is never empty by omission.
+        Ok((reply_text(&answer).unwrap_or_default(), tries))
+    }
+
+    /// Sends `body` and answers the reply's JSON, trying again as the policy says
+    /// (the computer-use agents' Messages and Responses APIs).
     ///
     /// # Errors
     ///
     /// [`AgentError::Model`] naming the last failure when no try succeeded.
     pub async fn call(&self, body: &Value) -> Result<Value, AgentError> {
+        self.call_counted(body, false).await.map(|(answer, _)| answer)
+    }
+
+    /// The retry loop: the reply's JSON and the number of tries; `chat` checks
+    /// the chat-completions reply (a refusal, its text).
+    async fn call_counted(&self, body: &Value, chat: bool) -> Result<(Value, u32), AgentError> {
         let mut waited = Duration::ZERO;
         let mut delay = self.retry.initial_delay;
         let mut tries = 0u32;
         loop {
             tries += 1;
-            let failure = match self.try_once(body).await {
-                Ok(answer) => return Ok(answer),
+            let failure = match self.try_once(body, chat).await {
+                Ok(answer) => return Ok((answer, tries)),
                 Err(failure) => failure,
             };
+            if let Some(text) = failure.refused {
+                return Err(AgentError::Refused { endpoint: self.endpoint.clone(), text });
+            }
             let pause = rand::rng().random_range(Duration::ZERO..=delay).max(failure.wait_at_least.unwrap_or_default());
             // Time spent waiting counts against the budget (the tries themselves are
             // bounded by the call timeout), so a fake clock sees the same decisions.
@@ -240,7 +292,7 @@ impl ModelClient {
         }
     }
 
-    async fn try_once(&self, body: &Value) -> Result<Value, Failure> {
+    async fn try_once(&self, body: &Value, chat: bool) -> Result<Value, Failure> {
         let mut request = self.http.post(&self.endpoint).json(body);
         if let Some(key) = &self.key {
             request = match self.kind {
@@ -252,7 +304,7 @@ impl ModelClient {
         for (name, value) in &self.headers {
             request = request.header(name, value);
         }
-        let transient = |reason: String| Failure { reason, transient: true, wait_at_least: None };
+        let transient = |reason: String| Failure { reason, transient: true, wait_at_least: None, refused: None };
         let response = request.send().await.map_err(|e| transient(error_chain(&e)))?;
         let status = response.status();
         let wait_at_least = retry_after(response.headers());
@@ -264,9 +316,33 @@ impl ModelClient {
                 reason: format!("HTTP {status}: {snippet}"),
                 transient: matches!(code, 408 | 409 | 429) || status.is_server_error(),
                 wait_at_least,
+                refused: None,
             });
         }
-        serde_json::from_str(&text).map_err(|e| transient(format!("the answer is not JSON (cut short?): {e}")))
+        let value: Value =
+            serde_json::from_str(&text).map_err(|e| transient(format!("the answer is not JSON (cut short?): {e}")))?;
+        if !chat {
+            return Ok(value);
+        }
+        if self.refusals == Refusals::Unfinished {
+            if let Some(text) = refusal(&value) {
+                return Err(Failure {
+                    reason: format!("refused: {text}"),
+                    transient: false,
+                    wait_at_least: None,
+                    refused: Some(text),
+                });
+            }
+        }
+        if reply_text(&value).is_none() {
+            return Err(Failure {
+                reason: "the answer has no choices[0].message.content".into(),
+                transient: false,
+                wait_at_least: None,
+                refused: None,
+            });
+        }
+        Ok(value)
     }
 }
 
@@ -306,6 +382,15 @@ pub(crate) fn error_chain(err: &(dyn std::error::Error + 'static)) -> String {
         source = inner.source();
     }
     text
+}
+
+/// The refusal's text when `choices[0].message` holds a refusal and no content.
+fn refusal(answer: &Value) -> Option<String> {
+    let message = answer.get("choices")?.get(0)?.get("message")?;
+    match message.get("content") {
+        Some(Value::String(_) | Value::Array(_)) => None,
+        _ => message.get("refusal").and_then(Value::as_str).map(str::to_owned),
+    }
 }
 
 /// `choices[0].message.content`, as a string or as a list of text parts; a

@@ -26,6 +26,7 @@ pub mod exec;
 pub mod external;
 pub mod llm;
 pub mod navi;
+pub mod observe;
 pub mod parse;
 pub mod replay;
 pub mod scripted;
@@ -34,8 +35,7 @@ pub mod waa_prompts;
 use serde::{Deserialize, Serialize};
 
 use arena_shared::action::Action;
-use arena_shared::clipboard::ClipboardContent;
-use arena_shared::observation::{A11yQuery, A11yTree, ScreenInfo, ScreenshotQuery};
+use arena_shared::observation::{A11yTree, ScreenInfo};
 
 use crate::client::GuestClient;
 use crate::error::ClientError;
@@ -43,23 +43,27 @@ use crate::som::Marks;
 use crate::task::Task;
 
 pub use exec::{execute, execute_with, ActionOutcome, ExecOptions};
+pub use observe::{Frame, ObserveConfig, ObserveError, ObserveTimings};
 
-/// What an agent sees at one step.
+/// What an agent sees at one step; built only by [`observe::observe`], the
+/// harness's own builder (tests use it through [`Observation::capture`]).
 #[derive(Debug, Clone)]
 pub struct Observation {
     /// 1-based step number.
     pub step: u32,
     /// The task's instruction.
     pub instruction: String,
-    /// The full-screen screenshot as PNG.
-    pub screenshot_png: Vec<u8>,
+    /// The full-screen screenshot, decoded once ([`Frame`]: the pixels and the bytes as sent).
+    pub screenshot: Frame,
     /// Where the screenshot came from when not from the guest (`vm-display: why`).
     pub screenshot_source: Option<String>,
     pub screen: ScreenInfo,
-    /// The accessibility tree, when it could be read.
+    /// The accessibility tree, when it could be read (its `truncated` flag says whether the budget cut it).
     pub a11y: Option<A11yTree>,
-    /// Titles of the visible top-level windows.
+    /// The window names upstream lists ([`arena_shared::window_list::window_names`]).
     pub window_titles: Vec<String>,
+    /// The foreground window's title, `Desktop` for Program Manager or an untitled
+    /// window ([`arena_shared::window_list::foreground_title`]).
     pub foreground_title: String,
     /// The foreground window's id, when there is one.
     pub foreground_id: Option<u64>,
@@ -73,6 +77,8 @@ pub struct Observation {
     /// `webparse` proposals), read only for an agent whose [`Agent::wants_dom`]
     /// is true; `None` otherwise or when no browser answers.
     pub dom: Option<Vec<crate::browser::DomElement>>,
+    /// How long each part took.
+    pub timings: ObserveTimings,
 }
 
 impl Observation {
@@ -86,51 +92,18 @@ impl Observation {
         self.a11y.as_ref().map(|tree| crate::som::marks_from_tree(tree, self.screen_size()))
     }
 
-    /// Observes the guest as upstream's `_get_obs` does: a full-size PNG
-    /// screenshot with the cursor, the UIA tree (left out when it cannot be
-    /// read, as upstream's `None`), the visible window titles and the clipboard's text.
+    /// The harness's observation ([`observe::observe`] with the default
+    /// [`ObserveConfig`]: tree read, no DOM), after reading the screen.
     ///
     /// # Errors
     ///
-    /// [`ClientError`] when the screen, the screenshot or the window list cannot be read.
-    pub async fn capture(client: &GuestClient, step: u32, instruction: &str) -> Result<Observation, ClientError> {
-        let screen = client.screen().await?;
-        let shot = client.screenshot(&ScreenshotQuery::default()).await?;
-        let a11y = match client.a11y(&A11yQuery::default()).await {
-            Ok(tree) => Some(tree),
-            Err(err) => {
-                tracing::warn!(error = %err, "no accessibility tree this step");
-                None
-            }
-        };
-        let windows = client.windows().await?;
-        let mut window_titles: Vec<String> = Vec::new();
-        for w in &windows {
-            if w.visible && !w.title.is_empty() && !window_titles.contains(&w.title) {
-                window_titles.push(w.title.clone());
-            }
-        }
-        let foreground = windows.iter().find(|w| w.focused);
-        let foreground_title = foreground.map(|w| w.title.clone()).unwrap_or_default();
-        let foreground_id = foreground.map(|w| w.id);
-        let clipboard = match client.clipboard_get().await {
-            Ok(ClipboardContent::Text { text }) => Some(text),
-            _ => None,
-        };
-        Ok(Observation {
-            step,
-            instruction: instruction.to_owned(),
-            screenshot_png: shot.bytes,
-            screenshot_source: None,
-            screen,
-            a11y,
-            window_titles,
-            foreground_title,
-            foreground_id,
-            tracked_clipboard: None,
-            clipboard,
-            dom: None,
-        })
+    /// [`ObserveError`] when the screen, the screenshot or the window list cannot be read.
+    pub async fn capture(client: &GuestClient, step: u32, instruction: &str) -> Result<Observation, ObserveError> {
+        let screen = client
+            .screen()
+            .await
+            .map_err(|err| ObserveError { what: "reading the screen", reason: err.to_string() })?;
+        observe::observe(client, &ObserveConfig::default(), &screen, step, instruction).await
     }
 }
 
@@ -232,6 +205,27 @@ pub struct Prediction {
     /// upstream's recorder writes an agent's `logs`.
     #[serde(skip)]
     pub logs: Vec<StepLog>,
+    /// How long the agent's own parts took (Set-of-Marks, the model), for `traj.jsonl`.
+    #[serde(skip)]
+    pub timings: PredictTimings,
+}
+
+/// The parts of one prediction an agent times, in milliseconds; `None`: the agent has no such part.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+pub struct PredictTimings {
+    /// Making the Set-of-Marks (its sources and the annotated image).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub som_ms: Option<u64>,
+    /// The model call, its own retries included.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub model_ms: Option<u64>,
+    /// Tries the model client made (1 when the first answered; 0 without a model).
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub model_tries: u32,
+}
+
+fn is_zero(n: &u32) -> bool {
+    *n == 0
 }
 
 /// One entry of an agent's per-step logs.
@@ -249,6 +243,8 @@ pub enum LogValue {
     Text(String),
     /// A `.png` file.
     Png(Vec<u8>),
+    /// A `.png` file, encoded from these pixels when it is written.
+    Image(std::sync::Arc<image::RgbaImage>),
     /// A `.json` file.
     Json(serde_json::Value),
     /// Inline in the trajectory line.
@@ -272,6 +268,11 @@ pub enum AgentError {
     /// not the agent's fault).
     #[error(transparent)]
     Guest(#[from] ClientError),
+    /// The model refused to answer (`message.refusal` without content). Upstream's
+    /// Navi cannot read such an answer, and the task is left unfinished, as for
+    /// [`AgentError::Model`] but without asking again.
+    #[error("model endpoint {endpoint} refused: {text}")]
+    Refused { endpoint: String, text: String },
     /// The agent's configuration is unusable.
     #[error("agent configuration: {0}")]
     Config(String),

@@ -21,16 +21,19 @@
 //! It is not a client of any one vendor's API and keeps no conversation
 //! between steps beyond the history and memory it writes into the prompt.
 
-use std::time::Duration;
+use std::sync::Arc;
+use std::time::{Duration, Instant};
 
 use base64::Engine as _;
+use image::RgbaImage;
 use serde_json::{json, Value};
 
-use super::llm::{self, ApiKind, ModelClient, RetryPolicy, TokensField};
+use super::llm::{self, ApiKind, ModelClient, Refusals, RetryPolicy, TokensField};
+use super::observe::encode_png;
 use super::parse::{parse_navi_reply, parse_reply};
 use super::waa_prompts::{UserInputs, WaaPrompts};
-use super::{Agent, AgentAction, AgentError, LogValue, Observation, Prediction, StepLog};
-use crate::som::{annotate, Marks, ProposedEntity, SomConfig, SomInput, SomOrigin, SomSources};
+use super::{Agent, AgentAction, AgentError, LogValue, Observation, PredictTimings, Prediction, StepLog};
+use crate::som::{annotate, Marks, ProposedEntity, SomConfig, SomInput, SomSources};
 use crate::task::Task;
 
 /// Environment variables the API key is read from, in order, when the configuration has none.
@@ -67,6 +70,8 @@ pub struct NaviConfig {
     /// Where the Set-of-Marks entities come from (upstream's `--som_origin`,
     /// default `a11y`) and how its services are reached.
     pub som: SomConfig,
+    /// What a refusal does (upstream: the task is left unfinished).
+    pub refusals: Refusals,
 }
 
 /// Which Navi the agent is.
@@ -100,6 +105,7 @@ impl NaviConfig {
             style: NaviStyle::default(),
             waa_prompts: None,
             som: SomConfig::default(),
+            refusals: Refusals::default(),
         }
     }
 
@@ -200,30 +206,32 @@ pub struct NaviAgent {
     memory: String,
     /// [`NaviStyle::Waa`]: the memory block, fences included, as upstream keeps it.
     memory_block: String,
-    previous_png: Option<Vec<u8>>,
+    /// The previous step's screenshot, as decoded then (never decoded again).
+    previous: Option<Arc<RgbaImage>>,
     last_error: Option<String>,
     /// The Set-of-Marks sources of [`NaviConfig::som`].
     som: SomSources,
 }
 
 /// An image part as upstream's client sends one: the screenshot at the model
-/// size as a JPEG (Pillow's default quality), `detail: auto`. A PNG that cannot
-/// be converted is sent as it is.
-fn jpeg_part(png: &[u8]) -> Value {
-    let url = match arena_shared::fastimg::png_to_model_jpeg(png, arena_shared::fastimg::PILLOW_JPEG_QUALITY) {
+/// size as a JPEG (Pillow's default quality), `detail: auto`, encoded here from
+/// the observation's pixels. An image that cannot be converted is sent as PNG.
+fn jpeg_part(pixels: &RgbaImage) -> Value {
+    let url = match arena_shared::fastimg::rgba_to_model_jpeg(pixels, arena_shared::fastimg::PILLOW_JPEG_QUALITY) {
         Ok(model) => {
             format!("data:image/jpeg;base64,{}", base64::engine::general_purpose::STANDARD.encode(&model.jpeg))
         }
         Err(err) => {
-            tracing::warn!(error = %err, "cannot make the model's JPEG; sending the PNG");
-            data_uri(png)
+            tracing::warn!(error = %err, "cannot make the model's JPEG; sending PNG");
+            data_uri(pixels)
         }
     };
     json!({"type": "image_url", "image_url": {"url": url, "detail": "auto"}})
 }
 
-fn data_uri(png: &[u8]) -> String {
-    format!("data:image/png;base64,{}", base64::engine::general_purpose::STANDARD.encode(png))
+/// The pixels as a PNG data URI (the [`NaviStyle::Arena`] request).
+fn data_uri(pixels: &RgbaImage) -> String {
+    format!("data:image/png;base64,{}", base64::engine::general_purpose::STANDARD.encode(encode_png(pixels)))
 }
 
 impl NaviAgent {
@@ -237,7 +245,8 @@ impl NaviAgent {
             return Err(AgentError::Config("the model's base URL and name must not be empty".into()));
         }
         let api = config.api.unwrap_or_else(|| ApiKind::detect(&config.base_url));
-        let client = ModelClient::new(&config.base_url, api, config.resolved_key(), config.timeout, config.retry)?;
+        let client = ModelClient::new(&config.base_url, api, config.resolved_key(), config.timeout, config.retry)?
+            .with_refusals(config.refusals);
         let memory = empty_memory(&config);
         let som = SomSources::new(config.som.clone()).map_err(|e| AgentError::Config(e.to_string()))?;
         Ok(NaviAgent {
@@ -247,7 +256,7 @@ impl NaviAgent {
             history: Vec::new(),
             memory: String::new(),
             memory_block: memory,
-            previous_png: None,
+            previous: None,
             last_error: None,
         })
     }
@@ -257,12 +266,8 @@ impl NaviAgent {
         // The browser's DOM elements for `oss` and `mixed-oss` (the episode reads
         // them when `wants_dom` says so; none when no browser answered).
         let dom = dom_entities(obs);
-        let input = SomInput {
-            tree: obs.a11y.as_ref(),
-            screenshot_png: &obs.screenshot_png,
-            size: obs.screen_size(),
-            dom: &dom,
-        };
+        let input =
+            SomInput { tree: obs.a11y.as_ref(), screenshot: &obs.screenshot, size: obs.screen_size(), dom: &dom };
         self.som.marks(&input).await.map_err(|err| AgentError::Model {
             endpoint: format!("the Set-of-Marks source `{}`", self.config.som.origin),
             reason: err.to_string(),
@@ -273,7 +278,8 @@ impl NaviAgent {
     /// inputs, with our words where it has prose.
     fn waa_prompt_text(&self, obs: &Observation, marks: Option<&Marks>) -> String {
         if let Some(prompts) = &self.config.waa_prompts {
-            let candidates = marks.map(Marks::candidate_list).unwrap_or_default();
+            // Without marks upstream still prints the list's header line.
+            let candidates = marks.map_or_else(|| Marks::default().candidate_list(), Marks::candidate_list);
             let codes: Vec<String> = self.history.iter().map(|t| t.text.clone()).collect();
             let history = prompts.history_text(&codes, self.config.max_history);
             let window_names = obs.window_titles.join("\n");
@@ -290,7 +296,7 @@ impl NaviAgent {
         }
         // Upstream shows Navi's own tracked clipboard, not the system's.
         let clipboard = obs.tracked_clipboard.as_deref().unwrap_or("(nothing copied yet)");
-        let candidates = marks.map_or_else(|| "(no element list this turn)".to_owned(), Marks::candidate_list);
+        let candidates = marks.map_or_else(|| Marks::default().candidate_list(), Marks::candidate_list);
         // Newest first, as upstream's history reads back from time step T-1.
         let skip = self.history.len().saturating_sub(self.config.max_history);
         let history: Vec<String> = self.history[skip..]
@@ -360,14 +366,14 @@ impl NaviAgent {
         }
     }
 
-    fn request_body(&self, obs: &Observation, marks: Option<&Marks>, annotated: &[u8]) -> Value {
+    fn request_body(&self, obs: &Observation, marks: Option<&Marks>, annotated: &RgbaImage) -> Value {
         let text = self.user_text(obs, marks);
         let (system, content) = match self.config.style {
             NaviStyle::Waa => {
                 // Upstream's order and form: the previous screen as it was (the
                 // current one on the first step), then the current one annotated,
                 // each resized to the model size and sent as JPEG.
-                let previous = self.previous_png.as_deref().unwrap_or(&obs.screenshot_png);
+                let previous = self.previous.as_deref().unwrap_or(&obs.screenshot.pixels);
                 let content = vec![json!({"type": "text", "text": text}), jpeg_part(previous), jpeg_part(annotated)];
                 let system = self.config.waa_prompts.as_ref().map_or(WAA_SYSTEM_PROMPT, |p| p.system.as_str());
                 (system, content)
@@ -378,7 +384,7 @@ impl NaviAgent {
                     json!({"type": "text", "text": "The current screen, with the elements' numbers:"}),
                     json!({"type": "image_url", "image_url": {"url": data_uri(annotated)}}),
                 ];
-                if let Some(previous) = &self.previous_png {
+                if let Some(previous) = &self.previous {
                     content.push(json!({"type": "text", "text": "The screen before your last action:"}));
                     content.push(json!({"type": "image_url", "image_url": {"url": data_uri(previous)}}));
                 }
@@ -405,7 +411,7 @@ impl NaviAgent {
         obs: &Observation,
         marks: Option<&Marks>,
         body: &Value,
-        annotated: &[u8],
+        annotated: &Arc<RgbaImage>,
         response: &str,
     ) -> Vec<StepLog> {
         let log = |key: &str, value: LogValue| StepLog { key: key.to_owned(), value };
@@ -427,7 +433,7 @@ impl NaviAgent {
             log("request", LogValue::Json(request)),
         ];
         if let Some(marks) = marks {
-            logs.push(log("foreground_window_prompt", LogValue::Png(annotated.to_vec())));
+            logs.push(log("foreground_window_prompt", LogValue::Image(Arc::clone(annotated))));
             logs.push(log("entity_list", LogValue::Json(serde_json::to_value(marks).unwrap_or(Value::Null))));
         }
         if let Some(tree) = &obs.a11y {
@@ -435,6 +441,10 @@ impl NaviAgent {
         }
         logs
     }
+}
+
+fn ms(d: Duration) -> u64 {
+    u64::try_from(d.as_millis()).unwrap_or(u64::MAX)
 }
 
 /// The observation's DOM elements as Set-of-Marks entities (`text/html`; an
@@ -455,37 +465,38 @@ impl Agent for NaviAgent {
 
     /// Upstream's `oss` pipelines start with the browser's DOM elements.
     fn wants_dom(&self) -> bool {
-        matches!(self.config.som.origin, SomOrigin::Oss | SomOrigin::MixedOss)
+        self.config.som.origin.needs_dom()
     }
 
     async fn reset(&mut self, _task: &Task) {
         self.history.clear();
         self.memory.clear();
         self.memory_block = empty_memory(&self.config);
-        self.previous_png = None;
+        self.previous = None;
         self.last_error = None;
     }
 
     async fn predict(&mut self, obs: &Observation) -> Result<Prediction, AgentError> {
+        let som_started = Instant::now();
         let marks = self.marks(obs).await?;
         let annotated = match &marks {
-            Some(m) => annotate(&obs.screenshot_png, m).unwrap_or_else(|err| {
-                tracing::warn!(error = %err, "cannot annotate the screenshot; sending it unannotated");
-                obs.screenshot_png.clone()
-            }),
-            None => obs.screenshot_png.clone(),
+            Some(m) => Arc::new(annotate(&obs.screenshot.pixels, m)),
+            None => Arc::clone(&obs.screenshot.pixels),
         };
+        let som_ms = ms(som_started.elapsed());
         let body = self.request_body(obs, marks.as_ref(), &annotated);
-        let response = self.client.complete(&body).await?;
+        let model_started = Instant::now();
+        let (response, model_tries) = self.client.complete_counted(&body).await?;
+        let timings = PredictTimings { som_ms: Some(som_ms), model_ms: Some(ms(model_started.elapsed())), model_tries };
         let logs = self.step_logs(obs, marks.as_ref(), &body, &annotated, &response);
-        self.previous_png = Some(obs.screenshot_png.clone());
+        self.previous = Some(Arc::clone(&obs.screenshot.pixels));
         if self.config.style == NaviStyle::Waa {
             let reply = parse_navi_reply(&response);
             if let Some(block) = reply.memory_block {
                 self.memory_block = block;
             }
             self.history.push(Turn { step: obs.step, text: reply.code });
-            return Ok(Prediction { response, actions: reply.actions, marks, raw_error: None, logs });
+            return Ok(Prediction { response, actions: reply.actions, marks, raw_error: None, logs, timings });
         }
         let prediction = match parse_reply(&response) {
             Ok(parsed) => {
@@ -495,13 +506,13 @@ impl Agent for NaviAgent {
                 let summary: Vec<String> = parsed.actions.iter().map(AgentAction::summary).collect();
                 self.history.push(Turn { step: obs.step, text: summary.join(" | ") });
                 self.last_error = None;
-                Prediction { response, actions: parsed.actions, marks, raw_error: None, logs }
+                Prediction { response, actions: parsed.actions, marks, raw_error: None, logs, timings }
             }
             Err(err) => {
                 tracing::info!(step = obs.step, error = %err, "unusable model reply");
                 self.history.push(Turn { step: obs.step, text: format!("(reply not usable: {err})") });
                 self.last_error = Some(err.clone());
-                Prediction { response, actions: Vec::new(), marks, raw_error: Some(err), logs }
+                Prediction { response, actions: Vec::new(), marks, raw_error: Some(err), logs, timings }
             }
         };
         Ok(prediction)
@@ -511,6 +522,7 @@ impl Agent for NaviAgent {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::som::SomOrigin;
 
     #[test]
     fn endpoints() {
@@ -594,7 +606,7 @@ mod tests {
         Observation {
             step: 1,
             instruction: "do it".into(),
-            screenshot_png: Vec::new(),
+            screenshot: crate::agent::Frame::from_pixels(RgbaImage::new(16, 10)),
             screenshot_source: None,
             screen: arena_shared::observation::ScreenInfo {
                 physical_width: 1280,
@@ -612,6 +624,7 @@ mod tests {
             tracked_clipboard: None,
             clipboard: None,
             dom: None,
+            timings: Default::default(),
         }
     }
 
@@ -619,10 +632,10 @@ mod tests {
     fn requests_carry_upstreams_sampling_defaults_and_the_right_length_field() {
         let obs = observation();
         let agent = NaviAgent::new(NaviConfig::new("http://x/v1", "gpt-4o")).unwrap();
-        let body = agent.request_body(&obs, None, b"png");
+        let body = agent.request_body(&obs, None, &obs.screenshot.pixels);
         assert_eq!((body["temperature"].clone(), body["max_tokens"].clone()), (json!(1.0), json!(4096)));
         let agent = NaviAgent::new(NaviConfig::new("http://x/v1", "o3-mini")).unwrap();
-        let body = agent.request_body(&obs, None, b"png");
+        let body = agent.request_body(&obs, None, &obs.screenshot.pixels);
         assert!(body.get("max_tokens").is_none() && body["max_completion_tokens"] == json!(4096), "{body}");
 
         // With a checkout's prompts, its texts are what is sent.
@@ -631,7 +644,7 @@ mod tests {
         let mut config = NaviConfig::new("http://x/v1", "gpt-4o");
         config.waa_prompts = Some(std::sync::Arc::new(WaaPrompts::load(root.path()).unwrap()));
         let agent = NaviAgent::new(config).unwrap();
-        let body = agent.request_body(&obs, None, b"png");
+        let body = agent.request_body(&obs, None, &obs.screenshot.pixels);
         assert_eq!(
             body["messages"][0]["content"],
             "Fake system text for a test.\nIt spans lines, with a brace {kept}."
@@ -646,7 +659,7 @@ mod tests {
         // The clipboard shown is the one the agent's computer tracks, not the system's.
         let tracked =
             Observation { tracked_clipboard: Some("tracked".into()), clipboard: Some("system".into()), ..obs.clone() };
-        let body = agent.request_body(&tracked, None, b"png");
+        let body = agent.request_body(&tracked, None, &tracked.screenshot.pixels);
         let text = body["messages"][1]["content"][0]["text"].as_str().unwrap();
         assert!(text.contains("Clip: tracked\n") && !text.contains("system"), "{text}");
     }

@@ -173,6 +173,7 @@ impl Agent for ReplayAgent {
             raw_error: step.actions.is_empty().then(|| format!("recorded step {} had no actions", step.step)),
             actions: step.actions,
             logs: Vec::new(),
+            timings: Default::default(),
         })
     }
 }

@@ -234,6 +234,7 @@ impl Agent for ScriptedAgent {
             actions: vec![action],
             raw_error: None,
             logs: Vec::new(),
+            timings: Default::default(),
         })
     }
 }

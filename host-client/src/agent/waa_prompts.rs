@@ -301,19 +301,37 @@ fn field_part(expr: &Expr, params: &[String]) -> Result<Part, String> {
     }
 }
 
-/// The commit a checkout's `.git/HEAD` names (a detached id, or the id its branch ref holds).
-fn git_head(root: &Path) -> String {
-    let git = root.join(".git");
+/// The commit of the checkout `root` is in: the root itself, or a folder inside
+/// a checkout (the `src/win-arena-container/client` folder); the first `.git`
+/// found going up is read, a folder (a clone) or a file (`gitdir: PATH`, a
+/// worktree or a submodule, whose branch refs live in its `commondir`). The
+/// HEAD's commit, detached or through its branch's ref (loose or packed), to
+/// 12 characters; `unknown` when no `.git` is found or it cannot be read.
+pub fn git_head(root: &Path) -> String {
+    let found = root.ancestors().find_map(|dir| {
+        let git = dir.join(".git");
+        if git.is_dir() {
+            return Some(git);
+        }
+        let text = std::fs::read_to_string(&git).ok()?;
+        let target = text.lines().find_map(|l| l.strip_prefix("gitdir:"))?.trim();
+        Some(dir.join(target))
+    });
+    let Some(git) = found else { return "unknown".into() };
+    let common = std::fs::read_to_string(git.join("commondir")).map_or_else(|_| git.clone(), |c| git.join(c.trim()));
+    let short = |id: &str| id.trim().chars().take(12).collect::<String>();
     let Ok(head) = std::fs::read_to_string(git.join("HEAD")) else { return "unknown".into() };
     let head = head.trim();
-    let Some(reference) = head.strip_prefix("ref: ") else { return head.chars().take(12).collect() };
-    if let Ok(id) = std::fs::read_to_string(git.join(reference)) {
-        return id.trim().chars().take(12).collect();
+    let Some(reference) = head.strip_prefix("ref: ") else { return short(head) };
+    for dir in [&git, &common] {
+        if let Ok(id) = std::fs::read_to_string(dir.join(reference)) {
+            return short(&id);
+        }
     }
-    let packed = std::fs::read_to_string(git.join("packed-refs")).unwrap_or_default();
+    let packed = std::fs::read_to_string(common.join("packed-refs")).unwrap_or_default();
     packed
         .lines()
-        .find_map(|l| l.strip_suffix(reference).map(|id| id.trim().chars().take(12).collect()))
+        .find_map(|l| l.strip_suffix(reference).filter(|id| id.ends_with(' ')).map(short))
         .unwrap_or_else(|| "unknown".into())
 }
 

@@ -28,7 +28,7 @@ use crate::agent::cu::anthropic::{AnthropicAgent, AnthropicConfig};
 use crate::agent::cu::openai::{OpenAiAgent, OpenAiConfig, SafetyChecks};
 use crate::agent::cu::uitars::{UiTarsAgent, UiTarsConfig};
 use crate::agent::cu::Endpoint;
-use crate::agent::llm::ApiKind;
+use crate::agent::llm::{ApiKind, Refusals};
 use crate::agent::navi::{NaviAgent, NaviConfig, NaviStyle};
 use crate::agent::replay::{ReplayAgent, ReplaySource};
 use crate::agent::scripted::{PlanSource, ScriptedAgent};
@@ -83,6 +83,18 @@ pub struct RunArgs {
     pub agent: AgentKind,
     #[command(flatten)]
     pub external: super::external::ExternalArgs,
+    /// Navi agent: reproduce one row of the WAA paper's Navi table (upstream's
+    /// README, "Available Configurations"): that row's Set-of-Marks origin and
+    /// accessibility backend, upstream's model parameters, step cap and pauses, and
+    /// upstream's prompts from --waa-root (required). Recorded in the results.
+    /// The model is still --model. See docs/compatibility.md, "Presets".
+    #[arg(
+        long,
+        value_enum,
+        value_name = "PRESET",
+        conflicts_with_all = ["som_origin", "a11y_backend", "temperature", "max_tokens", "navi_style", "max_steps", "sleep_after", "fast", "pauses", "no_a11y"]
+    )]
+    pub preset: Option<Preset>,
     /// Scripted agent: one plan file for every task, or a folder of `<task name>.json`
     /// plans [default: `<tasks>/plans` when it exists, else each task's `plan` key].
     #[arg(long, value_name = "PATH")]
@@ -116,6 +128,15 @@ pub struct RunArgs {
     /// `mixed-omni` (the tree, then what the other source adds). See docs/som.md.
     #[arg(long, default_value = "a11y", value_parser = parse_som_origin, value_name = "ORIGIN")]
     pub som_origin: SomOrigin,
+    /// Which accessibility tree is read, upstream's --a11y_backend: `uia` (UI
+    /// Automation, upstream's default) or `win32` (window enumeration, faster).
+    #[arg(long, value_enum, default_value_t = A11yBackendArg::Uia)]
+    pub a11y_backend: A11yBackendArg,
+    /// Navi agent: what a model refusal (`message.refusal` without content) does:
+    /// `unfinished` (upstream: the task is left without a result) or `answer` (its
+    /// text is a reply without actions and the task is scored). Recorded in the results.
+    #[arg(long, value_enum, default_value_t = RefusalsArg::Unfinished)]
+    pub refusals: RefusalsArg,
     /// Navi agent: base URL of the Grounding DINO service (`oss`, `mixed-oss`); see docs/som.md.
     #[arg(long, env = "ARENA_DETECTOR_URL", value_name = "URL")]
     pub detector_url: Option<String>,
@@ -258,6 +279,148 @@ pub struct RunArgs {
     pub vm: super::vm::VmArgs,
 }
 
+/// `--a11y-backend`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum A11yBackendArg {
+    Uia,
+    Win32,
+}
+
+/// `--refusals`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum RefusalsArg {
+    Unfinished,
+    Answer,
+}
+
+/// `--preset`: the rows of the WAA paper's Navi comparison that this project
+/// can run, as upstream's README lists them ("Available Configurations",
+/// microsoft/WindowsAgentArena at 6d39ed88, whose `run-local.sh` takes
+/// `--som-origin` and `--a11y-backend` and passes them to `run.py`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum Preset {
+    /// `--som-origin mixed-omni --a11y-backend uia`: OmniParser with the UIA tree, the paper's best row.
+    PaperMixedOmni,
+    /// `--som-origin omni`: OmniParser alone.
+    PaperOmni,
+    /// `--som-origin oss`: webparse, Grounding DINO and Tesseract OCR, the baseline.
+    PaperOss,
+    /// `--som-origin a11y --a11y-backend uia`: the UIA tree.
+    PaperA11yUia,
+    /// `--som-origin a11y --a11y-backend win32`: the win32 tree, the fastest.
+    PaperA11yWin32,
+    /// `--som-origin mixed-oss --a11y-backend uia`: the `oss` sources with the UIA tree.
+    PaperMixedOss,
+}
+
+/// Upstream's default run, the reference a non-preset Navi run is compared with:
+/// `run.py` and `start_client.sh` at 6d39ed88 (`--som_origin oss`, `--a11y_backend uia`,
+/// `--temperature 1.0`, `--max_steps 15`, `--sleep_after_execution 3`), Navi's
+/// `max_tokens` of 4096 (its planner's request), and the prompts of the checkout.
+pub mod upstream_default {
+    use super::SomOrigin;
+    pub const SOM_ORIGIN: SomOrigin = SomOrigin::Oss;
+    pub const A11Y_BACKEND: &str = "uia";
+    pub const TEMPERATURE: f64 = 1.0;
+    pub const MAX_TOKENS: u32 = 4096;
+    pub const MAX_STEPS: u32 = crate::episode::DEFAULT_MAX_STEPS;
+    pub const SLEEP_AFTER_SECONDS: f64 = 3.0;
+}
+
+impl Preset {
+    /// `paper-mixed-omni`, ...
+    pub fn name(self) -> &'static str {
+        match self {
+            Preset::PaperMixedOmni => "paper-mixed-omni",
+            Preset::PaperOmni => "paper-omni",
+            Preset::PaperOss => "paper-oss",
+            Preset::PaperA11yUia => "paper-a11y-uia",
+            Preset::PaperA11yWin32 => "paper-a11y-win32",
+            Preset::PaperMixedOss => "paper-mixed-oss",
+        }
+    }
+
+    /// The row's Set-of-Marks origin and accessibility backend.
+    pub fn row(self) -> (SomOrigin, A11yBackendArg) {
+        match self {
+            Preset::PaperMixedOmni => (SomOrigin::MixedOmni, A11yBackendArg::Uia),
+            // Upstream's default backend is uia; the row does not change it.
+            Preset::PaperOmni => (SomOrigin::Omni, A11yBackendArg::Uia),
+            Preset::PaperOss => (SomOrigin::Oss, A11yBackendArg::Uia),
+            Preset::PaperA11yUia => (SomOrigin::A11y, A11yBackendArg::Uia),
+            Preset::PaperA11yWin32 => (SomOrigin::A11y, A11yBackendArg::Win32),
+            Preset::PaperMixedOss => (SomOrigin::MixedOss, A11yBackendArg::Uia),
+        }
+    }
+
+    /// `args` with the row's settings and upstream's model parameters, step cap and pauses.
+    ///
+    /// # Errors
+    ///
+    /// Without --waa-root (a reproduction sends upstream's own prompts), or with an agent other than Navi.
+    pub fn apply(self, args: &RunArgs) -> anyhow::Result<RunArgs> {
+        if args.agent != AgentKind::Navi {
+            bail!("--preset {} is a Navi configuration: give --agent navi", self.name());
+        }
+        if args.waa_root.is_none() {
+            bail!(
+                "--preset {} reproduces upstream's run and needs upstream's prompts: give --waa-root (or ARENA_WAA_ROOT), a WindowsAgentArena checkout",
+                self.name()
+            );
+        }
+        let (som_origin, a11y_backend) = self.row();
+        Ok(RunArgs {
+            som_origin,
+            a11y_backend,
+            temperature: upstream_default::TEMPERATURE,
+            max_tokens: upstream_default::MAX_TOKENS,
+            navi_style: NaviStyleArg::Waa,
+            max_steps: upstream_default::MAX_STEPS,
+            sleep_after: None,
+            fast: false,
+            pauses: Some(PausesArg::Upstream),
+            no_a11y: false,
+            ..args.clone()
+        })
+    }
+}
+
+/// What a Navi run that is no preset changes from upstream's default run, one
+/// `name=ours (upstream: theirs)` item each; empty when nothing differs.
+pub fn differences_from_upstream(args: &RunArgs, fast: bool) -> Vec<String> {
+    let mut out = Vec::new();
+    let mut differs = |name: &str, ours: String, theirs: String| {
+        if ours != theirs {
+            out.push(format!("{name}={ours} (upstream: {theirs})"));
+        }
+    };
+    differs("som_origin", args.som_origin.name().to_owned(), upstream_default::SOM_ORIGIN.name().to_owned());
+    let backend = if args.a11y_backend == A11yBackendArg::Win32 { "win32" } else { "uia" };
+    differs("a11y_backend", backend.to_owned(), upstream_default::A11Y_BACKEND.to_owned());
+    let prompt = match (args.navi_style, &args.waa_root) {
+        (NaviStyleArg::Arena, _) => "arena (this project's prompt and reply reader)",
+        (NaviStyleArg::Waa, None) => "ours (no --waa-root)",
+        (NaviStyleArg::Waa, Some(_)) => "the checkout's",
+    };
+    differs("prompt", prompt.to_owned(), "the checkout's".to_owned());
+    differs("temperature", format!("{}", args.temperature), format!("{}", upstream_default::TEMPERATURE));
+    differs("max_tokens", args.max_tokens.to_string(), upstream_default::MAX_TOKENS.to_string());
+    differs("max_steps", args.max_steps.to_string(), upstream_default::MAX_STEPS.to_string());
+    let upstream_pauses = "5 s after the reset and the setup, 3 s after each action";
+    let pauses = if fast { "fast (none)" } else { upstream_pauses };
+    differs("pauses", pauses.to_owned(), upstream_pauses.to_owned());
+    if let Some(secs) = args.sleep_after {
+        differs("sleep_after", format!("{secs}"), format!("{}", upstream_default::SLEEP_AFTER_SECONDS));
+    }
+    if args.no_a11y {
+        differs("a11y", "off".to_owned(), "on".to_owned());
+    }
+    if args.refusals == RefusalsArg::Answer {
+        differs("refusals", "answer".to_owned(), "unfinished".to_owned());
+    }
+    out
+}
+
 /// `--computer-tool`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
 pub enum ComputerTool {
@@ -350,6 +513,11 @@ fn guests_from_file(path: &Path) -> anyhow::Result<Vec<String>> {
         .collect())
 }
 
+/// Where the behaviour constants a run uses come from, whatever --waa-root says:
+/// this project's code, written from upstream at 6d39ed88 (docs/compatibility.md,
+/// "Provenance").
+pub const BEHAVIOUR_CONSTANTS: &str = "arena (compiled in, from upstream 6d39ed88; not read from --waa-root)";
+
 /// The agent a run plays with.
 pub(crate) struct ChosenAgent {
     factory: AgentFactory,
@@ -413,12 +581,20 @@ pub(crate) fn agent_factory(args: &RunArgs) -> anyhow::Result<ChosenAgent> {
             config.som.origin = args.som_origin;
             config.som.detector_url = args.detector_url.clone();
             config.som.omniparser_url = args.omniparser_url.clone();
+            config.refusals = match args.refusals {
+                RefusalsArg::Unfinished => Refusals::Unfinished,
+                RefusalsArg::Answer => Refusals::Answer,
+            };
             let options = vec![
                 ("navi_style".to_owned(), style.to_owned()),
                 ("som_origin".to_owned(), args.som_origin.name().to_owned()),
                 ("prompt".to_owned(), prompt),
+                // Only the prompt texts follow --waa-root; every behaviour constant
+                // (pauses, step cap, budgets, image sizes, colours) is compiled in.
+                ("behaviour_constants".to_owned(), BEHAVIOUR_CONSTANTS.to_owned()),
                 ("temperature".to_owned(), format!("{}", args.temperature)),
                 ("max_tokens".to_owned(), args.max_tokens.to_string()),
+                ("refusals".to_owned(), config.refusals.name().to_owned()),
             ];
             config.api = match args.llm_api {
                 LlmApi::Auto => None,
@@ -539,6 +715,10 @@ fn computer_use_agent(args: &RunArgs) -> anyhow::Result<ChosenAgent> {
 ///
 /// Unusable arguments, tasks that do not load, no guest, or results that cannot be written.
 pub async fn run(conn: &Connection, args: RunArgs) -> anyhow::Result<ExitCode> {
+    let args = match args.preset {
+        Some(preset) => preset.apply(&args)?,
+        None => args,
+    };
     let tasks = load_tasks(&args.tasks, args.difficulty)?;
     let (chosen, mcp) = if args.agent == AgentKind::Mcp {
         let (built, endpoint) = super::external::mcp(&args.external, args.max_steps, &args.out).await?;
@@ -605,6 +785,11 @@ pub async fn run(conn: &Connection, args: RunArgs) -> anyhow::Result<ExitCode> {
     let mut config = if fast { EpisodeConfig::instant(cache) } else { EpisodeConfig::upstream(cache) };
     config.max_steps = args.max_steps;
     config.a11y = !args.no_a11y;
+    if args.a11y_backend == A11yBackendArg::Win32 {
+        config.a11y_query.backend = arena_shared::observation::A11yBackend::Win32;
+        config.options.insert("a11y_backend".into(), "win32".into());
+    }
+    config.options.extend(reproduction(&args, fast)?);
     config.model = model.clone();
     if let Some(secs) = args.sleep_after {
         config.sleep_after_action =
@@ -722,6 +907,23 @@ pub async fn run(conn: &Connection, args: RunArgs) -> anyhow::Result<ExitCode> {
     Ok(ExitCode::SUCCESS)
 }
 
+/// How the run stands to upstream's, as named options: `preset` for a preset,
+/// else, for Navi, `differs_from_upstream` listing what differs, announced in one
+/// line now (and shown by the report, which lists the options).
+fn reproduction(args: &RunArgs, fast: bool) -> anyhow::Result<Vec<(String, String)>> {
+    if let Some(preset) = args.preset {
+        emit(&format!("preset {}: reproducing that row of upstream's Navi table\n", preset.name()))?;
+        return Ok(vec![("preset".into(), preset.name().into())]);
+    }
+    if args.agent != AgentKind::Navi {
+        return Ok(Vec::new());
+    }
+    let differences = differences_from_upstream(args, fast);
+    let text = if differences.is_empty() { "none".to_owned() } else { differences.join("; ") };
+    emit(&format!("not a reproduction: differs from upstream's default Navi run in {text}\n"))?;
+    Ok(vec![("differs_from_upstream".into(), text)])
+}
+
 /// The first Ctrl-C cancels `stop`: no new task starts and running episodes end
 /// at their next step, unevaluated (they run again next time). The second exits
 /// at once with 130; every file already written stays, as each is written whole.
@@ -789,4 +991,89 @@ pub fn report(args: &ReportArgs) -> anyhow::Result<ExitCode> {
     emit(&summary.markdown())?;
     emit(&format!("\nreport: {}\n", path.display()))?;
     Ok(ExitCode::SUCCESS)
+}
+
+#[cfg(test)]
+mod tests {
+    use clap::Parser;
+
+    use super::*;
+
+    #[derive(Parser)]
+    struct Cli {
+        #[command(flatten)]
+        run: RunArgs,
+    }
+
+    fn parse(args: &[&str]) -> Result<RunArgs, clap::Error> {
+        Cli::try_parse_from(["arena", "--tasks", "t"].iter().chain(args)).map(|c| c.run)
+    }
+
+    const NAVI: [&str; 6] = ["--agent", "navi", "--llm-url", "http://127.0.0.1:9/v1", "--model", "m"];
+
+    #[test]
+    fn each_preset_sets_its_rows_origin_and_backend_and_upstreams_parameters_and_pauses() {
+        let rows = [
+            ("paper-mixed-omni", SomOrigin::MixedOmni, A11yBackendArg::Uia),
+            ("paper-omni", SomOrigin::Omni, A11yBackendArg::Uia),
+            ("paper-oss", SomOrigin::Oss, A11yBackendArg::Uia),
+            ("paper-a11y-uia", SomOrigin::A11y, A11yBackendArg::Uia),
+            ("paper-a11y-win32", SomOrigin::A11y, A11yBackendArg::Win32),
+            ("paper-mixed-oss", SomOrigin::MixedOss, A11yBackendArg::Uia),
+        ];
+        for (name, origin, backend) in rows {
+            let mut args = NAVI.to_vec();
+            args.extend(["--preset", name, "--waa-root", "/waa", "--stub-guests", "1"]);
+            let parsed = parse(&args).unwrap();
+            let preset = parsed.preset.expect("a preset");
+            assert_eq!(preset.name(), name);
+            let applied = preset.apply(&parsed).unwrap();
+            assert_eq!((applied.som_origin, applied.a11y_backend), (origin, backend), "{name}");
+            assert_eq!((applied.temperature, applied.max_tokens, applied.max_steps), (1.0, 4096, 15), "{name}");
+            assert_eq!(applied.navi_style, NaviStyleArg::Waa, "{name}");
+            // Upstream's pauses even against stub guests, which would otherwise run fast.
+            assert_eq!(applied.pauses, Some(PausesArg::Upstream), "{name}");
+            // Only the prompt source and the refusal rule could still differ; neither does.
+            let differences = differences_from_upstream(&applied, false);
+            let allowed = ["som_origin=", "a11y_backend="];
+            assert!(differences.iter().all(|d| allowed.iter().any(|a| d.starts_with(a))), "{name}: {differences:?}");
+
+            // A preset needs the checkout's prompts and the Navi agent.
+            let without_root: Vec<&str> = NAVI.iter().copied().chain(["--preset", name]).collect();
+            let err = preset.apply(&parse(&without_root).unwrap()).unwrap_err().to_string();
+            assert!(err.contains("--waa-root") && err.contains(name), "{err}");
+            let scripted = parse(&["--preset", name, "--waa-root", "/waa"]).unwrap();
+            assert!(preset.apply(&scripted).unwrap_err().to_string().contains("--agent navi"));
+        }
+    }
+
+    #[test]
+    fn a_preset_refuses_settings_that_would_change_its_row() {
+        for extra in [["--som-origin", "oss"], ["--temperature", "0.5"], ["--max-steps", "30"], ["--pauses", "fast"]] {
+            let mut args = NAVI.to_vec();
+            args.extend(["--preset", "paper-oss", "--waa-root", "/waa"]);
+            args.extend(extra);
+            let err = parse(&args).err().unwrap_or_else(|| panic!("{extra:?} accepted"));
+            assert_eq!(err.kind(), clap::error::ErrorKind::ArgumentConflict, "{extra:?}");
+        }
+    }
+
+    #[test]
+    fn a_default_navi_run_names_every_difference_from_upstreams_default_run() {
+        let args = parse(&NAVI).unwrap();
+        assert_eq!(
+            differences_from_upstream(&args, true),
+            [
+                "som_origin=a11y (upstream: oss)",
+                "prompt=ours (no --waa-root) (upstream: the checkout's)",
+                "pauses=fast (none) (upstream: 5 s after the reset and the setup, 3 s after each action)",
+            ]
+        );
+        let mut close = NAVI.to_vec();
+        close.extend(["--som-origin", "oss", "--waa-root", "/waa", "--refusals", "answer", "--a11y-backend", "win32"]);
+        assert_eq!(
+            differences_from_upstream(&parse(&close).unwrap(), false),
+            ["a11y_backend=win32 (upstream: uia)", "refusals=answer (upstream: unfinished)"]
+        );
+    }
 }

@@ -147,7 +147,7 @@ fn table(summary: &Summary) -> String {
         );
     }
     t.push_str("</tbody></table>\n");
-    t.push_str("<table id=\"tasks\"><thead><tr><th>Domain</th><th>Task</th><th>Score</th><th>Status</th><th>Steps</th><th>Time (s)</th><th>Attempt</th><th>Guest</th></tr></thead><tbody>\n");
+    t.push_str("<table id=\"tasks\"><thead><tr><th>Domain</th><th>Task</th><th>Score</th><th>Status</th><th>Failed by</th><th>Steps</th><th>Time (s)</th><th>Attempt</th><th>Guest</th></tr></thead><tbody>\n");
     for task in &summary.tasks {
         let (class, score) = match task.score {
             Some(s) if task.success => ("ok", super::python_float(s)),
@@ -156,11 +156,12 @@ fn table(summary: &Summary) -> String {
         };
         let _ = writeln!(
             t,
-            "<tr><td>{}</td><td><a href=\"#{}\">{}</a></td><td class=\"num {class}\">{score}</td><td>{}</td><td class=\"num\">{}</td><td class=\"num\">{:.1}</td><td class=\"num\">{}</td><td>{}</td></tr>",
+            "<tr><td>{}</td><td><a href=\"#{}\">{}</a></td><td class=\"num {class}\">{score}</td><td>{}</td><td>{}</td><td class=\"num\">{}</td><td class=\"num\">{:.1}</td><td class=\"num\">{}</td><td>{}</td></tr>",
             escape(&task.domain),
             anchor(&task.path),
             escape(&task.name),
             escape(&task.status),
+            escape(&super::summary::failed_by_text(task)),
             task.steps,
             task.elapsed_ms as f64 / 1000.0,
             task.attempt,
@@ -257,13 +258,22 @@ fn step_html(rel: &str, step: &StepRecord) -> String {
     let t = &step.timings;
     let mut s = format!(
         "<div class=\"step\"><a href=\"{src}\"><img loading=\"lazy\" src=\"{src}\" alt=\"step {n} screenshot\"></a><div>\
-         <p><b>Step {n}</b> <span class=\"meta\">{} &middot; then window {} &middot; observe {} ms, predict {} ms, act {} ms</span></p>\
+         <p><b>Step {n}</b> <span class=\"meta\">{} &middot; then window {} &middot; observe {} ms (screenshot {}, tree {}), predict {} ms (Set-of-Marks {}, model {}), act {} ms{}</span></p>\
          <pre>{}</pre><p class=\"meta\">response</p><pre>{}</pre>",
         escape(&step.first.action_timestamp),
         escape(&step.first.observation.window_title),
         t.observe_ms,
+        t.observe.screenshot_ms,
+        t.observe.tree_ms.map_or_else(|| "-".to_owned(), |v| v.to_string()),
         t.predict_ms,
+        t.predict.som_ms.map_or_else(|| "-".to_owned(), |v| v.to_string()),
+        t.predict.model_ms.map_or_else(|| "-".to_owned(), |v| v.to_string()),
         t.act_ms,
+        if t.timeouts.is_empty() && t.predict_retries == 0 {
+            String::new()
+        } else {
+            escape(&format!(" · {} retries; {}", t.predict_retries, t.timeouts.join("; ")))
+        },
         escape(&step.actions.iter().map(crate::agent::AgentAction::summary).collect::<Vec<_>>().join("\n")),
         escape(&step.response),
         n = step.step

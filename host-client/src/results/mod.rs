@@ -111,6 +111,72 @@ pub enum EpisodeStatus {
     Interrupted(String),
 }
 
+/// Whose failure a task's outcome is, so a reader tells "the environment
+/// failed" from "the agent failed" at a glance.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Blame {
+    /// Scored 1: no failure.
+    Passed,
+    /// The agent's: it finished without solving the task (a wrong answer, a
+    /// give-up, the step cap) or could not go on for a reason of its own.
+    Agent,
+    /// The environment's: the guest stopped answering, its reset or setup failed.
+    Guest,
+    /// The environment's: the VM the run owns failed.
+    Vm,
+    /// The environment's: the evaluation could not finish.
+    Evaluator,
+    /// The environment's: the model endpoint (or a Set-of-Marks service) stayed
+    /// down, refused, or the agent could not be made.
+    Model,
+    /// Nobody's: the run was stopped.
+    Interrupted,
+}
+
+impl Blame {
+    /// `passed`, `agent`, `guest`, `vm`, `evaluator`, `model` or `interrupted`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Blame::Passed => "passed",
+            Blame::Agent => "agent",
+            Blame::Guest => "guest",
+            Blame::Vm => "vm",
+            Blame::Evaluator => "evaluator",
+            Blame::Model => "model",
+            Blame::Interrupted => "interrupted",
+        }
+    }
+
+    /// Whether the environment (guest, VM, evaluator, model endpoint) failed, not the agent.
+    pub fn is_environment(self) -> bool {
+        matches!(self, Blame::Guest | Blame::Vm | Blame::Evaluator | Blame::Model)
+    }
+
+    /// `passed`, `agent`, `environment` or `interrupted`.
+    pub fn side(self) -> &'static str {
+        if self.is_environment() {
+            "environment"
+        } else {
+            self.name()
+        }
+    }
+
+    /// The blame of an outcome: its status and score.
+    pub fn of(status: &EpisodeStatus, score: f64) -> Blame {
+        match status {
+            EpisodeStatus::Completed if score >= 1.0 => Blame::Passed,
+            EpisodeStatus::Completed | EpisodeStatus::AgentError(_) => Blame::Agent,
+            // The fleet's failures name the VM (`preparing the VM: VM vm-0: QEMU exited`).
+            EpisodeStatus::InfraError(m) if m.contains("VM") => Blame::Vm,
+            EpisodeStatus::InfraError(_) => Blame::Guest,
+            EpisodeStatus::ModelError(_) => Blame::Model,
+            EpisodeStatus::EvalError(_) => Blame::Evaluator,
+            EpisodeStatus::Interrupted(_) => Blame::Interrupted,
+        }
+    }
+}
+
 impl EpisodeStatus {
     /// `completed`, `agent_error`, `infra_error`, `model_error`, `eval_error` or `interrupted`.
     pub fn kind(&self) -> &'static str {
@@ -153,18 +219,34 @@ impl EpisodeStatus {
     }
 }
 
-/// Host-side timings of one step, in milliseconds.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+/// Host-side timings of one step, in milliseconds, with the timeouts and retries it met.
+#[derive(Debug, Clone, PartialEq, Eq, Default, Serialize, Deserialize)]
 pub struct StepTimings {
-    /// Screenshot, accessibility tree, windows and clipboard.
+    /// Screenshot, accessibility tree, windows and clipboard (the observation the agent was given).
     pub observe_ms: u64,
-    /// The agent's `predict` (Set-of-Marks and the model call, when it has them).
+    /// The agent's `predict` (Set-of-Marks and the model call, when it has them), retries included.
     pub predict_ms: u64,
     /// Executing every action of the step.
     pub act_ms: u64,
     /// The pause after the actions (`sleep_after_action`, upstream's `--sleep_after_execution`).
     #[serde(default)]
     pub pause_ms: u64,
+    /// Each part of the observation the agent was given: screenshot, decode, tree, windows, clipboard, DOM.
+    #[serde(default)]
+    pub observe: crate::agent::ObserveTimings,
+    /// The agent's own parts: Set-of-Marks, the model call and its tries.
+    #[serde(default)]
+    pub predict: crate::agent::PredictTimings,
+    /// Times the harness asked the agent again after a model failure within the step.
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub predict_retries: u32,
+    /// Every timeout of the step, in words (`predict: no answer within 600 s`, `action 1: ...`).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub timeouts: Vec<String>,
+}
+
+fn is_zero(n: &u32) -> bool {
+    *n == 0
 }
 
 /// The observation keys of a `traj.jsonl` line, as upstream's recorder saves
@@ -369,6 +451,40 @@ fn one() -> u32 {
 }
 
 impl EpisodeResult {
+    /// The one way a record starts: `task` on `guest`, try `attempt`, with
+    /// `status`, no score, no steps and nothing run yet. The episode fills in the rest.
+    pub fn start(task: &crate::task::Task, guest: &str, attempt: u32, status: EpisodeStatus) -> EpisodeResult {
+        EpisodeResult {
+            task_id: task.id.clone(),
+            task_name: task.name.clone(),
+            domain: task.domain.clone(),
+            instruction: task.instruction.clone(),
+            agent: String::new(),
+            model: String::new(),
+            guest: guest.to_owned(),
+            attempt,
+            score: 0.0,
+            score_is_int: false,
+            status,
+            steps: 0,
+            last_action: "none".into(),
+            elapsed_ms: 0,
+            setup_ms: 0,
+            eval_ms: 0,
+            started_unix: unix_now(),
+            setup: Vec::new(),
+            eval: Value::Null,
+            timings: Vec::new(),
+            options: std::collections::BTreeMap::new(),
+            vm: None,
+        }
+    }
+
+    /// Whose failure this outcome is ([`Blame`]).
+    pub fn blame(&self) -> Blame {
+        Blame::of(&self.status, self.score)
+    }
+
     /// What `result.txt` holds: Python's `str()` of upstream's value, `1`/`0`
     /// for an int, else the float's repr (`1.0`, `0.5`, `0.3333333333333333`).
     ///

@@ -22,7 +22,10 @@ use serde::{Deserialize, Serialize};
 
 use super::{scan, write_atomic, FoundTask, ResultsError, SUMMARY_JSON, SUMMARY_MD};
 
-/// Upstream's groups of domains, as `show_result.py` prints them, in its order.
+/// Upstream's groups of domains, in the order they are printed. Upstream's
+/// `show_result.py` at 6d39ed88 prints the first three (Office, Daily,
+/// Professional); the other five come from a later fork's `show_result.py`
+/// (FanbinLu/WindowsAgentArena 4567840, 2025-03-16). docs/compatibility.md lists it.
 pub const GROUPS: &[(&str, &[&str])] = &[
     ("Office", &["libreoffice_calc", "libreoffice_impress", "libreoffice_writer"]),
     ("Daily", &["vlc", "thunderbird", "chrome"]),
@@ -83,6 +86,13 @@ pub struct TaskRow {
     pub attempt: u32,
     #[serde(default)]
     pub guest: String,
+    /// Whose failure this is ([`super::Blame::name`]: `passed`, `agent`, `guest`,
+    /// `vm`, `evaluator`, `model`, `interrupted`; `unknown` without `episode.json`).
+    #[serde(default)]
+    pub blame: String,
+    /// `passed`, `agent`, `environment`, `interrupted` or `unknown`: the side of [`TaskRow::blame`].
+    #[serde(default)]
+    pub failed_by: String,
 }
 
 /// The summary of a result folder.
@@ -100,6 +110,10 @@ pub struct Summary {
     /// one value means the folder mixes runs that are not comparable).
     #[serde(default)]
     pub options: BTreeMap<String, Vec<String>>,
+    /// The trial folders (`<action space>/<observation>/<model>/<trial>`) the
+    /// summary pools; upstream's `show_result.py` reads one.
+    #[serde(default)]
+    pub trials: Vec<String>,
 }
 
 impl Summary {
@@ -141,7 +155,17 @@ impl Summary {
                 }
             }
         }
-        Summary { overall, domains, groups, tasks, options }
+        let mut trials: Vec<String> =
+            tasks.iter().filter_map(|t| t.path.rsplitn(3, '/').nth(2).map(str::to_owned)).collect();
+        trials.sort();
+        trials.dedup();
+        Summary { overall, domains, groups, tasks, options, trials }
+    }
+
+    /// How many finished-or-not tasks failed on each side: (the agent's, the environment's).
+    pub fn failures(&self) -> (usize, usize) {
+        let count = |side: &str| self.tasks.iter().filter(|t| t.failed_by == side).count();
+        (count("agent"), count("environment"))
     }
 
     /// The tasks that have no score.
@@ -222,6 +246,22 @@ impl Summary {
             let list: Vec<String> = self.options.iter().map(|(k, v)| format!("{k}={}", v.join("|"))).collect();
             let _ = writeln!(md, "Options in force: {}.\n", list.join(", "));
         }
+        if self.trials.len() > 1 {
+            let _ = writeln!(
+                md,
+                "Pooled from {} trial folders ({}); upstream's show_result.py reads one trial folder at a time.\n",
+                self.trials.len(),
+                self.trials.join(", ")
+            );
+        }
+        let (agent, environment) = self.failures();
+        let mut parts: BTreeMap<&str, usize> = BTreeMap::new();
+        for t in self.tasks.iter().filter(|t| t.failed_by == "environment") {
+            *parts.entry(t.blame.as_str()).or_default() += 1;
+        }
+        let parts: Vec<String> = parts.iter().map(|(k, n)| format!("{k} {n}")).collect();
+        let parts = if parts.is_empty() { String::new() } else { format!(" ({})", parts.join(", ")) };
+        let _ = writeln!(md, "Failures: {agent} the agent's, {environment} the environment's{parts}.\n");
         md.push_str("| Domain | Tasks | Success rate | Solved | Solved rate | Avg steps | Avg time (s) | Agent errors | Unfinished |\n");
         md.push_str("|---|---:|---:|---:|---:|---:|---:|---:|---:|\n");
         let rows = self
@@ -244,15 +284,16 @@ impl Summary {
                 row.unfinished
             );
         }
-        md.push_str("\n## Tasks\n\n| Domain | Task | Score | Status | Steps | Time (s) | Attempt |\n|---|---|---:|---|---:|---:|---:|\n");
+        md.push_str("\n## Tasks\n\n| Domain | Task | Score | Status | Failed by | Steps | Time (s) | Attempt |\n|---|---|---:|---|---|---:|---:|---:|\n");
         for t in &self.tasks {
             let score = t.score.map_or_else(|| "-".to_owned(), super::python_float);
             let _ = writeln!(
                 md,
-                "| {} | {} | {score} | {} | {} | {:.1} | {} |",
+                "| {} | {} | {score} | {} | {} | {} | {:.1} | {} |",
                 md_escape(&t.domain),
                 md_escape(&t.name),
                 t.status,
+                failed_by_text(t),
                 t.steps,
                 t.elapsed_ms as f64 / 1000.0,
                 t.attempt
@@ -287,6 +328,15 @@ fn python_json(value: &impl Serialize) -> String {
     String::from_utf8(out).unwrap_or_default()
 }
 
+/// The "Failed by" cell: `-` for a pass, `agent`, `environment (guest)`, ...
+pub(crate) fn failed_by_text(t: &TaskRow) -> String {
+    match t.failed_by.as_str() {
+        "passed" => "-".to_owned(),
+        "environment" => format!("environment ({})", t.blame),
+        other => other.to_owned(),
+    }
+}
+
 fn md_escape(text: &str) -> String {
     text.replace('|', "\\|").replace('\n', " ")
 }
@@ -295,6 +345,7 @@ fn task_row(found: &FoundTask) -> TaskRow {
     let episode = found.episode.as_ref();
     let status = episode.map_or("unknown", |e| e.status.kind()).to_owned();
     let score = found.score;
+    let blame = episode.map(super::EpisodeResult::blame);
     TaskRow {
         domain: found.domain(),
         name: found.name(),
@@ -312,6 +363,8 @@ fn task_row(found: &FoundTask) -> TaskRow {
         elapsed_ms: episode.map_or(0, |e| e.elapsed_ms),
         attempt: episode.map_or(1, |e| e.attempt),
         guest: episode.map(|e| e.guest.clone()).unwrap_or_default(),
+        blame: blame.map_or("unknown", super::Blame::name).to_owned(),
+        failed_by: blame.map_or("unknown", super::Blame::side).to_owned(),
     }
 }
 

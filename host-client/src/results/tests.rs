@@ -56,7 +56,7 @@ fn step(n: u32) -> StepRecord {
         ended: true,
         screenshot_source: None,
         screenshot_file: TaskDir::screenshot_name(None, &timestamp),
-        timings: StepTimings { observe_ms: 3, predict_ms: 1, act_ms: 2, pause_ms: 0 },
+        timings: StepTimings { observe_ms: 3, predict_ms: 1, act_ms: 2, pause_ms: 0, ..StepTimings::default() },
         error: None,
         outcomes: Vec::new(),
         more: Vec::new(),

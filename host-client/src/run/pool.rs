@@ -194,7 +194,8 @@ pub async fn run_pool(
                             &item.task,
                             guest.base_url(),
                             item.attempt,
-                            &format!("preparing the guest: {error}"),
+                            // Only a run that owns its VMs prepares guests.
+                            &format!("preparing the VM: {error}"),
                         );
                         return Finished { guest, item, result, healthy: false };
                     }
@@ -328,28 +329,5 @@ async fn probe(
 /// prepared) or whose task panicked (a bug in this program, not the agent's
 /// doing): an infrastructure error, so it is tried again.
 fn infra_error(task: &Task, guest: &str, attempt: u32, message: &str) -> EpisodeResult {
-    EpisodeResult {
-        score_is_int: false,
-        task_id: task.id.clone(),
-        task_name: task.name.clone(),
-        domain: task.domain.clone(),
-        instruction: task.instruction.clone(),
-        agent: String::new(),
-        model: String::new(),
-        guest: guest.to_owned(),
-        attempt,
-        score: 0.0,
-        status: EpisodeStatus::InfraError(message.to_owned()),
-        steps: 0,
-        last_action: String::new(),
-        elapsed_ms: 0,
-        setup_ms: 0,
-        eval_ms: 0,
-        started_unix: crate::results::unix_now(),
-        setup: Vec::new(),
-        eval: serde_json::Value::Null,
-        timings: Vec::new(),
-        options: Default::default(),
-        vm: None,
-    }
+    EpisodeResult::start(task, guest, attempt, EpisodeStatus::InfraError(message.to_owned()))
 }

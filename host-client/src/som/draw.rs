@@ -16,12 +16,10 @@
 //!   no listed `text` entity's box (shrunk by one pixel) is taken; when none is
 //!   free the last is used. Touching edges do not count as overlap.
 
-use std::io::Cursor;
-
 use font8x8::UnicodeFonts;
-use image::{ImageFormat, Rgba, RgbaImage};
+use image::{Rgba, RgbaImage};
 
-use super::{Mark, Marks, SomError};
+use super::{Mark, Marks};
 
 /// Outline thickness of a box, in image pixels (upstream's `outlineWidth`).
 const BORDER: i64 = 2;
@@ -161,18 +159,14 @@ fn image_box(m: &Mark, (sx, sy): (f64, f64)) -> LabelRect {
     LabelRect { x, y, w: scale(m.rect.right(), sx) - x, h: scale(m.rect.bottom(), sy) - y }
 }
 
-/// Draws the listed marks that have a colour on the PNG screenshot `png`, as
-/// the module doc describes, and returns the annotated PNG.
+/// Draws the listed marks that have a colour on a copy of the screenshot's
+/// pixels, as the module doc describes, and returns it (encoded only where it
+/// leaves the host: the model request and the step's log file).
 ///
 /// Boxes are scaled from [`Marks::size`] to the image's size, so a downscaled
 /// screenshot is annotated in the right places; labels keep their size.
-///
-/// # Errors
-///
-/// [`SomError::Decode`] when `png` is not an image the `image` crate reads,
-/// [`SomError::Encode`] when encoding fails.
-pub fn annotate(png: &[u8], marks: &Marks) -> Result<Vec<u8>, SomError> {
-    let mut img = image::load_from_memory(png).map_err(|e| SomError::Decode(e.to_string()))?.to_rgba8();
+pub fn annotate(screenshot: &RgbaImage, marks: &Marks) -> RgbaImage {
+    let mut img = screenshot.clone();
     let scale = (
         f64::from(img.width()) / f64::from(marks.size.0.max(1)),
         f64::from(img.height()) / f64::from(marks.size.1.max(1)),
@@ -196,9 +190,7 @@ pub fn annotate(png: &[u8], marks: &Marks) -> Result<Vec<u8>, SomError> {
         fill(&mut img, r.x, r.y, r.x + r.w, r.y + r.h, rgba(c));
         draw_text(&mut img, r.x + PADDING[3], r.y + PADDING[0], text, WHITE);
     }
-    let mut out = Cursor::new(Vec::new());
-    img.write_to(&mut out, ImageFormat::Png).map_err(|e| SomError::Encode(e.to_string()))?;
-    Ok(out.into_inner())
+    img
 }
 
 #[cfg(test)]

@@ -110,6 +110,12 @@ impl SomOrigin {
         }
     }
 
+    /// Whether this origin starts from the browser's DOM elements (upstream's
+    /// `oss` pipelines run its web parser first), so each observation must read them.
+    pub fn needs_dom(self) -> bool {
+        matches!(self, SomOrigin::Oss | SomOrigin::MixedOss)
+    }
+
     /// Whether this origin reads the accessibility tree.
     pub fn uses_tree(self) -> bool {
         matches!(self, SomOrigin::A11y | SomOrigin::MixedOss | SomOrigin::MixedOmni)
@@ -268,10 +274,6 @@ impl Marks {
 #[derive(Debug, thiserror::Error)]
 #[non_exhaustive]
 pub enum SomError {
-    #[error("cannot decode the screenshot: {0}")]
-    Decode(String),
-    #[error("cannot encode the annotated screenshot: {0}")]
-    Encode(String),
     /// Tesseract is missing or failed.
     #[error("OCR: {0}")]
     Ocr(String),
@@ -314,8 +316,8 @@ impl Default for SomConfig {
 pub struct SomInput<'a> {
     /// The accessibility tree, when it could be read.
     pub tree: Option<&'a A11yTree>,
-    /// The full-screen screenshot as PNG.
-    pub screenshot_png: &'a [u8],
+    /// The full-screen screenshot, decoded once by the observation.
+    pub screenshot: &'a crate::agent::Frame,
     /// The screen's size in the tree's pixels: the space of the marks.
     pub size: (u32, u32),
     /// The browser's DOM elements for `oss` and `mixed-oss`, in screen pixels
@@ -396,12 +398,13 @@ impl SomSources {
 
     /// Upstream's `ScreenParser` pipeline: DOM, then the detector, then OCR.
     async fn oss(&self, input: &SomInput<'_>) -> Result<Vec<ProposedEntity>, SomError> {
-        let shot = Screenshot::read(input.screenshot_png, input.size)?;
+        let shot = Screenshot::read(input.screenshot, input.size);
         let url = self.config.detector_url.as_deref().unwrap_or_default();
         let params = detector::DetectorParams::default();
+        // The services are sent the screenshot's bytes as the guest sent them (no re-encoding).
         let (detected, words) = tokio::join!(
-            detector::detect_all(&self.http, url, input.screenshot_png, shot.dims, &params),
-            ocr::recognise(&self.config.tesseract, input.screenshot_png, self.config.timeout),
+            detector::detect_all(&self.http, url, &input.screenshot.encoded, shot.dims, &params),
+            ocr::recognise(&self.config.tesseract, &input.screenshot.pixels, self.config.timeout),
         );
         let mut entities = input.dom.to_vec();
         entities.extend(shot.to_screen(detected?));
@@ -410,9 +413,9 @@ impl SomSources {
     }
 
     async fn omni(&self, input: &SomInput<'_>) -> Result<Vec<ProposedEntity>, SomError> {
-        let shot = Screenshot::read(input.screenshot_png, input.size)?;
+        let shot = Screenshot::read(input.screenshot, input.size);
         let url = self.config.omniparser_url.as_deref().unwrap_or_default();
-        Ok(shot.to_screen(omni::parse(&self.http, url, input.screenshot_png, shot.dims).await?))
+        Ok(shot.to_screen(omni::parse(&self.http, url, &input.screenshot.encoded, shot.dims).await?))
     }
 }
 
@@ -423,13 +426,8 @@ struct Screenshot {
 }
 
 impl Screenshot {
-    fn read(png: &[u8], screen: (u32, u32)) -> Result<Screenshot, SomError> {
-        let dims = image::ImageReader::new(std::io::Cursor::new(png))
-            .with_guessed_format()
-            .map_err(|e| SomError::Decode(e.to_string()))?
-            .into_dimensions()
-            .map_err(|e| SomError::Decode(e.to_string()))?;
-        Ok(Screenshot { dims, screen })
+    fn read(frame: &crate::agent::Frame, screen: (u32, u32)) -> Screenshot {
+        Screenshot { dims: frame.size(), screen }
     }
 
     /// Boxes in screenshot pixels moved to screen pixels (unchanged when the two agree, as upstream's always do).

@@ -74,15 +74,20 @@ pub fn parse_tsv(tsv: &str) -> Vec<ProposedEntity> {
     out
 }
 
-/// Runs Tesseract on the PNG `png` and returns its words as entities, in the image's pixels.
+/// Runs Tesseract on the screenshot's pixels (written to a PNG file, the edge
+/// where they leave the host) and returns its words as entities, in the image's pixels.
 ///
 /// # Errors
 ///
-/// [`SomError::Decode`] when `png` is not an image; [`SomError::Ocr`] when the
-/// program is missing (the message says how to install it), fails, or outlives `timeout`.
-pub async fn recognise(program: &str, png: &[u8], timeout: Duration) -> Result<Vec<ProposedEntity>, SomError> {
+/// [`SomError::Ocr`] when the program is missing (the message says how to
+/// install it), fails, or outlives `timeout`.
+pub async fn recognise(
+    program: &str,
+    screenshot: &image::RgbaImage,
+    timeout: Duration,
+) -> Result<Vec<ProposedEntity>, SomError> {
     // Upstream's ScreenParser converts the screenshot to RGB before OCR.
-    let rgb = image::load_from_memory(png).map_err(|e| SomError::Decode(e.to_string()))?.to_rgb8();
+    let rgb = image::DynamicImage::ImageRgba8(screenshot.clone()).to_rgb8();
     let file = tempfile::Builder::new()
         .prefix("arena-ocr-")
         .suffix(".png")

@@ -2,7 +2,6 @@
 //! the prompt image's colours, OCR on a rendered image, the fake detector and
 //! OmniParser services, and the mixed modes end to end.
 
-use std::io::Cursor;
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
@@ -12,7 +11,7 @@ use axum::extract::State;
 use axum::Json;
 use base64::Engine as _;
 use font8x8::UnicodeFonts;
-use image::{ImageFormat, Rgba, RgbaImage};
+use image::{Rgba, RgbaImage};
 use serde_json::{json, Value};
 
 use super::*;
@@ -41,14 +40,13 @@ fn tree(rect: Rect, children: Vec<A11yNode>) -> A11yTree {
     }
 }
 
-fn png_of(img: &RgbaImage) -> Vec<u8> {
-    let mut out = Cursor::new(Vec::new());
-    img.write_to(&mut out, ImageFormat::Png).expect("encode");
-    out.into_inner()
+fn blank(w: u32, h: u32) -> RgbaImage {
+    RgbaImage::from_pixel(w, h, Rgba([250, 250, 250, 255]))
 }
 
-fn png(w: u32, h: u32) -> Vec<u8> {
-    png_of(&RgbaImage::from_pixel(w, h, Rgba([250, 250, 250, 255])))
+/// A screenshot as an observation carries it.
+fn frame(w: u32, h: u32) -> crate::agent::Frame {
+    crate::agent::Frame::from_pixels(blank(w, h))
 }
 
 /// A listed mark as the mixed-mode tests compare it: id, type, text, colour.
@@ -129,8 +127,8 @@ fn prompt_colours_follow_upstreams_maps() {
     assert_eq!(SomOrigin::Oss.prompt_colour("a11y"), None);
 }
 
-fn pixel(annotated: &[u8], x: u32, y: u32) -> Rgba<u8> {
-    *image::load_from_memory(annotated).expect("decode").to_rgba8().get_pixel(x, y)
+fn pixel(annotated: &RgbaImage, x: u32, y: u32) -> Rgba<u8> {
+    *annotated.get_pixel(x, y)
 }
 
 #[test]
@@ -140,7 +138,7 @@ fn every_a11y_box_is_red_with_its_label_below_right() {
         vec![leaf("a", 20, 20, 60, 40), leaf("b", 200, 40, 60, 40), leaf("c", 300, 100, 60, 40)],
     );
     let marks = marks_from_tree(&t, (400, 200));
-    let annotated = annotate(&png(400, 200), &marks).expect("annotate");
+    let annotated = annotate(&blank(400, 200), &marks);
     let red = Rgba([255, 0, 0, 255]);
     for m in &marks.entities {
         let (x, y) = (m.rect.x as u32, m.rect.y as u32);
@@ -152,7 +150,7 @@ fn every_a11y_box_is_red_with_its_label_below_right() {
     }
     // Mark 0's label: 18x12 below the box, its right edge at the box's (x 62..=80, y 60..=72),
     // red with white glyph pixels.
-    let img = image::load_from_memory(&annotated).unwrap().to_rgba8();
+    let img = &annotated;
     assert_eq!(img.get_pixel(63, 71), &red);
     let white =
         (60..72).flat_map(|y| (62..80).map(move |x| (x, y))).any(|(x, y)| img.get_pixel(x, y) == &Rgba([255; 4]));
@@ -170,7 +168,7 @@ fn pixel_modes_draw_icons_green_images_red_and_leave_text_undrawn() {
     ];
     let marks = number(SomOrigin::Oss, entities, (300, 100));
     assert_eq!(marks.entities.len(), 3, "text is listed");
-    let annotated = annotate(&png(300, 100), &marks).expect("annotate");
+    let annotated = annotate(&blank(300, 100), &marks);
     assert_eq!(pixel(&annotated, 10, 10), Rgba([0, 128, 0, 255]));
     assert_eq!(pixel(&annotated, 100, 10), Rgba([255, 0, 0, 255]));
     assert_eq!(pixel(&annotated, 200, 10), BACKGROUND);
@@ -179,14 +177,18 @@ fn pixel_modes_draw_icons_green_images_red_and_leave_text_undrawn() {
 #[test]
 fn annotate_scales_to_a_downscaled_screenshot() {
     let marks = marks_from_tree(&tree(Rect::new(0, 0, 400, 200), vec![leaf("box", 200, 80, 120, 80)]), (400, 200));
-    let annotated = annotate(&png(200, 100), &marks).expect("annotate");
+    let annotated = annotate(&blank(200, 100), &marks);
     assert_eq!(pixel(&annotated, 160, 80), Rgba([255, 0, 0, 255]));
     assert_eq!(pixel(&annotated, 100, 40), Rgba([255, 0, 0, 255]));
 }
 
 #[test]
-fn annotate_rejects_garbage() {
-    assert!(matches!(annotate(b"not a png", &Marks::default()), Err(SomError::Decode(_))));
+fn annotate_leaves_the_observations_pixels_alone() {
+    let marks = marks_from_tree(&tree(Rect::new(0, 0, 400, 200), vec![leaf("box", 200, 80, 120, 80)]), (400, 200));
+    let shot = blank(400, 200);
+    let annotated = annotate(&shot, &marks);
+    assert_eq!(pixel(&annotated, 200, 80), Rgba([255, 0, 0, 255]));
+    assert_eq!(pixel(&shot, 200, 80), BACKGROUND, "the previous-step image must stay unannotated");
 }
 
 // ---- OCR ----
@@ -242,7 +244,7 @@ async fn ocr_finds_rendered_words_where_they_were_drawn() {
     for (word, x, y) in drawn {
         render_words(&mut img, x as u32, y as u32, word, 5);
     }
-    let words = ocr::recognise(ocr::DEFAULT_PROGRAM, &png_of(&img), Duration::from_secs(60)).await.expect("ocr");
+    let words = ocr::recognise(ocr::DEFAULT_PROGRAM, &img, Duration::from_secs(60)).await.expect("ocr");
     let find = |w: &str| {
         words
             .iter()
@@ -294,7 +296,7 @@ fn tesseract_is_called_as_pytesseract_calls_it() {
 
 #[tokio::test]
 async fn a_missing_tesseract_is_a_clear_error() {
-    let err = ocr::recognise("arena-no-such-tesseract", &png(10, 10), Duration::from_secs(5)).await.unwrap_err();
+    let err = ocr::recognise("arena-no-such-tesseract", &blank(10, 10), Duration::from_secs(5)).await.unwrap_err();
     let text = err.to_string();
     assert!(matches!(err, SomError::Ocr(_)) && text.contains("not found") && text.contains("tesseract-ocr"), "{text}");
 }
@@ -336,10 +338,11 @@ async fn fake_detector(seen: Arc<Seen>) -> String {
 async fn the_detector_client_speaks_the_documented_shape_and_post_processes_as_upstream() {
     let seen = Arc::new(Seen::default());
     let url = fake_detector(Arc::clone(&seen)).await;
-    let shot = png(1000, 600);
+    let shot = frame(1000, 600);
     let http = reqwest::Client::new();
     let params = detector::DetectorParams::default();
-    let entities = detector::detect_all(&http, &format!("{url}/"), &shot, (1000, 600), &params).await.expect("detect");
+    let entities =
+        detector::detect_all(&http, &format!("{url}/"), &shot.encoded, (1000, 600), &params).await.expect("detect");
     let got: Vec<(&str, Rect, Option<&str>)> =
         entities.iter().map(|e| (e.kind.as_str(), e.rect, e.text.as_deref())).collect();
     assert_eq!(
@@ -358,7 +361,7 @@ async fn the_detector_client_speaks_the_documented_shape_and_post_processes_as_u
         (Some(0.03), Some(0.4))
     );
     let image = base64::engine::general_purpose::STANDARD.decode(requests[0]["image"].as_str().unwrap()).unwrap();
-    assert_eq!(image, shot);
+    assert_eq!(image, *shot.encoded);
 }
 
 #[tokio::test]
@@ -368,9 +371,10 @@ async fn a_failing_detector_names_itself_and_its_url() {
         axum::routing::post(|| async { (axum::http::StatusCode::INTERNAL_SERVER_ERROR, "CUDA out of memory") }),
     ))
     .await;
-    let err = detector::detect_all(&reqwest::Client::new(), &url, &png(10, 10), (10, 10), &Default::default())
-        .await
-        .unwrap_err();
+    let err =
+        detector::detect_all(&reqwest::Client::new(), &url, &frame(10, 10).encoded, (10, 10), &Default::default())
+            .await
+            .unwrap_err();
     let text = err.to_string();
     assert!(
         text.contains("Grounding DINO") && text.contains("/detect") && text.contains("CUDA out of memory"),
@@ -399,8 +403,8 @@ async fn fake_omniparser(seen: Arc<Seen>) -> String {
 async fn the_omniparser_client_speaks_its_servers_shape() {
     let seen = Arc::new(Seen::default());
     let url = fake_omniparser(Arc::clone(&seen)).await;
-    let shot = png(1000, 600);
-    let entities = omni::parse(&reqwest::Client::new(), &url, &shot, (1000, 600)).await.expect("parse");
+    let shot = frame(1000, 600);
+    let entities = omni::parse(&reqwest::Client::new(), &url, &shot.encoded, (1000, 600)).await.expect("parse");
     let got: Vec<(&str, Rect, Option<&str>)> =
         entities.iter().map(|e| (e.kind.as_str(), e.rect, e.text.as_deref())).collect();
     assert_eq!(
@@ -414,7 +418,7 @@ async fn the_omniparser_client_speaks_its_servers_shape() {
     );
     let body = seen.0.lock().unwrap()[0].clone();
     let image = base64::engine::general_purpose::STANDARD.decode(body["base64_image"].as_str().unwrap()).unwrap();
-    assert_eq!(image, shot);
+    assert_eq!(image, *shot.encoded);
 }
 
 // ---- the origins end to end ----
@@ -441,8 +445,8 @@ fn origins_that_need_a_service_refuse_to_start_without_its_url() {
 #[tokio::test]
 async fn a11y_without_a_tree_has_no_marks_and_with_one_matches_marks_from_tree() {
     let s = sources(SomConfig::default());
-    let shot = png(400, 200);
-    let input = SomInput { tree: None, screenshot_png: &shot, size: (400, 200), dom: &[] };
+    let shot = frame(400, 200);
+    let input = SomInput { tree: None, screenshot: &shot, size: (400, 200), dom: &[] };
     assert_eq!(s.marks(&input).await.unwrap(), None);
     let t = tree(Rect::new(0, 0, 400, 200), vec![leaf("a", 10, 10, 50, 20)]);
     let input = SomInput { tree: Some(&t), ..input };
@@ -452,7 +456,7 @@ async fn a11y_without_a_tree_has_no_marks_and_with_one_matches_marks_from_tree()
 #[tokio::test]
 async fn omni_and_mixed_omni_merge_as_upstream() {
     let url = fake_omniparser(Arc::new(Seen::default())).await;
-    let shot = png(1000, 600);
+    let shot = frame(1000, 600);
     // The a11y tree: a square button over OmniParser's gear icon, a wide text field, an
     // off-screen element clipped away, and a zero-size one that mixed modes drop.
     let t = tree(
@@ -465,7 +469,7 @@ async fn omni_and_mixed_omni_merge_as_upstream() {
         ],
     );
     let config = |origin| SomConfig { origin, omniparser_url: Some(url.clone()), ..SomConfig::default() };
-    let input = SomInput { tree: Some(&t), screenshot_png: &shot, size: (1000, 600), dom: &[] };
+    let input = SomInput { tree: Some(&t), screenshot: &shot, size: (1000, 600), dom: &[] };
 
     let omni = sources(config(SomOrigin::Omni)).marks(&input).await.unwrap().unwrap();
     let rows: Vec<(usize, &str, Option<&str>)> =
@@ -514,7 +518,7 @@ async fn oss_and_mixed_oss_order_dom_detector_ocr_and_merge_as_upstream() {
     let dir = tempfile::tempdir().unwrap();
     let tesseract = fake_tesseract(dir.path());
     let url = fake_detector(Arc::new(Seen::default())).await;
-    let shot = png(1000, 600);
+    let shot = frame(1000, 600);
     let dom = vec![ProposedEntity::dom(Rect::new(700, 100, 200, 30), Some("Sign in".into()))];
     // An a11y button over the detector's first icon (90, 40, 60, 50) and the first OCR word.
     let t = tree(Rect::new(0, 0, 1000, 600), vec![leaf("Back", 85, 35, 70, 60)]);
@@ -524,7 +528,7 @@ async fn oss_and_mixed_oss_order_dom_detector_ocr_and_merge_as_upstream() {
         tesseract: tesseract.clone(),
         ..SomConfig::default()
     };
-    let input = SomInput { tree: Some(&t), screenshot_png: &shot, size: (1000, 600), dom: &dom };
+    let input = SomInput { tree: Some(&t), screenshot: &shot, size: (1000, 600), dom: &dom };
 
     let oss = sources(config(SomOrigin::Oss)).marks(&input).await.unwrap().unwrap();
     let rows: Vec<(usize, &str, Option<&str>)> =

@@ -92,8 +92,10 @@ async fn per_step(url: &str) -> anyhow::Result<()> {
         let _text = matches!(clip?, ClipboardContent::Text { .. });
         let t1 = Instant::now();
         let marks = marks_from_tree(&tree, size);
-        let annotated = annotate(&shot.bytes, &marks)?;
-        anyhow::ensure!(!annotated.is_empty());
+        // Decoded once, as the observation does, then annotated in pixels.
+        let frame = arena_host::agent::Frame::decode(shot.bytes).map_err(anyhow::Error::msg)?;
+        let annotated = annotate(&frame.pixels, &marks);
+        anyhow::ensure!(annotated.width() > 0);
         marks_count = marks.entities.len();
         let t2 = Instant::now();
         let outcome = execute_with(&client, &action, Some(&marks), &mut computer, &options).await?;
@@ -108,7 +110,7 @@ async fn per_step(url: &str) -> anyhow::Result<()> {
         "host overhead per step on the stub ({STEPS} steps, 1440x900, Notepad open, {marks_count} marks; no model):"
     );
     print("observe (shot+tree+windows+clip)", &mut observe);
-    print("set-of-marks (select + annotate)", &mut som);
+    print("set-of-marks (decode + select + annotate)", &mut som);
     print("action (pyautogui line)", &mut act);
     print("total", &mut total);
     Ok(())
@@ -158,7 +160,7 @@ async fn pool_run(guests: &[Served], pause: Duration) -> anyhow::Result<(Duratio
     let started = Instant::now();
     let outcome = run_tasks(repeated(TASKS)?, clients, Arc::new(runner), &options).await?;
     let wall = started.elapsed();
-    let steps: Vec<_> = outcome.pool.results.iter().flat_map(|r| r.timings.iter().copied()).collect();
+    let steps: Vec<_> = outcome.pool.results.iter().flat_map(|r| r.timings.iter().cloned()).collect();
     let n = steps.len().max(1) as f64;
     let observe = steps.iter().map(|t| t.observe_ms as f64).sum::<f64>() / n;
     let act = steps.iter().map(|t| t.act_ms as f64).sum::<f64>() / n;

@@ -124,18 +124,26 @@ async fn rate_limits_and_server_errors_are_waited_out_honouring_retry_after() {
 }
 
 #[tokio::test]
-async fn slow_and_cut_short_answers_are_tried_again_and_a_refusal_is_an_answer() {
-    let slow = Answer { delay: Duration::from_secs(3), ..ok("late") };
-    let cut = Answer { body: r#"{"choices": [{"message": {"content": "par"#.into(), ..ok("") };
-    let refusal = Answer {
+async fn slow_and_cut_short_answers_are_tried_again_and_a_refusal_leaves_the_task_unfinished() {
+    let refusal = || Answer {
         body: json!({"choices": [{"message": {"content": null, "refusal": "I can't help with that."}}]}).to_string(),
         ..ok("")
     };
-    let (base, mock) = serve(vec![slow, cut, refusal], "/v1").await;
+    let slow = Answer { delay: Duration::from_secs(3), ..ok("late") };
+    let cut = Answer { body: r#"{"choices": [{"message": {"content": "par"#.into(), ..ok("") };
+    let (base, mock) = serve(vec![slow, cut, refusal()], "/v1").await;
     let (client, pauses) = model(&base, ApiKind::OpenAi, Duration::from_millis(300), RetryPolicy::default());
-    assert_eq!(client.complete(&body()).await.unwrap(), "I can't help with that.");
+    // Upstream's Navi reads only `content`: a refusal leaves the task unfinished, asked once.
+    let err = client.complete(&body()).await.unwrap_err();
+    assert!(matches!(&err, AgentError::Refused { text, .. } if text == "I can't help with that."), "{err:?}");
     assert_eq!(mock.seen.lock().unwrap().len(), 3);
     assert_eq!(pauses.0.lock().unwrap().len(), 2);
+
+    // `--refusals answer`: the refusal's text is the reply.
+    let (base, _mock) = serve(vec![refusal()], "/v1").await;
+    let (client, _) = model(&base, ApiKind::OpenAi, Duration::from_secs(5), RetryPolicy::default());
+    let client = client.with_refusals(Refusals::Answer);
+    assert_eq!(client.complete_counted(&body()).await.unwrap(), ("I can't help with that.".to_owned(), 1));
 }
 
 #[tokio::test]

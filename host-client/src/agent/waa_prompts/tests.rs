@@ -141,3 +141,40 @@ fn the_users_checkout_reads_when_one_is_given() {
     assert!(prompts.empty_memory.contains("```memory"), "{}", prompts.empty_memory);
     assert!(prompts.history_text(&["ACTION-MARK".into()], 15).contains("ACTION-MARK"));
 }
+
+#[test]
+fn provenance_names_the_commit_of_a_client_folder_root_and_of_a_worktree_git_file() {
+    let root = tempfile::tempdir().unwrap();
+    checkout(root.path(), PLANNER_TEXT, AGENT_TEXT);
+    // The client folder given as the root: the checkout's .git is found above it.
+    let client = WaaPrompts::load(&root.path().join("src/win-arena-container/client")).unwrap();
+    assert_eq!(client.source, "waa@0123456789ab");
+
+    // A worktree: `.git` is a file naming its git folder, whose branch ref lives in the
+    // main repository's folder (`commondir`), packed.
+    let main_git = root.path().join(".git");
+    let wt_git = main_git.join("worktrees/wt");
+    std::fs::create_dir_all(&wt_git).unwrap();
+    std::fs::write(wt_git.join("HEAD"), "ref: refs/heads/feature\n").unwrap();
+    std::fs::write(wt_git.join("commondir"), "../..\n").unwrap();
+    std::fs::write(
+        main_git.join("packed-refs"),
+        "# pack-refs with: peeled\nfedcba9876543210fedcba9876543210fedcba98 refs/heads/feature\n",
+    )
+    .unwrap();
+    let worktree = tempfile::tempdir().unwrap();
+    checkout(worktree.path(), PLANNER_TEXT, AGENT_TEXT);
+    std::fs::remove_dir_all(worktree.path().join(".git")).unwrap();
+    std::fs::write(worktree.path().join(".git"), format!("gitdir: {}\n", wt_git.display())).unwrap();
+    assert_eq!(WaaPrompts::load(worktree.path()).unwrap().source, "waa@fedcba987654");
+    assert_eq!(
+        WaaPrompts::load(&worktree.path().join("src/win-arena-container/client")).unwrap().source,
+        "waa@fedcba987654"
+    );
+
+    // No git at all: said plainly.
+    let bare = tempfile::tempdir().unwrap();
+    checkout(bare.path(), PLANNER_TEXT, AGENT_TEXT);
+    std::fs::remove_dir_all(bare.path().join(".git")).unwrap();
+    assert_eq!(git_head(&bare.path().join("src/win-arena-container/client")), "unknown");
+}
