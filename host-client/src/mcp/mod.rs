@@ -194,7 +194,7 @@ impl McpAgent {
 fn snapshot(obs: &Observation) -> Snapshot {
     Snapshot {
         step: obs.step,
-        png: obs.screenshot_png.clone(),
+        png: obs.screenshot.encoded.to_vec(),
         xml: obs.a11y.as_ref().map(|tree| arena_shared::a11y_xml::to_xml(tree, obs.foreground_id)),
         windows: obs.window_titles.clone(),
         foreground: obs.foreground_title.clone(),
@@ -273,6 +273,7 @@ impl Agent for McpAgent {
             marks: None,
             raw_error: None,
             logs,
+            timings: Default::default(),
         })
     }
 }

@@ -333,7 +333,14 @@ impl Agent for AnthropicAgent {
             }
             self.messages = messages;
             self.pending.clear();
-            return Ok(Prediction { response, actions: vec![decision], marks: None, raw_error: None, logs });
+            return Ok(Prediction {
+                response,
+                actions: vec![decision],
+                marks: None,
+                raw_error: None,
+                logs,
+                timings: Default::default(),
+            });
         }
 
         let ctx = Context { screen, cursor: self.cursor, coords };
@@ -384,7 +391,14 @@ impl Agent for AnthropicAgent {
         };
         self.messages = messages;
         self.pending = pending;
-        Ok(Prediction { response: response.trim().to_owned(), actions, marks: None, raw_error, logs })
+        Ok(Prediction {
+            response: response.trim().to_owned(),
+            actions,
+            marks: None,
+            raw_error,
+            logs,
+            timings: Default::default(),
+        })
     }
 }
 

@@ -29,7 +29,7 @@ use super::{AgentError, LogValue, Observation, StepLog};
 /// What a computer-use agent takes from an observation: the screenshot as PNG
 /// and the screen's size in physical pixels (which typed actions use).
 pub fn screen_of(obs: &Observation) -> (&[u8], (u32, u32)) {
-    (&obs.screenshot_png, obs.screen_size())
+    (&obs.screenshot.encoded[..], obs.screen_size())
 }
 
 /// How to reach a computer-use model (the options every vendor shares).

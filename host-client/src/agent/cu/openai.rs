@@ -178,7 +178,14 @@ impl Agent for OpenAiAgent {
             };
             self.previous_response_id = Some(id);
             self.pending = None;
-            return Ok(Prediction { response, actions: vec![decision], marks: None, raw_error: None, logs });
+            return Ok(Prediction {
+                response,
+                actions: vec![decision],
+                marks: None,
+                raw_error: None,
+                logs,
+                timings: Default::default(),
+            });
         };
         let call_id =
             call.get("call_id").and_then(Value::as_str).ok_or_else(|| malformed("a computer_call without call_id"))?;
@@ -201,6 +208,7 @@ impl Agent for OpenAiAgent {
                     marks: None,
                     raw_error: None,
                     logs,
+                    timings: Default::default(),
                 });
             }
         }
@@ -218,6 +226,6 @@ impl Agent for OpenAiAgent {
         // Acknowledged checks are exactly the pending ones, with their id, code and message.
         self.previous_response_id = Some(id);
         self.pending = Some(PendingCall { call_id: call_id.to_owned(), acknowledged: checks });
-        Ok(Prediction { response, actions, marks: None, raw_error, logs })
+        Ok(Prediction { response, actions, marks: None, raw_error, logs, timings: Default::default() })
     }
 }

@@ -290,5 +290,5 @@ pub fn prediction(
     let mut logs: Vec<StepLog> =
         act.record.into_iter().map(|(key, value)| StepLog { key, value: LogValue::Inline(value) }).collect();
     logs.push(StepLog { key: "action_space".into(), value: LogValue::Inline(Value::String(space.to_owned())) });
-    Ok(Prediction { response: act.response, actions, marks, raw_error: None, logs })
+    Ok(Prediction { response: act.response, actions, marks, raw_error: None, logs, timings: Default::default() })
 }

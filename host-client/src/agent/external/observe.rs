@@ -51,7 +51,7 @@ pub fn observe_message(
     match (mode, files) {
         (ScreenshotMode::Path, Some(dir)) if local => {
             let path = dir.join(format!("step_{}.png", obs.step));
-            std::fs::write(&path, &obs.screenshot_png)
+            std::fs::write(&path, &obs.screenshot.encoded[..])
                 .map_err(|err| format!("writing the screenshot {}: {err}", path.display()))?;
             m.insert("screenshot".into(), json!({ "path": path.to_string_lossy() }));
         }
@@ -59,7 +59,7 @@ pub fn observe_message(
             return Err("screenshot: path is only for agents on this machine (--agent exec); ask for inline".into());
         }
         (ScreenshotMode::Inline, _) => {
-            let b64 = base64::engine::general_purpose::STANDARD.encode(&obs.screenshot_png);
+            let b64 = base64::engine::general_purpose::STANDARD.encode(&obs.screenshot.encoded[..]);
             m.insert("screenshot".into(), json!({ "png_base64": b64 }));
         }
         (ScreenshotMode::None, _) => {}
