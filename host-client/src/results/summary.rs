@@ -129,6 +129,7 @@ impl Summary {
     /// Summarises task folders already found.
     pub fn from_found(found: &[FoundTask]) -> Summary {
         let mut tasks: Vec<TaskRow> = found.iter().map(task_row).collect();
+        // The same order as the run's (`Task::order_key`), on the rows read back from the folders.
         tasks.sort_by(|a, b| (&a.domain, &a.name, &a.path).cmp(&(&b.domain, &b.name, &b.path)));
         let mut by_domain: BTreeMap<&str, Vec<&TaskRow>> = BTreeMap::new();
         for row in &tasks {

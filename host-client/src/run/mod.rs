@@ -113,7 +113,7 @@ impl std::fmt::Display for TaskOrder {
 
 /// Sorts by domain, then name (then path, for duplicates).
 pub fn sort_tasks(tasks: &mut [Task]) {
-    tasks.sort_by(|a, b| (&a.domain, &a.name, &a.path).cmp(&(&b.domain, &b.name, &b.path)));
+    tasks.sort_by(|a, b| a.order_key().cmp(&b.order_key()));
 }
 
 /// Which tasks a run will do.
@@ -131,7 +131,7 @@ pub struct Plan {
 /// task of the shard is to do again.
 pub fn plan(tasks: Vec<Task>, shard: Shard, layout: &RunLayout, resume: bool, order: TaskOrder) -> Plan {
     let mut numbered: Vec<(usize, Task)> = tasks.into_iter().enumerate().collect();
-    numbered.sort_by(|(_, a), (_, b)| (&a.domain, &a.name, &a.path).cmp(&(&b.domain, &b.name, &b.path)));
+    numbered.sort_by(|(_, a), (_, b)| a.order_key().cmp(&b.order_key()));
     let mut mine = shard.select(numbered);
     match order {
         TaskOrder::Sorted => {}

@@ -269,6 +269,12 @@ pub struct Task {
 }
 
 impl Task {
+    /// The order tasks are listed and sharded in: domain, then name, then path
+    /// (for two files of one name).
+    pub fn order_key(&self) -> (&str, &str, &Path) {
+        (&self.domain, &self.name, &self.path)
+    }
+
     /// Loads and validates one task file. The domain is the name of its folder.
     ///
     /// # Errors
