@@ -44,9 +44,10 @@ export SOURCE_DATE_EPOCH=${SOURCE_DATE_EPOCH:-1704067200}
 # network, FAT with the code pages its mount needs, the ACPI power button and evdev to
 # read it.
 # The CD-ROM (IDE on `pc`, AHCI on q35) and ISO 9660 (with Joliet) read the OEM media of
-# `arena vm prepare`. (The TPM's tpm_tis is built into the generic kernel.)
+# `arena vm prepare`. (The TPM's tpm_tis is built into the generic kernel.) efivarfs reads
+# the firmware's SecureBoot variable.
 MODULES=(virtio_pci virtio_blk virtio_scsi sd_mod virtio_net vfat nls_cp437 nls_ascii
-    nls_utf8 nls_iso8859-1 button evdev ata_piix ahci sr_mod isofs)
+    nls_utf8 nls_iso8859-1 button evdev ata_piix ahci sr_mod isofs efivarfs)
 
 die() {
     echo "build-standin-image: $*" >&2
@@ -272,12 +273,16 @@ mkdir -p "$ISO/isolinux"
 cp "$ISOLINUX_BIN" "$LDLINUX_C32" "$STANDIN/isolinux.cfg" "$ISO/isolinux/"
 cp "$VMLINUZ" "$ISO/vmlinuz"
 cp "$WORK/initrd.img" "$WORK/install.img" "$ISO/"
-# The UEFI El Torito image: a small FAT volume with the EFI folder; its GRUB reads the
-# kernel and initrds from the CD's ISO 9660 file system.
+# The UEFI El Torito image: a small FAT volume with the EFI folder; its GRUB reads its
+# configuration, the kernel and the initrds from the CD's ISO 9660 file system.
 mkdir -p "$ISO/boot"
 mkfs.vfat -C --invariant -i 41524e42 -n ARENA_EFI "$ISO/boot/efi.img" \
     $(( ($(kb "$SHIM") + $(kb "$GRUB_EFI") + 256 + 63) / 64 * 64 )) >/dev/null
 efi_boot_files "$ISO/boot/efi.img" "$STANDIN/grub-install.cfg"
+# Started from the El Torito image, GRUB's $cmdpath is the CD's ISO 9660 volume: it reads
+# grub.cfg from there.
+mkdir -p "$ISO/EFI/BOOT"
+cp "$STANDIN/grub-install.cfg" "$ISO/EFI/BOOT/grub.cfg"
 find "$ISO" -exec touch -h -d "@$SOURCE_DATE_EPOCH" {} +
 rm -f "$OUT/installer.iso"
 xorriso -as mkisofs -quiet -o "$OUT/installer.iso" -V ARENA_INSTALL \
