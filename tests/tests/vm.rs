@@ -561,9 +561,10 @@ fn prepare_on_uefi_with_secure_boot_and_swtpm_seals_an_image_that_boots_healthy(
     let oem = oem_folder(dir.path(), &token);
     let out = dir.path().join("golden.qcow2");
     let work = arena_host::vm::prepare::work_dir(&out);
-    let done: Output = prepare_command(&image, &oem, &out, &["--size", "64G", "--firmware", "uefi", "--vm-machine", "q35"])
-        .output()
-        .unwrap();
+    let done: Output =
+        prepare_command(&image, &oem, &out, &["--size", "64G", "--firmware", "uefi", "--vm-machine", "q35"])
+            .output()
+            .unwrap();
     let said = String::from_utf8_lossy(&done.stdout);
     let serial = std::fs::read_to_string(work.join("serial.log")).unwrap_or_default();
     assert!(done.status.success(), "{said}\n{}\n{serial}", String::from_utf8_lossy(&done.stderr));
