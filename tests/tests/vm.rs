@@ -61,12 +61,17 @@ fn arena() -> Command {
 
 /// QEMU processes whose command line names `needle`.
 fn qemus_naming(needle: &str) -> Vec<u32> {
+    programs_naming(&["qemu-system"], needle)
+}
+
+/// Processes of any of `programs` whose command line names `needle`.
+fn programs_naming(programs: &[&str], needle: &str) -> Vec<u32> {
     let mut pids = Vec::new();
     for entry in std::fs::read_dir("/proc").into_iter().flatten().flatten() {
         let Ok(pid) = entry.file_name().to_string_lossy().parse::<u32>() else { continue };
         let cmdline = std::fs::read(entry.path().join("cmdline")).unwrap_or_default();
         let text = String::from_utf8_lossy(&cmdline).replace('\0', " ");
-        if text.contains("qemu-system") && text.contains(needle) {
+        if programs.iter().any(|program| text.contains(program)) && text.contains(needle) {
             pids.push(pid);
         }
     }
@@ -320,9 +325,11 @@ fn read_until(child: &mut Child, mut stop: impl FnMut(&str) -> bool) -> String {
 fn kill_and_reap(child: &mut Child, work: &Path) {
     child.kill().unwrap();
     child.wait().unwrap();
-    // QEMU and swtpm go with it.
-    let gone = Instant::now() + Duration::from_secs(10);
-    while !qemus_naming(&work.display().to_string()).is_empty() {
+    // QEMU and swtpm go with it. A qemu-img it started (snapshots, sealing) does
+    // not, and holds the disk's lock until it ends: a rerun started before that
+    // fails to open the disk.
+    let gone = Instant::now() + Duration::from_secs(60);
+    while !programs_naming(&["qemu-system", "qemu-img"], &work.display().to_string()).is_empty() {
         assert!(Instant::now() < gone, "QEMU outlived the killed prepare");
         std::thread::sleep(Duration::from_millis(100));
     }
