@@ -1,27 +1,31 @@
 #!/usr/bin/env bash
-# Builds the stand-in guest image: a Debian cloud kernel and an initramfs that runs the
+# Builds the stand-in guest image: Debian's signed kernel and an initramfs that runs the
 # Linux arena-guest (stub backend) at boot, for testing the QEMU machinery (overlays,
 # QMP, snapshots, the installer path) without a Windows image. See docs/vm-standin.md.
 #
 # Usage: scripts/build-standin-image.sh [OUT_DIR]      (default: target/standin)
 #
 # Writes into OUT_DIR:
-#   golden.qcow2    BIOS-bootable disk: SYSLINUX on a FAT volume with the kernel and initrd
-#   installer.iso   ISOLINUX CD booting the same kernel and initrd with arena.mode=install;
+#   golden.qcow2    disk that boots on BIOS (SYSLINUX) and on UEFI with Secure Boot
+#                   (Debian's signed shim, GRUB and kernel): a FAT volume with the kernel
+#                   and initrd
+#   installer.iso   CD (El Torito for BIOS with ISOLINUX and for UEFI with shim and GRUB)
+#                   booting the same kernel and initrd with arena.mode=install;
 #                   it writes the disk image onto the first disk and copies the OEM
 #                   folder's token onto it
 #   standin.json    manifest: kernel, guest binary sha256, guest port, screen size, files
-#   cache/          the downloaded kernel package (kept: a rerun reuses it)
+#   cache/          the downloaded packages (kept: a rerun reuses them)
 #
 # Environment (all optional):
 #   ARENA_GUEST_BIN          the Linux arena-guest to embed (default target/debug/arena-guest)
-#   ARENA_STANDIN_KERNEL     kernel package (default: what linux-image-cloud-amd64 depends on)
+#   ARENA_STANDIN_KERNEL     kernel package (default: what linux-image-amd64 depends on)
 #   SOURCE_DATE_EPOCH        the time stamped on every file in the images (default: a fixed
 #                            one), so the same inputs give byte-identical outputs
 #
 # Needs these Debian packages: apt dpkg binutils libc-bin busybox-static syslinux
 # syslinux-common isolinux mtools dosfstools xorriso cpio gzip qemu-utils coreutils.
-# No root: the kernel package is unpacked with dpkg-deb -x, the disk is written with mtools.
+# No root: the packages (kernel, shim-signed, grub-efi-amd64-signed) are fetched with
+# apt-get download and unpacked with dpkg-deb -x, the disks are written with mtools.
 set -euo pipefail
 # mkfs.vfat lives in /usr/sbin, which a non-root user's PATH often lacks.
 export PATH=$PATH:/usr/sbin:/sbin
@@ -39,9 +43,11 @@ export SOURCE_DATE_EPOCH=${SOURCE_DATE_EPOCH:-1704067200}
 # Drivers the image loads at boot (their dependencies are added): virtio disks and
 # network, FAT with the code pages its mount needs, the ACPI power button and evdev to
 # read it.
-# The IDE CD-ROM and ISO 9660 (with Joliet) read the OEM media of `arena vm prepare`.
+# The CD-ROM (IDE on `pc`, AHCI on q35) and ISO 9660 (with Joliet) read the OEM media of
+# `arena vm prepare`. (The TPM's tpm_tis is built into the generic kernel.) efivarfs reads
+# the firmware's SecureBoot variable.
 MODULES=(virtio_pci virtio_blk virtio_scsi sd_mod virtio_net vfat nls_cp437 nls_ascii
-    nls_utf8 nls_iso8859-1 button evdev ata_piix sr_mod isofs)
+    nls_utf8 nls_iso8859-1 button evdev ata_piix ahci sr_mod isofs efivarfs)
 
 die() {
     echo "build-standin-image: $*" >&2
@@ -67,6 +73,7 @@ need ldd libc-bin
 need busybox busybox-static
 need syslinux syslinux
 need mcopy mtools
+need mmd mtools
 need mkfs.vfat dosfstools
 need xorriso xorriso
 need cpio cpio
@@ -93,27 +100,36 @@ WORK=$OUT/work
 rm -rf "$WORK"
 mkdir -p "$WORK"
 
-# --- kernel ---------------------------------------------------------------------------
+# --- packages -------------------------------------------------------------------------
+# The newest cached .deb of package $1 in $CACHE, downloaded first if none is.
+debian_package() {
+    local deb
+    deb=$(find "$CACHE" -maxdepth 1 -name "${1}_*.deb" | sort | tail -n1)
+    if [ -z "$deb" ]; then
+        say "downloading $1" >&2
+        (cd "$CACHE" && apt-get download "$1" >&2) || die "apt-get download $1 failed"
+        deb=$(find "$CACHE" -maxdepth 1 -name "${1}_*.deb" | sort | tail -n1)
+        [ -n "$deb" ] || die "apt-get download $1 left no .deb in $CACHE"
+    else
+        say "reusing $(basename "$deb")" >&2
+    fi
+    echo "$deb"
+}
+
+# The generic kernel, not the cloud one: it has the AHCI driver (q35's CD-ROMs) and the
+# TPM's TIS driver. Debian signs it for Secure Boot (the linux-signed-amd64 source).
 KERNEL_PKG=${ARENA_STANDIN_KERNEL:-}
 if [ -z "$KERNEL_PKG" ]; then
-    KERNEL_PKG=$(apt-cache depends linux-image-cloud-amd64 2>/dev/null \
+    KERNEL_PKG=$(apt-cache depends linux-image-amd64 2>/dev/null \
         | sed -n 's/^ *Depends: \(linux-image-[0-9].*\)$/\1/p' | head -n1) || true
 fi
 if [ -z "$KERNEL_PKG" ]; then
     # No package lists (apt-get update not run, or offline): fall back to the cache.
-    cached=$(find "$CACHE" -maxdepth 1 -name 'linux-image-*-cloud-amd64_*.deb' | sort | tail -n1)
-    [ -n "$cached" ] || die "cannot tell the cloud kernel's version (apt-cache depends linux-image-cloud-amd64 gave nothing; run apt-get update) and none is cached in $CACHE"
+    cached=$(find "$CACHE" -maxdepth 1 -name 'linux-image-[0-9]*[0-9]-amd64_*.deb' | sort | tail -n1)
+    [ -n "$cached" ] || die "cannot tell the kernel's version (apt-cache depends linux-image-amd64 gave nothing; run apt-get update) and none is cached in $CACHE"
     KERNEL_PKG=$(basename "$cached" | cut -d_ -f1)
 fi
-deb=$(find "$CACHE" -maxdepth 1 -name "${KERNEL_PKG}_*.deb" | sort | tail -n1)
-if [ -z "$deb" ]; then
-    say "downloading $KERNEL_PKG"
-    (cd "$CACHE" && apt-get download "$KERNEL_PKG") || die "apt-get download $KERNEL_PKG failed"
-    deb=$(find "$CACHE" -maxdepth 1 -name "${KERNEL_PKG}_*.deb" | sort | tail -n1)
-    [ -n "$deb" ] || die "apt-get download $KERNEL_PKG left no .deb in $CACHE"
-else
-    say "reusing $(basename "$deb")"
-fi
+deb=$(debian_package "$KERNEL_PKG")
 dpkg-deb -x "$deb" "$WORK/kernel"
 KVER=${KERNEL_PKG#linux-image-}
 VMLINUZ=$WORK/kernel/boot/vmlinuz-$KVER
@@ -121,6 +137,31 @@ MODDIR=$WORK/kernel/lib/modules/$KVER
 if [ ! -f "$VMLINUZ" ] || [ ! -d "$MODDIR" ]; then
     die "$deb holds no boot/vmlinuz-$KVER and lib/modules/$KVER"
 fi
+
+# Secure Boot's chain, as Debian boots it: OVMF checks shim against Microsoft's third-party
+# UEFI CA (in the db of OVMF_VARS_4M.ms.fd), shim checks GRUB and the kernel against
+# Debian's key built into it. shim, started as \EFI\BOOT\BOOTX64.EFI, starts
+# grubx64.efi from its own folder; that GRUB reads grub.cfg beside it ($cmdpath).
+SHIM=$WORK/shim/usr/lib/shim/shimx64.efi.signed
+GRUB_EFI=$WORK/grub/usr/lib/grub/x86_64-efi-signed/grubx64.efi.signed
+SHIM_DEB=$(debian_package shim-signed)
+GRUB_DEB=$(debian_package grub-efi-amd64-signed)
+dpkg-deb -x "$SHIM_DEB" "$WORK/shim"
+dpkg-deb -x "$GRUB_DEB" "$WORK/grub"
+[ -f "$SHIM" ] || die "shim-signed holds no ${SHIM#"$WORK/shim"}"
+[ -f "$GRUB_EFI" ] || die "grub-efi-amd64-signed holds no ${GRUB_EFI#"$WORK/grub"}"
+# The EFI folder of a boot volume: shim, GRUB and the GRUB configuration $2, into FAT image $1.
+efi_boot_files() {
+    local dir=$WORK/efi-files
+    rm -rf "$dir"
+    mkdir -p "$dir"
+    cp "$SHIM" "$dir/BOOTX64.EFI"
+    cp "$GRUB_EFI" "$dir/grubx64.efi"
+    cp "$2" "$dir/grub.cfg"
+    touch -d "@$SOURCE_DATE_EPOCH" "$dir"/*
+    mmd -i "$1" ::/EFI ::/EFI/BOOT
+    mcopy -m -i "$1" "$dir/BOOTX64.EFI" "$dir/grubx64.efi" "$dir/grub.cfg" ::/EFI/BOOT/
+}
 
 # --- initramfs ------------------------------------------------------------------------
 RD=$WORK/initramfs
@@ -196,7 +237,8 @@ make_cpio "$RD" | gzip -9 -n >"$WORK/initrd.img"
 # there; a test stages 1 GiB). The spare is zeros: sparse in the qcow2 and in the gzip'd
 # copy the installer writes (and QEMU turns written zeros into unallocated clusters).
 kb() { echo $(( ($(stat -c %s "$1") + 1023) / 1024 )); }
-size_kb=$(( ($(kb "$VMLINUZ") + $(kb "$WORK/initrd.img") + 1536 * 1024 + 1023) / 1024 * 1024 ))
+size_kb=$(( ($(kb "$VMLINUZ") + $(kb "$WORK/initrd.img") + $(kb "$SHIM") + $(kb "$GRUB_EFI") \
+    + 1536 * 1024 + 1023) / 1024 * 1024 ))
 DISK=$WORK/disk.img
 mkfs.vfat -C --invariant -i 41524e41 -n ARENA "$DISK" "$size_kb" >/dev/null
 touch -d "@$SOURCE_DATE_EPOCH" "$VMLINUZ" "$WORK/initrd.img"
@@ -206,6 +248,7 @@ touch -d "@$SOURCE_DATE_EPOCH" "$WORK/syslinux.cfg"
 mcopy -m -i "$DISK" "$VMLINUZ" ::/vmlinuz
 mcopy -m -i "$DISK" "$WORK/initrd.img" ::/initrd.img
 mcopy -m -i "$DISK" "$WORK/syslinux.cfg" ::/syslinux.cfg
+efi_boot_files "$DISK" "$STANDIN/grub-disk.cfg"
 rm -f "$OUT/golden.qcow2"
 qemu-img convert -f raw -O qcow2 "$DISK" "$OUT/golden.qcow2"
 # A golden image is read-only: every VM's overlay depends on it unchanged.
@@ -230,11 +273,22 @@ mkdir -p "$ISO/isolinux"
 cp "$ISOLINUX_BIN" "$LDLINUX_C32" "$STANDIN/isolinux.cfg" "$ISO/isolinux/"
 cp "$VMLINUZ" "$ISO/vmlinuz"
 cp "$WORK/initrd.img" "$WORK/install.img" "$ISO/"
+# The UEFI El Torito image: a small FAT volume with the EFI folder; its GRUB reads its
+# configuration, the kernel and the initrds from the CD's ISO 9660 file system.
+mkdir -p "$ISO/boot"
+mkfs.vfat -C --invariant -i 41524e42 -n ARENA_EFI "$ISO/boot/efi.img" \
+    $(( ($(kb "$SHIM") + $(kb "$GRUB_EFI") + 256 + 63) / 64 * 64 )) >/dev/null
+efi_boot_files "$ISO/boot/efi.img" "$STANDIN/grub-install.cfg"
+# Started from the El Torito image, GRUB's $cmdpath is the CD's ISO 9660 volume: it reads
+# grub.cfg from there.
+mkdir -p "$ISO/EFI/BOOT"
+cp "$STANDIN/grub-install.cfg" "$ISO/EFI/BOOT/grub.cfg"
 find "$ISO" -exec touch -h -d "@$SOURCE_DATE_EPOCH" {} +
 rm -f "$OUT/installer.iso"
 xorriso -as mkisofs -quiet -o "$OUT/installer.iso" -V ARENA_INSTALL \
     -isohybrid-mbr "$ISOHDPFX" -b isolinux/isolinux.bin -c isolinux/boot.cat \
-    -no-emul-boot -boot-load-size 4 -boot-info-table "$ISO" 2>"$WORK/xorriso.log" \
+    -no-emul-boot -boot-load-size 4 -boot-info-table \
+    -eltorito-alt-boot -e boot/efi.img -no-emul-boot "$ISO" 2>"$WORK/xorriso.log" \
     || { cat "$WORK/xorriso.log" >&2; die "xorriso could not write installer.iso"; }
 
 # --- manifest -------------------------------------------------------------------------
@@ -247,6 +301,7 @@ file_entry() {
     printf '  "kernel_package": "%s",\n' "$KERNEL_PKG"
     printf '  "kernel_version": "%s",\n' "$KVER"
     printf '  "kernel_deb": "%s",\n' "$(basename "$deb")"
+    printf '  "uefi_debs": ["%s", "%s"],\n' "$(basename "$SHIM_DEB")" "$(basename "$GRUB_DEB")"
     printf '  "guest_sha256": "%s",\n' "$GUEST_SHA"
     printf '  "guest_port": %s,\n' "$GUEST_PORT"
     printf '  "screen": {"width": %s, "height": %s},\n' "${SCREEN%x*}" "${SCREEN#*x}"
