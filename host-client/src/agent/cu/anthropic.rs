@@ -34,7 +34,7 @@ use arena_shared::script::host::cursor_after;
 use super::{base64_png, cropped_png, exchange_logs, resized_png, screen_of, Endpoint};
 use crate::actionspace::{self, ActionSpace, Context, Coords, Step};
 use crate::agent::llm::{ApiKind, ModelClient};
-use crate::agent::{Agent, AgentAction, AgentError, Observation, Prediction};
+use crate::agent::{Agent, AgentAction, AgentError, Observation, Prediction, StepLog};
 use crate::task::Task;
 
 /// Environment variables the key is read from, in order.
@@ -252,6 +252,18 @@ pub(crate) fn final_decision(text: &str) -> AgentAction {
     }
 }
 
+/// The prediction that ends an episode when a computer-use model answers without
+/// an action: `FAIL` for a refusal (its text kept, marked), else [`final_decision`]
+/// of its text. Both the Anthropic and the OpenAI agent end this way.
+pub(crate) fn ending(text: String, refused: bool, logs: Vec<StepLog>) -> Prediction {
+    let (decision, response) = if refused {
+        (AgentAction::Fail, format!("(the model refused) {text}").trim().to_owned())
+    } else {
+        (final_decision(&text), text)
+    };
+    Prediction { response, actions: vec![decision], marks: None, raw_error: None, logs, timings: Default::default() }
+}
+
 #[async_trait::async_trait]
 impl Agent for AnthropicAgent {
     fn name(&self) -> &str {
@@ -325,23 +337,12 @@ impl Agent for AnthropicAgent {
         let stop_reason = answer.get("stop_reason").and_then(Value::as_str).unwrap_or_default();
         let uses: Vec<&Value> =
             content.iter().filter(|b| b.get("type").and_then(Value::as_str) == Some("tool_use")).collect();
-        let mut response = text.clone();
         if stop_reason == "refusal" || uses.is_empty() {
-            let decision = if stop_reason == "refusal" { AgentAction::Fail } else { final_decision(&text) };
-            if stop_reason == "refusal" {
-                response = format!("(the model refused) {text}").trim().to_owned();
-            }
             self.messages = messages;
             self.pending.clear();
-            return Ok(Prediction {
-                response,
-                actions: vec![decision],
-                marks: None,
-                raw_error: None,
-                logs,
-                timings: Default::default(),
-            });
+            return Ok(ending(text, stop_reason == "refusal", logs));
         }
+        let mut response = text;
 
         let ctx = Context { screen, cursor: self.cursor, coords };
         let mut pending = Vec::new();

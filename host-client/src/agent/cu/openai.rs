@@ -21,7 +21,7 @@
 
 use serde_json::{json, Value};
 
-use super::anthropic::final_decision;
+use super::anthropic::ending;
 use super::{base64_png, exchange_logs, screen_of, Endpoint};
 use crate::actionspace::{self, ActionSpace, Context, Coords, Step};
 use crate::agent::llm::{ApiKind, ModelClient};
@@ -171,21 +171,9 @@ impl Agent for OpenAiAgent {
         let text = text.join("\n");
         let call = output.iter().find(|i| i.get("type").and_then(Value::as_str) == Some("computer_call"));
         let Some(call) = call.filter(|_| !refused) else {
-            let (decision, response) = if refused {
-                (AgentAction::Fail, format!("(the model refused) {text}").trim().to_owned())
-            } else {
-                (final_decision(&text), text)
-            };
             self.previous_response_id = Some(id);
             self.pending = None;
-            return Ok(Prediction {
-                response,
-                actions: vec![decision],
-                marks: None,
-                raw_error: None,
-                logs,
-                timings: Default::default(),
-            });
+            return Ok(ending(text, refused, logs));
         };
         let call_id =
             call.get("call_id").and_then(Value::as_str).ok_or_else(|| malformed("a computer_call without call_id"))?;
