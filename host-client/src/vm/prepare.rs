@@ -692,7 +692,7 @@ async fn follow(
     let press_until = started + keypress_window(vm.spec.accel);
     let mut first_boot = true;
     let mut stage_since = Instant::now();
-    let mut seen_lines = 0usize;
+    let mut stages = StageLines::default();
     // QEMU's forwarder accepts connections before the guest listens: short questions.
     let client = vm.client().with_timeout(Duration::from_secs(2));
     let overall: Duration = options.timeouts.0.values().sum();
@@ -702,6 +702,14 @@ async fn follow(
     loop {
         tokio::select! {
             result = &mut wait => {
+                // The guest can say its last stages and answer within one tick:
+                // read what the serial port said up to now before leaving.
+                if result.is_ok() {
+                    let text = std::fs::read(&serial).unwrap_or_default();
+                    for stage in stages.take_new(&String::from_utf8_lossy(&text)) {
+                        enter_stage(stage, options, dir, state, &mut stage_since, progress)?;
+                    }
+                }
                 *state.seconds.entry(state.stage.name().to_owned()).or_default() += stage_since.elapsed().as_secs_f64();
                 return match result {
                     Ok(_) => Ok(()),
@@ -735,21 +743,9 @@ async fn follow(
                 // The guest's own stage lines on the serial port.
                 let text = std::fs::read(&serial).unwrap_or_default();
                 let text = String::from_utf8_lossy(&text);
-                let lines: Vec<&str> = text.lines().collect();
-                for line in lines.iter().skip(seen_lines) {
-                    let Some(name) = line.trim().strip_prefix(STAGE_LINE) else { continue };
-                    let Some(stage) = Stage::from_name(name.trim()) else { continue };
-                    if stage > state.stage && stage.mid_install() {
-                        *state.seconds.entry(state.stage.name().to_owned()).or_default() +=
-                            stage_since.elapsed().as_secs_f64();
-                        state.stage = stage;
-                        stage_since = Instant::now();
-                        write_state(dir, state)?;
-                        let limit = options.timeouts.get(stage);
-                        progress(PrepareEvent::Stage { stage, resumed: false, limit: Some(limit) });
-                    }
+                for stage in stages.take_new(&text) {
+                    enter_stage(stage, options, dir, state, &mut stage_since, progress)?;
                 }
-                seen_lines = lines.len();
                 let limit = options.timeouts.get(state.stage);
                 if stage_since.elapsed() > limit {
                     return Err(VmError::Invalid(format!(
@@ -770,6 +766,54 @@ async fn follow(
             }
         }
     }
+}
+
+/// The guest's `arena-stage: NAME` lines, read from the serial log as it grows.
+#[derive(Default)]
+struct StageLines {
+    /// Bytes of the log already read, up to the end of its last complete line
+    /// (a line still being written is read again once it is whole).
+    read: usize,
+}
+
+impl StageLines {
+    /// The stages named by the complete lines after the ones already read.
+    fn take_new(&mut self, text: &str) -> Vec<Stage> {
+        // QEMU truncates the log when it starts: a shorter log is a new one.
+        if text.len() < self.read {
+            self.read = 0;
+        }
+        let Some(whole) = text.get(self.read..).and_then(|rest| rest.rfind('\n').map(|end| &rest[..=end])) else {
+            return Vec::new();
+        };
+        self.read += whole.len();
+        stages_named(whole).collect()
+    }
+}
+
+/// Moves `state` on to `stage` if it is a later stage of the install, saying so.
+fn enter_stage(
+    stage: Stage,
+    options: &PrepareOptions,
+    dir: &Path,
+    state: &mut State,
+    stage_since: &mut Instant,
+    progress: &mut impl FnMut(PrepareEvent<'_>),
+) -> Result<(), VmError> {
+    if stage > state.stage && stage.mid_install() {
+        *state.seconds.entry(state.stage.name().to_owned()).or_default() += stage_since.elapsed().as_secs_f64();
+        state.stage = stage;
+        *stage_since = Instant::now();
+        write_state(dir, state)?;
+        let limit = options.timeouts.get(stage);
+        progress(PrepareEvent::Stage { stage, resumed: false, limit: Some(limit) });
+    }
+    Ok(())
+}
+
+/// The stages named by `arena-stage: NAME` lines in `text`, in order.
+fn stages_named(text: &str) -> impl Iterator<Item = Stage> + '_ {
+    text.lines().filter_map(|line| Stage::from_name(line.trim().strip_prefix(STAGE_LINE)?.trim()))
 }
 
 fn last_serial_lines(text: &str) -> String {
@@ -821,6 +865,21 @@ async fn keep_evidence(vm: &Vm, dir: &Path, stage: Stage, err: VmError) -> VmErr
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn stage_lines_are_read_once_and_only_when_whole() {
+        let mut lines = StageLines::default();
+        let mut log = String::from("boot\r\narena-stage: oobe\r\narena-stage: first-lo");
+        assert_eq!(lines.take_new(&log), vec![Stage::Oobe]);
+        assert_eq!(lines.take_new(&log), vec![]);
+        log.push_str("gon\r\nnoise arena-stage: setup\narena-stage: oem-install\n");
+        assert_eq!(lines.take_new(&log), vec![Stage::FirstLogon, Stage::OemInstall]);
+        assert_eq!(lines.take_new(&log), vec![]);
+        // A new QEMU truncates the log: it is read from its start again.
+        assert_eq!(lines.take_new("arena-stage: oobe\n"), vec![Stage::Oobe]);
+        let mut fresh = StageLines::default();
+        assert_eq!(fresh.take_new("arena-stage: unknown\narena-stage:\n\n"), vec![]);
+    }
 
     #[test]
     fn stage_timeouts_parse_and_name_what_is_wrong() {
