@@ -29,19 +29,28 @@ impl Drop for StopOnDrop {
     }
 }
 
-/// The cancel flags of the calls running now, by the address of their backend, so
-/// that shutting one server down stops its calls and no other's.
-static RUNNING: Mutex<Vec<(usize, Weak<AtomicBool>)>> = Mutex::new(Vec::new());
+/// The flags of one running call: `cancel` stops its work (the flag the backend and
+/// the interpreter check); `shutdown` says the server's shutdown set it, so the call
+/// answers that rather than a timeout.
+#[derive(Default)]
+struct Flags {
+    cancel: Arc<AtomicBool>,
+    shutdown: AtomicBool,
+}
+
+/// The flags of the calls running now, by the address of their backend, so that
+/// shutting one server down stops its calls and no other's.
+static RUNNING: Mutex<Vec<(usize, Weak<Flags>)>> = Mutex::new(Vec::new());
 
 fn backend_key(desktop: &Arc<dyn Desktop>) -> usize {
     Arc::as_ptr(desktop).cast::<()>() as usize
 }
 
-fn register(desktop: &Arc<dyn Desktop>, flag: &Arc<AtomicBool>) {
+fn register(desktop: &Arc<dyn Desktop>, flags: &Arc<Flags>) {
     let mut running = RUNNING.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
     // Finished calls drop their flags; forget them as new ones come.
-    running.retain(|(_, flag)| flag.strong_count() > 0);
-    running.push((backend_key(desktop), Arc::downgrade(flag)));
+    running.retain(|(_, flags)| flags.strong_count() > 0);
+    running.push((backend_key(desktop), Arc::downgrade(flags)));
 }
 
 /// Tells every call running against `desktop` to stop, as a timeout does; answers how
@@ -50,8 +59,9 @@ pub fn cancel_all(desktop: &Arc<dyn Desktop>) -> usize {
     let key = backend_key(desktop);
     let running = RUNNING.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
     let mut told = 0;
-    for flag in running.iter().filter(|(k, _)| *k == key).filter_map(|(_, flag)| flag.upgrade()) {
-        flag.store(true, Ordering::Relaxed);
+    for flags in running.iter().filter(|(k, _)| *k == key).filter_map(|(_, flags)| flags.upgrade()) {
+        flags.shutdown.store(true, Ordering::Relaxed);
+        flags.cancel.store(true, Ordering::Relaxed);
         told += 1;
     }
     told
@@ -61,7 +71,8 @@ pub fn cancel_all(desktop: &Arc<dyn Desktop>) -> usize {
 ///
 /// # Errors
 ///
-/// Whatever `f` returns, [`DesktopError::Timeout`] after `deadline`, or
+/// Whatever `f` returns, [`DesktopError::Timeout`] after `deadline`,
+/// [`DesktopError::ShuttingDown`] when the server's shutdown stopped it, or
 /// [`DesktopError::Os`] if the call panicked.
 pub async fn blocking<T, F>(desktop: &Arc<dyn Desktop>, op: &'static str, deadline: Duration, f: F) -> DesktopResult<T>
 where
@@ -69,19 +80,24 @@ where
     T: Send + 'static,
 {
     let desktop = Arc::clone(desktop);
-    let cancel = Arc::new(AtomicBool::new(false));
-    register(&desktop, &cancel);
+    let flags = Arc::new(Flags::default());
+    register(&desktop, &flags);
     let ms = u64::try_from(deadline.as_millis()).unwrap_or(u64::MAX);
     let task = tokio::task::spawn_blocking({
-        let cancel = Arc::clone(&cancel);
+        let cancel = Arc::clone(&flags.cancel);
         move || {
             let _scope = Scope::enter(op, ms, cancel);
             f(desktop.as_ref())
         }
     });
     // Whatever ends this call (its deadline, or the request going away), the work stops.
-    let _stop = StopOnDrop(cancel);
+    let _stop = StopOnDrop(Arc::clone(&flags.cancel));
     match tokio::time::timeout(deadline, task).await {
+        // Work stopped by the shutdown ends as a timeout would (the backend cannot
+        // tell the two apart); the answer says what happened.
+        Ok(Ok(Err(DesktopError::Timeout { .. }))) if flags.shutdown.load(Ordering::Relaxed) => {
+            Err(DesktopError::ShuttingDown { op })
+        }
         Ok(Ok(res)) => res,
         Ok(Err(join_err)) => {
             tracing::error!(op, error = %join_err, "backend call panicked");
@@ -154,7 +170,8 @@ mod tests {
         assert_eq!(cancel_all(&other), 0, "another backend's shutdown leaves this call alone");
         assert_eq!(cancel_all(&desktop), 1);
         let res = call.await.expect("joined");
-        assert!(matches!(res, Err(DesktopError::Timeout { op: "long", .. })), "{res:?}");
+        assert!(matches!(res, Err(DesktopError::ShuttingDown { op: "long" })), "{res:?}");
+        assert_eq!(res.unwrap_err().to_string(), "long was stopped: the guest is shutting down");
     }
 
     #[tokio::test]

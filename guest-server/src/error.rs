@@ -75,6 +75,7 @@ impl ApiError {
                 DesktopError::AlreadyExists(_) => (StatusCode::CONFLICT, ErrorCode::Conflict),
                 DesktopError::Unsupported(_) => (StatusCode::NOT_IMPLEMENTED, ErrorCode::Unsupported),
                 DesktopError::Timeout { .. } => (StatusCode::GATEWAY_TIMEOUT, ErrorCode::Timeout),
+                DesktopError::ShuttingDown { .. } => (StatusCode::SERVICE_UNAVAILABLE, ErrorCode::Unavailable),
                 DesktopError::Os { .. } => (StatusCode::INTERNAL_SERVER_ERROR, ErrorCode::Internal),
             },
         }

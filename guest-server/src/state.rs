@@ -35,6 +35,14 @@ impl AppState {
         }
     }
 
+    /// A share of the keyboard and mouse, held by every request that may drive them
+    /// (action batches, `/execute` and `/execute_windows` code, `/v1/exec` programs,
+    /// MCP input and Python tools): the doctor, which takes them alone, waits until
+    /// every share is given back, and no share is given while it runs.
+    pub async fn input_share(&self) -> tokio::sync::RwLockReadGuard<'_, ()> {
+        self.input.read().await
+    }
+
     /// Deadline of an ordinary backend call.
     pub fn call_timeout(&self) -> Duration {
         self.config.call_timeout()

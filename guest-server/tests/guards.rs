@@ -360,3 +360,42 @@ async fn the_doctor_waits_for_running_actions_and_puts_the_cursor_back() {
     assert_eq!(response.status(), StatusCode::OK);
     assert_eq!(stub.cursor_position().unwrap(), arena_shared::geometry::Point::new(123, 456), "the cursor is back");
 }
+
+#[tokio::test]
+async fn agent_code_and_programs_wait_while_the_doctor_has_the_input() {
+    let _turn = SERIAL.lock().await;
+    let dir = tempfile::tempdir().expect("temp dir");
+    let stub = Arc::new(
+        StubDesktop::with_config(StubConfig { root: Some(dir.path().into()), screen: (1440, 900), scenario: None })
+            .expect("stub desktop"),
+    );
+    let state = AppState::new(stub.clone(), ServerConfig::for_stub(), None);
+    let input = state.input.clone();
+    let router = arena_guest::router(state);
+    let post = |uri: &str, body: Value| {
+        Request::post(uri)
+            .header(header::HOST, "127.0.0.1")
+            .header(header::CONTENT_TYPE, "application/json")
+            .body(Body::from(to_vec(&body)))
+            .unwrap()
+    };
+    let requests = [
+        ("/execute", json!({"command": ["python", "-c", "import pyautogui; pyautogui.moveTo(11, 12)"]}), (11, 12)),
+        ("/execute_windows", json!({"command": "import pyautogui\npyautogui.moveTo(21, 22)"}), (21, 22)),
+        ("/v1/actions", json!({"actions": [{"type": "move_to", "x": 31, "y": 32}]}), (31, 32)),
+    ];
+    for (uri, body, (x, y)) in requests {
+        stub.perform(&Action::MoveTo { x: 1, y: 1 }).unwrap();
+        // The doctor has the keyboard and mouse.
+        let doctor = input.write().await;
+        let call = tokio::spawn(router.clone().oneshot(post(uri, body)));
+        // A stub call takes milliseconds; a request that did not wait would have moved the cursor.
+        tokio::time::sleep(std::time::Duration::from_millis(300)).await;
+        assert!(!call.is_finished(), "{uri} ran while the doctor had the input");
+        assert_eq!(stub.cursor_position().unwrap(), arena_shared::geometry::Point::new(1, 1), "{uri}");
+        drop(doctor);
+        let response = call.await.expect("joined").expect("infallible");
+        assert_eq!(response.status(), StatusCode::OK, "{uri}");
+        assert_eq!(stub.cursor_position().unwrap(), arena_shared::geometry::Point::new(x, y), "{uri}");
+    }
+}

@@ -44,6 +44,22 @@ fn is_one(n: &u32) -> bool {
 /// an agent's intent. Both the guest's routes and its backends refuse more up front.
 pub const MAX_TYPE_TEXT_BYTES: usize = 1 << 20;
 
+/// Refuses a `type_text` of more than [`MAX_TYPE_TEXT_BYTES`] with a message that
+/// gives both sizes; every route and backend that types checks with this.
+///
+/// # Errors
+///
+/// The message, when `text` is too long.
+pub fn check_typed_length(text: &str) -> Result<(), String> {
+    if text.len() > MAX_TYPE_TEXT_BYTES {
+        return Err(format!(
+            "type_text holds {} bytes; at most {MAX_TYPE_TEXT_BYTES} are typed in one action",
+            text.len()
+        ));
+    }
+    Ok(())
+}
+
 /// One input action.
 ///
 /// Scroll amounts are raw wheel deltas, as pyautogui passes them on Windows:

@@ -23,7 +23,8 @@ pub enum ErrorCode {
     Unsupported,
     /// A deadline passed (504).
     Timeout,
-    /// The server is at a limit right now (too many connections); try again (503).
+    /// The server is at a limit right now (too many connections) or is shutting down;
+    /// try again (503).
     Unavailable,
     /// Something failed inside the guest; details are in its log (500).
     Internal,

@@ -51,6 +51,9 @@ pub enum DesktopError {
     /// The call did not finish within its deadline.
     #[error("{op} timed out after {ms} ms")]
     Timeout { op: &'static str, ms: u64 },
+    /// The guest began shutting down and stopped the call.
+    #[error("{op} was stopped: the guest is shutting down")]
+    ShuttingDown { op: &'static str },
     /// The operating system refused; `message` carries its words.
     #[error("{op}: {message}")]
     Os { op: &'static str, message: String },

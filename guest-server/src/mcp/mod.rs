@@ -122,10 +122,13 @@ impl GuestMcp {
                 tokio::time::sleep(Duration::from_millis(ms)).await;
                 text(json!({"ok": true}).to_string())
             }
-            ToolCall::Input(action) => match blocking(desktop, "perform", timeout, move |d| d.perform(&action)).await {
-                Ok(()) => text(json!({"ok": true}).to_string()),
-                Err(err) => failed(&tool, &err),
-            },
+            ToolCall::Input(action) => {
+                let _input = self.state.input_share().await;
+                match blocking(desktop, "perform", timeout, move |d| d.perform(&action)).await {
+                    Ok(()) => text(json!({"ok": true}).to_string()),
+                    Err(err) => failed(&tool, &err),
+                }
+            }
             ToolCall::RunPython(code) => self.run_python(&tool, code, screen).await,
             ToolCall::GetTask | ToolCall::Done | ToolCall::Fail => tool_error(format!("unknown tool {tool:?}")),
         }
@@ -140,6 +143,7 @@ impl GuestMcp {
         };
         let timeout = self.state.call_timeout();
         let (w, h) = screen.unwrap_or((0, 0));
+        let _input = self.state.input_share().await;
         let ran = blocking(&self.state.desktop, "run_python", timeout, move |d| {
             let deadline = Instant::now() + timeout;
             let mut host = DesktopHost::new(d, deadline);

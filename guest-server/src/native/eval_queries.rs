@@ -138,6 +138,7 @@ async fn clock_tree(state: &AppState) -> Result<A11yTree, ApiError> {
         return Ok(tree);
     };
     let centre = rect.center();
+    let _input = state.input_share().await;
     blocking(&state.desktop, "maximize_clock", state.call_timeout(), move |d| {
         d.perform(&Action::Click { x: Some(centre.x), y: Some(centre.y), button: MouseButton::Left, count: 1 })
     })

@@ -49,7 +49,7 @@ async fn actions(
 ) -> Result<AppJson<ActionReport>, Response> {
     validate(&batch.actions, state.call_timeout()).map_err(IntoResponse::into_response)?;
     // Batches share the input; a doctor run takes it alone (see `native::doctor`).
-    let _input = state.input.read().await;
+    let _input = state.input_share().await;
     let started = Instant::now();
     let total = batch.actions.len();
     for (index, action) in batch.actions.into_iter().enumerate() {
@@ -164,12 +164,8 @@ fn check_action(action: &Action) -> Result<(), String> {
         Action::Drag { button: b, .. } => button(b),
         Action::Scroll { x, y, .. } | Action::DoubleClick { x, y } | Action::RightClick { x, y } => coords(x, y),
         Action::Wait { ms } if *ms > MAX_WAIT_MS => Err(format!("a wait lasts at most {MAX_WAIT_MS} ms (got {ms})")),
-        Action::TypeText { text, .. } if text.len() > arena_shared::action::MAX_TYPE_TEXT_BYTES => Err(format!(
-            "the text is {} bytes; at most {} are typed in one action",
-            text.len(),
-            arena_shared::action::MAX_TYPE_TEXT_BYTES
-        )),
-        Action::Wait { .. } | Action::MoveTo { .. } | Action::MoveRel { .. } | Action::TypeText { .. } => Ok(()),
+        Action::TypeText { text, .. } => arena_shared::action::check_typed_length(text),
+        Action::Wait { .. } | Action::MoveTo { .. } | Action::MoveRel { .. } => Ok(()),
     }
 }
 

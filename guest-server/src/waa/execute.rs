@@ -133,6 +133,7 @@ pub(crate) async fn execute(State(state): State<AppState>, PyJson(body): PyJson)
     let timeout_ms = state.config.exec_timeout_ms;
     let python = state.config.python.clone();
     let deadline = Duration::from_millis(timeout_ms) + EXEC_MARGIN;
+    let _input = state.input_share().await;
     on_backend_within(&state, "execute", deadline, move |desktop| {
         let command = expand_home_args(desktop, command)?;
         let mut spec = match (&command, shell) {
@@ -406,6 +407,7 @@ pub(crate) async fn execute_windows(
         timeout: Duration::from_millis(state.config.exec_timeout_ms),
     };
     let deadline = options.timeout + EXEC_MARGIN;
+    let _input = state.input_share().await;
     let run = on_backend_within(&state, "execute_windows", deadline, move |desktop| {
         Ok(run_computer_code(desktop, &code, computer.as_deref(), &options))
     })

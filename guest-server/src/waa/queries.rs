@@ -146,6 +146,7 @@ async fn clock_tree(state: &AppState) -> Result<A11yTree, WaaError> {
         return Ok(tree);
     };
     let centre = rect.center();
+    let _input = state.input_share().await;
     on_backend(state, "maximize_clock", move |desktop| {
         Ok(desktop.perform(&Action::Click {
             x: Some(centre.x),

@@ -107,13 +107,7 @@ pub(crate) fn perform(state: &mut State, action: &Action) -> DesktopResult<Vec<E
             }
         }
         Action::TypeText { text, interval_ms: _ } => {
-            if text.len() > arena_shared::action::MAX_TYPE_TEXT_BYTES {
-                return Err(DesktopError::InvalidInput(format!(
-                    "type_text holds {} bytes; at most {} are typed in one action",
-                    text.len(),
-                    arena_shared::action::MAX_TYPE_TEXT_BYTES
-                )));
-            }
+            arena_shared::action::check_typed_length(text).map_err(DesktopError::InvalidInput)?;
             let mods = state.mods;
             if !(mods.ctrl || mods.alt || mods.win) {
                 // Plain typing is one edit, not one per character: laying the text out

@@ -316,6 +316,7 @@ pub(super) fn perform(action: &Action, drag_step: Duration) -> DesktopResult<()>
             send_strokes(&strokes, "key up", hkl)
         }
         Action::TypeText { text, interval_ms } => {
+            arena_shared::action::check_typed_length(text).map_err(DesktopError::InvalidInput)?;
             let hkl = foreground_hkl();
             let groups = vk::type_text(text, &layout(hkl));
             match interval_ms.filter(|&ms| ms > 0) {
