@@ -50,8 +50,27 @@ fn doctor(args: &arena_guest::service::DoctorArgs) -> ExitCode {
             return ExitCode::FAILURE;
         }
     };
-    let options = arena_guest::doctor::DoctorOptions::for_server(&args.serve, state.token.is_some());
-    let report = arena_guest::doctor::run(state.desktop.as_ref(), &options);
+    // A server on this port drives the same desktop: its own doctor takes turns with
+    // its actions, where one run from here would type over a running episode.
+    let running = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .map_err(|err| format!("starting the async runtime: {err}"))
+        .and_then(|rt| rt.block_on(arena_guest::native::ask_running_server(&args.serve, state.token.as_deref())));
+    let report = match running {
+        Ok(Some(report)) => {
+            eprintln!("(the checks ran inside the arena-guest serving on port {})", args.serve.port);
+            report
+        }
+        Ok(None) => {
+            let options = arena_guest::doctor::DoctorOptions::for_server(&args.serve, state.token.is_some());
+            arena_guest::doctor::run(state.desktop.as_ref(), &options)
+        }
+        Err(err) => {
+            eprintln!("error: {err}");
+            return ExitCode::FAILURE;
+        }
+    };
     if args.json {
         match serde_json::to_string_pretty(&report) {
             Ok(json) => println!("{json}"),

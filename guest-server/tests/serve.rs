@@ -215,3 +215,25 @@ async fn sockets_without_the_token_hold_a_small_share_of_the_slots() {
     let answer = read_to_close(&mut stream).await;
     assert!(answer.starts_with("HTTP/1.1 401"), "{answer}");
 }
+
+/// `arena-guest doctor` beside a running server asks that server (whose doctor takes
+/// turns with its actions) instead of typing over it from a second process.
+#[tokio::test]
+async fn the_doctor_command_asks_the_server_running_on_its_port() {
+    let guest = start_with(Some(TOKEN), |_| {}).await;
+    let mut config = ServerConfig::for_stub();
+    config.port = guest.addr.port();
+    let report = arena_guest::native::ask_running_server(&config, Some(TOKEN)).await.expect("the server's report");
+    let report = report.expect("a server runs on the port");
+    assert!(!report.checks.is_empty(), "{report:?}");
+    let err = arena_guest::native::ask_running_server(&config, Some("not-the-token-0123456789")).await.unwrap_err();
+    assert!(err.contains("401") && err.contains("--token"), "{err}");
+    // Nothing on the port: the command checks in its own process.
+    let Guest { addr, mut stop, served, _dir } = guest;
+    let _ = stop.take().expect("sender").send(());
+    served.await.expect("joined").expect("served");
+    config.port = addr.port();
+    assert_eq!(arena_guest::native::ask_running_server(&config, Some(TOKEN)).await, Ok(None));
+    config.port = 0;
+    assert_eq!(arena_guest::native::ask_running_server(&config, None).await, Ok(None));
+}

@@ -27,6 +27,7 @@ mod browser;
 mod browser_ws;
 mod clipboard;
 mod doctor;
+pub use doctor::ask_running_server;
 mod eval_queries;
 mod exec;
 mod files;

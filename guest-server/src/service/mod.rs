@@ -65,6 +65,7 @@ pub enum Command {
     LogonTask(LogonTaskCommand),
     /// Check every capability end to end on this desktop (capture, cursor, typing into
     /// Notepad, clipboard, trees, exec timeouts, files) and report pass or fail with timings.
+    /// A server already serving on `--port` runs the checks itself, in turn with its actions.
     Doctor(Box<DoctorArgs>),
 }
 
