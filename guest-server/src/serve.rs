@@ -17,9 +17,11 @@
 //!   `min_body_rate` bytes a second on average ([`MinRateBody`]); a body that trickles
 //!   (one byte every few seconds, to hold a slot) fails, and its connection is closed;
 //! - with a token configured, connections that have not yet shown it are on probation:
-//!   at most `probation_slots` of them at once, and the oldest is closed when one more
-//!   arrives, so idle or reconnecting sockets without the token can never hold more than
-//!   that share of the slots, and a client that sends its token at once always gets in.
+//!   at most `probation_slots` of them at once, and when one more arrives the oldest
+//!   that has sent nothing yet is closed (the oldest of all when every one has sent
+//!   something), so idle or reconnecting sockets without the token can never hold more
+//!   than that share of the slots, and a client that sends its request at once is not
+//!   closed for a silent newcomer while its request is read.
 //!   The auth guard marks a connection authenticated ([`ConnContext::authenticated`])
 //!   and closes it after a 401;
 //! - connections may be upgraded (the DevTools websocket relay): every request carries
@@ -29,6 +31,7 @@
 use std::collections::VecDeque;
 use std::future::Future;
 use std::pin::{pin, Pin};
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
 use std::task::{Context, Poll};
 use std::time::Duration;
@@ -67,33 +70,87 @@ impl ConnContext {
     }
 }
 
-/// The connections that have not yet shown the token, oldest first, each with the
+/// A connection on probation: its id, whether it has sent any byte, and the
 /// signal that closes it.
+type OnProbation = (u64, Arc<AtomicBool>, CancellationToken);
+
+/// The connections that have not yet shown the token, oldest first.
 #[derive(Debug)]
 struct Probation {
     cap: usize,
-    waiting: Mutex<VecDeque<(u64, CancellationToken)>>,
+    waiting: Mutex<VecDeque<OnProbation>>,
 }
 
 impl Probation {
-    fn lock(&self) -> std::sync::MutexGuard<'_, VecDeque<(u64, CancellationToken)>> {
+    fn lock(&self) -> std::sync::MutexGuard<'_, VecDeque<OnProbation>> {
         self.waiting.lock().unwrap_or_else(std::sync::PoisonError::into_inner)
     }
 
-    /// Puts connection `id` on probation, closing the oldest one when all places are taken.
-    fn enter(&self, id: u64, evict: CancellationToken) {
+    /// Puts connection `id` on probation; when all places are taken, closes the
+    /// oldest connection that has sent nothing, or the oldest of all if each has.
+    fn enter(&self, id: u64, spoke: Arc<AtomicBool>, evict: CancellationToken) {
         let mut waiting = self.lock();
         while waiting.len() >= self.cap {
-            if let Some((old, token)) = waiting.pop_front() {
-                tracing::debug!(connection = old, "closing the oldest connection that has not shown the token");
+            let silent = waiting.iter().position(|(_, spoke, _)| !spoke.load(Ordering::Relaxed));
+            if let Some((old, _, token)) = waiting.remove(silent.unwrap_or(0)) {
+                tracing::debug!(connection = old, "closing a connection that has not shown the token");
                 token.cancel();
             }
         }
-        waiting.push_back((id, evict));
+        waiting.push_back((id, spoke, evict));
     }
 
     fn leave(&self, id: u64) {
-        self.lock().retain(|(waiting, _)| *waiting != id);
+        self.lock().retain(|(waiting, _, _)| *waiting != id);
+    }
+}
+
+/// A socket that notes when its peer first sends something.
+#[derive(Debug)]
+struct Heard<S> {
+    inner: S,
+    spoke: Arc<AtomicBool>,
+}
+
+impl<S: tokio::io::AsyncRead + Unpin> tokio::io::AsyncRead for Heard<S> {
+    fn poll_read(
+        self: Pin<&mut Self>,
+        cx: &mut Context<'_>,
+        buf: &mut tokio::io::ReadBuf<'_>,
+    ) -> Poll<std::io::Result<()>> {
+        let this = self.get_mut();
+        let before = buf.filled().len();
+        let polled = Pin::new(&mut this.inner).poll_read(cx, buf);
+        if buf.filled().len() > before {
+            this.spoke.store(true, Ordering::Relaxed);
+        }
+        polled
+    }
+}
+
+impl<S: tokio::io::AsyncWrite + Unpin> tokio::io::AsyncWrite for Heard<S> {
+    fn poll_write(self: Pin<&mut Self>, cx: &mut Context<'_>, data: &[u8]) -> Poll<std::io::Result<usize>> {
+        Pin::new(&mut self.get_mut().inner).poll_write(cx, data)
+    }
+
+    fn poll_flush(self: Pin<&mut Self>, cx: &mut Context<'_>) -> Poll<std::io::Result<()>> {
+        Pin::new(&mut self.get_mut().inner).poll_flush(cx)
+    }
+
+    fn poll_shutdown(self: Pin<&mut Self>, cx: &mut Context<'_>) -> Poll<std::io::Result<()>> {
+        Pin::new(&mut self.get_mut().inner).poll_shutdown(cx)
+    }
+
+    fn poll_write_vectored(
+        self: Pin<&mut Self>,
+        cx: &mut Context<'_>,
+        bufs: &[std::io::IoSlice<'_>],
+    ) -> Poll<std::io::Result<usize>> {
+        Pin::new(&mut self.get_mut().inner).poll_write_vectored(cx, bufs)
+    }
+
+    fn is_write_vectored(&self) -> bool {
+        self.inner.is_write_vectored()
     }
 }
 
@@ -255,8 +312,9 @@ pub async fn serve(
         };
         next_id += 1;
         let evict = CancellationToken::new();
+        let spoke = Arc::new(AtomicBool::new(false));
         if let Some(probation) = &probation {
-            probation.enter(next_id, evict.clone());
+            probation.enter(next_id, Arc::clone(&spoke), evict.clone());
         }
         let context = ConnContext {
             shutdown: stop.clone(),
@@ -272,7 +330,8 @@ pub async fn serve(
         }));
         let mut builder = hyper::server::conn::http1::Builder::new();
         builder.timer(TokioTimer::new()).header_read_timeout(limits.header_timeout).max_buf_size(limits.max_head_bytes);
-        let connection = builder.serve_connection(TokioIo::new(stream), service).with_upgrades();
+        let connection =
+            builder.serve_connection(TokioIo::new(Heard { inner: stream, spoke }), service).with_upgrades();
         connections.spawn(async move {
             let ConnContext { shutdown, _slot, probation } = context;
             let mut connection = pin!(connection);

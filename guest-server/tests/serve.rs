@@ -216,6 +216,35 @@ async fn sockets_without_the_token_hold_a_small_share_of_the_slots() {
     assert!(answer.starts_with("HTTP/1.1 401"), "{answer}");
 }
 
+#[tokio::test]
+async fn silent_newcomers_close_silent_sockets_before_one_whose_request_is_arriving() {
+    // 32 slots: at most 4 connections without the token at once.
+    let guest = start_with(Some(TOKEN), |c| {
+        c.max_connections = 32;
+        c.header_timeout_ms = 3_600_000;
+    })
+    .await;
+    // The oldest connection has begun its request; ten silent ones come after it.
+    let mut talker = TcpStream::connect(guest.addr).await.expect("connect");
+    talker.write_all(b"GET /v1/screen HTTP/1.1\r\nhost: 127.0.0.1\r\n").await.expect("send");
+    tokio::time::sleep(Duration::from_millis(50)).await;
+    let mut silent = Vec::new();
+    for _ in 0..10 {
+        silent.push(TcpStream::connect(guest.addr).await.expect("connect"));
+        tokio::time::sleep(Duration::from_millis(20)).await;
+    }
+    // The silent ones made room among themselves: the six oldest of them are closed.
+    for socket in silent.iter_mut().take(6) {
+        let said = read_to_close(socket).await;
+        assert!(said.is_empty(), "{said}");
+    }
+    // The talker was not: its request ends with the token and is served.
+    let rest = format!("authorization: Bearer {TOKEN}\r\nconnection: close\r\n\r\n");
+    talker.write_all(rest.as_bytes()).await.expect("the talker's connection is open");
+    let answer = read_to_close(&mut talker).await;
+    assert!(answer.starts_with("HTTP/1.1 200"), "{answer}");
+}
+
 /// `arena-guest doctor` beside a running server asks that server (whose doctor takes
 /// turns with its actions) instead of typing over it from a second process.
 #[tokio::test]
