@@ -16,6 +16,10 @@
 //! - a request's body must keep arriving: after the header timeout's grace, at least
 //!   `min_body_rate` bytes a second on average ([`MinRateBody`]); a body that trickles
 //!   (one byte every few seconds, to hold a slot) fails, and its connection is closed;
+//! - when every slot is taken, a new connection takes the slot of the connection whose
+//!   body is furthest behind that rate (one that has been sending for at least
+//!   [`BEHIND_AFTER`] and lives only on the grace), so bodies that trickle cannot keep
+//!   a legitimate client out even during their grace; with none behind it gets the 503;
 //! - with a token configured, connections that have not yet shown it are on probation:
 //!   at most `probation_slots` of them at once, and when one more arrives the oldest
 //!   that has sent nothing yet is closed (the oldest of all when every one has sent
@@ -58,6 +62,51 @@ pub struct ConnContext {
     _slot: Arc<OwnedSemaphorePermit>,
     /// This connection's place among those on probation, while it is on it.
     probation: Option<(Arc<Probation>, u64)>,
+    /// How far its request body has come, for the choice of a slot to take back.
+    body: Arc<Mutex<Option<BodyProgress>>>,
+}
+
+/// A request body being read: since when, and how many bytes came.
+#[derive(Debug, Clone, Copy)]
+struct BodyProgress {
+    started: tokio::time::Instant,
+    received: u64,
+}
+
+/// How long a body must have been arriving before it can count as behind.
+pub const BEHIND_AFTER: Duration = Duration::from_millis(500);
+
+/// The open connections, each with its body's progress and the signal that closes it.
+type Open = Mutex<std::collections::HashMap<u64, (Arc<Mutex<Option<BodyProgress>>>, CancellationToken)>>;
+
+/// Closes the connection whose body is furthest behind `rate` bytes a second (and has
+/// been arriving for [`BEHIND_AFTER`] at least); answers whether there was one.
+fn close_furthest_behind(open: &Open, rate: u64) -> bool {
+    let now = tokio::time::Instant::now();
+    let open = open.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
+    let deficit = |progress: &BodyProgress| {
+        let elapsed = now.saturating_duration_since(progress.started);
+        (elapsed >= BEHIND_AFTER).then(|| (elapsed.as_secs_f64() * rate as f64) - progress.received as f64)
+    };
+    let behind = open
+        .iter()
+        .filter_map(|(id, (body, evict))| {
+            let progress = (*body.lock().unwrap_or_else(std::sync::PoisonError::into_inner))?;
+            deficit(&progress).filter(|d| *d > 0.0).map(|d| (d, *id, evict))
+        })
+        .max_by(|a, b| a.0.total_cmp(&b.0));
+    match behind {
+        Some((deficit, id, evict)) => {
+            tracing::info!(
+                connection = id,
+                deficit_bytes = deficit as u64,
+                "every slot is taken: closing the connection whose body is furthest behind"
+            );
+            evict.cancel();
+            true
+        }
+        None => false,
+    }
 }
 
 impl ConnContext {
@@ -161,8 +210,12 @@ impl<S: tokio::io::AsyncWrite + Unpin> tokio::io::AsyncWrite for Heard<S> {
 #[derive(Debug)]
 pub struct MinRateBody<B> {
     inner: B,
+    /// Where the connection's serving loop can see how far the body has come.
+    progress: Option<Arc<Mutex<Option<BodyProgress>>>>,
     started: tokio::time::Instant,
     received: u64,
+    /// The body ended (or failed): nothing more is owed.
+    ended: bool,
     grace: Duration,
     rate: u64,
     deadline: Pin<Box<tokio::time::Sleep>>,
@@ -174,11 +227,20 @@ impl<B> MinRateBody<B> {
         let started = tokio::time::Instant::now();
         MinRateBody {
             inner,
+            progress: None,
             started,
             received: 0,
+            ended: false,
             grace,
             rate: rate.max(1),
             deadline: Box::pin(tokio::time::sleep_until(started + grace)),
+        }
+    }
+
+    fn report(&self) {
+        if let Some(progress) = &self.progress {
+            let mut slot = progress.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
+            *slot = (!self.ended).then_some(BodyProgress { started: self.started, received: self.received });
         }
     }
 
@@ -195,6 +257,24 @@ pub struct BodyTooSlow {
     rate: u64,
     received: u64,
     elapsed_ms: u64,
+}
+
+impl<B: hyper::body::Body> MinRateBody<B> {
+    /// Reports the body's progress into `progress` as it arrives (cleared at its end).
+    fn reporting_to(mut self, progress: Arc<Mutex<Option<BodyProgress>>>) -> MinRateBody<B> {
+        self.progress = Some(progress);
+        self.ended = self.inner.is_end_stream();
+        self.report();
+        self
+    }
+}
+
+impl<B> Drop for MinRateBody<B> {
+    fn drop(&mut self) {
+        // A body no longer read (served, refused or abandoned) is owed nothing.
+        self.ended = true;
+        self.report();
+    }
 }
 
 impl<B> hyper::body::Body for MinRateBody<B>
@@ -217,12 +297,24 @@ where
                     let next = this.next_deadline();
                     this.deadline.as_mut().reset(next);
                 }
+                this.ended = this.inner.is_end_stream();
+                this.report();
                 Poll::Ready(Some(Ok(frame)))
             }
-            Poll::Ready(Some(Err(err))) => Poll::Ready(Some(Err(err.into()))),
-            Poll::Ready(None) => Poll::Ready(None),
+            Poll::Ready(Some(Err(err))) => {
+                this.ended = true;
+                this.report();
+                Poll::Ready(Some(Err(err.into())))
+            }
+            Poll::Ready(None) => {
+                this.ended = true;
+                this.report();
+                Poll::Ready(None)
+            }
             Poll::Pending => match this.deadline.as_mut().poll(cx) {
                 Poll::Ready(()) => {
+                    this.ended = true;
+                    this.report();
                     let elapsed_ms = u64::try_from(this.started.elapsed().as_millis()).unwrap_or(u64::MAX);
                     tracing::warn!(received = this.received, elapsed_ms, "closing a request whose body trickles");
                     Poll::Ready(Some(Err(Box::new(BodyTooSlow {
@@ -289,6 +381,7 @@ pub async fn serve(
     let mut shutdown = pin!(shutdown);
     let probation =
         limits.probation_slots.map(|cap| Arc::new(Probation { cap: cap.max(1), waiting: Mutex::default() }));
+    let open: Arc<Open> = Arc::default();
     let mut next_id: u64 = 0;
     loop {
         let accepted = tokio::select! {
@@ -305,51 +398,37 @@ pub async fn serve(
                 continue;
             }
         };
-        let Ok(permit) = Arc::clone(&permits).try_acquire_owned() else {
-            tracing::warn!(%peer, max = limits.max_connections, "too many connections; refusing one");
-            connections.spawn(refuse_busy(stream, limits.max_connections));
-            continue;
+        // A free slot; or, when all are taken, the slot of a body that trickles, given
+        // back as its connection ends; or the 503.
+        let slot = match Arc::clone(&permits).try_acquire_owned() {
+            Ok(permit) => Slot::Free(permit),
+            Err(_) if close_furthest_behind(&open, limits.min_body_rate) => Slot::Freed(Arc::clone(&permits)),
+            Err(_) => {
+                tracing::warn!(%peer, max = limits.max_connections, "too many connections; refusing one");
+                connections.spawn(refuse_busy(stream, limits.max_connections));
+                continue;
+            }
         };
         next_id += 1;
-        let evict = CancellationToken::new();
-        let spoke = Arc::new(AtomicBool::new(false));
-        if let Some(probation) = &probation {
-            probation.enter(next_id, Arc::clone(&spoke), evict.clone());
-        }
-        let context = ConnContext {
-            shutdown: stop.clone(),
-            _slot: Arc::new(permit),
-            probation: probation.as_ref().map(|p| (Arc::clone(p), next_id)),
+        let id = next_id;
+        let shared = Shared {
+            limits,
+            app: app.clone(),
+            stop: stop.clone(),
+            probation: probation.clone(),
+            open: Arc::clone(&open),
         };
-        let per_request = context.clone();
-        let (grace, rate) = (limits.header_timeout, limits.min_body_rate);
-        let service = TowerToHyperService::new(app.clone().map_request(move |request: hyper::Request<Incoming>| {
-            let mut request = request.map(|body| Body::new(MinRateBody::new(body, grace, rate)));
-            request.extensions_mut().insert(per_request.clone());
-            request
-        }));
-        let mut builder = hyper::server::conn::http1::Builder::new();
-        builder.timer(TokioTimer::new()).header_read_timeout(limits.header_timeout).max_buf_size(limits.max_head_bytes);
-        let connection =
-            builder.serve_connection(TokioIo::new(Heard { inner: stream, spoke }), service).with_upgrades();
         connections.spawn(async move {
-            let ConnContext { shutdown, _slot, probation } = context;
-            let mut connection = pin!(connection);
-            let ended = tokio::select! {
-                ended = connection.as_mut() => ended,
-                () = evict.cancelled() => Ok(()),
-                () = shutdown.cancelled() => {
-                    // Finish the request in flight, then close; an idle keep-alive closes at once.
-                    connection.as_mut().graceful_shutdown();
-                    connection.await
+            let permit = match slot {
+                Slot::Free(permit) => permit,
+                Slot::Freed(permits) => {
+                    match tokio::time::timeout(Duration::from_secs(1), permits.acquire_owned()).await {
+                        Ok(Ok(permit)) => permit,
+                        _ => return refuse_busy(stream, limits.max_connections).await,
+                    }
                 }
             };
-            if let Some((probation, id)) = probation {
-                probation.leave(id);
-            }
-            if let Err(err) = ended {
-                tracing::debug!(%peer, error = %err, "connection ended with an error");
-            }
+            serve_connection(shared, stream, peer, id, permit).await;
         });
     }
     drop(listener);
@@ -370,6 +449,76 @@ pub async fn serve(
     }
     connections.shutdown().await;
     Ok(())
+}
+
+/// Where a new connection's slot comes from.
+enum Slot {
+    Free(OwnedSemaphorePermit),
+    /// A trickling connection was closed: its slot comes back as its task ends.
+    Freed(Arc<Semaphore>),
+}
+
+/// What every connection of one server shares.
+struct Shared {
+    limits: ConnLimits,
+    app: Router,
+    stop: CancellationToken,
+    probation: Option<Arc<Probation>>,
+    open: Arc<Open>,
+}
+
+/// Serves one accepted connection in its slot until it ends, is closed for a
+/// newcomer, or the server shuts down.
+async fn serve_connection(
+    shared: Shared,
+    stream: TcpStream,
+    peer: std::net::SocketAddr,
+    id: u64,
+    permit: OwnedSemaphorePermit,
+) {
+    let Shared { limits, app, stop, probation, open } = shared;
+    let evict = CancellationToken::new();
+    let spoke = Arc::new(AtomicBool::new(false));
+    if let Some(probation) = &probation {
+        probation.enter(id, Arc::clone(&spoke), evict.clone());
+    }
+    let body: Arc<Mutex<Option<BodyProgress>>> = Arc::default();
+    open.lock().unwrap_or_else(std::sync::PoisonError::into_inner).insert(id, (Arc::clone(&body), evict.clone()));
+    let context = ConnContext {
+        shutdown: stop,
+        _slot: Arc::new(permit),
+        probation: probation.map(|p| (p, id)),
+        body: Arc::clone(&body),
+    };
+    let per_request = context.clone();
+    let (grace, rate) = (limits.header_timeout, limits.min_body_rate);
+    let service = TowerToHyperService::new(app.map_request(move |request: hyper::Request<Incoming>| {
+        let progress = Arc::clone(&per_request.body);
+        let mut request = request.map(|body| Body::new(MinRateBody::new(body, grace, rate).reporting_to(progress)));
+        request.extensions_mut().insert(per_request.clone());
+        request
+    }));
+    let mut builder = hyper::server::conn::http1::Builder::new();
+    builder.timer(TokioTimer::new()).header_read_timeout(limits.header_timeout).max_buf_size(limits.max_head_bytes);
+    let connection = builder.serve_connection(TokioIo::new(Heard { inner: stream, spoke }), service).with_upgrades();
+    let ConnContext { shutdown, _slot, probation, body: _ } = context;
+    let mut connection = pin!(connection);
+    let ended = tokio::select! {
+        ended = connection.as_mut() => ended,
+        () = evict.cancelled() => Ok(()),
+        () = shutdown.cancelled() => {
+            // Finish the request in flight, then close; an idle keep-alive closes at once.
+            connection.as_mut().graceful_shutdown();
+            connection.await
+        }
+    };
+    if let Some((probation, id)) = probation {
+        probation.leave(id);
+    }
+    open.lock().unwrap_or_else(std::sync::PoisonError::into_inner).remove(&id);
+    if let Err(err) = ended {
+        tracing::debug!(%peer, error = %err, "connection ended with an error");
+    }
 }
 
 /// Answers a connection over the limit with a `503` and closes it.

@@ -166,6 +166,47 @@ async fn a_body_that_trickles_is_cut_off_and_its_connection_closed() {
 }
 
 #[tokio::test]
+async fn a_newcomer_takes_the_slot_of_a_trickling_body_when_all_are_taken() {
+    // Four slots, each held by a body that trickles within an hour's grace.
+    let guest = start(|c| {
+        c.max_connections = 4;
+        c.header_timeout_ms = 3_600_000;
+    })
+    .await;
+    let head = "POST /v1/actions HTTP/1.1\r\nhost: 127.0.0.1\r\ncontent-type: application/json\r\n\
+                content-length: 1000000\r\n\r\n{";
+    let mut tricklers = Vec::new();
+    for _ in 0..4 {
+        let mut stream = TcpStream::connect(guest.addr).await.expect("connect");
+        stream.write_all(head.as_bytes()).await.expect("send");
+        tricklers.push(stream);
+    }
+    // Each counts as behind once it has been sending for half a second.
+    tokio::time::sleep(arena_guest::serve::BEHIND_AFTER + Duration::from_millis(200)).await;
+    for _ in 0..3 {
+        let answer = get(guest.addr, "/v1/screen").await;
+        assert!(answer.starts_with("HTTP/1.1 200"), "{answer}");
+    }
+    // One trickler was closed to make room; the requests after the first took the slot
+    // it left (each closed its connection), so no other was closed.
+    let mut closed = 0;
+    for stream in &mut tricklers {
+        let mut byte = [0u8; 1];
+        // Closed with the body unread: an end of stream or a reset.
+        if let Ok(Ok(0) | Err(_)) = tokio::time::timeout(Duration::from_millis(200), stream.read(&mut byte)).await {
+            closed += 1;
+        }
+    }
+    assert_eq!(closed, 1);
+    // Idle connections are not behind on anything: over the limit, a newcomer gets the 503.
+    let idle = start(|c| c.max_connections = 2).await;
+    let _held =
+        (TcpStream::connect(idle.addr).await.expect("connect"), TcpStream::connect(idle.addr).await.expect("connect"));
+    tokio::time::sleep(arena_guest::serve::BEHIND_AFTER + Duration::from_millis(200)).await;
+    assert!(get(idle.addr, "/v1/screen").await.starts_with("HTTP/1.1 503"));
+}
+
+#[tokio::test]
 async fn a_body_sent_at_an_ordinary_pace_is_served() {
     let guest = start(|c| c.header_timeout_ms = 200).await;
     let mut stream = TcpStream::connect(guest.addr).await.expect("connect");

@@ -3,7 +3,9 @@
 //! case on a fresh process so that its peak resident memory is its own.
 //!
 //! With `ARENA_LOADBENCH_BASELINE=<path of an older arena-guest>` every case runs on
-//! that build too, and the two are printed side by side ("before" and "after").
+//! that build too, and the two are printed side by side ("before" and "after");
+//! `ARENA_LOADBENCH_GUEST=<path>` names the "after" build (by default this tree's
+//! debug build), so two release builds can be compared.
 //!
 //! Lockout scenarios, each for [`LOCKOUT`] with a legitimate client making one request
 //! at a time on a fresh connection (a client whose pooled connection was opened before
@@ -53,17 +55,46 @@ fn builds() -> anyhow::Result<Vec<(&'static str, PathBuf)>> {
     if let Some(baseline) = std::env::var_os("ARENA_LOADBENCH_BASELINE") {
         builds.push(("before", PathBuf::from(baseline)));
     }
-    builds.push(("after", arena_test_support::workspace_binary("arena-guest", "arena-guest")?));
+    // ARENA_LOADBENCH_GUEST: this build as a release binary (the debug build is the default).
+    let after = match std::env::var_os("ARENA_LOADBENCH_GUEST") {
+        Some(path) => PathBuf::from(path),
+        None => arena_test_support::workspace_binary("arena-guest", "arena-guest")?,
+    };
+    builds.push(("after", after));
     Ok(builds)
 }
 
-/// Starts `exe` with the stub backend on a free loopback port, with `extra` options.
+/// Address space each guest may map: a build that grows without bound (the baseline
+/// on the probe's programs) dies at this cap instead of taking the machine's memory.
+const ADDRESS_SPACE: &str = "8589934592";
+
+/// Starts `exe` with the stub backend on a free loopback port, with `extra` options,
+/// under `prlimit --as` (util-linux) when it is installed.
 fn start(exe: &Path, extra: &[&str]) -> anyhow::Result<Served> {
     let root = tempfile::tempdir().context("creating the stub root")?;
     let root_path = root.path().to_str().context("non-UTF-8 temp path")?.to_owned();
+    let exe_arg = exe.to_str().context("non-UTF-8 guest path")?.to_owned();
+    let cap = format!("--as={ADDRESS_SPACE}");
     let mut args = vec!["--backend", "stub", "--port", "0", "--stub-root", &root_path];
     args.extend_from_slice(extra);
-    Served::start(exe, &args, Some(root))
+    match arena_shared::search_path::find_program(Path::new("prlimit")) {
+        Some(prlimit) => {
+            let mut capped = vec![cap.as_str(), "--", exe_arg.as_str()];
+            capped.extend_from_slice(&args);
+            Served::start(&prlimit, &capped, Some(root))
+        }
+        None => Served::start(exe, &args, Some(root)),
+    }
+}
+
+/// CPU seconds `pid` has used (user and system; Linux).
+fn cpu_seconds(pid: u32) -> Option<f64> {
+    let stat = std::fs::read_to_string(format!("/proc/{pid}/stat")).ok()?;
+    // The fields after the command name, which is in parentheses and may hold spaces.
+    let rest = stat.rsplit_once(')')?.1;
+    let fields: Vec<&str> = rest.split_whitespace().collect();
+    let ticks: f64 = fields.get(11)?.parse::<f64>().ok()? + fields.get(12)?.parse::<f64>().ok()?;
+    Some(ticks / 100.0)
 }
 
 /// One hostile request: its answer's status (or what happened instead), the time to
@@ -71,19 +102,29 @@ fn start(exe: &Path, extra: &[&str]) -> anyhow::Result<Served> {
 async fn probe_case(exe: &Path, request: &(dyn Fn(&str) -> reqwest::RequestBuilder + Sync)) -> anyhow::Result<String> {
     let guest = start(exe, &["--exec-timeout-ms", "10000"])?;
     let started = Instant::now();
-    let outcome = match request(&guest.url).timeout(Duration::from_secs(20)).send().await {
+    let outcome = match request(&guest.url).timeout(Duration::from_secs(40)).send().await {
         Ok(answer) => {
             let status = answer.status().as_u16();
             let body = answer.bytes().await.map(|b| b.len()).unwrap_or(0);
             format!("{status} ({body} B)")
         }
-        Err(err) if err.is_timeout() => "no answer in 20 s".to_owned(),
+        Err(err) if err.is_timeout() => "no answer in 40 s".to_owned(),
         Err(err) => format!("failed: {}", err.to_string().chars().take(40).collect::<String>()),
     };
     let took = started.elapsed();
-    // Work that goes on after the answer (typing, decoding) shows in the peak a moment later.
-    tokio::time::sleep(Duration::from_millis(500)).await;
-    Ok(format!("{outcome:<22} {:>7.2} s  peak RSS {:>9}", took.as_secs_f64(), mib(memory_of(guest.pid(), "VmHWM:"))))
+    // Work that goes on after the answer (typing, decoding, a program past its deadline)
+    // shows in the peak and in the CPU used over the next two seconds.
+    let cpu_then = cpu_seconds(guest.pid());
+    tokio::time::sleep(Duration::from_secs(2)).await;
+    let after = match (cpu_then, cpu_seconds(guest.pid())) {
+        (Some(then), Some(now)) => format!("{:>4.0}%", (now - then) / 2.0 * 100.0),
+        _ => "gone".to_owned(),
+    };
+    Ok(format!(
+        "{outcome:<22} {:>7.2} s  peak RSS {:>9}  CPU after the answer {after}",
+        took.as_secs_f64(),
+        mib(memory_of(guest.pid(), "VmHWM:"))
+    ))
 }
 
 /// A gray 16384 x 16000 PNG (the probe's bomb: 250 KB of file, 1000 MiB as RGBA).
@@ -117,7 +158,10 @@ pub(crate) async fn probe_cases() -> anyhow::Result<()> {
         serde_json::json!({"actions": vec![serde_json::json!({"type": "wait", "ms": 60_000}); 1000]}).to_string();
     let filler = "x".repeat(BIG);
     println!();
-    println!("issue 25 probe cases (each on a fresh stub guest; status, time to the answer, the guest's peak RSS):");
+    println!(
+        "issue 25 probe cases (each on a fresh stub guest with --exec-timeout-ms 10000 under an 8 GiB address-space cap;"
+    );
+    println!("status, time to the answer, the guest's peak RSS, the CPU it used in the 2 s after answering):");
     type Case<'a> = (&'a str, Box<dyn Fn(&str) -> reqwest::RequestBuilder + Sync + 'a>);
     let json = |method: reqwest::Method, path: &'static str, body: &str| {
         let body = body.to_owned();
@@ -129,7 +173,27 @@ pub(crate) async fn probe_cases() -> anyhow::Result<()> {
                 .body(body.clone())
         }) as Box<dyn Fn(&str) -> reqwest::RequestBuilder + Sync>
     };
+    // The probe's programs, through `/execute` as upstream's host sends them (`python -c`).
+    let program = |code: &str| serde_json::json!({"command": ["python", "-c", code], "shell": false}).to_string();
     let cases: Vec<Case<'_>> = vec![
+        ("x = ['a'*10**6] * 10**6", json(reqwest::Method::POST, "/execute", &program("x = ['a' * 10**6] * 10**6"))),
+        ("x = [[0]*10**6] * 10**6", json(reqwest::Method::POST, "/execute", &program("x = [[0] * 10**6] * 10**6"))),
+        (
+            "s = 'a'*3000, 99999 times",
+            json(reqwest::Method::POST, "/execute", &program("for i in range(99999):\n    s = 'a' * 3000")),
+        ),
+        (
+            "d[i] = i, 99999 times",
+            json(reqwest::Method::POST, "/execute", &program("d = {}\nfor i in range(99999):\n    d[i] = i")),
+        ),
+        (
+            "x.reverse() of 999999 items, 99999 times",
+            json(
+                reqwest::Method::POST,
+                "/execute",
+                &program("x = list(range(999999))\nfor i in range(99999):\n    x.reverse()"),
+            ),
+        ),
         ("gray PNG bomb as clipboard image", json(reqwest::Method::PUT, "/v1/clipboard", &bomb_json)),
         ("type_text of 200 MiB", json(reqwest::Method::POST, "/v1/actions", &typing)),
         ("window title of 200 MiB", json(reqwest::Method::POST, "/v1/windows/activate", &title)),
