@@ -86,7 +86,7 @@ fn close_furthest_behind(open: &Open, rate: u64) -> bool {
     let open = open.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
     let deficit = |progress: &BodyProgress| {
         let elapsed = now.saturating_duration_since(progress.started);
-        (elapsed >= BEHIND_AFTER).then(|| (elapsed.as_secs_f64() * rate as f64) - progress.received as f64)
+        (elapsed >= BEHIND_AFTER).then_some((elapsed.as_secs_f64() * rate as f64) - progress.received as f64)
     };
     let behind = open
         .iter()
