@@ -12,9 +12,12 @@
 //! The rules compare what a path names, not how it is spelt: [`canonical`] turns every
 //! spelling Windows accepts for one file into one string before any comparison. Rooted
 //! paths (`\`, `/Users`) are on the system drive (the current drive of every guest
-//! process); `\\?\`, `\\.\` and `\??\` prefixes are dropped; admin shares of this machine
-//! (`\\localhost\C$\...`, `\\127.0.0.1\c$`, `\\?\UNC\<computer name>\C$`) are their
-//! drives; `.` and `..` are applied; trailing dots and spaces and stream suffixes
+//! process); `\\?\`, `\\.\` and `\??\` prefixes are dropped; admin shares
+//! (`\\localhost\C$\...`, `\\127.0.0.1\c$`, `\\?\UNC\<computer name>\C$`, and those of any
+//! other host name or address, since the guest cannot know every name that reaches it: a
+//! VM's NAT address, an alias) are their drives; paths into the device namespace that
+//! name no drive letter (`\\?\Volume{GUID}\`, `\\?\GLOBALROOT\Device\...`,
+//! `\\.\PhysicalDrive0`) are kept apart and refused by every destructive route; `.` and `..` are applied; trailing dots and spaces and stream suffixes
 //! (`:$DATA`) are cut from each name, as Win32 does; 8.3 short names (`PROGRA~1`) are
 //! expanded by the backend (`GetLongPathNameW` on Windows); case is folded.
 
@@ -38,18 +41,13 @@ const SYSTEM_FOLDERS: [&str; 8] = [
 pub struct Resolver<'a> {
     /// The drive of rooted paths (`\Users`): `%SystemDrive%`, `C:` by default.
     pub system_drive: String,
-    /// This machine's name, whose admin shares (`\\NAME\C$`) are its drives.
-    pub computer_name: Option<String>,
     /// The long form of a path holding 8.3 short names, when the backend has them.
     pub long_path: &'a dyn Fn(&str) -> Option<String>,
 }
 
 impl std::fmt::Debug for Resolver<'_> {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("Resolver")
-            .field("system_drive", &self.system_drive)
-            .field("computer_name", &self.computer_name)
-            .finish_non_exhaustive()
+        f.debug_struct("Resolver").field("system_drive", &self.system_drive).finish_non_exhaustive()
     }
 }
 
@@ -71,7 +69,7 @@ impl Resolver<'static> {
         } else {
             &no_long_names
         };
-        Resolver { system_drive, computer_name: desktop.env_var("COMPUTERNAME"), long_path }
+        Resolver { system_drive, long_path }
     }
 }
 
@@ -85,6 +83,9 @@ pub fn refuse_destructive(desktop: &dyn Desktop, op: &str, guest_path: &str) -> 
     let resolver = Resolver::of(desktop);
     let path = canonical(guest_path, &resolver);
     let shown = crate::error::clip(guest_path);
+    if path.starts_with(DEVICE) {
+        return Err(refused(op, &shown, "a volume or device path (only drive-letter and share paths are changed)"));
+    }
     if is_root(&path) {
         return Err(refused(op, &shown, "a drive root"));
     }
@@ -121,6 +122,9 @@ fn refused(op: &str, path: &str, what: &str) -> DesktopError {
     ))
 }
 
+/// How [`canonical`] starts a path into the device namespace that names no drive letter.
+const DEVICE: &str = r"\\?\";
+
 /// What `path` names, as one string: `x:\name\name` (or `\\host\share\name` for a share
 /// of another machine), lower case, with no trailing separator but a root's. See the
 /// module's documentation for the spellings it folds.
@@ -135,6 +139,10 @@ pub fn canonical(path: &str, resolver: &Resolver<'_>) -> String {
         let rest = &path[4..];
         path = match rest.get(..4) {
             Some(unc) if unc.eq_ignore_ascii_case(r"UNC\") => format!(r"\\{}", &rest[4..]),
+            _ if !names_a_drive(rest) && !rest.starts_with(['\\', '?', '.']) => {
+                // A volume, a device or an object-manager path: no drive letter to resolve to.
+                return format!("{DEVICE}{}", rest.to_lowercase());
+            }
             _ => rest.to_owned(),
         };
     }
@@ -160,6 +168,12 @@ pub fn canonical(path: &str, resolver: &Resolver<'_>) -> String {
     joined.to_lowercase()
 }
 
+/// Whether `path` starts with a drive letter and its colon.
+fn names_a_drive(path: &str) -> bool {
+    let bytes = path.as_bytes();
+    bytes.len() >= 2 && bytes[1] == b':' && bytes[0].is_ascii_alphabetic()
+}
+
 /// The root of a path (`C:\` or `\\host\share`) and the rest after it.
 fn split_root<'p>(path: &'p str, resolver: &Resolver<'_>) -> (String, &'p str) {
     let bytes = path.as_bytes();
@@ -175,7 +189,7 @@ fn split_root<'p>(path: &'p str, resolver: &Resolver<'_>) -> (String, &'p str) {
         let admin_drive = share_name.len() == 2
             && share_name.ends_with('$')
             && share_name.starts_with(|c: char| c.is_ascii_alphabetic());
-        if admin_drive && is_this_machine(host, resolver) {
+        if admin_drive {
             return (format!("{}:\\", share_name[..1].to_ascii_uppercase()), rest);
         }
         return (format!(r"\\{}\{}", host.to_lowercase(), share_name.to_lowercase()), rest);
@@ -183,24 +197,6 @@ fn split_root<'p>(path: &'p str, resolver: &Resolver<'_>) -> (String, &'p str) {
     // Rooted without a drive: the current drive, which is the system drive for every
     // guest program. Relative paths never reach here (the backends refuse them).
     (format!("{}\\", resolver.system_drive.to_ascii_uppercase()), path)
-}
-
-/// Whether a UNC host names this machine: a loopback name or address, or its name.
-fn is_this_machine(host: &str, resolver: &Resolver<'_>) -> bool {
-    let host = host.trim_end_matches('.').to_ascii_lowercase();
-    let host = host.trim_start_matches('[').trim_end_matches(']');
-    if host == "localhost" || host.ends_with(".localhost") || host == "::1" || host == "0:0:0:0:0:0:0:1" {
-        return true;
-    }
-    // `127.x.x.x` in any form Windows' resolver takes (`127.1`, `2130706433`), and
-    // the IPv6 literal names (`--1.ipv6-literal.net`).
-    if host.starts_with("127.") || host.parse::<u32>().is_ok_and(|n| n >> 24 == 127) {
-        return true;
-    }
-    if host == "--1.ipv6-literal.net" {
-        return true;
-    }
-    resolver.computer_name.as_deref().is_some_and(|name| name.trim().eq_ignore_ascii_case(host))
 }
 
 /// `root` + `parts` with short names expanded: the longest prefix the resolver expands.
@@ -256,11 +252,11 @@ mod tests {
     }
 
     fn stub_resolver() -> Resolver<'static> {
-        Resolver { system_drive: "C:".into(), computer_name: Some("ARENA-STUB".into()), long_path: &no_long_names }
+        Resolver { system_drive: "C:".into(), long_path: &no_long_names }
     }
 
     fn windows_resolver() -> Resolver<'static> {
-        Resolver { system_drive: "C:".into(), computer_name: Some("WIN-GUEST".into()), long_path: &windows_long_path }
+        Resolver { system_drive: "C:".into(), long_path: &windows_long_path }
     }
 
     /// Every spelling of a protected folder, with what each backend's resolver makes of
@@ -295,9 +291,23 @@ mod tests {
         (r"\\::1\C$\ProgramData", r"c:\programdata", None),
         (r"\\?\UNC\localhost\C$\Users", r"c:\users", None),
         (r"\\.\UNC\127.0.0.1\C$\Users", r"c:\users", None),
-        (r"\\arena-stub\C$\Users", r"c:\users", Some(r"\\arena-stub\c$\users")),
-        (r"\\WIN-GUEST\C$\Users", r"\\win-guest\c$\users", Some(r"c:\users")),
-        (r"\\fileserver\C$\Users", r"\\fileserver\c$\users", None),
+        (r"\\arena-stub\C$\Users", r"c:\users", None),
+        (r"\\WIN-GUEST\C$\Users", r"c:\users", None),
+        (r"\\10.0.2.15\C$\Windows", r"c:\windows", None),
+        (r"\\fileserver\d$\Users", r"d:\users", None),
+        (r"\\fileserver\data\Users", r"\\fileserver\data\users", None),
+        (
+            r"\\?\Volume{26a21bda-a627-11d7-9931-806e6f6e6963}\Windows",
+            r"\\?\volume{26a21bda-a627-11d7-9931-806e6f6e6963}\windows",
+            None,
+        ),
+        (r"\\?\GLOBALROOT\Device\HarddiskVolume3\Users", r"\\?\globalroot\device\harddiskvolume3\users", None),
+        (r"\\.\PhysicalDrive0", r"\\?\physicaldrive0", None),
+        (
+            r"\??\Volume{26a21bda-a627-11d7-9931-806e6f6e6963}\",
+            r"\\?\volume{26a21bda-a627-11d7-9931-806e6f6e6963}\",
+            None,
+        ),
         (r"\\localhost\Users", r"\\localhost\users", None),
         (r"C:\PROGRA~1", r"c:\progra~1", Some(r"c:\program files")),
         (r"c:\progra~2\", r"c:\progra~2", Some(r"c:\program files (x86)")),
@@ -323,7 +333,6 @@ mod tests {
         let stub = StubDesktop::new(dir.path().to_path_buf()).expect("stub");
         let resolver = Resolver::of(&stub);
         assert_eq!(resolver.system_drive, "C:");
-        assert_eq!(resolver.computer_name.as_deref(), Some("ARENA-STUB"));
         assert_eq!((resolver.long_path)(r"C:\PROGRA~1"), None);
     }
 
@@ -352,6 +361,11 @@ mod tests {
             r"\\?\UNC\localhost\C$\Windows",
             r"\\.\C:\Program Files",
             r"\\server\share",
+            r"\\10.0.2.15\C$\Users\Docker",
+            r"\\?\Volume{26a21bda-a627-11d7-9931-806e6f6e6963}\",
+            r"\\?\Volume{26a21bda-a627-11d7-9931-806e6f6e6963}\Users\Docker\Desktop\a.txt",
+            r"\\?\GLOBALROOT\Device\HarddiskVolume3\Windows",
+            r"\\.\PhysicalDrive0",
             r"C:\Windows",
             r"c:\windows\",
             r"C:\Windows.",
