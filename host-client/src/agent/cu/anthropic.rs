@@ -261,7 +261,16 @@ pub(crate) fn ending(text: String, refused: bool, logs: Vec<StepLog>) -> Predict
     } else {
         (final_decision(&text), text)
     };
-    Prediction { response, actions: vec![decision], marks: None, raw_error: None, logs, timings: Default::default() }
+    Prediction {
+        response,
+        actions: vec![decision],
+        marks: None,
+        raw_error: None,
+        logs,
+        timings: Default::default(),
+        // The agent translated its model's coordinates: its code is in pixels.
+        coords: Some(crate::actionspace::Coords::Pixels),
+    }
 }
 
 #[async_trait::async_trait]
@@ -399,6 +408,7 @@ impl Agent for AnthropicAgent {
             raw_error,
             logs,
             timings: Default::default(),
+            coords: Some(crate::actionspace::Coords::Pixels),
         })
     }
 }

@@ -197,6 +197,7 @@ impl Agent for OpenAiAgent {
                     raw_error: None,
                     logs,
                     timings: Default::default(),
+                    coords: Some(crate::actionspace::Coords::Pixels),
                 });
             }
         }
@@ -214,6 +215,14 @@ impl Agent for OpenAiAgent {
         // Acknowledged checks are exactly the pending ones, with their id, code and message.
         self.previous_response_id = Some(id);
         self.pending = Some(PendingCall { call_id: call_id.to_owned(), acknowledged: checks });
-        Ok(Prediction { response, actions, marks: None, raw_error, logs, timings: Default::default() })
+        Ok(Prediction {
+            response,
+            actions,
+            marks: None,
+            raw_error,
+            logs,
+            timings: Default::default(),
+            coords: Some(crate::actionspace::Coords::Pixels),
+        })
     }
 }
