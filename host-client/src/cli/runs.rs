@@ -677,7 +677,8 @@ fn computer_use_agent(args: &RunArgs) -> anyhow::Result<ChosenAgent> {
             let options = vec![option("safety_checks", config.safety_checks.name().into())];
             let factory: AgentFactory =
                 Arc::new(move || Ok(Box::new(OpenAiAgent::new(config.clone())?) as Box<dyn Agent>));
-            (factory, ActionSpace::OpenAi, Coords::Pixels.name(), options)
+            let (w, h) = crate::agent::cu::openai::MAX_DISPLAY;
+            (factory, ActionSpace::OpenAi, format!("image:within-{w}x{h}"), options)
         }
         _ => {
             let Some(path) = &args.prompt_file else {

@@ -120,8 +120,7 @@ pub fn recommended_size(screen: (u32, u32)) -> (u32, u32) {
         return t;
     }
     let long = f64::from(w.max(h));
-    let scale = (1568.0 / long).min((1_150_000.0 / (f64::from(w) * f64::from(h))).sqrt()).min(1.0);
-    (((f64::from(w) * scale) as u32).max(1), ((f64::from(h) * scale) as u32).max(1))
+    super::scaled_size((w, h), (1568.0 / long).min((1_150_000.0 / (f64::from(w) * f64::from(h))).sqrt()))
 }
 
 /// What the next message must answer about a `tool_use` of the last answer.
