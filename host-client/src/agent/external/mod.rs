@@ -113,44 +113,6 @@ fn hello_coords(name: &str) -> Result<Coords, String> {
     name.parse()
 }
 
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    fn hello(extra: Value) -> Value {
-        let mut hello = json!({"type": "hello", "protocol": 1, "action_space": "pyautogui"});
-        if let (Some(hello), Some(extra)) = (hello.as_object_mut(), extra.as_object()) {
-            hello.extend(extra.clone());
-        }
-        hello
-    }
-
-    #[test]
-    fn a_hello_may_name_a_coordinate_convention_and_an_unknown_one_is_refused() {
-        assert_eq!(check_hello(hello(json!({}))).expect("no coords").coords, None);
-        let named = check_hello(hello(json!({"coords": "grid1000"}))).expect("grid1000");
-        assert_eq!(named.coords.as_deref(), Some("grid1000"));
-        let err = check_hello(hello(json!({"coords": "percent"}))).expect_err("an unknown convention");
-        assert!(err.contains("\"percent\"") && err.contains("pixels, fraction, grid1000"), "{err}");
-        for name in protocol::COORDS {
-            assert_eq!(hello_coords(name).expect("each named convention parses").name(), name);
-        }
-    }
-
-    #[test]
-    fn the_hello_schema_lists_the_coordinate_conventions_the_harness_accepts() {
-        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../schemas/agent-protocol/agent-hello.json");
-        let schema: Value = serde_json::from_str(&std::fs::read_to_string(path).expect("the schema")).expect("JSON");
-        let listed: Vec<&str> = schema["properties"]["coords"]["enum"]
-            .as_array()
-            .expect("an enum")
-            .iter()
-            .filter_map(Value::as_str)
-            .collect();
-        assert_eq!(listed, protocol::COORDS);
-    }
-}
-
 /// Reads one agent message, naming what was wrong with it.
 fn parse_message(answer: Value) -> Result<AgentMessage, String> {
     let shown = short(&answer);
@@ -377,4 +339,42 @@ pub fn prediction(
         timings: Default::default(),
         coords: Some(coords),
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn hello(extra: Value) -> Value {
+        let mut hello = json!({"type": "hello", "protocol": 1, "action_space": "pyautogui"});
+        if let (Some(hello), Some(extra)) = (hello.as_object_mut(), extra.as_object()) {
+            hello.extend(extra.clone());
+        }
+        hello
+    }
+
+    #[test]
+    fn a_hello_may_name_a_coordinate_convention_and_an_unknown_one_is_refused() {
+        assert_eq!(check_hello(hello(json!({}))).expect("no coords").coords, None);
+        let named = check_hello(hello(json!({"coords": "grid1000"}))).expect("grid1000");
+        assert_eq!(named.coords.as_deref(), Some("grid1000"));
+        let err = check_hello(hello(json!({"coords": "percent"}))).expect_err("an unknown convention");
+        assert!(err.contains("\"percent\"") && err.contains("pixels, fraction, grid1000"), "{err}");
+        for name in protocol::COORDS {
+            assert_eq!(hello_coords(name).expect("each named convention parses").name(), name);
+        }
+    }
+
+    #[test]
+    fn the_hello_schema_lists_the_coordinate_conventions_the_harness_accepts() {
+        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../schemas/agent-protocol/agent-hello.json");
+        let schema: Value = serde_json::from_str(&std::fs::read_to_string(path).expect("the schema")).expect("JSON");
+        let listed: Vec<&str> = schema["properties"]["coords"]["enum"]
+            .as_array()
+            .expect("an enum")
+            .iter()
+            .filter_map(Value::as_str)
+            .collect();
+        assert_eq!(listed, protocol::COORDS);
+    }
 }
