@@ -547,7 +547,14 @@ impl Episode {
                 }
                 _ => {
                     last = Some(LastAction::Other);
-                    let run = agent::execute_with(client, action, prediction.marks.as_ref(), computer, &config.exec);
+                    // An agent that named its coordinate convention has its code rescaled by it.
+                    let exec = match prediction.coords {
+                        Some(coords) if coords != config.exec.coords => {
+                            std::borrow::Cow::Owned(ExecOptions { coords, ..config.exec.clone() })
+                        }
+                        _ => std::borrow::Cow::Borrowed(&config.exec),
+                    };
+                    let run = agent::execute_with(client, action, prediction.marks.as_ref(), computer, &exec);
                     match tokio::time::timeout(config.step_timeout, run).await {
                         Ok(Ok(outcome)) => {
                             if let Some(error) = &outcome.error {
@@ -1108,6 +1115,7 @@ mod tests {
             raw_error: Some("no code block".into()),
             logs: Vec::new(),
             timings: Default::default(),
+            coords: None,
         }));
         let script = vec![
             malformed,

@@ -1,8 +1,9 @@
-//! The conformance run of every action space: the stub tasks that input alone
-//! can solve, each driven by oracle answers written in one grammar, translated
-//! by `actionspace::parse` and carried out on an in-process stub guest, must all
-//! score 1. (The two Explorer stub tasks start a program, which no input-only
-//! grammar can express on the stub desktop, which has no Run dialog.)
+//! The conformance run of every action space: every stub task, each driven by
+//! oracle answers written in one grammar (keys by that grammar's own names,
+//! through its key table), translated by `actionspace::parse` and carried out on
+//! an in-process stub guest, must score 1. The two File Explorer tasks start a
+//! program as a person does on Windows: `win+r`, the command, Enter (or the Run
+//! dialog's OK button, clicked in the grammar's coordinates).
 
 use std::collections::VecDeque;
 use std::path::Path;
@@ -102,9 +103,13 @@ fn code(text: &str) -> Answer {
 
 #[tokio::test]
 async fn pyautogui_in_every_coordinate_convention_scores_the_stub_tasks() {
-    for (coords, centre) in
-        [(Coords::Pixels, "720, 450"), (Coords::Fraction, "0.5, 0.5"), (Coords::Grid1000, "500, 500")]
-    {
+    // `ok` is the Run dialog's OK button on the 1440x900 stub screen: the dialog sits at
+    // the bottom left of the work area, its OK button's centre near (191, 821).
+    for (coords, centre, ok) in [
+        (Coords::Pixels, "720, 450", "191, 821"),
+        (Coords::Fraction, "0.5, 0.5", "0.1326, 0.9122"),
+        (Coords::Grid1000, "500, 500", "133, 912"),
+    ] {
         let oracles = vec![
             (
                 "stub-notepad-draft",
@@ -132,6 +137,24 @@ async fn pyautogui_in_every_coordinate_convention_scores_the_stub_tasks() {
                 ],
             ),
             ("stub-settings-infeasible", vec![code("FAIL")]),
+            (
+                "stub-explorer-open-folder",
+                vec![
+                    code("pyautogui.hotkey('win', 'r')"),
+                    code(r"pyautogui.write(r'C:\Users\Docker\Documents\Reports')"),
+                    code(&format!("pyautogui.click({ok})")),
+                    code("DONE"),
+                ],
+            ),
+            (
+                "stub-explorer-fill-file",
+                vec![
+                    code("pyautogui.keyDown('winleft'); pyautogui.press('r'); pyautogui.keyUp('winleft')"),
+                    code(r"pyautogui.write('notepad C:\\Users\\Docker\\Documents\\Projects\\notes.txt\n')"),
+                    code("pyautogui.write('kickoff on monday')\npyautogui.hotkey('ctrl', 's')"),
+                    code("DONE"),
+                ],
+            ),
         ];
         conform(ActionSpace::Pyautogui, coords, oracles).await;
     }
@@ -172,6 +195,26 @@ async fn computer_13_scores_the_stub_tasks() {
             ],
         ),
         ("stub-settings-infeasible", vec![a(json!({"action_type": "FAIL"}))]),
+        (
+            "stub-explorer-open-folder",
+            vec![
+                a(json!({"action_type": "HOTKEY", "keys": ["win", "r"]})),
+                a(json!({"action_type": "TYPING", "text": r"C:\Users\Docker\Documents\Reports"})),
+                a(json!({"action_type": "CLICK", "x": 0.1326, "y": 0.9122})),
+                a(json!({"action_type": "DONE"})),
+            ],
+        ),
+        (
+            "stub-explorer-fill-file",
+            vec![
+                a(json!({"action_type": "HOTKEY", "keys": ["win", "r"]})),
+                a(json!({"action_type": "TYPING", "text": r"notepad C:\Users\Docker\Documents\Projects\notes.txt"})),
+                a(json!({"action_type": "PRESS", "key": "enter"})),
+                a(json!({"action_type": "TYPING", "text": "kickoff on monday"})),
+                a(json!({"action_type": "HOTKEY", "keys": ["ctrl", "s"]})),
+                a(json!({"action_type": "DONE"})),
+            ],
+        ),
     ];
     conform(ActionSpace::Computer13, Coords::Fraction, oracles).await;
 }
@@ -209,6 +252,27 @@ async fn anthropic_tool_inputs_of_both_versions_score_the_stub_tasks() {
                 ],
             ),
             ("stub-settings-infeasible", vec![a(json!({"action": "screenshot"})), Answer::Fail]),
+            (
+                "stub-explorer-open-folder",
+                vec![
+                    a(json!({"action": "key", "text": "super+r"})),
+                    a(json!({"action": "type", "text": r"C:\Users\Docker\Documents\Reports"})),
+                    // The OK button, in the 1280x800 image the tool declares.
+                    a(json!({"action": "left_click", "coordinate": [170, 730]})),
+                    Answer::Done,
+                ],
+            ),
+            (
+                "stub-explorer-fill-file",
+                vec![
+                    a(json!({"action": "key", "text": "Super_L+r"})),
+                    a(json!({"action": "type", "text": r"notepad C:\Users\Docker\Documents\Projects\notes.txt"})),
+                    a(json!({"action": "key", "text": "Return"})),
+                    a(json!({"action": "type", "text": "kickoff on monday"})),
+                    a(json!({"action": "key", "text": "ctrl+s"})),
+                    Answer::Done,
+                ],
+            ),
         ];
         conform(space, Coords::Image { width: 1280, height: 800 }, oracles).await;
     }
@@ -247,6 +311,26 @@ async fn openai_actions_score_the_stub_tasks() {
             ],
         ),
         ("stub-settings-infeasible", vec![Answer::Fail]),
+        (
+            "stub-explorer-open-folder",
+            vec![
+                a(json!({"type": "keypress", "keys": ["META", "R"]})),
+                a(json!({"type": "type", "text": r"C:\Users\Docker\Documents\Reports"})),
+                a(json!({"type": "click", "button": "left", "x": 191, "y": 821})),
+                Answer::Done,
+            ],
+        ),
+        (
+            "stub-explorer-fill-file",
+            vec![
+                a(json!({"type": "keypress", "keys": ["SUPER", "R"]})),
+                a(json!({"type": "type", "text": r"notepad C:\Users\Docker\Documents\Projects\notes.txt"})),
+                a(json!({"type": "keypress", "keys": ["ENTER"]})),
+                a(json!({"type": "type", "text": "kickoff on monday"})),
+                a(json!({"type": "keypress", "keys": ["CTRL", "S"]})),
+                Answer::Done,
+            ],
+        ),
     ];
     conform(ActionSpace::OpenAi, Coords::Pixels, oracles).await;
 }
@@ -276,6 +360,27 @@ async fn uitars_replies_score_the_stub_tasks() {
             ],
         ),
         ("stub-settings-infeasible", vec![code("Thought: No such setting.\nAction: call_user()")]),
+        (
+            "stub-explorer-open-folder",
+            vec![
+                code("Thought: Open the Run dialog.\nAction: hotkey(key='win r')"),
+                // UI-TARS escapes a backslash in its quoted arguments.
+                code(r"Action: type(content='C:\\Users\\Docker\\Documents\\Reports')"),
+                // The OK button on the 0..1000 grid of UI-TARS 1.0.
+                code("Action: click(start_box='(133,912)')"),
+                code("Action: finished()"),
+            ],
+        ),
+        (
+            "stub-explorer-fill-file",
+            vec![
+                code("Action: hotkey(key='win r')"),
+                code(r"Action: type(content='notepad C:\\Users\\Docker\\Documents\\Projects\\notes.txt\n')"),
+                code("Action: type(content='kickoff on monday')"),
+                code("Action: hotkey(key='ctrl s')"),
+                code("Action: finished()"),
+            ],
+        ),
     ];
     conform(ActionSpace::UiTars, Coords::Grid1000, oracles).await;
 }

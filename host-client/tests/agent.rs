@@ -583,3 +583,76 @@ async fn one_navi_step_decodes_each_screenshot_once() {
         assert_eq!(p.timings.model_tries, 1);
     }
 }
+
+/// An outside agent over the step protocol (`--agent exec`), a shell script that
+/// answers `hello` with `hello` (adding `extra` to it), `reset` with `ready`, the
+/// first `observe` with `code` in pyautogui and the next with `DONE`.
+#[cfg(unix)]
+fn exec_agent(dir: &Path, extra: &str, code: &str) -> arena_host::agent::external::ExternalAgent {
+    use arena_host::agent::external::transport::ProcessPool;
+    let hello = format!(
+        r#"{{"type":"hello","protocol":1,"agent":"sh","action_space":"pyautogui"{extra},"observation":{{"screenshot":"none","a11y":"none","windows":false,"clipboard":false}}}}"#
+    );
+    let act = json!({"type": "act", "actions": [code]}).to_string();
+    let script = format!(
+        "read -r line\nprintf '%s\\n' '{hello}'\nn=0\nwhile read -r line; do\n  case \"$line\" in\n    *'\"type\":\"reset\"'*) printf '%s\\n' '{{\"type\":\"ready\"}}' ;;\n    *) n=$((n+1)); if [ $n -eq 1 ]; then printf '%s\\n' '{act}'; else printf '%s\\n' '{{\"type\":\"act\",\"decision\":\"DONE\"}}'; fi ;;\n  esac\ndone\n"
+    );
+    let path = dir.join("agent.sh");
+    std::fs::write(&path, script).expect("write the agent script");
+    let pool = ProcessPool::new(&format!("sh {}", path.display())).expect("a process pool");
+    arena_host::agent::external::ExternalAgent::new("exec", Arc::new(pool), Duration::from_secs(20))
+}
+
+/// Runs one episode of `agent` on a fresh stub guest (1440x900) with the run's
+/// `coords`, and answers where the cursor ended.
+#[cfg(unix)]
+async fn cursor_after_episode(
+    mut agent: arena_host::agent::external::ExternalAgent,
+    coords: arena_host::actionspace::Coords,
+    dir: &Path,
+) -> (i32, i32) {
+    use arena_host::episode::{run_episode, EpisodeConfig};
+    use arena_host::results::EpisodeStatus;
+    let guest = start_guest().await;
+    let c = client(guest.url());
+    let mut config =
+        EpisodeConfig::instant(arena_host::setup::DownloadCache::new(dir.join("cache")).expect("a download cache"));
+    config.exec.coords = coords;
+    let task = task(dir, "");
+    let layout = arena_host::results::RunLayout {
+        root: dir.join("results"),
+        agent: "exec".into(),
+        observation: "screenshot".into(),
+        model: "sh".into(),
+        trial: coords.name(),
+    };
+    let result = run_episode(&c, &task, &mut agent, &config, &layout.task_dir(&task)).await;
+    assert_eq!(result.status, EpisodeStatus::Completed, "{result:?}");
+    let report = c.act(&arena_shared::action::ActionBatch { actions: Vec::new() }).await.expect("the cursor");
+    (report.cursor.x, report.cursor.y)
+}
+
+#[cfg(unix)]
+#[tokio::test]
+async fn an_exec_agents_pyautogui_is_rescaled_from_the_runs_or_its_own_coordinate_convention() {
+    use arena_host::actionspace::Coords;
+    let tmp = tempfile::tempdir().expect("tmp");
+    // The run's --coords grid1000: (250, 750) on the grid is (360, 675) of 1440x900.
+    let dir = tmp.path().join("grid");
+    let agent = exec_agent(&dir_made(&dir), "", "pyautogui.click(250, 750)").with_coords(Coords::Grid1000);
+    assert_eq!(cursor_after_episode(agent, Coords::Grid1000, &dir).await, (360, 675));
+    // The same answer in a pixels run lands where it says.
+    let dir = tmp.path().join("pixels");
+    let agent = exec_agent(&dir_made(&dir), "", "pyautogui.click(250, 750)");
+    assert_eq!(cursor_after_episode(agent, Coords::Pixels, &dir).await, (250, 750));
+    // An agent whose hello names fractions is read in fractions, whatever the run's.
+    let dir = tmp.path().join("fraction");
+    let agent = exec_agent(&dir_made(&dir), r#","coords":"fraction""#, "pyautogui.moveTo(0.25, 0.75)");
+    assert_eq!(cursor_after_episode(agent, Coords::Pixels, &dir).await, (360, 675));
+}
+
+#[cfg(unix)]
+fn dir_made(dir: &Path) -> std::path::PathBuf {
+    std::fs::create_dir_all(dir).expect("a folder");
+    dir.to_owned()
+}

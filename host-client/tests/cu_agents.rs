@@ -33,6 +33,8 @@ use arena_host::results::{EpisodeResult, EpisodeStatus, RunLayout};
 use arena_host::run::load_tasks;
 use arena_host::setup::DownloadCache;
 use arena_host::task::{Difficulty, Task};
+use arena_shared::action::{Action, MouseButton};
+use arena_shared::geometry::Point;
 use arena_test_support::StubGuest;
 
 const KEY: &str = "test-key";
@@ -377,8 +379,13 @@ async fn openai_agent(mock: &Mock, policy: SafetyChecks) -> OpenAiAgent {
     OpenAiAgent::new(config).expect("agent")
 }
 
-/// Checks every request of a Responses conversation: the tool, truncation, the
-/// chaining by id and the screenshot answering each call.
+/// The display `openai-cu` declares for the 1440x900 stub screen: scaled to fit
+/// within 1024x768, the size OpenAI's computer-use guide declares in its examples.
+const OPENAI_DISPLAY: (u32, u32) = (1024, 640);
+
+/// Checks every request of a Responses conversation: the tool (its display the
+/// size of every screenshot sent), truncation, the chaining by id and the
+/// screenshot answering each call.
 fn check_openai_requests(requests: &[(HeaderMap, Value)], replies: &[Value], instruction: &str) {
     for (n, (headers, body)) in requests.iter().enumerate() {
         assert_eq!(header(headers, "authorization"), format!("Bearer {KEY}"));
@@ -386,7 +393,8 @@ fn check_openai_requests(requests: &[(HeaderMap, Value)], replies: &[Value], ins
         assert_eq!(body["truncation"], "auto");
         assert_eq!(
             body["tools"],
-            json!([{"type": "computer_use_preview", "display_width": 1440, "display_height": 900, "environment": "windows"}])
+            json!([{"type": "computer_use_preview", "display_width": OPENAI_DISPLAY.0,
+                    "display_height": OPENAI_DISPLAY.1, "environment": "windows"}])
         );
         let input = &body["input"][0];
         let url = if n == 0 {
@@ -404,7 +412,7 @@ fn check_openai_requests(requests: &[(HeaderMap, Value)], replies: &[Value], ins
             input["output"]["image_url"].as_str().unwrap()
         };
         let b64 = url.strip_prefix("data:image/png;base64,").expect("a PNG data URL");
-        assert_eq!(png_size(b64), (1440, 900));
+        assert_eq!(png_size(b64), OPENAI_DISPLAY, "request {n}: the image is the declared display's size");
     }
 }
 
@@ -448,6 +456,32 @@ async fn openai_cu_errors_safety_fail_refusal_malformed_and_429() {
     let guest = StubGuest::start().await;
     let c = client(guest.url());
     let obs = Observation::capture(&c, 1, "do it").await.expect("observe");
+
+    // Coordinates are the declared display's (1024x640 for 1440x900), scaled back:
+    // (512, 320) is the screen's centre, a drag's ends and a scroll's point likewise.
+    let replies = vec![
+        computer_call("r1", "c1", json!({"type": "click", "button": "left", "x": 512, "y": 320}), json!([])),
+        computer_call(
+            "r2",
+            "c2",
+            json!({"type": "drag", "path": [{"x": 0, "y": 0}, {"x": 1023, "y": 639}]}),
+            json!([]),
+        ),
+    ];
+    let mock = Mock::new(replies.iter().cloned().map(ok).collect());
+    let mut agent = openai_agent(&mock, SafetyChecks::Ack).await;
+    let p = agent.predict(&obs).await.expect("an answer");
+    assert_eq!(
+        p.actions,
+        [AgentAction::Typed(vec![Action::Click { x: Some(720), y: Some(450), button: MouseButton::Left, count: 1 }])]
+    );
+    let p = agent.predict(&obs).await.expect("an answer");
+    let AgentAction::Typed(drag) = &p.actions[0] else { panic!("a typed drag: {p:?}") };
+    assert!(
+        matches!(drag[..], [Action::Drag { from: Some(Point { x: 0, y: 0 }), to: Point { x: 1439, y: 899 }, .. }]),
+        "{drag:?}"
+    );
+    check_openai_requests(&mock.requests(), &replies, "do it");
 
     // `--safety-checks fail`: the episode ends as FAIL and the checks are recorded.
     let check = json!([{"id": "sc_9", "code": "sensitive_domain", "message": "A bank."}]);
@@ -665,7 +699,7 @@ async fn arena_run_with_openai_cu_records_agent_model_action_space_and_coordinat
     let options = &summary["options"];
     assert_eq!(options["agent"], json!(["openai-cu"]), "{summary}");
     assert_eq!(options["action_space"], json!(["openai_computer"]));
-    assert_eq!(options["coords"], json!(["pixels"]));
+    assert_eq!(options["coords"], json!(["image:within-1024x768"]));
     assert_eq!(options["model"], json!(["computer-use-preview"]));
     assert_eq!(options["safety_checks"], json!(["fail"]));
     let result =

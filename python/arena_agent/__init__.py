@@ -8,6 +8,7 @@ Existing WindowsAgentArena and OSWorld agents run unchanged through
 
 from .protocol import (
     ACTION_SPACES,
+    COORDS,
     PROTOCOL_VERSION,
     Agent,
     ProtocolError,
@@ -19,6 +20,7 @@ from .protocol import (
 
 __all__ = [
     "ACTION_SPACES",
+    "COORDS",
     "PROTOCOL_VERSION",
     "Agent",
     "ProtocolError",

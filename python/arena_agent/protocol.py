@@ -13,6 +13,7 @@ import traceback
 
 PROTOCOL_VERSION = 1
 ACTION_SPACES = ("computer", "pyautogui", "computer_13", "typed")
+COORDS = ("pixels", "fraction", "grid1000")
 DECISIONS = ("DONE", "FAIL", "WAIT")
 
 
@@ -23,7 +24,10 @@ class ProtocolError(Exception):
 class Agent:
     """Base class of an agent.
 
-    ``action_space`` names what ``predict`` answers in; ``observation`` says
+    ``action_space`` names what ``predict`` answers in; ``coords`` (optional:
+    ``pixels``, ``fraction`` or ``grid1000``) what the coordinates of its
+    pyautogui code and ``computer_13`` actions are measured in, where ``None``
+    leaves it to the run's ``--coords``; ``observation`` says
     what each observation should carry (see ``docs/agents.md``): keys
     ``screenshot`` (``path``, ``inline`` or ``none``), ``a11y`` (``xml``,
     ``tree`` or ``none``), ``windows``, ``clipboard`` and ``som`` (booleans).
@@ -31,6 +35,7 @@ class Agent:
 
     name = None
     action_space = "pyautogui"
+    coords = None
     observation = {}
 
     def reset(self, task):
@@ -99,6 +104,11 @@ class Session:
             "agent": getattr(self.agent, "name", None) or type(self.agent).__name__,
             "action_space": space,
         }
+        coords = getattr(self.agent, "coords", None)
+        if coords is not None:
+            if coords not in COORDS:
+                raise ProtocolError(f"unknown coordinate convention {coords!r}; expected one of {', '.join(COORDS)}")
+            answer["coords"] = coords
         wants = dict(getattr(self.agent, "observation", None) or {})
         if wants:
             answer["observation"] = wants

@@ -128,12 +128,14 @@ pub fn parse(action: &Value, ctx: &Context) -> Result<Vec<Step>, ActionError> {
         "screenshot" => Ok(vec![Step::Screenshot]),
         "scroll" => {
             let (x, y) = point(action)?;
-            let wheel = |key: &str| -> Result<i32, ActionError> {
-                let px = number(SPACE, action, key)?.clamp(-1e6, 1e6) as i64;
+            // The distances are in the model's pixels, as its coordinates: screen pixels after scaling.
+            let (fx, fy) = ctx.coords.factors(ctx.screen);
+            let wheel = |key: &str, factor: f64| -> Result<i32, ActionError> {
+                let px = (number(SPACE, action, key)? * factor).clamp(-1e6, 1e6) as i64;
                 Ok((px * WHEEL_PER_100_PX / 100) as i32)
             };
             // Positive scroll_y scrolls down, which is a negative wheel delta.
-            act(Action::Scroll { x: Some(x), y: Some(y), dx: wheel("scroll_x")?, dy: -wheel("scroll_y")? })
+            act(Action::Scroll { x: Some(x), y: Some(y), dx: wheel("scroll_x", fx)?, dy: -wheel("scroll_y", fy)? })
         }
         "type" => act(Action::TypeText { text: string(SPACE, action, "text")?.to_owned(), interval_ms: None }),
         "wait" => act(Action::Wait { ms: WAIT_MS }),

@@ -54,13 +54,22 @@ pub fn parse(code: &str, ctx: &Context) -> Result<Vec<Step>, ActionError> {
         ActionError::new(ActionSpace::Pyautogui, format!("{what} the pyautogui code {quoted:?}{ellipsis}: {err}"))
     };
     let mut program = arena_shared::script::parse(code).map_err(|e| fail(e.into()))?;
-    if ctx.coords != Coords::Pixels {
-        let (fx, fy) = ctx.coords.factors(ctx.screen);
-        scale_block(&mut program.statements, fx, fy);
-    }
+    rescale(&mut program, ctx.coords, ctx.screen);
     let mut host = StepHost { rec: RecordingHost::new(ctx.screen, ctx.cursor), steps: Vec::new(), copied: None };
     run_program(&program, &mut host).map_err(fail)?;
     Ok(host.steps)
+}
+
+/// Rewrites a parsed program so that the coordinates of its pyautogui mouse calls,
+/// given in `coords`, become pixels of `screen` (see the module documentation).
+/// The one place this happens: the action space's translation above and the code
+/// agents hand the episode (`crate::agent::exec`, whatever the agent) both call it.
+/// With [`Coords::Pixels`] nothing changes.
+pub fn rescale(program: &mut Program, coords: Coords, screen: (u32, u32)) {
+    if coords != Coords::Pixels {
+        let (fx, fy) = coords.factors(screen);
+        scale_block(&mut program.statements, fx, fy);
+    }
 }
 
 /// How long translating one reply may take.

@@ -386,6 +386,15 @@ fn openai_every_action() {
     for (input, expected) in table {
         check(o, px, input, &expected);
     }
+    // openai-cu declares a 1024x640 display for a 1440x900 screen: points and scroll
+    // distances are the display's, scaled to the screen's (300 * 1.40625 px, 120 per 100 px).
+    let display = Coords::Image { width: 1024, height: 640 };
+    check(
+        o,
+        display,
+        json!({"type": "scroll", "x": 512, "y": 320, "scroll_x": 0, "scroll_y": 300}),
+        &[act(Action::Scroll { x: Some(720), y: Some(450), dx: 0, dy: -505 })],
+    );
     check_err(o, json!({"type": "teleport"}), &["unknown action type \"teleport\"", "keypress"]);
     check_err(o, json!({"type": "click", "x": 1, "y": 2, "button": "thumb"}), &["unknown button \"thumb\""]);
     check_err(o, json!({"type": "keypress", "keys": ["HYPER"]}), &["unknown key \"HYPER\""]);

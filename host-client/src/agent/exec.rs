@@ -54,6 +54,7 @@ use arena_shared::script::{
 };
 
 use super::{AgentAction, AgentError};
+use crate::actionspace::Coords;
 use crate::client::GuestClient;
 use crate::error::ClientError;
 use crate::som::Marks;
@@ -70,6 +71,11 @@ pub struct ExecOptions {
     /// Let go of keys an action leaves held (`keyDown` without `keyUp`) when that
     /// action ends, instead of at the end of the episode (`--held-keys action`).
     pub release_held_keys: bool,
+    /// What the coordinates of pyautogui code are measured in (`--coords`): every
+    /// pyautogui answer, from any agent, is rescaled to screen pixels by
+    /// [`crate::actionspace::pyautogui::rescale`] before it runs. A prediction may
+    /// name its own ([`crate::agent::Prediction::coords`]).
+    pub coords: Coords,
 }
 
 impl Default for ExecOptions {
@@ -79,6 +85,7 @@ impl Default for ExecOptions {
             computer_action_delay: 0.25,
             max_duration: Duration::from_secs(90),
             release_held_keys: false,
+            coords: Coords::Pixels,
         }
     }
 }
@@ -224,12 +231,24 @@ async fn run_script(
     computer: &mut ComputerState,
     options: &ExecOptions,
 ) -> Result<ActionOutcome, AgentError> {
-    let program = match parse(code) {
+    let mut program = match parse(code) {
         Ok(program) => program,
         Err(err) => {
             return Ok(ActionOutcome { error: Some(format!("SyntaxError: {err}")), ..ActionOutcome::default() });
         }
     };
+    if lang == Lang::Pyautogui && options.coords != Coords::Pixels {
+        let screen = match client.screen().await {
+            Ok(screen) => (screen.physical_width, screen.physical_height),
+            Err(err) if is_unreachable(&err) => return Err(AgentError::Guest(err)),
+            Err(err) => {
+                let error =
+                    Some(format!("reading the screen size to rescale {} coordinates: {err}", options.coords.name()));
+                return Ok(ActionOutcome { error, ..ActionOutcome::default() });
+            }
+        };
+        crate::actionspace::pyautogui::rescale(&mut program, options.coords, screen);
+    }
     let mut host = GuestHost::new(client.clone(), Handle::current(), options.clone());
     let mut state = computer.clone();
     let delay = options.computer_action_delay;

@@ -208,6 +208,10 @@ pub struct Prediction {
     /// How long the agent's own parts took (Set-of-Marks, the model), for `traj.jsonl`.
     #[serde(skip)]
     pub timings: PredictTimings,
+    /// What this prediction's pyautogui code measures coordinates in, when the agent
+    /// said (an outside agent's `hello`); `None` is the run's `--coords`.
+    #[serde(skip)]
+    pub coords: Option<crate::actionspace::Coords>,
 }
 
 /// The parts of one prediction an agent times, in milliseconds; `None`: the agent has no such part.

@@ -496,7 +496,15 @@ impl Agent for NaviAgent {
                 self.memory_block = block;
             }
             self.history.push(Turn { step: obs.step, text: reply.code });
-            return Ok(Prediction { response, actions: reply.actions, marks, raw_error: None, logs, timings });
+            return Ok(Prediction {
+                response,
+                actions: reply.actions,
+                marks,
+                raw_error: None,
+                logs,
+                timings,
+                coords: None,
+            });
         }
         let prediction = match parse_reply(&response) {
             Ok(parsed) => {
@@ -506,13 +514,13 @@ impl Agent for NaviAgent {
                 let summary: Vec<String> = parsed.actions.iter().map(AgentAction::summary).collect();
                 self.history.push(Turn { step: obs.step, text: summary.join(" | ") });
                 self.last_error = None;
-                Prediction { response, actions: parsed.actions, marks, raw_error: None, logs, timings }
+                Prediction { response, actions: parsed.actions, marks, raw_error: None, logs, timings, coords: None }
             }
             Err(err) => {
                 tracing::info!(step = obs.step, error = %err, "unusable model reply");
                 self.history.push(Turn { step: obs.step, text: format!("(reply not usable: {err})") });
                 self.last_error = Some(err.clone());
-                Prediction { response, actions: Vec::new(), marks, raw_error: Some(err), logs, timings }
+                Prediction { response, actions: Vec::new(), marks, raw_error: Some(err), logs, timings, coords: None }
             }
         };
         Ok(prediction)

@@ -174,6 +174,7 @@ impl Agent for ReplayAgent {
             actions: step.actions,
             logs: Vec::new(),
             timings: Default::default(),
+            coords: None,
         })
     }
 }

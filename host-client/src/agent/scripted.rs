@@ -235,6 +235,7 @@ impl Agent for ScriptedAgent {
             raw_error: None,
             logs: Vec::new(),
             timings: Default::default(),
+            coords: None,
         })
     }
 }

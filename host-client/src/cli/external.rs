@@ -8,6 +8,7 @@ use std::time::Duration;
 use anyhow::{bail, Context};
 use clap::Args;
 
+use crate::actionspace::Coords;
 use crate::agent::external::transport::{HttpAgent, ProcessPool};
 use crate::agent::external::{Connector, ExternalAgent};
 use crate::agent::Agent;
@@ -59,7 +60,7 @@ fn timeout(args: &ExternalArgs) -> anyhow::Result<Duration> {
 /// # Errors
 ///
 /// The option the agent needs is missing or unusable.
-pub(crate) fn exec_or_http(args: &ExternalArgs, http: bool) -> anyhow::Result<Built> {
+pub(crate) fn exec_or_http(args: &ExternalArgs, http: bool, coords: Coords) -> anyhow::Result<Built> {
     let timeout = timeout(args)?;
     let (connector, label, option): (Arc<dyn Connector>, &str, (String, String)) = if http {
         let Some(url) = &args.agent_url else { bail!("--agent http needs --agent-url URL (or ARENA_AGENT_URL)") };
@@ -75,8 +76,9 @@ pub(crate) fn exec_or_http(args: &ExternalArgs, http: bool) -> anyhow::Result<Bu
         ("agent_protocol".to_owned(), crate::agent::external::protocol::PROTOCOL_VERSION.to_string()),
         ("agent_timeout".to_owned(), format!("{}", args.agent_timeout)),
     ];
-    let factory: AgentFactory =
-        Arc::new(move || Ok(Box::new(ExternalAgent::new(label, Arc::clone(&connector), timeout)) as Box<dyn Agent>));
+    let factory: AgentFactory = Arc::new(move || {
+        Ok(Box::new(ExternalAgent::new(label, Arc::clone(&connector), timeout).with_coords(coords)) as Box<dyn Agent>)
+    });
     Ok(Built { factory, label: label.to_owned(), options })
 }
 

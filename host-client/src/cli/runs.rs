@@ -617,7 +617,7 @@ pub(crate) fn agent_factory(args: &RunArgs) -> anyhow::Result<ChosenAgent> {
         AgentKind::AnthropicCu | AgentKind::OpenaiCu | AgentKind::UiTars => computer_use_agent(args),
         AgentKind::Mcp => bail!("--agent mcp is set up by `arena run` itself"),
         AgentKind::Exec | AgentKind::Http => {
-            let built = super::external::exec_or_http(&args.external, args.agent == AgentKind::Http)?;
+            let built = super::external::exec_or_http(&args.external, args.agent == AgentKind::Http, args.coords)?;
             let model = args.model.clone().unwrap_or_else(|| "external".to_owned());
             Ok(ChosenAgent { factory: built.factory, label: built.label, model, options: built.options })
         }
@@ -677,7 +677,8 @@ fn computer_use_agent(args: &RunArgs) -> anyhow::Result<ChosenAgent> {
             let options = vec![option("safety_checks", config.safety_checks.name().into())];
             let factory: AgentFactory =
                 Arc::new(move || Ok(Box::new(OpenAiAgent::new(config.clone())?) as Box<dyn Agent>));
-            (factory, ActionSpace::OpenAi, Coords::Pixels.name(), options)
+            let (w, h) = crate::agent::cu::openai::MAX_DISPLAY;
+            (factory, ActionSpace::OpenAi, format!("image:within-{w}x{h}"), options)
         }
         _ => {
             let Some(path) = &args.prompt_file else {
@@ -732,7 +733,10 @@ pub async fn run(conn: &Connection, args: RunArgs) -> anyhow::Result<ExitCode> {
     let agent_name = args.agent.to_possible_value().map(|v| v.get_name().to_owned()).unwrap_or_default();
     agent_options.push(("agent".into(), agent_name));
     agent_options.push(("model".into(), model.clone()));
-    if !agent_options.iter().any(|(k, _)| k == "action_space") {
+    // Agents with their own convention (the computer-use agents) state it; for every
+    // other agent `--coords` is what its pyautogui code is rescaled from.
+    let run_coords = !agent_options.iter().any(|(k, _)| k == "action_space");
+    if run_coords {
         agent_options.push(("action_space".into(), agent_label.clone()));
         agent_options.push(("coords".into(), args.coords.name()));
     }
@@ -813,6 +817,9 @@ pub async fn run(conn: &Connection, args: RunArgs) -> anyhow::Result<ExitCode> {
     if let Some(fleet) = &fleet {
         config.options.insert("vm_reset".into(), args.reset.to_string());
         config.screen_source = Some(Arc::clone(fleet) as Arc<dyn crate::episode::ScreenSource>);
+    }
+    if run_coords {
+        config.exec.coords = args.coords;
     }
     if args.held_keys == HeldKeysArg::Action {
         config.exec.release_held_keys = true;

@@ -274,6 +274,7 @@ impl Agent for McpAgent {
             raw_error: None,
             logs,
             timings: Default::default(),
+            coords: None,
         })
     }
 }

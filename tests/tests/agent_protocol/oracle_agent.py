@@ -1,5 +1,6 @@
 """Agents the agent-protocol tests run through `python -m arena_agent`: the stub
-tasks' oracle solutions written in the four action spaces (one space per task),
+tasks' oracle solutions written in the four action spaces (one space per task,
+coordinates on the 0..1000 grid the hello names),
 and three that misbehave on one task (garbage, a hang, an exit)."""
 
 import os
@@ -14,8 +15,12 @@ PLANS = {
         ["pyautogui.write('kickoff on monday')\npyautogui.hotkey('ctrl', 's')"],
         "DONE",
     ]),
+    # As a person would: the Run dialog, the folder, and a click on its OK button,
+    # on the 0..1000 grid the agent names in its hello (near (191, 821) of 1440x900).
     "stub-explorer-open-folder": ("pyautogui", [
-        ["import subprocess\nsubprocess.Popen(['explorer.exe', r'C:\\Users\\Docker\\Documents\\Reports'])"],
+        ["pyautogui.hotkey('win', 'r')",
+         "pyautogui.write(r'C:\\Users\\Docker\\Documents\\Reports')",
+         "pyautogui.click(133, 912)"],
         "DONE",
     ]),
     "stub-notepad-append": ("computer", [
@@ -42,6 +47,7 @@ VICTIM = "stub-notepad-append"
 class Oracle(Agent):
     name = "oracle"
     action_space = "pyautogui"
+    coords = "grid1000"
 
     def reset(self, task):
         self.task = task["task_name"]

@@ -20,7 +20,7 @@ use arena_shared::geometry::Rect;
 use arena_shared::observation::{A11yBackend, A11yNode, A11yStates, A11yTree, TreeBudget};
 
 use super::input::ICON_PITCH;
-use super::window::{Caption, State, Window, WindowModel};
+use super::window::{Caption, Dialog, State, Window, WindowModel, RUN_FIELD_LABEL, RUN_PROMPT};
 use crate::desktop::a11y_walk::{self, TreeSource};
 use crate::desktop::cancel;
 use crate::desktop::windows::shell;
@@ -119,6 +119,14 @@ fn window_node(window: &Window, focused: bool, backend: A11yBackend, desktop_ite
         }
         node.children.push(element);
     }
+    if window.dialog.is_some() {
+        let mut controls = dialog_controls(window, focused);
+        if !uia {
+            controls.iter_mut().for_each(to_win32_roles);
+        }
+        node.children.extend(controls);
+        return node;
+    }
     if let Some(buf) = &window.text {
         let mut doc = leaf(if uia { "Document" } else { "Edit" }, "Edit", "Text Editor", window.body());
         doc.value = Some(buf.text.clone());
@@ -127,6 +135,37 @@ fn window_node(window: &Window, focused: bool, backend: A11yBackend, desktop_ite
         node.children.push(doc);
     }
     node
+}
+
+/// A dialog's controls with UI Automation's control types and their Win32 classes: its
+/// text (`Static`), the Run dialog's `Open:` combo box holding the command's edit field,
+/// and its buttons.
+fn dialog_controls(window: &Window, focused: bool) -> Vec<A11yNode> {
+    let (Some(dialog), Some(parts)) = (&window.dialog, window.dialog_parts()) else {
+        return Vec::new();
+    };
+    let text = match dialog {
+        Dialog::Run => RUN_PROMPT,
+        Dialog::Message(message) => message.as_str(),
+    };
+    let body = window.body();
+    let text_rect =
+        Rect::new(parts.text_at.x, parts.text_at.y, body.right() - parts.text_at.x, 3 * super::window::LINE_H);
+    let mut controls = vec![leaf("Text", "Static", text, text_rect)];
+    if let (Some((label_at, field)), Some(buf)) = (parts.field, &window.text) {
+        let label_w = RUN_FIELD_LABEL.len() as i32 * super::window::GLYPH_W;
+        controls.push(leaf("Text", "Static", RUN_FIELD_LABEL, Rect::new(label_at.x, field.y, label_w, field.height)));
+        let mut edit = leaf("Edit", "Edit", RUN_FIELD_LABEL, field);
+        edit.value = Some(buf.text.clone());
+        edit.focused = focused;
+        edit.states.editable = Some(true);
+        let mut combo = leaf("ComboBox", "ComboBox", RUN_FIELD_LABEL, field);
+        combo.value = Some(buf.text.clone());
+        combo.children.push(edit);
+        controls.push(combo);
+    }
+    controls.extend(parts.buttons.iter().map(|(button, r)| leaf("Button", "Button", button.label(), *r)));
+    controls
 }
 
 fn to_win32_roles(node: &mut A11yNode) {

@@ -4,14 +4,20 @@
 //! focus windows and press caption and taskbar buttons, title bars drag windows, the
 //! wheel scrolls the focused window, and keys edit the focused window's document with
 //! a caret and all-or-nothing selection (`ctrl+a`). Shortcuts: `ctrl+a/c/x/v/s`,
-//! `alt+f4`, `alt+tab`, `win+d`; `esc` and unknown combinations do nothing visible.
+//! `alt+f4`, `alt+tab`, `win+d` and `win+m` (show the desktop), `win+e` (File Explorer, as
+//! the `explorer` command starts it) and `win+r` (the Run dialog). In the Run dialog typing
+//! edits the command, `enter` (or its OK button) runs it through the stub's launch path and
+//! `esc` (or Cancel) closes it; `enter`, `space` and `esc` dismiss a message box. Elsewhere
+//! `esc` and unknown combinations do nothing visible.
 
 use arena_shared::action::{Action, MouseButton};
 use arena_shared::geometry::Point;
 use arena_shared::keys::{parse_chord, Key};
 
 use super::render::taskbar_buttons;
-use super::window::{layout, Caption, Grab, Hit, Press, State, Window, BODY_PAD, GLYPH_W, LINE_H, TASKBAR_H};
+use super::window::{
+    layout, Caption, Dialog, DialogButton, Grab, Hit, Press, State, Window, BODY_PAD, GLYPH_W, LINE_H, TASKBAR_H,
+};
 use crate::desktop::{ClipboardData, DesktopError, DesktopResult, WindowState};
 
 /// The most clicks or key presses one action may ask for.
@@ -26,6 +32,10 @@ const ICON_W: i32 = 140;
 pub(crate) enum Effect {
     /// Open the `n`th Desktop item (sorted by name), after a double click on its icon.
     OpenDesktopItem(usize),
+    /// Start a command line as the shell does (`win+e` starts `explorer`).
+    Launch(String),
+    /// The Run dialog `dialog` was told to run `line` (`enter` or its OK button).
+    RunDialog { dialog: u64, line: String },
 }
 
 /// Applies one action.
@@ -37,6 +47,13 @@ pub(crate) enum Effect {
 /// [`DesktopError::InvalidInput`] naming an unknown key, for [`Action::Unknown`], and for
 /// counts above [`MAX_REPEAT`]; the I/O error of a `ctrl+s` save.
 pub(crate) fn perform(state: &mut State, action: &Action) -> DesktopResult<Vec<Effect>> {
+    state.effects.clear();
+    let mut effects = apply(state, action)?;
+    effects.append(&mut state.effects);
+    Ok(effects)
+}
+
+fn apply(state: &mut State, action: &Action) -> DesktopResult<Vec<Effect>> {
     let mut effects = Vec::new();
     match action {
         Action::MoveTo { x, y } => move_to(state, Point::new(*x, *y)),
@@ -109,7 +126,10 @@ pub(crate) fn perform(state: &mut State, action: &Action) -> DesktopResult<Vec<E
         Action::TypeText { text, interval_ms: _ } => {
             arena_shared::action::check_typed_length(text).map_err(DesktopError::InvalidInput)?;
             let mods = state.mods;
-            if !(mods.ctrl || mods.alt || mods.win) {
+            // A dialog has keys of its own (`enter` runs the Run dialog's command), so text
+            // typed into one goes key by key.
+            let in_dialog = state.focused_app_mut().is_some_and(|w| w.dialog.is_some());
+            if !(mods.ctrl || mods.alt || mods.win || in_dialog) {
                 // Plain typing is one edit, not one per character: laying the text out
                 // again after every character made long texts quadratic.
                 let text: String = text
@@ -230,7 +250,9 @@ fn press(state: &mut State, button: MouseButton) {
             (MouseButton::Left, Hit::TitleBar) if !window.maximized && !window.is_desktop => {
                 grab = Some(Grab { window: id, dx: p.x - window.rect.x, dy: p.y - window.rect.y });
             }
-            (MouseButton::Left, Hit::Body) if window.text.is_some() => place_caret(window, p),
+            (MouseButton::Left, Hit::Body) if window.text.is_some() && window.dialog.is_none() => {
+                place_caret(window, p)
+            }
             _ => {}
         }
     }
@@ -279,7 +301,48 @@ fn release(state: &mut State, button: MouseButton) -> DesktopResult<()> {
                 state.activate(press.window)
             }
         }
-        Hit::TitleBar | Hit::Body => Ok(()),
+        Hit::Body => match state.window(press.window).and_then(|w| w.dialog_button_at(state.cursor)) {
+            Some(button) => press_dialog_button(state, press.window, button),
+            None => Ok(()),
+        },
+        Hit::TitleBar => Ok(()),
+    }
+}
+
+/// A dialog button pushed: OK runs the Run dialog's command or dismisses a message box,
+/// Cancel closes the dialog; Browse opens a file picker the stub does not model.
+fn press_dialog_button(state: &mut State, id: u64, button: DialogButton) -> DesktopResult<()> {
+    let Some(window) = state.window(id) else {
+        return Ok(());
+    };
+    match (button, &window.dialog) {
+        (DialogButton::Ok, Some(Dialog::Run)) => {
+            let line = window.text.as_ref().map(|b| b.text.trim().to_owned()).unwrap_or_default();
+            // As on Windows, OK does nothing while the command is empty.
+            if !line.is_empty() {
+                state.effects.push(Effect::RunDialog { dialog: id, line });
+            }
+            Ok(())
+        }
+        (DialogButton::Ok | DialogButton::Cancel, Some(_)) => state.close(id),
+        _ => Ok(()),
+    }
+}
+
+/// A key for the focused dialog, when the focused window is one: `Some` when the dialog
+/// handled it, `None` when it is an ordinary edit of the command field.
+fn dialog_key(state: &mut State, name: &str) -> Option<DesktopResult<()>> {
+    let window = state.focused_app_mut()?;
+    let id = window.id;
+    match (window.dialog.as_ref()?, name) {
+        (Dialog::Run, "enter") => Some(press_dialog_button(state, id, DialogButton::Ok)),
+        (Dialog::Message(_), "enter" | "space") => Some(press_dialog_button(state, id, DialogButton::Ok)),
+        (_, "esc") => Some(press_dialog_button(state, id, DialogButton::Cancel)),
+        // Tab moves between controls and up/down open the command history: nothing the
+        // stub draws changes, and the command field takes neither.
+        (_, "tab" | "up" | "down" | "pageup" | "pagedown") => Some(Ok(())),
+        (Dialog::Run, _) => None,
+        (Dialog::Message(_), _) => Some(Ok(())),
     }
 }
 
@@ -376,8 +439,11 @@ fn key_down(state: &mut State, key: Key) -> DesktopResult<()> {
     match key {
         Key::Char(c) if mods.ctrl && !mods.alt => shortcut(state, c.to_ascii_lowercase()),
         Key::Char(c) if mods.win => {
-            if matches!(c.to_ascii_lowercase(), 'd' | 'm') {
-                show_desktop(state);
+            match c.to_ascii_lowercase() {
+                'd' | 'm' => show_desktop(state),
+                'r' => state.open_run_dialog(),
+                'e' => state.effects.push(Effect::Launch("explorer".into())),
+                _ => {}
             }
             Ok(())
         }
@@ -393,6 +459,11 @@ fn key_down(state: &mut State, key: Key) -> DesktopResult<()> {
 
 fn named_key(state: &mut State, name: &str) -> DesktopResult<()> {
     let mods = state.mods;
+    if !(mods.ctrl || mods.alt || mods.win) {
+        if let Some(handled) = dialog_key(state, name) {
+            return handled;
+        }
+    }
     let text = match name {
         "enter" => Some("\n"),
         "space" => Some(" "),
@@ -438,6 +509,10 @@ fn edit(state: &mut State, f: impl FnOnce(&mut super::window::TextBuf)) {
     let Some(window) = state.focused_app_mut() else {
         return;
     };
+    if matches!(window.dialog, Some(Dialog::Message(_))) {
+        // A message box has nothing to type into.
+        return;
+    }
     let buf = window.text.get_or_insert_with(Default::default);
     f(buf);
     follow_caret(window);

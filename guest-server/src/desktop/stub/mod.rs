@@ -227,6 +227,7 @@ impl StubDesktop {
                 file,
                 elements: spec.elements.clone(),
                 refuse_close: spec.refuse_close,
+                dialog: None,
             });
             let work = state.work_area();
             if let Some(window) = state.window_mut(id) {
@@ -294,9 +295,77 @@ impl StubDesktop {
                 super::cancel::sleep(pause)?;
             }
             let one = Action::TypeText { text: c.to_string(), interval_ms: None };
-            input::perform(&mut self.lock(), &one)?;
+            let effects = input::perform(&mut self.lock(), &one)?;
+            self.apply_effects(effects)?;
         }
         Ok(())
+    }
+
+    /// Does what input asked of the rest of the desktop, with the state unlocked.
+    fn apply_effects(&self, effects: Vec<input::Effect>) -> DesktopResult<()> {
+        for effect in effects {
+            match effect {
+                input::Effect::OpenDesktopItem(n) => {
+                    if let Some(name) = self.desktop_items().get(n) {
+                        self.open_path(&format!(r"C:\Users\Docker\Desktop\{name}"))?;
+                    }
+                }
+                input::Effect::Launch(line) => {
+                    if self.launch_modelled(&CommandSpec::Shell(line.clone()))?.is_none() {
+                        return Err(DesktopError::NotFound(format!("program {line} not found")));
+                    }
+                }
+                input::Effect::RunDialog { dialog, line } => self.run_dialog(dialog, &line),
+            }
+        }
+        Ok(())
+    }
+
+    /// The Run dialog's OK: the line goes through the stub's launch path
+    /// ([`StubDesktop::launch_modelled`]), and a line that names a guest path opens it
+    /// even with spaces and no quotes, as the shell takes the whole line for a path
+    /// first. What starts closes the dialog. A line that names nothing the stub models
+    /// (it starts no real host process from typed text) gets a message box naming it,
+    /// titled with the line, as Windows answers; the dialog stays open behind it.
+    fn run_dialog(&self, dialog: u64, line: &str) {
+        let whole = line.trim().trim_matches('"');
+        let as_path = self.map_path(whole).ok().filter(|local| is_drive_path(whole) && local.exists());
+        let started = match as_path {
+            Some(_) => self.open_path(whole).map(|()| true),
+            None => self.launch_modelled(&CommandSpec::Shell(line.to_owned())).map(|pid| pid.is_some()),
+        };
+        let mut state = self.lock();
+        state.run_mru = Some(line.to_owned());
+        match started {
+            Ok(true) => {
+                // The dialog is still listed: nothing else closes it while the state is unlocked
+                // but a caller closing it by id, and then there is nothing left to close.
+                let _ = state.close(dialog);
+            }
+            Ok(false) => {
+                let name = process::tokenize(line).first().map_or_else(|| line.to_owned(), |t| t.text.clone());
+                let message = format!("Windows cannot find '{name}'. Check the name, then try again.");
+                state.open_message_box(line, &message);
+            }
+            Err(err) => {
+                state.open_message_box(line, &err.to_string());
+            }
+        }
+    }
+
+    /// Starts what a command line names when the stub models it: a guest document or
+    /// folder (`start "" C:\...\a.txt`), or a known program with its arguments. This is
+    /// the one launch path of [`Desktop::run`], [`Desktop::spawn`], the Run dialog and
+    /// `win+e`. `Ok(None)` when it names neither.
+    fn launch_modelled(&self, cmd: &CommandSpec) -> DesktopResult<Option<u32>> {
+        if let Some(path) = self.document_launch(cmd) {
+            self.open_path(&path)?;
+            return Ok(Some(self.lock().windows.first().map_or(0, |w| w.pid)));
+        }
+        if let Some(launch) = process::known_launch(cmd, &self.programs) {
+            return self.launch_known(&launch.key, &launch.args).map(Some);
+        }
+        Ok(None)
     }
 
     /// The document text of a window, if it has one.
@@ -344,6 +413,10 @@ impl StubDesktop {
             }
         }
         let mut state = self.lock();
+        // File Explorer windows belong to the shell's explorer.exe, as on Windows.
+        if program.process_name.eq_ignore_ascii_case("explorer.exe") {
+            new.pid = Some(state.shell_pid());
+        }
         let id = state.open(new);
         let pid = state.window(id).map_or(0, |w| w.pid);
         tracing::debug!(program = key, pid, id, "stub opened a program window");
@@ -354,9 +427,7 @@ impl StubDesktop {
     fn document_launch(&self, cmd: &CommandSpec) -> Option<String> {
         let words = process::launch_words(cmd)?;
         let first = words.first()?;
-        let bytes = first.as_bytes();
-        // Only drive-letter paths: a Unix path such as /bin/echo is a host program.
-        if words.len() != 1 || bytes.len() < 3 || !bytes[0].is_ascii_alphabetic() || bytes[1] != b':' {
+        if words.len() != 1 || !is_drive_path(first) {
             return None;
         }
         let local = self.map_path(first).ok()?;
@@ -421,6 +492,13 @@ impl StubDesktop {
         }
         Frame { image, cursor: Some(cursor), cursor_drawn: draw_cursor }
     }
+}
+
+/// Whether `path` starts with a drive letter (`C:\\...`). Only those are guest paths a
+/// command line opens: a Unix path such as /bin/echo is a host program.
+fn is_drive_path(path: &str) -> bool {
+    let bytes = path.as_bytes();
+    bytes.len() >= 3 && bytes[0].is_ascii_alphabetic() && bytes[1] == b':'
 }
 
 /// The display name of a guest path: its last component, or `Local Disk (C:)` for a drive.
@@ -568,16 +646,7 @@ impl Desktop for StubDesktop {
             state.record(action);
             effects
         };
-        for effect in effects {
-            match effect {
-                input::Effect::OpenDesktopItem(n) => {
-                    if let Some(name) = self.desktop_items().get(n) {
-                        self.open_path(&format!(r"C:\Users\Docker\Desktop\{name}"))?;
-                    }
-                }
-            }
-        }
-        Ok(())
+        self.apply_effects(effects)
     }
 
     fn windows(&self) -> DesktopResult<Vec<WindowInfo>> {
@@ -651,7 +720,7 @@ impl Desktop for StubDesktop {
         let name = display_name(guest_path);
         if meta.is_dir() {
             let mut state = self.lock();
-            let pid = state.windows[state.windows.len() - 1].pid;
+            let pid = state.shell_pid();
             state.open(NewWindow {
                 title: name,
                 class_name: "CabinetWClass".into(),
@@ -729,16 +798,7 @@ impl Desktop for StubDesktop {
     }
 
     fn run(&self, cmd: &CommandSpec, limits: &ExecLimits) -> DesktopResult<ExecOutput> {
-        let opened = if let Some(path) = self.document_launch(cmd) {
-            self.open_path(&path)?;
-            true
-        } else if let Some(launch) = process::known_launch(cmd, &self.programs) {
-            self.launch_known(&launch.key, &launch.args)?;
-            true
-        } else {
-            false
-        };
-        if opened {
+        if self.launch_modelled(cmd)?.is_some() {
             return Ok(ExecOutput {
                 exit_code: Some(0),
                 stdout: String::new(),
@@ -754,12 +814,8 @@ impl Desktop for StubDesktop {
     }
 
     fn spawn(&self, cmd: &CommandSpec) -> DesktopResult<u32> {
-        if let Some(path) = self.document_launch(cmd) {
-            self.open_path(&path)?;
-            return Ok(self.lock().windows.first().map_or(0, |w| w.pid));
-        }
-        if let Some(launch) = process::known_launch(cmd, &self.programs) {
-            return self.launch_known(&launch.key, &launch.args);
+        if let Some(pid) = self.launch_modelled(cmd)? {
+            return Ok(pid);
         }
         process::spawn_real(cmd, None)
     }

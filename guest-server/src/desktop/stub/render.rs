@@ -8,7 +8,9 @@ use arena_shared::geometry::Rect;
 use font8x8::UnicodeFonts;
 use image::RgbaImage;
 
-use super::window::{layout, Caption, State, Window, BODY_PAD, GLYPH_W, LINE_H, TASKBAR_H};
+use super::window::{
+    layout, Caption, Dialog, State, Window, BODY_PAD, GLYPH_W, LINE_H, RUN_FIELD_LABEL, RUN_PROMPT, TASKBAR_H,
+};
 
 /// Desktop background when there is no wallpaper.
 pub(crate) const BACKGROUND: [u8; 4] = [0, 99, 177, 255];
@@ -30,6 +32,11 @@ const TASKBAR_BUTTON: [u8; 4] = [64, 64, 64, 255];
 const TASKBAR_ACTIVE: [u8; 4] = [96, 96, 96, 255];
 const TASKBAR_TEXT: [u8; 4] = [240, 240, 240, 255];
 const DESKTOP_TEXT: [u8; 4] = [255, 255, 255, 255];
+/// A dialog's face, its buttons and their borders.
+const DIALOG_FACE: [u8; 4] = [240, 240, 240, 255];
+const DIALOG_BUTTON: [u8; 4] = [253, 253, 253, 255];
+const CONTROL_BORDER: [u8; 4] = [122, 122, 122, 255];
+const DEFAULT_BORDER: [u8; 4] = [0, 120, 215, 255];
 
 /// Width of one taskbar button.
 pub(crate) const TASKBAR_BUTTON_W: i32 = 160;
@@ -192,6 +199,10 @@ fn draw_window(canvas: &mut Canvas<'_>, window: &Window, focused: bool, screen: 
         canvas.text(r.x + (r.width - GLYPH_W) / 2, r.y + (r.height - 8) / 2, label, clip, text_color);
     }
     let body = window.body();
+    if window.dialog.is_some() {
+        draw_dialog(canvas, window, focused, clip);
+        return;
+    }
     canvas.fill(body, clip, BODY);
     let Some(buf) = &window.text else {
         return;
@@ -217,6 +228,51 @@ fn draw_window(canvas: &mut Canvas<'_>, window: &Window, focused: bool, screen: 
                 canvas.fill(Rect::new(x, y - 1, 1, 10), text_clip, BODY_TEXT);
             }
         }
+    }
+}
+
+/// A dialog's face: its text wrapped, the Run dialog's labelled command field with the
+/// caret or the selection, and its buttons (the first is the default, with a blue border).
+fn draw_dialog(canvas: &mut Canvas<'_>, window: &Window, focused: bool, clip: Rect) {
+    let (Some(dialog), Some(parts)) = (&window.dialog, window.dialog_parts()) else {
+        return;
+    };
+    canvas.fill(window.body(), clip, DIALOG_FACE);
+    let text = match dialog {
+        Dialog::Run => RUN_PROMPT,
+        Dialog::Message(message) => message.as_str(),
+    };
+    for (row, line) in layout(text, parts.text_cols).iter().enumerate() {
+        let piece: String = text.chars().skip(line.start).take(line.len).collect();
+        canvas.text(parts.text_at.x, parts.text_at.y + row as i32 * LINE_H, &piece, clip, BODY_TEXT);
+    }
+    if let (Some((label_at, field)), Some(buf)) = (parts.field, &window.text) {
+        canvas.text(label_at.x, label_at.y, RUN_FIELD_LABEL, clip, BODY_TEXT);
+        canvas.fill(field, clip, BODY);
+        canvas.outline(field, clip, if focused { DEFAULT_BORDER } else { CONTROL_BORDER });
+        let inner = Rect::new(field.x + 4, field.y + 1, field.width - 8, field.height - 2);
+        let inner_clip = intersect(inner, clip).unwrap_or(Rect::new(0, 0, 0, 0));
+        // One line that scrolls sideways to keep the caret in view.
+        let cols = (inner.width / GLYPH_W).max(1) as usize;
+        let first = (buf.caret + 1).saturating_sub(cols);
+        let shown: String = buf.text.chars().skip(first).take(cols).collect();
+        let y = field.y + (field.height - 8) / 2;
+        if buf.all_selected && !buf.text.is_empty() {
+            let w = shown.chars().count() as i32 * GLYPH_W;
+            canvas.fill(Rect::new(inner.x, y - 2, w, LINE_H), inner_clip, SELECTION);
+        }
+        canvas.text(inner.x, y, &shown, inner_clip, BODY_TEXT);
+        if focused && !buf.all_selected {
+            let x = inner.x + (buf.caret - first) as i32 * GLYPH_W;
+            canvas.fill(Rect::new(x, y - 1, 1, 10), inner_clip, BODY_TEXT);
+        }
+    }
+    for (i, (button, r)) in parts.buttons.iter().enumerate() {
+        canvas.fill(*r, clip, DIALOG_BUTTON);
+        canvas.outline(*r, clip, if i == 0 { DEFAULT_BORDER } else { CONTROL_BORDER });
+        let label = button.label();
+        let x = r.x + (r.width - label.len() as i32 * GLYPH_W) / 2;
+        canvas.text(x, r.y + (r.height - 8) / 2, label, clip, BODY_TEXT);
     }
 }
 

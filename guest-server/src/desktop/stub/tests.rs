@@ -747,3 +747,163 @@ fn a_slow_bulk_fetch_is_paid_only_by_uia_and_element_costs_by_both() {
     assert!(!win32.windows_walked[0].partial, "the win32 source has no bulk fetch");
     assert!(!win32.truncated);
 }
+
+/// The Run dialog's command field and buttons, from its window.
+fn run_dialog_parts(d: &StubDesktop) -> super::window::DialogParts {
+    let state = d.lock();
+    let run = state.windows.iter().find(|w| w.title == "Run" && w.class_name == "#32770").expect("a Run dialog");
+    run.dialog_parts().expect("the Run dialog's controls")
+}
+
+#[test]
+fn win_r_opens_the_run_dialog_which_types_draws_and_walks() {
+    let d = stub();
+    d.perform(&hotkey(&["win", "r"])).unwrap();
+    let run = d.windows().unwrap().into_iter().next().unwrap();
+    assert_eq!(
+        (run.title.as_str(), run.class_name.as_str(), run.process_name.as_str(), run.process_id, run.focused),
+        ("Run", "#32770", "explorer.exe", 1000, true),
+        "the shell's dialog, owned by explorer.exe"
+    );
+    assert!(run.rect.x < 100 && run.rect.bottom() > 700, "bottom left, as Windows places it: {:?}", run.rect);
+    let parts = run_dialog_parts(&d);
+    let (_, field) = parts.field.unwrap();
+    let blank = d.capture(false).unwrap();
+    assert_eq!(blank.image.get_pixel(field.x as u32 + 20, field.y as u32 + 2).0, [255, 255, 255, 255], "the field");
+
+    d.perform(&type_text("notepaX")).unwrap();
+    d.perform(&key("backspace")).unwrap();
+    d.perform(&type_text("d")).unwrap();
+    assert_eq!(d.window_text(run.id).as_deref(), Some("notepad"));
+    let typed = d.capture(false).unwrap();
+    let field_pixels = |img: &image::RgbaImage| -> Vec<[u8; 4]> {
+        (field.x..field.right())
+            .flat_map(|x| (field.y..field.bottom()).map(move |y| (x as u32, y as u32)))
+            .map(|(x, y)| img.get_pixel(x, y).0)
+            .collect()
+    };
+    assert_ne!(field_pixels(&blank.image), field_pixels(&typed.image), "the command is drawn in the field");
+
+    for backend in [A11yBackend::Uia, A11yBackend::Win32] {
+        let tree = d.accessibility(backend, &TreeBudget::WAA, true).unwrap();
+        let node = &tree.windows[0];
+        assert_eq!(node.name, "Run");
+        let mut edits = Vec::new();
+        let mut stack: Vec<&A11yNode> = vec![node];
+        while let Some(n) = stack.pop() {
+            if n.role == "Edit" {
+                edits.push(n);
+            }
+            stack.extend(n.children.iter());
+        }
+        assert_eq!(edits.len(), 1, "{backend:?}: one edit field");
+        assert_eq!((edits[0].name.as_str(), edits[0].value.as_deref()), ("Open:", Some("notepad")), "{backend:?}");
+        assert_eq!(edits[0].states.editable, Some(true));
+        let buttons: Vec<&str> = node.children.iter().filter(|c| c.role == "Button").map(|c| c.name.as_str()).collect();
+        assert!(buttons.ends_with(&["OK", "Cancel", "Browse..."]), "{backend:?}: {buttons:?}");
+    }
+    assert_eq!(
+        d.accessibility(A11yBackend::Win32, &TreeBudget::WAA, true).unwrap().windows[0].role,
+        "Dialog",
+        "class #32770"
+    );
+}
+
+#[test]
+fn the_run_dialog_opens_folders_and_documents_through_the_launch_path() {
+    let d = stub_with(
+        r#"{"dirs": ["C:\\Users\\Docker\\Documents\\Reports", "C:\\Users\\Docker\\My Stuff"],
+            "files": {"C:\\Users\\Docker\\Documents\\notes.txt": "hello"}}"#,
+    );
+    // `explorer <folder>`: a File Explorer window of the shell's process, titled after the folder.
+    d.perform(&hotkey(&["win", "r"])).unwrap();
+    d.perform(&type_text(r"explorer C:\Users\Docker\Documents\Reports")).unwrap();
+    d.perform(&key("enter")).unwrap();
+    let top = d.windows().unwrap().into_iter().next().unwrap();
+    assert_eq!(
+        (top.title.as_str(), top.class_name.as_str(), top.process_id, top.focused),
+        ("Reports", "CabinetWClass", 1000, true)
+    );
+    assert!(!titles(&d).contains(&"Run".to_owned()), "the dialog closed: {:?}", titles(&d));
+
+    // A bare folder path, with a space and no quotes, typed with its Enter as pyautogui types "\n".
+    d.perform(&hotkey(&["win", "r"])).unwrap();
+    assert_eq!(
+        d.window_text(d.find_window("Run").unwrap()).as_deref(),
+        Some(r"explorer C:\Users\Docker\Documents\Reports")
+    );
+    d.perform(&type_text("C:\\Users\\Docker\\My Stuff\n")).unwrap();
+    assert_eq!(focused_title(&d), "My Stuff", "typing replaced the offered command: {:?}", titles(&d));
+
+    // `notepad <file>`, typed a character at a time.
+    d.perform(&hotkey(&["win", "r"])).unwrap();
+    d.perform(&Action::TypeText {
+        text: "notepad C:\\Users\\Docker\\Documents\\notes.txt\n".into(),
+        interval_ms: Some(1),
+    })
+    .unwrap();
+    let top = d.windows().unwrap().into_iter().next().unwrap();
+    assert_eq!((top.title.as_str(), top.focused), ("notes.txt - Notepad", true));
+    assert_eq!(d.window_text(top.id).as_deref(), Some("hello"));
+    assert!(d.find_window("Run").is_none());
+}
+
+#[test]
+fn a_run_command_that_names_nothing_gets_a_message_box() {
+    let d = stub();
+    d.perform(&hotkey(&["win", "r"])).unwrap();
+    let run = d.find_window("Run").unwrap();
+    // An empty command does nothing, as Windows' OK button is disabled then.
+    d.perform(&key("enter")).unwrap();
+    assert_eq!(focused_title(&d), "Run");
+    d.perform(&type_text("no-such-program-xyz --flag")).unwrap();
+    d.perform(&key("enter")).unwrap();
+    let top = d.windows().unwrap().into_iter().next().unwrap();
+    assert_eq!(
+        (top.title.as_str(), top.class_name.as_str(), top.process_name.as_str(), top.focused),
+        ("no-such-program-xyz --flag", "#32770", "explorer.exe", true)
+    );
+    let tree = d.accessibility(A11yBackend::Uia, &TreeBudget::WAA, true).unwrap();
+    let texts: Vec<&str> = tree.windows[0].children.iter().map(|c| c.name.as_str()).collect();
+    assert!(texts.iter().any(|t| t.contains("cannot find 'no-such-program-xyz'")), "{texts:?}");
+    // Typing into the message box changes nothing; Enter dismisses it and the Run dialog is back.
+    d.perform(&type_text("abc")).unwrap();
+    d.perform(&key("enter")).unwrap();
+    assert_eq!(focused_title(&d), "Run");
+    assert_eq!(d.window_text(run).as_deref(), Some("no-such-program-xyz --flag"));
+    // A shell line with operators is nothing the dialog starts either: no host process runs.
+    d.perform(&hotkey(&["ctrl", "a"])).unwrap();
+    d.perform(&type_text("touch x && echo y")).unwrap();
+    d.perform(&key("enter")).unwrap();
+    assert_eq!(focused_title(&d), "touch x && echo y");
+    d.perform(&key("esc")).unwrap();
+    d.perform(&key("esc")).unwrap();
+    assert_eq!(titles(&d), ["Program Manager"], "esc closed both");
+}
+
+#[test]
+fn the_run_dialog_buttons_click() {
+    let d = stub_with(r#"{"dirs": ["C:\\Users\\Docker\\Documents\\Reports"]}"#);
+    d.perform(&hotkey(&["win", "r"])).unwrap();
+    let parts = run_dialog_parts(&d);
+    let cancel = parts.buttons.iter().find(|(b, _)| *b == super::window::DialogButton::Cancel).unwrap().1;
+    d.perform(&click(cancel.center().x, cancel.center().y)).unwrap();
+    assert_eq!(titles(&d), ["Program Manager"]);
+    d.perform(&hotkey(&["win", "r"])).unwrap();
+    d.perform(&type_text(r"C:\Users\Docker\Documents\Reports")).unwrap();
+    let ok = parts.buttons[0].1;
+    d.perform(&click(ok.center().x, ok.center().y)).unwrap();
+    assert_eq!(focused_title(&d), "Reports");
+    assert!(d.find_window("Run").is_none());
+}
+
+#[test]
+fn win_e_opens_file_explorer() {
+    let d = stub();
+    d.perform(&hotkey(&["win", "e"])).unwrap();
+    let top = d.windows().unwrap().into_iter().next().unwrap();
+    assert_eq!(
+        (top.title.as_str(), top.class_name.as_str(), top.process_name.as_str(), top.process_id, top.focused),
+        ("File Explorer", "CabinetWClass", "explorer.exe", 1000, true)
+    );
+}

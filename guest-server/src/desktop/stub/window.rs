@@ -10,6 +10,7 @@ use arena_shared::action::{Action, MouseButton};
 use arena_shared::geometry::{Point, Rect};
 use arena_shared::observation::{A11yNode, WindowInfo};
 
+use super::input::Effect;
 use super::registry::Registry;
 use crate::desktop::windows::shell;
 use crate::desktop::{ClipboardData, DesktopError, DesktopResult, WindowState};
@@ -208,6 +209,59 @@ pub(crate) fn layout(text: &str, cols: usize) -> Vec<VisualLine> {
     lines
 }
 
+/// A shell dialog the stub models: drawn and walked as its controls, not as a document.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub(crate) enum Dialog {
+    /// The Run dialog (`win+r`); its command field is the window's `text`.
+    Run,
+    /// A message box holding this message and an OK button.
+    Message(String),
+}
+
+/// A push button of a [`Dialog`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum DialogButton {
+    Ok,
+    Cancel,
+    Browse,
+}
+
+impl DialogButton {
+    pub(crate) fn label(self) -> &'static str {
+        match self {
+            DialogButton::Ok => "OK",
+            DialogButton::Cancel => "Cancel",
+            DialogButton::Browse => "Browse...",
+        }
+    }
+}
+
+/// The Run dialog's prompt, in our words (Windows' own sentence is Microsoft's text).
+pub(crate) const RUN_PROMPT: &str = "Type the name of a program, folder, document or Internet resource to open it.";
+/// The label of the Run dialog's command field, as Windows labels it.
+pub(crate) const RUN_FIELD_LABEL: &str = "Open:";
+/// The Run dialog's size.
+pub(crate) const RUN_SIZE: (i32, i32) = (420, 200);
+/// A message box's size.
+pub(crate) const MESSAGE_SIZE: (i32, i32) = (420, 160);
+/// Height of a dialog's command field and of its buttons.
+pub(crate) const CONTROL_H: i32 = 24;
+/// Width of a dialog button.
+pub(crate) const BUTTON_W: i32 = 84;
+/// A dialog's margin inside its body.
+const DIALOG_PAD: i32 = 14;
+
+/// Where a dialog's controls are: its text, its command field (the Run dialog's) and its buttons.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub(crate) struct DialogParts {
+    /// Where the text starts, and how many characters a line holds.
+    pub(crate) text_at: Point,
+    pub(crate) text_cols: usize,
+    /// The field's label position and the field.
+    pub(crate) field: Option<(Point, Rect)>,
+    pub(crate) buttons: Vec<(DialogButton, Rect)>,
+}
+
 /// A top-level window.
 #[derive(Debug, Clone)]
 pub(crate) struct Window {
@@ -234,6 +288,8 @@ pub(crate) struct Window {
     pub(crate) elements: Vec<A11yNode>,
     /// What the shell and UI Automation make of it (the scenario's window fields).
     pub(crate) model: WindowModel,
+    /// The shell dialog it is, if it is one.
+    pub(crate) dialog: Option<Dialog>,
 }
 
 /// A window's shell styles and UI Automation costs, as a scenario sets them.
@@ -302,6 +358,50 @@ impl Window {
         (cols, rows)
     }
 
+    /// The controls of a dialog window; `None` for other windows.
+    pub(crate) fn dialog_parts(&self) -> Option<DialogParts> {
+        let dialog = self.dialog.as_ref()?;
+        let body = self.body();
+        let text_at = Point::new(body.x + DIALOG_PAD, body.y + DIALOG_PAD);
+        let text_cols = ((body.width - 2 * DIALOG_PAD) / GLYPH_W).max(1) as usize;
+        let button_y = body.bottom() - DIALOG_PAD - CONTROL_H;
+        let row = |labels: &[DialogButton]| -> Vec<(DialogButton, Rect)> {
+            let n = labels.len() as i32;
+            labels
+                .iter()
+                .enumerate()
+                .map(|(i, b)| {
+                    let x = body.right() - DIALOG_PAD - (n - i as i32) * (BUTTON_W + 8) + 8;
+                    (*b, Rect::new(x, button_y, BUTTON_W, CONTROL_H))
+                })
+                .collect()
+        };
+        Some(match dialog {
+            Dialog::Run => {
+                let label_w = (RUN_FIELD_LABEL.len() as i32 + 1) * GLYPH_W;
+                let field_y = button_y - DIALOG_PAD - CONTROL_H;
+                let field = Rect::new(
+                    text_at.x + label_w,
+                    field_y,
+                    (body.width - 2 * DIALOG_PAD - label_w).max(GLYPH_W),
+                    CONTROL_H,
+                );
+                DialogParts {
+                    text_at,
+                    text_cols,
+                    field: Some((Point::new(text_at.x, field_y + (CONTROL_H - 8) / 2), field)),
+                    buttons: row(&[DialogButton::Ok, DialogButton::Cancel, DialogButton::Browse]),
+                }
+            }
+            Dialog::Message(_) => DialogParts { text_at, text_cols, field: None, buttons: row(&[DialogButton::Ok]) },
+        })
+    }
+
+    /// The dialog button at `p`, if any.
+    pub(crate) fn dialog_button_at(&self, p: Point) -> Option<DialogButton> {
+        self.dialog_parts()?.buttons.into_iter().find(|(_, r)| r.contains(p)).map(|(b, _)| b)
+    }
+
     pub(crate) fn hit(&self, p: Point) -> Option<Hit> {
         if self.is_desktop || !self.rect.contains(p) {
             return self.rect.contains(p).then_some(Hit::Body);
@@ -346,6 +446,7 @@ pub(crate) struct NewWindow {
     pub(crate) file: Option<PathBuf>,
     pub(crate) elements: Vec<A11yNode>,
     pub(crate) refuse_close: bool,
+    pub(crate) dialog: Option<Dialog>,
 }
 
 /// Held modifier keys, sided forms folded.
@@ -403,6 +504,10 @@ pub(crate) struct State {
     pub(crate) log: std::collections::VecDeque<Action>,
     pub(crate) shutdown: bool,
     pub(crate) wallpaper: Option<WallpaperCache>,
+    /// What the action being performed asks of the rest of the desktop (see [`super::input::perform`]).
+    pub(crate) effects: Vec<Effect>,
+    /// The command the Run dialog ran last, which it offers again (selected) when it opens.
+    pub(crate) run_mru: Option<String>,
 }
 
 impl State {
@@ -441,6 +546,8 @@ impl State {
             log: std::collections::VecDeque::new(),
             shutdown: false,
             wallpaper: None,
+            effects: Vec::new(),
+            run_mru: None,
         };
         let full = state.screen_rect();
         let pid = state.alloc_pid();
@@ -463,6 +570,7 @@ impl State {
             file: None,
             elements: Vec::new(),
             model: WindowModel::default(),
+            dialog: None,
         });
         state.focus = id;
         state
@@ -488,6 +596,65 @@ impl State {
     pub(crate) fn work_area(&self) -> Rect {
         let r = self.screen_rect();
         Rect::new(0, 0, r.width, (r.height - TASKBAR_H).max(1))
+    }
+
+    /// The process id of the shell (explorer.exe), which owns Program Manager, File
+    /// Explorer windows and the shell's dialogs.
+    pub(crate) fn shell_pid(&self) -> u32 {
+        self.windows.iter().find(|w| w.is_desktop).map_or(FIRST_PID, |w| w.pid)
+    }
+
+    /// `win+r`: the Run dialog at the bottom left of the work area, focused, offering the
+    /// last command it ran selected; Windows keeps one, so a second `win+r` brings it back.
+    pub(crate) fn open_run_dialog(&mut self) {
+        let mru = self.run_mru.clone().unwrap_or_default();
+        if let Some(id) = self.windows.iter().find(|w| w.dialog == Some(Dialog::Run)).map(|w| w.id) {
+            if let Some(window) = self.window_mut(id) {
+                window.minimized = false;
+                if let Some(buf) = window.text.as_mut() {
+                    buf.select_all();
+                }
+            }
+            // The id came from the window list just now.
+            let _ = self.activate(id);
+            return;
+        }
+        let work = self.work_area();
+        let (w, h) = RUN_SIZE;
+        let rect = Rect::new(work.x + 12, (work.bottom() - h - 12).max(0), w, h);
+        let pid = self.shell_pid();
+        let id = self.open(NewWindow {
+            title: "Run".into(),
+            class_name: "#32770".into(),
+            process_name: "explorer.exe".into(),
+            pid: Some(pid),
+            rect: Some(rect),
+            text: Some(mru),
+            dialog: Some(Dialog::Run),
+            ..NewWindow::default()
+        });
+        if let Some(buf) = self.window_mut(id).and_then(|w| w.text.as_mut()) {
+            if !buf.text.is_empty() {
+                buf.select_all();
+            }
+        }
+    }
+
+    /// A message box of the shell, centred on the work area and focused.
+    pub(crate) fn open_message_box(&mut self, title: &str, message: &str) -> u64 {
+        let work = self.work_area();
+        let (w, h) = MESSAGE_SIZE;
+        let rect = Rect::new(work.x + (work.width - w) / 2, work.y + (work.height - h) / 2, w, h);
+        let pid = self.shell_pid();
+        self.open(NewWindow {
+            title: title.to_owned(),
+            class_name: "#32770".into(),
+            process_name: "explorer.exe".into(),
+            pid: Some(pid),
+            rect: Some(rect),
+            dialog: Some(Dialog::Message(message.to_owned())),
+            ..NewWindow::default()
+        })
     }
 
     pub(crate) fn desktop_id(&self) -> u64 {
@@ -540,6 +707,7 @@ impl State {
                 file: new.file,
                 elements: new.elements,
                 model: WindowModel::default(),
+                dialog: new.dialog,
             },
         );
         self.focus = id;

@@ -120,8 +120,7 @@ pub fn recommended_size(screen: (u32, u32)) -> (u32, u32) {
         return t;
     }
     let long = f64::from(w.max(h));
-    let scale = (1568.0 / long).min((1_150_000.0 / (f64::from(w) * f64::from(h))).sqrt()).min(1.0);
-    (((f64::from(w) * scale) as u32).max(1), ((f64::from(h) * scale) as u32).max(1))
+    super::scaled_size((w, h), (1568.0 / long).min((1_150_000.0 / (f64::from(w) * f64::from(h))).sqrt()))
 }
 
 /// What the next message must answer about a `tool_use` of the last answer.
@@ -261,7 +260,16 @@ pub(crate) fn ending(text: String, refused: bool, logs: Vec<StepLog>) -> Predict
     } else {
         (final_decision(&text), text)
     };
-    Prediction { response, actions: vec![decision], marks: None, raw_error: None, logs, timings: Default::default() }
+    Prediction {
+        response,
+        actions: vec![decision],
+        marks: None,
+        raw_error: None,
+        logs,
+        timings: Default::default(),
+        // The agent translated its model's coordinates: its code is in pixels.
+        coords: Some(crate::actionspace::Coords::Pixels),
+    }
 }
 
 #[async_trait::async_trait]
@@ -399,6 +407,7 @@ impl Agent for AnthropicAgent {
             raw_error,
             logs,
             timings: Default::default(),
+            coords: Some(crate::actionspace::Coords::Pixels),
         })
     }
 }

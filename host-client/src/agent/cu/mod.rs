@@ -105,6 +105,22 @@ pub(crate) fn base64_png(png: &[u8]) -> String {
     base64::engine::general_purpose::STANDARD.encode(png)
 }
 
+/// `screen` scaled by `scale` (1 at most: a screenshot is never scaled up), each
+/// side truncated to whole pixels and at least 1. The one screenshot-size rule the
+/// agents that scale share (Anthropic's fallback, OpenAI's bound).
+pub(crate) fn scaled_size(screen: (u32, u32), scale: f64) -> (u32, u32) {
+    let scale = scale.min(1.0);
+    // A hair above the product, so that an exact fit (1440 * 1024/1440) is not cut a pixel short.
+    let side = |v: u32| ((f64::from(v.max(1)) * scale + 1e-6) as u32).max(1);
+    (side(screen.0), side(screen.1))
+}
+
+/// `screen` scaled down, keeping its aspect ratio, to fit within `bound`; as it is when it fits.
+pub(crate) fn fit_within(screen: (u32, u32), bound: (u32, u32)) -> (u32, u32) {
+    let (w, h) = (f64::from(screen.0.max(1)), f64::from(screen.1.max(1)));
+    scaled_size(screen, (f64::from(bound.0) / w).min(f64::from(bound.1) / h))
+}
+
 /// `png` resized to `size` (width, height), as PNG; the same bytes when it already is that size.
 ///
 /// # Errors
@@ -201,6 +217,15 @@ mod tests {
         assert_eq!(parts[0]["source"]["media_type"], "image/png");
         assert!(parts[1]["image_url"].as_str().unwrap().starts_with("(an image"));
         assert_eq!(parts[2]["text"], "data");
+    }
+
+    #[test]
+    fn sizes_fit_within_a_bound_keeping_the_aspect_ratio() {
+        assert_eq!(fit_within((1440, 900), (1024, 768)), (1024, 640));
+        assert_eq!(fit_within((1920, 1080), (1024, 768)), (1024, 576));
+        assert_eq!(fit_within((1024, 768), (1024, 768)), (1024, 768));
+        assert_eq!(fit_within((800, 600), (1024, 768)), (800, 600), "never scaled up");
+        assert_eq!(fit_within((768, 2000), (1024, 768)), (294, 768));
     }
 
     #[test]

@@ -15,14 +15,18 @@
 //! - An answer with no `computer_call` ends the episode: `FAIL` when its text says
 //!   FAIL (the instructions ask for that word), `DONE` otherwise; a `refusal`
 //!   content part is `FAIL`.
-//! - Screenshots go at the screen's own size, so coordinates are screen pixels.
+//! - Screenshots: the tool's declared `display_width`/`display_height` is the size
+//!   of every screenshot sent ([`display_size`]): the screen's own when it fits
+//!   within [`MAX_DISPLAY`], else the screen scaled down to fit it (aspect ratio
+//!   kept, by the same resize and coordinate convention the Anthropic agent uses,
+//!   `Coords::Image`), and the model's coordinates are scaled back to the screen's.
 //!
 //! The instructions text is this project's own wording.
 
 use serde_json::{json, Value};
 
 use super::anthropic::ending;
-use super::{base64_png, exchange_logs, screen_of, Endpoint};
+use super::{base64_png, exchange_logs, resized_png, screen_of, Endpoint};
 use crate::actionspace::{self, ActionSpace, Context, Coords, Step};
 use crate::agent::llm::{ApiKind, ModelClient};
 use crate::agent::{Agent, AgentAction, AgentError, Observation, Prediction};
@@ -36,6 +40,21 @@ pub const INSTRUCTIONS: &str =
     "You are operating a Windows 11 desktop with the computer tool to complete the user's task. \
 Do not ask for confirmation; act. When the task is complete, answer without a computer action and end with the word \
 DONE. If it cannot be done on this computer, answer without a computer action and end with the word FAIL.";
+
+/// The largest display the agent declares to the model. OpenAI's computer-use guide
+/// (<https://platform.openai.com/docs/guides/tools-computer-use>, the
+/// `computer_use_preview` tool) has the harness declare the display it sends
+/// screenshots of, and every example there declares `display_width` 1024 and
+/// `display_height` 768, with the browser viewport or virtual screen set to match.
+/// The guide names no hard maximum for this model; a larger guest screen is sent at
+/// that scale rather than at a size the published setup never uses.
+pub const MAX_DISPLAY: (u32, u32) = (1024, 768);
+
+/// The display size declared in the tool for a guest screen, and the size every
+/// screenshot is sent at (see [`MAX_DISPLAY`]).
+pub fn display_size(screen: (u32, u32)) -> (u32, u32) {
+    super::fit_within(screen, MAX_DISPLAY)
+}
 
 /// What to do with a call's `pending_safety_checks`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, clap::ValueEnum)]
@@ -110,7 +129,8 @@ impl Agent for OpenAiAgent {
 
     async fn predict(&mut self, obs: &Observation) -> Result<Prediction, AgentError> {
         let (png, screen) = screen_of(obs);
-        let image_url = format!("data:image/png;base64,{}", base64_png(png));
+        let size = display_size(screen);
+        let image_url = format!("data:image/png;base64,{}", base64_png(&resized_png(png, size)?));
         let input = match (&self.previous_response_id, &self.pending) {
             (Some(_), Some(call)) => json!([{
                 "type": "computer_call_output",
@@ -131,8 +151,8 @@ impl Agent for OpenAiAgent {
             "instructions": INSTRUCTIONS,
             "tools": [{
                 "type": "computer_use_preview",
-                "display_width": screen.0,
-                "display_height": screen.1,
+                "display_width": size.0,
+                "display_height": size.1,
                 "environment": "windows",
             }],
             "input": input,
@@ -197,11 +217,12 @@ impl Agent for OpenAiAgent {
                     raw_error: None,
                     logs,
                     timings: Default::default(),
+                    coords: Some(crate::actionspace::Coords::Pixels),
                 });
             }
         }
-        // Screenshots go at the screen's size, so the model's pixels are the screen's.
-        let ctx = Context { screen, cursor: (0, 0), coords: Coords::Pixels };
+        // The model's pixels are the declared display's: scaled back to the screen's.
+        let ctx = Context { screen, cursor: (0, 0), coords: Coords::Image { width: size.0, height: size.1 } };
         let (actions, raw_error) = match actionspace::parse(ActionSpace::OpenAi, &action, &ctx) {
             Ok(steps) => (
                 actionspace::to_agent_actions(
@@ -214,6 +235,14 @@ impl Agent for OpenAiAgent {
         // Acknowledged checks are exactly the pending ones, with their id, code and message.
         self.previous_response_id = Some(id);
         self.pending = Some(PendingCall { call_id: call_id.to_owned(), acknowledged: checks });
-        Ok(Prediction { response, actions, marks: None, raw_error, logs, timings: Default::default() })
+        Ok(Prediction {
+            response,
+            actions,
+            marks: None,
+            raw_error,
+            logs,
+            timings: Default::default(),
+            coords: Some(crate::actionspace::Coords::Pixels),
+        })
     }
 }

@@ -30,6 +30,7 @@ use std::time::Duration;
 
 use serde_json::{json, Value};
 
+use crate::actionspace::Coords;
 use crate::agent::{Agent, AgentAction, AgentError, LogValue, Observation, Prediction, StepLog};
 use crate::som::Marks;
 use crate::task::Task;
@@ -95,7 +96,21 @@ pub fn check_hello(answer: Value) -> Result<AgentHello, String> {
         ));
     }
     spaces::check_space(&hello.action_space)?;
+    if let Some(coords) = &hello.coords {
+        hello_coords(coords)?;
+    }
     Ok(hello)
+}
+
+/// A coordinate convention named in a `hello`.
+fn hello_coords(name: &str) -> Result<Coords, String> {
+    if !protocol::COORDS.contains(&name) {
+        return Err(format!(
+            "unknown coordinate convention {name:?} in hello; this harness accepts {}",
+            protocol::COORDS.join(", ")
+        ));
+    }
+    name.parse()
 }
 
 /// Reads one agent message, naming what was wrong with it.
@@ -152,12 +167,30 @@ pub struct ExternalAgent {
     reset_sent: bool,
     /// Longest wait for one answer.
     timeout: Duration,
+    /// The run's coordinate convention (`--coords`), unless the agent's `hello` names one.
+    coords: Coords,
 }
 
 impl ExternalAgent {
     /// An agent reached through `connector`, waiting at most `timeout` for each answer.
     pub fn new(name: &str, connector: std::sync::Arc<dyn Connector>, timeout: Duration) -> ExternalAgent {
-        ExternalAgent { name: name.to_owned(), connector, transport: None, task: None, reset_sent: false, timeout }
+        ExternalAgent {
+            name: name.to_owned(),
+            connector,
+            transport: None,
+            task: None,
+            reset_sent: false,
+            timeout,
+            coords: Coords::Pixels,
+        }
+    }
+
+    /// The run's coordinate convention (`--coords`) for this agent's `pyautogui` and
+    /// `computer_13` answers; a convention named in its `hello` wins.
+    #[must_use]
+    pub fn with_coords(mut self, coords: Coords) -> ExternalAgent {
+        self.coords = coords;
+        self
     }
 
     fn error(&self, reason: impl Into<String>) -> AgentError {
@@ -256,15 +289,20 @@ impl Agent for ExternalAgent {
             AgentMessage::Error { message } => return Err(self.error(format!("the agent gave up: {message}"))),
             other => return Err(self.error(format!("expected an act answer to observe, got {}", kind(&other)))),
         };
-        let default_space = self.transport.as_ref().map(|t| t.hello().action_space.clone()).unwrap_or_default();
+        let hello = self.transport.as_ref().map(|t| t.hello());
+        let default_space = hello.map(|h| h.action_space.clone()).unwrap_or_default();
+        // The handshake checked the name.
+        let coords = hello.and_then(|h| h.coords.as_deref()).and_then(|c| hello_coords(c).ok()).unwrap_or(self.coords);
         // An action outside its space is the agent's mistake, not a broken
         // exchange: the episode ends, and the process serves the next one.
-        prediction(act, &default_space, marks, obs.screen_size()).map_err(|reason| self.error(reason))
+        prediction(act, &default_space, marks, obs.screen_size(), coords).map_err(|reason| self.error(reason))
     }
 }
 
 /// An `act` answer as the episode's [`Prediction`]: actions in order, then the
 /// decision; each `record` field becomes a field of the step's trajectory line.
+/// `coords` is the convention of the answer's `computer_13` actions (translated
+/// here) and of its pyautogui code (rescaled where code runs, `crate::agent::exec`).
 ///
 /// # Errors
 ///
@@ -274,9 +312,10 @@ pub fn prediction(
     default_space: &str,
     marks: Option<Marks>,
     screen: (u32, u32),
+    coords: Coords,
 ) -> Result<Prediction, String> {
     let space = act.action_space.as_deref().unwrap_or(default_space);
-    let mut actions = spaces::to_actions(space, &act.actions, screen)?;
+    let mut actions = spaces::to_actions(space, &act.actions, screen, coords)?;
     match act.decision {
         Some(Decision::Done) => actions.push(AgentAction::Done),
         Some(Decision::Fail) => actions.push(AgentAction::Fail),
@@ -290,5 +329,52 @@ pub fn prediction(
     let mut logs: Vec<StepLog> =
         act.record.into_iter().map(|(key, value)| StepLog { key, value: LogValue::Inline(value) }).collect();
     logs.push(StepLog { key: "action_space".into(), value: LogValue::Inline(Value::String(space.to_owned())) });
-    Ok(Prediction { response: act.response, actions, marks, raw_error: None, logs, timings: Default::default() })
+    logs.push(StepLog { key: "coords".into(), value: LogValue::Inline(Value::String(coords.name())) });
+    Ok(Prediction {
+        response: act.response,
+        actions,
+        marks,
+        raw_error: None,
+        logs,
+        timings: Default::default(),
+        coords: Some(coords),
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn hello(extra: Value) -> Value {
+        let mut hello = json!({"type": "hello", "protocol": 1, "action_space": "pyautogui"});
+        if let (Some(hello), Some(extra)) = (hello.as_object_mut(), extra.as_object()) {
+            hello.extend(extra.clone());
+        }
+        hello
+    }
+
+    #[test]
+    fn a_hello_may_name_a_coordinate_convention_and_an_unknown_one_is_refused() {
+        assert_eq!(check_hello(hello(json!({}))).expect("no coords").coords, None);
+        let named = check_hello(hello(json!({"coords": "grid1000"}))).expect("grid1000");
+        assert_eq!(named.coords.as_deref(), Some("grid1000"));
+        let err = check_hello(hello(json!({"coords": "percent"}))).expect_err("an unknown convention");
+        assert!(err.contains("\"percent\"") && err.contains("pixels, fraction, grid1000"), "{err}");
+        for name in protocol::COORDS {
+            assert_eq!(hello_coords(name).expect("each named convention parses").name(), name);
+        }
+    }
+
+    #[test]
+    fn the_hello_schema_lists_the_coordinate_conventions_the_harness_accepts() {
+        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../schemas/agent-protocol/agent-hello.json");
+        let schema: Value = serde_json::from_str(&std::fs::read_to_string(path).expect("the schema")).expect("JSON");
+        let listed: Vec<&str> = schema["properties"]["coords"]["enum"]
+            .as_array()
+            .expect("an enum")
+            .iter()
+            .filter_map(Value::as_str)
+            .collect();
+        assert_eq!(listed, protocol::COORDS);
+    }
 }

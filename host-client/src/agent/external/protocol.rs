@@ -17,6 +17,9 @@ pub const PROTOCOL_VERSION: u32 = 1;
 /// The action spaces an answer may use.
 pub const ACTION_SPACES: [&str; 4] = ["computer", "pyautogui", "computer_13", "typed"];
 
+/// The coordinate conventions an agent may name in its `hello` (`--coords`'s).
+pub const COORDS: [&str; 3] = ["pixels", "fraction", "grid1000"];
+
 /// The harness's first message.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Hello {
@@ -95,6 +98,10 @@ pub struct AgentHello {
     pub agent: Option<String>,
     /// The action space its answers use unless an answer names another.
     pub action_space: String,
+    /// What the coordinates of its `pyautogui` and `computer_13` answers are
+    /// measured in ([`COORDS`]); absent, the run's `--coords`.
+    #[serde(default)]
+    pub coords: Option<String>,
     #[serde(default)]
     pub observation: ObservationWants,
 }

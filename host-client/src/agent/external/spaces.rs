@@ -12,10 +12,11 @@ use arena_shared::action::Action;
 use crate::actionspace::{Context, Coords};
 use crate::agent::AgentAction;
 
-/// `computer_13` actions (OSWorld's JSON actions, in screen pixels as OSWorld's are) as the
-/// episode's actions, through the action-space parsers of `crate::actionspace`.
-fn computer13(value: &Value, screen: (u32, u32)) -> Result<Vec<AgentAction>, String> {
-    let ctx = Context::new(screen, Coords::Pixels);
+/// `computer_13` actions (OSWorld's JSON actions, in `coords`: screen pixels as OSWorld's
+/// are, unless the run or the agent says otherwise) as the episode's actions, through the
+/// action-space parsers of `crate::actionspace`.
+fn computer13(value: &Value, screen: (u32, u32), coords: Coords) -> Result<Vec<AgentAction>, String> {
+    let ctx = Context::new(screen, coords);
     let steps = crate::actionspace::computer13::parse(value, &ctx).map_err(|err| err.to_string())?;
     Ok(crate::actionspace::to_agent_actions(&steps))
 }
@@ -36,13 +37,19 @@ pub fn check_space(space: &str) -> Result<(), String> {
     }
 }
 
-/// The answer's `actions` in `space`, in order.
+/// The answer's `actions` in `space`, in order; `computer_13` coordinates are in
+/// `coords` (pyautogui code is rescaled where it runs, `crate::agent::exec`).
 ///
 /// # Errors
 ///
 /// An unknown space, or an action that is not of its space (a code action that
 /// is not a string, a typed action that does not parse), named by its index.
-pub fn to_actions(space: &str, actions: &[Value], screen: (u32, u32)) -> Result<Vec<AgentAction>, String> {
+pub fn to_actions(
+    space: &str,
+    actions: &[Value],
+    screen: (u32, u32),
+    coords: Coords,
+) -> Result<Vec<AgentAction>, String> {
     check_space(space)?;
     let mut out = Vec::with_capacity(actions.len());
     for (i, action) in actions.iter().enumerate() {
@@ -63,7 +70,7 @@ pub fn to_actions(space: &str, actions: &[Value], screen: (u32, u32)) -> Result<
                 }
             }
             "computer_13" => {
-                out.extend(computer13(action, screen).map_err(bad)?);
+                out.extend(computer13(action, screen, coords).map_err(bad)?);
                 continue;
             }
             _ => {
@@ -97,38 +104,58 @@ mod tests {
     #[test]
     fn each_space_maps_its_actions_and_the_decision_words() {
         assert_eq!(
-            to_actions("pyautogui", &[json!("pyautogui.click(1, 2)"), json!("DONE")], (1440, 900)).expect("pyautogui"),
+            to_actions("pyautogui", &[json!("pyautogui.click(1, 2)"), json!("DONE")], (1440, 900), Coords::Pixels)
+                .expect("pyautogui"),
             vec![AgentAction::Pyautogui("pyautogui.click(1, 2)".into()), AgentAction::Done]
         );
         assert_eq!(
-            to_actions("computer", &[json!("computer.keyboard.write('x')")], (1440, 900)).expect("computer"),
+            to_actions("computer", &[json!("computer.keyboard.write('x')")], (1440, 900), Coords::Pixels)
+                .expect("computer"),
             vec![AgentAction::Computer("computer.keyboard.write('x')".into())]
         );
         assert_eq!(
-            to_actions("typed", &[json!({"type": "type_text", "text": "3"}), json!("WAIT")], (1440, 900))
-                .expect("typed"),
+            to_actions(
+                "typed",
+                &[json!({"type": "type_text", "text": "3"}), json!("WAIT")],
+                (1440, 900),
+                Coords::Pixels
+            )
+            .expect("typed"),
             vec![AgentAction::Typed(vec![Action::TypeText { text: "3".into(), interval_ms: None }]), AgentAction::Wait]
         );
     }
 
     #[test]
     fn bad_actions_are_named_by_index_and_space() {
-        let err =
-            to_actions("pyautogui", &[json!("DONE"), json!({"x": 1})], (1440, 900)).expect_err("an object is no code");
+        let err = to_actions("pyautogui", &[json!("DONE"), json!({"x": 1})], (1440, 900), Coords::Pixels)
+            .expect_err("an object is no code");
         assert!(err.starts_with("actions[1] in action space pyautogui: expected a code string"), "{err}");
-        let err = to_actions("typed", &[json!({"type": "teleport"})], (1440, 900)).expect_err("unknown typed action");
+        let err = to_actions("typed", &[json!({"type": "teleport"})], (1440, 900), Coords::Pixels)
+            .expect_err("unknown typed action");
         assert!(err.contains("actions[0]") && err.contains("teleport"), "{err}");
-        let err = to_actions("morse", &[], (1440, 900)).expect_err("unknown space");
+        let err = to_actions("morse", &[], (1440, 900), Coords::Pixels).expect_err("unknown space");
         assert!(err.contains("\"morse\"") && err.contains("computer_13"), "{err}");
     }
 
     #[test]
     fn computer_13_goes_through_the_action_space_parser() {
-        let got =
-            to_actions("computer_13", &[json!({"action_type": "TYPING", "parameters": {"text": "3"}})], (1440, 900))
-                .expect("computer_13");
+        let got = to_actions(
+            "computer_13",
+            &[json!({"action_type": "TYPING", "parameters": {"text": "3"}})],
+            (1440, 900),
+            Coords::Pixels,
+        )
+        .expect("computer_13");
         assert_eq!(got, vec![AgentAction::Typed(vec![Action::TypeText { text: "3".into(), interval_ms: None }])]);
-        let err = to_actions("computer_13", &[json!({"action_type": "TELEPORT"})], (1440, 900)).expect_err("unknown");
+        let err = to_actions("computer_13", &[json!({"action_type": "TELEPORT"})], (1440, 900), Coords::Pixels)
+            .expect_err("unknown");
+        let click = json!({"action_type": "CLICK", "x": 250, "y": 750});
+        let got = to_actions("computer_13", &[click], (1440, 900), Coords::Grid1000).expect("computer_13 on the grid");
+        let AgentAction::Typed(actions) = &got[0] else { panic!("typed actions: {got:?}") };
+        assert!(
+            matches!(actions[..], [Action::Click { x: Some(360), y: Some(675), .. }]),
+            "the run's grid1000 puts (250, 750) at (360, 675) of 1440x900: {actions:?}"
+        );
         assert!(err.contains("actions[0] in action space computer_13"), "{err}");
     }
 }

@@ -226,6 +226,7 @@ static PLACEHOLDER_HELLO: AgentHello = AgentHello {
     protocol: super::protocol::PROTOCOL_VERSION,
     agent: None,
     action_space: String::new(),
+    coords: None,
     observation: super::protocol::ObservationWants {
         screenshot: None,
         a11y: super::protocol::TreeMode::None,
