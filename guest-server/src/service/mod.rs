@@ -229,7 +229,8 @@ pub enum ServiceCliError {
 
 impl ServiceCliError {
     /// The process exit code for this error: 2 for a usage problem (wrong platform,
-    /// bad options), 1 for a failure while doing the work.
+    /// bad options, one of the two exes missing beside the other), 1 for a failure
+    /// while doing the work.
     pub fn exit_code(&self) -> u8 {
         match self {
             ServiceCliError::OnlyOnWindows(_)
