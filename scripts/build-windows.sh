@@ -1,6 +1,8 @@
 #!/usr/bin/env bash
-# Cross-builds arena-guest.exe for x86_64-pc-windows-gnu on Debian, and the
-# bcryptprimitives.dll shim that lets Rust programs start under Wine 8.
+# Cross-builds the guest's two exes for x86_64-pc-windows-gnu on Debian: arena-guest.exe
+# (the server, a console program) and arena-guest-logon.exe (the logon task's launcher, a
+# GUI-subsystem program; they ship together), and the bcryptprimitives.dll shim that lets
+# Rust programs start under Wine 8.
 #
 # Usage: scripts/build-windows.sh [--release] [--no-install]
 #
@@ -11,7 +13,8 @@
 # to target/windows so it never fights the native build over target/debug.
 #
 # Run as root, it installs the Debian packages it needs when they are missing.
-# Prints the exe path and size last; other scripts read the line `exe: PATH`.
+# Prints the exes' paths and sizes last; other scripts read the lines `exe: PATH` and
+# `launcher: PATH`.
 set -euo pipefail
 
 cd "$(dirname "$0")/.."
@@ -22,7 +25,7 @@ for arg in "$@"; do
     case "$arg" in
         --release) PROFILE=release ;;
         --no-install) INSTALL=0 ;;
-        -h|--help) sed -n '2,14p' "$0"; exit 0 ;;
+        -h|--help) sed -n '2,17p' "$0"; exit 0 ;;
         *) echo "unknown argument: $arg" >&2; exit 2 ;;
     esac
 done
@@ -54,7 +57,7 @@ export RUSTC_BOOTSTRAP=1
 export CARGO_TARGET_X86_64_PC_WINDOWS_GNU_LINKER=x86_64-w64-mingw32-gcc
 export CARGO_TARGET_DIR="$ROOT/target/windows"
 
-args=(build -p arena-guest --bin arena-guest --target "$TARGET" -Zbuild-std=std,panic_abort)
+args=(build -p arena-guest --bin arena-guest --bin arena-guest-logon --target "$TARGET" -Zbuild-std=std,panic_abort)
 if [ "$PROFILE" = release ]; then
     args+=(--release)
 fi
@@ -71,10 +74,13 @@ if [ ! -f "$SHIM" ] || [ scripts/wine/bcryptprimitives.c -nt "$SHIM" ] || [ scri
 fi
 
 EXE="$CARGO_TARGET_DIR/$TARGET/$PROFILE/arena-guest.exe"
-if [ ! -f "$EXE" ]; then
-    echo "the build finished but $EXE is missing" >&2
-    exit 1
-fi
+LAUNCHER="$CARGO_TARGET_DIR/$TARGET/$PROFILE/arena-guest-logon.exe"
+for f in "$EXE" "$LAUNCHER"; do
+    if [ ! -f "$f" ]; then
+        echo "the build finished but $f is missing" >&2
+        exit 1
+    fi
+done
 size=$(stat -c %s "$EXE")
 echo "shim: $SHIM"
 echo "exe size: $size bytes ($(( size / 1024 )) KiB, $PROFILE, unstripped)"
@@ -84,4 +90,6 @@ if command -v x86_64-w64-mingw32-strip >/dev/null; then
     stripped=$(stat -c %s "$CARGO_TARGET_DIR/arena-guest.stripped.exe")
     echo "exe size stripped: $stripped bytes ($(( stripped / 1024 )) KiB)"
 fi
+echo "launcher size: $(stat -c %s "$LAUNCHER") bytes ($PROFILE, unstripped)"
 echo "exe: $EXE"
+echo "launcher: $LAUNCHER"

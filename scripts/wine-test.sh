@@ -1,5 +1,6 @@
 #!/usr/bin/env bash
-# Runs the Windows backend's test suite under Wine: cross-builds arena-guest.exe,
+# Runs the Windows backend's test suite under Wine: cross-builds arena-guest.exe and
+# arena-guest-logon.exe (the logon task's launcher, found beside it),
 # starts a virtual display and a private Wine prefix, then runs tests/tests/wine.rs,
 # which drives the exe with the real host client.
 #
@@ -22,7 +23,7 @@ for arg in "$@"; do
     case "$arg" in
         --no-build) BUILD=0 ;;
         --release) PROFILE=release ;;
-        -h|--help) sed -n '2,16p' "$0"; exit 0 ;;
+        -h|--help) sed -n '2,15p' "$0"; exit 0 ;;
         *) echo "unknown argument: $arg" >&2; exit 2 ;;
     esac
 done
@@ -44,11 +45,12 @@ fi
 
 TARGET_DIR="$ROOT/target/windows"
 EXE="$TARGET_DIR/x86_64-pc-windows-gnu/$PROFILE/arena-guest.exe"
+LAUNCHER="$TARGET_DIR/x86_64-pc-windows-gnu/$PROFILE/arena-guest-logon.exe"
 SHIM="$TARGET_DIR/wine/bcryptprimitives.dll"
 if [ "$BUILD" = 1 ]; then
     if [ "$PROFILE" = release ]; then scripts/build-windows.sh --release; else scripts/build-windows.sh; fi
 fi
-for f in "$EXE" "$SHIM"; do
+for f in "$EXE" "$LAUNCHER" "$SHIM"; do
     [ -f "$f" ] || { echo "$f is missing: run scripts/build-windows.sh" >&2; exit 1; }
 done
 

@@ -3,7 +3,9 @@
 Installs arena-guest.exe into this Windows image and checks that it answers.
 
 .DESCRIPTION
-Copies the exe from the OEM folder to Program Files, provisions the API token
+Copies the guest's two exes from the OEM folder to Program Files (arena-guest.exe,
+the server, and arena-guest-logon.exe, the logon task's launcher, which must sit
+beside it), provisions the API token
 into a file only SYSTEM and Administrators can read, opens the guest's port in
 the firewall for the host-side network only, registers the guest to start in
 the interactive user's session (the exe's own Windows service by default, or a
@@ -14,7 +16,7 @@ Running it twice changes nothing: every step looks before it acts.
 
 Exit codes (setup.ps1 and install.bat pass them on):
   0  installed, and the guest reports every component up
-  2  a required input is missing (the exe, the token, or an elevated prompt)
+  2  a required input is missing (an exe, the token, or an elevated prompt)
   3  an install step failed (copy, ACL, firewall, service or task registration)
   4  installed, but the guest was not healthy within -HealthTimeoutSeconds
 #>
@@ -106,43 +108,59 @@ function Get-FileSha256([string]$Path) {
 if (-not (Test-Elevated)) {
     Stop-WithCode $ExitMissingInput 'run this from an elevated PowerShell (it installs a service and a firewall rule)'
 }
-$sourceExe = Join-Path $OemDir 'arena-guest.exe'
+# The server and the logon task's launcher ship together: `logon-task install` refuses
+# to register a task whose launcher is not beside arena-guest.exe.
+$ExeNames = @('arena-guest.exe', 'arena-guest-logon.exe')
 $sourceToken = Join-Path $OemDir 'arena-token'
 $installedExe = Join-Path $InstallDir 'arena-guest.exe'
-if (-not (Test-Path -LiteralPath $sourceExe -PathType Leaf) -and -not (Test-Path -LiteralPath $installedExe -PathType Leaf)) {
-    Stop-WithCode $ExitMissingInput "no arena-guest.exe in $OemDir (stage the folder with: arena prep stage --out DIR)"
+$installedLauncher = Join-Path $InstallDir 'arena-guest-logon.exe'
+foreach ($name in $ExeNames) {
+    if (-not (Test-Path -LiteralPath (Join-Path $OemDir $name) -PathType Leaf) -and
+        -not (Test-Path -LiteralPath (Join-Path $InstallDir $name) -PathType Leaf)) {
+        Stop-WithCode $ExitMissingInput "no $name in $OemDir (stage the folder with: arena prep stage --out DIR)"
+    }
 }
 if (-not (Test-Path -LiteralPath $sourceToken -PathType Leaf) -and -not (Test-Path -LiteralPath $TokenPath -PathType Leaf)) {
     Stop-WithCode $ExitMissingInput "no arena-token in $OemDir and none installed at $TokenPath"
 }
 
 try {
-    # ---- 1. the exe -----------------------------------------------------------
-    if (Test-Path -LiteralPath $sourceExe -PathType Leaf) {
-        $same = (Test-Path -LiteralPath $installedExe -PathType Leaf) -and
-            ((Get-FileSha256 $sourceExe) -eq (Get-FileSha256 $installedExe))
-        if ($same) {
-            Write-Step "exe already installed at $installedExe (same SHA-256)"
+    # ---- 1. the exes ----------------------------------------------------------
+    $changed = @()
+    foreach ($name in $ExeNames) {
+        $source = Join-Path $OemDir $name
+        $installed = Join-Path $InstallDir $name
+        if (-not (Test-Path -LiteralPath $source -PathType Leaf)) {
+            Write-Step "no $name in $OemDir; keeping the installed $installed"
+        }
+        elseif ((Test-Path -LiteralPath $installed -PathType Leaf) -and
+            ((Get-FileSha256 $source) -eq (Get-FileSha256 $installed))) {
+            Write-Step "$name already installed at $installed (same SHA-256)"
         }
         else {
-            # A running guest holds its exe open: stop it before replacing the file.
-            $service = Get-Service -Name $ServiceName -ErrorAction SilentlyContinue
-            if ($null -ne $service -and $service.Status -ne 'Stopped') {
-                Write-Step "stopping service $ServiceName to replace its exe"
-                Stop-Service -Name $ServiceName -Force
-            }
-            Get-Process -Name 'arena-guest' -ErrorAction SilentlyContinue |
-                Where-Object { $_.Path -eq $installedExe } |
-                ForEach-Object { Write-Step "stopping arena-guest.exe pid $($_.Id)"; Stop-Process -Id $_.Id -Force }
-            if (-not (Test-Path -LiteralPath $InstallDir)) {
-                New-Item -ItemType Directory -Path $InstallDir | Out-Null
-            }
-            Copy-Item -LiteralPath $sourceExe -Destination $installedExe -Force
-            Write-Step "copied arena-guest.exe to $installedExe"
+            $changed += $name
         }
     }
-    else {
-        Write-Step "no exe in $OemDir; keeping the installed $installedExe"
+    if ($changed.Count -gt 0) {
+        # A running guest holds its exes open: stop it before replacing the files, the
+        # launcher first (it would start the server again).
+        $service = Get-Service -Name $ServiceName -ErrorAction SilentlyContinue
+        if ($null -ne $service -and $service.Status -ne 'Stopped') {
+            Write-Step "stopping service $ServiceName to replace its exe"
+            Stop-Service -Name $ServiceName -Force
+        }
+        foreach ($process in @(@('arena-guest-logon', $installedLauncher), @('arena-guest', $installedExe))) {
+            Get-Process -Name $process[0] -ErrorAction SilentlyContinue |
+                Where-Object { $_.Path -eq $process[1] } |
+                ForEach-Object { Write-Step "stopping $($process[0]).exe pid $($_.Id)"; Stop-Process -Id $_.Id -Force }
+        }
+        if (-not (Test-Path -LiteralPath $InstallDir)) {
+            New-Item -ItemType Directory -Path $InstallDir | Out-Null
+        }
+        foreach ($name in $changed) {
+            Copy-Item -LiteralPath (Join-Path $OemDir $name) -Destination (Join-Path $InstallDir $name) -Force
+            Write-Step "copied $name to $InstallDir"
+        }
     }
 
     # ---- 2. the token ---------------------------------------------------------

@@ -1,7 +1,8 @@
 <#
 .SYNOPSIS
 Removes what install-guest.ps1 installed: the service or logon task, the firewall
-rule, the exe and (unless -KeepToken) the provisioned token.
+rule, the exes (arena-guest.exe and arena-guest-logon.exe) and (unless -KeepToken)
+the provisioned token.
 
 .DESCRIPTION
 Each step checks first, so running it on a clean machine, or twice, is fine.
@@ -53,9 +54,13 @@ try {
         if ($LASTEXITCODE -ne 0) {
             Write-Step "logon-task uninstall exited with $LASTEXITCODE (no task installed?)"
         }
-        Get-Process -Name 'arena-guest' -ErrorAction SilentlyContinue |
-            Where-Object { $_.Path -eq $exe } |
-            ForEach-Object { Write-Step "stopping pid $($_.Id)"; Stop-Process -Id $_.Id -Force }
+        # The logon task's launcher first: it would start the server again.
+        $launcher = Join-Path $InstallDir 'arena-guest-logon.exe'
+        foreach ($process in @(@('arena-guest-logon', $launcher), @('arena-guest', $exe))) {
+            Get-Process -Name $process[0] -ErrorAction SilentlyContinue |
+                Where-Object { $_.Path -eq $process[1] } |
+                ForEach-Object { Write-Step "stopping $($process[0]).exe pid $($_.Id)"; Stop-Process -Id $_.Id -Force }
+        }
     }
     elseif ($null -ne (Get-Service -Name $ServiceName -ErrorAction SilentlyContinue)) {
         # The exe is gone but its service is not: remove the registration directly.

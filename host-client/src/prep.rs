@@ -3,8 +3,8 @@
 //! guest to come up, component by component.
 //!
 //! The OEM folder is what dockur/windows copies to `C:\OEM` and runs
-//! `C:\OEM\install.bat` from at first logon: the cross-built `arena-guest.exe`,
-//! the PowerShell of `setup-scripts/`, a fresh API token (`arena-token`) and a
+//! `C:\OEM\install.bat` from at first logon: the cross-built `arena-guest.exe` and
+//! `arena-guest-logon.exe` (the logon task's launcher, built beside it), the PowerShell of `setup-scripts/`, a fresh API token (`arena-token`) and a
 //! `manifest.json` with versions and the SHA-256 of every staged file.
 //!
 //! It is not the installer (that is `setup-scripts/install-guest.ps1`, which runs
@@ -26,6 +26,10 @@ use crate::error::ClientError;
 
 /// Name of the guest exe inside the staged folder (install-guest.ps1 looks for it there).
 pub const EXE_NAME: &str = "arena-guest.exe";
+/// Name of the logon task's launcher, a GUI-subsystem exe that ships beside the guest
+/// exe (`arena-guest logon-task install` refuses to register a task without it); it is
+/// staged from the folder of the exe given or found.
+pub const LAUNCHER_NAME: &str = "arena-guest-logon.exe";
 /// Name of the token file inside the staged folder (install-guest.ps1 reads it).
 pub const TOKEN_NAME: &str = "arena-token";
 /// Name of the manifest inside the staged folder.
@@ -57,6 +61,14 @@ pub enum PrepError {
     /// No guest exe was given and none was found where the cross build puts it.
     #[error("no arena-guest.exe: tried {tried} (run scripts/build-windows.sh --release, or give --exe)")]
     NoExe { tried: String },
+
+    /// The logon task's launcher is not beside the guest exe.
+    #[error(
+        "no {LAUNCHER_NAME} beside {}: expected {} (scripts/build-windows.sh builds both exes into one folder)",
+        exe.display(),
+        launcher.display()
+    )]
+    NoLauncher { exe: PathBuf, launcher: PathBuf },
 
     /// The exe given is not a Windows program.
     #[error("{} is not a Windows executable (no MZ header): the guest must be built for Windows", .0.display())]
@@ -210,7 +222,7 @@ fn create_private_dir(dir: &Path) -> Result<(), PrepError> {
     builder.create(dir).map_err(io("creating", dir))
 }
 
-/// Fills `options.out` with the guest exe, the scripts, a fresh token and the manifest.
+/// Fills `options.out` with the guest's two exes, the scripts, a fresh token and the manifest.
 ///
 /// The scripts folder is copied as it is (hidden files left out), so `install.bat`
 /// and `setup.ps1` land at the top of the folder, where dockur runs them from.
@@ -221,6 +233,7 @@ fn create_private_dir(dir: &Path) -> Result<(), PrepError> {
 ///
 /// [`PrepError::NotEmpty`] for a non-empty folder without `force`,
 /// [`PrepError::NoExe`] or [`PrepError::NotWindowsExe`] for a missing or wrong exe,
+/// [`PrepError::NoLauncher`] when the logon task's launcher is not beside the exe,
 /// [`PrepError::MissingScript`] when the scripts lack `install.bat`, `setup.ps1`,
 /// `install-guest.ps1` or `arena-common.ps1` (which the others dot-source), and [`PrepError::Io`] naming the file that failed.
 pub fn stage(options: &StageOptions) -> Result<Staged, PrepError> {
@@ -242,6 +255,11 @@ pub fn stage(options: &StageOptions) -> Result<Staged, PrepError> {
         })?,
     };
     check_windows_exe(&exe)?;
+    let launcher = exe.with_file_name(LAUNCHER_NAME);
+    if !launcher.is_file() {
+        return Err(PrepError::NoLauncher { exe, launcher });
+    }
+    check_windows_exe(&launcher)?;
     for name in ["install.bat", "setup.ps1", "install-guest.ps1", "arena-common.ps1"] {
         if !options.scripts.join(name).is_file() {
             return Err(PrepError::MissingScript { dir: options.scripts.clone(), name });
@@ -253,11 +271,14 @@ pub fn stage(options: &StageOptions) -> Result<Staged, PrepError> {
     copy_tree(&options.scripts, out, &mut written)?;
     let staged_exe = out.join(EXE_NAME);
     std::fs::copy(&exe, &staged_exe).map_err(io("copying the exe to", &staged_exe))?;
+    let staged_launcher = out.join(LAUNCHER_NAME);
+    std::fs::copy(&launcher, &staged_launcher).map_err(io("copying the launcher to", &staged_launcher))?;
 
     let token = generate_token()?;
     let token_path = out.join(TOKEN_NAME);
     write_token_file(&token_path, &token)?;
     written.push(staged_exe);
+    written.push(staged_launcher);
     written.push(token_path.clone());
     if let Some(host_copy) = &options.token_out {
         write_token_file(host_copy, &token)?;

@@ -18,10 +18,12 @@ fn scripts_dir() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("..").join("setup-scripts")
 }
 
-/// A file that passes for a Windows exe (it starts with `MZ`); the stub guest never runs it.
+/// A file that passes for a Windows exe (it starts with `MZ`), with a launcher beside
+/// it as the cross build leaves them; the stub guest never runs either.
 fn fake_exe(dir: &Path) -> PathBuf {
     let path = dir.join("arena-guest.exe");
     std::fs::write(&path, b"MZ\x90\x00 not really a program").expect("fake exe");
+    std::fs::write(dir.join(prep::LAUNCHER_NAME), b"MZ\x90\x00 not really a launcher").expect("fake launcher");
     path
 }
 
@@ -66,6 +68,7 @@ fn a_staged_folder_matches_its_manifest() {
         "apps.json",
         "unattend/autounattend-snippet.xml",
         "arena-guest.exe",
+        "arena-guest-logon.exe",
         "arena-token",
     ] {
         assert!(
@@ -84,6 +87,10 @@ fn a_staged_folder_matches_its_manifest() {
     assert_eq!(prep::read_manifest(&out).unwrap(), staged.manifest);
     assert_eq!(staged.manifest.arena_version, env!("CARGO_PKG_VERSION"));
     assert_eq!(std::fs::read(out.join("arena-guest.exe")).unwrap(), std::fs::read(&exe).unwrap());
+    assert_eq!(
+        std::fs::read(out.join(prep::LAUNCHER_NAME)).unwrap(),
+        std::fs::read(work.path().join(prep::LAUNCHER_NAME)).unwrap()
+    );
 
     // The token: 64 hex digits, the same in the folder and in the host's copy.
     let token = std::fs::read_to_string(&staged.token_path).unwrap();
@@ -125,6 +132,19 @@ fn staging_refuses_a_non_empty_folder_without_force_and_a_non_windows_exe() {
     std::fs::write(&linux, b"\x7fELF a Linux build").unwrap();
     let err = prep::stage(&options(&work.path().join("oem2"), &linux, &token_out)).unwrap_err();
     assert!(matches!(err, PrepError::NotWindowsExe(_)), "{err}");
+
+    // The logon task's launcher must be beside the exe, and be a Windows program too.
+    let lonely = work.path().join("lonely");
+    std::fs::create_dir_all(&lonely).unwrap();
+    let lonely_exe = lonely.join("arena-guest.exe");
+    std::fs::copy(&exe, &lonely_exe).unwrap();
+    let err = prep::stage(&options(&work.path().join("oem4"), &lonely_exe, &token_out)).unwrap_err();
+    assert!(matches!(err, PrepError::NoLauncher { .. }), "{err}");
+    assert!(err.to_string().contains("no arena-guest-logon.exe beside "), "{err}");
+    assert!(!work.path().join("oem4").join("setup.ps1").exists(), "nothing is written when refused");
+    std::fs::write(lonely.join(prep::LAUNCHER_NAME), b"\x7fELF").unwrap();
+    let err = prep::stage(&options(&work.path().join("oem4"), &lonely_exe, &token_out)).unwrap_err();
+    assert!(matches!(&err, PrepError::NotWindowsExe(path) if path.ends_with(prep::LAUNCHER_NAME)), "{err}");
 
     let err = prep::stage(&StageOptions {
         scripts: work.path().to_path_buf(),

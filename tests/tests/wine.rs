@@ -643,3 +643,157 @@ async fn windows_service_under_wine() {
         started.elapsed().as_secs_f64()
     );
 }
+
+/// `IMAGE_SUBSYSTEM_WINDOWS_GUI`: Windows gives such a process no console.
+const SUBSYSTEM_GUI: u16 = 2;
+/// `IMAGE_SUBSYSTEM_WINDOWS_CUI`: a console program.
+const SUBSYSTEM_CONSOLE: u16 = 3;
+
+/// The `Subsystem` field of a PE32+ image's optional header, read from the file: the
+/// DOS header's `e_lfanew` (offset 0x3C) points at the `PE\0\0` signature, which the
+/// 20-byte COFF file header follows, then the optional header (magic 0x20B for PE32+),
+/// whose `Subsystem` is the 16-bit field at offset 68 (Microsoft's PE format
+/// specification, "Optional Header Windows-Specific Fields").
+fn pe_subsystem(path: &std::path::Path) -> u16 {
+    use std::io::Read as _;
+    let mut head = Vec::new();
+    let file = std::fs::File::open(path).unwrap_or_else(|err| panic!("opening {}: {err}", path.display()));
+    file.take(4096).read_to_end(&mut head).unwrap_or_else(|err| panic!("reading {}: {err}", path.display()));
+    let u16_at = |at: usize| u16::from_le_bytes([head[at], head[at + 1]]);
+    assert_eq!(&head[..2], b"MZ", "{} has no DOS header", path.display());
+    let pe = u32::from_le_bytes([head[0x3C], head[0x3D], head[0x3E], head[0x3F]]) as usize;
+    assert!(pe + 24 + 70 <= head.len(), "{}: the PE header is past the first 4 KiB", path.display());
+    assert_eq!(&head[pe..pe + 4], b"PE\0\0", "{} has no PE signature", path.display());
+    let optional = pe + 4 + 20;
+    assert_eq!(u16_at(optional), 0x20B, "{} is not a PE32+ image", path.display());
+    u16_at(optional + 68)
+}
+
+/// The exe at `from`, alone in the new folder `to` (a hard link when the file system allows).
+fn alone_in(from: &std::path::Path, to: &std::path::Path) -> std::path::PathBuf {
+    std::fs::create_dir_all(to).unwrap_or_else(|err| panic!("creating {}: {err}", to.display()));
+    let target = to.join(from.file_name().expect("a file name"));
+    if std::fs::hard_link(from, &target).is_err() {
+        std::fs::copy(from, &target).unwrap_or_else(|err| panic!("copying {} to a temp dir: {err}", from.display()));
+    }
+    target
+}
+
+/// The logon task's log in the Wine prefix (`C:\ProgramData\arena\logon-task.log`).
+fn logon_log() -> String {
+    let prefix = std::env::var_os("WINEPREFIX").map(std::path::PathBuf::from).expect("WINEPREFIX");
+    let path = prefix.join("drive_c").join("ProgramData").join("arena").join("logon-task.log");
+    std::fs::read_to_string(&path).unwrap_or_default()
+}
+
+/// Ends the launcher and any server of its port however the test ends.
+struct LauncherGuard {
+    launcher: std::process::Child,
+    port: String,
+}
+
+impl Drop for LauncherGuard {
+    fn drop(&mut self) {
+        let _ = self.launcher.kill();
+        let _ = self.launcher.wait();
+        for pid in wine_pids(&["--worker", &self.port]) {
+            let _ = std::process::Command::new("kill").args(["-9", &pid.to_string()]).status();
+        }
+    }
+}
+
+/// The logon task's launcher, `arena-guest-logon.exe`, for real under Wine (what Task
+/// Scheduler would start at logon; Wine 8's `schtasks` cannot run the task itself):
+/// its PE header says GUI subsystem while `arena-guest.exe` stays a console program;
+/// each exe names the other when it is missing; started with serve options, it runs
+/// `arena-guest.exe` from its folder, which answers `/v1/health`; a killed server is
+/// started again; and ending the launcher (as `schtasks /End` would) stops the server
+/// through its closed standard input.
+///
+/// What Wine cannot show: whether a console window would flash (Wine opens none for
+/// either kind of program without `wineconsole`); that is a prediction from Windows'
+/// documented behaviour (see docs/windows.md, "The logon task").
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn logon_launcher_under_wine() {
+    let Some(setup) = setup() else {
+        return;
+    };
+    let started = Instant::now();
+    let launcher = setup.exe.with_file_name("arena-guest-logon.exe");
+    assert!(
+        launcher.is_file(),
+        "{} is missing: scripts/build-windows.sh builds it beside {}",
+        launcher.display(),
+        setup.exe.display()
+    );
+
+    // 1. The launcher gets no console from Windows; the server stays a console program
+    // (its console, hidden, is what the programs it runs for agents share).
+    assert_eq!(pe_subsystem(&launcher), SUBSYSTEM_GUI, "{}", launcher.display());
+    assert_eq!(pe_subsystem(&setup.exe), SUBSYSTEM_CONSOLE, "{}", setup.exe.display());
+
+    // 2. Each exe names the other when it is missing from its folder.
+    let alone = tempfile::tempdir().expect("temp dir");
+    let server_alone = alone_in(&setup.exe, &alone.path().join("server"));
+    let (code, text) =
+        wine_run(&setup, server_alone.to_str().expect("UTF-8"), &["logon-task", "install", "--port", "5000"]);
+    assert_eq!(code, 2, "{text}");
+    assert!(text.contains("arena-guest-logon.exe is missing: expected at "), "{text}");
+    let launcher_alone = alone_in(&launcher, &alone.path().join("launcher"));
+    let port = free_port().to_string();
+    let (code, text) =
+        wine_run(&setup, launcher_alone.to_str().expect("UTF-8"), &["--port", &port, "--backend", "stub"]);
+    assert_eq!(code, 2, "the launcher without arena-guest.exe beside it: {text}");
+    let log = logon_log();
+    let last = log.lines().last().unwrap_or_default();
+    assert!(last.contains("error: arena-guest.exe is missing: expected at "), "the log ends with {last:?}");
+    // Bad options are refused before anything starts, and said in the log.
+    let (code, _) = wine_run(&setup, launcher.to_str().expect("UTF-8"), &["--port", "0"]);
+    assert_eq!(code, 2);
+    assert!(logon_log().lines().last().unwrap_or_default().contains("--port 0"), "{}", logon_log());
+
+    // 3. The launcher runs the server from its own folder.
+    let child = std::process::Command::new(&setup.wine)
+        .arg(&launcher)
+        .args(["--port", &port, "--backend", "stub"])
+        .stdin(std::process::Stdio::null())
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .expect("starting the launcher under Wine");
+    let mut guard = LauncherGuard { launcher: child, port: port.clone() };
+    let guest = client(&format!("http://127.0.0.1:{port}"));
+    let health =
+        eventually("the server the launcher started", Duration::from_secs(30), || async { guest.health().await.ok() })
+            .await;
+    assert_eq!(health.backend, "stub");
+    let servers = wine_pids(&["--worker", &port]);
+    assert_eq!(servers.len(), 1, "one server: {servers:?}");
+    let cmdline = std::fs::read(format!("/proc/{}/cmdline", servers[0])).unwrap_or_default();
+    assert!(String::from_utf8_lossy(&cmdline).contains("arena-guest.exe"), "{cmdline:?}");
+    let said = "started the server (pid ";
+    let with = format!("with [\"--port\", \"{port}\", \"--backend\", \"stub\"]");
+    assert!(logon_log().lines().any(|l| l.contains(said) && l.contains(&with)), "{}", logon_log());
+
+    // A server that dies is started again (after the 1 s backoff).
+    let killed = std::process::Command::new("kill").args(["-9", &servers[0].to_string()]).status().expect("kill");
+    assert!(killed.success());
+    eventually("a new server after the old one was killed", Duration::from_secs(20), || async {
+        let now = wine_pids(&["--worker", &port]);
+        let health = guest.health().await.ok()?;
+        (now.len() == 1 && now[0] != servers[0] && health.backend == "stub").then_some(())
+    })
+    .await;
+
+    // Ending the launcher closes the server's standard input: the server stops too.
+    guard.launcher.kill().expect("ending the launcher");
+    let _ = guard.launcher.wait();
+    eventually("the server to stop with its launcher", Duration::from_secs(15), || async {
+        (guest.health().await.is_err() && wine_pids(&["--worker", &port]).is_empty()).then_some(())
+    })
+    .await;
+    println!(
+        "BENCH: logon launcher test (subsystems, missing exes, start, relaunch, stop) {:.1} s",
+        started.elapsed().as_secs_f64()
+    );
+}

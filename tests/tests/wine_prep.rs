@@ -52,6 +52,8 @@ async fn the_staged_exe_serves_with_the_staged_token_under_wine() {
     })
     .expect("stage");
     assert!(prep::verify(&out).expect("verify").is_ok());
+    // The logon task's launcher is staged from beside the exe (wine.rs runs it).
+    assert!(staged.manifest.files.contains_key(prep::LAUNCHER_NAME), "{:?}", staged.manifest.files.keys());
 
     // The exe from the staged folder, as install-guest.ps1 would copy it, with the
     // token file the service registration passes.

@@ -5,14 +5,15 @@
 //! What is here: the clap definitions ([`Cli`]), the checks on the serve options a
 //! service or task passes on, the command lines the supervisor and the logon task run
 //! (quoted with [`arena_shared::cmdline::list2cmdline`]), the logon task's definition
-//! ([`task_xml`]) and the `schtasks.exe` arguments that register it, the worker's
-//! relaunch backoff, the log folder and log rotation, and the worker's stop signal (its
-//! standard input closing). All of it is tested natively.
+//! ([`task_xml`]) and the `schtasks.exe` arguments that register it, where the logon
+//! task's launcher ([`LAUNCHER_EXE`], a binary of its own) and the server find each
+//! other, the worker's relaunch backoff, the log folder and log rotation, and the
+//! worker's stop signal (its standard input closing). All of it is tested natively.
 //!
 //! The supervisor's decisions ([`supervisor_step`]) are here too.
 //!
 //! What is not: the Service Control Manager, tokens and `CreateProcessAsUserW`, and
-//! the logon task's launcher detaching from its console; those are FFI glue in
+//! the logon task's launcher loop; those are FFI glue in
 //! [`windows`] (compiled for Windows only), which follows [`supervisor_step`]. On other platforms [`execute_service`] answers
 //! [`ServiceCliError::OnlyOnWindows`].
 //! The service is not part of a desktop backend: it starts the server, whose
@@ -37,6 +38,14 @@ pub const DEFAULT_TASK_NAME: &str = "ArenaGuest";
 
 /// The logon task's log file in [`log_dir`]: the launcher's lines and the server's output.
 pub const LOGON_TASK_LOG: &str = "logon-task.log";
+
+/// The server's file name, which the logon task's launcher starts from its own folder.
+pub const SERVER_EXE: &str = "arena-guest.exe";
+
+/// The logon task's launcher (`guest-server/src/logon_main.rs`): a GUI-subsystem
+/// program, so Windows gives it no console and no window flashes at logon (see
+/// `docs/windows.md`, "The logon task"). It ships beside [`SERVER_EXE`].
+pub const LAUNCHER_EXE: &str = "arena-guest-logon.exe";
 
 /// The whole command line: serve flags (no subcommand: serve, as before), or a subcommand.
 #[derive(Debug, Clone, clap::Parser)]
@@ -99,20 +108,10 @@ pub enum ServiceCommand {
 pub enum LogonTaskCommand {
     /// Create (or replace) a task that starts the server at every logon of this user,
     /// elevated, with no time limit, at normal priority and without a console window.
+    /// The task runs arena-guest-logon.exe, which must be in this exe's folder.
     Install(TaskOptions),
     /// Delete the task.
     Uninstall(TaskNameOption),
-    /// What the task starts: detaches from its console window and runs the server
-    /// without one, restarting it if it dies. Not for interactive use.
-    Run(LauncherOptions),
-}
-
-/// The options of `logon-task run`.
-#[derive(Debug, Clone, PartialEq, Eq, clap::Args)]
-pub struct LauncherOptions {
-    /// The serve options the server gets, exactly as `arena-guest` takes them. They come last.
-    #[arg(trailing_var_arg = true, allow_hyphen_values = true, value_name = "SERVE OPTIONS")]
-    pub serve_args: Vec<String>,
 }
 
 /// Just a service name.
@@ -212,6 +211,14 @@ pub enum ServiceCliError {
     /// An OS call failed.
     #[error("{op}: {message}")]
     Os { op: String, message: String },
+    /// One of the two exes that ship together is not beside the other.
+    #[error(
+        "{name} is missing: expected at {}, beside {} (the two exes ship together: \
+         scripts/build-windows.sh builds both, install-guest.ps1 copies both)",
+        path.display(),
+        beside.display()
+    )]
+    MissingCompanion { name: &'static str, path: PathBuf, beside: PathBuf },
     /// A file or program could not be used.
     #[error("{what}: {source}")]
     Io {
@@ -223,10 +230,13 @@ pub enum ServiceCliError {
 
 impl ServiceCliError {
     /// The process exit code for this error: 2 for a usage problem (wrong platform,
-    /// bad options), 1 for a failure while doing the work.
+    /// bad options, one of the two exes missing beside the other), 1 for a failure
+    /// while doing the work.
     pub fn exit_code(&self) -> u8 {
         match self {
-            ServiceCliError::OnlyOnWindows(_) | ServiceCliError::InvalidServeOptions(_) => 2,
+            ServiceCliError::OnlyOnWindows(_)
+            | ServiceCliError::InvalidServeOptions(_)
+            | ServiceCliError::MissingCompanion { .. } => 2,
             ServiceCliError::Os { .. } | ServiceCliError::Io { .. } => 1,
         }
     }
@@ -310,11 +320,59 @@ pub fn worker_command_line(exe: &Path, serve_args: &[String]) -> String {
     command_line(exe, &args)
 }
 
-/// The arguments the logon task starts the exe with: `logon-task run -- SERVE OPTIONS`.
-pub fn logon_task_run_args(serve_args: &[String]) -> Vec<String> {
-    let mut args = vec!["logon-task".to_owned(), "run".to_owned(), "--".to_owned()];
-    args.extend(serve_args.iter().cloned());
-    args
+/// `name`, in the folder of `exe`, when it is a file there; otherwise
+/// [`ServiceCliError::MissingCompanion`] naming both.
+///
+/// # Errors
+///
+/// As above.
+pub fn companion(exe: &Path, name: &'static str) -> Result<PathBuf, ServiceCliError> {
+    let path = exe.with_file_name(name);
+    if path.is_file() {
+        Ok(path)
+    } else {
+        Err(ServiceCliError::MissingCompanion { name, path, beside: exe.to_path_buf() })
+    }
+}
+
+/// The serve options the logon task's launcher was started with (all its arguments:
+/// it has no options of its own), checked as [`validate_serve_args`] checks them.
+///
+/// # Errors
+///
+/// [`ServiceCliError::InvalidServeOptions`] for an argument that is not Unicode or
+/// options the server would refuse.
+pub fn launcher_serve_args(args: impl IntoIterator<Item = std::ffi::OsString>) -> Result<Vec<String>, ServiceCliError> {
+    let args = args
+        .into_iter()
+        .map(|arg| {
+            arg.into_string().map_err(|arg| {
+                ServiceCliError::InvalidServeOptions(format!("the argument {arg:?} is not valid Unicode"))
+            })
+        })
+        .collect::<Result<Vec<_>, _>>()?;
+    validate_serve_args(&args)?;
+    Ok(args)
+}
+
+/// Runs the logon task's launcher ([`LAUNCHER_EXE`]) with its command-line arguments:
+/// starts [`SERVER_EXE`] from the launcher's folder without a console window, and
+/// again whenever it dies, until the launcher is ended. Returns only on failure.
+///
+/// # Errors
+///
+/// Invalid serve options, the server missing from the launcher's folder, the log
+/// folder or the server not starting; [`ServiceCliError::OnlyOnWindows`] elsewhere.
+pub fn run_logon_launcher(
+    args: impl IntoIterator<Item = std::ffi::OsString>,
+) -> Result<std::convert::Infallible, ServiceCliError> {
+    let serve_args = launcher_serve_args(args)?;
+    if !crate::desktop::windows::target::IS_WINDOWS {
+        return Err(ServiceCliError::OnlyOnWindows("logon-task"));
+    }
+    let launcher = current_exe()?;
+    let server = companion(&launcher, SERVER_EXE)?;
+    windows::run_logon_task(&server, &serve_args)
 }
 
 /// The user a logon task is for, `DOMAIN\name`, from the installing shell's
@@ -327,15 +385,15 @@ pub fn task_user(domain: Option<&str>, name: Option<&str>) -> Option<String> {
     })
 }
 
-/// The logon task's definition for `exe` and `serve_args` (see [`task_xml`]): the
-/// launcher, in the exe's folder, for `user`.
-pub fn logon_task_definition(exe: &Path, serve_args: &[String], user: Option<&str>) -> String {
-    let arguments = list2cmdline(&logon_task_run_args(serve_args));
+/// The logon task's definition (see [`task_xml`]): the `launcher` ([`LAUNCHER_EXE`])
+/// with `serve_args` as its arguments, in its folder, for `user`.
+pub fn logon_task_definition(launcher: &Path, serve_args: &[String], user: Option<&str>) -> String {
+    let arguments = list2cmdline(serve_args);
     task_xml::logon_task_xml(&task_xml::LogonTask {
         user,
-        command: exe,
+        command: launcher,
         arguments: &arguments,
-        working_dir: exe_folder(exe).as_deref(),
+        working_dir: exe_folder(launcher).as_deref(),
     })
 }
 
@@ -491,23 +549,25 @@ pub fn execute_service(command: &ServiceCommand) -> Result<String, ServiceCliErr
 }
 
 /// Runs a `logon-task` subcommand and returns what to tell the user: `install` and
-/// `uninstall` through `schtasks.exe`, `run` (the launcher) in [`windows`].
+/// `uninstall` through `schtasks.exe`. What the task runs is [`LAUNCHER_EXE`], which
+/// `install` requires beside this exe.
 ///
 /// # Errors
 ///
 /// [`ServiceCliError::OnlyOnWindows`] on other platforms; invalid serve options;
+/// [`ServiceCliError::MissingCompanion`] when the launcher is not beside this exe;
 /// `schtasks.exe` missing or failing (its output is in the message).
 pub fn execute_logon_task(command: &LogonTaskCommand) -> Result<String, ServiceCliError> {
     match command {
         LogonTaskCommand::Install(options) => {
             validate_serve_args(&options.serve_args)?;
-            let exe = current_exe()?;
-            let user =
-                task_user(std::env::var("USERDOMAIN").ok().as_deref(), std::env::var("USERNAME").ok().as_deref());
-            let xml = logon_task_definition(&exe, &options.serve_args, user.as_deref());
             if !crate::desktop::windows::target::IS_WINDOWS {
                 return Err(ServiceCliError::OnlyOnWindows("logon-task"));
             }
+            let launcher = companion(&current_exe()?, LAUNCHER_EXE)?;
+            let user =
+                task_user(std::env::var("USERDOMAIN").ok().as_deref(), std::env::var("USERNAME").ok().as_deref());
+            let xml = logon_task_definition(&launcher, &options.serve_args, user.as_deref());
             let file = std::env::temp_dir().join(format!("arena-guest-task-{}.xml", std::process::id()));
             std::fs::write(&file, task_xml::to_utf16_file(&xml))
                 .map_err(|source| ServiceCliError::Io { what: format!("writing {}", file.display()), source })?;
@@ -520,7 +580,7 @@ pub fn execute_logon_task(command: &LogonTaskCommand) -> Result<String, ServiceC
                  window; output in {})\n{said}",
                 options.name,
                 user.as_deref().unwrap_or("the user"),
-                command_line(&exe, &logon_task_run_args(&options.serve_args)),
+                command_line(&launcher, &options.serve_args),
                 logs.display(),
             ))
         }
@@ -533,10 +593,6 @@ pub fn execute_logon_task(command: &LogonTaskCommand) -> Result<String, ServiceC
             let _ = schtasks(&schtasks_end_args(&name.name));
             let said = schtasks(&schtasks_delete_args(&name.name))?;
             Ok(format!("logon task {:?} deleted\n{said}", name.name))
-        }
-        LogonTaskCommand::Run(options) => {
-            validate_serve_args(&options.serve_args)?;
-            windows::run_logon_task(options)
         }
     }
 }
@@ -721,27 +777,21 @@ mod tests {
 
     #[test]
     fn schtasks_registers_the_launcher_from_an_xml_definition() {
-        let exe = Path::new(r"C:\Program Files\Arena\arena-guest.exe");
+        let launcher = Path::new(r"C:\Program Files\Arena\arena-guest-logon.exe");
         let serve = strings(&["--port", "5000", "--token-file", r"C:\ProgramData\arena\token"]);
-        assert_eq!(
-            logon_task_run_args(&serve),
-            strings(&["logon-task", "run", "--", "--port", "5000", "--token-file", r"C:\ProgramData\arena\token"])
-        );
-        let xml = logon_task_definition(exe, &serve, Some(r"VM\Docker"));
-        assert!(xml.contains(r"<Command>C:\Program Files\Arena\arena-guest.exe</Command>"), "{xml}");
-        assert!(
-            xml.contains(
-                r"<Arguments>logon-task run -- --port 5000 --token-file C:\ProgramData\arena\token</Arguments>"
-            ),
-            "{xml}"
-        );
+        let xml = logon_task_definition(launcher, &serve, Some(r"VM\Docker"));
+        // The GUI-subsystem launcher, not arena-guest.exe (a console program), with the
+        // serve options as its whole command line.
+        assert!(xml.contains(r"<Command>C:\Program Files\Arena\arena-guest-logon.exe</Command>"), "{xml}");
+        assert!(!xml.contains(r"\arena-guest.exe"), "{xml}");
+        assert!(xml.contains(r"<Arguments>--port 5000 --token-file C:\ProgramData\arena\token</Arguments>"), "{xml}");
         assert!(xml.contains(r"<WorkingDirectory>C:\Program Files\Arena</WorkingDirectory>"), "{xml}");
         assert!(xml.contains(r"<UserId>VM\Docker</UserId>"), "{xml}");
         assert_eq!(exe_folder(Path::new(r"C:\arena-guest.exe")), Some(PathBuf::from(r"C:\")));
         assert_eq!(exe_folder(Path::new("arena-guest.exe")), None);
         // A long command line is fine: /TR's 261-character limit does not apply to XML.
         let long = vec!["--scenario".to_owned(), "x".repeat(300)];
-        assert!(logon_task_definition(exe, &long, None).contains(&"x".repeat(300)));
+        assert!(logon_task_definition(launcher, &long, None).contains(&"x".repeat(300)));
 
         assert_eq!(
             schtasks_create_args("ArenaGuest", Path::new(r"C:\Temp\t.xml")),
@@ -761,16 +811,58 @@ mod tests {
     }
 
     #[test]
-    fn the_launcher_takes_the_serve_options_as_they_are() {
-        let cli = parse(&["logon-task", "run", "--", "--port", "5000", "--name", "x"]).unwrap();
-        let Some(Command::LogonTask(LogonTaskCommand::Run(options))) = cli.command else { panic!("not run") };
-        assert_eq!(options.serve_args, strings(&["--port", "5000", "--name", "x"]));
-        let back = Cli::try_parse_from(
-            std::iter::once("arena-guest".to_owned()).chain(logon_task_run_args(&options.serve_args)),
-        )
-        .unwrap();
-        let Some(Command::LogonTask(LogonTaskCommand::Run(again))) = back.command else { panic!("not run") };
-        assert_eq!(again, options);
+    fn the_launcher_takes_its_whole_command_line_as_serve_options() {
+        let args = ["--port", "5000", "--token-file", r"C:\My Token\t.txt", "--backend", "stub"];
+        let os = |words: &[&str]| words.iter().map(std::ffi::OsString::from).collect::<Vec<_>>();
+        assert_eq!(launcher_serve_args(os(&args)).unwrap(), strings(&args));
+        assert_eq!(launcher_serve_args(Vec::new()).unwrap(), Vec::<String>::new());
+        // Checked as the service's and the task's serve options are, before anything starts.
+        for (bad, said) in [(&["--port", "5000", "--worker"][..], "--worker"), (&["--port", "0"][..], "--port 0")] {
+            match launcher_serve_args(os(bad)) {
+                Err(ServiceCliError::InvalidServeOptions(why)) => assert!(why.contains(said), "{bad:?}: {why}"),
+                other => panic!("{bad:?} gave {other:?}"),
+            }
+        }
+        // `logon-task run` is gone: the launcher is a program of its own.
+        assert!(parse(&["logon-task", "run", "--", "--port", "5000"]).is_err());
+    }
+
+    #[cfg(unix)]
+    #[test]
+    fn a_launcher_argument_that_is_not_unicode_is_named() {
+        use std::os::unix::ffi::OsStringExt as _;
+        let bad = std::ffi::OsString::from_vec(b"--port\xff".to_vec());
+        let err = launcher_serve_args([bad]).unwrap_err();
+        assert!(
+            matches!(&err, ServiceCliError::InvalidServeOptions(why) if why.contains("not valid Unicode")),
+            "{err}"
+        );
+        assert_eq!(err.exit_code(), 2);
+    }
+
+    #[test]
+    fn each_exe_finds_the_other_beside_it_or_names_the_missing_one() {
+        let dir = tempfile::tempdir().unwrap();
+        let server = dir.path().join(SERVER_EXE);
+        let launcher = dir.path().join(LAUNCHER_EXE);
+        std::fs::write(&server, b"MZ").unwrap();
+        let err = companion(&server, LAUNCHER_EXE).unwrap_err();
+        let text = err.to_string();
+        assert!(text.starts_with("arena-guest-logon.exe is missing: expected at "), "{text}");
+        assert!(
+            text.contains(&launcher.display().to_string()) && text.contains(&server.display().to_string()),
+            "{text}"
+        );
+        assert_eq!(err.exit_code(), 2);
+        std::fs::write(&launcher, b"MZ").unwrap();
+        assert_eq!(companion(&server, LAUNCHER_EXE).unwrap(), launcher);
+        assert_eq!(companion(&launcher, SERVER_EXE).unwrap(), server);
+        // A folder of that name is not the program.
+        std::fs::remove_file(&server).unwrap();
+        std::fs::create_dir(&server).unwrap();
+        assert!(
+            matches!(companion(&launcher, SERVER_EXE), Err(ServiceCliError::MissingCompanion { name, .. }) if name == SERVER_EXE)
+        );
     }
 
     #[test]
@@ -828,6 +920,10 @@ mod tests {
         assert!(err.to_string().contains("only on Windows"));
         let task = LogonTaskCommand::Uninstall(TaskNameOption { name: DEFAULT_TASK_NAME.into() });
         assert!(matches!(execute_logon_task(&task), Err(ServiceCliError::OnlyOnWindows("logon-task"))));
+        let task = LogonTaskCommand::Install(TaskOptions { name: DEFAULT_TASK_NAME.into(), serve_args: Vec::new() });
+        assert!(matches!(execute_logon_task(&task), Err(ServiceCliError::OnlyOnWindows("logon-task"))));
+        let launched = run_logon_launcher(["--port".into(), "5000".into()]);
+        assert!(matches!(launched, Err(ServiceCliError::OnlyOnWindows("logon-task"))), "{launched:?}");
     }
 
     fn check(console: Option<u32>, worker: Option<u32>, expected: SupervisorStep) {

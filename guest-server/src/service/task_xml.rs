@@ -9,10 +9,11 @@
 //! [`NORMAL_PRIORITY`]. It also keeps the command line out of `/TR`'s 261-character
 //! limit, and it is the one creation form Wine 8's `schtasks.exe` supports.
 //!
-//! The task starts `arena-guest.exe logon-task run -- SERVE OPTIONS` in the
-//! installing user's session, with their highest privileges, in the exe's folder; that
-//! launcher starts the server without a console window (see the `windows` half of
-//! [`crate::service`]).
+//! The task starts `arena-guest-logon.exe SERVE OPTIONS` ([`crate::service::LAUNCHER_EXE`])
+//! in the installing user's session, with their highest privileges, in the exes'
+//! folder. That launcher is a GUI-subsystem program, so Task Scheduler's start of it
+//! opens no console window, and it starts the server (`arena-guest.exe`, a console
+//! program) with `CREATE_NO_WINDOW` (see the `windows` half of [`crate::service`]).
 //!
 //! Platform-neutral and tested natively; the glue writes the file and runs `schtasks`.
 
@@ -120,8 +121,8 @@ mod tests {
     fn sample() -> String {
         logon_task_xml(&LogonTask {
             user: Some(r"ARENA-VM\Docker"),
-            command: Path::new(r"C:\Program Files\Arena\arena-guest.exe"),
-            arguments: r#"logon-task run -- --port 5000 --token-file "C:\Program Files\Arena\t&k""#,
+            command: Path::new(r"C:\Program Files\Arena\arena-guest-logon.exe"),
+            arguments: r#"--port 5000 --token-file "C:\Program Files\Arena\t&k""#,
             working_dir: Some(Path::new(r"C:\Program Files\Arena")),
         })
     }
@@ -170,17 +171,19 @@ mod tests {
     }
 
     fn bare_task() -> LogonTask<'static> {
-        LogonTask { user: None, command: Path::new(r"C:\a\arena-guest.exe"), arguments: "", working_dir: None }
+        LogonTask { user: None, command: Path::new(r"C:\a\arena-guest-logon.exe"), arguments: "", working_dir: None }
     }
 
     #[test]
     fn the_action_runs_the_launcher_in_the_exes_folder_with_text_escaped() {
         let xml = sample();
-        assert_eq!(element(&xml, "Exec", "Command"), r"C:\Program Files\Arena\arena-guest.exe");
+        assert_eq!(element(&xml, "Exec", "Command"), r"C:\Program Files\Arena\arena-guest-logon.exe");
         assert_eq!(
             element(&xml, "Exec", "Arguments"),
-            r#"logon-task run -- --port 5000 --token-file &quot;C:\Program Files\Arena\t&amp;k&quot;"#
+            r#"--port 5000 --token-file &quot;C:\Program Files\Arena\t&amp;k&quot;"#
         );
+        // One action: the launcher alone, never arena-guest.exe (a console program) itself.
+        assert_eq!(xml.matches("<Exec>").count(), 1);
         assert_eq!(element(&xml, "Exec", "WorkingDirectory"), r"C:\Program Files\Arena");
         let bare = logon_task_xml(&bare_task());
         assert!(!bare.contains("<Arguments>") && !bare.contains("<WorkingDirectory>"), "{bare}");

@@ -1,24 +1,28 @@
-//! The logon task's launcher (`logon-task run`), what Task Scheduler starts at logon.
+//! The logon task's launcher loop: what `arena-guest-logon.exe` (the GUI-subsystem
+//! binary Task Scheduler starts at logon, `guest-server/src/logon_main.rs`) runs.
 //!
-//! `arena-guest.exe` is a console program, so Task Scheduler gives the task a console
-//! window on the user's desktop, where it would be in screenshots, window lists and
-//! trees. The launcher detaches from that console at once (`FreeConsole`; the window
-//! closes as soon as nothing is attached to it) and starts the server as a child with
+//! The launcher is a GUI-subsystem program, so Windows gives it no console at all:
+//! nothing flashes on the user's desktop at logon, and nothing lands in screenshots,
+//! window lists or trees. (Until it became a binary of its own the launcher was
+//! `arena-guest.exe logon-task run`, a console program: Task Scheduler opened a console
+//! window for it, which it closed with `FreeConsole` a moment later.) It starts
+//! [`crate::service::SERVER_EXE`] from its own folder as a child with
 //! `CREATE_NO_WINDOW`: the server gets a console of its own that has no window, so the
 //! console programs it runs for agents share that hidden console instead of each
 //! opening a window, as under upstream's hidden PowerShell. The server is
-//! `"<exe>" SERVE OPTIONS --worker`, as the service's worker: its standard input is a
-//! pipe only the launcher holds, so when the task is ended (the launcher terminated)
-//! the pipe closes and the server shuts down gracefully. A server that dies is started
-//! again after [`Backoff`]'s delay. Everything goes to `%ProgramData%\arena\logon-task.log`
-//! (the launcher's own lines and the server's output), moved aside past 10 MB.
+//! `"<arena-guest.exe>" SERVE OPTIONS --worker`, as the service's worker: its standard
+//! input is a pipe only the launcher holds, so when the task is ended (the launcher
+//! terminated) the pipe closes and the server shuts down gracefully. A server that dies
+//! is started again after [`Backoff`]'s delay. Everything goes to
+//! `%ProgramData%\arena\logon-task.log` (the launcher's own lines and the server's
+//! output), moved aside past 10 MB.
 //!
 //! FFI glue only: the task's definition, the command lines, the backoff and the log
 //! handling are in [`crate::service`], tested natively.
 
+use std::convert::Infallible;
 use std::fs::File;
 use std::io::Write as _;
-use std::os::windows::io::IntoRawHandle as _;
 use std::os::windows::process::CommandExt as _;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
@@ -26,20 +30,12 @@ use std::time::Instant;
 
 use windows::Win32::System::Threading::{CREATE_NEW_PROCESS_GROUP, CREATE_NO_WINDOW};
 
-use crate::service::{
-    current_exe, log_dir, rotate_log, Backoff, LauncherOptions, ServiceCliError, LOGON_TASK_LOG, LOG_MAX_BYTES,
-};
+use crate::service::{log_dir, rotate_log, Backoff, ServiceCliError, LOGON_TASK_LOG, LOG_MAX_BYTES};
 
-// The two console calls the launcher needs; the `windows` crate has them only behind a
-// feature this crate does not otherwise use.
-#[link(name = "kernel32")]
-extern "system" {
-    fn FreeConsole() -> i32;
-    fn SetStdHandle(which: u32, handle: *mut core::ffi::c_void) -> i32;
+/// `%ProgramData%\arena\logon-task.log`.
+fn log_path() -> PathBuf {
+    log_dir(std::env::var_os("ProgramData").as_deref()).join(LOGON_TASK_LOG)
 }
-
-/// `STD_INPUT_HANDLE`, `STD_OUTPUT_HANDLE`, `STD_ERROR_HANDLE` ((DWORD)-10, -11, -12).
-const STD_HANDLES: [u32; 3] = [-10i32 as u32, -11i32 as u32, -12i32 as u32];
 
 /// The log, rotated first when it has grown past [`LOG_MAX_BYTES`].
 fn open_log(path: &Path) -> Result<File, ServiceCliError> {
@@ -56,34 +52,31 @@ fn note(log: &mut File, line: &str) {
     let _ = writeln!(log, "logon-task launcher (pid {}): {line}", std::process::id());
 }
 
-/// Leaves the console Task Scheduler created, so its window closes, and points this
-/// process's standard output and error at the log (standard input at nothing), so
-/// nothing written later goes to a console handle that no longer exists.
-fn detach_console(log: &File) {
-    // SAFETY: FreeConsole has no preconditions; failing (no console) is harmless.
-    let _ = unsafe { FreeConsole() };
-    let out = log.try_clone().map(|file| file.into_raw_handle()).unwrap_or(std::ptr::null_mut());
-    for (which, handle) in STD_HANDLES.into_iter().zip([std::ptr::null_mut(), out, out]) {
-        // SAFETY: `handle` is null or a file handle that is never closed (leaked on purpose).
-        let _ = unsafe { SetStdHandle(which, handle) };
+/// See [`super::note_launcher_failure`].
+pub(super) fn note_failure(err: &ServiceCliError) {
+    let path = log_path();
+    if let Some(folder) = path.parent() {
+        let _ = std::fs::create_dir_all(folder);
+    }
+    if let Ok(mut log) = open_log(&path) {
+        note(&mut log, &format!("error: {err}"));
     }
 }
 
-/// Runs the server hidden until this process is ended; see the module documentation.
-pub(super) fn run(options: &LauncherOptions) -> Result<String, ServiceCliError> {
-    let exe = current_exe()?;
-    let logs = log_dir(std::env::var_os("ProgramData").as_deref());
-    std::fs::create_dir_all(&logs)
-        .map_err(|source| ServiceCliError::Io { what: format!("creating {}", logs.display()), source })?;
-    let log_path = logs.join(LOGON_TASK_LOG);
+/// Runs `server` hidden until this process is ended; see the module documentation.
+pub(super) fn run(server: &Path, serve_args: &[String]) -> Result<Infallible, ServiceCliError> {
+    let log_path = log_path();
+    if let Some(logs) = log_path.parent() {
+        std::fs::create_dir_all(logs)
+            .map_err(|source| ServiceCliError::Io { what: format!("creating {}", logs.display()), source })?;
+    }
     let mut log = open_log(&log_path)?;
-    detach_console(&log);
-    let folder: Option<PathBuf> = exe.parent().map(Path::to_path_buf);
+    let folder: Option<PathBuf> = server.parent().map(Path::to_path_buf);
     let mut backoff = Backoff::new();
     loop {
         let started = Instant::now();
-        let mut command = Command::new(&exe);
-        command.args(&options.serve_args).arg("--worker");
+        let mut command = Command::new(server);
+        command.args(serve_args).arg("--worker");
         if let Some(folder) = &folder {
             command.current_dir(folder);
         }
@@ -96,10 +89,10 @@ pub(super) fn run(options: &LauncherOptions) -> Result<String, ServiceCliError> 
             .stderr(output(&log)?)
             .creation_flags((CREATE_NO_WINDOW | CREATE_NEW_PROCESS_GROUP).0);
         let mut child = command.spawn().map_err(|source| {
-            note(&mut log, &format!("cannot start the server: {source}"));
-            ServiceCliError::Io { what: format!("starting {}", exe.display()), source }
+            note(&mut log, &format!("cannot start the server {}: {source}", server.display()));
+            ServiceCliError::Io { what: format!("starting {}", server.display()), source }
         })?;
-        note(&mut log, &format!("started the server (pid {}) with {:?}", child.id(), options.serve_args));
+        note(&mut log, &format!("started the server (pid {}) with {serve_args:?}", child.id()));
         // Never written to: the server stops when this pipe closes, which is when this
         // launcher ends. `wait` would close it first, so it is taken out and kept.
         let stop_pipe = child.stdin.take();
