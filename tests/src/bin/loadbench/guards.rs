@@ -87,6 +87,14 @@ fn start(exe: &Path, extra: &[&str]) -> anyhow::Result<Served> {
     }
 }
 
+/// Whether `pid` is running (not gone, not a zombie waiting to be reaped; Linux).
+fn alive(pid: u32) -> bool {
+    std::fs::read_to_string(format!("/proc/{pid}/status"))
+        .ok()
+        .and_then(|status| status.lines().find(|l| l.starts_with("State:")).map(|l| !l.contains('Z')))
+        .unwrap_or(false)
+}
+
 /// CPU seconds `pid` has used (user and system; Linux).
 fn cpu_seconds(pid: u32) -> Option<f64> {
     let stat = std::fs::read_to_string(format!("/proc/{pid}/stat")).ok()?;
@@ -101,6 +109,20 @@ fn cpu_seconds(pid: u32) -> Option<f64> {
 /// it, and the guest's peak resident memory.
 async fn probe_case(exe: &Path, request: &(dyn Fn(&str) -> reqwest::RequestBuilder + Sync)) -> anyhow::Result<String> {
     let guest = start(exe, &["--exec-timeout-ms", "10000"])?;
+    // The peak as sampled while the request runs: a guest that dies has none to read after.
+    let pid = guest.pid();
+    let sampling = Arc::new(AtomicBool::new(true));
+    let sampler = tokio::spawn({
+        let sampling = Arc::clone(&sampling);
+        async move {
+            let mut peak = None;
+            while sampling.load(Ordering::Relaxed) {
+                peak = memory_of(pid, "VmHWM:").or(peak);
+                tokio::time::sleep(Duration::from_millis(50)).await;
+            }
+            peak
+        }
+    });
     let started = Instant::now();
     let outcome = match request(&guest.url).timeout(Duration::from_secs(40)).send().await {
         Ok(answer) => {
@@ -109,7 +131,9 @@ async fn probe_case(exe: &Path, request: &(dyn Fn(&str) -> reqwest::RequestBuild
             format!("{status} ({body} B)")
         }
         Err(err) if err.is_timeout() => "no answer in 40 s".to_owned(),
-        Err(err) => format!("failed: {}", err.to_string().chars().take(40).collect::<String>()),
+        Err(_) if !alive(guest.pid()) => "the guest died".to_owned(),
+        // The guest answered (or closed) before taking the whole body.
+        Err(_) => "closed while sending".to_owned(),
     };
     let took = started.elapsed();
     // Work that goes on after the answer (typing, decoding, a program past its deadline)
@@ -120,11 +144,10 @@ async fn probe_case(exe: &Path, request: &(dyn Fn(&str) -> reqwest::RequestBuild
         (Some(then), Some(now)) => format!("{:>4.0}%", (now - then) / 2.0 * 100.0),
         _ => "gone".to_owned(),
     };
-    Ok(format!(
-        "{outcome:<22} {:>7.2} s  peak RSS {:>9}  CPU after the answer {after}",
-        took.as_secs_f64(),
-        mib(memory_of(guest.pid(), "VmHWM:"))
-    ))
+    sampling.store(false, Ordering::Relaxed);
+    let sampled = sampler.await.ok().flatten();
+    let peak = memory_of(guest.pid(), "VmHWM:").or(sampled);
+    Ok(format!("{outcome:<22} {:>7.2} s  peak RSS {:>9}  CPU after the answer {after}", took.as_secs_f64(), mib(peak)))
 }
 
 /// A gray 16384 x 16000 PNG (the probe's bomb: 250 KB of file, 1000 MiB as RGBA).
