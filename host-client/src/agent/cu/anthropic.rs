@@ -260,16 +260,7 @@ pub(crate) fn ending(text: String, refused: bool, logs: Vec<StepLog>) -> Predict
     } else {
         (final_decision(&text), text)
     };
-    Prediction {
-        response,
-        actions: vec![decision],
-        marks: None,
-        raw_error: None,
-        logs,
-        timings: Default::default(),
-        // The agent translated its model's coordinates: its code is in pixels.
-        coords: Some(crate::actionspace::Coords::Pixels),
-    }
+    super::translated(response, vec![decision], None, logs)
 }
 
 #[async_trait::async_trait]
@@ -400,15 +391,7 @@ impl Agent for AnthropicAgent {
         };
         self.messages = messages;
         self.pending = pending;
-        Ok(Prediction {
-            response: response.trim().to_owned(),
-            actions,
-            marks: None,
-            raw_error,
-            logs,
-            timings: Default::default(),
-            coords: Some(crate::actionspace::Coords::Pixels),
-        })
+        Ok(super::translated(response.trim().to_owned(), actions, raw_error, logs))
     }
 }
 

@@ -196,6 +196,26 @@ pub(crate) fn exchange_logs(request: &Value, response: &Value) -> Vec<StepLog> {
     ]
 }
 
+/// A computer-use agent's prediction. The agent has already scaled its model's
+/// coordinates back to the screen, so its actions are in pixels whatever the run's
+/// `--coords`; it has no marks and no timings of its own.
+pub(crate) fn translated(
+    response: String,
+    actions: Vec<super::AgentAction>,
+    raw_error: Option<String>,
+    logs: Vec<StepLog>,
+) -> super::Prediction {
+    super::Prediction {
+        response,
+        actions,
+        marks: None,
+        raw_error,
+        logs,
+        timings: Default::default(),
+        coords: Some(crate::actionspace::Coords::Pixels),
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use serde_json::json;

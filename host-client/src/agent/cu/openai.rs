@@ -210,15 +210,7 @@ impl Agent for OpenAiAgent {
             if self.config.safety_checks == SafetyChecks::Fail {
                 self.previous_response_id = Some(id);
                 self.pending = None;
-                return Ok(Prediction {
-                    response,
-                    actions: vec![AgentAction::Fail],
-                    marks: None,
-                    raw_error: None,
-                    logs,
-                    timings: Default::default(),
-                    coords: Some(crate::actionspace::Coords::Pixels),
-                });
+                return Ok(super::translated(response, vec![AgentAction::Fail], None, logs));
             }
         }
         // The model's pixels are the declared display's: scaled back to the screen's.
@@ -235,14 +227,6 @@ impl Agent for OpenAiAgent {
         // Acknowledged checks are exactly the pending ones, with their id, code and message.
         self.previous_response_id = Some(id);
         self.pending = Some(PendingCall { call_id: call_id.to_owned(), acknowledged: checks });
-        Ok(Prediction {
-            response,
-            actions,
-            marks: None,
-            raw_error,
-            logs,
-            timings: Default::default(),
-            coords: Some(crate::actionspace::Coords::Pixels),
-        })
+        Ok(super::translated(response, actions, raw_error, logs))
     }
 }

@@ -145,14 +145,6 @@ impl Agent for UiTarsAgent {
             Err(err) => (Vec::new(), Some(err.to_string())),
         };
         self.history.push(Turn { image_url, reply: reply.clone() });
-        Ok(Prediction {
-            response: reply,
-            actions,
-            marks: None,
-            raw_error,
-            logs,
-            timings: Default::default(),
-            coords: Some(crate::actionspace::Coords::Pixels),
-        })
+        Ok(super::translated(reply, actions, raw_error, logs))
     }
 }
