@@ -551,16 +551,49 @@ impl Vm {
 /// lives as long as the runtime.)
 pub(crate) fn die_with_this_process(command: &mut tokio::process::Command) {
     #[cfg(target_os = "linux")]
-    // SAFETY: the closure runs in the child between fork and exec and only
-    // calls prctl, which is async-signal-safe.
+    // SAFETY: the hook runs in the child between fork and exec and only calls
+    // prctl and getppid, which are async-signal-safe, and allocates nothing.
     unsafe {
-        command.pre_exec(|| {
-            libc::prctl(libc::PR_SET_PDEATHSIG, libc::SIGKILL);
-            Ok(())
-        });
+        command.pre_exec(parent_death_hook());
     }
     #[cfg(not(target_os = "linux"))]
     let _ = command;
+}
+
+/// [`die_with_this_process`] for a child run to its end (`qemu-img`, `xorriso`):
+/// the thread that starts it waits for it, so the signal comes exactly when
+/// this program dies. Without it a `qemu-img` of a killed prepare runs on and
+/// keeps the disk's lock, and the rerun cannot open the disk.
+pub(crate) fn die_with_this_process_std(command: &mut std::process::Command) {
+    #[cfg(target_os = "linux")]
+    {
+        use std::os::unix::process::CommandExt;
+        // SAFETY: as in die_with_this_process.
+        unsafe {
+            command.pre_exec(parent_death_hook());
+        }
+    }
+    #[cfg(not(target_os = "linux"))]
+    let _ = command;
+}
+
+/// The child's side: SIGKILL when the parent dies (`PR_SET_PDEATHSIG`, prctl(2)),
+/// and a refusal to start when the parent already died between fork and prctl
+/// (then no signal would ever come: the child has been handed to another parent).
+#[cfg(target_os = "linux")]
+fn parent_death_hook() -> impl FnMut() -> std::io::Result<()> + Send + Sync + 'static {
+    let parent = std::process::id();
+    move || {
+        // SAFETY: plain system calls with no pointers.
+        let (set, now) = unsafe { (libc::prctl(libc::PR_SET_PDEATHSIG, libc::SIGKILL), libc::getppid()) };
+        if set != 0 {
+            return Err(std::io::Error::last_os_error());
+        }
+        if u32::try_from(now).ok() != Some(parent) {
+            return Err(std::io::Error::from_raw_os_error(libc::ESRCH));
+        }
+        Ok(())
+    }
 }
 
 /// Returns once QEMU reports that the guest can no longer run (an emulation
