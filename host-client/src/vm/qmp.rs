@@ -111,11 +111,22 @@ impl Qmp {
     async fn execute<C>(&self, command: C, timeout: Duration) -> Result<C::Ok, VmError>
     where
         C: qapi::qmp::QmpCommand + qapi::Command + Send + 'static,
+        C::Ok: Send + 'static,
     {
         let name = <C as qapi::Command>::NAME;
-        match tokio::time::timeout(timeout, self.service.execute(command)).await {
-            Ok(Ok(ok)) => Ok(ok),
-            Ok(Err(err)) => Err(qmp_error(name, err)),
+        // The call runs as its own task, so that a deadline here (or a caller's
+        // own timeout around this) never drops it midway. QEMU's monitor here
+        // answers without command ids, so qapi gives every command id 0 and
+        // holds the connection until the answer comes; a call dropped after
+        // sending leaves its id pending, and the next command then panics
+        // inside qapi ("QAPI duplicate command id 0"), aborting the program.
+        // A call left running keeps its place: later ones wait behind it and
+        // meet their own deadlines.
+        let call = tokio::spawn(self.service.execute(command));
+        match tokio::time::timeout(timeout, call).await {
+            Ok(Ok(Ok(ok))) => Ok(ok),
+            Ok(Ok(Err(err))) => Err(qmp_error(name, err)),
+            Ok(Err(err)) => Err(qmp_error(name, format!("the call ended abnormally: {err}"))),
             Err(_) => Err(qmp_error(name, format!("no answer in {} s", timeout.as_secs()))),
         }
     }
