@@ -405,9 +405,7 @@ fn write_media(options: &PrepareOptions, dir: &Path) -> Result<PathBuf, VmError>
     let mut command = std::process::Command::new(&xorriso);
     command.args(&args);
     super::die_with_this_process_std(&mut command);
-    let out = command
-        .output()
-        .map_err(io(format!("starting {}", xorriso.display())))?;
+    let out = command.output().map_err(io(format!("starting {}", xorriso.display())))?;
     if !out.status.success() {
         return Err(VmError::Image {
             what: format!("building the OEM media {}", iso.display()),
