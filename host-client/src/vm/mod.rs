@@ -383,7 +383,7 @@ impl Vm {
             .spawn()
             .map_err(|source| VmError::Io { what: format!("starting {}", spec.qemu.display()), source })?;
         let qmp = tokio::select! {
-            qmp = Qmp::connect(&spec.qmp_socket, Duration::from_secs(30)) => qmp,
+            qmp = Qmp::connect(&spec.qmp_socket, qmp_deadline(&spec)) => qmp,
             status = child.wait() => {
                 let mut status = status.map(|s| s.to_string()).unwrap_or_else(|e| e.to_string());
                 if spec.accel == Accel::Kvm {
@@ -542,6 +542,18 @@ impl Vm {
         if let Some(tpm) = &mut self.tpm {
             tpm.stop().await;
         }
+    }
+}
+
+/// How long QEMU may take to greet on QMP: a started machine at once, but one
+/// started with `-loadvm` only once it has loaded the snapshot (all of a large
+/// guest's memory, slow under emulation on a busy machine). Giving up kills
+/// QEMU (SIGKILL): with 10 s for every greeting, a slow `-loadvm` ended so.
+fn qmp_deadline(spec: &VmSpec) -> Duration {
+    if spec.loadvm.is_some() {
+        qmp::SNAPSHOT_TIMEOUT
+    } else {
+        Duration::from_secs(30)
     }
 }
 

@@ -16,7 +16,7 @@ use tokio::time::Instant;
 use super::{check_snapshot_name, known_list, parse_snapshot_list, VmError};
 
 /// How long saving or loading a snapshot may take (memory of a large guest).
-const SNAPSHOT_TIMEOUT: Duration = Duration::from_secs(600);
+pub(crate) const SNAPSHOT_TIMEOUT: Duration = Duration::from_secs(600);
 
 type Service = QapiService<QmpStreamTokio<WriteHalf<UnixStream>>>;
 
@@ -51,9 +51,12 @@ impl Qmp {
     pub async fn connect(path: &Path, within: Duration) -> Result<Qmp, VmError> {
         let started = Instant::now();
         // A monitor serves one client at a time and keeps later ones waiting
-        // for its greeting: the greeting and negotiation get a deadline.
-        let greeting = Duration::from_secs(10);
+        // for its greeting: the greeting and negotiation get a deadline. QEMU
+        // also greets only once its main loop runs, which with `-loadvm` is
+        // after the whole snapshot is loaded: the deadline is what is left of
+        // `within`, and at least 10 s.
         let stream = loop {
+            let greeting = within.saturating_sub(started.elapsed()).max(Duration::from_secs(10));
             let attempt = async { QmpStreamTokio::open_uds(path).await?.negotiate().await };
             match tokio::time::timeout(greeting, attempt).await {
                 Ok(Ok(stream)) => break stream,
@@ -65,7 +68,7 @@ impl Qmp {
                 Err(_) => {
                     return Err(qmp_error(
                         &format!("connecting to {}", path.display()),
-                        "no greeting in 10 s (another client holds this monitor?)",
+                        format!("no greeting in {} s (another client holds this monitor?)", greeting.as_secs()),
                     ))
                 }
             }
