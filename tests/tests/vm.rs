@@ -326,6 +326,10 @@ fn read_until(child: &mut Child, mut stop: impl FnMut(&str) -> bool) -> String {
 fn kill_and_reap(child: &mut Child, work: &Path) {
     child.kill().unwrap();
     child.wait().unwrap();
+    nothing_left(work);
+}
+
+fn nothing_left(work: &Path) {
     // QEMU, swtpm and any qemu-img it started (snapshots, sealing) die with it
     // (PR_SET_PDEATHSIG): the signal is sent as it dies, so they are gone within
     // moments, and none keeps the disk's lock from the rerun.
@@ -462,15 +466,15 @@ fn prepare_is_killed_in_every_stage_and_the_reruns_seal_it() {
     status_says("healthy");
 
     // 6. The rerun goes on from the healthy snapshot, shuts the guest down and
-    // runs qemu-img on the disk (dropping the snapshot, the sealing copy of
-    // the 1 GiB): killed while one runs, which must die with it.
+    // runs qemu-img on the disk (dropping the snapshot, then the sealing copy
+    // of the 1 GiB): killed during the copy, which must die with it.
     let mut run = prepare_command(&image, &oem, &out, &["--size", "64G"]).spawn().unwrap();
     let deadline = Instant::now() + Duration::from_secs(300);
     let qemu_img = loop {
-        // Not the quick `qemu-img info` of the resume's start: its snapshot deletion or copy.
+        // Not a quick `qemu-img info` or the snapshot's deletion: the sealing copy.
         let working = programs_naming(&["qemu-img"], &work.display().to_string()).into_iter().find(|pid| {
             let cmdline = std::fs::read(format!("/proc/{pid}/cmdline")).unwrap_or_default();
-            cmdline.split(|b| *b == 0).any(|arg| arg == b"snapshot" || arg == b"convert")
+            cmdline.split(|b| *b == 0).any(|arg| arg == b"convert")
         });
         if let Some(pid) = working {
             break pid;
@@ -484,8 +488,15 @@ fn prepare_is_killed_in_every_stage_and_the_reruns_seal_it() {
         }
         std::thread::sleep(Duration::from_millis(5));
     };
-    kill_and_reap(&mut run, &work);
-    assert!(!Path::new(&format!("/proc/{qemu_img}/exe")).exists(), "qemu-img {qemu_img} outlived prepare");
+    run.kill().unwrap();
+    run.wait().unwrap();
+    // Far sooner than it would finish the copy of 1 GiB on its own.
+    let gone = Instant::now() + Duration::from_secs(5);
+    while Path::new(&format!("/proc/{qemu_img}/exe")).exists() {
+        assert!(Instant::now() < gone, "qemu-img {qemu_img} outlived prepare");
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    nothing_left(&work);
     let said = read_until(&mut run, |_| false);
     assert!(said.contains("stage healthy (resumed)") && !said.contains("starting over"), "{said}");
     status_says("shut-down");
