@@ -3,7 +3,8 @@
 //! a run on two VMs with per-task resets that scores as a run on plain stub
 //! guests while one VM's QEMU is killed mid-run; `vm prepare` from the
 //! stand-in installer (which enforces Windows 11 Setup's rules), killed in
-//! Setup and once healthy and resumed, with a 1 GiB OEM payload; Setup's
+//! every stage (the stand-in held in the mid-install ones by its test hook)
+//! and resumed to a sealed image, with a 1 GiB OEM payload; Setup's
 //! refusals; `--dry-run`; the install on the UEFI machine with Secure Boot and
 //! swtpm; foreign VM folders;
 //! and the errors bad input gets.
@@ -325,14 +326,42 @@ fn read_until(child: &mut Child, mut stop: impl FnMut(&str) -> bool) -> String {
 fn kill_and_reap(child: &mut Child, work: &Path) {
     child.kill().unwrap();
     child.wait().unwrap();
-    // QEMU and swtpm go with it. A qemu-img it started (snapshots, sealing) does
-    // not, and holds the disk's lock until it ends: a rerun started before that
-    // fails to open the disk.
-    let gone = Instant::now() + Duration::from_secs(60);
-    while !programs_naming(&["qemu-system", "qemu-img"], &work.display().to_string()).is_empty() {
-        assert!(Instant::now() < gone, "QEMU outlived the killed prepare");
-        std::thread::sleep(Duration::from_millis(100));
+    nothing_left(work);
+}
+
+fn nothing_left(work: &Path) {
+    // QEMU, swtpm and any qemu-img it started (snapshots, sealing) die with it
+    // (PR_SET_PDEATHSIG): the signal is sent as it dies, so they are gone within
+    // moments, and none keeps the disk's lock from the rerun.
+    let gone = Instant::now() + Duration::from_secs(10);
+    loop {
+        let left = programs_naming(&["qemu-system", "qemu-img", "swtpm"], &work.display().to_string());
+        if left.is_empty() {
+            break;
+        }
+        assert!(Instant::now() < gone, "processes {left:?} outlived the killed prepare");
+        std::thread::sleep(Duration::from_millis(50));
     }
+}
+
+/// Waits until the serial log of a prepare says `what` (the stand-in holds
+/// there, so it stays said); fails if prepare ends first.
+fn wait_serial(child: &mut Child, work: &Path, what: &str) {
+    let deadline = Instant::now() + Duration::from_secs(300);
+    loop {
+        let serial = std::fs::read_to_string(work.join("serial.log")).unwrap_or_default();
+        if serial.contains(what) {
+            return;
+        }
+        assert!(Instant::now() < deadline, "the serial port never said {what:?}: {serial}");
+        assert!(child.try_wait().unwrap().is_none(), "prepare ended before the serial port said {what:?}");
+        std::thread::sleep(Duration::from_millis(200));
+    }
+}
+
+/// The stand-in's test hook (docs/vm-standin.md): it stays in `stage`.
+fn hold_in(oem: &Path, stage: &str) {
+    std::fs::write(oem.join("arena-standin-hold"), format!("{stage}\n")).unwrap();
 }
 
 /// `name` copied out of the FAT volume of a (sealed) stand-in disk image; returns the copy.
@@ -354,13 +383,18 @@ fn file_in_image(image: &Path, name: &str, scratch: &Path) -> PathBuf {
     out
 }
 
-/// The whole install on the BIOS path with Setup's bypass keys, killed during
-/// Windows Setup (the rerun says it starts over from a blank disk) and again
-/// once the guest is healthy (the rerun goes on from the healthy snapshot), with
-/// a 1 GiB payload in the OEM folder that arrives in `C:\OEM` byte for byte.
+/// The whole install on the BIOS path with Setup's bypass keys, killed in
+/// each stage: in `setup` (once the disk is written), `oobe`, `first-logon` and
+/// `oem-install`, where the stand-in is held by its test hook (each rerun says
+/// it starts over from a blank disk, with the OEM folder as it is now); once
+/// the guest is healthy (the rerun goes on from the healthy snapshot); and while
+/// a qemu-img of the shut-down stage works on the disk (it dies with prepare;
+/// the rerun goes on from the shut-down stage and seals). The last install
+/// carries a 1 GiB payload in the OEM folder that arrives in `C:\OEM` byte for
+/// byte.
 #[test]
-fn prepare_is_killed_in_setup_and_at_shutdown_and_the_reruns_seal_it() {
-    let Some(image) = standin_image("prepare_is_killed_in_setup_and_at_shutdown_and_the_reruns_seal_it") else {
+fn prepare_is_killed_in_every_stage_and_the_reruns_seal_it() {
+    let Some(image) = standin_image("prepare_is_killed_in_every_stage_and_the_reruns_seal_it") else {
         return;
     };
     let _one = one_prepare_at_a_time();
@@ -368,7 +402,46 @@ fn prepare_is_killed_in_setup_and_at_shutdown_and_the_reruns_seal_it() {
     let dir = tempfile::tempdir().unwrap();
     let token = "7f".repeat(32);
     let oem = oem_folder(dir.path(), &token);
-    // 1 GiB that is not all zeros (zeros would pass a broken copy of sparse files).
+    let out = dir.path().join("golden.qcow2");
+    let work = arena_host::vm::prepare::work_dir(&out);
+    let status_says = |stage: &str| {
+        let status = arena().args(["vm", "prepare", "--status", "--out"]).arg(&out).output().unwrap();
+        let text = String::from_utf8_lossy(&status.stdout).into_owned();
+        assert!(text.contains(&format!("stage {stage}")), "--status after the kill in {stage}: {text}");
+    };
+
+    // 1. Killed in Windows Setup (the stand-in's installer), held once it has
+    // written the disk and before it reboots.
+    hold_in(&oem, "setup");
+    let mut run = prepare_command(&image, &oem, &out, &["--size", "64G"]).spawn().unwrap();
+    let said = read_until(&mut run, |line| line.starts_with("stage setup"));
+    wait_serial(&mut run, &work, "held in stage setup");
+    kill_and_reap(&mut run, &work);
+    assert!(!said.contains("starting over"), "{said}");
+    status_says("setup");
+
+    // 2.-4. Each rerun starts over from a blank disk and is killed in the next
+    // stage, which the guest said on the serial port and prepare on its stdout.
+    let mut previous = "setup";
+    for stage in ["oobe", "first-logon", "oem-install"] {
+        hold_in(&oem, stage);
+        let mut run = prepare_command(&image, &oem, &out, &["--size", "64G"]).spawn().unwrap();
+        let said = read_until(&mut run, |line| line.starts_with(&format!("stage {stage}")));
+        wait_serial(&mut run, &work, &format!("held in stage {stage}"));
+        kill_and_reap(&mut run, &work);
+        assert!(
+            said.contains(&format!("starting over from stage {previous}")) && said.contains("blank disk"),
+            "the rerun after the kill in {previous}: {said}"
+        );
+        status_says(stage);
+        previous = stage;
+    }
+    let killed_mid_install = started.elapsed();
+
+    // 5. No hold, and 1 GiB more in the OEM folder (not all zeros: zeros would
+    // pass a broken copy of sparse files). The rerun starts over with the
+    // folder as it is now, and is killed once the guest is healthy.
+    std::fs::remove_file(oem.join("arena-standin-hold")).unwrap();
     let payload = oem.join("payload.bin");
     {
         use std::io::Write;
@@ -383,36 +456,52 @@ fn prepare_is_killed_in_setup_and_at_shutdown_and_the_reruns_seal_it() {
         }
     }
     let expected = sha256_of(&payload);
-    let out = dir.path().join("golden.qcow2");
-    let work = arena_host::vm::prepare::work_dir(&out);
-
-    // 1. Killed while Windows Setup (the stand-in's installer) runs.
-    let mut first = prepare_command(&image, &oem, &out, &["--size", "64G"]).spawn().unwrap();
-    let deadline = Instant::now() + Duration::from_secs(300);
-    loop {
-        let serial = std::fs::read_to_string(work.join("serial.log")).unwrap_or_default();
-        if serial.contains("install: Windows Setup") {
-            break;
-        }
-        assert!(Instant::now() < deadline, "the installer never started");
-        assert!(first.try_wait().unwrap().is_none(), "prepare ended early");
-        std::thread::sleep(Duration::from_millis(200));
-    }
-    kill_and_reap(&mut first, &work);
-    let status = arena().args(["vm", "prepare", "--status", "--out"]).arg(&out).output().unwrap();
-    assert!(String::from_utf8_lossy(&status.stdout).contains("stage setup"), "{status:?}");
-
-    // 2. The rerun starts over, and is killed once the guest is healthy.
-    let mut second = prepare_command(&image, &oem, &out, &["--size", "64G"]).spawn().unwrap();
-    let said = read_until(&mut second, |line| line.starts_with("stage healthy") || line.starts_with("stage shut-down"));
-    kill_and_reap(&mut second, &work);
-    assert!(said.contains("starting over from stage setup") && said.contains("blank disk"), "{said}");
+    let mut run = prepare_command(&image, &oem, &out, &["--size", "64G"]).spawn().unwrap();
+    let said = read_until(&mut run, |line| line.starts_with("stage healthy") || line.starts_with("stage shut-down"));
+    kill_and_reap(&mut run, &work);
+    assert!(said.contains("starting over from stage oem-install") && said.contains("blank disk"), "{said}");
     for stage in ["stage oobe", "stage first-logon", "stage oem-install"] {
         assert!(said.contains(stage), "{stage} was not shown: {said}");
     }
+    status_says("healthy");
 
-    // 3. The next rerun goes on from the healthy snapshot (or, if the guest had
-    // already powered off, from the shut-down stage) and seals the image.
+    // 6. The rerun goes on from the healthy snapshot, shuts the guest down and
+    // runs qemu-img on the disk (dropping the snapshot, then the sealing copy
+    // of the 1 GiB): killed during the copy, which must die with it.
+    let mut run = prepare_command(&image, &oem, &out, &["--size", "64G"]).spawn().unwrap();
+    let deadline = Instant::now() + Duration::from_secs(300);
+    let qemu_img = loop {
+        // Not a quick `qemu-img info` or the snapshot's deletion: the sealing copy.
+        let working = programs_naming(&["qemu-img"], &work.display().to_string()).into_iter().find(|pid| {
+            let cmdline = std::fs::read(format!("/proc/{pid}/cmdline")).unwrap_or_default();
+            cmdline.split(|b| *b == 0).any(|arg| arg == b"convert")
+        });
+        if let Some(pid) = working {
+            break pid;
+        }
+        assert!(Instant::now() < deadline, "no qemu-img of the shut-down stage was seen");
+        if let Some(status) = run.try_wait().unwrap() {
+            let said = read_until(&mut run, |_| false);
+            let mut err = String::new();
+            std::io::Read::read_to_string(run.stderr.as_mut().unwrap(), &mut err).unwrap();
+            panic!("prepare ended ({status}) before a qemu-img of it was seen: {said}\n{err}");
+        }
+        std::thread::sleep(Duration::from_millis(5));
+    };
+    run.kill().unwrap();
+    run.wait().unwrap();
+    // Far sooner than it would finish the copy of 1 GiB on its own.
+    let gone = Instant::now() + Duration::from_secs(5);
+    while Path::new(&format!("/proc/{qemu_img}/exe")).exists() {
+        assert!(Instant::now() < gone, "qemu-img {qemu_img} outlived prepare");
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    nothing_left(&work);
+    let said = read_until(&mut run, |_| false);
+    assert!(said.contains("stage healthy (resumed)") && !said.contains("starting over"), "{said}");
+    status_says("shut-down");
+
+    // 7. The last rerun goes on from the shut-down stage and seals the image.
     let third: Output = prepare_command(&image, &oem, &out, &["--size", "64G"]).output().unwrap();
     let said = String::from_utf8_lossy(&third.stdout);
     assert!(third.status.success(), "{said}\n{}", String::from_utf8_lossy(&third.stderr));
@@ -427,7 +516,11 @@ fn prepare_is_killed_in_setup_and_at_shutdown_and_the_reruns_seal_it() {
     std::fs::remove_file(dir.path().join("extracted")).unwrap();
     let answer = std::fs::read_to_string(work.join("autounattend.xml")).unwrap();
     assert!(answer.contains("BypassTPMCheck"), "BIOS without a TPM needs the bypass keys");
-    eprintln!("prepare (BIOS, two kills, 1 GiB OEM payload): {:.0} s", started.elapsed().as_secs_f64());
+    eprintln!(
+        "prepare (BIOS, killed in setup, oobe, first-logon, oem-install, healthy and shut-down; 1 GiB OEM payload): {:.0} s, the four mid-install kills {:.0} s",
+        started.elapsed().as_secs_f64(),
+        killed_mid_install.as_secs_f64()
+    );
 
     // The golden image boots into the installed guest, which wants the OEM token.
     let rt = tokio::runtime::Builder::new_multi_thread().worker_threads(2).enable_all().build().unwrap();

@@ -43,8 +43,12 @@ pub struct QemuImg {
 
 impl QemuImg {
     fn run(&self, args: &[&std::ffi::OsStr], what: &str) -> Result<Vec<u8>, VmError> {
-        let output = Command::new(&self.program)
-            .args(args)
+        let mut command = Command::new(&self.program);
+        command.args(args);
+        // A prepare killed while qemu-img works (a snapshot, the sealing copy)
+        // takes it along, so the disk's lock is not left held.
+        super::die_with_this_process_std(&mut command);
+        let output = command
             .output()
             .map_err(|source| VmError::Io { what: format!("starting {}", self.program.display()), source })?;
         if !output.status.success() {

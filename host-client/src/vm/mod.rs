@@ -383,7 +383,7 @@ impl Vm {
             .spawn()
             .map_err(|source| VmError::Io { what: format!("starting {}", spec.qemu.display()), source })?;
         let qmp = tokio::select! {
-            qmp = Qmp::connect(&spec.qmp_socket, Duration::from_secs(30)) => qmp,
+            qmp = Qmp::connect(&spec.qmp_socket, qmp_deadline(&spec)) => qmp,
             status = child.wait() => {
                 let mut status = status.map(|s| s.to_string()).unwrap_or_else(|e| e.to_string());
                 if spec.accel == Accel::Kvm {
@@ -545,22 +545,67 @@ impl Vm {
     }
 }
 
+/// How long QEMU may take to greet on QMP: a started machine at once, but one
+/// started with `-loadvm` only once it has loaded the snapshot (all of a large
+/// guest's memory, slow under emulation on a busy machine). Giving up kills
+/// QEMU (SIGKILL): with 10 s for every greeting, a slow `-loadvm` ended so.
+fn qmp_deadline(spec: &VmSpec) -> Duration {
+    if spec.loadvm.is_some() {
+        qmp::SNAPSHOT_TIMEOUT
+    } else {
+        Duration::from_secs(30)
+    }
+}
+
 /// Makes the child `command` starts (QEMU, swtpm) end with this program even
 /// when it is killed outright, so no VM outlives the run that owns it. (The
 /// signal follows the thread that started the child: a runtime worker, which
 /// lives as long as the runtime.)
 pub(crate) fn die_with_this_process(command: &mut tokio::process::Command) {
     #[cfg(target_os = "linux")]
-    // SAFETY: the closure runs in the child between fork and exec and only
-    // calls prctl, which is async-signal-safe.
+    // SAFETY: the hook runs in the child between fork and exec and only calls
+    // prctl and getppid, which are async-signal-safe, and allocates nothing.
     unsafe {
-        command.pre_exec(|| {
-            libc::prctl(libc::PR_SET_PDEATHSIG, libc::SIGKILL);
-            Ok(())
-        });
+        command.pre_exec(parent_death_hook());
     }
     #[cfg(not(target_os = "linux"))]
     let _ = command;
+}
+
+/// [`die_with_this_process`] for a child run to its end (`qemu-img`, `xorriso`):
+/// the thread that starts it waits for it, so the signal comes exactly when
+/// this program dies. Without it a `qemu-img` of a killed prepare runs on and
+/// keeps the disk's lock, and the rerun cannot open the disk.
+pub(crate) fn die_with_this_process_std(command: &mut std::process::Command) {
+    #[cfg(target_os = "linux")]
+    {
+        use std::os::unix::process::CommandExt;
+        // SAFETY: as in die_with_this_process.
+        unsafe {
+            command.pre_exec(parent_death_hook());
+        }
+    }
+    #[cfg(not(target_os = "linux"))]
+    let _ = command;
+}
+
+/// The child's side: SIGKILL when the parent dies (`PR_SET_PDEATHSIG`, prctl(2)),
+/// and a refusal to start when the parent already died between fork and prctl
+/// (then no signal would ever come: the child has been handed to another parent).
+#[cfg(target_os = "linux")]
+fn parent_death_hook() -> impl FnMut() -> std::io::Result<()> + Send + Sync + 'static {
+    let parent = std::process::id();
+    move || {
+        // SAFETY: plain system calls with no pointers.
+        let (set, now) = unsafe { (libc::prctl(libc::PR_SET_PDEATHSIG, libc::SIGKILL), libc::getppid()) };
+        if set != 0 {
+            return Err(std::io::Error::last_os_error());
+        }
+        if u32::try_from(now).ok() != Some(parent) {
+            return Err(std::io::Error::from_raw_os_error(libc::ESRCH));
+        }
+        Ok(())
+    }
 }
 
 /// Returns once QEMU reports that the guest can no longer run (an emulation

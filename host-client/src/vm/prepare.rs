@@ -23,7 +23,11 @@
 //! last boundary that is safe: after `healthy` from the saved snapshot; before
 //! it, Windows' disk is half-installed (a power cut there makes Windows say
 //! "The computer restarted unexpectedly"), so the install starts over from a
-//! blank disk, and says so.
+//! blank disk, with the answer file and the OEM media built again from this
+//! run's options and OEM folder, and says so. A rerun first ends what the
+//! interrupted run left running on the folder's files ([`end_leftovers`]);
+//! on Linux QEMU, swtpm, `qemu-img` and `xorriso` die with prepare anyway
+//! (`PR_SET_PDEATHSIG`).
 //!
 //! On every failure the serial log, a screendump and the guest's doctor report
 //! (when it answers) are kept in `<out>.prepare/failures/`.
@@ -272,21 +276,89 @@ fn io(what: String) -> impl FnOnce(std::io::Error) -> VmError {
     move |source| VmError::Io { what, source }
 }
 
-/// Ends a QEMU an interrupted prepare left running on this disk.
-fn end_leftover(pid: u32, disk: &Path) {
-    let cmdline = std::fs::read(format!("/proc/{pid}/cmdline")).unwrap_or_default();
-    let disk = disk.display().to_string();
-    if String::from_utf8_lossy(&cmdline).contains(disk.as_str()) {
-        tracing::warn!(pid, "ending the QEMU an interrupted prepare left running");
-        // The process is ours (it holds our disk); nothing else is signalled.
-        let _ = std::process::Command::new("kill").arg("-KILL").arg(pid.to_string()).status();
-        for _ in 0..50 {
-            if !Path::new(&format!("/proc/{pid}")).exists() {
-                break;
+/// The programs of a prepare that hold files of its folder: QEMU and
+/// `qemu-img` (the disk's lock), swtpm (the TPM state's lock).
+const HOLDERS: &[&str] = &["qemu-system", "qemu-img", "swtpm"];
+
+/// How long a leftover `qemu-img` may take to finish on its own (a snapshot
+/// deletion ended midway can leave the disk with leaked clusters).
+const QEMU_IMG_GRACE: Duration = Duration::from_secs(20);
+
+/// Ends what an interrupted prepare left running on the files of `dir`, so the
+/// rerun can open them: a QEMU or swtpm at once; a `qemu-img` once it had
+/// [`QEMU_IMG_GRACE`] to finish. (Each child dies with prepare on Linux, but a
+/// prepare from an older build, or a child started in the instant its prepare
+/// died, may not have.) Only this user's processes whose program is one of
+/// [`HOLDERS`] and whose arguments name a file in `dir` are touched.
+fn end_leftovers(dir: &Path) {
+    let started = Instant::now();
+    loop {
+        let leftovers = holders_of(dir);
+        if leftovers.is_empty() {
+            return;
+        }
+        for (pid, program) in &leftovers {
+            let let_finish = program.starts_with("qemu-img") && started.elapsed() < QEMU_IMG_GRACE;
+            if !let_finish {
+                tracing::warn!(pid, program = %program, "ending what an interrupted prepare left running");
+                #[cfg(unix)]
+                // SAFETY: a plain system call; the process is this user's and runs
+                // one of our programs on our files (checked just now).
+                unsafe {
+                    libc::kill(*pid as libc::pid_t, libc::SIGKILL);
+                }
             }
-            std::thread::sleep(Duration::from_millis(100));
+        }
+        if started.elapsed() > QEMU_IMG_GRACE + Duration::from_secs(10) {
+            tracing::warn!(?leftovers, "processes of an interrupted prepare do not end");
+            return;
+        }
+        std::thread::sleep(Duration::from_millis(100));
+    }
+}
+
+/// This user's running processes of [`HOLDERS`] with an argument naming a file
+/// in `dir`: their ids and program names. QEMU's arguments name files inside
+/// options (`file=PATH,format=qcow2`), so each part between `,` and `=` is
+/// read as a path, relative to the process's working folder.
+fn holders_of(dir: &Path) -> Vec<(u32, String)> {
+    let mut found = Vec::new();
+    #[cfg(target_os = "linux")]
+    {
+        use std::os::unix::fs::MetadataExt;
+        let folders: Vec<PathBuf> =
+            [std::path::absolute(dir).ok(), std::fs::canonicalize(dir).ok()].into_iter().flatten().collect();
+        // SAFETY: geteuid has no arguments and cannot fail.
+        let me = unsafe { libc::geteuid() };
+        let own = std::process::id();
+        for entry in std::fs::read_dir("/proc").into_iter().flatten().flatten() {
+            let Ok(pid) = entry.file_name().to_string_lossy().parse::<u32>() else { continue };
+            if pid == own || entry.metadata().map(|m| m.uid()).ok() != Some(me) {
+                continue;
+            }
+            // Empty for a process that has ended (a zombie) or is gone.
+            let cmdline = std::fs::read(entry.path().join("cmdline")).unwrap_or_default();
+            let mut args = cmdline.split(|b| *b == 0).map(|arg| String::from_utf8_lossy(arg).into_owned());
+            let Some(program) = args.next() else { continue };
+            let program = program.rsplit('/').next().unwrap_or_default().to_owned();
+            if !HOLDERS.iter().any(|h| program.starts_with(h)) {
+                continue;
+            }
+            let cwd = std::fs::read_link(entry.path().join("cwd")).unwrap_or_default();
+            let names_ours = |arg: String| {
+                arg.split([',', '=']).filter(|part| !part.is_empty()).any(|part| {
+                    let path = cwd.join(part);
+                    folders.iter().any(|folder| path.starts_with(folder)) && path.exists()
+                })
+            };
+            if args.any(names_ours) {
+                found.push((pid, program));
+            }
         }
     }
+    #[cfg(not(target_os = "linux"))]
+    let _ = dir;
+    found
 }
 
 /// Checks the inputs of a new prepare.
@@ -330,10 +402,10 @@ fn write_media(options: &PrepareOptions, dir: &Path) -> Result<PathBuf, VmError>
     let iso = dir.join(MEDIA_FILE);
     let xorriso = find_xorriso(options.xorriso.as_deref())?;
     let args = media_args(&answer, &marker, &options.oem, &iso);
-    let out = std::process::Command::new(&xorriso)
-        .args(&args)
-        .output()
-        .map_err(io(format!("starting {}", xorriso.display())))?;
+    let mut command = std::process::Command::new(&xorriso);
+    command.args(&args);
+    super::die_with_this_process_std(&mut command);
+    let out = command.output().map_err(io(format!("starting {}", xorriso.display())))?;
     if !out.status.success() {
         return Err(VmError::Image {
             what: format!("building the OEM media {}", iso.display()),
@@ -482,9 +554,8 @@ pub async fn prepare(options: &PrepareOptions, mut progress: impl FnMut(PrepareE
             state
         }
     };
-    if let Some(pid) = state.qemu_pid.take() {
-        end_leftover(pid, &disk);
-    }
+    state.qemu_pid = None;
+    end_leftovers(&dir);
     let config = prepare_config(options, &dir);
     // The stage last announced, so none is announced twice.
     let mut announced = None;
@@ -613,9 +684,9 @@ fn start_over(
         std::fs::remove_dir_all(&tpm_state).map_err(io(format!("removing {}", tpm_state.display())))?;
     }
     let _ = std::fs::remove_file(dir.join(UEFI_VARS_FILE));
-    if !dir.join(MEDIA_FILE).exists() {
-        write_media(options, dir)?;
-    }
+    // A new install takes the answer file and the OEM folder as they are now
+    // (the user may have fixed what made the last one fail).
+    write_media(options, dir)?;
     state.stage = Stage::Setup;
     state.restarts += 1;
     state.reboots = 0;
@@ -879,6 +950,40 @@ mod tests {
         assert_eq!(lines.take_new("arena-stage: oobe\n"), vec![Stage::Oobe]);
         let mut fresh = StageLines::default();
         assert_eq!(fresh.take_new("arena-stage: unknown\narena-stage:\n\n"), vec![]);
+    }
+
+    /// A leftover QEMU (here a shell named like one, its arguments naming a
+    /// file of the folder as QEMU's options do) is found and ended; a process
+    /// naming another folder is not touched.
+    #[cfg(target_os = "linux")]
+    #[test]
+    fn leftovers_naming_the_folder_are_ended_and_no_other() {
+        let tmp = tempfile::tempdir().unwrap();
+        let dir = tmp.path().join("golden.qcow2.prepare");
+        let other = tmp.path().join("other").join("golden.qcow2.prepare");
+        for folder in [&dir, &other] {
+            std::fs::create_dir_all(folder).unwrap();
+            std::fs::write(folder.join("disk.qcow2"), b"").unwrap();
+        }
+        let fake = tmp.path().join("qemu-system-x86_64");
+        std::os::unix::fs::symlink("/bin/sh", &fake).unwrap();
+        let start = |folder: &Path| {
+            std::process::Command::new(&fake)
+                .args(["-c", "while :; do sleep 1; done", "sh"])
+                .arg(format!("file={},format=qcow2", folder.join("disk.qcow2").display()))
+                .spawn()
+                .unwrap()
+        };
+        let (mut ours, mut theirs) = (start(&dir), start(&other));
+        let found = holders_of(&dir);
+        assert_eq!(found, vec![(ours.id(), "qemu-system-x86_64".to_owned())]);
+        end_leftovers(&dir);
+        use std::os::unix::process::ExitStatusExt;
+        assert_eq!(ours.wait().unwrap().signal(), Some(libc::SIGKILL));
+        assert!(theirs.try_wait().unwrap().is_none(), "a process of another folder was ended");
+        assert_eq!(holders_of(&other).len(), 1);
+        theirs.kill().unwrap();
+        theirs.wait().unwrap();
     }
 
     #[test]

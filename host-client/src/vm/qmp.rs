@@ -16,7 +16,7 @@ use tokio::time::Instant;
 use super::{check_snapshot_name, known_list, parse_snapshot_list, VmError};
 
 /// How long saving or loading a snapshot may take (memory of a large guest).
-const SNAPSHOT_TIMEOUT: Duration = Duration::from_secs(600);
+pub(crate) const SNAPSHOT_TIMEOUT: Duration = Duration::from_secs(600);
 
 type Service = QapiService<QmpStreamTokio<WriteHalf<UnixStream>>>;
 
@@ -51,9 +51,12 @@ impl Qmp {
     pub async fn connect(path: &Path, within: Duration) -> Result<Qmp, VmError> {
         let started = Instant::now();
         // A monitor serves one client at a time and keeps later ones waiting
-        // for its greeting: the greeting and negotiation get a deadline.
-        let greeting = Duration::from_secs(10);
+        // for its greeting: the greeting and negotiation get a deadline. QEMU
+        // also greets only once its main loop runs, which with `-loadvm` is
+        // after the whole snapshot is loaded: the deadline is what is left of
+        // `within`, and at least 10 s.
         let stream = loop {
+            let greeting = within.saturating_sub(started.elapsed()).max(Duration::from_secs(10));
             let attempt = async { QmpStreamTokio::open_uds(path).await?.negotiate().await };
             match tokio::time::timeout(greeting, attempt).await {
                 Ok(Ok(stream)) => break stream,
@@ -65,7 +68,7 @@ impl Qmp {
                 Err(_) => {
                     return Err(qmp_error(
                         &format!("connecting to {}", path.display()),
-                        "no greeting in 10 s (another client holds this monitor?)",
+                        format!("no greeting in {} s (another client holds this monitor?)", greeting.as_secs()),
                     ))
                 }
             }
@@ -111,11 +114,22 @@ impl Qmp {
     async fn execute<C>(&self, command: C, timeout: Duration) -> Result<C::Ok, VmError>
     where
         C: qapi::qmp::QmpCommand + qapi::Command + Send + 'static,
+        C::Ok: Send + 'static,
     {
         let name = <C as qapi::Command>::NAME;
-        match tokio::time::timeout(timeout, self.service.execute(command)).await {
-            Ok(Ok(ok)) => Ok(ok),
-            Ok(Err(err)) => Err(qmp_error(name, err)),
+        // The call runs as its own task, so that a deadline here (or a caller's
+        // own timeout around this) never drops it midway. QEMU's monitor here
+        // answers without command ids, so qapi gives every command id 0 and
+        // holds the connection until the answer comes; a call dropped after
+        // sending leaves its id pending, and the next command then panics
+        // inside qapi ("QAPI duplicate command id 0"), aborting the program.
+        // A call left running keeps its place: later ones wait behind it and
+        // meet their own deadlines.
+        let call = tokio::spawn(self.service.execute(command));
+        match tokio::time::timeout(timeout, call).await {
+            Ok(Ok(Ok(ok))) => Ok(ok),
+            Ok(Ok(Err(err))) => Err(qmp_error(name, err)),
+            Ok(Err(err)) => Err(qmp_error(name, format!("the call ended abnormally: {err}"))),
             Err(_) => Err(qmp_error(name, format!("no answer in {} s", timeout.as_secs()))),
         }
     }
