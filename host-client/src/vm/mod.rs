@@ -733,6 +733,57 @@ pub fn folder_drive(folder: &Path, removable: bool) -> FolderDrive {
 mod tests {
     use super::*;
 
+    /// A child started with the hook (as prepare starts `qemu-img`) dies when the
+    /// process that started it ends: this test runs itself again as that parent.
+    #[cfg(target_os = "linux")]
+    #[test]
+    fn a_child_started_with_the_hook_dies_with_its_parent() {
+        const PARENT: &str = "ARENA_TEST_PARENT_DEATH_PIDFILE";
+        if let Some(pidfile) = std::env::var_os(PARENT) {
+            let mut command = std::process::Command::new("sleep");
+            command
+                .arg("600")
+                .stdin(std::process::Stdio::null())
+                .stdout(std::process::Stdio::null())
+                .stderr(std::process::Stdio::null());
+            die_with_this_process_std(&mut command);
+            let child = command.spawn().expect("sleep starts");
+            std::fs::write(pidfile, child.id().to_string()).expect("pid written");
+            // Not waited for: the parent ends with the child still running.
+            std::mem::forget(child);
+            return;
+        }
+        let dir = tempfile::tempdir().expect("dir");
+        let pidfile = dir.path().join("pid");
+        let status = std::process::Command::new(std::env::current_exe().expect("the test binary"))
+            .args(["--exact", "vm::tests::a_child_started_with_the_hook_dies_with_its_parent", "--test-threads=1"])
+            .env(PARENT, &pidfile)
+            .stdin(std::process::Stdio::null())
+            .stdout(std::process::Stdio::null())
+            .stderr(std::process::Stdio::null())
+            .status()
+            .expect("the parent runs");
+        assert!(status.success(), "{status}");
+        let pid: u32 = std::fs::read_to_string(&pidfile).expect("pid").trim().parse().expect("a pid");
+        // Gone, or a zombie waiting for its new parent to reap it: either way dead.
+        let running = || {
+            std::fs::read_to_string(format!("/proc/{pid}/status"))
+                .ok()
+                .and_then(|s| s.lines().find(|l| l.starts_with("State:")).map(|l| !l.contains('Z')))
+                .unwrap_or(false)
+        };
+        let until = std::time::Instant::now() + Duration::from_secs(10);
+        while running() && std::time::Instant::now() < until {
+            std::thread::sleep(Duration::from_millis(20));
+        }
+        let alive = running();
+        if alive {
+            // SAFETY: a plain signal to the process this test started.
+            unsafe { libc::kill(pid as i32, libc::SIGKILL) };
+        }
+        assert!(!alive, "sleep {pid} outlived the process that started it");
+    }
+
     #[test]
     fn the_monitor_snapshot_table_gives_names() {
         let text = "List of snapshots present on all disks:\r\nID        TAG               VM SIZE                DATE     VM CLOCK     ICOUNT\r\n--        ready              45.2 MiB 2026-11-26 01:02:03 00:00:12.345\r\n--        after-login        1 GiB 2026-11-26 01:05:03 00:03:12.345\r\n";
