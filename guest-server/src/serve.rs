@@ -32,7 +32,6 @@
 //!   a [`ConnContext`] whose slot an upgraded connection keeps until it ends, and whose
 //!   shutdown signal tells it to close.
 
-use std::collections::VecDeque;
 use std::future::Future;
 use std::pin::{pin, Pin};
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -60,10 +59,19 @@ pub struct ConnContext {
     /// Cancelled when the server starts shutting down.
     pub shutdown: CancellationToken,
     _slot: Arc<OwnedSemaphorePermit>,
-    /// This connection's place among those on probation, while it is on it.
-    probation: Option<(Arc<Probation>, u64)>,
+    /// The server's table of connections and this one's id in it.
+    connections: Arc<Connections>,
+    id: u64,
     /// How far its request body has come, for the choice of a slot to take back.
     body: Arc<Mutex<Option<BodyProgress>>>,
+}
+
+impl ConnContext {
+    /// The connection showed the token: it leaves probation and is never evicted for
+    /// want of it.
+    pub fn authenticated(&self) {
+        self.connections.authenticated(self.id);
+    }
 }
 
 /// A request body being read: since when, and how many bytes came.
@@ -76,81 +84,94 @@ struct BodyProgress {
 /// How long a body must have been arriving before it can count as behind.
 pub const BEHIND_AFTER: Duration = Duration::from_millis(500);
 
-/// The open connections, each with its body's progress and the signal that closes it.
-type Open = Mutex<std::collections::HashMap<u64, (Arc<Mutex<Option<BodyProgress>>>, CancellationToken)>>;
-
-/// Closes the connection whose body is furthest behind `rate` bytes a second (and has
-/// been arriving for [`BEHIND_AFTER`] at least); answers whether there was one.
-fn close_furthest_behind(open: &Open, rate: u64) -> bool {
-    let now = tokio::time::Instant::now();
-    let open = open.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
-    let deficit = |progress: &BodyProgress| {
-        let elapsed = now.saturating_duration_since(progress.started);
-        (elapsed >= BEHIND_AFTER).then_some((elapsed.as_secs_f64() * rate as f64) - progress.received as f64)
-    };
-    let behind = open
-        .iter()
-        .filter_map(|(id, (body, evict))| {
-            let progress = (*body.lock().unwrap_or_else(std::sync::PoisonError::into_inner))?;
-            deficit(&progress).filter(|d| *d > 0.0).map(|d| (d, *id, evict))
-        })
-        .max_by(|a, b| a.0.total_cmp(&b.0));
-    match behind {
-        Some((deficit, id, evict)) => {
-            tracing::info!(
-                connection = id,
-                deficit_bytes = deficit as u64,
-                "every slot is taken: closing the connection whose body is furthest behind"
-            );
-            evict.cancel();
-            true
-        }
-        None => false,
-    }
-}
-
-impl ConnContext {
-    /// The connection showed the token: it leaves probation and is never evicted for
-    /// want of it.
-    pub fn authenticated(&self) {
-        if let Some((probation, id)) = &self.probation {
-            probation.leave(*id);
-        }
-    }
-}
-
-/// A connection on probation: its id, whether it has sent any byte, and the
-/// signal that closes it.
-type OnProbation = (u64, Arc<AtomicBool>, CancellationToken);
-
-/// The connections that have not yet shown the token, oldest first.
+/// One open connection, as the choice of one to close for a newcomer sees it.
 #[derive(Debug)]
-struct Probation {
-    cap: usize,
-    waiting: Mutex<VecDeque<OnProbation>>,
+struct Conn {
+    /// Whether its peer has sent any byte.
+    spoke: Arc<AtomicBool>,
+    /// Its request body's progress, while one is being read.
+    body: Arc<Mutex<Option<BodyProgress>>>,
+    /// Closes it.
+    evict: CancellationToken,
+    /// It has not shown the token (and a token is required).
+    on_probation: bool,
 }
 
-impl Probation {
-    fn lock(&self) -> std::sync::MutexGuard<'_, VecDeque<OnProbation>> {
-        self.waiting.lock().unwrap_or_else(std::sync::PoisonError::into_inner)
+/// The open connections of one server, by id (ids grow, so the first is the oldest).
+#[derive(Debug)]
+struct Connections {
+    /// How many may be on probation at once; `None`: no token, no probation.
+    probation_cap: Option<usize>,
+    open: Mutex<std::collections::BTreeMap<u64, Conn>>,
+}
+
+impl Connections {
+    fn lock(&self) -> std::sync::MutexGuard<'_, std::collections::BTreeMap<u64, Conn>> {
+        self.open.lock().unwrap_or_else(std::sync::PoisonError::into_inner)
     }
 
-    /// Puts connection `id` on probation; when all places are taken, closes the
-    /// oldest connection that has sent nothing, or the oldest of all if each has.
-    fn enter(&self, id: u64, spoke: Arc<AtomicBool>, evict: CancellationToken) {
-        let mut waiting = self.lock();
-        while waiting.len() >= self.cap {
-            let silent = waiting.iter().position(|(_, spoke, _)| !spoke.load(Ordering::Relaxed));
-            if let Some((old, _, token)) = waiting.remove(silent.unwrap_or(0)) {
+    /// Adds connection `id`, on probation when a token is required; when all places on
+    /// probation are taken, closes the oldest one there that has sent nothing, or the
+    /// oldest there if each has.
+    fn admit(&self, id: u64, mut conn: Conn) {
+        let mut open = self.lock();
+        if let Some(cap) = self.probation_cap {
+            conn.on_probation = true;
+            loop {
+                let waiting: Vec<(&u64, &Conn)> = open.iter().filter(|(_, c)| c.on_probation).collect();
+                if waiting.len() < cap {
+                    break;
+                }
+                let silent = waiting.iter().find(|(_, c)| !c.spoke.load(Ordering::Relaxed));
+                let Some(&old) = silent.or(waiting.first()).map(|(old, _)| *old) else { break };
                 tracing::debug!(connection = old, "closing a connection that has not shown the token");
-                token.cancel();
+                if let Some(closed) = open.get_mut(&old) {
+                    closed.evict.cancel();
+                    closed.on_probation = false;
+                }
             }
         }
-        waiting.push_back((id, spoke, evict));
+        open.insert(id, conn);
     }
 
-    fn leave(&self, id: u64) {
-        self.lock().retain(|(waiting, _, _)| *waiting != id);
+    fn authenticated(&self, id: u64) {
+        if let Some(conn) = self.lock().get_mut(&id) {
+            conn.on_probation = false;
+        }
+    }
+
+    fn close(&self, id: u64) {
+        self.lock().remove(&id);
+    }
+
+    /// Closes the connection whose body is furthest behind `rate` bytes a second (and
+    /// has been arriving for [`BEHIND_AFTER`] at least); answers whether there was one.
+    fn close_furthest_behind(&self, rate: u64) -> bool {
+        let now = tokio::time::Instant::now();
+        let open = self.lock();
+        let deficit = |progress: &BodyProgress| {
+            let elapsed = now.saturating_duration_since(progress.started);
+            (elapsed >= BEHIND_AFTER).then_some((elapsed.as_secs_f64() * rate as f64) - progress.received as f64)
+        };
+        let behind = open
+            .iter()
+            .filter_map(|(id, conn)| {
+                let progress = (*conn.body.lock().unwrap_or_else(std::sync::PoisonError::into_inner))?;
+                deficit(&progress).filter(|d| *d > 0.0).map(|d| (d, *id, &conn.evict))
+            })
+            .max_by(|a, b| a.0.total_cmp(&b.0));
+        match behind {
+            Some((deficit, id, evict)) => {
+                tracing::info!(
+                    connection = id,
+                    deficit_bytes = deficit as u64,
+                    "every slot is taken: closing the connection whose body is furthest behind"
+                );
+                evict.cancel();
+                true
+            }
+            None => false,
+        }
     }
 }
 
@@ -379,9 +400,8 @@ pub async fn serve(
     let stop = CancellationToken::new();
     let mut connections = JoinSet::new();
     let mut shutdown = pin!(shutdown);
-    let probation =
-        limits.probation_slots.map(|cap| Arc::new(Probation { cap: cap.max(1), waiting: Mutex::default() }));
-    let open: Arc<Open> = Arc::default();
+    let table =
+        Arc::new(Connections { probation_cap: limits.probation_slots.map(|cap| cap.max(1)), open: Mutex::default() });
     let mut next_id: u64 = 0;
     loop {
         let accepted = tokio::select! {
@@ -402,7 +422,7 @@ pub async fn serve(
         // back as its connection ends; or the 503.
         let slot = match Arc::clone(&permits).try_acquire_owned() {
             Ok(permit) => Slot::Free(permit),
-            Err(_) if close_furthest_behind(&open, limits.min_body_rate) => Slot::Freed(Arc::clone(&permits)),
+            Err(_) if table.close_furthest_behind(limits.min_body_rate) => Slot::Freed(Arc::clone(&permits)),
             Err(_) => {
                 tracing::warn!(%peer, max = limits.max_connections, "too many connections; refusing one");
                 connections.spawn(refuse_busy(stream, limits.max_connections));
@@ -411,13 +431,7 @@ pub async fn serve(
         };
         next_id += 1;
         let id = next_id;
-        let shared = Shared {
-            limits,
-            app: app.clone(),
-            stop: stop.clone(),
-            probation: probation.clone(),
-            open: Arc::clone(&open),
-        };
+        let shared = Shared { limits, app: app.clone(), stop: stop.clone(), table: Arc::clone(&table) };
         connections.spawn(async move {
             let permit = match slot {
                 Slot::Free(permit) => permit,
@@ -463,8 +477,7 @@ struct Shared {
     limits: ConnLimits,
     app: Router,
     stop: CancellationToken,
-    probation: Option<Arc<Probation>>,
-    open: Arc<Open>,
+    table: Arc<Connections>,
 }
 
 /// Serves one accepted connection in its slot until it ends, is closed for a
@@ -476,20 +489,13 @@ async fn serve_connection(
     id: u64,
     permit: OwnedSemaphorePermit,
 ) {
-    let Shared { limits, app, stop, probation, open } = shared;
+    let Shared { limits, app, stop, table } = shared;
     let evict = CancellationToken::new();
     let spoke = Arc::new(AtomicBool::new(false));
-    if let Some(probation) = &probation {
-        probation.enter(id, Arc::clone(&spoke), evict.clone());
-    }
     let body: Arc<Mutex<Option<BodyProgress>>> = Arc::default();
-    open.lock().unwrap_or_else(std::sync::PoisonError::into_inner).insert(id, (Arc::clone(&body), evict.clone()));
-    let context = ConnContext {
-        shutdown: stop,
-        _slot: Arc::new(permit),
-        probation: probation.map(|p| (p, id)),
-        body: Arc::clone(&body),
-    };
+    let conn = Conn { spoke: Arc::clone(&spoke), body: Arc::clone(&body), evict: evict.clone(), on_probation: false };
+    table.admit(id, conn);
+    let context = ConnContext { shutdown: stop, _slot: Arc::new(permit), connections: Arc::clone(&table), id, body };
     let per_request = context.clone();
     let (grace, rate) = (limits.header_timeout, limits.min_body_rate);
     let service = TowerToHyperService::new(app.map_request(move |request: hyper::Request<Incoming>| {
@@ -501,7 +507,7 @@ async fn serve_connection(
     let mut builder = hyper::server::conn::http1::Builder::new();
     builder.timer(TokioTimer::new()).header_read_timeout(limits.header_timeout).max_buf_size(limits.max_head_bytes);
     let connection = builder.serve_connection(TokioIo::new(Heard { inner: stream, spoke }), service).with_upgrades();
-    let ConnContext { shutdown, _slot, probation, body: _ } = context;
+    let ConnContext { shutdown, _slot, .. } = context;
     let mut connection = pin!(connection);
     let ended = tokio::select! {
         ended = connection.as_mut() => ended,
@@ -512,10 +518,7 @@ async fn serve_connection(
             connection.await
         }
     };
-    if let Some((probation, id)) = probation {
-        probation.leave(id);
-    }
-    open.lock().unwrap_or_else(std::sync::PoisonError::into_inner).remove(&id);
+    table.close(id);
     if let Err(err) = ended {
         tracing::debug!(%peer, error = %err, "connection ended with an error");
     }
