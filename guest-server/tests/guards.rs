@@ -87,6 +87,8 @@ const MIB: usize = 1 << 20;
 struct App {
     router: Router,
     stub: Arc<StubDesktop>,
+    /// The server's input lock, as the doctor takes it.
+    input: Arc<tokio::sync::RwLock<()>>,
     dir: tempfile::TempDir,
 }
 
@@ -99,7 +101,8 @@ fn app_with(configure: impl FnOnce(&mut ServerConfig)) -> App {
     let mut config = ServerConfig::for_stub();
     configure(&mut config);
     let state = AppState::new(stub.clone(), config, None);
-    App { router: arena_guest::router(state), stub, dir }
+    let input = state.input.clone();
+    App { router: arena_guest::router(state), stub, input, dir }
 }
 
 fn app() -> App {
@@ -333,14 +336,7 @@ async fn a_request_without_the_token_closes_its_connection() {
 #[tokio::test]
 async fn the_doctor_waits_for_running_actions_and_puts_the_cursor_back() {
     let _turn = SERIAL.lock().await;
-    let dir = tempfile::tempdir().expect("temp dir");
-    let stub = Arc::new(
-        StubDesktop::with_config(StubConfig { root: Some(dir.path().into()), screen: (1440, 900), scenario: None })
-            .expect("stub desktop"),
-    );
-    let state = AppState::new(stub.clone(), ServerConfig::for_stub(), None);
-    let input = state.input.clone();
-    let router = arena_guest::router(state);
+    let App { router, stub, input, dir: _dir } = app();
     stub.perform(&Action::MoveTo { x: 123, y: 456 }).unwrap();
     // An action batch is running.
     let batch = input.read().await;
@@ -364,14 +360,7 @@ async fn the_doctor_waits_for_running_actions_and_puts_the_cursor_back() {
 #[tokio::test]
 async fn agent_code_and_programs_wait_while_the_doctor_has_the_input() {
     let _turn = SERIAL.lock().await;
-    let dir = tempfile::tempdir().expect("temp dir");
-    let stub = Arc::new(
-        StubDesktop::with_config(StubConfig { root: Some(dir.path().into()), screen: (1440, 900), scenario: None })
-            .expect("stub desktop"),
-    );
-    let state = AppState::new(stub.clone(), ServerConfig::for_stub(), None);
-    let input = state.input.clone();
-    let router = arena_guest::router(state);
+    let App { router, stub, input, dir: _dir } = app();
     let post = |uri: &str, body: Value| {
         Request::post(uri)
             .header(header::HOST, "127.0.0.1")
