@@ -37,11 +37,16 @@ const TOKEN: &str = "loadbench-token-0123456789";
 /// Bytes of the oversize bodies (the probe sent 900 MiB; this keeps the bench's own memory modest).
 const BIG: usize = 200 << 20;
 
-/// A `/proc/<pid>/status` field of `pid` in MiB (Linux).
-fn memory_of(pid: u32, field: &str) -> Option<f64> {
+/// The first word of a `/proc/<pid>/status` field of `pid` (Linux).
+fn status_field(pid: u32, field: &str) -> Option<String> {
     let status = std::fs::read_to_string(format!("/proc/{pid}/status")).ok()?;
     let line = status.lines().find(|l| l.starts_with(field))?;
-    let kb: f64 = line.split_whitespace().nth(1)?.parse().ok()?;
+    Some(line[field.len()..].split_whitespace().next()?.to_owned())
+}
+
+/// A `/proc/<pid>/status` memory field of `pid` in MiB (Linux).
+fn memory_of(pid: u32, field: &str) -> Option<f64> {
+    let kb: f64 = status_field(pid, field)?.parse().ok()?;
     Some(kb / 1024.0)
 }
 
@@ -89,10 +94,7 @@ fn start(exe: &Path, extra: &[&str]) -> anyhow::Result<Served> {
 
 /// Whether `pid` is running (not gone, not a zombie waiting to be reaped; Linux).
 fn alive(pid: u32) -> bool {
-    std::fs::read_to_string(format!("/proc/{pid}/status"))
-        .ok()
-        .and_then(|status| status.lines().find(|l| l.starts_with("State:")).map(|l| !l.contains('Z')))
-        .unwrap_or(false)
+    status_field(pid, "State:").is_some_and(|state| state != "Z")
 }
 
 /// CPU seconds `pid` has used (user and system; Linux).
