@@ -177,7 +177,13 @@ pub fn sweep_leftovers(desktop: &dyn Desktop) -> usize {
     removed
 }
 
-fn resolve_token(config: &ServerConfig) -> anyhow::Result<Option<String>> {
+/// The bearer token `config` names (`--token` or the first line of `--token-file`),
+/// checked; `None` when it names none.
+///
+/// # Errors
+///
+/// A malformed token or an unreadable token file.
+pub fn resolve_token(config: &ServerConfig) -> anyhow::Result<Option<String>> {
     let token = match (&config.token, &config.token_file) {
         (Some(token), _) => Some(arena_shared::token::parse(token).context("--token")?),
         (None, Some(path)) => {

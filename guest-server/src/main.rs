@@ -40,32 +40,40 @@ fn main() -> ExitCode {
     }
 }
 
-/// `arena-guest doctor`: builds the backend as the server would and checks it.
+/// `arena-guest doctor`: asks the server running on its port, or builds the backend as
+/// the server would and checks it.
 fn doctor(args: &arena_guest::service::DoctorArgs) -> ExitCode {
     init_tracing(LogFormat::Text, false);
-    let state = match arena_guest::build_state(args.serve.clone()) {
-        Ok(state) => state,
+    let token = match arena_guest::resolve_token(&args.serve) {
+        Ok(token) => token,
         Err(err) => {
             eprintln!("error: {err:#}");
             return ExitCode::FAILURE;
         }
     };
     // A server on this port drives the same desktop: its own doctor takes turns with
-    // its actions, where one run from here would type over a running episode.
+    // its actions, where one run from here would type over a running episode. Only
+    // when none answers is a backend of this process built.
     let running = tokio::runtime::Builder::new_current_thread()
         .enable_all()
         .build()
         .map_err(|err| format!("starting the async runtime: {err}"))
-        .and_then(|rt| rt.block_on(arena_guest::native::ask_running_server(&args.serve, state.token.as_deref())));
+        .and_then(|rt| rt.block_on(arena_guest::native::ask_running_server(&args.serve, token.as_deref())));
     let report = match running {
         Ok(Some(report)) => {
             eprintln!("(the checks ran inside the arena-guest serving on port {})", args.serve.port);
             report
         }
-        Ok(None) => {
-            let options = arena_guest::doctor::DoctorOptions::for_server(&args.serve, state.token.is_some());
-            arena_guest::doctor::run(state.desktop.as_ref(), &options)
-        }
+        Ok(None) => match arena_guest::build_state(args.serve.clone()) {
+            Ok(state) => {
+                let options = arena_guest::doctor::DoctorOptions::for_server(&args.serve, state.token.is_some());
+                arena_guest::doctor::run(state.desktop.as_ref(), &options)
+            }
+            Err(err) => {
+                eprintln!("error: {err:#}");
+                return ExitCode::FAILURE;
+            }
+        },
         Err(err) => {
             eprintln!("error: {err}");
             return ExitCode::FAILURE;
