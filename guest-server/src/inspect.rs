@@ -132,10 +132,10 @@ pub fn exif_strings(path: &Path) -> Vec<String> {
             exif::Value::SByte(v) => join(v.iter().map(i8::to_string).collect()),
             exif::Value::SShort(v) => join(v.iter().map(i16::to_string).collect()),
             exif::Value::SLong(v) => join(v.iter().map(i32::to_string).collect()),
-            exif::Value::Rational(v) => join(v.iter().map(|r| arena_shared::script::float_repr(r.to_f64())).collect()),
-            exif::Value::SRational(v) => join(v.iter().map(|r| arena_shared::script::float_repr(r.to_f64())).collect()),
-            exif::Value::Float(v) => join(v.iter().map(|f| arena_shared::script::float_repr(f64::from(*f))).collect()),
-            exif::Value::Double(v) => join(v.iter().map(|f| arena_shared::script::float_repr(*f)).collect()),
+            exif::Value::Rational(v) => join(v.iter().map(|r| arena_script::float_repr(r.to_f64())).collect()),
+            exif::Value::SRational(v) => join(v.iter().map(|r| arena_script::float_repr(r.to_f64())).collect()),
+            exif::Value::Float(v) => join(v.iter().map(|f| arena_script::float_repr(f64::from(*f))).collect()),
+            exif::Value::Double(v) => join(v.iter().map(|f| arena_script::float_repr(*f)).collect()),
             _ => String::new(),
         })
         .collect()

@@ -1,11 +1,11 @@
 //! The guest's [`ScriptHost`]: what the native Python-subset interpreter
-//! (`arena_shared::script`) does when `/execute` or `/execute_windows` code acts on
+//! (`arena_script`) does when `/execute` or `/execute_windows` code acts on
 //! the world. Every primitive becomes a call on the one [`Desktop`] backend, so the
 //! interpreter works the same over the stub and the Windows backend; what is made of
 //! primitives (the window list, `open_program`, `platform.version()`, saved
-//! screenshots) is `arena_shared::script::compose`'s, the same code the host runs.
+//! screenshots) is `arena_script::compose`'s, the same code the host runs.
 //!
-//! It is not the interpreter (that lives in `arena_shared::script`, whose only I/O is its host)
+//! It is not the interpreter (that lives in `arena_script`, whose only I/O is its host)
 //! and not a route: `waa::execute` decides which requests run code and how the
 //! answers look.
 //!
@@ -19,11 +19,11 @@
 use std::path::Path;
 use std::time::{Duration, Instant};
 
+use arena_script::compose::PROGRAM_NOT_FOUND;
+use arena_script::{CommandOutput, HostError, HostResult, PathKind, ScriptHost, WindowChange};
 use arena_shared::action::Action;
 use arena_shared::observation::WindowInfo;
 use arena_shared::registry::RegistryValue;
-use arena_shared::script::compose::PROGRAM_NOT_FOUND;
-use arena_shared::script::{CommandOutput, HostError, HostResult, PathKind, ScriptHost, WindowChange};
 use image::RgbaImage;
 
 use crate::desktop::{ClipboardData, CommandSpec, Desktop, DesktopError, ExecLimits, WindowState};
@@ -233,7 +233,7 @@ impl ScriptHost for DesktopHost<'_> {
 mod tests {
     use std::sync::Arc;
 
-    use arena_shared::script::{run_source, Composed as _, Globals};
+    use arena_script::{run_source, Composed as _, Globals};
 
     use super::*;
     use crate::desktop::stub::StubDesktop;
@@ -253,7 +253,7 @@ mod tests {
         let (_dir, stub) = stub();
         let mut host = DesktopHost::new(stub.as_ref(), Instant::now() + Duration::from_millis(30));
         let err = run_source("import time; time.sleep(5)", &mut host, Globals::python()).expect_err("times out");
-        assert_eq!(err.kind, arena_shared::script::ErrorKind::Timeout, "{err}");
+        assert_eq!(err.kind, arena_script::ErrorKind::Timeout, "{err}");
         let mut host = DesktopHost::new(stub.as_ref(), far());
         assert!(host.sleep(f64::NAN).is_err());
     }
@@ -302,7 +302,7 @@ mod tests {
         let (_dir, stub) = stub();
         let mut host = DesktopHost::new(stub.as_ref(), far());
         assert_eq!(host.os_version().as_deref(), Ok("10.0.22631"));
-        let key = arena_shared::script::compose::CURRENT_VERSION;
+        let key = arena_script::compose::CURRENT_VERSION;
         stub.registry_write(key, Some("CurrentBuildNumber"), &RegistryValue::Binary(vec![1])).expect("written");
         let err = host.os_version().expect_err("not a number");
         assert!(err.to_string().contains(r"CurrentVersion\CurrentBuildNumber is not a number"), "{err}");

@@ -20,10 +20,10 @@ use arena_guest::config::ServerConfig;
 use arena_guest::desktop::stub::{Scenario, StubConfig, StubDesktop};
 use arena_guest::desktop::{ClipboardData, Desktop};
 use arena_guest::state::AppState;
+use arena_script::{python_code_from_argv, python_code_from_command_line};
 use arena_shared::action::{Action, MouseButton};
 use arena_shared::cmdline::{shlex_split, truthy};
 use arena_shared::geometry::Point;
-use arena_shared::script::{python_code_from_argv, python_code_from_command_line};
 
 /// The upstream host's prefix for every `python -c` command (waa-api.md §b.2).
 const PREFIX: &str = "import pyautogui; import time; pyautogui.FAILSAFE = False; ";

@@ -34,9 +34,9 @@ use std::time::{Duration, Instant};
 
 use serde_json::Value;
 
+use arena_script::ComputerState;
 use arena_shared::action::{Action, ActionBatch};
 use arena_shared::observation::A11yQuery;
-use arena_shared::script::ComputerState;
 
 use crate::agent::observe::{self, ObserveConfig};
 use crate::agent::{self, Agent, AgentAction, AgentError, ExecOptions, LogValue, Observation, Prediction, StepLog};

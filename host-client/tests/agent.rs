@@ -22,11 +22,11 @@ use arena_host::agent::scripted::{PlanSource, ScriptedAgent};
 use arena_host::agent::{execute_with, Agent, AgentAction, AgentError, ExecOptions, Observation};
 use arena_host::client::{ClientConfig, GuestClient};
 use arena_host::task::Task;
+use arena_script::ComputerState;
 use arena_shared::action::Action;
 use arena_shared::clipboard::ClipboardContent;
 use arena_shared::exec::LaunchRequest;
 use arena_shared::observation::{A11yNode, A11yQuery, WindowTarget};
-use arena_shared::script::ComputerState;
 use arena_test_support::StubGuest;
 
 async fn start_guest() -> StubGuest {

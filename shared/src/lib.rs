@@ -21,8 +21,6 @@
 //! - [`health`]: the staged readiness report; [`doctor`]: the end-to-end capability report.
 //! - [`error`]: the error body every native route answers with.
 //! - [`window_list`]: the window list and title the model is shown, as upstream builds them.
-//! - [`script`]: a safe interpreter for the pyautogui and WAA `computer.*` Python that hosts
-//!   send, over a trait of primitives, with the `computer` behaviours composed once.
 //! - [`cmdline`], [`ntfs`], [`imaging`], [`atomic`], [`close_all`], [`token`], [`a11y_xml`]:
 //!   decisions both sides share (command lines, listing order, crop and encode, atomic
 //!   writes, which windows a reset spares, bearer tokens, upstream's accessibility XML).
@@ -57,7 +55,6 @@ pub mod mcp_tools;
 pub mod ntfs;
 pub mod observation;
 pub mod registry;
-pub mod script;
 pub mod search_path;
 pub mod token;
 pub mod window_list;

@@ -8,7 +8,7 @@
 //! The first test runs one program both ways against the real stub guest and compares
 //! what it printed and the files it saved, pixel for pixel and byte for byte.
 //!
-//! The behaviours composed of script-host primitives (`arena_shared::script::compose`)
+//! The behaviours composed of script-host primitives (`arena_script::compose`)
 //! are each run on both sides: `window_titles` (`pyautogui.getAllTitles()`),
 //! `os_version` (`platform.version()`) and `save_screenshot` (a PNG and a JPEG) in the
 //! first test; `open_program` and `switch_to_window` (Navi's `computer.os` and
@@ -20,9 +20,9 @@ use std::time::Duration;
 use arena_host::agent::exec::{execute_with, ExecOptions};
 use arena_host::agent::AgentAction;
 use arena_host::{ClientConfig, GuestClient};
+use arena_script::ComputerState;
 use arena_shared::exec::LaunchRequest;
 use arena_shared::observation::WindowTarget;
-use arena_shared::script::ComputerState;
 use arena_test_support::Served;
 use serde_json::{json, Value};
 

@@ -23,10 +23,10 @@ use rmcp::transport::streamable_http_server::{StreamableHttpServerConfig, Stream
 use rmcp::{ErrorData, RoleServer, ServerHandler};
 use serde_json::{json, Value};
 
+use arena_script::{self as script, ComputerState, Globals};
 use arena_shared::action::Action;
 use arena_shared::mcp_tools::{self, ToolCall};
 use arena_shared::observation::{A11yBackend, ImageFormat, TreeBudget};
-use arena_shared::script::{self, ComputerState, Globals};
 
 use crate::call::blocking;
 use crate::desktop::DesktopError;

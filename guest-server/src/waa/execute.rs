@@ -5,7 +5,7 @@
 //! with POSIX `shlex`, a list becomes one MSVC command line, `shell` (Python truthiness)
 //! runs it through `cmd /c`. A Python invocation with `-c` (`python -c CODE`, any
 //! spelling of the program, also inside a shell line) is not started as a process:
-//! the code runs natively with `arena_shared::script` over [`DesktopHost`], and the
+//! the code runs natively with `arena_script` over [`DesktopHost`], and the
 //! answer is what the Python process would have printed and returned. Code outside
 //! that subset runs with a real Python only when `--python` names one that exists;
 //! otherwise it is refused loudly, naming the construct. Other programs are whatever
@@ -21,7 +21,7 @@ use axum::http::StatusCode;
 use base64::Engine;
 use serde_json::{json, Value};
 
-use arena_shared::script::{self, ErrorKind, Globals, ParseError, ScriptError};
+use arena_script::{self as script, ErrorKind, Globals, ParseError, ScriptError};
 
 use crate::desktop::{CommandSpec, Desktop, DesktopError, ExecLimits};
 use crate::error::WaaError;

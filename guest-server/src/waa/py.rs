@@ -59,12 +59,12 @@ pub(crate) fn repr_str_list(items: &[String]) -> String {
 
 /// `repr(s)` of a Python `str` (shared with the script interpreter).
 pub(crate) fn repr_str(s: &str) -> String {
-    arena_shared::script::str_repr(s)
+    arena_script::str_repr(s)
 }
 
 /// `repr(float)` (shared with the script interpreter).
 pub(crate) fn float_repr(f: f64) -> String {
-    arena_shared::script::float_repr(f)
+    arena_script::float_repr(f)
 }
 
 /// `str(pathlib.WindowsPath(s))`: forward slashes become backslashes, empty and `.`

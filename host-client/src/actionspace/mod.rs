@@ -283,7 +283,7 @@ pub fn to_agent_actions(steps: &[Step]) -> Vec<AgentAction> {
             },
             Step::SetClipboard(text) => out.push(AgentAction::Pyautogui(format!(
                 "import pyperclip\npyperclip.copy({})",
-                arena_shared::script::str_repr(text)
+                arena_script::str_repr(text)
             ))),
             Step::Wait => out.push(AgentAction::Wait),
             Step::Done => out.push(AgentAction::Done),

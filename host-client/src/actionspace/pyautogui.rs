@@ -1,6 +1,6 @@
 //! pyautogui code as OSWorld agents write it, turned into steps.
 //!
-//! The code runs in the shared interpreter (`arena_shared::script`, the same
+//! The code runs in the shared interpreter (`arena_script`, the same
 //! parser and pyautogui semantics the guest's `/execute` has) against a host that
 //! records instead of acting: input calls become [`Step::Act`], `time.sleep` a
 //! [`Action::Wait`], `pyperclip.copy` a [`Step::SetClipboard`] (and
@@ -15,16 +15,16 @@
 //! centre of the screen. `pyautogui.position()` and `size()` still answer in
 //! pixels. With [`Coords::Pixels`] nothing is rewritten.
 
+use arena_script::ast::{BinOp, Const, Expr, ExprKind, FunctionBody, Program, Stmt, StmtKind};
+use arena_script::host::cursor_after;
+use arena_script::{
+    run, CommandOutput, ErrorKind, Globals, HostError, HostResult, PathKind, RecordingHost, ScriptHost, Stop,
+    WindowChange,
+};
 use arena_shared::action::Action;
 use arena_shared::cmdline::CommandSpec;
 use arena_shared::observation::WindowInfo;
 use arena_shared::registry::RegistryValue;
-use arena_shared::script::ast::{BinOp, Const, Expr, ExprKind, FunctionBody, Program, Stmt, StmtKind};
-use arena_shared::script::host::cursor_after;
-use arena_shared::script::{
-    run, CommandOutput, ErrorKind, Globals, HostError, HostResult, PathKind, RecordingHost, ScriptHost, Stop,
-    WindowChange,
-};
 use image::RgbaImage;
 use std::time::{Duration, Instant};
 
@@ -47,13 +47,13 @@ pub fn parse(code: &str, ctx: &Context) -> Result<Vec<Step>, ActionError> {
         "FAIL" => return Ok(vec![Step::Fail]),
         _ => {}
     }
-    let fail = |err: arena_shared::script::ScriptError| {
+    let fail = |err: arena_script::ScriptError| {
         let quoted: String = code.chars().take(QUOTE_CHARS).collect();
         let ellipsis = if code.chars().count() > QUOTE_CHARS { "..." } else { "" };
         let what = if err.kind == ErrorKind::Syntax { "cannot parse" } else { "cannot translate" };
         ActionError::new(ActionSpace::Pyautogui, format!("{what} the pyautogui code {quoted:?}{ellipsis}: {err}"))
     };
-    let mut program = arena_shared::script::parse(code).map_err(|e| fail(e.into()))?;
+    let mut program = arena_script::parse(code).map_err(|e| fail(e.into()))?;
     rescale(&mut program, ctx.coords, ctx.screen);
     let mut host = StepHost { rec: RecordingHost::new(ctx.screen, ctx.cursor), steps: Vec::new(), copied: None };
     run_program(&program, &mut host).map_err(fail)?;
@@ -75,7 +75,7 @@ pub fn rescale(program: &mut Program, coords: Coords, screen: (u32, u32)) {
 /// How long translating one reply may take.
 const TRANSLATE_TIME: Duration = Duration::from_secs(5);
 
-fn run_program(program: &Program, host: &mut StepHost) -> Result<(), arena_shared::script::ScriptError> {
+fn run_program(program: &Program, host: &mut StepHost) -> Result<(), arena_script::ScriptError> {
     // Translating runs no effects, only the program's own work: a few seconds bound a
     // reply that loops, besides the interpreter's loop budget.
     let stop = Stop::new(Some(Instant::now() + TRANSLATE_TIME), None);

@@ -1,7 +1,7 @@
 //! Carrying out an [`AgentAction`] on a guest: [`execute`].
 //!
 //! Navi `computer.*` code and pyautogui code run here on the host, in the
-//! `arena_shared::script` interpreter, against [`GuestHost`]: a
+//! `arena_script` interpreter, against [`GuestHost`]: a
 //! [`ScriptHost`] whose every effect is a typed call of the guest's `/v1`
 //! API (an input action is `POST /v1/actions`, `subprocess.run` is
 //! `POST /v1/exec`, `pyperclip.copy` is `PUT /v1/clipboard`, ...). The
@@ -24,7 +24,7 @@
 //! [`GuestHost`] implements only the primitives (capture, input, windows, files,
 //! processes, registry, clipboard, environment); every behaviour made of them (the
 //! window list, `switch_to_application`, `open_program`, `platform.version()`, saved
-//! screenshots, crops, command lines) is `arena_shared::script::compose`'s, the same
+//! screenshots, crops, command lines) is `arena_script::compose`'s, the same
 //! code the guest's own script host runs, so code gives the same result whether it
 //! runs here or in the guest's `/execute`.
 
@@ -38,6 +38,10 @@ use image::RgbaImage;
 use serde::{Deserialize, Serialize};
 use tokio::runtime::Handle;
 
+use arena_script::{
+    parse, run, CommandOutput, ComputerState, Globals, HostError, HostResult, PathKind, ScriptError, ScriptHost, Stop,
+    WindowChange,
+};
 use arena_shared::action::{Action, ActionBatch};
 use arena_shared::clipboard::ClipboardContent;
 use arena_shared::cmdline::CommandSpec;
@@ -48,10 +52,6 @@ use arena_shared::imaging::encode;
 use arena_shared::keys::HeldKeys;
 use arena_shared::observation::{ImageFormat, ScreenshotQuery, WindowInfo, WindowTarget};
 use arena_shared::registry::RegistryValue;
-use arena_shared::script::{
-    parse, run, CommandOutput, ComputerState, Globals, HostError, HostResult, PathKind, ScriptError, ScriptHost, Stop,
-    WindowChange,
-};
 
 use super::{AgentAction, AgentError};
 use crate::actionspace::Coords;

@@ -4,7 +4,7 @@
 //! Every agent implements [`Agent`]: it gets an [`Observation`] and answers a
 //! [`Prediction`] holding [`AgentAction`]s. [`execute`] carries out one action:
 //! typed actions go straight to `POST /v1/actions`; Navi `computer.*` code and
-//! pyautogui code run here on the host, in the `arena_shared::script`
+//! pyautogui code run here on the host, in the `arena_script`
 //! interpreter, whose effects become typed `/v1` calls (see [`exec`]). The
 //! guest therefore never runs agent code.
 //!
@@ -13,7 +13,7 @@
 //!
 //! # Layout
 //!
-//! - [`exec`]: [`execute`] and the [`script::ScriptHost`](arena_shared::script::ScriptHost) over a [`GuestClient`].
+//! - [`exec`]: [`execute`] and the [`script::ScriptHost`](arena_script::ScriptHost) over a [`GuestClient`].
 //! - [`parse`]: code blocks, `DONE`/`FAIL`/`WAIT` and the memory block in model output.
 //! - [`navi`]: [`navi::NaviAgent`], Navi-style prompting of any OpenAI-compatible chat endpoint.
 //! - [`scripted`]: [`scripted::ScriptedAgent`], which follows a plan file (oracle solutions, tests).

@@ -12,7 +12,7 @@
 //!
 //! It does not run anything and does not talk to the model.
 
-use arena_shared::script::parse;
+use arena_script::parse;
 
 use super::AgentAction;
 

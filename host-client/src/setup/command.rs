@@ -11,8 +11,8 @@
 //! are [`arena_shared::cmdline`]'s, the same the guest's own routes use.
 //! Pure and free of I/O.
 
+use arena_script::{python_code_from_argv, python_code_from_command_line, CommandArg as ScriptCommand};
 use arena_shared::cmdline::{cmd_arguments, execute_command, list2cmdline, CommandSpec};
-use arena_shared::script::{python_code_from_argv, python_code_from_command_line, CommandArg as ScriptCommand};
 
 use crate::task::CommandArg;
 

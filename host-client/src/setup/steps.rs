@@ -9,12 +9,12 @@
 use std::path::{Component, Path};
 use std::time::{Duration, SystemTime};
 
+use arena_script::actions_from_pyautogui;
 use arena_shared::action::ActionBatch;
 use arena_shared::exec::{ExecRequest, ExecResult, LaunchRequest};
 use arena_shared::files::KnownFolder;
 use arena_shared::geometry::CoordinateSpace;
 use arena_shared::observation::{WindowInfo, WindowTarget};
-use arena_shared::script::actions_from_pyautogui;
 
 use crate::client::GuestClient;
 use crate::task::{CommandArg, DownloadFile, SetupStep, Until};

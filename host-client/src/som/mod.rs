@@ -34,9 +34,9 @@ use std::time::Duration;
 
 use serde::{Deserialize, Serialize};
 
+use arena_script::float_repr;
 use arena_shared::geometry::Rect;
 use arena_shared::observation::A11yTree;
-use arena_shared::script::float_repr;
 
 pub use a11y::REDUNDANCY_THRESHOLD;
 pub use draw::annotate;

@@ -30,10 +30,10 @@ use arena_host::run::{load_tasks, run_tasks, RunOptions};
 use arena_host::setup::DownloadCache;
 use arena_host::som::{annotate, marks_from_tree};
 use arena_host::task::{Difficulty, Task};
+use arena_script::ComputerState;
 use arena_shared::clipboard::ClipboardContent;
 use arena_shared::exec::LaunchRequest;
 use arena_shared::observation::{A11yQuery, ImageFormat, ScreenshotQuery};
-use arena_shared::script::ComputerState;
 use arena_test_support::Served;
 
 const STEPS: usize = 40;

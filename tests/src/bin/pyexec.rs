@@ -169,7 +169,7 @@ const PROBES: &[(&str, &str)] = &[
 
 /// Runs each probe with a 2 s deadline and prints what it answered and cost.
 fn probes() {
-    use arena_shared::script::{parse, run_measured, Globals, RecordingHost, Stop};
+    use arena_script::{parse, run_measured, Globals, RecordingHost, Stop};
     println!("issue 25 probes, in process (peak = the interpreter's own accounting):");
     for (name, src) in PROBES {
         let program = match parse(src) {

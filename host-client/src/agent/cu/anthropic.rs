@@ -29,7 +29,7 @@
 
 use serde_json::{json, Value};
 
-use arena_shared::script::host::cursor_after;
+use arena_script::host::cursor_after;
 
 use super::{base64_png, cropped_png, exchange_logs, resized_png, screen_of, Endpoint};
 use crate::actionspace::{self, ActionSpace, Context, Coords, Step};

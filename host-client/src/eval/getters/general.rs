@@ -1,9 +1,9 @@
 //! Getters of upstream's `getters/general.py` and `getters/misc.py`: `rule`
 //! (the task's own rules) and `vm_command_line` (a program's output).
 
+use arena_script::CommandArg;
 use arena_shared::cmdline::{execute_command, CommandSpec};
 use arena_shared::exec::ExecRequest;
-use arena_shared::script::CommandArg;
 use serde_json::Value;
 
 use super::{GetterError, Params};

@@ -8,7 +8,7 @@
 //! 6d39ed88):
 //!
 //! - [`Composed::window_titles`]: `WindowManager.find_open_applications`, by
-//!   [`crate::window_list::window_names`] (visible, titled, minimised included, each
+//!   [`arena_shared::window_list::window_names`] (visible, titled, minimised included, each
 //!   title once, topmost first).
 //! - [`Composed::switch_to_window`]: `switch_to_application`'s effect on the window it
 //!   picked: the topmost visible window with that title is restored, maximised and
@@ -35,13 +35,13 @@
 //!   extension (`.png`; `.jpg`, `.jpeg`, `.jpe`, `.jfif`), refuses an unknown one
 //!   before touching the file, and cannot create a file in a missing folder
 //!   (`[Errno 2]`). JPEG is written at Pillow's default quality 75 by the one JPEG
-//!   encoder ([`crate::fastimg`], through [`crate::imaging::encode`]). Formats Pillow
+//!   encoder ([`arena_shared::fastimg`], through [`arena_shared::imaging::encode`]). Formats Pillow
 //!   knows but this project does not encode (BMP, GIF, TIFF, ...) are refused with a
 //!   message saying so.
 //! - [`Composed::copy_image`]: `Clipboard.copy_image`: Pillow's crop
-//!   ([`crate::imaging::crop_padded`]) of the observed screenshot, put on the clipboard.
+//!   ([`arena_shared::imaging::crop_padded`]) of the observed screenshot, put on the clipboard.
 //! - [`Composed::run_command`] and [`Composed::spawn_command`]: `subprocess` and
-//!   `os.system`, through [`crate::cmdline::subprocess_command`].
+//!   `os.system`, through [`arena_shared::cmdline::subprocess_command`].
 //!
 //! It is not a host: it has no state and performs nothing but primitives. The trait is
 //! implemented for every [`ScriptHost`] and cannot be implemented again, so no host can
@@ -51,12 +51,12 @@ use image::RgbaImage;
 
 use super::host::{CommandArg, CommandOutput, HostError, HostResult, PathKind, ScriptHost, WindowChange};
 use super::stdlib::ntpath;
-use crate::cmdline::{subprocess_command, CommandSpec};
-use crate::fastimg::PILLOW_JPEG_QUALITY;
-use crate::imaging::{crop_padded, encode};
-use crate::observation::{ImageFormat, WindowInfo};
-use crate::registry::RegistryValue;
-use crate::window_list::window_names;
+use arena_shared::cmdline::{subprocess_command, CommandSpec};
+use arena_shared::fastimg::PILLOW_JPEG_QUALITY;
+use arena_shared::imaging::{crop_padded, encode};
+use arena_shared::observation::{ImageFormat, WindowInfo};
+use arena_shared::registry::RegistryValue;
+use arena_shared::window_list::window_names;
 
 /// Where `OS.is_installed` looks, in its order.
 pub const APP_PATHS: [&str; 2] = [

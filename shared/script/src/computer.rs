@@ -15,7 +15,7 @@
 //!   whether it is installed.
 //! - `human.*` dialogs are refused: nobody answers them on this guest.
 
-use crate::keys::parse_chord;
+use arena_shared::keys::parse_chord;
 
 use super::compose::Composed as _;
 use super::difflib::get_close_matches;
@@ -23,8 +23,8 @@ use super::error::{not_supported, type_error, value_error, ErrorKind, ScriptErro
 use super::interp::{is_none, no_attribute, static_name, to_f64, to_i64, to_str, Args, Interp};
 use super::pyautogui::{coord, hotkey, perform, press_keys, type_text};
 use super::value::{Object, Value};
-use crate::action::{Action, MouseButton};
-use crate::geometry::Point;
+use arena_shared::action::{Action, MouseButton};
+use arena_shared::geometry::Point;
 
 /// What `/update_computer` set: the Set-of-Marks boxes and how to map them to the screen.
 #[derive(Debug, Clone, PartialEq)]

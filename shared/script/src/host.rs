@@ -13,12 +13,12 @@
 
 use image::RgbaImage;
 
-use crate::action::Action;
-use crate::cmdline::CommandSpec;
-use crate::observation::WindowInfo;
-use crate::registry::RegistryValue;
+use arena_shared::action::Action;
+use arena_shared::cmdline::CommandSpec;
+use arena_shared::observation::WindowInfo;
+use arena_shared::registry::RegistryValue;
 
-pub use crate::cmdline::CommandArg;
+pub use arena_shared::cmdline::CommandArg;
 
 /// Why a host could not carry out an effect.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]

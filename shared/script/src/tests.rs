@@ -5,8 +5,8 @@
 use std::collections::HashMap;
 
 use super::*;
-use crate::action::{Action, MouseButton};
-use crate::geometry::Point;
+use arena_shared::action::{Action, MouseButton};
+use arena_shared::geometry::Point;
 
 /// A scripted host: it records actions (sleeps as `Wait`) and every other effect.
 #[derive(Debug)]
@@ -80,14 +80,14 @@ impl ScriptHost for FakeHost {
     fn observed_screenshot(&mut self) -> HostResult<image::RgbaImage> {
         self.capture()
     }
-    fn windows(&mut self) -> HostResult<Vec<crate::observation::WindowInfo>> {
-        let window = |id: u64, title: &str, z_order: u32, focused: bool| crate::observation::WindowInfo {
+    fn windows(&mut self) -> HostResult<Vec<arena_shared::observation::WindowInfo>> {
+        let window = |id: u64, title: &str, z_order: u32, focused: bool| arena_shared::observation::WindowInfo {
             id,
             title: title.to_owned(),
             class_name: "C".to_owned(),
             process_id: 1,
             process_name: "p.exe".to_owned(),
-            rect: crate::geometry::Rect::new(0, 0, 10, 10),
+            rect: arena_shared::geometry::Rect::new(0, 0, 10, 10),
             visible: true,
             minimized: false,
             maximized: false,
@@ -116,12 +116,12 @@ impl ScriptHost for FakeHost {
         self.calls.push(format!("write_file {path}"));
         Ok(())
     }
-    fn run(&mut self, command: &crate::cmdline::CommandSpec) -> HostResult<CommandOutput> {
+    fn run(&mut self, command: &arena_shared::cmdline::CommandSpec) -> HostResult<CommandOutput> {
         self.calls.push(format!("run {command:?}"));
         Ok(self.command.clone())
     }
-    fn launch(&mut self, command: &crate::cmdline::CommandSpec) -> HostResult<Option<u32>> {
-        if let crate::cmdline::CommandSpec::Argv(argv) = command {
+    fn launch(&mut self, command: &arena_shared::cmdline::CommandSpec) -> HostResult<Option<u32>> {
+        if let arena_shared::cmdline::CommandSpec::Argv(argv) = command {
             if self.missing.contains(&argv[0]) {
                 return Ok(None);
             }
@@ -129,8 +129,12 @@ impl ScriptHost for FakeHost {
         self.calls.push(format!("launch {command:?}"));
         Ok(Some(4242))
     }
-    fn registry_read(&mut self, key: &str, value: Option<&str>) -> HostResult<Option<crate::registry::RegistryValue>> {
-        use crate::registry::RegistryValue;
+    fn registry_read(
+        &mut self,
+        key: &str,
+        value: Option<&str>,
+    ) -> HostResult<Option<arena_shared::registry::RegistryValue>> {
+        use arena_shared::registry::RegistryValue;
         if key == compose::CURRENT_VERSION {
             return Ok(match value {
                 Some("CurrentMajorVersionNumber") => Some(RegistryValue::Dword(10)),

@@ -8,7 +8,7 @@
 use libfuzzer_sys::fuzz_target;
 
 fuzz_target!(|src: &str| {
-    if let Err(err) = arena_shared::script::parse(src) {
+    if let Err(err) = arena_script::parse(src) {
         // Positions are 1-based and never beyond the end of the input.
         let breaks = src.matches(['\n', '\r']).count();
         assert!(err.line >= 1 && err.column >= 1, "{err:?}");

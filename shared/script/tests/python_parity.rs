@@ -1,6 +1,6 @@
 //! The interpreter against CPython: agent-reply-like programs (loops, conditionals,
 //! f-strings, comprehensions, slices, `try`, `def`, errors mid-program, syntax
-//! errors) run on `arena_shared::script` with a recording host and on `python3`
+//! errors) run on `arena_script` with a recording host and on `python3`
 //! with stub `pyautogui` and `time` modules, and must print the same text, perform
 //! the same input calls and end with the same exception type name.
 //!
@@ -13,8 +13,8 @@
 use std::io::Write as _;
 use std::process::{Command, Stdio};
 
+use arena_script::{run_source, ErrorKind, Globals, RecordingHost, MAX_CALL_DEPTH, MAX_STEPS};
 use arena_shared::action::{Action, MouseButton};
-use arena_shared::script::{run_source, ErrorKind, Globals, RecordingHost, MAX_CALL_DEPTH, MAX_STEPS};
 
 /// Stub modules and the runner for the CPython side: it compiles the program
 /// first (a syntax error runs nothing), executes it, then prints a marker, the

@@ -17,9 +17,9 @@
 //!   current coordinate);
 //! - `write()` types every character, including non-ASCII ones (upstream Q12 drops them).
 
-use crate::action::{Action, MouseButton};
-use crate::geometry::Point;
-use crate::keys::Key;
+use arena_shared::action::{Action, MouseButton};
+use arena_shared::geometry::Point;
+use arena_shared::keys::Key;
 
 use super::compose::Composed as _;
 use super::error::{not_supported, type_error, value_error, ScriptError};
@@ -115,7 +115,7 @@ pub(crate) fn attr(name: &str, out: &RunOutput) -> Option<Value> {
         "SECONDARY" => Value::str("secondary"),
         "KEYBOARD_KEYS" | "KEY_NAMES" => {
             let chars = (' '..='~').chain(['\t', '\n', '\r']).map(|c| Value::str(c.to_string()));
-            let named = crate::keys::NAMED_KEYS.iter().map(|k| Value::str((*k).to_owned()));
+            let named = arena_shared::keys::NAMED_KEYS.iter().map(|k| Value::str((*k).to_owned()));
             Value::list(chars.chain(named).collect())
         }
         _ => return None,

@@ -9,7 +9,7 @@
 //! Anything else (a script path, `-m module`, stdin, cmd.exe syntax) is `None`:
 //! not a program this interpreter can stand in for.
 
-use crate::cmdline::split_windows_command_line;
+use arena_shared::cmdline::split_windows_command_line;
 
 /// Whether `program` names a Python interpreter: `python`, `python3`, `python3.10`,
 /// `pythonw`, `py` or `pyw`, with or without a directory and `.exe`, in any case.

@@ -10,7 +10,7 @@
 //! refusing the rest (classes, `with`, generators, star-arguments, ...) with a
 //! precise [`ParseError`] before anything runs. Modules are interpreter objects,
 //! never real imports, and every effect goes through a [`ScriptHost`], so this
-//! module does no I/O of its own. Output is what CPython would print; failures are
+//! crate does no I/O of its own. Output is what CPython would print; failures are
 //! [`ScriptError`]s styled like Python exceptions.
 //!
 //! # Layout
@@ -47,7 +47,7 @@
 //! 10 million bytes and lists at a million items; sleeps, clicks and key presses
 //! go through the host, which may refuse them.
 
-use crate::action::Action;
+use arena_shared::action::Action;
 
 mod argv;
 pub mod ast;
