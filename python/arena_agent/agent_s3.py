@@ -42,8 +42,8 @@ class AgentS3Adapter(Agent):
     action_space = "pyautogui"
     # OSWorldACI writes screen pixels (it scales the grounding model's answer itself).
     coords = "pixels"
-    # Agent S3 looks at the screenshot only.
-    observation = {"screenshot": "path", "a11y": "none", "windows": False, "clipboard": False}
+    # Agent S3 looks at the screenshot only (a file for exec, inline over HTTP: the defaults).
+    observation = {"a11y": "none", "windows": False, "clipboard": False}
 
     def __init__(
         self,
