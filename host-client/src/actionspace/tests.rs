@@ -428,25 +428,25 @@ fn uitars_grammar_and_notations() {
         json!("Action: left_double(start_box='(0,0)')"),
         &[act(Action::DoubleClick { x: Some(0), y: Some(0) })],
     );
-    check(
-        u,
-        grid,
-        json!("Action: right_single(start_box='(1000,1000)')"),
-        &[act(Action::RightClick { x: Some(1440), y: Some(900) })],
-    );
+    check(u, grid, json!("Action: right_single(start_box='(1000,1000)')"), &[click(1440, 900, MouseButton::Right, 1)]);
     check(
         u,
         grid,
         json!("Action: drag(start_point='<point>0 0</point>', end_point='<point>500 500</point>')"),
-        &[act(Action::Drag {
-            from: Some(Point { x: 0, y: 0 }),
-            to: Point { x: 720, y: 450 },
-            button: MouseButton::Left,
-            duration_ms: Some(1000),
-        })],
+        &[
+            act(Action::MoveTo { x: 0, y: 0 }),
+            act(Action::Drag {
+                from: None,
+                to: Point { x: 720, y: 450 },
+                button: MouseButton::Left,
+                duration_ms: Some(1000),
+            }),
+        ],
     );
     check(u, grid, json!("Action: hotkey(key='ctrl c')"), &[hotkey(&["ctrl", "c"])]);
-    check(u, grid, json!("Action: hotkey(key='arrowdown')"), &[key("down")]);
+    check(u, grid, json!("Action: hotkey(key='arrowdown')"), &[hotkey(&["down"])]);
+    // Positions: fractions of the screen, round(..., 3), then pyautogui's int().
+    check(u, grid, json!("Action: click(start_box='(333,667)')"), &[click(479, 600, MouseButton::Left, 1)]);
     check(
         u,
         grid,
@@ -472,7 +472,7 @@ fn uitars_grammar_and_notations() {
         u,
         grid,
         json!("Action: hotkey(key='ctrl a')\n\nhotkey(key='delete')"),
-        &[hotkey(&["ctrl", "a"]), key("delete")],
+        &[hotkey(&["ctrl", "a"]), act(Action::Wait { ms: 1000 }), hotkey(&["delete"])],
     );
     check_err(u, json!("Thought: nothing to do"), &["no `Action:`"]);
     check_err(u, json!("Action: teleport(start_box='(1,1)')"), &["unknown call \"teleport\""]);

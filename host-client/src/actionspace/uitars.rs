@@ -9,16 +9,19 @@
 //! |---|---|
 //! | `click(start_box=...)`, `left_single(...)` | a left click at the box's centre |
 //! | `left_double(start_box=...)` | a double click |
-//! | `right_single(start_box=...)` | a right click |
+//! | `right_single(start_box=...)` | a right-button click |
 //! | `hover(start_box=...)` | a move |
-//! | `drag(start_box=..., end_box=...)`, `select(...)` | a 1 s left drag (the published parser's `dragTo(..., duration=1.0)`) |
-//! | `hotkey(key='ctrl c')` | the space-separated keys as one chord |
+//! | `drag(start_box=..., end_box=...)`, `select(...)` | a move to the start, then a 1 s left drag to the end (the published parser's `moveTo` and `dragTo(..., duration=1.0)`) |
+//! | `hotkey(key='ctrl c')` | the space-separated keys as one `hotkey` (one key too) |
 //! | `press(key=...)`, `keydown(key=...)`, `keyup(key=...)`, `release(key=...)` | a press, a key down, a key up |
 //! | `type(content='...')` | the text put on the clipboard and pasted with ctrl+v, a 0.5 s pause, and Enter when the content ends with a newline (the published parser's default, `input_swap=True`) |
 //! | `scroll(start_box=..., direction='up'/'down'/'left'/'right')` | 5 wheel units at the point (the published parser's `scroll(±5)`); `left`/`right` scroll horizontally |
 //! | `wait()` | the decision `WAIT` |
 //! | `finished(...)` | `DONE` |
 //! | `call_user()` | `FAIL` (nobody answers during a benchmark, as OSWorld's UI-TARS agent decides) |
+//!
+//! Several calls in one reply are separated by a 1 s pause, as the published
+//! parser's `time.sleep(1)` between them.
 //!
 //! Positions may be written `'(x,y)'`, `'(x1,y1,x2,y2)'` (a box: its centre),
 //! with `<|box_start|>`/`<|box_end|>` tokens, as `<point>x y</point>` or
@@ -30,11 +33,19 @@
 //! UI-TARS-1.5 (Qwen2.5-VL) answers in pixels of the screenshot after
 //! Qwen2.5-VL's `smart_resize` (factor 28, at least 100·28² and at most 16384·28²
 //! pixels), per the project's `README_coordinates.md` and `action_parser.py`.
+//! A position becomes screen pixels as the published parser's code does it: each
+//! number a fraction of the image (or grid), a box's centre the mean of its
+//! fractions, times the screen's size, rounded to 3 decimals (its `round(..., 3)`),
+//! then truncated as pyautogui's `int()` does.
+//!
+//! `tests/tests/uitars_parity.rs` runs the `ui-tars` PyPI package and this parser
+//! on a corpus of replies; where they differ on purpose, `docs/compatibility.md`
+//! says how and which way it moves scores.
 
 use arena_shared::action::{Action, MouseButton};
 use arena_shared::geometry::Point;
 
-use super::{chord, key_name, ActionError, ActionSpace, Context, Coords, Step};
+use super::{key_name, ActionError, ActionSpace, Context, Coords, Step};
 
 const SPACE: ActionSpace = ActionSpace::UiTars;
 
@@ -58,6 +69,9 @@ pub const KEYS: super::KeyTable = &[
 
 /// The published parser's wheel amount per `scroll`.
 pub const SCROLL_UNITS: i32 = 5;
+
+/// The published parser's pause between the calls of one reply (`time.sleep(1)`).
+pub const BETWEEN_CALLS_MS: u64 = 1000;
 
 /// Which UI-TARS, by its coordinate convention.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, clap::ValueEnum)]
@@ -154,7 +168,10 @@ pub fn parse(text: &str, ctx: &Context) -> Result<Reply, ActionError> {
         return Err(ActionError::new(SPACE, "`Action:` is followed by no call"));
     }
     let mut steps = Vec::new();
-    for call in &calls {
+    for (i, call) in calls.iter().enumerate() {
+        if i > 0 {
+            steps.push(Step::Act(Action::Wait { ms: BETWEEN_CALLS_MS }));
+        }
         steps.extend(call_steps(call, ctx)?);
     }
     Ok(Reply { thought, action_text, steps })
@@ -265,9 +282,11 @@ impl Call {
             .map(str::parse::<f64>)
             .collect::<Result<_, _>>()
             .map_err(|_| ActionError::new(SPACE, format!("{}: cannot read the position {raw:?}", self.name)))?;
+        // Each number as a fraction of the screen, as the published parser divides them.
+        let (fx, fy) = (fraction(ctx, 0), fraction(ctx, 1));
         let (x, y) = match numbers.as_slice() {
-            [x, y] => (*x, *y),
-            [x1, y1, x2, y2] => ((x1 + x2) / 2.0, (y1 + y2) / 2.0),
+            [x, y] => (fx(*x), fy(*y)),
+            [x1, y1, x2, y2] => ((fx(*x1) + fx(*x2)) / 2.0, (fy(*y1) + fy(*y2)) / 2.0),
             _ => {
                 return Err(ActionError::new(
                     SPACE,
@@ -275,7 +294,7 @@ impl Call {
                 ))
             }
         };
-        Ok(ctx.point(x, y))
+        Ok((screen_pixel(x, ctx.screen.0), screen_pixel(y, ctx.screen.1)))
     }
 
     fn key(&self) -> Result<&str, ActionError> {
@@ -283,6 +302,25 @@ impl Call {
             .filter(|k| !k.trim().is_empty())
             .ok_or_else(|| ActionError::new(SPACE, format!("{}(...) needs `key`", self.name)))
     }
+}
+
+/// A number of the reply on `axis` (0 for x, 1 for y) as a fraction of the screen.
+fn fraction(ctx: &Context, axis: usize) -> impl Fn(f64) -> f64 {
+    let screen = f64::from(if axis == 0 { ctx.screen.0 } else { ctx.screen.1 });
+    let unit = match ctx.coords {
+        Coords::Pixels => screen,
+        Coords::Fraction => 1.0,
+        Coords::Grid1000 => 1000.0,
+        Coords::Image { width, height } => f64::from(if axis == 0 { width } else { height }.max(1)),
+    };
+    move |v| v / unit
+}
+
+/// A fraction of a screen side in pixels: `round(f * side, 3)`, then `int()`.
+fn screen_pixel(fraction: f64, side: u32) -> i32 {
+    let v = ((fraction * f64::from(side)) * 1000.0).round_ties_even() / 1000.0;
+    // Saturating: absurd numbers land off screen, where the guest refuses them.
+    v.trunc() as i32
 }
 
 const START: &[&str] = &["start_box", "point", "start_point"];
@@ -301,7 +339,7 @@ fn call_steps(call: &Call, ctx: &Context) -> Result<Vec<Step>, ActionError> {
         }
         "right_single" => {
             let (x, y) = call.point(START, ctx)?;
-            act(Action::RightClick { x: Some(x), y: Some(y) })
+            act(Action::Click { x: Some(x), y: Some(y), button: MouseButton::Right, count: 1 })
         }
         "hover" => {
             let (x, y) = call.point(START, ctx)?;
@@ -310,17 +348,20 @@ fn call_steps(call: &Call, ctx: &Context) -> Result<Vec<Step>, ActionError> {
         "drag" | "select" => {
             let (fx, fy) = call.point(START, ctx)?;
             let (tx, ty) = call.point(END, ctx)?;
-            act(Action::Drag {
-                from: Some(Point { x: fx, y: fy }),
-                to: Point { x: tx, y: ty },
-                button: MouseButton::Left,
-                duration_ms: Some(1000),
-            })
+            Ok(vec![
+                Step::Act(Action::MoveTo { x: fx, y: fy }),
+                Step::Act(Action::Drag {
+                    from: None,
+                    to: Point { x: tx, y: ty },
+                    button: MouseButton::Left,
+                    duration_ms: Some(1000),
+                }),
+            ])
         }
         "hotkey" => {
             let keys =
                 call.key()?.split_whitespace().map(|k| key_name(SPACE, KEYS, k)).collect::<Result<Vec<_>, _>>()?;
-            act(chord(keys))
+            act(Action::Hotkey { keys })
         }
         "press" => act(Action::KeyPress { key: key_name(SPACE, KEYS, call.key()?.trim())?, presses: 1 }),
         "keydown" => act(Action::KeyDown { key: key_name(SPACE, KEYS, call.key()?.trim())? }),
