@@ -14,8 +14,10 @@
 //! It is not the guest: the server inside the VM is `arena-guest`, reached over
 //! HTTP like any other guest.
 
+pub mod bundle;
 pub mod disk;
 pub mod fleet;
+pub mod iso;
 pub mod prepare;
 pub mod qemu;
 pub mod qmp;

@@ -604,6 +604,8 @@ impl Desktop for StubDesktop {
                     Err(DesktopError::NotFound(format!("{shell} is not on PATH")))
                 }
             }
+            // The server reads the setup record itself (`native::health`); nothing of the desktop's.
+            Component::Setup => Ok("the setup record is the server's to read".to_owned()),
             Component::Unknown => Err(DesktopError::InvalidInput("unknown component".into())),
         }
     }
