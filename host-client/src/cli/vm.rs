@@ -83,6 +83,10 @@ pub struct VmArgs {
     /// How long a boot or a restore may take to reach a healthy guest.
     #[arg(long, default_value = "900", value_parser = parse_seconds, value_name = "SECONDS")]
     pub vm_boot_timeout: Duration,
+    /// The screen under UEFI, WIDTHxHEIGHT (OVMF's preferred resolution, which Windows'
+    /// basic display driver keeps; 1440x900 is upstream's).
+    #[arg(long, default_value = "1440x900", value_parser = parse_screen, value_name = "WxH")]
+    pub vm_screen: (u32, u32),
     /// A VNC display for each VM (5900 + N, on the forwarded address; the next VMs take N+1, ...).
     #[arg(long, value_name = "N")]
     pub vm_vnc: Option<u16>,
@@ -148,6 +152,7 @@ impl VmArgs {
         config.boot_timeout = self.vm_boot_timeout;
         config.vnc = self.vm_vnc;
         config.token = token;
+        config.screen = self.vm_screen;
         Ok(config)
     }
 }
@@ -321,6 +326,16 @@ impl PrepareArgs {
         // Setup checks for a TPM 2.0 and Secure Boot capable firmware; the keys only where they are absent.
         a.bypass_checks = !(uefi && tpm);
         Ok(a)
+    }
+}
+
+/// `--vm-screen`: WIDTHxHEIGHT, each 640 to 7680.
+fn parse_screen(text: &str) -> Result<(u32, u32), String> {
+    let (w, h) = text.split_once(['x', 'X']).ok_or_else(|| format!("{text:?}: use WIDTHxHEIGHT, e.g. 1440x900"))?;
+    let side = |s: &str| s.trim().parse::<u32>().ok().filter(|n| (480..=7680).contains(n));
+    match (side(w), side(h)) {
+        (Some(w), Some(h)) => Ok((w, h)),
+        _ => Err(format!("{text:?}: each side is a number from 480 to 7680")),
     }
 }
 

@@ -145,6 +145,8 @@ pub struct VmSpec {
     pub folders: Vec<FolderDrive>,
     /// A snapshot to start from (`-loadvm`).
     pub loadvm: Option<String>,
+    /// The screen, as the display's EDID offers it (its preferred mode).
+    pub screen: (u32, u32),
 }
 
 impl VmSpec {
@@ -166,7 +168,10 @@ impl VmSpec {
         a.push("-m").push(format!("{}M", self.memory_mib));
         a.push("-smp").push(self.cpus.to_string());
         a.push("-nodefaults");
-        a.push("-vga").push("std");
+        // QEMU's standard VGA, its EDID naming the screen as the preferred mode:
+        // what Windows' display settings and the stand-in's kernel start with.
+        a.push("-vga").push("none");
+        a.push("-device").push(format!("VGA,edid=on,xres={},yres={}", self.screen.0, self.screen.1));
         a.push("-rtc").push("base=localtime");
         if let Firmware::Uefi { code, vars, secure_boot } = &self.firmware {
             if *secure_boot {
@@ -356,6 +361,7 @@ mod tests {
             media: Vec::new(),
             folders: Vec::new(),
             loadvm: None,
+            screen: (1440, 900),
         }
     }
 
@@ -388,6 +394,7 @@ mod tests {
             "{text}"
         );
         assert!(text.contains("-display none"), "{text}");
+        assert!(text.contains("-vga none -device VGA,edid=on,xres=1440,yres=900"), "{text}");
         assert!(!text.contains("-loadvm"), "{text}");
     }
 
