@@ -10,6 +10,9 @@
 //! what was tried. The Windows backend and the stub (whose scenario can make its
 //! UI Automation answer empty) both answer `Component::Uia` through it.
 //!
+//! [`call_detached`] runs one call (a window's bulk fetch) on a thread of its own with
+//! a deadline, so the element-by-element read that follows a late one starts at once.
+//!
 //! [`ThreadCap`] bounds the threads that timed-out UI Automation work leaves behind:
 //! a worker stuck in a provider that never answers keeps its thread until the call
 //! returns, and a new worker is started only while fewer than the cap are alive.
@@ -119,6 +122,40 @@ impl ThreadCap {
     }
 }
 
+/// Runs `work` on a thread of its own (one place under `cap`) and waits for it
+/// at most `within`: a call that does not come back in time (a UI Automation
+/// bulk fetch a provider keeps busy past its transaction timeout) is abandoned,
+/// and finishes on its own thread while the caller goes on, so what comes next
+/// (the element-by-element read) never waits behind it.
+///
+/// # Errors
+///
+/// [`DesktopError::Timeout`] after `within`; [`DesktopError::Os`] when `cap`
+/// threads are still busy with abandoned calls, or the thread cannot start.
+pub fn call_detached<T: Send + 'static>(
+    cap: &ThreadCap,
+    within: std::time::Duration,
+    op: &'static str,
+    work: impl FnOnce() -> T + Send + 'static,
+) -> DesktopResult<T> {
+    let permit = cap.try_acquire().ok_or_else(|| DesktopError::Os {
+        op,
+        message: format!("{} abandoned calls are still running; no new one starts until one returns", cap.max()),
+    })?;
+    let (tx, rx) = std::sync::mpsc::sync_channel(1);
+    std::thread::Builder::new()
+        .name(op.into())
+        .spawn(move || {
+            let result = work();
+            // The place is free before the caller hears back.
+            drop(permit);
+            let _ = tx.send(result);
+        })
+        .map_err(|err| DesktopError::Os { op, message: format!("starting a thread: {err}") })?;
+    rx.recv_timeout(within)
+        .map_err(|_| DesktopError::Timeout { op, ms: u64::try_from(within.as_millis()).unwrap_or(u64::MAX) })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -181,6 +218,26 @@ mod tests {
                 panic!("nothing to re-create")
             });
         assert!(matches!(result, Err(DesktopError::Unsupported(_))));
+    }
+
+    #[test]
+    fn a_detached_call_is_abandoned_at_its_deadline_and_keeps_its_place_until_it_returns() {
+        let cap = ThreadCap::new(1);
+        assert_eq!(call_detached(&cap, std::time::Duration::from_secs(5), "quick", || 7).unwrap(), 7);
+        let (release, wait) = std::sync::mpsc::channel::<()>();
+        let started = Instant::now();
+        let err = call_detached(&cap, std::time::Duration::from_millis(100), "stuck", move || wait.recv().is_ok())
+            .unwrap_err();
+        assert!(matches!(err, DesktopError::Timeout { ms: 100, .. }), "{err}");
+        assert!(started.elapsed() < std::time::Duration::from_secs(2));
+        // The abandoned call holds the only place until it returns.
+        assert!(call_detached(&cap, std::time::Duration::from_secs(1), "next", || 1).is_err());
+        release.send(()).unwrap();
+        let until = Instant::now() + std::time::Duration::from_secs(5);
+        while cap.live() > 0 && Instant::now() < until {
+            std::thread::sleep(std::time::Duration::from_millis(5));
+        }
+        assert_eq!(call_detached(&cap, std::time::Duration::from_secs(1), "next", || 2).unwrap(), 2);
     }
 
     #[test]

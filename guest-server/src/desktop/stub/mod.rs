@@ -236,6 +236,7 @@ impl StubDesktop {
                     popup: spec.popup,
                     cloaked: spec.cloaked,
                     bulk_fetch_ms: spec.bulk_fetch_ms,
+                    bulk_fetch_hangs: spec.bulk_fetch_hangs,
                     element_ms: spec.element_ms,
                 };
                 if spec.popup && window.class_name.is_empty() {

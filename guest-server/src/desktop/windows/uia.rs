@@ -11,7 +11,9 @@
 //! requests' filter and the fallback's walker follow the choice.
 //!
 //! That call is all or nothing: a heavy window (a browser page, LibreOffice, VS Code)
-//! that does not finish within its share adds nothing. So when it fails, the window is
+//! that does not finish within its share adds nothing. It runs on a thread of its own
+//! ([`call_detached`]), so one a provider keeps past its timeout is abandoned there and
+//! never holds up what follows. So when it fails, the window is
 //! read element by element instead ([`TreeSource::prepare_partial`]): each element and
 //! then each child is fetched with a cache request for that element alone, through the
 //! chosen view's walker, and the walk keeps whatever it reads before the window's deadline.
@@ -46,7 +48,7 @@ use super::sys::{ComApartment, Hwnd};
 use super::window;
 use crate::config::UiaView;
 use crate::desktop::a11y_walk::{self, TreeSource, UiaProps};
-use crate::desktop::uia_health::{ThreadCap, ThreadPermit};
+use crate::desktop::uia_health::{call_detached, ThreadCap, ThreadPermit};
 use crate::desktop::{DesktopError, DesktopResult};
 
 /// Extra time the caller waits beyond the walk's own budget before abandoning the worker.
@@ -285,8 +287,15 @@ fn worker_main(rx: &mpsc::Receiver<Request>, view: UiaView) {
             return;
         }
     };
+    let fetches = ThreadCap::new(MAX_FETCH_THREADS);
     while let Ok(request) = rx.recv() {
-        let mut source = UiaSource { uia: &uia, live: false, budget_ms: request.budget.max_ms, failures: Vec::new() };
+        let mut source = UiaSource {
+            uia: &uia,
+            fetches: &fetches,
+            live: false,
+            budget_ms: request.budget.max_ms,
+            failures: Vec::new(),
+        };
         let result = a11y_walk::walk(&mut source, A11yBackend::Uia, &request.budget, request.foreground_only);
         let _ = request.reply.send(result);
     }
@@ -342,8 +351,27 @@ fn pattern<T>(elem: &IUIAutomationElement, available: UIA_PROPERTY_ID, read: imp
     }
 }
 
+/// A UI Automation client object moved to another thread of the multithreaded
+/// apartment (the bulk fetch's own thread, and back).
+struct Mta<T>(T);
+
+// SAFETY: UI Automation's client objects are created in the multithreaded
+// apartment (the worker and the fetch threads both join it) and are free-threaded
+// there: any thread of the apartment may call them, and each is used by one
+// thread at a time (handed over through a channel).
+unsafe impl<T> Send for Mta<T> {}
+
+/// How long past the transaction timeout the caller waits for a bulk fetch
+/// before abandoning it (a timeout that works returns first, with its own error).
+const FETCH_GRACE: Duration = Duration::from_millis(500);
+
+/// Most bulk fetches abandoned while their providers keep them, at once.
+const MAX_FETCH_THREADS: usize = 4;
+
 struct UiaSource<'a> {
     uia: &'a Uia,
+    /// The threads of bulk fetches, abandoned ones included.
+    fetches: &'a ThreadCap,
     /// The window being walked is read element by element (its subtree fetch failed).
     live: bool,
     /// The request's time budget, which bounds opening the windows.
@@ -422,8 +450,19 @@ impl TreeSource for UiaSource<'_> {
         self.live = false;
         let ms = u32::try_from(time.as_millis()).unwrap_or(u32::MAX).max(100);
         self.set_timeouts(ms.min(2_000), ms);
-        // SAFETY: one cross-process call that fetches the window's whole cached subtree.
-        unsafe { root.BuildUpdatedCache(&self.uia.cache) }.map_err(|err| super::sys::os("BuildUpdatedCache", &err))
+        // The fetch runs on a thread of its own: a provider that keeps it past the
+        // transaction timeout is abandoned there, and the element-by-element read
+        // (prepare_partial) starts at once instead of queueing behind it here.
+        let (root, cache) = (Mta(root.clone()), Mta(self.uia.cache.clone()));
+        let fetched = call_detached(self.fetches, time + FETCH_GRACE, "BuildUpdatedCache", move || {
+            let (root, cache) = (root, cache);
+            let _com = ComApartment::init(COINIT_MULTITHREADED)?;
+            // SAFETY: one cross-process call that fetches the window's whole cached subtree.
+            unsafe { root.0.BuildUpdatedCache(&cache.0) }
+                .map(Mta)
+                .map_err(|err| super::sys::os("BuildUpdatedCache", &err))
+        })??;
+        Ok(fetched.0)
     }
 
     fn record(&mut self, elem: &IUIAutomationElement) -> A11yNode {
