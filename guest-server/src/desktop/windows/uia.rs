@@ -38,7 +38,7 @@ use std::sync::Mutex;
 use std::time::{Duration, Instant};
 
 use arena_shared::observation::{A11yBackend, A11yNode, A11yTree, TreeBudget};
-use windows::core::Interface;
+use windows::core::{AgileReference, Interface};
 use windows::Win32::Foundation::HWND;
 use windows::Win32::System::Com::{CoCreateInstance, CLSCTX_INPROC_SERVER, COINIT_MULTITHREADED};
 use windows::Win32::System::Variant::{VariantClear, VARIANT, VT_BOOL, VT_BSTR, VT_I4};
@@ -351,16 +351,6 @@ fn pattern<T>(elem: &IUIAutomationElement, available: UIA_PROPERTY_ID, read: imp
     }
 }
 
-/// A UI Automation client object moved to another thread of the multithreaded
-/// apartment (the bulk fetch's own thread, and back).
-struct Mta<T>(T);
-
-// SAFETY: UI Automation's client objects are created in the multithreaded
-// apartment (the worker and the fetch threads both join it) and are free-threaded
-// there: any thread of the apartment may call them, and each is used by one
-// thread at a time (handed over through a channel).
-unsafe impl<T> Send for Mta<T> {}
-
 /// How long past the transaction timeout the caller waits for a bulk fetch
 /// before abandoning it (a timeout that works returns first, with its own error).
 const FETCH_GRACE: Duration = Duration::from_millis(500);
@@ -453,16 +443,20 @@ impl TreeSource for UiaSource<'_> {
         // The fetch runs on a thread of its own: a provider that keeps it past the
         // transaction timeout is abandoned there, and the element-by-element read
         // (prepare_partial) starts at once instead of queueing behind it here.
-        let (root, cache) = (Mta(root.clone()), Mta(self.uia.cache.clone()));
+        // The objects cross threads as agile references (COM's own way to hand an
+        // interface to another apartment's thread).
+        let agile = |err: windows::core::Error| super::sys::os("RoGetAgileReference", &err);
+        let root = AgileReference::new(root).map_err(agile)?;
+        let cache = AgileReference::new(&self.uia.cache).map_err(agile)?;
         let fetched = call_detached(self.fetches, time + FETCH_GRACE, "BuildUpdatedCache", move || {
-            let (root, cache) = (root, cache);
             let _com = ComApartment::init(COINIT_MULTITHREADED)?;
+            let (root, cache) = (root.resolve().map_err(agile)?, cache.resolve().map_err(agile)?);
             // SAFETY: one cross-process call that fetches the window's whole cached subtree.
-            unsafe { root.0.BuildUpdatedCache(&cache.0) }
-                .map(Mta)
-                .map_err(|err| super::sys::os("BuildUpdatedCache", &err))
+            let element = unsafe { root.BuildUpdatedCache(&cache) }
+                .map_err(|err| super::sys::os("BuildUpdatedCache", &err))?;
+            AgileReference::new(&element).map_err(agile)
         })??;
-        Ok(fetched.0)
+        fetched.resolve().map_err(agile)
     }
 
     fn record(&mut self, elem: &IUIAutomationElement) -> A11yNode {
