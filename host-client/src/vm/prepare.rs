@@ -640,7 +640,7 @@ pub async fn prepare(options: &PrepareOptions, mut progress: impl FnMut(PrepareE
         let next = match state.stage {
             Stage::Created => Stage::Setup,
             Stage::Setup | Stage::Oobe | Stage::FirstLogon | Stage::OemInstall | Stage::OemDone => {
-                let mut vm = launch(options, &config, &qemu, &img, &dir, &disk, None, &bundle).await?;
+                let mut vm = launch(options, &config, &qemu, &img, &disk, None, &bundle).await?;
                 state.qemu_pid = vm.pid();
                 write_state(&dir, &state)?;
                 progress(PrepareEvent::QemuStarted { pid: vm.pid(), accel: &vm.accel_note });
@@ -669,7 +669,7 @@ pub async fn prepare(options: &PrepareOptions, mut progress: impl FnMut(PrepareE
             }
             Stage::Healthy => {
                 let mut vm =
-                    launch(options, &config, &qemu, &img, &dir, &disk, Some(HEALTHY_SNAPSHOT.into()), &bundle).await?;
+                    launch(options, &config, &qemu, &img, &disk, Some(HEALTHY_SNAPSHOT.into()), &bundle).await?;
                 state.qemu_pid = vm.pid();
                 write_state(&dir, &state)?;
                 progress(PrepareEvent::QemuStarted { pid: vm.pid(), accel: &vm.accel_note });
@@ -765,11 +765,11 @@ async fn launch(
     config: &VmConfig,
     qemu: &Path,
     img: &QemuImg,
-    dir: &Path,
     disk: &Path,
     loadvm: Option<String>,
     bundle: &Bundle,
 ) -> Result<Vm, VmError> {
+    let dir = config.dir.as_path();
     let fresh_vars = !dir.join(UEFI_VARS_FILE).exists();
     let (mut spec, accel_note) = config.spec(qemu.to_owned(), disk.to_owned(), img, fresh_vars)?;
     spec.cdrom = Some(options.iso.clone());

@@ -452,8 +452,8 @@ impl TreeSource for UiaSource<'_> {
             let _com = ComApartment::init(COINIT_MULTITHREADED)?;
             let (root, cache) = (root.resolve().map_err(agile)?, cache.resolve().map_err(agile)?);
             // SAFETY: one cross-process call that fetches the window's whole cached subtree.
-            let element = unsafe { root.BuildUpdatedCache(&cache) }
-                .map_err(|err| super::sys::os("BuildUpdatedCache", &err))?;
+            let element =
+                unsafe { root.BuildUpdatedCache(&cache) }.map_err(|err| super::sys::os("BuildUpdatedCache", &err))?;
             AgileReference::new(&element).map_err(agile)
         })??;
         fetched.resolve().map_err(agile)
