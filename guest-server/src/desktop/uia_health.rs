@@ -5,7 +5,8 @@
 //! front: another WAA port reports it after a QEMU `loadvm`, until the automation
 //! client is created anew. [`check`] walks the foreground window; when it comes back
 //! empty over a lit screen with a window in front, it re-creates the client once
-//! (on Windows: a new worker thread with its own COM apartment and `CUIAutomation`)
+//! (on Windows: a new worker process, whose COM apartment and UI Automation client
+//! state are new, `desktop::uia_process`)
 //! and walks again, and only then reports the stage down, with a reason that says
 //! what was tried. The Windows backend and the stub (whose scenario can make its
 //! UI Automation answer empty) both answer `Component::Uia` through it.
@@ -72,7 +73,7 @@ pub fn check(
         op: "uia health",
         message: format!(
             "UI Automation answers an empty tree for the window in front ({front:?}) over a lit screen, also after \
-             re-creating the automation client and its COM apartment once; a snapshot restore can leave it so: \
+             re-creating it once (on Windows a new worker process, with a new COM apartment); a snapshot restore can leave it so: \
              restart the guest's session"
         ),
     })
