@@ -624,7 +624,7 @@ mod tests {
     #[test]
     fn deep_times_the_trees_of_heavy_applications_and_input_round_trips() {
         let scenario = r#"{"windows": [
-            {"title": "New tab - Microsoft Edge", "process_name": "msedge.exe", "bulk_fetch_ms": 8000, "bulk_fetch_hangs": true,
+            {"title": "New tab - Microsoft Edge", "process_name": "msedge.exe", "bulk_fetch_ms": 40000, "bulk_fetch_hangs": true,
              "elements": [{"role": "Button", "class_name": "", "name": "Back", "enabled": true, "visible": true}]},
             {"title": "Documents", "class_name": "CabinetWClass", "process_name": "explorer.exe"},
             {"title": "Calculator", "process_name": "calc.exe"}]}"#;
@@ -644,7 +644,8 @@ mod tests {
         assert!(!apps.iter().any(|(app, _)| *app == "Calculator"), "{apps:?}");
         let edge = deep.trees.iter().find(|t| t.app == "Edge" && t.source == "uia").unwrap();
         assert!(edge.partial && edge.nodes > 0 && edge.error.is_none(), "{edge:?}");
-        assert!(edge.ms < 5000, "the walk waited for the hung fetch: {edge:?}");
+        // Abandoned at its half of the 10 s budget, not after its 40 s.
+        assert!(edge.ms < 20_000, "the walk waited for the hung fetch: {edge:?}");
         assert_eq!(deep.input.len(), 2);
         assert!(deep.input.iter().all(|r| r.samples > 0), "{:?}", deep.input);
         let table = deep.render_table();

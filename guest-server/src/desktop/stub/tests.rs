@@ -755,7 +755,7 @@ fn a_slow_bulk_fetch_is_paid_only_by_uia_and_element_costs_by_both() {
 #[test]
 fn the_element_by_element_read_never_waits_behind_a_hung_bulk_fetch() {
     let d = stub_with(
-        r#"{"windows": [{"title": "Heavy", "bulk_fetch_ms": 8000, "bulk_fetch_hangs": true, "elements": [
+        r#"{"windows": [{"title": "Heavy", "bulk_fetch_ms": 30000, "bulk_fetch_hangs": true, "elements": [
             {"role": "Button", "class_name": "", "name": "first", "enabled": true, "visible": true},
             {"role": "Button", "class_name": "", "name": "second", "enabled": true, "visible": true}]}]}"#,
     );
@@ -763,7 +763,7 @@ fn the_element_by_element_read_never_waits_behind_a_hung_bulk_fetch() {
     let started = std::time::Instant::now();
     let tree = d.accessibility(A11yBackend::Uia, &budget, true).unwrap();
     let took = started.elapsed();
-    assert!(took < std::time::Duration::from_millis(3000), "the walk waited for the hung fetch: {took:?}");
+    assert!(took < std::time::Duration::from_secs(10), "the walk waited for the hung fetch: {took:?}");
     let walked = &tree.windows_walked[0];
     assert!(walked.partial, "{walked:?}");
     let names: Vec<&str> = tree.windows[0].children.iter().map(|c| c.name.as_str()).collect();
