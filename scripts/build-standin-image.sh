@@ -45,9 +45,10 @@ export SOURCE_DATE_EPOCH=${SOURCE_DATE_EPOCH:-1704067200}
 # read it.
 # The CD-ROM (IDE on `pc`, AHCI on q35) and ISO 9660 (with Joliet) read the OEM media of
 # `arena vm prepare`. (The TPM's tpm_tis is built into the generic kernel.) efivarfs reads
-# the firmware's SecureBoot variable.
+# the firmware's SecureBoot variable. bochs drives QEMU's standard VGA in the mode its
+# EDID prefers (`-device VGA,xres=,yres=`), on BIOS as on UEFI.
 MODULES=(virtio_pci virtio_blk virtio_scsi sd_mod virtio_net vfat nls_cp437 nls_ascii
-    nls_utf8 nls_iso8859-1 button evdev ata_piix ahci sr_mod isofs efivarfs)
+    nls_utf8 nls_iso8859-1 button evdev ata_piix ahci sr_mod isofs efivarfs bochs)
 
 die() {
     echo "build-standin-image: $*" >&2

@@ -293,7 +293,8 @@ while ((Get-Date) -lt $deadline) {
                 Write-Step ("  {0,-14} {1,-4} {2}" -f $component.component, $state, $component.detail)
             }
         }
-        $down = @($report.components | Where-Object { -not $_.ok })
+        # The setup component is down while setup.ps1 runs, and this script is one of its steps.
+        $down = @($report.components | Where-Object { -not $_.ok -and $_.component -ne 'setup' })
         if (@($report.components).Count -gt 0 -and $down.Count -eq 0) {
             Write-Step "guest ready: version $($report.version), backend $($report.backend), token required: $($report.auth_required)"
             exit 0
@@ -311,5 +312,5 @@ while ((Get-Date) -lt $deadline) {
 if ($null -eq $report) {
     Stop-WithCode $ExitNotHealthy "the guest never answered on $url ($lastError); see the service's event log or run arena-guest.exe service status --name $ServiceName"
 }
-$missing = @($report.components | Where-Object { -not $_.ok } | ForEach-Object { "$($_.component) ($($_.detail))" })
+$missing = @($report.components | Where-Object { -not $_.ok -and $_.component -ne 'setup' } | ForEach-Object { "$($_.component) ($($_.detail))" })
 Stop-WithCode $ExitNotHealthy "the guest is not healthy after $HealthTimeoutSeconds s; still down: $($missing -join '; ')"

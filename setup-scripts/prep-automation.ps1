@@ -1,6 +1,7 @@
 <#
 .SYNOPSIS
-Turns off what breaks unattended desktop automation: Windows Update, the lock
+Turns off what breaks unattended desktop automation: Windows Update, Defender's
+real-time protection, SmartScreen, Smart App Control, password expiry, the lock
 screen, the screen saver, sleep, UAC's secure desktop, first-run pop-ups and
 focus-stealing notifications; shows file extensions.
 
@@ -21,20 +22,6 @@ Set-StrictMode -Version Latest
 $ErrorActionPreference = 'Stop'
 
 . (Join-Path $PSScriptRoot 'arena-common.ps1')
-
-# Writes a registry value only when it differs; creates the key when missing.
-function Set-RegistryValue([string]$Key, [string]$Name, $Value, [string]$Type = 'DWord') {
-    if (-not (Test-Path -LiteralPath $Key)) {
-        New-Item -Path $Key -Force | Out-Null
-    }
-    $current = Get-ItemProperty -LiteralPath $Key -Name $Name -ErrorAction SilentlyContinue
-    if ($null -ne $current -and "$($current.$Name)" -eq "$Value") {
-        Write-Step "already $Key\$Name = $Value"
-        return
-    }
-    New-ItemProperty -LiteralPath $Key -Name $Name -Value $Value -PropertyType $Type -Force | Out-Null
-    Write-Step "set $Key\$Name = $Value"
-}
 
 # Runs powercfg; it only sets values, so running it again with the same values changes nothing.
 function Invoke-PowerCfg([string[]]$Arguments) {
@@ -66,6 +53,21 @@ try {
             Write-Step 'already wuauserv disabled'
         }
     }
+
+    # Defender's real-time protection, SmartScreen and Smart App Control: the answer file of
+    # `arena vm prepare` writes the same policies in its specialize pass; here for images
+    # made another way. Tamper Protection may keep real-time protection on regardless
+    # (docs/vm.md); a task's downloads and programs must not be held up or blocked.
+    Set-RegistryValue 'HKLM:\SOFTWARE\Policies\Microsoft\Windows Defender\Real-Time Protection' 'DisableRealtimeMonitoring' 1
+    Set-RegistryValue 'HKLM:\SOFTWARE\Policies\Microsoft\Windows\System' 'EnableSmartScreen' 0
+    Set-RegistryValue 'HKLM:\SYSTEM\CurrentControlSet\Control\CI\Policy' 'VerifiedAndReputablePolicyState' 0
+    # Passwords never expire (Windows' default maximum age is 42 days, after which the
+    # auto-logon stops at "The user's password must be changed").
+    & net.exe accounts /maxpwage:unlimited | Out-Null
+    if ($LASTEXITCODE -ne 0) {
+        throw "net accounts /maxpwage:unlimited exited with $LASTEXITCODE"
+    }
+    Write-Step 'passwords never expire (net accounts /maxpwage:unlimited)'
 
     # Lock screen and sign-in on wake: the guest cannot see or type into the secure desktop.
     Set-RegistryValue 'HKLM:\SOFTWARE\Policies\Microsoft\Windows\Personalization' 'NoLockScreen' 1

@@ -31,20 +31,6 @@ $ErrorActionPreference = 'Stop'
 
 . (Join-Path $PSScriptRoot 'arena-common.ps1')
 
-# Writes a registry value only when it differs; creates the key when missing.
-function Set-RegistryValue([string]$Key, [string]$Name, $Value, [string]$Type = 'DWord') {
-    if (-not (Test-Path -LiteralPath $Key)) {
-        New-Item -Path $Key -Force | Out-Null
-    }
-    $current = Get-ItemProperty -LiteralPath $Key -Name $Name -ErrorAction SilentlyContinue
-    if ($null -ne $current -and "$($current.$Name)" -eq "$Value") {
-        Write-Step "already $Key\$Name = $Value"
-        return
-    }
-    New-ItemProperty -LiteralPath $Key -Name $Name -Value $Value -PropertyType $Type -Force | Out-Null
-    Write-Step "set $Key\$Name = $Value"
-}
-
 $identity = [Security.Principal.WindowsIdentity]::GetCurrent()
 if (-not (New-Object Security.Principal.WindowsPrincipal($identity)).IsInRole([Security.Principal.WindowsBuiltInRole]::Administrator)) {
     Write-Step 'ERROR: run this from an elevated PowerShell (it writes HKLM policies)'

@@ -17,8 +17,14 @@ folder, run as a child PowerShell so its exit code is its own):
 A required step that fails stops the setup; a later one is logged and
 reported at the end, and the rest still run.
 
-It writes "arena-stage: oem-install" to COM1 when it starts and
-"arena-stage: guest-installed" once the guest answers, for `arena vm prepare`.
+It writes "arena-stage: oem-install" to COM1 when it starts,
+"arena-stage: guest-installed" once the guest answers, and at the end
+"arena-stage: oem-done" when every step succeeded or "arena-stage: oem-failed
+STEP (exit code N)" naming the steps that failed: `arena vm prepare` seals the
+image only after oem-done. Step by step it records its progress in
+%ProgramData%\arena\setup-status.json (state running, done or failed; the step;
+steps done of all; the failed steps; the log), which the guest reports as its
+`setup` health component: a guest is not healthy while its setup runs.
 Rerunning it is safe: every step skips what is already done.
 
 Exit codes: 0 every step succeeded; otherwise the exit code of the required step
@@ -77,6 +83,25 @@ function Invoke-Step([string]$Script, [string[]]$Arguments) {
     return $code
 }
 
+# The progress record the guest's `setup` health component reads, written whole
+# (temporary file, then a rename) so the guest never reads half of it.
+$StatusPath = Join-Path $env:ProgramData 'arena\setup-status.json'
+function Write-Status([string]$State, [string]$Step, [int]$Done, [string[]]$Failed) {
+    $record = [ordered]@{
+        state  = $State
+        step   = $Step
+        done   = $Done
+        total  = $steps.Count
+        failed = @($Failed)
+        log    = $LogPath
+    }
+    $json = ConvertTo-Json -InputObject $record -Compress
+    $temporary = "$StatusPath.tmp"
+    # UTF-8 without a byte-order mark.
+    [System.IO.File]::WriteAllText($temporary, $json)
+    Move-Item -LiteralPath $temporary -Destination $StatusPath -Force
+}
+
 Write-Log "arena setup starting (OEM folder $OemDir, mode $Mode, port $Port, host network $HostNetwork)"
 Send-Stage 'oem-install'
 $steps = @(
@@ -88,26 +113,37 @@ $steps = @(
     @{ Script = 'prep-browser.ps1'; Required = $false; Arguments = @() }
 )
 $failed = New-Object System.Collections.Generic.List[string]
+$done = 0
 foreach ($step in $steps) {
     if ($SkipApps -and $step.Script -eq 'prep-apps.ps1') {
         Write-Log '---- prep-apps.ps1 skipped (-SkipApps)'
+        $done++
         continue
     }
+    Write-Status 'running' $step.Script $done $failed.ToArray()
     $code = Invoke-Step $step.Script $step.Arguments
     if ($code -ne 0 -and $step.Required) {
+        $failed.Add("$($step.Script) (exit code $code)")
         Write-Log "arena setup FAILED at $($step.Script) with exit code $code"
+        Write-Status 'failed' $step.Script $done $failed.ToArray()
+        Send-Stage "oem-failed $($step.Script) (exit code $code); log $LogPath"
         exit $code
     }
     if ($code -ne 0) {
         $failed.Add("$($step.Script) (exit code $code)")
     }
+    $done++
     if ($step.Script -eq 'install-guest.ps1') {
         Send-Stage 'guest-installed'
     }
 }
 if ($failed.Count -gt 0) {
     Write-Log "arena setup finished with the guest installed and healthy, but these steps failed: $($failed -join ', ')"
+    Write-Status 'failed' $failed[0].Split(' ')[0] $done $failed.ToArray()
+    Send-Stage "oem-failed $($failed -join ', '); log $LogPath"
     exit 6
 }
 Write-Log 'arena setup finished: the guest is installed and healthy'
+Write-Status 'done' '' $done @()
+Send-Stage 'oem-done'
 exit 0

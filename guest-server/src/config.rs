@@ -177,6 +177,12 @@ pub struct ServerConfig {
     #[arg(long, env = "ARENA_DRAG_STEP_MS", default_value_t = 200, value_parser = clap::value_parser!(u64).range(0..=5_000))]
     pub drag_step_ms: u64,
 
+    /// The image setup's record (`setup.ps1` writes it step by step), which the
+    /// `setup` health component reports [default: `%ProgramData%\arena\setup-status.json`
+    /// on Windows, none elsewhere]; without a record the component is up.
+    #[arg(long, env = "ARENA_SETUP_STATUS", value_name = "FILE")]
+    pub setup_status: Option<PathBuf>,
+
     /// Log format.
     #[arg(long, env = "ARENA_LOG_FORMAT", value_enum, default_value_t = LogFormat::Text)]
     pub log_format: LogFormat,
@@ -195,6 +201,12 @@ pub struct ServerConfig {
 }
 
 impl ServerConfig {
+    /// The setup record the `setup` health component reads: `--setup-status`, or
+    /// the platform's default ([`crate::desktop::windows::target::default_setup_status`]).
+    pub fn setup_status_file(&self) -> Option<PathBuf> {
+        self.setup_status.clone().or_else(crate::desktop::windows::target::default_setup_status)
+    }
+
     /// The backend to use, defaulting by platform.
     pub fn backend_kind(&self) -> BackendKind {
         self.backend.unwrap_or(if crate::desktop::windows::target::IS_WINDOWS {
@@ -242,6 +254,7 @@ impl ServerConfig {
             uia_view: UiaView::Raw,
             capture_layered: false,
             drag_step_ms: 200,
+            setup_status: None,
             log_format: LogFormat::Text,
             mcp: false,
             worker: false,

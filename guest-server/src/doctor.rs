@@ -16,7 +16,7 @@
 use std::time::{Duration, Instant};
 
 use arena_shared::action::Action;
-use arena_shared::doctor::{CheckStatus, DoctorCheck, DoctorReport};
+use arena_shared::doctor::{CheckStatus, DeepReport, DoctorCheck, DoctorReport, RoundTrip, TreeTiming};
 use arena_shared::files::KnownFolder;
 use arena_shared::geometry::Point;
 use arena_shared::observation::{A11yBackend, A11yNode, A11yTree, TreeBudget, WindowInfo};
@@ -33,13 +33,21 @@ pub struct DoctorOptions {
     pub token: bool,
     /// How long a window may take to appear after its program starts.
     pub window_wait: Option<Duration>,
+    /// Also time the trees of the heavy applications running and input round
+    /// trips ([`deep`], `arena doctor --deep`).
+    pub deep: bool,
 }
 
 impl DoctorOptions {
     /// The options of a server configured with `config` (its bind address) and
     /// `token` (whether one is in force).
     pub fn for_server(config: &crate::config::ServerConfig, token: bool) -> DoctorOptions {
-        DoctorOptions { bind: Some(std::net::SocketAddr::new(config.bind, config.port)), token, window_wait: None }
+        DoctorOptions {
+            bind: Some(std::net::SocketAddr::new(config.bind, config.port)),
+            token,
+            window_wait: None,
+            deep: false,
+        }
     }
 }
 
@@ -92,6 +100,7 @@ pub fn run(desktop: &dyn Desktop, options: &DoctorOptions) -> DoctorReport {
     time("exec_timeout", &mut || exec_timeout(desktop));
     time("files", &mut || files(desktop));
     time("reachability", &mut || reachability(options));
+    let deep = options.deep.then(|| deep(desktop, wait));
     if let Some(Point { x, y }) = cursor_before {
         if let Err(err) = desktop.perform(&Action::MoveTo { x, y }) {
             tracing::warn!(error = %err, "the doctor could not put the cursor back");
@@ -102,7 +111,118 @@ pub fn run(desktop: &dyn Desktop, options: &DoctorOptions) -> DoctorReport {
         version: env!("CARGO_PKG_VERSION").to_owned(),
         checks,
         total_ms: millis(started.elapsed()),
+        deep,
     }
+}
+
+/// Heavy applications by their process (and, for hosts shared by several, the
+/// window's class or title): what `--deep` times the trees of.
+const HEAVY_APPS: &[(&str, &str, &str)] = &[
+    ("msedge.exe", "", "Edge"),
+    ("chrome.exe", "", "Chrome"),
+    ("explorer.exe", "CabinetWClass", "File Explorer"),
+    ("systemsettings.exe", "", "Settings"),
+    ("applicationframehost.exe", "Settings", "Settings"),
+    ("notepad.exe", "", "Notepad"),
+    ("winword.exe", "", "Word"),
+    ("excel.exe", "", "Excel"),
+    ("powerpnt.exe", "", "PowerPoint"),
+    ("outlook.exe", "", "Outlook"),
+    ("onenote.exe", "", "OneNote"),
+    ("soffice.bin", "", "LibreOffice"),
+    ("soffice.exe", "", "LibreOffice"),
+    ("code.exe", "", "VS Code"),
+];
+
+/// The heavy application a window belongs to, if it is one.
+fn heavy_app(w: &WindowInfo) -> Option<&'static str> {
+    HEAVY_APPS.iter().find_map(|(process, class_or_title, app)| {
+        let matches_process = w.process_name.eq_ignore_ascii_case(process);
+        let matches_rest = class_or_title.is_empty()
+            || w.class_name.eq_ignore_ascii_case(class_or_title)
+            || w.title.contains(class_or_title);
+        (matches_process && matches_rest).then_some(*app)
+    })
+}
+
+/// `--deep`: each visible window of a heavy application (and a Notepad of the
+/// doctor's own, so there is always one) is brought to the front and its tree
+/// walked with upstream's budget, through UI Automation and the win32 source;
+/// then input round trips: the cursor moved and read back, and a key typed into
+/// the doctor's Notepad until its tree shows it.
+pub fn deep(desktop: &dyn Desktop, wait: Duration) -> DeepReport {
+    let mut report = DeepReport::default();
+    let mut own = None;
+    let _ = start_notepad(desktop, wait, &mut own);
+    let windows = desktop.windows().unwrap_or_default();
+    // At most a dozen windows, so the whole run stays within the route's deadline.
+    let heavy = windows.iter().filter(|w| w.visible && !w.minimized).filter_map(|w| Some((w, heavy_app(w)?)));
+    for (w, app) in heavy.take(12) {
+        let _ = desktop.activate_window(w.id);
+        for (backend, source) in [(A11yBackend::Uia, "uia"), (A11yBackend::Win32, "win32")] {
+            let began = Instant::now();
+            let walked = desktop.accessibility(backend, &TREE_BUDGET, true);
+            let ms = millis(began.elapsed());
+            let (nodes, truncated, partial, error) = match walked {
+                Ok(tree) => (tree.node_count, tree.truncated, tree.windows_walked.iter().any(|ww| ww.partial), None),
+                Err(err) => (0, false, false, Some(err.to_string())),
+            };
+            report.trees.push(TreeTiming {
+                app: app.to_owned(),
+                window: w.title.clone(),
+                source: source.to_owned(),
+                nodes,
+                ms,
+                truncated,
+                partial,
+                error,
+            });
+        }
+    }
+    // The cursor moved and read back.
+    let mut moves = Vec::new();
+    if let Ok(screen) = desktop.screen() {
+        let target = cursor_target(screen.physical_width, screen.physical_height);
+        for i in 0..20 {
+            let began = Instant::now();
+            if desktop.perform(&Action::MoveTo { x: target.x + i, y: target.y }).is_err() {
+                break;
+            }
+            if desktop.cursor_position().ok() == Some(Point { x: target.x + i, y: target.y }) {
+                moves.push(began.elapsed().as_secs_f64() * 1000.0);
+            }
+        }
+    }
+    report.input.push(RoundTrip::of("cursor moved and read back", &moves));
+    // A key typed into the doctor's Notepad until its tree shows it.
+    let mut keys = Vec::new();
+    if let Some(notepad) = &own {
+        for (i, letter) in ["q", "w", "e"].iter().enumerate() {
+            if desktop.activate_window(notepad.id).is_err() {
+                break;
+            }
+            let began = Instant::now();
+            if desktop.perform(&Action::TypeText { text: (*letter).to_owned(), interval_ms: None }).is_err() {
+                break;
+            }
+            let typed = ["q", "w", "e"][..=i].concat();
+            while began.elapsed() < READ_BACK_WAIT {
+                let seen = [A11yBackend::Win32, A11yBackend::Uia].iter().any(|backend| {
+                    desktop
+                        .accessibility(*backend, &TREE_BUDGET, true)
+                        .is_ok_and(|tree| tree.windows.iter().any(|w| tree_holds(w, &typed)))
+                });
+                if seen {
+                    keys.push(began.elapsed().as_secs_f64() * 1000.0);
+                    break;
+                }
+                std::thread::sleep(Duration::from_millis(20));
+            }
+        }
+        remove(desktop, notepad);
+    }
+    report.input.push(RoundTrip::of("key typed into Notepad, seen in its tree", &keys));
+    report
 }
 
 /// Why a check did not pass.
@@ -496,6 +616,42 @@ fn reachability(options: &DoctorOptions) -> Outcome {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// `--deep` on the stub: the doctor's Notepad and a scenario's Edge and
+    /// Explorer windows get their tree timed through both sources (Edge's bulk
+    /// fetch hangs, so it is read element by element), and both round trips are
+    /// measured.
+    #[test]
+    fn deep_times_the_trees_of_heavy_applications_and_input_round_trips() {
+        let scenario = r#"{"windows": [
+            {"title": "New tab - Microsoft Edge", "process_name": "msedge.exe", "bulk_fetch_ms": 40000, "bulk_fetch_hangs": true,
+             "elements": [{"role": "Button", "class_name": "", "name": "Back", "enabled": true, "visible": true}]},
+            {"title": "Documents", "class_name": "CabinetWClass", "process_name": "explorer.exe"},
+            {"title": "Calculator", "process_name": "calc.exe"}]}"#;
+        let scenario = crate::desktop::stub::scenario::Scenario::parse(scenario, "test").unwrap();
+        let desktop = crate::desktop::stub::StubDesktop::with_config(crate::desktop::stub::StubConfig {
+            scenario: Some(scenario),
+            ..crate::desktop::stub::StubConfig::default()
+        })
+        .unwrap();
+        let options = DoctorOptions { deep: true, ..DoctorOptions::default() };
+        let report = run(&desktop, &options);
+        let deep = report.deep.expect("the deep report");
+        let apps: Vec<(&str, &str)> = deep.trees.iter().map(|t| (t.app.as_str(), t.source.as_str())).collect();
+        for wanted in [("Edge", "uia"), ("Edge", "win32"), ("File Explorer", "uia"), ("Notepad", "uia")] {
+            assert!(apps.contains(&wanted), "{wanted:?} not in {apps:?}");
+        }
+        assert!(!apps.iter().any(|(app, _)| *app == "Calculator"), "{apps:?}");
+        let edge = deep.trees.iter().find(|t| t.app == "Edge" && t.source == "uia").unwrap();
+        assert!(edge.partial && edge.nodes > 0 && edge.error.is_none(), "{edge:?}");
+        // Abandoned at its half of the 10 s budget, not after its 40 s.
+        assert!(edge.ms < 20_000, "the walk waited for the hung fetch: {edge:?}");
+        assert_eq!(deep.input.len(), 2);
+        assert!(deep.input.iter().all(|r| r.samples > 0), "{:?}", deep.input);
+        let table = deep.render_table();
+        assert!(table.contains("| Edge | New tab - Microsoft Edge | uia |"), "{table}");
+        assert!(table.contains("| key typed into Notepad, seen in its tree | 3 |"), "{table}");
+    }
 
     #[test]
     fn the_cursor_target_is_inside_the_screen_away_from_the_edges() {

@@ -11,6 +11,16 @@ use arena_guest::config::{LogFormat, ServerConfig};
 use arena_guest::service::{Cli, Command, ServiceCommand};
 
 fn main() -> ExitCode {
+    // The Windows backend's UI Automation worker process (a hidden subcommand).
+    if let Some(ended) = arena_guest::desktop::windows::uia_worker_from_args() {
+        return match ended {
+            Ok(()) => ExitCode::SUCCESS,
+            Err(err) => {
+                eprintln!("error: {err}");
+                ExitCode::FAILURE
+            }
+        };
+    }
     let cli = Cli::parse();
     let outcome = match &cli.command {
         None => return serve(cli.serve),

@@ -269,6 +269,18 @@ impl GuestClient {
         self.json(call).await
     }
 
+    /// `GET /v1/doctor?deep=true`: the doctor, with the heavy applications'
+    /// tree timings and input round trips.
+    pub async fn doctor_deep(&self) -> Result<arena_shared::doctor::DoctorReport, ClientError> {
+        let call = Call {
+            deadline: DOCTOR_DEADLINE,
+            retry: Retry::Never,
+            query: Some(vec![("deep".into(), "true".into())]),
+            ..self.call(Method::GET, "/v1/doctor")
+        };
+        self.json(call).await
+    }
+
     pub async fn health_once(&self, deadline: Duration) -> Result<HealthReport, ClientError> {
         self.health_with(deadline, Retry::Never).await
     }

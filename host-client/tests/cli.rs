@@ -66,5 +66,15 @@ async fn doctor_reports_a_healthy_stub_and_exits_zero() {
     let report = client.doctor().await.expect("doctor report");
     assert!(report.passed(), "{}", report.render_text());
     assert!(report.check("notepad_typing").is_some(), "{}", report.render_text());
+    assert!(report.deep.is_none());
+    // `--deep`: the table of tree timings (the doctor's own Notepad at least) and round trips.
+    let deep = cli(&["doctor", "--deep", "--guest", &url]);
+    assert_eq!(arena_host::run(deep).await.expect("doctor --deep"), ExitCode::SUCCESS);
+    let deep = client.doctor_deep().await.expect("deep report").deep.expect("the deep part");
+    assert!(deep.trees.iter().any(|t| t.app == "Notepad" && t.source == "uia" && t.nodes > 0), "{deep:?}");
+    assert!(deep.input.iter().all(|r| r.samples > 0), "{deep:?}");
+    let table = deep.render_table();
+    println!("{table}");
+    assert!(table.contains("| Notepad |") && table.contains("| cursor moved and read back |"), "{table}");
     stub.stop().await.expect("stub stops");
 }

@@ -64,6 +64,99 @@ pub struct DoctorReport {
     pub checks: Vec<DoctorCheck>,
     /// Wall time of the whole run.
     pub total_ms: u64,
+    /// `--deep`: the timings of the trees of the heavy applications running and
+    /// of input round trips.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub deep: Option<DeepReport>,
+}
+
+/// What `arena doctor --deep` measures on a real desktop.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, Default)]
+pub struct DeepReport {
+    /// One row per window of a heavy application (Edge, File Explorer, Settings,
+    /// Notepad, Office, ...) and per tree source.
+    pub trees: Vec<TreeTiming>,
+    /// Input sent and seen to arrive, timed.
+    pub input: Vec<RoundTrip>,
+}
+
+/// The tree of one window, walked in front with upstream's budget.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct TreeTiming {
+    /// The application (`Edge`, `File Explorer`, ...).
+    pub app: String,
+    /// The window's title.
+    pub window: String,
+    /// `uia` or `win32`.
+    pub source: String,
+    pub nodes: u32,
+    pub ms: u64,
+    /// The budget cut it.
+    pub truncated: bool,
+    /// UI Automation's bulk fetch failed and the window was read element by element.
+    pub partial: bool,
+    /// Why the walk failed, when it did.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub error: Option<String>,
+}
+
+/// One kind of input round trip, over several samples.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct RoundTrip {
+    pub what: String,
+    pub samples: u32,
+    pub median_ms: f64,
+    pub max_ms: f64,
+}
+
+impl DeepReport {
+    /// The tables a user pastes into an issue (Markdown).
+    pub fn render_table(&self) -> String {
+        let mut out = String::from("| application | window | source | nodes | ms | cut | element by element |\n|---|---|---|---:|---:|---|---|\n");
+        if self.trees.is_empty() {
+            out.push_str("| (no heavy application was running) | | | | | | |\n");
+        }
+        for t in &self.trees {
+            let cell = |s: &str| s.replace('|', "\\|").replace('\n', " ");
+            let nodes = match &t.error {
+                Some(err) => format!("failed: {}", cell(err)),
+                None => t.nodes.to_string(),
+            };
+            out.push_str(&format!(
+                "| {} | {} | {} | {nodes} | {} | {} | {} |\n",
+                cell(&t.app),
+                cell(&t.window),
+                t.source,
+                t.ms,
+                if t.truncated { "yes" } else { "no" },
+                if t.partial { "yes" } else { "no" }
+            ));
+        }
+        out.push_str("\n| input round trip | samples | median ms | max ms |\n|---|---:|---:|---:|\n");
+        for r in &self.input {
+            out.push_str(&format!("| {} | {} | {:.1} | {:.1} |\n", r.what, r.samples, r.median_ms, r.max_ms));
+        }
+        out
+    }
+}
+
+impl RoundTrip {
+    /// The median and maximum of `samples` (milliseconds).
+    pub fn of(what: &str, samples: &[f64]) -> RoundTrip {
+        let mut sorted = samples.to_vec();
+        sorted.sort_by(f64::total_cmp);
+        let median = match sorted.len() {
+            0 => 0.0,
+            n if n % 2 == 1 => sorted[n / 2],
+            n => (sorted[n / 2 - 1] + sorted[n / 2]) / 2.0,
+        };
+        RoundTrip {
+            what: what.to_owned(),
+            samples: u32::try_from(sorted.len()).unwrap_or(u32::MAX),
+            median_ms: median,
+            max_ms: sorted.last().copied().unwrap_or(0.0),
+        }
+    }
 }
 
 impl DoctorReport {
@@ -117,6 +210,7 @@ mod tests {
             version: "1.0".into(),
             checks: vec![check("capture", CheckStatus::Pass), check("uia", CheckStatus::Unavailable)],
             total_ms: 40,
+            deep: None,
         };
         report.checks.push(check("integrity", CheckStatus::Info));
         assert!(report.passed());
@@ -127,6 +221,27 @@ mod tests {
         assert!(text.contains("N/A   uia"), "{text}");
         assert!(text.ends_with("FAILED: 4 checks, 1 failed, 1 unavailable, 40 ms\n"), "{text}");
         assert_eq!(report.check("uia").map(|c| c.status), Some(CheckStatus::Unavailable));
+    }
+
+    #[test]
+    fn the_deep_table_is_markdown_a_user_can_paste() {
+        let deep = DeepReport {
+            trees: vec![TreeTiming {
+                app: "Edge".into(),
+                window: "New tab | Work".into(),
+                source: "uia".into(),
+                nodes: 812,
+                ms: 2400,
+                truncated: true,
+                partial: true,
+                error: None,
+            }],
+            input: vec![RoundTrip::of("cursor move, read back", &[3.0, 1.0, 2.0, 10.0])],
+        };
+        let table = deep.render_table();
+        assert!(table.contains("| Edge | New tab \\| Work | uia | 812 | 2400 | yes | yes |"), "{table}");
+        assert!(table.contains("| cursor move, read back | 4 | 2.5 | 10.0 |"), "{table}");
+        assert!(DeepReport::default().render_table().contains("no heavy application"));
     }
 
     #[test]

@@ -20,12 +20,16 @@ pub enum Component {
     /// win32 source, which stays up when UI Automation answers empty trees, as it
     /// can after a snapshot restore).
     Uia,
+    /// The image's setup (`setup.ps1`): up once every step has finished (or
+    /// when this guest was not installed by it), down while a step runs or after
+    /// one failed; the detail says which step ([`SetupProgress`]).
+    Setup,
     #[serde(other)]
     Unknown,
 }
 
 impl Component {
-    pub const ALL: [Component; 7] = [
+    pub const ALL: [Component; 8] = [
         Component::Capture,
         Component::Input,
         Component::Accessibility,
@@ -33,7 +37,75 @@ impl Component {
         Component::Files,
         Component::Exec,
         Component::Uia,
+        Component::Setup,
     ];
+}
+
+/// Where the image's setup is, as `setup.ps1` records it in
+/// `%ProgramData%\arena\setup-status.json` step by step (the guest reads it for
+/// [`Component::Setup`]; `arena vm prepare` reads it off a failed install's disk).
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct SetupProgress {
+    pub state: SetupState,
+    /// The step running, or the one that failed.
+    #[serde(default)]
+    pub step: String,
+    /// Steps finished so far, and how many there are.
+    #[serde(default)]
+    pub done: u32,
+    #[serde(default)]
+    pub total: u32,
+    /// Steps that failed, each with its exit code (`prep-apps.ps1 (exit code 3)`).
+    #[serde(default)]
+    pub failed: Vec<String>,
+    /// The setup's log in the guest.
+    #[serde(default)]
+    pub log: String,
+}
+
+/// [`SetupProgress::state`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum SetupState {
+    Running,
+    Done,
+    Failed,
+    #[serde(other)]
+    Unknown,
+}
+
+impl SetupProgress {
+    /// Reads the record `setup.ps1` writes (UTF-8, a byte-order mark allowed).
+    ///
+    /// # Errors
+    ///
+    /// Not the record's JSON, with serde's reason.
+    pub fn parse(bytes: &[u8]) -> Result<SetupProgress, String> {
+        let bytes = bytes.strip_prefix(b"\xef\xbb\xbf").unwrap_or(bytes);
+        serde_json::from_slice(bytes).map_err(|err| format!("the setup record is not readable: {err}"))
+    }
+
+    /// Whether the setup is over with every step done, and what to say about it.
+    pub fn judge(&self) -> (bool, String) {
+        let failed =
+            if self.failed.is_empty() { String::new() } else { format!("; failed: {}", self.failed.join(", ")) };
+        match self.state {
+            SetupState::Done if self.failed.is_empty() => {
+                (true, format!("setup finished: {} of {} steps", self.done, self.total))
+            }
+            SetupState::Running => (
+                false,
+                format!(
+                    "setup running: step {} of {} ({}){failed}; log {}",
+                    self.done + 1,
+                    self.total,
+                    self.step,
+                    self.log
+                ),
+            ),
+            _ => (false, format!("setup failed at {}{failed}; log {}", self.step, self.log)),
+        }
+    }
 }
 
 /// Result of probing one component.
@@ -86,5 +158,35 @@ impl HealthReport {
     /// Whether `component` was probed and is up.
     pub fn is_up(&self, component: Component) -> bool {
         self.components.iter().any(|c| c.component == component && c.ok)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_setup_record_reads_with_a_byte_order_mark_and_is_judged() {
+        let running = SetupProgress::parse(
+            b"\xef\xbb\xbf{\"state\":\"running\",\"step\":\"prep-apps.ps1\",\"done\":4,\"total\":6,\"log\":\"C:\\\\ProgramData\\\\arena\\\\logs\\\\setup.log\"}",
+        )
+        .unwrap();
+        let (ok, detail) = running.judge();
+        assert!(!ok && detail.contains("step 5 of 6 (prep-apps.ps1)"), "{detail}");
+        let done = SetupProgress { state: SetupState::Done, done: 6, total: 6, ..running.clone() };
+        assert_eq!(done.judge(), (true, "setup finished: 6 of 6 steps".to_owned()));
+        let failed = SetupProgress {
+            state: SetupState::Failed,
+            failed: vec!["prep-apps.ps1 (exit code 3)".into()],
+            ..running.clone()
+        };
+        let (ok, detail) = failed.judge();
+        assert!(!ok && detail.contains("failed at prep-apps.ps1") && detail.contains("exit code 3"), "{detail}");
+        // A run that finished with a failed step is not a finished setup.
+        let (ok, _) = SetupProgress { state: SetupState::Done, ..failed }.judge();
+        assert!(!ok);
+        assert!(SetupProgress::parse(b"not json").unwrap_err().contains("not readable"));
+        let newer: SetupProgress = serde_json::from_str(r#"{"state":"paused"}"#).unwrap();
+        assert_eq!(newer.state, SetupState::Unknown);
     }
 }

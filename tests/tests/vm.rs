@@ -108,9 +108,11 @@ async fn a_vm_boots_snapshots_restores_and_shuts_down() {
     vm.save_snapshot(READY_SNAPSHOT).await.unwrap();
     assert_eq!(vm.snapshots().await.unwrap(), vec![READY_SNAPSHOT.to_owned()]);
 
-    // QEMU's own view of the screen agrees with the guest's screenshot.
+    // QEMU's own view of the screen agrees with the guest's screenshot, at the
+    // size upstream's image has (the VGA's EDID offers it; BIOS path).
     let screen = check_screen(&vm).await.unwrap();
     assert!(!screen.dump_black, "{screen:?}");
+    assert_eq!((screen.dump_width, screen.dump_height), (1440, 900), "{screen:?}");
     assert_eq!((screen.dump_width, screen.dump_height), (screen.guest_width, screen.guest_height), "{screen:?}");
     assert_eq!(screen.problem, None);
 
@@ -419,6 +421,9 @@ fn prepare_is_killed_in_every_stage_and_the_reruns_seal_it() {
     kill_and_reap(&mut run, &work);
     assert!(!said.contains("starting over"), "{said}");
     status_says("setup");
+    // The interrupted prepare left its bundle: the timeline, screendumps, the command
+    // lines, the answer file and the serial log.
+    assert_bundle(&work);
 
     // 2.-4. Each rerun starts over from a blank disk and is killed in the next
     // stage, which the guest said on the serial port and prepare on its stdout.
@@ -690,6 +695,10 @@ fn prepare_on_uefi_with_secure_boot_and_swtpm_seals_an_image_that_boots_healthy(
         assert!(tpm.contains("tpm-tis") && tpm.contains("emulator"), "{tpm}");
         vm.wait_healthy(config.boot_timeout, |_| {}).await.unwrap();
         vm.client().folders().await.unwrap();
+        // The screen under UEFI is the one asked for, as under BIOS.
+        let dump = vm.screendump().await.unwrap();
+        assert_eq!((dump.width, dump.height), (1440, 900));
+        assert!(!dump.black);
         vm.kill().await;
     });
     let booted = std::fs::read_to_string(dir.path().join("vm/serial.log")).unwrap();
@@ -807,4 +816,214 @@ fn bad_input_gets_errors_that_name_it() {
 
     // Nothing was started by any of them.
     assert!(qemus_naming(&dir.path().display().to_string()).is_empty());
+}
+
+/// The diagnostic bundle every prepare keeps in its folder (docs/vm.md): the
+/// timeline with stage timings, at least one screendump, the command lines of
+/// xorriso and QEMU, the answer file and the serial log.
+fn assert_bundle(work: &Path) {
+    let timeline = std::fs::read_to_string(work.join("timeline.log")).expect("timeline.log");
+    assert!(timeline.contains("stage setup") && timeline.contains("starting QEMU"), "{timeline}");
+    // Each line has the clock and the seconds since the start.
+    assert!(timeline.lines().all(|l| l.contains(" +") && l.contains("s ")), "{timeline}");
+    let screens: Vec<_> = std::fs::read_dir(work.join("screens")).expect("screens/").flatten().collect();
+    assert!(!screens.is_empty(), "no screendump in screens/");
+    for shot in &screens {
+        let png = std::fs::read(shot.path()).unwrap();
+        assert!(png.starts_with(b"\x89PNG"), "{:?}", shot.path());
+    }
+    let commands = std::fs::read_to_string(work.join("commands.txt")).expect("commands.txt");
+    assert!(commands.lines().any(|l| l.starts_with("xorriso ")), "{commands}");
+    assert!(commands.lines().any(|l| l.starts_with("qemu-system-x86_64 ")), "{commands}");
+    assert!(work.join("autounattend.xml").is_file() && work.join("serial.log").is_file());
+}
+
+/// The stand-in's test hooks for the OEM install (docs/vm-standin.md): the
+/// steps after the guest's install take `seconds`; with `fail`, that step fails.
+fn oem_hooks(oem: &Path, seconds: u32, fail: Option<&str>) {
+    std::fs::write(oem.join("arena-standin-oem-seconds"), format!("{seconds}\n")).unwrap();
+    let fail_file = oem.join("arena-standin-oem-fail");
+    match fail {
+        Some(step) => std::fs::write(&fail_file, format!("{step}\n")).unwrap(),
+        None => {
+            let _ = std::fs::remove_file(&fail_file);
+        }
+    }
+}
+
+/// The seal waits for the OEM install: the stand-in's guest answers healthy
+/// within seconds of its first logon, while the rest of its OEM install holds
+/// for 40 s more (as the app downloads of a real one do, with the guest
+/// already up). Prepare must wait for `arena-stage: oem-done` and for the
+/// guest's `setup` component, and seal after it: the sealed image's setup
+/// record says the setup finished. The old prepare, which sealed once every
+/// component was up, sealed during the hold: its image's record said running.
+#[test]
+fn prepare_seals_only_after_the_oem_install_says_it_is_done() {
+    let Some(image) = standin_image("prepare_seals_only_after_the_oem_install_says_it_is_done") else { return };
+    let _one = one_prepare_at_a_time();
+    let started = Instant::now();
+    let dir = tempfile::tempdir().unwrap();
+    let token = "6a".repeat(32);
+    let oem = oem_folder(dir.path(), &token);
+    oem_hooks(&oem, 40, None);
+    let out = dir.path().join("golden.qcow2");
+    let work = arena_host::vm::prepare::work_dir(&out);
+    let mut run = prepare_command(&image, &oem, &out, &["--size", "64G"]).spawn().unwrap();
+    // The guest answers healthy during the hold, with its setup component down.
+    let said = read_until(&mut run, |line| line.starts_with("stage oem-install"));
+    let client = GuestClient::new(
+        &format!("http://127.0.0.1:{}", forwarded_port(&work)),
+        ClientConfig { token: Some(token.clone()), timeout: Duration::from_secs(3), retries: 0 },
+    )
+    .unwrap();
+    let rt = tokio::runtime::Builder::new_current_thread().enable_all().build().unwrap();
+    let during = rt.block_on(async {
+        let deadline = Instant::now() + Duration::from_secs(120);
+        loop {
+            if let Ok(report) = client.health().await {
+                let others_up = report
+                    .components
+                    .iter()
+                    .filter(|c| c.component != arena_shared::health::Component::Setup)
+                    .all(|c| c.ok);
+                if others_up {
+                    return report;
+                }
+            }
+            assert!(Instant::now() < deadline, "the guest never answered during the OEM install");
+            tokio::time::sleep(Duration::from_millis(500)).await;
+        }
+    });
+    let setup = during.components.iter().find(|c| c.component == arena_shared::health::Component::Setup).unwrap();
+    assert!(!setup.ok && setup.detail.contains("setup running"), "{setup:?}");
+    let status = wait_child(&mut run, Duration::from_secs(600));
+    let rest = read_until(&mut run, |_| false);
+    let said = format!("{said}{rest}");
+    let mut err = String::new();
+    std::io::Read::read_to_string(run.stderr.as_mut().unwrap(), &mut err).unwrap();
+    assert!(status.success(), "{said}\n{err}");
+    let done_at = said.find("stage oem-done").unwrap_or_else(|| panic!("no oem-done stage: {said}"));
+    let healthy_at = said.find("stage healthy").unwrap_or_else(|| panic!("no healthy stage: {said}"));
+    assert!(done_at < healthy_at, "{said}");
+    // The sealed image holds the finished setup's record.
+    let record = std::fs::read(file_in_image(&out, "ProgramData/arena/setup-status.json", dir.path())).unwrap();
+    let record = arena_shared::health::SetupProgress::parse(&record).unwrap();
+    assert_eq!(record.state, arena_shared::health::SetupState::Done, "{record:?}");
+    let timeline = std::fs::read_to_string(work.join("timeline.log")).unwrap();
+    assert!(timeline.contains("stage oem-done") && timeline.contains("setup finished"), "{timeline}");
+    assert_bundle(&work);
+    eprintln!("prepare with a 40 s OEM hold (BIOS): {:.0} s", started.elapsed().as_secs_f64());
+}
+
+/// The host port a running prepare's QEMU forwards to the guest, from its command line.
+fn forwarded_port(work: &Path) -> u16 {
+    let deadline = Instant::now() + Duration::from_secs(60);
+    loop {
+        let commands = std::fs::read_to_string(work.join("commands.txt")).unwrap_or_default();
+        if let Some(port) = commands
+            .lines()
+            .rev()
+            .find_map(|l| l.split("hostfwd=tcp:127.0.0.1:").nth(1))
+            .and_then(|rest| rest.split('-').next())
+            .and_then(|p| p.parse().ok())
+        {
+            return port;
+        }
+        assert!(Instant::now() < deadline, "no QEMU command line in commands.txt");
+        std::thread::sleep(Duration::from_millis(200));
+    }
+}
+
+/// A failed OEM step is a failed prepare that names the step; the folder holds
+/// the bundle and the failure's evidence, with the stand-in's Setup logs and the
+/// OEM install's log copied off the disk image.
+#[test]
+fn a_failed_oem_step_fails_prepare_naming_it_and_keeps_the_logs() {
+    let Some(image) = standin_image("a_failed_oem_step_fails_prepare_naming_it_and_keeps_the_logs") else { return };
+    let _one = one_prepare_at_a_time();
+    let dir = tempfile::tempdir().unwrap();
+    let oem = oem_folder(dir.path(), &"5b".repeat(32));
+    oem_hooks(&oem, 2, Some("prep-apps.ps1"));
+    let out = dir.path().join("golden.qcow2");
+    let work = arena_host::vm::prepare::work_dir(&out);
+    let run = prepare_command(&image, &oem, &out, &["--size", "64G"]).output().unwrap();
+    let err = String::from_utf8_lossy(&run.stderr);
+    assert!(!run.status.success(), "the prepare succeeded");
+    assert!(err.contains("the OEM install failed") && err.contains("prep-apps.ps1 (exit code 3)"), "{err}");
+    assert!(err.contains("copied off the disk image"), "{err}");
+    assert!(!out.exists());
+    let failure = work.join("failures").join("oem-install-1");
+    for file in ["serial.log", "screendump.png", "Windows_Panther_setupact.log", "ProgramData_arena_logs_setup.log"] {
+        assert!(failure.join(file).is_file(), "{file} is not in {}: {err}", failure.display());
+    }
+    let setup_log = std::fs::read_to_string(failure.join("ProgramData_arena_logs_setup.log")).unwrap();
+    assert!(setup_log.contains("prep-apps.ps1 exited with 3"), "{setup_log}");
+    let setupact = std::fs::read_to_string(failure.join("Windows_Panther_setupact.log")).unwrap();
+    assert!(setupact.contains("stand-in Windows Setup"), "{setupact}");
+    assert_bundle(&work);
+    let timeline = std::fs::read_to_string(work.join("timeline.log")).unwrap();
+    assert!(timeline.contains("the OEM install failed") && timeline.contains("evidence kept"), "{timeline}");
+}
+
+/// `--list-editions` reads a UDF disc as Windows ISOs are (made here with
+/// genisoimage's UDF): the images of its `sources/install.wim`.
+#[test]
+fn list_editions_reads_the_image_list_of_a_udf_iso() {
+    let Some(genisoimage) = arena_shared::search_path::find_program(Path::new("genisoimage")) else {
+        assert!(std::env::var("ARENA_REQUIRE_QEMU").as_deref() != Ok("1"), "genisoimage is missing");
+        eprintln!("SKIPPED: list_editions_reads_the_image_list_of_a_udf_iso: genisoimage not found");
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let root = dir.path().join("iso");
+    std::fs::create_dir_all(root.join("sources")).unwrap();
+    let xml = r#"<WIM><IMAGE INDEX="1"><NAME>Windows 11 Home</NAME><WINDOWS><EDITIONID>Core</EDITIONID></WINDOWS></IMAGE><IMAGE INDEX="2"><NAME>Windows 10 Pro</NAME><DISPLAYNAME>Windows 11 Pro</DISPLAYNAME><WINDOWS><EDITIONID>Professional</EDITIONID></WINDOWS></IMAGE></WIM>"#;
+    let list: Vec<u8> = std::iter::once(0xfeffu16).chain(xml.encode_utf16()).flat_map(u16::to_le_bytes).collect();
+    let mut wim = vec![0u8; 208];
+    wim[..8].copy_from_slice(b"MSWIM\0\0\0");
+    wim[72..79].copy_from_slice(&(list.len() as u64).to_le_bytes()[..7]);
+    wim[80..88].copy_from_slice(&4096u64.to_le_bytes());
+    wim[88..96].copy_from_slice(&(list.len() as u64).to_le_bytes());
+    wim.resize(4096, 0);
+    wim.extend(&list);
+    std::fs::write(root.join("sources").join("install.wim"), &wim).unwrap();
+    let iso = dir.path().join("win.iso");
+    let made = Command::new(genisoimage).args(["-quiet", "-udf", "-o"]).arg(&iso).arg(&root).output().unwrap();
+    assert!(made.status.success(), "{}", String::from_utf8_lossy(&made.stderr));
+    let run = arena().args(["vm", "prepare", "--list-editions"]).arg(&iso).output().unwrap();
+    let said = String::from_utf8_lossy(&run.stdout);
+    assert!(run.status.success(), "{said}{}", String::from_utf8_lossy(&run.stderr));
+    assert!(said.contains("    1  Core") && said.contains("Windows 11 Home"), "{said}");
+    assert!(said.contains("    2  Professional") && said.contains("Windows 10 Pro (Windows 11 Pro)"), "{said}");
+    // The answer file of --edition pro picks image 2 with Pro's generic key; home is refused.
+    let oem = oem_folder(dir.path(), &"7f".repeat(32));
+    let out = dir.path().join("g.qcow2");
+    let dry = arena()
+        .args(["vm", "prepare", "--dry-run", "--edition", "pro", "--iso"])
+        .arg(&iso)
+        .arg("--oem")
+        .arg(&oem)
+        .arg("--out")
+        .arg(&out)
+        .output()
+        .unwrap();
+    if dry.status.success() {
+        let answer = std::fs::read_to_string(arena_host::vm::prepare::work_dir(&out).join("autounattend.xml")).unwrap();
+        assert!(answer.contains("<Value>2</Value>") && answer.contains("W269N-WFGWX-YVC9B-4J6C9-T83GX"), "{answer}");
+    } else {
+        // Without QEMU the dry run stops before the answer file is used; the choice is unit-tested.
+        assert!(String::from_utf8_lossy(&dry.stderr).contains("qemu"), "{}", String::from_utf8_lossy(&dry.stderr));
+    }
+    let home = arena()
+        .args(["vm", "prepare", "--dry-run", "--edition", "home", "--iso"])
+        .arg(&iso)
+        .arg("--oem")
+        .arg(&oem)
+        .arg("--out")
+        .arg(dir.path().join("h.qcow2"))
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&home.stderr);
+    assert!(!home.status.success() && err.contains("Home") && err.contains("refused"), "{err}");
 }

@@ -460,6 +460,19 @@ async fn windows_backend_under_wine() {
         avg(&capture_ms)
     );
     println!("BENCH: action round trip (move_to) avg {:.1} ms over 20", avg(&moves));
+
+    // `arena doctor --deep` on the Wine desktop: Wine's Notepad (the doctor's own)
+    // gets its tree timed (UI Automation absent: the row says why) and the round
+    // trips are measured; the table is what a user pastes.
+    let deep = c.doctor_deep().await.expect("doctor --deep").deep.expect("the deep part");
+    for line in deep.render_table().lines() {
+        println!("DOCTOR DEEP: {line}");
+    }
+    let win32 = deep.trees.iter().find(|t| t.app == "Notepad" && t.source == "win32").expect("a win32 Notepad row");
+    assert!(win32.error.is_none() && win32.nodes > 0, "{win32:?}");
+    assert!(deep.trees.iter().any(|t| t.app == "Notepad" && t.source == "uia" && t.error.is_some()), "{deep:?}");
+    let moved = deep.input.iter().find(|r| r.what.starts_with("cursor")).expect("cursor round trips");
+    assert!(moved.samples > 0, "{moved:?}");
     println!("BENCH: whole Wine suite {:.1} s", suite_started.elapsed().as_secs_f64());
 
     // 12. `arena-guest doctor` on the same desktop, as a user runs it first in a new

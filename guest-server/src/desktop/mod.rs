@@ -18,6 +18,7 @@ pub mod a11y_walk;
 pub mod cancel;
 pub mod stub;
 pub mod uia_health;
+pub mod uia_process;
 pub mod windows;
 
 use std::path::PathBuf;

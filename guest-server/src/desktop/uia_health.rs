@@ -5,10 +5,14 @@
 //! front: another WAA port reports it after a QEMU `loadvm`, until the automation
 //! client is created anew. [`check`] walks the foreground window; when it comes back
 //! empty over a lit screen with a window in front, it re-creates the client once
-//! (on Windows: a new worker thread with its own COM apartment and `CUIAutomation`)
+//! (on Windows: a new worker process, whose COM apartment and UI Automation client
+//! state are new, `desktop::uia_process`)
 //! and walks again, and only then reports the stage down, with a reason that says
 //! what was tried. The Windows backend and the stub (whose scenario can make its
 //! UI Automation answer empty) both answer `Component::Uia` through it.
+//!
+//! [`call_detached`] runs one call (a window's bulk fetch) on a thread of its own with
+//! a deadline, so the element-by-element read that follows a late one starts at once.
 //!
 //! [`ThreadCap`] bounds the threads that timed-out UI Automation work leaves behind:
 //! a worker stuck in a provider that never answers keeps its thread until the call
@@ -69,7 +73,7 @@ pub fn check(
         op: "uia health",
         message: format!(
             "UI Automation answers an empty tree for the window in front ({front:?}) over a lit screen, also after \
-             re-creating the automation client and its COM apartment once; a snapshot restore can leave it so: \
+             re-creating it once (on Windows a new worker process, with a new COM apartment); a snapshot restore can leave it so: \
              restart the guest's session"
         ),
     })
@@ -117,6 +121,40 @@ impl ThreadCap {
     pub fn max(&self) -> usize {
         self.max
     }
+}
+
+/// Runs `work` on a thread of its own (one place under `cap`) and waits for it
+/// at most `within`: a call that does not come back in time (a UI Automation
+/// bulk fetch a provider keeps busy past its transaction timeout) is abandoned,
+/// and finishes on its own thread while the caller goes on, so what comes next
+/// (the element-by-element read) never waits behind it.
+///
+/// # Errors
+///
+/// [`DesktopError::Timeout`] after `within`; [`DesktopError::Os`] when `cap`
+/// threads are still busy with abandoned calls, or the thread cannot start.
+pub fn call_detached<T: Send + 'static>(
+    cap: &ThreadCap,
+    within: std::time::Duration,
+    op: &'static str,
+    work: impl FnOnce() -> T + Send + 'static,
+) -> DesktopResult<T> {
+    let permit = cap.try_acquire().ok_or_else(|| DesktopError::Os {
+        op,
+        message: format!("{} abandoned calls are still running; no new one starts until one returns", cap.max()),
+    })?;
+    let (tx, rx) = std::sync::mpsc::sync_channel(1);
+    std::thread::Builder::new()
+        .name(op.into())
+        .spawn(move || {
+            let result = work();
+            // The place is free before the caller hears back.
+            drop(permit);
+            let _ = tx.send(result);
+        })
+        .map_err(|err| DesktopError::Os { op, message: format!("starting a thread: {err}") })?;
+    rx.recv_timeout(within)
+        .map_err(|_| DesktopError::Timeout { op, ms: u64::try_from(within.as_millis()).unwrap_or(u64::MAX) })
 }
 
 #[cfg(test)]
@@ -181,6 +219,26 @@ mod tests {
                 panic!("nothing to re-create")
             });
         assert!(matches!(result, Err(DesktopError::Unsupported(_))));
+    }
+
+    #[test]
+    fn a_detached_call_is_abandoned_at_its_deadline_and_keeps_its_place_until_it_returns() {
+        let cap = ThreadCap::new(1);
+        assert_eq!(call_detached(&cap, std::time::Duration::from_secs(5), "quick", || 7).unwrap(), 7);
+        let (release, wait) = std::sync::mpsc::channel::<()>();
+        let started = Instant::now();
+        let err = call_detached(&cap, std::time::Duration::from_millis(100), "stuck", move || wait.recv().is_ok())
+            .unwrap_err();
+        assert!(matches!(err, DesktopError::Timeout { ms: 100, .. }), "{err}");
+        assert!(started.elapsed() < std::time::Duration::from_secs(2));
+        // The abandoned call holds the only place until it returns.
+        assert!(call_detached(&cap, std::time::Duration::from_secs(1), "next", || 1).is_err());
+        release.send(()).unwrap();
+        let until = Instant::now() + std::time::Duration::from_secs(5);
+        while cap.live() > 0 && Instant::now() < until {
+            std::thread::sleep(std::time::Duration::from_millis(5));
+        }
+        assert_eq!(call_detached(&cap, std::time::Duration::from_secs(1), "next", || 2).unwrap(), 2);
     }
 
     #[test]

@@ -89,11 +89,22 @@ pub(crate) fn routes() -> Router<AppState> {
     Router::new().route("/v1/doctor", get(doctor))
 }
 
-async fn doctor(State(state): State<AppState>) -> Result<AppJson<DoctorReport>, ApiError> {
+/// `?deep=true`: also the heavy applications' trees and input round trips.
+#[derive(Debug, Default, serde::Deserialize)]
+struct DoctorQuery {
+    #[serde(default)]
+    deep: bool,
+}
+
+async fn doctor(
+    State(state): State<AppState>,
+    axum::extract::Query(query): axum::extract::Query<DoctorQuery>,
+) -> Result<AppJson<DoctorReport>, ApiError> {
     static ONE_AT_A_TIME: tokio::sync::Mutex<()> = tokio::sync::Mutex::const_new(());
     let _turn = ONE_AT_A_TIME.lock().await;
     let _input = state.input.write().await;
-    let options = DoctorOptions::for_server(&state.config, state.token.is_some());
+    let mut options = DoctorOptions::for_server(&state.config, state.token.is_some());
+    options.deep = query.deep;
     let report = blocking(&state.desktop, "doctor", DEADLINE, move |d| Ok(run(d, &options))).await?;
     Ok(AppJson(report))
 }

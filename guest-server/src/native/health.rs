@@ -91,10 +91,52 @@ async fn fresh_report(state: &AppState) -> HealthReport {
 
 async fn probe(state: &AppState, component: Component) -> ComponentHealth {
     let started = Instant::now();
+    if component == Component::Setup {
+        let (ok, detail) = setup_state(state.config.setup_status_file().as_deref());
+        return ComponentHealth { component, ok, detail, elapsed_ms: millis(started.elapsed()) };
+    }
     let res = blocking(&state.desktop, "probe", PROBE_DEADLINE, move |d| d.probe(component)).await;
     let elapsed_ms = millis(started.elapsed());
     match res {
         Ok(detail) => ComponentHealth { component, ok: true, detail, elapsed_ms },
         Err(err) => ComponentHealth { component, ok: false, detail: err.to_string(), elapsed_ms },
+    }
+}
+
+/// The `setup` component: what the setup record says, or up when there is none
+/// (a guest installed another way, the stub).
+fn setup_state(file: Option<&std::path::Path>) -> (bool, String) {
+    let Some(file) = file else {
+        return (true, "no setup record is kept here".to_owned());
+    };
+    match std::fs::read(file) {
+        Ok(bytes) => match arena_shared::health::SetupProgress::parse(&bytes) {
+            Ok(progress) => progress.judge(),
+            Err(err) => (false, format!("{}: {err}", file.display())),
+        },
+        Err(err) if err.kind() == std::io::ErrorKind::NotFound => {
+            (true, format!("no setup record at {}: this guest was not installed by setup.ps1", file.display()))
+        }
+        Err(err) => (false, format!("{}: {err}", file.display())),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_setup_component_follows_the_record() {
+        let dir = tempfile::tempdir().unwrap();
+        let file = dir.path().join("setup-status.json");
+        assert!(setup_state(None).0);
+        assert!(setup_state(Some(&file)).0, "no record: up");
+        std::fs::write(&file, r#"{"state":"running","step":"prep-apps.ps1","done":4,"total":6}"#).unwrap();
+        let (ok, detail) = setup_state(Some(&file));
+        assert!(!ok && detail.contains("prep-apps.ps1"), "{detail}");
+        std::fs::write(&file, r#"{"state":"done","done":6,"total":6}"#).unwrap();
+        assert!(setup_state(Some(&file)).0);
+        std::fs::write(&file, "{").unwrap();
+        assert!(!setup_state(Some(&file)).0);
     }
 }

@@ -144,6 +144,10 @@ pub enum Command {
         /// Print the report as JSON.
         #[arg(long)]
         json: bool,
+        /// Also time the tree of each heavy application running (Edge, File Explorer,
+        /// Settings, Notepad, Office) and input round trips, printed as a table to paste.
+        #[arg(long)]
+        deep: bool,
     },
     /// Show screen size, scale and monitors (JSON).
     Screen,
@@ -392,12 +396,20 @@ pub async fn run(cli: Cli) -> anyhow::Result<ExitCode> {
             Ok(ExitCode::SUCCESS)
         }
         Command::Health { wait, json } => health(conn, wait, json).await,
-        Command::Doctor { json } => {
-            let report = with_spinner("the guest is checking its desktop", conn.client()?.doctor()).await?;
+        Command::Doctor { json, deep } => {
+            let client = conn.client()?;
+            let report = if deep {
+                with_spinner("the guest is checking its desktop and timing its trees", client.doctor_deep()).await?
+            } else {
+                with_spinner("the guest is checking its desktop", client.doctor()).await?
+            };
             if json {
                 emit_json(&report)?;
             } else {
                 emit(&report.render_text())?;
+                if let Some(deep) = &report.deep {
+                    emit(&format!("\n{}", deep.render_table()))?;
+                }
             }
             Ok(if report.passed() { ExitCode::SUCCESS } else { ExitCode::FAILURE })
         }

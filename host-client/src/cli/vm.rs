@@ -21,7 +21,7 @@ use crate::vm::fleet::ResetPolicy;
 use crate::vm::prepare::{self, Answer, PrepareEvent, PrepareOptions, Stage, StageTimeouts};
 use crate::vm::qemu::{Accel, DiskBus, NicModel};
 use crate::vm::qmp::Qmp;
-use crate::vm::unattend::{AnswerOptions, FirmwareKind, ImageChoice, Uac};
+use crate::vm::unattend::{choose_image, AnswerOptions, FirmwareKind, Uac};
 use crate::vm::{Boot, Uefi, Vm, VmConfig, READY_SNAPSHOT};
 
 /// `--vm-accel`.
@@ -83,6 +83,10 @@ pub struct VmArgs {
     /// How long a boot or a restore may take to reach a healthy guest.
     #[arg(long, default_value = "900", value_parser = parse_seconds, value_name = "SECONDS")]
     pub vm_boot_timeout: Duration,
+    /// The screen under UEFI, WIDTHxHEIGHT (OVMF's preferred resolution, which Windows'
+    /// basic display driver keeps; 1440x900 is upstream's).
+    #[arg(long, default_value = "1440x900", value_parser = parse_screen, value_name = "WxH")]
+    pub vm_screen: (u32, u32),
     /// A VNC display for each VM (5900 + N, on the forwarded address; the next VMs take N+1, ...).
     #[arg(long, value_name = "N")]
     pub vm_vnc: Option<u16>,
@@ -148,6 +152,7 @@ impl VmArgs {
         config.boot_timeout = self.vm_boot_timeout;
         config.vnc = self.vm_vnc;
         config.token = token;
+        config.screen = self.vm_screen;
         Ok(config)
     }
 }
@@ -219,17 +224,20 @@ pub enum VmCommand {
 /// `arena vm prepare`.
 #[derive(Debug, Clone, Args)]
 pub struct PrepareArgs {
-    #[arg(long, value_name = "ISO", required_unless_present = "status")]
+    #[arg(long, value_name = "ISO", required_unless_present_any = ["status", "list_editions"])]
     pub iso: Option<PathBuf>,
     /// The folder `arena prep stage` filled.
-    #[arg(long, value_name = "DIR", required_unless_present = "status")]
+    #[arg(long, value_name = "DIR", required_unless_present_any = ["status", "list_editions"])]
     pub oem: Option<PathBuf>,
     /// Your own answer file instead of the generated one (put on the OEM media as autounattend.xml).
     #[arg(long, value_name = "FILE")]
     pub answer: Option<PathBuf>,
     /// The golden image to write (read-only when done).
-    #[arg(long, value_name = "IMAGE")]
-    pub out: PathBuf,
+    #[arg(long, value_name = "IMAGE", required_unless_present = "list_editions")]
+    pub out: Option<PathBuf>,
+    /// Only print the images the installer ISO (or an install.wim) holds: index, edition and name.
+    #[arg(long, value_name = "ISO", exclusive = true)]
+    pub list_editions: Option<PathBuf>,
     /// The disk's size (Windows 11 Setup wants 64 GB at least).
     #[arg(long, default_value = "64G")]
     pub size: String,
@@ -238,13 +246,15 @@ pub struct PrepareArgs {
     /// LabConfig bypass keys in the answer file.
     #[arg(long, value_enum, default_value_t = FirmwareKind::Bios)]
     pub firmware: FirmwareKind,
-    /// The image to install, by edition name as the ISO lists it ("Windows 11 Pro").
-    #[arg(long, value_name = "NAME", conflicts_with = "image_index")]
+    /// The edition to install: pro, pro-n, pro-workstations, pro-education, education,
+    /// education-n, enterprise, enterprise-n (with Microsoft's generic key for it), or an
+    /// image's name as the ISO lists it ("Windows 11 Pro"); Home is refused.
+    #[arg(long, value_name = "EDITION", conflicts_with = "image_index")]
     pub edition: Option<String>,
-    /// The image to install, by index in install.wim/install.esd [default: 1].
+    /// The image to install, by index in install.wim/install.esd [default: 1] (`--list-editions`).
     #[arg(long, value_name = "N")]
     pub image_index: Option<u32>,
-    /// A product key, for editions that need one (XXXXX-XXXXX-XXXXX-XXXXX-XXXXX).
+    /// A product key, instead of the edition's generic one (XXXXX-XXXXX-XXXXX-XXXXX-XXXXX).
     #[arg(long, value_name = "KEY")]
     pub product_key: Option<String>,
     /// The local administrator account that logs on automatically (WAA's is Docker).
@@ -289,14 +299,22 @@ pub struct PrepareArgs {
 }
 
 impl PrepareArgs {
-    fn answer(&self, uefi: bool, tpm: bool) -> AnswerOptions {
+    /// The answer file's options; the image and key from the ISO's image list
+    /// when it can be read ([`crate::vm::iso::list_images`]), else from the options alone.
+    fn answer(&self, uefi: bool, tpm: bool, iso: &Path) -> anyhow::Result<AnswerOptions> {
         let mut a = AnswerOptions::new();
-        a.image = match (&self.edition, self.image_index) {
-            (Some(name), _) => ImageChoice::Name(name.clone()),
-            (None, Some(n)) => ImageChoice::Index(n),
-            (None, None) => ImageChoice::Index(1),
+        let images = match crate::vm::iso::list_images(iso) {
+            Ok(images) => Some(images),
+            Err(why) => {
+                tracing::info!(%why, "the ISO's image list could not be read; the image is chosen from the options alone");
+                None
+            }
         };
-        a.product_key = self.product_key.clone();
+        let (image, key) =
+            choose_image(self.edition.as_deref(), self.image_index, self.product_key.clone(), images.as_deref())
+                .map_err(anyhow::Error::msg)?;
+        a.image = image;
+        a.product_key = key;
         a.user = self.user.clone();
         a.password = self.password.clone();
         a.locale = self.locale.clone();
@@ -307,7 +325,17 @@ impl PrepareArgs {
         a.firmware = if uefi { FirmwareKind::Uefi } else { FirmwareKind::Bios };
         // Setup checks for a TPM 2.0 and Secure Boot capable firmware; the keys only where they are absent.
         a.bypass_checks = !(uefi && tpm);
-        a
+        Ok(a)
+    }
+}
+
+/// `--vm-screen`: WIDTHxHEIGHT, each 640 to 7680.
+fn parse_screen(text: &str) -> Result<(u32, u32), String> {
+    let (w, h) = text.split_once(['x', 'X']).ok_or_else(|| format!("{text:?}: use WIDTHxHEIGHT, e.g. 1440x900"))?;
+    let side = |s: &str| s.trim().parse::<u32>().ok().filter(|n| (480..=7680).contains(n));
+    match (side(w), side(h)) {
+        (Some(w), Some(h)) => Ok((w, h)),
+        _ => Err(format!("{text:?}: each side is a number from 480 to 7680")),
     }
 }
 
@@ -380,7 +408,12 @@ pub async fn run(conn: &Connection, args: VmCommandArgs) -> anyhow::Result<ExitC
 }
 
 async fn prepare_command(conn: &Connection, args: PrepareArgs) -> anyhow::Result<ExitCode> {
-    let out = args.out.clone();
+    if let Some(iso) = &args.list_editions {
+        let images = crate::vm::iso::list_images(iso).map_err(anyhow::Error::msg)?;
+        emit(&crate::vm::iso::render_list(&images))?;
+        return Ok(ExitCode::SUCCESS);
+    }
+    let Some(out) = args.out.clone() else { anyhow::bail!("arena vm prepare needs --out") };
     if args.status {
         return Ok(match prepare::read_state(&out)? {
             Some(state) => {
@@ -415,7 +448,13 @@ async fn prepare_command(conn: &Connection, args: PrepareArgs) -> anyhow::Result
         vm.vm_firmware = FirmwareKind::Uefi;
     }
     let config = vm.config(&out, &out, "prepare", token)?;
-    let mut timeouts = StageTimeouts::default();
+    // Stage deadlines fit the accelerator the VM will run under (emulation is several times slower).
+    let accel = match args.vm.vm_accel {
+        AccelArg::Kvm => Accel::Kvm,
+        AccelArg::Tcg => Accel::Tcg,
+        AccelArg::Auto => crate::vm::qemu::detect_accel().0,
+    };
+    let mut timeouts = StageTimeouts::for_accel(accel);
     if let Some(grace) = args.shutdown_timeout {
         timeouts.0.insert(Stage::ShutDown, grace);
     }
@@ -424,7 +463,7 @@ async fn prepare_command(conn: &Connection, args: PrepareArgs) -> anyhow::Result
     }
     let answer = match &args.answer {
         Some(file) => Answer::File(file.clone()),
-        None => Answer::Generated(args.answer(config.uefi.is_some(), config.tpm)),
+        None => Answer::Generated(args.answer(config.uefi.is_some(), config.tpm, &iso)?),
     };
     let options = PrepareOptions {
         iso,

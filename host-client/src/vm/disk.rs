@@ -187,6 +187,34 @@ impl QemuImg {
         Ok(())
     }
 
+    /// Copies `size` bytes from `offset` of the qcow2 disk `disk` into a new
+    /// sparse raw file `to` (replacing it): one volume of the disk, read without
+    /// mounting it. Shared read (`-U`), so a disk still locked is read too.
+    ///
+    /// # Errors
+    ///
+    /// `qemu-img convert` fails.
+    pub fn extract_raw(&self, disk: &Path, offset: u64, size: u64, to: &Path) -> Result<(), VmError> {
+        let _ = std::fs::remove_file(to);
+        let source = format!(
+            "driver=raw,offset={offset},size={size},file.driver=qcow2,file.file.filename={}",
+            disk.display().to_string().replace(',', ",,")
+        );
+        self.run(
+            &[
+                "convert".as_ref(),
+                "-U".as_ref(),
+                "--image-opts".as_ref(),
+                source.as_ref(),
+                "-O".as_ref(),
+                "raw".as_ref(),
+                to.as_os_str(),
+            ],
+            &format!("copying {size} bytes at {offset} of {}", disk.display()),
+        )?;
+        Ok(())
+    }
+
     /// Copies `from` (any format QEMU reads) into a new qcow2 image at `to`.
     ///
     /// # Errors

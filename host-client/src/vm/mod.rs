@@ -14,8 +14,11 @@
 //! It is not the guest: the server inside the VM is `arena-guest`, reached over
 //! HTTP like any other guest.
 
+pub mod bundle;
 pub mod disk;
 pub mod fleet;
+pub mod iso;
+pub mod ovmf;
 pub mod prepare;
 pub mod qemu;
 pub mod qmp;
@@ -112,6 +115,9 @@ pub struct VmConfig {
     pub token: Option<String>,
     /// How long a boot (or a restore) may take to reach a healthy guest.
     pub boot_timeout: Duration,
+    /// The screen the firmware starts with under UEFI (OVMF's `PlatformConfig`,
+    /// [`ovmf`]): Windows' basic display driver keeps it.
+    pub screen: (u32, u32),
 }
 
 impl VmConfig {
@@ -139,6 +145,7 @@ impl VmConfig {
             vnc: None,
             token: None,
             boot_timeout: Duration::from_secs(900),
+            screen: (1440, 900),
         }
     }
 
@@ -170,7 +177,7 @@ impl VmConfig {
             Some(uefi) => {
                 let vars = self.dir.join(UEFI_VARS_FILE);
                 if !vars.exists() || fresh_vars {
-                    img.convert_to_qcow2(&uefi.vars_template, &vars)?;
+                    self.make_uefi_vars(img, &uefi.vars_template, &vars)?;
                 }
                 Firmware::Uefi { code: uefi.code.clone(), vars, secure_boot: uefi.secure_boot }
             }
@@ -213,8 +220,30 @@ impl VmConfig {
             media: Vec::new(),
             folders: Vec::new(),
             loadvm: None,
+            screen: self.screen,
         };
         Ok((spec, accel_note))
+    }
+}
+
+impl VmConfig {
+    /// This VM's UEFI variables: the template with OVMF's preferred resolution
+    /// set to [`VmConfig::screen`], as qcow2. A template that is not an edk2
+    /// variables file is used as it is (said in the log).
+    fn make_uefi_vars(&self, img: &QemuImg, template: &Path, vars: &Path) -> Result<(), VmError> {
+        let mut bytes = std::fs::read(template)
+            .map_err(|source| VmError::Io { what: format!("reading {}", template.display()), source })?;
+        let (width, height) = self.screen;
+        if let Err(why) = ovmf::set_resolution(&mut bytes, width, height) {
+            tracing::warn!(template = %template.display(), %why, "the UEFI screen cannot be set; OVMF chooses it");
+            return img.convert_to_qcow2(template, vars);
+        }
+        let raw = self.dir.join("uefi-vars.raw.tmp");
+        std::fs::write(&raw, &bytes)
+            .map_err(|source| VmError::Io { what: format!("writing {}", raw.display()), source })?;
+        let made = img.convert_to_qcow2(&raw, vars);
+        let _ = std::fs::remove_file(&raw);
+        made
     }
 }
 

@@ -39,6 +39,7 @@ use std::time::{Duration, Instant};
 
 use serde::{Deserialize, Serialize};
 
+use super::bundle::{self, Bundle};
 use super::disk::{make_read_only, QemuImg};
 use super::qemu::{self, Accel};
 use super::tpm::{self, SwtpmSpec};
@@ -60,6 +61,10 @@ pub enum Stage {
     FirstLogon,
     /// `C:\OEM\install.bat` runs `setup.ps1`.
     OemInstall,
+    /// `setup.ps1` finished every step (`arena-stage: oem-done`); the guest must
+    /// answer with every component up, its setup included, within the `healthy`
+    /// deadline.
+    OemDone,
     /// The guest answered with every component up and was saved as a snapshot;
     /// it still has to shut down.
     Healthy,
@@ -81,6 +86,7 @@ impl Stage {
             Stage::Oobe => "oobe",
             Stage::FirstLogon => "first-logon",
             Stage::OemInstall => "oem-install",
+            Stage::OemDone => "oem-done",
             Stage::Healthy => "healthy",
             Stage::ShutDown => "shut-down",
             Stage::Sealed => "sealed",
@@ -94,6 +100,7 @@ impl Stage {
             Stage::Oobe,
             Stage::FirstLogon,
             Stage::OemInstall,
+            Stage::OemDone,
             Stage::Healthy,
             Stage::ShutDown,
             Stage::Sealed,
@@ -104,7 +111,13 @@ impl Stage {
 
     /// Whether the disk is mid-install in this stage (a resume starts over).
     fn mid_install(self) -> bool {
-        matches!(self, Stage::Setup | Stage::Oobe | Stage::FirstLogon | Stage::OemInstall)
+        matches!(self, Stage::Setup | Stage::Oobe | Stage::FirstLogon | Stage::OemInstall | Stage::OemDone)
+    }
+
+    /// The deadline that applies in this stage: `oem-done` waits on the guest's
+    /// health, so it has `healthy`'s.
+    fn deadline(self, timeouts: &StageTimeouts) -> Duration {
+        timeouts.get(if self == Stage::OemDone { Stage::Healthy } else { self })
     }
 }
 
@@ -134,7 +147,34 @@ impl Default for StageTimeouts {
     }
 }
 
+/// How much longer each stage may take under software emulation (TCG) than
+/// under KVM, where the defaults are set: Windows Setup, OOBE, the first logon,
+/// the guest's start and the shutdown are processor-bound and run many times
+/// slower emulated (docs/vm.md gives the figures); the OEM install is largely
+/// downloads, so it gets less.
+pub const TCG_FACTOR: &[(Stage, u32)] = &[
+    (Stage::Setup, 4),
+    (Stage::Oobe, 4),
+    (Stage::FirstLogon, 4),
+    (Stage::OemInstall, 2),
+    (Stage::Healthy, 4),
+    (Stage::ShutDown, 4),
+];
+
 impl StageTimeouts {
+    /// The defaults for a VM that runs under `accel`: scaled by [`TCG_FACTOR`] under emulation.
+    pub fn for_accel(accel: Accel) -> StageTimeouts {
+        let mut timeouts = StageTimeouts::default();
+        if accel == Accel::Tcg {
+            for (stage, factor) in TCG_FACTOR {
+                if let Some(limit) = timeouts.0.get_mut(stage) {
+                    *limit *= *factor;
+                }
+            }
+        }
+        timeouts
+    }
+
     pub fn get(&self, stage: Stage) -> Duration {
         self.0.get(&stage).copied().unwrap_or(Duration::from_secs(3600))
     }
@@ -389,9 +429,17 @@ fn check_inputs(options: &PrepareOptions) -> Result<(), VmError> {
 fn write_media(options: &PrepareOptions, dir: &Path) -> Result<PathBuf, VmError> {
     let answer = dir.join(ANSWER_FILE);
     let text = match &options.answer {
-        Answer::Generated(o) => unattend::render(o),
+        Answer::Generated(o) => {
+            let text = unattend::render(o);
+            // Setup refuses (or skips) a value past its documented maximum: never hand it one.
+            unattend::check_limits(&text, true).map_err(VmError::Invalid)?;
+            text
+        }
         Answer::File(path) => {
-            std::fs::read_to_string(path).map_err(io(format!("reading --answer {}", path.display())))?
+            let text = std::fs::read_to_string(path).map_err(io(format!("reading --answer {}", path.display())))?;
+            unattend::check_limits(&text, false)
+                .map_err(|err| VmError::Invalid(format!("--answer {}: {err}", path.display())))?;
+            text
         }
     };
     arena_shared::atomic::write_atomic(&answer, text.as_bytes())
@@ -399,12 +447,15 @@ fn write_media(options: &PrepareOptions, dir: &Path) -> Result<PathBuf, VmError>
     let marker = dir.join(unattend::OEM_MARKER);
     std::fs::write(&marker, "The arena's OEM media: OEM\\ becomes C:\\OEM.\r\n")
         .map_err(io(format!("writing {}", marker.display())))?;
+    let script = dir.join(unattend::OEM_SCRIPT);
+    std::fs::write(&script, unattend::oem_copy_script()).map_err(io(format!("writing {}", script.display())))?;
     let iso = dir.join(MEDIA_FILE);
     let xorriso = find_xorriso(options.xorriso.as_deref())?;
-    let args = media_args(&answer, &marker, &options.oem, &iso);
+    let args = media_args(&answer, &marker, &script, &options.oem, &iso);
     let mut command = std::process::Command::new(&xorriso);
     command.args(&args);
     super::die_with_this_process_std(&mut command);
+    Bundle::new(dir).command(&shell_line(&xorriso, &args));
     let out = command.output().map_err(io(format!("starting {}", xorriso.display())))?;
     if !out.status.success() {
         return Err(VmError::Image {
@@ -427,7 +478,7 @@ pub fn find_xorriso(explicit: Option<&Path>) -> Result<PathBuf, VmError> {
 /// xorriso's arguments for the OEM media: ISO 9660 level 3 (files over 4 GiB
 /// in several extents), Joliet with long names (what Windows reads), Rock
 /// Ridge (what Linux reads), the label, and the three parts grafted in place.
-pub fn media_args(answer: &Path, marker: &Path, oem: &Path, iso: &Path) -> Vec<OsString> {
+pub fn media_args(answer: &Path, marker: &Path, script: &Path, oem: &Path, iso: &Path) -> Vec<OsString> {
     let graft = |name: &str, path: &Path| {
         let mut arg = OsString::from(format!("{name}="));
         arg.push(path);
@@ -442,6 +493,7 @@ pub fn media_args(answer: &Path, marker: &Path, oem: &Path, iso: &Path) -> Vec<O
     args.push("-graft-points".into());
     args.push(graft(ANSWER_FILE, answer));
     args.push(graft(unattend::OEM_MARKER, marker));
+    args.push(graft(unattend::OEM_SCRIPT, script));
     args.push(graft(&format!("{}/", unattend::OEM_MEDIA_FOLDER), oem));
     args
 }
@@ -556,6 +608,14 @@ pub async fn prepare(options: &PrepareOptions, mut progress: impl FnMut(PrepareE
     };
     state.qemu_pid = None;
     end_leftovers(&dir);
+    let mut bundle = Bundle::new(&dir);
+    bundle.note(&format!(
+        "arena vm prepare {} at stage {} (iso {}, oem {})",
+        if resumed { "resumed" } else { "started" },
+        state.stage.name(),
+        options.iso.display(),
+        options.oem.display()
+    ));
     let config = prepare_config(options, &dir);
     // The stage last announced, so none is announced twice.
     let mut announced = None;
@@ -566,6 +626,7 @@ pub async fn prepare(options: &PrepareOptions, mut progress: impl FnMut(PrepareE
             let snapshot = state.stage == Stage::Healthy && has_snapshot(&img, &disk, HEALTHY_SNAPSHOT);
             if let Some(why) = start_over_reason(state.stage, snapshot) {
                 progress(PrepareEvent::StartOver { from: state.stage, why });
+                bundle.note(&format!("starting over from stage {}: {why}", state.stage.name()));
                 start_over(options, &img, &dir, &disk, &mut state)?;
             }
         }
@@ -573,21 +634,23 @@ pub async fn prepare(options: &PrepareOptions, mut progress: impl FnMut(PrepareE
         let limit = TIMED_STAGES.contains(&state.stage).then(|| options.timeouts.get(state.stage));
         if announced != Some(state.stage) {
             progress(PrepareEvent::Stage { stage: state.stage, resumed, limit });
+            bundle.note(&format!("stage {}{}", state.stage.name(), if resumed { " (resumed)" } else { "" }));
         }
         resumed = false;
         let next = match state.stage {
             Stage::Created => Stage::Setup,
-            Stage::Setup | Stage::Oobe | Stage::FirstLogon | Stage::OemInstall => {
-                let mut vm = launch(options, &config, &qemu, &img, &dir, &disk, None).await?;
+            Stage::Setup | Stage::Oobe | Stage::FirstLogon | Stage::OemInstall | Stage::OemDone => {
+                let mut vm = launch(options, &config, &qemu, &img, &disk, None, &bundle).await?;
                 state.qemu_pid = vm.pid();
                 write_state(&dir, &state)?;
                 progress(PrepareEvent::QemuStarted { pid: vm.pid(), accel: &vm.accel_note });
-                if let Err(err) = follow(&mut vm, options, &dir, &mut state, &mut progress).await {
-                    let err = keep_evidence(&vm, &dir, state.stage, err).await;
+                if let Err(err) = follow(&mut vm, options, &dir, &mut state, &mut bundle, &mut progress).await {
+                    bundle.note(&format!("failed in stage {}: {err}", state.stage.name()));
+                    let evidence = keep_evidence(&vm, &dir, state.stage).await;
                     vm.kill().await;
                     state.qemu_pid = None;
                     write_state(&dir, &state)?;
-                    return Err(err);
+                    return Err(finish_evidence(evidence, &img, &disk, &bundle, err));
                 }
                 // Healthy: a safe point to come back to, then the shutdown.
                 if let Err(err) = vm.save_snapshot(HEALTHY_SNAPSHOT).await {
@@ -598,23 +661,26 @@ pub async fn prepare(options: &PrepareOptions, mut progress: impl FnMut(PrepareE
                 }
                 state.stage = Stage::Healthy;
                 write_state(&dir, &state)?;
+                bundle.note("healthy: the guest, its setup done, was saved as snapshot prepare-healthy");
                 // Said once the snapshot is there: from here a resume goes on from it.
                 progress(PrepareEvent::Stage { stage: Stage::Healthy, resumed: false, limit: None });
                 announced = Some(Stage::ShutDown);
                 shut_down(vm, options, &dir, &mut state, &mut progress).await?
             }
             Stage::Healthy => {
-                let mut vm = launch(options, &config, &qemu, &img, &dir, &disk, Some(HEALTHY_SNAPSHOT.into())).await?;
+                let mut vm =
+                    launch(options, &config, &qemu, &img, &disk, Some(HEALTHY_SNAPSHOT.into()), &bundle).await?;
                 state.qemu_pid = vm.pid();
                 write_state(&dir, &state)?;
                 progress(PrepareEvent::QemuStarted { pid: vm.pid(), accel: &vm.accel_note });
                 let limit = options.timeouts.get(Stage::Healthy);
                 if let Err(err) = vm.wait_healthy(limit, |_| {}).await {
-                    let err = keep_evidence(&vm, &dir, Stage::Healthy, err).await;
+                    bundle.note(&format!("failed in stage healthy: {err}"));
+                    let evidence = keep_evidence(&vm, &dir, Stage::Healthy).await;
                     vm.kill().await;
                     state.qemu_pid = None;
                     write_state(&dir, &state)?;
-                    return Err(err);
+                    return Err(finish_evidence(evidence, &img, &disk, &bundle, err));
                 }
                 announced = Some(Stage::ShutDown);
                 shut_down(vm, options, &dir, &mut state, &mut progress).await?
@@ -638,6 +704,7 @@ pub async fn prepare(options: &PrepareOptions, mut progress: impl FnMut(PrepareE
                 Stage::Sealed
             }
             Stage::Sealed => {
+                bundle.note(&format!("sealed: {}", options.out.display()));
                 // Done: the folder keeps its logs, the answer file and the media for review.
                 for file in ["qmp.sock", super::CONTROL_SOCKET, tpm::SOCKET] {
                     let _ = std::fs::remove_file(dir.join(file));
@@ -698,15 +765,23 @@ async fn launch(
     config: &VmConfig,
     qemu: &Path,
     img: &QemuImg,
-    dir: &Path,
     disk: &Path,
     loadvm: Option<String>,
+    bundle: &Bundle,
 ) -> Result<Vm, VmError> {
+    let dir = config.dir.as_path();
     let fresh_vars = !dir.join(UEFI_VARS_FILE).exists();
     let (mut spec, accel_note) = config.spec(qemu.to_owned(), disk.to_owned(), img, fresh_vars)?;
     spec.cdrom = Some(options.iso.clone());
     spec.media = vec![dir.join(MEDIA_FILE)];
     spec.loadvm = loadvm;
+    bundle.keep_serial();
+    if spec.tpm_socket.is_some() {
+        let program = tpm::find_swtpm(config.swtpm.as_deref()).unwrap_or_else(|_| "swtpm".into());
+        bundle.command(&shell_line(&program, &SwtpmSpec::in_dir(program.clone(), dir).args()));
+    }
+    bundle.command(&shell_line(&spec.qemu, &spec.args()));
+    bundle.note(&format!("starting QEMU ({accel_note})"));
     Vm::launch(config, spec, accel_note).await
 }
 
@@ -734,69 +809,94 @@ async fn shut_down(
 
 /// Under UEFI, Windows' CD boot loader waits for a key ("Press any key to boot
 /// from CD or DVD") and otherwise falls through to the next boot option. The
-/// prepare presses the space bar over QMP about once a second on the first boot
-/// from the installer only (until its first reset), for this long: the prompt
-/// shows for a few seconds once the firmware has started, later under
-/// emulation. A remastered ISO with `efisys_noprompt.bin` would avoid the
+/// prepare presses the space bar over QMP about once a second while Windows
+/// Setup's first stage has not answered: across the VM's resets (the firmware
+/// may reset once before the loader runs, as OVMF does after enrolling its
+/// variables), until the first `arena-stage:` line or the first reboot from
+/// the disk Setup made bootable, and for at most this long from the start:
+/// the prompt shows for a few seconds once the firmware has started, later
+/// under emulation. A remastered ISO with `efisys_noprompt.bin` would avoid the
 /// presses, but Windows ISOs keep their files in UDF, which xorriso does not
 /// write, so remastering needs the whole ISO unpacked and a UDF writer.
 fn keypress_window(accel: Accel) -> Duration {
     match accel {
-        Accel::Kvm => Duration::from_secs(90),
-        Accel::Tcg => Duration::from_secs(600),
+        Accel::Kvm => Duration::from_secs(180),
+        Accel::Tcg => Duration::from_secs(1200),
     }
 }
 
-/// Follows the install from QEMU's start to a healthy guest, stage by stage,
-/// each within its deadline.
+/// Resets after which the disk is what boots (Setup's WinPE stage wrote it and
+/// rebooted): from then on a press could only reach the installer's prompt,
+/// which must not boot again. Two: the firmware's own reset, then Setup's.
+const PRESS_RESETS: u32 = 2;
+
+/// What the guest's serial line says: a stage, or the OEM install's failure.
+#[derive(Debug, Clone, PartialEq, Eq)]
+enum StageEvent {
+    Enter(Stage),
+    Failed(String),
+}
+
+/// Follows the install from QEMU's start to a healthy guest whose setup is done,
+/// stage by stage, each within its deadline: the guest's health is awaited only
+/// once `setup.ps1` has said `oem-done` (so the seal never races the OEM
+/// install), and an `oem-failed` line ends the prepare at once, naming the step.
 async fn follow(
     vm: &mut Vm,
     options: &PrepareOptions,
     dir: &Path,
     state: &mut State,
+    bundle: &mut Bundle,
     progress: &mut impl FnMut(PrepareEvent<'_>),
 ) -> Result<(), VmError> {
     let mut events = vm.qmp.events();
     let serial = dir.join("serial.log");
     let started = Instant::now();
-    let press_keys = matches!(vm.spec.firmware, qemu::Firmware::Uefi { .. }) && state.reboots == 0;
+    let press_keys =
+        matches!(vm.spec.firmware, qemu::Firmware::Uefi { .. }) && state.stage == Stage::Setup && state.reboots == 0;
     let press_until = started + keypress_window(vm.spec.accel);
-    let mut first_boot = true;
+    let mut resets_here = 0u32;
     let mut stage_since = Instant::now();
     let mut stages = StageLines::default();
     // QEMU's forwarder accepts connections before the guest listens: short questions.
     let client = vm.client().with_timeout(Duration::from_secs(2));
-    let overall: Duration = options.timeouts.0.values().sum();
-    let wait = crate::prep::wait_healthy(&client, overall, Duration::from_millis(500), |_| {});
-    tokio::pin!(wait);
+    let mut health: Option<std::pin::Pin<Box<dyn std::future::Future<Output = _> + Send + '_>>> = None;
     let mut tick = tokio::time::interval(Duration::from_secs(1));
+    bundle.screendump(vm, state.stage.name()).await;
     loop {
         tokio::select! {
-            result = &mut wait => {
-                // The guest can say its last stages and answer within one tick:
-                // read what the serial port said up to now before leaving.
-                if result.is_ok() {
-                    let text = std::fs::read(&serial).unwrap_or_default();
-                    for stage in stages.take_new(&String::from_utf8_lossy(&text)) {
-                        enter_stage(stage, options, dir, state, &mut stage_since, progress)?;
-                    }
+            result = async {
+                match health.as_mut() {
+                    Some(wait) => wait.await,
+                    None => std::future::pending().await,
                 }
+            } => {
+                let result: Result<arena_shared::health::HealthReport, crate::prep::PrepError> = result;
                 *state.seconds.entry(state.stage.name().to_owned()).or_default() += stage_since.elapsed().as_secs_f64();
                 return match result {
-                    Ok(_) => Ok(()),
+                    Ok(report) => {
+                        let setup = report.components.iter().find(|c| c.component == arena_shared::health::Component::Setup);
+                        bundle.note(&format!(
+                            "the guest answers with every component up ({})",
+                            setup.map_or("it reports no setup component", |c| c.detail.as_str())
+                        ));
+                        Ok(())
+                    }
                     Err(source) => Err(VmError::NotHealthy { name: "prepare".into(), source }),
                 };
             }
             Ok(name) = events.recv() => {
                 if name == "RESET" {
                     state.reboots += 1;
-                    first_boot = false;
+                    resets_here += 1;
                     progress(PrepareEvent::Reboot { count: state.reboots });
+                    bundle.note(&format!("the VM reset ({} so far)", state.reboots));
                     write_state(dir, state)?;
                     // Setup's deadline is per boot.
                     if state.stage == Stage::Setup {
                         stage_since = Instant::now();
                     }
+                    bundle.screendump(vm, &format!("{}-reset", state.stage.name())).await;
                 } else if name == "SHUTDOWN" || name == super::qmp::CLOSED {
                     // Setup powers off only when it cannot go on: its last words say why.
                     let text = std::fs::read(&serial).unwrap_or_default();
@@ -808,22 +908,49 @@ async fn follow(
                 }
             }
             _ = tick.tick() => {
-                if press_keys && first_boot && Instant::now() < press_until {
-                    let _ = vm.qmp.hmp("sendkey spc", Duration::from_secs(2)).await;
-                }
                 // The guest's own stage lines on the serial port.
                 let text = std::fs::read(&serial).unwrap_or_default();
                 let text = String::from_utf8_lossy(&text);
-                for stage in stages.take_new(&text) {
-                    enter_stage(stage, options, dir, state, &mut stage_since, progress)?;
+                let new = stages.take_new(&text);
+                // Setup's first stage answered: no key may reach the installer's prompt again.
+                let answered = stages.any || resets_here >= PRESS_RESETS;
+                if press_keys && !answered && Instant::now() < press_until {
+                    let _ = vm.qmp.hmp("sendkey spc", Duration::from_secs(2)).await;
                 }
-                let limit = options.timeouts.get(state.stage);
+                for event in new {
+                    match event {
+                        StageEvent::Enter(stage) => {
+                            if enter_stage(stage, options, dir, state, &mut stage_since, progress)? {
+                                bundle.note(&format!("stage {}", stage.name()));
+                                bundle.screendump(vm, stage.name()).await;
+                            }
+                            if stage == Stage::OemDone && health.is_none() {
+                                let limit = Stage::OemDone.deadline(&options.timeouts);
+                                health = Some(Box::pin(crate::prep::wait_healthy(&client, limit, Duration::from_millis(500), |_| {})));
+                            }
+                        }
+                        StageEvent::Failed(why) => {
+                            bundle.note(&format!("the OEM install failed: {why}"));
+                            return Err(VmError::Invalid(format!(
+                                "the OEM install failed in stage {}: {why} (the guest's log is %ProgramData%\\arena\\logs\\setup.log; fix the cause in the OEM folder and run the same command again)",
+                                state.stage.name()
+                            )));
+                        }
+                    }
+                }
+                bundle.screendump_if_due(vm, state.stage.name()).await;
+                let limit = state.stage.deadline(&options.timeouts);
                 if stage_since.elapsed() > limit {
+                    let waited = if state.stage == Stage::OemDone {
+                        " for the guest to answer with every component up"
+                    } else {
+                        ""
+                    };
                     return Err(VmError::Invalid(format!(
-                        "stage {} took longer than its {} s (--stage-timeout {}=DURATION to allow more); {}",
+                        "stage {} took longer than its {} s{waited} (--stage-timeout {}=DURATION to allow more); {}",
                         state.stage.name(),
                         limit.as_secs(),
-                        state.stage.name(),
+                        if state.stage == Stage::OemDone { "healthy" } else { state.stage.name() },
                         last_serial_lines(&text)
                     )));
                 }
@@ -845,11 +972,13 @@ struct StageLines {
     /// Bytes of the log already read, up to the end of its last complete line
     /// (a line still being written is read again once it is whole).
     read: usize,
+    /// Whether any stage line was seen.
+    any: bool,
 }
 
 impl StageLines {
-    /// The stages named by the complete lines after the ones already read.
-    fn take_new(&mut self, text: &str) -> Vec<Stage> {
+    /// The stage lines among the complete lines after the ones already read.
+    fn take_new(&mut self, text: &str) -> Vec<StageEvent> {
         // QEMU truncates the log when it starts: a shorter log is a new one.
         if text.len() < self.read {
             self.read = 0;
@@ -858,11 +987,14 @@ impl StageLines {
             return Vec::new();
         };
         self.read += whole.len();
-        stages_named(whole).collect()
+        let found: Vec<StageEvent> = stages_named(whole).collect();
+        self.any |= !found.is_empty();
+        found
     }
 }
 
-/// Moves `state` on to `stage` if it is a later stage of the install, saying so.
+/// Moves `state` on to `stage` if it is a later stage of the install, saying
+/// so; whether it did.
 fn enter_stage(
     stage: Stage,
     options: &PrepareOptions,
@@ -870,21 +1002,30 @@ fn enter_stage(
     state: &mut State,
     stage_since: &mut Instant,
     progress: &mut impl FnMut(PrepareEvent<'_>),
-) -> Result<(), VmError> {
+) -> Result<bool, VmError> {
     if stage > state.stage && stage.mid_install() {
         *state.seconds.entry(state.stage.name().to_owned()).or_default() += stage_since.elapsed().as_secs_f64();
         state.stage = stage;
         *stage_since = Instant::now();
         write_state(dir, state)?;
-        let limit = options.timeouts.get(stage);
+        let limit = stage.deadline(&options.timeouts);
         progress(PrepareEvent::Stage { stage, resumed: false, limit: Some(limit) });
+        return Ok(true);
     }
-    Ok(())
+    Ok(false)
 }
 
-/// The stages named by `arena-stage: NAME` lines in `text`, in order.
-fn stages_named(text: &str) -> impl Iterator<Item = Stage> + '_ {
-    text.lines().filter_map(|line| Stage::from_name(line.trim().strip_prefix(STAGE_LINE)?.trim()))
+/// The stage lines in `text`, in order: `arena-stage: NAME` for a stage,
+/// `arena-stage: oem-failed WHY` for the OEM install's failure.
+fn stages_named(text: &str) -> impl Iterator<Item = StageEvent> + '_ {
+    text.lines().filter_map(|line| {
+        let said = line.trim().strip_prefix(STAGE_LINE)?.trim();
+        if let Some(why) = said.strip_prefix("oem-failed") {
+            let why = why.trim();
+            return Some(StageEvent::Failed(if why.is_empty() { "a step failed".to_owned() } else { why.to_owned() }));
+        }
+        Stage::from_name(said).map(StageEvent::Enter)
+    })
 }
 
 fn last_serial_lines(text: &str) -> String {
@@ -895,9 +1036,19 @@ fn last_serial_lines(text: &str) -> String {
     format!("the serial port's last lines: {}", lines[lines.len().saturating_sub(5)..].join(" | "))
 }
 
-/// Keeps the serial log, a screendump and the doctor's report of a failed
-/// stage in `failures/<stage>-<n>/`, and names the folder in the error.
-async fn keep_evidence(vm: &Vm, dir: &Path, stage: Stage, err: VmError) -> VmError {
+/// What a failed stage left in `failures/<stage>-<n>/` while QEMU still ran.
+struct Evidence {
+    folder: PathBuf,
+    doctor: String,
+    /// The Setup logs copied from the guest.
+    logs: Vec<String>,
+}
+
+/// Keeps the serial and QEMU logs, a screendump, the doctor's report and the
+/// Setup logs ([`bundle::SETUP_LOGS`]) of a failed stage in
+/// `failures/<stage>-<n>/`, asking the guest while it answers; [`finish_evidence`]
+/// reads the logs off the disk once QEMU is stopped if the guest gave none.
+async fn keep_evidence(vm: &Vm, dir: &Path, stage: Stage) -> Option<Evidence> {
     let failures = dir.join("failures");
     let mut n = 1;
     let folder = loop {
@@ -907,29 +1058,52 @@ async fn keep_evidence(vm: &Vm, dir: &Path, stage: Stage, err: VmError) -> VmErr
         }
         n += 1;
     };
-    if std::fs::create_dir_all(&folder).is_err() {
-        return err;
-    }
+    std::fs::create_dir_all(&folder).ok()?;
     let _ = std::fs::copy(dir.join("serial.log"), folder.join("serial.log"));
     let _ = std::fs::copy(dir.join("qemu.log"), folder.join("qemu.log"));
     let shot = folder.join("screendump.png");
     let _ = tokio::time::timeout(Duration::from_secs(10), vm.qmp.screendump(&shot)).await;
-    let doctor = match tokio::time::timeout(
-        Duration::from_secs(150),
-        vm.client().with_timeout(Duration::from_secs(120)).doctor(),
-    )
-    .await
-    {
-        Ok(Ok(report)) => {
+    // Whether the guest answers at all, before the slow questions.
+    let answers = vm.client().with_timeout(Duration::from_secs(3)).health_once(Duration::from_secs(3)).await.is_ok();
+    let mut doctor = String::new();
+    let mut logs = Vec::new();
+    if answers {
+        logs = bundle::copy_logs_from_guest(&vm.client().with_timeout(Duration::from_secs(20)), &folder).await;
+        if let Ok(Ok(report)) =
+            tokio::time::timeout(Duration::from_secs(150), vm.client().with_timeout(Duration::from_secs(120)).doctor())
+                .await
+        {
             let text = serde_json::to_string_pretty(&report).unwrap_or_default();
             let _ = std::fs::write(folder.join("doctor.json"), &text);
-            format!("\nthe guest's doctor report:\n{text}")
+            doctor = format!("\nthe guest's doctor report:\n{text}");
         }
-        _ => String::new(),
+    }
+    Some(Evidence { folder, doctor, logs })
+}
+
+/// Completes the evidence once QEMU has stopped: the Setup logs off the disk
+/// image when the guest gave none; the error names the folder and what it holds.
+fn finish_evidence(evidence: Option<Evidence>, img: &QemuImg, disk: &Path, bundle: &Bundle, err: VmError) -> VmError {
+    let Some(Evidence { folder, doctor, mut logs }) = evidence else { return err };
+    let mut how = "from the guest".to_owned();
+    let mut problems = Vec::new();
+    if logs.is_empty() {
+        (logs, problems) = bundle::copy_logs_off_disk(img, disk, &folder);
+        how = "off the disk image".to_owned();
+    }
+    let logs = if logs.is_empty() {
+        format!(
+            "no Setup log could be read ({})",
+            if problems.is_empty() { "none was on the disk yet".to_owned() } else { problems.join("; ") }
+        )
+    } else {
+        format!("the Setup logs ({}) copied {how}", logs.join(", "))
     };
+    bundle.note(&format!("evidence kept in {}: {logs}", folder.display()));
     VmError::Invalid(format!(
-        "{err}{doctor}\n(the serial log, a screendump and what the guest said are in {}; run the same command again: the install starts over from a blank disk)",
-        folder.display()
+        "{err}{doctor}\n(the serial log, a screendump, {logs} and what the guest said are in {}; the whole install's timeline, screendumps and command lines are in {}; run the same command again: the install starts over from a blank disk)",
+        folder.display(),
+        folder.parent().and_then(Path::parent).unwrap_or(&folder).display()
     ))
 }
 
@@ -939,17 +1113,39 @@ mod tests {
 
     #[test]
     fn stage_lines_are_read_once_and_only_when_whole() {
+        use StageEvent::{Enter, Failed};
         let mut lines = StageLines::default();
         let mut log = String::from("boot\r\narena-stage: oobe\r\narena-stage: first-lo");
-        assert_eq!(lines.take_new(&log), vec![Stage::Oobe]);
+        assert_eq!(lines.take_new(&log), vec![Enter(Stage::Oobe)]);
         assert_eq!(lines.take_new(&log), vec![]);
         log.push_str("gon\r\nnoise arena-stage: setup\narena-stage: oem-install\n");
-        assert_eq!(lines.take_new(&log), vec![Stage::FirstLogon, Stage::OemInstall]);
+        assert_eq!(lines.take_new(&log), vec![Enter(Stage::FirstLogon), Enter(Stage::OemInstall)]);
         assert_eq!(lines.take_new(&log), vec![]);
+        // The OEM install's end, or its failure naming the step.
+        log.push_str(
+            "arena-stage: oem-done\r\narena-stage: oem-failed prep-apps.ps1 (exit code 3)\r\narena-stage: oem-failed\n",
+        );
+        assert_eq!(
+            lines.take_new(&log),
+            vec![Enter(Stage::OemDone), Failed("prep-apps.ps1 (exit code 3)".into()), Failed("a step failed".into())]
+        );
         // A new QEMU truncates the log: it is read from its start again.
-        assert_eq!(lines.take_new("arena-stage: oobe\n"), vec![Stage::Oobe]);
+        assert_eq!(lines.take_new("arena-stage: oobe\n"), vec![Enter(Stage::Oobe)]);
         let mut fresh = StageLines::default();
         assert_eq!(fresh.take_new("arena-stage: unknown\narena-stage:\n\n"), vec![]);
+        assert!(!fresh.any && lines.any);
+    }
+
+    #[test]
+    fn emulation_scales_the_deadlines_and_oem_done_waits_as_long_as_healthy() {
+        let kvm = StageTimeouts::for_accel(Accel::Kvm);
+        let tcg = StageTimeouts::for_accel(Accel::Tcg);
+        assert_eq!(kvm, StageTimeouts::default());
+        assert_eq!(tcg.get(Stage::Setup), kvm.get(Stage::Setup) * 4);
+        assert_eq!(tcg.get(Stage::OemInstall), kvm.get(Stage::OemInstall) * 2);
+        assert_eq!(Stage::OemDone.deadline(&kvm), kvm.get(Stage::Healthy));
+        assert!(Stage::OemDone.mid_install() && Stage::OemInstall < Stage::OemDone && Stage::OemDone < Stage::Healthy);
+        assert_eq!(Stage::from_name("oem-done"), Some(Stage::OemDone));
     }
 
     /// A leftover QEMU (here a shell named like one, its arguments naming a
@@ -1039,13 +1235,14 @@ mod tests {
         let args = media_args(
             Path::new("/w/autounattend.xml"),
             Path::new("/w/ARENA-OEM.TXT"),
+            Path::new("/w/ARENA-OEM.CMD"),
             Path::new("/stage/oem"),
             Path::new("/w/oem-media.iso"),
         );
         let line = shell_line(Path::new("xorriso"), &args);
         assert_eq!(
             line,
-            "xorriso -as mkisofs -quiet -iso-level 3 -J -joliet-long -r -V ARENA_OEM -o /w/oem-media.iso -graft-points autounattend.xml=/w/autounattend.xml ARENA-OEM.TXT=/w/ARENA-OEM.TXT OEM/=/stage/oem"
+            "xorriso -as mkisofs -quiet -iso-level 3 -J -joliet-long -r -V ARENA_OEM -o /w/oem-media.iso -graft-points autounattend.xml=/w/autounattend.xml ARENA-OEM.TXT=/w/ARENA-OEM.TXT ARENA-OEM.CMD=/w/ARENA-OEM.CMD OEM/=/stage/oem"
         );
         let quoted = shell_line(Path::new("qemu-system-x86_64"), &["a b".into(), "it's".into(), "".into()]);
         assert_eq!(quoted, r"qemu-system-x86_64 'a b' 'it'\''s' ''");

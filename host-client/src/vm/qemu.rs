@@ -62,14 +62,17 @@ pub enum Firmware {
 ///   when it finds a Hyper-V-compatible hypervisor (QEMU's docs/system/i386/hyperv.rst:
 ///   relaxed timing, virtual APIC, spinlock hints, synthetic timers and clock,
 ///   TLB flush and IPI hypercalls), so the guest neither crawls nor drifts after
-///   `loadvm`; VMX is hidden unless `nested`, so Windows does not turn on
-///   virtualisation-based security inside the VM.
+///   `loadvm`; the virtualisation extensions, Intel's VMX and AMD's SVM, are
+///   hidden unless `nested`, so Windows does not turn on virtualisation-based
+///   security inside the VM (with `nested`, `host` shows the host's own).
 pub fn cpu_model(accel: Accel, nested: bool) -> String {
     match accel {
         Accel::Tcg => TCG_CPU.to_owned(),
         Accel::Kvm => {
             let mut cpu = format!("host,{}", HYPERV_ENLIGHTENMENTS.join(","));
-            cpu.push_str(if nested { ",vmx=on" } else { ",vmx=off" });
+            if !nested {
+                cpu.push_str(",vmx=off,svm=off");
+            }
             cpu
         }
     }
@@ -142,6 +145,8 @@ pub struct VmSpec {
     pub folders: Vec<FolderDrive>,
     /// A snapshot to start from (`-loadvm`).
     pub loadvm: Option<String>,
+    /// The screen, as the display's EDID offers it (its preferred mode).
+    pub screen: (u32, u32),
 }
 
 impl VmSpec {
@@ -163,7 +168,10 @@ impl VmSpec {
         a.push("-m").push(format!("{}M", self.memory_mib));
         a.push("-smp").push(self.cpus.to_string());
         a.push("-nodefaults");
-        a.push("-vga").push("std");
+        // QEMU's standard VGA, its EDID naming the screen as the preferred mode:
+        // what Windows' display settings and the stand-in's kernel start with.
+        a.push("-vga").push("none");
+        a.push("-device").push(format!("VGA,edid=on,xres={},yres={}", self.screen.0, self.screen.1));
         a.push("-rtc").push("base=localtime");
         if let Firmware::Uefi { code, vars, secure_boot } = &self.firmware {
             if *secure_boot {
@@ -353,6 +361,7 @@ mod tests {
             media: Vec::new(),
             folders: Vec::new(),
             loadvm: None,
+            screen: (1440, 900),
         }
     }
 
@@ -364,7 +373,7 @@ mod tests {
     fn a_plain_vm_forwards_one_port_and_has_no_display() {
         let text = line(&spec());
         assert!(text.contains("-machine q35,accel=kvm -cpu host,hv-relaxed,"), "{text}");
-        assert!(text.contains(",hv-ipi,vmx=off -m 4096M -smp 2"), "{text}");
+        assert!(text.contains(",hv-ipi,vmx=off,svm=off -m 4096M -smp 2"), "{text}");
         assert!(!text.contains("smm=on") && !text.contains("tpm"), "{text}");
         // Commas in paths are doubled for QEMU's option parser.
         assert!(
@@ -385,6 +394,7 @@ mod tests {
             "{text}"
         );
         assert!(text.contains("-display none"), "{text}");
+        assert!(text.contains("-vga none -device VGA,edid=on,xres=1440,yres=900"), "{text}");
         assert!(!text.contains("-loadvm"), "{text}");
     }
 
@@ -398,7 +408,7 @@ mod tests {
         // Nested virtualisation is asked for explicitly, and only means something under KVM.
         s.accel = Accel::Kvm;
         s.nested = true;
-        assert!(line(&s).contains(",vmx=on -m"), "{}", line(&s));
+        assert!(line(&s).contains(",hv-ipi -m") && !line(&s).contains("vmx"), "{}", line(&s));
     }
 
     #[test]

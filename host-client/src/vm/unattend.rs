@@ -20,10 +20,17 @@
 //!   Secure Boot, the `LabConfig` keys that let Setup go on without them.
 //! - offlineServicing: UAC (`EnableLUA`), off by default as in upstream's images.
 //! - specialize: computer name, time zone, `BypassNRO` (a local account without
-//!   a network), and the copy of the OEM media to `C:\OEM`.
+//!   a network), passwords that never expire, Windows Update, Defender's
+//!   real-time protection, SmartScreen and Smart App Control off ([`SPECIALIZE_POLICIES`]),
+//!   and the copy of the OEM media to `C:\OEM` by a script on the media
+//!   ([`oem_copy_command`], [`oem_copy_script`]).
 //! - oobeSystem: no automatic device encryption (each VM has its own TPM),
 //!   locale, the local administrator account, auto-logon, OOBE's pages hidden,
-//!   and `C:\OEM\install.bat` as the first logon command.
+//!   the account's password set never to expire, and `C:\OEM\install.bat` as
+//!   the first logon command.
+//!
+//! Every string written is checked against the maximum the reference gives for
+//! its setting ([`LIMITS`], [`check_limits`]) before the file is used.
 
 use std::fmt::Write as _;
 
@@ -63,6 +70,9 @@ pub enum ImageChoice {
     Index(u32),
     /// `/IMAGE/NAME`: the edition's name as the image lists it ("Windows 11 Pro").
     Name(String),
+    /// No image named: Setup picks the image the product key is for (a
+    /// multi-edition ISO whose image list could not be read here).
+    ByKey,
 }
 
 /// Everything the answer file is made from.
@@ -117,6 +127,14 @@ impl AnswerOptions {
         match &self.image {
             ImageChoice::Index(0) => return Err("--image-index 0: images are numbered from 1".into()),
             ImageChoice::Name(name) if name.trim().is_empty() => return Err("--edition is empty".into()),
+            ImageChoice::Name(name) => {
+                if let Some(edition) = Edition::find(name).filter(|e| e.refused) {
+                    return Err(edition.refusal());
+                }
+            }
+            ImageChoice::ByKey if self.product_key.is_none() => {
+                return Err("no image is chosen and no product key says which: give --image-index or --edition".into())
+            }
             _ => {}
         }
         if let Some(key) = &self.product_key {
@@ -142,6 +160,10 @@ impl AnswerOptions {
         }
         if self.password.chars().any(char::is_control) {
             return Err("--password holds a control character".into());
+        }
+        // `net user`: "Passwords can be up to 127 characters long."
+        if self.password.chars().count() > 127 {
+            return Err("--password: a Windows password has at most 127 characters".into());
         }
         if !is_language_tag(&self.locale) {
             return Err(format!("--locale {:?}: use a language tag such as en-US", self.locale));
@@ -197,6 +219,236 @@ fn is_input_locale(text: &str) -> bool {
     })
 }
 
+/// A Windows 11 edition `--edition` can name: its short name, the `EDITIONID`
+/// its image carries in `install.wim`'s XML, the name Microsoft's media give it,
+/// and the key Setup needs to pass its product-key page without a user key.
+///
+/// The keys are Microsoft's published Generic Volume License Keys ("Key
+/// Management Services (KMS) client activation and product keys",
+/// learn.microsoft.com/windows-server/get-started/kms-client-activation-keys,
+/// table "Windows 11 and Windows 10 Semi-Annual Channel"): they choose the
+/// edition and let Setup go on; they do not activate Windows (that needs a KMS
+/// host or a license), which a benchmark VM does not need. Home has no such key
+/// and is refused: it ignores the group policies the image relies on (Windows
+/// Update off, no lock screen).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Edition {
+    /// What `--edition` takes (`pro`, `enterprise`, ...).
+    pub short: &'static str,
+    /// `EDITIONID` in the image list (`Professional`).
+    pub id: &'static str,
+    /// The name Windows 11 media give the image (`Windows 11 Pro`).
+    pub name: &'static str,
+    /// Microsoft's generic key for it.
+    pub key: Option<&'static str>,
+    /// Refused: the policies the image depends on do not apply to it.
+    pub refused: bool,
+}
+
+/// The editions `--edition` knows (see [`Edition`]).
+pub const EDITIONS: &[Edition] = &[
+    Edition {
+        short: "pro",
+        id: "Professional",
+        name: "Windows 11 Pro",
+        key: Some("W269N-WFGWX-YVC9B-4J6C9-T83GX"),
+        refused: false,
+    },
+    Edition {
+        short: "pro-n",
+        id: "ProfessionalN",
+        name: "Windows 11 Pro N",
+        key: Some("MH37W-N47XK-V7XM9-C7227-GCQG9"),
+        refused: false,
+    },
+    Edition {
+        short: "pro-workstations",
+        id: "ProfessionalWorkstation",
+        name: "Windows 11 Pro for Workstations",
+        key: Some("NRG8B-VKK3Q-CXVCJ-9G2XF-6Q84J"),
+        refused: false,
+    },
+    Edition {
+        short: "pro-education",
+        id: "ProfessionalEducation",
+        name: "Windows 11 Pro Education",
+        key: Some("6TP4R-GNPTD-KYYHQ-7B7DP-J447Y"),
+        refused: false,
+    },
+    Edition {
+        short: "education",
+        id: "Education",
+        name: "Windows 11 Education",
+        key: Some("NW6C2-QMPVW-D7KKK-3GKT6-VCFB2"),
+        refused: false,
+    },
+    Edition {
+        short: "education-n",
+        id: "EducationN",
+        name: "Windows 11 Education N",
+        key: Some("2WH4N-8QGBV-H22JP-CT43Q-MDWWJ"),
+        refused: false,
+    },
+    Edition {
+        short: "enterprise",
+        id: "Enterprise",
+        name: "Windows 11 Enterprise",
+        key: Some("NPPR9-FWDCX-D2C8J-H872K-2YT43"),
+        refused: false,
+    },
+    Edition {
+        short: "enterprise-n",
+        id: "EnterpriseN",
+        name: "Windows 11 Enterprise N",
+        key: Some("DPH2V-TTNVB-4X9Q3-TJR4H-KHJW4"),
+        refused: false,
+    },
+    Edition { short: "home", id: "Core", name: "Windows 11 Home", key: None, refused: true },
+    Edition { short: "home-n", id: "CoreN", name: "Windows 11 Home N", key: None, refused: true },
+    Edition {
+        short: "home-single-language",
+        id: "CoreSingleLanguage",
+        name: "Windows 11 Home Single Language",
+        key: None,
+        refused: true,
+    },
+    Edition {
+        short: "home-country-specific",
+        id: "CoreCountrySpecific",
+        name: "Windows 11 Home China",
+        key: None,
+        refused: true,
+    },
+];
+
+impl Edition {
+    /// The edition `text` names: its short name, its `EDITIONID`, or its image
+    /// name as Windows 11 media spell it or as some Windows 11 media still do
+    /// ("Windows 10 Pro"); case and spacing do not matter.
+    pub fn find(text: &str) -> Option<Edition> {
+        let wanted = fold(text);
+        EDITIONS.iter().copied().find(|e| {
+            [e.short.to_owned(), e.id.to_owned(), e.name.to_owned(), e.name.replacen("Windows 11", "Windows 10", 1)]
+                .iter()
+                .any(|n| fold(n) == wanted)
+        })
+    }
+
+    /// The edition whose `EDITIONID` is `id`.
+    pub fn by_id(id: &str) -> Option<Edition> {
+        EDITIONS.iter().copied().find(|e| e.id.eq_ignore_ascii_case(id.trim()))
+    }
+
+    /// Why this edition is refused.
+    pub fn refusal(&self) -> String {
+        format!(
+            "{} (edition {}) is refused: Home ignores the group policies the image depends on (Windows Update off, no lock screen, no consumer pop-ups); choose pro, enterprise or education",
+            self.name, self.id
+        )
+    }
+}
+
+/// The image and key the answer file gets from `--edition`, `--image-index` and
+/// `--product-key`, with the ISO's image list when it could be read here
+/// ([`super::iso::list_images`]).
+///
+/// - A known edition (`pro`, `Enterprise`, "Windows 11 Pro"): the image of that
+///   edition by index when the list is known (by `EDITIONID`, else by name), or
+///   no image and the edition's key (Setup installs what the key is for).
+/// - Another name: the image of that `NAME` or `DISPLAYNAME` by index, or `/IMAGE/NAME`.
+/// - An index (1 by default): that image, with its edition's key when the list says it.
+///
+/// `--product-key` replaces the generic key.
+///
+/// # Errors
+///
+/// Home (by name or by what the list says the image is), a name or index the
+/// list does not hold (naming what it holds), or a known edition without the
+/// list and without a key.
+pub fn choose_image(
+    edition: Option<&str>,
+    index: Option<u32>,
+    product_key: Option<String>,
+    images: Option<&[super::iso::IsoImage]>,
+) -> Result<(ImageChoice, Option<String>), String> {
+    let listed = |images: &[super::iso::IsoImage]| {
+        images
+            .iter()
+            .map(|i| format!("{} {:?} ({})", i.index, i.name, i.edition_id.as_deref().unwrap_or("?")))
+            .collect::<Vec<_>>()
+            .join(", ")
+    };
+    // The key of the image the list says `image` is, refusing Home.
+    let key_of = |image: &super::iso::IsoImage| -> Result<Option<String>, String> {
+        let edition = image.edition_id.as_deref().and_then(Edition::by_id);
+        match edition {
+            Some(e) if e.refused => Err(format!("image {}: {}", image.index, e.refusal())),
+            Some(e) => Ok(product_key.clone().or(e.key.map(str::to_owned))),
+            None => Ok(product_key.clone()),
+        }
+    };
+    match (edition, index) {
+        (Some(text), _) => {
+            let known = Edition::find(text);
+            if let Some(e) = known.filter(|e| e.refused) {
+                return Err(e.refusal());
+            }
+            match (known, images) {
+                (Some(e), Some(images)) => {
+                    let image = images
+                        .iter()
+                        .find(|i| i.edition_id.as_deref().is_some_and(|id| id.eq_ignore_ascii_case(e.id)))
+                        .or_else(|| images.iter().find(|i| Edition::find(&i.name) == Some(e)))
+                        .ok_or_else(|| {
+                            format!("--edition {text}: the ISO holds no {} image; it holds: {}", e.name, listed(images))
+                        })?;
+                    Ok((ImageChoice::Index(image.index), product_key.or(e.key.map(str::to_owned))))
+                }
+                (Some(e), None) => {
+                    let key = product_key.or(e.key.map(str::to_owned));
+                    if key.is_none() {
+                        return Err(format!("--edition {text}: Microsoft publishes no generic key for it; give --product-key or --image-index"));
+                    }
+                    Ok((ImageChoice::ByKey, key))
+                }
+                (None, Some(images)) => {
+                    let wanted = fold(text);
+                    let image = images
+                        .iter()
+                        .find(|i| {
+                            fold(&i.name) == wanted || i.display_name.as_deref().is_some_and(|d| fold(d) == wanted)
+                        })
+                        .ok_or_else(|| {
+                            format!(
+                                "--edition {text:?}: the ISO holds no image of that name; it holds: {}",
+                                listed(images)
+                            )
+                        })?;
+                    Ok((ImageChoice::Index(image.index), key_of(image)?))
+                }
+                (None, None) => Ok((ImageChoice::Name(text.to_owned()), product_key)),
+            }
+        }
+        (None, index) => {
+            let n = index.unwrap_or(1);
+            match images {
+                Some(images) => {
+                    let image = images.iter().find(|i| i.index == n).ok_or_else(|| {
+                        format!("--image-index {n}: the ISO holds no image {n}; it holds: {}", listed(images))
+                    })?;
+                    Ok((ImageChoice::Index(n), key_of(image)?))
+                }
+                None => Ok((ImageChoice::Index(n), product_key)),
+            }
+        }
+    }
+}
+
+/// Lower case without spaces, dashes or underscores, for comparing edition names.
+fn fold(text: &str) -> String {
+    text.chars().filter(|c| !matches!(c, ' ' | '-' | '_')).flat_map(char::to_lowercase).collect()
+}
+
 /// Components documented in the unattend reference, with the passes each
 /// setting used here is valid in. Only what this module writes is listed.
 pub const DOCUMENTED: &[(&str, &str, &[&str])] = &[
@@ -230,19 +482,82 @@ pub const DOCUMENTED: &[(&str, &str, &[&str])] = &[
 pub const PASSES: &[&str] =
     &["windowsPE", "offlineServicing", "generalize", "specialize", "auditSystem", "auditUser", "oobeSystem"];
 
+/// The script at the OEM media's root that copies its `OEM\` folder to `C:\OEM`
+/// (found by [`oem_copy_command`], which runs it).
+pub const OEM_SCRIPT: &str = "ARENA-OEM.CMD";
+
 /// The command the specialize pass runs to copy the OEM media's folder to
-/// `C:\OEM` (found by its marker file, since CD-ROM drive letters vary).
+/// `C:\OEM`: it finds the drive by its marker file (CD-ROM letters vary) and
+/// calls the script beside it, so the command stays far below the 259
+/// characters Setup allows a `RunSynchronousCommand` `Path` ([`LIMITS`]).
 pub fn oem_copy_command() -> String {
     format!(
-        "powershell.exe -NoProfile -ExecutionPolicy Bypass -Command \"$d = Get-PSDrive -PSProvider FileSystem | \
-         Where-Object {{ Test-Path -LiteralPath (Join-Path $_.Root '{OEM_MARKER}') }} | Select-Object -First 1; \
-         if ($null -eq $d) {{ exit 2 }}; robocopy (Join-Path $d.Root '{OEM_MEDIA_FOLDER}') 'C:\\OEM' /E /R:2 /W:2 /NP /NFL /NDL; \
-         if ($LASTEXITCODE -ge 8) {{ exit 1 }}; exit 0\""
+        "cmd.exe /d /c for %d in (D E F G H I J K L M N O P Q R S T U V W X Y Z) do @if exist %d:\\{OEM_MARKER} call %d:\\{OEM_SCRIPT}"
     )
 }
 
-/// The first logon command: the OEM install (it logs to `%ProgramData%\arena\logs`).
-pub const FIRST_LOGON_COMMAND: &str = r"cmd.exe /d /c C:\OEM\install.bat";
+/// The script [`oem_copy_command`] calls: robocopy from the media's `OEM\` to
+/// `C:\OEM`; a copy that fails says `arena-stage: oem-failed ...` on COM1 so
+/// that prepare stops at once, naming it. CRLF line ends, as cmd.exe reads them.
+pub fn oem_copy_script() -> String {
+    [
+        "@echo off",
+        "rem Written by arena vm prepare: the specialize pass calls this script from the OEM media",
+        "rem (found by ARENA-OEM.TXT beside it) to copy the media's OEM folder to C:\\OEM.",
+        "robocopy \"%~d0\\OEM\" C:\\OEM /E /R:2 /W:2 /NP /NFL /NDL >NUL",
+        "if %ERRORLEVEL% GEQ 8 (",
+        "  echo arena-stage: oem-failed copying the OEM media to C:\\OEM: robocopy exit code %ERRORLEVEL%>COM1",
+        "  exit /b 1",
+        ")",
+        "echo arena-oem: the OEM media were copied to C:\\OEM>COM1",
+        "exit /b 0",
+        "",
+    ]
+    .join("\r\n")
+}
+
+/// The policies the specialize pass writes, before the first logon and before
+/// any script could fail: each a `reg.exe add` of the Group Policy value
+/// Microsoft documents for it, since no unattend setting of Windows 11 turns
+/// these off (docs/vm.md's comparison table lists each). `prep-automation.ps1`
+/// writes them again, for images made another way.
+pub const SPECIALIZE_POLICIES: &[(&str, &str)] = &[
+    (
+        r#"reg.exe add "HKLM\SOFTWARE\Policies\Microsoft\Windows\WindowsUpdate\AU" /v NoAutoUpdate /t REG_DWORD /d 1 /f"#,
+        "Windows Update: no automatic updates (policy NoAutoUpdate)",
+    ),
+    (
+        r#"reg.exe add "HKLM\SOFTWARE\Policies\Microsoft\Windows Defender\Real-Time Protection" /v DisableRealtimeMonitoring /t REG_DWORD /d 1 /f"#,
+        "Defender: real-time protection off (policy DisableRealtimeMonitoring)",
+    ),
+    (
+        r#"reg.exe add "HKLM\SOFTWARE\Policies\Microsoft\Windows\System" /v EnableSmartScreen /t REG_DWORD /d 0 /f"#,
+        "SmartScreen for apps and files off (policy EnableSmartScreen)",
+    ),
+    (
+        r#"reg.exe add "HKLM\SYSTEM\CurrentControlSet\Control\CI\Policy" /v VerifiedAndReputablePolicyState /t REG_DWORD /d 0 /f"#,
+        "Smart App Control off, before its first evaluation (VerifiedAndReputablePolicyState)",
+    ),
+];
+
+/// Passwords never expire: the local accounts' maximum password age becomes
+/// unlimited (Windows' default is 42 days, after which the auto-logon stops at
+/// "The user's password must be changed"). A machine policy, so the specialize
+/// pass sets it before the account exists.
+pub const PASSWORDS_NEVER_EXPIRE: &str = "net.exe accounts /maxpwage:unlimited";
+
+/// The first logon command that marks the account's own password as never
+/// expiring (as `Set-LocalUser -PasswordNeverExpires`), on top of [`PASSWORDS_NEVER_EXPIRE`].
+pub fn password_never_expires_command(user: &str) -> String {
+    format!(
+        "powershell.exe -NoProfile -NonInteractive -Command \"Set-LocalUser -Name '{}' -PasswordNeverExpires $true\"",
+        user.replace('\'', "''")
+    )
+}
+
+/// The first logon command: the OEM install (it logs to `%ProgramData%\arena\logs`),
+/// or, when the specialize pass did not copy it, a stage line that says so.
+pub const FIRST_LOGON_COMMAND: &str = r"cmd.exe /d /c if exist C:\OEM\install.bat (C:\OEM\install.bat) else (echo arena-stage: oem-failed C:\OEM\install.bat is missing: the specialize pass did not copy the OEM media>COM1)";
 
 /// A command that writes `arena-stage: NAME` to the first serial port, where
 /// `arena vm prepare` follows the install's stages (QEMU writes it to `serial.log`).
@@ -285,16 +600,20 @@ pub fn render(o: &AnswerOptions) -> String {
     disk_configuration(&mut x, o.firmware);
     x.open("ImageInstall");
     x.open("OSImage");
-    x.open("InstallFrom");
-    x.open("MetaData").add();
-    let (key, value) = match &o.image {
-        ImageChoice::Index(n) => ("/IMAGE/INDEX", n.to_string()),
-        ImageChoice::Name(name) => ("/IMAGE/NAME", name.clone()),
+    let chosen = match &o.image {
+        ImageChoice::Index(n) => Some(("/IMAGE/INDEX", n.to_string())),
+        ImageChoice::Name(name) => Some(("/IMAGE/NAME", name.clone())),
+        // Setup installs the image the product key is for.
+        ImageChoice::ByKey => None,
     };
-    x.leaf("Key", key);
-    x.leaf("Value", &value);
-    x.close("MetaData");
-    x.close("InstallFrom");
+    if let Some((key, value)) = chosen {
+        x.open("InstallFrom");
+        x.open("MetaData").add();
+        x.leaf("Key", key);
+        x.leaf("Value", &value);
+        x.close("MetaData");
+        x.close("InstallFrom");
+    }
     x.open("InstallTo");
     x.leaf("DiskID", "0");
     x.leaf("PartitionID", &windows_partition(o.firmware).to_string());
@@ -345,14 +664,7 @@ pub fn render(o: &AnswerOptions) -> String {
     x.close("component");
     x.component("Microsoft-Windows-Deployment");
     x.open("RunSynchronous");
-    for (i, (path, what)) in [
-        (BYPASS_NRO.to_owned(), "local account without a network"),
-        (oem_copy_command(), "OEM media to C:\\OEM"),
-        (stage_command("oobe"), "tell arena vm prepare that OOBE comes next"),
-    ]
-    .iter()
-    .enumerate()
-    {
+    for (i, (path, what)) in specialize_commands().iter().enumerate() {
         x.open("RunSynchronousCommand").add();
         x.leaf("Order", &(i + 1).to_string());
         x.leaf("Path", path);
@@ -403,13 +715,7 @@ pub fn render(o: &AnswerOptions) -> String {
     x.leaf("ProtectYourPC", "3");
     x.close("OOBE");
     x.open("FirstLogonCommands");
-    for (i, (command, what)) in [
-        (stage_command("first-logon"), "tell arena vm prepare that the user logged on"),
-        (FIRST_LOGON_COMMAND.to_owned(), "arena OEM install (setup.ps1)"),
-    ]
-    .iter()
-    .enumerate()
-    {
+    for (i, (command, what)) in first_logon_commands(&o.user).iter().enumerate() {
         x.open("SynchronousCommand").add();
         x.leaf("Order", &(i + 1).to_string());
         x.leaf("CommandLine", command);
@@ -423,6 +729,235 @@ pub fn render(o: &AnswerOptions) -> String {
 
     x.close("unattend");
     x.out
+}
+
+/// The specialize pass's commands, in order: a local account without a network,
+/// passwords that never expire, the policies, the OEM copy, the stage line.
+pub fn specialize_commands() -> Vec<(String, String)> {
+    let mut commands = vec![
+        (BYPASS_NRO.to_owned(), "local account without a network".to_owned()),
+        (PASSWORDS_NEVER_EXPIRE.to_owned(), "passwords never expire (maximum age unlimited)".to_owned()),
+    ];
+    commands.extend(SPECIALIZE_POLICIES.iter().map(|(path, what)| ((*path).to_owned(), (*what).to_owned())));
+    commands.push((oem_copy_command(), "OEM media to C:\\OEM".to_owned()));
+    commands.push((stage_command("oobe"), "tell arena vm prepare that OOBE comes next".to_owned()));
+    commands
+}
+
+/// The first logon commands, in order.
+pub fn first_logon_commands(user: &str) -> Vec<(String, String)> {
+    vec![
+        (stage_command("first-logon"), "tell arena vm prepare that the user logged on".to_owned()),
+        (password_never_expires_command(user), "the account's password never expires".to_owned()),
+        (FIRST_LOGON_COMMAND.to_owned(), "arena OEM install (setup.ps1)".to_owned()),
+    ]
+}
+
+/// One documented maximum: the setting (its element names from the component
+/// down, under pass `pass`), the most characters its value may have, and the
+/// reference page that gives it
+/// (learn.microsoft.com/windows-hardware/customize/desktop/unattend/PAGE).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Limit {
+    pub component: &'static str,
+    pub path: &'static [&'static str],
+    pub max_chars: usize,
+    pub page: &'static str,
+}
+
+/// The maxima Microsoft's unattend reference gives for the string settings this
+/// module writes; a setting the reference gives no maximum for is listed in
+/// [`UNLIMITED`] with its page instead. Numbers (`Order` 1 to 500) are in
+/// [`ORDER_RANGE`].
+pub const LIMITS: &[Limit] = &[
+    Limit {
+        component: "Microsoft-Windows-Deployment",
+        path: &["RunSynchronous", "RunSynchronousCommand", "Path"],
+        max_chars: 259,
+        page: "microsoft-windows-deployment-runsynchronous-runsynchronouscommand-path",
+    },
+    Limit {
+        component: "Microsoft-Windows-Deployment",
+        path: &["RunSynchronous", "RunSynchronousCommand", "Description"],
+        max_chars: 256,
+        page: "microsoft-windows-deployment-runsynchronous-runsynchronouscommand-description",
+    },
+    Limit {
+        component: "Microsoft-Windows-Shell-Setup",
+        path: &["FirstLogonCommands", "SynchronousCommand", "CommandLine"],
+        max_chars: 1024,
+        page: "microsoft-windows-shell-setup-firstlogoncommands-synchronouscommand-commandline",
+    },
+    Limit {
+        component: "Microsoft-Windows-Shell-Setup",
+        path: &["FirstLogonCommands", "SynchronousCommand", "Description"],
+        max_chars: 256,
+        page: "microsoft-windows-shell-setup-firstlogoncommands-synchronouscommand-description",
+    },
+    Limit {
+        component: "Microsoft-Windows-Shell-Setup",
+        path: &["ComputerName"],
+        max_chars: 15,
+        page: "microsoft-windows-shell-setup-computername",
+    },
+    Limit {
+        component: "Microsoft-Windows-Shell-Setup",
+        path: &["TimeZone"],
+        max_chars: 256,
+        page: "microsoft-windows-shell-setup-timezone",
+    },
+    Limit {
+        component: "Microsoft-Windows-Shell-Setup",
+        path: &["UserAccounts", "LocalAccounts", "LocalAccount", "Name"],
+        max_chars: 256,
+        page: "microsoft-windows-shell-setup-useraccounts-localaccounts-localaccount-name",
+    },
+    Limit {
+        component: "Microsoft-Windows-Shell-Setup",
+        path: &["AutoLogon", "Username"],
+        max_chars: 256,
+        page: "microsoft-windows-shell-setup-autologon-username",
+    },
+    Limit {
+        component: "Microsoft-Windows-Setup",
+        path: &["UserData", "FullName"],
+        max_chars: 63,
+        page: "microsoft-windows-setup-userdata-fullname",
+    },
+    Limit {
+        component: "Microsoft-Windows-Setup",
+        path: &["UserData", "ProductKey", "Key"],
+        max_chars: 29,
+        page: "microsoft-windows-setup-userdata-productkey-key",
+    },
+    Limit {
+        component: "Microsoft-Windows-Setup",
+        path: &["DiskConfiguration", "Disk", "ModifyPartitions", "ModifyPartition", "Label"],
+        // FAT32 volume labels have 11 characters; NTFS ones 32.
+        max_chars: 11,
+        page: "microsoft-windows-setup-diskconfiguration-disk-modifypartitions-modifypartition-label",
+    },
+];
+
+/// String settings written here whose reference page gives no maximum: the
+/// component, the path, and the page. The limits test requires every string
+/// written to be in [`LIMITS`] or here.
+pub const UNLIMITED: &[(&str, &[&str], &str)] = &[
+    (
+        "Microsoft-Windows-Setup",
+        &["RunSynchronous", "RunSynchronousCommand", "Path"],
+        "microsoft-windows-setup-runsynchronous-runsynchronouscommand-path",
+    ),
+    (
+        "Microsoft-Windows-Setup",
+        &["ImageInstall", "OSImage", "InstallFrom", "MetaData", "Value"],
+        "microsoft-windows-setup-imageinstall-osimage-installfrom-metadata-value",
+    ),
+    (
+        "Microsoft-Windows-Shell-Setup",
+        &["UserAccounts", "LocalAccounts", "LocalAccount", "Password", "Value"],
+        "microsoft-windows-shell-setup-useraccounts-localaccounts-localaccount-password-value",
+    ),
+    (
+        "Microsoft-Windows-Shell-Setup",
+        &["AutoLogon", "Password", "Value"],
+        "microsoft-windows-shell-setup-autologon-password-value",
+    ),
+];
+
+/// `Order` of `RunSynchronousCommand` and `SynchronousCommand`: "an integer from 1 through 500".
+pub const ORDER_RANGE: std::ops::RangeInclusive<u32> = 1..=500;
+
+/// Values that are fixed words (`true`, `OnError`, `/IMAGE/INDEX`, ...), locale
+/// tags or sizes, which the limits check does not measure: element names.
+const FIXED_VALUES: &[&str] = &[
+    "UILanguage",
+    "InputLocale",
+    "SystemLocale",
+    "UserLocale",
+    "DiskID",
+    "WillWipeDisk",
+    "Order",
+    "Type",
+    "Size",
+    "Extend",
+    "PartitionID",
+    "Format",
+    "Letter",
+    "Active",
+    "WillShowUI",
+    "Key",
+    "InstallToAvailablePartition",
+    "AcceptEula",
+    "Enable",
+    "EnableLUA",
+    "PreventDeviceEncryption",
+    "Group",
+    "PlainText",
+    "Enabled",
+    "LogonCount",
+    "HideEULAPage",
+    "HideLocalAccountScreen",
+    "HideOEMRegistrationScreen",
+    "HideOnlineAccountScreens",
+    "HideWirelessSetupInOOBE",
+    "ProtectYourPC",
+    "RequiresUserInput",
+];
+
+/// Checks every value of an answer file against [`LIMITS`]: each string setting
+/// must be within its documented maximum (or be one the reference gives none
+/// for, [`UNLIMITED`], or a fixed word, [`FIXED_VALUES`]), and every `Order` in
+/// [`ORDER_RANGE`].
+///
+/// # Errors
+///
+/// The first value out of bounds, naming the setting, its length, the maximum
+/// and the reference page; or a string setting the tables do not know.
+///
+/// With `strict` off (a user's own answer file), settings the tables do not
+/// know are let through; only known maxima are enforced.
+pub fn check_limits(xml: &str, strict: bool) -> Result<(), String> {
+    let doc = roxmltree::Document::parse(xml).map_err(|err| format!("the answer file is not XML: {err}"))?;
+    for component in doc.descendants().filter(|n| n.has_tag_name("component")) {
+        let name = component.attribute("name").unwrap_or_default();
+        for leaf in component.descendants().filter(|n| n.is_element() && !n.children().any(|c| c.is_element())) {
+            let path: Vec<&str> = leaf
+                .ancestors()
+                .take_while(|a| *a != component)
+                .filter(|a| a.is_element())
+                .map(|a| a.tag_name().name())
+                .collect::<Vec<_>>()
+                .into_iter()
+                .rev()
+                .collect();
+            let value = leaf.text().unwrap_or_default();
+            let setting = format!("{name}/{}", path.join("/"));
+            let last = path.last().copied().unwrap_or_default();
+            if last == "Order" {
+                let n: u32 = value.trim().parse().map_err(|_| format!("{setting}: {value:?} is not a number"))?;
+                if !ORDER_RANGE.contains(&n) {
+                    return Err(format!("{setting}: {n} is outside 1 to 500"));
+                }
+                continue;
+            }
+            if let Some(limit) = LIMITS.iter().find(|l| l.component == name && l.path == path.as_slice()) {
+                let chars = value.chars().count();
+                if chars > limit.max_chars {
+                    return Err(format!(
+                        "{setting} has {chars} characters; the unattend reference ({}) allows at most {}: {value:?}",
+                        limit.page, limit.max_chars
+                    ));
+                }
+                continue;
+            }
+            let unlimited = UNLIMITED.iter().any(|(c, p, _)| *c == name && *p == path.as_slice());
+            if strict && !unlimited && !FIXED_VALUES.contains(&last) {
+                return Err(format!("{setting}: no documented limit is known for this setting (add it to LIMITS)"));
+            }
+        }
+    }
+    Ok(())
 }
 
 fn international(x: &mut Xml, o: &AnswerOptions) {

@@ -255,6 +255,8 @@ struct StubSource<'a> {
     current: WindowModel,
     /// Elements are being read one by one.
     live: bool,
+    /// The threads of bulk fetches abandoned while they hang.
+    fetches: crate::desktop::uia_health::ThreadCap,
 }
 
 impl<'a> TreeSource for StubSource<'a> {
@@ -274,6 +276,19 @@ impl<'a> TreeSource for StubSource<'a> {
             self.windows.iter().find(|w| std::ptr::eq(&w.node, *root)).map_or_else(WindowModel::default, |w| w.model);
         self.live = self.backend == A11yBackend::Win32;
         let bulk = self.current.bulk_fetch_ms;
+        if self.backend == A11yBackend::Uia && bulk > 0 && self.current.bulk_fetch_hangs {
+            // A fetch that ignores its timeout runs on a thread of its own, as the
+            // Windows source's does, and is abandoned at the time offered: the
+            // element-by-element read starts then, not when the fetch ends.
+            let fetch = move || std::thread::sleep(Duration::from_millis(bulk));
+            crate::desktop::uia_health::call_detached(
+                &self.fetches,
+                time,
+                "BuildUpdatedCache (a hung provider)",
+                fetch,
+            )?;
+            return Ok(*root);
+        }
         if self.backend == A11yBackend::Uia && bulk > 0 {
             let offered = u64::try_from(time.as_millis()).unwrap_or(u64::MAX);
             if bulk > offered {
@@ -338,6 +353,12 @@ pub(crate) fn walk(
     uia_empty: bool,
 ) -> DesktopResult<A11yTree> {
     let windows = if uia_empty { Vec::new() } else { roots };
-    let mut source = StubSource { windows: &windows, backend, current: WindowModel::default(), live: false };
+    let mut source = StubSource {
+        windows: &windows,
+        backend,
+        current: WindowModel::default(),
+        live: false,
+        fetches: crate::desktop::uia_health::ThreadCap::new(4),
+    };
     a11y_walk::walk(&mut source, backend, budget, foreground_only)
 }

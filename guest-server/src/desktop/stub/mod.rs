@@ -236,6 +236,7 @@ impl StubDesktop {
                     popup: spec.popup,
                     cloaked: spec.cloaked,
                     bulk_fetch_ms: spec.bulk_fetch_ms,
+                    bulk_fetch_hangs: spec.bulk_fetch_hangs,
                     element_ms: spec.element_ms,
                 };
                 if spec.popup && window.class_name.is_empty() {
@@ -604,6 +605,8 @@ impl Desktop for StubDesktop {
                     Err(DesktopError::NotFound(format!("{shell} is not on PATH")))
                 }
             }
+            // The server reads the setup record itself (`native::health`); nothing of the desktop's.
+            Component::Setup => Ok("the setup record is the server's to read".to_owned()),
             Component::Unknown => Err(DesktopError::InvalidInput("unknown component".into())),
         }
     }

@@ -28,7 +28,9 @@
 //! (accessibility subtrees, `arena_shared::observation::A11yNode` JSON, shown under the window).
 //! What the trees see of it, through the same walker and root filter as the Windows backend:
 //! `bulk_fetch_ms` (UI Automation's whole-subtree fetch of the window takes this long, and
-//! fails as a UIA timeout does when that is more than the time it is offered), `element_ms`
+//! fails as a UIA timeout does when that is more than the time it is offered),
+//! `bulk_fetch_hangs` (the fetch ignores its timeout and runs its whole `bulk_fetch_ms`, as
+//! a provider kept busy does: the walk abandons it and reads element by element at once), `element_ms`
 //! (each element read one by one takes this long), `tool_window` (`WS_EX_TOOLWINDOW`: left
 //! out of the trees unless it belongs to the foreground window's process), `popup` (a popup
 //! menu or drop-down owned by another window: class `#32768` unless `class_name` says
@@ -124,6 +126,8 @@ pub struct ScenarioWindow {
     pub elements: Vec<A11yNode>,
     #[serde(default)]
     pub bulk_fetch_ms: u64,
+    #[serde(default)]
+    pub bulk_fetch_hangs: bool,
     #[serde(default)]
     pub element_ms: u64,
     #[serde(default)]

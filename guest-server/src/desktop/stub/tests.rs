@@ -748,6 +748,28 @@ fn a_slow_bulk_fetch_is_paid_only_by_uia_and_element_costs_by_both() {
     assert!(!win32.truncated);
 }
 
+/// A bulk fetch that a busy provider keeps past its timeout (the scenario's
+/// `bulk_fetch_hangs`) is abandoned at its half of the window's time, and the
+/// element-by-element read runs at once, not after the fetch: the walk ends
+/// within its budget with the window's elements, while the fetch still runs.
+#[test]
+fn the_element_by_element_read_never_waits_behind_a_hung_bulk_fetch() {
+    let d = stub_with(
+        r#"{"windows": [{"title": "Heavy", "bulk_fetch_ms": 30000, "bulk_fetch_hangs": true, "elements": [
+            {"role": "Button", "class_name": "", "name": "first", "enabled": true, "visible": true},
+            {"role": "Button", "class_name": "", "name": "second", "enabled": true, "visible": true}]}]}"#,
+    );
+    let budget = TreeBudget { max_ms: 1000, ..TreeBudget::WAA };
+    let started = std::time::Instant::now();
+    let tree = d.accessibility(A11yBackend::Uia, &budget, true).unwrap();
+    let took = started.elapsed();
+    assert!(took < std::time::Duration::from_secs(10), "the walk waited for the hung fetch: {took:?}");
+    let walked = &tree.windows_walked[0];
+    assert!(walked.partial, "{walked:?}");
+    let names: Vec<&str> = tree.windows[0].children.iter().map(|c| c.name.as_str()).collect();
+    assert!(names.contains(&"first") && names.contains(&"second"), "{names:?}");
+}
+
 /// The Run dialog's command field and buttons, from its window.
 fn run_dialog_parts(d: &StubDesktop) -> super::window::DialogParts {
     let state = d.lock();

@@ -303,6 +303,8 @@ pub(crate) struct WindowModel {
     pub(crate) cloaked: bool,
     /// How long UI Automation's whole-subtree fetch of it takes.
     pub(crate) bulk_fetch_ms: u64,
+    /// The fetch ignores its timeout (a provider kept busy): it runs its whole time.
+    pub(crate) bulk_fetch_hangs: bool,
     /// How long reading one of its elements by itself takes.
     pub(crate) element_ms: u64,
 }

@@ -205,6 +205,8 @@ impl WindowsDesktop {
                     }),
                 }
             }
+            // The server reads the setup record itself (`native::health`); nothing of the desktop's.
+            Component::Setup => Ok("the setup record is the server's to read".to_owned()),
             Component::Unknown => Err(DesktopError::InvalidInput("unknown component".into())),
         }
     }

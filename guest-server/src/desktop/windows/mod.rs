@@ -115,6 +115,27 @@ pub fn start(config: &ServerConfig) -> anyhow::Result<std::sync::Arc<dyn crate::
     }
 }
 
+/// `arena-guest uia-worker --view raw|control`, the UI Automation worker process
+/// the Windows backend starts ([`crate::desktop::uia_process`]): `None` when the
+/// command line is not that; else how it ended.
+pub fn uia_worker_from_args() -> Option<Result<(), String>> {
+    let mut args = std::env::args().skip(1);
+    if args.next().as_deref() != Some(crate::desktop::uia_process::SUBCOMMAND) {
+        return None;
+    }
+    let view = match args.skip_while(|a| a != "--view").nth(1).as_deref() {
+        Some("control") => crate::config::UiaView::Control,
+        _ => crate::config::UiaView::Raw,
+    };
+    #[cfg(windows)]
+    return Some(uia::run_worker_process(view).map_err(|err| format!("the UI Automation worker: {err}")));
+    #[cfg(not(windows))]
+    {
+        let _ = view;
+        Some(Err("the UI Automation worker runs only in the Windows exe".into()))
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -21,6 +21,16 @@ pub const SHELL_REPORTS_MISSING_PROGRAMS: bool = IS_WINDOWS;
 pub const SLOW_SHELL_LINE: &str =
     if IS_WINDOWS { "start /b ping -n 60 127.0.0.1 >nul & ping -n 60 127.0.0.1" } else { "sleep 60 & sleep 60" };
 
+/// Where `setup.ps1` records the image setup's progress: `%ProgramData%\arena\setup-status.json`
+/// on Windows; nowhere elsewhere (the stub's hosts pass `--setup-status` when they have one).
+pub fn default_setup_status() -> Option<std::path::PathBuf> {
+    if !IS_WINDOWS {
+        return None;
+    }
+    let data = std::env::var_os("ProgramData").unwrap_or_else(|| r"C:\ProgramData".into());
+    Some(std::path::Path::new(&data).join("arena").join("setup-status.json"))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -30,5 +40,6 @@ mod tests {
         assert_eq!(SHELL == "cmd.exe", IS_WINDOWS);
         assert_eq!(SLOW_SHELL_LINE.contains("ping"), IS_WINDOWS);
         assert_eq!(SHELL_REPORTS_MISSING_PROGRAMS, IS_WINDOWS);
+        assert_eq!(default_setup_status().is_some(), IS_WINDOWS);
     }
 }

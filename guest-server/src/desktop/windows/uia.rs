@@ -1,7 +1,8 @@
 //! The `uia` accessibility source: IUIAutomation with one cache request per window.
 //!
-//! All COM objects live on one dedicated thread, which takes requests over a channel
-//! and answers over another, so no UI Automation pointer ever crosses a thread. Each
+//! The walks run in a worker process of their own (`arena-guest uia-worker`,
+//! [`crate::desktop::uia_process`]): COM's multithreaded apartment and UI Automation's
+//! client state are per process, so only a new process starts UI Automation afresh. Each
 //! top-level window costs one cross-process call (`BuildUpdatedCache` with
 //! `TreeScope_Subtree` and every property the output needs); the walk then reads the
 //! cache. `IUIAutomation2`'s transaction timeout bounds that call by the window's share
@@ -11,7 +12,9 @@
 //! requests' filter and the fallback's walker follow the choice.
 //!
 //! That call is all or nothing: a heavy window (a browser page, LibreOffice, VS Code)
-//! that does not finish within its share adds nothing. So when it fails, the window is
+//! that does not finish within its share adds nothing. It runs on a thread of its own
+//! ([`call_detached`]), so one a provider keeps past its timeout is abandoned there and
+//! never holds up what follows. So when it fails, the window is
 //! read element by element instead ([`TreeSource::prepare_partial`]): each element and
 //! then each child is fetched with a cache request for that element alone, through the
 //! chosen view's walker, and the walk keeps whatever it reads before the window's deadline.
@@ -21,22 +24,18 @@
 //! before it; a window that fails to open is listed in `windows_walked` with the reason.
 //!
 //! If a request does not come back in time (a provider that hangs beyond the
-//! transaction timeout), the worker is abandoned: the next request starts a fresh
-//! thread, and the stuck one ends on its own when its call returns. At most
-//! [`MAX_UIA_THREADS`] threads are alive at once ([`ThreadCap`]); past that, requests
-//! are refused with a clear error until a stuck one returns. [`UiaWorker::recreate`]
-//! drops the automation client (the health stage's revival).
+//! transaction timeout), the worker process is ended and the next request starts a new
+//! one. [`UiaWorker::recreate`] ends it too (the health stage's revival).
 //!
 //! Where UI Automation is missing (Wine), creating `CUIAutomation` fails: the worker
 //! says so once, and every later request is answered at once with
 //! [`DesktopError::Unsupported`].
 
-use std::sync::mpsc;
 use std::sync::Mutex;
 use std::time::{Duration, Instant};
 
 use arena_shared::observation::{A11yBackend, A11yNode, A11yTree, TreeBudget};
-use windows::core::Interface;
+use windows::core::{AgileReference, Interface};
 use windows::Win32::Foundation::HWND;
 use windows::Win32::System::Com::{CoCreateInstance, CLSCTX_INPROC_SERVER, COINIT_MULTITHREADED};
 use windows::Win32::System::Variant::{VariantClear, VARIANT, VT_BOOL, VT_BSTR, VT_I4};
@@ -46,7 +45,8 @@ use super::sys::{ComApartment, Hwnd};
 use super::window;
 use crate::config::UiaView;
 use crate::desktop::a11y_walk::{self, TreeSource, UiaProps};
-use crate::desktop::uia_health::{ThreadCap, ThreadPermit};
+use crate::desktop::uia_health::{call_detached, ThreadCap};
+use crate::desktop::uia_process::{self, WorkerAnswer, WorkerProcess, WorkerRequest, SUBCOMMAND};
 use crate::desktop::{DesktopError, DesktopResult};
 
 /// Extra time the caller waits beyond the walk's own budget before abandoning the worker.
@@ -74,135 +74,119 @@ const PROPERTIES: [UIA_PROPERTY_ID; 18] = [
     UIA_ToggleToggleStatePropertyId,
 ];
 
-struct Request {
-    budget: TreeBudget,
-    foreground_only: bool,
-    reply: mpsc::SyncSender<DesktopResult<A11yTree>>,
-}
-
-/// Most UI Automation worker threads alive at once: the running one plus those
-/// abandoned while stuck in a provider that does not answer. A hung provider can
-/// hold this many threads (and their COM objects), never more; requests past it are
-/// refused until one of them returns.
-const MAX_UIA_THREADS: usize = 4;
+/// How long a new worker process may take to start, on top of a request's own time.
+const START_GRACE: Duration = Duration::from_secs(10);
 
 #[derive(Debug)]
 struct State {
-    /// The view every worker walks.
-    view: UiaView,
-    /// The running worker's request channel.
-    worker: Option<mpsc::Sender<Request>>,
+    /// The worker process (started on first use), which walks the view chosen.
+    process: WorkerProcess,
     /// Why UI Automation cannot be used here, once a worker found out.
     unavailable: Option<String>,
-    /// The worker threads alive, running or abandoned.
-    threads: ThreadCap,
 }
 
-/// The handle the backend keeps: starts the worker thread on first use.
+/// The handle the backend keeps: the UI Automation worker process
+/// (`arena-guest uia-worker`, [`crate::desktop::uia_process`]), started on first use.
 #[derive(Debug)]
 pub(super) struct UiaWorker {
     state: Mutex<State>,
 }
 
 impl UiaWorker {
-    /// A worker (started on first use) that walks `view`.
+    /// A worker (started on first use) that walks `view`: this same exe, run
+    /// as `uia-worker`, in the server's session, without a console window.
     pub(super) fn new(view: UiaView) -> UiaWorker {
-        UiaWorker {
-            state: Mutex::new(State {
-                view,
-                worker: None,
-                unavailable: None,
-                threads: ThreadCap::new(MAX_UIA_THREADS),
-            }),
-        }
+        let process = WorkerProcess::new(move || {
+            use std::os::windows::process::CommandExt;
+            let exe = std::env::current_exe().unwrap_or_else(|_| "arena-guest.exe".into());
+            let mut command = std::process::Command::new(exe);
+            command.args([SUBCOMMAND, "--view", view_name(view)]);
+            // CREATE_NO_WINDOW: a console program started without a console of its own.
+            command.creation_flags(0x0800_0000);
+            command
+        });
+        UiaWorker { state: Mutex::new(State { process, unavailable: None }) }
     }
 
-    /// Walks the visible top-level windows with UI Automation.
+    /// Walks the visible top-level windows with UI Automation, in the worker process.
     ///
     /// # Errors
     ///
     /// [`DesktopError::Unsupported`] where UI Automation does not exist,
-    /// [`DesktopError::Timeout`] when the worker does not answer in time, and
-    /// [`DesktopError::Os`] when [`MAX_UIA_THREADS`] workers are stuck.
+    /// [`DesktopError::Timeout`] when the worker does not answer in time (it is
+    /// then ended, and the next request starts a new one), and
+    /// [`DesktopError::Os`] when it cannot be started.
     pub(super) fn tree(&self, budget: &TreeBudget, foreground_only: bool) -> DesktopResult<A11yTree> {
-        let tx = {
-            let mut state = self.lock();
-            if let Some(why) = &state.unavailable {
-                return Err(DesktopError::Unsupported(why.clone()));
-            }
-            match &state.worker {
-                Some(tx) => tx.clone(),
-                None => {
-                    let Some(permit) = state.threads.try_acquire() else {
-                        return Err(DesktopError::Os {
-                            op: "uia",
-                            message: format!(
-                                "{} UI Automation threads are stuck in providers that do not answer; no new one \
-                                 starts until one of them returns",
-                                state.threads.max()
-                            ),
-                        });
-                    };
-                    let tx = spawn_worker(state.view, permit)?;
-                    state.worker = Some(tx.clone());
-                    tx
-                }
-            }
-        };
-        let (reply, answer) = mpsc::sync_channel(1);
-        if tx.send(Request { budget: *budget, foreground_only, reply }).is_err() {
-            self.forget_worker();
-            return Err(DesktopError::Os { op: "uia", message: "the UI Automation worker has stopped; retry".into() });
+        let mut state = self.lock();
+        if let Some(why) = &state.unavailable {
+            return Err(DesktopError::Unsupported(why.clone()));
         }
-        let wait = Duration::from_millis(budget.max_ms) + REPLY_GRACE;
-        match answer.recv_timeout(wait) {
-            Ok(Err(DesktopError::Unsupported(why))) => {
-                let mut state = self.lock();
-                state.unavailable = Some(why.clone());
-                state.worker = None;
-                Err(DesktopError::Unsupported(why))
-            }
-            Ok(result) => result,
-            Err(mpsc::RecvTimeoutError::Timeout) => {
-                tracing::warn!(wait_ms = wait.as_millis() as u64, "the UI Automation worker is stuck; abandoning it");
-                self.forget_worker();
-                Err(DesktopError::Timeout { op: "uia tree", ms: wait.as_millis() as u64 })
-            }
-            Err(mpsc::RecvTimeoutError::Disconnected) => {
-                self.forget_worker();
-                Err(DesktopError::Os { op: "uia", message: "the UI Automation worker ended without answering".into() })
-            }
+        let wait = Duration::from_millis(budget.max_ms) + REPLY_GRACE + START_GRACE;
+        let result = state.process.request(WorkerRequest { budget: *budget, foreground_only }, wait);
+        if let Err(DesktopError::Unsupported(why)) = &result {
+            state.unavailable = Some(why.clone());
+            state.process.restart();
         }
+        result
     }
 
-    /// Drops the automation client: the worker thread ends (releasing its
-    /// `CUIAutomation`, cache requests and COM apartment) once its queue is empty, and
-    /// the next request starts a new one with new objects.
+    /// Revives UI Automation: ends the worker process, so the next request
+    /// starts a new one, with a new COM apartment and a new UI Automation client
+    /// state (a new thread in this process would share both).
     pub(super) fn recreate(&self) {
-        tracing::info!("re-creating the UI Automation client");
-        self.forget_worker();
+        tracing::info!("restarting the UI Automation worker process");
+        self.lock().process.restart();
     }
 
     fn lock(&self) -> std::sync::MutexGuard<'_, State> {
         self.state.lock().unwrap_or_else(std::sync::PoisonError::into_inner)
     }
+}
 
-    fn forget_worker(&self) {
-        self.lock().worker = None;
+/// The `--view` word of the worker's command line.
+fn view_name(view: UiaView) -> &'static str {
+    match view {
+        UiaView::Raw => "raw",
+        UiaView::Control => "control",
     }
 }
 
-fn spawn_worker(view: UiaView, permit: ThreadPermit) -> DesktopResult<mpsc::Sender<Request>> {
-    let (tx, rx) = mpsc::channel::<Request>();
-    std::thread::Builder::new()
-        .name("uia".into())
-        .spawn(move || {
-            // The thread's place under the cap is given back when it ends.
-            let _permit = permit;
-            worker_main(&rx, view);
-        })
-        .map_err(|err| DesktopError::Os { op: "uia", message: format!("starting the UI Automation thread: {err}") })?;
-    Ok(tx)
+/// The worker process's side (`arena-guest uia-worker --view VIEW`): answers the
+/// guest's walk requests on standard input and output until the input closes.
+///
+/// # Errors
+///
+/// Writing an answer failed (the guest went away).
+pub(super) fn run_worker_process(view: UiaView) -> std::io::Result<()> {
+    let stdin = std::io::stdin();
+    let stdout = std::io::stdout();
+    let setup = ComApartment::init(COINIT_MULTITHREADED).and_then(|com| setup(view).map(|uia| (com, uia)));
+    let (_com, uia) = match setup {
+        Ok(ok) => ok,
+        Err(err) => {
+            let why = match err {
+                DesktopError::Unsupported(m) => m,
+                other => format!("UI Automation could not start: {other}; use backend=win32"),
+            };
+            return uia_process::serve(stdin.lock(), stdout.lock(), |_| WorkerAnswer::Unsupported(why.clone()));
+        }
+    };
+    let fetches = ThreadCap::new(MAX_FETCH_THREADS);
+    uia_process::serve(stdin.lock(), stdout.lock(), |request| {
+        let mut source = UiaSource {
+            uia: &uia,
+            fetches: &fetches,
+            live: false,
+            budget_ms: request.budget.max_ms,
+            failures: Vec::new(),
+        };
+        WorkerAnswer::from_result(a11y_walk::walk(
+            &mut source,
+            A11yBackend::Uia,
+            &request.budget,
+            request.foreground_only,
+        ))
+    })
 }
 
 /// The COM objects of the worker thread.
@@ -263,35 +247,6 @@ fn setup(view: UiaView) -> DesktopResult<Uia> {
     Ok(Uia { automation, cache, element_cache, walker, automation2 })
 }
 
-fn worker_main(rx: &mpsc::Receiver<Request>, view: UiaView) {
-    let setup = ComApartment::init(COINIT_MULTITHREADED).and_then(|com| setup(view).map(|uia| (com, uia)));
-    let (_com, uia) = match setup {
-        Ok(ok) => ok,
-        Err(err) => {
-            let err = match err {
-                DesktopError::Unsupported(m) => DesktopError::Unsupported(m),
-                other => {
-                    DesktopError::Unsupported(format!("UI Automation could not start: {other}; use backend=win32"))
-                }
-            };
-            // The thread that started this worker sends its request right away: answer
-            // it and whatever else is queued, then stop. The caller remembers the reason.
-            if let Ok(request) = rx.recv() {
-                let _ = request.reply.send(Err(DesktopError::Unsupported(err.to_string())));
-            }
-            while let Ok(request) = rx.try_recv() {
-                let _ = request.reply.send(Err(DesktopError::Unsupported(err.to_string())));
-            }
-            return;
-        }
-    };
-    while let Ok(request) = rx.recv() {
-        let mut source = UiaSource { uia: &uia, live: false, budget_ms: request.budget.max_ms, failures: Vec::new() };
-        let result = a11y_walk::walk(&mut source, A11yBackend::Uia, &request.budget, request.foreground_only);
-        let _ = request.reply.send(result);
-    }
-}
-
 /// A VARIANT read from the cache, cleared on drop.
 struct Variant(VARIANT);
 
@@ -342,8 +297,17 @@ fn pattern<T>(elem: &IUIAutomationElement, available: UIA_PROPERTY_ID, read: imp
     }
 }
 
+/// How long past the transaction timeout the caller waits for a bulk fetch
+/// before abandoning it (a timeout that works returns first, with its own error).
+const FETCH_GRACE: Duration = Duration::from_millis(500);
+
+/// Most bulk fetches abandoned while their providers keep them, at once.
+const MAX_FETCH_THREADS: usize = 4;
+
 struct UiaSource<'a> {
     uia: &'a Uia,
+    /// The threads of bulk fetches, abandoned ones included.
+    fetches: &'a ThreadCap,
     /// The window being walked is read element by element (its subtree fetch failed).
     live: bool,
     /// The request's time budget, which bounds opening the windows.
@@ -422,8 +386,23 @@ impl TreeSource for UiaSource<'_> {
         self.live = false;
         let ms = u32::try_from(time.as_millis()).unwrap_or(u32::MAX).max(100);
         self.set_timeouts(ms.min(2_000), ms);
-        // SAFETY: one cross-process call that fetches the window's whole cached subtree.
-        unsafe { root.BuildUpdatedCache(&self.uia.cache) }.map_err(|err| super::sys::os("BuildUpdatedCache", &err))
+        // The fetch runs on a thread of its own: a provider that keeps it past the
+        // transaction timeout is abandoned there, and the element-by-element read
+        // (prepare_partial) starts at once instead of queueing behind it here.
+        // The objects cross threads as agile references (COM's own way to hand an
+        // interface to another apartment's thread).
+        let agile = |err: windows::core::Error| super::sys::os("RoGetAgileReference", &err);
+        let root = AgileReference::new(root).map_err(agile)?;
+        let cache = AgileReference::new(&self.uia.cache).map_err(agile)?;
+        let fetched = call_detached(self.fetches, time + FETCH_GRACE, "BuildUpdatedCache", move || {
+            let _com = ComApartment::init(COINIT_MULTITHREADED)?;
+            let (root, cache) = (root.resolve().map_err(agile)?, cache.resolve().map_err(agile)?);
+            // SAFETY: one cross-process call that fetches the window's whole cached subtree.
+            let element =
+                unsafe { root.BuildUpdatedCache(&cache) }.map_err(|err| super::sys::os("BuildUpdatedCache", &err))?;
+            AgileReference::new(&element).map_err(agile)
+        })??;
+        fetched.resolve().map_err(agile)
     }
 
     fn record(&mut self, elem: &IUIAutomationElement) -> A11yNode {

@@ -101,14 +101,218 @@ fn the_default_file_uses_only_documented_settings_and_answers_every_page() {
     assert_eq!(text_of(&doc, "oobeSystem", &["AutoLogon", "Username"]), ["Docker"]);
     assert_eq!(text_of(&doc, "oobeSystem", &["AutoLogon", "Enabled"]), ["true"]);
     assert_eq!(text_of(&doc, "oobeSystem", &["OOBE", "HideOnlineAccountScreens"]), ["true"]);
-    assert_eq!(
-        text_of(&doc, "oobeSystem", &["FirstLogonCommands", "SynchronousCommand", "CommandLine"]),
-        [stage_command("first-logon").as_str(), FIRST_LOGON_COMMAND]
-    );
+    let first_logon = text_of(&doc, "oobeSystem", &["FirstLogonCommands", "SynchronousCommand", "CommandLine"]);
+    assert_eq!(first_logon[0], stage_command("first-logon"));
+    assert_eq!(first_logon[2], FIRST_LOGON_COMMAND);
     let specialize = text_of(&doc, "specialize", &["RunSynchronous", "RunSynchronousCommand", "Path"]);
     assert_eq!(specialize[0], BYPASS_NRO);
-    assert!(specialize[1].contains(OEM_MARKER) && specialize[1].contains(r"C:\OEM"), "{specialize:?}");
-    assert_eq!(specialize[2], "cmd.exe /d /c echo arena-stage: oobe>COM1");
+    let copy = specialize.iter().find(|p| p.contains(OEM_MARKER)).expect("the OEM copy");
+    assert!(copy.contains(OEM_SCRIPT), "{specialize:?}");
+    assert!(oem_copy_script().contains(r#"robocopy "%~d0\OEM" C:\OEM"#));
+    assert_eq!(specialize.last().copied(), Some("cmd.exe /d /c echo arena-stage: oobe>COM1"));
+    check_limits(&xml, true).unwrap();
+}
+
+/// The accounts' passwords never expire, set where no later script can miss
+/// it: the maximum password age in the specialize pass (a machine policy, so it
+/// holds before the account exists) and the account's own flag at its first
+/// logon, before the OEM install runs.
+#[test]
+fn the_password_never_expires_from_the_specialize_pass_and_the_first_logon() {
+    let mut o = AnswerOptions::new();
+    o.user = "O'Brien".into();
+    let xml = render(&o);
+    let doc = roxmltree::Document::parse(&xml).unwrap();
+    let specialize = text_of(&doc, "specialize", &["RunSynchronous", "RunSynchronousCommand", "Path"]);
+    let copy = specialize.iter().position(|p| p.contains(OEM_SCRIPT)).unwrap();
+    let policy = specialize.iter().position(|p| *p == "net.exe accounts /maxpwage:unlimited").expect("maxpwage");
+    assert!(policy < copy, "{specialize:?}");
+    let first_logon = text_of(&doc, "oobeSystem", &["FirstLogonCommands", "SynchronousCommand", "CommandLine"]);
+    let own = first_logon.iter().position(|c| c.contains("-PasswordNeverExpires $true")).expect("the account's flag");
+    assert!(first_logon[own].contains("-Name 'O''Brien'"), "{first_logon:?}");
+    assert!(own < first_logon.iter().position(|c| *c == FIRST_LOGON_COMMAND).unwrap());
+}
+
+/// Windows Update, Defender's real-time protection, SmartScreen and Smart App
+/// Control are turned off in the specialize pass, before the OEM copy.
+#[test]
+fn the_policies_are_written_in_the_specialize_pass() {
+    let xml = render(&AnswerOptions::new());
+    let doc = roxmltree::Document::parse(&xml).unwrap();
+    let specialize = text_of(&doc, "specialize", &["RunSynchronous", "RunSynchronousCommand", "Path"]);
+    for (needle, value) in [
+        (r"WindowsUpdate\AU", "NoAutoUpdate /t REG_DWORD /d 1"),
+        (r"Windows Defender\Real-Time Protection", "DisableRealtimeMonitoring /t REG_DWORD /d 1"),
+        (r"Windows\System", "EnableSmartScreen /t REG_DWORD /d 0"),
+        (r"CI\Policy", "VerifiedAndReputablePolicyState /t REG_DWORD /d 0"),
+    ] {
+        assert!(specialize.iter().any(|p| p.contains(needle) && p.contains(value)), "{needle}: {specialize:?}");
+    }
+}
+
+/// Every string the generator writes, for both firmware paths and every
+/// option that changes the file (UAC, bypass keys, image by index, by name and
+/// by key, a product key, long names), is within the maximum Microsoft's
+/// unattend reference gives for its setting ([`LIMITS`], each with its page),
+/// or is a setting whose page gives none ([`UNLIMITED`]).
+#[test]
+fn every_generated_string_is_within_its_documented_maximum() {
+    let mut variants = Vec::new();
+    for firmware in [FirmwareKind::Bios, FirmwareKind::Uefi] {
+        for uac in [Uac::Off, Uac::On] {
+            for image in
+                [ImageChoice::Index(6), ImageChoice::Name("Windows 11 Pro for Workstations".into()), ImageChoice::ByKey]
+            {
+                let mut o = AnswerOptions::new();
+                o.firmware = firmware;
+                o.uac = uac;
+                o.bypass_checks = firmware == FirmwareKind::Bios;
+                o.image = image;
+                o.product_key = Some("NRG8B-VKK3Q-CXVCJ-9G2XF-6Q84J".into());
+                // The longest values the option checks let through.
+                o.user = "u".repeat(20);
+                o.password = "p".repeat(127);
+                o.computer_name = "C".repeat(15);
+                o.timezone = "Pacific Standard Time_dstoff".into();
+                variants.push(o);
+            }
+        }
+    }
+    for o in &variants {
+        o.check().unwrap();
+        let xml = render(o);
+        check_documented(&xml);
+        check_limits(&xml, true).unwrap_or_else(|err| panic!("{err}\n{xml}"));
+    }
+    // The tables cite a page for every maximum.
+    for limit in LIMITS {
+        assert!(limit.page.starts_with(&limit.component.to_lowercase()), "{limit:?}");
+        assert!(limit.max_chars > 0);
+    }
+    for (component, _, page) in UNLIMITED {
+        assert!(page.starts_with(&component.to_lowercase()), "{page}");
+    }
+}
+
+/// The check itself: a specialize command of 260 characters (one past the 259
+/// of `RunSynchronousCommand/Path`) fails, naming the setting and the page;
+/// 259 passes; an Order of 501 and an unknown setting fail.
+#[test]
+fn the_limits_check_fails_on_a_260_character_specialize_command() {
+    let xml = render(&AnswerOptions::new());
+    let swap =
+        |path: &str| xml.replacen(&format!("<Path>{}</Path>", escape(BYPASS_NRO)), &format!("<Path>{path}</Path>"), 1);
+    let err = check_limits(&swap(&"x".repeat(260)), true).unwrap_err();
+    assert!(err.contains("RunSynchronousCommand/Path has 260 characters"), "{err}");
+    assert!(
+        err.contains("microsoft-windows-deployment-runsynchronous-runsynchronouscommand-path") && err.contains("259")
+    );
+    check_limits(&swap(&"x".repeat(259)), true).unwrap();
+    // Entities count as the one character they stand for.
+    check_limits(&swap(&"&amp;".repeat(259)), true).unwrap();
+    assert!(check_limits(&xml.replacen("<Order>1</Order>", "<Order>501</Order>", 1), true)
+        .unwrap_err()
+        .contains("501"));
+    let unknown = xml.replacen("<TimeZone>UTC</TimeZone>", "<TimeZone>UTC</TimeZone><Themes>x</Themes>", 1);
+    assert!(check_limits(&unknown, true).unwrap_err().contains("no documented limit"));
+    check_limits(&unknown, false).unwrap();
+    // The old copy command, 350 characters of PowerShell, would have failed here.
+    let old = format!("powershell.exe -NoProfile -ExecutionPolicy Bypass -Command \"{}\"", "x".repeat(290));
+    assert!(check_limits(&swap(&old), true).is_err());
+    assert!(oem_copy_command().len() < 259, "{}", oem_copy_command().len());
+}
+
+fn images() -> Vec<crate::vm::iso::IsoImage> {
+    let image = |index, name: &str, id: &str| crate::vm::iso::IsoImage {
+        index,
+        name: name.into(),
+        display_name: None,
+        edition_id: Some(id.into()),
+    };
+    vec![
+        image(1, "Windows 11 Home", "Core"),
+        // Some Windows 11 media still name the image as Windows 10 did.
+        image(2, "Windows 10 Pro", "Professional"),
+        image(3, "Windows 11 Education", "Education"),
+        image(4, "Windows 11 Enterprise", "Enterprise"),
+    ]
+}
+
+/// `--edition pro`, `--edition enterprise` and `--image-index N` give the image
+/// and the key each needs, with the ISO's image list and without it;
+/// `--edition home`, and an index whose image is Home, are refused.
+#[test]
+fn editions_and_indexes_choose_the_image_and_the_generic_key() {
+    let list = images();
+    let pro = Some("W269N-WFGWX-YVC9B-4J6C9-T83GX".to_owned());
+    let enterprise = Some("NPPR9-FWDCX-D2C8J-H872K-2YT43".to_owned());
+    // With the list: by EDITIONID, whatever the image's name says.
+    assert_eq!(choose_image(Some("pro"), None, None, Some(&list)).unwrap(), (ImageChoice::Index(2), pro.clone()));
+    assert_eq!(
+        choose_image(Some("Windows 11 Pro"), None, None, Some(&list)).unwrap(),
+        (ImageChoice::Index(2), pro.clone())
+    );
+    assert_eq!(
+        choose_image(Some("Professional"), None, None, Some(&list)).unwrap(),
+        (ImageChoice::Index(2), pro.clone())
+    );
+    assert_eq!(
+        choose_image(Some("enterprise"), None, None, Some(&list)).unwrap(),
+        (ImageChoice::Index(4), enterprise.clone())
+    );
+    assert_eq!(
+        choose_image(None, Some(3), None, Some(&list)).unwrap().1.as_deref(),
+        Some("NW6C2-QMPVW-D7KKK-3GKT6-VCFB2")
+    );
+    // A user's key wins.
+    let mine = Some("AAAAA-BBBBB-CCCCC-DDDDD-EEEEE".to_owned());
+    assert_eq!(choose_image(Some("pro"), None, mine.clone(), Some(&list)).unwrap().1, mine);
+    // Without it: the key chooses the image, or the index stands alone.
+    assert_eq!(choose_image(Some("pro"), None, None, None).unwrap(), (ImageChoice::ByKey, pro));
+    assert_eq!(choose_image(Some("enterprise"), None, None, None).unwrap(), (ImageChoice::ByKey, enterprise));
+    assert_eq!(choose_image(None, Some(6), None, None).unwrap(), (ImageChoice::Index(6), None));
+    assert_eq!(choose_image(None, None, None, None).unwrap(), (ImageChoice::Index(1), None));
+    assert_eq!(
+        choose_image(Some("Windows 11 SE"), None, None, None).unwrap(),
+        (ImageChoice::Name("Windows 11 SE".into()), None)
+    );
+    // Home, by name or by what the list says image 1 is, and what the ISO lacks.
+    for refused in [
+        choose_image(Some("home"), None, None, None),
+        choose_image(Some("Windows 11 Home"), None, None, Some(&list)),
+        choose_image(None, Some(1), None, Some(&list)),
+        choose_image(None, None, None, Some(&list)),
+    ] {
+        let err = refused.unwrap_err();
+        assert!(err.contains("Home") && err.contains("refused"), "{err}");
+    }
+    let err = choose_image(Some("pro-workstations"), None, None, Some(&list)).unwrap_err();
+    assert!(
+        err.contains("holds no Windows 11 Pro for Workstations image") && err.contains("4 \"Windows 11 Enterprise\""),
+        "{err}"
+    );
+    assert!(choose_image(None, Some(9), None, Some(&list)).unwrap_err().contains("no image 9"));
+
+    // The answer files: a key-only choice writes no image, an index writes it, both write the key.
+    let mut o = AnswerOptions::new();
+    (o.image, o.product_key) = choose_image(Some("enterprise"), None, None, None).unwrap();
+    o.check().unwrap();
+    let xml = render(&o);
+    check_documented(&xml);
+    let doc = roxmltree::Document::parse(&xml).unwrap();
+    assert!(text_of(&doc, "windowsPE", &["ImageInstall", "OSImage", "InstallFrom"]).is_empty());
+    assert_eq!(text_of(&doc, "windowsPE", &["UserData", "ProductKey", "Key"]), ["NPPR9-FWDCX-D2C8J-H872K-2YT43"]);
+    (o.image, o.product_key) = choose_image(Some("pro"), None, None, Some(&list)).unwrap();
+    let xml = render(&o);
+    let doc = roxmltree::Document::parse(&xml).unwrap();
+    assert_eq!(text_of(&doc, "windowsPE", &["ImageInstall", "OSImage", "InstallFrom", "MetaData", "Value"]), ["2"]);
+    assert_eq!(text_of(&doc, "windowsPE", &["UserData", "ProductKey", "Key"]), ["W269N-WFGWX-YVC9B-4J6C9-T83GX"]);
+    // The checks refuse Home by name too, and a key-only choice without a key.
+    o.image = ImageChoice::Name("Windows 11 Home".into());
+    assert!(o.check().unwrap_err().contains("refused"));
+    o.image = ImageChoice::ByKey;
+    o.product_key = None;
+    assert!(o.check().unwrap_err().contains("no image is chosen"));
 }
 
 #[test]
