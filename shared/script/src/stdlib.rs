@@ -12,8 +12,9 @@
 use super::compose::Composed as _;
 use super::error::{not_supported, type_error, value_error, ErrorKind, ScriptError};
 use super::host::{CommandArg, CommandOutput, PathKind};
-use super::interp::{is_none, static_name, to_f64, to_i64, to_str, Args, Interp};
 use super::value::{Object, Value};
+use crate::args::{is_none, static_name, to_f64, to_i64, to_str, Args};
+use crate::runtime::Runtime;
 use arena_shared::ntpath;
 
 const TIME: &[&str] = &["sleep"];
@@ -89,7 +90,7 @@ pub(crate) fn attr(module: &'static str, name: &str) -> Option<Value> {
 }
 
 /// Calls `<module>.<name>`.
-pub(crate) fn call(it: &mut Interp<'_, '_>, module: &str, name: &str, args: Args) -> Result<Value, ScriptError> {
+pub(crate) fn call(it: &mut Runtime<'_, '_>, module: &str, name: &str, args: Args) -> Result<Value, ScriptError> {
     match module {
         "time" | "pyperclip" | "sys" | "platform" | "PIL.Image" | "PIL.ImageGrab" => misc(it, module, name, args),
         "os" => os(it, name, args),
@@ -111,7 +112,7 @@ fn path_arg(v: &Value) -> Result<&str, ScriptError> {
     }
 }
 
-fn misc(it: &mut Interp<'_, '_>, module: &str, name: &str, args: Args) -> Result<Value, ScriptError> {
+fn misc(it: &mut Runtime<'_, '_>, module: &str, name: &str, args: Args) -> Result<Value, ScriptError> {
     match (module, name) {
         ("time", "sleep") => {
             let a = args.bind("sleep", &["secs"], 1)?;
@@ -165,7 +166,7 @@ fn misc(it: &mut Interp<'_, '_>, module: &str, name: &str, args: Args) -> Result
             let region = match a[0].as_ref().filter(|v| !matches!(v, Value::None)) {
                 None => None,
                 Some(bbox) => {
-                    let items = super::interp::iterate(bbox)?;
+                    let items = crate::args::iterate(bbox)?;
                     let [l, t, r, b] = items.as_slice() else {
                         return Err(value_error("bbox must be (left, top, right, bottom)"));
                     };
@@ -181,7 +182,7 @@ fn misc(it: &mut Interp<'_, '_>, module: &str, name: &str, args: Args) -> Result
 }
 
 /// `SystemExit(status)`: `None` is 0, an int is the code, anything else is printed to stderr and is 1.
-pub(crate) fn exit_with(it: &mut Interp<'_, '_>, status: Option<Value>) -> ScriptError {
+pub(crate) fn exit_with(it: &mut Runtime<'_, '_>, status: Option<Value>) -> ScriptError {
     let code = match status.unwrap_or(Value::None) {
         Value::None => 0,
         Value::Int(i) => i32::try_from(i).unwrap_or(-1),
@@ -195,7 +196,7 @@ pub(crate) fn exit_with(it: &mut Interp<'_, '_>, status: Option<Value>) -> Scrip
     it.system_exit(code)
 }
 
-fn os(it: &mut Interp<'_, '_>, name: &str, args: Args) -> Result<Value, ScriptError> {
+fn os(it: &mut Runtime<'_, '_>, name: &str, args: Args) -> Result<Value, ScriptError> {
     match name {
         "getenv" => {
             let a = args.bind("getenv", &["key", "default"], 1)?;
@@ -242,7 +243,7 @@ fn os(it: &mut Interp<'_, '_>, name: &str, args: Args) -> Result<Value, ScriptEr
     }
 }
 
-fn os_path(it: &mut Interp<'_, '_>, name: &str, args: Args) -> Result<Value, ScriptError> {
+fn os_path(it: &mut Runtime<'_, '_>, name: &str, args: Args) -> Result<Value, ScriptError> {
     let s = |v: String| Ok(Value::str(v));
     let pair = |(a, b): (&str, &str)| Ok(Value::tuple(vec![Value::str(a.to_owned()), Value::str(b.to_owned())]));
     if name == "join" {
@@ -335,7 +336,7 @@ pub(crate) fn called_process_error(
     )
 }
 
-fn subprocess(it: &mut Interp<'_, '_>, name: &str, args: Args) -> Result<Value, ScriptError> {
+fn subprocess(it: &mut Runtime<'_, '_>, name: &str, args: Args) -> Result<Value, ScriptError> {
     let mut pos = args.pos.into_iter();
     let Some(cmd_value) = pos.next() else {
         return Err(type_error(format!("{name}() missing 1 required positional argument: 'args'")));
