@@ -95,6 +95,15 @@ async fn method_not_allowed(request: Request) -> axum::response::Response {
     }
 }
 
+/// The backend `config` asks for: `--backend`, else the platform's own.
+fn backend_kind(config: &ServerConfig) -> BackendKind {
+    config.backend.unwrap_or(if crate::desktop::windows::target::IS_WINDOWS {
+        BackendKind::Windows
+    } else {
+        BackendKind::Stub
+    })
+}
+
 /// Checks the configuration, builds the backend and the state.
 ///
 /// # Errors
@@ -112,7 +121,7 @@ pub fn build_state(config: ServerConfig) -> anyhow::Result<AppState> {
         }
         tracing::warn!(bind = %config.bind, "serving a non-loopback address WITHOUT authentication: anyone who can reach this port can run programs and read files");
     }
-    let desktop: Arc<dyn Desktop> = match config.backend_kind() {
+    let desktop: Arc<dyn Desktop> = match backend_kind(&config) {
         BackendKind::Stub => {
             let scenario = match &config.scenario {
                 Some(path) => {
