@@ -27,6 +27,7 @@
 
 pub mod auth;
 pub mod call;
+pub mod cli;
 pub mod config;
 pub mod desktop;
 pub mod doctor;

@@ -37,7 +37,7 @@ fn is_library_code(path: &str) -> bool {
     let printing_on_purpose = [
         // Binaries' entry points report to their user.
         "guest-server/src/main.rs",
-        "guest-server/src/logon_main.rs",
+        "guest-server/launch/src/main.rs",
         "host-client/src/main.rs",
         // The `arena` command line is the host's user interface.
         "host-client/src/cli/",
