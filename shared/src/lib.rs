@@ -25,7 +25,8 @@
 //! - [`error`]: the error body every native route answers with.
 //! - [`window_list`]: the window list and title the model is shown, as upstream builds them.
 //! - [`mcp_tools`]: the desktop tools both MCP servers offer, each call checked into an action.
-//! - [`token`]: a bearer token parsed from a token file's text or an option.
+//! - [`token`]: a bearer token parsed from a token file's text or an option, and the one
+//!   check of an `Authorization` header against it, which every server uses.
 //! - [`ntpath`]: Python 3.10's Windows path rules (`os.path` on upstream's guest).
 //! - [`cmdline`], [`ntfs`], [`imaging`], [`atomic`], [`close_all`], [`a11y_xml`]:
 //!   decisions both sides share (command lines, listing order, crop and encode, atomic
