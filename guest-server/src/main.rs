@@ -2,6 +2,8 @@
 //! serves (the default) or runs a `service` / `logon-task` subcommand from
 //! [`arena_guest::service`], or the `doctor` ([`arena_guest::doctor`]).
 
+#![forbid(unsafe_code)]
+
 use std::net::SocketAddr;
 use std::process::ExitCode;
 

@@ -40,6 +40,8 @@
 //! may extend carry an `Unknown` fallback, so an older host can talk to a newer
 //! guest and the other way round.
 
+#![forbid(unsafe_code)]
+
 pub mod a11y_xml;
 pub mod action;
 pub mod atomic;

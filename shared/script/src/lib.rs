@@ -56,6 +56,8 @@
 //! 10 million bytes and lists at a million items; sleeps, clicks and key presses
 //! go through the host, which may refuse them.
 
+#![forbid(unsafe_code)]
+
 use arena_shared::action::Action;
 
 mod args;
