@@ -8,22 +8,29 @@
 //! - a typed native API under `/v1/` ([`native`]) that the Rust host client uses.
 //!
 //! It is not the host side (see `arena-host`), and it holds no Win32 code outside
-//! `desktop/windows/`.
+//! its `windows/` folders (`desktop/windows/`, the backend; `service/windows/`, the
+//! Service Control Manager glue).
 //!
 //! # Layout
 //!
-//! - [`config`]: the one [`config::ServerConfig`].
+//! - [`cli`]: the whole command line (clap). [`config`]: the one [`config::ServerConfig`]
+//!   (defined in `arena_guest_launch`, which the logon launcher shares) and the body limits.
+//! - [`serve`]: the HTTP/1 server loop and its connection limits.
 //! - [`desktop`]: the backend trait and its backends ([`desktop::stub`]).
 //! - [`call`]: backend calls with deadlines.
 //! - [`waa`], [`native`]: the routes. [`auth`]: token and cross-site guards.
 //! - [`error`]: the error shapes. [`state`]: handler state.
-//! - [`paths`], [`imaging`]: platform-neutral helpers the routes share.
+//! - [`paths`], [`imaging`], [`urlencoded`]: platform-neutral helpers the routes share
+//!   (the path rules themselves are `arena_shared::ntpath`).
 //! - [`inspect`]: the logic of the evaluator queries both APIs answer.
 //! - [`protect`]: what no route may delete, move or recycle.
 //! - [`script_host`]: the desktop side of the native Python-subset interpreter.
-//! - [`mcp`]: `--mcp`, the desktop tools over the Model Context Protocol at `/mcp`.
+//! - [`mcp`]: `--mcp`, the desktop tools over the Model Context Protocol at `/mcp` (over
+//!   `arena_mcp`, the glue the host's endpoint shares). [`doctor`]: every capability
+//!   checked end to end.
 //! - [`service`]: the `service` and `logon-task` subcommands (running in the user's session), with the
-//!   Windows service supervisor in `service/windows/`.
+//!   Windows service supervisor in `service/windows/`; the logon task's launcher is the
+//!   binary of `arena_guest_launch`.
 
 pub mod auth;
 pub mod call;
