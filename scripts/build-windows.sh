@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Cross-builds the guest's two exes for x86_64-pc-windows-gnu on Debian: arena-guest.exe
-# (the server, a console program) and arena-guest-logon.exe (the logon task's launcher, a
-# GUI-subsystem program; they ship together), and the bcryptprimitives.dll shim that lets
+# (the server, a console program, crate arena-guest) and arena-guest-logon.exe (the logon
+# task's launcher, a GUI-subsystem program of its own small crate, arena-guest-launch in
+# guest-server/launch/; they ship together), and the bcryptprimitives.dll shim that lets
 # Rust programs start under Wine 8.
 #
 # Usage: scripts/build-windows.sh [--release] [--no-install]
@@ -25,7 +26,7 @@ for arg in "$@"; do
     case "$arg" in
         --release) PROFILE=release ;;
         --no-install) INSTALL=0 ;;
-        -h|--help) sed -n '2,17p' "$0"; exit 0 ;;
+        -h|--help) sed -n '2,18p' "$0"; exit 0 ;;
         *) echo "unknown argument: $arg" >&2; exit 2 ;;
     esac
 done
@@ -57,7 +58,7 @@ export RUSTC_BOOTSTRAP=1
 export CARGO_TARGET_X86_64_PC_WINDOWS_GNU_LINKER=x86_64-w64-mingw32-gcc
 export CARGO_TARGET_DIR="$ROOT/target/windows"
 
-args=(build -p arena-guest --bin arena-guest --bin arena-guest-logon --target "$TARGET" -Zbuild-std=std,panic_abort)
+args=(build -p arena-guest -p arena-guest-launch --bin arena-guest --bin arena-guest-logon --target "$TARGET" -Zbuild-std=std,panic_abort)
 if [ "$PROFILE" = release ]; then
     args+=(--release)
 fi
@@ -91,5 +92,10 @@ if command -v x86_64-w64-mingw32-strip >/dev/null; then
     echo "exe size stripped: $stripped bytes ($(( stripped / 1024 )) KiB)"
 fi
 echo "launcher size: $(stat -c %s "$LAUNCHER") bytes ($PROFILE, unstripped)"
+if command -v x86_64-w64-mingw32-strip >/dev/null; then
+    x86_64-w64-mingw32-strip -o "$CARGO_TARGET_DIR/arena-guest-logon.stripped.exe" "$LAUNCHER"
+    stripped=$(stat -c %s "$CARGO_TARGET_DIR/arena-guest-logon.stripped.exe")
+    echo "launcher size stripped: $stripped bytes ($(( stripped / 1024 )) KiB)"
+fi
 echo "exe: $EXE"
 echo "launcher: $LAUNCHER"

@@ -1,8 +1,8 @@
 //! Request guards: bearer-token authentication and the cross-site request check.
 //!
 //! - When a token is configured, every request but the readiness probes
-//!   (`/probe`, `/v1/health`) must carry `Authorization: Bearer <token>`;
-//!   the comparison is constant-time.
+//!   (`/probe`, `/v1/health`) must carry `Authorization: Bearer <token>`, checked
+//!   by the project's one bearer check (constant time, the scheme in any case).
 //! - A request that carries an `Origin` header or `Sec-Fetch-Site: cross-site`
 //!   comes from a web page (host clients send neither) and is refused, so a page
 //!   browsed inside the VM cannot drive the server with a cross-origin form post
@@ -21,7 +21,6 @@ use axum::http::{header, HeaderMap, StatusCode};
 use axum::middleware::Next;
 use axum::response::{IntoResponse, Response};
 use axum::Json;
-use subtle::ConstantTimeEq;
 
 use crate::error::ApiError;
 use crate::state::AppState;
@@ -128,14 +127,10 @@ fn cross_site(headers: &HeaderMap) -> Option<String> {
     }
 }
 
+/// The project's one bearer check ([`arena_shared::token::bearer_matches`]: constant
+/// time, the scheme in any case).
 fn token_matches(headers: &HeaderMap, token: &str) -> bool {
-    let Some(value) = headers.get(header::AUTHORIZATION).and_then(|v| v.to_str().ok()) else {
-        return false;
-    };
-    let Some(given) = value.strip_prefix("Bearer ").or_else(|| value.strip_prefix("bearer ")) else {
-        return false;
-    };
-    given.trim().as_bytes().ct_eq(token.as_bytes()).into()
+    arena_shared::token::bearer_matches(headers.get(header::AUTHORIZATION).map(|v| v.as_bytes()), token)
 }
 
 fn refuse(native: bool, status: StatusCode, message: &str) -> Response {

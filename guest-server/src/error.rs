@@ -1,5 +1,9 @@
-//! The two error shapes the server answers with.
+//! The two error shapes the server answers with, and the backend's error they map.
 //!
+//! - [`DesktopError`]: what a backend call fails with, the same variants on every
+//!   platform (re-exported as `crate::desktop::DesktopError`, the trait's error). It
+//!   is defined here, beside its HTTP mapping, so that this module imports nothing
+//!   from `desktop` (which quotes input through [`clip`]).
 //! - [`ApiError`]: native `/v1/` routes, an [`ErrorBody`] with a precise status.
 //! - [`WaaError`]: legacy routes, upstream's `{"status":"error","message":...}`
 //!   with 500 for everything the catch-all handler would catch, or the exact
@@ -16,7 +20,48 @@ use axum::Json;
 
 use arena_shared::error::{ErrorBody, ErrorCode};
 
-use crate::desktop::DesktopError;
+/// What went wrong in a backend call. The same variants on every platform.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum DesktopError {
+    /// The caller asked for something malformed or impossible; the message says what.
+    #[error("{0}")]
+    InvalidInput(String),
+    /// A path, window, key or value does not exist.
+    #[error("{0}")]
+    NotFound(String),
+    /// The thing exists and may not be touched.
+    #[error("{0}")]
+    PermissionDenied(String),
+    /// The thing to be created exists already.
+    #[error("{0}")]
+    AlreadyExists(String),
+    /// This backend cannot do this.
+    #[error("{0}")]
+    Unsupported(String),
+    /// The call did not finish within its deadline.
+    #[error("{op} timed out after {ms} ms")]
+    Timeout { op: &'static str, ms: u64 },
+    /// The guest began shutting down and stopped the call.
+    #[error("{op} was stopped: the guest is shutting down")]
+    ShuttingDown { op: &'static str },
+    /// The operating system refused; `message` carries its words.
+    #[error("{op}: {message}")]
+    Os { op: &'static str, message: String },
+}
+
+impl DesktopError {
+    /// Maps an I/O error about `what` (usually a path) onto the closest variant.
+    pub fn io(op: &'static str, what: &str, err: std::io::Error) -> DesktopError {
+        use std::io::ErrorKind;
+        match err.kind() {
+            ErrorKind::NotFound => DesktopError::NotFound(format!("{what}: not found")),
+            ErrorKind::PermissionDenied => DesktopError::PermissionDenied(format!("{what}: permission denied")),
+            ErrorKind::AlreadyExists => DesktopError::AlreadyExists(format!("{what}: already exists")),
+            _ => DesktopError::Os { op, message: format!("{what}: {err}") },
+        }
+    }
+}
 
 /// Most bytes of client input quoted in one error message.
 pub const MAX_ECHO_BYTES: usize = 256;

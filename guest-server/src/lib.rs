@@ -8,25 +8,33 @@
 //! - a typed native API under `/v1/` ([`native`]) that the Rust host client uses.
 //!
 //! It is not the host side (see `arena-host`), and it holds no Win32 code outside
-//! `desktop/windows/`.
+//! its `windows/` folders (`desktop/windows/`, the backend; `service/windows/`, the
+//! Service Control Manager glue).
 //!
 //! # Layout
 //!
-//! - [`config`]: the one [`config::ServerConfig`].
+//! - [`cli`]: the whole command line (clap). [`config`]: the one [`config::ServerConfig`]
+//!   (defined in `arena_guest_launch`, which the logon launcher shares) and the body limits.
+//! - [`serve`]: the HTTP/1 server loop and its connection limits.
 //! - [`desktop`]: the backend trait and its backends ([`desktop::stub`]).
 //! - [`call`]: backend calls with deadlines.
 //! - [`waa`], [`native`]: the routes. [`auth`]: token and cross-site guards.
 //! - [`error`]: the error shapes. [`state`]: handler state.
-//! - [`paths`], [`imaging`]: platform-neutral helpers the routes share.
+//! - [`paths`], [`imaging`], [`urlencoded`]: platform-neutral helpers the routes share
+//!   (the path rules themselves are `arena_shared::ntpath`).
 //! - [`inspect`]: the logic of the evaluator queries both APIs answer.
 //! - [`protect`]: what no route may delete, move or recycle.
 //! - [`script_host`]: the desktop side of the native Python-subset interpreter.
-//! - [`mcp`]: `--mcp`, the desktop tools over the Model Context Protocol at `/mcp`.
+//! - [`mcp`]: `--mcp`, the desktop tools over the Model Context Protocol at `/mcp` (over
+//!   `arena_mcp`, the glue the host's endpoint shares). [`doctor`]: every capability
+//!   checked end to end.
 //! - [`service`]: the `service` and `logon-task` subcommands (running in the user's session), with the
-//!   Windows service supervisor in `service/windows/`.
+//!   Windows service supervisor in `service/windows/`; the logon task's launcher is the
+//!   binary of `arena_guest_launch`.
 
 pub mod auth;
 pub mod call;
+pub mod cli;
 pub mod config;
 pub mod desktop;
 pub mod doctor;
@@ -95,6 +103,21 @@ async fn method_not_allowed(request: Request) -> axum::response::Response {
     }
 }
 
+/// The backend `config` asks for: `--backend`, else the platform's own.
+fn backend_kind(config: &ServerConfig) -> BackendKind {
+    config.backend.unwrap_or(if crate::desktop::windows::target::IS_WINDOWS {
+        BackendKind::Windows
+    } else {
+        BackendKind::Stub
+    })
+}
+
+/// The setup record the `setup` health component reads: `--setup-status`, or the
+/// platform's default ([`desktop::windows::target::default_setup_status`]).
+pub fn setup_status_file(config: &ServerConfig) -> Option<std::path::PathBuf> {
+    config.setup_status.clone().or_else(crate::desktop::windows::target::default_setup_status)
+}
+
 /// Checks the configuration, builds the backend and the state.
 ///
 /// # Errors
@@ -112,7 +135,7 @@ pub fn build_state(config: ServerConfig) -> anyhow::Result<AppState> {
         }
         tracing::warn!(bind = %config.bind, "serving a non-loopback address WITHOUT authentication: anyone who can reach this port can run programs and read files");
     }
-    let desktop: Arc<dyn Desktop> = match config.backend_kind() {
+    let desktop: Arc<dyn Desktop> = match backend_kind(&config) {
         BackendKind::Stub => {
             let scenario = match &config.scenario {
                 Some(path) => {

@@ -1,14 +1,16 @@
-//! `arena-guest`: parses the command line, sets up logging, and serves (the default)
-//! or runs a `service` / `logon-task` subcommand from [`arena_guest::service`], or the
-//! `doctor` ([`arena_guest::doctor`]).
+//! `arena-guest`: parses the command line ([`arena_guest::cli`]), sets up logging, and
+//! serves (the default) or runs a `service` / `logon-task` subcommand from
+//! [`arena_guest::service`], or the `doctor` ([`arena_guest::doctor`]).
+
+#![forbid(unsafe_code)]
 
 use std::net::SocketAddr;
 use std::process::ExitCode;
 
 use clap::Parser;
 
+use arena_guest::cli::{Cli, Command, ServiceCommand};
 use arena_guest::config::{LogFormat, ServerConfig};
-use arena_guest::service::{Cli, Command, ServiceCommand};
 
 fn main() -> ExitCode {
     // The Windows backend's UI Automation worker process (a hidden subcommand).
@@ -52,7 +54,7 @@ fn main() -> ExitCode {
 
 /// `arena-guest doctor`: asks the server running on its port, or builds the backend as
 /// the server would and checks it.
-fn doctor(args: &arena_guest::service::DoctorArgs) -> ExitCode {
+fn doctor(args: &arena_guest::cli::DoctorArgs) -> ExitCode {
     init_tracing(LogFormat::Text, false);
     let token = match arena_guest::resolve_token(&args.serve) {
         Ok(token) => token,

@@ -873,6 +873,14 @@ async fn a_token_is_required_except_for_health() {
         .body(Body::empty())
         .unwrap();
     app.send(right).await.assert_status(StatusCode::OK);
+    // The scheme compares without regard to case (RFC 7235).
+    for scheme in ["bearer", "BEARER"] {
+        let right = Request::get("/v1/screen")
+            .header(header::AUTHORIZATION, format!("{scheme} {TOKEN}"))
+            .body(Body::empty())
+            .unwrap();
+        app.send(right).await.assert_status(StatusCode::OK);
+    }
     let health = app.get("/v1/health").await;
     health.assert_status(StatusCode::OK);
     assert!(health.json::<HealthReport>().auth_required);

@@ -7,9 +7,11 @@
 //! executor all crop through [`crop_padded`], so the same code gives the same
 //! pixels wherever it runs.
 //!
-//! [`encode`] is the one way either side turns pixels into PNG or JPEG bytes: the
-//! guest's screenshot routes and both script hosts' saved screenshots and clipboard
-//! images; JPEG goes through [`crate::fastimg::encode_jpeg`].
+//! [`encode`] is the one PNG encoder and the way to JPEG (through
+//! [`crate::fastimg::encode_jpeg`], which the model-image path of [`crate::fastimg`]
+//! uses too): the guest's screenshot routes, its MCP screenshot, and both script hosts'
+//! saved screenshots and clipboard images. (The host's agents still encode PNG in three
+//! places of their own, which the host's part of issue 28 brings here.)
 
 use image::error::{EncodingError, ImageFormatHint};
 use image::{ImageEncoder, Rgba, RgbaImage};

@@ -1,13 +1,16 @@
-//! The wire vocabulary both sides of the arena speak.
+//! The wire vocabulary both sides of the arena speak, and every decision both sides
+//! share.
 //!
 //! This crate is the only place that derives serde for types that cross the
 //! guest/host boundary: typed input actions, observations (screen, windows,
 //! accessibility), exec requests and results, file operations, the staged
-//! health report and the one error body.
+//! health report and the one error body. Beside the types it holds the rules the
+//! guest and the host must apply alike (key names, command lines, Windows paths,
+//! listing order, image crops and encodings, tokens, the MCP tool table), so that
+//! each is written once.
 //! Its only I/O is on the local file system and environment, where both sides must
-//! behave alike: [`atomic`] writes files, [`ntfs`] lists folders, [`token`] reads a
-//! token file, [`search_path`] looks for a program on `PATH`. It knows nothing of
-//! HTTP, Windows APIs or tokio.
+//! behave alike: [`atomic`] writes files, [`ntfs`] lists folders, [`search_path`] looks
+//! for a program on `PATH`. It knows nothing of HTTP, Windows APIs or tokio.
 //!
 //! # Layout
 //!
@@ -21,9 +24,13 @@
 //! - [`health`]: the staged readiness report; [`doctor`]: the end-to-end capability report.
 //! - [`error`]: the error body every native route answers with.
 //! - [`window_list`]: the window list and title the model is shown, as upstream builds them.
-//! - [`cmdline`], [`ntfs`], [`imaging`], [`atomic`], [`close_all`], [`token`], [`a11y_xml`]:
+//! - [`mcp_tools`]: the desktop tools both MCP servers offer, each call checked into an action.
+//! - [`token`]: a bearer token parsed from a token file's text or an option, and the one
+//!   check of an `Authorization` header against it, which every server uses.
+//! - [`ntpath`]: Python 3.10's Windows path rules (`os.path` on upstream's guest).
+//! - [`cmdline`], [`ntfs`], [`imaging`], [`atomic`], [`close_all`], [`a11y_xml`]:
 //!   decisions both sides share (command lines, listing order, crop and encode, atomic
-//!   writes, which windows a reset spares, bearer tokens, upstream's accessibility XML).
+//!   writes, which windows a reset spares, upstream's accessibility XML).
 //! - [`calendar`] (day counts to dates), [`markup`] (XML/HTML escaping), [`search_path`]
 //!   (the `PATH` lookup): the one copy of each small utility.
 //!
@@ -32,6 +39,8 @@
 //! New fields are `Option` or `#[serde(default)]`, and enums that a newer peer
 //! may extend carry an `Unknown` fallback, so an older host can talk to a newer
 //! guest and the other way round.
+
+#![forbid(unsafe_code)]
 
 pub mod a11y_xml;
 pub mod action;
@@ -53,6 +62,7 @@ pub mod keys;
 pub mod markup;
 pub mod mcp_tools;
 pub mod ntfs;
+pub mod ntpath;
 pub mod observation;
 pub mod registry;
 pub mod search_path;

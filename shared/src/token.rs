@@ -1,5 +1,7 @@
 //! Bearer tokens as both sides read them from a token file or an option: the one
-//! rule, so a token the guest accepts is the token the host sends.
+//! rule, so a token the guest accepts is the token the host sends; and the one check
+//! of a request's `Authorization` header against the token, which every server of the
+//! project (the guest's routes and its MCP endpoint, the host's MCP endpoint) uses.
 //!
 //! A token file holds the token on its first line; a UTF-8 byte-order mark (which
 //! Windows editors and PowerShell's `Out-File` write) and surrounding white space are
@@ -35,6 +37,27 @@ pub fn parse(text: &str) -> Result<String, TokenError> {
     Ok(token.to_owned())
 }
 
+/// Whether an `Authorization` header's value (`None`: no header) carries `token` as
+/// bearer credentials: `Bearer` (the scheme compares without regard to case, RFC 7235
+/// section 2.1), one or more spaces, then the token (RFC 6750 section 2.1), with
+/// surrounding white space ignored. The token is compared in constant time, so how
+/// long a wrong token takes to refuse says nothing of how much of it was right.
+pub fn bearer_matches(authorization: Option<&[u8]>, token: &str) -> bool {
+    use subtle::ConstantTimeEq as _;
+    let Some(value) = authorization else { return false };
+    let value = value.trim_ascii();
+    let scheme = b"bearer";
+    if value.len() <= scheme.len() || !value[..scheme.len()].eq_ignore_ascii_case(scheme) {
+        return false;
+    }
+    let rest = &value[scheme.len()..];
+    if rest.first() != Some(&b' ') {
+        return false;
+    }
+    let given = rest.trim_ascii_start();
+    !token.is_empty() && bool::from(given.ct_eq(token.as_bytes()))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -51,5 +74,31 @@ mod tests {
         check("", Err(TokenError::Empty));
         check("0123456789abcdéf", Err(TokenError::BadCharacter('é', 14)));
         check("0123 456789abcdef", Err(TokenError::BadCharacter(' ', 4)));
+    }
+
+    #[test]
+    fn bearer_credentials_are_checked_as_rfc_6750_writes_them() {
+        let token = "0123456789abcdef0123";
+        let check = |header: Option<&str>| bearer_matches(header.map(str::as_bytes), token);
+        assert!(check(Some("Bearer 0123456789abcdef0123")));
+        // The scheme is case-insensitive; spaces between it and the token, and around, are allowed.
+        assert!(check(Some("bearer 0123456789abcdef0123")));
+        assert!(check(Some("BEARER 0123456789abcdef0123")));
+        assert!(check(Some("bEaReR   0123456789abcdef0123 ")));
+        // A missing header, a wrong token of the same length, another scheme, no space, no token.
+        assert!(!check(None));
+        assert!(!check(Some("Bearer 0123456789abcdef0124")));
+        assert!(!check(Some("Bearer 1123456789abcdef0123")));
+        assert!(!check(Some("Bearer 0123456789abcdef012")));
+        assert!(!check(Some("Bearer 0123456789abcdef01234")));
+        assert!(!check(Some("Basic 0123456789abcdef0123")));
+        assert!(!check(Some("Bearer0123456789abcdef0123")));
+        assert!(!check(Some("Bearer ")));
+        assert!(!check(Some("Bearer")));
+        assert!(!check(Some("")));
+        assert!(!check(Some("0123456789abcdef0123")));
+        // Bytes that are not UTF-8 are just a wrong token; an empty token matches nothing.
+        assert!(!bearer_matches(Some(b"Bearer \xff\xfe"), token));
+        assert!(!bearer_matches(Some(b"Bearer "), ""));
     }
 }

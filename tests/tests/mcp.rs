@@ -1,7 +1,7 @@
 //! `arena run --agent mcp` end to end: the real binary serves MCP, a client
 //! written with the official Rust SDK (`rmcp`) plays two stub tasks through the
 //! tools, a bad argument is a tool error on a session that lives on, the tool
-//! list has the documented names, and a request without the token is refused;
+//! list has the documented names, and the bearer token is checked (refused without it);
 //! and `arena-guest --mcp`, the guest as an MCP server on its own.
 
 #![cfg(unix)]
@@ -102,17 +102,31 @@ const DESKTOP_TOOLS: [&str; 12] = [
     "wait",
 ];
 
-/// Asserts that `url` refuses an MCP request without the token.
-async fn assert_refused_without_token(url: &str) {
-    let refused = reqwest::Client::new()
-        .post(url)
-        .header("Content-Type", "application/json")
-        .header("Accept", "application/json, text/event-stream")
-        .body(r#"{"jsonrpc":"2.0","id":1,"method":"tools/list"}"#)
-        .send()
-        .await
-        .expect("an answer");
-    assert_eq!(refused.status().as_u16(), 401, "no token, no MCP");
+/// Asserts that `url` checks the bearer token as every server of the project does
+/// (`arena_shared::token::bearer_matches`): no header and a wrong token of the right
+/// length are refused with 401; the right token passes with the scheme in any case.
+async fn assert_bearer_checked(url: &str, token: &str) {
+    let status = |authorization: Option<String>| async move {
+        let mut request = reqwest::Client::new()
+            .post(url)
+            .header("Content-Type", "application/json")
+            .header("Accept", "application/json, text/event-stream")
+            .body(r#"{"jsonrpc":"2.0","id":1,"method":"tools/list"}"#);
+        if let Some(value) = authorization {
+            request = request.header("Authorization", value);
+        }
+        request.send().await.expect("an answer").status().as_u16()
+    };
+    assert_eq!(status(None).await, 401, "no token, no MCP");
+    let mut wrong = token.to_owned();
+    let last = if wrong.ends_with('x') { 'y' } else { 'x' };
+    wrong.pop();
+    wrong.push(last);
+    assert_eq!(status(Some(format!("Bearer {wrong}"))).await, 401, "a wrong token of the same length");
+    for scheme in ["bearer", "BEARER"] {
+        let passed = status(Some(format!("{scheme} {token}"))).await;
+        assert_ne!(passed, 401, "the scheme is case-insensitive (RFC 7235): {scheme}");
+    }
 }
 
 async fn tool_names(client: &RunningService<RoleClient, ClientConfig>) -> Vec<String> {
@@ -162,7 +176,7 @@ async fn an_rmcp_client_plays_two_stub_tasks() {
     let (tasks, out) = (two_tasks(tmp.path()), tmp.path().join("out"));
     let (child, url) = start_run(&tasks, &out);
 
-    assert_refused_without_token(&url).await;
+    assert_bearer_checked(&url, TOKEN).await;
 
     let client = connect(&url).await;
     let mut expected = vec!["get_task"];
@@ -267,7 +281,7 @@ async fn the_guest_serves_mcp_behind_its_token() {
         arena_test_support::Served::guest(&["--mcp", "--token", "guest-secret-token-0123"]).expect("arena-guest --mcp");
     let url = format!("{}/mcp", guest.url.trim_end_matches('/'));
 
-    assert_refused_without_token(&url).await;
+    assert_bearer_checked(&url, "guest-secret-token-0123").await;
 
     let client = connect_with(&url, "guest-secret-token-0123").await;
     assert_eq!(tool_names(&client).await, DESKTOP_TOOLS, "the desktop tools, without the task and decision tools");

@@ -13,7 +13,15 @@
 //! - `cfg(windows)`, as an attribute or as the `cfg!(windows)` macro, is written only
 //!   inside folders named `windows/`;
 //! - every source folder and every module a crate root or a folder's `mod.rs` declares
-//!   is named in `ARCHITECTURE.md` (in a code span), so the code map stays whole;
+//!   is named in a code span of its own crate's section of `ARCHITECTURE.md` (the
+//!   `## `<folder>/` (<crate>)` heading and what follows it up to the next `## `), so
+//!   the code map stays whole and a module named only elsewhere does not count;
+//! - no import loop between the top-level modules of a crate: an edge is a `crate::X`
+//!   or `super::X` path (reaching the crate root) in a module's files, comments, test
+//!   modules and test files aside; every strongly connected component of more than one
+//!   module is reported (a loop that is the nature of the thing is one folder module);
+//! - every crate root (`src/lib.rs`, `src/main.rs`, `src/bin/*.rs`) whose crate has no
+//!   `unsafe` code says `#![forbid(unsafe_code)]`, so none creeps in unseen;
 //! - every Rust file under a `src/` folder opens with a `//!` doc;
 //! - docs and comments name no machine paths (`/work/`, `/tmp/`, `/root/`, `/home/`,
 //!   `C:\Users\<someone>` other than the benchmark's `Docker` user or a placeholder);
@@ -31,19 +39,20 @@ fn at(line: usize, rule: &'static str) -> Violation {
     Violation { line, rule }
 }
 
-/// Where the library code lives, and which of it may print.
+/// Where the library code lives (every crate's `src/` but the bench binaries'), and
+/// which of it may print.
 fn is_library_code(path: &str) -> bool {
-    let libraries = ["shared/src/", "guest-server/src/", "host-client/src/", "tests/support/src/"];
     let printing_on_purpose = [
-        // Binaries' entry points report to their user.
+        // Binaries' entry points report to their user; the bench binaries print figures.
         "guest-server/src/main.rs",
-        "guest-server/src/logon_main.rs",
+        "guest-server/launch/src/main.rs",
         "host-client/src/main.rs",
+        "tests/src/",
         // The `arena` command line is the host's user interface.
         "host-client/src/cli/",
     ];
     path.ends_with(".rs")
-        && libraries.iter().any(|p| path.starts_with(p))
+        && path.contains("/src/")
         && !printing_on_purpose.iter().any(|p| path.starts_with(p))
         && !is_test_file(path)
 }
@@ -196,27 +205,382 @@ fn declares_top_level_modules(path: &str) -> bool {
     inside == "lib.rs" || inside == "main.rs" || inside.ends_with("/mod.rs")
 }
 
+/// The folder of the crate a source file belongs to (`guest-server/launch/` for
+/// `guest-server/launch/src/lib.rs`), if it is under a `src/` folder.
+fn crate_folder(path: &str) -> Option<String> {
+    let (folder, _) = path.split_once("/src/")?;
+    Some(format!("{folder}/"))
+}
+
+/// The section of `architecture` about the crate in `folder`: its `## ` heading naming
+/// `` `folder` `` in a code span and the text up to the next `## ` heading.
+fn crate_section<'a>(architecture: &'a str, folder: &str) -> Option<&'a str> {
+    let span = format!("`{folder}`");
+    let mut start = None;
+    let mut offset = 0;
+    for line in architecture.split_inclusive('\n') {
+        if line.starts_with("## ") {
+            if let Some(begin) = start {
+                return Some(&architecture[begin..offset]);
+            }
+            if line.contains(&span) {
+                start = Some(offset);
+            }
+        }
+        offset += line.len();
+    }
+    start.map(|begin| &architecture[begin..])
+}
+
 /// Every module declared in a crate root or a folder's `mod.rs`, and every folder of a
-/// module file, is named in a code span of `architecture`.
+/// module file, is named in a code span of its own crate's section of `architecture`.
 fn modules_in_the_code_map(path: &str, text: &str, architecture: &str) -> Vec<Violation> {
     if !path.ends_with(".rs") || !path.contains("/src/") {
         return Vec::new();
     }
-    let named = code_span_words(architecture);
+    let Some(section) = crate_folder(path).and_then(|folder| crate_section(architecture, &folder)) else {
+        return vec![at(1, "a crate without its section in ARCHITECTURE.md (## `<folder>/` (<crate>))")];
+    };
+    let named = code_span_words(section);
     let mut out = Vec::new();
     if declares_top_level_modules(path) {
         for (n, module) in declared_modules(text) {
             if !named.contains(module) {
-                out.push(at(n, "a module missing from ARCHITECTURE.md (name it in the code map)"));
+                out.push(at(
+                    n,
+                    "a module missing from its crate's section of ARCHITECTURE.md (name it in the code map)",
+                ));
             }
         }
     }
     let (_, inside) = path.split_once("/src/").unwrap_or(("", ""));
     let folders: Vec<&str> = inside.split('/').collect();
     if folders[..folders.len() - 1].iter().any(|folder| !folder.is_empty() && !named.contains(folder)) {
-        out.push(at(1, "a source folder missing from ARCHITECTURE.md (name it in the code map)"));
+        out.push(at(
+            1,
+            "a source folder missing from its crate's section of ARCHITECTURE.md (name it in the code map)",
+        ));
     }
     out
+}
+
+// ----- crates as module trees: import loops and `forbid(unsafe_code)` -----
+
+/// A crate's files, by path relative to the repository, and their texts.
+type Files<'a> = std::collections::BTreeMap<&'a str, &'a str>;
+
+/// The crate roots among `files`: `src/lib.rs`, `src/main.rs`, `src/bin/NAME.rs` and
+/// `src/bin/NAME/main.rs`.
+fn crate_roots<'a>(files: &Files<'a>) -> Vec<&'a str> {
+    files
+        .keys()
+        .copied()
+        .filter(|path| {
+            let Some((_, inside)) = path.split_once("/src/") else { return false };
+            let bin = inside.strip_prefix("bin/");
+            inside == "lib.rs"
+                || inside == "main.rs"
+                || bin.is_some_and(|b| (b.ends_with(".rs") && !b.contains('/')) || b.ends_with("/main.rs"))
+        })
+        .collect()
+}
+
+/// The folder a module file's children live in: `src/` for a crate root or a
+/// `mod.rs`, `src/a/` for `src/a.rs`.
+fn children_folder(path: &str, is_root: bool) -> String {
+    let (dir, name) = path.rsplit_once('/').unwrap_or(("", path));
+    if is_root || name == "mod.rs" {
+        format!("{dir}/")
+    } else {
+        format!("{dir}/{}/", name.trim_end_matches(".rs"))
+    }
+}
+
+/// The modules `text` declares (`mod NAME;`, test modules aside) with the files they
+/// are in, `#[path]` attributes followed.
+fn declared_module_files<'a>(path: &str, text: &str, is_root: bool, files: &Files<'a>) -> Vec<(String, &'a str)> {
+    let mut out = Vec::new();
+    let lines: Vec<&str> = text.lines().collect();
+    for (n, name) in declared_modules(text) {
+        let attribute = lines.get(n.wrapping_sub(2)).map(|l| l.trim()).unwrap_or("");
+        let candidates = match attribute.strip_prefix("#[path = \"").and_then(|a| a.strip_suffix("\"]")) {
+            Some(relative) => {
+                let dir = path.rsplit_once('/').map_or("", |(d, _)| d);
+                vec![normalize(&format!("{dir}/{relative}"))]
+            }
+            None => {
+                let folder = children_folder(path, is_root);
+                vec![format!("{folder}{name}.rs"), format!("{folder}{name}/mod.rs")]
+            }
+        };
+        if let Some(found) = candidates.iter().find_map(|c| files.get_key_value(c.as_str()).map(|(k, _)| *k)) {
+            out.push((name.to_owned(), found));
+        }
+    }
+    out
+}
+
+/// `path` with its `..` and `.` components resolved.
+fn normalize(path: &str) -> String {
+    let mut parts: Vec<&str> = Vec::new();
+    for part in path.split('/') {
+        match part {
+            ".." => {
+                parts.pop();
+            }
+            "." | "" => {}
+            other => parts.push(other),
+        }
+    }
+    parts.join("/")
+}
+
+/// The top-level modules of the crate rooted at `root`, each with all its files and
+/// their depth below the crate root (1 for the module's own file).
+fn top_level_modules<'a>(root: &str, files: &Files<'a>) -> Vec<(String, Vec<(&'a str, usize)>)> {
+    let Some(text) = files.get(root) else { return Vec::new() };
+    declared_module_files(root, text, true, files)
+        .into_iter()
+        .map(|(name, file)| {
+            let mut all = vec![(file, 1)];
+            let mut i = 0;
+            while i < all.len() {
+                let (path, depth) = all[i];
+                let children = declared_module_files(path, files[path], false, files);
+                all.extend(children.into_iter().map(|(_, child)| (child, depth + 1)));
+                i += 1;
+            }
+            (name, all)
+        })
+        .collect()
+}
+
+/// `text` without comments, string contents and `#[cfg(test)]` modules.
+fn code_without_tests(text: &str) -> String {
+    let mut out = String::with_capacity(text.len());
+    let mut lines = text.lines().map(|l| strip_strings(strip_comment(l))).peekable();
+    while let Some(line) = lines.next() {
+        if line.trim() == "#[cfg(test)]" {
+            let next = lines.peek().map(|l| l.trim().to_owned()).unwrap_or_default();
+            let is_module =
+                ["mod ", "pub mod ", "pub(crate) mod ", "pub(super) mod "].iter().any(|p| next.starts_with(p));
+            if is_module {
+                let mut depth = 0i64;
+                let mut opened = false;
+                for line in lines.by_ref() {
+                    depth += line.matches('{').count() as i64 - line.matches('}').count() as i64;
+                    opened |= line.contains('{');
+                    if (opened && depth <= 0) || (!opened && line.trim_end().ends_with(';')) {
+                        break;
+                    }
+                }
+                continue;
+            }
+        }
+        out.push_str(&line);
+        out.push('\n');
+    }
+    out
+}
+
+/// The first names of the paths in a `{...}` group starting at `group` (just after
+/// its `{`), at its own level only.
+fn group_heads(group: &str) -> Vec<&str> {
+    let mut heads = Vec::new();
+    let mut depth = 0;
+    let mut expect_head = true;
+    let mut start = None;
+    for (i, c) in group.char_indices() {
+        let word = c.is_alphanumeric() || c == '_';
+        if word {
+            if start.is_none() && expect_head && depth == 0 {
+                start = Some(i);
+            }
+            continue;
+        }
+        if let Some(s) = start.take() {
+            heads.push(&group[s..i]);
+        }
+        match c {
+            '{' => depth += 1,
+            '}' if depth == 0 => break,
+            '}' => depth -= 1,
+            ',' if depth == 0 => {
+                expect_head = true;
+                continue;
+            }
+            _ => {}
+        }
+        if !c.is_whitespace() {
+            expect_head = false;
+        }
+    }
+    heads
+}
+
+/// The top-level modules a file at `depth` below the crate root names: `crate::X`,
+/// `crate::{X, Y}`, and `super::` chains that reach the crate root.
+fn named_top_level(code: &str, depth: usize) -> Vec<&str> {
+    let mut out = Vec::new();
+    let word_start = |i: usize| i == 0 || !code[..i].ends_with(|c: char| c.is_alphanumeric() || c == '_' || c == ':');
+    let mut after_root = Vec::new();
+    for (i, _) in code.match_indices("crate::") {
+        if word_start(i) {
+            after_root.push(i + "crate::".len());
+        }
+    }
+    for (i, _) in code.match_indices("super::") {
+        if !word_start(i) {
+            continue;
+        }
+        let mut end = i;
+        let mut levels = 0;
+        while code[end..].starts_with("super::") {
+            end += "super::".len();
+            levels += 1;
+        }
+        if levels == depth {
+            after_root.push(end);
+        }
+    }
+    for start in after_root {
+        let rest = &code[start..];
+        if let Some(group) = rest.strip_prefix('{') {
+            out.extend(group_heads(group));
+        } else {
+            let len = rest.find(|c: char| !(c.is_alphanumeric() || c == '_')).unwrap_or(rest.len());
+            if len > 0 {
+                out.push(&rest[..len]);
+            }
+        }
+    }
+    out
+}
+
+/// The strongly connected components of more than one node (Tarjan's algorithm),
+/// each sorted, in a stable order.
+fn loops(edges: &std::collections::BTreeMap<String, std::collections::BTreeSet<String>>) -> Vec<Vec<String>> {
+    struct Walk<'a> {
+        edges: &'a std::collections::BTreeMap<String, std::collections::BTreeSet<String>>,
+        index: std::collections::HashMap<&'a str, usize>,
+        low: std::collections::HashMap<&'a str, usize>,
+        stack: Vec<&'a str>,
+        on_stack: std::collections::HashSet<&'a str>,
+        found: Vec<Vec<String>>,
+    }
+    impl<'a> Walk<'a> {
+        fn visit(&mut self, v: &'a str) {
+            let n = self.index.len();
+            self.index.insert(v, n);
+            self.low.insert(v, n);
+            self.stack.push(v);
+            self.on_stack.insert(v);
+            for w in self.edges.get(v).into_iter().flatten() {
+                let w = w.as_str();
+                if !self.index.contains_key(w) {
+                    self.visit(w);
+                    let low = self.low[v].min(self.low[w]);
+                    self.low.insert(v, low);
+                } else if self.on_stack.contains(w) {
+                    let low = self.low[v].min(self.index[w]);
+                    self.low.insert(v, low);
+                }
+            }
+            if self.low[v] == self.index[v] {
+                let mut component = Vec::new();
+                while let Some(w) = self.stack.pop() {
+                    self.on_stack.remove(w);
+                    component.push(w.to_owned());
+                    if w == v {
+                        break;
+                    }
+                }
+                if component.len() > 1 {
+                    component.sort();
+                    self.found.push(component);
+                }
+            }
+        }
+    }
+    let mut walk = Walk {
+        edges,
+        index: Default::default(),
+        low: Default::default(),
+        stack: Vec::new(),
+        on_stack: Default::default(),
+        found: Vec::new(),
+    };
+    for v in edges.keys() {
+        if !walk.index.contains_key(v.as_str()) {
+            walk.visit(v);
+        }
+    }
+    walk.found.sort();
+    walk.found
+}
+
+/// The import loops between the top-level modules of the crate rooted at `root`, each
+/// as `a -> b -> ... ` lines.
+fn import_loops(root: &str, files: &Files<'_>) -> Vec<String> {
+    let modules = top_level_modules(root, files);
+    let names: std::collections::BTreeSet<&str> = modules.iter().map(|(name, _)| name.as_str()).collect();
+    let mut edges: std::collections::BTreeMap<String, std::collections::BTreeSet<String>> = Default::default();
+    for (name, module_files) in &modules {
+        let targets = edges.entry(name.clone()).or_default();
+        for (path, depth) in module_files {
+            if is_test_file(path) || path.contains("/tests/") {
+                continue;
+            }
+            let code = code_without_tests(files[path]);
+            for target in named_top_level(&code, *depth) {
+                if target != name && names.contains(target) {
+                    targets.insert(target.to_owned());
+                }
+            }
+        }
+    }
+    loops(&edges)
+        .into_iter()
+        .map(|component| {
+            let inside = |m: &String| {
+                let to: Vec<&str> = edges[m].iter().filter(|t| component.contains(t)).map(String::as_str).collect();
+                format!("{m} -> {}", to.join(", "))
+            };
+            format!(
+                "import loop between {}: {}",
+                component.join(", "),
+                component.iter().map(inside).collect::<Vec<_>>().join("; ")
+            )
+        })
+        .collect()
+}
+
+/// Whether `text` has `unsafe` code (a block, function, impl or extern block).
+fn has_unsafe(text: &str) -> bool {
+    text.lines().map(|l| strip_strings(strip_comment(l))).any(|line| {
+        line.match_indices("unsafe").any(|(pos, _)| {
+            let word_start = pos == 0 || !line[..pos].ends_with(|c: char| c.is_alphanumeric() || c == '_');
+            let after = line[pos + "unsafe".len()..].trim_start();
+            word_start
+                && (after.starts_with('{')
+                    || after.starts_with("fn ")
+                    || after.starts_with("impl")
+                    || after.starts_with("extern"))
+        })
+    })
+}
+
+/// A crate root whose crate has no `unsafe` code and that does not forbid it.
+fn forbids_unsafe_where_none(root: &str, files: &Files<'_>) -> Option<&'static str> {
+    let text = files.get(root)?;
+    let crate_files = std::iter::once(*text)
+        .chain(top_level_modules(root, files).into_iter().flat_map(|(_, fs)| fs.into_iter().map(|(p, _)| files[p])));
+    let mut any_unsafe = false;
+    for file in crate_files {
+        any_unsafe |= has_unsafe(file);
+    }
+    let forbids = text.lines().any(|l| l.trim() == "#![forbid(unsafe_code)]");
+    (!any_unsafe && !forbids).then_some("a crate without unsafe code whose root does not say #![forbid(unsafe_code)]")
 }
 
 fn opens_with_module_doc(path: &str, text: &str) -> Vec<Violation> {
@@ -354,6 +718,16 @@ fn the_repository_is_tidy() {
         let mapped = modules_in_the_code_map(file, &text, &architecture);
         problems.extend(mapped.into_iter().map(|v| format!("{file}:{}: {}", v.line, v.rule)));
     }
+    let sources: Vec<(String, String)> = files
+        .iter()
+        .filter(|f| f.ends_with(".rs"))
+        .filter_map(|f| Some((f.clone(), std::fs::read_to_string(root.join(f)).ok()?)))
+        .collect();
+    let sources: Files<'_> = sources.iter().map(|(p, t)| (p.as_str(), t.as_str())).collect();
+    for crate_root in crate_roots(&sources) {
+        problems.extend(import_loops(crate_root, &sources).into_iter().map(|l| format!("{crate_root}: {l}")));
+        problems.extend(forbids_unsafe_where_none(crate_root, &sources).map(|rule| format!("{crate_root}:1: {rule}")));
+    }
     assert!(checked > 100, "only {checked} files were checked");
     assert!(problems.is_empty(), "{} tidy problems:\n{}", problems.len(), problems.join("\n"));
 }
@@ -404,20 +778,95 @@ fn cfg_windows_belongs_in_windows_folders() {
 }
 
 #[test]
-fn modules_and_folders_must_be_in_the_code_map() {
-    let architecture =
-        "| `shared/` | `action`, `script::{host, compose}` |\n| `desktop/stub/` | the stub |\nnot code: missing\n";
+fn modules_and_folders_must_be_in_their_crates_section() {
+    let architecture = "# Map\n\nIntro naming `elsewhere` and `missing`.\n\n\
+        ## `shared/` (arena-shared)\n\n| `action`, `script::{host, compose}` |\n| `desktop/stub/` | the stub |\nnot code: missing\n\n\
+        ## `guest-server/` (arena-guest)\n\n| `desktop/`, `stub/`, `elsewhere` |\n\n\
+        ## `tests/` (arena-tests) and `tests/support/` (arena-test-support)\n\n| `guest` |\n";
     let root = "//! The crate.\npub mod action;\nmod missing;\npub(crate) mod script;\n#[cfg(test)]\nmod helpers;\nmod tests;\n";
     assert_eq!(lines_of(modules_in_the_code_map("shared/src/lib.rs", root, architecture)), [3]);
     let folder = "//! A folder.\nmod host;\nmod compose;\nmod extra;\n";
     assert_eq!(lines_of(modules_in_the_code_map("shared/src/script/mod.rs", folder, architecture)), [4]);
+    // Named in another crate's section, or outside any section: not named.
+    let other = "//! The crate.\nmod elsewhere;\nmod action;\n";
+    assert_eq!(lines_of(modules_in_the_code_map("shared/src/lib.rs", other, architecture)), [2]);
+    assert_eq!(lines_of(modules_in_the_code_map("guest-server/src/lib.rs", other, architecture)), [3]);
+    // A crate whose section's heading names it with another crate.
+    assert!(modules_in_the_code_map("tests/support/src/lib.rs", "//! x\nmod guest;\n", architecture).is_empty());
     // A file's folders must be named too; a file that is not a root declares nothing checked.
     assert_eq!(
         lines_of(modules_in_the_code_map("guest-server/src/desktop/stub/a.rs", "mod z;\n", architecture)),
         Vec::<usize>::new()
     );
     assert_eq!(lines_of(modules_in_the_code_map("guest-server/src/unmapped/a.rs", "", architecture)), [1]);
+    // `shared/script/` is another crate than `shared/`, and has no section here.
+    let found = modules_in_the_code_map("shared/script/src/lib.rs", root, architecture);
+    assert_eq!(lines_of(found.clone()), [1]);
+    assert!(found[0].rule.contains("without its section"));
     assert!(modules_in_the_code_map("docs/x.md", root, architecture).is_empty());
+}
+
+fn files_of<'a>(files: &'a [(&'a str, &'a str)]) -> Files<'a> {
+    files.iter().copied().collect()
+}
+
+#[test]
+fn import_loops_between_top_level_modules_are_caught() {
+    let crate_files = [
+        ("x/src/lib.rs", "//! Root.\npub mod a;\nmod b;\nmod c;\nmod d;\nmod e;\n#[cfg(test)]\nmod tests;\n"),
+        // a -> b through a grouped `use` over two lines.
+        ("x/src/a.rs", "//! A.\nuse crate::{\n    b::Thing,\n    e,\n};\n"),
+        // b -> a through `super::` in a folder module's own file.
+        ("x/src/b/mod.rs", "//! B.\nmod inner;\npub(crate) use super::a::f;\n"),
+        // c -> d from a child file, two levels down: `super::super::d`.
+        ("x/src/c.rs", "//! C.\nmod deep;\n"),
+        ("x/src/c/deep.rs", "//! Deep.\nfn g() { super::super::d::h() }\n"),
+        // d -> c in a comment, a string and a test module only: no edge.
+        (
+            "x/src/d.rs",
+            "//! D, which never says crate::c.\n// crate::c::x\nconst S: &str = \"crate::c\";\n\
+             #[cfg(test)]\nmod tests {\n    use crate::c;\n}\npub fn h() {}\n",
+        ),
+        // e -> c -> d: no loop; a file named tests.rs is test code.
+        ("x/src/e.rs", "//! E.\nuse crate::c as _;\n"),
+        ("x/src/b/inner.rs", "//! Inner: `super::` is b here.\nuse super::Thing;\n"),
+        ("x/src/tests.rs", "use crate::{a, b, c, d, e};\n"),
+    ];
+    let files = files_of(&crate_files);
+    let found = import_loops("x/src/lib.rs", &files);
+    assert_eq!(found, ["import loop between a, b: a -> b; b -> a"], "{found:?}");
+    // Three modules in a ring, with a `#[path]` module.
+    let ring = [
+        ("y/src/main.rs", "//! Bin.\nmod p;\n#[path = \"q_impl.rs\"]\nmod q;\nmod r;\n"),
+        ("y/src/p.rs", "//! P.\nuse crate::q;\n"),
+        ("y/src/q_impl.rs", "//! Q.\nuse crate::r::x;\n"),
+        ("y/src/r.rs", "//! R.\nuse super::p;\n"),
+    ];
+    let found = import_loops("y/src/main.rs", &files_of(&ring));
+    assert_eq!(found, ["import loop between p, q, r: p -> q; q -> r; r -> p"], "{found:?}");
+    assert_eq!(crate_roots(&files_of(&ring)), ["y/src/main.rs"]);
+}
+
+#[test]
+fn crates_without_unsafe_code_forbid_it() {
+    let safe =
+        [("s/src/lib.rs", "//! Safe.\nmod m;\n"), ("s/src/m.rs", "//! M.\n// unsafe { in a comment }\nfn f() {}\n")];
+    let found = forbids_unsafe_where_none("s/src/lib.rs", &files_of(&safe));
+    assert!(found.is_some_and(|rule| rule.contains("forbid(unsafe_code)")));
+    let forbidden = [("s/src/lib.rs", "//! Safe.\n\n#![forbid(unsafe_code)]\nmod m;\n"), ("s/src/m.rs", "//! M.\n")];
+    assert_eq!(forbids_unsafe_where_none("s/src/lib.rs", &files_of(&forbidden)), None);
+    // Unsafe code in a module (a test module counts) excuses the root.
+    let not_safe = [
+        ("u/src/lib.rs", "//! Unsafe inside.\nmod m;\n"),
+        (
+            "u/src/m.rs",
+            "//! M.\n#[cfg(test)]\nmod tests {\n    // SAFETY: none needed.\n    fn f() { unsafe { g() } }\n}\n",
+        ),
+    ];
+    assert_eq!(forbids_unsafe_where_none("u/src/lib.rs", &files_of(&not_safe)), None);
+    let bins = [("t/src/bin/bench.rs", "//! A bench.\nfn main() {}\n"), ("t/src/bin/other/main.rs", "//! Other.\n")];
+    assert_eq!(crate_roots(&files_of(&bins)), ["t/src/bin/bench.rs", "t/src/bin/other/main.rs"]);
+    assert!(forbids_unsafe_where_none("t/src/bin/bench.rs", &files_of(&bins)).is_some());
 }
 
 #[test]

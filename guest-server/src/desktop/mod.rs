@@ -30,48 +30,9 @@ use arena_shared::health::Component;
 use arena_shared::observation::{A11yBackend, A11yTree, ScreenInfo, TreeBudget, WindowInfo};
 use arena_shared::registry::RegistryValue;
 
-/// What went wrong in a backend call. The same variants on every platform.
-#[derive(Debug, thiserror::Error)]
-#[non_exhaustive]
-pub enum DesktopError {
-    /// The caller asked for something malformed or impossible; the message says what.
-    #[error("{0}")]
-    InvalidInput(String),
-    /// A path, window, key or value does not exist.
-    #[error("{0}")]
-    NotFound(String),
-    /// The thing exists and may not be touched.
-    #[error("{0}")]
-    PermissionDenied(String),
-    /// The thing to be created exists already.
-    #[error("{0}")]
-    AlreadyExists(String),
-    /// This backend cannot do this.
-    #[error("{0}")]
-    Unsupported(String),
-    /// The call did not finish within its deadline.
-    #[error("{op} timed out after {ms} ms")]
-    Timeout { op: &'static str, ms: u64 },
-    /// The guest began shutting down and stopped the call.
-    #[error("{op} was stopped: the guest is shutting down")]
-    ShuttingDown { op: &'static str },
-    /// The operating system refused; `message` carries its words.
-    #[error("{op}: {message}")]
-    Os { op: &'static str, message: String },
-}
-
-impl DesktopError {
-    /// Maps an I/O error about `what` (usually a path) onto the closest variant.
-    pub fn io(op: &'static str, what: &str, err: std::io::Error) -> DesktopError {
-        use std::io::ErrorKind;
-        match err.kind() {
-            ErrorKind::NotFound => DesktopError::NotFound(format!("{what}: not found")),
-            ErrorKind::PermissionDenied => DesktopError::PermissionDenied(format!("{what}: permission denied")),
-            ErrorKind::AlreadyExists => DesktopError::AlreadyExists(format!("{what}: already exists")),
-            _ => DesktopError::Os { op, message: format!("{what}: {err}") },
-        }
-    }
-}
+/// What went wrong in a backend call (defined beside the answers it becomes, so that
+/// `error` needs nothing from this module).
+pub use crate::error::DesktopError;
 
 /// Result alias for backend calls.
 pub type DesktopResult<T> = Result<T, DesktopError>;

@@ -5,23 +5,19 @@
 //!
 //! The tools are the desktop tools of `arena_shared::mcp_tools` (the same names
 //! and arguments as the host's benchmark endpoint), without `get_task`, `done`
-//! and `fail`. Each calls the [`Desktop`] through [`crate::call::blocking`], as
-//! the native routes do; `run_python` runs in the shared interpreter.
+//! and `fail`; the handler, the tool table and the result shapes are `arena_mcp`'s,
+//! which the host's endpoint shares. Each tool calls the
+//! [`Desktop`](crate::desktop::Desktop) through [`crate::call::blocking`], as the
+//! native routes do; `run_python` runs in the shared interpreter.
 
-use std::borrow::Cow;
-use std::sync::Arc;
 use std::time::{Duration, Instant};
 
+use arena_mcp::{image_png, text, tool_error, Server, ToolServer};
 use base64::Engine as _;
-use rmcp::model::{
-    CallToolRequestParams, CallToolResponse, CallToolResult, ContentBlock, Implementation, ListToolsResult,
-    PaginatedRequestParams, ProtocolVersion, ServerCapabilities, ServerConfig, Tool,
-};
-use rmcp::service::RequestContext;
+use rmcp::model::{CallToolRequestParams, CallToolResponse};
 use rmcp::transport::streamable_http_server::session::local::LocalSessionManager;
-use rmcp::transport::streamable_http_server::{StreamableHttpServerConfig, StreamableHttpService};
-use rmcp::{ErrorData, RoleServer, ServerHandler};
-use serde_json::{json, Value};
+use rmcp::transport::streamable_http_server::StreamableHttpService;
+use serde_json::json;
 
 use arena_script::{self as script, ComputerState, Globals};
 use arena_shared::action::Action;
@@ -33,18 +29,12 @@ use crate::desktop::DesktopError;
 use crate::script_host::DesktopHost;
 use crate::state::AppState;
 
-/// The newest MCP revision served (sessions, as the host's endpoint).
-const MAX_PROTOCOL: ProtocolVersion = ProtocolVersion::V_2025_11_25;
-
 /// The `/mcp` service: one [`GuestMcp`] per session. rmcp's own `Host` check
 /// is off because [`crate::auth::guard`] in front of it already makes that
 /// decision for every route (loopback names, `--allow-host`).
-pub fn service(state: AppState) -> StreamableHttpService<GuestMcp, LocalSessionManager> {
-    let config = StreamableHttpServerConfig::default()
-        .with_sse_keep_alive(Some(Duration::from_secs(15)))
-        .disable_allowed_hosts()
-        .enforce_origin_validation();
-    StreamableHttpService::new(move || Ok(GuestMcp { state: state.clone() }), Default::default(), config)
+pub fn service(state: AppState) -> StreamableHttpService<Server<GuestMcp>, LocalSessionManager> {
+    let config = arena_mcp::http_config().disable_allowed_hosts();
+    StreamableHttpService::new(move || Ok(Server(GuestMcp { state: state.clone() })), Default::default(), config)
 }
 
 /// One MCP session over the guest's desktop.
@@ -53,20 +43,13 @@ pub struct GuestMcp {
     state: AppState,
 }
 
-fn text(text: impl Into<String>) -> CallToolResponse {
-    CallToolResult::success(vec![ContentBlock::text(text)]).into()
-}
-
-fn tool_error(message: impl Into<String>) -> CallToolResponse {
-    CallToolResult::error(vec![ContentBlock::text(message)]).into()
-}
-
 fn failed(tool: &str, err: &DesktopError) -> CallToolResponse {
     tool_error(format!("{tool}: {err}"))
 }
 
 impl GuestMcp {
-    async fn call(&self, request: CallToolRequestParams) -> CallToolResponse {
+    /// One tool call on this machine's desktop.
+    async fn answer(&self, request: CallToolRequestParams) -> CallToolResponse {
         let tool = request.name.to_string();
         let desktop = &self.state.desktop;
         let timeout = self.state.call_timeout();
@@ -87,10 +70,7 @@ impl GuestMcp {
                 })
                 .await;
                 match png {
-                    Ok(png) => {
-                        let b64 = base64::engine::general_purpose::STANDARD.encode(png);
-                        CallToolResult::success(vec![ContentBlock::image(b64, "image/png")]).into()
-                    }
+                    Ok(png) => image_png(base64::engine::general_purpose::STANDARD.encode(png)),
                     Err(err) => failed(&tool, &err),
                 }
             }
@@ -169,40 +149,14 @@ impl GuestMcp {
     }
 }
 
-impl ServerHandler for GuestMcp {
-    fn get_info(&self) -> ServerConfig {
-        ServerConfig::new(ServerCapabilities::builder().enable_tools().build())
-            .with_protocol_version(MAX_PROTOCOL)
-            .with_server_info(Implementation::new("arena-guest", env!("CARGO_PKG_VERSION")))
-            .with_instructions(
-                "The desktop of this machine: screenshot, accessibility tree, windows, mouse and keyboard.",
-            )
-    }
+impl ToolServer for GuestMcp {
+    const NAME: &'static str = "arena-guest";
+    const VERSION: &'static str = env!("CARGO_PKG_VERSION");
+    const INSTRUCTIONS: &'static str =
+        "The desktop of this machine: screenshot, accessibility tree, windows, mouse and keyboard.";
+    const WITH_TASK: bool = false;
 
-    fn supported_protocol_versions(&self) -> Cow<'static, [ProtocolVersion]> {
-        Cow::Borrowed(ProtocolVersion::known_up_to(&MAX_PROTOCOL))
-    }
-
-    async fn list_tools(
-        &self,
-        _request: Option<PaginatedRequestParams>,
-        _context: RequestContext<RoleServer>,
-    ) -> Result<ListToolsResult, ErrorData> {
-        let tools = mcp_tools::tool_list(false)
-            .into_iter()
-            .filter_map(|(name, description, schema)| match schema {
-                Value::Object(schema) => Some(Tool::new(name, description, Arc::new(schema))),
-                _ => None,
-            })
-            .collect();
-        Ok(ListToolsResult::with_all_items(tools))
-    }
-
-    async fn call_tool(
-        &self,
-        request: CallToolRequestParams,
-        _context: RequestContext<RoleServer>,
-    ) -> Result<CallToolResponse, ErrorData> {
-        Ok(self.call(request).await)
+    async fn call(&self, request: CallToolRequestParams) -> CallToolResponse {
+        self.answer(request).await
     }
 }

@@ -21,6 +21,7 @@ use arena_shared::eval::{
     SortedByModifiedQuery, TimerQuery, WorldClockQuery,
 };
 use arena_shared::files::KnownFolder;
+use arena_shared::ntpath;
 use arena_shared::observation::{A11yBackend, A11yTree, TreeBudget};
 
 use crate::call::blocking;
@@ -54,7 +55,7 @@ fn non_empty(field: &str, value: &str) -> Result<(), ApiError> {
 
 /// A request path with `~` and `%VAR%` expanded, as every native route takes paths.
 fn expand(d: &dyn Desktop, path: &str) -> String {
-    paths::expand(path, &|name| d.env_var(name))
+    paths::expand(path, &mut |name| d.env_var(name))
 }
 
 /// The foreground window's UIA tree, walked within upstream's budget.
@@ -79,7 +80,7 @@ async fn is_details_view(
         Ok(items
             .iter()
             .filter(|n| n.as_str() == "Header")
-            .any(|name| !logic::guest_exists(d, &paths::join(&folder, name))))
+            .any(|name| !logic::guest_exists(d, &ntpath::join(&[&folder, name]))))
     })
     .await?;
     Ok(if details {
@@ -106,7 +107,7 @@ async fn are_files_sorted_by_modified_time(
         let mut names = Vec::new();
         let mut stats = Vec::new();
         for name in items {
-            let guest = paths::join(&folder, &name);
+            let guest = ntpath::join(&[&folder, &name]);
             // Items that are not in the folder (the column header, group headings) are skipped, as upstream does.
             let Some(meta) = d.map_path(&guest).ok().and_then(|local| std::fs::metadata(local).ok()) else {
                 continue;
@@ -238,7 +239,7 @@ async fn library_folders(
             Some(dir) => dir,
             None => d.known_folder(KnownFolder::AppData)?,
         };
-        let guest = paths::join(&appdata, &format!("Microsoft\\Windows\\Libraries\\{name}.library-ms"));
+        let guest = ntpath::join(&[&appdata, &format!("Microsoft\\Windows\\Libraries\\{name}.library-ms")]);
         let bytes = d.map_path(&guest).ok().and_then(|local| std::fs::read(local).ok());
         Ok(bytes.map(|bytes| (guest, logic::decode_xml_text(&bytes))))
     })

@@ -74,7 +74,7 @@ async fn exec(
     // The program may drive the keyboard and mouse as agent code does.
     let _input = state.input_share().await;
     let output = blocking(&state.desktop, "run", deadline, move |d| {
-        let cwd = cwd.map(|cwd| paths::expand(&cwd, &|name| d.env_var(name)));
+        let cwd = cwd.map(|cwd| paths::expand(&cwd, &mut |name| d.env_var(name)));
         let limits = ExecLimits { timeout_ms, max_output_bytes, cwd, stdin: stdin.map(String::into_bytes) };
         d.run(&command, &limits)
     })

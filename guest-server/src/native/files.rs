@@ -74,7 +74,7 @@ fn locate(d: &dyn Desktop, path: &str) -> Result<Located, ApiError> {
     if path.trim().is_empty() {
         return Err(ApiError::BadRequest("path must not be empty".into()));
     }
-    let guest = paths::expand(path, &|name| d.env_var(name));
+    let guest = paths::expand(path, &mut |name| d.env_var(name));
     let local = d.map_path(&guest)?;
     Ok(Located { guest, local })
 }

@@ -92,7 +92,7 @@ async fn fresh_report(state: &AppState) -> HealthReport {
 async fn probe(state: &AppState, component: Component) -> ComponentHealth {
     let started = Instant::now();
     if component == Component::Setup {
-        let (ok, detail) = setup_state(state.config.setup_status_file().as_deref());
+        let (ok, detail) = setup_state(crate::setup_status_file(&state.config).as_deref());
         return ComponentHealth { component, ok, detail, elapsed_ms: millis(started.elapsed()) };
     }
     let res = blocking(&state.desktop, "probe", PROBE_DEADLINE, move |d| d.probe(component)).await;

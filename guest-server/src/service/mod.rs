@@ -1,171 +1,34 @@
-//! The command line of `arena-guest` beyond serving: the `service` and `logon-task`
-//! subcommands, and the platform-neutral parts of running the server in the user's
-//! session from a Windows service or a logon task.
+//! The `service` and `logon-task` subcommands of `arena-guest`, and the
+//! platform-neutral parts of running the server in the user's session from a Windows
+//! service or a logon task.
 //!
-//! What is here: the clap definitions ([`Cli`]), the checks on the serve options a
-//! service or task passes on, the command lines the supervisor and the logon task run
-//! (quoted with [`arena_shared::cmdline::list2cmdline`]), the logon task's definition
-//! ([`task_xml`]) and the `schtasks.exe` arguments that register it, where the logon
-//! task's launcher ([`LAUNCHER_EXE`], a binary of its own) and the server find each
-//! other, the worker's relaunch backoff, the log folder and log rotation, and the
-//! worker's stop signal (its standard input closing). All of it is tested natively.
+//! What is here: the command lines the supervisor and the logon task run (quoted with
+//! [`arena_shared::cmdline::list2cmdline`]), the logon task's definition ([`task_xml`])
+//! and the `schtasks.exe` arguments that register it, which user token the worker gets,
+//! the worker's stop signal (its standard input closing) and the supervisor's decisions
+//! ([`supervisor_step`]). All of it is tested natively. The serve options' checks, the
+//! exes' names, the restart backoff and the logs are `arena_guest_launch`'s, which the
+//! logon task's launcher (a binary of that crate) shares; the subcommands' clap
+//! definitions are [`crate::cli`].
 //!
-//! The supervisor's decisions ([`supervisor_step`]) are here too.
-//!
-//! What is not: the Service Control Manager, tokens and `CreateProcessAsUserW`, and
-//! the logon task's launcher loop; those are FFI glue in
-//! [`windows`] (compiled for Windows only), which follows [`supervisor_step`]. On other platforms [`execute_service`] answers
-//! [`ServiceCliError::OnlyOnWindows`].
-//! The service is not part of a desktop backend: it starts the server, whose
-//! backend then drives the desktop.
+//! What is not: the Service Control Manager, tokens and `CreateProcessAsUserW`; those
+//! are FFI glue in [`windows`] (compiled for Windows only), which follows
+//! [`supervisor_step`]. On other platforms [`execute_service`] answers
+//! [`ServiceCliError::OnlyOnWindows`]. The service is not part of a desktop backend:
+//! it starts the server, whose backend then drives the desktop.
 
 pub mod task_xml;
 pub mod windows;
 
 use std::path::{Path, PathBuf};
-use std::time::Duration;
 
-use clap::Parser as _;
-
-use crate::config::ServerConfig;
+use arena_guest_launch::error::ServiceCliError;
+use arena_guest_launch::exes::{companion, current_exe, LAUNCHER_EXE};
+use arena_guest_launch::logs::{log_dir, LOGON_TASK_LOG};
+use arena_guest_launch::options::validate_serve_args;
 use arena_shared::cmdline::list2cmdline;
 
-/// The service name used when `--name` is not given.
-pub const DEFAULT_SERVICE_NAME: &str = "ArenaGuest";
-
-/// The scheduled task name used when `--name` is not given.
-pub const DEFAULT_TASK_NAME: &str = "ArenaGuest";
-
-/// The logon task's log file in [`log_dir`]: the launcher's lines and the server's output.
-pub const LOGON_TASK_LOG: &str = "logon-task.log";
-
-/// The server's file name, which the logon task's launcher starts from its own folder.
-pub const SERVER_EXE: &str = "arena-guest.exe";
-
-/// The logon task's launcher (`guest-server/src/logon_main.rs`): a GUI-subsystem
-/// program, so Windows gives it no console and no window flashes at logon (see
-/// `docs/windows.md`, "The logon task"). It ships beside [`SERVER_EXE`].
-pub const LAUNCHER_EXE: &str = "arena-guest-logon.exe";
-
-/// The whole command line: serve flags (no subcommand: serve, as before), or a subcommand.
-#[derive(Debug, Clone, clap::Parser)]
-#[command(
-    name = "arena-guest",
-    version,
-    about = "Desktop-control server for Windows agent benchmarks (WAA-compatible)",
-    args_conflicts_with_subcommands = true
-)]
-pub struct Cli {
-    #[command(subcommand)]
-    pub command: Option<Command>,
-
-    #[command(flatten)]
-    pub serve: ServerConfig,
-}
-
-/// The subcommands.
-#[derive(Debug, Clone, clap::Subcommand)]
-pub enum Command {
-    /// Run as a Windows service that starts the server in the logged-on user's session (Windows only).
-    #[command(subcommand)]
-    Service(ServiceCommand),
-    /// Start the server at every logon through a scheduled task, as upstream WAA does (Windows only).
-    #[command(subcommand)]
-    LogonTask(LogonTaskCommand),
-    /// Check every capability end to end on this desktop (capture, cursor, typing into
-    /// Notepad, clipboard, trees, exec timeouts, files) and report pass or fail with timings.
-    /// A server already serving on `--port` runs the checks itself, in turn with its actions.
-    Doctor(Box<DoctorArgs>),
-}
-
-/// `arena-guest doctor`: the backend options of the server, and the output format.
-#[derive(Debug, Clone, clap::Args)]
-pub struct DoctorArgs {
-    /// Print the report as JSON (the shape of `GET /v1/doctor`).
-    #[arg(long)]
-    pub json: bool,
-
-    #[command(flatten)]
-    pub serve: ServerConfig,
-}
-
-/// `arena-guest service ...`.
-#[derive(Debug, Clone, clap::Subcommand)]
-pub enum ServiceCommand {
-    /// Register the service (automatic start, LocalSystem) and leave it stopped.
-    /// An existing service of that name gets the new command line.
-    Install(SupervisorOptions),
-    /// Stop the service if it runs, and delete it.
-    Uninstall(NameOption),
-    /// Print the service's state and command line.
-    Status(NameOption),
-    /// The supervisor itself: what the Service Control Manager starts. Not for interactive use.
-    Run(SupervisorOptions),
-}
-
-/// `arena-guest logon-task ...`.
-#[derive(Debug, Clone, clap::Subcommand)]
-pub enum LogonTaskCommand {
-    /// Create (or replace) a task that starts the server at every logon of this user,
-    /// elevated, with no time limit, at normal priority and without a console window.
-    /// The task runs arena-guest-logon.exe, which must be in this exe's folder.
-    Install(TaskOptions),
-    /// Delete the task.
-    Uninstall(TaskNameOption),
-}
-
-/// Just a service name.
-#[derive(Debug, Clone, clap::Args)]
-pub struct NameOption {
-    /// Service name.
-    #[arg(long, default_value = DEFAULT_SERVICE_NAME)]
-    pub name: String,
-}
-
-/// Just a task name.
-#[derive(Debug, Clone, clap::Args)]
-pub struct TaskNameOption {
-    /// Scheduled task name.
-    #[arg(long, default_value = DEFAULT_TASK_NAME)]
-    pub name: String,
-}
-
-/// The options of `service install` and `service run`.
-#[derive(Debug, Clone, PartialEq, Eq, clap::Args)]
-pub struct SupervisorOptions {
-    /// Service name.
-    #[arg(long, default_value = DEFAULT_SERVICE_NAME)]
-    pub name: String,
-
-    /// When the logged-on user's token cannot be had (Wine has no real sessions), start
-    /// the worker in the service's own session instead of waiting. On real Windows that
-    /// is session 0, where desktop calls are refused: for tests only.
-    #[arg(long)]
-    pub allow_same_session: bool,
-
-    /// Which of the logged-on user's tokens the worker runs with. `elevated` (the
-    /// default): an administrator's full token when UAC splits it, so the worker can
-    /// read a token file only Administrators may read, drive elevated windows, and
-    /// start programs that need elevation. `user`: the token the session has (medium
-    /// integrity when UAC is on), as a program the user starts would get.
-    #[arg(long, value_enum, default_value_t = WorkerToken::Elevated)]
-    pub worker_token: WorkerToken,
-
-    /// The serve options the worker gets, exactly as `arena-guest` takes them
-    /// (e.g. `--bind 0.0.0.0 --port 5000 --token-file C:\arena\token`). They come last.
-    #[arg(trailing_var_arg = true, allow_hyphen_values = true, value_name = "SERVE OPTIONS")]
-    pub serve_args: Vec<String>,
-}
-
-/// `service install --worker-token`: which user token starts the worker.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, clap::ValueEnum)]
-pub enum WorkerToken {
-    /// The full administrator token when UAC gave the session a filtered one.
-    #[default]
-    Elevated,
-    /// The session's own token, filtered or not.
-    User,
-}
+use crate::cli::{LogonTaskCommand, ServiceCommand, SupervisorOptions, WorkerToken};
 
 /// What to start the worker with, given the session token's `TOKEN_ELEVATION_TYPE`
 /// (1 default, 2 full, 3 limited; `None` when it could not be read).
@@ -185,97 +48,6 @@ pub fn choose_worker_token(wanted: WorkerToken, elevation_type: Option<i32>) -> 
         (WorkerToken::Elevated, Some(3)) => TokenChoice::Linked,
         _ => TokenChoice::Session,
     }
-}
-
-/// The options of `logon-task install`.
-#[derive(Debug, Clone, PartialEq, Eq, clap::Args)]
-pub struct TaskOptions {
-    /// Scheduled task name.
-    #[arg(long, default_value = DEFAULT_TASK_NAME)]
-    pub name: String,
-
-    /// The serve options the task passes to `arena-guest`. They come last.
-    #[arg(trailing_var_arg = true, allow_hyphen_values = true, value_name = "SERVE OPTIONS")]
-    pub serve_args: Vec<String>,
-}
-
-/// Why a `service` or `logon-task` subcommand failed.
-#[derive(Debug, thiserror::Error)]
-pub enum ServiceCliError {
-    /// The subcommand needs Windows.
-    #[error("`arena-guest {0}` works only on Windows (this build is for another platform)")]
-    OnlyOnWindows(&'static str),
-    /// The serve options to pass on are not valid.
-    #[error("invalid serve options: {0}")]
-    InvalidServeOptions(String),
-    /// An OS call failed.
-    #[error("{op}: {message}")]
-    Os { op: String, message: String },
-    /// One of the two exes that ship together is not beside the other.
-    #[error(
-        "{name} is missing: expected at {}, beside {} (the two exes ship together: \
-         scripts/build-windows.sh builds both, install-guest.ps1 copies both)",
-        path.display(),
-        beside.display()
-    )]
-    MissingCompanion { name: &'static str, path: PathBuf, beside: PathBuf },
-    /// A file or program could not be used.
-    #[error("{what}: {source}")]
-    Io {
-        what: String,
-        #[source]
-        source: std::io::Error,
-    },
-}
-
-impl ServiceCliError {
-    /// The process exit code for this error: 2 for a usage problem (wrong platform,
-    /// bad options, one of the two exes missing beside the other), 1 for a failure
-    /// while doing the work.
-    pub fn exit_code(&self) -> u8 {
-        match self {
-            ServiceCliError::OnlyOnWindows(_)
-            | ServiceCliError::InvalidServeOptions(_)
-            | ServiceCliError::MissingCompanion { .. } => 2,
-            ServiceCliError::Os { .. } | ServiceCliError::Io { .. } => 1,
-        }
-    }
-}
-
-/// Checks the serve options a service or logon task will pass to `arena-guest`, by
-/// parsing them as the server will, and returns the configuration they give.
-///
-/// Beyond what the server itself checks, this refuses `--worker` (the supervisor adds
-/// it), `--token` (a command line stored in the service or task is readable by every
-/// local user: use `--token-file`) and port 0 (nobody could find the server).
-///
-/// # Errors
-///
-/// [`ServiceCliError::InvalidServeOptions`] saying what is wrong.
-pub fn validate_serve_args(serve_args: &[String]) -> Result<ServerConfig, ServiceCliError> {
-    let invalid = |why: String| Err(ServiceCliError::InvalidServeOptions(why));
-    for arg in serve_args {
-        let flag = arg.split_once('=').map_or(arg.as_str(), |(flag, _)| flag);
-        match flag {
-            "--worker" => return invalid("--worker is added by the supervisor; leave it out".into()),
-            "--token" => {
-                return invalid(
-                    "--token would be stored in a command line every local user can read; use --token-file".into(),
-                )
-            }
-            _ => {}
-        }
-    }
-    let argv = std::iter::once("arena-guest").chain(serve_args.iter().map(String::as_str));
-    let config = ServerConfig::try_parse_from(argv).map_err(|err| {
-        // clap's rendering ends with a usage hint over several lines; the first line says it all.
-        let text = err.to_string();
-        ServiceCliError::InvalidServeOptions(text.lines().next().unwrap_or("").trim_start_matches("error: ").to_owned())
-    })?;
-    if config.port == 0 {
-        return invalid("--port 0 picks a random port nobody could find; give a fixed port".into());
-    }
-    Ok(config)
 }
 
 /// The arguments the Service Control Manager starts the exe with (after the exe path):
@@ -318,61 +90,6 @@ pub fn worker_command_line(exe: &Path, serve_args: &[String]) -> String {
     let mut args = serve_args.to_vec();
     args.push("--worker".to_owned());
     command_line(exe, &args)
-}
-
-/// `name`, in the folder of `exe`, when it is a file there; otherwise
-/// [`ServiceCliError::MissingCompanion`] naming both.
-///
-/// # Errors
-///
-/// As above.
-pub fn companion(exe: &Path, name: &'static str) -> Result<PathBuf, ServiceCliError> {
-    let path = exe.with_file_name(name);
-    if path.is_file() {
-        Ok(path)
-    } else {
-        Err(ServiceCliError::MissingCompanion { name, path, beside: exe.to_path_buf() })
-    }
-}
-
-/// The serve options the logon task's launcher was started with (all its arguments:
-/// it has no options of its own), checked as [`validate_serve_args`] checks them.
-///
-/// # Errors
-///
-/// [`ServiceCliError::InvalidServeOptions`] for an argument that is not Unicode or
-/// options the server would refuse.
-pub fn launcher_serve_args(args: impl IntoIterator<Item = std::ffi::OsString>) -> Result<Vec<String>, ServiceCliError> {
-    let args = args
-        .into_iter()
-        .map(|arg| {
-            arg.into_string().map_err(|arg| {
-                ServiceCliError::InvalidServeOptions(format!("the argument {arg:?} is not valid Unicode"))
-            })
-        })
-        .collect::<Result<Vec<_>, _>>()?;
-    validate_serve_args(&args)?;
-    Ok(args)
-}
-
-/// Runs the logon task's launcher ([`LAUNCHER_EXE`]) with its command-line arguments:
-/// starts [`SERVER_EXE`] from the launcher's folder without a console window, and
-/// again whenever it dies, until the launcher is ended. Returns only on failure.
-///
-/// # Errors
-///
-/// Invalid serve options, the server missing from the launcher's folder, the log
-/// folder or the server not starting; [`ServiceCliError::OnlyOnWindows`] elsewhere.
-pub fn run_logon_launcher(
-    args: impl IntoIterator<Item = std::ffi::OsString>,
-) -> Result<std::convert::Infallible, ServiceCliError> {
-    let serve_args = launcher_serve_args(args)?;
-    if !crate::desktop::windows::target::IS_WINDOWS {
-        return Err(ServiceCliError::OnlyOnWindows("logon-task"));
-    }
-    let launcher = current_exe()?;
-    let server = companion(&launcher, SERVER_EXE)?;
-    windows::run_logon_task(&server, &serve_args)
 }
 
 /// The user a logon task is for, `DOMAIN\name`, from the installing shell's
@@ -421,79 +138,6 @@ pub fn schtasks_end_args(name: &str) -> Vec<String> {
 /// The arguments of `schtasks.exe` that delete the logon task.
 pub fn schtasks_delete_args(name: &str) -> Vec<String> {
     ["/Delete", "/TN", name, "/F"].iter().map(|s| (*s).to_owned()).collect()
-}
-
-/// How long the supervisor waits before starting a worker again after one ended.
-///
-/// A worker that keeps dying at once (a taken port, a bad option) is restarted after
-/// 1, 2, 4, ... up to 30 seconds, so it does not spin; one that ran for a minute or
-/// more is restarted after a second again.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub struct Backoff {
-    next: Duration,
-}
-
-impl Backoff {
-    /// The first delay.
-    pub const MIN: Duration = Duration::from_secs(1);
-    /// The longest delay.
-    pub const MAX: Duration = Duration::from_secs(30);
-    /// A worker that ran this long counts as healthy: the delay starts over.
-    pub const HEALTHY: Duration = Duration::from_secs(60);
-
-    pub fn new() -> Backoff {
-        Backoff { next: Backoff::MIN }
-    }
-
-    /// The delay before the next start, given how long the worker that ended ran.
-    pub fn after_exit(&mut self, ran_for: Duration) -> Duration {
-        if ran_for >= Backoff::HEALTHY {
-            self.next = Backoff::MIN;
-        }
-        let delay = self.next;
-        self.next = (self.next * 2).min(Backoff::MAX);
-        delay
-    }
-}
-
-impl Default for Backoff {
-    fn default() -> Backoff {
-        Backoff::new()
-    }
-}
-
-/// The folder the service logs into: `%ProgramData%\arena` (`C:\ProgramData\arena` when
-/// the variable is missing). A service has no console, so its logs go to files there:
-/// `service.log` (the supervisor) and `worker.log` (the worker's output).
-pub fn log_dir(program_data: Option<&std::ffi::OsStr>) -> PathBuf {
-    let base = program_data.filter(|p| !p.is_empty()).map_or_else(|| PathBuf::from(r"C:\ProgramData"), PathBuf::from);
-    base.join("arena")
-}
-
-/// Largest log file kept before it is rotated.
-pub const LOG_MAX_BYTES: u64 = 10 * 1024 * 1024;
-
-/// Moves `path` to `<path>.old` (replacing an older one) when it is larger than
-/// `max_bytes`, so logs that are only ever appended to stay bounded.
-///
-/// # Errors
-///
-/// The rename failing; a missing file is not an error.
-pub fn rotate_log(path: &Path, max_bytes: u64) -> std::io::Result<bool> {
-    match std::fs::metadata(path) {
-        Ok(meta) if meta.len() > max_bytes => {
-            let mut old = path.as_os_str().to_owned();
-            old.push(".old");
-            let old = PathBuf::from(old);
-            // Windows' rename does not replace an existing file.
-            let _ = std::fs::remove_file(&old);
-            std::fs::rename(path, &old)?;
-            Ok(true)
-        }
-        Ok(_) => Ok(false),
-        Err(err) if err.kind() == std::io::ErrorKind::NotFound => Ok(false),
-        Err(err) => Err(err),
-    }
 }
 
 /// Reads `input` to its end (or to an error), discarding what it reads.
@@ -561,7 +205,7 @@ pub fn execute_logon_task(command: &LogonTaskCommand) -> Result<String, ServiceC
     match command {
         LogonTaskCommand::Install(options) => {
             validate_serve_args(&options.serve_args)?;
-            if !crate::desktop::windows::target::IS_WINDOWS {
+            if !arena_guest_launch::windows::IS_WINDOWS {
                 return Err(ServiceCliError::OnlyOnWindows("logon-task"));
             }
             let launcher = companion(&current_exe()?, LAUNCHER_EXE)?;
@@ -585,7 +229,7 @@ pub fn execute_logon_task(command: &LogonTaskCommand) -> Result<String, ServiceC
             ))
         }
         LogonTaskCommand::Uninstall(name) => {
-            if !crate::desktop::windows::target::IS_WINDOWS {
+            if !arena_guest_launch::windows::IS_WINDOWS {
                 return Err(ServiceCliError::OnlyOnWindows("logon-task"));
             }
             // End a running launcher first: its server then stops through its closed
@@ -612,15 +256,6 @@ fn schtasks(args: &[String]) -> Result<String, ServiceCliError> {
         let said = if text.is_empty() { "no output".to_owned() } else { text.to_owned() };
         Err(ServiceCliError::Os { op: format!("schtasks {}", list2cmdline(args)), message: format!("{code}: {said}") })
     }
-}
-
-/// This program's path, for the command lines stored in the service or task.
-///
-/// # Errors
-///
-/// The OS not telling.
-pub fn current_exe() -> Result<PathBuf, ServiceCliError> {
-    std::env::current_exe().map_err(|source| ServiceCliError::Io { what: "finding this program's path".into(), source })
 }
 
 /// What the service supervisor should do about its worker.
@@ -651,6 +286,8 @@ pub fn supervisor_step(console_session: Option<u32>, worker_session: Option<u32>
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::cli::{Cli, Command, TaskNameOption, TaskOptions, DEFAULT_SERVICE_NAME, DEFAULT_TASK_NAME};
+    use clap::Parser as _;
 
     fn strings(words: &[&str]) -> Vec<String> {
         words.iter().map(|s| (*s).to_owned()).collect()
@@ -660,32 +297,23 @@ mod tests {
         Cli::try_parse_from(std::iter::once("arena-guest").chain(words.iter().copied()))
     }
 
-    #[test]
-    fn flags_alone_still_mean_serve() {
-        let cli = parse(&["--port", "5001", "--backend", "stub"]).unwrap();
-        assert!(cli.command.is_none());
-        assert_eq!(cli.serve.port, 5001);
-        assert!(!cli.serve.worker);
-        let worker = parse(&["--port", "5001", "--worker"]).unwrap();
-        assert!(worker.serve.worker);
+    fn check_line(exe: &str, args: &[&str], expected: &str) {
+        assert_eq!(command_line(Path::new(exe), &strings(args)), expected, "{exe} {args:?}");
     }
 
     #[test]
-    fn service_install_takes_its_options_then_the_serve_options() {
-        let cli = parse(&["service", "install", "--name", "Svc", "--port", "5002", "--bind", "0.0.0.0"]).unwrap();
-        let Some(Command::Service(ServiceCommand::Install(options))) = cli.command else {
-            panic!("not service install: {:?}", cli.command)
-        };
-        assert_eq!(options.name, "Svc");
-        assert!(!options.allow_same_session);
-        assert_eq!(options.serve_args, strings(&["--port", "5002", "--bind", "0.0.0.0"]));
-
-        let cli = parse(&["service", "status"]).unwrap();
-        let Some(Command::Service(ServiceCommand::Status(name))) = cli.command else { panic!("not status") };
-        assert_eq!(name.name, DEFAULT_SERVICE_NAME);
-
-        // Serve flags before the subcommand are a mistake, not silently dropped.
-        assert!(parse(&["--port", "5003", "service", "install"]).is_err());
+    fn command_lines_quote_the_program_and_the_arguments() {
+        check_line(r"C:\arena\arena-guest.exe", &[], r#""C:\arena\arena-guest.exe""#);
+        check_line(
+            r"C:\Program Files\arena\arena-guest.exe",
+            &["--port", "5000", "--token-file", r"C:\My Token\t.txt"],
+            r#""C:\Program Files\arena\arena-guest.exe" --port 5000 --token-file "C:\My Token\t.txt""#,
+        );
+        check_line(r"C:\a.exe", &["--scenario", r#"say "hi""#, ""], r#""C:\a.exe" --scenario "say \"hi\"" """#);
+        assert_eq!(
+            worker_command_line(Path::new(r"C:\a b\g.exe"), &strings(&["--port", "5000"])),
+            r#""C:\a b\g.exe" --port 5000 --worker"#
+        );
     }
 
     #[test]
@@ -731,48 +359,6 @@ mod tests {
         let cli = parse(&["service", "install", "--worker-token", "user", "--port", "5000"]).unwrap();
         let Some(Command::Service(ServiceCommand::Install(options))) = cli.command else { panic!("not install") };
         assert_eq!(options.worker_token, WorkerToken::User);
-        assert!(parse(&["service", "install", "--worker-token", "root"]).is_err());
-    }
-
-    fn check_line(exe: &str, args: &[&str], expected: &str) {
-        assert_eq!(command_line(Path::new(exe), &strings(args)), expected, "{exe} {args:?}");
-    }
-
-    #[test]
-    fn command_lines_quote_the_program_and_the_arguments() {
-        check_line(r"C:\arena\arena-guest.exe", &[], r#""C:\arena\arena-guest.exe""#);
-        check_line(
-            r"C:\Program Files\arena\arena-guest.exe",
-            &["--port", "5000", "--token-file", r"C:\My Token\t.txt"],
-            r#""C:\Program Files\arena\arena-guest.exe" --port 5000 --token-file "C:\My Token\t.txt""#,
-        );
-        check_line(r"C:\a.exe", &["--scenario", r#"say "hi""#, ""], r#""C:\a.exe" --scenario "say \"hi\"" """#);
-        assert_eq!(
-            worker_command_line(Path::new(r"C:\a b\g.exe"), &strings(&["--port", "5000"])),
-            r#""C:\a b\g.exe" --port 5000 --worker"#
-        );
-    }
-
-    fn check_invalid(args: &[&str], expected: &str) {
-        match validate_serve_args(&strings(args)) {
-            Err(ServiceCliError::InvalidServeOptions(why)) => assert!(why.contains(expected), "{args:?}: {why}"),
-            other => panic!("{args:?} gave {other:?}"),
-        }
-    }
-
-    #[test]
-    fn serve_options_are_checked_before_they_are_stored() {
-        let config = validate_serve_args(&strings(&["--port", "5005", "--backend", "stub"])).unwrap();
-        assert_eq!(config.port, 5005);
-        check_invalid(&["--port", "5005", "--worker"], "--worker");
-        check_invalid(&["--token", "0123456789abcdef0123"], "--token-file");
-        check_invalid(&["--token=0123456789abcdef0123"], "--token-file");
-        check_invalid(&["--port", "0"], "--port 0");
-        check_invalid(&["--port", "notaport"], "notaport");
-        check_invalid(&["--no-such-flag"], "--no-such-flag");
-        let err = validate_serve_args(&strings(&["--port", "0"])).unwrap_err();
-        assert_eq!(err.exit_code(), 2);
-        assert_eq!(ServiceCliError::OnlyOnWindows("service").exit_code(), 2);
     }
 
     #[test]
@@ -811,93 +397,6 @@ mod tests {
     }
 
     #[test]
-    fn the_launcher_takes_its_whole_command_line_as_serve_options() {
-        let args = ["--port", "5000", "--token-file", r"C:\My Token\t.txt", "--backend", "stub"];
-        let os = |words: &[&str]| words.iter().map(std::ffi::OsString::from).collect::<Vec<_>>();
-        assert_eq!(launcher_serve_args(os(&args)).unwrap(), strings(&args));
-        assert_eq!(launcher_serve_args(Vec::new()).unwrap(), Vec::<String>::new());
-        // Checked as the service's and the task's serve options are, before anything starts.
-        for (bad, said) in [(&["--port", "5000", "--worker"][..], "--worker"), (&["--port", "0"][..], "--port 0")] {
-            match launcher_serve_args(os(bad)) {
-                Err(ServiceCliError::InvalidServeOptions(why)) => assert!(why.contains(said), "{bad:?}: {why}"),
-                other => panic!("{bad:?} gave {other:?}"),
-            }
-        }
-        // `logon-task run` is gone: the launcher is a program of its own.
-        assert!(parse(&["logon-task", "run", "--", "--port", "5000"]).is_err());
-    }
-
-    #[cfg(unix)]
-    #[test]
-    fn a_launcher_argument_that_is_not_unicode_is_named() {
-        use std::os::unix::ffi::OsStringExt as _;
-        let bad = std::ffi::OsString::from_vec(b"--port\xff".to_vec());
-        let err = launcher_serve_args([bad]).unwrap_err();
-        assert!(
-            matches!(&err, ServiceCliError::InvalidServeOptions(why) if why.contains("not valid Unicode")),
-            "{err}"
-        );
-        assert_eq!(err.exit_code(), 2);
-    }
-
-    #[test]
-    fn each_exe_finds_the_other_beside_it_or_names_the_missing_one() {
-        let dir = tempfile::tempdir().unwrap();
-        let server = dir.path().join(SERVER_EXE);
-        let launcher = dir.path().join(LAUNCHER_EXE);
-        std::fs::write(&server, b"MZ").unwrap();
-        let err = companion(&server, LAUNCHER_EXE).unwrap_err();
-        let text = err.to_string();
-        assert!(text.starts_with("arena-guest-logon.exe is missing: expected at "), "{text}");
-        assert!(
-            text.contains(&launcher.display().to_string()) && text.contains(&server.display().to_string()),
-            "{text}"
-        );
-        assert_eq!(err.exit_code(), 2);
-        std::fs::write(&launcher, b"MZ").unwrap();
-        assert_eq!(companion(&server, LAUNCHER_EXE).unwrap(), launcher);
-        assert_eq!(companion(&launcher, SERVER_EXE).unwrap(), server);
-        // A folder of that name is not the program.
-        std::fs::remove_file(&server).unwrap();
-        std::fs::create_dir(&server).unwrap();
-        assert!(
-            matches!(companion(&launcher, SERVER_EXE), Err(ServiceCliError::MissingCompanion { name, .. }) if name == SERVER_EXE)
-        );
-    }
-
-    #[test]
-    fn backoff_grows_while_the_worker_keeps_dying_and_resets_after_a_good_run() {
-        let mut backoff = Backoff::new();
-        let quick = Duration::from_millis(200);
-        let delays: Vec<u64> = (0..7).map(|_| backoff.after_exit(quick).as_secs()).collect();
-        assert_eq!(delays, [1, 2, 4, 8, 16, 30, 30]);
-        assert_eq!(backoff.after_exit(Backoff::HEALTHY), Backoff::MIN);
-        assert_eq!(backoff.after_exit(quick), Duration::from_secs(2));
-    }
-
-    #[test]
-    fn logs_go_under_program_data() {
-        let dir = log_dir(Some(std::ffi::OsStr::new("/data")));
-        assert_eq!(dir, Path::new("/data").join("arena"));
-        assert_eq!(log_dir(None), PathBuf::from(r"C:\ProgramData").join("arena"));
-        assert_eq!(log_dir(Some(std::ffi::OsStr::new(""))), PathBuf::from(r"C:\ProgramData").join("arena"));
-    }
-
-    #[test]
-    fn a_large_log_is_moved_aside() {
-        let dir = tempfile::tempdir().unwrap();
-        let log = dir.path().join("service.log");
-        assert!(!rotate_log(&log, 10).unwrap(), "a missing log is left alone");
-        std::fs::write(&log, b"0123456789").unwrap();
-        assert!(!rotate_log(&log, 10).unwrap());
-        std::fs::write(dir.path().join("service.log.old"), b"older").unwrap();
-        std::fs::write(&log, b"0123456789ab").unwrap();
-        assert!(rotate_log(&log, 10).unwrap());
-        assert!(!log.exists());
-        assert_eq!(std::fs::read(dir.path().join("service.log.old")).unwrap(), b"0123456789ab");
-    }
-
-    #[test]
     fn the_stop_signal_is_the_end_of_input() {
         // Returns (instead of hanging) at the end of input, however much came first.
         drain_to_eof(std::io::Cursor::new(vec![7u8; 1000]));
@@ -906,7 +405,7 @@ mod tests {
 
     #[test]
     fn other_platforms_say_windows_only() {
-        if crate::desktop::windows::target::IS_WINDOWS {
+        if arena_guest_launch::windows::IS_WINDOWS {
             return;
         }
         let install = ServiceCommand::Install(SupervisorOptions {
@@ -922,8 +421,6 @@ mod tests {
         assert!(matches!(execute_logon_task(&task), Err(ServiceCliError::OnlyOnWindows("logon-task"))));
         let task = LogonTaskCommand::Install(TaskOptions { name: DEFAULT_TASK_NAME.into(), serve_args: Vec::new() });
         assert!(matches!(execute_logon_task(&task), Err(ServiceCliError::OnlyOnWindows("logon-task"))));
-        let launched = run_logon_launcher(["--port".into(), "5000".into()]);
-        assert!(matches!(launched, Err(ServiceCliError::OnlyOnWindows("logon-task"))), "{launched:?}");
     }
 
     fn check(console: Option<u32>, worker: Option<u32>, expected: SupervisorStep) {

@@ -9,7 +9,7 @@
 //! [`NORMAL_PRIORITY`]. It also keeps the command line out of `/TR`'s 261-character
 //! limit, and it is the one creation form Wine 8's `schtasks.exe` supports.
 //!
-//! The task starts `arena-guest-logon.exe SERVE OPTIONS` ([`crate::service::LAUNCHER_EXE`])
+//! The task starts `arena-guest-logon.exe SERVE OPTIONS` ([`arena_guest_launch::exes::LAUNCHER_EXE`])
 //! in the installing user's session, with their highest privileges, in the exes'
 //! folder. That launcher is a GUI-subsystem program, so Task Scheduler's start of it
 //! opens no console window, and it starts the server (`arena-guest.exe`, a console

@@ -31,6 +31,7 @@ use crate::waa::body::{Data, PyJson};
 use crate::waa::WaaState;
 use crate::waa::{expand_user, json, json_err, on_backend, on_backend_within, py, text, WaaResult};
 use arena_shared::cmdline::{list2cmdline, shlex_split};
+use arena_shared::ntpath;
 
 /// Output kept per stream: far above anything upstream ever returned, so nothing is lost,
 /// while a runaway program cannot exhaust the server's memory.
@@ -189,7 +190,7 @@ fn python_code(spec: &CommandSpec) -> Option<String> {
 fn with_program(spec: CommandSpec, program: &Path) -> CommandSpec {
     match spec {
         CommandSpec::Argv(mut argv) if !argv.is_empty() => {
-            let base = crate::paths::basename(&argv[0]).to_ascii_lowercase();
+            let base = ntpath::basename(&argv[0]).to_ascii_lowercase();
             let launcher = matches!(base.strip_suffix(".exe").unwrap_or(&base), "py" | "pyw");
             let selector = argv.get(1).is_some_and(|a| {
                 a.starts_with("-V:") || a.strip_prefix('-').is_some_and(|v| v.starts_with(|c: char| c.is_ascii_digit()))

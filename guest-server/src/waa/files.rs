@@ -16,10 +16,10 @@ use axum::response::{IntoResponse, Response};
 use serde_json::{json, Value};
 
 use arena_shared::files::KnownFolder;
+use arena_shared::ntpath;
 
 use crate::desktop::Desktop;
 use crate::error::WaaError;
-use crate::paths;
 use crate::state::AppState;
 use crate::waa::body::{Data, FileData, PyForm, PyJson};
 use crate::waa::py::{self, OsCall};
@@ -112,7 +112,7 @@ pub(crate) async fn file(State(state): State<AppState>, form: PyForm) -> WaaResu
             tokio::fs::File::from_std(file),
             256 << 10,
         ));
-        let name = paths::basename(&path);
+        let name = ntpath::basename(&path);
         let mut res = body.into_response();
         let headers = res.headers_mut();
         headers.insert(header::CONTENT_LENGTH, HeaderValue::from(meta.len()));
@@ -267,7 +267,7 @@ fn join_args(path: &Value, name: &Value) -> Result<String, WaaError> {
             )));
         }
     }
-    Ok(paths::join(path.as_str().unwrap_or_default(), name.as_str().unwrap_or_default()))
+    Ok(ntpath::join(&[path.as_str().unwrap_or_default(), name.as_str().unwrap_or_default()]))
 }
 
 #[derive(Clone, Copy)]
@@ -343,7 +343,7 @@ fn list_tree(local: &Path, guest: &str, budget: &mut ListBudget, depth: usize) -
         }
         budget.entries += 1;
         let child_local = local.join(&name);
-        let child_guest = paths::join(guest, &name);
+        let child_guest = ntpath::join(&[guest, &name]);
         if child_local.is_dir() {
             if depth + 1 >= MAX_LIST_DEPTH {
                 children.push(json!({"error": format!("{child_guest}: nested more than {MAX_LIST_DEPTH} levels deep; not listed")}));
@@ -354,7 +354,7 @@ fn list_tree(local: &Path, guest: &str, budget: &mut ListBudget, depth: usize) -
             children.push(json!({"type": "file", "name": name}));
         }
     }
-    json!({"type": "directory", "name": paths::basename(guest), "children": children})
+    json!({"type": "directory", "name": ntpath::basename(guest), "children": children})
 }
 
 /// `POST /list_directory`.
@@ -477,7 +477,7 @@ fn clear_downloads(desktop: &dyn Desktop) -> Result<Response, WaaError> {
         if name == "desktop.ini" {
             continue;
         }
-        let guest = paths::join(&dir, &name);
+        let guest = ntpath::join(&[&dir, &name]);
         let entry = local.join(&name);
         // `os.remove` refuses directories; they stay and are reported as failures.
         let is_dir = std::fs::symlink_metadata(&entry).is_ok_and(|m| m.is_dir());

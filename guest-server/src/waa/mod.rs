@@ -247,12 +247,12 @@ where
 
 /// `os.path.expandvars(os.path.expanduser(path))` with the guest's environment.
 pub(crate) fn expand(desktop: &dyn Desktop, path: &str) -> String {
-    crate::paths::expand(path, &|name| desktop.env_var(name))
+    crate::paths::expand(path, &mut |name| desktop.env_var(name))
 }
 
 /// `os.path.expanduser(path)` with the guest's environment.
 pub(crate) fn expand_user(desktop: &dyn Desktop, path: &str) -> String {
-    crate::paths::expand_user(path, &|name| desktop.env_var(name))
+    arena_shared::ntpath::expanduser(path, &mut |name| desktop.env_var(name))
 }
 
 /// A required string argument: Python would raise `TypeError` in `os.fspath` for anything else.

@@ -14,6 +14,7 @@ use serde_json::{json, Value};
 
 use arena_shared::action::{Action, MouseButton};
 use arena_shared::files::KnownFolder;
+use arena_shared::ntpath;
 use arena_shared::observation::{A11yBackend, A11yTree, TreeBudget};
 
 use crate::error::WaaError;
@@ -21,7 +22,6 @@ use crate::inspect::{
     decode_xml_text, exif_strings, explorer_items, find_element, find_in_tree, first_line_contains, guest_exists,
     library_urls, mask_is_read_only, sorted_by_mtime,
 };
-use crate::paths;
 use crate::state::AppState;
 use crate::waa::body::{Data, PyJson};
 use crate::waa::py::{self, OsCall};
@@ -36,7 +36,7 @@ async fn foreground_tree(state: &AppState) -> Result<A11yTree, WaaError> {
 
 fn join_str(base: &Value, name: &str) -> Result<String, WaaError> {
     match base {
-        Value::String(base) => Ok(paths::join(base, name)),
+        Value::String(base) => Ok(ntpath::join(&[base, name])),
         other => Err(WaaError::catch(format!(
             "join() argument must be str, bytes, or os.PathLike object, not '{}'",
             py::type_name(other)
@@ -288,7 +288,7 @@ pub(crate) async fn library_folders(State(state): State<AppState>, PyJson(body):
             Some(dir) => dir,
             None => desktop.known_folder(KnownFolder::AppData)?,
         };
-        let guest = paths::join(&appdata, &format!("Microsoft\\Windows\\Libraries\\{name}.library-ms"));
+        let guest = ntpath::join(&[&appdata, &format!("Microsoft\\Windows\\Libraries\\{name}.library-ms")]);
         let bytes = desktop.map_path(&guest).ok().and_then(|local| std::fs::read(local).ok());
         let Some(bytes) = bytes else {
             return Err(json_err(StatusCode::BAD_REQUEST, json!({"error": format!("{name} does not exist")})));

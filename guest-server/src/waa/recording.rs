@@ -14,10 +14,10 @@ use axum::http::StatusCode;
 use serde_json::json;
 
 use arena_shared::files::KnownFolder;
+use arena_shared::ntpath;
 
 use crate::desktop::{CommandSpec, Desktop, DesktopError, ExecLimits};
 use crate::error::WaaError;
-use crate::paths;
 use crate::state::AppState;
 use crate::waa::body::PyForm;
 use crate::waa::WaaState;
@@ -42,7 +42,7 @@ fn recordings_dir(desktop: &dyn Desktop) -> Result<String, WaaError> {
         .and_then(|dir: PathBuf| desktop.unmap_path(&dir).ok());
     match beside_exe {
         Some(dir) => Ok(dir),
-        None => Ok(paths::join(&desktop.known_folder(KnownFolder::Temp)?, "arena-recordings")),
+        None => Ok(ntpath::join(&[&desktop.known_folder(KnownFolder::Temp)?, "arena-recordings"])),
     }
 }
 
@@ -60,7 +60,7 @@ pub(crate) async fn start_recording(State(state): State<AppState>, State(session
         if let Ok(local) = desktop.map_path(&dir) {
             std::fs::create_dir_all(&local).map_err(|err| WaaError::catch(format!("creating {dir}: {err}")))?;
         }
-        let path = paths::join(&dir, "recording.mp4");
+        let path = ntpath::join(&[&dir, "recording.mp4"]);
         let screen = desktop.screen()?;
         let command = format!(
             "ffmpeg -y -f gdigrab -draw_mouse 1 -video_size {}x{} -i desktop -pix_fmt yuv420p -c:v libx264 -r 30 '{path}'",

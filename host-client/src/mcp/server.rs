@@ -1,54 +1,29 @@
-//! The MCP server of `--agent mcp`: one rmcp handler per session
-//! ([`ArenaSession`]), served with rmcp's streamable-HTTP transport at `/mcp`
-//! behind the bearer token, with rmcp's `Host` check and every `Origin`
-//! refused (a browser page cannot reach it), as the guest's own guards.
+//! The MCP server of `--agent mcp`: one handler per session ([`ArenaSession`], an
+//! `arena_mcp::ToolServer`: the handler, tool table, result shapes and protocol
+//! version are `arena_mcp`'s, which the guest's `--mcp` shares), served with rmcp's
+//! streamable-HTTP transport at `/mcp` behind the bearer token (the project's one
+//! check, `arena_shared::token::bearer_matches`), with rmcp's `Host` check and every
+//! `Origin` refused (a browser page cannot reach it), as the guest's own guards.
 
-use std::borrow::Cow;
 use std::net::SocketAddr;
 use std::sync::Arc;
 use std::time::Duration;
 
+use arena_mcp::{image_png, text, tool_error, Server, ToolServer};
 use axum::extract::Request;
 use axum::http::StatusCode;
 use axum::middleware::Next;
 use axum::response::{IntoResponse, Response};
 use base64::Engine as _;
-use rmcp::model::{
-    CallToolRequestParams, CallToolResponse, CallToolResult, ContentBlock, Implementation, ListToolsResult,
-    PaginatedRequestParams, ProtocolVersion, ServerCapabilities, ServerConfig, Tool,
-};
-use rmcp::service::RequestContext;
+use rmcp::model::{CallToolRequestParams, CallToolResponse};
 use rmcp::transport::streamable_http_server::session::local::LocalSessionManager;
-use rmcp::transport::streamable_http_server::{StreamableHttpServerConfig, StreamableHttpService};
-use rmcp::{ErrorData, RoleServer, ServerHandler};
+use rmcp::transport::streamable_http_server::StreamableHttpService;
+use rmcp::ServerHandler;
 use serde_json::{json, Value};
 use tokio_util::sync::CancellationToken;
 
 use super::{ended_text, EpisodeLink, Hub, Pending, Reply};
 use arena_shared::mcp_tools::{self as tools, ToolCall};
-
-/// The newest protocol version served: sessions (`Mcp-Session-Id`) carry the
-/// episode a client is bound to, and the 2026 revision has none.
-pub const MAX_PROTOCOL: ProtocolVersion = ProtocolVersion::V_2025_11_25;
-
-/// The MCP tools as rmcp describes them.
-pub fn rmcp_tools(with_task: bool) -> Vec<Tool> {
-    tools::tool_list(with_task)
-        .into_iter()
-        .map(|(name, description, schema)| {
-            let Value::Object(schema) = schema else { unreachable!("every input schema is an object") };
-            Tool::new(name, description, Arc::new(schema))
-        })
-        .collect()
-}
-
-fn text(text: impl Into<String>) -> CallToolResponse {
-    CallToolResult::success(vec![ContentBlock::text(text)]).into()
-}
-
-fn tool_error(message: impl Into<String>) -> CallToolResponse {
-    CallToolResult::error(vec![ContentBlock::text(message)]).into()
-}
 
 /// One MCP session: at most one episode at a time.
 #[derive(Debug)]
@@ -73,7 +48,9 @@ impl ArenaSession {
         bound.clone()
     }
 
-    async fn call(&self, request: CallToolRequestParams) -> CallToolResponse {
+    /// One tool call: binds an episode (`get_task`), answers from its latest
+    /// observation, or hands an action to the episode and waits for the step.
+    async fn answer(&self, request: CallToolRequestParams) -> CallToolResponse {
         let link = self.current().await;
         let screen = link.as_ref().and_then(|l| l.latest.lock().ok().map(|s| s.screen));
         let arguments = request.arguments.clone().map(Value::Object).unwrap_or_else(|| json!({}));
@@ -104,8 +81,7 @@ impl ArenaSession {
         let action = match call {
             ToolCall::GetTask => return tool_error("get_task: answered above"),
             ToolCall::Screenshot => {
-                let b64 = base64::engine::general_purpose::STANDARD.encode(&latest.png);
-                return CallToolResult::success(vec![ContentBlock::image(b64, "image/png")]).into();
+                return image_png(base64::engine::general_purpose::STANDARD.encode(&latest.png));
             }
             ToolCall::AccessibilityTree { win32: true } => {
                 return tool_error(
@@ -155,46 +131,23 @@ impl Drop for ArenaSession {
     }
 }
 
-impl ServerHandler for ArenaSession {
-    fn get_info(&self) -> ServerConfig {
-        ServerConfig::new(ServerCapabilities::builder().enable_tools().build())
-            .with_protocol_version(MAX_PROTOCOL)
-            .with_server_info(Implementation::new("arena", env!("CARGO_PKG_VERSION")))
-            .with_instructions(
-                "A WindowsAgentArena benchmark episode: call get_task, act with the desktop tools, then done or fail.",
-            )
-    }
+impl ToolServer for ArenaSession {
+    const NAME: &'static str = "arena";
+    const VERSION: &'static str = env!("CARGO_PKG_VERSION");
+    const INSTRUCTIONS: &'static str =
+        "A WindowsAgentArena benchmark episode: call get_task, act with the desktop tools, then done or fail.";
+    const WITH_TASK: bool = true;
 
-    fn supported_protocol_versions(&self) -> Cow<'static, [ProtocolVersion]> {
-        Cow::Borrowed(ProtocolVersion::known_up_to(&MAX_PROTOCOL))
-    }
-
-    async fn list_tools(
-        &self,
-        _request: Option<PaginatedRequestParams>,
-        _context: RequestContext<RoleServer>,
-    ) -> Result<ListToolsResult, ErrorData> {
-        Ok(ListToolsResult::with_all_items(rmcp_tools(true)))
-    }
-
-    async fn call_tool(
-        &self,
-        request: CallToolRequestParams,
-        _context: RequestContext<RoleServer>,
-    ) -> Result<CallToolResponse, ErrorData> {
-        Ok(self.call(request).await)
+    async fn call(&self, request: CallToolRequestParams) -> CallToolResponse {
+        self.answer(request).await
     }
 }
 
-/// Refuses a request without `Authorization: Bearer TOKEN`.
+/// Refuses a request without `Authorization: Bearer TOKEN` (the project's one bearer
+/// check: constant time, the scheme in any case).
 async fn require_token(token: Arc<str>, request: Request, next: Next) -> Response {
-    let given = request
-        .headers()
-        .get(axum::http::header::AUTHORIZATION)
-        .and_then(|v| v.to_str().ok())
-        .and_then(|v| v.strip_prefix("Bearer "));
-    let ok = given.is_some_and(|g| g.len() == token.len() && g.bytes().zip(token.bytes()).all(|(a, b)| a == b));
-    if ok {
+    let given = request.headers().get(axum::http::header::AUTHORIZATION).map(|v| v.as_bytes());
+    if arena_shared::token::bearer_matches(given, &token) {
         next.run(request).await
     } else {
         (StatusCode::UNAUTHORIZED, [(axum::http::header::WWW_AUTHENTICATE, "Bearer")], "a bearer token is required\n")
@@ -212,12 +165,9 @@ where
     let mut hosts: Vec<String> = ["localhost", "127.0.0.1", "::1", "[::1]"].iter().map(|s| (*s).to_owned()).collect();
     hosts.push(listen.ip().to_string());
     hosts.push(listen.to_string());
-    let mut config = StreamableHttpServerConfig::default()
-        .with_sse_keep_alive(Some(Duration::from_secs(15)))
-        .with_cancellation_token(stop);
+    let mut config = arena_mcp::http_config().with_cancellation_token(stop);
     config.allowed_hosts = hosts;
     config.legacy_session_mode = true;
-    let config = config.enforce_origin_validation();
     let service: StreamableHttpService<S, LocalSessionManager> =
         StreamableHttpService::new(move || Ok(make()), Default::default(), config);
     let token: Arc<str> = Arc::from(token);
@@ -235,7 +185,7 @@ pub async fn serve(listener: tokio::net::TcpListener, hub: Arc<Hub>, token: Stri
             return;
         }
     };
-    let app = router(move || ArenaSession::new(Arc::clone(&hub)), &token, addr, stop.clone());
+    let app = router(move || Server(ArenaSession::new(Arc::clone(&hub))), &token, addr, stop.clone());
     if let Err(err) = axum::serve(listener, app).with_graceful_shutdown(stop.cancelled_owned()).await {
         tracing::error!(error = %err, "the MCP server stopped");
     }

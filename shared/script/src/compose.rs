@@ -50,10 +50,10 @@
 use image::RgbaImage;
 
 use super::host::{CommandArg, CommandOutput, HostError, HostResult, PathKind, ScriptHost, WindowChange};
-use super::stdlib::ntpath;
 use arena_shared::cmdline::{subprocess_command, CommandSpec};
 use arena_shared::fastimg::PILLOW_JPEG_QUALITY;
 use arena_shared::imaging::{crop_padded, encode};
+use arena_shared::ntpath;
 use arena_shared::observation::{ImageFormat, WindowInfo};
 use arena_shared::registry::RegistryValue;
 use arena_shared::window_list::window_names;
@@ -187,8 +187,8 @@ pub trait Composed: ScriptHost {
     /// primitive failed.
     fn save_screenshot(&mut self, path: &str, region: Option<[i32; 4]>, format: Option<&str>) -> HostResult<()> {
         let format = pillow_format(path, format)?;
-        let (folder, _) = ntpath::split(path);
-        if !folder.is_empty() && self.path_kind(&folder) != Some(PathKind::Dir) {
+        let folder = ntpath::dirname(path);
+        if !folder.is_empty() && self.path_kind(folder) != Some(PathKind::Dir) {
             return Err(format!("[Errno 2] No such file or directory: '{path}'").into());
         }
         let image = self.capture()?;

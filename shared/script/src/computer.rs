@@ -20,43 +20,12 @@ use arena_shared::keys::parse_chord;
 use super::compose::Composed as _;
 use super::difflib::get_close_matches;
 use super::error::{not_supported, type_error, value_error, ErrorKind, ScriptError};
-use super::interp::{is_none, no_attribute, static_name, to_f64, to_i64, to_str, Args, Interp};
 use super::pyautogui::{coord, hotkey, perform, press_keys, type_text};
 use super::value::{Object, Value};
+use crate::args::{is_none, no_attribute, static_name, to_f64, to_i64, to_str, Args};
+use crate::runtime::{ComputerState, Runtime};
 use arena_shared::action::{Action, MouseButton};
 use arena_shared::geometry::Point;
-
-/// What `/update_computer` set: the Set-of-Marks boxes and how to map them to the screen.
-#[derive(Debug, Clone, PartialEq)]
-pub struct ComputerState {
-    /// Element boxes `[x1, y1, x2, y2]` in screenshot pixels; the index is the element id.
-    pub rects: Vec<[i32; 4]>,
-    /// `[x0, y0, x1, y1]` of the observed view; `move_abs` fractions are relative to it.
-    pub window_rect: [i32; 4],
-    /// Multiplies element centres in `move_id`.
-    pub scale: (f64, f64),
-    /// The "virtual clipboard" text `/obs_winagent` echoes back.
-    pub clipboard_content: Option<String>,
-    /// Use alt+c / alt+v instead of ctrl+c / ctrl+v.
-    pub swap_ctrl_alt: bool,
-    /// The element last moved to with `move_id`.
-    pub current_id: Option<usize>,
-}
-
-impl ComputerState {
-    /// A state for a `width` x `height` screen with no elements, as after an
-    /// `/update_computer` with an empty `rects` list.
-    pub fn for_screen(width: i32, height: i32) -> ComputerState {
-        ComputerState {
-            rects: Vec::new(),
-            window_rect: [0, 0, width, height],
-            scale: (1.0, 1.0),
-            clipboard_content: None,
-            swap_ctrl_alt: false,
-            current_id: None,
-        }
-    }
-}
 
 const MOUSE: &[&str] = &["move_id", "move_abs", "single_click", "double_click", "right_click", "scroll", "drag"];
 const KEYBOARD: &[&str] = &["write", "press"];
@@ -65,14 +34,14 @@ const OS: &[&str] = &["open_program", "maximize_window"];
 const WINDOW_MANAGER: &[&str] = &["find_open_applications", "switch_to_application"];
 const HUMAN: &[&str] = &["ask_question", "ask_action", "get_past_input"];
 
-fn state<'s>(it: &'s mut Interp<'_, '_>) -> Result<&'s mut ComputerState, ScriptError> {
+fn state<'s>(it: &'s mut Runtime<'_, '_>) -> Result<&'s mut ComputerState, ScriptError> {
     it.computer.as_deref_mut().ok_or_else(|| {
         ScriptError::new(ErrorKind::Attribute, "'NoneType' object has no attribute (the computer is not set up)")
     })
 }
 
 /// An attribute of one of the `Computer` objects.
-pub(crate) fn attr(it: &mut Interp<'_, '_>, object: &Object, name: &str) -> Result<Value, ScriptError> {
+pub(crate) fn attr(it: &mut Runtime<'_, '_>, object: &Object, name: &str) -> Result<Value, ScriptError> {
     let obj = Value::Object(object.clone());
     let methods: &[&'static str] = match object {
         Object::Computer => {
@@ -122,7 +91,7 @@ pub(crate) fn attr(it: &mut Interp<'_, '_>, object: &Object, name: &str) -> Resu
 
 /// Calls a method of one of the `Computer` objects.
 pub(crate) fn call_method(
-    it: &mut Interp<'_, '_>,
+    it: &mut Runtime<'_, '_>,
     object: Object,
     name: &str,
     args: Args,
@@ -262,7 +231,7 @@ pub(crate) fn call_method(
                 it.print(&format!("error: Program {program} is not installed\n"))?;
                 return Ok(Value::None);
             }
-            let esc = |it: &mut Interp<'_, '_>| press_keys(it, &["esc".to_owned()], 1, 0.0);
+            let esc = |it: &mut Runtime<'_, '_>| press_keys(it, &["esc".to_owned()], 1, 0.0);
             it.sleep(2.0)?;
             esc(it)?;
             let maximized = it.host.maximize_foreground();
@@ -347,7 +316,7 @@ fn fraction_to_screen(s: &ComputerState, x: Option<&Value>, y: Option<&Value>) -
 }
 
 /// `drag(screen_x, screen_y)` in pixels, or `drag(x=..., y=...)` in fractions of `window_rect`.
-fn drag_target(it: &mut Interp<'_, '_>, args: Args) -> Result<(i32, i32), ScriptError> {
+fn drag_target(it: &mut Runtime<'_, '_>, args: Args) -> Result<(i32, i32), ScriptError> {
     let normalized = args.kw.iter().any(|(k, _)| k == "x" || k == "y");
     if !normalized {
         let a = args.bind("drag", &["screen_x", "screen_y"], 2)?;
@@ -371,7 +340,7 @@ fn drag_target(it: &mut Interp<'_, '_>, args: Args) -> Result<(i32, i32), Script
     fraction_to_screen(state(it)?, a[0].as_ref(), a[1].as_ref())
 }
 
-fn ctrl_or_alt(it: &mut Interp<'_, '_>) -> Result<String, ScriptError> {
+fn ctrl_or_alt(it: &mut Runtime<'_, '_>) -> Result<String, ScriptError> {
     Ok(if state(it)?.swap_ctrl_alt { "alt" } else { "ctrl" }.to_owned())
 }
 

@@ -16,15 +16,20 @@
 //! # Layout
 //!
 //! - [`parser`]: source to [`ast::Program`] through `rustpython-parser`; [`parse`].
-//! - `interp`: statements, control flow, scopes, user functions, expressions; [`run`], [`Globals`], [`RunOutput`].
-//! - `builtins` and `methods`: the builtin functions and the methods of `str`, `list`, `tuple`, `dict`, `set`.
-//! - `value`, `ops` and `format`: runtime values, `str`/`repr`, arithmetic and
-//!   comparisons with Python semantics, format specs, `%` and `str.format`.
-//! - `heap`: the shared, copy-on-write payloads of strings and containers, the
-//!   live memory meter they are counted on, and the hash-table keys of dicts and sets.
+//! - `interp/`: the evaluator: statements, control flow, scopes, user functions,
+//!   expressions ([`run`], [`Globals`]), with the builtin functions (`builtins`) and
+//!   the methods of `str`, `list`, `tuple`, `dict`, `set` (`methods`), which call back
+//!   into it.
+//! - `value/`: runtime values and `str`/`repr`; `heap`, the shared, copy-on-write
+//!   payloads of strings and containers, the live memory meter they are counted on,
+//!   and the hash-table keys of dicts and sets; `ops`, arithmetic and comparisons with
+//!   Python semantics; `format`, format specs, `%` and `str.format`.
 //! - `stop`: the deadline and cancel flag ([`Stop`]) a run checks as it works.
+//! - `args`: how built-ins bind and convert their arguments, and iteration.
+//! - `runtime`: the effects side of a run (host, output, `sys.exit`, [`ComputerState`]),
+//!   what the imported modules act through; [`RunOutput`].
 //! - `pyautogui`: the pyautogui 0.9.54 module mapped to [`Action`]s.
-//! - `stdlib`: `time`, `os`, `os.path` (ntpath), `subprocess`, `platform`, `sys`, `PIL`, `pyperclip`.
+//! - `stdlib`: `time`, `os`, `os.path` ([`arena_shared::ntpath`]), `subprocess`, `platform`, `sys`, `PIL`, `pyperclip`.
 //! - `computer`: the Navi `Computer` object over [`ComputerState`]; `difflib` for its fuzzy window match.
 //! - [`host`]: the [`ScriptHost`] trait of primitives (input, capture, windows, files,
 //!   processes, registry, clipboard, environment) and the I/O-free [`RecordingHost`].
@@ -32,6 +37,10 @@
 //!   switching windows, opening a program, the OS version, saving a screenshot,
 //!   `subprocess`), written once for the guest and the host.
 //! - `argv`: recognising `python -c CODE` command lines.
+//!
+//! The modules import one another in layers, without loops: the imported modules
+//! (`pyautogui`, `stdlib`, `computer`) get a `runtime`, never the evaluator, and the
+//! two folders hold what is mutually recursive by nature (see `ARCHITECTURE.md`).
 //!
 //! # Safety properties
 //!
@@ -47,23 +56,22 @@
 //! 10 million bytes and lists at a million items; sleeps, clicks and key presses
 //! go through the host, which may refuse them.
 
+#![forbid(unsafe_code)]
+
 use arena_shared::action::Action;
 
+mod args;
 mod argv;
 pub mod ast;
-mod builtins;
 pub mod compose;
 mod computer;
 mod difflib;
 mod error;
-mod format;
-mod heap;
 pub mod host;
 mod interp;
-mod methods;
-mod ops;
 pub mod parser;
 mod pyautogui;
+mod runtime;
 mod stdlib;
 mod stop;
 mod value;
@@ -73,14 +81,12 @@ mod tests;
 
 pub use argv::{is_python_program, python_code_from_argv, python_code_from_command_line};
 pub use compose::Composed;
-pub use computer::ComputerState;
 pub use difflib::{get_close_matches, ratio as sequence_ratio};
 pub use error::{ErrorKind, ParseError, ScriptError};
 pub use host::{CommandArg, CommandOutput, HostError, HostResult, PathKind, RecordingHost, ScriptHost, WindowChange};
-pub use interp::{
-    run, run_measured, Globals, RunOutput, RunStats, KNOWN_MODULES, MAX_CALL_DEPTH, MAX_MEMORY, MAX_STEPS,
-};
+pub use interp::{run, run_measured, Globals, RunStats, KNOWN_MODULES, MAX_CALL_DEPTH, MAX_MEMORY, MAX_STEPS};
 pub use parser::parse;
+pub use runtime::{ComputerState, RunOutput};
 pub use stop::Stop;
 pub use value::{float_repr, str_repr};
 

@@ -23,8 +23,9 @@ use arena_shared::keys::Key;
 
 use super::compose::Composed as _;
 use super::error::{not_supported, type_error, value_error, ScriptError};
-use super::interp::{is_none, iterate, static_name, to_f64, to_str, Args, Interp, RunOutput};
 use super::value::{Object, Value};
+use crate::args::{is_none, iterate, static_name, to_f64, to_str, Args};
+use crate::runtime::{RunOutput, Runtime};
 
 /// The most repetitions (`clicks`, `presses`) one call may ask for.
 const MAX_REPEAT: i64 = 1000;
@@ -123,7 +124,7 @@ pub(crate) fn attr(name: &str, out: &RunOutput) -> Option<Value> {
 }
 
 /// Calls `pyautogui.<name>`.
-pub(crate) fn call(it: &mut Interp<'_, '_>, name: &'static str, args: Args) -> Result<Value, ScriptError> {
+pub(crate) fn call(it: &mut Runtime<'_, '_>, name: &'static str, args: Args) -> Result<Value, ScriptError> {
     let result = dispatch(it, name, args)?;
     if PAUSED.contains(&name) {
         if let Some(pause) = it.out.pause.filter(|p| *p > 0.0) {
@@ -144,7 +145,7 @@ const DRAG_REL: &[&str] =
     &["xOffset", "yOffset", "duration", "tween", "button", "logScreenshot", "_pause", "mouseDownUp"];
 const SCROLL: &[&str] = &["clicks", "x", "y", "logScreenshot", "_pause"];
 
-fn dispatch(it: &mut Interp<'_, '_>, name: &'static str, args: Args) -> Result<Value, ScriptError> {
+fn dispatch(it: &mut Runtime<'_, '_>, name: &'static str, args: Args) -> Result<Value, ScriptError> {
     match name {
         "click" => {
             let a = args.bind(name, CLICK, 0)?;
@@ -361,19 +362,19 @@ enum ClickKind {
     Right,
 }
 
-pub(crate) fn perform(it: &mut Interp<'_, '_>, action: Action) -> Result<(), ScriptError> {
+pub(crate) fn perform(it: &mut Runtime<'_, '_>, action: Action) -> Result<(), ScriptError> {
     let result = it.host.perform(action);
     it.host(result)
 }
 
-fn screen(it: &mut Interp<'_, '_>) -> Result<(i64, i64), ScriptError> {
+fn screen(it: &mut Runtime<'_, '_>) -> Result<(i64, i64), ScriptError> {
     let size = it.host.screen_size();
     let (w, h) = it.host(size)?;
     Ok((i64::from(w), i64::from(h)))
 }
 
 /// The image object `screenshot(region=...)` returns.
-pub(crate) fn screenshot_image(it: &mut Interp<'_, '_>, region: &Option<Value>) -> Result<Value, ScriptError> {
+pub(crate) fn screenshot_image(it: &mut Runtime<'_, '_>, region: &Option<Value>) -> Result<Value, ScriptError> {
     match region.as_ref().filter(|v| !matches!(v, Value::None)) {
         None => {
             let (width, height) = screen(it)?;
@@ -435,13 +436,13 @@ pub(crate) fn coord(v: &Value, what: &str) -> Result<i32, ScriptError> {
 
 /// pyautogui's `_normalizeXYArgs`, returning `None` when both are absent (the current position).
 pub(crate) fn normalize_xy(
-    it: &mut Interp<'_, '_>,
+    it: &mut Runtime<'_, '_>,
     x: &Option<Value>,
     y: &Option<Value>,
 ) -> Result<Option<(i32, i32)>, ScriptError> {
     let x = x.as_ref().filter(|v| !matches!(v, Value::None));
     let y = y.as_ref().filter(|v| !matches!(v, Value::None));
-    let cursor = |it: &mut Interp<'_, '_>| {
+    let cursor = |it: &mut Runtime<'_, '_>| {
         let pos = it.host.cursor_position();
         it.host(pos)
     };
@@ -487,7 +488,7 @@ pub(crate) fn normalize_xy(
 
 /// Like [`normalize_xy`], with the current position filled in.
 pub(crate) fn full_xy(
-    it: &mut Interp<'_, '_>,
+    it: &mut Runtime<'_, '_>,
     x: &Option<Value>,
     y: &Option<Value>,
 ) -> Result<(i32, i32), ScriptError> {
@@ -540,7 +541,7 @@ pub(crate) fn button(v: &Option<Value>) -> Result<MouseButton, ScriptError> {
 fn count(v: &Option<Value>, what: &str) -> Result<u32, ScriptError> {
     let n = match v {
         None => 1,
-        Some(v @ (Value::Int(_) | Value::Bool(_))) => super::interp::to_i64(v, what)?,
+        Some(v @ (Value::Int(_) | Value::Bool(_))) => crate::args::to_i64(v, what)?,
         Some(other) => {
             return Err(type_error(format!(
                 "'{}' object cannot be interpreted as an integer ({what})",
@@ -575,7 +576,7 @@ fn check_number(v: &Option<Value>, what: &str) -> Result<(), ScriptError> {
 }
 
 fn clicks_at(
-    it: &mut Interp<'_, '_>,
+    it: &mut Runtime<'_, '_>,
     at: Option<(i32, i32)>,
     button: MouseButton,
     clicks: u32,
@@ -607,7 +608,7 @@ fn clicks_at(
 }
 
 fn drag_to(
-    it: &mut Interp<'_, '_>,
+    it: &mut Runtime<'_, '_>,
     x: i32,
     y: i32,
     button: MouseButton,
@@ -661,7 +662,7 @@ fn key_list(func: &str, seq: &Value) -> Result<Vec<String>, ScriptError> {
 }
 
 pub(crate) fn press_keys(
-    it: &mut Interp<'_, '_>,
+    it: &mut Runtime<'_, '_>,
     keys: &[String],
     presses: u32,
     interval: f64,
@@ -683,7 +684,7 @@ pub(crate) fn press_keys(
     Ok(())
 }
 
-pub(crate) fn hotkey(it: &mut Interp<'_, '_>, keys: Vec<String>, interval: f64) -> Result<(), ScriptError> {
+pub(crate) fn hotkey(it: &mut Runtime<'_, '_>, keys: Vec<String>, interval: f64) -> Result<(), ScriptError> {
     if keys.is_empty() {
         return Ok(());
     }
@@ -703,7 +704,7 @@ pub(crate) fn hotkey(it: &mut Interp<'_, '_>, keys: Vec<String>, interval: f64) 
 
 /// `pyautogui.write(text)`: runs of text are typed as Unicode; `\n` and `\r`
 /// press Enter, `\t` Tab and `\b` Backspace, as pyautogui maps those characters to keys.
-pub(crate) fn type_text(it: &mut Interp<'_, '_>, text: &str, interval: f64) -> Result<(), ScriptError> {
+pub(crate) fn type_text(it: &mut Runtime<'_, '_>, text: &str, interval: f64) -> Result<(), ScriptError> {
     let interval_ms = (interval > 0.0).then(|| (interval * 1000.0).round() as u64);
     let mut run = String::new();
     for c in text.chars() {

@@ -1,5 +1,5 @@
 //! The standard-library modules a script may import: `time`, `os`, `os.path`
-//! (`ntpath` semantics, `\` separator), `subprocess`, `platform`, `sys`,
+//! (Python 3.10's `ntpath`, the one copy in [`arena_shared::ntpath`]), `subprocess`, `platform`, `sys`,
 //! `PIL` (as names; `ImageGrab.grab` works, `Image.open` does not) and
 //! `pyperclip`.
 //!
@@ -12,8 +12,10 @@
 use super::compose::Composed as _;
 use super::error::{not_supported, type_error, value_error, ErrorKind, ScriptError};
 use super::host::{CommandArg, CommandOutput, PathKind};
-use super::interp::{is_none, static_name, to_f64, to_i64, to_str, Args, Interp};
 use super::value::{Object, Value};
+use crate::args::{is_none, static_name, to_f64, to_i64, to_str, Args};
+use crate::runtime::Runtime;
+use arena_shared::ntpath;
 
 const TIME: &[&str] = &["sleep"];
 const OS: &[&str] = &["getenv", "system", "listdir", "startfile"];
@@ -88,7 +90,7 @@ pub(crate) fn attr(module: &'static str, name: &str) -> Option<Value> {
 }
 
 /// Calls `<module>.<name>`.
-pub(crate) fn call(it: &mut Interp<'_, '_>, module: &str, name: &str, args: Args) -> Result<Value, ScriptError> {
+pub(crate) fn call(it: &mut Runtime<'_, '_>, module: &str, name: &str, args: Args) -> Result<Value, ScriptError> {
     match module {
         "time" | "pyperclip" | "sys" | "platform" | "PIL.Image" | "PIL.ImageGrab" => misc(it, module, name, args),
         "os" => os(it, name, args),
@@ -110,7 +112,7 @@ fn path_arg(v: &Value) -> Result<&str, ScriptError> {
     }
 }
 
-fn misc(it: &mut Interp<'_, '_>, module: &str, name: &str, args: Args) -> Result<Value, ScriptError> {
+fn misc(it: &mut Runtime<'_, '_>, module: &str, name: &str, args: Args) -> Result<Value, ScriptError> {
     match (module, name) {
         ("time", "sleep") => {
             let a = args.bind("sleep", &["secs"], 1)?;
@@ -164,7 +166,7 @@ fn misc(it: &mut Interp<'_, '_>, module: &str, name: &str, args: Args) -> Result
             let region = match a[0].as_ref().filter(|v| !matches!(v, Value::None)) {
                 None => None,
                 Some(bbox) => {
-                    let items = super::interp::iterate(bbox)?;
+                    let items = crate::args::iterate(bbox)?;
                     let [l, t, r, b] = items.as_slice() else {
                         return Err(value_error("bbox must be (left, top, right, bottom)"));
                     };
@@ -180,7 +182,7 @@ fn misc(it: &mut Interp<'_, '_>, module: &str, name: &str, args: Args) -> Result
 }
 
 /// `SystemExit(status)`: `None` is 0, an int is the code, anything else is printed to stderr and is 1.
-pub(crate) fn exit_with(it: &mut Interp<'_, '_>, status: Option<Value>) -> ScriptError {
+pub(crate) fn exit_with(it: &mut Runtime<'_, '_>, status: Option<Value>) -> ScriptError {
     let code = match status.unwrap_or(Value::None) {
         Value::None => 0,
         Value::Int(i) => i32::try_from(i).unwrap_or(-1),
@@ -194,7 +196,7 @@ pub(crate) fn exit_with(it: &mut Interp<'_, '_>, status: Option<Value>) -> Scrip
     it.system_exit(code)
 }
 
-fn os(it: &mut Interp<'_, '_>, name: &str, args: Args) -> Result<Value, ScriptError> {
+fn os(it: &mut Runtime<'_, '_>, name: &str, args: Args) -> Result<Value, ScriptError> {
     match name {
         "getenv" => {
             let a = args.bind("getenv", &["key", "default"], 1)?;
@@ -241,9 +243,9 @@ fn os(it: &mut Interp<'_, '_>, name: &str, args: Args) -> Result<Value, ScriptEr
     }
 }
 
-fn os_path(it: &mut Interp<'_, '_>, name: &str, args: Args) -> Result<Value, ScriptError> {
+fn os_path(it: &mut Runtime<'_, '_>, name: &str, args: Args) -> Result<Value, ScriptError> {
     let s = |v: String| Ok(Value::str(v));
-    let pair = |(a, b): (String, String)| Ok(Value::tuple(vec![Value::str(a), Value::str(b)]));
+    let pair = |(a, b): (&str, &str)| Ok(Value::tuple(vec![Value::str(a.to_owned()), Value::str(b.to_owned())]));
     if name == "join" {
         if !args.kw.is_empty() {
             return Err(type_error("join() takes no keyword arguments"));
@@ -260,14 +262,11 @@ fn os_path(it: &mut Interp<'_, '_>, name: &str, args: Args) -> Result<Value, Scr
     let a = args.bind(name, &["path"], 1)?;
     let path = path_arg(arg(&a, 0))?.to_owned();
     match name {
-        "basename" => s(ntpath::split(&path).1),
-        "dirname" => s(ntpath::split(&path).0),
+        "basename" => s(ntpath::basename(&path).to_owned()),
+        "dirname" => s(ntpath::dirname(&path).to_owned()),
         "split" => pair(ntpath::split(&path)),
         "splitext" => pair(ntpath::splitext(&path)),
-        "splitdrive" => {
-            let (d, p) = ntpath::splitdrive(&path);
-            pair((d.to_owned(), p.to_owned()))
-        }
+        "splitdrive" => pair(ntpath::splitdrive(&path)),
         "isabs" => Ok(Value::Bool(ntpath::isabs(&path))),
         "expanduser" => {
             let host = &mut *it.host;
@@ -337,7 +336,7 @@ pub(crate) fn called_process_error(
     )
 }
 
-fn subprocess(it: &mut Interp<'_, '_>, name: &str, args: Args) -> Result<Value, ScriptError> {
+fn subprocess(it: &mut Runtime<'_, '_>, name: &str, args: Args) -> Result<Value, ScriptError> {
     let mut pos = args.pos.into_iter();
     let Some(cmd_value) = pos.next() else {
         return Err(type_error(format!("{name}() missing 1 required positional argument: 'args'")));
@@ -411,173 +410,4 @@ fn subprocess(it: &mut Interp<'_, '_>, name: &str, args: Args) -> Result<Value, 
         "check_call" => Value::Int(0),
         _ => Value::Int(code),
     })
-}
-
-/// Python's `ntpath` (3.10) path functions, on `&str` with ASCII separators.
-pub(crate) mod ntpath {
-    fn is_sep(c: char) -> bool {
-        c == '\\' || c == '/'
-    }
-
-    /// `ntpath.splitdrive`: `C:` or a UNC `\\server\share` prefix.
-    pub(crate) fn splitdrive(p: &str) -> (&str, &str) {
-        if p.len() < 2 {
-            return ("", p);
-        }
-        let norm: String = p.chars().map(|c| if c == '/' { '\\' } else { c }).collect();
-        if norm.starts_with("\\\\") && !norm[2..].starts_with('\\') {
-            let Some(index) = norm[2..].find('\\').map(|i| i + 2) else {
-                return ("", p);
-            };
-            let index2 = match norm[index + 1..].find('\\').map(|i| i + index + 1) {
-                Some(i) if i == index + 1 => return ("", p),
-                Some(i) => i,
-                None => p.len(),
-            };
-            return p.split_at(index2);
-        }
-        if norm.as_bytes().get(1) == Some(&b':') && p.is_char_boundary(2) {
-            return p.split_at(2);
-        }
-        ("", p)
-    }
-
-    /// `ntpath.join`.
-    pub(crate) fn join(parts: &[&str]) -> String {
-        let (first_drive, first_path) = splitdrive(parts.first().copied().unwrap_or(""));
-        let mut drive = first_drive.to_owned();
-        let mut path = first_path.to_owned();
-        for part in parts.iter().skip(1) {
-            let (p_drive, p_path) = splitdrive(part);
-            if p_path.starts_with(is_sep) {
-                if !p_drive.is_empty() || drive.is_empty() {
-                    drive = p_drive.to_owned();
-                }
-                path = p_path.to_owned();
-                continue;
-            } else if !p_drive.is_empty() && p_drive != drive {
-                if p_drive.to_lowercase() != drive.to_lowercase() {
-                    drive = p_drive.to_owned();
-                    path = p_path.to_owned();
-                    continue;
-                }
-                drive = p_drive.to_owned();
-            }
-            if !path.is_empty() && !path.ends_with(is_sep) {
-                path.push('\\');
-            }
-            path.push_str(p_path);
-        }
-        if !path.is_empty() && !path.starts_with(is_sep) && !drive.is_empty() && !drive.ends_with(':') {
-            return format!("{drive}\\{path}");
-        }
-        format!("{drive}{path}")
-    }
-
-    /// `ntpath.split`: (head, tail), with trailing separators stripped from the head.
-    pub(crate) fn split(p: &str) -> (String, String) {
-        let (drive, rest) = splitdrive(p);
-        let i = rest.rfind(is_sep).map_or(0, |i| i + 1);
-        let (head, tail) = rest.split_at(i);
-        let stripped = head.trim_end_matches(is_sep);
-        let head = if stripped.is_empty() { head } else { stripped };
-        (format!("{drive}{head}"), tail.to_owned())
-    }
-
-    /// `ntpath.splitext`: leading dots of the file name do not start an extension.
-    pub(crate) fn splitext(p: &str) -> (String, String) {
-        let sep_index = p.rfind(is_sep).map_or(0, |i| i + 1);
-        if let Some(dot) = p.rfind('.').filter(|d| *d >= sep_index) {
-            if p[sep_index..dot].chars().any(|c| c != '.') {
-                return (p[..dot].to_owned(), p[dot..].to_owned());
-            }
-        }
-        (p.to_owned(), String::new())
-    }
-
-    /// `ntpath.isabs` (3.10): a separator right after the drive.
-    pub(crate) fn isabs(p: &str) -> bool {
-        splitdrive(p).1.starts_with(is_sep)
-    }
-
-    /// `ntpath.expanduser` with the environment read through `env`.
-    pub(crate) fn expanduser(path: &str, env: &mut dyn FnMut(&str) -> Option<String>) -> String {
-        if !path.starts_with('~') {
-            return path.to_owned();
-        }
-        let end = path[1..].find(is_sep).map_or(path.len(), |i| i + 1);
-        let mut home = match env("USERPROFILE") {
-            Some(home) => home,
-            None => match env("HOMEPATH") {
-                None => return path.to_owned(),
-                Some(home_path) => join(&[&env("HOMEDRIVE").unwrap_or_default(), &home_path]),
-            },
-        };
-        if end != 1 {
-            let target = &path[1..end];
-            if env("USERNAME").as_deref() != Some(target) {
-                let (parent, current) = split(&home);
-                if env("USERNAME").as_deref() != Some(current.as_str()) {
-                    return path.to_owned();
-                }
-                home = join(&[&parent, target]);
-            }
-        }
-        format!("{home}{}", &path[end..])
-    }
-
-    #[cfg(test)]
-    mod tests {
-        use super::*;
-
-        #[test]
-        fn join_matches_ntpath() {
-            let check = |parts: &[&str], expected: &str| assert_eq!(join(parts), expected, "{parts:?}");
-            check(
-                &[r"C:\Users\Docker\AppData\Local", r"Google\Chrome\User Data\Default\History"],
-                r"C:\Users\Docker\AppData\Local\Google\Chrome\User Data\Default\History",
-            );
-            check(&["a", "b", "c"], r"a\b\c");
-            check(&[r"a\", "b"], r"a\b");
-            check(&["a/", "b"], "a/b");
-            check(&["a", r"\b"], r"\b");
-            check(&[r"C:\a", r"\b"], r"C:\b");
-            check(&[r"C:\a", r"D:b"], "D:b");
-            check(&[r"C:\a", r"c:b"], r"c:\a\b");
-            check(&["C:", "b"], "C:b");
-            check(&[r"\\server\share", "x"], r"\\server\share\x");
-            check(&["", "b"], "b");
-            check(&["a", ""], r"a\");
-        }
-
-        #[test]
-        fn split_and_friends_match_ntpath() {
-            let check =
-                |p: &str, head: &str, tail: &str| assert_eq!(split(p), (head.to_owned(), tail.to_owned()), "{p}");
-            check(r"C:\Users\Docker\file.txt", r"C:\Users\Docker", "file.txt");
-            check(r"C:\file.txt", r"C:\", "file.txt");
-            check(r"C:\", r"C:\", "");
-            check("file", "", "file");
-            check(r"a\\b", "a", "b");
-            check(r"\\server\share\x", r"\\server\share\", "x");
-            assert_eq!(splitext(r"C:\a\b.tar.gz"), (r"C:\a\b.tar".to_owned(), ".gz".to_owned()));
-            assert_eq!(splitext(r"C:\a\.bashrc"), (r"C:\a\.bashrc".to_owned(), String::new()));
-            assert_eq!(splitext(r"a.b\c"), (r"a.b\c".to_owned(), String::new()));
-            assert!(isabs(r"C:\x") && isabs(r"\x") && !isabs("C:x") && !isabs("x"));
-        }
-
-        #[test]
-        fn expanduser_matches_ntpath() {
-            let mut env = |name: &str| match name {
-                "USERPROFILE" => Some(r"C:\Users\Docker".to_owned()),
-                "USERNAME" => Some("Docker".to_owned()),
-                _ => None,
-            };
-            assert_eq!(expanduser("~", &mut env), r"C:\Users\Docker");
-            assert_eq!(expanduser(r"~\Desktop", &mut env), r"C:\Users\Docker\Desktop");
-            assert_eq!(expanduser("~other/x", &mut env), r"C:\Users\other/x");
-            assert_eq!(expanduser("x~", &mut env), "x~");
-            assert_eq!(expanduser("~", &mut |_| None), "~");
-        }
-    }
 }

@@ -14,6 +14,8 @@
 //!
 //! Run: `cargo run -p arena-tests --bin agentbench` (needs `python3`).
 
+#![forbid(unsafe_code)]
+
 use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, ExitCode, Stdio};

@@ -13,6 +13,8 @@
 //! Run: `cargo run -p arena-tests --bin episodes` (add `--release` for
 //! release figures).
 
+#![forbid(unsafe_code)]
+
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::sync::Arc;

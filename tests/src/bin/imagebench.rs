@@ -18,6 +18,8 @@
 //! `imagebench --save-png PATH` also keeps a copy of the test image at PATH.
 //! Run it in release mode: `cargo run --release -p arena-tests --bin imagebench`.
 
+#![forbid(unsafe_code)]
+
 use std::process::{Command, ExitCode};
 use std::time::Instant;
 

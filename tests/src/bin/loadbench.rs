@@ -19,6 +19,8 @@
 //! Run it in release mode: `cargo run --release -p arena-tests --bin loadbench`
 //! (`-- guards` runs the guards section alone).
 
+#![forbid(unsafe_code)]
+
 #[path = "loadbench/guards.rs"]
 mod guards;
 

@@ -15,6 +15,8 @@
 //!
 //! Run: `cargo run --release -p arena-tests --bin navibench`.
 
+#![forbid(unsafe_code)]
+
 use std::process::ExitCode;
 use std::time::Duration;
 

@@ -11,6 +11,8 @@
 //! `--keep DIR` writes the files into DIR and leaves them there, so that
 //! `tests/bench/office_upstream.py DIR` can time the Python libraries on the same files.
 
+#![forbid(unsafe_code)]
+
 use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;

@@ -12,6 +12,8 @@
 //! by the interpreter's own accounting and the time to that answer.
 //! Run it in release mode: `cargo run --release -p arena-tests --bin pyexec`.
 
+#![forbid(unsafe_code)]
+
 use std::process::ExitCode;
 use std::time::{Duration, Instant};
 

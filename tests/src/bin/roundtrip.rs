@@ -7,6 +7,8 @@
 //! call on the blocking pool and, for screenshots, rendering and PNG encoding.
 //! Run it in release mode: `cargo run --release -p arena-tests --bin roundtrip`.
 
+#![forbid(unsafe_code)]
+
 use std::process::ExitCode;
 use std::time::{Duration, Instant};
 

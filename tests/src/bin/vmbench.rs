@@ -12,6 +12,8 @@
 //! (`scripts/build-standin-image.sh`). `--accel kvm` where KVM works; software
 //! emulation otherwise. Run: `cargo run --release -p arena-tests --bin vmbench`.
 
+#![forbid(unsafe_code)]
+
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::time::{Duration, Instant};

@@ -21,6 +21,8 @@
 //! `corpus.rs` (corpus locator), `wine.rs` (Wine locator), `standin.rs` (stand-in
 //! image locator), `wait.rs` (polling), `png.rs` (PNG bombs).
 
+#![forbid(unsafe_code)]
+
 mod corpus;
 #[cfg(feature = "guest")]
 mod guest;

@@ -49,9 +49,13 @@ use windows_service::service_manager::{ServiceManager, ServiceManagerAccess};
 use windows::Win32::UI::Shell::{FOLDERID_ProgramData, SHGetKnownFolderPath, KF_FLAG_DEFAULT};
 
 use crate::desktop::windows::sys::{describe, token_info, CoTaskString, OwnedHandle};
+use arena_guest_launch::error::ServiceCliError;
+use arena_guest_launch::logs::{log_dir, rotate_log, LOG_MAX_BYTES};
+use arena_guest_launch::restart::Backoff;
+
+use crate::cli::{ServiceCommand, SupervisorOptions, WorkerToken};
 use crate::service::{
-    choose_worker_token, log_dir, rotate_log, service_run_args, supervisor_step, worker_command_line, Backoff,
-    ServiceCliError, ServiceCommand, SupervisorOptions, SupervisorStep, TokenChoice, WorkerToken, LOG_MAX_BYTES,
+    choose_worker_token, service_run_args, supervisor_step, worker_command_line, SupervisorStep, TokenChoice,
 };
 
 /// How long a worker gets to stop after its standard input closes, before it is terminated.

@@ -8,15 +8,25 @@
 //! interpreter objects (a screenshot, the `Computer` parts, a finished process) are
 //! small enums. `str` and `repr` follow CPython, including float formatting
 //! (`0.5`, `1.0`, `1e-05`, `inf`), and never build more text than the budget holds.
+//!
+//! This folder is the value model, four files that need one another by nature:
+//! [`Value`] holds [`heap`] payloads and the payloads hold values; a dict or set key
+//! ([`heap::Key`]) compares with Python's equality from [`ops`]; `%` on a string in
+//! [`ops`] is [`format`]'s printf formatting, which looks keys up in dicts. Nothing
+//! here knows the interpreter, the host or any module a script imports.
+
+pub(crate) mod format;
+pub(crate) mod heap;
+pub(crate) mod ops;
 
 use std::collections::HashMap;
 use std::fmt::Write as _;
 use std::rc::Rc;
 use std::sync::Arc;
 
-use super::ast::Function;
-use super::error::{ErrorKind, ScriptError};
-use super::heap::{self, DictMap, Heap, SetMap};
+use self::heap::{DictMap, Heap, SetMap};
+use crate::ast::Function;
+use crate::error::{ErrorKind, ScriptError};
 
 /// A runtime value.
 #[derive(Debug, Clone, PartialEq)]

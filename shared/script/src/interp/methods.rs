@@ -5,13 +5,14 @@
 //! the variable the receiver expression names (see `Interp::call_mutating`);
 //! called on a temporary value they change only that copy.
 
-use super::compose::Composed as _;
-use super::error::{not_supported, type_error, value_error, ErrorKind, ScriptError};
-use super::heap::{self, Key};
-use super::interp::{check_hashable, dict_insert, iterate, make_set, no_attribute, to_i64, to_str, Args, Interp};
-use super::ops;
-use super::stop;
-use super::value::{Object, Value};
+use super::{check_hashable, dict_insert, make_set, Interp};
+use crate::args::{iterate, no_attribute, to_i64, to_str, Args};
+use crate::compose::Composed as _;
+use crate::error::{not_supported, type_error, value_error, ErrorKind, ScriptError};
+use crate::stop;
+use crate::value::heap::{self, Key};
+use crate::value::ops;
+use crate::value::{Object, Value};
 
 pub(crate) const STR_METHODS: &[&str] = &[
     "lower",
@@ -126,7 +127,7 @@ impl Interp<'_, '_> {
                 let a = args.bind("get", &["key", "default"], 1)?;
                 let key = a[0].clone().unwrap_or(Value::None);
                 let name = to_str(&key, "environment variable name")?;
-                Ok(self.host.env_var(name).map(Value::str).unwrap_or_else(|| a[1].clone().unwrap_or(Value::None)))
+                Ok(self.rt.host.env_var(name).map(Value::str).unwrap_or_else(|| a[1].clone().unwrap_or(Value::None)))
             }
             Value::Object(Object::Image { region, .. }) => {
                 let a = args.bind("save", &["fp", "format"], 1)?;
@@ -136,18 +137,18 @@ impl Interp<'_, '_> {
                     None | Some(Value::None) => None,
                     Some(format) => Some(to_str(format, "save() format")?.to_owned()),
                 };
-                let result = self.host.save_screenshot(&path, *region, format.as_deref());
-                self.host(result)?;
+                let result = self.rt.host.save_screenshot(&path, *region, format.as_deref());
+                self.rt.host(result)?;
                 Ok(Value::None)
             }
             Value::Object(Object::Completed { args: cmd, returncode, stdout, stderr }) => {
                 args.bind("check_returncode", &[], 0)?;
                 if *returncode != 0 {
-                    return Err(super::stdlib::called_process_error(cmd, *returncode, stdout.clone(), stderr.clone()));
+                    return Err(crate::stdlib::called_process_error(cmd, *returncode, stdout.clone(), stderr.clone()));
                 }
                 Ok(Value::None)
             }
-            Value::Object(object) => super::computer::call_method(self, object.clone(), name, args),
+            Value::Object(object) => crate::computer::call_method(&mut self.rt, object.clone(), name, args),
             other => Err(no_attribute(other, name)),
         }
     }
@@ -267,7 +268,7 @@ impl Interp<'_, '_> {
                     }
                     let i = match &a[0] {
                         None => heap.len() - 1,
-                        Some(index) => super::interp::seq_index(heap.len(), index, "list")
+                        Some(index) => super::seq_index(heap.len(), index, "list")
                             .map_err(|_| ScriptError::new(ErrorKind::Index, "pop index out of range"))?,
                     };
                     Ok(heap.make_mut().remove(i))
@@ -295,7 +296,7 @@ impl Interp<'_, '_> {
                     let len = items.len();
                     let mut done = 0;
                     while done < len / 2 {
-                        let chunk = (len / 2 - done).min(super::stop::WORK_SLICE as usize);
+                        let chunk = (len / 2 - done).min(crate::stop::WORK_SLICE as usize);
                         for i in done..done + chunk {
                             items.swap(i, len - 1 - i);
                         }
@@ -681,7 +682,7 @@ fn str_method(s: &str, name: &str, args: Args) -> Result<Value, ScriptError> {
                 _ => cased && title_case(s) == s,
             }))
         }
-        "format" => Ok(Value::str(super::format::str_format(s, &args.pos, &args.kw)?)),
+        "format" => Ok(Value::str(crate::value::format::str_format(s, &args.pos, &args.kw)?)),
         "zfill" => {
             let a = args.bind("zfill", &["width"], 1)?;
             let width = usize::try_from(to_i64(a[0].as_ref().unwrap_or(&Value::None), "width")?).unwrap_or(0);

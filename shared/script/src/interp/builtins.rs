@@ -2,13 +2,14 @@
 //! containers (`list`, `dict`, `set`, `range`, ...), iteration helpers
 //! (`enumerate`, `zip`, `sorted`, `map`, ...) and numeric helpers.
 
-use super::ast::BinOp;
-use super::error::{not_supported, type_error, value_error, ErrorKind, ScriptError};
-use super::heap::{self, DictMap, SetMap};
-use super::interp::{dict_insert, is_none, iterate, make_set, to_f64, to_i64, to_str, Args, Interp};
-use super::ops;
-use super::stop;
-use super::value::Value;
+use super::{dict_insert, make_set, Interp};
+use crate::args::{is_none, iterate, to_f64, to_i64, to_str, Args};
+use crate::ast::BinOp;
+use crate::error::{not_supported, type_error, value_error, ErrorKind, ScriptError};
+use crate::stop;
+use crate::value::heap::{self, DictMap, SetMap};
+use crate::value::ops;
+use crate::value::Value;
 
 impl Interp<'_, '_> {
     pub(crate) fn builtin(&mut self, name: &str, args: Args) -> Result<Value, ScriptError> {
@@ -32,7 +33,7 @@ impl Interp<'_, '_> {
                 }
                 let text: Vec<String> = args.pos.iter().map(Value::try_to_str).collect::<Result<_, _>>()?;
                 let line = format!("{}{end}", text.join(&sep));
-                self.print(&line)?;
+                self.rt.print(&line)?;
                 Ok(Value::None)
             }
             "type" => {
@@ -61,7 +62,7 @@ impl Interp<'_, '_> {
                     Value::Dict(d) => d.len(),
                     Value::Set(v) => v.len(),
                     Value::Range(start, stop, step) => {
-                        usize::try_from(super::value::range_len(*start, *stop, *step)).unwrap_or(usize::MAX)
+                        usize::try_from(crate::value::range_len(*start, *stop, *step)).unwrap_or(usize::MAX)
                     }
                     Value::Point(..) | Value::Size(..) => 2,
                     other => return Err(type_error(format!("object of type '{}' has no len()", other.type_name()))),
@@ -151,7 +152,7 @@ impl Interp<'_, '_> {
                         if !matches!(item, Value::Int(_) | Value::Float(_) | Value::Bool(_)) {
                             return Err(not_supported("sum() of non-numbers is not supported"));
                         }
-                        total = ops::binary(super::ast::BinOp::Add, &total, item)?;
+                        total = ops::binary(crate::ast::BinOp::Add, &total, item)?;
                     }
                     Ok(())
                 })?;
@@ -333,7 +334,7 @@ impl Interp<'_, '_> {
                     Some(v) => to_str(v, "format() argument 2")?.to_owned(),
                     None => String::new(),
                 };
-                Ok(Value::str(super::format::format_value(a[0].as_ref().unwrap_or(&Value::None), &spec)?))
+                Ok(Value::str(crate::value::format::format_value(a[0].as_ref().unwrap_or(&Value::None), &spec)?))
             }
             "hex" | "oct" | "bin" => {
                 let a = args.bind(name, &["number"], 1)?;
@@ -346,7 +347,7 @@ impl Interp<'_, '_> {
                     "oct" => "#o",
                     _ => "#b",
                 };
-                Ok(Value::str(super::format::format_value(&v, spec)?))
+                Ok(Value::str(crate::value::format::format_value(&v, spec)?))
             }
             "chr" => {
                 let a = args.bind("chr", &["i"], 1)?;
@@ -371,7 +372,7 @@ impl Interp<'_, '_> {
             }
             "exit" | "quit" => {
                 let a = args.bind(name, &["code"], 0)?;
-                Err(super::stdlib::exit_with(self, a[0].clone()))
+                Err(crate::stdlib::exit_with(&mut self.rt, a[0].clone()))
             }
             other => Err(not_supported(format!("{other}() is not supported by this interpreter"))),
         }
@@ -499,7 +500,7 @@ fn builtin_int(args: Args) -> Result<Value, ScriptError> {
 }
 
 fn parse_int(s: &str, base: i64) -> Result<Value, ScriptError> {
-    let invalid = || value_error(format!("invalid literal for int() with base {base}: {}", super::value::str_repr(s)));
+    let invalid = || value_error(format!("invalid literal for int() with base {base}: {}", crate::value::str_repr(s)));
     if !(base == 0 || (2..=36).contains(&base)) {
         return Err(value_error("int() base must be >= 2 and <= 36, or 0"));
     }
@@ -547,7 +548,7 @@ fn builtin_float(args: Args) -> Result<Value, ScriptError> {
             };
             parsed
                 .map(Value::Float)
-                .ok_or_else(|| value_error(format!("could not convert string to float: {}", super::value::str_repr(s))))
+                .ok_or_else(|| value_error(format!("could not convert string to float: {}", crate::value::str_repr(s))))
         }
         Some(v @ (Value::Int(_) | Value::Bool(_) | Value::Float(_))) => Ok(Value::Float(to_f64(v, "x")?)),
         Some(other) => {

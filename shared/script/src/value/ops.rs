@@ -7,10 +7,10 @@
 
 use std::cmp::Ordering;
 
-use super::ast::{BinOp, UnaryOp};
-use super::error::{type_error, value_error, ErrorKind, ScriptError};
 use super::heap::{self, reserve_items, Heap, SetMap};
-use super::value::Value;
+use super::Value;
+use crate::ast::{BinOp, UnaryOp};
+use crate::error::{type_error, value_error, ErrorKind, ScriptError};
 
 /// The longest string (in bytes) an operation may build.
 pub(crate) const MAX_LEN: usize = 10_000_000;
@@ -195,7 +195,7 @@ fn repeat_items(items: &[Value], times: usize, total: usize) -> Result<Vec<Value
     let mut out = Vec::with_capacity(total);
     for _ in 0..times {
         out.extend(items.iter().cloned());
-        super::stop::work(items.len() as u64)?;
+        crate::stop::work(items.len() as u64)?;
     }
     Ok(out)
 }

@@ -3,29 +3,39 @@
 //!
 //! Modules are interpreter objects, never real imports: `import` only binds
 //! names from a fixed list ([`KNOWN_MODULES`]); their functions live in
-//! [`super::pyautogui`], [`super::stdlib`] and [`super::computer`]; builtins
-//! live in [`super::builtins`] and the methods of plain values in [`super::methods`].
-//! Every effect goes through the [`ScriptHost`].
+//! [`crate::pyautogui`], [`crate::stdlib`] and [`crate::computer`], which get the
+//! run's [`Runtime`] (its effects), never the evaluator. Every effect goes through
+//! the [`ScriptHost`].
+//!
+//! This folder is the evaluator, one type ([`Interp`]) whose `impl` spans three
+//! files because they call one another by nature: this file runs statements and
+//! expressions and calls the builtins and methods, which call back into it
+//! (`sorted(key=f)`, `map(f, ...)`, a method on a subscripted variable): [`builtins`]
+//! holds the builtin functions and [`methods`] the methods of plain values.
 //!
 //! A run always ends: loop iterations and function calls together are capped at
 //! [`MAX_STEPS`], calls nest at most [`MAX_CALL_DEPTH`] deep, and what the
 //! program builds and reads is charged against an allocation budget.
 
+mod builtins;
+mod methods;
+
 use std::collections::HashMap;
 use std::rc::Rc;
 use std::sync::Arc;
 
-use super::ast::{
+use crate::args::{iterate, no_attribute, static_name, to_f64, to_i64, to_str, Args, LoopIter};
+use crate::ast::{
     BinOp, CmpOp, CompKind, Const, Expr, ExprKind, FPart, Function, FunctionBody, Generator, Handler, Program, Stmt,
     StmtKind, Target,
 };
-use super::computer::ComputerState;
-use super::error::{not_supported, type_error, value_error, ErrorKind, ScriptError};
-use super::heap::{self, DictMap, Heap, Key, SetMap};
-use super::host::{HostResult, ScriptHost};
-use super::ops;
-use super::stop::{self, Stop};
-use super::value::{Object, UserFn, Value};
+use crate::error::{not_supported, type_error, value_error, ErrorKind, ScriptError};
+use crate::host::ScriptHost;
+use crate::runtime::{ComputerState, RunOutput, Runtime};
+use crate::stop::{self, Stop};
+use crate::value::heap::{self, DictMap, Key, SetMap};
+use crate::value::ops;
+use crate::value::{Object, UserFn, Value};
 
 /// Modules a script may import.
 pub const KNOWN_MODULES: &[&str] = &[
@@ -179,21 +189,6 @@ impl<'a> Globals<'a> {
     }
 }
 
-/// What a finished program printed and set.
-#[derive(Debug, Clone, PartialEq, Default)]
-pub struct RunOutput {
-    /// Everything printed, exactly as CPython would print it.
-    pub stdout: String,
-    /// What child processes wrote to stderr, and `sys.exit("message")` texts.
-    pub stderr: String,
-    /// 0, or the code given to `sys.exit`.
-    pub exit_code: i32,
-    /// The last `pyautogui.FAILSAFE = ...` assignment (it has no effect here).
-    pub failsafe: Option<bool>,
-    /// The last `pyautogui.PAUSE = ...` assignment (applied after each pyautogui call).
-    pub pause: Option<f64>,
-}
-
 /// What a run cost, by the interpreter's own accounting.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub struct RunStats {
@@ -242,14 +237,9 @@ fn run_in_scope(
     steps: &mut u64,
 ) -> Result<RunOutput, ScriptError> {
     let mut interp = Interp {
-        host,
-        computer: globals.computer,
-        action_delay: globals.computer_action_delay,
+        rt: Runtime::new(host, globals.computer, globals.computer_action_delay),
         vars: HashMap::new(),
         frames: vec![Frame::default()],
-        out: RunOutput::default(),
-        exit: None,
-        printed: 0,
         steps: 0,
         calls: 0,
         depth: 0,
@@ -258,12 +248,12 @@ fn run_in_scope(
     interp.vars.insert("__name__".into(), Value::str("__main__"));
     let preimport_line = program.statements.first().map_or(1, |s| s.line);
     for module in globals.preimport {
-        let stmt = StmtKind::Import(vec![super::ast::ImportName { module: (*module).to_owned(), alias: None }]);
+        let stmt = StmtKind::Import(vec![crate::ast::ImportName { module: (*module).to_owned(), alias: None }]);
         interp
             .statement(&Stmt { line: preimport_line, column: 1, kind: stmt })
             .map_err(|e| interp.finish_error(e, 1))?;
     }
-    if interp.computer.is_some() {
+    if interp.rt.computer.is_some() {
         interp.vars.insert("computer".into(), Value::Object(Object::Computer));
         interp.vars.insert("human".into(), Value::Object(Object::Human));
     }
@@ -277,171 +267,20 @@ fn run_in_scope(
         }
     }
     *steps = interp.steps;
-    if let Some(code) = interp.exit {
-        interp.out.exit_code = code;
+    if let Some(code) = interp.rt.exit {
+        interp.rt.out.exit_code = code;
     }
-    Ok(std::mem::take(&mut interp.out))
-}
-
-/// Positional and keyword arguments of one call.
-#[derive(Debug, Default)]
-pub(crate) struct Args {
-    pub(crate) pos: Vec<Value>,
-    pub(crate) kw: Vec<(String, Value)>,
-}
-
-impl Args {
-    /// Binds arguments to `params` like a Python signature whose first `required`
-    /// parameters have no default. Missing optional parameters are `None`.
-    pub(crate) fn bind(self, fname: &str, params: &[&str], required: usize) -> Result<Vec<Option<Value>>, ScriptError> {
-        if self.pos.len() > params.len() {
-            let takes = if required == params.len() {
-                format!("{} positional argument{}", params.len(), if params.len() == 1 { "" } else { "s" })
-            } else {
-                format!("from {required} to {} positional arguments", params.len())
-            };
-            let given = self.pos.len();
-            let verb = if given == 1 { "was" } else { "were" };
-            return Err(type_error(format!("{fname}() takes {takes} but {given} {verb} given")));
-        }
-        let mut bound: Vec<Option<Value>> = vec![None; params.len()];
-        for (slot, value) in bound.iter_mut().zip(self.pos) {
-            *slot = Some(value);
-        }
-        for (name, value) in self.kw {
-            let Some(i) = params.iter().position(|p| *p == name) else {
-                return Err(type_error(format!("{fname}() got an unexpected keyword argument '{name}'")));
-            };
-            if bound[i].is_some() {
-                return Err(type_error(format!("{fname}() got multiple values for argument '{name}'")));
-            }
-            bound[i] = Some(value);
-        }
-        let missing: Vec<String> =
-            (0..required).filter(|i| bound[*i].is_none()).map(|i| format!("'{}'", params[i])).collect();
-        if !missing.is_empty() {
-            let list = match missing.len() {
-                1 => missing[0].clone(),
-                2 => format!("{} and {}", missing[0], missing[1]),
-                n => format!("{}, and {}", missing[..n - 1].join(", "), missing[n - 1]),
-            };
-            let plural = if missing.len() == 1 { "argument" } else { "arguments" };
-            return Err(type_error(format!(
-                "{fname}() missing {} required positional {plural}: {list}",
-                missing.len()
-            )));
-        }
-        Ok(bound)
-    }
-}
-
-/// A bound argument that is absent or Python `None`.
-pub(crate) fn is_none(arg: &Option<Value>) -> bool {
-    matches!(arg, None | Some(Value::None))
-}
-
-/// A number argument as `f64`.
-pub(crate) fn to_f64(v: &Value, what: &str) -> Result<f64, ScriptError> {
-    match v {
-        Value::Bool(b) => Ok(f64::from(u8::from(*b))),
-        // Precision loss above 2**53 matches Python's int-to-float conversion.
-        Value::Int(i) => Ok(*i as f64),
-        Value::Float(f) => Ok(*f),
-        other => Err(type_error(format!("{what} must be a number, not {}", other.type_name()))),
-    }
-}
-
-/// An integer argument (bools count, floats do not).
-pub(crate) fn to_i64(v: &Value, what: &str) -> Result<i64, ScriptError> {
-    match v {
-        Value::Bool(b) => Ok(i64::from(*b)),
-        Value::Int(i) => Ok(*i),
-        other => Err(type_error(format!("{what} must be an integer, not {}", other.type_name()))),
-    }
-}
-
-/// A string argument.
-pub(crate) fn to_str<'v>(v: &'v Value, what: &str) -> Result<&'v str, ScriptError> {
-    match v {
-        Value::Str(s) => Ok(s),
-        other => Err(type_error(format!("{what} must be str, not {}", other.type_name()))),
-    }
-}
-
-/// The items of an iterable value, sharing their payloads; the list of them is
-/// reserved against the memory budget before it is built.
-pub(crate) fn iterate(v: &Value) -> Result<Vec<Value>, ScriptError> {
-    match v {
-        Value::List(items) | Value::Tuple(items) => {
-            heap::reserve_items(items.len())?;
-            Ok(items.to_vec())
-        }
-        Value::Str(s) => {
-            if s.len() > ops::MAX_ITEMS {
-                return Err(ScriptError::new(
-                    ErrorKind::Memory,
-                    format!("result would exceed {} items", ops::MAX_ITEMS),
-                ));
-            }
-            // Each character becomes a string of its own.
-            heap::reserve_items(s.len().saturating_mul(2))?;
-            Ok(s.chars().map(|c| Value::str(c.to_string())).collect())
-        }
-        Value::Dict(entries) => {
-            heap::reserve_items(entries.len())?;
-            Ok(entries.keys().map(|k| k.0.clone()).collect())
-        }
-        Value::Set(items) => {
-            heap::reserve_items(items.len())?;
-            Ok(items.iter().map(|k| k.0.clone()).collect())
-        }
-        Value::Range(start, stop, step) => {
-            let len = super::value::range_len(*start, *stop, *step);
-            if len > ops::MAX_ITEMS as u64 {
-                return Err(ScriptError::new(
-                    ErrorKind::Memory,
-                    format!("result would exceed {} items", ops::MAX_ITEMS),
-                ));
-            }
-            heap::reserve_items(usize::try_from(len).unwrap_or(usize::MAX))?;
-            let mut it = LoopIter::Range { next: *start, stop: *stop, step: *step };
-            let mut out = Vec::with_capacity(usize::try_from(len).unwrap_or(0));
-            while let Some(v) = it.next() {
-                out.push(v);
-                if out.len() % 1024 == 0 {
-                    stop::work(1024)?;
-                }
-            }
-            Ok(out)
-        }
-        Value::Point(a, b) | Value::Size(a, b) => Ok(vec![Value::Int(*a), Value::Int(*b)]),
-        other => Err(type_error(format!("'{}' object is not iterable", other.type_name()))),
-    }
-}
-
-/// Finds `name` in `list` and returns the list's `'static` copy.
-pub(crate) fn static_name(list: &[&'static str], name: &str) -> Option<&'static str> {
-    list.iter().copied().find(|n| *n == name)
-}
-
-pub(crate) fn no_attribute(value: &Value, name: &str) -> ScriptError {
-    ScriptError::new(ErrorKind::Attribute, format!("'{}' object has no attribute '{name}'", value.type_name()))
+    Ok(std::mem::take(&mut interp.rt.out))
 }
 
 /// The interpreter state for one run.
 pub(crate) struct Interp<'h, 'c> {
-    pub(crate) host: &'h mut dyn ScriptHost,
-    pub(crate) computer: Option<&'c mut ComputerState>,
-    pub(crate) action_delay: f64,
+    /// What the built-in modules act through: the host, the output, the Navi state.
+    pub(crate) rt: Runtime<'h, 'c>,
     /// The module's globals.
     vars: HashMap<String, Value>,
     /// The module frame, then one per active user function call.
     frames: Vec<Frame>,
-    pub(crate) out: RunOutput,
-    /// Set by `sys.exit`.
-    pub(crate) exit: Option<i32>,
-    /// Bytes printed, held against the memory budget until the run ends.
-    printed: usize,
     /// Loop iterations and calls so far, against [`MAX_STEPS`].
     steps: u64,
     /// User function calls in progress.
@@ -452,15 +291,9 @@ pub(crate) struct Interp<'h, 'c> {
     handling: Vec<ScriptError>,
 }
 
-impl Drop for Interp<'_, '_> {
-    fn drop(&mut self) {
-        heap::release(self.printed);
-    }
-}
-
 impl std::fmt::Debug for Interp<'_, '_> {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("Interp").field("vars", &self.vars).field("out", &self.out).finish_non_exhaustive()
+        f.debug_struct("Interp").field("vars", &self.vars).field("out", &self.rt.out).finish_non_exhaustive()
     }
 }
 
@@ -470,39 +303,9 @@ impl Interp<'_, '_> {
         if err.line == 0 {
             err.line = line;
         }
-        err.stdout = std::mem::take(&mut self.out.stdout);
-        err.stderr = std::mem::take(&mut self.out.stderr);
+        err.stdout = std::mem::take(&mut self.rt.out.stdout);
+        err.stderr = std::mem::take(&mut self.rt.out.stderr);
         err
-    }
-
-    /// Host failures become `OSError`s carrying the host's message; a timeout or an
-    /// unreachable host becomes its own kind, which stops the script.
-    pub(crate) fn host<T>(&mut self, result: HostResult<T>) -> Result<T, ScriptError> {
-        result.map_err(super::error::host_error)
-    }
-
-    pub(crate) fn print(&mut self, text: &str) -> Result<(), ScriptError> {
-        heap::hold(text.len())?;
-        self.printed += text.len();
-        self.out.stdout.push_str(text);
-        Ok(())
-    }
-
-    pub(crate) fn sleep(&mut self, seconds: f64) -> Result<(), ScriptError> {
-        if seconds.is_nan() {
-            return Err(value_error("Invalid value NaN (not a number)"));
-        }
-        if seconds < 0.0 {
-            return Err(value_error("sleep length must be non-negative"));
-        }
-        let result = self.host.sleep(seconds);
-        self.host(result)
-    }
-
-    /// Stops the run like `SystemExit`.
-    pub(crate) fn system_exit(&mut self, code: i32) -> ScriptError {
-        self.exit = Some(code);
-        ScriptError::new(ErrorKind::SystemExit, "")
     }
 
     /// Counts one loop iteration or function call against [`MAX_STEPS`].
@@ -752,7 +555,7 @@ impl Interp<'_, '_> {
     }
 
     #[inline(never)]
-    fn run_import(&mut self, names: &[super::ast::ImportName]) -> Result<Flow, ScriptError> {
+    fn run_import(&mut self, names: &[crate::ast::ImportName]) -> Result<Flow, ScriptError> {
         for name in names {
             let module = find_module(&name.module)?;
             match &name.alias {
@@ -1201,12 +1004,12 @@ impl Interp<'_, '_> {
         args: &[Expr],
         kwargs: &[(String, Expr)],
     ) -> Result<Option<Value>, ScriptError> {
-        if !super::methods::is_mutating(method) {
+        if !self::methods::is_mutating(method) {
             return Ok(None);
         }
         let Some(place) = self.place(recv)? else { return Ok(None) };
         let applies = match self.place_mut(&place)? {
-            Some(target) => super::methods::mutates(target, method),
+            Some(target) => self::methods::mutates(target, method),
             None => false,
         };
         if !applies {
@@ -1244,12 +1047,12 @@ impl Interp<'_, '_> {
     fn set_attr(&mut self, obj: &Value, attr: &str, value: &Value) -> Result<(), ScriptError> {
         match (obj, attr) {
             (Value::Module("pyautogui"), "FAILSAFE") => {
-                self.out.failsafe = Some(value.truthy());
+                self.rt.out.failsafe = Some(value.truthy());
                 Ok(())
             }
             (Value::Module("pyautogui"), "PAUSE") => {
                 let pause = to_f64(value, "pyautogui.PAUSE")?;
-                self.out.pause = Some(pause);
+                self.rt.out.pause = Some(pause);
                 Ok(())
             }
             (
@@ -1330,7 +1133,7 @@ impl Interp<'_, '_> {
     }
 
     #[inline(never)]
-    fn eval_unary(&mut self, op: super::ast::UnaryOp, operand: &Expr) -> Result<Value, ScriptError> {
+    fn eval_unary(&mut self, op: crate::ast::UnaryOp, operand: &Expr) -> Result<Value, ScriptError> {
         let v = self.eval(operand)?;
         ops::unary(op, &v)
     }
@@ -1409,7 +1212,7 @@ impl Interp<'_, '_> {
                         None => value,
                     };
                     let spec = self.fstring(spec)?;
-                    out.push_str(&super::format::format_value(&value, &spec)?);
+                    out.push_str(&crate::value::format::format_value(&value, &spec)?);
                 }
             }
             if out.len() > ops::MAX_LEN {
@@ -1468,7 +1271,7 @@ impl Interp<'_, '_> {
             }
             Value::Object(Object::Environ) => {
                 let name = to_str(item, "environment variable name")?;
-                self.host.env_var(name).is_some()
+                self.rt.host.env_var(name).is_some()
             }
             other => return Err(type_error(format!("argument of type '{}' is not iterable", other.type_name()))),
         })
@@ -1521,8 +1324,8 @@ impl Interp<'_, '_> {
 
     pub(crate) fn module_attr(&mut self, module: &'static str, name: &str) -> Result<Value, ScriptError> {
         let found = match module {
-            "pyautogui" => super::pyautogui::attr(name, &self.out),
-            _ => super::stdlib::attr(module, name),
+            "pyautogui" => crate::pyautogui::attr(name, &self.rt.out),
+            _ => crate::stdlib::attr(module, name),
         };
         found.ok_or_else(|| {
             ScriptError::new(
@@ -1533,7 +1336,7 @@ impl Interp<'_, '_> {
     }
 
     fn get_attr(&mut self, obj: Value, name: &str) -> Result<Value, ScriptError> {
-        use super::methods::{DICT_METHODS, LIST_METHODS, SET_METHODS, STR_METHODS, TUPLE_METHODS};
+        use self::methods::{DICT_METHODS, LIST_METHODS, SET_METHODS, STR_METHODS, TUPLE_METHODS};
         let method = |list: &[&'static str], obj: &Value| {
             static_name(list, name).map(|m| Value::Method(Box::new(obj.clone()), m))
         };
@@ -1592,7 +1395,7 @@ impl Interp<'_, '_> {
                     }
                     _ => None,
                 },
-                _ => return super::computer::attr(self, object, name),
+                _ => return crate::computer::attr(&mut self.rt, object, name),
             },
             _ => None,
         };
@@ -1603,7 +1406,7 @@ impl Interp<'_, '_> {
         match obj {
             Value::Object(Object::Environ) => {
                 let name = to_str(index, "environment variable name")?;
-                self.host.env_var(name).map(Value::str).ok_or_else(|| ScriptError::new(ErrorKind::Key, index.repr()))
+                self.rt.host.env_var(name).map(Value::str).ok_or_else(|| ScriptError::new(ErrorKind::Key, index.repr()))
             }
             other => index_value(other, index),
         }
@@ -1612,8 +1415,8 @@ impl Interp<'_, '_> {
     pub(crate) fn call(&mut self, func: Value, args: Args) -> Result<Value, ScriptError> {
         match func {
             Value::Function { module: "", name } => self.builtin(name, args),
-            Value::Function { module: "pyautogui", name } => super::pyautogui::call(self, name, args),
-            Value::Function { module, name } => super::stdlib::call(self, module, name, args),
+            Value::Function { module: "pyautogui", name } => crate::pyautogui::call(&mut self.rt, name, args),
+            Value::Function { module, name } => crate::stdlib::call(&mut self.rt, module, name, args),
             Value::Method(recv, name) => self.call_method(*recv, name, args),
             Value::UserFn(f) => self.call_user(&f, args),
             Value::ExcType(kind) => {
@@ -1697,62 +1500,6 @@ struct Place {
     keys: Vec<Value>,
 }
 
-/// What a `for` loop or a comprehension walks: the items of a list, tuple, dict or
-/// set, shared with the value looped over (a change to the variable during the
-/// loop changes a copy), a range counted lazily, or the items of anything else.
-enum LoopIter {
-    Seq(Heap<Vec<Value>>, usize),
-    Keys(Heap<DictMap>, usize),
-    Set(Heap<SetMap>, usize),
-    Items(std::vec::IntoIter<Value>),
-    Range { next: i64, stop: i64, step: i64 },
-}
-
-impl LoopIter {
-    fn new(v: Value) -> Result<LoopIter, ScriptError> {
-        Ok(match v {
-            Value::Range(start, stop, step) => LoopIter::Range { next: start, stop, step },
-            Value::List(items) | Value::Tuple(items) => LoopIter::Seq(items, 0),
-            Value::Dict(entries) => LoopIter::Keys(entries, 0),
-            Value::Set(items) => LoopIter::Set(items, 0),
-            other => LoopIter::Items(iterate(&other)?.into_iter()),
-        })
-    }
-
-    fn next(&mut self) -> Option<Value> {
-        match self {
-            LoopIter::Seq(items, i) => {
-                let item = items.get(*i).cloned();
-                *i += 1;
-                item
-            }
-            LoopIter::Keys(entries, i) => {
-                let key = entries.get_index(*i).map(|(k, _)| k.0.clone());
-                *i += 1;
-                key
-            }
-            LoopIter::Set(items, i) => {
-                let item = items.get_index(*i).map(|k| k.0.clone());
-                *i += 1;
-                item
-            }
-            LoopIter::Items(items) => items.next(),
-            LoopIter::Range { next, stop, step } => {
-                let more = if *step > 0 { *next < *stop } else { *next > *stop };
-                if !more {
-                    return None;
-                }
-                let current = *next;
-                match next.checked_add(*step) {
-                    Some(n) => *next = n,
-                    None => *next = *stop,
-                }
-                Some(Value::Int(current))
-            }
-        }
-    }
-}
-
 /// The position `index` names in a sequence of `len` items (negative counts from the end).
 pub(crate) fn seq_index(len: usize, index: &Value, what: &str) -> Result<usize, ScriptError> {
     let i = match index {
@@ -1786,7 +1533,7 @@ fn index_value(container: &Value, index: &Value) -> Result<Value, ScriptError> {
             Ok(Value::str(s.chars().nth(i).map(String::from).unwrap_or_default()))
         }
         Value::Range(start, stop, step) => {
-            let len = usize::try_from(super::value::range_len(*start, *stop, *step)).unwrap_or(usize::MAX);
+            let len = usize::try_from(crate::value::range_len(*start, *stop, *step)).unwrap_or(usize::MAX);
             let i = i64::try_from(seq_index(len, index, "range object")?).unwrap_or(0);
             Ok(Value::Int(start + i * step))
         }
@@ -1911,7 +1658,7 @@ fn remove_item(container: &mut Value, key: &Value) -> Result<(), ScriptError> {
 /// Inserts or replaces `key` in a dict's entries.
 pub(crate) fn dict_insert(entries: &mut DictMap, key: Value, value: Value) -> Result<(), ScriptError> {
     check_hashable(&key)?;
-    super::methods::grow_table(entries.len(), entries.capacity(), 2 * heap::SLOT + 2 * std::mem::size_of::<usize>())?;
+    self::methods::grow_table(entries.len(), entries.capacity(), 2 * heap::SLOT + 2 * std::mem::size_of::<usize>())?;
     // Python keeps the first key of equal ones (`{1: 'a', 1.0: 'b'}` is `{1: 'b'}`).
     match entries.get_mut(&Key(key.clone())) {
         Some(slot) => *slot = value,

@@ -23,8 +23,8 @@ use std::rc::Rc;
 
 use indexmap::{IndexMap, IndexSet};
 
-use super::error::{ErrorKind, ScriptError};
-use super::value::Value;
+use super::Value;
+use crate::error::{ErrorKind, ScriptError};
 
 /// A dict's table: insertion order kept, keys hashed as Python hashes them.
 pub(crate) type DictMap = IndexMap<Key, Value>;

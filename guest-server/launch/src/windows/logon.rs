@@ -1,12 +1,12 @@
 //! The logon task's launcher loop: what `arena-guest-logon.exe` (the GUI-subsystem
-//! binary Task Scheduler starts at logon, `guest-server/src/logon_main.rs`) runs.
+//! binary Task Scheduler starts at logon, `guest-server/launch/src/main.rs`) runs.
 //!
 //! The launcher is a GUI-subsystem program, so Windows gives it no console at all:
 //! nothing flashes on the user's desktop at logon, and nothing lands in screenshots,
 //! window lists or trees. (Until it became a binary of its own the launcher was
 //! `arena-guest.exe logon-task run`, a console program: Task Scheduler opened a console
 //! window for it, which it closed with `FreeConsole` a moment later.) It starts
-//! [`crate::service::SERVER_EXE`] from its own folder as a child with
+//! [`crate::exes::SERVER_EXE`] from its own folder as a child with
 //! `CREATE_NO_WINDOW`: the server gets a console of its own that has no window, so the
 //! console programs it runs for agents share that hidden console instead of each
 //! opening a window, as under upstream's hidden PowerShell. The server is
@@ -17,8 +17,9 @@
 //! `%ProgramData%\arena\logon-task.log` (the launcher's own lines and the server's
 //! output), moved aside past 10 MB.
 //!
-//! FFI glue only: the task's definition, the command lines, the backoff and the log
-//! handling are in [`crate::service`], tested natively.
+//! FFI glue only: the serve options' checks, the backoff and the log handling are in
+//! this crate's neutral modules, and the task's definition in `arena_guest::service`,
+//! all tested natively.
 
 use std::convert::Infallible;
 use std::fs::File;
@@ -28,9 +29,11 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::time::Instant;
 
-use windows::Win32::System::Threading::{CREATE_NEW_PROCESS_GROUP, CREATE_NO_WINDOW};
+use windows_sys::Win32::System::Threading::{CREATE_NEW_PROCESS_GROUP, CREATE_NO_WINDOW};
 
-use crate::service::{log_dir, rotate_log, Backoff, ServiceCliError, LOGON_TASK_LOG, LOG_MAX_BYTES};
+use crate::error::ServiceCliError;
+use crate::logs::{log_dir, rotate_log, LOGON_TASK_LOG, LOG_MAX_BYTES};
+use crate::restart::Backoff;
 
 /// `%ProgramData%\arena\logon-task.log`.
 fn log_path() -> PathBuf {
@@ -87,7 +90,7 @@ pub(super) fn run(server: &Path, serve_args: &[String]) -> Result<Infallible, Se
             .stdin(Stdio::piped())
             .stdout(output(&log)?)
             .stderr(output(&log)?)
-            .creation_flags((CREATE_NO_WINDOW | CREATE_NEW_PROCESS_GROUP).0);
+            .creation_flags(CREATE_NO_WINDOW | CREATE_NEW_PROCESS_GROUP);
         let mut child = command.spawn().map_err(|source| {
             note(&mut log, &format!("cannot start the server {}: {source}", server.display()));
             ServiceCliError::Io { what: format!("starting {}", server.display()), source }

@@ -6,8 +6,8 @@
 //! precision and the `d x X o b c e E f F g G % n s` types); other values accept
 //! only an empty spec, as `object.__format__` does.
 
-use super::error::{not_supported, type_error, value_error, ErrorKind, ScriptError};
-use super::value::{float_repr, Value};
+use super::{float_repr, Value};
+use crate::error::{not_supported, type_error, value_error, ErrorKind, ScriptError};
 
 /// A parsed format spec.
 #[derive(Debug, Default)]
@@ -510,7 +510,7 @@ fn field_value(name: &str, pos: &[Value], kw: &[(String, Value)], auto: &mut usi
         kw.iter()
             .find(|(k, _)| k == head)
             .map(|(_, v)| v.clone())
-            .ok_or_else(|| ScriptError::new(ErrorKind::Key, super::value::str_repr(head)))?
+            .ok_or_else(|| ScriptError::new(ErrorKind::Key, super::str_repr(head)))?
     };
     let mut rest = index.unwrap_or("");
     while let Some(stripped) = rest.strip_prefix('[') {
@@ -526,7 +526,7 @@ fn field_value(name: &str, pos: &[Value], kw: &[(String, Value)], auto: &mut usi
             (Value::Dict(entries), _) => entries
                 .get(&super::heap::Key(Value::str(key)))
                 .cloned()
-                .ok_or_else(|| ScriptError::new(ErrorKind::Key, super::value::str_repr(key)))?,
+                .ok_or_else(|| ScriptError::new(ErrorKind::Key, super::str_repr(key)))?,
             (other, _) => return Err(type_error(format!("'{}' object is not subscriptable", other.type_name()))),
         };
     }

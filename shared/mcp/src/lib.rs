@@ -1,0 +1,183 @@
+//! The Model Context Protocol glue both MCP servers of the project share: the
+//! guest's `--mcp` (the desktop of one machine) and the host's `--agent mcp` (a
+//! benchmark run's episodes). Each server writes only what its tools do, as a
+//! [`ToolServer`]; this crate makes it an rmcp [`ServerHandler`] ([`Server`]) that
+//! offers the tools of [`arena_shared::mcp_tools`] ([`tools`]), answers with the
+//! result shapes both use ([`text`], [`image_png`], [`tool_error`]), speaks the
+//! protocol revisions up to [`MAX_PROTOCOL`], and is served with the same
+//! streamable-HTTP settings ([`http_config`]).
+//!
+//! What is not here: the tools' names, arguments and checks (`arena_shared::mcp_tools`),
+//! the bearer check (`arena_shared::token::bearer_matches`, which every server of the
+//! project uses), and each server's routing and guards.
+
+#![forbid(unsafe_code)]
+
+use std::borrow::Cow;
+use std::future::Future;
+use std::sync::Arc;
+use std::time::Duration;
+
+use rmcp::model::{
+    CallToolRequestParams, CallToolResponse, CallToolResult, ContentBlock, Implementation, ListToolsResult,
+    PaginatedRequestParams, ProtocolVersion, ServerCapabilities, ServerConfig, Tool,
+};
+use rmcp::service::RequestContext;
+use rmcp::transport::streamable_http_server::StreamableHttpServerConfig;
+use rmcp::{ErrorData, RoleServer, ServerHandler};
+use serde_json::Value;
+
+use arena_shared::mcp_tools;
+
+/// The newest MCP revision served: both servers keep state per session
+/// (`Mcp-Session-Id`: the host binds an episode to it), which the 2026 revision has
+/// no more.
+pub const MAX_PROTOCOL: ProtocolVersion = ProtocolVersion::V_2025_11_25;
+
+/// How often an idle server-sent event stream gets a keep-alive comment.
+pub const SSE_KEEP_ALIVE: Duration = Duration::from_secs(15);
+
+/// The desktop tools of [`arena_shared::mcp_tools`] as rmcp describes them; the
+/// benchmark's `get_task`, `done` and `fail` with `with_task`.
+pub fn tools(with_task: bool) -> Vec<Tool> {
+    mcp_tools::tool_list(with_task)
+        .into_iter()
+        .filter_map(|(name, description, schema)| match schema {
+            Value::Object(schema) => Some(Tool::new(name, description, Arc::new(schema))),
+            // Every input schema is an object (mcp_tools' tests say so); anything else is no tool.
+            _ => None,
+        })
+        .collect()
+}
+
+/// A tool's successful text result.
+pub fn text(text: impl Into<String>) -> CallToolResponse {
+    CallToolResult::success(vec![ContentBlock::text(text)]).into()
+}
+
+/// A tool's successful image result: a PNG, base64-encoded.
+pub fn image_png(base64: impl Into<String>) -> CallToolResponse {
+    CallToolResult::success(vec![ContentBlock::image(base64, "image/png")]).into()
+}
+
+/// A tool's failure, told to the model as a result with `isError` (not a protocol error).
+pub fn tool_error(message: impl Into<String>) -> CallToolResponse {
+    CallToolResult::error(vec![ContentBlock::text(message)]).into()
+}
+
+/// The streamable-HTTP settings both servers start from: keep-alives, and every
+/// request with an `Origin` refused (a web page never reaches a desktop). Each server
+/// adds its own `Host` rule and shutdown.
+pub fn http_config() -> StreamableHttpServerConfig {
+    StreamableHttpServerConfig::default().with_sse_keep_alive(Some(SSE_KEEP_ALIVE)).enforce_origin_validation()
+}
+
+/// What one MCP server does with its tools; [`Server`] does the rest.
+pub trait ToolServer: Send + Sync + 'static {
+    /// The server's name in `initialize` (`serverInfo.name`).
+    const NAME: &'static str;
+    /// The server's version in `initialize`.
+    const VERSION: &'static str;
+    /// What the server is, for the model (`instructions`).
+    const INSTRUCTIONS: &'static str;
+    /// Whether the benchmark's `get_task`, `done` and `fail` are offered.
+    const WITH_TASK: bool;
+
+    /// Runs one tool call; a failure is a [`tool_error`] result.
+    fn call(&self, request: CallToolRequestParams) -> impl Future<Output = CallToolResponse> + Send + '_;
+}
+
+/// A [`ToolServer`] as an rmcp [`ServerHandler`]: one per session.
+#[derive(Debug)]
+pub struct Server<T>(pub T);
+
+impl<T: ToolServer> ServerHandler for Server<T> {
+    fn get_info(&self) -> ServerConfig {
+        ServerConfig::new(ServerCapabilities::builder().enable_tools().build())
+            .with_protocol_version(MAX_PROTOCOL)
+            .with_server_info(Implementation::new(T::NAME, T::VERSION))
+            .with_instructions(T::INSTRUCTIONS)
+    }
+
+    fn supported_protocol_versions(&self) -> Cow<'static, [ProtocolVersion]> {
+        Cow::Borrowed(ProtocolVersion::known_up_to(&MAX_PROTOCOL))
+    }
+
+    async fn list_tools(
+        &self,
+        _request: Option<PaginatedRequestParams>,
+        _context: RequestContext<RoleServer>,
+    ) -> Result<ListToolsResult, ErrorData> {
+        Ok(ListToolsResult::with_all_items(tools(T::WITH_TASK)))
+    }
+
+    async fn call_tool(
+        &self,
+        request: CallToolRequestParams,
+        _context: RequestContext<RoleServer>,
+    ) -> Result<CallToolResponse, ErrorData> {
+        Ok(self.0.call(request).await)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    struct Echo;
+
+    impl ToolServer for Echo {
+        const NAME: &'static str = "echo";
+        const VERSION: &'static str = "1.2.3";
+        const INSTRUCTIONS: &'static str = "echoes";
+        const WITH_TASK: bool = true;
+
+        async fn call(&self, request: CallToolRequestParams) -> CallToolResponse {
+            if request.name == "fail" {
+                tool_error("no")
+            } else {
+                text(request.name.to_string())
+            }
+        }
+    }
+
+    #[test]
+    fn every_tool_of_the_table_is_offered_with_its_schema() {
+        for with_task in [false, true] {
+            let offered = tools(with_task);
+            let table = mcp_tools::tool_list(with_task);
+            assert_eq!(offered.len(), table.len(), "a tool was dropped (with_task {with_task})");
+            for (tool, (name, _, schema)) in offered.iter().zip(&table) {
+                assert_eq!(tool.name, *name);
+                assert_eq!(Value::Object((*tool.input_schema).clone()), *schema);
+            }
+        }
+        assert!(tools(true).iter().any(|t| t.name == "get_task"));
+        assert!(!tools(false).iter().any(|t| t.name == "get_task"));
+    }
+
+    #[test]
+    fn the_handler_says_who_it_is_and_which_revisions_it_speaks() {
+        let server = Server(Echo);
+        let info = server.get_info();
+        assert_eq!(info.server_info.name, "echo");
+        assert_eq!(info.server_info.version, "1.2.3");
+        assert_eq!(info.instructions.as_deref(), Some("echoes"));
+        assert!(info.capabilities.tools.is_some());
+        let versions = server.supported_protocol_versions();
+        assert_eq!(versions.last(), Some(&MAX_PROTOCOL));
+    }
+
+    #[tokio::test]
+    async fn calls_reach_the_tool_server_and_failures_are_results() {
+        let call = |name: &'static str| CallToolRequestParams::new(name);
+        let ok = Echo.call(call("screenshot")).await;
+        let failed = Echo.call(call("fail")).await;
+        let complete = |r: CallToolResponse| match r {
+            CallToolResponse::Complete(result) => serde_json::to_value(result).expect("serialises"),
+            other => panic!("not a complete result: {other:?}"),
+        };
+        assert_eq!(complete(ok), complete(text("screenshot")));
+        assert_eq!(complete(failed)["isError"], Value::Bool(true));
+    }
+}
