@@ -1,4 +1,4 @@
-//! Preparing a Windows image for the arena: staging its OEM folder, checking a
+//! The OEM folder of a new Windows image (`arena prep`): staging it, checking a
 //! staged folder against its manifest, and waiting for a freshly prepared VM's
 //! guest to come up, component by component.
 //!
@@ -21,8 +21,8 @@ use sha2::{Digest, Sha256};
 
 use arena_shared::health::{Component, ComponentHealth, HealthReport, Readiness};
 
-use crate::client::GuestClient;
-use crate::error::ClientError;
+use arena_client::client::GuestClient;
+use arena_client::error::ClientError;
 
 /// Name of the guest exe inside the staged folder (install-guest.ps1 looks for it there).
 pub const EXE_NAME: &str = "arena-guest.exe";

@@ -11,7 +11,7 @@ use std::time::Duration;
 
 use arena_host::client::{sha256_hex, ClientConfig, GuestClient};
 use arena_host::error::ClientError;
-use arena_host::prep::{self, PrepError, StageOptions, WaitEvent};
+use arena_host::oem::{self, PrepError, StageOptions, WaitEvent};
 use arena_test_support::StubGuest;
 
 fn scripts_dir() -> PathBuf {
@@ -23,7 +23,7 @@ fn scripts_dir() -> PathBuf {
 fn fake_exe(dir: &Path) -> PathBuf {
     let path = dir.join("arena-guest.exe");
     std::fs::write(&path, b"MZ\x90\x00 not really a program").expect("fake exe");
-    std::fs::write(dir.join(prep::LAUNCHER_NAME), b"MZ\x90\x00 not really a launcher").expect("fake launcher");
+    std::fs::write(dir.join(oem::LAUNCHER_NAME), b"MZ\x90\x00 not really a launcher").expect("fake launcher");
     path
 }
 
@@ -58,7 +58,7 @@ fn a_staged_folder_matches_its_manifest() {
     let exe = fake_exe(work.path());
     let out = work.path().join("oem");
     let token_out = work.path().join("config/arena/token");
-    let staged = prep::stage(&options(&out, &exe, &token_out)).expect("stage");
+    let staged = oem::stage(&options(&out, &exe, &token_out)).expect("stage");
 
     // The layout dockur expects, and the files install-guest.ps1 reads.
     for name in [
@@ -84,12 +84,12 @@ fn a_staged_folder_matches_its_manifest() {
         assert_eq!(entry.sha256, sha256_hex(&bytes), "{name}");
         assert_eq!(entry.size, bytes.len() as u64, "{name}");
     }
-    assert_eq!(prep::read_manifest(&out).unwrap(), staged.manifest);
+    assert_eq!(oem::read_manifest(&out).unwrap(), staged.manifest);
     assert_eq!(staged.manifest.arena_version, env!("CARGO_PKG_VERSION"));
     assert_eq!(std::fs::read(out.join("arena-guest.exe")).unwrap(), std::fs::read(&exe).unwrap());
     assert_eq!(
-        std::fs::read(out.join(prep::LAUNCHER_NAME)).unwrap(),
-        std::fs::read(work.path().join(prep::LAUNCHER_NAME)).unwrap()
+        std::fs::read(out.join(oem::LAUNCHER_NAME)).unwrap(),
+        std::fs::read(work.path().join(oem::LAUNCHER_NAME)).unwrap()
     );
 
     // The token: 64 hex digits, the same in the folder and in the host's copy.
@@ -97,7 +97,7 @@ fn a_staged_folder_matches_its_manifest() {
     assert_eq!(token.trim().len(), 64);
     assert_eq!(std::fs::read_to_string(&token_out).unwrap(), token);
 
-    let report = prep::verify(&out).unwrap();
+    let report = oem::verify(&out).unwrap();
     assert!(report.is_ok(), "{report:?}");
     assert_eq!(report.matched.len(), staged.manifest.files.len());
     assert!(report.extra.is_empty() && report.missing.is_empty());
@@ -112,25 +112,25 @@ fn staging_refuses_a_non_empty_folder_without_force_and_a_non_windows_exe() {
     std::fs::write(out.join("keep-me.txt"), "user file").unwrap();
     let token_out = work.path().join("token");
 
-    let err = prep::stage(&options(&out, &exe, &token_out)).unwrap_err();
+    let err = oem::stage(&options(&out, &exe, &token_out)).unwrap_err();
     assert!(matches!(err, PrepError::NotEmpty(_)), "{err}");
     assert!(!out.join("setup.ps1").exists(), "nothing is written when refused");
 
-    let first = prep::stage(&StageOptions { force: true, ..options(&out, &exe, &token_out) }).expect("forced stage");
+    let first = oem::stage(&StageOptions { force: true, ..options(&out, &exe, &token_out) }).expect("forced stage");
     assert_eq!(
         std::fs::read_to_string(out.join("keep-me.txt")).unwrap(),
         "user file",
         "unrelated files are left alone"
     );
     assert!(!first.manifest.files.contains_key("keep-me.txt"), "only staged files are in the manifest");
-    assert_eq!(prep::verify(&out).unwrap().extra, ["keep-me.txt"]);
+    assert_eq!(oem::verify(&out).unwrap().extra, ["keep-me.txt"]);
     // A second forced stage makes a new token.
-    let second = prep::stage(&StageOptions { force: true, ..options(&out, &exe, &token_out) }).expect("restage");
+    let second = oem::stage(&StageOptions { force: true, ..options(&out, &exe, &token_out) }).expect("restage");
     assert_ne!(first.manifest.files["arena-token"].sha256, second.manifest.files["arena-token"].sha256);
 
     let linux = work.path().join("arena-guest");
     std::fs::write(&linux, b"\x7fELF a Linux build").unwrap();
-    let err = prep::stage(&options(&work.path().join("oem2"), &linux, &token_out)).unwrap_err();
+    let err = oem::stage(&options(&work.path().join("oem2"), &linux, &token_out)).unwrap_err();
     assert!(matches!(err, PrepError::NotWindowsExe(_)), "{err}");
 
     // The logon task's launcher must be beside the exe, and be a Windows program too.
@@ -138,15 +138,15 @@ fn staging_refuses_a_non_empty_folder_without_force_and_a_non_windows_exe() {
     std::fs::create_dir_all(&lonely).unwrap();
     let lonely_exe = lonely.join("arena-guest.exe");
     std::fs::copy(&exe, &lonely_exe).unwrap();
-    let err = prep::stage(&options(&work.path().join("oem4"), &lonely_exe, &token_out)).unwrap_err();
+    let err = oem::stage(&options(&work.path().join("oem4"), &lonely_exe, &token_out)).unwrap_err();
     assert!(matches!(err, PrepError::NoLauncher { .. }), "{err}");
     assert!(err.to_string().contains("no arena-guest-logon.exe beside "), "{err}");
     assert!(!work.path().join("oem4").join("setup.ps1").exists(), "nothing is written when refused");
-    std::fs::write(lonely.join(prep::LAUNCHER_NAME), b"\x7fELF").unwrap();
-    let err = prep::stage(&options(&work.path().join("oem4"), &lonely_exe, &token_out)).unwrap_err();
-    assert!(matches!(&err, PrepError::NotWindowsExe(path) if path.ends_with(prep::LAUNCHER_NAME)), "{err}");
+    std::fs::write(lonely.join(oem::LAUNCHER_NAME), b"\x7fELF").unwrap();
+    let err = oem::stage(&options(&work.path().join("oem4"), &lonely_exe, &token_out)).unwrap_err();
+    assert!(matches!(&err, PrepError::NotWindowsExe(path) if path.ends_with(oem::LAUNCHER_NAME)), "{err}");
 
-    let err = prep::stage(&StageOptions {
+    let err = oem::stage(&StageOptions {
         scripts: work.path().to_path_buf(),
         ..options(&work.path().join("oem3"), &exe, &token_out)
     })
@@ -159,7 +159,7 @@ fn verify_detects_changed_missing_and_extra_files() {
     let work = tempfile::tempdir().unwrap();
     let exe = fake_exe(work.path());
     let out = work.path().join("oem");
-    prep::stage(&options(&out, &exe, &work.path().join("token"))).unwrap();
+    oem::stage(&options(&out, &exe, &work.path().join("token"))).unwrap();
 
     // One byte of install-guest.ps1 changed, setup.ps1 gone, an installer added.
     let target = out.join("install-guest.ps1");
@@ -170,14 +170,14 @@ fn verify_detects_changed_missing_and_extra_files() {
     std::fs::create_dir_all(out.join("installers")).unwrap();
     std::fs::write(out.join("installers/vlc.exe"), b"MZ").unwrap();
 
-    let report = prep::verify(&out).unwrap();
+    let report = oem::verify(&out).unwrap();
     assert!(!report.is_ok());
     assert_eq!(report.mismatched.iter().map(|m| m.path.as_str()).collect::<Vec<_>>(), ["install-guest.ps1"]);
     assert_eq!(report.missing, ["setup.ps1"]);
     assert_eq!(report.extra, ["installers/vlc.exe"]);
 
     std::fs::remove_file(out.join("manifest.json")).unwrap();
-    assert!(matches!(prep::verify(&out), Err(PrepError::Manifest { .. })));
+    assert!(matches!(oem::verify(&out), Err(PrepError::Manifest { .. })));
 }
 
 #[tokio::test]
@@ -186,7 +186,7 @@ async fn the_staged_token_is_accepted_and_a_wrong_one_refused() {
     let exe = fake_exe(work.path());
     let out = work.path().join("oem");
     let token_out = work.path().join("host-token");
-    let staged = prep::stage(&options(&out, &exe, &token_out)).unwrap();
+    let staged = oem::stage(&options(&out, &exe, &token_out)).unwrap();
     let guest = start_guest(&staged.token_path).await;
     let token = std::fs::read_to_string(&token_out).unwrap().trim().to_owned();
 
@@ -203,14 +203,14 @@ async fn the_staged_token_is_accepted_and_a_wrong_one_refused() {
 
     // wait_healthy: every component reported up, then the token checked.
     let mut events = Vec::new();
-    let report = prep::wait_healthy(
+    let report = oem::wait_healthy(
         &client(guest.url(), Some(&token)),
         Duration::from_secs(10),
         Duration::from_millis(100),
         |e| {
             events.push(match e {
                 WaitEvent::Reachable { .. } => "reachable".to_owned(),
-                WaitEvent::Up { component } => format!("up {}", prep::component_name(component.component)),
+                WaitEvent::Up { component } => format!("up {}", oem::component_name(component.component)),
                 WaitEvent::TokenAccepted => "token".to_owned(),
                 other => format!("{other:?}"),
             });
@@ -223,7 +223,7 @@ async fn the_staged_token_is_accepted_and_a_wrong_one_refused() {
     assert_eq!(events.iter().filter(|e| e.starts_with("up ")).count(), report.components.len(), "{events:?}");
 
     // The wrong token ends the wait at once, with a reason.
-    let err = prep::wait_healthy(
+    let err = oem::wait_healthy(
         &client(guest.url(), Some(&wrong)),
         Duration::from_secs(10),
         Duration::from_millis(100),
@@ -243,7 +243,7 @@ async fn waiting_for_a_guest_that_never_answers_says_so() {
     };
     let c = client(&format!("http://127.0.0.1:{port}"), None);
     let mut unreachable = 0;
-    let err = prep::wait_healthy(&c, Duration::from_millis(600), Duration::from_millis(100), |e| {
+    let err = oem::wait_healthy(&c, Duration::from_millis(600), Duration::from_millis(100), |e| {
         if matches!(e, WaitEvent::Unreachable { .. }) {
             unreachable += 1;
         }

@@ -28,7 +28,9 @@ use serde_json::Value;
 use arena_shared::action::{Action, MouseButton};
 use arena_shared::geometry::Point;
 
-use super::{chord, json_type, key_list, key_name, opt_number, string, ActionError, ActionSpace, Context, Step};
+use super::{
+    chord, json_type, key_list, key_name, opt_number, string, ActionError, ActionSpace, Context, Decision, Step,
+};
 
 const SPACE: ActionSpace = ActionSpace::Computer13;
 
@@ -95,10 +97,10 @@ pub fn parse(action: &Value, ctx: &Context) -> Result<Vec<Step>, ActionError> {
     };
     let key = || key_name(SPACE, KEYS, string(SPACE, &params, "key")?);
     let act = |a: Action| Ok(vec![Step::Act(a)]);
+    if let Some(decision) = Decision::parse(kind) {
+        return Ok(vec![decision.into()]);
+    }
     match kind {
-        "WAIT" => Ok(vec![Step::Wait]),
-        "DONE" => Ok(vec![Step::Done]),
-        "FAIL" => Ok(vec![Step::Fail]),
         "MOVE_TO" => match point(false)? {
             Some((x, y)) => act(Action::MoveTo { x, y }),
             None => Ok(Vec::new()),

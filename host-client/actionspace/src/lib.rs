@@ -1,8 +1,10 @@
-//! Action spaces: the grammars agents answer in, each translated into the
-//! guest's typed [`Action`]s and the step decisions `WAIT`, `DONE` and `FAIL`.
+//! Action spaces (`arena-actionspace`): the grammars agents answer in, each
+//! translated into the guest's typed [`Action`]s and the step decisions `WAIT`,
+//! `DONE` and `FAIL`.
 //!
-//! One entry point serves every caller (the built-in computer-use agents, the
-//! step protocol, tests):
+//! One entry point serves every caller (the computer-use agents, the agent
+//! executor for every pyautogui answer whichever way it came in, `arena act`,
+//! setup steps through [`pyautogui::parse`], tests):
 //!
 //! ```text
 //! actionspace::parse(space, &input, &ctx) -> Result<Vec<Step>, ActionError>
@@ -16,14 +18,19 @@
 //!   and the coordinate convention ([`Coords`]) the agent's numbers are in.
 //! - A [`Step`] is one typed input action, a clipboard write (pyperclip, UI-TARS
 //!   typing), a decision, or a request only the agent can answer (a
-//!   screenshot, the cursor position, a zoomed region). [`to_agent_actions`]
-//!   turns steps into what the episode executes.
+//!   screenshot, the cursor position, a zoomed region). Steps are all this crate
+//!   answers: carrying them out is the host's agent executor's business.
 //!
 //! An unknown action, parameter value or key is an [`ActionError`] naming the
 //! grammar and what was wrong, never a silent no-op.
 //!
+//! It is not an agent and does no I/O: pyautogui code runs in the shared
+//! interpreter against a host that records instead of acting.
+//!
 //! # Layout
 //!
+//! - [`decision`]: [`Decision`], the one reading of the words `WAIT`, `DONE` and `FAIL`.
+//! - [`typed_action`]: the one check of a typed action as JSON (`arena_shared::action::Action`).
 //! - [`pyautogui`]: pyautogui code as OSWorld agents write it (the shared interpreter, pyperclip, coordinates rescaled).
 //! - [`computer13`]: OSWorld's `computer_13` JSON actions.
 //! - [`anthropic`]: Anthropic's `computer` tool, versions `computer_20250124` and `computer_20251124`.
@@ -32,8 +39,11 @@
 //!
 //! Each grammar has its own key table into pyautogui's names (`arena_shared::keys`), which the guest speaks.
 
+#![forbid(unsafe_code)]
+
 pub mod anthropic;
 pub mod computer13;
+pub mod decision;
 pub mod openai;
 pub mod pyautogui;
 pub mod uitars;
@@ -43,37 +53,42 @@ use std::fmt;
 use serde_json::Value;
 
 use arena_shared::action::Action;
+use arena_shared::error::json_kind as json_type;
 use arena_shared::keys::Key;
 
-use crate::agent::AgentAction;
+pub use decision::Decision;
 
 /// A grammar agents answer in.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, clap::ValueEnum)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub enum ActionSpace {
     /// pyautogui code (OSWorld's `pyautogui` action space), with pyperclip and `time.sleep`.
-    #[value(name = "pyautogui")]
     Pyautogui,
     /// OSWorld's `computer_13` JSON actions.
-    #[value(name = "computer_13")]
     Computer13,
     /// Anthropic's `computer_20250124` tool input.
-    #[value(name = "computer_20250124")]
     Anthropic20250124,
     /// Anthropic's `computer_20251124` tool input (adds `zoom`).
-    #[value(name = "computer_20251124")]
     Anthropic20251124,
     /// OpenAI's `computer_call` action objects (`computer_use_preview`).
-    #[value(name = "openai_computer")]
     OpenAi,
     /// UI-TARS replies (`Thought: ... Action: click(...)`).
-    #[value(name = "uitars")]
     UiTars,
     /// This project's typed actions (`arena_shared::action::Action` as JSON).
-    #[value(name = "typed")]
     Typed,
 }
 
 impl ActionSpace {
+    /// Every space, in the order the docs list them.
+    pub const ALL: [ActionSpace; 7] = [
+        ActionSpace::Pyautogui,
+        ActionSpace::Computer13,
+        ActionSpace::Anthropic20250124,
+        ActionSpace::Anthropic20251124,
+        ActionSpace::OpenAi,
+        ActionSpace::UiTars,
+        ActionSpace::Typed,
+    ];
+
     /// The name used on the command line and in recorded options.
     pub fn name(self) -> &'static str {
         match self {
@@ -91,6 +106,17 @@ impl ActionSpace {
 impl fmt::Display for ActionSpace {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         f.write_str(self.name())
+    }
+}
+
+impl std::str::FromStr for ActionSpace {
+    type Err = String;
+
+    fn from_str(s: &str) -> Result<ActionSpace, String> {
+        ActionSpace::ALL.into_iter().find(|space| space.name() == s).ok_or_else(|| {
+            let names: Vec<&str> = ActionSpace::ALL.iter().map(|space| space.name()).collect();
+            format!("unknown action space {s:?} (expected one of {})", names.join(", "))
+        })
     }
 }
 
@@ -205,6 +231,16 @@ pub enum Step {
     Zoom([i32; 4]),
 }
 
+impl From<Decision> for Step {
+    fn from(decision: Decision) -> Step {
+        match decision {
+            Decision::Wait => Step::Wait,
+            Decision::Done => Step::Done,
+            Decision::Fail => Step::Fail,
+        }
+    }
+}
+
 /// An answer that does not translate: which grammar, and what was wrong.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
 #[error("{space} action: {message}")]
@@ -238,12 +274,31 @@ pub fn parse(space: ActionSpace, input: &Value, ctx: &Context) -> Result<Vec<Ste
         }
         ActionSpace::OpenAi => each(space, input, |v| openai::parse(v, ctx)),
         ActionSpace::Typed => each(space, input, |v| {
-            serde_json::from_value::<Action>(v.clone())
-                .ok()
-                .filter(|a| *a != Action::Unknown)
-                .map(|a| vec![Step::Act(a)])
-                .ok_or_else(|| ActionError::new(space, format!("not a typed action: {v}")))
+            typed_action(v).map(|a| vec![Step::Act(a)]).map_err(|why| ActionError::new(space, why))
         }),
+    }
+}
+
+/// The one check of a typed action as JSON: `value` must be an
+/// `arena_shared::action::Action` this build knows (a newer peer's kind, which
+/// reads as `Action::Unknown`, is refused).
+///
+/// # Errors
+///
+/// A message naming what was wrong: not an action, or an unknown `type`.
+pub fn typed_action(value: &Value) -> Result<Action, String> {
+    let shown = || {
+        let text = value.to_string();
+        if text.chars().count() > 200 {
+            format!("{}...", text.chars().take(200).collect::<String>())
+        } else {
+            text
+        }
+    };
+    match serde_json::from_value::<Action>(value.clone()) {
+        Ok(Action::Unknown) => Err(format!("unknown typed action {}", shown())),
+        Ok(action) => Ok(action),
+        Err(err) => Err(format!("not a typed action: {}: {err}", shown())),
     }
 }
 
@@ -264,34 +319,6 @@ fn each(
         Value::Object(_) | Value::String(_) => one(input),
         other => Err(ActionError::new(space, format!("expected an action object, got {}", json_type(other)))),
     }
-}
-
-/// A JSON value's type, for messages.
-pub(crate) use crate::task::kind_of as json_type;
-
-/// Turns steps into the actions an episode executes: runs of input actions
-/// become one typed batch, a clipboard write runs as `pyperclip.copy` in the
-/// host's interpreter, and the decisions keep their meaning. Requests only the
-/// agent answers (screenshot, cursor position, zoom) do nothing here.
-pub fn to_agent_actions(steps: &[Step]) -> Vec<AgentAction> {
-    let mut out: Vec<AgentAction> = Vec::new();
-    for step in steps {
-        match step {
-            Step::Act(action) => match out.last_mut() {
-                Some(AgentAction::Typed(batch)) => batch.push(action.clone()),
-                _ => out.push(AgentAction::Typed(vec![action.clone()])),
-            },
-            Step::SetClipboard(text) => out.push(AgentAction::Pyautogui(format!(
-                "import pyperclip\npyperclip.copy({})",
-                arena_script::str_repr(text)
-            ))),
-            Step::Wait => out.push(AgentAction::Wait),
-            Step::Done => out.push(AgentAction::Done),
-            Step::Fail => out.push(AgentAction::Fail),
-            Step::Screenshot | Step::CursorPosition | Step::Zoom(_) => {}
-        }
-    }
-    out
 }
 
 /// One grammar's key table: its names (lowercase) and the pyautogui names they stand for.

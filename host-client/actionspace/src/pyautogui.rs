@@ -1,4 +1,7 @@
-//! pyautogui code as OSWorld agents write it, turned into steps.
+//! pyautogui code as OSWorld agents write it, turned into steps: the host's one
+//! translation of pyautogui into actions ([`parse`]), for agents (every way an
+//! answer comes in: Navi, the step protocol, MCP's `run_python`, `arena act`) and
+//! for tasks' `execute` setup steps alike, under one deadline.
 //!
 //! The code runs in the shared interpreter (`arena_script`, the same
 //! parser and pyautogui semantics the guest's `/execute` has) against a host that
@@ -6,7 +9,8 @@
 //! [`Action::Wait`], `pyperclip.copy` a [`Step::SetClipboard`] (and
 //! `pyperclip.paste` gives back what the code copied). Anything else with an effect
 //! (files, processes, windows, screenshots) is refused, naming what. The answers
-//! `WAIT`, `DONE` and `FAIL` (OSWorld's special actions) are decisions.
+//! `WAIT`, `DONE` and `FAIL` (OSWorld's special actions) are decisions. The whole
+//! program is translated before anything is done, so code that fails does nothing.
 //!
 //! Coordinates: with [`Coords::Fraction`], [`Coords::Grid1000`] or an image size,
 //! the `x`/`y` arguments of every pyautogui mouse call (and the offsets of
@@ -28,12 +32,14 @@ use arena_shared::registry::RegistryValue;
 use image::RgbaImage;
 use std::time::{Duration, Instant};
 
-use super::{ActionError, ActionSpace, Context, Coords, Step};
+use super::{ActionError, ActionSpace, Context, Coords, Decision, Step};
 
 /// How much of the code an error quotes.
 const QUOTE_CHARS: usize = 200;
 
-/// Translates one answer: pyautogui code or one of `WAIT`, `DONE`, `FAIL`.
+/// Translates one answer: pyautogui code or one of `WAIT`, `DONE`, `FAIL`. The
+/// program runs with `pyautogui` and `time` imported (upstream's `python -c "import
+/// pyautogui; import time; ..."`), for at most [`TRANSLATE_TIME`].
 ///
 /// # Errors
 ///
@@ -41,11 +47,8 @@ const QUOTE_CHARS: usize = 200;
 /// interpreter's subset, does something other than input, or raises; the message
 /// names the line and quotes the code.
 pub fn parse(code: &str, ctx: &Context) -> Result<Vec<Step>, ActionError> {
-    match code.trim() {
-        "WAIT" => return Ok(vec![Step::Wait]),
-        "DONE" => return Ok(vec![Step::Done]),
-        "FAIL" => return Ok(vec![Step::Fail]),
-        _ => {}
+    if let Some(decision) = Decision::parse(code) {
+        return Ok(vec![decision.into()]);
     }
     let fail = |err: arena_script::ScriptError| {
         let quoted: String = code.chars().take(QUOTE_CHARS).collect();
@@ -62,9 +65,9 @@ pub fn parse(code: &str, ctx: &Context) -> Result<Vec<Step>, ActionError> {
 
 /// Rewrites a parsed program so that the coordinates of its pyautogui mouse calls,
 /// given in `coords`, become pixels of `screen` (see the module documentation).
-/// The one place this happens: the action space's translation above and the code
-/// agents hand the episode (`crate::agent::exec`, whatever the agent) both call it.
-/// With [`Coords::Pixels`] nothing changes.
+/// The one place this happens: [`parse`], and the host's executor when a run lets
+/// pyautogui code run with its effects (`--pyautogui-effects`). With
+/// [`Coords::Pixels`] nothing changes.
 pub fn rescale(program: &mut Program, coords: Coords, screen: (u32, u32)) {
     if coords != Coords::Pixels {
         let (fx, fy) = coords.factors(screen);
@@ -72,8 +75,8 @@ pub fn rescale(program: &mut Program, coords: Coords, screen: (u32, u32)) {
     }
 }
 
-/// How long translating one reply may take.
-const TRANSLATE_TIME: Duration = Duration::from_secs(5);
+/// How long translating one answer may take.
+pub const TRANSLATE_TIME: Duration = Duration::from_secs(5);
 
 fn run_program(program: &Program, host: &mut StepHost) -> Result<(), arena_script::ScriptError> {
     // Translating runs no effects, only the program's own work: a few seconds bound a
@@ -81,26 +84,6 @@ fn run_program(program: &Program, host: &mut StepHost) -> Result<(), arena_scrip
     let stop = Stop::new(Some(Instant::now() + TRANSLATE_TIME), None);
     let globals = Globals { computer: None, computer_action_delay: 0.25, preimport: &["pyautogui", "time"], stop };
     run(program, host, globals).map(|_| ())
-}
-
-/// Translates pyautogui code with pixel coordinates into the input actions it
-/// performs, for a screen of `screen` pixels with the cursor at `cursor`
-/// (relative moves and `position()` use them). This is what `arena act
-/// --pyautogui` sends; a clipboard write, which is no input action, is refused.
-///
-/// # Errors
-///
-/// As [`parse`], and for code that writes the clipboard or answers a decision.
-pub fn actions_from_code(code: &str, screen: (u32, u32), cursor: (i32, i32)) -> anyhow::Result<Vec<Action>> {
-    let ctx = Context { screen, cursor, coords: Coords::Pixels };
-    let mut actions = Vec::new();
-    for step in parse(code, &ctx)? {
-        match step {
-            Step::Act(action) => actions.push(action),
-            other => anyhow::bail!("cannot translate the pyautogui code into input actions: it asks for {other:?}"),
-        }
-    }
-    Ok(actions)
 }
 
 /// The pyautogui functions whose coordinates are rescaled, with the positional

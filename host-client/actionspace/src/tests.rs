@@ -147,11 +147,99 @@ fn pyautogui_errors_name_the_code_and_the_problem() {
     check_err(p, json!("import pyperclip\npyautogui.write(pyperclip.paste())"), &["clipboard this code did not write"]);
     check_err(p, json!("pyperclip.copy('x')"), &["NameError", "pyperclip"]);
     check_err(p, json!({"code": "x"}), &["expected a string, got an object"]);
-    assert!(pyautogui::actions_from_code("import pyperclip; pyperclip.copy('a')", SCREEN, (0, 0)).is_err());
-    assert_eq!(
-        pyautogui::actions_from_code("pyautogui.moveRel(5, 5)", SCREEN, (10, 20)).unwrap(),
-        [Action::MoveRel { dx: 5, dy: 5 }]
+    check_err(p, json!("open('C:/x.txt', 'w')"), &["cannot translate", "open"]);
+    check_err(p, json!("import os\nos.system('del C:\\\\x.txt')"), &["running a command"]);
+    let at = Context { screen: SCREEN, cursor: (10, 20), coords: Coords::Pixels };
+    assert_eq!(pyautogui::parse("pyautogui.moveRel(5, 5)", &at).unwrap(), [act(Action::MoveRel { dx: 5, dy: 5 })]);
+}
+
+#[test]
+fn pyautogui_answers_that_never_end_are_refused_in_time() {
+    let started = std::time::Instant::now();
+    // Far more work than the loop budget allows would take longer than the deadline,
+    // were the budget not there; either bound ends it with an error naming the code.
+    let err = pyautogui::parse("while True:\n    x = 1", &ctx(Coords::Pixels)).unwrap_err();
+    assert!(err.message.contains("cannot translate"), "{err}");
+    assert!(started.elapsed() <= pyautogui::TRANSLATE_TIME + std::time::Duration::from_secs(5));
+}
+
+#[test]
+fn computer_13_templates_translate_to_actions() {
+    // The pyautogui lines upstream's host sends for computer_13 actions (waa-api.md §b.6).
+    let at = Context { screen: (1440, 900), cursor: (10, 20), coords: Coords::Pixels };
+    let check = |code: &str, expected: &[Action]| {
+        let steps = pyautogui::parse(code, &at).unwrap_or_else(|e| panic!("{code}: {e}"));
+        let expected: Vec<Step> = expected.iter().cloned().map(Step::Act).collect();
+        assert_eq!(steps, expected, "{code}");
+    };
+    let key = |k: &str| Action::KeyPress { key: k.into(), presses: 1 };
+    let text = |t: &str| Action::TypeText { text: t.into(), interval_ms: None };
+    let wait = |ms: u64| Action::Wait { ms };
+    let click_at = |x: i32, y: i32| Action::Click { x: Some(x), y: Some(y), button: MouseButton::Left, count: 1 };
+    let keys = |k: &[&str]| Action::Hotkey { keys: k.iter().map(|s| (*s).to_owned()).collect() };
+    check("pyautogui.moveTo(100, 200, 0.6, pyautogui.easeInQuad)", &[Action::MoveTo { x: 100, y: 200 }]);
+    check("pyautogui.moveTo(100.9, 200.2, 0.5, pyautogui.easeOutBounce)", &[Action::MoveTo { x: 100, y: 200 }]);
+    check(
+        "pyautogui.click(button='right', x=5, y=6, clicks=2)",
+        &[Action::Click { x: Some(5), y: Some(6), button: MouseButton::Right, count: 2 }],
     );
+    check("pyautogui.click()", &[Action::Click { x: None, y: None, button: MouseButton::Left, count: 1 }]);
+    check("pyautogui.mouseDown(button='left')", &[Action::MouseDown { button: MouseButton::Left, x: None, y: None }]);
+    check("pyautogui.mouseUp(button='middle')", &[Action::MouseUp { button: MouseButton::Middle, x: None, y: None }]);
+    check("pyautogui.rightClick(x=7, y=8)", &[Action::RightClick { x: Some(7), y: Some(8) }]);
+    check("pyautogui.doubleClick(x=7, y=8)", &[Action::DoubleClick { x: Some(7), y: Some(8) }]);
+    check(
+        "pyautogui.dragTo(500, 400, duration=1.0, button='left', mouseDownUp=True)",
+        &[Action::Drag { from: None, to: Point::new(500, 400), button: MouseButton::Left, duration_ms: Some(1000) }],
+    );
+    check("pyautogui.hscroll(-3)", &[Action::Scroll { x: None, y: None, dx: -3, dy: 0 }]);
+    check("pyautogui.vscroll(120)", &[Action::Scroll { x: None, y: None, dx: 0, dy: 120 }]);
+    check("pyautogui.scroll(-5, x=1, y=2)", &[Action::Scroll { x: Some(1), y: Some(2), dx: 0, dy: -5 }]);
+    check("pyautogui.typewrite('hello world')", &[text("hello world")]);
+    check("pyautogui.typewrite(\"it's\")", &[text("it's")]);
+    check("pyautogui.typewrite('a\\nb\\tc')", &[text("a"), key("enter"), text("b"), key("tab"), text("c")]);
+    check("pyautogui.write(['a', 'Enter', 'pgdn'])", &[key("a"), key("enter"), key("pagedown")]);
+    check("pyautogui.press('enter')", &[key("enter")]);
+    check("pyautogui.press('ESC', presses=3)", &[Action::KeyPress { key: "esc".into(), presses: 3 }]);
+    check("pyautogui.press(['a', 'b'], interval=0.1)", &[key("a"), key("b"), wait(100)]);
+    check("pyautogui.keyDown('shift')", &[Action::KeyDown { key: "shift".into() }]);
+    check("pyautogui.keyUp('shift')", &[Action::KeyUp { key: "shift".into() }]);
+    check("pyautogui.hotkey('ctrl', 'c')", &[keys(&["ctrl", "c"])]);
+    check("pyautogui.hotkey(['ctrl', 'shift', 't'])", &[keys(&["ctrl", "shift", "t"])]);
+    check(
+        "pyautogui.hotkey('ctrl', 'c', interval=0.1)",
+        &[
+            Action::KeyDown { key: "ctrl".into() },
+            wait(100),
+            Action::KeyDown { key: "c".into() },
+            wait(100),
+            Action::KeyUp { key: "c".into() },
+            wait(100),
+            Action::KeyUp { key: "ctrl".into() },
+            wait(100),
+        ],
+    );
+    check("pyautogui.moveRel(5, -5)", &[Action::MoveRel { dx: 5, dy: -5 }]);
+    check("pyautogui.move(None, 3)", &[Action::MoveRel { dx: 0, dy: 3 }]);
+    check(
+        "pyautogui.drag(30, 40, button='right')",
+        &[Action::Drag { from: None, to: Point::new(40, 60), button: MouseButton::Right, duration_ms: None }],
+    );
+    check("pyautogui.click((300, 400))", &[click_at(300, 400)]);
+    check("pyautogui.click(x=300)", &[click_at(300, 20)]);
+    check("pyautogui.click([100, 200, 50, 31])", &[click_at(125, 215)]);
+    check(
+        "pyautogui.click(1, 2, clicks=2, interval=0.25)",
+        &[
+            click_at(1, 2),
+            wait(250),
+            Action::Click { x: None, y: None, button: MouseButton::Left, count: 1 },
+            wait(250),
+        ],
+    );
+    check("pyautogui.tripleClick()", &[Action::Click { x: None, y: None, button: MouseButton::Left, count: 3 }]);
+    check("pyautogui.sleep(0.3)", &[wait(300)]);
+    check("x = 1, 2", &[]);
 }
 
 #[test]
@@ -507,34 +595,19 @@ fn uitars_versions_and_smart_resize() {
 }
 
 #[test]
-fn typed_actions_and_the_conversion_into_agent_actions() {
+fn typed_actions_and_coordinate_conventions() {
     check(
         ActionSpace::Typed,
         Coords::Pixels,
         json!([{"type": "move_to", "x": 1, "y": 2}]),
         &[act(Action::MoveTo { x: 1, y: 2 })],
     );
-    check_err(ActionSpace::Typed, json!({"type": "teleport"}), &["not a typed action"]);
-    let steps = [
-        act(Action::MoveTo { x: 1, y: 2 }),
-        act(Action::Click { x: None, y: None, button: MouseButton::Left, count: 1 }),
-        Step::SetClipboard("it's".into()),
-        Step::Screenshot,
-        hotkey(&["ctrl", "v"]),
-        Step::Done,
-    ];
-    assert_eq!(
-        to_agent_actions(&steps),
-        vec![
-            AgentAction::Typed(vec![
-                Action::MoveTo { x: 1, y: 2 },
-                Action::Click { x: None, y: None, button: MouseButton::Left, count: 1 }
-            ]),
-            AgentAction::Pyautogui("import pyperclip\npyperclip.copy(\"it's\")".into()),
-            AgentAction::Typed(vec![Action::Hotkey { keys: vec!["ctrl".into(), "v".into()] }]),
-            AgentAction::Done,
-        ]
-    );
+    check_err(ActionSpace::Typed, json!({"type": "teleport"}), &["unknown typed action", "teleport"]);
+    check_err(ActionSpace::Typed, json!({"x": 1}), &["not a typed action"]);
+    for space in ActionSpace::ALL {
+        assert_eq!(space.name().parse::<ActionSpace>(), Ok(space));
+    }
+    assert!("morse".parse::<ActionSpace>().unwrap_err().contains("computer_13"));
     assert_eq!(Coords::Fraction.from_screen(720, 450, SCREEN), (0.5, 0.5));
     assert_eq!("grid1000".parse::<Coords>(), Ok(Coords::Grid1000));
     assert!("inches".parse::<Coords>().unwrap_err().contains("inches"));

@@ -60,14 +60,12 @@ pub const KEYS: super::KeyTable = &[
 pub const SCROLL_UNITS: i32 = 5;
 
 /// Which UI-TARS, by its coordinate convention.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, clap::ValueEnum)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum UiTarsVersion {
     /// UI-TARS 2B/7B/72B (Qwen2-VL): a 0..1000 grid.
-    #[value(name = "1.0")]
     V1,
     /// UI-TARS-1.5 (Qwen2.5-VL): pixels of the `smart_resize`d screenshot.
     #[default]
-    #[value(name = "1.5")]
     V1_5,
 }
 

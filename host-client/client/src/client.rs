@@ -37,6 +37,7 @@ use arena_shared::exec::{ExecRequest, ExecResult, LaunchRequest, LaunchResult};
 use arena_shared::files::{
     DirListing, Exists, FileStat, FileWritten, KnownFolders, MkdirRequest, PathQuery, WriteQuery,
 };
+use arena_shared::geometry::CoordinateSpace;
 use arena_shared::health::{Component, HealthReport};
 use arena_shared::observation::{
     A11yQuery, A11yTree, ScreenInfo, ScreenshotMeta, ScreenshotQuery, WindowInfo, WindowTarget,
@@ -463,6 +464,24 @@ impl GuestClient {
             ..self.call(Method::POST, "/v1/actions")
         };
         self.json(call).await
+    }
+
+    /// The screen's size in the coordinate space the guest's input uses (what
+    /// pyautogui's `size()` answers there) and where the cursor is: what pyautogui
+    /// code is translated against. Two calls: `GET /v1/screen` and an empty
+    /// `POST /v1/actions`, which moves nothing and reports the cursor.
+    ///
+    /// # Errors
+    ///
+    /// Any [`ClientError`] of the two calls.
+    pub async fn pointer(&self) -> Result<((u32, u32), (i32, i32)), ClientError> {
+        let screen = self.screen().await?;
+        let size = match screen.coordinate_space {
+            CoordinateSpace::Logical => (screen.logical_width, screen.logical_height),
+            _ => (screen.physical_width, screen.physical_height),
+        };
+        let report = self.act(&ActionBatch { actions: Vec::new() }).await?;
+        Ok((size, (report.cursor.x, report.cursor.y)))
     }
 
     /// Performs one action; see [`GuestClient::act`].

@@ -100,14 +100,26 @@ impl ClientError {
         }
     }
 
+    /// Whether the guest is out of reach, rather than refusing one call: nothing
+    /// answered (no connection, no answer in time, a transfer broken in flight) or it
+    /// never became ready. The one rule for it: the agent executor and the
+    /// observation call such an error an infrastructure failure (never the agent's),
+    /// and [`ClientError::is_transient`] retries idempotent calls on it.
+    pub fn out_of_reach(&self) -> bool {
+        matches!(
+            self,
+            ClientError::Connect { .. }
+                | ClientError::Timeout { .. }
+                | ClientError::Io { .. }
+                | ClientError::NotReady { .. }
+        )
+    }
+
     /// Whether retrying the same idempotent request may succeed: the guest was
-    /// not reachable, too slow, or a proxy in front of it reported a bad gateway.
+    /// [out of reach](ClientError::out_of_reach), or a proxy in front of it
+    /// reported a bad gateway (502 to 504).
     pub fn is_transient(&self) -> bool {
-        match self {
-            ClientError::Connect { .. } | ClientError::Timeout { .. } => true,
-            ClientError::Api { status, .. } => matches!(status, 502..=504),
-            _ => false,
-        }
+        self.out_of_reach() || matches!(self, ClientError::Api { status: 502..=504, .. })
     }
 }
 
@@ -176,7 +188,7 @@ pub fn component_name(component: Component) -> String {
 
 /// Joins an error and its sources into one line, skipping a source whose text
 /// its parent already contains (reqwest and hyper repeat themselves).
-pub(crate) fn flatten(err: &(dyn std::error::Error + 'static)) -> String {
+pub fn flatten(err: &(dyn std::error::Error + 'static)) -> String {
     let mut parts: Vec<String> = vec![err.to_string()];
     let mut source = err.source();
     while let Some(inner) = source {
@@ -267,7 +279,31 @@ mod tests {
         assert!(!api(500).is_transient());
         assert!(!api(404).is_transient());
         assert!(ClientError::Connect { call: site(), reason: String::new() }.is_transient());
+        assert!(ClientError::Io { call: site(), reason: String::new() }.is_transient());
         assert!(!ClientError::Decode { call: site(), reason: String::new() }.is_transient());
+    }
+
+    #[test]
+    fn out_of_reach_is_no_answer_at_all_never_an_answer() {
+        let reached = [
+            ClientError::Api { call: site(), status: 504, code: ErrorCode::Timeout, message: String::new() },
+            ClientError::Api { call: site(), status: 502, code: ErrorCode::Internal, message: String::new() },
+            ClientError::Decode { call: site(), reason: String::new() },
+            ClientError::Integrity { call: site(), expected: String::new(), actual: String::new() },
+            ClientError::InvalidUrl { url: String::new(), reason: String::new() },
+        ];
+        for err in reached {
+            assert!(!err.out_of_reach(), "{err}");
+        }
+        let gone = [
+            ClientError::Connect { call: site(), reason: String::new() },
+            ClientError::Timeout { call: site(), after: Duration::from_secs(1) },
+            ClientError::Io { call: site(), reason: String::new() },
+            ClientError::NotReady { guest: String::new(), waited: Duration::ZERO, down: vec![], last_error: None },
+        ];
+        for err in gone {
+            assert!(err.out_of_reach(), "{err}");
+        }
     }
 
     #[test]

@@ -14,7 +14,8 @@
 //! bytes share one copy, and a corrupted copy is noticed and fetched again.
 //!
 //! It is not an HTTP cache: no expiry, no revalidation. A URL's content is
-//! what it was when first fetched, which is what repeatable runs need.
+//! what it was when first fetched, which is what repeatable runs need. The setup
+//! steps (`download`) and the getters (cloud files) share it.
 
 use std::collections::BTreeMap;
 use std::io::Write as _;
@@ -26,7 +27,17 @@ use sha2::{Digest, Sha256};
 
 use arena_shared::atomic::AtomicFile;
 
-use super::SetupError;
+/// The cache could not serve a URL.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum CacheError {
+    /// A file could not be downloaded and is not in the cache. Names the URL.
+    #[error("download of {url} failed: {reason}")]
+    Download { url: String, reason: String },
+    /// The cache folder could not be read or written.
+    #[error("download cache {}: {reason}", path.display())]
+    Cache { path: PathBuf, reason: String },
+}
 
 /// Attempts per URL (upstream: 3).
 const ATTEMPTS: u32 = 3;
@@ -52,8 +63,8 @@ impl DownloadCache {
     ///
     /// # Errors
     ///
-    /// [`SetupError::Cache`] when the folder cannot be created.
-    pub fn new(dir: impl Into<PathBuf>) -> Result<DownloadCache, SetupError> {
+    /// [`CacheError::Cache`] when the folder cannot be created.
+    pub fn new(dir: impl Into<PathBuf>) -> Result<DownloadCache, CacheError> {
         let dir = dir.into();
         let blobs = dir.join("blobs");
         std::fs::create_dir_all(&blobs).map_err(|err| cache_error(&blobs, &err))?;
@@ -61,7 +72,7 @@ impl DownloadCache {
             .connect_timeout(Duration::from_secs(30))
             .read_timeout(READ_TIMEOUT)
             .build()
-            .map_err(|err| SetupError::Cache {
+            .map_err(|err| CacheError::Cache {
                 path: dir.clone(),
                 reason: format!("cannot build an HTTP client: {err}"),
             })?;
@@ -85,8 +96,8 @@ impl DownloadCache {
     ///
     /// # Errors
     ///
-    /// [`SetupError::Cache`] when the index exists but cannot be read or parsed.
-    pub async fn lookup(&self, url: &str) -> Result<Option<PathBuf>, SetupError> {
+    /// [`CacheError::Cache`] when the index exists but cannot be read or parsed.
+    pub async fn lookup(&self, url: &str) -> Result<Option<PathBuf>, CacheError> {
         let index = self.read_index().await?;
         let Some(sha256) = index.get(url) else { return Ok(None) };
         if !is_sha256(sha256) {
@@ -109,10 +120,10 @@ impl DownloadCache {
     ///
     /// # Errors
     ///
-    /// [`SetupError::Download`] naming the URL when it is not cached and every
+    /// [`CacheError::Download`] naming the URL when it is not cached and every
     /// attempt failed (no network, a non-2xx status, a broken transfer);
-    /// [`SetupError::Cache`] when the cache cannot be read or written.
-    pub async fn fetch(&self, url: &str) -> Result<PathBuf, SetupError> {
+    /// [`CacheError::Cache`] when the cache cannot be read or written.
+    pub async fn fetch(&self, url: &str) -> Result<PathBuf, CacheError> {
         if let Some(path) = self.lookup(url).await? {
             tracing::debug!(%url, path = %path.display(), "download served from the cache");
             return Ok(path);
@@ -135,7 +146,7 @@ impl DownloadCache {
                 tokio::time::sleep(RETRY_PAUSE * (1 << (attempt - 1))).await;
             }
         }
-        Err(SetupError::Download {
+        Err(CacheError::Download {
             url: url.to_owned(),
             reason: format!(
                 "not in the download cache {} and {ATTEMPTS} attempts to fetch it failed (last: {last_error})",
@@ -169,10 +180,10 @@ impl DownloadCache {
         Ok(sha256)
     }
 
-    async fn read_index(&self) -> Result<Index, SetupError> {
+    async fn read_index(&self) -> Result<Index, CacheError> {
         let path = self.index_path();
         match tokio::fs::read(&path).await {
-            Ok(bytes) => serde_json::from_slice(&bytes).map_err(|err| SetupError::Cache {
+            Ok(bytes) => serde_json::from_slice(&bytes).map_err(|err| CacheError::Cache {
                 path,
                 reason: format!("the index is not a JSON object of URL to hash: {err}"),
             }),
@@ -182,18 +193,18 @@ impl DownloadCache {
     }
 
     /// Adds `url → sha256` to the index: read, change, write a temporary file, rename.
-    async fn record(&self, url: &str, sha256: &str) -> Result<(), SetupError> {
+    async fn record(&self, url: &str, sha256: &str) -> Result<(), CacheError> {
         let _guard = self.index_lock.lock().await;
         let mut index = self.read_index().await?;
         index.insert(url.to_owned(), sha256.to_owned());
         let path = self.index_path();
         let text = serde_json::to_vec_pretty(&index)
-            .map_err(|err| SetupError::Cache { path: path.clone(), reason: err.to_string() })?;
-        tokio::task::spawn_blocking(move || -> Result<(), SetupError> {
+            .map_err(|err| CacheError::Cache { path: path.clone(), reason: err.to_string() })?;
+        tokio::task::spawn_blocking(move || -> Result<(), CacheError> {
             arena_shared::atomic::write_atomic(&path, &text).map_err(|err| cache_error(&path, &err))
         })
         .await
-        .map_err(|err| SetupError::Cache {
+        .map_err(|err| CacheError::Cache {
             path: self.index_path(),
             reason: format!("the index writer failed: {err}"),
         })?
@@ -203,11 +214,11 @@ impl DownloadCache {
 /// Why one download attempt failed: worth another attempt, or not.
 enum Failure {
     Network(String),
-    Cache(SetupError),
+    Cache(CacheError),
 }
 
-fn cache_error(path: &Path, err: &std::io::Error) -> SetupError {
-    SetupError::Cache { path: path.to_owned(), reason: err.to_string() }
+fn cache_error(path: &Path, err: &std::io::Error) -> CacheError {
+    CacheError::Cache { path: path.to_owned(), reason: err.to_string() }
 }
 
 fn is_sha256(s: &str) -> bool {
@@ -216,7 +227,7 @@ fn is_sha256(s: &str) -> bool {
 
 /// A reqwest error as one line, with its innermost cause ("Connection refused").
 fn describe(err: &reqwest::Error) -> String {
-    crate::error::flatten(err)
+    arena_client::error::flatten(err)
 }
 
 #[cfg(test)]

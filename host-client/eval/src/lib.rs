@@ -1,11 +1,15 @@
-//! Task evaluation: run a task's getters, call its metrics, combine the scores
-//! as upstream's `DesktopEnv.evaluate` does.
+//! Task evaluation (`arena-eval`): run a task's getters, call its metrics,
+//! combine the scores as upstream's `DesktopEnv.evaluate` does. [`evaluate`] is
+//! the boundary: the episode hands it the task's evaluator, the agent's last
+//! word and an [`EvalContext`], and gets an [`EvalOutcome`].
 //!
 //! What it is: the framework ([`evaluate`], the outcome types, the getter and
-//! metric registries) and the getters and metrics built so far. What it is
-//! not: it does not run `postconfig` (the episode runner runs those steps with
-//! [`crate::setup`] first) and it never fails: a getter or metric that cannot
-//! produce a value scores 0 with the reason recorded in the outcome.
+//! metric registries), the getters and metrics with the file formats they read
+//! (PDF, SQLite, 7z, audio, video, Office packages), and the host's download
+//! cache ([`cache`], shared with the setup steps). What it is not: it does not
+//! run `postconfig` (the episode runner runs those steps with `arena-setup`
+//! first) and it never fails: a getter or metric that cannot produce a value
+//! scores 0 with the reason recorded in the outcome.
 //!
 //! Scoring, as upstream:
 //! 1. `func: "infeasible"`: 1 when the agent's last word was FAIL, else 0.
@@ -17,10 +21,14 @@
 //!
 //! # Layout
 //!
+//! - [`cache`]: [`DownloadCache`], the host's content-addressed store of downloaded files.
 //! - [`value`]: [`Fetched`], what getters return, and Python's `==` over JSON.
 //! - [`getters`]: the getter registry ([`getters::lookup`]), one file per family.
 //! - [`metrics`]: the metric registry ([`metrics::lookup`]), one file per family.
 
+#![forbid(unsafe_code)]
+
+pub mod cache;
 pub mod getters;
 pub mod metrics;
 pub mod value;
@@ -34,10 +42,10 @@ use std::time::Instant;
 use serde::{Deserialize, Serialize};
 use serde_json::Value;
 
-use crate::client::GuestClient;
-use crate::setup::DownloadCache;
-use crate::task::{Conj, Evaluator, GetterSpec, MetricCall, Scoring, Task};
+use arena_client::client::GuestClient;
+use arena_task::{Conj, Evaluator, GetterSpec, MetricCall, Scoring, Task};
 
+pub use cache::{CacheError, DownloadCache};
 pub use getters::{Getter, GetterError};
 pub use metrics::{MetricError, MetricFn, MetricInput};
 pub use value::Fetched;
@@ -61,18 +69,6 @@ pub enum LastAction {
     Wait,
     /// Anything else (the episode ended on the step cap after a normal action).
     Other,
-}
-
-impl LastAction {
-    /// Reads a control word as the agent writes it (`DONE`, `fail`, ...); anything else is [`LastAction::Other`].
-    pub fn from_word(word: &str) -> LastAction {
-        match word.trim().to_ascii_uppercase().as_str() {
-            "DONE" => LastAction::Done,
-            "FAIL" => LastAction::Fail,
-            "WAIT" => LastAction::Wait,
-            _ => LastAction::Other,
-        }
-    }
 }
 
 /// Where a metric's evaluation failed.

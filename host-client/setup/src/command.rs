@@ -14,7 +14,7 @@
 use arena_script::{python_code_from_argv, python_code_from_command_line, CommandArg as ScriptCommand};
 use arena_shared::cmdline::{cmd_arguments, execute_command, list2cmdline, CommandSpec};
 
-use crate::task::CommandArg;
+use arena_task::CommandArg;
 
 /// What an `execute` step sends to the guest.
 #[derive(Debug, Clone, PartialEq, Eq)]

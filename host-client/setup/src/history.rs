@@ -15,7 +15,7 @@ use std::time::{Duration, SystemTime, UNIX_EPOCH};
 
 use rusqlite::{params, Connection};
 
-use crate::task::{Browser, HistoryEntry};
+use arena_task::{Browser, HistoryEntry};
 
 /// Seconds from 1601-01-01 to 1970-01-01.
 const WEBKIT_TO_UNIX_SECS: i64 = 11_644_473_600;

@@ -1,13 +1,15 @@
 //! Running a task's setup steps (`config` and `evaluator.postconfig`) and
-//! resetting the guest between episodes, with upstream WAA's semantics but
-//! over the guest's native `/v1/` API.
+//! resetting the guest between episodes (`arena-setup`), with upstream WAA's
+//! semantics but over the guest's native `/v1/` API.
 //!
 //! Upstream's host (`SetupController`) sends each step to a legacy route
 //! (`/setup/launch`, `/setup/execute`, ...) and the guest does the work. Here
 //! the host does what upstream's host *and* guest did together, one typed call
-//! at a time: a `download` is fetched into a content-addressed host cache and
-//! pushed as bytes, an `execute` of `python -c <pyautogui code>` becomes typed
-//! input actions, the browser tab steps talk to the browser's DevTools HTTP
+//! at a time: a `download` is fetched into the host's content-addressed cache
+//! (`arena_eval::cache`, which the getters share) and pushed as bytes, an `execute`
+//! of `python -c <pyautogui code>` becomes typed input actions through the host's
+//! one pyautogui translation (`arena_actionspace::pyautogui::parse`), the browser
+//! tab steps talk to the browser's DevTools HTTP
 //! endpoint through the guest, and the browse-history steps build Chrome's
 //! SQLite database on the host.
 //!
@@ -16,18 +18,18 @@
 //! aborts the rest ([`run_step`] answers `Err` for it). Pauses that upstream
 //! sleeps go through [`Settle`], so tests run them at no cost.
 //!
-//! This module is not the episode loop (see `episode`) and does not evaluate.
+//! This crate is not the episode loop (`arena-host`'s `episode`) and does not evaluate.
 //!
 //! # Layout
 //!
 //! - `steps`: one function per step type, and [`run_step`]'s dispatch.
 //! - `command`: command lines for `launch` and `execute` (pure, unit-tested).
-//! - [`cache`] holds [`DownloadCache`].
 //! - `cdp`: tab steps over the DevTools HTTP endpoint; [`compare_urls`].
 //! - `outcome`: what one step did, shared by `steps` and `cdp` (so neither imports the other).
 //! - [`history`] builds Chrome's `History` database.
 
-pub mod cache;
+#![forbid(unsafe_code)]
+
 mod cdp;
 mod command;
 pub mod history;
@@ -41,11 +43,11 @@ use serde::Serialize;
 
 use arena_shared::files::{FileKind, KnownFolder};
 
-use crate::client::GuestClient;
-use crate::error::ClientError;
-use crate::task::SetupStep;
+use arena_client::client::GuestClient;
+use arena_client::error::ClientError;
+use arena_task::SetupStep;
 
-pub use cache::DownloadCache;
+pub use arena_eval::cache::DownloadCache;
 pub use cdp::compare_urls;
 
 /// How long [`reset`] waits for the guest's staged health (upstream polls `/probe` 20 × 5 s).
@@ -66,6 +68,16 @@ pub enum SetupError {
     /// A guest call that reset depends on failed.
     #[error(transparent)]
     Guest(#[from] ClientError),
+}
+
+impl From<arena_eval::CacheError> for SetupError {
+    fn from(err: arena_eval::CacheError) -> SetupError {
+        match err {
+            arena_eval::CacheError::Download { url, reason } => SetupError::Download { url, reason },
+            arena_eval::CacheError::Cache { path, reason } => SetupError::Cache { path, reason },
+            other => SetupError::Cache { path: PathBuf::new(), reason: other.to_string() },
+        }
+    }
 }
 
 /// Scales the pauses upstream sleeps (after opening a file, between the steps of

@@ -3,7 +3,7 @@
 //! A leaf module, so the step runner (`steps`) and the browser steps (`cdp`) both
 //! build outcomes without importing each other.
 
-use crate::error::ClientError;
+use arena_client::error::ClientError;
 
 /// What a step did.
 #[derive(Debug, Clone, PartialEq, Eq)]

@@ -9,15 +9,15 @@
 use std::path::{Component, Path};
 use std::time::{Duration, SystemTime};
 
-use arena_script::actions_from_pyautogui;
+use arena_actionspace::pyautogui;
+use arena_actionspace::{Context, Coords, Step};
 use arena_shared::action::ActionBatch;
 use arena_shared::exec::{ExecRequest, ExecResult, LaunchRequest};
 use arena_shared::files::KnownFolder;
-use arena_shared::geometry::CoordinateSpace;
 use arena_shared::observation::{WindowInfo, WindowTarget};
 
-use crate::client::GuestClient;
-use crate::task::{CommandArg, DownloadFile, SetupStep, Until};
+use arena_client::client::GuestClient;
+use arena_task::{CommandArg, DownloadFile, SetupStep, Until};
 
 use super::command::{self, ExecPlan};
 use super::outcome::Outcome;
@@ -352,13 +352,15 @@ async fn execute(
 }
 
 /// One attempt of an `execute` step: pyautogui code as typed actions when it is only
-/// input, any other command (or code doing more than input) run on the guest.
+/// input (translated by the host's one pyautogui translation), any other command
+/// (or code doing more than input: files, processes, the clipboard) run on the guest.
 async fn run_once(client: &GuestClient, plan: &ExecPlan) -> Result<Ran, String> {
     let spec = match plan {
         ExecPlan::Run(spec) => spec,
         ExecPlan::Python { code, command } => {
-            let (screen, cursor) = pointer_context(client).await?;
-            match actions_from_pyautogui(code, screen, cursor) {
+            let (screen, cursor) = client.pointer().await.map_err(|err| err.to_string())?;
+            let ctx = Context { screen, cursor, coords: Coords::Pixels };
+            match input_only(pyautogui::parse(code, &ctx)) {
                 Ok(actions) => {
                     let n = actions.len();
                     client.act(&ActionBatch { actions }).await.map_err(|err| err.to_string())?;
@@ -369,8 +371,8 @@ async fn run_once(client: &GuestClient, plan: &ExecPlan) -> Result<Ran, String> 
                         how: format!("python -c translated into {n} input actions"),
                     });
                 }
-                Err(err) => {
-                    tracing::info!(error = %err, "python code is not only input; running it on the guest");
+                Err(why) => {
+                    tracing::info!(reason = %why, "python code is not only input; running it on the guest");
                     command
                 }
             }
@@ -385,22 +387,18 @@ async fn run_once(client: &GuestClient, plan: &ExecPlan) -> Result<Ran, String> 
     Ok(Ran { returncode: result.exit_code.map(i64::from), output: result.stdout, error: result.stderr, how })
 }
 
-/// The screen size pyautogui sees and the cursor position, for translating code into actions.
-async fn pointer_context(client: &GuestClient) -> Result<((u32, u32), (i32, i32)), String> {
-    let screen = client.screen().await.map_err(|err| err.to_string())?;
-    let size = match screen.coordinate_space {
-        CoordinateSpace::Logical => (screen.logical_width, screen.logical_height),
-        _ => (screen.physical_width, screen.physical_height),
-    };
-    // An empty batch moves nothing and reports where the cursor is.
-    let cursor = match client.act(&ActionBatch { actions: Vec::new() }).await {
-        Ok(report) => (report.cursor.x, report.cursor.y),
-        Err(err) => {
-            tracing::debug!(error = %err, "cursor position unknown; assuming (0, 0)");
-            (0, 0)
-        }
-    };
-    Ok((size, cursor))
+/// The input actions of a translation that is only input.
+fn input_only(
+    steps: Result<Vec<Step>, arena_actionspace::ActionError>,
+) -> Result<Vec<arena_shared::action::Action>, String> {
+    steps
+        .map_err(|err| err.to_string())?
+        .into_iter()
+        .map(|step| match step {
+            Step::Act(action) => Ok(action),
+            other => Err(format!("the code asks for {other:?}, which is not an input action")),
+        })
+        .collect()
 }
 
 #[cfg(test)]

@@ -14,11 +14,11 @@ use axum::{Json, Router};
 use serde_json::{json, Value};
 use tokio::net::TcpListener;
 
-use arena_host::client::{ClientConfig, GuestClient};
-use arena_host::setup::{self, DownloadCache, Settle, SetupContext, SetupError, StepReport};
-use arena_host::task::{Browser, CommandArg, DownloadFile, HistoryEntry, SetupStep, Until};
+use arena_client::client::{ClientConfig, GuestClient};
+use arena_setup::{DownloadCache, Settle, SetupContext, SetupError, StepReport};
 use arena_shared::files::FileKind;
 use arena_shared::observation::WindowInfo;
+use arena_task::{Browser, CommandArg, DownloadFile, HistoryEntry, SetupStep, Until};
 use arena_test_support::StubGuest;
 
 const DOCS: &str = r"C:\Users\Docker\Documents";
@@ -104,7 +104,7 @@ fn execute(command: CommandArg) -> SetupStep {
 }
 
 async fn step(ctx: &SetupContext, step: SetupStep) -> StepReport {
-    setup::run_step(ctx, &step).await.unwrap_or_else(|err| panic!("{step:?}: {err}"))
+    arena_setup::run_step(ctx, &step).await.unwrap_or_else(|err| panic!("{step:?}: {err}"))
 }
 
 async fn step_ok(ctx: &SetupContext, s: SetupStep) -> StepReport {
@@ -445,7 +445,7 @@ async fn downloads_are_cached_and_replayed_offline() {
     assert_eq!(std::fs::read(guest.cache_dir.path().join("blobs").join(&sha)).expect("blob"), FILES[0].1);
 
     // A 404 is a failed download, and aborts.
-    let err = setup::run_step(
+    let err = arena_setup::run_step(
         ctx,
         &SetupStep::Download {
             files: vec![DownloadFile { url: format!("{base}/gone.bin"), path: format!(r"{DOCS}\gone.bin") }],
@@ -469,7 +469,7 @@ async fn downloads_are_cached_and_replayed_offline() {
         SetupStep::Download { files: vec![DownloadFile { url: missing_url.clone(), path: format!(r"{DOCS}\x.docx") }] },
         SetupStep::CreateFolder { path: format!(r"{DOCS}\after-abort") },
     ];
-    match setup::run_step(&offline, &steps[0]).await {
+    match arena_setup::run_step(&offline, &steps[0]).await {
         Err(err @ SetupError::Download { .. }) => {
             let text = err.to_string();
             assert!(text.contains(&missing_url), "{text}");
@@ -477,9 +477,9 @@ async fn downloads_are_cached_and_replayed_offline() {
         }
         other => panic!("expected a download error, got {other:?}"),
     }
-    let reports = setup::run_steps(&offline, &steps).await;
+    let reports = arena_setup::run_steps(&offline, &steps).await;
     assert_eq!(reports.len(), 1, "nothing runs after a failed download: {reports:?}");
-    assert!(setup::aborted(&reports));
+    assert!(arena_setup::aborted(&reports));
     assert!(!exists(ctx, &format!(r"{DOCS}\after-abort")).await);
 }
 
@@ -651,7 +651,7 @@ async fn reset_closes_windows_and_clears_downloads_but_keeps_folders_and_desktop
     }
     assert!(titles(ctx).await.len() > 1);
 
-    setup::reset(&ctx.client, Duration::ZERO, &setup::RealClock).await.expect("reset");
+    arena_setup::reset(&ctx.client, Duration::ZERO, &arena_setup::RealClock).await.expect("reset");
 
     assert_eq!(titles(ctx).await, vec!["Program Manager".to_owned()]);
     let mut left: Vec<String> =

@@ -1,7 +1,7 @@
 //! `arena prep`: stage an OEM folder for a new Windows image, verify a staged
 //! folder against its manifest, and wait for a prepared VM's guest to be healthy.
 //!
-//! The work is in [`crate::prep`]; this module only turns arguments into its
+//! The work is in [`crate::oem`]; this module only turns arguments into its
 //! options and its results into lines on stdout.
 
 use std::path::PathBuf;
@@ -10,7 +10,7 @@ use std::time::Duration;
 
 use clap::{Args, Subcommand};
 
-use crate::prep::{self, component_name, StageOptions, WaitEvent};
+use crate::oem::{self, component_name, StageOptions, WaitEvent};
 
 use super::{emit, parse_seconds, Connection};
 
@@ -69,9 +69,9 @@ pub enum PrepCommand {
 pub async fn run(conn: &Connection, args: PrepArgs) -> anyhow::Result<ExitCode> {
     match args.command {
         PrepCommand::Stage { out, exe, scripts, token_out, force } => {
-            let token_out = token_out.or_else(prep::default_token_out);
+            let token_out = token_out.or_else(oem::default_token_out);
             let workspace = std::env::current_dir().unwrap_or_else(|_| PathBuf::from("."));
-            let staged = prep::stage(&StageOptions { out: out.clone(), exe, scripts, token_out, force, workspace })?;
+            let staged = oem::stage(&StageOptions { out: out.clone(), exe, scripts, token_out, force, workspace })?;
             let m = &staged.manifest;
             let mut text = format!("staged {} file(s) into {}\n", m.files.len(), out.display());
             text.push_str(&format!("  exe:      {}\n", m.exe_source));
@@ -93,7 +93,7 @@ pub async fn run(conn: &Connection, args: PrepArgs) -> anyhow::Result<ExitCode> 
             Ok(ExitCode::SUCCESS)
         }
         PrepCommand::Verify { dir } => {
-            let report = prep::verify(&dir)?;
+            let report = oem::verify(&dir)?;
             let mut text = String::new();
             for m in &report.mismatched {
                 text.push_str(&format!(
@@ -124,7 +124,7 @@ pub async fn run(conn: &Connection, args: PrepArgs) -> anyhow::Result<ExitCode> 
         PrepCommand::Wait { timeout, poll } => {
             let client = conn.client()?;
             let started = std::time::Instant::now();
-            let result = prep::wait_healthy(&client, timeout, poll, |event| {
+            let result = oem::wait_healthy(&client, timeout, poll, |event| {
                 let at = started.elapsed().as_secs_f64();
                 let line = match event {
                     WaitEvent::Unreachable { error } => format!("[{at:6.1}s] not reachable yet: {error}\n"),

@@ -1,18 +1,27 @@
-//! Carrying out an [`AgentAction`] on a guest: [`execute`].
+//! The episode's action port: carrying out an [`AgentAction`] on a guest, [`execute`].
 //!
-//! Navi `computer.*` code and pyautogui code run here on the host, in the
-//! `arena_script` interpreter, against [`GuestHost`]: a
-//! [`ScriptHost`] whose every effect is a typed call of the guest's `/v1`
-//! API (an input action is `POST /v1/actions`, `subprocess.run` is
-//! `POST /v1/exec`, `pyperclip.copy` is `PUT /v1/clipboard`, ...). The
-//! interpreter is synchronous, so a script runs on a blocking worker thread
-//! and reaches the async client through the runtime's [`Handle`].
+//! Each kind of action has one way in:
+//! - typed actions are one `POST /v1/actions` batch, and a clipboard action one
+//!   `PUT /v1/clipboard`;
+//! - pyautogui code, whichever way it came (Navi, a scripted plan, the step
+//!   protocol, MCP's `run_python`, `arena act --pyautogui`), is translated whole by
+//!   the `pyautogui` action space (`arena_actionspace::parse`, for the guest's
+//!   screen and cursor: [`pointer`]) and its steps are carried out by
+//!   [`perform_steps`], so every way refuses the same files and processes and
+//!   turns the same `pyperclip.copy` into the same clipboard call;
+//! - Navi `computer.*` code runs here on the host, in the `arena_script`
+//!   interpreter, against [`GuestHost`]: a [`ScriptHost`] whose every effect is a
+//!   typed call of the guest's `/v1` API (an input action is `POST /v1/actions`,
+//!   `subprocess.run` is `POST /v1/exec`, `pyperclip.copy` is `PUT /v1/clipboard`,
+//!   ...). The interpreter is synchronous, so a script runs on a blocking worker
+//!   thread and reaches the async client through the runtime's [`Handle`].
 //!
 //! Failures are sorted in two: what the agent did wrong or the desktop refused
-//! (a Python exception, an unknown key, a program that is not installed) is
-//! recorded in [`ActionOutcome::error`] and the episode goes on, as upstream's
-//! `/execute_windows` answers 500 and the runner carries on; a guest that cannot
-//! be reached at all is an [`AgentError::Guest`], an infrastructure error.
+//! (a Python exception, code that does not translate, an unknown key, a program
+//! that is not installed) is recorded in [`ActionOutcome::error`] and the episode
+//! goes on, as upstream's `/execute_windows` answers 500 and the runner carries
+//! on; a guest [out of reach](arena_client::ClientError::out_of_reach) is an
+//! [`ExecError::Guest`], an infrastructure error.
 //!
 //! Deliberate differences from upstream:
 //! - `computer.clipboard.copy_image(id)` crops a fresh screenshot (without the
@@ -38,6 +47,10 @@ use image::RgbaImage;
 use serde::{Deserialize, Serialize};
 use tokio::runtime::Handle;
 
+use arena_actionspace::{ActionSpace, Context, Coords, Step};
+use arena_client::client::GuestClient;
+use arena_client::error::ClientError;
+use arena_client::frame::{encode_png, Frame};
 use arena_script::{
     parse, run, CommandOutput, ComputerState, Globals, HostError, HostResult, PathKind, ScriptError, ScriptHost, Stop,
     WindowChange,
@@ -48,16 +61,24 @@ use arena_shared::cmdline::CommandSpec;
 use arena_shared::exec::{ExecRequest, LaunchRequest};
 use arena_shared::files::FileKind;
 use arena_shared::geometry::Point;
-use arena_shared::imaging::encode;
 use arena_shared::keys::HeldKeys;
 use arena_shared::observation::{ImageFormat, ScreenshotQuery, WindowInfo, WindowTarget};
 use arena_shared::registry::RegistryValue;
 
-use super::{AgentAction, AgentError};
-use crate::actionspace::Coords;
-use crate::client::GuestClient;
-use crate::error::ClientError;
+use super::AgentAction;
 use crate::som::Marks;
+
+/// Why an action could not be carried out at all: an infrastructure failure, never the agent's.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum ExecError {
+    /// The guest is out of reach ([`ClientError::out_of_reach`]).
+    #[error(transparent)]
+    Guest(#[from] ClientError),
+    /// The worker thread that ran a script died.
+    #[error("the script worker failed: {0}")]
+    Worker(String),
+}
 
 /// How scripts are run.
 #[derive(Debug, Clone, PartialEq)]
@@ -72,10 +93,15 @@ pub struct ExecOptions {
     /// action ends, instead of at the end of the episode (`--held-keys action`).
     pub release_held_keys: bool,
     /// What the coordinates of pyautogui code are measured in (`--coords`): every
-    /// pyautogui answer, from any agent, is rescaled to screen pixels by
-    /// [`crate::actionspace::pyautogui::rescale`] before it runs. A prediction may
-    /// name its own ([`crate::agent::Prediction::coords`]).
+    /// pyautogui answer, from any agent, is translated in this convention by the
+    /// `pyautogui` action space. A prediction may name its own
+    /// ([`crate::agent::Prediction::coords`]).
     pub coords: Coords,
+    /// Run pyautogui code with its effects (`--pyautogui-effects`): in the host's
+    /// interpreter against [`GuestHost`], files, processes and screenshots through
+    /// the guest's API, as upstream's `python -c` runs it. Off (the default), it is
+    /// translated by the `pyautogui` action space: input and clipboard only.
+    pub pyautogui_effects: bool,
 }
 
 impl Default for ExecOptions {
@@ -86,6 +112,7 @@ impl Default for ExecOptions {
             max_duration: Duration::from_secs(90),
             release_held_keys: false,
             coords: Coords::Pixels,
+            pyautogui_effects: false,
         }
     }
 }
@@ -128,15 +155,15 @@ pub struct ActionOutcome {
 ///
 /// # Errors
 ///
-/// [`AgentError::Guest`] when the guest cannot be reached (connection refused,
-/// no answer in time, a broken transfer); [`AgentError::Worker`] if the script
+/// [`ExecError::Guest`] when the guest cannot be reached (connection refused,
+/// no answer in time, a broken transfer); [`ExecError::Worker`] if the script
 /// thread died. Everything else is an [`ActionOutcome::error`].
 pub async fn execute(
     client: &GuestClient,
     action: &AgentAction,
     marks: Option<&Marks>,
     computer: &mut ComputerState,
-) -> Result<ActionOutcome, AgentError> {
+) -> Result<ActionOutcome, ExecError> {
     execute_with(client, action, marks, computer, &ExecOptions::default()).await
 }
 
@@ -151,7 +178,7 @@ pub async fn execute_with(
     marks: Option<&Marks>,
     computer: &mut ComputerState,
     options: &ExecOptions,
-) -> Result<ActionOutcome, AgentError> {
+) -> Result<ActionOutcome, ExecError> {
     let started = Instant::now();
     if let Some(marks) = marks {
         apply_marks(computer, marks);
@@ -159,11 +186,125 @@ pub async fn execute_with(
     let mut outcome = match action {
         AgentAction::Wait | AgentAction::Done | AgentAction::Fail => ActionOutcome::default(),
         AgentAction::Typed(actions) => typed(client, actions, options.release_held_keys).await?,
+        AgentAction::Clipboard(text) => clipboard(client, text).await?,
         AgentAction::Computer(code) => run_script(client, code, Lang::Computer, computer, options).await?,
-        AgentAction::Pyautogui(code) => run_script(client, code, Lang::Pyautogui, computer, options).await?,
+        AgentAction::Pyautogui(code) if options.pyautogui_effects => {
+            run_script(client, code, Lang::Pyautogui, computer, options).await?
+        }
+        AgentAction::Pyautogui(code) => pyautogui(client, code, options).await?,
     };
     outcome.elapsed_ms = u64::try_from(started.elapsed().as_millis()).unwrap_or(u64::MAX);
     Ok(outcome)
+}
+
+/// An outcome that did nothing because of `error`.
+fn refused(error: String) -> ActionOutcome {
+    ActionOutcome { error: Some(error), ..ActionOutcome::default() }
+}
+
+/// pyautogui code: translated whole by the `pyautogui` action space for the guest's
+/// screen and cursor, in the run's (or the agent's) coordinate convention, then
+/// carried out step by step. Code that does not translate does nothing; the
+/// translation's error is the outcome's.
+async fn pyautogui(client: &GuestClient, code: &str, options: &ExecOptions) -> Result<ActionOutcome, ExecError> {
+    let ctx = match pointer(client, options.coords).await {
+        Ok(ctx) => ctx,
+        Err(err) if err.out_of_reach() => return Err(ExecError::Guest(err)),
+        Err(err) => return Ok(refused(format!("reading the screen and the cursor for the pyautogui code: {err}"))),
+    };
+    match translate_pyautogui(code, &ctx) {
+        Ok(steps) => perform_steps(client, &steps, options).await,
+        Err(err) => Ok(refused(err)),
+    }
+}
+
+/// pyautogui code as steps, through the one entry point of the action spaces.
+///
+/// # Errors
+///
+/// The action space's error, naming the code and what does not translate.
+pub fn translate_pyautogui(code: &str, ctx: &Context) -> Result<Vec<Step>, String> {
+    arena_actionspace::parse(ActionSpace::Pyautogui, &serde_json::Value::String(code.to_owned()), ctx)
+        .map_err(|err| err.to_string())
+}
+
+/// What pyautogui code is translated against on the guest behind `client`: its
+/// [`GuestClient::pointer`] (the screen in the coordinate space its input uses, the
+/// cursor) and `coords`.
+///
+/// # Errors
+///
+/// The guest's screen or cursor cannot be read.
+pub async fn pointer(client: &GuestClient, coords: Coords) -> Result<Context, ClientError> {
+    let (screen, cursor) = client.pointer().await?;
+    Ok(Context { screen, cursor, coords })
+}
+
+/// Carries out an action space's steps in order: runs of input actions as one
+/// batch each, a clipboard write as `PUT /v1/clipboard`. Decisions and the requests
+/// only an agent answers (screenshot, cursor, zoom) do nothing here. Waits are
+/// scaled by [`ExecOptions::sleep_scale`], and steps whose waits add up past
+/// [`ExecOptions::max_duration`] are refused before anything is done. The first
+/// step the guest refuses ends the run; its error is the outcome's.
+///
+/// # Errors
+///
+/// [`ExecError::Guest`] when the guest is out of reach.
+pub async fn perform_steps(
+    client: &GuestClient,
+    steps: &[Step],
+    options: &ExecOptions,
+) -> Result<ActionOutcome, ExecError> {
+    let scale = options.sleep_scale.max(0.0);
+    let mut waited = 0.0f64;
+    let steps: Vec<Step> = steps
+        .iter()
+        .map(|step| match step {
+            Step::Act(Action::Wait { ms }) => {
+                let scaled = (*ms as f64 * scale).round();
+                waited += scaled;
+                // The cast saturates for absurd values, refused just below.
+                Step::Act(Action::Wait { ms: scaled as u64 })
+            }
+            other => other.clone(),
+        })
+        .collect();
+    if waited > options.max_duration.as_secs_f64() * 1000.0 {
+        return Ok(refused(format!(
+            "the code waits {} s in all, past the action's {} s limit",
+            (waited / 1000.0).round(),
+            options.max_duration.as_secs()
+        )));
+    }
+    let mut outcome = ActionOutcome::default();
+    for action in AgentAction::from_steps(&steps) {
+        let part = match &action {
+            AgentAction::Typed(actions) => typed(client, actions, options.release_held_keys).await?,
+            AgentAction::Clipboard(text) => clipboard(client, text).await?,
+            _ => continue,
+        };
+        outcome.performed += part.performed;
+        outcome.cursor = part.cursor.or(outcome.cursor);
+        for key in part.keys_down {
+            if !outcome.keys_down.contains(&key) {
+                outcome.keys_down.push(key);
+            }
+        }
+        if part.error.is_some() {
+            outcome.error = part.error;
+            break;
+        }
+    }
+    Ok(outcome)
+}
+
+/// Puts `text` on the guest's clipboard (one `PUT /v1/clipboard`).
+async fn clipboard(client: &GuestClient, text: &str) -> Result<ActionOutcome, ExecError> {
+    match client.clipboard_set(&ClipboardContent::Text { text: text.to_owned() }).await {
+        Ok(()) => Ok(ActionOutcome::default()),
+        Err(err) if err.out_of_reach() => Err(ExecError::Guest(err)),
+        Err(err) => Ok(refused(err.to_string())),
+    }
 }
 
 /// Navi's `/update_computer` from the Set-of-Marks: the element boxes, the whole
@@ -178,12 +319,7 @@ fn apply_marks(computer: &mut ComputerState, marks: &Marks) {
     computer.scale = (1.0, 1.0);
 }
 
-/// Whether a client error means the guest is out of reach, rather than that it refused the call.
-fn is_unreachable(err: &ClientError) -> bool {
-    matches!(err, ClientError::Connect { .. } | ClientError::Timeout { .. } | ClientError::Io { .. })
-}
-
-async fn typed(client: &GuestClient, actions: &[Action], release: bool) -> Result<ActionOutcome, AgentError> {
+async fn typed(client: &GuestClient, actions: &[Action], release: bool) -> Result<ActionOutcome, ExecError> {
     // By default a key a typed batch holds stays held into the next step (upstream's
     // computer_13 KEY_DOWN, CLICK, KEY_UP are three steps) and the episode lets it go
     // at its end; with `release` the batch lets go of it itself.
@@ -204,8 +340,8 @@ async fn typed(client: &GuestClient, actions: &[Action], release: bool) -> Resul
                 ..ActionOutcome::default()
             })
         }
-        Err(err) if is_unreachable(&err) => Err(AgentError::Guest(err)),
-        Err(err) => Ok(ActionOutcome { error: Some(err.to_string()), ..ActionOutcome::default() }),
+        Err(err) if err.out_of_reach() => Err(ExecError::Guest(err)),
+        Err(err) => Ok(refused(err.to_string())),
     }
 }
 
@@ -218,36 +354,38 @@ impl Drop for CancelOnDrop {
     }
 }
 
+/// Which code [`run_script`] runs.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum Lang {
+    /// Navi's `computer.*` code, with `computer` bound (upstream's `/execute_windows`).
     Computer,
+    /// pyautogui code with its effects (`--pyautogui-effects`), with `pyautogui` and
+    /// `time` imported (upstream's `python -c`).
     Pyautogui,
 }
 
+/// Code run on the host against [`GuestHost`].
 async fn run_script(
     client: &GuestClient,
     code: &str,
     lang: Lang,
     computer: &mut ComputerState,
     options: &ExecOptions,
-) -> Result<ActionOutcome, AgentError> {
+) -> Result<ActionOutcome, ExecError> {
     let mut program = match parse(code) {
         Ok(program) => program,
-        Err(err) => {
-            return Ok(ActionOutcome { error: Some(format!("SyntaxError: {err}")), ..ActionOutcome::default() });
-        }
+        Err(err) => return Ok(refused(format!("SyntaxError: {err}"))),
     };
     if lang == Lang::Pyautogui && options.coords != Coords::Pixels {
-        let screen = match client.screen().await {
-            Ok(screen) => (screen.physical_width, screen.physical_height),
-            Err(err) if is_unreachable(&err) => return Err(AgentError::Guest(err)),
+        let screen = match client.pointer().await {
+            Ok((screen, _)) => screen,
+            Err(err) if err.out_of_reach() => return Err(ExecError::Guest(err)),
             Err(err) => {
-                let error =
-                    Some(format!("reading the screen size to rescale {} coordinates: {err}", options.coords.name()));
-                return Ok(ActionOutcome { error, ..ActionOutcome::default() });
+                let error = format!("reading the screen size to rescale {} coordinates: {err}", options.coords.name());
+                return Ok(refused(error));
             }
         };
-        crate::actionspace::pyautogui::rescale(&mut program, options.coords, screen);
+        arena_actionspace::pyautogui::rescale(&mut program, options.coords, screen);
     }
     let mut host = GuestHost::new(client.clone(), Handle::current(), options.clone());
     let mut state = computer.clone();
@@ -262,7 +400,6 @@ async fn run_script(
             Lang::Computer => {
                 Globals { computer: Some(&mut state), computer_action_delay: delay, preimport: &[], stop }
             }
-            // Upstream runs pyautogui code as `python -c "import pyautogui; import time; ..."`.
             Lang::Pyautogui => {
                 Globals { computer: None, computer_action_delay: delay, preimport: &["pyautogui", "time"], stop }
             }
@@ -271,7 +408,7 @@ async fn run_script(
         (result, state, host)
     })
     .await
-    .map_err(|err| AgentError::Worker(err.to_string()))?;
+    .map_err(|err| ExecError::Worker(err.to_string()))?;
     *computer = state;
     // With --held-keys action, a key the code left held (a keyDown without its keyUp,
     // or code that stopped between the two) is let go now; by default it stays held
@@ -279,8 +416,8 @@ async fn run_script(
     let releases = if options.release_held_keys { host.held.releases() } else { Vec::new() };
     if !releases.is_empty() && host.unreachable.is_none() {
         if let Err(err) = client.act(&ActionBatch { actions: releases }).await {
-            if is_unreachable(&err) {
-                return Err(AgentError::Guest(err));
+            if err.out_of_reach() {
+                return Err(ExecError::Guest(err));
             }
             tracing::warn!(error = %err, "releasing the keys the agent's code left held failed");
         }
@@ -288,7 +425,7 @@ async fn run_script(
     if let Some(err) = host.unreachable {
         // The script stopped at the first call that found the guest gone
         // (`ErrorKind::Unreachable`); the client's error says how.
-        return Err(AgentError::Guest(err));
+        return Err(ExecError::Guest(err));
     }
     let mut outcome = ActionOutcome {
         cursor: host.cursor,
@@ -390,7 +527,7 @@ impl GuestHost {
     /// A client error as the script sees it; an unreachable guest is remembered.
     fn client_error(&mut self, err: ClientError) -> HostError {
         let message = err.to_string();
-        if is_unreachable(&err) {
+        if err.out_of_reach() {
             self.unreachable = Some(err);
             return HostError::Unreachable(message);
         }
@@ -445,8 +582,8 @@ impl ScriptHost for GuestHost {
     fn capture(&mut self) -> HostResult<RgbaImage> {
         let query = ScreenshotQuery { format: ImageFormat::Png, cursor: Some(false), ..ScreenshotQuery::default() };
         let shot = self.call(|c| async move { c.screenshot(&query).await })?;
-        image::load_from_memory(&shot.bytes)
-            .map(|i| i.to_rgba8())
+        Frame::decode(shot.bytes)
+            .map(|frame| Arc::unwrap_or_clone(frame.pixels))
             .map_err(|e| HostError::Failed(format!("cannot decode the screenshot: {e}")))
     }
 
@@ -546,7 +683,10 @@ impl ScriptHost for GuestHost {
     }
 
     fn clipboard_set_image(&mut self, image: RgbaImage) -> HostResult<()> {
-        let png = encode(&image, ImageFormat::Png, 100).map_err(|e| format!("cannot encode the image: {e}"))?;
+        let png = encode_png(&image);
+        if png.is_empty() {
+            return Err(HostError::Failed("cannot encode the image".into()));
+        }
         let content = ClipboardContent::Image {
             width: image.width(),
             height: image.height(),

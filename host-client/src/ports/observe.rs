@@ -14,17 +14,15 @@
 //! Set-of-Marks sources, the annotation, the model's JPEG, the previous
 //! step's image) use its pixels, and the guest's own PNG bytes are what is
 //! written to the result folder. Encoding happens only at the edges: files,
-//! service requests and model requests. [`decodes_on_this_thread`] counts the
-//! decodes, so a test can hold a step to one per source image.
+//! service requests and model requests. `arena_client::frame::decodes_on_this_thread`
+//! counts the decodes, so a test can hold a step to one per source image.
 //!
 //! Each part is timed ([`ObserveTimings`]); the parts run concurrently, so
 //! their sum may exceed [`ObserveTimings::total_ms`].
 
-use std::cell::Cell;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
-use image::RgbaImage;
 use serde::{Deserialize, Serialize};
 
 use arena_shared::clipboard::ClipboardContent;
@@ -32,77 +30,9 @@ use arena_shared::observation::{A11yQuery, ImageFormat, ScreenInfo, ScreenshotQu
 use arena_shared::window_list;
 
 use super::Observation;
-use crate::client::GuestClient;
-use crate::error::ClientError;
-
-thread_local! {
-    static DECODES: Cell<u64> = const { Cell::new(0) };
-}
-
-/// How many screenshots [`Frame::decode`] has decoded on this thread (a test's
-/// single-threaded runtime sees every decode of its own episode).
-pub fn decodes_on_this_thread() -> u64 {
-    DECODES.with(Cell::get)
-}
-
-/// A screenshot, decoded once: the bytes as they came (written to files as they
-/// are) and the pixels every stage reads.
-#[derive(Clone)]
-pub struct Frame {
-    /// The encoded image as the guest (or the VM's display) sent it, normally PNG.
-    pub encoded: Arc<[u8]>,
-    /// The decoded pixels.
-    pub pixels: Arc<RgbaImage>,
-}
-
-impl std::fmt::Debug for Frame {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("Frame")
-            .field("width", &self.pixels.width())
-            .field("height", &self.pixels.height())
-            .field("encoded_bytes", &self.encoded.len())
-            .finish()
-    }
-}
-
-impl PartialEq for Frame {
-    fn eq(&self, other: &Frame) -> bool {
-        self.encoded == other.encoded
-    }
-}
-
-impl Frame {
-    /// Decodes `bytes` (counted by [`decodes_on_this_thread`]).
-    ///
-    /// # Errors
-    ///
-    /// A message naming why the bytes are not an image this build reads.
-    pub fn decode(bytes: Vec<u8>) -> Result<Frame, String> {
-        DECODES.with(|c| c.set(c.get() + 1));
-        let pixels = arena_shared::fastimg::decode_rgba(&bytes).map_err(|e| e.to_string())?;
-        Ok(Frame { encoded: bytes.into(), pixels: Arc::new(pixels) })
-    }
-
-    /// A frame made from pixels (tests, benches), encoded as PNG for the files.
-    pub fn from_pixels(pixels: RgbaImage) -> Frame {
-        Frame { encoded: encode_png(&pixels).into(), pixels: Arc::new(pixels) }
-    }
-
-    /// Width and height in pixels.
-    pub fn size(&self) -> (u32, u32) {
-        self.pixels.dimensions()
-    }
-}
-
-/// Pixels as PNG: the edge where an image leaves the host as a file or a request.
-pub fn encode_png(pixels: &RgbaImage) -> Vec<u8> {
-    let mut out = Vec::new();
-    if let Err(err) = pixels.write_to(&mut std::io::Cursor::new(&mut out), image::ImageFormat::Png) {
-        // Writing PNG into memory fails only for a zero-sized image.
-        tracing::warn!(error = %err, "cannot encode an image as PNG");
-    }
-    out
-}
+use arena_client::client::GuestClient;
+use arena_client::error::ClientError;
+use arena_client::frame::Frame;
 
 /// How long each part of one observation took, in milliseconds. `None`: the part was not read.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
@@ -176,25 +106,14 @@ fn ms(d: Duration) -> u64 {
     u64::try_from(d.as_millis()).unwrap_or(u64::MAX)
 }
 
-/// Whether a client error means the guest is out of reach (rather than refusing one call).
-pub(crate) fn unreachable(err: &ClientError) -> bool {
-    matches!(
-        err,
-        ClientError::Connect { .. }
-            | ClientError::Timeout { .. }
-            | ClientError::Io { .. }
-            | ClientError::NotReady { .. }
-    )
-}
-
 /// Why the guest's screenshot should give way to the VM's display, if it should:
 /// a black frame (a lock screen, UAC's secure desktop) or a failed capture of a
 /// guest that still answers.
-pub(crate) fn fallback_reason(shot: &Result<crate::client::Screenshot, ClientError>) -> Option<String> {
+pub(crate) fn fallback_reason(shot: &Result<arena_client::client::Screenshot, ClientError>) -> Option<String> {
     match shot {
         Ok(shot) if shot.meta.black_frame => Some("the guest's screenshot was black".to_owned()),
         Ok(_) => None,
-        Err(err) if unreachable(err) => None,
+        Err(err) if err.out_of_reach() => None,
         Err(err) => Some(format!("the guest's screenshot failed: {err}")),
     }
 }
@@ -237,7 +156,7 @@ pub async fn observe(
         timed(client.clipboard_get()),
         async {
             if config.dom {
-                Some(timed(crate::browser::dom_elements(client)).await)
+                Some(timed(arena_client::browser::dom_elements(client)).await)
             } else {
                 None
             }
@@ -270,7 +189,7 @@ pub async fn observe(
             timings.tree_ms = Some(took);
             match answer {
                 Ok(tree) => Some(tree),
-                Err(err) if unreachable(&err) => return Err(failed("reading the accessibility tree", err)),
+                Err(err) if err.out_of_reach() => return Err(failed("reading the accessibility tree", err)),
                 Err(err) => {
                     tracing::warn!(step, error = %err, "no accessibility tree this step");
                     None
@@ -281,7 +200,7 @@ pub async fn observe(
     let clipboard = match clipboard {
         Ok(ClipboardContent::Text { text }) => Some(text),
         Ok(_) => None,
-        Err(err) if unreachable(&err) => return Err(failed("reading the clipboard", err)),
+        Err(err) if err.out_of_reach() => return Err(failed("reading the clipboard", err)),
         Err(err) => {
             tracing::debug!(error = %err, "no clipboard this step");
             None

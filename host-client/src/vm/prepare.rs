@@ -767,7 +767,7 @@ async fn follow(
     // QEMU's forwarder accepts connections before the guest listens: short questions.
     let client = vm.client().with_timeout(Duration::from_secs(2));
     let overall: Duration = options.timeouts.0.values().sum();
-    let wait = crate::prep::wait_healthy(&client, overall, Duration::from_millis(500), |_| {});
+    let wait = crate::oem::wait_healthy(&client, overall, Duration::from_millis(500), |_| {});
     tokio::pin!(wait);
     let mut tick = tokio::time::interval(Duration::from_secs(1));
     loop {

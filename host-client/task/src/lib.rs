@@ -1,13 +1,19 @@
-//! WAA task files: loading, validation and the task model.
+//! WAA task files (`arena-task`): loading, validation, the task model and
+//! upstream's vocabulary. The bottom of the harness's layers: the setup steps
+//! (`arena-setup`) and the evaluators (`arena-eval`) are built on its types, and
+//! it knows neither.
 //!
-//! Files are read in two layers. [`raw`] mirrors upstream's JSON as written
+//! Files are read in two layers. `raw` mirrors upstream's JSON as written
 //! (stray keys such as `_comments` accepted); [`Task::from_data`] checks it and
 //! builds the model: typed [`SetupStep`]s, and an [`Evaluator`] whose getter and
 //! metric names are known upstream names ([`names`]). An unknown step, getter or
 //! metric fails here, at load time, with the file and the name, never mid-episode.
+//! Whether this build *implements* a name is the evaluators' registry's business,
+//! checked against [`names`] by their own tests and reported by `arena validate`.
 //!
-//! This module does no network or guest I/O; running steps is [`crate::setup`]'s
-//! job and evaluating is [`crate::eval`]'s.
+//! This crate does no network or guest I/O.
+
+#![forbid(unsafe_code)]
 
 pub mod names;
 mod raw;
@@ -84,7 +90,7 @@ fn check_index_name(name: &str, what: &str) -> Result<(), String> {
 }
 
 /// Task difficulty: which folder of the corpus a task index resolves into.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default, clap::ValueEnum)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
 pub enum Difficulty {
     /// `examples/`.
     #[default]
@@ -538,17 +544,7 @@ impl Params<'_> {
     }
 }
 
-/// A JSON value's kind, for messages ("a string", "a list").
-pub(crate) fn kind_of(value: &Value) -> &'static str {
-    match value {
-        Value::Null => "null",
-        Value::Bool(_) => "a boolean",
-        Value::Number(_) => "a number",
-        Value::String(_) => "a string",
-        Value::Array(_) => "a list",
-        Value::Object(_) => "an object",
-    }
-}
+use arena_shared::error::json_kind as kind_of;
 
 fn evaluator(data: EvaluatorData) -> Result<Evaluator, String> {
     let postconfig = steps(&data.postconfig, "evaluator.postconfig")?;

@@ -1,7 +1,7 @@
 //! The upstream vocabulary: every setup step, getter and metric name a WAA
 //! task may use. A name outside these lists fails when the task loads.
 //! Whether this build *implements* a getter or metric is the evaluator
-//! registry's business ([`crate::eval`]), reported by `arena validate`.
+//! registry's business (`arena-eval`), reported by `arena validate`.
 
 /// Setup step types (`config` and `evaluator.postconfig`): the 13 the corpus
 /// uses and the ones upstream implements without using.

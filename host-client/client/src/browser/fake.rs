@@ -23,38 +23,38 @@ use super::page::{READ_SCRIPT, STATE_SCRIPT};
 
 /// One page the fake browser shows.
 #[derive(Debug, Clone, Default)]
-pub(crate) struct FakePage {
-    pub(crate) id: String,
-    pub(crate) title: String,
-    pub(crate) url: String,
-    pub(crate) html: String,
+pub struct FakePage {
+    pub id: String,
+    pub title: String,
+    pub url: String,
+    pub html: String,
     /// What the DOM extraction script answers on this page.
-    pub(crate) dom: Value,
+    pub dom: Value,
 }
 
 /// What the fake knows: its pages, the sites `Page.navigate` can reach
 /// (address to title and HTML), and every method it was sent.
 #[derive(Debug, Default)]
-pub(crate) struct FakeState {
-    pub(crate) pages: Vec<FakePage>,
-    pub(crate) sites: HashMap<String, (String, String)>,
-    pub(crate) methods: Vec<String>,
+pub struct FakeState {
+    pub pages: Vec<FakePage>,
+    pub sites: HashMap<String, (String, String)>,
+    pub methods: Vec<String>,
     next: u32,
     port: u16,
 }
 
-pub(crate) type Shared = Arc<Mutex<FakeState>>;
+pub type Shared = Arc<Mutex<FakeState>>;
 
 /// A running fake; it stops with the test's runtime.
 #[derive(Debug)]
-pub(crate) struct FakeDevtools {
-    pub(crate) port: u16,
-    pub(crate) state: Shared,
+pub struct FakeDevtools {
+    pub port: u16,
+    pub state: Shared,
 }
 
 impl FakeDevtools {
     /// Serves `pages` (front page first) on `127.0.0.1:0`.
-    pub(crate) async fn start(pages: Vec<FakePage>, sites: &[(&str, &str, &str)]) -> FakeDevtools {
+    pub async fn start(pages: Vec<FakePage>, sites: &[(&str, &str, &str)]) -> FakeDevtools {
         let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.expect("bind the fake devtools");
         let port = listener.local_addr().expect("addr").port();
         let sites = sites
@@ -75,12 +75,12 @@ impl FakeDevtools {
     }
 
     /// The ids of the open pages, front first.
-    pub(crate) fn page_ids(&self) -> Vec<String> {
+    pub fn page_ids(&self) -> Vec<String> {
         self.state.lock().expect("fake state").pages.iter().map(|p| p.id.clone()).collect()
     }
 
     /// Every method received so far.
-    pub(crate) fn methods(&self) -> Vec<String> {
+    pub fn methods(&self) -> Vec<String> {
         self.state.lock().expect("fake state").methods.clone()
     }
 }

@@ -5,14 +5,17 @@
 //! - [`dom`]: [`dom::dom_elements`], the front page's elements in screen pixels (upstream Navi's `webparse`).
 //! - [`page`]: a page's title, address and HTML (upstream's `page_info` and `active_tab_info`).
 //!
-//! It is not the tab setup steps (`crate::setup::cdp`, plain DevTools HTTP).
+//! - `fake` (tests, feature `fake-devtools`): a DevTools endpoint served with axum.
+//!
+//! It is not the setup steps that open and close tabs (those use plain DevTools HTTP
+//! through the guest; `arena-setup`), and it imports nothing above this crate.
 
 pub mod cdp;
 pub mod dom;
 pub mod page;
 
-#[cfg(test)]
-pub(crate) mod fake;
+#[cfg(any(test, feature = "fake-devtools"))]
+pub mod fake;
 #[cfg(test)]
 mod tests;
 

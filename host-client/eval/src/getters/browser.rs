@@ -10,7 +10,7 @@
 //! Tabs: upstream drives Chrome through Playwright over the DevTools websocket.
 //! Tab lists come from the DevTools HTTP `json/list` (forwarded by the guest),
 //! and `page_info` and `active_tab_info` read title, address and HTML over the
-//! DevTools websocket the guest relays ([`crate::browser::page`]). The active
+//! DevTools websocket the guest relays ([`arena_client::browser::page`]). The active
 //! tab's address is the value of the omnibox element named "Address and search
 //! bar" under a `Chrome_WidgetWin_1` window, exactly as upstream reads it.
 //!
@@ -24,11 +24,11 @@ use serde_json::{json, Map, Value};
 
 use super::explorer::known_folder;
 use super::{dest_path, guest_join, GetterError, Params};
-use crate::browser::cdp::CdpError;
-use crate::browser::page::{self, LoadState};
-use crate::error::ClientError;
-use crate::eval::value::{py_eq, py_truthy, Fetched};
-use crate::eval::EvalContext;
+use crate::value::{py_eq, py_truthy, Fetched};
+use crate::EvalContext;
+use arena_client::browser::cdp::CdpError;
+use arena_client::browser::page::{self, LoadState};
+use arena_client::error::ClientError;
 
 #[cfg(test)]
 #[path = "browser_tests.rs"]
@@ -571,7 +571,7 @@ fn as_page(target: &Value) -> Option<Tab> {
 /// `get_page_info`: opens a new tab, navigates it to `url`, waits for
 /// `load_state` (Playwright's, default `load`) and returns `{title, url,
 /// content}` with the page's HTML, over the DevTools websocket as upstream's
-/// Playwright does (see [`crate::browser::page`]); the tab is closed
+/// Playwright does (see [`arena_client::browser::page`]); the tab is closed
 /// afterwards. A page that does not load in time is read as it is, titled
 /// `Load timeout`, as upstream's.
 async fn page_info(ctx: &EvalContext, p: &Params<'_>) -> Result<Fetched, GetterError> {

@@ -12,10 +12,10 @@ use serde_json::{json, Value};
 
 use super::super::tests::{start_guest_with, Guest};
 use super::{bare_home_page, headless_print_argv, parse_lnk, parse_qs, unquote};
-use crate::browser::fake::{FakeDevtools, FakePage};
-use crate::eval::fetch;
-use crate::eval::value::Fetched;
-use crate::task::GetterSpec;
+use crate::fetch;
+use crate::value::Fetched;
+use arena_client::browser::fake::{FakeDevtools, FakePage};
+use arena_task::GetterSpec;
 
 /// Starts a stub guest, seeded by `scenario` when given, whose DevTools
 /// forward goes to `cdp_port` (default: a port nothing listens on).

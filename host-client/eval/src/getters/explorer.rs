@@ -5,8 +5,8 @@
 use arena_shared::files::{FileKind, KnownFolder};
 
 use super::{guest_join, GetterError, Params};
-use crate::eval::value::Fetched;
-use crate::eval::EvalContext;
+use crate::value::Fetched;
+use crate::EvalContext;
 
 /// `get_vm_folder_exists_in_documents`: whether `Documents\<folder_name>` is a directory.
 pub(super) async fn vm_folder_exists_in_documents(

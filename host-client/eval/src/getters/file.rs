@@ -8,9 +8,9 @@ use arena_shared::calendar::{civil_from_days, days_from_civil};
 use arena_shared::files::FileKind;
 
 use super::{dest_path, guest_join, one_or_list, GetterError, Params};
-use crate::error::ClientError;
-use crate::eval::value::Fetched;
-use crate::eval::EvalContext;
+use crate::value::Fetched;
+use crate::EvalContext;
+use arena_client::error::ClientError;
 
 /// `path` and `dest` as one pair, or as two lists with `multi`.
 fn pairs<'a>(params: &Params<'a>) -> Result<Vec<(String, String)>, GetterError> {

@@ -7,8 +7,8 @@ use arena_shared::exec::ExecRequest;
 use serde_json::Value;
 
 use super::{GetterError, Params};
-use crate::eval::value::{json_kind, Fetched};
-use crate::eval::EvalContext;
+use crate::value::{json_kind, Fetched};
+use crate::EvalContext;
 
 /// `get_rule`: returns `rules` as written.
 pub(super) fn rule(params: &Params<'_>) -> Result<Fetched, GetterError> {

@@ -5,8 +5,8 @@
 use arena_shared::registry::RegistryValue;
 
 use super::{dest_path, GetterError, Params};
-use crate::eval::value::Fetched;
-use crate::eval::EvalContext;
+use crate::value::Fetched;
+use crate::EvalContext;
 
 /// Where Windows keeps the wallpaper path (what `SPI_GETDESKWALLPAPER` reads).
 const DESKTOP_KEY: &str = r"HKCU\Control Panel\Desktop";

@@ -29,7 +29,7 @@ use serde_json::{Map, Value};
 
 use super::value::{json_kind, Fetched};
 use super::EvalContext;
-use crate::error::ClientError;
+use arena_client::error::ClientError;
 
 /// Why a getter produced no value. The evaluator records the message and scores 0.
 #[derive(Debug, thiserror::Error)]

@@ -26,9 +26,9 @@ use serde_json::{Map, Value};
 
 use super::explorer::known_folder;
 use super::{dest_path, guest_join, GetterError, Params};
-use crate::error::ClientError;
-use crate::eval::value::{json_kind, Fetched};
-use crate::eval::EvalContext;
+use crate::value::{json_kind, Fetched};
+use crate::EvalContext;
+use arena_client::error::ClientError;
 use arena_shared::calendar::civil_from_days;
 
 #[cfg(test)]
@@ -418,8 +418,9 @@ async fn is_red_circle_present_on_canvas(ctx: &EvalContext, p: &Params<'_>) -> R
     let Some(bytes) = pull_optional(ctx, p, path).await? else {
         return Ok(Fetched::Bool(false));
     };
-    let image = image::load_from_memory(&bytes).map_err(|err| p.failed(format!("{path} is not an image: {err}")))?;
-    Ok(Fetched::Bool(has_red_circle(&image.to_rgb8())))
+    let rgba =
+        arena_shared::fastimg::decode_rgba(&bytes).map_err(|err| p.failed(format!("{path} is not an image: {err}")))?;
+    Ok(Fetched::Bool(has_red_circle(&image::DynamicImage::ImageRgba8(rgba).to_rgb8())))
 }
 
 /// Whether a pixel is red by OpenCV's HSV ranges (hue within 10 of 0 on the

@@ -14,10 +14,10 @@ use serde_json::{json, Value};
 
 use super::super::tests::{start_guest_with, Guest};
 use super::{decode_night_light, has_red_circle, protected_7z_holds, rule_relative_time, Day};
-use crate::eval::fetch;
-use crate::eval::getters::Params;
-use crate::eval::value::Fetched;
-use crate::task::GetterSpec;
+use crate::fetch;
+use crate::getters::Params;
+use crate::value::Fetched;
+use arena_task::GetterSpec;
 
 async fn start(scenario: Option<Value>) -> Guest {
     start_guest_with(scenario, |_| {}).await

@@ -10,11 +10,11 @@ use arena_test_support::StubGuest;
 use serde_json::{json, Value};
 
 use super::{lookup, GetterError, Params};
-use crate::client::{ClientConfig, GuestClient};
-use crate::eval::value::Fetched;
-use crate::eval::{fetch, EvalContext};
-use crate::setup::DownloadCache;
-use crate::task::GetterSpec;
+use crate::cache::DownloadCache;
+use crate::value::Fetched;
+use crate::{fetch, EvalContext};
+use arena_client::client::{ClientConfig, GuestClient};
+use arena_task::GetterSpec;
 
 /// A stub guest serving in a task (the one test launcher), with a host work folder
 /// and a download cache; stops when dropped.
@@ -384,7 +384,7 @@ async fn cloud_file_downloads_through_the_cache_and_replays_offline() {
 /// and a text comparison against a downloaded gold file.
 #[tokio::test]
 async fn a_corpus_style_task_evaluates_end_to_end() {
-    use crate::eval::{evaluate, LastAction};
+    use crate::{evaluate, LastAction};
     let guest = start_guest().await;
     let (url, _hits, _server) = file_server().await;
     let docs = folder(&guest, KnownFolder::Documents).await;
@@ -403,7 +403,7 @@ async fn a_corpus_style_task_evaluates_end_to_end() {
         }
     });
     let evaluator =
-        crate::task::Task::parse(&task.to_string(), std::path::Path::new("notepad/t.json")).unwrap().evaluator;
+        arena_task::Task::parse(&task.to_string(), std::path::Path::new("notepad/t.json")).unwrap().evaluator;
 
     let missing = evaluate(&guest.ctx, &evaluator, Some(&LastAction::Done)).await;
     assert_eq!((missing.score, missing.metrics.len()), (0.0, 1), "{missing:?}");

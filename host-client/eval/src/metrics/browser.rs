@@ -11,7 +11,7 @@
 use serde_json::{Map, Value};
 
 use super::{score, MetricError, MetricFn, MetricInput};
-use crate::eval::value::{json_kind, py_contains, py_eq, py_truthy, Fetched};
+use crate::value::{json_kind, py_contains, py_eq, py_truthy, Fetched};
 
 #[cfg(test)]
 #[path = "browser_tests.rs"]

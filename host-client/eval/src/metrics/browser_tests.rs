@@ -5,9 +5,9 @@
 use serde_json::{json, Map, Value};
 
 use super::{compare_urls, lookup, urlparse, urlunparse};
-use crate::eval::metrics::MetricInput;
-use crate::eval::value::Fetched;
-use crate::eval::LastAction;
+use crate::metrics::MetricInput;
+use crate::value::Fetched;
+use crate::LastAction;
 
 /// What a case should give: a score, or an error whose message contains the text.
 #[derive(Debug)]

@@ -3,8 +3,8 @@
 use serde_json::Value;
 
 use super::{score, MetricError, MetricInput};
-use crate::eval::value::{py_contains, py_eq, Fetched};
-use crate::eval::LastAction;
+use crate::value::{py_contains, py_eq, Fetched};
+use crate::LastAction;
 
 /// `exact_match(result, rules)`: `result == rules["expected"]` with Python's
 /// equality (so `True` matches `1.0`).
@@ -14,7 +14,7 @@ pub(super) fn exact_match(input: &MetricInput) -> Result<f64, MetricError> {
 }
 
 /// `infeasible`: 1 when the agent's last word was FAIL. Tasks whose only
-/// metric is `infeasible` never get here ([`crate::eval::evaluate`] scores them
+/// metric is `infeasible` never get here ([`crate::evaluate`] scores them
 /// directly); in a list it is the same rule.
 pub(super) fn infeasible(input: &MetricInput) -> Result<f64, MetricError> {
     Ok(score(input.last_action == Some(LastAction::Fail)))
@@ -47,7 +47,7 @@ pub(super) fn check_direct_json_object(input: &MetricInput) -> Result<f64, Metri
     let Value::Object(result) = result else {
         return Ok(0.0);
     };
-    let expect_in_result = rules.get("expect_in_result").is_some_and(crate::eval::value::py_truthy);
+    let expect_in_result = rules.get("expect_in_result").is_some_and(crate::value::py_truthy);
     for (key, want) in expected {
         let have = result.get(key).unwrap_or(&Value::Null);
         let ok = if !expect_in_result {

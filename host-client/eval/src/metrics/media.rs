@@ -23,7 +23,7 @@ use std::path::Path;
 use serde_json::Value;
 
 use super::{file_of, score, MetricError, MetricFn, MetricInput};
-use crate::eval::value::Fetched;
+use crate::value::Fetched;
 
 /// The metric of this family named `name`, if implemented.
 pub(super) fn lookup(name: &str) -> Option<MetricFn> {
@@ -220,8 +220,10 @@ fn compare_images(input: &MetricInput) -> Result<f64, MetricError> {
 /// alpha dropped).
 fn gray_image(path: &Path) -> Result<image::GrayImage, MetricError> {
     let bytes = read_bytes(path)?;
-    let rgb =
-        image::load_from_memory(&bytes).map_err(|err| parse_error(path, format!("not an image: {err}")))?.to_rgb8();
+    // The host's one decoder (with its size and memory limits).
+    let rgba =
+        arena_shared::fastimg::decode_rgba(&bytes).map_err(|err| parse_error(path, format!("not an image: {err}")))?;
+    let rgb = image::DynamicImage::ImageRgba8(rgba).to_rgb8();
     Ok(image::GrayImage::from_fn(rgb.width(), rgb.height(), |x, y| {
         let [r, g, b] = rgb.get_pixel(x, y).0.map(u32::from);
         // PIL's fixed-point L = R*299/1000 + G*587/1000 + B*114/1000, rounded.

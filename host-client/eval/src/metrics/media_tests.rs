@@ -10,10 +10,10 @@ use serde_json::{json, Map, Value};
 
 use super::lookup;
 use super::video::{phash_of_gray32, same_video};
-use crate::eval::metrics::tests::pdf_bytes;
-use crate::eval::metrics::MetricInput;
-use crate::eval::value::Fetched;
-use crate::eval::LastAction;
+use crate::metrics::tests::pdf_bytes;
+use crate::metrics::MetricInput;
+use crate::value::Fetched;
+use crate::LastAction;
 
 #[derive(Debug)]
 enum Want {

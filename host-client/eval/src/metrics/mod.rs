@@ -4,7 +4,7 @@
 //! getter's value, the expected getter's value if the task has one, the
 //! task's `options`, and the agent's last control word) returning a score in
 //! `[0, 1]`. Metrics read host files only; they never talk to the guest, so
-//! [`crate::eval::evaluate`] can run them on a blocking thread.
+//! [`crate::evaluate`] can run them on a blocking thread.
 //!
 //! [`lookup`] is the one place that names metrics: a closed `match` from the
 //! upstream name to the function. A name it does not know is a metric this

@@ -6,8 +6,8 @@ use std::path::Path;
 use serde_json::{json, Map, Value};
 
 use super::{lookup, MetricInput};
-use crate::eval::value::Fetched;
-use crate::eval::LastAction;
+use crate::value::Fetched;
+use crate::LastAction;
 
 /// What a case should give: a score, or an error whose message contains the text.
 #[derive(Debug)]
@@ -195,7 +195,7 @@ fn unknown_metrics_are_not_registered() {
         "is_extension_installed",
     ] {
         assert!(lookup(name).is_some(), "{name}");
-        assert!(crate::task::names::METRICS.contains(&name), "{name} is not an upstream metric name");
+        assert!(arena_task::names::METRICS.contains(&name), "{name} is not an upstream metric name");
     }
 }
 

@@ -4,7 +4,7 @@
 use serde_json::Value;
 
 use super::{file_of, read_text, score, MetricError, MetricInput};
-use crate::eval::value::{dict_contains, json_kind, py_contains, py_truthy, Fetched};
+use crate::value::{dict_contains, json_kind, py_contains, py_truthy, Fetched};
 
 /// `compare_text_file(actual, expected, ignore_blanks=False, ignore_case=False)`:
 /// both files read as text (universal newlines) and compared exactly. With

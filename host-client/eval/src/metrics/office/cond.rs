@@ -20,7 +20,7 @@
 
 use std::cmp::Ordering;
 
-use crate::eval::metrics::MetricError;
+use crate::metrics::MetricError;
 
 /// A value inside the formula.
 #[derive(Debug, Clone, PartialEq)]

@@ -16,7 +16,7 @@ use roxmltree::Node;
 use super::docx::{Document, Paragraph};
 use super::package::{parse_xml, Package};
 use super::xml::{attr, descendants};
-use crate::eval::metrics::{file_of, read_text, score, MetricError, MetricInput};
+use crate::metrics::{file_of, read_text, score, MetricError, MetricInput};
 
 /// The two files of a two-document metric; `None` when either is missing (score 0).
 fn pair(input: &MetricInput) -> Result<Option<(&Path, &Path)>, MetricError> {

@@ -14,7 +14,7 @@ use roxmltree::Node;
 
 use super::package::{parse_xml, Package};
 use super::xml::{attr, child, child_val, children, rel_id, toggle};
-use crate::eval::metrics::MetricError;
+use crate::metrics::MetricError;
 
 /// EMU per twip (python-docx lengths are EMU).
 const EMU_PER_TWIP: i64 = 635;

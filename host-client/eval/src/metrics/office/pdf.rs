@@ -8,8 +8,8 @@
 use std::collections::HashMap;
 use std::path::Path;
 
-use crate::eval::metrics::{MetricError, MetricInput};
-use crate::eval::value::Fetched;
+use crate::metrics::{MetricError, MetricInput};
+use crate::value::Fetched;
 
 /// The text of every page of a PDF, with the ends stripped.
 ///
@@ -27,7 +27,7 @@ fn pdf_text(path: &Path) -> Result<String, MetricError> {
 /// # Errors
 ///
 /// [`MetricError::Parse`] when the bytes are not a readable PDF.
-pub(in crate::eval::metrics) fn pdf_text_of_bytes(bytes: &[u8], what: &str) -> Result<String, MetricError> {
+pub(in crate::metrics) fn pdf_text_of_bytes(bytes: &[u8], what: &str) -> Result<String, MetricError> {
     let parse = |message: String| MetricError::Parse { what: what.to_owned(), message };
     std::panic::catch_unwind(|| pdf_extract::extract_text_from_mem(bytes))
         .map_err(|_| parse("the PDF text extractor failed on this file".into()))?

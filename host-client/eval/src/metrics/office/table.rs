@@ -15,8 +15,8 @@ use std::collections::{BTreeMap, BTreeSet};
 use super::cond::{Condition, V};
 use super::frame::Frame;
 use super::xlsx::{parse_coordinate, Dxf, Sheet, Value, Workbook};
-use crate::eval::metrics::{file_of, MetricError, MetricInput};
-use crate::eval::value::py_eq;
+use crate::metrics::{file_of, MetricError, MetricInput};
+use crate::value::py_eq;
 
 /// The most cells a `style` rule walks (upstream walks the whole used range too,
 /// but a stray styled cell at the sheet's end should not exhaust memory).

@@ -12,9 +12,9 @@ use rust_xlsxwriter::{
 };
 use serde_json::{json, Map, Value};
 
-use crate::eval::metrics::tests::pdf_bytes;
-use crate::eval::metrics::{lookup, MetricInput};
-use crate::eval::value::Fetched;
+use crate::metrics::tests::pdf_bytes;
+use crate::metrics::{lookup, MetricInput};
+use crate::value::Fetched;
 
 /// What a case should give: a score, or an error whose message contains the text.
 #[derive(Debug)]

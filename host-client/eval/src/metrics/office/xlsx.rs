@@ -17,7 +17,7 @@ use arena_shared::calendar::days_from_civil;
 
 use super::package::{parse_xml, Package};
 use super::xml::{attr, child, child_val, children, descendants, joined_text, rel_id, toggle, truthy};
-use crate::eval::metrics::MetricError;
+use crate::metrics::MetricError;
 
 /// What openpyxl's `Color.rgb` gives for a theme, indexed or automatic colour:
 /// the unset descriptor, which prints as this message. Upstream compares it
