@@ -654,3 +654,34 @@ fn dir_made(dir: &Path) -> std::path::PathBuf {
     std::fs::create_dir_all(dir).expect("a folder");
     dir.to_owned()
 }
+
+/// One step of an outside agent over the step protocol that asks for everything an
+/// observation offers (the screenshot inline, the tree as XML, the windows, the
+/// clipboard, the Set-of-Marks boxes) decodes each screenshot once: the observation's.
+#[cfg(unix)]
+#[tokio::test]
+async fn one_step_protocol_step_decodes_each_screenshot_once() {
+    use arena_host::agent::external::transport::ProcessPool;
+    use arena_host::agent::external::ExternalAgent;
+    use arena_host::frame::decodes_on_this_thread;
+    let (_guest, c) = guest_with_notepad().await;
+    let dir = tempfile::tempdir().expect("dir");
+    let hello = r#"{"type":"hello","protocol":1,"agent":"sh","action_space":"pyautogui","observation":{"screenshot":"inline","a11y":"xml","windows":true,"clipboard":true,"som":true}}"#;
+    let act = json!({"type": "act", "actions": ["pyautogui.click(1, 2)"]}).to_string();
+    let script = format!(
+        "read -r line\nprintf '%s\\n' '{hello}'\nwhile read -r line; do\n  case \"$line\" in\n    *'\"type\":\"reset\"'*) printf '%s\\n' '{{\"type\":\"ready\"}}' ;;\n    *) printf '%s\\n' '{act}' ;;\n  esac\ndone\n"
+    );
+    let path = dir.path().join("agent.sh");
+    std::fs::write(&path, script).expect("write the agent script");
+    let pool = ProcessPool::new(&format!("sh {}", path.display())).expect("a process pool");
+    let mut agent = ExternalAgent::new("exec", Arc::new(pool), Duration::from_secs(20));
+    agent.reset(&task(dir.path(), "")).await;
+    for step in 1..=2 {
+        let before = decodes_on_this_thread();
+        let obs = Observation::capture(&c, step, "Type hello in Notepad").await.expect("observe");
+        let p = agent.predict(&obs).await.expect("prediction");
+        assert_eq!(p.actions, vec![AgentAction::Pyautogui("pyautogui.click(1, 2)".into())]);
+        assert!(p.marks.is_some(), "the Set-of-Marks boxes were asked for");
+        assert_eq!(decodes_on_this_thread() - before, 1, "step {step}");
+    }
+}
