@@ -16,7 +16,7 @@ pub const ACTIONS_BODY_BYTES: usize = 8 << 20;
 /// Largest body of `/execute`, `/setup/execute` and `/execute_windows`: 2 MiB, room for
 /// the interpreter's source cap written as a JSON string.
 pub const EXECUTE_BODY_BYTES: usize = 2 << 20;
-/// Largest body of `POST /v1/clipboard` (an image as base64): 64 MiB.
+/// Largest body of `PUT /v1/clipboard` (an image as base64): 64 MiB.
 pub const CLIPBOARD_BODY_BYTES: usize = 64 << 20;
 
 /// Which backend drives the desktop.
