@@ -139,7 +139,8 @@ foreach ($step in $steps) {
 }
 if ($failed.Count -gt 0) {
     Write-Log "arena setup finished with the guest installed and healthy, but these steps failed: $($failed -join ', ')"
-    Write-Status 'failed' $failed[0].Split(' ')[0] $done $failed.ToArray()
+    $firstFailed = ($failed[0] -split ' ')[0]
+    Write-Status 'failed' $firstFailed $done ($failed.ToArray())
     Send-Stage "oem-failed $($failed -join ', '); log $LogPath"
     exit 6
 }

@@ -6,16 +6,16 @@
 //! The sequence is upstream's `lib_run_single.run_single_example` (waa-api.md
 //! §b.5), over the typed `/v1` API:
 //!
-//! 1. `agent.reset(task)`; [`setup::reset`] (close windows, wait for the
+//! 1. `agent.reset(task)`; [`arena_setup::reset`] (close windows, wait for the
 //!    guest's staged health, clear Downloads); the task's `config` steps. A
 //!    failed reset or an aborted setup (a download that cannot be had) ends
 //!    the episode as an infrastructure error.
 //! 2. Up to `max_steps` times: observe (screenshot, accessibility tree,
 //!    windows, clipboard), `agent.predict`, then each action in order:
 //!    `DONE`/`FAIL` stop, `WAIT` pauses, anything else is carried out by
-//!    [`agent::execute_with`] and followed by the pause upstream calls
+//!    [`ports::exec::execute_with`](crate::ports::exec::execute_with) and followed by the pause upstream calls
 //!    `--sleep_after_execution`.
-//! 3. The evaluator's `postconfig` steps, then [`eval::evaluate`] with the
+//! 3. The evaluator's `postconfig` steps, then [`arena_eval::evaluate`] with the
 //!    agent's last control word.
 //!
 //! Errors are sorted three ways ([`EpisodeStatus`]): an unreachable guest (or a
@@ -38,19 +38,20 @@ use arena_script::ComputerState;
 use arena_shared::action::{Action, ActionBatch};
 use arena_shared::observation::A11yQuery;
 
-use crate::agent::observe::{self, ObserveConfig};
-use crate::agent::{self, Agent, AgentAction, AgentError, ExecOptions, LogValue, Observation, Prediction, StepLog};
-use crate::client::GuestClient;
-use crate::eval::{self, EvalContext, LastAction};
+use crate::agent::{Agent, AgentError, AgentFactory, LogValue, Prediction, StepLog};
+use crate::ports::exec::{self, ExecError, ExecOptions};
+use crate::ports::observe::{self, ObserveConfig, ScreenSource};
+use crate::ports::{AgentAction, Observation};
 use crate::results::{
     timestamp_now, ActionRecord, ObservationKeys, ResetRecord, RunLayout, StepRecord, StepTimings, TaskDir,
 };
 use crate::run::pool::TaskRunner;
-use crate::setup::{self, DownloadCache, Settle, SetupContext};
-use crate::task::Task;
+use arena_client::client::GuestClient;
+use arena_eval::{EvalContext, LastAction};
+use arena_setup::{DownloadCache, Settle, SetupContext};
+use arena_task::Task;
 
-pub use crate::agent::observe::ScreenSource;
-pub use crate::results::{EpisodeResult, EpisodeStatus};
+use crate::results::{EpisodeResult, EpisodeStatus};
 
 /// Upstream's `--max_steps`.
 pub const DEFAULT_MAX_STEPS: u32 = 15;
@@ -71,7 +72,7 @@ pub struct EpisodeConfig {
     /// Pause after the task's setup, before the first observation (upstream: 5 s).
     pub pause_after_setup: Duration,
     /// Where the pauses above go (a test's fake clock records them).
-    pub clock: Arc<dyn setup::Clock>,
+    pub clock: Arc<dyn arena_setup::Clock>,
     /// Cancelled to stop the run (Ctrl-C): the episode ends at its next step
     /// boundary as [`EpisodeStatus::Interrupted`], without evaluating.
     pub stop: tokio_util::sync::CancellationToken,
@@ -106,9 +107,9 @@ impl EpisodeConfig {
         EpisodeConfig {
             max_steps: DEFAULT_MAX_STEPS,
             sleep_after_action: DEFAULT_SLEEP_AFTER_ACTION,
-            pause_after_close_all: setup::AFTER_CLOSE_ALL,
-            pause_after_setup: setup::AFTER_SETUP,
-            clock: Arc::new(setup::RealClock),
+            pause_after_close_all: arena_setup::AFTER_CLOSE_ALL,
+            pause_after_setup: arena_setup::AFTER_SETUP,
+            clock: Arc::new(arena_setup::RealClock),
             stop: tokio_util::sync::CancellationToken::new(),
             options: [("pauses".to_owned(), "upstream".to_owned())].into(),
             a11y: true,
@@ -223,6 +224,29 @@ struct Seen {
     tree_file: String,
 }
 
+/// What every part of one episode's play reads: the guest, the task, the run's
+/// configuration, the task's result folder and the guest's screen.
+struct Play<'a> {
+    client: &'a GuestClient,
+    task: &'a Task,
+    config: &'a EpisodeConfig,
+    out: &'a TaskDir,
+    screen: &'a arena_shared::observation::ScreenInfo,
+}
+
+/// What the actions of one step did so far.
+#[derive(Default)]
+struct Acted {
+    /// A decision ended the episode.
+    stop: bool,
+    /// The step's last control word.
+    last: Option<LastAction>,
+    /// Time spent in upstream's pauses.
+    pause: Duration,
+    /// Time spent observing after each action.
+    observing: Duration,
+}
+
 /// Writes one of an agent's step logs as upstream's recorder names its files
 /// (`<key>-step_<step - 1>_<time>.<ext>`); answers what the trajectory line holds.
 fn write_log(out: &TaskDir, step: u32, timestamp: &str, log: &StepLog) -> Result<Value, crate::results::ResultsError> {
@@ -231,7 +255,7 @@ fn write_log(out: &TaskDir, step: u32, timestamp: &str, log: &StepLog) -> Result
         LogValue::Inline(value) => return Ok(value.clone()),
         LogValue::Text(text) => (name("txt"), text.clone().into_bytes()),
         LogValue::Png(png) => (name("png"), png.clone()),
-        LogValue::Image(pixels) => (name("png"), observe::encode_png(pixels)),
+        LogValue::Image(pixels) => (name("png"), arena_client::frame::encode_png(pixels)),
         LogValue::Json(value) => (name("json"), serde_json::to_vec_pretty(value).unwrap_or_default()),
     };
     out.write_file(&file, &bytes)?;
@@ -242,10 +266,11 @@ fn write_log(out: &TaskDir, step: u32, timestamp: &str, log: &StepLog) -> Result
 fn upstream_action(action: &AgentAction) -> String {
     match action {
         AgentAction::Computer(code) | AgentAction::Pyautogui(code) => code.clone(),
-        AgentAction::Wait => "WAIT".into(),
-        AgentAction::Done => "DONE".into(),
-        AgentAction::Fail => "FAIL".into(),
-        AgentAction::Typed(_) => action.summary(),
+        AgentAction::Wait
+        | AgentAction::Done
+        | AgentAction::Fail
+        | AgentAction::Typed(_)
+        | AgentAction::Clipboard(_) => action.summary(),
     }
 }
 
@@ -277,7 +302,7 @@ fn infra(what: &str, err: impl std::fmt::Display) -> EpisodeStatus {
     EpisodeStatus::InfraError(format!("{what}: {err}"))
 }
 
-fn phase(report: &setup::StepReport, phase: &str) -> Value {
+fn phase(report: &arena_setup::StepReport, phase: &str) -> Value {
     let mut value = serde_json::to_value(report).unwrap_or(Value::Null);
     if let Value::Object(map) = &mut value {
         map.insert("phase".into(), Value::String(phase.to_owned()));
@@ -304,7 +329,8 @@ impl Episode {
                 (false, format!("releasing {names} failed: {err}"))
             }
         };
-        let report = setup::StepReport { kind: "release_held_keys", ok, detail, elapsed_ms: ms(started.elapsed()) };
+        let report =
+            arena_setup::StepReport { kind: "release_held_keys", ok, detail, elapsed_ms: ms(started.elapsed()) };
         self.result.setup.push(phase(&report, "teardown"));
     }
 
@@ -320,7 +346,7 @@ impl Episode {
         started: Instant,
     ) -> Result<(), EpisodeStatus> {
         agent.reset(task).await;
-        setup::reset(client, config.pause_after_close_all, config.clock.as_ref())
+        arena_setup::reset(client, config.pause_after_close_all, config.clock.as_ref())
             .await
             .map_err(|err| infra("reset", err))?;
         let ctx = SetupContext {
@@ -330,9 +356,9 @@ impl Episode {
             settle: config.settle,
             activate_non_strict: config.options.get("activate_non_strict").is_some_and(|v| v == "on"),
         };
-        let reports = setup::run_steps(&ctx, &task.config).await;
+        let reports = arena_setup::run_steps(&ctx, &task.config).await;
         self.result.setup.extend(reports.iter().map(|r| phase(r, "config")));
-        if setup::aborted(&reports) {
+        if arena_setup::aborted(&reports) {
             let detail = reports.last().map(|r| r.detail.clone()).unwrap_or_default();
             return Err(EpisodeStatus::InfraError(format!("setup {detail}")));
         }
@@ -341,22 +367,20 @@ impl Episode {
         interrupted(config, "after the setup")?;
 
         let screen = client.screen().await.map_err(|err| infra("reading the screen", err))?;
+        let play = Play { client, task, config, out, screen: &screen };
         let mut computer = ComputerState::for_screen(
             i32::try_from(screen.physical_width).unwrap_or(i32::MAX),
             i32::try_from(screen.physical_height).unwrap_or(i32::MAX),
         );
         // The observation after the reset: upstream's step-0 line.
         let timestamp = timestamp_now();
-        let mut seen = self
-            .observe_into(client, task, &screen, out, 1, None, &timestamp, computer.clipboard_content.clone())
-            .await?;
+        let mut seen = self.observe_into(&play, 1, None, &timestamp, computer.clipboard_content.clone()).await?;
         self.reset =
             Some(ResetRecord { step_num: 0, action_timestamp: timestamp, action: None, observation: observed(&seen) });
         let mut last: Option<LastAction> = None;
         for step in 1..=config.max_steps {
             interrupted(config, "between steps")?;
-            let (stop, step_last, next) =
-                self.step(client, task, agent, config, out, &screen, &mut computer, step, seen).await?;
+            let (stop, step_last, next) = self.step(&play, agent, &mut computer, step, seen).await?;
             seen = next;
             if step_last.is_some() {
                 last = step_last;
@@ -376,14 +400,14 @@ impl Episode {
         .to_owned();
 
         let eval_started = Instant::now();
-        let post = setup::run_steps(&ctx, &task.evaluator.postconfig).await;
+        let post = arena_setup::run_steps(&ctx, &task.evaluator.postconfig).await;
         self.result.setup.extend(post.iter().map(|r| phase(r, "postconfig")));
-        if setup::aborted(&post) {
+        if arena_setup::aborted(&post) {
             let detail = post.last().map(|r| r.detail.clone()).unwrap_or_default();
             return Err(EpisodeStatus::InfraError(format!("postconfig {detail}")));
         }
         let ectx = EvalContext { client: client.clone(), cache: config.cache.clone(), work_dir: out.eval_dir() };
-        let outcome = eval::evaluate(&ectx, &task.evaluator, last.as_ref()).await;
+        let outcome = arena_eval::evaluate(&ectx, &task.evaluator, last.as_ref()).await;
         self.result.eval_ms = ms(eval_started.elapsed());
         self.release_keys(client).await;
         self.result.eval = serde_json::to_value(&outcome).unwrap_or(Value::Null);
@@ -405,22 +429,19 @@ impl Episode {
     /// Observes with the one builder ([`observe::observe`]), writes the
     /// screenshot (the guest's bytes, not re-encoded) and the tree under
     /// upstream's names and answers all three.
-    #[allow(clippy::too_many_arguments)]
     async fn observe_into(
         &mut self,
-        client: &GuestClient,
-        task: &Task,
-        screen: &arena_shared::observation::ScreenInfo,
-        out: &TaskDir,
+        play: &Play<'_>,
         for_step: u32,
         index: Option<u32>,
         timestamp: &str,
         tracked_clipboard: Option<String>,
     ) -> Result<Seen, EpisodeStatus> {
-        let mut obs = observe::observe(client, &self.observe, screen, for_step, &task.instruction)
+        let mut obs = observe::observe(play.client, &self.observe, play.screen, for_step, &play.task.instruction)
             .await
             .map_err(|err| EpisodeStatus::InfraError(err.to_string()))?;
         obs.tracked_clipboard = tracked_clipboard;
+        let out = play.out;
         let file = out
             .write_screenshot(index, timestamp, &obs.screenshot.encoded)
             .map_err(|err| infra("writing the screenshot", err))?;
@@ -437,22 +458,18 @@ impl Episode {
     }
 
     /// One step as upstream's loop makes it: predict from the latest observation,
-    /// then each action in turn, each followed by its pause and a fresh
-    /// observation (upstream's `env.step`). Answers whether the episode stops
+    /// then each action in turn ([`Episode::act`]), each followed by its pause and a
+    /// fresh observation (upstream's `env.step`). Answers whether the episode stops
     /// here, the step's last control word and the latest observation.
-    #[allow(clippy::too_many_arguments)]
     async fn step(
         &mut self,
-        client: &GuestClient,
-        task: &Task,
+        play: &Play<'_>,
         agent: &mut dyn Agent,
-        config: &EpisodeConfig,
-        out: &TaskDir,
-        screen: &arena_shared::observation::ScreenInfo,
         computer: &mut ComputerState,
         step: u32,
         seen: Seen,
     ) -> Result<(bool, Option<LastAction>, Seen), EpisodeStatus> {
+        let (config, out) = (play.config, play.out);
         let mut record = StepRecord {
             first: ActionRecord {
                 step_num: step,
@@ -478,47 +495,12 @@ impl Episode {
         };
         self.result.steps = step;
 
-        let t_predict = Instant::now();
-        let prediction = predict(agent, &seen.obs, config, &mut record.timings).await;
-        record.timings.predict_ms = ms(t_predict.elapsed());
-        let prediction = match prediction {
-            Ok(p) => p,
-            Err(AgentError::Guest(err)) => {
-                self.push(out, record)?;
-                return Err(infra("the guest stopped answering", err));
-            }
-            Err(err @ (AgentError::Model { .. } | AgentError::Refused { .. })) => {
-                // Upstream's `predict` raises when the model cannot be had: the
-                // task is left unfinished, not scored.
-                record.error = Some(err.to_string());
-                record.ended = true;
-                self.push(out, record)?;
-                return Err(EpisodeStatus::ModelError(err.to_string()));
-            }
-            Err(err) => {
-                let message = err.to_string();
-                record.error = Some(message.clone());
-                record.ended = true;
-                self.result.status = EpisodeStatus::AgentError(message);
-                self.push(out, record)?;
-                return Ok((true, None, seen));
-            }
+        let Some(prediction) = self.predict_step(play, agent, &seen.obs, &mut record).await? else {
+            return Ok((true, None, seen));
         };
-        record.timings.predict = prediction.timings;
-        record.response = prediction.response.clone();
-        record.actions = prediction.actions.clone();
-        let timestamp = record.first.action_timestamp.clone();
-        for log in &prediction.logs {
-            let value = write_log(out, step, &timestamp, log).map_err(|err| infra("writing the step's logs", err))?;
-            record.logs.insert(log.key.clone(), value);
-        }
-        if let Some(raw) = &prediction.raw_error {
-            // The step is spent; the agent keeps the error to tell the model next time.
-            record.error = Some(raw.clone());
-        }
 
         let t_act = Instant::now();
-        let (mut stop, mut last, mut pause, mut observing) = (false, None, Duration::ZERO, 0);
+        let mut acted = Acted::default();
         let mut latest = seen;
         for (k, action) in prediction.actions.iter().enumerate() {
             let mut line = if k == 0 {
@@ -527,95 +509,156 @@ impl Episode {
                 ActionRecord { step_num: step, action_timestamp: timestamp_now(), ..ActionRecord::default() }
             };
             line.action = upstream_action(action);
-            line.info = serde_json::json!({});
-            match action {
-                AgentAction::Done | AgentAction::Fail => {
-                    let fail = *action == AgentAction::Fail;
-                    last = Some(if fail { LastAction::Fail } else { LastAction::Done });
-                    stop = true;
-                    line.done = true;
-                    line.info =
-                        if fail { serde_json::json!({"fail": true}) } else { serde_json::json!({"done": true}) };
-                    pause += config.sleep_after_action;
-                    config.clock.sleep(config.sleep_after_action, "after DONE or FAIL").await;
-                }
-                AgentAction::Wait => {
-                    // Upstream's env.step sleeps for WAIT, then again as after any action.
-                    last = Some(LastAction::Wait);
-                    pause += config.sleep_after_action * 2;
-                    config.clock.sleep(config.sleep_after_action * 2, "for WAIT").await;
-                }
-                _ => {
-                    last = Some(LastAction::Other);
-                    // An agent that named its coordinate convention has its code rescaled by it.
-                    let exec = match prediction.coords {
-                        Some(coords) if coords != config.exec.coords => {
-                            std::borrow::Cow::Owned(ExecOptions { coords, ..config.exec.clone() })
-                        }
-                        _ => std::borrow::Cow::Borrowed(&config.exec),
-                    };
-                    let run = agent::execute_with(client, action, prediction.marks.as_ref(), computer, &exec);
-                    match tokio::time::timeout(config.step_timeout, run).await {
-                        Ok(Ok(outcome)) => {
-                            if let Some(error) = &outcome.error {
-                                tracing::debug!(task = %task.name, step, error, "an action failed");
-                            }
-                            for key in &outcome.keys_down {
-                                if !self.keys_down.contains(key) {
-                                    self.keys_down.push(key.clone());
-                                }
-                            }
-                            record.outcomes.push(serde_json::to_value(&outcome).unwrap_or(Value::Null));
-                        }
-                        Ok(Err(AgentError::Guest(err))) => {
-                            record.timings.act_ms = ms(t_act.elapsed());
-                            self.push(out, record)?;
-                            return Err(infra("the guest stopped answering", err));
-                        }
-                        Ok(Err(err)) => {
-                            record.outcomes.push(serde_json::json!({ "error": err.to_string() }));
-                        }
-                        Err(_) => {
-                            let message = format!("the action took longer than {} s", config.step_timeout.as_secs());
-                            record.timings.timeouts.push(format!("action {}: {message}", k + 1));
-                            record.outcomes.push(serde_json::json!({ "error": message }));
-                        }
-                    }
-                    pause += config.sleep_after_action;
-                    config.clock.sleep(config.sleep_after_action, "after an action").await;
-                }
+            line.info = match action {
+                AgentAction::Done => serde_json::json!({"done": true}),
+                AgentAction::Fail => serde_json::json!({"fail": true}),
+                _ => serde_json::json!({}),
+            };
+            line.done = matches!(action, AgentAction::Done | AgentAction::Fail);
+            if let Err(status) = self.act(play, &prediction, k, computer, &mut record, &mut acted).await {
+                record.timings.act_ms = ms(t_act.elapsed());
+                self.push(out, record)?;
+                return Err(status);
             }
             // Upstream observes after every action, DONE and FAIL included.
             let t_observe = Instant::now();
-            latest = self
-                .observe_into(
-                    client,
-                    task,
-                    screen,
-                    out,
-                    step + 1,
-                    Some(step - 1),
-                    &line.action_timestamp,
-                    computer.clipboard_content.clone(),
-                )
-                .await?;
-            observing += t_observe.elapsed().as_millis();
+            let tracked = computer.clipboard_content.clone();
+            latest = self.observe_into(play, step + 1, Some(step - 1), &line.action_timestamp, tracked).await?;
+            acted.observing += t_observe.elapsed();
             line.observation = observed(&latest);
             if k == 0 {
                 record.first = line;
             } else {
                 record.more.push(line);
             }
-            if stop {
+            if acted.stop {
                 break;
             }
         }
-        let observing = Duration::from_millis(u64::try_from(observing).unwrap_or(u64::MAX));
-        record.timings.act_ms = ms(t_act.elapsed().saturating_sub(pause).saturating_sub(observing));
-        record.timings.pause_ms = ms(pause);
-        record.ended = stop || step == config.max_steps;
+        record.timings.act_ms = ms(t_act.elapsed().saturating_sub(acted.pause).saturating_sub(acted.observing));
+        record.timings.pause_ms = ms(acted.pause);
+        record.ended = acted.stop || step == config.max_steps;
         self.push(out, record)?;
-        Ok((stop, last, latest))
+        Ok((acted.stop, acted.last, latest))
+    }
+
+    /// Asks the agent for the step's prediction and records it (response, actions,
+    /// logs, a malformed-output error). `Ok(None)`: the agent could not answer, the
+    /// step is recorded and the episode ends as an agent error; `Err`: the guest
+    /// went away or the model stayed down (the task is left unfinished).
+    async fn predict_step(
+        &mut self,
+        play: &Play<'_>,
+        agent: &mut dyn Agent,
+        obs: &Observation,
+        record: &mut StepRecord,
+    ) -> Result<Option<Prediction>, EpisodeStatus> {
+        let (config, out) = (play.config, play.out);
+        let t_predict = Instant::now();
+        let prediction = predict(agent, obs, config, &mut record.timings).await;
+        record.timings.predict_ms = ms(t_predict.elapsed());
+        let prediction = match prediction {
+            Ok(p) => p,
+            Err(AgentError::Guest(err)) => {
+                self.push(out, record.clone())?;
+                return Err(infra("the guest stopped answering", err));
+            }
+            Err(err @ (AgentError::Model { .. } | AgentError::Refused { .. })) => {
+                // Upstream's `predict` raises when the model cannot be had: the
+                // task is left unfinished, not scored.
+                record.error = Some(err.to_string());
+                record.ended = true;
+                self.push(out, record.clone())?;
+                return Err(EpisodeStatus::ModelError(err.to_string()));
+            }
+            Err(err) => {
+                let message = err.to_string();
+                record.error = Some(message.clone());
+                record.ended = true;
+                self.result.status = EpisodeStatus::AgentError(message);
+                self.push(out, record.clone())?;
+                return Ok(None);
+            }
+        };
+        record.timings.predict = prediction.timings;
+        record.response = prediction.response.clone();
+        record.actions = prediction.actions.clone();
+        let timestamp = record.first.action_timestamp.clone();
+        for log in &prediction.logs {
+            let value =
+                write_log(out, record.step, &timestamp, log).map_err(|err| infra("writing the step's logs", err))?;
+            record.logs.insert(log.key.clone(), value);
+        }
+        if let Some(raw) = &prediction.raw_error {
+            // The step is spent; the agent keeps the error to tell the model next time.
+            record.error = Some(raw.clone());
+        }
+        Ok(Some(prediction))
+    }
+
+    /// Action `k` of `prediction`: a decision stops or pauses, anything else is
+    /// carried out through the action port, then upstream's pause. `Err`: the guest
+    /// went away (an infrastructure error).
+    async fn act(
+        &mut self,
+        play: &Play<'_>,
+        prediction: &Prediction,
+        k: usize,
+        computer: &mut ComputerState,
+        record: &mut StepRecord,
+        acted: &mut Acted,
+    ) -> Result<(), EpisodeStatus> {
+        let config = play.config;
+        let action = &prediction.actions[k];
+        match action {
+            AgentAction::Done | AgentAction::Fail => {
+                let fail = *action == AgentAction::Fail;
+                acted.last = Some(if fail { LastAction::Fail } else { LastAction::Done });
+                acted.stop = true;
+                acted.pause += config.sleep_after_action;
+                config.clock.sleep(config.sleep_after_action, "after DONE or FAIL").await;
+            }
+            AgentAction::Wait => {
+                // Upstream's env.step sleeps for WAIT, then again as after any action.
+                acted.last = Some(LastAction::Wait);
+                acted.pause += config.sleep_after_action * 2;
+                config.clock.sleep(config.sleep_after_action * 2, "for WAIT").await;
+            }
+            _ => {
+                acted.last = Some(LastAction::Other);
+                // An agent that named its coordinate convention has its code translated in it.
+                let options = match prediction.coords {
+                    Some(coords) if coords != config.exec.coords => {
+                        std::borrow::Cow::Owned(ExecOptions { coords, ..config.exec.clone() })
+                    }
+                    _ => std::borrow::Cow::Borrowed(&config.exec),
+                };
+                let run = exec::execute_with(play.client, action, prediction.marks.as_ref(), computer, &options);
+                match tokio::time::timeout(config.step_timeout, run).await {
+                    Ok(Ok(outcome)) => {
+                        if let Some(error) = &outcome.error {
+                            tracing::debug!(task = %play.task.name, step = record.step, error, "an action failed");
+                        }
+                        for key in &outcome.keys_down {
+                            if !self.keys_down.contains(key) {
+                                self.keys_down.push(key.clone());
+                            }
+                        }
+                        record.outcomes.push(serde_json::to_value(&outcome).unwrap_or(Value::Null));
+                    }
+                    Ok(Err(ExecError::Guest(err))) => return Err(infra("the guest stopped answering", err)),
+                    Ok(Err(err)) => record.outcomes.push(serde_json::json!({ "error": err.to_string() })),
+                    Err(_) => {
+                        let message = format!("the action took longer than {} s", config.step_timeout.as_secs());
+                        record.timings.timeouts.push(format!("action {}: {message}", k + 1));
+                        record.outcomes.push(serde_json::json!({ "error": message }));
+                    }
+                }
+                acted.pause += config.sleep_after_action;
+                config.clock.sleep(config.sleep_after_action, "after an action").await;
+            }
+        }
+        Ok(())
     }
 
     /// Records a step and rewrites the trajectory, so a crash keeps every finished step.
@@ -654,9 +697,6 @@ async fn predict(
         }
     }
 }
-
-/// Makes a fresh agent for each episode.
-pub type AgentFactory = Arc<dyn Fn() -> Result<Box<dyn Agent>, AgentError> + Send + Sync>;
 
 /// The [`TaskRunner`] of real runs: a fresh agent per episode, results in the run's layout.
 #[derive(Clone)]
@@ -712,11 +752,11 @@ mod tests {
     use std::path::PathBuf;
 
     use super::*;
-    use crate::agent::observe::fallback_reason;
     use crate::cli::stub::{start, RunningStub, StubArgs};
-    use crate::client::ClientConfig;
-    use crate::error::ClientError;
+    use crate::ports::observe::fallback_reason;
     use crate::results::RESULT_FILE;
+    use arena_client::client::ClientConfig;
+    use arena_client::error::ClientError;
     use arena_shared::observation::ImageFormat;
 
     /// Answers from a script of results; a `None` entry stops the guest first.
@@ -776,7 +816,7 @@ mod tests {
     struct Recorded(std::sync::Mutex<Vec<(Duration, &'static str)>>);
 
     #[async_trait::async_trait]
-    impl setup::Clock for Recorded {
+    impl arena_setup::Clock for Recorded {
         async fn sleep(&self, d: Duration, why: &'static str) {
             self.0.lock().unwrap().push((d, why));
         }
@@ -887,8 +927,8 @@ mod tests {
 
     #[test]
     fn the_vm_display_stands_in_for_a_black_or_failed_capture_of_a_guest_that_answers() {
-        use crate::client::Screenshot;
-        use crate::error::CallSite;
+        use arena_client::client::Screenshot;
+        use arena_client::error::CallSite;
         use arena_shared::geometry::CoordinateSpace;
         use arena_shared::observation::ScreenshotMeta;
         let shot = |black: bool| -> Result<Screenshot, ClientError> {

@@ -1,49 +1,52 @@
-//! The host side of the arena: a typed client of the guest's native API, the
-//! benchmark harness on top of it (tasks, setup, agents, episodes, evaluation,
-//! results, runs over a pool of guests), and the `arena` command line.
+//! The host side of the arena (`arena-host`): the benchmark harness (agents, the
+//! episode loop, results, runs over a pool of guests, Windows VMs) and the `arena`
+//! command line, on top of the host's lower layers, each a crate of its own:
+//! `arena-client` (the guest client, its errors, the screenshot frame, the
+//! guest's browser), `arena-actionspace` (the grammars agents answer in),
+//! `arena-task` (task files), `arena-eval` (getters, metrics, the download cache)
+//! and `arena-setup` (setup steps and the reset). They are re-exported here under
+//! their module names ([`client`], [`actionspace`], [`task`], [`eval`],
+//! [`setup`], ...) for callers outside; this crate's own modules import them directly.
 //!
 //! It is not the guest server (see `arena-guest`, which this crate embeds only with
 //! its default `stub-guest` feature, for `arena serve-stub`, `run --stub-guests` and
-//! a self-contained `arena demo`), and it does not speak the legacy WAA routes.
+//! a self-contained `arena demo`), it does not speak the legacy WAA routes, and it
+//! serves HTTP only with its default `mcp-endpoint` feature (`arena run --agent mcp`).
 //!
 //! # Layout
 //!
-//! - [`browser`]: the guest's browser over the DevTools protocol (DOM elements, page contents).
-//! - [`client`]: [`client::GuestClient`], one async method per `/v1/` route,
-//!   with deadlines, retries of idempotent calls and a readiness wait.
-//! - [`error`]: [`error::ClientError`], which always names the guest, the call and the cause.
-//! - [`task`]: WAA task files, read in two layers (raw mirror, validated task).
-//! - [`setup`]: the tasks' setup steps over the guest API, and the download cache.
-//! - [`agent`]: the agent trait; Navi, scripted and replay agents; outside agents over the step protocol; running agent code.
-//! - [`mcp`]: the MCP endpoint of `arena run --agent mcp`, where an outside agent drives each episode.
+//! - [`ports`]: the episode's two ports to the guest: the observation builder and the action executor.
 //! - [`som`]: Set-of-Marks from every source of upstream's `--som_origin`: the accessibility tree, OCR, the DOM, a detector, OmniParser and their mixes.
-//! - [`actionspace`]: the grammars agents answer in (pyautogui, `computer_13`, Anthropic's and OpenAI's computer actions, UI-TARS) translated into typed actions.
+//! - [`agent`]: the agent trait; Navi, scripted, replay and computer-use agents; outside agents over the step protocol; the factory of a run's agent.
+//! - `mcp` (feature `mcp-endpoint`): the MCP endpoint of `arena run --agent mcp`, where an outside agent drives each episode.
 //! - [`episode`]: one episode: reset, setup, the observe/act loop, evaluation.
-//! - [`eval`]: getters and metrics by closed registries.
 //! - [`results`]: result folders in upstream's layout, the summary and the HTML report.
 //! - [`run`]: task lists, shards, the pool of guests, merging shards.
-//! - [`prep`]: staging a Windows image's OEM folder and waiting for its guest.
+//! - [`oem`]: staging a Windows image's OEM folder and waiting for its guest.
 //! - [`vm`]: Windows VMs run with QEMU: overlays of a golden image, QMP, snapshots per task, screendumps, golden images from an ISO.
 //! - [`cli`]: the `arena` command line (`main.rs` only parses and calls [`run`]).
 
-pub mod actionspace;
+#![deny(unsafe_code)]
+
 pub mod agent;
-pub mod browser;
 pub mod cli;
-pub mod client;
 pub mod episode;
-pub mod error;
-pub mod eval;
+#[cfg(feature = "mcp-endpoint")]
 pub mod mcp;
-pub mod prep;
+pub mod oem;
+pub mod ports;
 pub mod results;
 pub mod run;
-pub mod setup;
 pub mod som;
-pub mod task;
+// The one module with `unsafe`: libc calls for the QEMU processes (prctl, kill, access).
+#[allow(unsafe_code)]
 pub mod vm;
 
-pub use client::{ClientConfig, GuestClient};
-pub use error::ClientError;
+pub use arena_actionspace as actionspace;
+pub use arena_client::{browser, client, error, frame};
+pub use arena_client::{ClientConfig, ClientError, GuestClient};
+pub use arena_eval as eval;
+pub use arena_setup as setup;
+pub use arena_task as task;
 
 pub use cli::{run, Cli};

@@ -1,6 +1,8 @@
 //! `arena`: the host command line. Parses, sets up logging on stderr, and
 //! hands over to [`arena_host::run`]; everything else lives in the library.
 
+#![forbid(unsafe_code)]
+
 use std::io::IsTerminal;
 use std::process::ExitCode;
 

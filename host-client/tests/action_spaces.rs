@@ -12,9 +12,10 @@ use std::time::Duration;
 use serde_json::{json, Value};
 
 use arena_host::actionspace::{self, ActionSpace, Context, Coords};
-use arena_host::agent::{Agent, AgentAction, AgentError, Observation, Prediction};
+use arena_host::agent::{Agent, AgentError, Prediction};
 use arena_host::client::{ClientConfig, GuestClient};
 use arena_host::episode::{run_episode, EpisodeConfig};
+use arena_host::ports::{AgentAction, Observation};
 use arena_host::results::{EpisodeStatus, RunLayout};
 use arena_host::run::load_tasks;
 use arena_host::setup::DownloadCache;
@@ -54,7 +55,7 @@ impl Agent for Oracle {
                 let ctx = Context::new(obs.screen_size(), self.coords);
                 let steps = actionspace::parse(self.space, &value, &ctx)
                     .map_err(|e| AgentError::Plan { path: "oracle".into(), reason: e.to_string() })?;
-                (value.to_string(), actionspace::to_agent_actions(&steps))
+                (value.to_string(), AgentAction::from_steps(&steps))
             }
         };
         Ok(Prediction { response, actions, ..Prediction::default() })

@@ -1,7 +1,8 @@
 //! The `arena` command line run through the library's [`arena_host::run`],
-//! against embedded stub guests.
+//! against embedded stub guests and a guest that never answers.
 
 use std::process::ExitCode;
+use std::time::Duration;
 
 use clap::Parser;
 
@@ -77,4 +78,43 @@ async fn doctor_reports_a_healthy_stub_and_exits_zero() {
     println!("{table}");
     assert!(table.contains("| Notepad |") && table.contains("| cursor moved and read back |"), "{table}");
     stub.stop().await.expect("stub stops");
+}
+
+/// A server that accepts connections and never answers, as a hung guest does.
+async fn hung_guest() -> String {
+    let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.expect("bind");
+    let url = format!("http://{}", listener.local_addr().expect("addr"));
+    tokio::spawn(async move {
+        let mut held = Vec::new();
+        while let Ok((socket, _)) = listener.accept().await {
+            held.push(socket);
+        }
+    });
+    url
+}
+
+/// `arena health` against a hung guest ends within its wait plus one call's deadline,
+/// however many retries the connection allows. Time is paused (tokio's test clock
+/// jumps to the next timer when everything waits), so this measures the deadlines
+/// the command sets, not the machine's speed.
+#[tokio::test(start_paused = true)]
+async fn health_against_a_hung_guest_ends_within_its_deadlines() {
+    let url = hung_guest().await;
+    let run = |args: &[&str]| {
+        let mut argv = vec!["arena", "--guest", url.as_str(), "--timeout", "7", "--retries", "3", "health"];
+        argv.extend_from_slice(args);
+        arena_host::run(arena_host::Cli::parse_from(argv))
+    };
+    let started = tokio::time::Instant::now();
+    let err = run(&["--wait", "2"]).await.expect_err("never ready");
+    let waited = started.elapsed();
+    assert!(waited <= Duration::from_secs(2 + 7), "--wait 2 took {waited:?}");
+    let text = format!("{err:#}");
+    assert!(text.contains("--timeout") && text.contains('7'), "{text}");
+
+    let started = tokio::time::Instant::now();
+    let err = run(&[]).await.expect_err("no answer");
+    let waited = started.elapsed();
+    assert!(waited <= Duration::from_secs(7), "one call of 7 s, no retries: took {waited:?}");
+    assert!(format!("{err:#}").contains("--timeout"), "{err:#}");
 }

@@ -26,9 +26,10 @@ use arena_host::agent::cu::anthropic::{AnthropicAgent, AnthropicConfig};
 use arena_host::agent::cu::openai::{OpenAiAgent, OpenAiConfig, SafetyChecks};
 use arena_host::agent::cu::uitars::{UiTarsAgent, UiTarsConfig};
 use arena_host::agent::llm::RetryPolicy;
-use arena_host::agent::{Agent, AgentAction, AgentError, Observation};
+use arena_host::agent::{Agent, AgentError};
 use arena_host::client::{ClientConfig, GuestClient};
 use arena_host::episode::{run_episode, EpisodeConfig};
+use arena_host::ports::{AgentAction, Observation};
 use arena_host::results::{EpisodeResult, EpisodeStatus, RunLayout};
 use arena_host::run::load_tasks;
 use arena_host::setup::DownloadCache;
@@ -705,4 +706,60 @@ async fn arena_run_with_openai_cu_records_agent_model_action_space_and_coordinat
     let result =
         out.join("openai_computer/a11y_tree/computer-use-preview/0/settings/stub-settings-infeasible/result.txt");
     assert!(result.is_file(), "the result is filed under the action space and the model");
+}
+
+/// Observes the stub guest and asks `agent` for `steps` steps, holding each step to
+/// one decode of the screenshot: the observation's. The agent's images (resized,
+/// cropped for a zoom, or the bytes as sent) come from the observation's frame.
+async fn one_decode_per_step(agent: &mut dyn Agent, steps: u32) {
+    use arena_host::frame::decodes_on_this_thread;
+    let guest = StubGuest::start().await;
+    let c = client(guest.url());
+    let task = stub_task("stub-notepad-draft");
+    agent.reset(&task).await;
+    for step in 1..=steps {
+        // The test's runtime runs on this thread, so every decode of the step is counted.
+        let before = decodes_on_this_thread();
+        let obs = Observation::capture(&c, step, &task.instruction).await.expect("observe");
+        let prediction = agent.predict(&obs).await.expect("a prediction");
+        assert_eq!(prediction.raw_error, None, "step {step}");
+        assert_eq!(decodes_on_this_thread() - before, 1, "{}: step {step}", agent.name());
+    }
+}
+
+#[tokio::test]
+async fn one_anthropic_step_decodes_each_screenshot_once() {
+    // A zoom (a crop of the current screenshot) answered in the second step's request,
+    // and a screenshot resized to the recommended size in both.
+    let mock = Mock::new(vec![
+        ok(tool_use("t1", json!({"action": "zoom", "region": [0, 0, 400, 300]}))),
+        ok(end_turn("Done.")),
+    ]);
+    let base = serve(mock.clone(), "/v1/messages", "").await;
+    let mut config = AnthropicConfig::new(&base, "claude-test");
+    config.endpoint.api_key = Some(KEY.into());
+    config.tool = ActionSpace::Anthropic20251124;
+    config.enable_zoom = true;
+    let mut agent = AnthropicAgent::new(config).expect("agent");
+    one_decode_per_step(&mut agent, 2).await;
+    assert_eq!(mock.left(), 0, "both answers were asked for");
+}
+
+#[tokio::test]
+async fn one_openai_step_decodes_each_screenshot_once() {
+    let mock = Mock::new(vec![
+        ok(computer_call("r1", "c1", json!({"type": "click", "button": "left", "x": 10, "y": 20}), json!([]))),
+        ok(computer_call("r2", "c2", json!({"type": "type", "text": "x"}), json!([]))),
+    ]);
+    let mut agent = openai_agent(&mock, SafetyChecks::Ack).await;
+    one_decode_per_step(&mut agent, 2).await;
+    assert_eq!(mock.left(), 0, "both answers were asked for");
+}
+
+#[tokio::test]
+async fn one_ui_tars_step_decodes_each_screenshot_once() {
+    let mock = Mock::new(vec![chat("Thought: click.\nAction: click(start_box='(100,200)')"), chat("Action: wait()")]);
+    let mut agent = uitars_agent(&mock, UiTarsVersion::V1_5, 5).await;
+    one_decode_per_step(&mut agent, 2).await;
+    assert_eq!(mock.left(), 0, "both answers were asked for");
 }

@@ -1,4 +1,5 @@
-//! The one error body every native route answers with.
+//! The one error body every native route answers with, and how a JSON value's
+//! kind is named in error messages ([`json_kind`]).
 
 use serde::{Deserialize, Serialize};
 
@@ -37,4 +38,18 @@ pub enum ErrorCode {
 pub struct ErrorBody {
     pub error: ErrorCode,
     pub message: String,
+}
+
+/// A JSON value's kind as error messages name it ("a string", "a list"): for task
+/// files, action spaces and any other JSON a caller sends in the wrong shape.
+pub fn json_kind(value: &serde_json::Value) -> &'static str {
+    use serde_json::Value;
+    match value {
+        Value::Null => "null",
+        Value::Bool(_) => "a boolean",
+        Value::Number(_) => "a number",
+        Value::String(_) => "a string",
+        Value::Array(_) => "a list",
+        Value::Object(_) => "an object",
+    }
 }

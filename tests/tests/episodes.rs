@@ -10,9 +10,11 @@ use std::time::Duration;
 
 use arena_host::agent::replay::{ReplayAgent, ReplaySource};
 use arena_host::agent::scripted::{PlanSource, ScriptedAgent};
-use arena_host::agent::{Agent, AgentAction};
+use arena_host::agent::Agent;
+use arena_host::agent::AgentFactory;
 use arena_host::client::{ClientConfig, GuestClient};
-use arena_host::episode::{run_episode, AgentFactory, EpisodeConfig, EpisodeRunner};
+use arena_host::episode::{run_episode, EpisodeConfig, EpisodeRunner};
+use arena_host::ports::AgentAction;
 use arena_host::results::summary::Summary;
 use arena_host::results::{EpisodeStatus, RunLayout, RESULT_FILE};
 use arena_host::run::merge::merge;

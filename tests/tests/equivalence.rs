@@ -1,8 +1,9 @@
 //! The same agent code run host-side and guest-side gives the same result.
 //!
-//! An agent's pyautogui code can run in two places: on the host, in the shared
-//! interpreter over the guest's `/v1` API (what `arena run` does), or in the guest,
-//! through upstream's `/execute` route with `python -c` (what upstream's host does).
+//! An agent's pyautogui code can run with its effects in two places: on the host, in
+//! the shared interpreter over the guest's `/v1` API (what `arena run
+//! --pyautogui-effects` does), or in the guest, through upstream's `/execute` route
+//! with `python -c` (what upstream's host does).
 //! Both must list a folder in the same order, crop a screenshot region that runs off
 //! the screen the same way, and hand a shell line with quotes to the shell unchanged.
 //! The first test runs one program both ways against the real stub guest and compares
@@ -17,8 +18,8 @@
 
 use std::time::Duration;
 
-use arena_host::agent::exec::{execute_with, ExecOptions};
-use arena_host::agent::AgentAction;
+use arena_host::ports::exec::{execute_with, ExecOptions};
+use arena_host::ports::AgentAction;
 use arena_host::{ClientConfig, GuestClient};
 use arena_script::ComputerState;
 use arena_shared::exec::LaunchRequest;
@@ -54,12 +55,12 @@ async fn guest_side(base: &str) -> String {
     answer["output"].as_str().expect("output").to_owned()
 }
 
-/// Runs the program on the host, as an agent's pyautogui action.
+/// Runs the program on the host, as an agent's pyautogui action with its effects.
 async fn host_side(client: &GuestClient) -> String {
     let mut computer = ComputerState::for_screen(1440, 900);
     let action = AgentAction::Pyautogui(program("host"));
-    let outcome =
-        execute_with(client, &action, None, &mut computer, &ExecOptions::instant()).await.expect("guest reachable");
+    let options = ExecOptions { pyautogui_effects: true, ..ExecOptions::instant() };
+    let outcome = execute_with(client, &action, None, &mut computer, &options).await.expect("guest reachable");
     assert_eq!(outcome.error, None, "{outcome:?}");
     outcome.stdout
 }

@@ -284,7 +284,7 @@ const PREPARE_FLAGS: &[&str] = &[
 fn oem_folder(root: &Path, token: &str) -> PathBuf {
     let oem = root.join("oem");
     std::fs::create_dir_all(&oem).unwrap();
-    std::fs::write(oem.join(arena_host::prep::TOKEN_NAME), format!("{token}\n")).unwrap();
+    std::fs::write(oem.join(arena_host::oem::TOKEN_NAME), format!("{token}\n")).unwrap();
     std::fs::write(oem.join("install.bat"), "@echo off\r\n").unwrap();
     oem
 }

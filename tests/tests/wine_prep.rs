@@ -13,7 +13,7 @@ use std::time::Duration;
 
 use arena_host::client::{ClientConfig, GuestClient};
 use arena_host::error::ClientError;
-use arena_host::prep::{self, StageOptions};
+use arena_host::oem::{self, StageOptions};
 use arena_test_support::Served;
 
 fn setup() -> Option<(PathBuf, PathBuf)> {
@@ -42,7 +42,7 @@ async fn the_staged_exe_serves_with_the_staged_token_under_wine() {
     let out = work.path().join("oem");
     let token_out = work.path().join("host-token");
     let scripts = Path::new(env!("CARGO_MANIFEST_DIR")).join("..").join("setup-scripts");
-    let staged = prep::stage(&StageOptions {
+    let staged = oem::stage(&StageOptions {
         out: out.clone(),
         exe: Some(exe),
         scripts,
@@ -51,13 +51,13 @@ async fn the_staged_exe_serves_with_the_staged_token_under_wine() {
         workspace: PathBuf::from("."),
     })
     .expect("stage");
-    assert!(prep::verify(&out).expect("verify").is_ok());
+    assert!(oem::verify(&out).expect("verify").is_ok());
     // The logon task's launcher is staged from beside the exe (wine.rs runs it).
-    assert!(staged.manifest.files.contains_key(prep::LAUNCHER_NAME), "{:?}", staged.manifest.files.keys());
+    assert!(staged.manifest.files.contains_key(oem::LAUNCHER_NAME), "{:?}", staged.manifest.files.keys());
 
     // The exe from the staged folder, as install-guest.ps1 would copy it, with the
     // token file the service registration passes.
-    let staged_exe = out.join(prep::EXE_NAME);
+    let staged_exe = out.join(oem::EXE_NAME);
     let args = [
         staged_exe.to_str().expect("UTF-8 path").to_owned(),
         "--backend".into(),
@@ -82,7 +82,7 @@ async fn the_staged_exe_serves_with_the_staged_token_under_wine() {
     assert!(matches!(err, ClientError::Api { status: 401, .. }), "no token: {err}");
 
     // The host-side wait sees it healthy and the token accepted.
-    prep::wait_healthy(&client(&guest.url, Some(&token)), Duration::from_secs(30), Duration::from_millis(200), |_| {})
+    oem::wait_healthy(&client(&guest.url, Some(&token)), Duration::from_secs(30), Duration::from_millis(200), |_| {})
         .await
         .expect("prep wait against the Windows exe");
 }

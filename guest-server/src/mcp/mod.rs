@@ -131,7 +131,7 @@ impl GuestMcp {
                 ComputerState::for_screen(i32::try_from(w).unwrap_or(i32::MAX), i32::try_from(h).unwrap_or(i32::MAX));
             // The call's deadline and its cancel flag (set on timeout, a dropped request or shutdown).
             let stop = script::Stop::new(Some(deadline), crate::desktop::cancel::flag());
-            let globals = if code.contains("computer.") {
+            let globals = if script::dialect_of(&code) == script::Dialect::Computer {
                 Globals { computer: Some(&mut computer), computer_action_delay: 0.0, preimport: &[], stop }
             } else {
                 Globals { computer: None, computer_action_delay: 0.0, preimport: &["pyautogui", "time"], stop }

@@ -141,7 +141,7 @@ pub struct ModelClient {
     key: Option<String>,
     http: reqwest::Client,
     retry: RetryPolicy,
-    clock: std::sync::Arc<dyn crate::setup::Clock>,
+    clock: std::sync::Arc<dyn arena_setup::Clock>,
     /// Headers sent with every request besides the key (`anthropic-version`, `anthropic-beta`).
     headers: Vec<(String, String)>,
 }
@@ -198,7 +198,7 @@ impl ModelClient {
             key,
             http,
             retry,
-            clock: std::sync::Arc::new(crate::setup::RealClock),
+            clock: std::sync::Arc::new(arena_setup::RealClock),
             headers: Vec::new(),
         })
     }
@@ -219,7 +219,7 @@ impl ModelClient {
 
     /// The same client with its pauses between tries on `clock` (a test's fake clock).
     #[must_use]
-    pub fn with_clock(mut self, clock: std::sync::Arc<dyn crate::setup::Clock>) -> ModelClient {
+    pub fn with_clock(mut self, clock: std::sync::Arc<dyn arena_setup::Clock>) -> ModelClient {
         self.clock = clock;
         self
     }

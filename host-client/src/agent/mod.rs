@@ -1,189 +1,45 @@
-//! Agents: what decides the next action from an observation, and how an
-//! agent's actions are carried out on a guest.
+//! Agents: what decides the next actions from an observation.
 //!
 //! Every agent implements [`Agent`]: it gets an [`Observation`] and answers a
-//! [`Prediction`] holding [`AgentAction`]s. [`execute`] carries out one action:
-//! typed actions go straight to `POST /v1/actions`; Navi `computer.*` code and
-//! pyautogui code run here on the host, in the `arena_script`
-//! interpreter, whose effects become typed `/v1` calls (see [`exec`]). The
-//! guest therefore never runs agent code.
+//! [`Prediction`] holding [`AgentAction`]s, which the episode carries out through
+//! its action port (`crate::ports::exec`). [`factory`] builds the agent of a run
+//! from its options.
 //!
 //! It is not the episode loop (observe, predict, execute, evaluate: that is
-//! `crate::episode`), and it does not decide when a step counts or when to stop.
+//! `crate::episode`), it does not carry actions out (`crate::ports`), and it does
+//! not decide when a step counts or when to stop.
 //!
 //! # Layout
 //!
-//! - [`exec`]: [`execute`] and the [`script::ScriptHost`](arena_script::ScriptHost) over a [`GuestClient`].
 //! - [`parse`]: code blocks, `DONE`/`FAIL`/`WAIT` and the memory block in model output.
-//! - [`navi`]: [`navi::NaviAgent`], Navi-style prompting of any OpenAI-compatible chat endpoint.
+//! - [`navi`]: [`navi::NaviAgent`], Navi-style prompting of any OpenAI-compatible chat endpoint;
+//!   [`waa_prompts`], upstream's prompt texts read from a WAA checkout; [`llm`], the chat client.
 //! - [`scripted`]: [`scripted::ScriptedAgent`], which follows a plan file (oracle solutions, tests).
 //! - [`replay`]: [`replay::ReplayAgent`], which repeats a recorded trajectory.
 //! - [`cu`]: the computer-use agents (Anthropic's `computer` tool, OpenAI's Responses API, UI-TARS).
 //! - [`external`]: [`external::ExternalAgent`], an agent in another program over the step protocol.
+//! - [`factory`]: [`factory::build`], a run's agent from its [`factory::AgentOptions`].
 
 pub mod cu;
-pub mod exec;
 pub mod external;
+pub mod factory;
 pub mod llm;
 pub mod navi;
-pub mod observe;
 pub mod parse;
 pub mod replay;
 pub mod scripted;
 pub mod waa_prompts;
 
+use std::sync::Arc;
+
 use serde::{Deserialize, Serialize};
 
-use arena_shared::action::Action;
-use arena_shared::observation::{A11yTree, ScreenInfo};
+use arena_client::error::ClientError;
 
-use crate::client::GuestClient;
-use crate::error::ClientError;
+use crate::ports::exec::ExecError;
+use crate::ports::{AgentAction, Observation};
 use crate::som::Marks;
-use crate::task::Task;
-
-pub use exec::{execute, execute_with, ActionOutcome, ExecOptions};
-pub use observe::{Frame, ObserveConfig, ObserveError, ObserveTimings};
-
-/// What an agent sees at one step; built only by [`observe::observe`], the
-/// harness's own builder (tests use it through [`Observation::capture`]).
-#[derive(Debug, Clone)]
-pub struct Observation {
-    /// 1-based step number.
-    pub step: u32,
-    /// The task's instruction.
-    pub instruction: String,
-    /// The full-screen screenshot, decoded once ([`Frame`]: the pixels and the bytes as sent).
-    pub screenshot: Frame,
-    /// Where the screenshot came from when not from the guest (`vm-display: why`).
-    pub screenshot_source: Option<String>,
-    pub screen: ScreenInfo,
-    /// The accessibility tree, when it could be read (its `truncated` flag says whether the budget cut it).
-    pub a11y: Option<A11yTree>,
-    /// The window names upstream lists ([`arena_shared::window_list::window_names`]).
-    pub window_titles: Vec<String>,
-    /// The foreground window's title, `Desktop` for Program Manager or an untitled
-    /// window ([`arena_shared::window_list::foreground_title`]).
-    pub foreground_title: String,
-    /// The foreground window's id, when there is one.
-    pub foreground_id: Option<u64>,
-    /// The clipboard text the agent's `computer` object tracks (what its
-    /// `copy_text` put there), which upstream's Navi is shown as
-    /// `computer_clipboard`; `None` until its code copies something.
-    pub tracked_clipboard: Option<String>,
-    /// The clipboard's text, when it holds text.
-    pub clipboard: Option<String>,
-    /// The browser's front-page DOM elements in screen pixels (upstream Navi's
-    /// `webparse` proposals), read only for an agent whose [`Agent::wants_dom`]
-    /// is true; `None` otherwise or when no browser answers.
-    pub dom: Option<Vec<crate::browser::DomElement>>,
-    /// How long each part took.
-    pub timings: ObserveTimings,
-}
-
-impl Observation {
-    /// The screen's size in physical pixels, which the tree's rectangles use.
-    pub fn screen_size(&self) -> (u32, u32) {
-        (self.screen.physical_width, self.screen.physical_height)
-    }
-
-    /// The Set-of-Marks boxes of this observation, when it has a tree.
-    pub fn marks(&self) -> Option<Marks> {
-        self.a11y.as_ref().map(|tree| crate::som::marks_from_tree(tree, self.screen_size()))
-    }
-
-    /// The harness's observation ([`observe::observe`] with the default
-    /// [`ObserveConfig`]: tree read, no DOM), after reading the screen.
-    ///
-    /// # Errors
-    ///
-    /// [`ObserveError`] when the screen, the screenshot or the window list cannot be read.
-    pub async fn capture(client: &GuestClient, step: u32, instruction: &str) -> Result<Observation, ObserveError> {
-        let screen = client
-            .screen()
-            .await
-            .map_err(|err| ObserveError { what: "reading the screen", reason: err.to_string() })?;
-        observe::observe(client, &ObserveConfig::default(), &screen, step, instruction).await
-    }
-}
-
-/// One thing an agent wants done.
-///
-/// In trajectories it is written as JSON with a `kind` tag:
-/// `{"kind": "computer", "code": "..."}`, `{"kind": "pyautogui", "code": "..."}`,
-/// `{"kind": "typed", "actions": [...]}`, `{"kind": "wait"}`, `{"kind": "done"}`, `{"kind": "fail"}`.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(into = "ActionRecord", from = "ActionRecord")]
-pub enum AgentAction {
-    /// Navi `computer.*` code, run with `computer` bound (upstream's `/execute_windows`).
-    Computer(String),
-    /// pyautogui code, run with `pyautogui` and `time` imported (upstream's `python -c`).
-    Pyautogui(String),
-    /// Typed input actions, sent as one batch.
-    Typed(Vec<Action>),
-    /// The agent waits a step.
-    Wait,
-    /// The agent says the task is done.
-    Done,
-    /// The agent says the task cannot be done.
-    Fail,
-}
-
-impl AgentAction {
-    /// Whether this action ends the episode (`DONE` or `FAIL`).
-    pub fn is_terminal(&self) -> bool {
-        matches!(self, AgentAction::Done | AgentAction::Fail)
-    }
-
-    /// A one-line description for logs and prompts' action history.
-    pub fn summary(&self) -> String {
-        match self {
-            AgentAction::Computer(code) | AgentAction::Pyautogui(code) => code.trim().replace('\n', "; "),
-            AgentAction::Typed(actions) => serde_json::to_string(actions).unwrap_or_else(|_| format!("{actions:?}")),
-            AgentAction::Wait => "WAIT".to_owned(),
-            AgentAction::Done => "DONE".to_owned(),
-            AgentAction::Fail => "FAIL".to_owned(),
-        }
-    }
-}
-
-/// The JSON shape of [`AgentAction`].
-#[derive(Serialize, Deserialize)]
-#[serde(tag = "kind", rename_all = "snake_case")]
-enum ActionRecord {
-    Computer { code: String },
-    Pyautogui { code: String },
-    Typed { actions: Vec<Action> },
-    Wait,
-    Done,
-    Fail,
-}
-
-impl From<AgentAction> for ActionRecord {
-    fn from(a: AgentAction) -> ActionRecord {
-        match a {
-            AgentAction::Computer(code) => ActionRecord::Computer { code },
-            AgentAction::Pyautogui(code) => ActionRecord::Pyautogui { code },
-            AgentAction::Typed(actions) => ActionRecord::Typed { actions },
-            AgentAction::Wait => ActionRecord::Wait,
-            AgentAction::Done => ActionRecord::Done,
-            AgentAction::Fail => ActionRecord::Fail,
-        }
-    }
-}
-
-impl From<ActionRecord> for AgentAction {
-    fn from(r: ActionRecord) -> AgentAction {
-        match r {
-            ActionRecord::Computer { code } => AgentAction::Computer(code),
-            ActionRecord::Pyautogui { code } => AgentAction::Pyautogui(code),
-            ActionRecord::Typed { actions } => AgentAction::Typed(actions),
-            ActionRecord::Wait => AgentAction::Wait,
-            ActionRecord::Done => AgentAction::Done,
-            ActionRecord::Fail => AgentAction::Fail,
-        }
-    }
-}
+use arena_task::Task;
 
 /// An agent's answer for one step.
 #[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
@@ -211,7 +67,7 @@ pub struct Prediction {
     /// What this prediction's pyautogui code measures coordinates in, when the agent
     /// said (an outside agent's `hello`); `None` is the run's `--coords`.
     #[serde(skip)]
-    pub coords: Option<crate::actionspace::Coords>,
+    pub coords: Option<arena_actionspace::Coords>,
 }
 
 /// The parts of one prediction an agent times, in milliseconds; `None`: the agent has no such part.
@@ -314,33 +170,14 @@ pub trait Agent: Send {
     }
 }
 
-#[cfg(test)]
-mod tests {
-    use super::*;
-    use arena_shared::action::MouseButton;
-
-    #[test]
-    fn actions_round_trip_through_json_with_a_kind_tag() {
-        let check = |action: AgentAction, json: &str| {
-            assert_eq!(serde_json::to_string(&action).expect("serialize"), json);
-            assert_eq!(serde_json::from_str::<AgentAction>(json).expect("deserialize"), action);
-        };
-        check(
-            AgentAction::Computer("computer.mouse.move_id(id=3)".into()),
-            r#"{"kind":"computer","code":"computer.mouse.move_id(id=3)"}"#,
-        );
-        check(AgentAction::Pyautogui("pyautogui.click()".into()), r#"{"kind":"pyautogui","code":"pyautogui.click()"}"#);
-        check(
-            AgentAction::Typed(vec![Action::Click { x: Some(1), y: Some(2), button: MouseButton::Left, count: 1 }]),
-            r#"{"kind":"typed","actions":[{"type":"click","x":1,"y":2,"button":"left"}]}"#,
-        );
-        check(AgentAction::Wait, r#"{"kind":"wait"}"#);
-        check(AgentAction::Done, r#"{"kind":"done"}"#);
-        check(AgentAction::Fail, r#"{"kind":"fail"}"#);
-    }
-
-    #[test]
-    fn an_unknown_kind_is_an_error() {
-        assert!(serde_json::from_str::<AgentAction>(r#"{"kind":"teleport"}"#).is_err());
+impl From<ExecError> for AgentError {
+    fn from(err: ExecError) -> AgentError {
+        match err {
+            ExecError::Guest(err) => AgentError::Guest(err),
+            ExecError::Worker(reason) => AgentError::Worker(reason),
+        }
     }
 }
+
+/// Makes a fresh agent for each episode.
+pub type AgentFactory = Arc<dyn Fn() -> Result<Box<dyn Agent>, AgentError> + Send + Sync>;

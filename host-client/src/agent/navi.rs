@@ -29,12 +29,13 @@ use image::RgbaImage;
 use serde_json::{json, Value};
 
 use super::llm::{self, ApiKind, ModelClient, Refusals, RetryPolicy, TokensField};
-use super::observe::encode_png;
 use super::parse::{parse_navi_reply, parse_reply};
 use super::waa_prompts::{UserInputs, WaaPrompts};
-use super::{Agent, AgentAction, AgentError, LogValue, Observation, PredictTimings, Prediction, StepLog};
+use super::{Agent, AgentError, LogValue, PredictTimings, Prediction, StepLog};
+use crate::ports::{AgentAction, Observation};
 use crate::som::{annotate, Marks, ProposedEntity, SomConfig, SomInput, SomSources};
-use crate::task::Task;
+use arena_client::frame::encode_png;
+use arena_task::Task;
 
 /// Environment variables the API key is read from, in order, when the configuration has none.
 pub const KEY_VARS: [&str; 2] = ["ARENA_LLM_KEY", "OPENAI_API_KEY"];
@@ -602,8 +603,8 @@ mod tests {
         assert!(dom_entities(&obs).is_empty());
         let rect = arena_shared::geometry::Rect::new(10, 20, 30, 40);
         obs.dom = Some(vec![
-            crate::browser::DomElement { rect, text: "Sign in".into(), kind: "BUTTON".into() },
-            crate::browser::DomElement { rect, text: String::new(), kind: "A".into() },
+            arena_client::browser::DomElement { rect, text: "Sign in".into(), kind: "BUTTON".into() },
+            arena_client::browser::DomElement { rect, text: String::new(), kind: "A".into() },
         ]);
         let entities = dom_entities(&obs);
         assert_eq!(entities, vec![ProposedEntity::dom(rect, Some("Sign in".into())), ProposedEntity::dom(rect, None)]);
@@ -614,7 +615,7 @@ mod tests {
         Observation {
             step: 1,
             instruction: "do it".into(),
-            screenshot: crate::agent::Frame::from_pixels(RgbaImage::new(16, 10)),
+            screenshot: arena_client::frame::Frame::from_pixels(RgbaImage::new(16, 10)),
             screenshot_source: None,
             screen: arena_shared::observation::ScreenInfo {
                 physical_width: 1280,

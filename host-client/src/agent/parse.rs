@@ -5,16 +5,18 @@
 //! ```` ```py ````, or unlabelled) or a control word. In a block, a line that
 //! is only `DONE`, `FAIL` or `WAIT` ends the code before it and becomes that
 //! control action, so `computer.keyboard.press("enter")` followed by `DONE` is
-//! two actions. Code that mentions `pyautogui` and not `computer.` is
-//! pyautogui code; anything else is Navi `computer.*` code. Every code action
-//! must parse with the interpreter's parser, so a syntax error is reported
-//! here, before anything runs.
+//! two actions. Code that uses the `computer` object is Navi `computer.*` code
+//! and anything else pyautogui code, by the one rule both MCP servers use too
+//! (`arena_script::dialect_of`). Every code action must parse with the
+//! interpreter's parser, so a syntax error is reported here, before anything runs.
+//! The decision words are read by `arena_actionspace::Decision`.
 //!
 //! It does not run anything and does not talk to the model.
 
-use arena_script::parse;
+use arena_actionspace::Decision;
+use arena_script::{dialect_of, parse, Dialect};
 
-use super::AgentAction;
+use crate::ports::AgentAction;
 
 /// What a reply holds.
 #[derive(Debug, Clone, PartialEq)]
@@ -25,12 +27,7 @@ pub struct Parsed {
 }
 
 fn control(word: &str) -> Option<AgentAction> {
-    match word.trim().trim_matches(|c: char| c == '`' || c == '.' || c == '*') {
-        "DONE" => Some(AgentAction::Done),
-        "FAIL" => Some(AgentAction::Fail),
-        "WAIT" => Some(AgentAction::Wait),
-        _ => None,
-    }
+    Decision::parse(word).map(AgentAction::from)
 }
 
 /// The bodies of the fenced code blocks of `text` whose language is Python or
@@ -62,17 +59,23 @@ pub fn code_blocks(text: &str) -> Vec<String> {
     blocks
 }
 
-fn code_action(code: &str) -> Result<Option<AgentAction>, String> {
-    let meaningful = code.lines().any(|l| {
+/// Whether `code` has a line that is neither blank nor a comment.
+fn meaningful(code: &str) -> bool {
+    code.lines().any(|l| {
         let l = l.trim();
         !l.is_empty() && !l.starts_with('#')
-    });
-    if !meaningful {
+    })
+}
+
+fn code_action(code: &str) -> Result<Option<AgentAction>, String> {
+    if !meaningful(code) {
         return Ok(None);
     }
     parse(code).map_err(|e| format!("the code block does not parse: {e}"))?;
-    let pyautogui = code.contains("pyautogui") && !code.contains("computer.");
-    Ok(Some(if pyautogui { AgentAction::Pyautogui(code.to_owned()) } else { AgentAction::Computer(code.to_owned()) }))
+    Ok(Some(match dialect_of(code) {
+        Dialect::Pyautogui => AgentAction::Pyautogui(code.to_owned()),
+        Dialect::Computer => AgentAction::Computer(code.to_owned()),
+    }))
 }
 
 /// The actions of one code block, split at control-word lines.
@@ -167,8 +170,9 @@ pub const PLAN_NOT_FOUND: &str = "# plan not found";
 #[derive(Debug, Clone, PartialEq)]
 pub struct NaviReply {
     /// One action: the code of the first ```` ```python ```` block ([`PLAN_NOT_FOUND`]
-    /// without one), replaced by `DONE`, `FAIL` or `WAIT` when a ```` ```decision ````
-    /// block names one (checked in that order, anywhere in the block).
+    /// without one; pyautogui code when it does not use the `computer` object),
+    /// replaced by `DONE`, `FAIL` or `WAIT` when a ```` ```decision ```` block names
+    /// one (checked in that order, anywhere in the block).
     pub actions: Vec<AgentAction>,
     /// The code as the action history records it (the decision does not change it).
     pub code: String,
@@ -182,16 +186,19 @@ pub struct NaviReply {
 /// non-empty line (which makes upstream's agent raise) counts as no block.
 pub fn parse_navi_reply(text: &str) -> NaviReply {
     let memory_block = fenced(text, "memory").map(|inner| format!("```memory\n{inner}```"));
-    let code = fenced(text, "python").and_then(|c| dedent(&c)).unwrap_or_else(|| PLAN_NOT_FOUND.to_owned());
-    let mut actions = vec![AgentAction::Computer(code.clone())];
-    if let Some(decision) = fenced(text, "decision") {
-        if decision.contains("DONE") {
-            actions = vec![AgentAction::Done];
-        } else if decision.contains("FAIL") {
-            actions = vec![AgentAction::Fail];
-        } else if decision.contains("WAIT") {
-            actions = vec![AgentAction::Wait];
+    let code = fenced(text, "python").and_then(|c| dedent(&c));
+    let mut actions = vec![match &code {
+        // Code that does not use the `computer` object is pyautogui code, translated
+        // as every pyautogui answer is (upstream runs any code as `computer` code).
+        Some(code) if dialect_of(code) == Dialect::Pyautogui && meaningful(code) => {
+            AgentAction::Pyautogui(code.clone())
         }
+        Some(code) => AgentAction::Computer(code.clone()),
+        None => AgentAction::Computer(PLAN_NOT_FOUND.to_owned()),
+    }];
+    let code = code.unwrap_or_else(|| PLAN_NOT_FOUND.to_owned());
+    if let Some(decision) = fenced(text, "decision").as_deref().and_then(Decision::named_in) {
+        actions = vec![decision.into()];
     }
     NaviReply { actions, code, memory_block }
 }
@@ -221,6 +228,11 @@ mod tests {
         assert_eq!((r.actions, r.code.as_str(), r.memory_block), (computer(PLAN_NOT_FOUND), PLAN_NOT_FOUND, None));
         assert_eq!(parse_navi_reply("```py\nx()\n```").actions, computer(PLAN_NOT_FOUND), "only ```python counts");
         assert_eq!(parse_navi_reply("```python\n\n```").actions, computer(PLAN_NOT_FOUND));
+        // Code that does not use the `computer` object is pyautogui code.
+        assert_eq!(
+            parse_navi_reply("```python\nimport os\nos.remove('C:/x.txt')\n```").actions,
+            vec![AgentAction::Pyautogui("import os\nos.remove('C:/x.txt')\n".into())]
+        );
         // The memory block is kept whole, fences included.
         let r = parse_navi_reply("```memory\nsaved file.txt\n```\n```python\nf()\n```");
         assert_eq!(r.memory_block.as_deref(), Some("```memory\nsaved file.txt\n```"));

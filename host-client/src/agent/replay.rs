@@ -18,8 +18,9 @@ use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
-use super::{Agent, AgentAction, AgentError, Observation, Prediction};
-use crate::task::Task;
+use super::{Agent, AgentError, Prediction};
+use crate::ports::{AgentAction, Observation};
+use arena_task::Task;
 
 /// What a replay reads from one trajectory line.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -72,11 +73,9 @@ pub fn parse_trajectory(text: &str, origin: &str) -> Result<Vec<TrajectoryStep>,
             continue;
         }
         let action = match value.get("action") {
-            Some(serde_json::Value::String(code)) => match code.trim() {
-                "DONE" => AgentAction::Done,
-                "FAIL" => AgentAction::Fail,
-                "WAIT" => AgentAction::Wait,
-                _ => AgentAction::Computer(code.clone()),
+            Some(serde_json::Value::String(code)) => match arena_actionspace::Decision::parse(code) {
+                Some(decision) => decision.into(),
+                None => AgentAction::Computer(code.clone()),
             },
             other => return Err(bad(i, format!("`action` is not a string: {other:?}"))),
         };

@@ -28,8 +28,9 @@ use serde::{Deserialize, Serialize};
 
 use arena_shared::action::Action;
 
-use super::{Agent, AgentAction, AgentError, Observation, Prediction};
-use crate::task::Task;
+use super::{Agent, AgentError, Prediction};
+use crate::ports::{AgentAction, Observation};
+use arena_task::Task;
 
 /// One plan step as written.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -65,11 +66,9 @@ pub struct Plan {
 impl PlanStep {
     fn action(&self) -> Result<AgentAction, String> {
         Ok(match self {
-            PlanStep::Control(word) => match word.trim() {
-                "DONE" => AgentAction::Done,
-                "FAIL" => AgentAction::Fail,
-                "WAIT" => AgentAction::Wait,
-                other => return Err(format!("unknown step {other:?} (expected DONE, FAIL or WAIT)")),
+            PlanStep::Control(word) => match arena_actionspace::Decision::parse(word) {
+                Some(decision) => decision.into(),
+                None => return Err(format!("unknown step {:?} (expected DONE, FAIL or WAIT)", word.trim())),
             },
             PlanStep::Code { code, lang: CodeLang::Computer } => AgentAction::Computer(code.clone()),
             PlanStep::Code { code, lang: CodeLang::Pyautogui } => AgentAction::Pyautogui(code.clone()),

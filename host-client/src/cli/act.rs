@@ -4,13 +4,17 @@
 //! `key enter`), and every key and button name is checked here, before
 //! anything is sent, so a typo is reported with the name that was wrong
 //! rather than as a guest error after half a batch ran.
-//! It is not an action interpreter: the guest performs the batch.
+//! `--pyautogui` code goes through the host's one pyautogui translation, the one
+//! every agent's pyautogui answer goes through (`crate::ports::exec`), and its
+//! steps are carried out the same way: input as typed batches, `pyperclip.copy`
+//! as one clipboard call. It is not an action interpreter: the guest performs the batch.
 
 use std::path::PathBuf;
 
 use anyhow::{bail, Context};
 use clap::{Args, Subcommand};
 
+use arena_actionspace::{Coords, Step};
 use arena_shared::action::{Action, ActionBatch, MouseButton};
 use arena_shared::geometry::Point;
 use arena_shared::keys::{parse_chord, Key};
@@ -29,7 +33,9 @@ pub struct ActArgs {
     pub json_file: Option<PathBuf>,
 
     /// pyautogui code, as agents write it (`pyautogui.click(10, 20)`), translated into
-    /// actions here with the guest's screen size and cursor; nothing runs as Python.
+    /// actions here with the guest's screen size and cursor, as every agent's
+    /// pyautogui answer is (`pyperclip.copy` puts text on the clipboard); nothing
+    /// runs as Python.
     #[arg(long, value_name = "CODE", conflicts_with_all = ["json", "json_file"])]
     pub pyautogui: Option<String>,
 
@@ -168,7 +174,7 @@ impl ActArgs {
                 parse_batch_json(&text).with_context(|| format!("--json-file {}", path.display()))?
             }
             (None, None, None) if self.pyautogui.is_some() => {
-                bail!("--pyautogui needs the guest's screen size: use `ActArgs::batch_for`")
+                bail!("--pyautogui needs the guest's screen size: use `ActArgs::steps_for`")
             }
             (None, None, None) => {
                 bail!("name an action (`arena act click 100 200`) or give --json / --json-file / --pyautogui")
@@ -181,28 +187,31 @@ impl ActArgs {
 }
 
 impl ActArgs {
-    /// The batch to send to `client`'s guest: [`ActArgs::to_batch`], or the
-    /// translation of `--pyautogui` code for the guest's screen and cursor.
+    /// The steps to carry out on `client`'s guest: [`ActArgs::to_batch`]'s actions,
+    /// or the translation of `--pyautogui` code for the guest's screen and cursor.
     ///
     /// # Errors
     ///
-    /// What [`ActArgs::to_batch`] refuses, the guest cannot be asked, or the code
-    /// cannot be translated (see [`crate::actionspace::pyautogui::actions_from_code`]).
-    pub async fn batch_for(&self, client: &crate::GuestClient) -> anyhow::Result<ActionBatch> {
+    /// What [`ActArgs::to_batch`] refuses, the guest cannot be asked, the code
+    /// cannot be translated (the action space's message), or it answers a decision
+    /// or asks for something only an agent can (a screenshot), which `arena act`
+    /// does not do.
+    pub async fn steps_for(&self, client: &crate::GuestClient) -> anyhow::Result<Vec<Step>> {
         let Some(code) = &self.pyautogui else {
-            return self.to_batch();
+            return Ok(self.to_batch()?.actions.into_iter().map(Step::Act).collect());
         };
-        let screen = client.screen().await?;
-        // An empty wait performs nothing and reports where the cursor is.
-        let cursor = client.act(&ActionBatch { actions: vec![Action::Wait { ms: 0 }] }).await?.cursor;
-        let actions = crate::actionspace::pyautogui::actions_from_code(
-            code,
-            (screen.physical_width, screen.physical_height),
-            (cursor.x, cursor.y),
-        )?;
-        let batch = ActionBatch { actions };
-        validate_batch(&batch).context("--pyautogui")?;
-        Ok(batch)
+        let ctx = crate::ports::exec::pointer(client, Coords::Pixels).await?;
+        let steps = crate::ports::exec::translate_pyautogui(code, &ctx).map_err(anyhow::Error::msg)?;
+        let mut actions = Vec::new();
+        for step in &steps {
+            match step {
+                Step::Act(action) => actions.push(action.clone()),
+                Step::SetClipboard(_) => {}
+                other => bail!("--pyautogui: the code asks for {other:?}, which `arena act` does not do"),
+            }
+        }
+        validate_batch(&ActionBatch { actions }).context("--pyautogui")?;
+        Ok(steps)
     }
 }
 
@@ -481,23 +490,27 @@ mod tests {
             "pyautogui.moveTo(30, 40); pyautogui.moveRel(1, 2); pyautogui.click()",
         ])
         .expect("parses");
-        assert!(format!("{:#}", harness.act.to_batch().expect_err("needs the guest")).contains("batch_for"));
+        assert!(format!("{:#}", harness.act.to_batch().expect_err("needs the guest")).contains("steps_for"));
         let stub = crate::cli::stub::start(&crate::cli::stub::StubArgs::default(), None).await.expect("stub guest");
         let client = crate::GuestClient::new(&stub.url(), crate::ClientConfig::default()).expect("client");
-        let batch = harness.act.batch_for(&client).await.expect("translated");
+        let steps = harness.act.steps_for(&client).await.expect("translated");
         assert_eq!(
-            batch.actions,
+            steps,
             vec![
-                Action::MoveTo { x: 30, y: 40 },
-                Action::MoveRel { dx: 1, dy: 2 },
-                Action::Click { x: None, y: None, button: MouseButton::Left, count: 1 },
+                Step::Act(Action::MoveTo { x: 30, y: 40 }),
+                Step::Act(Action::MoveRel { dx: 1, dy: 2 }),
+                Step::Act(Action::Click { x: None, y: None, button: MouseButton::Left, count: 1 }),
             ]
         );
-        let report = client.act(&batch).await.expect("performed");
-        assert_eq!((report.cursor.x, report.cursor.y), (31, 42));
+        let options = crate::ports::exec::ExecOptions::default();
+        let outcome = crate::ports::exec::perform_steps(&client, &steps, &options).await.expect("performed");
+        let cursor = outcome.cursor.expect("a cursor");
+        assert_eq!((cursor.x, cursor.y, outcome.performed), (31, 42, 3));
         let bad = Harness::try_parse_from(["act", "--pyautogui", "pyautogui.screenshot('x.png')"]).expect("parses");
-        let err = format!("{:#}", bad.act.batch_for(&client).await.expect_err("not input"));
+        let err = format!("{:#}", bad.act.steps_for(&client).await.expect_err("not input"));
         assert!(err.contains("saving a screenshot"), "{err}");
+        let done = Harness::try_parse_from(["act", "--pyautogui", "DONE"]).expect("parses");
+        assert!(format!("{:#}", done.act.steps_for(&client).await.expect_err("a decision")).contains("Done"));
         assert!(Harness::try_parse_from(["act", "--pyautogui", "x", "--json", "[]"]).is_err());
         stub.stop().await.expect("stops");
     }

@@ -25,7 +25,7 @@ use arena_shared::files::KnownFolder;
 use arena_shared::observation::{A11yNode, A11yQuery, ScreenshotQuery, WindowInfo, WindowTarget};
 
 use super::{emit, local, render, stub, with_spinner, Connection};
-use crate::client::GuestClient;
+use arena_client::client::GuestClient;
 
 /// The sentence typed into Notepad and looked for in the tree.
 const SENTENCE: &str = "The quick brown fox jumps over the lazy arena.";

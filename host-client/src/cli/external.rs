@@ -1,18 +1,12 @@
 //! The options of the outside agents of `arena run` (`--agent exec`, `--agent
-//! http`, `--agent mcp`) and the factories that build them; `runs` flattens
-//! [`ExternalArgs`] into its arguments and calls [`exec_or_http`] and [`mcp`].
+//! http`, `--agent mcp`), and the run's MCP endpoint; `runs` flattens
+//! [`ExternalArgs`] into its arguments (the exec and HTTP agents are built by
+//! `crate::agent::factory` from them) and calls [`mcp`] and [`run_with_mcp`].
+//!
+//! The MCP endpoint serves HTTP, so it is built only with the `mcp-endpoint`
+//! feature (a default feature); without it `--agent mcp` is an error that says so.
 
-use std::sync::Arc;
-use std::time::Duration;
-
-use anyhow::{bail, Context};
 use clap::Args;
-
-use crate::actionspace::Coords;
-use crate::agent::external::transport::{HttpAgent, ProcessPool};
-use crate::agent::external::{Connector, ExternalAgent};
-use crate::agent::Agent;
-use crate::episode::AgentFactory;
 
 /// Options of the outside agents.
 #[derive(Debug, Clone, Args)]
@@ -39,105 +33,163 @@ pub struct ExternalArgs {
     pub mcp_token: Option<String>,
 }
 
-/// What `runs` needs to know about the chosen outside agent.
-pub(crate) struct Built {
-    pub(crate) factory: AgentFactory,
-    pub(crate) label: String,
-    pub(crate) options: Vec<(String, String)>,
-}
+#[cfg(feature = "mcp-endpoint")]
+pub(crate) use with_mcp::{mcp, run_with_mcp};
+#[cfg(not(feature = "mcp-endpoint"))]
+pub(crate) use without_mcp::{mcp, run_with_mcp};
 
-fn timeout(args: &ExternalArgs) -> anyhow::Result<Duration> {
-    let timeout = Duration::try_from_secs_f64(args.agent_timeout)
-        .context("--agent-timeout must be a number of seconds, 0 or more")?;
-    if timeout.is_zero() {
-        bail!("--agent-timeout must be more than 0 seconds");
+#[cfg(feature = "mcp-endpoint")]
+mod with_mcp {
+    use std::sync::Arc;
+    use std::time::Duration;
+
+    use anyhow::{bail, Context};
+    use tokio_util::sync::CancellationToken;
+
+    use super::ExternalArgs;
+    use crate::agent::factory::{agent_timeout, ChosenAgent};
+    use crate::agent::{Agent, AgentFactory};
+    use crate::episode::EpisodeRunner;
+    use crate::results::ResultsError;
+    use crate::run::{run_tasks, RunOptions, RunOutcome};
+    use arena_client::GuestClient;
+    use arena_task::Task;
+
+    /// The MCP endpoint of a run: its hub, where it listens and its token.
+    pub(crate) struct McpEndpoint {
+        hub: Arc<crate::mcp::Hub>,
+        listener: tokio::net::TcpListener,
+        token: String,
     }
-    Ok(timeout)
-}
 
-/// `--agent exec` (`http` false) or `--agent http`.
-///
-/// # Errors
-///
-/// The option the agent needs is missing or unusable.
-pub(crate) fn exec_or_http(args: &ExternalArgs, http: bool, coords: Coords) -> anyhow::Result<Built> {
-    let timeout = timeout(args)?;
-    let (connector, label, option): (Arc<dyn Connector>, &str, (String, String)) = if http {
-        let Some(url) = &args.agent_url else { bail!("--agent http needs --agent-url URL (or ARENA_AGENT_URL)") };
-        let agent = HttpAgent::new(url, timeout).map_err(anyhow::Error::msg)?;
-        (Arc::new(agent), "http", ("agent_url".to_owned(), url.clone()))
-    } else {
-        let Some(cmd) = &args.agent_cmd else { bail!("--agent exec needs --agent-cmd \"PROGRAM ARGS\"") };
-        let pool = ProcessPool::new(cmd).map_err(anyhow::Error::msg)?;
-        (Arc::new(pool), "exec", ("agent_cmd".to_owned(), cmd.clone()))
-    };
-    let options = vec![
-        option,
-        ("agent_protocol".to_owned(), crate::agent::external::protocol::PROTOCOL_VERSION.to_string()),
-        ("agent_timeout".to_owned(), format!("{}", args.agent_timeout)),
-    ];
-    let factory: AgentFactory = Arc::new(move || {
-        Ok(Box::new(ExternalAgent::new(label, Arc::clone(&connector), timeout).with_coords(coords)) as Box<dyn Agent>)
-    });
-    Ok(Built { factory, label: label.to_owned(), options })
-}
-
-/// The MCP endpoint of a run: its hub, where it listens and its token.
-pub(crate) struct McpEndpoint {
-    pub(crate) hub: Arc<crate::mcp::Hub>,
-    pub(crate) listener: tokio::net::TcpListener,
-    pub(crate) token: String,
-}
-
-impl std::fmt::Debug for McpEndpoint {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("McpEndpoint").field("listener", &self.listener.local_addr().ok()).finish_non_exhaustive()
-    }
-}
-
-/// `--agent mcp`: binds `--mcp-listen`, settles the token (given, or generated,
-/// printed and written to `<out>/mcp-token`), and answers the agent factory.
-///
-/// # Errors
-///
-/// No `--mcp-listen`, an address that cannot be bound, a token file that cannot be written.
-pub(crate) async fn mcp(
-    args: &ExternalArgs,
-    max_steps: u32,
-    out: &std::path::Path,
-) -> anyhow::Result<(Built, McpEndpoint)> {
-    let timeout = timeout(args)?;
-    let Some(listen) = &args.mcp_listen else { bail!("--agent mcp needs --mcp-listen ADDR (e.g. 127.0.0.1:8765)") };
-    let listener = tokio::net::TcpListener::bind(listen.as_str())
-        .await
-        .with_context(|| format!("binding --mcp-listen {listen}"))?;
-    let addr = listener.local_addr().context("the MCP listener's address")?;
-    let token = match &args.mcp_token {
-        Some(token) => arena_shared::token::parse(token).map_err(|err| anyhow::anyhow!("--mcp-token: {err}"))?,
-        None => {
-            let token = crate::mcp::generate_token();
-            std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
-            let file = out.join("mcp-token");
-            arena_shared::atomic::write_atomic(&file, token.as_bytes())
-                .with_context(|| format!("writing {}", file.display()))?;
-            #[cfg(unix)]
-            {
-                use std::os::unix::fs::PermissionsExt as _;
-                let _ = std::fs::set_permissions(&file, std::fs::Permissions::from_mode(0o600));
-            }
-            super::emit(&format!("MCP token (also in {}): {token}\n", file.display()))?;
-            token
+    impl std::fmt::Debug for McpEndpoint {
+        fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+            f.debug_struct("McpEndpoint").field("listener", &self.listener.local_addr().ok()).finish_non_exhaustive()
         }
-    };
-    super::emit(&format!("MCP endpoint: http://{addr}/mcp\n"))?;
-    let hub = crate::mcp::Hub::new();
-    let agent_hub = Arc::clone(&hub);
-    let factory: AgentFactory = Arc::new(move || {
-        Ok(Box::new(crate::mcp::McpAgent::new(Arc::clone(&agent_hub), max_steps, timeout)) as Box<dyn Agent>)
-    });
-    let options = vec![
-        ("mcp_listen".to_owned(), addr.to_string()),
-        ("agent_timeout".to_owned(), format!("{}", args.agent_timeout)),
-    ];
-    Ok((Built { factory, label: "mcp".to_owned(), options }, McpEndpoint { hub, listener, token }))
+    }
+
+    /// `--agent mcp`: binds `--mcp-listen`, settles the token (given, or generated,
+    /// printed and written to `<out>/mcp-token`), and answers the agent factory.
+    ///
+    /// # Errors
+    ///
+    /// No `--mcp-listen`, an address that cannot be bound, a token file that cannot be written.
+    pub(crate) async fn mcp(
+        args: &ExternalArgs,
+        max_steps: u32,
+        out: &std::path::Path,
+        model: Option<String>,
+    ) -> anyhow::Result<(ChosenAgent, McpEndpoint)> {
+        let timeout = agent_timeout(args.agent_timeout)?;
+        let Some(listen) = &args.mcp_listen else { bail!("--agent mcp needs --mcp-listen ADDR (e.g. 127.0.0.1:8765)") };
+        let listener = tokio::net::TcpListener::bind(listen.as_str())
+            .await
+            .with_context(|| format!("binding --mcp-listen {listen}"))?;
+        let addr = listener.local_addr().context("the MCP listener's address")?;
+        let token = match &args.mcp_token {
+            Some(token) => arena_shared::token::parse(token).map_err(|err| anyhow::anyhow!("--mcp-token: {err}"))?,
+            None => {
+                let token = crate::mcp::generate_token();
+                std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
+                let file = out.join("mcp-token");
+                arena_shared::atomic::write_atomic(&file, token.as_bytes())
+                    .with_context(|| format!("writing {}", file.display()))?;
+                #[cfg(unix)]
+                {
+                    use std::os::unix::fs::PermissionsExt as _;
+                    let _ = std::fs::set_permissions(&file, std::fs::Permissions::from_mode(0o600));
+                }
+                super::super::emit(&format!("MCP token (also in {}): {token}\n", file.display()))?;
+                token
+            }
+        };
+        super::super::emit(&format!("MCP endpoint: http://{addr}/mcp\n"))?;
+        let hub = crate::mcp::Hub::new();
+        let agent_hub = Arc::clone(&hub);
+        let factory: AgentFactory = Arc::new(move || {
+            Ok(Box::new(crate::mcp::McpAgent::new(Arc::clone(&agent_hub), max_steps, timeout)) as Box<dyn Agent>)
+        });
+        let options = vec![
+            ("mcp_listen".to_owned(), addr.to_string()),
+            ("agent_timeout".to_owned(), format!("{}", args.agent_timeout)),
+        ];
+        let model = model.unwrap_or_else(|| "external".to_owned());
+        Ok((ChosenAgent { factory, label: "mcp".to_owned(), model, options }, McpEndpoint { hub, listener, token }))
+    }
+
+    /// Runs `tasks` with the MCP endpoint served beside them; at the end, sessions
+    /// waiting for a task are told there is none, then the server stops.
+    ///
+    /// # Errors
+    ///
+    /// As [`run_tasks`].
+    pub(crate) async fn run_with_mcp(
+        endpoint: McpEndpoint,
+        tasks: Vec<Task>,
+        guests: Vec<GuestClient>,
+        runner: EpisodeRunner,
+        options: &RunOptions,
+    ) -> Result<RunOutcome, ResultsError> {
+        let served = CancellationToken::new();
+        let server = tokio::spawn(crate::mcp::server::serve(
+            endpoint.listener,
+            Arc::clone(&endpoint.hub),
+            endpoint.token.clone(),
+            served.clone(),
+        ));
+        let runner = crate::mcp::McpRunner { inner: runner, hub: Arc::clone(&endpoint.hub) };
+        let outcome = run_tasks(tasks, guests, Arc::new(runner), options).await;
+        endpoint.hub.close();
+        tokio::time::sleep(Duration::from_millis(200)).await;
+        served.cancel();
+        let _ = server.await;
+        outcome
+    }
+}
+
+#[cfg(not(feature = "mcp-endpoint"))]
+mod without_mcp {
+    use super::ExternalArgs;
+    use crate::agent::factory::ChosenAgent;
+    use crate::episode::EpisodeRunner;
+    use crate::results::ResultsError;
+    use crate::run::{RunOptions, RunOutcome};
+    use arena_client::GuestClient;
+    use arena_task::Task;
+
+    /// No MCP endpoint in this build: nothing can hold one.
+    #[derive(Debug)]
+    pub(crate) enum McpEndpoint {}
+
+    /// `--agent mcp` in a build without the endpoint.
+    ///
+    /// # Errors
+    ///
+    /// Always: this build has no MCP endpoint.
+    pub(crate) async fn mcp(
+        _args: &ExternalArgs,
+        _max_steps: u32,
+        _out: &std::path::Path,
+        _model: Option<String>,
+    ) -> anyhow::Result<(ChosenAgent, McpEndpoint)> {
+        anyhow::bail!(
+            "--agent mcp: this arena was built without the MCP endpoint (cargo feature `mcp-endpoint`, \
+             a default feature; build with `cargo build -p arena-host --features mcp-endpoint`)"
+        )
+    }
+
+    /// Never called: there is no endpoint to run with.
+    ///
+    /// # Errors
+    ///
+    /// None.
+    pub(crate) async fn run_with_mcp(
+        endpoint: McpEndpoint,
+        _tasks: Vec<Task>,
+        _guests: Vec<GuestClient>,
+        _runner: EpisodeRunner,
+        _options: &RunOptions,
+    ) -> Result<RunOutcome, ResultsError> {
+        match endpoint {}
+    }
 }

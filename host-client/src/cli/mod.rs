@@ -2,7 +2,7 @@
 //!
 //! This module is the body of the binary, kept in the library so it is
 //! tested like the rest: it parses nothing itself (clap does), talks to the
-//! guest only through [`crate::client::GuestClient`], and is the one place in
+//! guest only through [`arena_client::client::GuestClient`], and is the one place in
 //! the crate that writes to stdout, because that output is its interface.
 //! Diagnostics go to stderr through `tracing`.
 //!
@@ -19,7 +19,7 @@ pub mod corpus;
 pub mod demo;
 pub mod external;
 pub mod local;
-pub mod prep;
+pub mod oem;
 pub mod render;
 pub mod runs;
 pub mod stub;
@@ -39,8 +39,8 @@ use arena_shared::exec::{ExecRequest, LaunchRequest};
 use arena_shared::health::Readiness;
 use arena_shared::observation::{A11yBackend, A11yQuery, ImageFormat, ScreenshotQuery, WindowTarget};
 
-use crate::client::{ClientConfig, GuestClient, WindowOp};
-use crate::error::ClientError;
+use arena_client::client::{ClientConfig, GuestClient, WindowOp};
+use arena_client::error::ClientError;
 
 /// Where the guest is when neither `--guest` nor `ARENA_GUEST` says.
 pub const DEFAULT_GUEST: &str = "http://127.0.0.1:5000";
@@ -247,7 +247,7 @@ pub enum Command {
     /// Rebuild summary.json, summary.md and report.html of a result folder.
     Report(runs::ReportArgs),
     /// Stage an OEM folder for a new Windows image, verify one, or wait for a prepared guest.
-    Prep(prep::PrepArgs),
+    Prep(oem::PrepArgs),
     /// Get the upstream WAA task corpus without cloning WindowsAgentArena.
     Corpus(corpus::CorpusArgs),
     /// Run Windows VMs with QEMU: start one on an overlay of a golden image, snapshot,
@@ -473,11 +473,18 @@ pub async fn run(cli: Cli) -> anyhow::Result<ExitCode> {
         }
         Command::Act(args) => {
             let client = conn.client()?;
-            let batch = args.batch_for(&client).await?;
-            let report = client.act(&batch).await?;
+            let steps = args.steps_for(&client).await?;
+            let started = std::time::Instant::now();
+            let outcome =
+                crate::ports::exec::perform_steps(&client, &steps, &crate::ports::exec::ExecOptions::default()).await?;
+            if let Some(error) = outcome.error {
+                anyhow::bail!("{error}");
+            }
+            let cursor = outcome.cursor.map(|c| format!("; cursor at {},{}", c.x, c.y)).unwrap_or_default();
             emit(&format!(
-                "executed {} action(s) in {} ms; cursor at {},{}\n",
-                report.executed, report.elapsed_ms, report.cursor.x, report.cursor.y
+                "executed {} action(s) in {} ms{cursor}\n",
+                outcome.performed,
+                started.elapsed().as_millis()
             ))?;
             Ok(ExitCode::SUCCESS)
         }
@@ -578,7 +585,7 @@ pub async fn run(cli: Cli) -> anyhow::Result<ExitCode> {
         Command::Run(args) => runs::run(conn, *args).await,
         Command::Merge(args) => runs::merge(&args),
         Command::Report(args) => runs::report(&args),
-        Command::Prep(args) => prep::run(conn, args).await,
+        Command::Prep(args) => oem::run(conn, args).await,
         Command::Corpus(args) => corpus::run(args).await,
         Command::Vm(args) => vm::run(conn, args).await,
     }
@@ -743,7 +750,7 @@ mod tests {
         .unwrap();
         let Command::Run(args) = cli.command else { panic!("not run") };
         assert_eq!(args.som_origin, crate::som::SomOrigin::MixedOmni);
-        let chosen = runs::agent_factory(&args).unwrap();
+        let chosen = crate::agent::factory::build(&args.agent_options()).unwrap();
         assert!(chosen.options.contains(&("som_origin".to_owned(), "mixed-omni".to_owned())), "{:?}", chosen.options);
         // The service a pixel origin needs is checked before the run starts.
         let cli = parse(&[
@@ -762,7 +769,7 @@ mod tests {
         .unwrap();
         let Command::Run(args) = cli.command else { panic!("not run") };
         if std::env::var_os("ARENA_DETECTOR_URL").is_none() {
-            let err = format!("{:#}", runs::agent_factory(&args).err().expect("refused"));
+            let err = format!("{:#}", crate::agent::factory::build(&args.agent_options()).expect_err("refused"));
             assert!(err.contains("--detector-url"), "{err}");
         }
         let err = parse(&["run", "--tasks", "t", "--som-origin", "mixed"]).unwrap_err().to_string();

@@ -14,7 +14,7 @@ use arena_shared::health::{HealthReport, Readiness};
 use arena_shared::observation::{A11yNode, A11yTree, ScreenshotMeta, WindowInfo};
 use arena_shared::registry::RegistryValue;
 
-use crate::error::component_name;
+use arena_client::error::component_name;
 
 /// Longest value or name shown in the outline before it is cut.
 const MAX_OUTLINE_TEXT: usize = 120;

@@ -19,56 +19,25 @@ use std::time::Duration;
 
 use anyhow::{bail, Context};
 use clap::{Args, ValueEnum};
-use tokio_util::sync::CancellationToken;
 
 use super::{emit, stub, Connection};
-use crate::actionspace::uitars::UiTarsVersion;
-use crate::actionspace::{ActionSpace, Coords};
-use crate::agent::cu::anthropic::{AnthropicAgent, AnthropicConfig};
-use crate::agent::cu::openai::{OpenAiAgent, OpenAiConfig, SafetyChecks};
-use crate::agent::cu::uitars::{UiTarsAgent, UiTarsConfig};
-use crate::agent::cu::Endpoint;
+use crate::agent::cu::openai::SafetyChecks;
+use crate::agent::factory::{self, AgentKind, AgentOptions, ChosenAgent};
 use crate::agent::llm::{ApiKind, Refusals};
-use crate::agent::navi::{NaviAgent, NaviConfig, NaviStyle};
-use crate::agent::replay::{ReplayAgent, ReplaySource};
-use crate::agent::scripted::{PlanSource, ScriptedAgent};
-use crate::agent::{Agent, ExecOptions};
-use crate::episode::{AgentFactory, EpisodeConfig, EpisodeRunner};
+use crate::agent::navi::NaviStyle;
+use crate::episode::{EpisodeConfig, EpisodeRunner};
+use crate::ports::exec::ExecOptions;
 use crate::results::html::write_report;
 use crate::results::summary::Summary;
 use crate::results::RunLayout;
 use crate::run::pool::PoolConfig;
 use crate::run::shard::Shard;
 use crate::run::{load_tasks, run_tasks, RunOptions, TaskOrder};
-use crate::setup::{DownloadCache, Settle};
 use crate::som::SomOrigin;
-use crate::task::Difficulty;
-
-/// Which agent plays.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
-pub enum AgentKind {
-    /// Follows plan files (`--plans`), or each task's own `plan` key.
-    Scripted,
-    /// Repeats recorded trajectories (`--replay`).
-    Replay,
-    /// Navi-style prompting of an OpenAI-compatible chat endpoint (`--llm-url`, `--model`).
-    Navi,
-    /// Claude with Anthropic's computer tool over the Messages API (`--llm-url
-    /// https://api.anthropic.com`, `--model`; key from ARENA_LLM_KEY or ANTHROPIC_API_KEY).
-    AnthropicCu,
-    /// OpenAI's computer-use model over the Responses API (`--llm-url https://api.openai.com/v1`,
-    /// `--model computer-use-preview`; key from ARENA_LLM_KEY or OPENAI_API_KEY).
-    OpenaiCu,
-    /// UI-TARS over an OpenAI-compatible chat endpoint such as vLLM (`--llm-url`, `--model`,
-    /// `--prompt-file`).
-    UiTars,
-    /// An agent program speaking the step protocol on its stdin/stdout (`--agent-cmd`).
-    Exec,
-    /// An agent server taking the step protocol as HTTP POSTs (`--agent-url`).
-    Http,
-    /// An MCP client driving each episode through the tools served at `--mcp-listen`.
-    Mcp,
-}
+use arena_actionspace::uitars::UiTarsVersion;
+use arena_actionspace::{ActionSpace, Coords};
+use arena_setup::{DownloadCache, Settle};
+use arena_task::Difficulty;
 
 /// Arguments of `arena run`.
 #[derive(Debug, Clone, Args)]
@@ -77,8 +46,8 @@ pub struct RunArgs {
     #[arg(long, value_name = "PATH")]
     pub tasks: PathBuf,
     /// Which variant of the corpus an index or root resolves into.
-    #[arg(long, value_enum, default_value_t = Difficulty::Normal)]
-    pub difficulty: Difficulty,
+    #[arg(long, value_enum, default_value_t = DifficultyArg::Normal)]
+    pub difficulty: DifficultyArg,
     #[arg(long, value_enum, default_value_t = AgentKind::Scripted)]
     pub agent: AgentKind,
     #[command(flatten)]
@@ -190,8 +159,8 @@ pub struct RunArgs {
     pub prompt_file: Option<PathBuf>,
     /// ui-tars: the model's coordinate convention: `1.0` (a 0..1000 grid, UI-TARS
     /// 2B/7B/72B) or `1.5` (pixels of the smart-resized screenshot, UI-TARS-1.5).
-    #[arg(long, value_enum, default_value_t = UiTarsVersion::V1_5)]
-    pub uitars_version: UiTarsVersion,
+    #[arg(long, value_enum, default_value_t = UiTarsVersionArg::V1_5)]
+    pub uitars_version: UiTarsVersionArg,
     /// Guests of the pool, comma-separated (repeatable); the global --guest is added to them.
     #[arg(long, value_delimiter = ',', value_name = "URL,...")]
     pub guests: Vec<String>,
@@ -258,6 +227,12 @@ pub struct RunArgs {
     /// it. Recorded in the results.
     #[arg(long, value_enum, default_value_t = HeldKeysArg::Episode)]
     pub held_keys: HeldKeysArg,
+    /// Run agents' pyautogui code with its effects, as upstream's `python -c` does:
+    /// files, processes and saved screenshots through the guest's API. Without it,
+    /// pyautogui code is translated into input and clipboard steps, and code reaching
+    /// for anything else does nothing and is the step's error. Recorded in the results.
+    #[arg(long)]
+    pub pyautogui_effects: bool,
     /// The trial folder level of the results (upstream's --trial_id).
     #[arg(long, default_value = crate::results::DEFAULT_TRIAL_ID, value_name = "ID")]
     pub trial_id: String,
@@ -277,6 +252,36 @@ pub struct RunArgs {
     pub vm_dir: Option<PathBuf>,
     #[command(flatten)]
     pub vm: super::vm::VmArgs,
+}
+
+/// `--difficulty`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, clap::ValueEnum)]
+pub enum DifficultyArg {
+    /// `examples/`.
+    #[default]
+    Normal,
+    /// `examples_noctxt/` (upstream's `--diff_lvl hard`).
+    Hard,
+}
+
+impl From<DifficultyArg> for Difficulty {
+    fn from(arg: DifficultyArg) -> Difficulty {
+        match arg {
+            DifficultyArg::Normal => Difficulty::Normal,
+            DifficultyArg::Hard => Difficulty::Hard,
+        }
+    }
+}
+
+/// `--uitars-version`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum UiTarsVersionArg {
+    /// UI-TARS 2B/7B/72B (Qwen2-VL): a 0..1000 grid.
+    #[value(name = "1.0")]
+    V1,
+    /// UI-TARS-1.5 (Qwen2.5-VL): pixels of the `smart_resize`d screenshot.
+    #[value(name = "1.5")]
+    V1_5,
 }
 
 /// `--a11y-backend`.
@@ -513,201 +518,57 @@ fn guests_from_file(path: &Path) -> anyhow::Result<Vec<String>> {
         .collect())
 }
 
-/// Where the behaviour constants a run uses come from, whatever --waa-root says:
-/// this project's code, written from upstream at 6d39ed88 (docs/compatibility.md,
-/// "Provenance").
-pub const BEHAVIOUR_CONSTANTS: &str = "arena (compiled in, from upstream 6d39ed88; not read from --waa-root)";
-
-/// The agent a run plays with.
-pub(crate) struct ChosenAgent {
-    factory: AgentFactory,
-    /// The action-space level of the result folders.
-    label: String,
-    /// The model level of the result folders.
-    model: String,
-    /// The agent's named options, recorded in the results.
-    pub(crate) options: Vec<(String, String)>,
-}
-
-pub(crate) fn agent_factory(args: &RunArgs) -> anyhow::Result<ChosenAgent> {
-    match args.agent {
-        AgentKind::Scripted => {
-            let default_dir = if args.tasks.is_dir() {
-                Some(args.tasks.join("plans"))
-            } else {
-                args.tasks.parent().map(|p| p.join("plans"))
-            };
-            let source = match &args.plans {
-                Some(path) if path.is_dir() => PlanSource::Dir(path.clone()),
-                Some(path) => PlanSource::Fixed(crate::agent::scripted::Plan::load(path)?),
-                None => match default_dir.filter(|d| d.is_dir()) {
-                    Some(dir) => PlanSource::Dir(dir),
-                    None => PlanSource::TaskKey,
-                },
-            };
-            let factory: AgentFactory =
-                Arc::new(move || Ok(Box::new(ScriptedAgent::new(source.clone())) as Box<dyn Agent>));
-            Ok(ChosenAgent { factory, label: "scripted".into(), model: "plan".into(), options: Vec::new() })
-        }
-        AgentKind::Replay => {
-            let Some(path) = args.replay.clone() else { bail!("--agent replay needs --replay FILE_OR_DIR") };
-            let source = if path.is_dir() { ReplaySource::Dir(path) } else { ReplaySource::File(path) };
-            let factory: AgentFactory =
-                Arc::new(move || Ok(Box::new(ReplayAgent::new(source.clone())) as Box<dyn Agent>));
-            Ok(ChosenAgent { factory, label: "replay".into(), model: "replay".into(), options: Vec::new() })
-        }
-        AgentKind::Navi => {
-            let (Some(url), Some(model)) = (args.llm_url.clone(), args.model.clone()) else {
-                bail!("--agent navi needs --llm-url (or ARENA_LLM_URL) and --model (or ARENA_LLM_MODEL)");
-            };
-            let mut config = NaviConfig::new(&url, &model);
-            config.temperature = args.temperature;
-            config.max_tokens = args.max_tokens;
-            config.style = match args.navi_style {
+impl RunArgs {
+    /// What these flags say about the agent, for [`factory::build`].
+    pub fn agent_options(&self) -> AgentOptions {
+        AgentOptions {
+            kind: self.agent,
+            tasks: self.tasks.clone(),
+            plans: self.plans.clone(),
+            replay: self.replay.clone(),
+            llm_url: self.llm_url.clone(),
+            model: self.model.clone(),
+            temperature: self.temperature,
+            max_tokens: self.max_tokens,
+            navi_style: match self.navi_style {
                 NaviStyleArg::Waa => NaviStyle::Waa,
                 NaviStyleArg::Arena => NaviStyle::Arena,
-            };
-            if let Some(root) = &args.waa_root {
-                let prompts = crate::agent::waa_prompts::WaaPrompts::load(root)
-                    .with_context(|| format!("reading Navi's prompts from the WAA checkout {}", root.display()))?;
-                config.waa_prompts = Some(Arc::new(prompts));
-            }
-            // Which prompt text runs: upstream's from a checkout (`waa@<commit>`) or ours.
-            let (style, prompt) = match (config.style, &config.waa_prompts) {
-                (NaviStyle::Waa, Some(prompts)) => ("waa", prompts.source.clone()),
-                (NaviStyle::Waa, None) => ("waa", "arena".to_owned()),
-                (NaviStyle::Arena, _) => ("arena", "arena".to_owned()),
-            };
-            config.som.origin = args.som_origin;
-            config.som.detector_url = args.detector_url.clone();
-            config.som.omniparser_url = args.omniparser_url.clone();
-            config.refusals = match args.refusals {
+            },
+            som_origin: self.som_origin,
+            detector_url: self.detector_url.clone(),
+            omniparser_url: self.omniparser_url.clone(),
+            waa_root: self.waa_root.clone(),
+            refusals: match self.refusals {
                 RefusalsArg::Unfinished => Refusals::Unfinished,
                 RefusalsArg::Answer => Refusals::Answer,
-            };
-            let options = vec![
-                ("navi_style".to_owned(), style.to_owned()),
-                ("som_origin".to_owned(), args.som_origin.name().to_owned()),
-                ("prompt".to_owned(), prompt),
-                // Only the prompt texts follow --waa-root; every behaviour constant
-                // (pauses, step cap, budgets, image sizes, colours) is compiled in.
-                ("behaviour_constants".to_owned(), BEHAVIOUR_CONSTANTS.to_owned()),
-                ("temperature".to_owned(), format!("{}", args.temperature)),
-                ("max_tokens".to_owned(), args.max_tokens.to_string()),
-                ("refusals".to_owned(), config.refusals.name().to_owned()),
-            ];
-            config.api = match args.llm_api {
+            },
+            llm_api: match self.llm_api {
                 LlmApi::Auto => None,
                 LlmApi::Openai => Some(ApiKind::OpenAi),
                 LlmApi::Azure => Some(ApiKind::Azure),
-            };
-            let seconds = |value: f64, flag: &str| {
-                Duration::try_from_secs_f64(value)
-                    .with_context(|| format!("{flag} must be a number of seconds, 0 or more"))
-            };
-            config.timeout = seconds(args.llm_timeout, "--llm-timeout")?;
-            config.retry.give_up_after = seconds(args.llm_retry, "--llm-retry")?;
-            // Fail now, not once per task, when the configuration is unusable.
-            NaviAgent::new(config.clone())?;
-            let factory: AgentFactory =
-                Arc::new(move || Ok(Box::new(NaviAgent::new(config.clone())?) as Box<dyn Agent>));
-            // Upstream files Navi's results under its action space.
-            Ok(ChosenAgent { factory, label: crate::results::DEFAULT_ACTION_SPACE_LABEL.into(), model, options })
-        }
-        AgentKind::AnthropicCu | AgentKind::OpenaiCu | AgentKind::UiTars => computer_use_agent(args),
-        AgentKind::Mcp => bail!("--agent mcp is set up by `arena run` itself"),
-        AgentKind::Exec | AgentKind::Http => {
-            let built = super::external::exec_or_http(&args.external, args.agent == AgentKind::Http, args.coords)?;
-            let model = args.model.clone().unwrap_or_else(|| "external".to_owned());
-            Ok(ChosenAgent { factory: built.factory, label: built.label, model, options: built.options })
-        }
-    }
-}
-
-/// The endpoint options the computer-use agents share with Navi's.
-fn cu_endpoint(args: &RunArgs, name: &str) -> anyhow::Result<Endpoint> {
-    let (Some(url), Some(model)) = (args.llm_url.clone(), args.model.clone()) else {
-        bail!("--agent {name} needs --llm-url (or ARENA_LLM_URL) and --model (or ARENA_LLM_MODEL)");
-    };
-    let seconds = |value: f64, flag: &str| {
-        Duration::try_from_secs_f64(value).with_context(|| format!("{flag} must be a number of seconds, 0 or more"))
-    };
-    let mut endpoint = Endpoint::new(&url, &model);
-    endpoint.timeout = seconds(args.llm_timeout, "--llm-timeout")?;
-    endpoint.retry.give_up_after = seconds(args.llm_retry, "--llm-retry")?;
-    endpoint.max_tokens = args.max_tokens;
-    Ok(endpoint)
-}
-
-/// `--agent anthropic-cu`, `openai-cu` and `ui-tars`: each is checked once here, so
-/// an unusable configuration fails before any task starts.
-fn computer_use_agent(args: &RunArgs) -> anyhow::Result<ChosenAgent> {
-    let option = |k: &str, v: String| (k.to_owned(), v);
-    let (factory, space, coords, mut options): (AgentFactory, ActionSpace, String, Vec<(String, String)>) = match args
-        .agent
-    {
-        AgentKind::AnthropicCu => {
-            let mut config = AnthropicConfig::new("", "");
-            config.endpoint = cu_endpoint(args, "anthropic-cu")?;
-            config.tool = match args.computer_tool {
+            },
+            llm_timeout: self.llm_timeout,
+            llm_retry: self.llm_retry,
+            coords: self.coords,
+            computer_tool: match self.computer_tool {
                 ComputerTool::Computer20250124 => ActionSpace::Anthropic20250124,
                 ComputerTool::Computer20251124 => ActionSpace::Anthropic20251124,
-            };
-            config.enable_zoom = args.zoom;
-            config.thinking_budget = args.thinking_budget;
-            config.prompt_caching = !args.no_prompt_cache;
-            config.keep_images = args.keep_images.unwrap_or(config.keep_images);
-            AnthropicAgent::new(config.clone())?;
-            let options = vec![
-                option("keep_images", config.keep_images.to_string()),
-                option("thinking_budget", config.thinking_budget.map_or("off".into(), |b| b.to_string())),
-                option("prompt_caching", if config.prompt_caching { "on" } else { "off" }.into()),
-                option("zoom", if config.enable_zoom { "on" } else { "off" }.into()),
-            ];
-            let space = config.tool;
-            let factory: AgentFactory =
-                Arc::new(move || Ok(Box::new(AnthropicAgent::new(config.clone())?) as Box<dyn Agent>));
-            (factory, space, "image:recommended-size".into(), options)
+            },
+            zoom: self.zoom,
+            thinking_budget: self.thinking_budget,
+            prompt_caching: !self.no_prompt_cache,
+            keep_images: self.keep_images,
+            safety_checks: self.safety_checks,
+            prompt_file: self.prompt_file.clone(),
+            uitars_version: match self.uitars_version {
+                UiTarsVersionArg::V1 => UiTarsVersion::V1,
+                UiTarsVersionArg::V1_5 => UiTarsVersion::V1_5,
+            },
+            agent_cmd: self.external.agent_cmd.clone(),
+            agent_url: self.external.agent_url.clone(),
+            agent_timeout: self.external.agent_timeout,
         }
-        AgentKind::OpenaiCu => {
-            let mut config = OpenAiConfig::new("", "");
-            config.endpoint = cu_endpoint(args, "openai-cu")?;
-            config.safety_checks = args.safety_checks;
-            OpenAiAgent::new(config.clone())?;
-            let options = vec![option("safety_checks", config.safety_checks.name().into())];
-            let factory: AgentFactory =
-                Arc::new(move || Ok(Box::new(OpenAiAgent::new(config.clone())?) as Box<dyn Agent>));
-            let (w, h) = crate::agent::cu::openai::MAX_DISPLAY;
-            (factory, ActionSpace::OpenAi, format!("image:within-{w}x{h}"), options)
-        }
-        _ => {
-            let Some(path) = &args.prompt_file else {
-                bail!("--agent ui-tars needs --prompt-file: the UI-TARS prompt template, as its project publishes it");
-            };
-            let template = UiTarsConfig::read_prompt(path)?;
-            let mut config = UiTarsConfig::new("", "", &template);
-            config.endpoint = cu_endpoint(args, "ui-tars")?;
-            config.version = args.uitars_version;
-            config.history_images = args.keep_images.unwrap_or(config.history_images);
-            UiTarsAgent::new(config.clone())?;
-            let coords = match config.version {
-                UiTarsVersion::V1 => Coords::Grid1000.name(),
-                UiTarsVersion::V1_5 => "image:smart-resize".into(),
-            };
-            let options = vec![
-                option("uitars_version", config.version.name().into()),
-                option("keep_images", config.history_images.to_string()),
-                option("prompt_file", path.display().to_string()),
-            ];
-            let factory: AgentFactory =
-                Arc::new(move || Ok(Box::new(UiTarsAgent::new(config.clone())?) as Box<dyn Agent>));
-            (factory, ActionSpace::UiTars, coords, options)
-        }
-    };
-    let model = args.model.clone().unwrap_or_default();
-    options.push(option("action_space", space.name().into()));
-    options.push(option("coords", coords));
-    Ok(ChosenAgent { factory, label: space.name().into(), model, options })
+    }
 }
 
 /// `arena run`.
@@ -720,13 +581,13 @@ pub async fn run(conn: &Connection, args: RunArgs) -> anyhow::Result<ExitCode> {
         Some(preset) => preset.apply(&args)?,
         None => args,
     };
-    let tasks = load_tasks(&args.tasks, args.difficulty)?;
+    let tasks = load_tasks(&args.tasks, args.difficulty.into())?;
     let (chosen, mcp) = if args.agent == AgentKind::Mcp {
-        let (built, endpoint) = super::external::mcp(&args.external, args.max_steps, &args.out).await?;
-        let model = args.model.clone().unwrap_or_else(|| "external".to_owned());
-        (ChosenAgent { factory: built.factory, label: built.label, model, options: built.options }, Some(endpoint))
+        let (chosen, endpoint) =
+            super::external::mcp(&args.external, args.max_steps, &args.out, args.model.clone()).await?;
+        (chosen, Some(endpoint))
     } else {
-        (agent_factory(&args)?, None)
+        (factory::build(&args.agent_options())?, None)
     };
     let ChosenAgent { factory: agents, label: agent_label, model, options: mut agent_options } = chosen;
     // Every run records who played, in which action space and coordinates.
@@ -816,10 +677,14 @@ pub async fn run(conn: &Connection, args: RunArgs) -> anyhow::Result<ExitCode> {
     }
     if let Some(fleet) = &fleet {
         config.options.insert("vm_reset".into(), args.reset.to_string());
-        config.screen_source = Some(Arc::clone(fleet) as Arc<dyn crate::episode::ScreenSource>);
+        config.screen_source = Some(Arc::clone(fleet) as Arc<dyn crate::ports::observe::ScreenSource>);
     }
     if run_coords {
         config.exec.coords = args.coords;
+    }
+    if args.pyautogui_effects {
+        config.exec.pyautogui_effects = true;
+        config.options.insert("pyautogui_effects".into(), "on".into());
     }
     if args.held_keys == HeldKeysArg::Action {
         config.exec.release_held_keys = true;
@@ -851,23 +716,7 @@ pub async fn run(conn: &Connection, args: RunArgs) -> anyhow::Result<ExitCode> {
     let watcher = tokio::spawn(watch_interrupts(stop.clone()));
     let runner = EpisodeRunner { layout, config, agents };
     let outcome = match mcp {
-        Some(endpoint) => {
-            let served = CancellationToken::new();
-            let server = tokio::spawn(crate::mcp::server::serve(
-                endpoint.listener,
-                Arc::clone(&endpoint.hub),
-                endpoint.token.clone(),
-                served.clone(),
-            ));
-            let runner = crate::mcp::McpRunner { inner: runner, hub: Arc::clone(&endpoint.hub) };
-            let outcome = run_tasks(tasks, guests, Arc::new(runner), &options).await;
-            // Sessions waiting for a task are told there is none, then the server stops.
-            endpoint.hub.close();
-            tokio::time::sleep(Duration::from_millis(200)).await;
-            served.cancel();
-            let _ = server.await;
-            outcome
-        }
+        Some(endpoint) => super::external::run_with_mcp(endpoint, tasks, guests, runner, &options).await,
         None => run_tasks(tasks, guests, Arc::new(runner), &options).await,
     };
     watcher.abort();

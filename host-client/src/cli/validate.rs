@@ -13,8 +13,9 @@ use std::process::ExitCode;
 use clap::Args;
 use serde::Serialize;
 
-use crate::eval::{getter_supported, metric_supported};
-use crate::task::{load_dir, names, read_index, Difficulty, Task, TaskError};
+use super::runs::DifficultyArg;
+use arena_eval::{getter_supported, metric_supported};
+use arena_task::{load_dir, names, read_index, Difficulty, Task, TaskError};
 
 /// Arguments of `arena validate`.
 #[derive(Debug, Clone, Args)]
@@ -27,8 +28,8 @@ pub struct ValidateArgs {
     #[arg(long, value_name = "FILE")]
     pub index: Option<PathBuf>,
     /// Which variant of the tasks an index resolves to.
-    #[arg(long, value_enum, default_value_t = Difficulty::Normal, requires = "index")]
-    pub difficulty: Difficulty,
+    #[arg(long, value_enum, default_value_t = DifficultyArg::Normal, requires = "index")]
+    pub difficulty: DifficultyArg,
     /// Print the report as JSON.
     #[arg(long)]
     pub json: bool,
@@ -193,7 +194,8 @@ pub fn load(args: &ValidateArgs) -> anyhow::Result<(Vec<Task>, Vec<TaskError>)> 
     let (mut tasks, mut errors) = (Vec::new(), Vec::new());
     for (domain, ids) in entries {
         for id in ids {
-            let path = args.folder.join(args.difficulty.folder()).join(&domain).join(format!("{id}.json"));
+            let path =
+                args.folder.join(Difficulty::from(args.difficulty).folder()).join(&domain).join(format!("{id}.json"));
             match Task::load(&path) {
                 Ok(task) => tasks.push(task),
                 Err(err) => errors.push(err),
@@ -243,7 +245,7 @@ mod tests {
         ValidateArgs {
             folder: folder.to_owned(),
             index: None,
-            difficulty: Difficulty::Normal,
+            difficulty: DifficultyArg::Normal,
             json: false,
             strict: false,
         }
@@ -277,7 +279,7 @@ mod tests {
     #[test]
     fn an_index_selects_tasks_of_one_difficulty() {
         let Some(root) = corpus("validate::an_index_selects_tasks_of_one_difficulty") else { return };
-        for difficulty in [Difficulty::Normal, Difficulty::Hard] {
+        for difficulty in [DifficultyArg::Normal, DifficultyArg::Hard] {
             let a = ValidateArgs { index: Some("test_small.json".into()), difficulty, ..args(&root) };
             let (tasks, errors) = load(&a).unwrap();
             assert!(errors.is_empty(), "{errors:?}");
@@ -285,7 +287,9 @@ mod tests {
                 read_index(&root.join("test_small.json")).unwrap().iter().map(|(_, ids)| ids.len()).sum();
             assert_eq!(tasks.len(), expected);
             assert!(
-                tasks.iter().all(|t| t.path.components().any(|c| c.as_os_str() == difficulty.folder())),
+                tasks
+                    .iter()
+                    .all(|t| t.path.components().any(|c| c.as_os_str() == Difficulty::from(difficulty).folder())),
                 "{difficulty:?}"
             );
         }
@@ -354,7 +358,7 @@ mod tests {
         let crate::cli::Command::Validate(a) = cli.command else { panic!("not validate") };
         assert_eq!(
             (a.folder, a.index, a.difficulty, a.json, a.strict),
-            ("tasks".into(), Some("test_all.json".into()), Difficulty::Hard, true, false)
+            ("tasks".into(), Some("test_all.json".into()), DifficultyArg::Hard, true, false)
         );
         assert!(crate::cli::Cli::try_parse_from(["arena", "validate", "tasks", "--difficulty", "hard"]).is_err());
     }

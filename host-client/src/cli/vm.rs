@@ -507,7 +507,7 @@ async fn prepare_command(conn: &Connection, args: PrepareArgs) -> anyhow::Result
 
 /// The token `arena prep stage` put in the OEM folder, for waiting on the guest it installs.
 fn read_oem_token(oem: &Path) -> Option<String> {
-    let text = std::fs::read_to_string(oem.join(crate::prep::TOKEN_NAME)).ok()?;
+    let text = std::fs::read_to_string(oem.join(crate::oem::TOKEN_NAME)).ok()?;
     arena_shared::token::parse(&text).ok()
 }
 

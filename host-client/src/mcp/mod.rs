@@ -25,11 +25,12 @@ use std::time::Duration;
 use serde_json::{json, Value};
 use tokio::sync::{mpsc, oneshot, Notify};
 
-use crate::agent::{Agent, AgentAction, AgentError, LogValue, Observation, Prediction, StepLog};
-use crate::client::GuestClient;
-use crate::episode::EpisodeResult;
+use crate::agent::{Agent, AgentError, LogValue, Prediction, StepLog};
+use crate::ports::{AgentAction, Observation};
+use crate::results::EpisodeResult;
 use crate::run::pool::TaskRunner;
-use crate::task::Task;
+use arena_client::client::GuestClient;
+use arena_task::Task;
 
 /// What the session is told when its action tool call has been carried out.
 #[derive(Debug, Clone)]
@@ -293,7 +294,7 @@ impl<R: TaskRunner> TaskRunner for McpRunner<R> {
         guest: &GuestClient,
         task: &Task,
         attempt: u32,
-        vm: Option<crate::vm::VmStart>,
+        vm: Option<crate::results::VmStart>,
     ) -> EpisodeResult {
         let result = self.inner.run(guest, task, attempt, vm).await;
         self.hub.publish(&task.name, &result);
@@ -302,13 +303,18 @@ impl<R: TaskRunner> TaskRunner for McpRunner<R> {
 }
 
 /// What an action tool call does in an episode: input as a typed action, code
-/// as Navi's `computer` code when it names the `computer` object, else as pyautogui code.
+/// as Navi's `computer` code when it uses the `computer` object, else as pyautogui
+/// code (the one rule, `arena_script::dialect_of`, which Navi's replies and the
+/// guest's MCP server follow too).
 pub fn agent_action(call: arena_shared::mcp_tools::ToolCall) -> Option<AgentAction> {
+    use arena_script::{dialect_of, Dialect};
     use arena_shared::mcp_tools::ToolCall;
     match call {
         ToolCall::Input(action) => Some(AgentAction::Typed(vec![action])),
-        ToolCall::RunPython(code) if code.contains("computer.") => Some(AgentAction::Computer(code)),
-        ToolCall::RunPython(code) => Some(AgentAction::Pyautogui(code)),
+        ToolCall::RunPython(code) => Some(match dialect_of(&code) {
+            Dialect::Computer => AgentAction::Computer(code),
+            Dialect::Pyautogui => AgentAction::Pyautogui(code),
+        }),
         ToolCall::Done => Some(AgentAction::Done),
         ToolCall::Fail => Some(AgentAction::Fail),
         _ => None,

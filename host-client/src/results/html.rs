@@ -274,7 +274,7 @@ fn step_html(rel: &str, step: &StepRecord) -> String {
         } else {
             escape(&format!(" · {} retries; {}", t.predict_retries, t.timeouts.join("; ")))
         },
-        escape(&step.actions.iter().map(crate::agent::AgentAction::summary).collect::<Vec<_>>().join("\n")),
+        escape(&step.actions.iter().map(crate::ports::AgentAction::summary).collect::<Vec<_>>().join("\n")),
         escape(&step.response),
         n = step.step
     );

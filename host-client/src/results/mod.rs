@@ -42,8 +42,8 @@ use arena_shared::calendar::civil_from_days;
 use serde::{Deserialize, Serialize};
 use serde_json::Value;
 
-use crate::agent::AgentAction;
-use crate::task::Task;
+use crate::ports::AgentAction;
+use arena_task::Task;
 
 /// The score file upstream writes and reads.
 pub const RESULT_FILE: &str = "result.txt";
@@ -233,7 +233,7 @@ pub struct StepTimings {
     pub pause_ms: u64,
     /// Each part of the observation the agent was given: screenshot, decode, tree, windows, clipboard, DOM.
     #[serde(default)]
-    pub observe: crate::agent::ObserveTimings,
+    pub observe: crate::ports::ObserveTimings,
     /// The agent's own parts: Set-of-Marks, the model call and its tries.
     #[serde(default)]
     pub predict: crate::agent::PredictTimings,
@@ -394,10 +394,10 @@ pub struct EpisodeResult {
     /// Seconds since the Unix epoch when the episode started.
     #[serde(default)]
     pub started_unix: u64,
-    /// Reports of the setup steps (config and postconfig), as [`crate::setup`] gives them.
+    /// Reports of the setup steps (config and postconfig), as [`arena_setup`] gives them.
     #[serde(default)]
     pub setup: Vec<Value>,
-    /// The evaluation outcome, as [`crate::eval`] gives it (`null` when it did not run).
+    /// The evaluation outcome, as [`arena_eval`] gives it (`null` when it did not run).
     #[serde(default)]
     pub eval: Value,
     /// The per-step timings, in step order (a copy of what `traj.jsonl` holds).
@@ -453,7 +453,7 @@ fn one() -> u32 {
 impl EpisodeResult {
     /// The one way a record starts: `task` on `guest`, try `attempt`, with
     /// `status`, no score, no steps and nothing run yet. The episode fills in the rest.
-    pub fn start(task: &crate::task::Task, guest: &str, attempt: u32, status: EpisodeStatus) -> EpisodeResult {
+    pub fn start(task: &arena_task::Task, guest: &str, attempt: u32, status: EpisodeStatus) -> EpisodeResult {
         EpisodeResult {
             task_id: task.id.clone(),
             task_name: task.name.clone(),
@@ -535,8 +535,6 @@ pub struct RunLayout {
     pub trial: String,
 }
 
-/// Upstream's default `--action_space`, the first folder level of its results.
-pub const DEFAULT_ACTION_SPACE_LABEL: &str = "pyautogui";
 /// Upstream's default `--trial_id`.
 pub const DEFAULT_TRIAL_ID: &str = "0";
 

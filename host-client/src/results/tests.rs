@@ -52,7 +52,7 @@ fn step(n: u32) -> StepRecord {
         },
         step: n,
         response: "<b>ok</b>".into(),
-        actions: vec![crate::agent::AgentAction::Done],
+        actions: vec![crate::ports::AgentAction::Done],
         ended: true,
         screenshot_source: None,
         screenshot_file: TaskDir::screenshot_name(None, &timestamp),

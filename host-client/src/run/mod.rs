@@ -27,11 +27,11 @@ pub mod shard;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
-use crate::client::GuestClient;
 use crate::results::html::write_report;
 use crate::results::summary::Summary;
 use crate::results::{ResultsError, RunLayout};
-use crate::task::{Difficulty, Task, TaskError};
+use arena_client::client::GuestClient;
+use arena_task::{Difficulty, Task, TaskError};
 
 use self::pool::{run_pool, PoolConfig, PoolEvent, PoolReport, TaskRunner};
 use self::shard::Shard;
@@ -71,14 +71,14 @@ pub fn load_tasks(spec: &Path, difficulty: Difficulty) -> Result<Vec<Task>, Load
         // A corpus root (holding `examples/`) is read in the chosen difficulty.
         let examples = spec.join(difficulty.folder());
         let dir = if examples.is_dir() { examples } else { spec.to_owned() };
-        let (tasks, errors) = crate::task::load_dir(&dir);
+        let (tasks, errors) = arena_task::load_dir(&dir);
         if !errors.is_empty() {
             return Err(LoadError::Tasks(errors));
         }
         tasks
     } else {
         let root = spec.parent().unwrap_or(Path::new("."));
-        crate::task::load_index(root, spec, difficulty).map_err(|err| LoadError::Tasks(vec![err]))?
+        arena_task::load_index(root, spec, difficulty).map_err(|err| LoadError::Tasks(vec![err]))?
     };
     if tasks.is_empty() {
         return Err(LoadError::Empty { path: spec.to_owned() });

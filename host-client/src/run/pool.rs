@@ -19,10 +19,10 @@ use std::time::{Duration, Instant};
 use tokio::task::JoinSet;
 use tokio_util::sync::CancellationToken;
 
-use crate::client::GuestClient;
 use crate::results::VmStart;
 use crate::results::{EpisodeResult, EpisodeStatus};
-use crate::task::Task;
+use arena_client::client::GuestClient;
+use arena_task::Task;
 
 /// Runs one task on one guest. Implemented by the episode runner; tests use fakes.
 #[async_trait::async_trait]

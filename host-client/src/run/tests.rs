@@ -6,9 +6,9 @@ use std::time::Duration;
 
 use super::pool::*;
 use super::*;
-use crate::client::ClientConfig;
 use crate::results::tests::{episode, layout, write_task};
 use crate::results::{EpisodeResult, EpisodeStatus};
+use arena_client::client::ClientConfig;
 
 fn task(domain: &str, name: &str) -> Task {
     let text = r#"{"id": "x", "instruction": "i", "config": [], "evaluator": {"func": "infeasible"}}"#;

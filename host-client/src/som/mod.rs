@@ -317,7 +317,7 @@ pub struct SomInput<'a> {
     /// The accessibility tree, when it could be read.
     pub tree: Option<&'a A11yTree>,
     /// The full-screen screenshot, decoded once by the observation.
-    pub screenshot: &'a crate::agent::Frame,
+    pub screenshot: &'a arena_client::frame::Frame,
     /// The screen's size in the tree's pixels: the space of the marks.
     pub size: (u32, u32),
     /// The browser's DOM elements for `oss` and `mixed-oss`, in screen pixels
@@ -426,7 +426,7 @@ struct Screenshot {
 }
 
 impl Screenshot {
-    fn read(frame: &crate::agent::Frame, screen: (u32, u32)) -> Screenshot {
+    fn read(frame: &arena_client::frame::Frame, screen: (u32, u32)) -> Screenshot {
         Screenshot { dims: frame.size(), screen }
     }
 

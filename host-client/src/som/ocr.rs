@@ -86,14 +86,17 @@ pub async fn recognise(
     screenshot: &image::RgbaImage,
     timeout: Duration,
 ) -> Result<Vec<ProposedEntity>, SomError> {
-    // Upstream's ScreenParser converts the screenshot to RGB before OCR.
-    let rgb = image::DynamicImage::ImageRgba8(screenshot.clone()).to_rgb8();
+    // Upstream's ScreenParser converts the screenshot to RGB before OCR: the colours
+    // are kept and the image made opaque, then encoded by the host's one PNG encoder.
+    let mut opaque = screenshot.clone();
+    opaque.pixels_mut().for_each(|px| px.0[3] = 255);
+    let png = arena_client::frame::encode_png(&opaque);
     let file = tempfile::Builder::new()
         .prefix("arena-ocr-")
         .suffix(".png")
         .tempfile()
         .map_err(|e| SomError::Ocr(format!("cannot create the image file for Tesseract: {e}")))?;
-    rgb.save_with_format(file.path(), image::ImageFormat::Png)
+    std::fs::write(file.path(), &png)
         .map_err(|e| SomError::Ocr(format!("cannot write the image file for Tesseract: {e}")))?;
     let child = tokio::process::Command::new(program)
         .args(command_args(file.path()))

@@ -45,8 +45,8 @@ fn blank(w: u32, h: u32) -> RgbaImage {
 }
 
 /// A screenshot as an observation carries it.
-fn frame(w: u32, h: u32) -> crate::agent::Frame {
-    crate::agent::Frame::from_pixels(blank(w, h))
+fn frame(w: u32, h: u32) -> arena_client::frame::Frame {
+    arena_client::frame::Frame::from_pixels(blank(w, h))
 }
 
 /// A listed mark as the mixed-mode tests compare it: id, type, text, colour.

@@ -10,9 +10,10 @@ use std::time::Instant;
 use arena_shared::observation::ScreenshotQuery;
 use tokio::sync::Mutex;
 
-use super::{Boot, Vm, VmConfig, VmError, VmStart, READY_SNAPSHOT};
-use crate::client::GuestClient;
+use super::{Boot, Vm, VmConfig, VmError, READY_SNAPSHOT};
+use crate::results::VmStart;
 use crate::run::pool::GuestLifecycle;
+use arena_client::client::GuestClient;
 
 /// When a VM goes back to its `ready` snapshot.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -281,7 +282,7 @@ impl GuestLifecycle for VmFleet {
 }
 
 #[async_trait::async_trait]
-impl crate::episode::ScreenSource for VmFleet {
+impl crate::ports::observe::ScreenSource for VmFleet {
     async fn screendump(&self, guest: &str) -> Option<Vec<u8>> {
         let slot = self.slots.iter().find(|s| s.url == guest)?;
         let state = slot.state.lock().await;

@@ -32,8 +32,8 @@ use std::time::Duration;
 
 use arena_shared::health::HealthReport;
 
-use crate::client::{ClientConfig, GuestClient};
-use crate::prep::{wait_healthy, PrepError, WaitEvent};
+use crate::oem::{wait_healthy, PrepError, WaitEvent};
+use arena_client::client::{ClientConfig, GuestClient};
 use disk::{ImageInfo, QemuImg};
 use qemu::{Accel, DiskBus, Firmware, FolderDrive, NicModel, VmSpec};
 use qmp::Qmp;
@@ -315,8 +315,6 @@ pub fn claim_dir(dir: &Path) -> Result<(), VmError> {
     std::fs::write(&marker, b"a VM folder of arena (arena vm start, arena run --vm-dir, arena vm prepare)\n")
         .map_err(|source| VmError::Io { what: format!("writing {}", marker.display()), source })
 }
-
-pub use crate::results::VmStart;
 
 /// One running QEMU process.
 #[derive(Debug)]

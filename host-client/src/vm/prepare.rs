@@ -871,7 +871,7 @@ async fn follow(
                     None => std::future::pending().await,
                 }
             } => {
-                let result: Result<arena_shared::health::HealthReport, crate::prep::PrepError> = result;
+                let result: Result<arena_shared::health::HealthReport, crate::oem::PrepError> = result;
                 *state.seconds.entry(state.stage.name().to_owned()).or_default() += stage_since.elapsed().as_secs_f64();
                 return match result {
                     Ok(report) => {
@@ -926,7 +926,7 @@ async fn follow(
                             }
                             if stage == Stage::OemDone && health.is_none() {
                                 let limit = Stage::OemDone.deadline(&options.timeouts);
-                                health = Some(Box::pin(crate::prep::wait_healthy(&client, limit, Duration::from_millis(500), |_| {})));
+                                health = Some(Box::pin(crate::oem::wait_healthy(&client, limit, Duration::from_millis(500), |_| {})));
                             }
                         }
                         StageEvent::Failed(why) => {

@@ -31,6 +31,7 @@
 //! - `pyautogui`: the pyautogui 0.9.54 module mapped to [`Action`]s.
 //! - `stdlib`: `time`, `os`, `os.path` ([`arena_shared::ntpath`]), `subprocess`, `platform`, `sys`, `PIL`, `pyperclip`.
 //! - `computer`: the Navi `Computer` object over [`ComputerState`]; `difflib` for its fuzzy window match.
+//! - `dialect`: [`dialect_of`], whether agent code is Navi's `computer` code or pyautogui code.
 //! - [`host`]: the [`ScriptHost`] trait of primitives (input, capture, windows, files,
 //!   processes, registry, clipboard, environment) and the I/O-free [`RecordingHost`].
 //! - [`compose`]: the behaviours made of primitives ([`Composed`]: the window list,
@@ -58,13 +59,12 @@
 
 #![forbid(unsafe_code)]
 
-use arena_shared::action::Action;
-
 mod args;
 mod argv;
 pub mod ast;
 pub mod compose;
 mod computer;
+mod dialect;
 mod difflib;
 mod error;
 pub mod host;
@@ -81,6 +81,7 @@ mod tests;
 
 pub use argv::{is_python_program, python_code_from_argv, python_code_from_command_line};
 pub use compose::Composed;
+pub use dialect::{dialect_of, Dialect};
 pub use difflib::{get_close_matches, ratio as sequence_ratio};
 pub use error::{ErrorKind, ParseError, ScriptError};
 pub use host::{CommandArg, CommandOutput, HostError, HostResult, PathKind, RecordingHost, ScriptHost, WindowChange};
@@ -99,23 +100,4 @@ pub use value::{float_repr, str_repr};
 pub fn run_source(src: &str, host: &mut dyn ScriptHost, globals: Globals<'_>) -> Result<RunOutput, ScriptError> {
     let program = parse(src)?;
     run(&program, host, globals)
-}
-
-/// Translates pyautogui code into the input actions it performs, without I/O.
-///
-/// The code runs against a [`RecordingHost`] for a screen of `screen` pixels with
-/// the cursor at `cursor`; `pyautogui` and `time` are imported first, as the
-/// upstream host's `import pyautogui; import time; ...` prefix does. Sleeps become
-/// [`Action::Wait`]; anything that is not input (screenshots, files, processes,
-/// the clipboard, windows) fails with a message saying it cannot be translated.
-///
-/// # Errors
-///
-/// [`ScriptError`] for a parse error, an unsupported call or a Python exception.
-pub fn actions_from_pyautogui(code: &str, screen: (u32, u32), cursor: (i32, i32)) -> Result<Vec<Action>, ScriptError> {
-    let program = parse(code)?;
-    let mut host = RecordingHost::new(screen, cursor);
-    let globals = Globals { preimport: &["pyautogui", "time"], ..Globals::python() };
-    run(&program, &mut host, globals)?;
-    Ok(host.actions)
 }

@@ -22,9 +22,12 @@ use std::time::{Duration, Instant};
 
 use anyhow::Context;
 use arena_host::agent::scripted::{PlanSource, ScriptedAgent};
-use arena_host::agent::{execute_with, Agent, AgentAction, ExecOptions};
+use arena_host::agent::Agent;
+use arena_host::agent::AgentFactory;
 use arena_host::client::{ClientConfig, GuestClient};
-use arena_host::episode::{AgentFactory, EpisodeConfig, EpisodeRunner};
+use arena_host::episode::{EpisodeConfig, EpisodeRunner};
+use arena_host::ports::exec::{execute_with, ExecOptions};
+use arena_host::ports::AgentAction;
 use arena_host::results::RunLayout;
 use arena_host::run::pool::PoolConfig;
 use arena_host::run::shard::Shard;
@@ -95,7 +98,7 @@ async fn per_step(url: &str) -> anyhow::Result<()> {
         let t1 = Instant::now();
         let marks = marks_from_tree(&tree, size);
         // Decoded once, as the observation does, then annotated in pixels.
-        let frame = arena_host::agent::Frame::decode(shot.bytes).map_err(anyhow::Error::msg)?;
+        let frame = arena_host::frame::Frame::decode(shot.bytes).map_err(anyhow::Error::msg)?;
         let annotated = annotate(&frame.pixels, &marks);
         anyhow::ensure!(annotated.width() > 0);
         marks_count = marks.entities.len();

@@ -10,9 +10,11 @@ import time
 from arena_agent import Agent, screenshot_bytes
 
 PLANS = {
-    "stub-explorer-fill-file": ("pyautogui", [
+    # pyautogui answers are input only, so starting Notepad on the file is WAA
+    # `computer` code (upstream's /execute_windows runs any Python).
+    "stub-explorer-fill-file": ("computer", [
         ["import subprocess\nsubprocess.Popen(['notepad.exe', r'C:\\Users\\Docker\\Documents\\Projects\\notes.txt'])"],
-        ["pyautogui.write('kickoff on monday')\npyautogui.hotkey('ctrl', 's')"],
+        ["computer.keyboard.write('kickoff on monday')\ncomputer.keyboard.press('ctrl+s')"],
         "DONE",
     ]),
     # As a person would: the Run dialog, the folder, and a click on its OK button,

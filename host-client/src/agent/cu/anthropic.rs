@@ -32,10 +32,11 @@ use serde_json::{json, Value};
 use arena_script::host::cursor_after;
 
 use super::{base64_png, cropped_png, exchange_logs, resized_png, screen_of, Endpoint};
-use crate::actionspace::{self, ActionSpace, Context, Coords, Step};
 use crate::agent::llm::{ApiKind, ModelClient};
-use crate::agent::{Agent, AgentAction, AgentError, Observation, Prediction, StepLog};
-use crate::task::Task;
+use crate::agent::{Agent, AgentError, Prediction, StepLog};
+use crate::ports::{AgentAction, Observation};
+use arena_actionspace::{ActionSpace, Context, Coords, Decision, Step};
+use arena_task::Task;
 
 /// Environment variables the key is read from, in order.
 pub const KEY_VARS: [&str; 2] = ["ARENA_LLM_KEY", "ANTHROPIC_API_KEY"];
@@ -243,8 +244,7 @@ fn keep_last_images(messages: &mut [Value], keep: usize) {
 
 /// The decision of an answer that calls no tool.
 pub(crate) fn final_decision(text: &str) -> AgentAction {
-    let said_fail = text.split(|c: char| !c.is_ascii_alphanumeric()).any(|w| w == "FAIL");
-    if said_fail {
+    if Decision::Fail.said_in(text) {
         AgentAction::Fail
     } else {
         AgentAction::Done
@@ -276,10 +276,10 @@ impl Agent for AnthropicAgent {
     }
 
     async fn predict(&mut self, obs: &Observation) -> Result<Prediction, AgentError> {
-        let (png, screen) = screen_of(obs);
+        let (frame, screen) = screen_of(obs);
         let size = recommended_size(screen);
         let coords = Coords::Image { width: size.0, height: size.1 };
-        let shot = image_block(&resized_png(png, size)?);
+        let shot = image_block(&resized_png(frame, size)?);
 
         let mut messages = self.messages.clone();
         if messages.is_empty() {
@@ -295,7 +295,7 @@ impl Agent for AnthropicAgent {
                         let (x, y) = coords.from_screen(self.cursor.0, self.cursor.1, screen);
                         content.push(text_block(&format!("X={},Y={}", x.round(), y.round())));
                     }
-                    Answer::Zoom(rect) => content.push(image_block(&cropped_png(png, *rect)?)),
+                    Answer::Zoom(rect) => content.push(image_block(&cropped_png(frame, *rect)?)),
                     Answer::Error(why) => {
                         is_error = true;
                         content.push(text_block(why));
@@ -352,8 +352,8 @@ impl Agent for AnthropicAgent {
             let input = block.get("input").cloned().unwrap_or(Value::Null);
             response.push_str(&format!("\n{input}"));
             let parsed = match block.get("name").and_then(Value::as_str) {
-                Some("computer") => actionspace::parse(self.config.tool, &input, &ctx),
-                other => Err(actionspace::ActionError::new(self.config.tool, format!("unknown tool {other:?}"))),
+                Some("computer") => arena_actionspace::parse(self.config.tool, &input, &ctx),
+                other => Err(arena_actionspace::ActionError::new(self.config.tool, format!("unknown tool {other:?}"))),
             };
             let answer = match parsed {
                 Ok(s) => {
@@ -387,7 +387,7 @@ impl Agent for AnthropicAgent {
                     self.cursor = cursor_after(action, self.cursor);
                 }
             }
-            actionspace::to_agent_actions(&steps)
+            AgentAction::from_steps(&steps)
         };
         self.messages = messages;
         self.pending = pending;

@@ -7,12 +7,15 @@
 //!
 //! All three call their endpoint through [`super::llm::ModelClient`] (backoff,
 //! `Retry-After`; a model that stays down is [`AgentError::Model`], which leaves
-//! the task unfinished), translate answers with [`crate::actionspace`], and keep
+//! the task unfinished), translate answers with [`arena_actionspace`], and keep
 //! each step's request (images left out) and response beside the trajectory as
 //! Navi does. A state change is committed only once an answer is read, so the
 //! episode may ask again after a failed call.
 //!
-//! What they see of an [`Observation`] goes through one adapter, [`screen_of`].
+//! What they see of an [`Observation`] goes through one adapter, [`screen_of`]:
+//! the observation's [`Frame`], whose encoded bytes are sent as they came when
+//! the model takes the screen's size, and whose decoded pixels are resized or
+//! cropped (never decoded again) and encoded by the host's one PNG encoder.
 
 pub mod anthropic;
 pub mod openai;
@@ -23,13 +26,16 @@ use std::time::Duration;
 use base64::Engine as _;
 use serde_json::Value;
 
-use super::llm::{ApiKind, ModelClient, RetryPolicy};
-use super::{AgentError, LogValue, Observation, StepLog};
+use arena_client::frame::{encode_png, Frame};
 
-/// What a computer-use agent takes from an observation: the screenshot as PNG
+use super::llm::{ApiKind, ModelClient, RetryPolicy};
+use super::{AgentError, LogValue, StepLog};
+use crate::ports::Observation;
+
+/// What a computer-use agent takes from an observation: the screenshot's frame
 /// and the screen's size in physical pixels (which typed actions use).
-pub fn screen_of(obs: &Observation) -> (&[u8], (u32, u32)) {
-    (&obs.screenshot.encoded[..], obs.screen_size())
+pub fn screen_of(obs: &Observation) -> (&Frame, (u32, u32)) {
+    (&obs.screenshot, obs.screen_size())
 }
 
 /// How to reach a computer-use model (the options every vendor shares).
@@ -121,46 +127,48 @@ pub(crate) fn fit_within(screen: (u32, u32), bound: (u32, u32)) -> (u32, u32) {
     scaled_size(screen, (f64::from(bound.0) / w).min(f64::from(bound.1) / h))
 }
 
-/// `png` resized to `size` (width, height), as PNG; the same bytes when it already is that size.
+/// The screenshot resized to `size` (width, height), as PNG: the bytes as they
+/// came when it already is that size, else its pixels resized and encoded.
 ///
 /// # Errors
 ///
-/// [`AgentError::Config`] when the screenshot cannot be decoded or encoded (a guest fault the agent cannot fix).
-pub(crate) fn resized_png(png: &[u8], size: (u32, u32)) -> Result<Vec<u8>, AgentError> {
-    let bad = |e: String| AgentError::Config(format!("the screenshot: {e}"));
-    let image = image::load_from_memory_with_format(png, image::ImageFormat::Png).map_err(|e| bad(e.to_string()))?;
-    if (image.width(), image.height()) == size {
-        return Ok(png.to_vec());
+/// [`AgentError::Config`] when the pixels cannot be resized or encoded (a guest fault the agent cannot fix).
+pub(crate) fn resized_png(frame: &Frame, size: (u32, u32)) -> Result<Vec<u8>, AgentError> {
+    if frame.size() == size {
+        return Ok(frame.encoded.to_vec());
     }
-    let rgba = image.to_rgba8();
-    let scaled = arena_shared::fastimg::resize_rgba(&rgba, size.0, size.1, arena_shared::fastimg::Filter::Bilinear)
-        .map_err(|e| bad(e.to_string()))?;
-    encode_png(&scaled).map_err(bad)
+    let bad = |e: String| AgentError::Config(format!("the screenshot: {e}"));
+    let scaled =
+        arena_shared::fastimg::resize_rgba(&frame.pixels, size.0, size.1, arena_shared::fastimg::Filter::Bilinear)
+            .map_err(|e| bad(e.to_string()))?;
+    png(&scaled).map_err(bad)
 }
 
-/// The region `[x1, y1, x2, y2]` of `png`, as PNG (black where it leaves the image).
+/// The region `[x1, y1, x2, y2]` of the screenshot's pixels, as PNG (black where it leaves the image).
 ///
 /// # Errors
 ///
-/// [`AgentError::Config`] when the screenshot cannot be decoded or the crop is too large.
-pub(crate) fn cropped_png(png: &[u8], rect: [i32; 4]) -> Result<Vec<u8>, AgentError> {
+/// [`AgentError::Config`] when the crop is too large or cannot be encoded.
+pub(crate) fn cropped_png(frame: &Frame, rect: [i32; 4]) -> Result<Vec<u8>, AgentError> {
     let bad = |e: String| AgentError::Config(format!("the screenshot: {e}"));
-    let image = image::load_from_memory_with_format(png, image::ImageFormat::Png).map_err(|e| bad(e.to_string()))?;
     let crop = arena_shared::imaging::crop_padded(
-        &image.to_rgba8(),
+        &frame.pixels,
         i64::from(rect[0]),
         i64::from(rect[1]),
         i64::from(rect[2]),
         i64::from(rect[3]),
     )
     .map_err(|e| bad(e.to_string()))?;
-    encode_png(&crop).map_err(bad)
+    png(&crop).map_err(bad)
 }
 
-fn encode_png(image: &image::RgbaImage) -> Result<Vec<u8>, String> {
-    let mut out = std::io::Cursor::new(Vec::new());
-    image.write_to(&mut out, image::ImageFormat::Png).map_err(|e| e.to_string())?;
-    Ok(out.into_inner())
+/// Pixels as PNG through the host's one encoder.
+fn png(pixels: &image::RgbaImage) -> Result<Vec<u8>, String> {
+    let png = encode_png(pixels);
+    if png.is_empty() {
+        return Err(format!("a {}x{} image cannot be encoded", pixels.width(), pixels.height()));
+    }
+    Ok(png)
 }
 
 /// `value` with every embedded image (base64 `data` of an image source, `data:`
@@ -212,7 +220,7 @@ pub(crate) fn translated(
         raw_error,
         logs,
         timings: Default::default(),
-        coords: Some(crate::actionspace::Coords::Pixels),
+        coords: Some(arena_actionspace::Coords::Pixels),
     }
 }
 

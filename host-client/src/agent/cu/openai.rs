@@ -27,10 +27,11 @@ use serde_json::{json, Value};
 
 use super::anthropic::ending;
 use super::{base64_png, exchange_logs, resized_png, screen_of, Endpoint};
-use crate::actionspace::{self, ActionSpace, Context, Coords, Step};
 use crate::agent::llm::{ApiKind, ModelClient};
-use crate::agent::{Agent, AgentAction, AgentError, Observation, Prediction};
-use crate::task::Task;
+use crate::agent::{Agent, AgentError, Prediction};
+use crate::ports::{AgentAction, Observation};
+use arena_actionspace::{ActionSpace, Context, Coords, Step};
+use arena_task::Task;
 
 /// Environment variables the key is read from, in order.
 pub const KEY_VARS: [&str; 2] = ["ARENA_LLM_KEY", "OPENAI_API_KEY"];
@@ -128,9 +129,9 @@ impl Agent for OpenAiAgent {
     }
 
     async fn predict(&mut self, obs: &Observation) -> Result<Prediction, AgentError> {
-        let (png, screen) = screen_of(obs);
+        let (frame, screen) = screen_of(obs);
         let size = display_size(screen);
-        let image_url = format!("data:image/png;base64,{}", base64_png(&resized_png(png, size)?));
+        let image_url = format!("data:image/png;base64,{}", base64_png(&resized_png(frame, size)?));
         let input = match (&self.previous_response_id, &self.pending) {
             (Some(_), Some(call)) => json!([{
                 "type": "computer_call_output",
@@ -215,11 +216,9 @@ impl Agent for OpenAiAgent {
         }
         // The model's pixels are the declared display's: scaled back to the screen's.
         let ctx = Context { screen, cursor: (0, 0), coords: Coords::Image { width: size.0, height: size.1 } };
-        let (actions, raw_error) = match actionspace::parse(ActionSpace::OpenAi, &action, &ctx) {
+        let (actions, raw_error) = match arena_actionspace::parse(ActionSpace::OpenAi, &action, &ctx) {
             Ok(steps) => (
-                actionspace::to_agent_actions(
-                    &steps.into_iter().filter(|s| *s != Step::Screenshot).collect::<Vec<_>>(),
-                ),
+                AgentAction::from_steps(&steps.into_iter().filter(|s| *s != Step::Screenshot).collect::<Vec<_>>()),
                 None,
             ),
             Err(err) => (Vec::new(), Some(err.to_string())),

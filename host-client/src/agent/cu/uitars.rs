@@ -8,18 +8,19 @@
 //!   first user message, then for each earlier step its screenshot (only the last
 //!   `history_images` screenshots, the current one included, are sent) and the
 //!   model's reply, then the current screenshot.
-//! - **Replies** are read by [`crate::actionspace::uitars`] with the coordinate
+//! - **Replies** are read by [`arena_actionspace::uitars`] with the coordinate
 //!   convention of the configured [`UiTarsVersion`] for the screenshot sent
 //!   (the screen's own size).
 
 use serde_json::{json, Value};
 
 use super::{base64_png, exchange_logs, screen_of, Endpoint};
-use crate::actionspace::uitars::{self as grammar, UiTarsVersion};
-use crate::actionspace::{self, Context};
 use crate::agent::llm::{ApiKind, ModelClient};
-use crate::agent::{Agent, AgentError, Observation, Prediction};
-use crate::task::Task;
+use crate::agent::{Agent, AgentError, Prediction};
+use crate::ports::{AgentAction, Observation};
+use arena_actionspace::uitars::UiTarsVersion;
+use arena_actionspace::{ActionSpace, Context};
+use arena_task::Task;
 
 /// Environment variables the key is read from, in order (vLLM takes any key, or none).
 pub const KEY_VARS: [&str; 2] = ["ARENA_LLM_KEY", "OPENAI_API_KEY"];
@@ -134,16 +135,17 @@ impl Agent for UiTarsAgent {
     }
 
     async fn predict(&mut self, obs: &Observation) -> Result<Prediction, AgentError> {
-        let (png, screen) = screen_of(obs);
-        let image_url = format!("data:image/png;base64,{}", base64_png(png));
+        let (frame, screen) = screen_of(obs);
+        let image_url = format!("data:image/png;base64,{}", base64_png(&frame.encoded));
         let body = self.body(&obs.instruction, &image_url);
         let reply = self.client.complete(&body).await?;
         let logs = exchange_logs(&body, &json!({"content": reply}));
         let ctx = Context::new(screen, self.config.version.coords(screen));
-        let (actions, raw_error) = match grammar::parse(&reply, &ctx) {
-            Ok(parsed) => (actionspace::to_agent_actions(&parsed.steps), None),
-            Err(err) => (Vec::new(), Some(err.to_string())),
-        };
+        let (actions, raw_error) =
+            match arena_actionspace::parse(ActionSpace::UiTars, &Value::String(reply.clone()), &ctx) {
+                Ok(steps) => (AgentAction::from_steps(&steps), None),
+                Err(err) => (Vec::new(), Some(err.to_string())),
+            };
         self.history.push(Turn { image_url, reply: reply.clone() });
         Ok(super::translated(reply, actions, raw_error, logs))
     }

@@ -10,8 +10,9 @@
 //! ends as an agent error; the process is replaced before the next episode.
 //!
 //! It is not the MCP endpoint (the agent drives there: `crate::mcp`), nor the
-//! action spaces themselves: code runs through [`crate::agent::exec`] and
-//! `computer_13` goes through [`spaces`].
+//! action spaces themselves: code runs through the action port
+//! (`crate::ports::exec`), and `computer_13` and typed actions go through
+//! `arena_actionspace::parse` ([`spaces`]).
 //!
 //! # Layout
 //!
@@ -30,12 +31,13 @@ use std::time::Duration;
 
 use serde_json::{json, Value};
 
-use crate::actionspace::Coords;
-use crate::agent::{Agent, AgentAction, AgentError, LogValue, Observation, Prediction, StepLog};
+use crate::agent::{Agent, AgentError, LogValue, Prediction, StepLog};
+use crate::ports::{AgentAction, Observation};
 use crate::som::Marks;
-use crate::task::Task;
+use arena_actionspace::Coords;
+use arena_task::Task;
 
-use protocol::{AgentHello, AgentMessage, Decision, PROTOCOL_VERSION};
+use protocol::{AgentHello, AgentMessage, PROTOCOL_VERSION};
 
 /// One exchange with an outside agent: a message out, one answer back.
 #[async_trait::async_trait]
@@ -302,7 +304,7 @@ impl Agent for ExternalAgent {
 /// An `act` answer as the episode's [`Prediction`]: actions in order, then the
 /// decision; each `record` field becomes a field of the step's trajectory line.
 /// `coords` is the convention of the answer's `computer_13` actions (translated
-/// here) and of its pyautogui code (rescaled where code runs, `crate::agent::exec`).
+/// here) and of its pyautogui code (translated where code runs, `crate::ports::exec`).
 ///
 /// # Errors
 ///
@@ -316,12 +318,7 @@ pub fn prediction(
 ) -> Result<Prediction, String> {
     let space = act.action_space.as_deref().unwrap_or(default_space);
     let mut actions = spaces::to_actions(space, &act.actions, screen, coords)?;
-    match act.decision {
-        Some(Decision::Done) => actions.push(AgentAction::Done),
-        Some(Decision::Fail) => actions.push(AgentAction::Fail),
-        Some(Decision::Wait) => actions.push(AgentAction::Wait),
-        None => {}
-    }
+    actions.extend(act.decision.map(AgentAction::from));
     let marks = match act.computer_update {
         Some(update) => Some(Marks { entities: Vec::new(), rects: update.screen_rects(), size: screen }),
         None => marks,

@@ -7,9 +7,9 @@ use std::path::Path;
 use base64::Engine as _;
 use serde_json::{json, Map, Value};
 
-use crate::agent::Observation;
+use crate::ports::Observation;
 use crate::som::Marks;
-use crate::task::Task;
+use arena_task::Task;
 
 use super::protocol::{AgentHello, ScreenshotMode, TreeMode};
 

@@ -7,6 +7,7 @@
 //! `ready`, `observe` → `act`. An agent may answer any message with `error`,
 //! which ends the episode as an agent error.
 
+use arena_actionspace::Decision;
 use serde::{Deserialize, Serialize};
 use serde_json::{Map, Value};
 
@@ -114,17 +115,6 @@ pub enum AgentMessage {
     Ready {},
     Act(Act),
     Error { message: String },
-}
-
-/// `DONE`, `FAIL` or `WAIT`.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
-pub enum Decision {
-    #[serde(rename = "DONE")]
-    Done,
-    #[serde(rename = "FAIL")]
-    Fail,
-    #[serde(rename = "WAIT")]
-    Wait,
 }
 
 /// The agent's answer to `observe`.

@@ -1,25 +1,17 @@
 //! The action spaces an outside agent may answer in, mapped to [`AgentAction`]s:
-//! WAA `computer` code and pyautogui code (run by the host's interpreter, as
-//! Navi's are), `computer_13` JSON actions (OSWorld's), and typed actions
-//! (`arena_shared::action::Action` as JSON). In every space the strings `DONE`,
-//! `FAIL` and `WAIT` are the decisions, as upstream's and OSWorld's agents put
-//! them among their actions.
+//! WAA `computer` code (run by the host's interpreter, as Navi's is), pyautogui
+//! code (translated where it runs by the `pyautogui` action space, as every
+//! pyautogui answer is), and OSWorld's `computer_13` JSON actions and typed
+//! actions (`arena_shared::action::Action` as JSON), both through the one entry
+//! point of the action spaces, `arena_actionspace::parse`. In every space the
+//! strings `DONE`, `FAIL` and `WAIT` are the decisions ([`Decision::parse`]), as
+//! upstream's and OSWorld's agents put them among their actions.
 
 use serde_json::Value;
 
-use arena_shared::action::Action;
+use arena_actionspace::{ActionSpace, Context, Coords, Decision};
 
-use crate::actionspace::{Context, Coords};
-use crate::agent::AgentAction;
-
-/// `computer_13` actions (OSWorld's JSON actions, in `coords`: screen pixels as OSWorld's
-/// are, unless the run or the agent says otherwise) as the episode's actions, through the
-/// action-space parsers of `crate::actionspace`.
-fn computer13(value: &Value, screen: (u32, u32), coords: Coords) -> Result<Vec<AgentAction>, String> {
-    let ctx = Context::new(screen, coords);
-    let steps = crate::actionspace::computer13::parse(value, &ctx).map_err(|err| err.to_string())?;
-    Ok(crate::actionspace::to_agent_actions(&steps))
-}
+use crate::ports::AgentAction;
 
 /// Checks that `space` is one the harness accepts.
 ///
@@ -38,7 +30,7 @@ pub fn check_space(space: &str) -> Result<(), String> {
 }
 
 /// The answer's `actions` in `space`, in order; `computer_13` coordinates are in
-/// `coords` (pyautogui code is rescaled where it runs, `crate::agent::exec`).
+/// `coords` (pyautogui code is translated in them where it runs, `crate::ports::exec`).
 ///
 /// # Errors
 ///
@@ -51,54 +43,39 @@ pub fn to_actions(
     coords: Coords,
 ) -> Result<Vec<AgentAction>, String> {
     check_space(space)?;
+    let ctx = Context::new(screen, coords);
     let mut out = Vec::with_capacity(actions.len());
     for (i, action) in actions.iter().enumerate() {
-        if let Some(word) = action.as_str().and_then(decision) {
-            out.push(word);
+        if let Some(decision) = action.as_str().and_then(Decision::parse) {
+            out.push(decision.into());
             continue;
         }
         let bad = |why: String| format!("actions[{i}] in action space {space}: {why}");
-        let converted = match space {
+        let grammar = match space {
             "computer" | "pyautogui" => {
                 let Some(code) = action.as_str() else {
                     return Err(bad(format!("expected a code string, got {}", super::short(action))));
                 };
-                if space == "computer" {
+                out.push(if space == "computer" {
                     AgentAction::Computer(code.to_owned())
                 } else {
                     AgentAction::Pyautogui(code.to_owned())
-                }
-            }
-            "computer_13" => {
-                out.extend(computer13(action, screen, coords).map_err(bad)?);
+                });
                 continue;
             }
-            _ => {
-                let typed: Action = serde_json::from_value(action.clone()).map_err(|err| bad(err.to_string()))?;
-                if typed == Action::Unknown {
-                    return Err(bad(format!("unknown typed action {}", super::short(action))));
-                }
-                AgentAction::Typed(vec![typed])
-            }
+            "computer_13" => ActionSpace::Computer13,
+            _ => ActionSpace::Typed,
         };
-        out.push(converted);
+        let steps = arena_actionspace::parse(grammar, action, &ctx).map_err(|err| bad(err.to_string()))?;
+        out.extend(AgentAction::from_steps(&steps));
     }
     Ok(out)
-}
-
-/// `DONE`, `FAIL` or `WAIT` as an action.
-fn decision(word: &str) -> Option<AgentAction> {
-    match word.trim() {
-        "DONE" => Some(AgentAction::Done),
-        "FAIL" => Some(AgentAction::Fail),
-        "WAIT" => Some(AgentAction::Wait),
-        _ => None,
-    }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use arena_shared::action::Action;
     use serde_json::json;
 
     #[test]

@@ -64,7 +64,7 @@ async fn serve(script: Vec<Answer>, path: &str) -> (String, Arc<Mock>) {
 struct Pauses(Mutex<Vec<Duration>>);
 
 #[async_trait::async_trait]
-impl crate::setup::Clock for Pauses {
+impl arena_setup::Clock for Pauses {
     async fn sleep(&self, d: Duration, _why: &'static str) {
         self.0.lock().unwrap().push(d);
     }

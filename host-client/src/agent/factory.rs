@@ -1,0 +1,361 @@
+//! A run's agent, built from its options: [`build`] checks an [`AgentOptions`]
+//! once (so an unusable configuration fails before any task starts) and answers
+//! the [`AgentFactory`] that makes a fresh agent per episode, with the result
+//! folders' labels and the agent's named options recorded in the results.
+//!
+//! It builds every agent kind of this layer: scripted, replay, Navi, the
+//! computer-use agents and the outside agents over the step protocol. It is not
+//! the command line (`crate::cli` turns flags into [`AgentOptions`]), and it does
+//! not build the MCP agent, whose endpoint serves HTTP (`crate::mcp`, feature
+//! `mcp-endpoint`).
+
+use std::path::PathBuf;
+use std::sync::Arc;
+use std::time::Duration;
+
+use anyhow::{bail, Context as _};
+
+use arena_actionspace::uitars::UiTarsVersion;
+use arena_actionspace::{ActionSpace, Coords};
+
+use super::cu::anthropic::{AnthropicAgent, AnthropicConfig};
+use super::cu::openai::{OpenAiAgent, OpenAiConfig, SafetyChecks};
+use super::cu::uitars::{UiTarsAgent, UiTarsConfig};
+use super::cu::Endpoint;
+use super::external::transport::{HttpAgent, ProcessPool};
+use super::external::{Connector, ExternalAgent};
+use super::llm::{ApiKind, Refusals};
+use super::navi::{NaviAgent, NaviConfig, NaviStyle};
+use super::replay::{ReplayAgent, ReplaySource};
+use super::scripted::{Plan, PlanSource, ScriptedAgent};
+use super::waa_prompts::WaaPrompts;
+use super::{Agent, AgentFactory};
+use crate::som::SomOrigin;
+
+/// Which agent plays.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum AgentKind {
+    /// Follows plan files (`--plans`), or each task's own `plan` key.
+    Scripted,
+    /// Repeats recorded trajectories (`--replay`).
+    Replay,
+    /// Navi-style prompting of an OpenAI-compatible chat endpoint (`--llm-url`, `--model`).
+    Navi,
+    /// Claude with Anthropic's computer tool over the Messages API (`--llm-url
+    /// https://api.anthropic.com`, `--model`; key from ARENA_LLM_KEY or ANTHROPIC_API_KEY).
+    AnthropicCu,
+    /// OpenAI's computer-use model over the Responses API (`--llm-url https://api.openai.com/v1`,
+    /// `--model computer-use-preview`; key from ARENA_LLM_KEY or OPENAI_API_KEY).
+    OpenaiCu,
+    /// UI-TARS over an OpenAI-compatible chat endpoint such as vLLM (`--llm-url`, `--model`,
+    /// `--prompt-file`).
+    UiTars,
+    /// An agent program speaking the step protocol on its stdin/stdout (`--agent-cmd`).
+    Exec,
+    /// An agent server taking the step protocol as HTTP POSTs (`--agent-url`).
+    Http,
+    /// An MCP client driving each episode through the tools served at `--mcp-listen`
+    /// (feature `mcp-endpoint`).
+    Mcp,
+}
+
+/// Where the behaviour constants a run uses come from, whatever `--waa-root` says:
+/// this project's code, written from upstream at 6d39ed88 (docs/compatibility.md,
+/// "Provenance").
+pub const BEHAVIOUR_CONSTANTS: &str = "arena (compiled in, from upstream 6d39ed88; not read from --waa-root)";
+
+/// Upstream's default `--action_space`, the first folder level of its results,
+/// under which Navi's results are filed.
+pub const DEFAULT_ACTION_SPACE_LABEL: &str = "pyautogui";
+
+/// What a run says about its agent; each field names the `arena run` flag it comes from.
+#[derive(Debug, Clone)]
+pub struct AgentOptions {
+    pub kind: AgentKind,
+    /// `--tasks`: where a scripted run looks for its default `plans` folder.
+    pub tasks: PathBuf,
+    /// `--plans`.
+    pub plans: Option<PathBuf>,
+    /// `--replay`.
+    pub replay: Option<PathBuf>,
+    /// `--llm-url`.
+    pub llm_url: Option<String>,
+    /// `--model`.
+    pub model: Option<String>,
+    /// `--temperature` (Navi).
+    pub temperature: f64,
+    /// `--max-tokens`.
+    pub max_tokens: u32,
+    /// `--navi-style`.
+    pub navi_style: NaviStyle,
+    /// `--som-origin` (Navi).
+    pub som_origin: SomOrigin,
+    /// `--detector-url`.
+    pub detector_url: Option<String>,
+    /// `--omniparser-url`.
+    pub omniparser_url: Option<String>,
+    /// `--waa-root`: upstream's prompt texts.
+    pub waa_root: Option<PathBuf>,
+    /// `--refusals` (Navi).
+    pub refusals: Refusals,
+    /// `--llm-api`: `None` detects Azure by the URL.
+    pub llm_api: Option<ApiKind>,
+    /// `--llm-timeout`, seconds.
+    pub llm_timeout: f64,
+    /// `--llm-retry`, seconds.
+    pub llm_retry: f64,
+    /// `--coords`: the outside agents' convention unless their `hello` names one.
+    pub coords: Coords,
+    /// `--computer-tool`: [`ActionSpace::Anthropic20250124`] or [`ActionSpace::Anthropic20251124`].
+    pub computer_tool: ActionSpace,
+    /// `--zoom`.
+    pub zoom: bool,
+    /// `--thinking-budget`.
+    pub thinking_budget: Option<u32>,
+    /// Not `--no-prompt-cache`.
+    pub prompt_caching: bool,
+    /// `--keep-images`.
+    pub keep_images: Option<usize>,
+    /// `--safety-checks`.
+    pub safety_checks: SafetyChecks,
+    /// `--prompt-file` (UI-TARS).
+    pub prompt_file: Option<PathBuf>,
+    /// `--uitars-version`.
+    pub uitars_version: UiTarsVersion,
+    /// `--agent-cmd`.
+    pub agent_cmd: Option<String>,
+    /// `--agent-url`.
+    pub agent_url: Option<String>,
+    /// `--agent-timeout`, seconds.
+    pub agent_timeout: f64,
+}
+
+/// The agent a run plays with.
+pub struct ChosenAgent {
+    pub factory: AgentFactory,
+    /// The action-space level of the result folders.
+    pub label: String,
+    /// The model level of the result folders.
+    pub model: String,
+    /// The agent's named options, recorded in the results.
+    pub options: Vec<(String, String)>,
+}
+
+impl std::fmt::Debug for ChosenAgent {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("ChosenAgent")
+            .field("label", &self.label)
+            .field("model", &self.model)
+            .field("options", &self.options)
+            .finish_non_exhaustive()
+    }
+}
+
+/// `value` seconds as a duration, naming `flag` when it is not a number of seconds.
+fn seconds(value: f64, flag: &str) -> anyhow::Result<Duration> {
+    Duration::try_from_secs_f64(value).with_context(|| format!("{flag} must be a number of seconds, 0 or more"))
+}
+
+/// The agent `options` choose, checked now.
+///
+/// # Errors
+///
+/// A flag the agent needs is missing or unusable (named), a plan, prompt or
+/// checkout cannot be read, or the agent is [`AgentKind::Mcp`] (set up by `arena run`).
+pub fn build(options: &AgentOptions) -> anyhow::Result<ChosenAgent> {
+    match options.kind {
+        AgentKind::Scripted => scripted(options),
+        AgentKind::Replay => {
+            let Some(path) = options.replay.clone() else { bail!("--agent replay needs --replay FILE_OR_DIR") };
+            let source = if path.is_dir() { ReplaySource::Dir(path) } else { ReplaySource::File(path) };
+            let factory: AgentFactory =
+                Arc::new(move || Ok(Box::new(ReplayAgent::new(source.clone())) as Box<dyn Agent>));
+            Ok(ChosenAgent { factory, label: "replay".into(), model: "replay".into(), options: Vec::new() })
+        }
+        AgentKind::Navi => navi(options),
+        AgentKind::AnthropicCu | AgentKind::OpenaiCu | AgentKind::UiTars => computer_use(options),
+        AgentKind::Exec | AgentKind::Http => external(options),
+        AgentKind::Mcp => bail!("--agent mcp is set up by `arena run` itself"),
+    }
+}
+
+fn scripted(options: &AgentOptions) -> anyhow::Result<ChosenAgent> {
+    let default_dir = if options.tasks.is_dir() {
+        Some(options.tasks.join("plans"))
+    } else {
+        options.tasks.parent().map(|p| p.join("plans"))
+    };
+    let source = match &options.plans {
+        Some(path) if path.is_dir() => PlanSource::Dir(path.clone()),
+        Some(path) => PlanSource::Fixed(Plan::load(path)?),
+        None => match default_dir.filter(|d| d.is_dir()) {
+            Some(dir) => PlanSource::Dir(dir),
+            None => PlanSource::TaskKey,
+        },
+    };
+    let factory: AgentFactory = Arc::new(move || Ok(Box::new(ScriptedAgent::new(source.clone())) as Box<dyn Agent>));
+    Ok(ChosenAgent { factory, label: "scripted".into(), model: "plan".into(), options: Vec::new() })
+}
+
+fn navi(options: &AgentOptions) -> anyhow::Result<ChosenAgent> {
+    let (Some(url), Some(model)) = (options.llm_url.clone(), options.model.clone()) else {
+        bail!("--agent navi needs --llm-url (or ARENA_LLM_URL) and --model (or ARENA_LLM_MODEL)");
+    };
+    let mut config = NaviConfig::new(&url, &model);
+    config.temperature = options.temperature;
+    config.max_tokens = options.max_tokens;
+    config.style = options.navi_style;
+    if let Some(root) = &options.waa_root {
+        let prompts = WaaPrompts::load(root)
+            .with_context(|| format!("reading Navi's prompts from the WAA checkout {}", root.display()))?;
+        config.waa_prompts = Some(Arc::new(prompts));
+    }
+    // Which prompt text runs: upstream's from a checkout (`waa@<commit>`) or ours.
+    let (style, prompt) = match (config.style, &config.waa_prompts) {
+        (NaviStyle::Waa, Some(prompts)) => ("waa", prompts.source.clone()),
+        (NaviStyle::Waa, None) => ("waa", "arena".to_owned()),
+        (NaviStyle::Arena, _) => ("arena", "arena".to_owned()),
+    };
+    config.som.origin = options.som_origin;
+    config.som.detector_url = options.detector_url.clone();
+    config.som.omniparser_url = options.omniparser_url.clone();
+    config.refusals = options.refusals;
+    let recorded = vec![
+        ("navi_style".to_owned(), style.to_owned()),
+        ("som_origin".to_owned(), options.som_origin.name().to_owned()),
+        ("prompt".to_owned(), prompt),
+        // Only the prompt texts follow --waa-root; every behaviour constant
+        // (pauses, step cap, budgets, image sizes, colours) is compiled in.
+        ("behaviour_constants".to_owned(), BEHAVIOUR_CONSTANTS.to_owned()),
+        ("temperature".to_owned(), format!("{}", options.temperature)),
+        ("max_tokens".to_owned(), options.max_tokens.to_string()),
+        ("refusals".to_owned(), config.refusals.name().to_owned()),
+    ];
+    config.api = options.llm_api;
+    config.timeout = seconds(options.llm_timeout, "--llm-timeout")?;
+    config.retry.give_up_after = seconds(options.llm_retry, "--llm-retry")?;
+    // Fail now, not once per task, when the configuration is unusable.
+    NaviAgent::new(config.clone())?;
+    let factory: AgentFactory = Arc::new(move || Ok(Box::new(NaviAgent::new(config.clone())?) as Box<dyn Agent>));
+    // Upstream files Navi's results under its action space.
+    Ok(ChosenAgent { factory, label: DEFAULT_ACTION_SPACE_LABEL.into(), model, options: recorded })
+}
+
+/// The endpoint options the computer-use agents share with Navi's.
+fn cu_endpoint(options: &AgentOptions, name: &str) -> anyhow::Result<Endpoint> {
+    let (Some(url), Some(model)) = (options.llm_url.clone(), options.model.clone()) else {
+        bail!("--agent {name} needs --llm-url (or ARENA_LLM_URL) and --model (or ARENA_LLM_MODEL)");
+    };
+    let mut endpoint = Endpoint::new(&url, &model);
+    endpoint.timeout = seconds(options.llm_timeout, "--llm-timeout")?;
+    endpoint.retry.give_up_after = seconds(options.llm_retry, "--llm-retry")?;
+    endpoint.max_tokens = options.max_tokens;
+    Ok(endpoint)
+}
+
+/// `anthropic-cu`, `openai-cu` and `ui-tars`.
+fn computer_use(options: &AgentOptions) -> anyhow::Result<ChosenAgent> {
+    let option = |k: &str, v: String| (k.to_owned(), v);
+    let (factory, space, coords, mut recorded): (AgentFactory, ActionSpace, String, Vec<(String, String)>) =
+        match options.kind {
+            AgentKind::AnthropicCu => {
+                let mut config = AnthropicConfig::new("", "");
+                config.endpoint = cu_endpoint(options, "anthropic-cu")?;
+                config.tool = options.computer_tool;
+                config.enable_zoom = options.zoom;
+                config.thinking_budget = options.thinking_budget;
+                config.prompt_caching = options.prompt_caching;
+                config.keep_images = options.keep_images.unwrap_or(config.keep_images);
+                AnthropicAgent::new(config.clone())?;
+                let recorded = vec![
+                    option("keep_images", config.keep_images.to_string()),
+                    option("thinking_budget", config.thinking_budget.map_or("off".into(), |b| b.to_string())),
+                    option("prompt_caching", if config.prompt_caching { "on" } else { "off" }.into()),
+                    option("zoom", if config.enable_zoom { "on" } else { "off" }.into()),
+                ];
+                let space = config.tool;
+                let factory: AgentFactory =
+                    Arc::new(move || Ok(Box::new(AnthropicAgent::new(config.clone())?) as Box<dyn Agent>));
+                (factory, space, "image:recommended-size".into(), recorded)
+            }
+            AgentKind::OpenaiCu => {
+                let mut config = OpenAiConfig::new("", "");
+                config.endpoint = cu_endpoint(options, "openai-cu")?;
+                config.safety_checks = options.safety_checks;
+                OpenAiAgent::new(config.clone())?;
+                let recorded = vec![option("safety_checks", config.safety_checks.name().into())];
+                let factory: AgentFactory =
+                    Arc::new(move || Ok(Box::new(OpenAiAgent::new(config.clone())?) as Box<dyn Agent>));
+                let (w, h) = super::cu::openai::MAX_DISPLAY;
+                (factory, ActionSpace::OpenAi, format!("image:within-{w}x{h}"), recorded)
+            }
+            _ => {
+                let Some(path) = &options.prompt_file else {
+                    bail!(
+                        "--agent ui-tars needs --prompt-file: the UI-TARS prompt template, as its project publishes it"
+                    );
+                };
+                let template = UiTarsConfig::read_prompt(path)?;
+                let mut config = UiTarsConfig::new("", "", &template);
+                config.endpoint = cu_endpoint(options, "ui-tars")?;
+                config.version = options.uitars_version;
+                config.history_images = options.keep_images.unwrap_or(config.history_images);
+                UiTarsAgent::new(config.clone())?;
+                let coords = match config.version {
+                    UiTarsVersion::V1 => Coords::Grid1000.name(),
+                    UiTarsVersion::V1_5 => "image:smart-resize".into(),
+                };
+                let recorded = vec![
+                    option("uitars_version", config.version.name().into()),
+                    option("keep_images", config.history_images.to_string()),
+                    option("prompt_file", path.display().to_string()),
+                ];
+                let factory: AgentFactory =
+                    Arc::new(move || Ok(Box::new(UiTarsAgent::new(config.clone())?) as Box<dyn Agent>));
+                (factory, ActionSpace::UiTars, coords, recorded)
+            }
+        };
+    let model = options.model.clone().unwrap_or_default();
+    recorded.push(option("action_space", space.name().into()));
+    recorded.push(option("coords", coords));
+    Ok(ChosenAgent { factory, label: space.name().into(), model, options: recorded })
+}
+
+/// The longest wait for one answer of an outside agent (`--agent-timeout`).
+///
+/// # Errors
+///
+/// Not a number of seconds, or 0.
+pub fn agent_timeout(seconds_given: f64) -> anyhow::Result<Duration> {
+    let timeout = seconds(seconds_given, "--agent-timeout")?;
+    if timeout.is_zero() {
+        bail!("--agent-timeout must be more than 0 seconds");
+    }
+    Ok(timeout)
+}
+
+/// `exec` or `http`: an outside agent over the step protocol.
+fn external(options: &AgentOptions) -> anyhow::Result<ChosenAgent> {
+    let timeout = agent_timeout(options.agent_timeout)?;
+    let http = options.kind == AgentKind::Http;
+    let (connector, label, option): (Arc<dyn Connector>, &str, (String, String)) = if http {
+        let Some(url) = &options.agent_url else { bail!("--agent http needs --agent-url URL (or ARENA_AGENT_URL)") };
+        let agent = HttpAgent::new(url, timeout).map_err(anyhow::Error::msg)?;
+        (Arc::new(agent), "http", ("agent_url".to_owned(), url.clone()))
+    } else {
+        let Some(cmd) = &options.agent_cmd else { bail!("--agent exec needs --agent-cmd \"PROGRAM ARGS\"") };
+        let pool = ProcessPool::new(cmd).map_err(anyhow::Error::msg)?;
+        (Arc::new(pool), "exec", ("agent_cmd".to_owned(), cmd.clone()))
+    };
+    let recorded = vec![
+        option,
+        ("agent_protocol".to_owned(), super::external::protocol::PROTOCOL_VERSION.to_string()),
+        ("agent_timeout".to_owned(), format!("{}", options.agent_timeout)),
+    ];
+    let coords = options.coords;
+    let factory: AgentFactory = Arc::new(move || {
+        Ok(Box::new(ExternalAgent::new(label, Arc::clone(&connector), timeout).with_coords(coords)) as Box<dyn Agent>)
+    });
+    let model = options.model.clone().unwrap_or_else(|| "external".to_owned());
+    Ok(ChosenAgent { factory, label: label.to_owned(), model, options: recorded })
+}
