@@ -2,7 +2,7 @@
 //!
 //! An agent's pyautogui code can run with its effects in two places: on the host, in
 //! the shared interpreter over the guest's `/v1` API (what `arena run
-//! --pyautogui-effects` does), or in the guest, through upstream's `/execute` route
+//! the default does), or in the guest, through upstream's `/execute` route
 //! with `python -c` (what upstream's host does).
 //! Both must list a folder in the same order, crop a screenshot region that runs off
 //! the screen the same way, and hand a shell line with quotes to the shell unchanged.

@@ -4,9 +4,12 @@
 //! (the endpoint's tool-call mapping), a computer-use agent (UI-TARS, where typing
 //! goes through the clipboard) and `arena act --pyautogui` (the real binary).
 //!
-//! Code reaching for files or processes (`open`, `os.remove`, a saved screenshot, a
-//! command) does nothing on the guest and every way records the one translation
-//! error of the `pyautogui` action space; a clipboard paste (`pyperclip.copy` then
+//! By default (as upstream's `python -c`) code reaching for files or processes
+//! (`open`, `os.remove`, a saved screenshot, a command) has the same effect on the
+//! guest and the same outcome whichever way it came; with `--pyautogui-translate-only`
+//! it does nothing on the guest and every way records the one translation error of
+//! the `pyautogui` action space (as `arena act --pyautogui` always does); a clipboard
+//! paste (`pyperclip.copy` then
 //! Ctrl+V) is one clipboard write and one hotkey everywhere, so Notepad gets the
 //! text each time. Runs against the in-process stub guest.
 
@@ -83,11 +86,14 @@ async fn notepad_text(c: &GuestClient) -> String {
 
 /// What the step's actions did: the errors of their outcomes, in order.
 async fn carry_out(c: &GuestClient, actions: &[AgentAction]) -> Vec<String> {
+    carry_out_with(c, actions, &ExecOptions::instant()).await
+}
+
+async fn carry_out_with(c: &GuestClient, actions: &[AgentAction], options: &ExecOptions) -> Vec<String> {
     let mut state = ComputerState::for_screen(1440, 900);
     let mut errors = Vec::new();
     for action in actions {
-        let outcome =
-            execute_with(c, action, None, &mut state, &ExecOptions::instant()).await.expect("the guest answers");
+        let outcome = execute_with(c, action, None, &mut state, options).await.expect("the guest answers");
         errors.extend(outcome.error);
     }
     errors
@@ -199,8 +205,72 @@ fn arena_act(url: &str, code: &str) -> (bool, String) {
     (out.status.success(), String::from_utf8_lossy(&out.stderr).into_owned())
 }
 
+/// What the guest holds after hostile code: the target file's bytes (if any) and
+/// whether the screenshot file exists.
+type GuestState = (Option<Vec<u8>>, bool);
+
+async fn guest_state(c: &GuestClient) -> GuestState {
+    let kept = c.pull_file(TARGET).await.ok().map(|f| f.bytes);
+    let shot = c.exists(r"C:\Users\Docker\Desktop\shot.png").await.expect("exists").exists;
+    (kept, shot)
+}
+
+/// Puts the target file back and removes the saved screenshot.
+async fn restore(c: &GuestClient) {
+    c.push_file(TARGET, KEPT.to_vec(), Some(true)).await.expect("the file the code goes for");
+    let _ = c.delete(r"C:\Users\Docker\Desktop\shot.png", false).await;
+}
+
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
-async fn hostile_pyautogui_gets_the_same_answer_through_every_way_into_a_step() {
+async fn hostile_pyautogui_has_the_same_effect_through_every_way_by_default() {
+    let guest = StubGuest::start().await;
+    let c = client(guest.url());
+    let tmp = tempfile::tempdir().expect("tmp");
+    let task = task(tmp.path());
+    restore(&c).await;
+    let obs = Observation::capture(&c, 1, &task.instruction).await.expect("observe");
+    let effects = ExecOptions::instant();
+    assert!(effects.pyautogui_effects, "upstream's rule is the default");
+    for (n, code) in hostile().iter().enumerate() {
+        let dir: PathBuf = tmp.path().join(format!("exec-{n}"));
+        std::fs::create_dir_all(&dir).expect("dir");
+        let ways: Vec<(&str, Vec<AgentAction>)> = vec![
+            ("navi", navi(&obs, &task, code).await),
+            ("exec", exec_agent(&dir, &obs, &task, code).await),
+            ("http", http_agent(&obs, &task, code).await),
+            ("mcp", mcp(code)),
+        ];
+        let mut seen: Option<(Vec<String>, GuestState)> = None;
+        for (way, actions) in ways {
+            restore(&c).await;
+            let errors = carry_out_with(&c, &actions, &effects).await;
+            let after = (errors, guest_state(&c).await);
+            match &seen {
+                None => seen = Some(after),
+                Some(first) => assert_eq!(&after, first, "{way}: {code}"),
+            }
+        }
+        let (errors, (kept, shot)) = seen.expect("four ways");
+        // What upstream's `python -c` would do, as far as the host's closed interpreter
+        // goes: files are out of its reach (an error, the file kept), a saved
+        // screenshot lands on the guest, a command goes to the guest's exec route.
+        match n {
+            0 | 1 => {
+                assert!(
+                    errors.len() == 1 && errors[0].contains("not supported by this interpreter"),
+                    "{code}: {errors:?}"
+                );
+                assert_eq!(kept.as_deref(), Some(KEPT), "{code}");
+            }
+            2 => assert!(errors.is_empty() && shot, "{code}: {errors:?}"),
+            _ => assert!(errors.len() == 1 && errors[0].contains("/v1/exec"), "{code}: {errors:?}"),
+        }
+    }
+    restore(&c).await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn hostile_pyautogui_gets_the_same_answer_through_every_way_when_translate_only() {
     let guest = StubGuest::start().await;
     let c = client(guest.url());
     let tmp = tempfile::tempdir().expect("tmp");
@@ -209,6 +279,7 @@ async fn hostile_pyautogui_gets_the_same_answer_through_every_way_into_a_step() 
     c.launch(&LaunchRequest { shell: None, argv: vec!["notepad.exe".into()] }).await.expect("notepad");
     let obs = Observation::capture(&c, 1, &task.instruction).await.expect("observe");
     let ctx = pointer(&c, Coords::Pixels).await.expect("screen and cursor");
+    let translate_only = ExecOptions { pyautogui_effects: false, ..ExecOptions::instant() };
 
     for (n, code) in hostile().iter().enumerate() {
         let expected = translate_pyautogui(code, &ctx).expect_err("hostile code does not translate");
@@ -224,7 +295,7 @@ async fn hostile_pyautogui_gets_the_same_answer_through_every_way_into_a_step() 
             // Navi keeps the block's last newline; the code is the same.
             let [AgentAction::Pyautogui(got)] = &actions[..] else { panic!("{way}: {actions:?}") };
             assert_eq!(got.trim_end(), code, "{way}");
-            let errors = carry_out(&c, &actions).await;
+            let errors = carry_out_with(&c, &actions, &translate_only).await;
             assert_eq!(errors, vec![translate_pyautogui(got, &ctx).expect_err("refused")], "{way}: {code}");
             assert_eq!(reason(&errors[0]), reason(&expected), "{way}: {code}");
         }

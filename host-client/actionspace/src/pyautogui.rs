@@ -66,7 +66,7 @@ pub fn parse(code: &str, ctx: &Context) -> Result<Vec<Step>, ActionError> {
 /// Rewrites a parsed program so that the coordinates of its pyautogui mouse calls,
 /// given in `coords`, become pixels of `screen` (see the module documentation).
 /// The one place this happens: [`parse`], and the host's executor when a run lets
-/// pyautogui code run with its effects (`--pyautogui-effects`). With
+/// pyautogui code run with its effects (the default; not with `--pyautogui-translate-only`). With
 /// [`Coords::Pixels`] nothing changes.
 pub fn rescale(program: &mut Program, coords: Coords, screen: (u32, u32)) {
     if coords != Coords::Pixels {

@@ -227,12 +227,13 @@ pub struct RunArgs {
     /// it. Recorded in the results.
     #[arg(long, value_enum, default_value_t = HeldKeysArg::Episode)]
     pub held_keys: HeldKeysArg,
-    /// Run agents' pyautogui code with its effects, as upstream's `python -c` does:
-    /// files, processes and saved screenshots through the guest's API. Without it,
-    /// pyautogui code is translated into input and clipboard steps, and code reaching
-    /// for anything else does nothing and is the step's error. Recorded in the results.
+    /// Translate agents' pyautogui code into input and clipboard steps only: code
+    /// reaching for files, processes or saved screenshots does nothing and is the
+    /// step's error. Without it the code runs with its effects, as upstream's
+    /// `python -c` does (files, processes and screenshots through the guest's API).
+    /// Recorded in the results as `pyautogui_effects=off`.
     #[arg(long)]
-    pub pyautogui_effects: bool,
+    pub pyautogui_translate_only: bool,
     /// The trial folder level of the results (upstream's --trial_id).
     #[arg(long, default_value = crate::results::DEFAULT_TRIAL_ID, value_name = "ID")]
     pub trial_id: String,
@@ -682,9 +683,9 @@ pub async fn run(conn: &Connection, args: RunArgs) -> anyhow::Result<ExitCode> {
     if run_coords {
         config.exec.coords = args.coords;
     }
-    if args.pyautogui_effects {
-        config.exec.pyautogui_effects = true;
-        config.options.insert("pyautogui_effects".into(), "on".into());
+    if args.pyautogui_translate_only {
+        config.exec.pyautogui_effects = false;
+        config.options.insert("pyautogui_effects".into(), "off".into());
     }
     if args.held_keys == HeldKeysArg::Action {
         config.exec.release_held_keys = true;

@@ -97,10 +97,11 @@ pub struct ExecOptions {
     /// `pyautogui` action space. A prediction may name its own
     /// ([`crate::agent::Prediction::coords`]).
     pub coords: Coords,
-    /// Run pyautogui code with its effects (`--pyautogui-effects`): in the host's
-    /// interpreter against [`GuestHost`], files, processes and screenshots through
-    /// the guest's API, as upstream's `python -c` runs it. Off (the default), it is
-    /// translated by the `pyautogui` action space: input and clipboard only.
+    /// Run pyautogui code with its effects (the default, as upstream's `python -c`
+    /// runs it): in the host's interpreter against [`GuestHost`], files, processes
+    /// and screenshots through the guest's API. Off (`--pyautogui-translate-only`),
+    /// it is translated by the `pyautogui` action space: input and clipboard only,
+    /// and code reaching for anything else is the step's error.
     pub pyautogui_effects: bool,
 }
 
@@ -112,7 +113,7 @@ impl Default for ExecOptions {
             max_duration: Duration::from_secs(90),
             release_held_keys: false,
             coords: Coords::Pixels,
-            pyautogui_effects: false,
+            pyautogui_effects: true,
         }
     }
 }
@@ -359,7 +360,7 @@ impl Drop for CancelOnDrop {
 enum Lang {
     /// Navi's `computer.*` code, with `computer` bound (upstream's `/execute_windows`).
     Computer,
-    /// pyautogui code with its effects (`--pyautogui-effects`), with `pyautogui` and
+    /// pyautogui code with its effects (the default), with `pyautogui` and
     /// `time` imported (upstream's `python -c`).
     Pyautogui,
 }
