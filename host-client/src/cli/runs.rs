@@ -72,19 +72,21 @@ pub struct RunArgs {
     /// (`<out>/<agent>/<observation>/<model>`) holding `<domain>/<task>/traj.jsonl`.
     #[arg(long, value_name = "PATH")]
     pub replay: Option<PathBuf>,
-    /// Navi agent: base URL of the API: OpenAI-compatible (`.../v1`) or a classic Azure
-    /// OpenAI deployment (`https://NAME.openai.azure.com/openai/deployments/D?api-version=V`).
-    /// The key comes from ARENA_LLM_KEY or OPENAI_API_KEY.
+    /// Model agents (navi, anthropic-cu, openai-cu, ui-tars): base URL of the API. Navi
+    /// and ui-tars: OpenAI-compatible (`.../v1`) or a classic Azure OpenAI deployment
+    /// (`https://NAME.openai.azure.com/openai/deployments/D?api-version=V`). The key
+    /// comes from ARENA_LLM_KEY, else OPENAI_API_KEY (ANTHROPIC_API_KEY for anthropic-cu).
     #[arg(long, env = "ARENA_LLM_URL", value_name = "URL")]
     pub llm_url: Option<String>,
-    /// Navi agent: the model name.
+    /// Model agents (navi, anthropic-cu, openai-cu, ui-tars): the model name.
     #[arg(long, env = "ARENA_LLM_MODEL")]
     pub model: Option<String>,
     /// Navi agent: sampling temperature (upstream's Navi: 1.0).
     #[arg(long, default_value_t = 1.0)]
     pub temperature: f64,
-    /// Navi agent: longest answer in tokens (upstream's Navi: 4096); sent as
-    /// `max_completion_tokens` to reasoning models (o1, o3, o4, gpt-5), else `max_tokens`.
+    /// Model agents (navi, anthropic-cu, openai-cu, ui-tars): longest answer in tokens
+    /// (upstream's Navi: 4096); Navi sends it as `max_completion_tokens` to reasoning
+    /// models (o1, o3, o4, gpt-5), else `max_tokens`.
     #[arg(long, default_value_t = 4096)]
     pub max_tokens: u32,
     /// Navi agent: `waa`, upstream's message layout and reply rules (our words for its
