@@ -20,8 +20,9 @@ use arena_task::{load_dir, names, read_index, Difficulty, Task, TaskError};
 /// Arguments of `arena validate`.
 #[derive(Debug, Clone, Args)]
 pub struct ValidateArgs {
-    /// A folder of task files (searched recursively), or with --index the corpus
-    /// root holding `examples/` and `examples_noctxt/`.
+    /// A folder of task files (searched recursively); with --index the corpus root
+    /// holding `examples/` and `examples_noctxt/`; or, as `arena run` takes it, an
+    /// index file (`test_all.json`) whose folder is the corpus root.
     pub folder: PathBuf,
     /// A test index (`test_all.json`): validate only the tasks it names. A
     /// relative path is looked up under FOLDER when it is not found as given.
@@ -183,8 +184,14 @@ impl Report {
 ///
 /// An index that cannot be read or is malformed, or a folder that does not exist.
 pub fn load(args: &ValidateArgs) -> anyhow::Result<(Vec<Task>, Vec<TaskError>)> {
+    if args.folder.is_file() && args.index.is_none() {
+        // An index file given where `arena run` takes it: its folder is the root.
+        let root = args.folder.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
+        let by_file = ValidateArgs { folder: root.to_owned(), index: Some(args.folder.clone()), ..args.clone() };
+        return load(&by_file);
+    }
     if !args.folder.is_dir() {
-        anyhow::bail!("{} is not a folder", args.folder.display());
+        anyhow::bail!("{} is neither a folder nor an index file", args.folder.display());
     }
     let Some(index) = &args.index else {
         return Ok(load_dir(&args.folder));
@@ -295,6 +302,12 @@ mod tests {
         }
         let missing = ValidateArgs { index: Some("absent_index.json".into()), ..args(&root) };
         assert!(load(&missing).is_err());
+        // The index file alone, as `arena run` takes it, selects the same tasks.
+        let by_folder = load(&ValidateArgs { index: Some("test_small.json".into()), ..args(&root) }).unwrap().0;
+        let by_file = load(&args(&root.join("test_small.json"))).unwrap().0;
+        let paths = |tasks: &[Task]| tasks.iter().map(|t| t.path.clone()).collect::<Vec<_>>();
+        assert_eq!(paths(&by_file), paths(&by_folder));
+        assert!(!by_file.is_empty());
     }
 
     #[test]
