@@ -1171,6 +1171,19 @@ mod tests {
                 .unwrap()
         };
         let (mut ours, mut theirs) = (start(&dir), start(&other));
+        // A child is only visible by its command line once it has exec'd: on a loaded
+        // machine that comes after spawn() returns, so wait for it (bounded).
+        for child in [&ours, &theirs] {
+            let cmdline = format!("/proc/{}/cmdline", child.id());
+            let exec_done = (0..500).any(|_| {
+                let seen = std::fs::read(&cmdline).is_ok_and(|c| c.windows(11).any(|w| w == b"format=qcow"));
+                if !seen {
+                    std::thread::sleep(Duration::from_millis(10));
+                }
+                seen
+            });
+            assert!(exec_done, "the stand-in process {} never showed its command line", child.id());
+        }
         let found = holders_of(&dir);
         assert_eq!(found, vec![(ours.id(), "qemu-system-x86_64".to_owned())]);
         end_leftovers(&dir);
