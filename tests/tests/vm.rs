@@ -14,6 +14,7 @@
 
 #![cfg(target_os = "linux")]
 
+use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Output, Stdio};
 use std::time::{Duration, Instant};
@@ -655,7 +656,8 @@ fn prepare_on_uefi_with_secure_boot_and_swtpm_seals_an_image_that_boots_healthy(
         Ok(uefi) => uefi,
         Err(err) => {
             assert!(std::env::var("ARENA_REQUIRE_QEMU").as_deref() != Ok("1"), "{err}");
-            eprintln!("SKIPPED: {TEST}: {err}");
+            // Straight to stderr (libtest captures eprintln!), so test.sh counts it.
+            let _ = writeln!(std::io::stderr(), "SKIPPED: {TEST}: {err}");
             return;
         }
     };
@@ -972,7 +974,10 @@ fn a_failed_oem_step_fails_prepare_naming_it_and_keeps_the_logs() {
 fn list_editions_reads_the_image_list_of_a_udf_iso() {
     let Some(genisoimage) = arena_shared::search_path::find_program(Path::new("genisoimage")) else {
         assert!(std::env::var("ARENA_REQUIRE_QEMU").as_deref() != Ok("1"), "genisoimage is missing");
-        eprintln!("SKIPPED: list_editions_reads_the_image_list_of_a_udf_iso: genisoimage not found");
+        let _ = writeln!(
+            std::io::stderr(),
+            "SKIPPED: list_editions_reads_the_image_list_of_a_udf_iso: genisoimage not found"
+        );
         return;
     };
     let dir = tempfile::tempdir().unwrap();
