@@ -73,8 +73,8 @@ pub struct EpisodeConfig {
     pub pause_after_setup: Duration,
     /// Where the pauses above go (a test's fake clock records them).
     pub clock: Arc<dyn arena_setup::Clock>,
-    /// Cancelled to stop the run (Ctrl-C): the episode ends at its next step
-    /// boundary as [`EpisodeStatus::Interrupted`], without evaluating.
+    /// Cancelled to stop the run (Ctrl-C, SIGTERM): the episode ends at once,
+    /// mid-step if need be, as [`EpisodeStatus::Interrupted`], without evaluating.
     pub stop: tokio_util::sync::CancellationToken,
     /// The named options in force, recorded in `episode.json` and `summary.json`
     /// (`pauses`, `order`, ...), so two runs can be compared honestly.
@@ -86,7 +86,8 @@ pub struct EpisodeConfig {
     /// How many times a failing model call is asked again within one step
     /// before the episode ends as an agent error.
     pub max_model_retries: u32,
-    /// Longest one prediction, and one action, may take.
+    /// Longest one prediction may take, and all the actions of one step together
+    /// (those not begun when it is up are not run).
     pub step_timeout: Duration,
     /// Pauses of setup steps.
     pub settle: Settle,
@@ -245,6 +246,8 @@ struct Acted {
     pause: Duration,
     /// Time spent observing after each action.
     observing: Duration,
+    /// When the step's time is up (`step_timeout` after its actions began).
+    deadline: Option<tokio::time::Instant>,
 }
 
 /// Writes one of an agent's step logs as upstream's recorder names its files
@@ -380,7 +383,15 @@ impl Episode {
         let mut last: Option<LastAction> = None;
         for step in 1..=config.max_steps {
             interrupted(config, "between steps")?;
-            let (stop, step_last, next) = self.step(&play, agent, &mut computer, step, seen).await?;
+            // A stop does not wait for the step: whatever the agent answered,
+            // its prediction and actions end here (the task runs again next time).
+            let (stop, step_last, next) = tokio::select! {
+                biased;
+                () = config.stop.cancelled() => return Err(EpisodeStatus::Interrupted(format!(
+                    "the run was stopped during step {step}; nothing was evaluated"
+                ))),
+                stepped = self.step(&play, agent, &mut computer, step, seen) => stepped?,
+            };
             seen = next;
             if step_last.is_some() {
                 last = step_last;
@@ -500,9 +511,21 @@ impl Episode {
         };
 
         let t_act = Instant::now();
-        let mut acted = Acted::default();
+        // The step's actions share one deadline, not one each.
+        let deadline = tokio::time::Instant::now() + config.step_timeout;
+        let mut acted = Acted { deadline: Some(deadline), ..Acted::default() };
         let mut latest = seen;
         for (k, action) in prediction.actions.iter().enumerate() {
+            if tokio::time::Instant::now() >= deadline {
+                let message = format!(
+                    "actions {} to {} not run: the step's {} s were up",
+                    k + 1,
+                    prediction.actions.len(),
+                    config.step_timeout.as_secs()
+                );
+                record.timings.timeouts.push(message);
+                break;
+            }
             let mut line = if k == 0 {
                 record.first.clone()
             } else {
@@ -634,7 +657,8 @@ impl Episode {
                     _ => std::borrow::Cow::Borrowed(&config.exec),
                 };
                 let run = exec::execute_with(play.client, action, prediction.marks.as_ref(), computer, &options);
-                match tokio::time::timeout(config.step_timeout, run).await {
+                let deadline = acted.deadline.unwrap_or_else(|| tokio::time::Instant::now() + config.step_timeout);
+                match tokio::time::timeout_at(deadline, run).await {
                     Ok(Ok(outcome)) => {
                         if let Some(error) = &outcome.error {
                             tracing::debug!(task = %play.task.name, step = record.step, error, "an action failed");
@@ -649,7 +673,7 @@ impl Episode {
                     Ok(Err(ExecError::Guest(err))) => return Err(infra("the guest stopped answering", err)),
                     Ok(Err(err)) => record.outcomes.push(serde_json::json!({ "error": err.to_string() })),
                     Err(_) => {
-                        let message = format!("the action took longer than {} s", config.step_timeout.as_secs());
+                        let message = format!("the action outlasted the step's {} s", config.step_timeout.as_secs());
                         record.timings.timeouts.push(format!("action {}: {message}", k + 1));
                         record.outcomes.push(serde_json::json!({ "error": message }));
                     }

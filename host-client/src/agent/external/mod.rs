@@ -21,11 +21,17 @@
 //!   its stderr into the log) and [`transport::HttpAgent`].
 //! - [`observe`]: the one adapter from an [`Observation`] to an `observe` message.
 //! - [`spaces`]: answers' actions to [`AgentAction`]s, with the `computer_13` seam.
+//! - [`stderr`]: an exec agent's stderr into the run's log, bounded per task.
+//! - [`tree`]: an exec agent's process group and descendants, ended with it.
 
 pub mod observe;
 pub mod protocol;
 pub mod spaces;
+pub mod stderr;
 pub mod transport;
+// With `vm`, the host's one other module with `unsafe`: kill and killpg of an agent's processes.
+#[allow(unsafe_code)]
+pub mod tree;
 
 use std::time::Duration;
 
@@ -115,10 +121,20 @@ fn hello_coords(name: &str) -> Result<Coords, String> {
     name.parse()
 }
 
-/// Reads one agent message, naming what was wrong with it.
+/// Reads one agent message, naming what was wrong with it; an `act` with more
+/// than [`protocol::MAX_ACTIONS`] actions is refused before it is read further.
 fn parse_message(answer: Value) -> Result<AgentMessage, String> {
-    let shown = short(&answer);
-    serde_json::from_value(answer).map_err(|err| format!("malformed message {shown}: {err}"))
+    if let Some(actions) = answer.get("actions").and_then(Value::as_array) {
+        if actions.len() > protocol::MAX_ACTIONS {
+            return Err(format!(
+                "the agent answered {} actions in one act; at most {} are taken",
+                actions.len(),
+                protocol::MAX_ACTIONS
+            ));
+        }
+    }
+    <AgentMessage as serde::Deserialize>::deserialize(&answer)
+        .map_err(|err| format!("malformed message {}: {err}", short(&answer)))
 }
 
 fn kind(message: &AgentMessage) -> &'static str {
@@ -130,13 +146,30 @@ fn kind(message: &AgentMessage) -> &'static str {
     }
 }
 
-/// A message cut to a readable length for an error.
+/// A message cut to a readable length for an error (written no further than
+/// that, however long the message).
 pub(crate) fn short(value: &Value) -> String {
-    let text = value.to_string();
+    /// A writer that keeps the first bytes and then refuses more.
+    struct Head(Vec<u8>);
+    impl std::io::Write for Head {
+        fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+            if self.0.len() >= 1024 {
+                return Err(std::io::ErrorKind::WriteZero.into());
+            }
+            self.0.extend_from_slice(buf);
+            Ok(buf.len())
+        }
+        fn flush(&mut self) -> std::io::Result<()> {
+            Ok(())
+        }
+    }
+    let mut head = Head(Vec::new());
+    let _ = serde_json::to_writer(&mut head, value);
+    let text = String::from_utf8_lossy(&head.0);
     if text.chars().count() > 200 {
         format!("{}...", text.chars().take(200).collect::<String>())
     } else {
-        text
+        text.into_owned()
     }
 }
 
@@ -360,6 +393,29 @@ mod tests {
         for name in protocol::COORDS {
             assert_eq!(hello_coords(name).expect("each named convention parses").name(), name);
         }
+    }
+
+    #[test]
+    fn an_act_of_a_million_actions_is_refused_naming_the_count_and_the_schema_says_the_limit() {
+        let many = json!({"type": "act", "actions": vec![json!({"type": "key_press", "key": "a"}); 1_000_000]});
+        let err = parse_message(many).expect_err("too many actions");
+        assert!(err.contains("1000000 actions") && err.contains("at most 256"), "{err}");
+        let most = json!({"type": "act", "actions": vec![json!("WAIT"); protocol::MAX_ACTIONS]});
+        assert!(
+            matches!(parse_message(most), Ok(AgentMessage::Act(act)) if act.actions.len() == protocol::MAX_ACTIONS)
+        );
+
+        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../schemas/agent-protocol/act.json");
+        let schema: Value = serde_json::from_str(&std::fs::read_to_string(path).expect("the schema")).expect("JSON");
+        assert_eq!(schema["properties"]["actions"]["maxItems"], json!(protocol::MAX_ACTIONS));
+    }
+
+    #[test]
+    fn a_long_message_is_shown_short_without_writing_it_whole() {
+        let long = json!({"response": "a".repeat(10_000_000)});
+        let shown = short(&long);
+        assert!(shown.len() < 300 && shown.ends_with("..."), "{shown}");
+        assert_eq!(short(&json!({"a": 1})), r#"{"a":1}"#);
     }
 
     #[test]
