@@ -348,6 +348,7 @@ impl Episode {
         out: &TaskDir,
         started: Instant,
     ) -> Result<(), EpisodeStatus> {
+        agent.keep_files_in(out.path());
         agent.reset(task).await;
         arena_setup::reset(client, config.pause_after_close_all, config.clock.as_ref())
             .await
@@ -521,7 +522,7 @@ impl Episode {
                     "actions {} to {} not run: the step's {} s were up",
                     k + 1,
                     prediction.actions.len(),
-                    config.step_timeout.as_secs()
+                    config.step_timeout.as_secs_f64()
                 );
                 record.timings.timeouts.push(message);
                 break;
@@ -673,7 +674,8 @@ impl Episode {
                     Ok(Err(ExecError::Guest(err))) => return Err(infra("the guest stopped answering", err)),
                     Ok(Err(err)) => record.outcomes.push(serde_json::json!({ "error": err.to_string() })),
                     Err(_) => {
-                        let message = format!("the action outlasted the step's {} s", config.step_timeout.as_secs());
+                        let message =
+                            format!("the action outlasted the step's {} s", config.step_timeout.as_secs_f64());
                         record.timings.timeouts.push(format!("action {}: {message}", k + 1));
                         record.outcomes.push(serde_json::json!({ "error": message }));
                     }
@@ -1048,6 +1050,37 @@ mod tests {
         // Nothing to release, nothing reported.
         let (result, _out, _tmp) = play(&task("exact_match"), vec![says(vec![AgentAction::Done])], false).await;
         assert!(result.setup.iter().all(|r| r["phase"] != "teardown"), "{:?}", result.setup);
+    }
+
+    /// A clock that really pauses (on tokio's timer).
+    #[derive(Debug)]
+    struct Pausing;
+
+    #[async_trait::async_trait]
+    impl arena_setup::Clock for Pausing {
+        async fn sleep(&self, d: Duration, _why: &'static str) {
+            tokio::time::sleep(d).await;
+        }
+    }
+
+    #[tokio::test]
+    async fn a_steps_actions_share_its_deadline_and_those_not_begun_in_time_are_not_run() {
+        // 50 actions with 100 ms after each would take 5 s; the step has 300 ms.
+        let script = vec![says(vec![AgentAction::Pyautogui("pyautogui.press('a')".into()); 50])];
+        let configure = |cache| EpisodeConfig {
+            max_steps: 1,
+            step_timeout: Duration::from_millis(300),
+            sleep_after_action: Duration::from_millis(100),
+            clock: Arc::new(Pausing),
+            ..EpisodeConfig::instant(cache)
+        };
+        let (_, out, _tmp) = play_with(&task("exact_match"), script, false, configure, None).await;
+        let text = std::fs::read_to_string(out.path().join(crate::results::TRAJ_FILE)).unwrap();
+        let ran = text.lines().filter(|l| serde_json::from_str::<Value>(l).unwrap()["step_num"] == 1).count();
+        assert!((1..50).contains(&ran), "{ran} of the 50 actions ran");
+        let traj = out.read_trajectory().unwrap();
+        let said = format!("actions {} to 50 not run: the step's 0.3 s were up", ran + 1);
+        assert_eq!(traj[0].timings.timeouts, vec![said]);
     }
 
     #[tokio::test]

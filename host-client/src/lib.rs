@@ -38,8 +38,7 @@ pub mod ports;
 pub mod results;
 pub mod run;
 pub mod som;
-// A module with `unsafe` (the other is `agent::external::tree`, which ends an
-// outside agent's processes): libc calls for the QEMU processes (prctl, kill, access).
+// The one module with `unsafe`: libc calls for the QEMU processes (prctl, kill, access).
 #[allow(unsafe_code)]
 pub mod vm;
 

@@ -25,6 +25,7 @@ use std::process::{Child, Command, ExitStatus, Stdio};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
+use arena_host::agent::external::stderr;
 use arena_host::results::summary::{Summary, TaskRow};
 use arena_test_support::workspace_binary;
 use serde_json::{json, Value};
@@ -292,6 +293,8 @@ fn an_act_of_a_million_actions_is_refused_at_once_and_the_run_goes_on() {
     println!("a million actions: the run's peak resident size {} MiB", peak >> 20);
     assert_eq!(status.code(), Some(0), "{stderr}");
     assert_victim_only(&tmp.path().join("out"), "1000000 actions in one act; at most 256", &stderr);
+    // Counted in the answer's text, never made a JSON tree (which took 868 MiB).
+    assert!(peak < 300 << 20, "the run peaked at {} MiB\n{stderr}", peak >> 20);
 }
 
 #[test]
@@ -330,9 +333,38 @@ fn stderr_flood(mode: &str) {
     assert_eq!(status.code(), Some(0), "{}", &stderr[stderr.len().saturating_sub(4000)..]);
     let rows = rows(&tmp.path().join("out"));
     assert!(rows.values().all(|r| r.status == "completed"), "{rows:?}");
-    let cap = arena_host::agent::external::stderr::TASK_CAP as usize;
+    let cap = usize::try_from(stderr::TASK_CAP).expect("cap");
     assert!(stderr.len() < cap + cap / 2, "the run log is {} bytes", stderr.len());
     assert!(stderr.contains("were not logged"), "the log notes what it dropped");
+    // The stream itself is in the victim's result folder, up to its own cap.
+    let file = task_dir(&tmp.path().join("out"), VICTIM).join(stderr::FILE_NAME);
+    let kept = std::fs::read(&file).expect("the victim's agent-stderr.log");
+    let file_cap = usize::try_from(stderr::FILE_CAP).expect("cap");
+    let note = String::from_utf8_lossy(&kept[file_cap.min(kept.len())..]);
+    assert!(
+        kept.len() > file_cap && note.contains("more bytes of stderr were not kept"),
+        "{} bytes: {note}",
+        kept.len()
+    );
+    let byte = if mode == "lines" { b'x' } else { b'y' };
+    assert!(kept[..1000].iter().all(|&b| b == byte), "the stream as the agent wrote it");
+    assert!(stderr.contains(&file.display().to_string()), "the log names the file");
+}
+
+/// The result folder of `task` under `out`, wherever the layout puts it.
+fn task_dir(out: &Path, task: &str) -> PathBuf {
+    let mut todo = vec![out.to_owned()];
+    while let Some(dir) = todo.pop() {
+        for entry in std::fs::read_dir(&dir).expect("a results folder").flatten() {
+            if entry.file_type().is_ok_and(|t| t.is_dir()) {
+                if entry.file_name() == task {
+                    return entry.path();
+                }
+                todo.push(entry.path());
+            }
+        }
+    }
+    panic!("no result folder for {task} under {}", out.display());
 }
 
 #[test]

@@ -540,19 +540,6 @@ impl GuestHost {
     }
 }
 
-/// What the command's stderr ends with when the guest cut its output at its
-/// bound (`/v1/exec`'s `max_output_bytes`): said, so that a cut listing is not
-/// taken for a whole one. Empty when nothing was cut.
-fn truncation_note(stdout: bool, stderr: bool) -> String {
-    let cut = match (stdout, stderr) {
-        (false, false) => return String::new(),
-        (true, false) => "stdout",
-        (false, true) => "stderr",
-        (true, true) => "stdout and stderr",
-    };
-    format!("\n[arena: the command's {cut} was cut at the guest's output limit; what is above is not all of it]\n")
-}
-
 impl ScriptHost for GuestHost {
     fn perform(&mut self, action: Action) -> HostResult<()> {
         let tracked = action.clone();
@@ -655,9 +642,7 @@ impl ScriptHost for GuestHost {
         if result.timed_out {
             return Err(HostError::TimedOut("the command ran out of time".to_owned()));
         }
-        let mut stderr = result.stderr;
-        stderr.push_str(&truncation_note(result.stdout_truncated, result.stderr_truncated));
-        Ok(CommandOutput { code: result.exit_code.unwrap_or(-1), stdout: result.stdout, stderr })
+        Ok(CommandOutput { code: result.exit_code.unwrap_or(-1), stdout: result.stdout, stderr: result.stderr })
     }
 
     fn launch(&mut self, command: &CommandSpec) -> HostResult<Option<u32>> {
@@ -725,14 +710,6 @@ impl ScriptHost for GuestHost {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn cut_output_is_said_in_the_commands_stderr_and_whole_output_is_not() {
-        assert_eq!(truncation_note(false, false), "");
-        assert!(truncation_note(true, false).contains("the command's stdout was cut"));
-        assert!(truncation_note(false, true).contains("the command's stderr was cut"));
-        assert!(truncation_note(true, true).contains("stdout and stderr was cut"));
-    }
 
     #[test]
     fn marks_set_the_computer_state_as_update_computer_does() {

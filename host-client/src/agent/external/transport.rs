@@ -185,6 +185,7 @@ impl AgentProcess {
         }
         let text = String::from_utf8_lossy(&answer);
         let text = text.trim();
+        super::check_action_count(text.as_bytes())?;
         match serde_json::from_str::<Value>(text) {
             Ok(value @ Value::Object(_)) => Ok(value),
             Ok(other) => Err(format!("the agent answered {}, not a JSON object", short(&other))),
@@ -229,6 +230,10 @@ impl Transport for AgentProcess {
 
     fn files(&self) -> Option<&Path> {
         Some(&self.dir)
+    }
+
+    fn keep_files_in(&mut self, dir: &Path) {
+        self.budget.keep_in(dir);
     }
 
     fn poison(&mut self) {
@@ -298,6 +303,7 @@ impl HttpAgent {
             let shown: String = String::from_utf8_lossy(&body).chars().take(200).collect();
             return Err(format!("POST {}: HTTP {status}: {shown}", self.url));
         }
+        super::check_action_count(&body)?;
         match serde_json::from_slice::<Value>(&body) {
             Ok(value @ Value::Object(_)) => Ok(value),
             Ok(other) => Err(format!("the agent answered {}, not a JSON object", short(&other))),

@@ -52,26 +52,26 @@ pub fn end_all() {
 
 #[cfg(unix)]
 fn end_tree(pid: u32) {
-    let Ok(leader) = libc::pid_t::try_from(pid) else { return };
-    if leader <= 1 {
+    use rustix::process::{getpgid, getpgrp, kill_process, kill_process_group, Pid, Signal};
+    let Some(leader) = i32::try_from(pid).ok().and_then(Pid::from_raw) else { return };
+    if leader.is_init() {
         return;
     }
-    // SAFETY: plain system calls with no pointers.
-    let ours = unsafe { libc::getpgrp() };
+    // This program's own group is never signalled.
+    let ours = getpgrp();
     // Twice: a process forked while the first round ran is found by the second.
+    // Errors are processes already gone.
     for _ in 0..2 {
-        let below = descendants(leader);
-        // SAFETY: signals to the agent's own group and to processes found below it;
-        // this program's own group is never signalled.
-        unsafe {
-            if leader != ours {
-                libc::killpg(leader, libc::SIGKILL);
-            }
-            for &p in &below {
-                let group = libc::getpgid(p);
-                libc::kill(p, libc::SIGKILL);
-                if group > 1 && group != ours {
-                    libc::killpg(group, libc::SIGKILL);
+        let below = descendants(leader.as_raw_nonzero().get());
+        if leader != ours {
+            let _ = kill_process_group(leader, Signal::KILL);
+        }
+        for p in below.into_iter().filter_map(Pid::from_raw) {
+            let group = getpgid(Some(p));
+            let _ = kill_process(p, Signal::KILL);
+            if let Ok(group) = group {
+                if !group.is_init() && group != ours {
+                    let _ = kill_process_group(group, Signal::KILL);
                 }
             }
         }
@@ -82,13 +82,14 @@ fn end_tree(pid: u32) {
 fn end_tree(_pid: u32) {}
 
 /// Every process below `root`, by the parent each names in `/proc/PID/stat`
-/// (empty where there is no `/proc`).
+/// (empty where there is no `/proc`). Read by hand: a dozen lines, where the
+/// `procfs` crate would add a dependency tree for one field.
 #[cfg(unix)]
-fn descendants(root: libc::pid_t) -> Vec<libc::pid_t> {
+fn descendants(root: i32) -> Vec<i32> {
     let Ok(entries) = std::fs::read_dir("/proc") else { return Vec::new() };
-    let mut parents: Vec<(libc::pid_t, libc::pid_t)> = Vec::new();
+    let mut parents: Vec<(i32, i32)> = Vec::new();
     for entry in entries.flatten() {
-        let Some(pid) = entry.file_name().to_str().and_then(|s| s.parse::<libc::pid_t>().ok()) else { continue };
+        let Some(pid) = entry.file_name().to_str().and_then(|s| s.parse::<i32>().ok()) else { continue };
         let Ok(stat) = std::fs::read_to_string(entry.path().join("stat")) else { continue };
         // "PID (COMM) STATE PPID ...": the name may hold spaces and parentheses.
         let Some(after) = stat.rfind(')').map(|i| &stat[i + 1..]) else { continue };
@@ -130,7 +131,7 @@ mod tests {
         let mut line = String::new();
         let stdout = child.stdout.take().expect("stdout");
         tokio::io::AsyncBufReadExt::read_line(&mut tokio::io::BufReader::new(stdout), &mut line).await.expect("a line");
-        let below = descendants(libc::pid_t::try_from(pid).expect("pid"));
+        let below = descendants(i32::try_from(pid).expect("pid"));
         assert!(below.len() >= 2, "two sleeps below the shell: {below:?}");
         end(pid);
         let _ = child.wait().await;
