@@ -8,8 +8,9 @@
 //! An act of a million actions is refused at once; SIGTERM during a long act
 //! ends the run with the finished task kept, the victim interrupted and
 //! `summary.json` written; a stderr flood (lines, or no newline at all) leaves
-//! a run log under its cap; an agent's children (plain, and in a new session)
-//! are gone when the run ends.
+//! a run log under its cap, and the stream itself in the task's
+//! `agent-stderr.log` under that file's cap; an agent's children (plain, and in
+//! a new session) are gone when the run ends.
 //!
 //! The exec agents are `hostile_agent/hostile.py` (needs `python3`: without it
 //! those tests print `SKIPPED: <test>: python3 not found`, unless
