@@ -73,8 +73,8 @@ pub struct EpisodeConfig {
     pub pause_after_setup: Duration,
     /// Where the pauses above go (a test's fake clock records them).
     pub clock: Arc<dyn arena_setup::Clock>,
-    /// Cancelled to stop the run (Ctrl-C): the episode ends at its next step
-    /// boundary as [`EpisodeStatus::Interrupted`], without evaluating.
+    /// Cancelled to stop the run (Ctrl-C, SIGTERM): the episode ends at once,
+    /// mid-step if need be, as [`EpisodeStatus::Interrupted`], without evaluating.
     pub stop: tokio_util::sync::CancellationToken,
     /// The named options in force, recorded in `episode.json` and `summary.json`
     /// (`pauses`, `order`, ...), so two runs can be compared honestly.
@@ -86,7 +86,8 @@ pub struct EpisodeConfig {
     /// How many times a failing model call is asked again within one step
     /// before the episode ends as an agent error.
     pub max_model_retries: u32,
-    /// Longest one prediction, and one action, may take.
+    /// Longest one prediction may take, and all the actions of one step together
+    /// (those not begun when it is up are not run).
     pub step_timeout: Duration,
     /// Pauses of setup steps.
     pub settle: Settle,
@@ -245,6 +246,8 @@ struct Acted {
     pause: Duration,
     /// Time spent observing after each action.
     observing: Duration,
+    /// When the step's time is up (`step_timeout` after its actions began).
+    deadline: Option<tokio::time::Instant>,
 }
 
 /// Writes one of an agent's step logs as upstream's recorder names its files
@@ -345,6 +348,7 @@ impl Episode {
         out: &TaskDir,
         started: Instant,
     ) -> Result<(), EpisodeStatus> {
+        agent.keep_files_in(out.path());
         agent.reset(task).await;
         arena_setup::reset(client, config.pause_after_close_all, config.clock.as_ref())
             .await
@@ -380,7 +384,15 @@ impl Episode {
         let mut last: Option<LastAction> = None;
         for step in 1..=config.max_steps {
             interrupted(config, "between steps")?;
-            let (stop, step_last, next) = self.step(&play, agent, &mut computer, step, seen).await?;
+            // A stop does not wait for the step: whatever the agent answered,
+            // its prediction and actions end here (the task runs again next time).
+            let (stop, step_last, next) = tokio::select! {
+                biased;
+                () = config.stop.cancelled() => return Err(EpisodeStatus::Interrupted(format!(
+                    "the run was stopped during step {step}; nothing was evaluated"
+                ))),
+                stepped = self.step(&play, agent, &mut computer, step, seen) => stepped?,
+            };
             seen = next;
             if step_last.is_some() {
                 last = step_last;
@@ -500,9 +512,21 @@ impl Episode {
         };
 
         let t_act = Instant::now();
-        let mut acted = Acted::default();
+        // The step's actions share one deadline, not one each.
+        let deadline = tokio::time::Instant::now() + config.step_timeout;
+        let mut acted = Acted { deadline: Some(deadline), ..Acted::default() };
         let mut latest = seen;
         for (k, action) in prediction.actions.iter().enumerate() {
+            if tokio::time::Instant::now() >= deadline {
+                let message = format!(
+                    "actions {} to {} not run: the step's {} s were up",
+                    k + 1,
+                    prediction.actions.len(),
+                    config.step_timeout.as_secs_f64()
+                );
+                record.timings.timeouts.push(message);
+                break;
+            }
             let mut line = if k == 0 {
                 record.first.clone()
             } else {
@@ -634,7 +658,8 @@ impl Episode {
                     _ => std::borrow::Cow::Borrowed(&config.exec),
                 };
                 let run = exec::execute_with(play.client, action, prediction.marks.as_ref(), computer, &options);
-                match tokio::time::timeout(config.step_timeout, run).await {
+                let deadline = acted.deadline.unwrap_or_else(|| tokio::time::Instant::now() + config.step_timeout);
+                match tokio::time::timeout_at(deadline, run).await {
                     Ok(Ok(outcome)) => {
                         if let Some(error) = &outcome.error {
                             tracing::debug!(task = %play.task.name, step = record.step, error, "an action failed");
@@ -649,7 +674,8 @@ impl Episode {
                     Ok(Err(ExecError::Guest(err))) => return Err(infra("the guest stopped answering", err)),
                     Ok(Err(err)) => record.outcomes.push(serde_json::json!({ "error": err.to_string() })),
                     Err(_) => {
-                        let message = format!("the action took longer than {} s", config.step_timeout.as_secs());
+                        let message =
+                            format!("the action outlasted the step's {} s", config.step_timeout.as_secs_f64());
                         record.timings.timeouts.push(format!("action {}: {message}", k + 1));
                         record.outcomes.push(serde_json::json!({ "error": message }));
                     }
@@ -1024,6 +1050,37 @@ mod tests {
         // Nothing to release, nothing reported.
         let (result, _out, _tmp) = play(&task("exact_match"), vec![says(vec![AgentAction::Done])], false).await;
         assert!(result.setup.iter().all(|r| r["phase"] != "teardown"), "{:?}", result.setup);
+    }
+
+    /// A clock that really pauses (on tokio's timer).
+    #[derive(Debug)]
+    struct Pausing;
+
+    #[async_trait::async_trait]
+    impl arena_setup::Clock for Pausing {
+        async fn sleep(&self, d: Duration, _why: &'static str) {
+            tokio::time::sleep(d).await;
+        }
+    }
+
+    #[tokio::test]
+    async fn a_steps_actions_share_its_deadline_and_those_not_begun_in_time_are_not_run() {
+        // 50 actions with 100 ms after each would take 5 s; the step has 300 ms.
+        let script = vec![says(vec![AgentAction::Pyautogui("pyautogui.press('a')".into()); 50])];
+        let configure = |cache| EpisodeConfig {
+            max_steps: 1,
+            step_timeout: Duration::from_millis(300),
+            sleep_after_action: Duration::from_millis(100),
+            clock: Arc::new(Pausing),
+            ..EpisodeConfig::instant(cache)
+        };
+        let (_, out, _tmp) = play_with(&task("exact_match"), script, false, configure, None).await;
+        let text = std::fs::read_to_string(out.path().join(crate::results::TRAJ_FILE)).unwrap();
+        let ran = text.lines().filter(|l| serde_json::from_str::<Value>(l).unwrap()["step_num"] == 1).count();
+        assert!((1..50).contains(&ran), "{ran} of the 50 actions ran");
+        let traj = out.read_trajectory().unwrap();
+        let said = format!("actions {} to 50 not run: the step's 0.3 s were up", ran + 1);
+        assert_eq!(traj[0].timings.timeouts, vec![said]);
     }
 
     #[tokio::test]

@@ -163,6 +163,10 @@ pub trait Agent: Send {
     /// [`Prediction`] with no actions and [`Prediction::raw_error`] set.
     async fn predict(&mut self, obs: &Observation) -> Result<Prediction, AgentError>;
 
+    /// The episode's result folder, named before [`Agent::reset`], for files an
+    /// agent keeps beside the trajectory (an exec agent's stderr).
+    fn keep_files_in(&mut self, _dir: &std::path::Path) {}
+
     /// Whether each observation should carry the browser's DOM elements
     /// ([`Observation::dom`]); reading them costs a DevTools round trip per step.
     fn wants_dom(&self) -> bool {

@@ -784,7 +784,8 @@ fn reproduction(args: &RunArgs, fast: bool) -> anyhow::Result<Vec<(String, Strin
 }
 
 /// The first Ctrl-C cancels `stop`: no new task starts and running episodes end
-/// at their next step, unevaluated (they run again next time). The second exits
+/// at once, in the middle of a step whatever the agent answered, unevaluated
+/// (they run again next time). The second exits
 /// at once with 130; every file already written stays, as each is written whole.
 async fn watch_interrupts(stop: tokio_util::sync::CancellationToken) {
     // SIGTERM (a pod being deleted, `docker stop`) counts as the first Ctrl-C.
@@ -808,11 +809,13 @@ async fn watch_interrupts(stop: tokio_util::sync::CancellationToken) {
         () = terminated => {}
     }
     eprintln!(
-        "\ninterrupted: no new task starts; running episodes stop at their next step (Ctrl-C again to abandon them now)"
+        "\ninterrupted: no new task starts; running episodes stop now, unevaluated, and summary.json is written (Ctrl-C again to exit at once)"
     );
     stop.cancel();
     if tokio::signal::ctrl_c().await.is_ok() {
         eprintln!("abandoned: finished tasks are kept; the others run again with the same command");
+        // No destructor runs past this: outside agents are ended here.
+        crate::agent::external::tree::end_all();
         std::process::exit(130);
     }
 }

@@ -21,11 +21,15 @@
 //!   its stderr into the log) and [`transport::HttpAgent`].
 //! - [`observe`]: the one adapter from an [`Observation`] to an `observe` message.
 //! - [`spaces`]: answers' actions to [`AgentAction`]s, with the `computer_13` seam.
+//! - [`stderr`]: an exec agent's stderr into the run's log, bounded per task.
+//! - [`tree`]: an exec agent's process group and descendants, ended with it.
 
 pub mod observe;
 pub mod protocol;
 pub mod spaces;
+pub mod stderr;
 pub mod transport;
+pub mod tree;
 
 use std::time::Duration;
 
@@ -61,6 +65,10 @@ pub trait Transport: Send {
     fn files(&self) -> Option<&std::path::Path> {
         None
     }
+
+    /// Keeps what the agent writes on the side (an exec agent's stderr) in
+    /// `dir`, the episode's result folder, from now on.
+    fn keep_files_in(&mut self, _dir: &std::path::Path) {}
 
     /// Marks the connection unusable after a protocol error, so that it is not
     /// reused for another episode.
@@ -115,10 +123,83 @@ fn hello_coords(name: &str) -> Result<Coords, String> {
     name.parse()
 }
 
-/// Reads one agent message, naming what was wrong with it.
+/// Reads one agent message, naming what was wrong with it; an `act` with more
+/// than [`protocol::MAX_ACTIONS`] actions is refused.
 fn parse_message(answer: Value) -> Result<AgentMessage, String> {
-    let shown = short(&answer);
-    serde_json::from_value(answer).map_err(|err| format!("malformed message {shown}: {err}"))
+    if let Some(actions) = answer.get("actions").and_then(Value::as_array) {
+        if actions.len() > protocol::MAX_ACTIONS {
+            return Err(too_many_actions(actions.len()));
+        }
+    }
+    <AgentMessage as serde::Deserialize>::deserialize(&answer)
+        .map_err(|err| format!("malformed message {}: {err}", short(&answer)))
+}
+
+fn too_many_actions(count: usize) -> String {
+    format!("the agent answered {count} actions in one act; at most {} are taken", protocol::MAX_ACTIONS)
+}
+
+/// Refuses an answer whose `actions` lists hold more than
+/// [`protocol::MAX_ACTIONS`] actions together, by counting them in the raw
+/// answer, before it becomes a JSON tree (a million small actions would take a
+/// tree of most of a GiB). Anything else, malformed JSON included, passes, for
+/// [`parse_message`] to name.
+pub(crate) fn check_action_count(answer: &[u8]) -> Result<(), String> {
+    use serde::de::{Deserializer, IgnoredAny, MapAccess, SeqAccess, Visitor};
+
+    /// How many elements a list has (0 for `null`), none of them kept.
+    struct Count(usize);
+    impl<'de> serde::Deserialize<'de> for Count {
+        fn deserialize<D: Deserializer<'de>>(deserializer: D) -> Result<Count, D::Error> {
+            struct Elements;
+            impl<'de> Visitor<'de> for Elements {
+                type Value = Count;
+                fn expecting(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+                    f.write_str("a list")
+                }
+                fn visit_unit<E>(self) -> Result<Count, E> {
+                    Ok(Count(0))
+                }
+                fn visit_seq<A: SeqAccess<'de>>(self, mut seq: A) -> Result<Count, A::Error> {
+                    let mut n = 0;
+                    while seq.next_element::<IgnoredAny>()?.is_some() {
+                        n += 1;
+                    }
+                    Ok(Count(n))
+                }
+            }
+            deserializer.deserialize_any(Elements)
+        }
+    }
+    /// The actions of every `actions` key of an object (a repeated key counts each time).
+    struct Probe(usize);
+    impl<'de> serde::Deserialize<'de> for Probe {
+        fn deserialize<D: Deserializer<'de>>(deserializer: D) -> Result<Probe, D::Error> {
+            struct Fields;
+            impl<'de> Visitor<'de> for Fields {
+                type Value = Probe;
+                fn expecting(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+                    f.write_str("an object")
+                }
+                fn visit_map<A: MapAccess<'de>>(self, mut map: A) -> Result<Probe, A::Error> {
+                    let mut n = 0;
+                    while let Some(key) = map.next_key::<String>()? {
+                        if key == "actions" {
+                            n += map.next_value::<Count>()?.0;
+                        } else {
+                            map.next_value::<IgnoredAny>()?;
+                        }
+                    }
+                    Ok(Probe(n))
+                }
+            }
+            deserializer.deserialize_map(Fields)
+        }
+    }
+    match serde_json::from_slice::<Probe>(answer) {
+        Ok(Probe(n)) if n > protocol::MAX_ACTIONS => Err(too_many_actions(n)),
+        _ => Ok(()),
+    }
 }
 
 fn kind(message: &AgentMessage) -> &'static str {
@@ -130,13 +211,30 @@ fn kind(message: &AgentMessage) -> &'static str {
     }
 }
 
-/// A message cut to a readable length for an error.
+/// A message cut to a readable length for an error (written no further than
+/// that, however long the message).
 pub(crate) fn short(value: &Value) -> String {
-    let text = value.to_string();
+    /// A writer that keeps the first bytes and then refuses more.
+    struct Head(Vec<u8>);
+    impl std::io::Write for Head {
+        fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+            if self.0.len() >= 1024 {
+                return Err(std::io::ErrorKind::WriteZero.into());
+            }
+            self.0.extend_from_slice(buf);
+            Ok(buf.len())
+        }
+        fn flush(&mut self) -> std::io::Result<()> {
+            Ok(())
+        }
+    }
+    let mut head = Head(Vec::new());
+    let _ = serde_json::to_writer(&mut head, value);
+    let text = String::from_utf8_lossy(&head.0);
     if text.chars().count() > 200 {
         format!("{}...", text.chars().take(200).collect::<String>())
     } else {
-        text
+        text.into_owned()
     }
 }
 
@@ -171,6 +269,8 @@ pub struct ExternalAgent {
     timeout: Duration,
     /// The run's coordinate convention (`--coords`), unless the agent's `hello` names one.
     coords: Coords,
+    /// The episode's result folder, handed to the transport when it connects.
+    files_in: Option<std::path::PathBuf>,
 }
 
 impl ExternalAgent {
@@ -184,6 +284,7 @@ impl ExternalAgent {
             reset_sent: false,
             timeout,
             coords: Coords::Pixels,
+            files_in: None,
         }
     }
 
@@ -228,6 +329,10 @@ impl ExternalAgent {
                 Ok(Err(reason)) => return Err(self.error(reason)),
                 Err(_) => return Err(self.error(format!("no handshake within {} s", self.timeout.as_secs_f64()))),
             };
+            let mut transport = transport;
+            if let Some(dir) = &self.files_in {
+                transport.keep_files_in(dir);
+            }
             self.transport = Some(transport);
         }
         Ok(())
@@ -267,6 +372,13 @@ impl Drop for ExternalAgent {
 impl Agent for ExternalAgent {
     fn name(&self) -> &str {
         &self.name
+    }
+
+    fn keep_files_in(&mut self, dir: &std::path::Path) {
+        self.files_in = Some(dir.to_owned());
+        if let Some(transport) = self.transport.as_mut() {
+            transport.keep_files_in(dir);
+        }
     }
 
     async fn reset(&mut self, task: &Task) {
@@ -360,6 +472,43 @@ mod tests {
         for name in protocol::COORDS {
             assert_eq!(hello_coords(name).expect("each named convention parses").name(), name);
         }
+    }
+
+    #[test]
+    fn an_act_of_a_million_actions_is_refused_naming_the_count_and_the_schema_says_the_limit() {
+        // Counted in the raw answer, never made a tree.
+        let action = r#"{"type": "key_press", "key": "a"}"#;
+        let many = format!(r#"{{"type": "act", "actions": [{}]}}"#, vec![action; 1_000_000].join(","));
+        let err = check_action_count(many.as_bytes()).expect_err("too many actions");
+        assert!(err.contains("1000000 actions") && err.contains("at most 256"), "{err}");
+        // A repeated key counts each time; the limit itself passes.
+        let split = format!(r#"{{"actions": [{0}], "type": "act", "actions": [{0}]}}"#, vec![action; 200].join(","));
+        assert!(check_action_count(split.as_bytes()).expect_err("400 actions").contains("400 actions"));
+        let most = format!(r#"{{"type": "act", "actions": [{}]}}"#, vec!["\"WAIT\""; protocol::MAX_ACTIONS].join(","));
+        check_action_count(most.as_bytes()).expect("the limit passes");
+        for other in
+            [r#"{"type": "act", "actions": null}"#, r#"{"actions": 3}"#, "[1, 2]", "not JSON", r#"{"type": "act"}"#]
+        {
+            check_action_count(other.as_bytes()).expect("left for parse_message to name");
+        }
+        let value: Value = serde_json::from_str(&most).expect("JSON");
+        assert!(
+            matches!(parse_message(value), Ok(AgentMessage::Act(act)) if act.actions.len() == protocol::MAX_ACTIONS)
+        );
+        let over = json!({"type": "act", "actions": vec![json!("WAIT"); protocol::MAX_ACTIONS + 1]});
+        assert!(parse_message(over).expect_err("257").contains("257 actions"));
+
+        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../schemas/agent-protocol/act.json");
+        let schema: Value = serde_json::from_str(&std::fs::read_to_string(path).expect("the schema")).expect("JSON");
+        assert_eq!(schema["properties"]["actions"]["maxItems"], json!(protocol::MAX_ACTIONS));
+    }
+
+    #[test]
+    fn a_long_message_is_shown_short_without_writing_it_whole() {
+        let long = json!({"response": "a".repeat(10_000_000)});
+        let shown = short(&long);
+        assert!(shown.len() < 300 && shown.ends_with("..."), "{shown}");
+        assert_eq!(short(&json!({"a": 1})), r#"{"a":1}"#);
     }
 
     #[test]

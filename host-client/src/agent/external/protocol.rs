@@ -18,6 +18,12 @@ pub const PROTOCOL_VERSION: u32 = 1;
 /// The action spaces an answer may use.
 pub const ACTION_SPACES: [&str; 4] = ["computer", "pyautogui", "computer_13", "typed"];
 
+/// The most actions one `act` may carry (decision apart): an answer with more is
+/// refused before any of them runs, as an agent error naming the count. Every
+/// action is followed by the run's pause and an observation, so this bounds a
+/// step to minutes even before its deadline; agents answer one to a few.
+pub const MAX_ACTIONS: usize = 256;
+
 /// The coordinate conventions an agent may name in its `hello` (`--coords`'s).
 pub const COORDS: [&str; 3] = ["pixels", "fraction", "grid1000"];
 

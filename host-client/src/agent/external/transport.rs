@@ -6,8 +6,10 @@
 //! with N guest workers has at most N processes, each serving one episode at a
 //! time. A process that broke the protocol, timed out or died is killed and
 //! never reused; the next episode starts a fresh one (and shakes hands again).
-//! Each process's stderr goes, line by line, into the run's log (`tracing`,
-//! target `arena::agent`).
+//! Each process's stderr goes into the run's log (`tracing`, target
+//! `arena::agent`), bounded per task ([`super::stderr`]). A process runs in a
+//! group of its own and ends with everything it started ([`super::tree`]).
+//! An answer is at most [`MAX_ANSWER`] bytes over either transport.
 
 use std::path::{Path, PathBuf};
 use std::process::Stdio;
@@ -19,10 +21,13 @@ use tokio::io::{AsyncBufReadExt, AsyncReadExt, AsyncWriteExt, BufReader};
 use tokio::process::{Child, ChildStdin, ChildStdout};
 
 use super::protocol::AgentHello;
+use super::stderr::StderrBudget;
 use super::{check_hello, hello_message, short, Connector, Transport};
 
-/// The longest line an agent may answer with (a screenshot inline is far less).
-const MAX_LINE: usize = 64 << 20;
+/// The longest answer an agent may give, one line from a process or one HTTP
+/// body (a screenshot inline is far less): a longer one is an agent error for
+/// its task, read no further than this, so it never costs the run more memory.
+pub const MAX_ANSWER: usize = 64 << 20;
 
 /// Agent processes started from one command line, one per episode running at once.
 #[derive(Debug)]
@@ -62,29 +67,31 @@ impl ProcessPool {
         let n = self.started.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
         let dir = self.files.path().join(format!("process-{n}"));
         std::fs::create_dir_all(&dir).map_err(|err| format!("creating {}: {err}", dir.display()))?;
-        let mut child = tokio::process::Command::new(&self.argv[0])
-            .args(&self.argv[1..])
-            .stdin(Stdio::piped())
-            .stdout(Stdio::piped())
-            .stderr(Stdio::piped())
-            .kill_on_drop(true)
-            .spawn()
-            .map_err(|err| format!("cannot start {:?}: {err}", self.argv[0]))?;
+        let mut command = tokio::process::Command::new(&self.argv[0]);
+        command.args(&self.argv[1..]).stdin(Stdio::piped()).stdout(Stdio::piped()).stderr(Stdio::piped());
+        command.kill_on_drop(true);
+        super::tree::own_group(&mut command);
+        let mut child = command.spawn().map_err(|err| format!("cannot start {:?}: {err}", self.argv[0]))?;
         let pid = child.id().unwrap_or_default();
+        super::tree::register(pid);
         tracing::info!(pid, command = %self.argv.join(" "), "agent process started");
+        let budget = StderrBudget::new(pid);
         if let Some(stderr) = child.stderr.take() {
-            tokio::spawn(async move {
-                let mut lines = BufReader::new(stderr).lines();
-                while let Ok(Some(line)) = lines.next_line().await {
-                    tracing::info!(target: "arena::agent", pid, "{line}");
-                }
-            });
+            tokio::spawn(super::stderr::pump(stderr, budget.clone()));
         }
         let (Some(stdin), Some(stdout)) = (child.stdin.take(), child.stdout.take()) else {
             return Err("the agent process has no pipes".to_owned());
         };
-        let mut process =
-            AgentProcess { child, stdin, stdout: BufReader::new(stdout), hello: None, dir, poisoned: false };
+        let mut process = AgentProcess {
+            child,
+            pid,
+            stdin,
+            stdout: BufReader::new(stdout),
+            hello: None,
+            dir,
+            poisoned: false,
+            budget,
+        };
         let answer = process.exchange(&hello_message()).await?;
         process.hello = Some(check_hello(answer)?);
         Ok(process)
@@ -98,6 +105,7 @@ impl Connector for ProcessPool {
         if let Some(mut process) = kept {
             if process.alive() {
                 process.clear_files();
+                process.budget.end_task();
                 return Ok(Box::new(process));
             }
             tracing::warn!(pid = process.child.id(), "the agent process died between episodes; starting another");
@@ -125,11 +133,24 @@ impl Connector for ProcessPool {
 #[derive(Debug)]
 pub struct AgentProcess {
     child: Child,
+    /// The process's id, which leads its process group.
+    pid: u32,
     stdin: ChildStdin,
     stdout: BufReader<ChildStdout>,
     hello: Option<AgentHello>,
     dir: PathBuf,
     poisoned: bool,
+    /// Its stderr's share of the run's log.
+    budget: Arc<StderrBudget>,
+}
+
+impl Drop for AgentProcess {
+    /// The process and everything it started end with it: when it broke the
+    /// protocol and is replaced, when its episode worker stops, when the run ends.
+    fn drop(&mut self) {
+        super::tree::end(self.pid);
+        self.budget.end_task();
+    }
 }
 
 impl AgentProcess {
@@ -153,17 +174,18 @@ impl AgentProcess {
         }
         let _ = self.stdin.flush().await;
         let mut answer = Vec::new();
-        let read = (&mut self.stdout).take(MAX_LINE as u64 + 1).read_until(b'\n', &mut answer).await;
+        let read = (&mut self.stdout).take(MAX_ANSWER as u64 + 1).read_until(b'\n', &mut answer).await;
         match read {
             Ok(0) => return Err(self.gone("the agent closed its output").await),
-            Ok(_) if answer.len() > MAX_LINE => {
-                return Err(format!("the agent's answer is longer than {} MiB", MAX_LINE >> 20));
+            Ok(_) if answer.len() > MAX_ANSWER => {
+                return Err(format!("the agent's answer is longer than {} MiB", MAX_ANSWER >> 20));
             }
             Ok(_) => {}
             Err(err) => return Err(format!("reading the agent's answer: {err}")),
         }
         let text = String::from_utf8_lossy(&answer);
         let text = text.trim();
+        super::check_action_count(text.as_bytes())?;
         match serde_json::from_str::<Value>(text) {
             Ok(value @ Value::Object(_)) => Ok(value),
             Ok(other) => Err(format!("the agent answered {}, not a JSON object", short(&other))),
@@ -210,8 +232,13 @@ impl Transport for AgentProcess {
         Some(&self.dir)
     }
 
+    fn keep_files_in(&mut self, dir: &Path) {
+        self.budget.keep_in(dir);
+    }
+
     fn poison(&mut self) {
         self.poisoned = true;
+        super::tree::end(self.pid);
         let _ = self.child.start_kill();
     }
 
@@ -269,11 +296,14 @@ impl HttpAgent {
             .await
             .map_err(|err| format!("POST {}: {err}", self.url))?;
         let status = response.status();
-        let body = response.bytes().await.map_err(|err| format!("POST {}: reading the answer: {err}", self.url))?;
+        // Only the start of an error body is shown.
+        let (limit, cut) = if status.is_success() { (MAX_ANSWER, false) } else { (4096, true) };
+        let body = read_bounded(response, limit, cut).await.map_err(|err| format!("POST {}: {err}", self.url))?;
         if !status.is_success() {
             let shown: String = String::from_utf8_lossy(&body).chars().take(200).collect();
             return Err(format!("POST {}: HTTP {status}: {shown}", self.url));
         }
+        super::check_action_count(&body)?;
         match serde_json::from_slice::<Value>(&body) {
             Ok(value @ Value::Object(_)) => Ok(value),
             Ok(other) => Err(format!("the agent answered {}, not a JSON object", short(&other))),
@@ -283,6 +313,28 @@ impl HttpAgent {
             }
         }
     }
+}
+
+/// A response body read chunk by chunk, at most `limit` bytes: a body announced
+/// or found longer is refused as soon as that is known, or with `cut` kept to
+/// its first `limit` bytes. The client's timeout bounds a slow body.
+async fn read_bounded(mut response: reqwest::Response, limit: usize, cut: bool) -> Result<Vec<u8>, String> {
+    let too_long = || format!("the agent's answer is longer than {} MiB", limit >> 20);
+    if !cut && response.content_length().is_some_and(|n| n > limit as u64) {
+        return Err(too_long());
+    }
+    let mut body = Vec::new();
+    while let Some(chunk) = response.chunk().await.map_err(|err| format!("reading the answer: {err}"))? {
+        if body.len() + chunk.len() > limit {
+            if cut {
+                body.extend_from_slice(&chunk[..limit - body.len()]);
+                break;
+            }
+            return Err(too_long());
+        }
+        body.extend_from_slice(&chunk);
+    }
+    Ok(body)
 }
 
 /// An [`HttpAgent`] after its handshake.
