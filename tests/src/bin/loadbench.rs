@@ -17,7 +17,9 @@
 //!
 //! Memory figures read `/proc/self/status` (Linux); elsewhere they print as unknown.
 //! Run it in release mode: `cargo run --release -p arena-tests --bin loadbench`
-//! (`-- guards` runs the guards section alone).
+//! (`-- guards` runs the guards section alone). With `ARENA_BENCH_GUESTS=LABEL=PATH,...`
+//! it first runs the mixed workload against a process of each named guest build, side
+//! by side in rotated rounds (`-- side-by-side` runs that alone).
 
 #![forbid(unsafe_code)]
 
@@ -81,8 +83,35 @@ async fn client_loop(client: GuestClient, until: Instant, id: usize) -> (Vec<Dur
     (latencies, errors)
 }
 
+/// What one load phase measured.
+#[derive(Debug, Clone, Copy)]
+struct Figures {
+    per_second: f64,
+    p50: Duration,
+    p99: Duration,
+    errors: usize,
+}
+
+impl Figures {
+    fn print(&self, name: &str) {
+        println!(
+            "{name:<46} {:>8.0} req/s  p50 {:>7.2} ms  p99 {:>7.2} ms  errors {}",
+            self.per_second,
+            self.p50.as_secs_f64() * 1000.0,
+            self.p99.as_secs_f64() * 1000.0,
+            self.errors
+        );
+    }
+}
+
 /// Runs `clients` concurrent clients for [`PHASE`] and prints the figures.
 async fn phase(url: &str, name: &str, clients: usize) -> anyhow::Result<()> {
+    measure(url, clients).await?.print(name);
+    Ok(())
+}
+
+/// Runs `clients` concurrent clients for [`PHASE`] against `url`.
+async fn measure(url: &str, clients: usize) -> anyhow::Result<Figures> {
     let until = Instant::now() + PHASE;
     let mut tasks = tokio::task::JoinSet::new();
     for id in 0..clients {
@@ -98,16 +127,50 @@ async fn phase(url: &str, name: &str, clients: usize) -> anyhow::Result<()> {
     }
     latencies.sort();
     let pct = |p: f64| latencies.get(((latencies.len().max(1) - 1) as f64 * p) as usize).copied().unwrap_or_default();
-    println!(
-        "{name:<46} {:>8.0} req/s  p50 {:>7.2} ms  p99 {:>7.2} ms  errors {errors}",
-        latencies.len() as f64 / PHASE.as_secs_f64(),
-        pct(0.5).as_secs_f64() * 1000.0,
-        pct(0.99).as_secs_f64() * 1000.0,
-    );
+    Ok(Figures { per_second: latencies.len() as f64 / PHASE.as_secs_f64(), p50: pct(0.5), p99: pct(0.99), errors })
+}
+
+/// Rounds of the side-by-side load comparison (builds rotated each round).
+const ROUNDS: usize = 3;
+
+/// The mixed workload at 50 and 200 clients against a process of each guest build of
+/// `ARENA_BENCH_GUESTS`, all started alike, in interleaved rounds; every round's row
+/// and each build's median round (by p99) are printed.
+async fn side_by_side(builds: &[(String, std::path::PathBuf)]) -> anyhow::Result<()> {
+    println!("side by side, guest processes ({ROUNDS} rounds of {} s per phase, builds rotated):", PHASE.as_secs());
+    let extra = ["--computer-action-delay-ms", "0", "--max-connections", "1024"];
+    let served: Vec<arena_test_support::Served> = builds
+        .iter()
+        .map(|(label, exe)| {
+            arena_test_support::Served::guest_of(exe, &extra).with_context(|| format!("starting the {label} guest"))
+        })
+        .collect::<anyhow::Result<_>>()?;
+    for clients in [50, 200] {
+        let mut rounds = vec![Vec::new(); builds.len()];
+        for round in 0..ROUNDS {
+            for i in 0..builds.len() {
+                let b = (i + round) % builds.len();
+                let figures = measure(&served[b].url, clients).await?;
+                figures.print(&format!("{}: {clients} clients, round {}", builds[b].0, round + 1));
+                rounds[b].push(figures);
+            }
+        }
+        for ((label, _), mut figures) in builds.iter().zip(rounds) {
+            figures.sort_by_key(|f| f.p99);
+            figures[figures.len() / 2].print(&format!("{label}: {clients} clients, median round"));
+        }
+    }
     Ok(())
 }
 
 async fn run() -> anyhow::Result<()> {
+    let builds = arena_test_support::bench_guests()?;
+    if !builds.is_empty() {
+        side_by_side(&builds).await?;
+    }
+    if std::env::args().nth(1).as_deref() == Some("side-by-side") {
+        return Ok(());
+    }
     if std::env::args().nth(1).as_deref() != Some("guards") {
         load().await?;
     }

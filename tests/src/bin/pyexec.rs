@@ -11,6 +11,8 @@
 //! process through the interpreter and prints, for each, its answer, the peak bytes
 //! by the interpreter's own accounting and the time to that answer.
 //! Run it in release mode: `cargo run --release -p arena-tests --bin pyexec`.
+//! With `ARENA_BENCH_GUESTS=LABEL=PATH,...` it first measures the same request against
+//! each named guest binary (a process of each build, started alike) side by side.
 
 #![forbid(unsafe_code)]
 
@@ -93,14 +95,10 @@ fn spawn_python(program: &str) -> anyhow::Result<Stats> {
     Ok(Stats::new(samples))
 }
 
-async fn run() -> anyhow::Result<()> {
-    // The one test launcher; the guest stops when `stub` is dropped at the end.
-    let stub = arena_test_support::StubGuest::start().await;
-    let url = format!("{}/execute", stub.url());
-    let http = reqwest::Client::new();
+/// `runs` timed `POST /execute` of [`CODE`] against the guest at `base`, after 20 to warm up.
+async fn execute_samples(http: &reqwest::Client, base: &str, runs: usize) -> anyhow::Result<Vec<Duration>> {
+    let url = format!("{base}/execute");
     let body = serde_json::json!({"command": ["python", "-c", CODE], "shell": false});
-    println!("arena pyexec bench: one pyautogui click through POST /execute, natively, vs. a Python process start");
-
     let post = || async {
         let answer: serde_json::Value = http.post(&url).json(&body).send().await?.error_for_status()?.json().await?;
         anyhow::ensure!(answer["returncode"] == 0 && answer["status"] == "success", "unexpected answer {answer}");
@@ -109,13 +107,54 @@ async fn run() -> anyhow::Result<()> {
     for _ in 0..20 {
         post().await.context("warming up")?;
     }
-    let mut native = Vec::with_capacity(NATIVE_RUNS);
-    for _ in 0..NATIVE_RUNS {
+    let mut samples = Vec::with_capacity(runs);
+    for _ in 0..runs {
         let start = Instant::now();
         post().await.context("measuring /execute")?;
-        native.push(start.elapsed());
+        samples.push(start.elapsed());
     }
-    let native = Stats::new(native);
+    Ok(samples)
+}
+
+/// Rounds of the side-by-side comparison; each build measures [`NATIVE_RUNS`] / `ROUNDS`
+/// requests per round, builds in a rotated order, so that drift of the machine spreads
+/// over all of them.
+const ROUNDS: usize = 5;
+
+/// The same `/execute` figure for each guest build of `ARENA_BENCH_GUESTS`, each a
+/// separate process started the same way, measured in interleaved rounds.
+async fn side_by_side(http: &reqwest::Client, builds: &[(String, std::path::PathBuf)]) -> anyhow::Result<()> {
+    println!("side by side, guest processes ({ROUNDS} rounds, builds rotated each round):");
+    let extra = ["--computer-action-delay-ms", "0"];
+    let served: Vec<arena_test_support::Served> = builds
+        .iter()
+        .map(|(label, exe)| {
+            arena_test_support::Served::guest_of(exe, &extra).with_context(|| format!("starting the {label} guest"))
+        })
+        .collect::<anyhow::Result<_>>()?;
+    let mut samples = vec![Vec::new(); builds.len()];
+    for round in 0..ROUNDS {
+        for i in 0..builds.len() {
+            let b = (i + round) % builds.len();
+            samples[b].extend(execute_samples(http, &served[b].url, NATIVE_RUNS / ROUNDS).await?);
+        }
+    }
+    for ((label, _), samples) in builds.iter().zip(samples) {
+        Stats::new(samples).print(&format!("{label}: POST /execute pyautogui.click"));
+    }
+    Ok(())
+}
+
+async fn run() -> anyhow::Result<()> {
+    let http = reqwest::Client::new();
+    let builds = arena_test_support::bench_guests()?;
+    if !builds.is_empty() {
+        side_by_side(&http, &builds).await?;
+    }
+    // The one test launcher; the guest stops when `stub` is dropped at the end.
+    let stub = arena_test_support::StubGuest::start().await;
+    println!("arena pyexec bench: one pyautogui click through POST /execute, natively, vs. a Python process start");
+    let native = Stats::new(execute_samples(&http, stub.url(), NATIVE_RUNS).await?);
     native.print("native POST /execute pyautogui.click");
 
     let process = spawn_python("python3")?;

@@ -117,6 +117,18 @@ impl Served {
     /// See [`Served::start`].
     pub fn guest(extra: &[&str]) -> anyhow::Result<Served> {
         let exe = workspace_binary("arena-guest", "arena-guest")?;
+        Served::guest_of(&exe, extra)
+    }
+
+    /// Starts the guest binary `exe` (this tree's or another build's) with the stub
+    /// backend on a free loopback port, no settle pauses, and `extra` options. Every
+    /// option given here exists in every build since the stub backend did, so that
+    /// benches can start older builds the same way.
+    ///
+    /// # Errors
+    ///
+    /// See [`Served::start`].
+    pub fn guest_of(exe: &Path, extra: &[&str]) -> anyhow::Result<Served> {
         let root = tempfile::tempdir().context("creating the stub root")?;
         let root_path = root.path().to_str().context("non-UTF-8 temp path")?.to_owned();
         let mut args = vec![
@@ -132,7 +144,7 @@ impl Served {
             "0",
         ];
         args.extend_from_slice(extra);
-        Served::start(&exe, &args, Some(root))
+        Served::start(exe, &args, Some(root))
     }
 
     /// Process id of the child.
@@ -147,3 +159,30 @@ impl Drop for Served {
         let _ = self.child.wait();
     }
 }
+
+/// The guest builds a bench compares side by side, from `ARENA_BENCH_GUESTS`:
+/// `LABEL=PATH` pairs separated by commas (`old=../old/target/release/arena-guest,new=target/release/arena-guest`).
+/// Empty when the variable is unset.
+///
+/// # Errors
+///
+/// A pair without `=`, an empty label, or a path that is not a file.
+pub fn bench_guests() -> anyhow::Result<Vec<(String, PathBuf)>> {
+    let Some(value) = std::env::var_os(BENCH_GUESTS_VAR) else {
+        return Ok(Vec::new());
+    };
+    let value = value.to_str().with_context(|| format!("{BENCH_GUESTS_VAR} is not UTF-8"))?.to_owned();
+    let mut builds = Vec::new();
+    for pair in value.split(',').filter(|p| !p.trim().is_empty()) {
+        let (label, path) =
+            pair.split_once('=').with_context(|| format!("{BENCH_GUESTS_VAR}: {pair:?} is not LABEL=PATH"))?;
+        anyhow::ensure!(!label.trim().is_empty(), "{BENCH_GUESTS_VAR}: {pair:?} has an empty label");
+        let path = PathBuf::from(path.trim());
+        anyhow::ensure!(path.is_file(), "{BENCH_GUESTS_VAR}: {} is not a file", path.display());
+        builds.push((label.trim().to_owned(), path));
+    }
+    Ok(builds)
+}
+
+/// The variable [`bench_guests`] reads.
+pub const BENCH_GUESTS_VAR: &str = "ARENA_BENCH_GUESTS";
