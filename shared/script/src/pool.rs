@@ -1,0 +1,72 @@
+//! The memory all runs of a process share: a total that the programs running at once
+//! draw their bytes from, on top of each program's own [`crate::MAX_MEMORY`].
+//!
+//! A run takes bytes from its pool in chunks of [`CHUNK`] as what it holds grows
+//! past what it has taken, and gives all of them back when it ends: its share is its
+//! high-water mark while it runs. When the pool has no more, the run fails with
+//! `MemoryError` naming the total, as it does at its own budget. So a server running
+//! many programs at once (the guest's `/execute`, its MCP `run_python`) holds at most
+//! the pool's total in program values, however many programs it was sent.
+
+use std::sync::atomic::{AtomicUsize, Ordering};
+
+/// The granularity in which runs draw from a pool, so that the shared counter is
+/// touched once per mebibyte a program grows, not per value.
+pub const CHUNK: usize = 1 << 20;
+
+/// A budget in bytes shared by the runs that name it in their `Globals`.
+#[derive(Debug)]
+pub struct MemoryPool {
+    total: usize,
+    taken: AtomicUsize,
+}
+
+impl MemoryPool {
+    /// A pool of `total` bytes, none taken.
+    pub fn new(total: usize) -> MemoryPool {
+        MemoryPool { total, taken: AtomicUsize::new(0) }
+    }
+
+    /// The pool's size in bytes.
+    pub fn total(&self) -> usize {
+        self.total
+    }
+
+    /// The bytes the runs hold from it now.
+    pub fn in_use(&self) -> usize {
+        self.taken.load(Ordering::Relaxed)
+    }
+
+    /// Takes `bytes` when that many are left; false (and nothing taken) when not.
+    pub(crate) fn take(&self, bytes: usize) -> bool {
+        self.taken
+            .fetch_update(Ordering::AcqRel, Ordering::Acquire, |taken| {
+                taken.checked_add(bytes).filter(|&after| after <= self.total)
+            })
+            .is_ok()
+    }
+
+    /// Gives back `bytes` taken with [`MemoryPool::take`].
+    pub(crate) fn give(&self, bytes: usize) {
+        // Never below zero, whatever a caller gives back.
+        let _ = self.taken.fetch_update(Ordering::AcqRel, Ordering::Acquire, |taken| Some(taken.saturating_sub(bytes)));
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn takes_up_to_the_total_and_gives_back() {
+        let pool = MemoryPool::new(3 * CHUNK);
+        assert!(pool.take(2 * CHUNK));
+        assert!(!pool.take(2 * CHUNK), "past the total");
+        assert_eq!(pool.in_use(), 2 * CHUNK);
+        assert!(pool.take(CHUNK));
+        pool.give(3 * CHUNK);
+        assert_eq!(pool.in_use(), 0);
+        pool.give(CHUNK);
+        assert_eq!(pool.in_use(), 0);
+    }
+}
