@@ -132,9 +132,21 @@ impl GuestMcp {
             // The call's deadline and its cancel flag (set on timeout, a dropped request or shutdown).
             let stop = script::Stop::new(Some(deadline), crate::desktop::cancel::flag());
             let globals = if script::dialect_of(&code) == script::Dialect::Computer {
-                Globals { computer: Some(&mut computer), computer_action_delay: 0.0, preimport: &[], stop }
+                Globals {
+                    computer: Some(&mut computer),
+                    computer_action_delay: 0.0,
+                    preimport: &[],
+                    stop,
+                    memory: None,
+                }
             } else {
-                Globals { computer: None, computer_action_delay: 0.0, preimport: &["pyautogui", "time"], stop }
+                Globals {
+                    computer: None,
+                    computer_action_delay: 0.0,
+                    preimport: &["pyautogui", "time"],
+                    stop,
+                    memory: None,
+                }
             };
             Ok(script::run(&program, &mut host, globals))
         })

@@ -503,6 +503,7 @@ pub fn run_computer_code(
         computer_action_delay: options.action_delay.as_secs_f64(),
         preimport: &[],
         stop: code_stop(deadline),
+        memory: None,
     };
     let result = script::run(&program, &mut host, globals);
     let result = code_result(result, options);

@@ -82,7 +82,8 @@ fn run_program(program: &Program, host: &mut StepHost) -> Result<(), arena_scrip
     // Translating runs no effects, only the program's own work: a few seconds bound a
     // reply that loops, besides the interpreter's loop budget.
     let stop = Stop::new(Some(Instant::now() + TRANSLATE_TIME), None);
-    let globals = Globals { computer: None, computer_action_delay: 0.25, preimport: &["pyautogui", "time"], stop, memory: None };
+    let globals =
+        Globals { computer: None, computer_action_delay: 0.25, preimport: &["pyautogui", "time"], stop, memory: None };
     run(program, host, globals).map(|_| ())
 }
 

@@ -401,9 +401,13 @@ async fn run_script(
             Lang::Computer => {
                 Globals { computer: Some(&mut state), computer_action_delay: delay, preimport: &[], stop, memory: None }
             }
-            Lang::Pyautogui => {
-                Globals { computer: None, computer_action_delay: delay, preimport: &["pyautogui", "time"], stop, memory: None }
-            }
+            Lang::Pyautogui => Globals {
+                computer: None,
+                computer_action_delay: delay,
+                preimport: &["pyautogui", "time"],
+                stop,
+                memory: None,
+            },
         };
         let result = run(&program, &mut host, globals);
         (result, state, host)

@@ -69,4 +69,20 @@ mod tests {
         pool.give(CHUNK);
         assert_eq!(pool.in_use(), 0);
     }
+
+    #[test]
+    fn a_run_past_its_pool_fails_naming_the_total_and_gives_its_share_back() {
+        let pool = std::sync::Arc::new(MemoryPool::new(4 * CHUNK));
+        let run = |code: &str| {
+            let program = crate::parse(code).expect("parses");
+            let mut host = crate::RecordingHost::new((100, 100), (0, 0));
+            crate::run(&program, &mut host, crate::Globals::python().with_memory(Some(pool.clone())))
+        };
+        let err = run("x = 'a' * 6000000").expect_err("6 MB is past a 4 MiB pool");
+        assert_eq!(err.kind, crate::ErrorKind::Memory);
+        assert!(err.message.contains("4 MiB together"), "{}", err.message);
+        assert_eq!(pool.in_use(), 0, "the run gave its share back");
+        assert!(run("x = 'a' * 2000000").is_ok(), "within the pool");
+        assert_eq!(pool.in_use(), 0);
+    }
 }

@@ -196,7 +196,13 @@ impl<'a> Globals<'a> {
 
     /// `/execute_windows`: `computer` and `human` are bound to `state`.
     pub fn computer(state: &'a mut ComputerState) -> Globals<'a> {
-        Globals { computer: Some(state), computer_action_delay: 0.25, preimport: &[], stop: Stop::never(), memory: None }
+        Globals {
+            computer: Some(state),
+            computer_action_delay: 0.25,
+            preimport: &[],
+            stop: Stop::never(),
+            memory: None,
+        }
     }
 }
 
