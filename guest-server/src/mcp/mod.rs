@@ -123,8 +123,13 @@ impl GuestMcp {
         };
         let timeout = self.state.call_timeout();
         let (w, h) = screen.unwrap_or((0, 0));
+        let place = match self.state.programs.admit().await {
+            Ok(place) => place,
+            Err(busy) => return tool_error(format!("{tool}: {busy}")),
+        };
         let _input = self.state.input_share().await;
         let ran = blocking(&self.state.desktop, "run_python", timeout, move |d| {
+            let memory = Some(place.memory());
             let deadline = Instant::now() + timeout;
             let mut host = DesktopHost::new(d, deadline);
             let mut computer =
@@ -132,21 +137,9 @@ impl GuestMcp {
             // The call's deadline and its cancel flag (set on timeout, a dropped request or shutdown).
             let stop = script::Stop::new(Some(deadline), crate::desktop::cancel::flag());
             let globals = if script::dialect_of(&code) == script::Dialect::Computer {
-                Globals {
-                    computer: Some(&mut computer),
-                    computer_action_delay: 0.0,
-                    preimport: &[],
-                    stop,
-                    memory: None,
-                }
+                Globals { computer: Some(&mut computer), computer_action_delay: 0.0, preimport: &[], stop, memory }
             } else {
-                Globals {
-                    computer: None,
-                    computer_action_delay: 0.0,
-                    preimport: &["pyautogui", "time"],
-                    stop,
-                    memory: None,
-                }
+                Globals { computer: None, computer_action_delay: 0.0, preimport: &["pyautogui", "time"], stop, memory }
             };
             Ok(script::run(&program, &mut host, globals))
         })

@@ -208,6 +208,12 @@ struct StepHost {
 }
 
 impl ScriptHost for StepHost {
+    // The steps are kept until the whole program is translated: the run counts them
+    // against its memory budget, as its own values.
+    fn keeps_actions(&self) -> bool {
+        true
+    }
+
     fn perform(&mut self, action: Action) -> HostResult<()> {
         self.rec.cursor = cursor_after(&action, self.rec.cursor);
         self.steps.push(Step::Act(action));

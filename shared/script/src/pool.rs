@@ -85,4 +85,24 @@ mod tests {
         assert!(run("x = 'a' * 2000000").is_ok(), "within the pool");
         assert_eq!(pool.in_use(), 0);
     }
+
+    #[test]
+    fn actions_a_recording_host_keeps_count_against_the_run() {
+        // 200,000 recorded actions (a line of text, then Enter, 100,000 times) hold
+        // several MiB though the program's own value (one 200 kB string) holds far
+        // less; a 4 MiB pool refuses them.
+        let pool = std::sync::Arc::new(MemoryPool::new(4 * CHUNK));
+        let program = crate::parse("import pyautogui\npyautogui.write('a\\n' * 100000)").expect("parses");
+        let mut host = crate::RecordingHost::new((100, 100), (0, 0));
+        let err = crate::run(&program, &mut host, crate::Globals::python().with_memory(Some(pool.clone())))
+            .expect_err("the recorded actions are past the pool");
+        assert_eq!(err.kind, crate::ErrorKind::Memory, "{err}");
+        assert!(host.actions.len() < 200_000, "stopped before recording them all: {}", host.actions.len());
+        assert_eq!(pool.in_use(), 0);
+        // The same program against a host that acts (it does not say it keeps its
+        // actions) holds only the string.
+        let mut acting = crate::tests::FakeHost::new();
+        crate::run(&program, &mut acting, crate::Globals::python().with_memory(Some(pool.clone()))).expect("runs");
+        assert_eq!(acting.actions.len(), 200_000);
+    }
 }
