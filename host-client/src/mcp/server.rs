@@ -9,14 +9,13 @@ use std::net::SocketAddr;
 use std::sync::Arc;
 use std::time::Duration;
 
-use arena_mcp::{image_png, text, tool_error, Server, ToolServer};
+use arena_mcp::{image_png, text, tool_error, BoundedSessions, Server, SessionLimits, ToolServer};
 use axum::extract::Request;
 use axum::http::StatusCode;
 use axum::middleware::Next;
 use axum::response::{IntoResponse, Response};
 use base64::Engine as _;
 use rmcp::model::{CallToolRequestParams, CallToolResponse};
-use rmcp::transport::streamable_http_server::session::local::LocalSessionManager;
 use rmcp::transport::streamable_http_server::StreamableHttpService;
 use rmcp::ServerHandler;
 use serde_json::{json, Value};
@@ -168,8 +167,10 @@ where
     let mut config = arena_mcp::http_config().with_cancellation_token(stop);
     config.allowed_hosts = hosts;
     config.legacy_session_mode = true;
-    let service: StreamableHttpService<S, LocalSessionManager> =
-        StreamableHttpService::new(move || Ok(make()), Default::default(), config);
+    // At most 64 sessions (a new one closes the one idle longest), each closed after
+    // 2 minutes without a call, a call whose client hung up cancelled.
+    let service: StreamableHttpService<S, BoundedSessions> =
+        StreamableHttpService::new(move || Ok(make()), BoundedSessions::new(SessionLimits::DEFAULT), config);
     let token: Arc<str> = Arc::from(token);
     axum::Router::new()
         .nest_service("/mcp", service)
