@@ -167,10 +167,7 @@ pub(crate) async fn execute(State(state): State<AppState>, PyJson(body): PyJson)
         let limits = ExecLimits { timeout_ms, max_output_bytes: MAX_OUTPUT_BYTES, cwd: None, stdin: None };
         match desktop.run(&spec, &limits) {
             Ok(out) if out.timed_out => Err(WaaError::catch(timeout_message(&command, timeout_ms))),
-            Ok(out) => Ok(json(
-                StatusCode::OK,
-                json!({"status": "success", "output": out.stdout, "error": out.stderr, "returncode": out.exit_code.unwrap_or(-1)}),
-            )),
+            Ok(out) => Ok(json(StatusCode::OK, execute_answer(out))),
             Err(DesktopError::NotFound(_)) => Err(WaaError::catch(PROGRAM_NOT_FOUND)),
             Err(DesktopError::Timeout { .. }) => Err(WaaError::catch(timeout_message(&command, timeout_ms))),
             Err(err) => Err(WaaError::from(err)),
@@ -183,6 +180,25 @@ pub(crate) async fn execute(State(state): State<AppState>, PyJson(body): PyJson)
 /// 503 with upstream's error shape, naming the limit.
 fn busy(busy: crate::programs::Busy) -> WaaError {
     json_err(StatusCode::SERVICE_UNAVAILABLE, json!({"status": "error", "message": busy.to_string()}))
+}
+
+/// `/execute`'s answer for a finished process: upstream's four fields, and
+/// `output_truncated` / `error_truncated` (`true`) when a stream was cut at
+/// [`MAX_OUTPUT_BYTES`], so that a cut answer is never taken for the whole one.
+fn execute_answer(out: crate::desktop::ExecOutput) -> Value {
+    let mut answer = json!({
+        "status": "success",
+        "output": out.stdout,
+        "error": out.stderr,
+        "returncode": out.exit_code.unwrap_or(-1),
+    });
+    if out.stdout_truncated {
+        answer["output_truncated"] = json!(true);
+    }
+    if out.stderr_truncated {
+        answer["error_truncated"] = json!(true);
+    }
+    answer
 }
 
 /// The code of a `python -c CODE` command, however it is spelled.
@@ -634,6 +650,29 @@ fn none_attribute(statement: &str) -> Option<String> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_cut_stream_is_flagged_in_the_answer() {
+        let out = |stdout_truncated, stderr_truncated| crate::desktop::ExecOutput {
+            exit_code: Some(0),
+            stdout: "x".into(),
+            stderr: String::new(),
+            stdout_truncated,
+            stderr_truncated,
+            timed_out: false,
+            duration_ms: 1,
+        };
+        let whole = execute_answer(out(false, false));
+        assert_eq!(
+            whole,
+            json!({"status": "success", "output": "x", "error": "", "returncode": 0}),
+            "upstream's shape"
+        );
+        let cut = execute_answer(out(true, false));
+        assert_eq!(cut["output_truncated"], true);
+        assert!(cut.get("error_truncated").is_none());
+        assert_eq!(execute_answer(out(false, true))["error_truncated"], true);
+    }
 
     #[test]
     fn none_attribute_names_the_method() {
