@@ -100,6 +100,9 @@ pub enum ApiError {
     Conflict(String),
     #[error("{0}")]
     PayloadTooLarge(String),
+    /// The guest is at a limit of work running at once (`--max-programs`).
+    #[error("{0}")]
+    Busy(String),
     #[error(transparent)]
     Desktop(#[from] DesktopError),
 }
@@ -113,6 +116,7 @@ impl ApiError {
             ApiError::NotFound(_) => (StatusCode::NOT_FOUND, ErrorCode::NotFound),
             ApiError::Conflict(_) => (StatusCode::CONFLICT, ErrorCode::Conflict),
             ApiError::PayloadTooLarge(_) => (StatusCode::PAYLOAD_TOO_LARGE, ErrorCode::PayloadTooLarge),
+            ApiError::Busy(_) => (StatusCode::SERVICE_UNAVAILABLE, ErrorCode::Unavailable),
             ApiError::Desktop(err) => match err {
                 DesktopError::InvalidInput(_) => (StatusCode::BAD_REQUEST, ErrorCode::BadRequest),
                 DesktopError::NotFound(_) => (StatusCode::NOT_FOUND, ErrorCode::NotFound),
@@ -124,6 +128,12 @@ impl ApiError {
                 DesktopError::Os { .. } => (StatusCode::INTERNAL_SERVER_ERROR, ErrorCode::Internal),
             },
         }
+    }
+}
+
+impl From<crate::programs::Busy> for ApiError {
+    fn from(busy: crate::programs::Busy) -> ApiError {
+        ApiError::Busy(busy.to_string())
     }
 }
 

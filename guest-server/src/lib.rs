@@ -44,6 +44,7 @@ pub mod inspect;
 pub mod mcp;
 pub mod native;
 pub mod paths;
+pub mod programs;
 pub mod protect;
 pub mod script_host;
 pub mod serve;

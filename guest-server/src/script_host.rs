@@ -106,8 +106,11 @@ impl ScriptHost for DesktopHost<'_> {
         let remaining = self.remaining();
         // Infinity lands here too, so it never reaches `Duration::from_secs_f64`.
         if seconds > remaining.as_secs_f64() {
-            std::thread::sleep(remaining);
-            return Err(HostError::TimedOut(format!("sleeping {seconds} s would outlast the command's timeout")));
+            // Refused at once: waiting out the rest would only delay the same failure.
+            return Err(HostError::TimedOut(format!(
+                "sleeping {seconds} s would outlast the command's timeout ({:.3} s left); nothing was waited",
+                remaining.as_secs_f64()
+            )));
         }
         if seconds > 0.0 {
             std::thread::sleep(Duration::from_secs_f64(seconds));

@@ -21,12 +21,16 @@ pub struct AppState {
     /// takes it alone (write), so it waits for running batches and none starts while
     /// it types into its Notepad.
     pub input: Arc<tokio::sync::RwLock<()>>,
+    /// The programs running now and the interpreter memory they share.
+    pub programs: Arc<crate::programs::Programs>,
 }
 
 impl AppState {
     pub fn new(desktop: Arc<dyn Desktop>, config: ServerConfig, token: Option<String>) -> AppState {
+        let programs = Arc::new(crate::programs::Programs::from_config(&config));
         AppState {
             desktop,
+            programs,
             config: Arc::new(config),
             token: token.map(Arc::from),
             started: Instant::now(),

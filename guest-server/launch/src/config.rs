@@ -122,6 +122,30 @@ pub struct ServerConfig {
     #[arg(long, env = "ARENA_EXEC_TIMEOUT_MS", default_value_t = 120_000)]
     pub exec_timeout_ms: u64,
 
+    /// Most programs run at once (`/execute`, `/setup/execute`, `/execute_windows`,
+    /// `/v1/exec` and MCP `run_python`); one more waits for a free place up to
+    /// `--program-wait-ms`, then is answered 503 naming this limit.
+    #[arg(long, env = "ARENA_MAX_PROGRAMS", default_value_t = 8, value_parser = clap::value_parser!(u32).range(1..=1024))]
+    pub max_programs: u32,
+
+    /// How long a program waits for a free place under `--max-programs`, in milliseconds.
+    #[arg(long, env = "ARENA_PROGRAM_WAIT_MS", default_value_t = 10_000)]
+    pub program_wait_ms: u64,
+
+    /// The interpreter memory all programs running at once share, in MiB (each also
+    /// has its own 256 MiB); past it a program fails with `MemoryError` naming it.
+    #[arg(long, env = "ARENA_PROGRAM_MEMORY_MIB", default_value_t = 512, value_parser = clap::value_parser!(u64).range(16..=1_048_576))]
+    pub program_memory_mib: u64,
+
+    /// With `--mcp`: most MCP sessions open at once; a new one closes the session idle
+    /// longest (none when every session has a call running: then it is refused).
+    #[arg(long, env = "ARENA_MCP_MAX_SESSIONS", default_value_t = 64, value_parser = clap::value_parser!(u32).range(1..=100_000))]
+    pub mcp_max_sessions: u32,
+
+    /// With `--mcp`: an MCP session with no call for this many seconds is closed.
+    #[arg(long, env = "ARENA_MCP_IDLE_SECS", default_value_t = 120, value_parser = clap::value_parser!(u64).range(1..=86_400))]
+    pub mcp_idle_secs: u64,
+
     /// Pause after `/setup/open_file` opens a file, in milliseconds (upstream sleeps 5 s).
     #[arg(long, env = "ARENA_OPEN_SETTLE_MS", default_value_t = 5_000)]
     pub open_settle_ms: u64,
@@ -219,6 +243,11 @@ impl ServerConfig {
             call_timeout_ms: 30_000,
             a11y_timeout_ms: 60_000,
             exec_timeout_ms: 120_000,
+            max_programs: 8,
+            program_wait_ms: 10_000,
+            program_memory_mib: 512,
+            mcp_max_sessions: 64,
+            mcp_idle_secs: 120,
             open_settle_ms: 0,
             activate_settle_ms: 0,
             python: None,

@@ -12,10 +12,9 @@
 
 use std::time::{Duration, Instant};
 
-use arena_mcp::{image_png, text, tool_error, Server, ToolServer};
+use arena_mcp::{image_png, text, tool_error, BoundedSessions, Server, SessionLimits, ToolServer};
 use base64::Engine as _;
 use rmcp::model::{CallToolRequestParams, CallToolResponse};
-use rmcp::transport::streamable_http_server::session::local::LocalSessionManager;
 use rmcp::transport::streamable_http_server::StreamableHttpService;
 use serde_json::json;
 
@@ -26,15 +25,27 @@ use arena_shared::observation::{A11yBackend, ImageFormat, TreeBudget};
 
 use crate::call::blocking;
 use crate::desktop::DesktopError;
+use crate::native::input::validate;
 use crate::script_host::DesktopHost;
 use crate::state::AppState;
 
-/// The `/mcp` service: one [`GuestMcp`] per session. rmcp's own `Host` check
-/// is off because [`crate::auth::guard`] in front of it already makes that
-/// decision for every route (loopback names, `--allow-host`).
-pub fn service(state: AppState) -> StreamableHttpService<Server<GuestMcp>, LocalSessionManager> {
+/// The `/mcp` service: one [`GuestMcp`] per session, at most `--mcp-max-sessions`
+/// open (a new one closes the one idle longest), each closed after
+/// `--mcp-idle-secs` without a call, a call whose client hung up cancelled
+/// ([`arena_mcp::BoundedSessions`]). rmcp's own `Host` check is off because
+/// [`crate::auth::guard`] in front of it already makes that decision for every
+/// route (loopback names, `--allow-host`).
+pub fn service(state: AppState) -> StreamableHttpService<Server<GuestMcp>, BoundedSessions> {
     let config = arena_mcp::http_config().disable_allowed_hosts();
-    StreamableHttpService::new(move || Ok(Server(GuestMcp { state: state.clone() })), Default::default(), config)
+    let limits = SessionLimits {
+        max_sessions: state.config.mcp_max_sessions as usize,
+        idle: Duration::from_secs(state.config.mcp_idle_secs),
+    };
+    StreamableHttpService::new(
+        move || Ok(Server(GuestMcp { state: state.clone() })),
+        BoundedSessions::new(limits),
+        config,
+    )
 }
 
 /// One MCP session over the guest's desktop.
@@ -61,6 +72,12 @@ impl GuestMcp {
             Ok(call) => call,
             Err(message) => return tool_error(message),
         };
+        // The checks of `/v1/actions` (keys, counts, durations), the call as a batch of one.
+        if let ToolCall::Input(action) = &call {
+            if let Err(err) = validate(std::slice::from_ref(action), timeout) {
+                return tool_error(format!("{tool}: {err}"));
+            }
+        }
         match call {
             ToolCall::Screenshot => {
                 let png = blocking(desktop, "screenshot", timeout, |d| {
@@ -123,8 +140,13 @@ impl GuestMcp {
         };
         let timeout = self.state.call_timeout();
         let (w, h) = screen.unwrap_or((0, 0));
+        let place = match self.state.programs.admit().await {
+            Ok(place) => place,
+            Err(busy) => return tool_error(format!("{tool}: {busy}")),
+        };
         let _input = self.state.input_share().await;
         let ran = blocking(&self.state.desktop, "run_python", timeout, move |d| {
+            let memory = Some(place.memory());
             let deadline = Instant::now() + timeout;
             let mut host = DesktopHost::new(d, deadline);
             let mut computer =
@@ -132,9 +154,9 @@ impl GuestMcp {
             // The call's deadline and its cancel flag (set on timeout, a dropped request or shutdown).
             let stop = script::Stop::new(Some(deadline), crate::desktop::cancel::flag());
             let globals = if script::dialect_of(&code) == script::Dialect::Computer {
-                Globals { computer: Some(&mut computer), computer_action_delay: 0.0, preimport: &[], stop }
+                Globals { computer: Some(&mut computer), computer_action_delay: 0.0, preimport: &[], stop, memory }
             } else {
-                Globals { computer: None, computer_action_delay: 0.0, preimport: &["pyautogui", "time"], stop }
+                Globals { computer: None, computer_action_delay: 0.0, preimport: &["pyautogui", "time"], stop, memory }
             };
             Ok(script::run(&program, &mut host, globals))
         })

@@ -71,9 +71,12 @@ async fn exec(
     let program = program_of(&command);
     let deadline = Duration::from_millis(timeout_ms) + DEADLINE_MARGIN;
     let ExecRequest { cwd, stdin, .. } = request;
+    // One of the programs running at once (`--max-programs`), held by the work itself.
+    let place = state.programs.admit().await?;
     // The program may drive the keyboard and mouse as agent code does.
     let _input = state.input_share().await;
     let output = blocking(&state.desktop, "run", deadline, move |d| {
+        let _place = place;
         let cwd = cwd.map(|cwd| paths::expand(&cwd, &mut |name| d.env_var(name)));
         let limits = ExecLimits { timeout_ms, max_output_bytes, cwd, stdin: stdin.map(String::into_bytes) };
         d.run(&command, &limits)

@@ -33,6 +33,8 @@ const MAX_ACTIONS: usize = 1000;
 const MAX_WAIT_MS: u64 = 60_000;
 /// Most repetitions of one click or key press; more is a runaway loop, not an agent's intent.
 const MAX_REPEAT: u32 = 1000;
+/// Most keys one hotkey (MCP's `press_keys`) presses together: a chord, not a text.
+const MAX_CHORD_KEYS: usize = 64;
 /// Most time one batch may plan by its own waits, drags and typing pauses: 5 minutes.
 /// (A thousand one-minute waits were accepted before: 16.7 hours holding a connection.)
 pub(crate) const MAX_BATCH_MS: u64 = 300_000;
@@ -85,8 +87,9 @@ fn planned_duration(action: &Action) -> Duration {
 }
 
 /// Checks every action of a batch before any runs: names, counts, and that no action
-/// is planned to outlast the call deadline (it would be cut off part-way).
-fn validate(actions: &[Action], call_deadline: Duration) -> Result<(), ApiError> {
+/// is planned to outlast the call deadline (it would be cut off part-way). The guest's
+/// MCP input tools go through it too, each call as a batch of one.
+pub(crate) fn validate(actions: &[Action], call_deadline: Duration) -> Result<(), ApiError> {
     if actions.len() > MAX_ACTIONS {
         return Err(ApiError::BadRequest(format!(
             "a batch holds at most {MAX_ACTIONS} actions (got {})",
@@ -148,6 +151,9 @@ fn check_action(action: &Action) -> Result<(), String> {
         }
         Action::KeyDown { key: name } | Action::KeyUp { key: name } => key(name),
         Action::Hotkey { keys } if keys.is_empty() => Err("a hotkey needs at least one key".to_owned()),
+        Action::Hotkey { keys } if keys.len() > MAX_CHORD_KEYS => {
+            Err(format!("a hotkey presses at most {MAX_CHORD_KEYS} keys together (got {})", keys.len()))
+        }
         Action::Hotkey { keys } => keys.iter().try_for_each(|name| key(name)),
         Action::Click { x, y, button: b, count } => {
             coords(x, y)?;
@@ -236,6 +242,7 @@ mod tests {
         check(Action::Hotkey { keys: vec!["ctrl".into(), "c".into()] }, Ok(()));
         check(Action::Hotkey { keys: vec!["ctrl".into(), "nokey".into()] }, Err("nokey"));
         check(Action::Hotkey { keys: vec![] }, Err("at least one key"));
+        check(Action::Hotkey { keys: vec!["a".into(); 200_000] }, Err("at most 64 keys"));
         check(Action::Wait { ms: 60_000 }, Ok(()));
         check(Action::Wait { ms: 60_001 }, Err("at most"));
         check(Action::Unknown, Err("unknown action"));

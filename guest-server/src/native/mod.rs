@@ -32,7 +32,7 @@ mod eval_queries;
 mod exec;
 mod files;
 mod health;
-mod input;
+pub(crate) mod input;
 mod registry;
 mod screen;
 mod windows;

@@ -21,7 +21,7 @@ use axum::http::StatusCode;
 use base64::Engine;
 use serde_json::{json, Value};
 
-use arena_script::{self as script, ErrorKind, Globals, ParseError, ScriptError};
+use arena_script::{self as script, ErrorKind, Globals, MemoryPool, ParseError, ScriptError};
 
 use crate::desktop::{CommandSpec, Desktop, DesktopError, ExecLimits};
 use crate::error::WaaError;
@@ -134,8 +134,11 @@ pub(crate) async fn execute(State(state): State<AppState>, PyJson(body): PyJson)
     let timeout_ms = state.config.exec_timeout_ms;
     let python = state.config.python.clone();
     let deadline = Duration::from_millis(timeout_ms) + EXEC_MARGIN;
+    let place = state.programs.admit().await.map_err(busy)?;
     let _input = state.input_share().await;
     on_backend_within(&state, "execute", deadline, move |desktop| {
+        // The place is the work's: it is given back when the program has stopped.
+        let memory = place.memory();
         let command = expand_home_args(desktop, command)?;
         let mut spec = match (&command, shell) {
             (Value::String(line), _) => CommandSpec::Shell(line.clone()),
@@ -147,7 +150,7 @@ pub(crate) async fn execute(State(state): State<AppState>, PyJson(body): PyJson)
             }
         };
         if let Some(code) = python_code(&spec) {
-            match run_python(desktop, &code, &command, timeout_ms) {
+            match run_python(desktop, &code, &command, timeout_ms, memory) {
                 Native::Answer(answer) => return answer,
                 Native::Unsupported(message) => match python.as_deref().filter(|p| arena_shared::search_path::find_program(p).is_some()) {
                     Some(program) => {
@@ -164,16 +167,38 @@ pub(crate) async fn execute(State(state): State<AppState>, PyJson(body): PyJson)
         let limits = ExecLimits { timeout_ms, max_output_bytes: MAX_OUTPUT_BYTES, cwd: None, stdin: None };
         match desktop.run(&spec, &limits) {
             Ok(out) if out.timed_out => Err(WaaError::catch(timeout_message(&command, timeout_ms))),
-            Ok(out) => Ok(json(
-                StatusCode::OK,
-                json!({"status": "success", "output": out.stdout, "error": out.stderr, "returncode": out.exit_code.unwrap_or(-1)}),
-            )),
+            Ok(out) => Ok(json(StatusCode::OK, execute_answer(out))),
             Err(DesktopError::NotFound(_)) => Err(WaaError::catch(PROGRAM_NOT_FOUND)),
             Err(DesktopError::Timeout { .. }) => Err(WaaError::catch(timeout_message(&command, timeout_ms))),
             Err(err) => Err(WaaError::from(err)),
         }
     })
     .await
+}
+
+/// `/execute`'s answer when `--max-programs` are running and none finished in time:
+/// 503 with upstream's error shape, naming the limit.
+fn busy(busy: crate::programs::Busy) -> WaaError {
+    json_err(StatusCode::SERVICE_UNAVAILABLE, json!({"status": "error", "message": busy.to_string()}))
+}
+
+/// `/execute`'s answer for a finished process: upstream's four fields, and
+/// `output_truncated` / `error_truncated` (`true`) when a stream was cut at
+/// [`MAX_OUTPUT_BYTES`], so that a cut answer is never taken for the whole one.
+fn execute_answer(out: crate::desktop::ExecOutput) -> Value {
+    let mut answer = json!({
+        "status": "success",
+        "output": out.stdout,
+        "error": out.stderr,
+        "returncode": out.exit_code.unwrap_or(-1),
+    });
+    if out.stdout_truncated {
+        answer["output_truncated"] = json!(true);
+    }
+    if out.stderr_truncated {
+        answer["error_truncated"] = json!(true);
+    }
+    answer
 }
 
 /// The code of a `python -c CODE` command, however it is spelled.
@@ -247,16 +272,21 @@ fn code_stop(deadline: Instant) -> script::Stop {
 
 /// Runs `python -c` code natively and answers like upstream's `subprocess.run` would:
 /// 200 with stdout, stderr and the exit code (1 and a traceback for an exception).
-fn run_python(desktop: &dyn Desktop, code: &str, command: &Value, timeout_ms: u64) -> Native {
+fn run_python(desktop: &dyn Desktop, code: &str, command: &Value, timeout_ms: u64, memory: Arc<MemoryPool>) -> Native {
     let program = match script::parse(code) {
         Ok(program) => program,
         Err(err) => return Native::Unsupported(unsupported_parse(&err)),
     };
     let deadline = Instant::now() + Duration::from_millis(timeout_ms);
     let mut host = DesktopHost::new(desktop, deadline);
-    let globals = Globals::python().with_stop(code_stop(deadline));
+    let globals = Globals::python().with_stop(code_stop(deadline)).with_memory(Some(memory));
     let (stdout, stderr, returncode) = match script::run(&program, &mut host, globals) {
         Ok(out) => (out.stdout, out.stderr, out.exit_code),
+        Err(err) if err.kind == ErrorKind::Timeout && err.message.contains("would outlast") => {
+            // Refused at once rather than waited out: Python's own words, and why.
+            let message = format!("{} ({})", timeout_message(command, timeout_ms), err.message);
+            return Native::Answer(Err(WaaError::catch(message)));
+        }
         Err(err) if err.kind == ErrorKind::Timeout => {
             return Native::Answer(Err(WaaError::catch(timeout_message(command, timeout_ms))))
         }
@@ -408,9 +438,10 @@ pub(crate) async fn execute_windows(
         timeout: Duration::from_millis(state.config.exec_timeout_ms),
     };
     let deadline = options.timeout + EXEC_MARGIN;
+    let place = state.programs.admit().await.map_err(busy)?;
     let _input = state.input_share().await;
     let run = on_backend_within(&state, "execute_windows", deadline, move |desktop| {
-        Ok(run_computer_code(desktop, &code, computer.as_deref(), &options))
+        Ok(run_computer_code(desktop, &code, computer.as_deref(), &options, Some(place.memory())))
     })
     .await?;
     if let (Some(before), Some(after)) = (started_from, run.state) {
@@ -476,6 +507,7 @@ pub fn run_computer_code(
     code: &str,
     computer: Option<&ComputerState>,
     options: &CodeOptions,
+    memory: Option<Arc<MemoryPool>>,
 ) -> ComputerRun {
     let fail = |message: String| ComputerRun { result: Err(message), state: None };
     let program = match script::parse(code) {
@@ -488,7 +520,9 @@ pub fn run_computer_code(
             return fail(format!("'NoneType' object has no attribute '{attribute}'"));
         }
         let mut host = DesktopHost::new(desktop, deadline);
-        let globals = Globals { computer_action_delay: 0.0, ..Globals::python() }.with_stop(code_stop(deadline));
+        let globals = Globals { computer_action_delay: 0.0, ..Globals::python() }
+            .with_stop(code_stop(deadline))
+            .with_memory(memory);
         let result = script::run(&program, &mut host, globals);
         return ComputerRun { result: code_result(result, options), state: None };
     };
@@ -503,6 +537,7 @@ pub fn run_computer_code(
         computer_action_delay: options.action_delay.as_secs_f64(),
         preimport: &[],
         stop: code_stop(deadline),
+        memory,
     };
     let result = script::run(&program, &mut host, globals);
     let result = code_result(result, options);
@@ -615,6 +650,29 @@ fn none_attribute(statement: &str) -> Option<String> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_cut_stream_is_flagged_in_the_answer() {
+        let out = |stdout_truncated, stderr_truncated| crate::desktop::ExecOutput {
+            exit_code: Some(0),
+            stdout: "x".into(),
+            stderr: String::new(),
+            stdout_truncated,
+            stderr_truncated,
+            timed_out: false,
+            duration_ms: 1,
+        };
+        let whole = execute_answer(out(false, false));
+        assert_eq!(
+            whole,
+            json!({"status": "success", "output": "x", "error": "", "returncode": 0}),
+            "upstream's shape"
+        );
+        let cut = execute_answer(out(true, false));
+        assert_eq!(cut["output_truncated"], true);
+        assert!(cut.get("error_truncated").is_none());
+        assert_eq!(execute_answer(out(false, true))["error_truncated"], true);
+    }
 
     #[test]
     fn none_attribute_names_the_method() {

@@ -82,7 +82,8 @@ fn run_program(program: &Program, host: &mut StepHost) -> Result<(), arena_scrip
     // Translating runs no effects, only the program's own work: a few seconds bound a
     // reply that loops, besides the interpreter's loop budget.
     let stop = Stop::new(Some(Instant::now() + TRANSLATE_TIME), None);
-    let globals = Globals { computer: None, computer_action_delay: 0.25, preimport: &["pyautogui", "time"], stop };
+    let globals =
+        Globals { computer: None, computer_action_delay: 0.25, preimport: &["pyautogui", "time"], stop, memory: None };
     run(program, host, globals).map(|_| ())
 }
 
@@ -207,6 +208,12 @@ struct StepHost {
 }
 
 impl ScriptHost for StepHost {
+    // The steps are kept until the whole program is translated: the run counts them
+    // against its memory budget, as its own values.
+    fn keeps_actions(&self) -> bool {
+        true
+    }
+
     fn perform(&mut self, action: Action) -> HostResult<()> {
         self.rec.cursor = cursor_after(&action, self.rec.cursor);
         self.steps.push(Step::Act(action));

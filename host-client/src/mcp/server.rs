@@ -9,14 +9,13 @@ use std::net::SocketAddr;
 use std::sync::Arc;
 use std::time::Duration;
 
-use arena_mcp::{image_png, text, tool_error, Server, ToolServer};
+use arena_mcp::{image_png, text, tool_error, BoundedSessions, Server, SessionLimits, ToolServer};
 use axum::extract::Request;
 use axum::http::StatusCode;
 use axum::middleware::Next;
 use axum::response::{IntoResponse, Response};
 use base64::Engine as _;
 use rmcp::model::{CallToolRequestParams, CallToolResponse};
-use rmcp::transport::streamable_http_server::session::local::LocalSessionManager;
 use rmcp::transport::streamable_http_server::StreamableHttpService;
 use rmcp::ServerHandler;
 use serde_json::{json, Value};
@@ -168,8 +167,10 @@ where
     let mut config = arena_mcp::http_config().with_cancellation_token(stop);
     config.allowed_hosts = hosts;
     config.legacy_session_mode = true;
-    let service: StreamableHttpService<S, LocalSessionManager> =
-        StreamableHttpService::new(move || Ok(make()), Default::default(), config);
+    // At most 64 sessions (a new one closes the one idle longest), each closed after
+    // 2 minutes without a call, a call whose client hung up cancelled.
+    let service: StreamableHttpService<S, BoundedSessions> =
+        StreamableHttpService::new(move || Ok(make()), BoundedSessions::new(SessionLimits::DEFAULT), config);
     let token: Arc<str> = Arc::from(token);
     axum::Router::new()
         .nest_service("/mcp", service)
@@ -188,5 +189,60 @@ pub async fn serve(listener: tokio::net::TcpListener, hub: Arc<Hub>, token: Stri
     let app = router(move || Server(ArenaSession::new(Arc::clone(&hub))), &token, addr, stop.clone());
     if let Err(err) = axum::serve(listener, app).with_graceful_shutdown(stop.cancelled_owned()).await {
         tracing::error!(error = %err, "the MCP server stopped");
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// `initialize` on the endpoint; answers the status and the session id.
+    async fn initialize(http: &reqwest::Client, url: &str) -> (u16, Option<String>) {
+        let init = json!({"jsonrpc": "2.0", "id": 0, "method": "initialize", "params": {
+            "protocolVersion": "2025-06-18", "capabilities": {}, "clientInfo": {"name": "t", "version": "0"}}});
+        let response = http
+            .post(url)
+            .bearer_auth("t0ken")
+            .header("Accept", "application/json, text/event-stream")
+            .json(&init)
+            .send()
+            .await
+            .expect("answered");
+        let session = response.headers().get("mcp-session-id").and_then(|v| v.to_str().ok()).map(str::to_owned);
+        let status = response.status().as_u16();
+        let _ = response.bytes().await;
+        (status, session)
+    }
+
+    #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+    async fn initialize_floods_keep_the_endpoint_at_its_session_cap() {
+        let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.expect("binds");
+        let addr = listener.local_addr().expect("an address");
+        let stop = CancellationToken::new();
+        let hub = super::super::Hub::new();
+        let app = router(move || Server(ArenaSession::new(Arc::clone(&hub))), "t0ken", addr, stop.clone());
+        let served = tokio::spawn(async move { axum::serve(listener, app).await });
+        let url = format!("http://{addr}/mcp");
+        let http = reqwest::Client::new();
+        let (status, first) = initialize(&http, &url).await;
+        assert_eq!(status, 200);
+        let first = first.expect("a session id");
+        // Past the cap of 64, each new session closes the one idle longest.
+        for _ in 0..300 {
+            assert_eq!(initialize(&http, &url).await.0, 200);
+        }
+        let list = json!({"jsonrpc": "2.0", "id": 1, "method": "tools/list"});
+        let gone = http
+            .post(&url)
+            .bearer_auth("t0ken")
+            .header("Accept", "application/json, text/event-stream")
+            .header("Mcp-Session-Id", &first)
+            .json(&list)
+            .send()
+            .await
+            .expect("answered");
+        assert_eq!(gone.status(), 404, "the first session was closed to make room");
+        stop.cancel();
+        served.abort();
     }
 }

@@ -399,11 +399,15 @@ async fn run_script(
     let (result, state, mut host) = tokio::task::spawn_blocking(move || {
         let globals = match lang {
             Lang::Computer => {
-                Globals { computer: Some(&mut state), computer_action_delay: delay, preimport: &[], stop }
+                Globals { computer: Some(&mut state), computer_action_delay: delay, preimport: &[], stop, memory: None }
             }
-            Lang::Pyautogui => {
-                Globals { computer: None, computer_action_delay: delay, preimport: &["pyautogui", "time"], stop }
-            }
+            Lang::Pyautogui => Globals {
+                computer: None,
+                computer_action_delay: delay,
+                preimport: &["pyautogui", "time"],
+                stop,
+                memory: None,
+            },
         };
         let result = run(&program, &mut host, globals);
         (result, state, host)

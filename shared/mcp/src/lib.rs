@@ -5,13 +5,18 @@
 //! offers the tools of [`arena_shared::mcp_tools`] ([`tools`]), answers with the
 //! result shapes both use ([`text`], [`image_png`], [`tool_error`]), speaks the
 //! protocol revisions up to [`MAX_PROTOCOL`], and is served with the same
-//! streamable-HTTP settings ([`http_config`]).
+//! streamable-HTTP settings ([`http_config`]) and the same bounded sessions
+//! ([`BoundedSessions`]: a cap, idle expiry, hung-up calls cancelled).
 //!
 //! What is not here: the tools' names, arguments and checks (`arena_shared::mcp_tools`),
 //! the bearer check (`arena_shared::token::bearer_matches`, which every server of the
 //! project uses), and each server's routing and guards.
 
 #![forbid(unsafe_code)]
+
+pub mod sessions;
+
+pub use sessions::{BoundedSessions, SessionLimits};
 
 use std::borrow::Cow;
 use std::future::Future;
@@ -114,9 +119,16 @@ impl<T: ToolServer> ServerHandler for Server<T> {
     async fn call_tool(
         &self,
         request: CallToolRequestParams,
-        _context: RequestContext<RoleServer>,
+        context: RequestContext<RoleServer>,
     ) -> Result<CallToolResponse, ErrorData> {
-        Ok(self.0.call(request).await)
+        // A cancelled request (the client's `notifications/cancelled`, or its hang-up,
+        // which `BoundedSessions` turns into one) drops the tool's future: the work
+        // behind it is told to stop (the guest's backend calls set their cancel flag
+        // when dropped, which the interpreter checks).
+        tokio::select! {
+            answer = self.0.call(request) => Ok(answer),
+            () = context.ct.cancelled() => Err(ErrorData::internal_error("the call was cancelled", None)),
+        }
     }
 }
 

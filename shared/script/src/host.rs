@@ -98,6 +98,15 @@ pub trait ScriptHost {
     /// which stops the script.
     fn sleep(&mut self, seconds: f64) -> HostResult<()>;
 
+    /// Whether the host keeps what it is asked to do instead of doing it (a recorder
+    /// collecting actions): the run then counts each action and pause against its own
+    /// memory budget and its pool ([`action_bytes`]), so that a program cannot make its
+    /// host hold more than it may hold itself (`pyautogui.write('a' * 10**7)` would
+    /// otherwise be ten million recorded actions beside a 10 MB string).
+    fn keeps_actions(&self) -> bool {
+        false
+    }
+
     /// The cursor position in physical pixels.
     fn cursor_position(&mut self) -> HostResult<(i32, i32)>;
 
@@ -190,11 +199,28 @@ impl RecordingHost {
     }
 }
 
+/// The bytes one recorded action holds: its own size and the text it owns.
+pub fn action_bytes(action: &Action) -> usize {
+    let owned = match action {
+        Action::KeyPress { key, .. } | Action::KeyDown { key } | Action::KeyUp { key } => key.capacity(),
+        Action::Hotkey { keys } => {
+            keys.capacity() * std::mem::size_of::<String>() + keys.iter().map(String::capacity).sum::<usize>()
+        }
+        Action::TypeText { text, .. } => text.capacity(),
+        _ => 0,
+    };
+    std::mem::size_of::<Action>() + owned
+}
+
 fn not_an_action<T>(what: &str) -> HostResult<T> {
     Err(HostError::Failed(format!("{what} cannot be translated into input actions")))
 }
 
 impl ScriptHost for RecordingHost {
+    fn keeps_actions(&self) -> bool {
+        true
+    }
+
     fn perform(&mut self, action: Action) -> HostResult<()> {
         self.cursor = cursor_after(&action, self.cursor);
         self.actions.push(action);

@@ -70,6 +70,7 @@ mod error;
 pub mod host;
 mod interp;
 pub mod parser;
+mod pool;
 mod pyautogui;
 mod runtime;
 mod stdlib;
@@ -84,9 +85,12 @@ pub use compose::Composed;
 pub use dialect::{dialect_of, Dialect};
 pub use difflib::{get_close_matches, ratio as sequence_ratio};
 pub use error::{ErrorKind, ParseError, ScriptError};
-pub use host::{CommandArg, CommandOutput, HostError, HostResult, PathKind, RecordingHost, ScriptHost, WindowChange};
+pub use host::{
+    action_bytes, CommandArg, CommandOutput, HostError, HostResult, PathKind, RecordingHost, ScriptHost, WindowChange,
+};
 pub use interp::{run, run_measured, Globals, RunStats, KNOWN_MODULES, MAX_CALL_DEPTH, MAX_MEMORY, MAX_STEPS};
 pub use parser::parse;
+pub use pool::{MemoryPool, CHUNK as MEMORY_CHUNK};
 pub use runtime::{ComputerState, RunOutput};
 pub use stop::Stop;
 pub use value::{float_repr, str_repr};

@@ -23,7 +23,7 @@ use arena_shared::keys::Key;
 
 use super::compose::Composed as _;
 use super::error::{not_supported, type_error, value_error, ScriptError};
-use super::value::{Object, Value};
+use super::value::{heap, Object, Value};
 use crate::args::{is_none, iterate, static_name, to_f64, to_str, Args};
 use crate::runtime::{RunOutput, Runtime};
 
@@ -363,6 +363,9 @@ enum ClickKind {
 }
 
 pub(crate) fn perform(it: &mut Runtime<'_, '_>, action: Action) -> Result<(), ScriptError> {
+    if it.host.keeps_actions() {
+        heap::hold(crate::host::action_bytes(&action))?;
+    }
     let result = it.host.perform(action);
     it.host(result)
 }

@@ -10,6 +10,7 @@
 
 use crate::error::{value_error, ErrorKind, ScriptError};
 use crate::host::{HostResult, ScriptHost};
+use crate::stop;
 use crate::value::heap;
 
 /// What a finished program printed and set.
@@ -115,6 +116,22 @@ impl Runtime<'_, '_> {
         }
         if seconds < 0.0 {
             return Err(value_error("sleep length must be non-negative"));
+        }
+        // A pause that cannot end before the run must stop is refused at once, rather
+        // than waited out to fail at the deadline anyway.
+        if let Some(left) = stop::time_left() {
+            if seconds > left.as_secs_f64() {
+                return Err(ScriptError::new(
+                    ErrorKind::Timeout,
+                    format!(
+                        "time.sleep({seconds}) would outlast the program's deadline ({:.3} s left); nothing was waited",
+                        left.as_secs_f64()
+                    ),
+                ));
+            }
+        }
+        if self.host.keeps_actions() && (seconds * 1000.0).round() >= 1.0 {
+            heap::hold(std::mem::size_of::<arena_shared::action::Action>())?;
         }
         let result = self.host.sleep(seconds);
         self.host(result)

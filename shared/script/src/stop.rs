@@ -12,7 +12,7 @@
 use std::cell::{Cell, RefCell};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
-use std::time::Instant;
+use std::time::{Duration, Instant};
 
 use super::error::{ErrorKind, ScriptError};
 
@@ -78,6 +78,11 @@ impl Drop for StopScope {
         WORK.with(|w| w.set(self.saved_work));
         CHECKS.with(|c| c.set(self.saved_checks));
     }
+}
+
+/// The time left before the run's deadline, if it has one.
+pub(crate) fn time_left() -> Option<Duration> {
+    CURRENT.with(|c| c.borrow().deadline.map(|deadline| deadline.saturating_duration_since(Instant::now())))
 }
 
 /// Fails with `TimeoutError` when the run's deadline has passed or its flag is set.

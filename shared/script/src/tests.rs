@@ -10,8 +10,8 @@ use arena_shared::geometry::Point;
 
 /// A scripted host: it records actions (sleeps as `Wait`) and every other effect.
 #[derive(Debug)]
-struct FakeHost {
-    actions: Vec<Action>,
+pub(crate) struct FakeHost {
+    pub(crate) actions: Vec<Action>,
     calls: Vec<String>,
     cursor: (i32, i32),
     screen: (u32, u32),
@@ -30,7 +30,7 @@ struct FakeHost {
 }
 
 impl FakeHost {
-    fn new() -> FakeHost {
+    pub(crate) fn new() -> FakeHost {
         let env = [
             ("USERPROFILE", r"C:\Users\Docker"),
             ("USERNAME", "Docker"),
@@ -929,4 +929,21 @@ proptest::proptest! {
         proptest::prop_assert_eq!(printed(&format!("print({literal}, end='')")), s.clone());
         proptest::prop_assert_eq!(printed(&format!("print(repr({literal}), end='')")), literal);
     }
+}
+
+#[test]
+fn a_sleep_past_the_deadline_is_refused_at_once() {
+    let deadline = std::time::Instant::now() + std::time::Duration::from_secs(30);
+    let globals = Globals::python().with_stop(Stop::new(Some(deadline), None));
+    let mut host = FakeHost::new();
+    let started = std::time::Instant::now();
+    let err = run_source("import time\ntime.sleep(10**6)", &mut host, globals).expect_err("refused");
+    assert!(started.elapsed() < std::time::Duration::from_secs(5), "refused at once, not waited out");
+    assert_eq!(err.kind, ErrorKind::Timeout);
+    assert!(err.message.contains("time.sleep(1000000)") && err.message.contains("deadline"), "{}", err.message);
+    assert!(host.actions.is_empty(), "the host was never asked to sleep");
+    // Within the deadline the host sleeps as before.
+    let globals = Globals::python().with_stop(Stop::new(Some(deadline), None));
+    run_source("import time\ntime.sleep(1.5)", &mut host, globals).expect("runs");
+    assert_eq!(host.actions, vec![Action::Wait { ms: 1500 }]);
 }

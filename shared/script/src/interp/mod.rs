@@ -31,6 +31,7 @@ use crate::ast::{
 };
 use crate::error::{not_supported, type_error, value_error, ErrorKind, ScriptError};
 use crate::host::ScriptHost;
+use crate::pool::MemoryPool;
 use crate::runtime::{ComputerState, RunOutput, Runtime};
 use crate::stop::{self, Stop};
 use crate::value::heap::{self, DictMap, Key, SetMap};
@@ -166,12 +167,15 @@ pub struct Globals<'a> {
     /// The request's deadline and cancel flag: the run stops with `TimeoutError`
     /// within a bounded amount of work once either fires.
     pub stop: Stop,
+    /// The memory this run shares with the others running at once (see
+    /// [`MemoryPool`]); `None`: only its own [`MAX_MEMORY`].
+    pub memory: Option<Arc<MemoryPool>>,
 }
 
 impl Globals<'static> {
     /// Plain `python -c`: nothing is bound.
     pub fn python() -> Globals<'static> {
-        Globals { computer: None, computer_action_delay: 0.25, preimport: &[], stop: Stop::never() }
+        Globals { computer: None, computer_action_delay: 0.25, preimport: &[], stop: Stop::never(), memory: None }
     }
 }
 
@@ -183,9 +187,22 @@ impl<'a> Globals<'a> {
         self
     }
 
+    /// These globals, drawing memory from `pool` as well as their own budget.
+    #[must_use]
+    pub fn with_memory(mut self, pool: Option<Arc<MemoryPool>>) -> Globals<'a> {
+        self.memory = pool;
+        self
+    }
+
     /// `/execute_windows`: `computer` and `human` are bound to `state`.
     pub fn computer(state: &'a mut ComputerState) -> Globals<'a> {
-        Globals { computer: Some(state), computer_action_delay: 0.25, preimport: &[], stop: Stop::never() }
+        Globals {
+            computer: Some(state),
+            computer_action_delay: 0.25,
+            preimport: &[],
+            stop: Stop::never(),
+            memory: None,
+        }
     }
 }
 
@@ -221,7 +238,7 @@ pub fn run_measured(
     host: &mut dyn ScriptHost,
     globals: Globals<'_>,
 ) -> (Result<RunOutput, ScriptError>, RunStats) {
-    let _meter = heap::MeterScope::enter(MAX_MEMORY);
+    let _meter = heap::MeterScope::enter(MAX_MEMORY, globals.memory.clone());
     let _stop = stop::StopScope::enter(globals.stop.clone());
     let mut steps = 0;
     let result = run_in_scope(program, host, globals, &mut steps);

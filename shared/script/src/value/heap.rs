@@ -15,16 +15,18 @@
 //! The meter is thread-local because a run never leaves its thread and values are
 //! not `Send`; [`MeterScope`] starts one run's accounting and restores the previous.
 
-use std::cell::Cell;
+use std::cell::{Cell, RefCell};
 use std::fmt;
 use std::hash::{Hash, Hasher};
 use std::ops::{Deref, DerefMut};
 use std::rc::Rc;
+use std::sync::Arc;
 
 use indexmap::{IndexMap, IndexSet};
 
 use super::Value;
 use crate::error::{ErrorKind, ScriptError};
+use crate::pool::{MemoryPool, CHUNK};
 
 /// A dict's table: insertion order kept, keys hashed as Python hashes them.
 pub(crate) type DictMap = IndexMap<Key, Value>;
@@ -37,6 +39,42 @@ thread_local! {
     static PEAK: Cell<usize> = const { Cell::new(0) };
     static LIMIT: Cell<usize> = const { Cell::new(usize::MAX) };
     static OVERFLOW: Cell<bool> = const { Cell::new(false) };
+    /// The pool the run shares with others, if any, and the bytes it has taken from it
+    /// (`usize::MAX` without a pool, so the check on every charge is one comparison).
+    static POOL: RefCell<Option<Arc<MemoryPool>>> = const { RefCell::new(None) };
+    static TAKEN: Cell<usize> = const { Cell::new(usize::MAX) };
+    static POOL_OUT: Cell<bool> = const { Cell::new(false) };
+}
+
+/// Makes sure the run has taken `live` bytes from its pool, taking more in chunks;
+/// false when the pool has no more.
+fn cover(live: usize) -> bool {
+    let taken = TAKEN.with(Cell::get);
+    if live <= taken {
+        return true;
+    }
+    POOL.with(|pool| match pool.borrow().as_ref() {
+        None => true,
+        Some(pool) => {
+            let want = (live - taken).div_ceil(CHUNK).saturating_mul(CHUNK);
+            let ok = pool.take(want);
+            if ok {
+                TAKEN.with(|t| t.set(taken + want));
+            }
+            ok
+        }
+    })
+}
+
+fn pool_error() -> ScriptError {
+    let total = POOL.with(|pool| pool.borrow().as_ref().map_or(0, |pool| pool.total()));
+    ScriptError::new(
+        ErrorKind::Memory,
+        format!(
+            "the programs running at once would hold more than {} MiB together (the total interpreter memory budget)",
+            total >> 20
+        ),
+    )
 }
 
 /// Counts `bytes` as held now.
@@ -47,6 +85,9 @@ fn charge(bytes: usize) {
         live
     });
     PEAK.with(|p| p.set(p.get().max(live)));
+    if !cover(live) {
+        POOL_OUT.with(|o| o.set(true));
+    }
 }
 
 /// Gives `bytes` back.
@@ -76,8 +117,12 @@ fn memory_error(limit: usize) -> ScriptError {
 /// `MemoryError` naming the budget.
 pub(crate) fn reserve(bytes: usize) -> Result<(), ScriptError> {
     let limit = LIMIT.with(Cell::get);
-    if live().saturating_add(bytes) > limit {
+    let after = live().saturating_add(bytes);
+    if after > limit {
         return Err(memory_error(limit));
+    }
+    if !cover(after) {
+        return Err(pool_error());
     }
     Ok(())
 }
@@ -136,6 +181,9 @@ pub(crate) fn check() -> Result<(), ScriptError> {
     if OVERFLOW.with(|o| o.replace(false)) {
         return Err(memory_error(LIMIT.with(Cell::get)));
     }
+    if POOL_OUT.with(|o| o.replace(false)) {
+        return Err(pool_error());
+    }
     reserve(0)
 }
 
@@ -144,16 +192,22 @@ pub(crate) fn check() -> Result<(), ScriptError> {
 #[derive(Debug)]
 pub(crate) struct MeterScope {
     saved: (usize, usize, usize),
+    saved_pool: (Option<Arc<MemoryPool>>, usize),
 }
 
 impl MeterScope {
-    pub(crate) fn enter(limit: usize) -> MeterScope {
+    /// One run's accounting against its own `limit` and, when given, a `pool` shared
+    /// with other runs.
+    pub(crate) fn enter(limit: usize, pool: Option<Arc<MemoryPool>>) -> MeterScope {
         let saved = (live(), peak(), LIMIT.with(Cell::get));
         OVERFLOW.with(|o| o.set(false));
+        POOL_OUT.with(|o| o.set(false));
         LIVE.with(|l| l.set(0));
         PEAK.with(|p| p.set(0));
         LIMIT.with(|l| l.set(limit));
-        MeterScope { saved }
+        let taken = if pool.is_some() { 0 } else { usize::MAX };
+        let saved_pool = (POOL.with(|p| p.replace(pool)), TAKEN.with(|t| t.replace(taken)));
+        MeterScope { saved, saved_pool }
     }
 }
 
@@ -163,6 +217,13 @@ impl Drop for MeterScope {
         LIVE.with(|l| l.set(live));
         PEAK.with(|p| p.set(peak));
         LIMIT.with(|l| l.set(limit));
+        let (pool, taken) = (self.saved_pool.0.take(), self.saved_pool.1);
+        let ours = POOL.with(|p| p.replace(pool));
+        let our_taken = TAKEN.with(|t| t.replace(taken));
+        if let Some(ours) = ours {
+            ours.give(our_taken);
+        }
+        POOL_OUT.with(|o| o.set(false));
     }
 }
 
@@ -449,7 +510,7 @@ mod tests {
 
     #[test]
     fn payloads_give_their_bytes_back_when_dropped() {
-        let _scope = MeterScope::enter(1 << 20);
+        let _scope = MeterScope::enter(1 << 20, None);
         let text = Heap::new("a".repeat(1000));
         assert!(live() >= 1000);
         let shared = text.clone();
@@ -463,7 +524,7 @@ mod tests {
 
     #[test]
     fn changing_a_shared_payload_copies_it_and_counts_the_copy() {
-        let _scope = MeterScope::enter(1 << 20);
+        let _scope = MeterScope::enter(1 << 20, None);
         let a = Heap::new(vec![Value::Int(1); 10]);
         let mut b = a.clone();
         b.make_mut().push(Value::Int(2));
@@ -476,7 +537,7 @@ mod tests {
 
     #[test]
     fn the_budget_refuses_before_building() {
-        let _scope = MeterScope::enter(1000);
+        let _scope = MeterScope::enter(1000, None);
         assert!(reserve_text(999).is_ok());
         let err = reserve_items(1000).unwrap_err();
         assert_eq!(err.kind, ErrorKind::Memory);
