@@ -196,6 +196,10 @@ pub struct RunArgs {
     /// Tries per task after infrastructure errors, the first included.
     #[arg(long, default_value_t = 3)]
     pub attempts: u32,
+    /// Seconds the run waits, with tasks left and every guest down, for one to
+    /// answer again before it ends and lists the unfinished tasks.
+    #[arg(long, default_value_t = 600, value_name = "SECS")]
+    pub guest_wait: u64,
     /// Leave the accessibility tree out of observations.
     #[arg(long)]
     pub no_a11y: bool,
@@ -706,6 +710,7 @@ pub async fn run(conn: &Connection, args: RunArgs) -> anyhow::Result<ExitCode> {
         resume: !args.no_resume,
         pool: PoolConfig {
             max_attempts: args.attempts.max(1),
+            no_guest_timeout: Duration::from_secs(args.guest_wait),
             lifecycle: fleet.clone().map(|f| f as Arc<dyn crate::run::pool::GuestLifecycle>),
             ..PoolConfig::default()
         },
@@ -759,6 +764,10 @@ pub async fn run(conn: &Connection, args: RunArgs) -> anyhow::Result<ExitCode> {
         }
         for task in &outcome.pool.not_run {
             lines.push_str(&format!("  {task}: not run (no healthy guest left)\n"));
+        }
+        if let Some(why) = &outcome.pool.ended_early {
+            let down = outcome.pool.guests_down.join(", ");
+            lines.push_str(&format!("the run ended early: {why} (guests down: {down})\n"));
         }
         emit(&lines)?;
         return Ok(ExitCode::from(if stop.is_cancelled() { 130 } else { 2 }));

@@ -19,7 +19,9 @@
 //! - [`pool`]: [`pool::run_pool`], one task per guest, retries, dead guests set aside.
 //! - [`shard`]: [`shard::Shard`], `--shard i/n`.
 //! - [`merge`]: [`merge::merge`], shard folders into one.
+//! - [`blame`]: whose failure a guest that stops answering is, by what the agent did in the step.
 
+pub mod blame;
 pub mod merge;
 pub mod pool;
 pub mod shard;
