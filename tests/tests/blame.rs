@@ -164,7 +164,7 @@ fn assert_incomplete(out: &Path, summary: &Value, code: Option<i32>, text: &str)
 fn an_agent_whose_code_ends_the_guest_fails_the_task_and_the_run_ends_by_itself() {
     let tmp = tempfile::tempdir().expect("tmp");
     let index = corpus(tmp.path());
-    let guest = Served::guest(&[]).expect("the stub guest");
+    let guest = Served::guest(&["--stub-host-exec"]).expect("the stub guest");
     let code = "import subprocess\nsubprocess.run(['sh', '-c', 'kill -9 $PPID'])";
     let agent_cmd = agent(tmp.path(), ":", &json!({"type": "act", "actions": [code]}));
     let out = tmp.path().join("out");

@@ -172,6 +172,11 @@ pub struct RunArgs {
     /// Start N embedded stub guests for the run (demos and tests); implies --fast.
     #[arg(long, value_name = "N")]
     pub stub_guests: Option<u16>,
+    /// The embedded stub guests run commands that are none of their simulated
+    /// programs as REAL processes on this machine (off: refused, so agent code
+    /// starts nothing on the host). Recorded in the results as `stub_host_exec=on`.
+    #[arg(long, requires = "stub_guests")]
+    pub stub_host_exec: bool,
     /// This machine's slice, i/n with i from 1 (a 0-based JOB_COMPLETION_INDEX is $((INDEX + 1))/N).
     #[arg(long, default_value = "1/1", value_parser = parse_shard)]
     pub shard: Shard,
@@ -193,6 +198,10 @@ pub struct RunArgs {
     /// Run every task of the shard again, even those with a result.txt.
     #[arg(long)]
     pub no_resume: bool,
+    /// Skip the checks before the first task (the outside agent's hello, one
+    /// minimal request to the model endpoint, the guests' health).
+    #[arg(long)]
+    pub no_preflight: bool,
     /// Tries per task after infrastructure errors, the first included.
     #[arg(long, default_value_t = 3)]
     pub attempts: u32,
@@ -596,7 +605,7 @@ pub async fn run(conn: &Connection, args: RunArgs) -> anyhow::Result<ExitCode> {
     } else {
         (factory::build(&args.agent_options())?, None)
     };
-    let ChosenAgent { factory: agents, label: agent_label, model, options: mut agent_options } = chosen;
+    let ChosenAgent { factory: agents, label: agent_label, model, options: mut agent_options, preflight } = chosen;
     // Every run records who played, in which action space and coordinates.
     let agent_name = args.agent.to_possible_value().map(|v| v.get_name().to_owned()).unwrap_or_default();
     agent_options.push(("agent".into(), agent_name));
@@ -628,7 +637,8 @@ pub async fn run(conn: &Connection, args: RunArgs) -> anyhow::Result<ExitCode> {
     };
     let mut stubs = Vec::new();
     for _ in 0..args.stub_guests.unwrap_or(0) {
-        let running = stub::start(&stub::StubArgs::default(), conn.resolve_token()?).await?;
+        let stub_args = stub::StubArgs { stub_host_exec: args.stub_host_exec, ..stub::StubArgs::default() };
+        let running = stub::start(&stub_args, conn.resolve_token()?).await?;
         urls.push(running.url());
         stubs.push(running);
     }
@@ -646,6 +656,16 @@ pub async fn run(conn: &Connection, args: RunArgs) -> anyhow::Result<ExitCode> {
         })
         .collect::<anyhow::Result<Vec<_>>>()?;
 
+    if !args.no_preflight {
+        // A setup mistake ends the run here, before any score is written.
+        let result = self::preflight(preflight.as_ref(), &guests).await;
+        if result.is_err() {
+            for stub in std::mem::take(&mut stubs) {
+                let _ = stub.stop().await;
+            }
+        }
+        result?;
+    }
     let cache_dir = args.cache.clone().unwrap_or_else(|| args.out.join("download-cache"));
     let cache = DownloadCache::new(&cache_dir)
         .with_context(|| format!("opening the download cache {}", cache_dir.display()))?;
@@ -677,6 +697,9 @@ pub async fn run(conn: &Connection, args: RunArgs) -> anyhow::Result<ExitCode> {
     config.options.extend(agent_options);
     if args.activate_non_strict {
         config.options.insert("activate_non_strict".into(), "on".into());
+    }
+    if args.stub_host_exec {
+        config.options.insert("stub_host_exec".into(), "on".into());
     }
     if fast {
         config.settle = Settle::none();
@@ -773,6 +796,36 @@ pub async fn run(conn: &Connection, args: RunArgs) -> anyhow::Result<ExitCode> {
         return Ok(ExitCode::from(if stop.is_cancelled() { 130 } else { 2 }));
     }
     Ok(ExitCode::SUCCESS)
+}
+
+/// The checks before a run's first task: the agent's ([`factory::Preflight`]),
+/// then the guests' health (at least one must answer; the others are said).
+async fn preflight(agent: Option<&factory::Preflight>, guests: &[arena_client::GuestClient]) -> anyhow::Result<()> {
+    if let Some(check) = agent {
+        match check.check().await {
+            Ok(None) => {}
+            Ok(Some(note)) => tracing::warn!(%note, "preflight: the model endpoint did not answer well; going on"),
+            Err(err) => {
+                bail!("preflight: {err:#}\nno task was run and no result written (--no-preflight skips these checks)")
+            }
+        }
+    }
+    let mut down = Vec::new();
+    for guest in guests {
+        if let Err(err) = guest.with_timeout(Duration::from_secs(30)).health().await {
+            down.push(format!("{}: {err}", guest.base_url()));
+        }
+    }
+    if !guests.is_empty() && down.len() == guests.len() {
+        bail!(
+            "preflight: no guest answers its health check:\n  {}\nno task was run and no result written (--no-preflight skips these checks)",
+            down.join("\n  ")
+        );
+    }
+    for line in down {
+        tracing::warn!(guest = %line, "preflight: a guest does not answer; the run goes on without it until it does");
+    }
+    Ok(())
 }
 
 /// How the run stands to upstream's, as named options: `preset` for a preset,
