@@ -168,24 +168,37 @@ impl Preflight {
         Preflight::Model(Box::new(client.clone()), body)
     }
 
-    /// Runs the check: `Ok(Some(note))` when something is off that does not
-    /// stop the run (a model endpoint answering 500), `Ok(None)` when all is well.
+    /// Runs the check: a note when something is off that does not stop the run
+    /// (a model endpoint answering 500), and an outside agent's `hello`.
     ///
     /// # Errors
     ///
     /// The agent did not answer its `hello`, or the model endpoint answered 401, 403 or 404.
-    pub async fn check(&self) -> anyhow::Result<Option<String>> {
+    pub async fn check(&self) -> anyhow::Result<Checked> {
         match self {
             Preflight::Hello(connector) => match connector.connect().await {
                 Ok(transport) => {
+                    let hello = transport.hello().clone();
                     connector.release(transport);
-                    Ok(None)
+                    Ok(Checked { note: None, hello: Some(hello) })
                 }
                 Err(err) => bail!("the agent {} did not answer its hello: {err}", connector.label()),
             },
-            Preflight::Model(client, body) => client.preflight(body).await.map_err(anyhow::Error::msg),
+            Preflight::Model(client, body) => {
+                let note = client.preflight(body).await.map_err(anyhow::Error::msg)?;
+                Ok(Checked { note, hello: None })
+            }
         }
     }
+}
+
+/// What a passed [`Preflight`] learnt.
+#[derive(Debug, Clone, Default)]
+pub struct Checked {
+    /// Something off that does not stop the run.
+    pub note: Option<String>,
+    /// The outside agent's `hello`: its name, action space and coordinates.
+    pub hello: Option<super::external::protocol::AgentHello>,
 }
 
 /// The chat-completions request of a preflight: one short user message.
@@ -394,6 +407,13 @@ fn computer_use(options: &AgentOptions) -> anyhow::Result<ChosenAgent> {
     Ok(ChosenAgent { factory, label: space.name().into(), model, options: recorded, preflight: Some(preflight) })
 }
 
+/// The first 8 hex digits of the SHA-256 of `text`: a short, stable name for an
+/// outside agent's command or URL.
+pub fn fingerprint(text: &str) -> String {
+    use sha2::Digest as _;
+    sha2::Sha256::digest(text.as_bytes()).iter().take(4).map(|b| format!("{b:02x}")).collect()
+}
+
 /// The longest wait for one answer of an outside agent (`--agent-timeout`).
 ///
 /// # Errors
@@ -430,6 +450,7 @@ fn external(options: &AgentOptions) -> anyhow::Result<ChosenAgent> {
     let factory: AgentFactory = Arc::new(move || {
         Ok(Box::new(ExternalAgent::new(label, Arc::clone(&connector), timeout).with_coords(coords)) as Box<dyn Agent>)
     });
-    let model = options.model.clone().unwrap_or_else(|| "external".to_owned());
+    // The model level names the agent: a different command or URL is another folder.
+    let model = options.model.clone().unwrap_or_else(|| format!("external-{}", fingerprint(&recorded[0].1)));
     Ok(ChosenAgent { factory, label: label.to_owned(), model, options: recorded, preflight })
 }

@@ -195,6 +195,10 @@ pub struct RunArgs {
     /// The same as `--pauses fast` (the default with --stub-guests).
     #[arg(long)]
     pub fast: bool,
+    /// Resume into a results folder whose recorded options differ from this run's
+    /// (refused otherwise, naming the differences). Recorded as `force_resume=on`.
+    #[arg(long)]
+    pub force_resume: bool,
     /// Run every task of the shard again, even those with a result.txt.
     #[arg(long)]
     pub no_resume: bool,
@@ -656,6 +660,7 @@ pub async fn run(conn: &Connection, args: RunArgs) -> anyhow::Result<ExitCode> {
         })
         .collect::<anyhow::Result<Vec<_>>>()?;
 
+    let mut hello = None;
     if !args.no_preflight {
         // A setup mistake ends the run here, before any score is written.
         let result = self::preflight(preflight.as_ref(), &guests).await;
@@ -664,7 +669,22 @@ pub async fn run(conn: &Connection, args: RunArgs) -> anyhow::Result<ExitCode> {
                 let _ = stub.stop().await;
             }
         }
-        result?;
+        hello = result?;
+    }
+    // An outside agent is named by its hello (else by the fingerprint the factory
+    // gave), and what it declared is recorded, not the run's defaults.
+    let mut model = model;
+    if let Some(hello) = &hello {
+        if let Some(name) = hello.agent.as_deref().map(str::trim).filter(|n| !n.is_empty()) {
+            if args.model.is_none() {
+                model = crate::results::safe_component(name);
+            }
+            agent_options.push(("agent_name".into(), name.to_owned()));
+        }
+        agent_options.retain(|(k, _)| k != "model" && k != "action_space" && k != "coords");
+        agent_options.push(("model".into(), model.clone()));
+        agent_options.push(("action_space".into(), hello.action_space.clone()));
+        agent_options.push(("coords".into(), hello.coords.clone().unwrap_or_else(|| args.coords.name())));
     }
     let cache_dir = args.cache.clone().unwrap_or_else(|| args.out.join("download-cache"));
     let cache = DownloadCache::new(&cache_dir)
@@ -727,6 +747,18 @@ pub async fn run(conn: &Connection, args: RunArgs) -> anyhow::Result<ExitCode> {
         model,
         trial: args.trial_id.clone(),
     };
+    let differences = option_differences(&layout.base(), &config.options)?;
+    if !differences.is_empty() {
+        if !args.force_resume {
+            bail!(
+                "{} holds results run with other options; resuming would mix two runs in one number:\n  {}\nuse another --out, or --force-resume to mix them anyway (recorded)",
+                layout.base().display(),
+                differences.join("\n  ")
+            );
+        }
+        tracing::warn!(differences = %differences.join("; "), "--force-resume: mixing runs with different options");
+        config.options.insert(FORCE_RESUME.into(), "on".into());
+    }
     let options = RunOptions {
         layout: layout.clone(),
         shard: args.shard,
@@ -800,11 +832,19 @@ pub async fn run(conn: &Connection, args: RunArgs) -> anyhow::Result<ExitCode> {
 
 /// The checks before a run's first task: the agent's ([`factory::Preflight`]),
 /// then the guests' health (at least one must answer; the others are said).
-async fn preflight(agent: Option<&factory::Preflight>, guests: &[arena_client::GuestClient]) -> anyhow::Result<()> {
+async fn preflight(
+    agent: Option<&factory::Preflight>,
+    guests: &[arena_client::GuestClient],
+) -> anyhow::Result<Option<crate::agent::external::protocol::AgentHello>> {
+    let mut hello = None;
     if let Some(check) = agent {
         match check.check().await {
-            Ok(None) => {}
-            Ok(Some(note)) => tracing::warn!(%note, "preflight: the model endpoint did not answer well; going on"),
+            Ok(checked) => {
+                if let Some(note) = checked.note {
+                    tracing::warn!(%note, "preflight: the model endpoint did not answer well; going on");
+                }
+                hello = checked.hello;
+            }
             Err(err) => {
                 bail!("preflight: {err:#}\nno task was run and no result written (--no-preflight skips these checks)")
             }
@@ -825,7 +865,47 @@ async fn preflight(agent: Option<&factory::Preflight>, guests: &[arena_client::G
     for line in down {
         tracing::warn!(guest = %line, "preflight: a guest does not answer; the run goes on without it until it does");
     }
-    Ok(())
+    Ok(hello)
+}
+
+/// The option `--force-resume` records, left out of the comparison.
+const FORCE_RESUME: &str = "force_resume";
+
+/// How the options recorded in the task folders below `base` differ from `ours`,
+/// one line per option (`name: the folder has A, this run B`); empty for a new
+/// folder or the same options.
+fn option_differences(base: &Path, ours: &std::collections::BTreeMap<String, String>) -> anyhow::Result<Vec<String>> {
+    if !base.is_dir() {
+        return Ok(Vec::new());
+    }
+    let found = crate::results::scan(base)?;
+    let mut theirs: std::collections::BTreeMap<&str, std::collections::BTreeSet<&str>> = Default::default();
+    let episodes: Vec<&crate::results::EpisodeResult> = found.iter().filter_map(|f| f.episode.as_ref()).collect();
+    if episodes.is_empty() {
+        return Ok(Vec::new());
+    }
+    for episode in &episodes {
+        for (name, value) in &episode.options {
+            theirs.entry(name).or_default().insert(value);
+        }
+    }
+    let mut names: std::collections::BTreeSet<&str> = theirs.keys().copied().collect();
+    names.extend(ours.keys().map(String::as_str));
+    names.remove(FORCE_RESUME);
+    let mut out = Vec::new();
+    for name in names {
+        let had: Vec<&str> = theirs.get(name).map(|v| v.iter().copied().collect()).unwrap_or_default();
+        let have = ours.get(name).map(String::as_str);
+        let same = match have {
+            Some(v) => had.len() == 1 && had[0] == v && episodes.iter().all(|e| e.options.contains_key(name)),
+            None => had.is_empty(),
+        };
+        if !same {
+            let had = if had.is_empty() { "not set".to_owned() } else { had.join(" | ") };
+            out.push(format!("{name}: the folder has {had}, this run {}", have.unwrap_or("not set")));
+        }
+    }
+    Ok(out)
 }
 
 /// How the run stands to upstream's, as named options: `preset` for a preset,
