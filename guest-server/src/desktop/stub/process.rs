@@ -232,10 +232,13 @@ pub(crate) fn command_name(cmd: &CommandSpec) -> String {
 }
 
 /// The answer to a command that is none of the simulated programs when real host
-/// processes are off: the same words whichever way the command came.
+/// processes are off: the same words whichever way the command came. It is "not
+/// found" (404), as a program missing from a Windows guest is, so callers that
+/// treat a missing program as upstream does (`open_program`'s "not installed")
+/// keep doing so.
 pub(crate) fn refusal(cmd: &CommandSpec) -> DesktopError {
-    DesktopError::PermissionDenied(format!(
-        "the stub guest runs only its simulated programs; {:?} is not one of them and host processes are off (start the guest with --stub-host-exec to run real commands on this machine)",
+    DesktopError::NotFound(format!(
+        "program {} not found: the stub guest runs only its simulated programs and host processes are off (start the guest with --stub-host-exec to run real commands on this machine)",
         command_name(cmd)
     ))
 }

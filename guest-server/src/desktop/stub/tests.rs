@@ -359,14 +359,14 @@ fn without_host_exec_only_simulated_programs_run_and_the_rest_is_refused() {
     ];
     for err in refused {
         assert!(
-            matches!(&err, DesktopError::PermissionDenied(m) if m.contains("only its simulated programs") && m.contains("--stub-host-exec")),
+            matches!(&err, DesktopError::NotFound(m) if m.contains("only its simulated programs") && m.contains("--stub-host-exec")),
             "{err:?}"
         );
     }
     // An executable file in the guest is not started either.
     let exe = d.root().join("C").join("Users").join("Docker").join("Desktop").join("tool.exe");
     std::fs::write(&exe, format!("#!/bin/sh\n{touch}\n")).unwrap();
-    assert!(matches!(d.open_path(r"C:\Users\Docker\Desktop\tool.exe"), Err(DesktopError::PermissionDenied(_))));
+    assert!(matches!(d.open_path(r"C:\Users\Docker\Desktop\tool.exe"), Err(DesktopError::NotFound(_))));
     assert!(!marker.exists(), "nothing ran on the host");
     // The simulated programs still open their windows.
     d.spawn(&CommandSpec::Shell("notepad".into())).unwrap();
