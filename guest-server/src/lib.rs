@@ -148,6 +148,7 @@ pub fn build_state(config: ServerConfig) -> anyhow::Result<AppState> {
                 root: config.stub_root.clone(),
                 screen: config.screen,
                 scenario,
+                host_exec: config.stub_host_exec,
             })
             .context("starting the stub desktop")?;
             Arc::new(stub)

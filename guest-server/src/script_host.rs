@@ -294,10 +294,24 @@ mod tests {
         let mut host = DesktopHost::new(stub.as_ref(), far());
         assert_eq!(host.open_program("notepad"), Ok(true));
         assert!(stub.find_window("Notepad").is_some());
+        // Without --stub-host-exec, a program that is not simulated is not installed.
         assert_eq!(host.open_program("arena-no-such-program-xyz"), Ok(false));
         assert!(host.open_program("notepad & calc").is_err());
         assert_eq!(host.active_window_title().as_deref(), Ok("Untitled - Notepad"));
         assert!(host.window_titles().expect("titles").contains(&"Untitled - Notepad".to_owned()));
+    }
+
+    #[test]
+    fn with_host_exec_open_program_reports_a_missing_program_as_not_opened() {
+        let dir = tempfile::tempdir().expect("tmp");
+        let config = crate::desktop::stub::StubConfig {
+            root: Some(dir.path().to_path_buf()),
+            host_exec: true,
+            ..crate::desktop::stub::StubConfig::default()
+        };
+        let stub = StubDesktop::with_config(config).expect("stub");
+        let mut host = DesktopHost::new(&stub, far());
+        assert_eq!(host.open_program("arena-no-such-program-xyz"), Ok(false));
     }
 
     #[test]

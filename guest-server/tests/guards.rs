@@ -95,8 +95,13 @@ struct App {
 fn app_with(configure: impl FnOnce(&mut ServerConfig)) -> App {
     let dir = tempfile::tempdir().expect("temp dir");
     let stub = Arc::new(
-        StubDesktop::with_config(StubConfig { root: Some(dir.path().into()), screen: (1440, 900), scenario: None })
-            .expect("stub desktop"),
+        StubDesktop::with_config(StubConfig {
+            root: Some(dir.path().into()),
+            screen: (1440, 900),
+            scenario: None,
+            host_exec: false,
+        })
+        .expect("stub desktop"),
     );
     let mut config = ServerConfig::for_stub();
     configure(&mut config);
@@ -322,9 +327,13 @@ async fn gray_and_one_bit_png_bombs_are_refused_before_decoding() {
 async fn a_request_without_the_token_closes_its_connection() {
     let _turn = SERIAL.lock().await;
     let dir = tempfile::tempdir().expect("temp dir");
-    let stub =
-        StubDesktop::with_config(StubConfig { root: Some(dir.path().into()), screen: (1440, 900), scenario: None })
-            .expect("stub desktop");
+    let stub = StubDesktop::with_config(StubConfig {
+        root: Some(dir.path().into()),
+        screen: (1440, 900),
+        scenario: None,
+        host_exec: false,
+    })
+    .expect("stub desktop");
     let state = AppState::new(Arc::new(stub), ServerConfig::for_stub(), Some("0123456789abcdef0123".into()));
     let router = arena_guest::router(state);
     let request = Request::builder().uri("/v1/screen").header(header::HOST, "127.0.0.1").body(Body::empty()).unwrap();

@@ -67,9 +67,13 @@ impl Answer {
 
 fn app_with(token: Option<&str>) -> TestApp {
     let dir = tempfile::tempdir().expect("temp dir");
-    let stub =
-        StubDesktop::with_config(StubConfig { root: Some(dir.path().into()), screen: (1440, 900), scenario: None })
-            .expect("stub desktop");
+    let stub = StubDesktop::with_config(StubConfig {
+        root: Some(dir.path().into()),
+        screen: (1440, 900),
+        scenario: None,
+        host_exec: true,
+    })
+    .expect("stub desktop");
     let state = AppState::new(Arc::new(stub), ServerConfig::for_stub(), token.map(str::to_owned));
     TestApp { router: arena_guest::router(state), dir }
 }
@@ -752,9 +756,13 @@ async fn wallpaper_is_set_from_an_existing_image_only() {
 /// A router over a fresh stub whose browser debugging port is `cdp_port`.
 fn app_with_cdp_port(cdp_port: u16) -> TestApp {
     let dir = tempfile::tempdir().expect("temp dir");
-    let stub =
-        StubDesktop::with_config(StubConfig { root: Some(dir.path().into()), screen: (1440, 900), scenario: None })
-            .expect("stub desktop");
+    let stub = StubDesktop::with_config(StubConfig {
+        root: Some(dir.path().into()),
+        screen: (1440, 900),
+        scenario: None,
+        host_exec: false,
+    })
+    .expect("stub desktop");
     let mut config = ServerConfig::for_stub();
     config.cdp_port = cdp_port;
     let state = AppState::new(Arc::new(stub), config, None);
@@ -906,9 +914,13 @@ async fn health_without_the_token_shows_stages_only() {
 /// Five health polls against a stub that counts its probes, with `cache_ms` of reuse.
 async fn probes_for_five_polls(cache_ms: u64) -> usize {
     let dir = tempfile::tempdir().unwrap();
-    let inner =
-        StubDesktop::with_config(StubConfig { root: Some(dir.path().into()), screen: (1440, 900), scenario: None })
-            .unwrap();
+    let inner = StubDesktop::with_config(StubConfig {
+        root: Some(dir.path().into()),
+        screen: (1440, 900),
+        scenario: None,
+        host_exec: false,
+    })
+    .unwrap();
     let desktop = Arc::new(HangsOnText::new(inner, "never"));
     let mut config = ServerConfig::for_stub();
     config.health_cache_ms = cache_ms;
@@ -979,9 +991,13 @@ async fn without_a_token_only_this_servers_host_names_are_served() {
 #[tokio::test]
 async fn allowed_host_names_and_a_token_let_other_names_through() {
     let dir = tempfile::tempdir().expect("temp dir");
-    let stub =
-        StubDesktop::with_config(StubConfig { root: Some(dir.path().into()), screen: (1440, 900), scenario: None })
-            .expect("stub desktop");
+    let stub = StubDesktop::with_config(StubConfig {
+        root: Some(dir.path().into()),
+        screen: (1440, 900),
+        scenario: None,
+        host_exec: false,
+    })
+    .expect("stub desktop");
     let mut config = ServerConfig::for_stub();
     config.allow_host = vec!["guest-7.cluster.local".into()];
     let app = TestApp { router: arena_guest::router(AppState::new(Arc::new(stub), config, None)), dir };
@@ -1127,9 +1143,13 @@ mod delegate {
 #[tokio::test]
 async fn a_failing_action_stops_the_batch_and_says_where() {
     let dir = tempfile::tempdir().unwrap();
-    let inner =
-        StubDesktop::with_config(StubConfig { root: Some(dir.path().into()), screen: (1440, 900), scenario: None })
-            .unwrap();
+    let inner = StubDesktop::with_config(StubConfig {
+        root: Some(dir.path().into()),
+        screen: (1440, 900),
+        scenario: None,
+        host_exec: false,
+    })
+    .unwrap();
     let state = AppState::new(Arc::new(HangsOnText::new(inner, "boom")), ServerConfig::for_stub(), None);
     let app = TestApp { router: arena_guest::router(state), dir };
     let batch = json!({"actions": [
@@ -1196,8 +1216,13 @@ async fn eventually(what: &str, mut f: impl FnMut() -> bool) {
 async fn slow_typing_leaves_the_desktop_to_other_calls_and_stops_when_abandoned() {
     let dir = tempfile::tempdir().unwrap();
     let stub = Arc::new(
-        StubDesktop::with_config(StubConfig { root: Some(dir.path().into()), screen: (1440, 900), scenario: None })
-            .unwrap(),
+        StubDesktop::with_config(StubConfig {
+            root: Some(dir.path().into()),
+            screen: (1440, 900),
+            scenario: None,
+            host_exec: false,
+        })
+        .unwrap(),
     );
     let app = TestApp { router: arena_guest::router(AppState::new(stub.clone(), ServerConfig::for_stub(), None)), dir };
     app.post("/v1/launch", json!({"argv": ["notepad"]})).await.assert_status(StatusCode::OK);
@@ -1256,9 +1281,13 @@ async fn registry_paths_past_windows_limits_are_refused_and_not_stored() {
 #[tokio::test]
 async fn temporary_files_of_interrupted_writes_are_swept_at_start_up() {
     let dir = tempfile::tempdir().unwrap();
-    let stub =
-        StubDesktop::with_config(StubConfig { root: Some(dir.path().into()), screen: (1440, 900), scenario: None })
-            .unwrap();
+    let stub = StubDesktop::with_config(StubConfig {
+        root: Some(dir.path().into()),
+        screen: (1440, 900),
+        scenario: None,
+        host_exec: false,
+    })
+    .unwrap();
     let folder = dir.path().join("C/Users/Docker/Documents/reports");
     std::fs::create_dir_all(&folder).unwrap();
     let stale = folder.join(format!("{}x1y2z3", arena_shared::atomic::TEMP_PREFIX));
@@ -1278,9 +1307,13 @@ async fn temporary_files_of_interrupted_writes_are_swept_at_start_up() {
 #[tokio::test]
 async fn large_files_stream_both_ways_and_an_oversized_body_writes_nothing() {
     let dir = tempfile::tempdir().unwrap();
-    let stub =
-        StubDesktop::with_config(StubConfig { root: Some(dir.path().into()), screen: (1440, 900), scenario: None })
-            .unwrap();
+    let stub = StubDesktop::with_config(StubConfig {
+        root: Some(dir.path().into()),
+        screen: (1440, 900),
+        scenario: None,
+        host_exec: false,
+    })
+    .unwrap();
     let mut config = ServerConfig::for_stub();
     config.max_body_bytes = 3 << 20;
     let app = TestApp { router: arena_guest::router(AppState::new(Arc::new(stub), config, None)), dir };

@@ -40,7 +40,12 @@ impl App {
         let scenario =
             Scenario::parse(&scenario.to_string(), "test").unwrap_or_else(|err| panic!("test scenario: {err}"));
         let dir = tempfile::tempdir().expect("temp dir");
-        let config_stub = StubConfig { root: Some(dir.path().into()), screen: (1440, 900), scenario: Some(scenario) };
+        let config_stub = StubConfig {
+            root: Some(dir.path().into()),
+            screen: (1440, 900),
+            scenario: Some(scenario),
+            host_exec: true,
+        };
         let stub = Arc::new(StubDesktop::with_config(config_stub).expect("stub desktop"));
         let state = AppState::new(stub.clone(), config, None);
         App { router: arena_guest::router(state), stub, _dir: dir }

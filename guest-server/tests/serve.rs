@@ -29,9 +29,13 @@ const TOKEN: &str = "0123456789abcdef0123";
 
 async fn start_with(token: Option<&str>, configure: impl FnOnce(&mut ServerConfig)) -> Guest {
     let dir = tempfile::tempdir().expect("dir");
-    let stub =
-        StubDesktop::with_config(StubConfig { root: Some(dir.path().into()), screen: (1440, 900), scenario: None })
-            .expect("stub");
+    let stub = StubDesktop::with_config(StubConfig {
+        root: Some(dir.path().into()),
+        screen: (1440, 900),
+        scenario: None,
+        host_exec: false,
+    })
+    .expect("stub");
     let mut config = ServerConfig::for_stub();
     configure(&mut config);
     let state = AppState::new(Arc::new(stub), config, token.map(str::to_owned));

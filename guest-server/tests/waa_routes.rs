@@ -79,8 +79,13 @@ fn scenario(value: Value) -> Scenario {
 fn app_with(scenario: Option<Scenario>, config: ServerConfig) -> TestApp {
     let dir = tempfile::tempdir().expect("temp dir");
     let stub = Arc::new(
-        StubDesktop::with_config(StubConfig { root: Some(dir.path().into()), screen: (1440, 900), scenario })
-            .expect("stub desktop"),
+        StubDesktop::with_config(StubConfig {
+            root: Some(dir.path().into()),
+            screen: (1440, 900),
+            scenario,
+            host_exec: true,
+        })
+        .expect("stub desktop"),
     );
     let state = AppState::new(stub.clone(), config, None);
     TestApp { router: arena_guest::router(state), stub, _dir: dir }

@@ -45,6 +45,7 @@ use crate::ports::{AgentAction, Observation};
 use crate::results::{
     timestamp_now, ActionRecord, ObservationKeys, ResetRecord, RunLayout, StepRecord, StepTimings, TaskDir,
 };
+use crate::run::blame::{self, Phase};
 use crate::run::pool::TaskRunner;
 use arena_client::client::GuestClient;
 use arena_eval::{EvalContext, LastAction};
@@ -248,6 +249,8 @@ struct Acted {
     observing: Duration,
     /// When the step's time is up (`step_timeout` after its actions began).
     deadline: Option<tokio::time::Instant>,
+    /// An action that reaches the guest ran in this step (run::blame).
+    ran: bool,
 }
 
 /// Writes one of an agent's step logs as upstream's recorder names its files
@@ -511,6 +514,17 @@ impl Episode {
             return Ok((true, None, seen));
         };
 
+        // The guest answered at the step's start; ask again before anything of the
+        // agent's runs, so a failure from here on is decided by what it did.
+        if blame::before_actions(&prediction.actions) {
+            if let Err(err) = play.client.health_once(blame::DECIDING_CHECK).await {
+                let status = blame::guest_failure(Phase::Deciding, step, "asked before the actions", err);
+                record.error = status.message().map(str::to_owned);
+                record.ended = true;
+                self.push(out, record)?;
+                return Err(status);
+            }
+        }
         let t_act = Instant::now();
         // The step's actions share one deadline, not one each.
         let deadline = tokio::time::Instant::now() + config.step_timeout;
@@ -541,13 +555,31 @@ impl Episode {
             line.done = matches!(action, AgentAction::Done | AgentAction::Fail);
             if let Err(status) = self.act(play, &prediction, k, computer, &mut record, &mut acted).await {
                 record.timings.act_ms = ms(t_act.elapsed());
+                if !status.is_unfinished() {
+                    record.error = status.message().map(str::to_owned);
+                    record.ended = true;
+                }
                 self.push(out, record)?;
                 return Err(status);
             }
             // Upstream observes after every action, DONE and FAIL included.
             let t_observe = Instant::now();
             let tracked = computer.clipboard_content.clone();
-            latest = self.observe_into(play, step + 1, Some(step - 1), &line.action_timestamp, tracked).await?;
+            let observed_after =
+                self.observe_into(play, step + 1, Some(step - 1), &line.action_timestamp, tracked).await;
+            latest = match observed_after {
+                Ok(seen) => seen,
+                // The guest went away after the step's actions ran: the agent's doing.
+                Err(EpisodeStatus::InfraError(err)) if acted.ran => {
+                    let status = blame::after_action(step, "observing after the action", err);
+                    record.error = status.message().map(str::to_owned);
+                    record.ended = true;
+                    record.timings.act_ms = ms(t_act.elapsed());
+                    self.push(out, record)?;
+                    return Err(status);
+                }
+                Err(status) => return Err(status),
+            };
             acted.observing += t_observe.elapsed();
             line.observation = observed(&latest);
             if k == 0 {
@@ -657,6 +689,7 @@ impl Episode {
                     }
                     _ => std::borrow::Cow::Borrowed(&config.exec),
                 };
+                acted.ran = true;
                 let run = exec::execute_with(play.client, action, prediction.marks.as_ref(), computer, &options);
                 let deadline = acted.deadline.unwrap_or_else(|| tokio::time::Instant::now() + config.step_timeout);
                 match tokio::time::timeout_at(deadline, run).await {
@@ -671,7 +704,11 @@ impl Episode {
                         }
                         record.outcomes.push(serde_json::to_value(&outcome).unwrap_or(Value::Null));
                     }
-                    Ok(Err(ExecError::Guest(err))) => return Err(infra("the guest stopped answering", err)),
+                    // The guest answered right before this step's actions: whatever
+                    // became of it in one of them is the agent's (run::blame).
+                    Ok(Err(ExecError::Guest(err))) => {
+                        return Err(blame::after_action(record.step, &format!("action {}", k + 1), err))
+                    }
                     Ok(Err(err)) => record.outcomes.push(serde_json::json!({ "error": err.to_string() })),
                     Err(_) => {
                         let message =

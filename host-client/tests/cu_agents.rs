@@ -688,6 +688,8 @@ async fn arena_run_with_openai_cu_records_agent_model_action_space_and_coordinat
         out.to_str().unwrap(),
         "--safety-checks",
         "fail",
+        // The mock answers one scripted reply; the preflight is tests/tests/preflight.rs's.
+        "--no-preflight",
     ];
     let mut cli = arena_host::Cli::try_parse_from(words).expect("arguments parse");
     cli.connection.token = None;

@@ -25,7 +25,7 @@ fn find<'a>(node: &'a A11yNode, pred: &dyn Fn(&A11yNode) -> bool) -> Option<&'a 
 
 #[tokio::test]
 async fn client_drives_the_real_guest_binary() {
-    let guest = Served::guest(&[]).expect("guest starts");
+    let guest = Served::guest(&["--stub-host-exec"]).expect("guest starts");
     let client = client(&guest.url, None);
 
     let health = client.wait_ready(&Component::ALL, Duration::from_secs(30), Duration::from_millis(50)).await.unwrap();
@@ -103,7 +103,7 @@ async fn client_drives_the_real_guest_binary() {
 #[tokio::test]
 async fn token_is_required_when_configured() {
     let token = "e2e-token-0123456789abcdef";
-    let guest = Served::guest(&["--token", token]).expect("guest starts");
+    let guest = Served::guest(&["--token", token, "--stub-host-exec"]).expect("guest starts");
 
     let anonymous = client(&guest.url, None);
     // Readiness stays open so hosts can poll before they have the token.
@@ -157,7 +157,8 @@ fn arena(url: &str, args: &[&str]) -> std::process::Output {
 #[test]
 fn cli_drives_a_guest_started_by_serve_stub() {
     let exe = workspace_binary("arena-host", "arena").unwrap();
-    let guest = Served::start(&exe, &["serve-stub", "--port", "0"], None).expect("serve-stub starts");
+    let guest =
+        Served::start(&exe, &["serve-stub", "--port", "0", "--stub-host-exec"], None).expect("serve-stub starts");
     let url = guest.url.as_str();
 
     let out = arena(url, &["health"]);

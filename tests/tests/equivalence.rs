@@ -72,7 +72,7 @@ fn client_of(guest: &Served) -> GuestClient {
 
 #[tokio::test]
 async fn agent_code_gives_the_same_result_on_the_host_and_in_the_guest() {
-    let guest = Served::guest(&[]).expect("guest starts");
+    let guest = Served::guest(&["--stub-host-exec"]).expect("guest starts");
     let client = client_of(&guest);
     // Names whose NTFS order differs from a lowercase or ordinal sort.
     for name in ["b.txt", "_notes.txt", "Zebra.txt", "apple.txt", "A.md", "éclair.txt"] {
@@ -136,7 +136,7 @@ async fn window_state(client: &GuestClient) -> Vec<(String, bool, bool, bool)> {
 
 /// A fresh guest with Calculator open, as both sides start.
 async fn calculator_desktop() -> (Served, GuestClient) {
-    let guest = Served::guest(&[]).expect("guest starts");
+    let guest = Served::guest(&["--stub-host-exec"]).expect("guest starts");
     let client = client_of(&guest);
     client.launch(&LaunchRequest::new(arena_shared::cmdline::CommandSpec::Shell("calc".into()))).await.expect("calc");
     (guest, client)

@@ -11,7 +11,10 @@
 //! the `pyautogui` action space (as `arena act --pyautogui` always does); a clipboard
 //! paste (`pyperclip.copy` then
 //! Ctrl+V) is one clipboard write and one hotkey everywhere, so Notepad gets the
-//! text each time. Runs against the in-process stub guest.
+//! text each time. Code reaching for the host (`os.system`, `subprocess.run`, a
+//! host file such as `/etc/passwd`) on a stub without `--stub-host-exec` gets the
+//! same refusal through every way, and nothing starts on the host. Runs against
+//! the in-process stub guest.
 
 #![cfg(unix)]
 
@@ -334,4 +337,60 @@ async fn hostile_pyautogui_gets_the_same_answer_through_every_way_when_translate
     assert_eq!(c.clipboard_get().await.expect("clipboard"), ClipboardContent::Text { text: "x".into() });
     typed.push('x');
     assert_eq!(notepad_text(&c).await, typed, "arena act");
+}
+
+/// Code that reaches for the host: a shell command and a process that would
+/// create `marker` on the host, and a host file outside the stub root.
+fn host_reaching(marker: &Path) -> Vec<String> {
+    let m = marker.display();
+    vec![
+        format!("import os\nos.system('touch {m}')"),
+        format!("import subprocess\nsubprocess.run(['sh', '-c', 'touch {m}'])"),
+        "print(open('/etc/passwd').read())".to_owned(),
+    ]
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn on_the_stub_host_reaching_code_is_refused_the_same_way_through_every_way_and_nothing_runs_on_the_host() {
+    // The stub as a run starts it: without --stub-host-exec.
+    let guest = StubGuest::start().await;
+    let c = client(guest.url());
+    let tmp = tempfile::tempdir().expect("tmp");
+    let task = task(tmp.path());
+    let marker = tmp.path().join("host-marker");
+    let obs = Observation::capture(&c, 1, &task.instruction).await.expect("observe");
+    for (n, code) in host_reaching(&marker).iter().enumerate() {
+        let dir: PathBuf = tmp.path().join(format!("host-{n}"));
+        std::fs::create_dir_all(&dir).expect("dir");
+        let ways: Vec<(&str, Vec<AgentAction>)> = vec![
+            ("navi", navi(&obs, &task, code).await),
+            ("exec", exec_agent(&dir, &obs, &task, code).await),
+            ("http", http_agent(&obs, &task, code).await),
+            ("mcp", mcp(code)),
+        ];
+        let mut seen: Option<Vec<String>> = None;
+        for (way, actions) in ways {
+            let errors = carry_out(&c, &actions).await;
+            assert!(!marker.exists(), "{way}: {code}: a host process ran");
+            match &seen {
+                None => seen = Some(errors),
+                Some(first) => assert_eq!(&errors, first, "{way}: {code}"),
+            }
+        }
+        let errors = seen.expect("four ways");
+        assert_eq!(errors.len(), 1, "{code}: {errors:?}");
+        match n {
+            0 | 1 => assert!(
+                errors[0].contains("only its simulated programs") && errors[0].contains("--stub-host-exec"),
+                "{code}: {errors:?}"
+            ),
+            _ => assert!(errors[0].contains("not supported by this interpreter"), "{code}: {errors:?}"),
+        }
+        assert!(!errors[0].contains("root:"), "no host file reached the agent: {errors:?}");
+        // `arena act --pyautogui` refuses it too, and starts nothing.
+        let (ok, stderr) = arena_act(guest.url(), code);
+        assert!(!ok, "arena act: {code}: {stderr}");
+        assert!(!marker.exists(), "arena act: {code}: a host process ran");
+        assert!(!stderr.contains("root:"), "arena act: {stderr}");
+    }
 }

@@ -33,7 +33,7 @@ async fn upload(client: &reqwest::Client, base: &str, guest_path: &str, bytes: V
 
 #[tokio::test]
 async fn upstream_host_sequence_for_one_episode() {
-    let guest = Served::guest(&[]).expect("guest starts");
+    let guest = Served::guest(&["--stub-host-exec"]).expect("guest starts");
     let base = guest.url.clone();
     let client = http();
 

@@ -81,6 +81,13 @@ pub struct ServerConfig {
     #[arg(long, env = "ARENA_SCENARIO")]
     pub scenario: Option<PathBuf>,
 
+    /// Stub backend: run commands that are none of its simulated programs as REAL
+    /// processes on this machine, as the user running the server (tests that need
+    /// a real process). Without it such a command is refused, so agent code on the
+    /// stub cannot start anything on the host.
+    #[arg(long, env = "ARENA_STUB_HOST_EXEC")]
+    pub stub_host_exec: bool,
+
     /// Stub backend: screen size as WIDTHxHEIGHT.
     #[arg(long, env = "ARENA_SCREEN", default_value = "1440x900", value_parser = parse_size)]
     pub screen: (u32, u32),
@@ -234,6 +241,7 @@ impl ServerConfig {
             allow_host: Vec::new(),
             stub_root: None,
             scenario: None,
+            stub_host_exec: false,
             screen: (1440, 900),
             max_body_bytes: 1 << 30,
             health_cache_ms: 1000,

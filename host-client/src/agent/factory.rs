@@ -139,7 +139,77 @@ pub struct ChosenAgent {
     pub model: String,
     /// The agent's named options, recorded in the results.
     pub options: Vec<(String, String)>,
+    /// What `arena run` checks before the first task ([`Preflight::check`]).
+    pub preflight: Option<Preflight>,
 }
+
+/// A check of the agent before a run's first task, so that a setup mistake ends
+/// the run before any score is written (docs/agents.md, "Preflight").
+#[derive(Clone)]
+pub enum Preflight {
+    /// An outside agent's `hello` round trip (a process started, or a URL answering).
+    Hello(Arc<dyn Connector>),
+    /// One minimal request to a model agent's endpoint.
+    Model(Box<super::llm::ModelClient>, serde_json::Value),
+}
+
+impl std::fmt::Debug for Preflight {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Preflight::Hello(c) => write!(f, "Preflight::Hello({})", c.label()),
+            Preflight::Model(client, _) => write!(f, "Preflight::Model({})", client.endpoint()),
+        }
+    }
+}
+
+impl Preflight {
+    /// A model agent's preflight: `body`, one minimal request of its API.
+    pub fn model(client: &super::llm::ModelClient, body: serde_json::Value) -> Preflight {
+        Preflight::Model(Box::new(client.clone()), body)
+    }
+
+    /// Runs the check: a note when something is off that does not stop the run
+    /// (a model endpoint answering 500), and an outside agent's `hello`.
+    ///
+    /// # Errors
+    ///
+    /// The agent did not answer its `hello`, or the model endpoint answered 401, 403 or 404.
+    pub async fn check(&self) -> anyhow::Result<Checked> {
+        match self {
+            Preflight::Hello(connector) => match connector.connect().await {
+                Ok(transport) => {
+                    let hello = transport.hello().clone();
+                    connector.release(transport);
+                    Ok(Checked { note: None, hello: Some(hello) })
+                }
+                Err(err) => bail!("the agent {} did not answer its hello: {err}", connector.label()),
+            },
+            Preflight::Model(client, body) => {
+                let note = client.preflight(body).await.map_err(anyhow::Error::msg)?;
+                Ok(Checked { note, hello: None })
+            }
+        }
+    }
+}
+
+/// What a passed [`Preflight`] learnt.
+#[derive(Debug, Clone, Default)]
+pub struct Checked {
+    /// Something off that does not stop the run.
+    pub note: Option<String>,
+    /// The outside agent's `hello`: its name, action space and coordinates.
+    pub hello: Option<super::external::protocol::AgentHello>,
+}
+
+/// The chat-completions request of a preflight: one short user message.
+fn chat_probe(model: &str) -> serde_json::Value {
+    let mut body = serde_json::json!({"model": model, "messages": [{"role": "user", "content": PROBE_TEXT}]});
+    body[super::llm::TokensField::for_model(model).name()] = serde_json::json!(16);
+    body
+}
+
+/// What a preflight asks a model.
+const PROBE_TEXT: &str = "Reply with OK.";
 
 impl std::fmt::Debug for ChosenAgent {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
@@ -170,7 +240,13 @@ pub fn build(options: &AgentOptions) -> anyhow::Result<ChosenAgent> {
             let source = if path.is_dir() { ReplaySource::Dir(path) } else { ReplaySource::File(path) };
             let factory: AgentFactory =
                 Arc::new(move || Ok(Box::new(ReplayAgent::new(source.clone())) as Box<dyn Agent>));
-            Ok(ChosenAgent { factory, label: "replay".into(), model: "replay".into(), options: Vec::new() })
+            Ok(ChosenAgent {
+                factory,
+                label: "replay".into(),
+                model: "replay".into(),
+                options: Vec::new(),
+                preflight: None,
+            })
         }
         AgentKind::Navi => navi(options),
         AgentKind::AnthropicCu | AgentKind::OpenaiCu | AgentKind::UiTars => computer_use(options),
@@ -194,7 +270,7 @@ fn scripted(options: &AgentOptions) -> anyhow::Result<ChosenAgent> {
         },
     };
     let factory: AgentFactory = Arc::new(move || Ok(Box::new(ScriptedAgent::new(source.clone())) as Box<dyn Agent>));
-    Ok(ChosenAgent { factory, label: "scripted".into(), model: "plan".into(), options: Vec::new() })
+    Ok(ChosenAgent { factory, label: "scripted".into(), model: "plan".into(), options: Vec::new(), preflight: None })
 }
 
 fn navi(options: &AgentOptions) -> anyhow::Result<ChosenAgent> {
@@ -235,10 +311,11 @@ fn navi(options: &AgentOptions) -> anyhow::Result<ChosenAgent> {
     config.timeout = seconds(options.llm_timeout, "--llm-timeout")?;
     config.retry.give_up_after = seconds(options.llm_retry, "--llm-retry")?;
     // Fail now, not once per task, when the configuration is unusable.
-    NaviAgent::new(config.clone())?;
+    let probe = NaviAgent::new(config.clone())?;
+    let preflight = Some(Preflight::model(probe.client(), chat_probe(&model)));
     let factory: AgentFactory = Arc::new(move || Ok(Box::new(NaviAgent::new(config.clone())?) as Box<dyn Agent>));
     // Upstream files Navi's results under its action space.
-    Ok(ChosenAgent { factory, label: DEFAULT_ACTION_SPACE_LABEL.into(), model, options: recorded })
+    Ok(ChosenAgent { factory, label: DEFAULT_ACTION_SPACE_LABEL.into(), model, options: recorded, preflight })
 }
 
 /// The endpoint options the computer-use agents share with Navi's.
@@ -256,69 +333,85 @@ fn cu_endpoint(options: &AgentOptions, name: &str) -> anyhow::Result<Endpoint> {
 /// `anthropic-cu`, `openai-cu` and `ui-tars`.
 fn computer_use(options: &AgentOptions) -> anyhow::Result<ChosenAgent> {
     let option = |k: &str, v: String| (k.to_owned(), v);
-    let (factory, space, coords, mut recorded): (AgentFactory, ActionSpace, String, Vec<(String, String)>) =
-        match options.kind {
-            AgentKind::AnthropicCu => {
-                let mut config = AnthropicConfig::new("", "");
-                config.endpoint = cu_endpoint(options, "anthropic-cu")?;
-                config.tool = options.computer_tool;
-                config.enable_zoom = options.zoom;
-                config.thinking_budget = options.thinking_budget;
-                config.prompt_caching = options.prompt_caching;
-                config.keep_images = options.keep_images.unwrap_or(config.keep_images);
-                AnthropicAgent::new(config.clone())?;
-                let recorded = vec![
-                    option("keep_images", config.keep_images.to_string()),
-                    option("thinking_budget", config.thinking_budget.map_or("off".into(), |b| b.to_string())),
-                    option("prompt_caching", if config.prompt_caching { "on" } else { "off" }.into()),
-                    option("zoom", if config.enable_zoom { "on" } else { "off" }.into()),
-                ];
-                let space = config.tool;
-                let factory: AgentFactory =
-                    Arc::new(move || Ok(Box::new(AnthropicAgent::new(config.clone())?) as Box<dyn Agent>));
-                (factory, space, "image:recommended-size".into(), recorded)
-            }
-            AgentKind::OpenaiCu => {
-                let mut config = OpenAiConfig::new("", "");
-                config.endpoint = cu_endpoint(options, "openai-cu")?;
-                config.safety_checks = options.safety_checks;
-                OpenAiAgent::new(config.clone())?;
-                let recorded = vec![option("safety_checks", config.safety_checks.name().into())];
-                let factory: AgentFactory =
-                    Arc::new(move || Ok(Box::new(OpenAiAgent::new(config.clone())?) as Box<dyn Agent>));
-                let (w, h) = super::cu::openai::MAX_DISPLAY;
-                (factory, ActionSpace::OpenAi, format!("image:within-{w}x{h}"), recorded)
-            }
-            _ => {
-                let Some(path) = &options.prompt_file else {
-                    bail!(
-                        "--agent ui-tars needs --prompt-file: the UI-TARS prompt template, as its project publishes it"
-                    );
-                };
-                let template = UiTarsConfig::read_prompt(path)?;
-                let mut config = UiTarsConfig::new("", "", &template);
-                config.endpoint = cu_endpoint(options, "ui-tars")?;
-                config.version = options.uitars_version;
-                config.history_images = options.keep_images.unwrap_or(config.history_images);
-                UiTarsAgent::new(config.clone())?;
-                let coords = match config.version {
-                    UiTarsVersion::V1 => Coords::Grid1000.name(),
-                    UiTarsVersion::V1_5 => "image:smart-resize".into(),
-                };
-                let recorded = vec![
-                    option("uitars_version", config.version.name().into()),
-                    option("keep_images", config.history_images.to_string()),
-                    option("prompt_file", path.display().to_string()),
-                ];
-                let factory: AgentFactory =
-                    Arc::new(move || Ok(Box::new(UiTarsAgent::new(config.clone())?) as Box<dyn Agent>));
-                (factory, ActionSpace::UiTars, coords, recorded)
-            }
-        };
     let model = options.model.clone().unwrap_or_default();
+    #[allow(clippy::type_complexity)]
+    let (factory, space, coords, mut recorded, preflight): (
+        AgentFactory,
+        ActionSpace,
+        String,
+        Vec<(String, String)>,
+        Preflight,
+    ) = match options.kind {
+        AgentKind::AnthropicCu => {
+            let mut config = AnthropicConfig::new("", "");
+            config.endpoint = cu_endpoint(options, "anthropic-cu")?;
+            config.tool = options.computer_tool;
+            config.enable_zoom = options.zoom;
+            config.thinking_budget = options.thinking_budget;
+            config.prompt_caching = options.prompt_caching;
+            config.keep_images = options.keep_images.unwrap_or(config.keep_images);
+            let probe = AnthropicAgent::new(config.clone())?;
+            let body = serde_json::json!({"model": model, "max_tokens": 16, "messages": [{"role": "user", "content": PROBE_TEXT}]});
+            let preflight = Preflight::model(probe.client(), body);
+            let recorded = vec![
+                option("keep_images", config.keep_images.to_string()),
+                option("thinking_budget", config.thinking_budget.map_or("off".into(), |b| b.to_string())),
+                option("prompt_caching", if config.prompt_caching { "on" } else { "off" }.into()),
+                option("zoom", if config.enable_zoom { "on" } else { "off" }.into()),
+            ];
+            let space = config.tool;
+            let factory: AgentFactory =
+                Arc::new(move || Ok(Box::new(AnthropicAgent::new(config.clone())?) as Box<dyn Agent>));
+            (factory, space, "image:recommended-size".into(), recorded, preflight)
+        }
+        AgentKind::OpenaiCu => {
+            let mut config = OpenAiConfig::new("", "");
+            config.endpoint = cu_endpoint(options, "openai-cu")?;
+            config.safety_checks = options.safety_checks;
+            let probe = OpenAiAgent::new(config.clone())?;
+            let body = serde_json::json!({"model": model, "input": PROBE_TEXT, "max_output_tokens": 16});
+            let preflight = Preflight::model(probe.client(), body);
+            let recorded = vec![option("safety_checks", config.safety_checks.name().into())];
+            let factory: AgentFactory =
+                Arc::new(move || Ok(Box::new(OpenAiAgent::new(config.clone())?) as Box<dyn Agent>));
+            let (w, h) = super::cu::openai::MAX_DISPLAY;
+            (factory, ActionSpace::OpenAi, format!("image:within-{w}x{h}"), recorded, preflight)
+        }
+        _ => {
+            let Some(path) = &options.prompt_file else {
+                bail!("--agent ui-tars needs --prompt-file: the UI-TARS prompt template, as its project publishes it");
+            };
+            let template = UiTarsConfig::read_prompt(path)?;
+            let mut config = UiTarsConfig::new("", "", &template);
+            config.endpoint = cu_endpoint(options, "ui-tars")?;
+            config.version = options.uitars_version;
+            config.history_images = options.keep_images.unwrap_or(config.history_images);
+            let probe = UiTarsAgent::new(config.clone())?;
+            let preflight = Preflight::model(probe.client(), chat_probe(&model));
+            let coords = match config.version {
+                UiTarsVersion::V1 => Coords::Grid1000.name(),
+                UiTarsVersion::V1_5 => "image:smart-resize".into(),
+            };
+            let recorded = vec![
+                option("uitars_version", config.version.name().into()),
+                option("keep_images", config.history_images.to_string()),
+                option("prompt_file", path.display().to_string()),
+            ];
+            let factory: AgentFactory =
+                Arc::new(move || Ok(Box::new(UiTarsAgent::new(config.clone())?) as Box<dyn Agent>));
+            (factory, ActionSpace::UiTars, coords, recorded, preflight)
+        }
+    };
     recorded.push(option("action_space", space.name().into()));
     recorded.push(option("coords", coords));
-    Ok(ChosenAgent { factory, label: space.name().into(), model, options: recorded })
+    Ok(ChosenAgent { factory, label: space.name().into(), model, options: recorded, preflight: Some(preflight) })
+}
+
+/// The first 8 hex digits of the SHA-256 of `text`: a short, stable name for an
+/// outside agent's command or URL.
+pub fn fingerprint(text: &str) -> String {
+    use sha2::Digest as _;
+    sha2::Sha256::digest(text.as_bytes()).iter().take(4).map(|b| format!("{b:02x}")).collect()
 }
 
 /// The longest wait for one answer of an outside agent (`--agent-timeout`).
@@ -353,9 +446,11 @@ fn external(options: &AgentOptions) -> anyhow::Result<ChosenAgent> {
         ("agent_timeout".to_owned(), format!("{}", options.agent_timeout)),
     ];
     let coords = options.coords;
+    let preflight = Some(Preflight::Hello(Arc::clone(&connector)));
     let factory: AgentFactory = Arc::new(move || {
         Ok(Box::new(ExternalAgent::new(label, Arc::clone(&connector), timeout).with_coords(coords)) as Box<dyn Agent>)
     });
-    let model = options.model.clone().unwrap_or_else(|| "external".to_owned());
-    Ok(ChosenAgent { factory, label: label.to_owned(), model, options: recorded })
+    // The model level names the agent: a different command or URL is another folder.
+    let model = options.model.clone().unwrap_or_else(|| format!("external-{}", fingerprint(&recorded[0].1)));
+    Ok(ChosenAgent { factory, label: label.to_owned(), model, options: recorded, preflight })
 }

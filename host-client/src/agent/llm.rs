@@ -292,7 +292,37 @@ impl ModelClient {
         }
     }
 
-    async fn try_once(&self, body: &Value, chat: bool) -> Result<Value, Failure> {
+    /// One minimal request before a run's first task (`arena run`'s preflight),
+    /// never tried again: `Err` naming the endpoint and status when it answers
+    /// 401, 403 or 404 (a wrong key, model or URL, which no retry mends);
+    /// `Ok(Some(note))` for any other failure (the run goes on and its own calls
+    /// retry as usual); `Ok(None)` when it answered.
+    ///
+    /// # Errors
+    ///
+    /// The endpoint refused the key or does not exist, in words.
+    pub async fn preflight(&self, body: &Value) -> Result<Option<String>, String> {
+        let response = match self.request(body).send().await {
+            Ok(response) => response,
+            Err(err) => return Ok(Some(format!("{}: {}", self.endpoint, error_chain(&err)))),
+        };
+        let status = response.status();
+        if status.is_success() {
+            return Ok(None);
+        }
+        let snippet: String = response.text().await.unwrap_or_default().chars().take(300).collect();
+        let said = format!("{} answered HTTP {status}: {snippet}", self.endpoint);
+        match status.as_u16() {
+            401 | 403 => {
+                Err(format!("{said} (is the key right? it comes from ARENA_LLM_KEY or the agent's own variable)"))
+            }
+            404 => Err(format!("{said} (is the URL or the model name right?)")),
+            _ => Ok(Some(said)),
+        }
+    }
+
+    /// The request of `body` with the key and the extra headers.
+    fn request(&self, body: &Value) -> reqwest::RequestBuilder {
         let mut request = self.http.post(&self.endpoint).json(body);
         if let Some(key) = &self.key {
             request = match self.kind {
@@ -304,6 +334,11 @@ impl ModelClient {
         for (name, value) in &self.headers {
             request = request.header(name, value);
         }
+        request
+    }
+
+    async fn try_once(&self, body: &Value, chat: bool) -> Result<Value, Failure> {
+        let request = self.request(body);
         let transient = |reason: String| Failure { reason, transient: true, wait_at_least: None, refused: None };
         let response = request.send().await.map_err(|e| transient(error_chain(&e)))?;
         let status = response.status();

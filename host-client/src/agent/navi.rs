@@ -236,6 +236,11 @@ fn data_uri(pixels: &RgbaImage) -> String {
 }
 
 impl NaviAgent {
+    /// The model client, for `arena run`'s preflight.
+    pub fn client(&self) -> &crate::agent::llm::ModelClient {
+        &self.client
+    }
+
     /// An agent for `config`; the API key is resolved now.
     ///
     /// # Errors

@@ -124,7 +124,10 @@ pub async fn run(conn: &Connection, args: DemoArgs) -> anyhow::Result<ExitCode> 
         None => {
             let stub = report
                 .step("start stub guest", async {
-                    let stub = stub::start(&stub::StubArgs::default(), token.clone()).await?;
+                    // No agent plays here: the demo's own `echo` is the one command it
+                    // runs, so its stub runs real processes (`--stub-host-exec`).
+                    let args = stub::StubArgs { stub_host_exec: true, ..stub::StubArgs::default() };
+                    let stub = stub::start(&args, token.clone()).await?;
                     let detail = format!("listening on {}", stub.url());
                     Ok((stub, detail))
                 })

@@ -114,7 +114,9 @@ mod with_mcp {
             ("agent_timeout".to_owned(), format!("{}", args.agent_timeout)),
         ];
         let model = model.unwrap_or_else(|| "external".to_owned());
-        Ok((ChosenAgent { factory, label: "mcp".to_owned(), model, options }, McpEndpoint { hub, listener, token }))
+        // An MCP client connects when it will; there is no agent to ask first.
+        let chosen = ChosenAgent { factory, label: "mcp".to_owned(), model, options, preflight: None };
+        Ok((chosen, McpEndpoint { hub, listener, token }))
     }
 
     /// Runs `tasks` with the MCP endpoint served beside them; at the end, sessions

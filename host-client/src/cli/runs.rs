@@ -172,6 +172,11 @@ pub struct RunArgs {
     /// Start N embedded stub guests for the run (demos and tests); implies --fast.
     #[arg(long, value_name = "N")]
     pub stub_guests: Option<u16>,
+    /// The embedded stub guests run commands that are none of their simulated
+    /// programs as REAL processes on this machine (off: refused, so agent code
+    /// starts nothing on the host). Recorded in the results as `stub_host_exec=on`.
+    #[arg(long, requires = "stub_guests")]
+    pub stub_host_exec: bool,
     /// This machine's slice, i/n with i from 1 (a 0-based JOB_COMPLETION_INDEX is $((INDEX + 1))/N).
     #[arg(long, default_value = "1/1", value_parser = parse_shard)]
     pub shard: Shard,
@@ -190,12 +195,24 @@ pub struct RunArgs {
     /// The same as `--pauses fast` (the default with --stub-guests).
     #[arg(long)]
     pub fast: bool,
+    /// Resume into a results folder whose recorded options differ from this run's
+    /// (refused otherwise, naming the differences). Recorded as `force_resume=on`.
+    #[arg(long)]
+    pub force_resume: bool,
     /// Run every task of the shard again, even those with a result.txt.
     #[arg(long)]
     pub no_resume: bool,
+    /// Skip the checks before the first task (the outside agent's hello, one
+    /// minimal request to the model endpoint, the guests' health).
+    #[arg(long)]
+    pub no_preflight: bool,
     /// Tries per task after infrastructure errors, the first included.
     #[arg(long, default_value_t = 3)]
     pub attempts: u32,
+    /// Seconds the run waits, with tasks left and every guest down, for one to
+    /// answer again before it ends and lists the unfinished tasks.
+    #[arg(long, default_value_t = 600, value_name = "SECS")]
+    pub guest_wait: u64,
     /// Leave the accessibility tree out of observations.
     #[arg(long)]
     pub no_a11y: bool,
@@ -592,7 +609,7 @@ pub async fn run(conn: &Connection, args: RunArgs) -> anyhow::Result<ExitCode> {
     } else {
         (factory::build(&args.agent_options())?, None)
     };
-    let ChosenAgent { factory: agents, label: agent_label, model, options: mut agent_options } = chosen;
+    let ChosenAgent { factory: agents, label: agent_label, model, options: mut agent_options, preflight } = chosen;
     // Every run records who played, in which action space and coordinates.
     let agent_name = args.agent.to_possible_value().map(|v| v.get_name().to_owned()).unwrap_or_default();
     agent_options.push(("agent".into(), agent_name));
@@ -624,7 +641,8 @@ pub async fn run(conn: &Connection, args: RunArgs) -> anyhow::Result<ExitCode> {
     };
     let mut stubs = Vec::new();
     for _ in 0..args.stub_guests.unwrap_or(0) {
-        let running = stub::start(&stub::StubArgs::default(), conn.resolve_token()?).await?;
+        let stub_args = stub::StubArgs { stub_host_exec: args.stub_host_exec, ..stub::StubArgs::default() };
+        let running = stub::start(&stub_args, conn.resolve_token()?).await?;
         urls.push(running.url());
         stubs.push(running);
     }
@@ -642,6 +660,32 @@ pub async fn run(conn: &Connection, args: RunArgs) -> anyhow::Result<ExitCode> {
         })
         .collect::<anyhow::Result<Vec<_>>>()?;
 
+    let mut hello = None;
+    if !args.no_preflight {
+        // A setup mistake ends the run here, before any score is written.
+        let result = self::preflight(preflight.as_ref(), &guests).await;
+        if result.is_err() {
+            for stub in std::mem::take(&mut stubs) {
+                let _ = stub.stop().await;
+            }
+        }
+        hello = result?;
+    }
+    // An outside agent is named by its hello (else by the fingerprint the factory
+    // gave), and what it declared is recorded, not the run's defaults.
+    let mut model = model;
+    if let Some(hello) = &hello {
+        if let Some(name) = hello.agent.as_deref().map(str::trim).filter(|n| !n.is_empty()) {
+            if args.model.is_none() {
+                model = crate::results::safe_component(name);
+            }
+            agent_options.push(("agent_name".into(), name.to_owned()));
+        }
+        agent_options.retain(|(k, _)| k != "model" && k != "action_space" && k != "coords");
+        agent_options.push(("model".into(), model.clone()));
+        agent_options.push(("action_space".into(), hello.action_space.clone()));
+        agent_options.push(("coords".into(), hello.coords.clone().unwrap_or_else(|| args.coords.name())));
+    }
     let cache_dir = args.cache.clone().unwrap_or_else(|| args.out.join("download-cache"));
     let cache = DownloadCache::new(&cache_dir)
         .with_context(|| format!("opening the download cache {}", cache_dir.display()))?;
@@ -674,6 +718,9 @@ pub async fn run(conn: &Connection, args: RunArgs) -> anyhow::Result<ExitCode> {
     if args.activate_non_strict {
         config.options.insert("activate_non_strict".into(), "on".into());
     }
+    if args.stub_host_exec {
+        config.options.insert("stub_host_exec".into(), "on".into());
+    }
     if fast {
         config.settle = Settle::none();
         config.exec = ExecOptions::instant();
@@ -700,12 +747,25 @@ pub async fn run(conn: &Connection, args: RunArgs) -> anyhow::Result<ExitCode> {
         model,
         trial: args.trial_id.clone(),
     };
+    let differences = option_differences(&layout.base(), &config.options)?;
+    if !differences.is_empty() {
+        if !args.force_resume {
+            bail!(
+                "{} holds results run with other options; resuming would mix two runs in one number:\n  {}\nuse another --out, or --force-resume to mix them anyway (recorded)",
+                layout.base().display(),
+                differences.join("\n  ")
+            );
+        }
+        tracing::warn!(differences = %differences.join("; "), "--force-resume: mixing runs with different options");
+        config.options.insert(FORCE_RESUME.into(), "on".into());
+    }
     let options = RunOptions {
         layout: layout.clone(),
         shard: args.shard,
         resume: !args.no_resume,
         pool: PoolConfig {
             max_attempts: args.attempts.max(1),
+            no_guest_timeout: Duration::from_secs(args.guest_wait),
             lifecycle: fleet.clone().map(|f| f as Arc<dyn crate::run::pool::GuestLifecycle>),
             ..PoolConfig::default()
         },
@@ -760,10 +820,92 @@ pub async fn run(conn: &Connection, args: RunArgs) -> anyhow::Result<ExitCode> {
         for task in &outcome.pool.not_run {
             lines.push_str(&format!("  {task}: not run (no healthy guest left)\n"));
         }
+        if let Some(why) = &outcome.pool.ended_early {
+            let down = outcome.pool.guests_down.join(", ");
+            lines.push_str(&format!("the run ended early: {why} (guests down: {down})\n"));
+        }
         emit(&lines)?;
         return Ok(ExitCode::from(if stop.is_cancelled() { 130 } else { 2 }));
     }
     Ok(ExitCode::SUCCESS)
+}
+
+/// The checks before a run's first task: the agent's ([`factory::Preflight`]),
+/// then the guests' health (at least one must answer; the others are said).
+async fn preflight(
+    agent: Option<&factory::Preflight>,
+    guests: &[arena_client::GuestClient],
+) -> anyhow::Result<Option<crate::agent::external::protocol::AgentHello>> {
+    let mut hello = None;
+    if let Some(check) = agent {
+        match check.check().await {
+            Ok(checked) => {
+                if let Some(note) = checked.note {
+                    tracing::warn!(%note, "preflight: the model endpoint did not answer well; going on");
+                }
+                hello = checked.hello;
+            }
+            Err(err) => {
+                bail!("preflight: {err:#}\nno task was run and no result written (--no-preflight skips these checks)")
+            }
+        }
+    }
+    let mut down = Vec::new();
+    for guest in guests {
+        if let Err(err) = guest.with_timeout(Duration::from_secs(30)).health().await {
+            down.push(format!("{}: {err}", guest.base_url()));
+        }
+    }
+    if !guests.is_empty() && down.len() == guests.len() {
+        bail!(
+            "preflight: no guest answers its health check:\n  {}\nno task was run and no result written (--no-preflight skips these checks)",
+            down.join("\n  ")
+        );
+    }
+    for line in down {
+        tracing::warn!(guest = %line, "preflight: a guest does not answer; the run goes on without it until it does");
+    }
+    Ok(hello)
+}
+
+/// The option `--force-resume` records, left out of the comparison.
+const FORCE_RESUME: &str = "force_resume";
+
+/// How the options recorded in the task folders below `base` differ from `ours`,
+/// one line per option (`name: the folder has A, this run B`); empty for a new
+/// folder or the same options.
+fn option_differences(base: &Path, ours: &std::collections::BTreeMap<String, String>) -> anyhow::Result<Vec<String>> {
+    if !base.is_dir() {
+        return Ok(Vec::new());
+    }
+    let found = crate::results::scan(base)?;
+    let mut theirs: std::collections::BTreeMap<&str, std::collections::BTreeSet<&str>> = Default::default();
+    let episodes: Vec<&crate::results::EpisodeResult> = found.iter().filter_map(|f| f.episode.as_ref()).collect();
+    if episodes.is_empty() {
+        return Ok(Vec::new());
+    }
+    for episode in &episodes {
+        for (name, value) in &episode.options {
+            theirs.entry(name).or_default().insert(value);
+        }
+    }
+    let mut names: std::collections::BTreeSet<&str> = theirs.keys().copied().collect();
+    names.extend(ours.keys().map(String::as_str));
+    names.remove(FORCE_RESUME);
+    let mut out = Vec::new();
+    for name in names {
+        let had: Vec<&str> = theirs.get(name).map(|v| v.iter().copied().collect()).unwrap_or_default();
+        let have = ours.get(name).map(String::as_str);
+        let same = match have {
+            Some(v) => had.len() == 1 && had[0] == v && episodes.iter().all(|e| e.options.contains_key(name)),
+            None => had.is_empty(),
+        };
+        if !same {
+            let had = if had.is_empty() { "not set".to_owned() } else { had.join(" | ") };
+            out.push(format!("{name}: the folder has {had}, this run {}", have.unwrap_or("not set")));
+        }
+    }
+    Ok(out)
 }
 
 /// How the run stands to upstream's, as named options: `preset` for a preset,

@@ -37,11 +37,22 @@ pub struct StubArgs {
     /// Screen size as WIDTHxHEIGHT.
     #[arg(long, default_value = "1440x900", value_parser = parse_screen)]
     pub screen: (u32, u32),
+    /// Run commands that are none of the stub's simulated programs as REAL processes
+    /// on this machine (off: refused, so agent code starts nothing on the host).
+    #[arg(long)]
+    pub stub_host_exec: bool,
 }
 
 impl Default for StubArgs {
     fn default() -> StubArgs {
-        StubArgs { port: 0, bind: IpAddr::from([127, 0, 0, 1]), root: None, scenario: None, screen: (1440, 900) }
+        StubArgs {
+            port: 0,
+            bind: IpAddr::from([127, 0, 0, 1]),
+            root: None,
+            scenario: None,
+            screen: (1440, 900),
+            stub_host_exec: false,
+        }
     }
 }
 
@@ -89,6 +100,7 @@ fn server_config(args: &StubArgs, token: Option<String>) -> ServerConfig {
     config.stub_root = args.root.clone();
     config.scenario = args.scenario.clone();
     config.screen = args.screen;
+    config.stub_host_exec = args.stub_host_exec;
     config.token = token;
     config
 }

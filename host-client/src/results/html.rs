@@ -61,14 +61,27 @@ pub fn render(summary: &Summary, found: &[FoundTask], title: &str) -> String {
     let o = &summary.overall;
     let _ = writeln!(
         html,
-        "<h1>{}</h1><p class=\"meta\" id=\"overall\">Success rate {:.1}% (mean score × 100 over {} finished tasks, as upstream computes it); {} solved outright ({:.1}%); {} unfinished.</p>",
+        "<h1>{}</h1><p class=\"meta\" id=\"overall\">Success rate {:.1}% (mean score × 100 over {} finished tasks, as upstream computes it); \
+         Strict rate {:.1}% (over all {} tasks, those without a result counted as 0); {} solved outright ({:.1}%); {} unfinished.</p>",
         escape(title),
         o.success_rate,
         o.tasks,
+        o.strict_rate,
+        o.tasks + o.unfinished,
         o.successes,
         o.solved_rate,
         o.unfinished
     );
+    if let Some(words) = summary.incomplete_words() {
+        let missing: Vec<String> =
+            summary.missing.iter().map(|m| escape(&format!("{}/{}", m.domain, m.name))).collect();
+        let _ = writeln!(
+            html,
+            "<p class=\"warn\" id=\"incomplete\">{} Missing: {}.</p>",
+            escape(&words),
+            missing.join(", ")
+        );
+    }
     html.push_str("<h2>Success per domain</h2>\n");
     html.push_str(&chart(&summary.domains, o));
     html.push_str(&table(summary));
@@ -292,7 +305,7 @@ fn step_html(rel: &str, step: &StepRecord) -> String {
 /// `root` cannot be read or a file cannot be written.
 pub fn write_report(root: &Path, title: &str) -> Result<(Summary, PathBuf), ResultsError> {
     let found = scan(root)?;
-    let summary = Summary::from_found(&found);
+    let summary = Summary::from_found_in(root, &found);
     summary.write(root)?;
     let path = root.join(REPORT_HTML);
     write_atomic(&path, render(&summary, &found, title).as_bytes())?;

@@ -31,9 +31,11 @@
 //! - this file: [`RunLayout`], [`TaskDir`], the records, atomic writes, scanning.
 //! - [`summary`]: [`summary::Summary`], `summary.json` and `summary.md`.
 //! - [`html`]: the HTML report, `report.html`.
+//! - [`task_list`]: the run's task list in each trial folder (`task_list.json`).
 
 pub mod html;
 pub mod summary;
+pub mod task_list;
 
 use std::path::{Path, PathBuf};
 use std::time::{SystemTime, UNIX_EPOCH};

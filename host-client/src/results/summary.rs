@@ -13,6 +13,11 @@
 //! `run.py` compute it, so partial credit counts. The strict count of tasks
 //! that scored 1 is given beside it as "solved". Unfinished tasks are listed
 //! apart and are in no denominator, as upstream's readers skip them.
+//!
+//! Beside it, the **strict rate**: the mean score × 100 over every task of the
+//! task list (the run's `task_list.json`, [`super::task_list`]), a task without
+//! a result counted as 0, which no unfinished task can raise; `complete` says
+//! whether every task has a result, and `missing` lists those that do not.
 
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
@@ -20,7 +25,7 @@ use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
-use super::{scan, write_atomic, FoundTask, ResultsError, SUMMARY_JSON, SUMMARY_MD};
+use super::{scan, task_list, write_atomic, FoundTask, ResultsError, SUMMARY_JSON, SUMMARY_MD};
 
 /// Upstream's groups of domains, in the order they are printed. Upstream's
 /// `show_result.py` at 6d39ed88 prints the first three (Office, Daily,
@@ -63,8 +68,23 @@ pub struct DomainRow {
     pub avg_seconds: f64,
     /// Finished tasks whose agent failed.
     pub agent_errors: u32,
-    /// Tasks with no score because the infrastructure failed.
+    /// Tasks with no score: unfinished, or listed and never started.
     pub unfinished: u32,
+    /// Mean score × 100 over every task (finished or not, unfinished as 0).
+    #[serde(default)]
+    pub strict_rate: f64,
+    /// Whether every task has a result.
+    #[serde(default)]
+    pub complete: bool,
+}
+
+/// A task of the task list without a result.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct MissingTask {
+    pub domain: String,
+    pub name: String,
+    /// Its folder, relative to the summary's root, with `/` separators (it may not exist).
+    pub path: String,
 }
 
 /// One task in the summary.
@@ -114,6 +134,9 @@ pub struct Summary {
     /// summary pools; upstream's `show_result.py` reads one.
     #[serde(default)]
     pub trials: Vec<String>,
+    /// Every task of the task list (and every task folder) without a result.
+    #[serde(default)]
+    pub missing: Vec<MissingTask>,
 }
 
 impl Summary {
@@ -123,11 +146,27 @@ impl Summary {
     ///
     /// `root` cannot be read.
     pub fn from_dir(root: &Path) -> Result<Summary, ResultsError> {
-        Ok(Summary::from_found(&scan(root)?))
+        Ok(Summary::from_found_in(root, &scan(root)?))
     }
 
-    /// Summarises task folders already found.
+    /// Summarises task folders already found under `root`, with the tasks its
+    /// task lists name that have no folder.
+    pub fn from_found_in(root: &Path, found: &[FoundTask]) -> Summary {
+        let known: std::collections::BTreeSet<PathBuf> = found.iter().map(|f| f.relative.clone()).collect();
+        let never_started: Vec<MissingTask> = task_list::listed_tasks(root)
+            .into_iter()
+            .filter(|(_, _, path)| !known.contains(path))
+            .map(|(domain, name, path)| MissingTask { domain, name, path: slash_path(&path) })
+            .collect();
+        Summary::summarise(found, never_started)
+    }
+
+    /// Summarises task folders already found, knowing no task list.
     pub fn from_found(found: &[FoundTask]) -> Summary {
+        Summary::summarise(found, Vec::new())
+    }
+
+    fn summarise(found: &[FoundTask], never_started: Vec<MissingTask>) -> Summary {
         let mut tasks: Vec<TaskRow> = found.iter().map(task_row).collect();
         // The same order as the run's (`Task::order_key`), on the rows read back from the folders.
         tasks.sort_by(|a, b| (&a.domain, &a.name, &a.path).cmp(&(&b.domain, &b.name, &b.path)));
@@ -135,17 +174,29 @@ impl Summary {
         for row in &tasks {
             by_domain.entry(row.domain.as_str()).or_default().push(row);
         }
-        let domains = by_domain.iter().map(|(domain, rows)| domain_row(domain, rows)).collect();
+        for m in &never_started {
+            by_domain.entry(m.domain.as_str()).or_default();
+        }
+        let not_run = |members: &dyn Fn(&str) -> bool| never_started.iter().filter(|m| members(&m.domain)).count();
+        let domains =
+            by_domain.iter().map(|(domain, rows)| domain_row(domain, rows, not_run(&|d| d == *domain))).collect();
         let groups = GROUPS
             .iter()
             .map(|(name, members)| {
                 let rows: Vec<&TaskRow> = tasks.iter().filter(|t| members.contains(&t.domain.as_str())).collect();
-                domain_row(name, &rows)
+                domain_row(name, &rows, not_run(&|d| members.contains(&d)))
             })
             .filter(|row| row.tasks > 0)
             .collect();
         let all: Vec<&TaskRow> = tasks.iter().collect();
-        let overall = domain_row("Overall", &all);
+        let overall = domain_row("Overall", &all, never_started.len());
+        let mut missing: Vec<MissingTask> = tasks
+            .iter()
+            .filter(|t| t.score.is_none())
+            .map(|t| MissingTask { domain: t.domain.clone(), name: t.name.clone(), path: t.path.clone() })
+            .chain(never_started)
+            .collect();
+        missing.sort_by(|a, b| (&a.domain, &a.name, &a.path).cmp(&(&b.domain, &b.name, &b.path)));
         let mut options: BTreeMap<String, Vec<String>> = BTreeMap::new();
         for episode in found.iter().filter_map(|f| f.episode.as_ref()) {
             for (name, value) in &episode.options {
@@ -160,7 +211,19 @@ impl Summary {
             tasks.iter().filter_map(|t| t.path.rsplitn(3, '/').nth(2).map(str::to_owned)).collect();
         trials.sort();
         trials.dedup();
-        Summary { overall, domains, groups, tasks, options, trials }
+        Summary { overall, domains, groups, tasks, options, trials, missing }
+    }
+
+    /// The words that mark an incomplete run, or `None` when every task has a result.
+    pub fn incomplete_words(&self) -> Option<String> {
+        let o = &self.overall;
+        (!o.complete).then(|| {
+            format!(
+                "This run is incomplete: {} of {} tasks have no result; the success rate is over the finished tasks only, the strict rate counts the others as 0.",
+                o.unfinished,
+                o.tasks + o.unfinished
+            )
+        })
     }
 
     /// How many finished-or-not tasks failed on each side: (the agent's, the environment's).
@@ -243,6 +306,18 @@ impl Summary {
         let mut md = String::new();
         md.push_str("# Run summary\n\n");
         md.push_str("Success rate as upstream computes it: mean score × 100 over the finished tasks. Solved: tasks that scored 1.\n\n");
+        let o = &self.overall;
+        let _ = writeln!(
+            md,
+            "**Success rate {:.1}%** (over the {} finished tasks) · **Strict rate {:.1}%** (over all {} tasks, those without a result counted as 0).\n",
+            o.success_rate,
+            o.tasks,
+            o.strict_rate,
+            o.tasks + o.unfinished
+        );
+        if let Some(words) = self.incomplete_words() {
+            let _ = writeln!(md, "**{words}**\n");
+        }
         if !self.options.is_empty() {
             let list: Vec<String> = self.options.iter().map(|(k, v)| format!("{k}={}", v.join("|"))).collect();
             let _ = writeln!(md, "Options in force: {}.\n", list.join(", "));
@@ -300,6 +375,12 @@ impl Summary {
                 t.attempt
             );
         }
+        if !self.missing.is_empty() {
+            md.push_str("\n## Missing\n\nTasks of the task list without a result (run the same command again to play them):\n\n");
+            for m in &self.missing {
+                let _ = writeln!(md, "- `{}/{}`", m.domain, m.name);
+            }
+        }
         let errors: Vec<&TaskRow> = self.tasks.iter().filter(|t| t.error.is_some()).collect();
         if !errors.is_empty() {
             md.push_str("\n## Errors\n\n");
@@ -350,12 +431,7 @@ fn task_row(found: &FoundTask) -> TaskRow {
     TaskRow {
         domain: found.domain(),
         name: found.name(),
-        path: found
-            .relative
-            .components()
-            .map(|c| c.as_os_str().to_string_lossy().into_owned())
-            .collect::<Vec<_>>()
-            .join("/"),
+        path: slash_path(&found.relative),
         score,
         success: score.is_some_and(|s| s >= 1.0 - 1e-9),
         status,
@@ -369,7 +445,13 @@ fn task_row(found: &FoundTask) -> TaskRow {
     }
 }
 
-fn domain_row(domain: &str, rows: &[&TaskRow]) -> DomainRow {
+/// A relative path with `/` separators.
+fn slash_path(path: &Path) -> String {
+    path.components().map(|c| c.as_os_str().to_string_lossy().into_owned()).collect::<Vec<_>>().join("/")
+}
+
+/// The row of `rows`, with `not_run` more tasks of the task list that have no folder.
+fn domain_row(domain: &str, rows: &[&TaskRow], not_run: usize) -> DomainRow {
     let finished: Vec<&&TaskRow> = rows.iter().filter(|r| r.score.is_some()).collect();
     let n = finished.len() as u32;
     let successes = finished.iter().filter(|r| r.success).count() as u32;
@@ -390,6 +472,12 @@ fn domain_row(domain: &str, rows: &[&TaskRow]) -> DomainRow {
         avg_steps: mean(&|r| f64::from(r.steps)),
         avg_seconds: mean(&|r| r.elapsed_ms as f64 / 1000.0),
         agent_errors: finished.iter().filter(|r| r.status == "agent_error").count() as u32,
-        unfinished: rows.len() as u32 - n,
+        unfinished: (rows.len() + not_run) as u32 - n,
+        strict_rate: if rows.len() + not_run == 0 {
+            0.0
+        } else {
+            100.0 * finished.iter().map(|r| r.score.unwrap_or(0.0)).sum::<f64>() / (rows.len() + not_run) as f64
+        },
+        complete: rows.len() + not_run == n as usize,
     }
 }

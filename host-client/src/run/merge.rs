@@ -72,6 +72,7 @@ pub fn merge(out: &Path, shards: &[PathBuf], title: &str) -> Result<MergeReport,
             seen.insert(found.relative.clone(), finished);
             copied += 1;
         }
+        crate::results::task_list::merge_into(out, shard)?;
     }
     let (summary, report) = write_report(out, title)?;
     Ok(MergeReport { copied, duplicates, summary, report })

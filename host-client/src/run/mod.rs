@@ -19,7 +19,9 @@
 //! - [`pool`]: [`pool::run_pool`], one task per guest, retries, dead guests set aside.
 //! - [`shard`]: [`shard::Shard`], `--shard i/n`.
 //! - [`merge`]: [`merge::merge`], shard folders into one.
+//! - [`blame`]: whose failure a guest that stops answering is, by what the agent did in the step.
 
+pub mod blame;
 pub mod merge;
 pub mod pool;
 pub mod shard;
@@ -194,6 +196,9 @@ pub async fn run_tasks(
     std::fs::create_dir_all(root).map_err(|source| ResultsError::Io { path: root.clone(), source })?;
     let plan = plan(tasks, options.shard, &options.layout, options.resume, options.order);
     let (todo, skipped) = (plan.todo.len(), plan.finished.len());
+    // The whole list, so that a task that never starts still counts (the strict rate).
+    let listed: Vec<&Task> = plan.todo.iter().chain(&plan.finished).collect();
+    crate::results::task_list::record(&options.layout.base(), &listed)?;
     tracing::info!(shard = %options.shard, todo, skipped, guests = guests.len(), "starting the run");
     let bar = if options.progress {
         let bar = indicatif::ProgressBar::new(todo as u64);

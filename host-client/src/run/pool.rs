@@ -127,6 +127,8 @@ pub struct PoolReport {
     pub not_run: Vec<String>,
     /// Guests that were down when the run ended.
     pub guests_down: Vec<String>,
+    /// Why the run ended with tasks left, when no healthy guest was left to run them.
+    pub ended_early: Option<String>,
 }
 
 #[derive(Debug)]
@@ -143,7 +145,8 @@ struct Finished {
     guest: GuestClient,
     item: Pending,
     result: EpisodeResult,
-    /// False when the episode was an infrastructure error and the guest did not answer afterwards.
+    /// False when the episode was an infrastructure error, or the agent's action
+    /// ended the guest, and the guest did not answer afterwards.
     healthy: bool,
 }
 
@@ -220,7 +223,10 @@ pub async fn run_pool(
                 };
                 // After an infrastructure error, find out here (not in the
                 // dispatcher, which must not wait) whether the guest still answers.
-                let healthy = !result.status.is_infra() || guest.with_timeout(health_timeout).health().await.is_ok();
+                // So also after an agent whose action ended its guest (run::blame):
+                // the task is finished, but the guest must not get the next one.
+                let suspect = result.status.is_infra() || super::blame::guest_lost_by_agent(&result.status);
+                let healthy = !suspect || guest.with_timeout(health_timeout).health().await.is_ok();
                 Finished { guest, item, result, healthy }
             });
         }
@@ -271,7 +277,14 @@ pub async fn run_pool(
                     _ => {
                         on_event(PoolEvent::Finished { task: &item.task, result: &result });
                         report.results.push(result);
-                        free.push_back(guest);
+                        if healthy {
+                            free.push_back(guest);
+                        } else {
+                            let error = "it stopped answering after the agent's action";
+                            on_event(PoolEvent::GuestDown { guest: guest.base_url(), error });
+                            down.push(guest.base_url().to_owned());
+                            probes.spawn(probe(guest.clone(), config.probe_interval, config.health_timeout, config.lifecycle.clone()));
+                        }
                     }
                 }
             }
@@ -284,7 +297,8 @@ pub async fn run_pool(
             }
             () = config.stop.cancelled(), if !config.stop.is_cancelled() => {}
             () = tokio::time::sleep(idle_deadline), if waiting_for_guests => {
-                let reason = format!("no guest answered for {} s", config.no_guest_timeout.as_secs());
+                let reason = format!("no healthy guest left: none answered for {} s", config.no_guest_timeout.as_secs());
+                report.ended_early = Some(reason.clone());
                 for item in pending.drain(..) {
                     on_event(PoolEvent::GaveUp { task: &item.task, reason: &reason });
                     report.not_run.push(format!("{}/{}", item.task.domain, item.task.name));

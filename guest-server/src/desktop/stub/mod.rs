@@ -57,11 +57,14 @@ pub struct StubConfig {
     /// Screen size in pixels (a scenario's `screen` wins).
     pub screen: (u32, u32),
     pub scenario: Option<Scenario>,
+    /// Whether a command that is none of the simulated programs runs as a real
+    /// host process (`--stub-host-exec`); off, it is refused ([`process::refusal`]).
+    pub host_exec: bool,
 }
 
 impl Default for StubConfig {
     fn default() -> StubConfig {
-        StubConfig { root: None, screen: (1440, 900), scenario: None }
+        StubConfig { root: None, screen: (1440, 900), scenario: None, host_exec: false }
     }
 }
 
@@ -80,6 +83,8 @@ pub struct StubDesktop {
     state: Mutex<State>,
     /// The modelled UI Automation client's faults and re-creations.
     uia: Mutex<a11y::UiaModel>,
+    /// Real host processes allowed (`StubConfig::host_exec`).
+    host_exec: bool,
 }
 
 impl StubDesktop {
@@ -158,6 +163,7 @@ impl StubDesktop {
             acls,
             state: Mutex::new(State::new(screen)),
             uia: Mutex::new(uia),
+            host_exec: config.host_exec,
         };
         stub.apply_scenario(&scenario)?;
         Ok(stub)
@@ -597,6 +603,9 @@ impl Desktop for StubDesktop {
                 removed?;
                 Ok(format!("wrote, read back and deleted a file under {}", self.root.display()))
             }
+            Component::Exec if !self.host_exec => {
+                Ok("simulated programs only (host processes need --stub-host-exec)".to_owned())
+            }
             Component::Exec => {
                 let shell = target::SHELL;
                 if target::SHELL_REPORTS_MISSING_PROGRAMS || process::on_path(shell) {
@@ -742,7 +751,11 @@ impl Desktop for StubDesktop {
             if self.programs.contains_key(&key) {
                 return self.launch_known(&key, &[]).map(|_| ());
             }
-            return process::spawn_real(&CommandSpec::Argv(vec![local.display().to_string()]), None).map(|_| ());
+            let cmd = CommandSpec::Argv(vec![local.display().to_string()]);
+            if !self.host_exec {
+                return Err(process::refusal(&cmd));
+            }
+            return process::spawn_real(&cmd, None).map(|_| ());
         }
         let program = self.associations.get(&ext).and_then(|key| self.programs.get(key).map(|p| (key, p)));
         let Some((key, _)) = program else {
@@ -812,6 +825,9 @@ impl Desktop for StubDesktop {
                 duration_ms: 0,
             });
         }
+        if !self.host_exec {
+            return Err(process::refusal(cmd));
+        }
         let cwd = self.map_cwd(limits)?;
         process::run_real(cmd, limits, cwd)
     }
@@ -819,6 +835,9 @@ impl Desktop for StubDesktop {
     fn spawn(&self, cmd: &CommandSpec) -> DesktopResult<u32> {
         if let Some(pid) = self.launch_modelled(cmd)? {
             return Ok(pid);
+        }
+        if !self.host_exec {
+            return Err(process::refusal(cmd));
         }
         process::spawn_real(cmd, None)
     }

@@ -1,5 +1,7 @@
 //! Programs in the stub: the table of known programs that only open a window,
-//! command-line parsing to recognise them, and real host processes for everything else.
+//! command-line parsing to recognise them, and, only under `--stub-host-exec`, real
+//! host processes for everything else; without it everything else is refused
+//! ([`refusal`]), so agent code on the stub starts nothing on the host.
 //!
 //! Real processes run on the host (`sh -c` on Unix, `cmd /c` on Windows); they are not
 //! sandboxed and see the host file system, not the stub's guest paths.
@@ -227,6 +229,18 @@ pub(crate) fn command_name(cmd: &CommandSpec) -> String {
             skip_wrappers(&tokens).first().map(|t| t.text.clone()).unwrap_or_default()
         }
     }
+}
+
+/// The answer to a command that is none of the simulated programs when real host
+/// processes are off: the same words whichever way the command came. It is "not
+/// found" (404), as a program missing from a Windows guest is, so callers that
+/// treat a missing program as upstream does (`open_program`'s "not installed")
+/// keep doing so.
+pub(crate) fn refusal(cmd: &CommandSpec) -> DesktopError {
+    DesktopError::NotFound(format!(
+        "program {} not found: the stub guest runs only its simulated programs and host processes are off (start the guest with --stub-host-exec to run real commands on this machine)",
+        command_name(cmd)
+    ))
 }
 
 /// Builds the host command for `cmd`.

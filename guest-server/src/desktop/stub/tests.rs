@@ -9,8 +9,10 @@ use arena_shared::observation::A11yNode;
 use super::render::{BACKGROUND, TITLE_FOCUSED, TITLE_UNFOCUSED};
 use super::*;
 
+/// A stub that runs unknown programs as real host processes (`--stub-host-exec`),
+/// for the tests of that path; [`StubConfig::default`] refuses them.
 fn stub() -> StubDesktop {
-    StubDesktop::with_config(StubConfig::default()).unwrap()
+    StubDesktop::with_config(StubConfig { host_exec: true, ..StubConfig::default() }).unwrap()
 }
 
 fn stub_with(json: &str) -> StubDesktop {
@@ -341,6 +343,35 @@ fn a_known_program_opens_a_file_argument() {
     let w = &d.windows().unwrap()[0];
     assert_eq!(w.title, "x.txt - Notepad");
     assert_eq!(d.window_text(w.id).unwrap(), "from file");
+}
+
+#[test]
+fn without_host_exec_only_simulated_programs_run_and_the_rest_is_refused() {
+    let d = StubDesktop::with_config(StubConfig::default()).unwrap();
+    let marker = std::env::temp_dir().join(format!("arena-stub-refused-{}", std::process::id()));
+    let _ = std::fs::remove_file(&marker);
+    let touch = format!("touch '{}'", marker.display());
+    let refused = [
+        d.spawn(&CommandSpec::Shell(touch.clone())).unwrap_err(),
+        d.run(&CommandSpec::Shell(touch.clone()), &limits(1000)).unwrap_err(),
+        d.run(&CommandSpec::Argv(vec!["sh".into(), "-c".into(), touch.clone()]), &limits(1000)).unwrap_err(),
+        d.spawn(&CommandSpec::Argv(vec!["no-such-program-xyz".into()])).unwrap_err(),
+    ];
+    for err in refused {
+        assert!(
+            matches!(&err, DesktopError::NotFound(m) if m.contains("only its simulated programs") && m.contains("--stub-host-exec")),
+            "{err:?}"
+        );
+    }
+    // An executable file in the guest is not started either.
+    let exe = d.root().join("C").join("Users").join("Docker").join("Desktop").join("tool.exe");
+    std::fs::write(&exe, format!("#!/bin/sh\n{touch}\n")).unwrap();
+    assert!(matches!(d.open_path(r"C:\Users\Docker\Desktop\tool.exe"), Err(DesktopError::NotFound(_))));
+    assert!(!marker.exists(), "nothing ran on the host");
+    // The simulated programs still open their windows.
+    d.spawn(&CommandSpec::Shell("notepad".into())).unwrap();
+    assert_eq!(d.windows().unwrap()[0].title, "Untitled - Notepad");
+    assert!(d.probe(Component::Exec).unwrap().contains("simulated programs only"));
 }
 
 #[cfg(unix)]

@@ -155,6 +155,11 @@ pub struct AnthropicAgent {
 }
 
 impl AnthropicAgent {
+    /// The model client, for `arena run`'s preflight.
+    pub fn client(&self) -> &crate::agent::llm::ModelClient {
+        &self.client
+    }
+
     /// An agent for `config`; the key is resolved now.
     ///
     /// # Errors

@@ -106,6 +106,11 @@ pub struct OpenAiAgent {
 }
 
 impl OpenAiAgent {
+    /// The model client, for `arena run`'s preflight.
+    pub fn client(&self) -> &crate::agent::llm::ModelClient {
+        &self.client
+    }
+
     /// An agent for `config`; the key is resolved now.
     ///
     /// # Errors

@@ -85,6 +85,11 @@ pub struct UiTarsAgent {
 }
 
 impl UiTarsAgent {
+    /// The model client, for `arena run`'s preflight.
+    pub fn client(&self) -> &crate::agent::llm::ModelClient {
+        &self.client
+    }
+
     /// An agent for `config`; the key is resolved now.
     ///
     /// # Errors

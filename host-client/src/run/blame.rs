@@ -1,0 +1,99 @@
+//! Whose failure a guest that stops answering is, decided by what the agent did
+//! (docs/compatibility.md, "Blame after an agent's action").
+//!
+//! Upstream has no rule: any exception in a task leaves it without a result, so
+//! an agent whose code ends, hangs or reboots the guest takes the task out of the
+//! success rate's denominator and gets it retried. Here the step decides:
+//!
+//! - The guest answered at the step's start (its observation was taken) and
+//!   again right before the step's first action ran ([`before_actions`]). If it
+//!   fails that second question, it failed while the agent was deciding: the
+//!   environment's failure, the task unfinished and retried.
+//! - Once an action of the step has run (code, input, a clipboard write), a guest
+//!   that stops answering, in the action itself, in the observation after it, or
+//!   in a later action of the step, failed because of the agent
+//!   ([`after_action`]): the task is finished with score 0, "Failed by: agent",
+//!   and is not retried.
+//!
+//! It is not the pool: the pool only reads the status (an agent error is never
+//! retried) and asks the guest for its health afterwards to set a dead one aside.
+
+use std::time::Duration;
+
+use crate::ports::AgentAction;
+use crate::results::EpisodeStatus;
+
+/// Longest the question "does the guest still answer?" before a step's actions
+/// may take: a hung guest costs this much, then the step is the environment's.
+pub const DECIDING_CHECK: Duration = Duration::from_secs(10);
+
+/// Where in a step the guest stopped answering.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Phase {
+    /// Before any action of the step ran: the agent was deciding.
+    Deciding,
+    /// After at least one action of the step ran.
+    Acting,
+}
+
+/// Whether `action` reaches the guest (anything but the decisions DONE, FAIL
+/// and WAIT, which run nothing).
+pub fn reaches_guest(action: &AgentAction) -> bool {
+    !matches!(action, AgentAction::Done | AgentAction::Fail | AgentAction::Wait)
+}
+
+/// Whether the guest must be asked for its health before the step's actions:
+/// only when one of them reaches the guest.
+pub fn before_actions(actions: &[AgentAction]) -> bool {
+    actions.iter().any(reaches_guest)
+}
+
+/// The status of an episode whose guest stopped answering in `phase` of `step`
+/// (`what` says where, `err` how).
+pub fn guest_failure(phase: Phase, step: u32, what: &str, err: impl std::fmt::Display) -> EpisodeStatus {
+    match phase {
+        Phase::Deciding => EpisodeStatus::InfraError(format!(
+            "the guest stopped answering while the agent was deciding step {step} ({what}): {err}"
+        )),
+        Phase::Acting => after_action(step, what, err),
+    }
+}
+
+/// The agent's failure: the guest stopped answering after an action of the agent ran.
+pub fn after_action(step: u32, what: &str, err: impl std::fmt::Display) -> EpisodeStatus {
+    EpisodeStatus::AgentError(format!(
+        "{AFTER_ACTION} {step} ({what}): {err}; it answered before the action, so the failure is the agent's"
+    ))
+}
+
+/// The words that open [`after_action`]'s message, which the pool and reports look for.
+pub const AFTER_ACTION: &str = "the guest stopped answering after the agent's action in step";
+
+/// Whether `status` is [`after_action`]'s: the guest is likely gone.
+pub fn guest_lost_by_agent(status: &EpisodeStatus) -> bool {
+    matches!(status, EpisodeStatus::AgentError(m) if m.starts_with(AFTER_ACTION))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_failure_while_deciding_is_the_environments_and_after_an_action_the_agents() {
+        let deciding = guest_failure(Phase::Deciding, 3, "before the actions", "refused");
+        assert!(deciding.is_infra() && deciding.is_unfinished(), "{deciding:?}");
+        let acting = guest_failure(Phase::Acting, 3, "the action", "reset");
+        assert!(!acting.is_unfinished(), "{acting:?}");
+        assert!(guest_lost_by_agent(&acting));
+        assert!(!guest_lost_by_agent(&deciding));
+        assert!(!guest_lost_by_agent(&EpisodeStatus::AgentError("the plan is used up".into())));
+        assert_eq!(crate::results::Blame::of(&acting, 0.0).name(), "agent");
+    }
+
+    #[test]
+    fn only_actions_that_reach_the_guest_call_for_the_check() {
+        assert!(!before_actions(&[AgentAction::Wait, AgentAction::Done]));
+        assert!(!before_actions(&[]));
+        assert!(before_actions(&[AgentAction::Fail, AgentAction::Pyautogui("pyautogui.click(1, 1)".into())]));
+    }
+}
