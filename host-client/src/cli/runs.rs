@@ -645,6 +645,15 @@ pub async fn run(conn: &Connection, args: RunArgs) -> anyhow::Result<ExitCode> {
         agent_options.push(("coords".into(), args.coords.name()));
     }
 
+    // The cost ledger's price and budget are checked before any guest or VM starts.
+    let price = match &args.prices {
+        Some(path) => Some(crate::results::ledger::Prices::load(path)?.of(&model, path)?),
+        None => None,
+    };
+    if let Some(max) = args.max_cost.filter(|m| !m.is_finite() || *m < 0.0) {
+        bail!("--max-cost {max}: give a number of US dollars, 0 or more");
+    }
+
     let mut urls: Vec<String> = conn.guest.iter().cloned().collect();
     urls.extend(args.guests.iter().map(|s| s.trim().to_owned()).filter(|s| !s.is_empty()));
     if let Some(file) = &args.guests_file {
@@ -699,13 +708,7 @@ pub async fn run(conn: &Connection, args: RunArgs) -> anyhow::Result<ExitCode> {
     }
     config.options.extend(reproduction(&args, fast)?);
     config.model = model.clone();
-    if let Some(path) = &args.prices {
-        let prices = crate::results::ledger::Prices::load(path)?;
-        config.price = Some(prices.of(&model, path)?);
-    }
-    if let Some(max) = args.max_cost.filter(|m| !m.is_finite() || *m < 0.0) {
-        bail!("--max-cost {max}: give a number of US dollars, 0 or more");
-    }
+    config.price = price;
     if let Some(secs) = args.sleep_after {
         config.sleep_after_action =
             Duration::try_from_secs_f64(secs).context("--sleep-after must be a number of seconds, 0 or more")?;
