@@ -101,6 +101,8 @@ pub struct EpisodeConfig {
     /// The VMs' own displays, when the run owns its VMs: the observation's
     /// screenshot when the guest's capture fails or is black.
     pub screen_source: Option<Arc<dyn ScreenSource>>,
+    /// The price of the run's model (`--prices`): each episode's tokens are priced into `cost_usd`.
+    pub price: Option<crate::results::ledger::Price>,
 }
 
 impl EpisodeConfig {
@@ -123,6 +125,7 @@ impl EpisodeConfig {
             cache,
             model: String::new(),
             screen_source: None,
+            price: None,
         }
     }
 
@@ -191,6 +194,9 @@ pub async fn run_attempt(
     }
     ep.result.elapsed_ms = ms(started.elapsed());
     ep.result.timings = ep.steps.iter().map(|s| s.timings.clone()).collect();
+    if let Some(price) = &config.price {
+        ep.result.cost_usd = Some(ep.result.tokens.as_ref().map_or(0.0, |t| price.cost(t)));
+    }
     if let Err(err) = out.finish(&ep.result, ep.reset.as_ref(), &ep.steps) {
         tracing::error!(task = %task.name, error = %err, "cannot write the episode's results");
         ep.result.status = EpisodeStatus::InfraError(format!("cannot write the results: {err}"));
@@ -505,6 +511,7 @@ impl Episode {
             },
             error: None,
             outcomes: Vec::new(),
+            usage: None,
             more: Vec::new(),
             logs: std::collections::BTreeMap::new(),
         };
@@ -613,6 +620,11 @@ impl Episode {
         let t_predict = Instant::now();
         let prediction = predict(agent, obs, config, &mut record.timings).await;
         record.timings.predict_ms = ms(t_predict.elapsed());
+        // The cost ledger: what the agent reported in its answer, else what its model client counted.
+        record.usage = prediction.as_ref().ok().and_then(|p| p.usage).or_else(|| agent.take_usage());
+        if let Some(usage) = &record.usage {
+            self.result.tokens.get_or_insert_with(Default::default).add(usage);
+        }
         let prediction = match prediction {
             Ok(p) => p,
             Err(AgentError::Guest(err)) => {
@@ -1250,6 +1262,7 @@ mod tests {
             logs: Vec::new(),
             timings: Default::default(),
             coords: None,
+            usage: None,
         }));
         let script = vec![
             malformed,

@@ -257,6 +257,9 @@ async fn anthropic_cu_solves_two_stub_tasks_and_every_request_is_well_formed() {
     let (result, dir) = episode(&draft, &mut agent, tmp.path()).await;
     assert_solved(&result);
     assert_eq!(result.steps, 3);
+    // Each reply's usage (1 in, 1 out) is counted per step and summed for the task.
+    let tokens = result.tokens.expect("the task's tokens");
+    assert_eq!((tokens.input, tokens.output, tokens.cached), (3, 3, 0));
     check_anthropic_requests(&mock.requests(), &replies, &draft.instruction, "computer-use-2025-01-24");
     assert_exchanges_recorded(&dir, 3);
 
@@ -708,6 +711,100 @@ async fn arena_run_with_openai_cu_records_agent_model_action_space_and_coordinat
     let result =
         out.join("openai_computer/a11y_tree/computer-use-preview/0/settings/stub-settings-infeasible/result.txt");
     assert!(result.is_file(), "the result is filed under the action space and the model");
+}
+
+#[tokio::test]
+async fn a_mock_models_usage_is_the_tasks_and_the_runs_tokens_and_cost() {
+    use clap::Parser as _;
+    let tmp = tempfile::tempdir().unwrap();
+    let domain = tmp.path().join("tasks").join("settings");
+    std::fs::create_dir_all(&domain).unwrap();
+    let source =
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../tasks/stub/examples/settings/stub-settings-infeasible.json");
+    std::fs::copy(&source, domain.join("stub-settings-infeasible.json")).unwrap();
+    // The Responses API's usage (openai-python's ResponseUsage).
+    let mut reply = message("r1", json!({"type": "output_text", "text": "No such setting. FAIL"}));
+    reply["usage"] = json!({"input_tokens": 1500, "input_tokens_details": {"cached_tokens": 1000},
+        "output_tokens": 40, "output_tokens_details": {"reasoning_tokens": 0}, "total_tokens": 1540});
+    let mock = Mock::new(vec![ok(reply)]);
+    let base = serve(mock.clone(), "/v1/responses", "/v1").await;
+    let out = tmp.path().join("out");
+    let tasks = tmp.path().join("tasks");
+    let prices = tmp.path().join("prices.json");
+    std::fs::write(&prices, r#"{"computer-use-preview": {"input": 3.0, "output": 12.0, "cached_input": 0.75}}"#)
+        .unwrap();
+    let words = [
+        "arena",
+        "run",
+        "--tasks",
+        tasks.to_str().unwrap(),
+        "--agent",
+        "openai-cu",
+        "--llm-url",
+        &base,
+        "--model",
+        "computer-use-preview",
+        "--stub-guests",
+        "1",
+        "--out",
+        out.to_str().unwrap(),
+        "--prices",
+        prices.to_str().unwrap(),
+    ];
+    let mut cli = arena_host::Cli::try_parse_from(words).expect("arguments parse");
+    cli.connection.token = None;
+    cli.connection.token_file = None;
+    cli.connection.guest = None;
+    let code = arena_host::run(cli).await.expect("the run runs");
+    assert_eq!(code, std::process::ExitCode::SUCCESS);
+    let dir = out.join("openai_computer/a11y_tree/computer-use-preview/0/settings/stub-settings-infeasible");
+    let traj = std::fs::read_to_string(dir.join("traj.jsonl")).unwrap();
+    let step: Value =
+        traj.lines().map(|l| serde_json::from_str::<Value>(l).unwrap()).find(|l| l.get("step").is_some()).unwrap();
+    assert_eq!(
+        (step["usage"]["input"].clone(), step["usage"]["output"].clone(), step["usage"]["cached"].clone()),
+        (json!(1500), json!(40), json!(1000))
+    );
+    assert!(step["usage"]["model_ms"].is_u64());
+    let cost = (500.0 * 3.0 + 1000.0 * 0.75 + 40.0 * 12.0) / 1e6;
+    let episode: Value = serde_json::from_slice(&std::fs::read(dir.join("episode.json")).unwrap()).unwrap();
+    assert_eq!(episode["tokens"]["input"], 1500);
+    assert!((episode["cost_usd"].as_f64().unwrap() - cost).abs() < 1e-12, "{}", episode["cost_usd"]);
+    let summary: Value = serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
+    assert_eq!(summary["overall"]["tokens"]["input"], 1500, "{summary}");
+    assert_eq!(summary["overall"]["tokens"]["output"], 40);
+    assert_eq!(summary["tasks"][0]["tokens"]["cached"], 1000);
+    assert!((summary["overall"]["cost_usd"].as_f64().unwrap() - cost).abs() < 1e-12);
+
+    // A price file without the run's model is refused before anything runs, naming both.
+    std::fs::write(&prices, r#"{"gpt-4o": {"input": 2.5, "output": 10.0}}"#).unwrap();
+    let fresh = tmp.path().join("fresh");
+    let words = [
+        "arena",
+        "run",
+        "--tasks",
+        tasks.to_str().unwrap(),
+        "--agent",
+        "openai-cu",
+        "--llm-url",
+        &base,
+        "--model",
+        "computer-use-preview",
+        "--stub-guests",
+        "1",
+        "--out",
+        fresh.to_str().unwrap(),
+        "--prices",
+        prices.to_str().unwrap(),
+    ];
+    let mut cli = arena_host::Cli::try_parse_from(words).expect("arguments parse");
+    cli.connection.token = None;
+    cli.connection.token_file = None;
+    cli.connection.guest = None;
+    let err = format!("{:#}", arena_host::run(cli).await.expect_err("no price for the model"));
+    assert!(err.contains("\"computer-use-preview\"") && err.contains("\"gpt-4o\""), "{err}");
+    assert!(!fresh.exists(), "nothing was written");
+    assert_eq!(mock.requests().len(), 1, "the model was not called again");
 }
 
 /// Observes the stub guest and asks `agent` for `steps` steps, holding each step to

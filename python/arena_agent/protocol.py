@@ -46,7 +46,8 @@ class Agent:
         """Answers the ``observe`` message ``obs``.
 
         Return a dict with any of ``actions``, ``decision``, ``response``,
-        ``record``, ``action_space``, ``computer_update``; or a list of
+        ``record``, ``action_space``, ``computer_update``, ``usage`` (the
+        step's model tokens, ``{"input_tokens": N, "output_tokens": N}``); or a list of
         actions; or OSWorld's ``(response, actions)`` pair.
         """
         raise NotImplementedError

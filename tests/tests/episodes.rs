@@ -74,6 +74,8 @@ fn options(root: &Path, shard: Shard) -> RunOptions {
         progress: false,
         title: "stub run".into(),
         order: Default::default(),
+        trials: 1,
+        budget: Default::default(),
     }
 }
 

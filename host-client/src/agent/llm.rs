@@ -144,6 +144,30 @@ pub struct ModelClient {
     clock: std::sync::Arc<dyn arena_setup::Clock>,
     /// Headers sent with every request besides the key (`anthropic-version`, `anthropic-beta`).
     headers: Vec<(String, String)>,
+    /// The tokens and time of the answers since the last [`ModelClient::take_usage`].
+    usage: UsageMeter,
+}
+
+/// What a client's answers cost since it was last read; a clone starts from
+/// nothing, so two agents made from one client never count each other's calls.
+#[derive(Debug, Default)]
+struct UsageMeter(std::sync::Mutex<Option<super::Usage>>);
+
+impl Clone for UsageMeter {
+    fn clone(&self) -> UsageMeter {
+        UsageMeter::default()
+    }
+}
+
+impl UsageMeter {
+    fn add(&self, usage: &super::Usage) {
+        let mut total = self.0.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
+        total.get_or_insert_with(super::Usage::default).add(usage);
+    }
+
+    fn take(&self) -> Option<super::Usage> {
+        self.0.lock().unwrap_or_else(std::sync::PoisonError::into_inner).take()
+    }
 }
 
 /// Why one try failed, and whether another may succeed.
@@ -200,6 +224,7 @@ impl ModelClient {
             retry,
             clock: std::sync::Arc::new(arena_setup::RealClock),
             headers: Vec::new(),
+            usage: UsageMeter::default(),
         })
     }
 
@@ -227,6 +252,12 @@ impl ModelClient {
     /// The URL requests go to.
     pub fn endpoint(&self) -> &str {
         &self.endpoint
+    }
+
+    /// The tokens and model time of the answers since the last call (`None`
+    /// when no answer said its `usage`): what the agent reports for its step.
+    pub fn take_usage(&self) -> Option<super::Usage> {
+        self.usage.take()
     }
 
     /// Sends `body` and answers the reply's text, trying again as the policy says.
@@ -268,8 +299,14 @@ impl ModelClient {
         let mut tries = 0u32;
         loop {
             tries += 1;
+            let started = std::time::Instant::now();
             let failure = match self.try_once(body, chat).await {
-                Ok(answer) => return Ok((answer, tries)),
+                Ok(answer) => {
+                    let mut usage = super::Usage::of_response(&answer).unwrap_or_default();
+                    usage.model_ms = started.elapsed().as_millis() as u64;
+                    self.usage.add(&usage);
+                    return Ok((answer, tries));
+                }
                 Err(failure) => failure,
             };
             if let Some(text) = failure.refused {

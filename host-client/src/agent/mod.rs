@@ -68,6 +68,75 @@ pub struct Prediction {
     /// said (an outside agent's `hello`); `None` is the run's `--coords`.
     #[serde(skip)]
     pub coords: Option<arena_actionspace::Coords>,
+    /// The tokens and model time this prediction cost, when the agent knows
+    /// (the built-in model agents from their responses' `usage`, an outside
+    /// agent from its `act`'s `usage`).
+    #[serde(skip)]
+    pub usage: Option<Usage>,
+}
+
+/// Tokens and model time: of one step, a task, a domain or a run (the cost ledger).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+pub struct Usage {
+    /// Prompt tokens, those read from a cache included.
+    #[serde(default)]
+    pub input: u64,
+    /// Completion tokens (reasoning included where the vendor counts it there).
+    #[serde(default)]
+    pub output: u64,
+    /// The part of [`Usage::input`] read from the vendor's prompt cache.
+    #[serde(default)]
+    pub cached: u64,
+    /// Wall time of the model calls that answered, in milliseconds.
+    #[serde(default)]
+    pub model_ms: u64,
+}
+
+impl Usage {
+    /// Adds `other` into this one (saturating).
+    pub fn add(&mut self, other: &Usage) {
+        self.input = self.input.saturating_add(other.input);
+        self.output = self.output.saturating_add(other.output);
+        self.cached = self.cached.saturating_add(other.cached);
+        self.model_ms = self.model_ms.saturating_add(other.model_ms);
+    }
+
+    /// Input plus output tokens.
+    pub fn total(&self) -> u64 {
+        self.input.saturating_add(self.output)
+    }
+
+    /// The `usage` object of a model response, whichever vendor's shape it has:
+    /// chat completions (`prompt_tokens`, `completion_tokens`,
+    /// `prompt_tokens_details.cached_tokens`; openai-python's `CompletionUsage`),
+    /// the Responses API (`input_tokens`, `output_tokens`,
+    /// `input_tokens_details.cached_tokens`; `ResponseUsage`), and Anthropic's
+    /// Messages (`input_tokens` without the cache, `cache_read_input_tokens`,
+    /// `cache_creation_input_tokens`, `output_tokens`; anthropic-python's `Usage`),
+    /// whose input here is the three input counts together. `None` without a
+    /// `usage` object or counts in it.
+    pub fn of_response(answer: &serde_json::Value) -> Option<Usage> {
+        let usage = answer.get("usage")?;
+        let n = |v: &serde_json::Value, key: &str| v.get(key).and_then(serde_json::Value::as_u64);
+        if let (Some(input), Some(output)) = (n(usage, "prompt_tokens"), n(usage, "completion_tokens")) {
+            let cached = usage.get("prompt_tokens_details").and_then(|d| n(d, "cached_tokens")).unwrap_or(0);
+            return Some(Usage { input, output, cached: cached.min(input), model_ms: 0 });
+        }
+        let (input, output) = (n(usage, "input_tokens")?, n(usage, "output_tokens")?);
+        let read = n(usage, "cache_read_input_tokens");
+        let written = n(usage, "cache_creation_input_tokens");
+        if read.is_some() || written.is_some() {
+            let (read, written) = (read.unwrap_or(0), written.unwrap_or(0));
+            return Some(Usage {
+                input: input.saturating_add(read).saturating_add(written),
+                output,
+                cached: read,
+                model_ms: 0,
+            });
+        }
+        let cached = usage.get("input_tokens_details").and_then(|d| n(d, "cached_tokens")).unwrap_or(0);
+        Some(Usage { input, output, cached: cached.min(input), model_ms: 0 })
+    }
 }
 
 /// The parts of one prediction an agent times, in milliseconds; `None`: the agent has no such part.
@@ -172,6 +241,13 @@ pub trait Agent: Send {
     fn wants_dom(&self) -> bool {
         false
     }
+
+    /// The tokens and model time spent since the last call, for the cost ledger:
+    /// the built-in model agents answer their client's count (every answered
+    /// call, a prediction that then failed included); `None` for agents without a model.
+    fn take_usage(&mut self) -> Option<Usage> {
+        None
+    }
 }
 
 impl From<ExecError> for AgentError {
@@ -185,3 +261,30 @@ impl From<ExecError> for AgentError {
 
 /// Makes a fresh agent for each episode.
 pub type AgentFactory = Arc<dyn Fn() -> Result<Box<dyn Agent>, AgentError> + Send + Sync>;
+
+#[cfg(test)]
+mod tests {
+    use super::Usage;
+    use serde_json::json;
+
+    #[test]
+    fn usage_is_read_from_each_vendors_response() {
+        // Chat completions (openai-python's CompletionUsage).
+        let chat = json!({"usage": {"prompt_tokens": 120, "completion_tokens": 30, "total_tokens": 150,
+            "prompt_tokens_details": {"cached_tokens": 100}}});
+        assert_eq!(Usage::of_response(&chat), Some(Usage { input: 120, output: 30, cached: 100, model_ms: 0 }));
+        // The Responses API (ResponseUsage).
+        let responses = json!({"usage": {"input_tokens": 50, "output_tokens": 7, "total_tokens": 57,
+            "input_tokens_details": {"cached_tokens": 20}, "output_tokens_details": {"reasoning_tokens": 3}}});
+        assert_eq!(Usage::of_response(&responses), Some(Usage { input: 50, output: 7, cached: 20, model_ms: 0 }));
+        // Anthropic's Messages: input_tokens leaves the cache out.
+        let anthropic = json!({"usage": {"input_tokens": 10, "cache_read_input_tokens": 200,
+            "cache_creation_input_tokens": 5, "output_tokens": 9}});
+        assert_eq!(Usage::of_response(&anthropic), Some(Usage { input: 215, output: 9, cached: 200, model_ms: 0 }));
+        assert_eq!(Usage::of_response(&json!({"choices": []})), None);
+        assert_eq!(Usage::of_response(&json!({"usage": {"prompt_tokens": -1}})), None);
+        // A cached count above the input is bounded by it.
+        let odd = json!({"usage": {"prompt_tokens": 1, "completion_tokens": 1, "prompt_tokens_details": {"cached_tokens": 9}}});
+        assert_eq!(Usage::of_response(&odd).map(|u| u.cached), Some(1));
+    }
+}

@@ -469,6 +469,10 @@ impl Agent for NaviAgent {
         "navi"
     }
 
+    fn take_usage(&mut self) -> Option<crate::agent::Usage> {
+        self.client.take_usage()
+    }
+
     /// Upstream's `oss` pipelines start with the browser's DOM elements.
     fn wants_dom(&self) -> bool {
         self.config.som.origin.needs_dom()
@@ -510,6 +514,7 @@ impl Agent for NaviAgent {
                 logs,
                 timings,
                 coords: None,
+                usage: None,
             });
         }
         let prediction = match parse_reply(&response) {
@@ -520,13 +525,31 @@ impl Agent for NaviAgent {
                 let summary: Vec<String> = parsed.actions.iter().map(AgentAction::summary).collect();
                 self.history.push(Turn { step: obs.step, text: summary.join(" | ") });
                 self.last_error = None;
-                Prediction { response, actions: parsed.actions, marks, raw_error: None, logs, timings, coords: None }
+                Prediction {
+                    response,
+                    actions: parsed.actions,
+                    marks,
+                    raw_error: None,
+                    logs,
+                    timings,
+                    coords: None,
+                    usage: None,
+                }
             }
             Err(err) => {
                 tracing::info!(step = obs.step, error = %err, "unusable model reply");
                 self.history.push(Turn { step: obs.step, text: format!("(reply not usable: {err})") });
                 self.last_error = Some(err.clone());
-                Prediction { response, actions: Vec::new(), marks, raw_error: Some(err), logs, timings, coords: None }
+                Prediction {
+                    response,
+                    actions: Vec::new(),
+                    marks,
+                    raw_error: Some(err),
+                    logs,
+                    timings,
+                    coords: None,
+                    usage: None,
+                }
             }
         };
         Ok(prediction)

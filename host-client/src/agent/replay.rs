@@ -174,6 +174,7 @@ impl Agent for ReplayAgent {
             logs: Vec::new(),
             timings: Default::default(),
             coords: None,
+            usage: None,
         })
     }
 }

@@ -235,6 +235,7 @@ impl Agent for ScriptedAgent {
             logs: Vec::new(),
             timings: Default::default(),
             coords: None,
+            usage: None,
         })
     }
 }

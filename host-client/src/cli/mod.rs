@@ -246,6 +246,9 @@ pub enum Command {
     Merge(runs::MergeArgs),
     /// Rebuild summary.json, summary.md and report.html of a result folder.
     Report(runs::ReportArgs),
+    /// Compare two result folders task by task: the difference in success rate with a
+    /// paired bootstrap interval, and the tasks that did better or worse.
+    Compare(runs::CompareArgs),
     /// Stage an OEM folder for a new Windows image, verify one, or wait for a prepared guest.
     Prep(oem::PrepArgs),
     /// Get the upstream WAA task corpus without cloning WindowsAgentArena.
@@ -585,6 +588,7 @@ pub async fn run(cli: Cli) -> anyhow::Result<ExitCode> {
         Command::Run(args) => runs::run(conn, *args).await,
         Command::Merge(args) => runs::merge(&args),
         Command::Report(args) => runs::report(&args),
+        Command::Compare(args) => runs::compare(&args),
         Command::Prep(args) => oem::run(conn, args).await,
         Command::Corpus(args) => corpus::run(args).await,
         Command::Vm(args) => vm::run(conn, args).await,

@@ -256,6 +256,26 @@ pub struct RunArgs {
     /// The trial folder level of the results (upstream's --trial_id).
     #[arg(long, default_value = crate::results::DEFAULT_TRIAL_ID, value_name = "ID")]
     pub trial_id: String,
+    /// Run each task K times, trial k in trial folder k (0..K-1, upstream's trial
+    /// level), trial-major: every task of trial 0, then of trial 1, ...; each trial
+    /// resumes on its own. The summary gains pass@k, pass^k and the flaky tasks.
+    /// Recorded in the results when above 1.
+    #[arg(long, default_value_t = 1, value_name = "K", value_parser = clap::value_parser!(u32).range(1..=1000))]
+    pub trials: u32,
+    /// The cost ledger's prices: a JSON file of model name -> {"input": USD, "output":
+    /// USD, "cached_input": USD} per million tokens (docs/results.md); each task's
+    /// tokens are priced into its `cost_usd`. No price is built in.
+    #[arg(long, value_name = "FILE")]
+    pub prices: Option<PathBuf>,
+    /// Start no new task once the folder's tasks have cost this many US dollars
+    /// (needs --prices); running tasks finish. Recorded in summary.json (`budget`).
+    #[arg(long, value_name = "USD", requires = "prices")]
+    pub max_cost: Option<f64>,
+    /// Start no new task once the folder's tasks have used this many tokens, input
+    /// and output together; running tasks finish. Recorded in summary.json (`budget`).
+    /// (--max-tokens is the model's longest answer, upstream's parameter.)
+    #[arg(long, value_name = "N")]
+    pub max_total_tokens: Option<u64>,
     /// Run the tasks in VMs this run starts with QEMU, each on an overlay of this
     /// read-only golden image, restored to its `ready` snapshot as --reset says.
     #[arg(long, value_name = "IMAGE")]
@@ -511,6 +531,18 @@ pub struct ReportArgs {
     pub dir: PathBuf,
 }
 
+/// Arguments of `arena compare`.
+#[derive(Debug, Clone, Args)]
+pub struct CompareArgs {
+    /// The first result folder (A).
+    pub run_a: PathBuf,
+    /// The second result folder (B); differences are B - A.
+    pub run_b: PathBuf,
+    /// Print the comparison as JSON.
+    #[arg(long)]
+    pub json: bool,
+}
+
 fn parse_shard(text: &str) -> Result<Shard, String> {
     text.parse()
 }
@@ -601,6 +633,14 @@ pub async fn run(conn: &Connection, args: RunArgs) -> anyhow::Result<ExitCode> {
         Some(preset) => preset.apply(&args)?,
         None => args,
     };
+    if args.trials > 1 && args.trial_id != crate::results::DEFAULT_TRIAL_ID {
+        bail!(
+            "--trials {} writes trial folders 0..{}; it cannot be combined with --trial-id {}",
+            args.trials,
+            args.trials - 1,
+            args.trial_id
+        );
+    }
     let tasks = load_tasks(&args.tasks, args.difficulty.into())?;
     let (chosen, mcp) = if args.agent == AgentKind::Mcp {
         let (chosen, endpoint) =
@@ -620,6 +660,15 @@ pub async fn run(conn: &Connection, args: RunArgs) -> anyhow::Result<ExitCode> {
     if run_coords {
         agent_options.push(("action_space".into(), agent_label.clone()));
         agent_options.push(("coords".into(), args.coords.name()));
+    }
+
+    // The cost ledger's price and budget are checked before any guest or VM starts.
+    let price = match &args.prices {
+        Some(path) => Some(crate::results::ledger::Prices::load(path)?.of(&model, path)?),
+        None => None,
+    };
+    if let Some(max) = args.max_cost.filter(|m| !m.is_finite() || *m < 0.0) {
+        bail!("--max-cost {max}: give a number of US dollars, 0 or more");
     }
 
     let mut urls: Vec<String> = conn.guest.iter().cloned().collect();
@@ -703,6 +752,7 @@ pub async fn run(conn: &Connection, args: RunArgs) -> anyhow::Result<ExitCode> {
     }
     config.options.extend(reproduction(&args, fast)?);
     config.model = model.clone();
+    config.price = price;
     if let Some(secs) = args.sleep_after {
         config.sleep_after_action =
             Duration::try_from_secs_f64(secs).context("--sleep-after must be a number of seconds, 0 or more")?;
@@ -715,6 +765,9 @@ pub async fn run(conn: &Connection, args: RunArgs) -> anyhow::Result<ExitCode> {
     };
     config.options.insert("order".into(), order.to_string());
     config.options.extend(agent_options);
+    if args.trials > 1 {
+        config.options.insert("trials".into(), args.trials.to_string());
+    }
     if args.activate_non_strict {
         config.options.insert("activate_non_strict".into(), "on".into());
     }
@@ -772,6 +825,8 @@ pub async fn run(conn: &Connection, args: RunArgs) -> anyhow::Result<ExitCode> {
         progress: progress_wanted(),
         title: format!("arena run: {} ({})", args.tasks.display(), layout.base().display()),
         order,
+        trials: args.trials,
+        budget: crate::results::ledger::Budget { max_cost_usd: args.max_cost, max_tokens: args.max_total_tokens },
     };
     // Ctrl-C: the first stops the run gently, the second abandons it.
     let stop = options.pool.stop.clone();
@@ -817,8 +872,13 @@ pub async fn run(conn: &Connection, args: RunArgs) -> anyhow::Result<ExitCode> {
             let why = r.status.message().unwrap_or_default();
             lines.push_str(&format!("  {}/{}: {}: {why}\n", r.domain, r.task_name, r.status.kind()));
         }
+        let budget = outcome.summary.budget.as_ref().and_then(|b| b.stopped.as_deref());
         for task in &outcome.pool.not_run {
-            lines.push_str(&format!("  {task}: not run (no healthy guest left)\n"));
+            let why = match budget {
+                Some(why) => format!("not started: the budget is reached ({why})"),
+                None => "not run (no healthy guest left)".to_owned(),
+            };
+            lines.push_str(&format!("  {task}: {why}\n"));
         }
         if let Some(why) = &outcome.pool.ended_early {
             let down = outcome.pool.guests_down.join(", ");
@@ -994,6 +1054,21 @@ pub fn report(args: &ReportArgs) -> anyhow::Result<ExitCode> {
         write_report(&args.dir, &format!("arena report: {}", args.dir.display()))?;
     emit(&summary.markdown())?;
     emit(&format!("\nreport: {}\n", path.display()))?;
+    Ok(ExitCode::SUCCESS)
+}
+
+/// `arena compare`.
+///
+/// # Errors
+///
+/// A folder cannot be read or mixes agents.
+pub fn compare(args: &CompareArgs) -> anyhow::Result<ExitCode> {
+    let comparison = crate::results::compare::Comparison::of_dirs(&args.run_a, &args.run_b)?;
+    if args.json {
+        emit(&format!("{}\n", serde_json::to_string_pretty(&comparison)?))?;
+    } else {
+        emit(&comparison.text())?;
+    }
     Ok(ExitCode::SUCCESS)
 }
 

@@ -276,6 +276,7 @@ impl Agent for McpAgent {
             logs,
             timings: Default::default(),
             coords: None,
+            usage: None,
         })
     }
 }

@@ -82,6 +82,8 @@ pub fn render(summary: &Summary, found: &[FoundTask], title: &str) -> String {
             missing.join(", ")
         );
     }
+    html.push_str(&trials_html(summary));
+    html.push_str(&ledger_html(summary));
     html.push_str("<h2>Success per domain</h2>\n");
     html.push_str(&chart(&summary.domains, o));
     html.push_str(&table(summary));
@@ -130,6 +132,88 @@ fn chart(domains: &[DomainRow], overall: &DomainRow) -> String {
     }
     svg.push_str("</svg>\n");
     svg
+}
+
+/// The run's tokens, model time and cost, and its budget, when any task reported tokens.
+fn ledger_html(summary: &Summary) -> String {
+    let o = &summary.overall;
+    if o.tokens == crate::agent::Usage::default() && o.cost_usd.is_none() && summary.budget.is_none() {
+        return String::new();
+    }
+    let mut h = format!(
+        "<p class=\"meta\" id=\"cost\">Tokens: {} input ({} cached), {} output; model time {:.1} s{}.",
+        o.tokens.input,
+        o.tokens.cached,
+        o.tokens.output,
+        o.tokens.model_ms as f64 / 1000.0,
+        o.cost_usd.map_or(String::new(), |c| format!("; cost ${c:.4}"))
+    );
+    if let Some(b) = &summary.budget {
+        match &b.stopped {
+            Some(why) => {
+                let _ = write!(h, " Budget reached ({}): {} task(s) not started.", escape(why), b.not_started.len());
+            }
+            None => h.push_str(" Budget not reached."),
+        }
+    }
+    h.push_str("</p>\n");
+    h
+}
+
+/// The success rate's interval; with more than one trial per task, pass@k and
+/// pass^k per domain and the flaky tasks.
+fn trials_html(summary: &Summary) -> String {
+    let mut h = String::new();
+    if let Some([low, high]) = summary.overall.rate_ci95 {
+        let _ = writeln!(
+            h,
+            "<p class=\"meta\" id=\"interval\">95% interval of the success rate (seeded bootstrap over tasks): [{low:.1}%, {high:.1}%].</p>"
+        );
+    }
+    let most = summary.overall.pass_at_k.keys().next_back().copied().unwrap_or(0);
+    if most <= 1 {
+        return h;
+    }
+    let _ = writeln!(
+        h,
+        "<h2>Trials</h2>\n<p class=\"meta\">Up to {most} trials per task; a trial passes when it scores 1. pass@k: at least one of k trials passes; pass^k: all k pass.</p>"
+    );
+    h.push_str("<table id=\"trials\"><thead><tr><th>Domain</th>");
+    for k in 1..=most {
+        let _ = write!(h, "<th>pass@{k}</th><th>pass^{k}</th>");
+    }
+    h.push_str("<th>95% interval</th></tr></thead><tbody>\n");
+    for (row, class) in
+        summary.domains.iter().map(|r| (r, "")).chain(std::iter::once((&summary.overall, " class=\"overall\"")))
+    {
+        let _ = write!(h, "<tr{class}><td>{}</td>", escape(&row.domain));
+        for k in 1..=most {
+            for map in [&row.pass_at_k, &row.pass_hat_k] {
+                let cell = map.get(&k).map_or("-".to_owned(), |v| format!("{v:.1}%"));
+                let _ = write!(h, "<td class=\"num\">{cell}</td>");
+            }
+        }
+        let ci = row.rate_ci95.map_or("-".to_owned(), |[l, hi]| format!("[{l:.1}%, {hi:.1}%]"));
+        let _ = writeln!(h, "<td class=\"num\">{ci}</td></tr>");
+    }
+    h.push_str("</tbody></table>\n");
+    if summary.flaky_tasks.is_empty() {
+        h.push_str("<p id=\"flaky\">No flaky task: every task passed in all its trials or in none.</p>\n");
+    } else {
+        let _ = writeln!(h, "<p>Flaky tasks (passed in some trials, failed in others):</p><ul id=\"flaky\">");
+        for t in &summary.flaky_tasks {
+            let _ = writeln!(
+                h,
+                "<li>{} / {}: {} of {} trials passed</li>",
+                escape(&t.domain),
+                escape(&t.name),
+                t.passes,
+                t.trials
+            );
+        }
+        h.push_str("</ul>\n");
+    }
+    h
 }
 
 fn table(summary: &Summary) -> String {
@@ -305,7 +389,8 @@ fn step_html(rel: &str, step: &StepRecord) -> String {
 /// `root` cannot be read or a file cannot be written.
 pub fn write_report(root: &Path, title: &str) -> Result<(Summary, PathBuf), ResultsError> {
     let found = scan(root)?;
-    let summary = Summary::from_found_in(root, &found);
+    let mut summary = Summary::from_found_in(root, &found);
+    summary.budget = super::ledger::BudgetRecord::read(root);
     summary.write(root)?;
     let path = root.join(REPORT_HTML);
     write_atomic(&path, render(&summary, &found, title).as_bytes())?;

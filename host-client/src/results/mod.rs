@@ -30,10 +30,16 @@
 //!
 //! - this file: [`RunLayout`], [`TaskDir`], the records, atomic writes, scanning.
 //! - [`summary`]: [`summary::Summary`], `summary.json` and `summary.md`.
+//! - [`compare`]: [`compare::Comparison`], `arena compare` of two folders.
+//! - [`ledger`]: prices, the budget and its record (the cost ledger).
+//! - [`stats`]: pass@k, pass^k and the bootstrap intervals of repeated trials.
 //! - [`html`]: the HTML report, `report.html`.
 //! - [`task_list`]: the run's task list in each trial folder (`task_list.json`).
 
+pub mod compare;
 pub mod html;
+pub mod ledger;
+pub mod stats;
 pub mod summary;
 pub mod task_list;
 
@@ -344,6 +350,10 @@ pub struct StepRecord {
     /// Per-action outcomes the agent's executor reported (free-form).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub outcomes: Vec<Value>,
+    /// The tokens and model time of the step's prediction (the cost ledger),
+    /// when the agent reports them.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub usage: Option<crate::agent::Usage>,
     /// Upstream's lines for the step's second and further actions.
     #[serde(skip)]
     pub more: Vec<ActionRecord>,
@@ -412,6 +422,12 @@ pub struct EpisodeResult {
     /// owns its VMs (`arena run --vm-image`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub vm: Option<VmStart>,
+    /// The steps' tokens and model time together, when the agent reported any.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub tokens: Option<crate::agent::Usage>,
+    /// What [`EpisodeResult::tokens`] cost in US dollars, by the run's `--prices` file.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub cost_usd: Option<f64>,
 }
 
 /// Where a task's VM started from, recorded in `episode.json`. A plain record
@@ -479,6 +495,8 @@ impl EpisodeResult {
             timings: Vec::new(),
             options: std::collections::BTreeMap::new(),
             vm: None,
+            tokens: None,
+            cost_usd: None,
         }
     }
 
@@ -540,19 +558,39 @@ pub struct RunLayout {
 /// Upstream's default `--trial_id`.
 pub const DEFAULT_TRIAL_ID: &str = "0";
 
+/// The key of a task's `extra` map that carries its trial number (0..K-1) in a
+/// run of several trials: the run sets it on each copy of a task it queues
+/// (`crate::run::plan`) and removes it in a run of one, so a task file cannot choose it.
+pub const TRIAL_KEY: &str = "_arena_trial";
+
+/// The trial a run marked `task` with ([`TRIAL_KEY`]).
+pub fn trial_of(task: &Task) -> Option<u64> {
+    task.extra.get(TRIAL_KEY).and_then(Value::as_u64)
+}
+
 impl RunLayout {
     /// The trial folder the domains go in (`show_result.py`'s target folder).
     pub fn base(&self) -> PathBuf {
+        self.trial_base(&self.trial)
+    }
+
+    /// The folder of trial `trial` (`<action space>/<observation>/<model>/<trial>`).
+    pub fn trial_base(&self, trial: &str) -> PathBuf {
         self.root
             .join(safe_component(&self.agent))
             .join(safe_component(&self.observation))
             .join(safe_component(&self.model))
-            .join(safe_component(&self.trial))
+            .join(safe_component(trial))
     }
 
-    /// The folder of one task (not created).
+    /// The folder of one task (not created): in the trial the run marked it
+    /// with ([`TRIAL_KEY`], `arena run --trials K`), else in [`RunLayout::trial`].
     pub fn task_dir(&self, task: &Task) -> TaskDir {
-        TaskDir::new(self.base().join(safe_component(&task.domain)).join(safe_component(&task.name)))
+        let base = match trial_of(task) {
+            Some(trial) => self.trial_base(&trial.to_string()),
+            None => self.base(),
+        };
+        TaskDir::new(base.join(safe_component(&task.domain)).join(safe_component(&task.name)))
     }
 }
 

@@ -76,6 +76,23 @@ pub struct DomainRow {
     /// Whether every task has a result.
     #[serde(default)]
     pub complete: bool,
+    /// k → percent: the unbiased pass@k over the tasks with at least k finished
+    /// trials ([`super::stats`]); `{1: solved rate}` for one trial.
+    #[serde(default)]
+    pub pass_at_k: BTreeMap<u32, f64>,
+    /// k → percent: pass^k, all of k trials succeed ([`super::stats`]).
+    #[serde(default)]
+    pub pass_hat_k: BTreeMap<u32, f64>,
+    /// `[low, high]` in percent: the seeded bootstrap 95 % interval over tasks of
+    /// the success rate (each task its mean score over its trials); `null` without a finished task.
+    #[serde(default)]
+    pub rate_ci95: Option<[f64; 2]>,
+    /// Tokens and model time of every task of the row, finished or not (the cost ledger).
+    #[serde(default)]
+    pub tokens: crate::agent::Usage,
+    /// What they cost in US dollars (`--prices`), when priced.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub cost_usd: Option<f64>,
 }
 
 /// A task of the task list without a result.
@@ -85,6 +102,19 @@ pub struct MissingTask {
     pub name: String,
     /// Its folder, relative to the summary's root, with `/` separators (it may not exist).
     pub path: String,
+}
+
+/// A task whose trials both passed and failed.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct FlakyTask {
+    pub domain: String,
+    pub name: String,
+    /// The task across its trials: its path with the trial level left out.
+    pub key: String,
+    /// Finished trials.
+    pub trials: u32,
+    /// Trials that scored 1.
+    pub passes: u32,
 }
 
 /// One task in the summary.
@@ -113,6 +143,12 @@ pub struct TaskRow {
     /// `passed`, `agent`, `environment`, `interrupted` or `unknown`: the side of [`TaskRow::blame`].
     #[serde(default)]
     pub failed_by: String,
+    /// The task's tokens and model time, when its agent reported them.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub tokens: Option<crate::agent::Usage>,
+    /// What they cost in US dollars (`--prices`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub cost_usd: Option<f64>,
 }
 
 /// The summary of a result folder.
@@ -137,6 +173,13 @@ pub struct Summary {
     /// Every task of the task list (and every task folder) without a result.
     #[serde(default)]
     pub missing: Vec<MissingTask>,
+    /// The tasks whose finished trials both passed and failed (`arena run --trials K`).
+    #[serde(default)]
+    pub flaky_tasks: Vec<FlakyTask>,
+    /// The run's budget (`--max-cost`, `--max-total-tokens`): limits, spend, and
+    /// whether it stopped the run starting tasks (`budget.json`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub budget: Option<super::ledger::BudgetRecord>,
 }
 
 impl Summary {
@@ -146,7 +189,9 @@ impl Summary {
     ///
     /// `root` cannot be read.
     pub fn from_dir(root: &Path) -> Result<Summary, ResultsError> {
-        Ok(Summary::from_found_in(root, &scan(root)?))
+        let mut summary = Summary::from_found_in(root, &scan(root)?);
+        summary.budget = super::ledger::BudgetRecord::read(root);
+        Ok(summary)
     }
 
     /// Summarises task folders already found under `root`, with the tasks its
@@ -211,7 +256,18 @@ impl Summary {
             tasks.iter().filter_map(|t| t.path.rsplitn(3, '/').nth(2).map(str::to_owned)).collect();
         trials.sort();
         trials.dedup();
-        Summary { overall, domains, groups, tasks, options, trials, missing }
+        let flaky_tasks = per_task(&all)
+            .into_iter()
+            .filter(|t| t.passes > 0 && t.passes < t.trials)
+            .map(|t| FlakyTask {
+                domain: t.domain.to_owned(),
+                name: t.name.to_owned(),
+                key: t.key,
+                trials: t.trials,
+                passes: t.passes,
+            })
+            .collect();
+        Summary { overall, domains, groups, tasks, options, trials, missing, flaky_tasks, budget: None }
     }
 
     /// The words that mark an incomplete run, or `None` when every task has a result.
@@ -301,6 +357,101 @@ impl Summary {
         Ok(())
     }
 
+    /// The cost ledger per domain and overall, and the budget, when any task reported tokens.
+    fn ledger_markdown(&self) -> String {
+        let mut md = String::new();
+        let o = &self.overall;
+        if o.tokens == crate::agent::Usage::default() && o.cost_usd.is_none() && self.budget.is_none() {
+            return md;
+        }
+        md.push_str("\n## Cost\n\n| Domain | Input tokens | Cached | Output tokens | Model time (s) | Cost (USD) |\n|---|---:|---:|---:|---:|---:|\n");
+        for (name, row) in self
+            .domains
+            .iter()
+            .map(|row| (md_escape(&row.domain), row))
+            .chain(std::iter::once((format!("**{}**", o.domain), o)))
+        {
+            let t = &row.tokens;
+            let cost = row.cost_usd.map_or("-".to_owned(), |c| format!("{c:.4}"));
+            let _ = writeln!(
+                md,
+                "| {name} | {} | {} | {} | {:.1} | {cost} |",
+                t.input,
+                t.cached,
+                t.output,
+                t.model_ms as f64 / 1000.0
+            );
+        }
+        if let Some(b) = &self.budget {
+            let limits: Vec<String> = [
+                b.budget.max_cost_usd.map(|c| format!("--max-cost ${c}")),
+                b.budget.max_tokens.map(|n| format!("--max-total-tokens {n}")),
+            ]
+            .into_iter()
+            .flatten()
+            .collect();
+            let _ = write!(
+                md,
+                "\nBudget {}: spent ${:.4} and {} tokens.",
+                limits.join(", "),
+                b.spent.cost_usd,
+                b.spent.tokens.total()
+            );
+            match &b.stopped {
+                Some(why) => {
+                    let _ = writeln!(md, " Reached ({why}): {} task(s) not started.", b.not_started.len());
+                }
+                None => md.push_str(" Not reached.\n"),
+            }
+        }
+        md
+    }
+
+    /// The interval, and with more than one trial per task pass@k, pass^k and the flaky tasks.
+    fn trials_markdown(&self) -> String {
+        let mut md = String::new();
+        if let Some([low, high]) = self.overall.rate_ci95 {
+            let _ = writeln!(md, "\nSuccess rate 95% interval (seeded bootstrap over tasks): [{low:.1}%, {high:.1}%].");
+        }
+        let most = self.overall.pass_at_k.keys().next_back().copied().unwrap_or(0);
+        if most > 1 {
+            let ks: Vec<u32> = (1..=most).collect();
+            let _ = writeln!(md, "\n## Trials\n\nUp to {most} trials per task; a trial passes when it scores 1. pass@k: at least one of k trials passes; pass^k: all k pass (unbiased estimators, averaged over the tasks with at least k trials).\n");
+            let head: Vec<String> = ks.iter().flat_map(|k| [format!("pass@{k}"), format!("pass^{k}")]).collect();
+            let _ = writeln!(md, "| Domain | {} | 95% interval |", head.join(" | "));
+            let _ = writeln!(md, "|---|{}---|", "---:|".repeat(head.len()));
+            for (name, row) in self
+                .domains
+                .iter()
+                .map(|row| (md_escape(&row.domain), row))
+                .chain(std::iter::once((format!("**{}**", self.overall.domain), &self.overall)))
+            {
+                let cells: Vec<String> = ks
+                    .iter()
+                    .flat_map(|k| {
+                        [&row.pass_at_k, &row.pass_hat_k]
+                            .map(|m| m.get(k).map_or("-".to_owned(), |v| format!("{v:.1}%")))
+                    })
+                    .collect();
+                let ci = row.rate_ci95.map_or("-".to_owned(), |[l, h]| format!("[{l:.1}%, {h:.1}%]"));
+                let _ = writeln!(md, "| {name} | {} | {ci} |", cells.join(" | "));
+            }
+            if self.flaky_tasks.is_empty() {
+                md.push_str("\nNo flaky task: every task passed in all its trials or in none.\n");
+            } else {
+                let _ = writeln!(
+                    md,
+                    "\nFlaky tasks (passed in some trials, failed in others): {}.",
+                    self.flaky_tasks.len()
+                );
+                for t in &self.flaky_tasks {
+                    let _ = writeln!(md, "- `{}/{}`: {} of {} trials passed", t.domain, t.name, t.passes, t.trials);
+                }
+            }
+        }
+        md
+    }
+
     /// The summary as Markdown: the domain table, then every task, then the errors.
     pub fn markdown(&self) -> String {
         let mut md = String::new();
@@ -360,6 +511,8 @@ impl Summary {
                 row.unfinished
             );
         }
+        md.push_str(&self.trials_markdown());
+        md.push_str(&self.ledger_markdown());
         md.push_str("\n## Tasks\n\n| Domain | Task | Score | Status | Failed by | Steps | Time (s) | Attempt |\n|---|---|---:|---|---|---:|---:|---:|\n");
         for t in &self.tasks {
             let score = t.score.map_or_else(|| "-".to_owned(), super::python_float);
@@ -442,6 +595,8 @@ fn task_row(found: &FoundTask) -> TaskRow {
         guest: episode.map(|e| e.guest.clone()).unwrap_or_default(),
         blame: blame.map_or("unknown", super::Blame::name).to_owned(),
         failed_by: blame.map_or("unknown", super::Blame::side).to_owned(),
+        tokens: episode.and_then(|e| e.tokens),
+        cost_usd: episode.and_then(|e| e.cost_usd),
     }
 }
 
@@ -455,6 +610,10 @@ fn domain_row(domain: &str, rows: &[&TaskRow], not_run: usize) -> DomainRow {
     let finished: Vec<&&TaskRow> = rows.iter().filter(|r| r.score.is_some()).collect();
     let n = finished.len() as u32;
     let successes = finished.iter().filter(|r| r.success).count() as u32;
+    let tasks = per_task(rows);
+    let counts: Vec<(u32, u32)> = tasks.iter().map(|t| (t.trials, t.passes)).collect();
+    let (pass_at_k, pass_hat_k) = super::stats::pass_maps(&counts);
+    let means: Vec<f64> = tasks.iter().map(|t| t.mean_score).collect();
     let mean = |f: &dyn Fn(&TaskRow) -> f64| {
         if n == 0 {
             0.0
@@ -479,5 +638,65 @@ fn domain_row(domain: &str, rows: &[&TaskRow], not_run: usize) -> DomainRow {
             100.0 * finished.iter().map(|r| r.score.unwrap_or(0.0)).sum::<f64>() / (rows.len() + not_run) as f64
         },
         complete: rows.len() + not_run == n as usize,
+        pass_at_k,
+        pass_hat_k,
+        rate_ci95: super::stats::bootstrap_ci95(&means).map(|[low, high]| [100.0 * low, 100.0 * high]),
+        tokens: rows.iter().filter_map(|r| r.tokens.as_ref()).fold(crate::agent::Usage::default(), |mut sum, t| {
+            sum.add(t);
+            sum
+        }),
+        cost_usd: rows.iter().any(|r| r.cost_usd.is_some()).then(|| rows.iter().filter_map(|r| r.cost_usd).sum()),
     }
+}
+
+/// One task across its trial folders.
+#[derive(Debug)]
+pub(crate) struct TaskTrials<'a> {
+    pub key: String,
+    pub domain: &'a str,
+    pub name: &'a str,
+    /// Finished trials.
+    pub trials: u32,
+    /// Finished trials that scored 1.
+    pub passes: u32,
+    /// The mean score of the finished trials.
+    pub mean_score: f64,
+}
+
+/// A task's identity across trials: its path without the trial level
+/// (`<action space>/<observation>/<model>/<domain>/<task>`), so trial folders
+/// of one agent and model pool and different ones do not.
+pub(crate) fn trial_key(path: &str) -> String {
+    let mut parts: Vec<&str> = path.split('/').collect();
+    if parts.len() >= 3 {
+        parts.remove(parts.len() - 3);
+    }
+    parts.join("/")
+}
+
+/// The rows grouped into tasks across trials (tasks with at least one finished trial), by key.
+pub(crate) fn per_task<'a>(rows: &[&'a TaskRow]) -> Vec<TaskTrials<'a>> {
+    let mut by_key: BTreeMap<String, TaskTrials<'a>> = BTreeMap::new();
+    for row in rows {
+        let Some(score) = row.score else { continue };
+        let key = trial_key(&row.path);
+        let entry = by_key.entry(key.clone()).or_insert(TaskTrials {
+            key,
+            domain: &row.domain,
+            name: &row.name,
+            trials: 0,
+            passes: 0,
+            mean_score: 0.0,
+        });
+        entry.trials += 1;
+        entry.passes += u32::from(row.success);
+        entry.mean_score += score;
+    }
+    by_key
+        .into_values()
+        .map(|mut t| {
+            t.mean_score /= f64::from(t.trials);
+            t
+        })
+        .collect()
 }

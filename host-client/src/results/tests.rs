@@ -29,6 +29,8 @@ pub(crate) fn episode(domain: &str, name: &str, score: f64, status: EpisodeStatu
         timings: Vec::new(),
         options: Default::default(),
         vm: None,
+        tokens: None,
+        cost_usd: None,
     }
 }
 
@@ -57,6 +59,7 @@ fn step(n: u32) -> StepRecord {
         screenshot_source: None,
         screenshot_file: TaskDir::screenshot_name(None, &timestamp),
         timings: StepTimings { observe_ms: 3, predict_ms: 1, act_ms: 2, pause_ms: 0, ..StepTimings::default() },
+        usage: None,
         error: None,
         outcomes: Vec::new(),
         more: Vec::new(),

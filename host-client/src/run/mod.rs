@@ -132,6 +132,23 @@ pub struct Plan {
 /// so shards agree across machines whatever the order. With `resume` off every
 /// task of the shard is to do again.
 pub fn plan(tasks: Vec<Task>, shard: Shard, layout: &RunLayout, resume: bool, order: TaskOrder) -> Plan {
+    plan_trials(tasks, shard, layout, resume, order, 1)
+}
+
+/// [`plan`] for `trials` trials of each task: with more than one, every task is
+/// queued once per trial, trial-major (every task of trial 0 in `order`, then of
+/// trial 1, ...), so that what drifts over a run (a guest, a model endpoint) is
+/// spread over the trials instead of lining up with one; each copy carries its
+/// trial ([`crate::results::TRIAL_KEY`]), which puts it in trial folder 0..K-1
+/// ([`RunLayout::task_dir`]), finished or not on its own.
+pub fn plan_trials(
+    tasks: Vec<Task>,
+    shard: Shard,
+    layout: &RunLayout,
+    resume: bool,
+    order: TaskOrder,
+    trials: u32,
+) -> Plan {
     let mut numbered: Vec<(usize, Task)> = tasks.into_iter().enumerate().collect();
     numbered.sort_by(|(_, a), (_, b)| a.order_key().cmp(&b.order_key()));
     let mut mine = shard.select(numbered);
@@ -146,8 +163,25 @@ pub fn plan(tasks: Vec<Task>, shard: Shard, layout: &RunLayout, resume: bool, or
             mine.shuffle(&mut rand_chacha::ChaCha8Rng::seed_from_u64(seed));
         }
     }
-    let (finished, todo) =
-        mine.into_iter().map(|(_, task)| task).partition(|task| resume && layout.task_dir(task).is_finished());
+    let mine = mine.into_iter().map(|(_, mut task)| {
+        task.extra.remove(crate::results::TRIAL_KEY);
+        task
+    });
+    let queue: Vec<Task> = if trials > 1 {
+        let mine: Vec<Task> = mine.collect();
+        (0..trials)
+            .flat_map(|trial| {
+                mine.iter().map(move |task| {
+                    let mut task = task.clone();
+                    task.extra.insert(crate::results::TRIAL_KEY.to_owned(), trial.into());
+                    task
+                })
+            })
+            .collect()
+    } else {
+        mine.collect()
+    };
+    let (finished, todo) = queue.into_iter().partition(|task| resume && layout.task_dir(task).is_finished());
     Plan { todo, finished }
 }
 
@@ -165,6 +199,11 @@ pub struct RunOptions {
     pub title: String,
     /// The order tasks go to the guests in.
     pub order: TaskOrder,
+    /// Trials of each task (`--trials`, 1 by default): trial folders 0..K-1, trial-major.
+    pub trials: u32,
+    /// Spend after which no new task starts (`--max-cost`, `--max-total-tokens`);
+    /// the spend of the folder's earlier runs counts.
+    pub budget: crate::results::ledger::Budget,
 }
 
 /// What a run did.
@@ -194,7 +233,7 @@ pub async fn run_tasks(
 ) -> Result<RunOutcome, ResultsError> {
     let root = &options.layout.root;
     std::fs::create_dir_all(root).map_err(|source| ResultsError::Io { path: root.clone(), source })?;
-    let plan = plan(tasks, options.shard, &options.layout, options.resume, options.order);
+    let plan = plan_trials(tasks, options.shard, &options.layout, options.resume, options.order, options.trials);
     let (todo, skipped) = (plan.todo.len(), plan.finished.len());
     // The whole list, so that a task that never starts still counts (the strict rate).
     let listed: Vec<&Task> = plan.todo.iter().chain(&plan.finished).collect();
@@ -210,6 +249,18 @@ pub async fn run_tasks(
         indicatif::ProgressBar::hidden()
     };
     let mut solved = 0u32;
+    let budget = options.budget;
+    let mut spent = crate::results::ledger::Spent::default();
+    if budget.is_set() {
+        for task in Summary::from_dir(root)?.tasks {
+            spent.add(task.tokens.as_ref(), task.cost_usd);
+        }
+    }
+    let mut stopped = budget.reached(&spent);
+    let no_new_tasks = options.pool.no_new_tasks.clone();
+    if stopped.is_some() {
+        no_new_tasks.cancel();
+    }
     let mut on_event = |event: PoolEvent<'_>| match event {
         PoolEvent::Started { task, guest, attempt } => {
             tracing::info!(task = %task.name, domain = %task.domain, guest, attempt, "task started");
@@ -217,6 +268,15 @@ pub async fn run_tasks(
         PoolEvent::Finished { task, result } => {
             if result.success() {
                 solved += 1;
+            }
+            spent.add(result.tokens.as_ref(), result.cost_usd);
+            if stopped.is_none() {
+                stopped = budget.reached(&spent);
+                if let Some(why) = &stopped {
+                    tracing::warn!(why, "the budget is spent: no new task starts");
+                    bar.println(format!("budget reached ({why}): no new task starts; running ones finish"));
+                    no_new_tasks.cancel();
+                }
             }
             tracing::info!(task = %task.name, domain = %task.domain, score = result.score, status = result.status.kind(), steps = result.steps, "task finished");
             bar.inc(1);
@@ -242,6 +302,10 @@ pub async fn run_tasks(
     };
     let report = run_pool(guests, plan.todo, runner, &options.pool, &mut on_event).await;
     bar.finish_and_clear();
+    if budget.is_set() {
+        let not_started = if stopped.is_some() { report.not_run.clone() } else { Vec::new() };
+        crate::results::ledger::BudgetRecord { budget, spent, stopped, not_started }.write(root)?;
+    }
     let (summary, path) = write_report(root, &options.title)?;
     Ok(RunOutcome { todo, skipped, pool: report, summary, report: path })
 }

@@ -65,6 +65,9 @@ pub struct PoolConfig {
     /// Cancelled to stop the run (the first Ctrl-C): no new task starts, the
     /// running episodes end at their next step, the rest are listed as not run.
     pub stop: CancellationToken,
+    /// Cancelled when the run's budget is spent (`--max-cost`, `--max-total-tokens`):
+    /// no new task starts, the running ones finish, the rest are listed as not run.
+    pub no_new_tasks: CancellationToken,
     /// Set when the pool owns its guests: snapshots restored before tasks, dead
     /// guests rebuilt instead of waited for.
     pub lifecycle: Option<Arc<dyn GuestLifecycle>>,
@@ -78,6 +81,7 @@ impl Default for PoolConfig {
             health_timeout: Duration::from_secs(5),
             no_guest_timeout: Duration::from_secs(600),
             stop: CancellationToken::new(),
+            no_new_tasks: CancellationToken::new(),
             lifecycle: None,
         }
     }
@@ -170,7 +174,7 @@ pub async fn run_pool(
     let mut idle_since: Option<Instant> = None;
 
     loop {
-        if config.stop.is_cancelled() {
+        if config.stop.is_cancelled() || config.no_new_tasks.is_cancelled() {
             for item in pending.drain(..) {
                 report.not_run.push(format!("{}/{}", item.task.domain, item.task.name));
             }

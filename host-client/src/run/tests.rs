@@ -288,3 +288,39 @@ fn task_lists_load_from_folders_and_indexes_and_report_every_broken_file() {
     let empty = tempfile::tempdir().unwrap();
     assert!(matches!(load_tasks(empty.path(), Difficulty::Normal), Err(LoadError::Empty { .. })));
 }
+
+#[test]
+fn trials_are_queued_trial_major_each_in_its_folder_and_resume_alone() {
+    let root = tempfile::tempdir().unwrap();
+    let layout = layout(root.path());
+    let all = tasks(3);
+    let names: Vec<String> = all.iter().map(|t| t.name.clone()).collect();
+    // Trial 1 of the second task is already finished (trial folder `1`).
+    let mut done = all[1].clone();
+    done.extra.insert(crate::results::TRIAL_KEY.into(), 1.into());
+    let dir = layout.task_dir(&done);
+    assert!(dir.path().ends_with(format!("1/{}/{}", done.domain, done.name)), "{}", dir.path().display());
+    dir.prepare().unwrap();
+    dir.write_result("1.0").unwrap();
+
+    let p = plan_trials(all.clone(), Shard::ALL, &layout, true, TaskOrder::Index, 3);
+    let queued: Vec<(u64, String)> =
+        p.todo.iter().map(|t| (crate::results::trial_of(t).unwrap(), t.name.clone())).collect();
+    let mut want = Vec::new();
+    for trial in 0..3u64 {
+        for (i, name) in names.iter().enumerate() {
+            if !(trial == 1 && i == 1) {
+                want.push((trial, name.clone()));
+            }
+        }
+    }
+    assert_eq!(queued, want, "every task of trial 0, then of trial 1, ...");
+    assert_eq!(p.finished.len(), 1);
+
+    // One trial: no mark, upstream's trial folder, and a task file cannot choose one.
+    let mut sneaky = all.clone();
+    sneaky[0].extra.insert(crate::results::TRIAL_KEY.into(), 7.into());
+    let p = plan_trials(sneaky, Shard::ALL, &layout, true, TaskOrder::Index, 1);
+    assert!(p.todo.iter().all(|t| crate::results::trial_of(t).is_none()));
+    assert_eq!(layout.task_dir(&p.todo[0]).path(), layout.base().join(&all[0].domain).join(&all[0].name));
+}

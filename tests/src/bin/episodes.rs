@@ -160,6 +160,8 @@ async fn pool_run(guests: &[Served], pause: Duration) -> anyhow::Result<(Duratio
         progress: false,
         title: "bench".into(),
         order: Default::default(),
+        trials: 1,
+        budget: Default::default(),
     };
     let clients = guests.iter().map(|g| client(&g.url)).collect::<anyhow::Result<Vec<_>>>()?;
     let started = Instant::now();

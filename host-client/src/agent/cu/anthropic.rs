@@ -274,6 +274,10 @@ impl Agent for AnthropicAgent {
         "anthropic-cu"
     }
 
+    fn take_usage(&mut self) -> Option<crate::agent::Usage> {
+        self.client.take_usage()
+    }
+
     async fn reset(&mut self, _task: &Task) {
         self.messages.clear();
         self.pending.clear();

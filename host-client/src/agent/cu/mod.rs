@@ -221,6 +221,7 @@ pub(crate) fn translated(
         logs,
         timings: Default::default(),
         coords: Some(arena_actionspace::Coords::Pixels),
+        usage: None,
     }
 }
 

@@ -128,6 +128,10 @@ impl Agent for OpenAiAgent {
         "openai-cu"
     }
 
+    fn take_usage(&mut self) -> Option<crate::agent::Usage> {
+        self.client.take_usage()
+    }
+
     async fn reset(&mut self, _task: &Task) {
         self.previous_response_id = None;
         self.pending = None;

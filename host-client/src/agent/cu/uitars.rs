@@ -135,6 +135,10 @@ impl Agent for UiTarsAgent {
         "ui-tars"
     }
 
+    fn take_usage(&mut self) -> Option<crate::agent::Usage> {
+        self.client.take_usage()
+    }
+
     async fn reset(&mut self, _task: &Task) {
         self.history.clear();
     }

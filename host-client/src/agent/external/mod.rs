@@ -447,6 +447,12 @@ pub fn prediction(
         logs,
         timings: Default::default(),
         coords: Some(coords),
+        usage: act.usage.map(|u| crate::agent::Usage {
+            input: u.input_tokens,
+            output: u.output_tokens,
+            cached: u.cached_tokens.min(u.input_tokens),
+            model_ms: u.model_ms,
+        }),
     })
 }
 

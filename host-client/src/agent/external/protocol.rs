@@ -147,6 +147,22 @@ pub struct Act {
     /// the element boxes `computer.mouse.move_id` resolves against.
     #[serde(default)]
     pub computer_update: Option<ComputerUpdate>,
+    /// What the step cost the agent's model, as the agent reports it (the cost ledger).
+    #[serde(default)]
+    pub usage: Option<ActUsage>,
+}
+
+/// An `act`'s optional `usage`: tokens the agent's model took for the step.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub struct ActUsage {
+    pub input_tokens: u64,
+    pub output_tokens: u64,
+    /// The part of `input_tokens` read from a prompt cache.
+    #[serde(default)]
+    pub cached_tokens: u64,
+    /// Wall time of the agent's model calls, in milliseconds.
+    #[serde(default)]
+    pub model_ms: u64,
 }
 
 /// The part of upstream's `/update_computer` arguments the harness uses.
