@@ -750,6 +750,8 @@ async fn a_mock_models_usage_is_the_tasks_and_the_runs_tokens_and_cost() {
         out.to_str().unwrap(),
         "--prices",
         prices.to_str().unwrap(),
+        // The mock answers only its scripted replies, not a preflight request.
+        "--no-preflight",
     ];
     let mut cli = arena_host::Cli::try_parse_from(words).expect("arguments parse");
     cli.connection.token = None;

@@ -205,7 +205,8 @@ async fn files_round_trip_with_hashes() {
 
 #[tokio::test]
 async fn exec_launch_and_open() {
-    let guest = start_guest(None).await;
+    // `/v1/exec` of a real command: the stub runs host processes only when told to.
+    let guest = StubGuest::start_with(|config| config.stub_host_exec = true).await;
     let c = client(guest.url());
     let argv: Vec<String> = if cfg!(windows) {
         vec!["cmd".into(), "/c".into(), "echo".into(), "hi there".into()]

@@ -64,7 +64,12 @@ struct Guest {
 }
 
 async fn start_guest_with(cdp_port: u16) -> Guest {
-    let stub = StubGuest::start_with(|config| config.cdp_port = cdp_port).await;
+    // Setup's `execute` steps run real commands here: the stub runs them only when told to.
+    let stub = StubGuest::start_with(|config| {
+        config.cdp_port = cdp_port;
+        config.stub_host_exec = true;
+    })
+    .await;
     let client =
         GuestClient::new(stub.url(), ClientConfig { token: None, timeout: Duration::from_secs(20), retries: 1 })
             .expect("client");

@@ -198,7 +198,8 @@ async fn file_and_folder_existence() {
 #[cfg(unix)]
 #[tokio::test]
 async fn vm_command_line_returns_stdout() {
-    let guest = start_guest().await;
+    // Real commands: the stub runs host processes only when told to.
+    let guest = start_guest_with(None, |config| config.stub_host_exec = true).await;
     check(
         &guest,
         json!({"type": "vm_command_line", "command": ["sh", "-c", "echo ms-python.python; exit 3"]}),
