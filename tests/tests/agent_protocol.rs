@@ -38,19 +38,6 @@ fn here() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/agent_protocol")
 }
 
-/// Whether `python3` runs here; without it, a loud skip (or a failure when required).
-fn python_available(test: &str) -> bool {
-    if Command::new("python3").arg("--version").output().is_ok_and(|o| o.status.success()) {
-        return true;
-    }
-    assert!(
-        std::env::var_os("ARENA_REQUIRE_PYTHON").is_none(),
-        "{test}: python3 not found and ARENA_REQUIRE_PYTHON is set"
-    );
-    println!("SKIPPED: {test}: python3 not found");
-    false
-}
-
 /// PYTHONPATH with the package and the test's agents.
 fn pythonpath() -> String {
     format!("{}:{}", repo().join("python").display(), here().display())
@@ -143,7 +130,7 @@ fn validate_logs(dir: &Path) -> (usize, usize, usize) {
 
 #[test]
 fn the_stub_tasks_through_an_exec_agent_in_four_action_spaces() {
-    if !python_available("the_stub_tasks_through_an_exec_agent_in_four_action_spaces") {
+    if !arena_test_support::python3_or_skip("the_stub_tasks_through_an_exec_agent_in_four_action_spaces") {
         return;
     }
     let tmp = tempfile::tempdir().expect("tmp");
@@ -189,7 +176,7 @@ fn http_agent(class: &str) -> (Child, String) {
 
 #[test]
 fn the_stub_tasks_through_an_http_agent() {
-    if !python_available("the_stub_tasks_through_an_http_agent") {
+    if !arena_test_support::python3_or_skip("the_stub_tasks_through_an_http_agent") {
         return;
     }
     let tmp = tempfile::tempdir().expect("tmp");
@@ -229,28 +216,28 @@ fn misbehaving(class: &str, cause: &str) {
 
 #[test]
 fn an_agent_that_prints_garbage_is_an_agent_error_and_the_run_goes_on() {
-    if python_available("an_agent_that_prints_garbage_is_an_agent_error_and_the_run_goes_on") {
+    if arena_test_support::python3_or_skip("an_agent_that_prints_garbage_is_an_agent_error_and_the_run_goes_on") {
         misbehaving("Garbage", "not JSON");
     }
 }
 
 #[test]
 fn an_agent_that_hangs_is_an_agent_error_and_the_run_goes_on() {
-    if python_available("an_agent_that_hangs_is_an_agent_error_and_the_run_goes_on") {
+    if arena_test_support::python3_or_skip("an_agent_that_hangs_is_an_agent_error_and_the_run_goes_on") {
         misbehaving("Hang", "no answer to observe within 3 s");
     }
 }
 
 #[test]
 fn an_agent_that_exits_is_an_agent_error_and_the_run_goes_on() {
-    if python_available("an_agent_that_exits_is_an_agent_error_and_the_run_goes_on") {
+    if arena_test_support::python3_or_skip("an_agent_that_exits_is_an_agent_error_and_the_run_goes_on") {
         misbehaving("Exit", "the agent process exited");
     }
 }
 
 #[test]
 fn the_step_protocol_example_agent_runs() {
-    if !python_available("the_step_protocol_example_agent_runs") {
+    if !arena_test_support::python3_or_skip("the_step_protocol_example_agent_runs") {
         return;
     }
     let tmp = tempfile::tempdir().expect("tmp");
@@ -317,7 +304,7 @@ fn upstream_navi_through_the_runner_asks_what_the_built_in_navi_asks() {
         println!("SKIPPED: {test}: ARENA_WAA_ROOT does not name a WindowsAgentArena checkout");
         return;
     };
-    if !python_available(test) {
+    if !arena_test_support::python3_or_skip(test) {
         return;
     }
     let tmp = tempfile::tempdir().expect("tmp");

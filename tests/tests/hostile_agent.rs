@@ -255,19 +255,6 @@ fn an_http_agent_sending_1_gib_until_it_closes_is_an_agent_error_and_the_run_sta
     huge_http_answer(Huge::UntilClose);
 }
 
-/// Whether `python3` runs here; without it, a loud skip (or a failure when required).
-fn python_available(test: &str) -> bool {
-    if Command::new("python3").arg("--version").output().is_ok_and(|o| o.status.success()) {
-        return true;
-    }
-    assert!(
-        std::env::var_os("ARENA_REQUIRE_PYTHON").is_none(),
-        "{test}: python3 not found and ARENA_REQUIRE_PYTHON is set"
-    );
-    println!("SKIPPED: {test}: python3 not found");
-    false
-}
-
 /// The `--agent exec` arguments of `hostile.py MODE ARG MARKER`.
 fn hostile(mode: &str, arg: &str, marker: &Path) -> Vec<String> {
     let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/hostile_agent/hostile.py");
@@ -285,7 +272,7 @@ fn run_hostile(tmp: &Path, mode: &str, arg: &str, extra: &[&str]) -> (ExitStatus
 #[test]
 fn an_act_of_a_million_actions_is_refused_at_once_and_the_run_goes_on() {
     let test = "an_act_of_a_million_actions_is_refused_at_once_and_the_run_goes_on";
-    if !python_available(test) {
+    if !arena_test_support::python3_or_skip(test) {
         return;
     }
     let tmp = tempfile::tempdir().expect("tmp");
@@ -301,7 +288,7 @@ fn an_act_of_a_million_actions_is_refused_at_once_and_the_run_goes_on() {
 #[test]
 fn sigterm_during_a_long_act_ends_the_run_with_its_summary() {
     let test = "sigterm_during_a_long_act_ends_the_run_with_its_summary";
-    if !python_available(test) {
+    if !arena_test_support::python3_or_skip(test) {
         return;
     }
     let tmp = tempfile::tempdir().expect("tmp");
@@ -370,14 +357,14 @@ fn task_dir(out: &Path, task: &str) -> PathBuf {
 
 #[test]
 fn a_flood_of_stderr_lines_leaves_a_run_log_under_its_cap() {
-    if python_available("a_flood_of_stderr_lines_leaves_a_run_log_under_its_cap") {
+    if arena_test_support::python3_or_skip("a_flood_of_stderr_lines_leaves_a_run_log_under_its_cap") {
         stderr_flood("lines");
     }
 }
 
 #[test]
 fn a_flood_of_stderr_without_a_newline_leaves_a_run_log_under_its_cap() {
-    if python_available("a_flood_of_stderr_without_a_newline_leaves_a_run_log_under_its_cap") {
+    if arena_test_support::python3_or_skip("a_flood_of_stderr_without_a_newline_leaves_a_run_log_under_its_cap") {
         stderr_flood("raw");
     }
 }
@@ -392,7 +379,7 @@ fn alive(pid: u32) -> bool {
 
 #[test]
 fn an_exec_agents_children_are_gone_after_its_run() {
-    if !python_available("an_exec_agents_children_are_gone_after_its_run") {
+    if !arena_test_support::python3_or_skip("an_exec_agents_children_are_gone_after_its_run") {
         return;
     }
     let tmp = tempfile::tempdir().expect("tmp");

@@ -31,18 +31,6 @@ fn repo() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
 }
 
-fn python_available(test: &str) -> bool {
-    if Command::new("python3").arg("--version").output().is_ok_and(|o| o.status.success()) {
-        return true;
-    }
-    assert!(
-        std::env::var_os("ARENA_REQUIRE_PYTHON").is_none(),
-        "{test}: python3 not found and ARENA_REQUIRE_PYTHON is set"
-    );
-    eprintln!("SKIPPED: {test}: python3 not found");
-    false
-}
-
 /// The cost of one step's usage, in USD, from the prices' definition.
 fn step_cost() -> f64 {
     ((INPUT - CACHED) as f64 * PRICE_INPUT + CACHED as f64 * PRICE_CACHED + OUTPUT as f64 * PRICE_OUTPUT) / 1e6
@@ -88,7 +76,7 @@ fn close(a: f64, b: f64) -> bool {
 #[test]
 fn an_exec_agents_usage_is_counted_per_step_task_domain_and_run_and_priced() {
     let test = "an_exec_agents_usage_is_counted_per_step_task_domain_and_run_and_priced";
-    if !python_available(test) {
+    if !arena_test_support::python3_or_skip(test) {
         return;
     }
     let tmp = tempfile::tempdir().expect("tmp");
@@ -141,7 +129,7 @@ fn an_exec_agents_usage_is_counted_per_step_task_domain_and_run_and_priced() {
 #[test]
 fn a_budget_stops_the_run_after_the_task_that_reaches_it() {
     let test = "a_budget_stops_the_run_after_the_task_that_reaches_it";
-    if !python_available(test) {
+    if !arena_test_support::python3_or_skip(test) {
         return;
     }
     let tmp = tempfile::tempdir().expect("tmp");

@@ -36,18 +36,6 @@ fn repo() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
 }
 
-fn python_available(test: &str) -> bool {
-    if Command::new("python3").arg("--version").output().is_ok_and(|o| o.status.success()) {
-        return true;
-    }
-    assert!(
-        std::env::var_os("ARENA_REQUIRE_PYTHON").is_none(),
-        "{test}: python3 not found and ARENA_REQUIRE_PYTHON is set"
-    );
-    eprintln!("SKIPPED: {test}: python3 not found");
-    false
-}
-
 fn arena() -> PathBuf {
     workspace_binary("arena-host", "arena").expect("the arena binary")
 }
@@ -111,7 +99,7 @@ fn assert_maps(row: &Value, at: &[f64], hat: &[f64], what: &str) {
 #[test]
 fn three_trials_of_a_flaky_agent_give_pass_at_k_pass_hat_k_and_flaky_tasks() {
     let test = "three_trials_of_a_flaky_agent_give_pass_at_k_pass_hat_k_and_flaky_tasks";
-    if !python_available(test) {
+    if !arena_test_support::python3_or_skip(test) {
         return;
     }
     let tmp = tempfile::tempdir().expect("tmp");
@@ -196,7 +184,7 @@ fn three_trials_of_a_flaky_agent_give_pass_at_k_pass_hat_k_and_flaky_tasks() {
 #[test]
 fn compare_lists_the_tasks_that_moved_each_way() {
     let test = "compare_lists_the_tasks_that_moved_each_way";
-    if !python_available(test) {
+    if !arena_test_support::python3_or_skip(test) {
         return;
     }
     let tmp = tempfile::tempdir().expect("tmp");

@@ -37,7 +37,7 @@ pub use corpus::{waa_corpus, CORPUS_VAR, REQUIRE_CORPUS_VAR, SKIP_PREFIX};
 #[cfg(feature = "guest")]
 pub use guest::StubGuest;
 pub use png::png_claiming;
-pub use process::{bench_guests, workspace_binary, Served, BENCH_GUESTS_VAR};
+pub use process::{bench_guests, python3_or_skip, workspace_binary, Served, BENCH_GUESTS_VAR};
 pub use standin::{standin_image, StandinImage, REQUIRE_QEMU_VAR, STANDIN_DIR_VAR};
 #[cfg(feature = "guest")]
 pub use wait::eventually;

@@ -2,7 +2,7 @@
 //! use with the cargo that runs the tests, started on port 0, and asked where they
 //! listen (their `listening on URL` line).
 
-use std::io::{BufRead, BufReader};
+use std::io::{BufRead, BufReader, Write as _};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::sync::OnceLock;
@@ -186,3 +186,22 @@ pub fn bench_guests() -> anyhow::Result<Vec<(String, PathBuf)>> {
 
 /// The variable [`bench_guests`] reads.
 pub const BENCH_GUESTS_VAR: &str = "ARENA_BENCH_GUESTS";
+
+/// Whether `python3` runs here. Without it the test is skipped loudly (a
+/// `SKIPPED: <test>: python3 not found` line on stderr, which libtest does not
+/// capture, so `./test.sh` counts it), or fails when `ARENA_REQUIRE_PYTHON` is set.
+///
+/// # Panics
+///
+/// When `python3` is missing and `ARENA_REQUIRE_PYTHON` is set.
+pub fn python3_or_skip(test: &str) -> bool {
+    if Command::new("python3").arg("--version").output().is_ok_and(|o| o.status.success()) {
+        return true;
+    }
+    assert!(
+        std::env::var_os("ARENA_REQUIRE_PYTHON").is_none(),
+        "{test}: python3 not found and ARENA_REQUIRE_PYTHON is set"
+    );
+    let _ = writeln!(std::io::stderr(), "SKIPPED: {test}: python3 not found");
+    false
+}
