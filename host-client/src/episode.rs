@@ -101,6 +101,9 @@ pub struct EpisodeConfig {
     /// The VMs' own displays, when the run owns its VMs: the observation's
     /// screenshot when the guest's capture fails or is black.
     pub screen_source: Option<Arc<dyn ScreenSource>>,
+    /// What the harness knows of the guests' surroundings, when the run owns its
+    /// VMs: a guest whose QEMU died is the environment's failure (run::blame).
+    pub guest_watch: Option<Arc<dyn blame::GuestWatch>>,
     /// The price of the run's model (`--prices`): each episode's tokens are priced into `cost_usd`.
     pub price: Option<crate::results::ledger::Price>,
 }
@@ -125,6 +128,7 @@ impl EpisodeConfig {
             cache,
             model: String::new(),
             screen_source: None,
+            guest_watch: None,
             price: None,
         }
     }
@@ -578,7 +582,15 @@ impl Episode {
                 Ok(seen) => seen,
                 // The guest went away after the step's actions ran: the agent's doing.
                 Err(EpisodeStatus::InfraError(err)) if acted.ran => {
-                    let status = blame::after_action(step, "observing after the action", err);
+                    let watch = play.config.guest_watch.as_deref();
+                    let status = blame::after_action_unless_outside(
+                        watch,
+                        play.client.base_url(),
+                        step,
+                        "observing after the action",
+                        err,
+                    )
+                    .await;
                     record.error = status.message().map(str::to_owned);
                     record.ended = true;
                     record.timings.act_ms = ms(t_act.elapsed());
@@ -719,7 +731,10 @@ impl Episode {
                     // The guest answered right before this step's actions: whatever
                     // became of it in one of them is the agent's (run::blame).
                     Ok(Err(ExecError::Guest(err))) => {
-                        return Err(blame::after_action(record.step, &format!("action {}", k + 1), err))
+                        let what = format!("action {}", k + 1);
+                        let watch = config.guest_watch.as_deref();
+                        let url = play.client.base_url();
+                        return Err(blame::after_action_unless_outside(watch, url, record.step, &what, err).await);
                     }
                     Ok(Err(err)) => record.outcomes.push(serde_json::json!({ "error": err.to_string() })),
                     Err(_) => {

@@ -781,6 +781,7 @@ pub async fn run(conn: &Connection, args: RunArgs) -> anyhow::Result<ExitCode> {
     if let Some(fleet) = &fleet {
         config.options.insert("vm_reset".into(), args.reset.to_string());
         config.screen_source = Some(Arc::clone(fleet) as Arc<dyn crate::ports::observe::ScreenSource>);
+        config.guest_watch = Some(Arc::clone(fleet) as Arc<dyn crate::run::blame::GuestWatch>);
     }
     if run_coords {
         config.exec.coords = args.coords;

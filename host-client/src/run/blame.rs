@@ -15,6 +15,10 @@
 //!   ([`after_action`]): the task is finished with score 0, "Failed by: agent",
 //!   and is not retried.
 //!
+//! - Unless the harness knows the environment failed on its own: a VM whose
+//!   QEMU was killed, crashed or was told to quit by the host ([`GuestWatch`])
+//!   is the environment's failure at any point of the step.
+//!
 //! It is not the pool: the pool only reads the status (an agent error is never
 //! retried) and asks the guest for its health afterwards to set a dead one aside.
 
@@ -34,6 +38,40 @@ pub enum Phase {
     Deciding,
     /// After at least one action of the step ran.
     Acting,
+}
+
+/// What the harness knows of a guest's surroundings (a VM fleet knows its QEMUs).
+#[async_trait::async_trait]
+pub trait GuestWatch: Send + Sync {
+    /// Why the guest at `guest` (its URL) stopped answering for a reason outside
+    /// it, when it did; `None` when nothing outside the guest failed.
+    async fn outside_failure(&self, guest: &str) -> Option<String>;
+}
+
+impl std::fmt::Debug for dyn GuestWatch {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("GuestWatch")
+    }
+}
+
+/// [`after_action`], unless `watch` knows the guest's environment failed on its
+/// own: then the environment's failure, unfinished and retried.
+pub async fn after_action_unless_outside(
+    watch: Option<&dyn GuestWatch>,
+    guest: &str,
+    step: u32,
+    what: &str,
+    err: impl std::fmt::Display,
+) -> EpisodeStatus {
+    if let Some(why) = match watch {
+        Some(watch) => watch.outside_failure(guest).await,
+        None => None,
+    } {
+        return EpisodeStatus::InfraError(format!(
+            "the guest stopped answering in step {step} ({what}): {err}; {why}, which no action of the agent does, so the failure is the environment's"
+        ));
+    }
+    after_action(step, what, err)
 }
 
 /// Whether `action` reaches the guest (anything but the decisions DONE, FAIL
@@ -88,6 +126,29 @@ mod tests {
         assert!(!guest_lost_by_agent(&deciding));
         assert!(!guest_lost_by_agent(&EpisodeStatus::AgentError("the plan is used up".into())));
         assert_eq!(crate::results::Blame::of(&acting, 0.0).name(), "agent");
+    }
+
+    struct Watch(Option<&'static str>);
+
+    #[async_trait::async_trait]
+    impl GuestWatch for Watch {
+        async fn outside_failure(&self, guest: &str) -> Option<String> {
+            assert_eq!(guest, "http://vm-1");
+            self.0.map(str::to_owned)
+        }
+    }
+
+    #[tokio::test]
+    async fn a_guest_whose_vm_was_killed_is_the_environments_failure_even_after_an_action() {
+        let killed = Watch(Some("QEMU ended (signal: 9 (SIGKILL))"));
+        let status = after_action_unless_outside(Some(&killed), "http://vm-1", 2, "action 1", "reset").await;
+        assert!(status.is_infra() && status.is_unfinished(), "{status:?}");
+        assert!(status.message().unwrap_or_default().contains("SIGKILL"), "{status:?}");
+        let alive = Watch(None);
+        let status = after_action_unless_outside(Some(&alive), "http://vm-1", 2, "action 1", "reset").await;
+        assert!(guest_lost_by_agent(&status), "{status:?}");
+        let status = after_action_unless_outside(None, "http://vm-1", 2, "action 1", "reset").await;
+        assert!(guest_lost_by_agent(&status), "{status:?}");
     }
 
     #[test]

@@ -5,7 +5,7 @@
 //! overlay's snapshot (or, failing that, from a new overlay).
 
 use std::str::FromStr;
-use std::time::Instant;
+use std::time::{Duration, Instant};
 
 use arena_shared::observation::ScreenshotQuery;
 use tokio::sync::Mutex;
@@ -278,6 +278,32 @@ impl GuestLifecycle for VmFleet {
         state.first = true;
         state.rebuilt = true;
         Ok(())
+    }
+}
+
+/// How long a guest that stopped answering waits for its QEMU's exit to show:
+/// a killed process closes its sockets a moment before it can be reaped.
+const EXIT_SHOWS_WITHIN: Duration = Duration::from_secs(1);
+
+#[async_trait::async_trait]
+impl crate::run::blame::GuestWatch for VmFleet {
+    async fn outside_failure(&self, guest: &str) -> Option<String> {
+        let slot = self.slots.iter().find(|s| s.url == guest)?;
+        let until = Instant::now() + EXIT_SHOWS_WITHIN;
+        loop {
+            {
+                let mut state = slot.state.lock().await;
+                let name = state.config.name.clone();
+                let Some(vm) = state.vm.as_mut() else { return Some(format!("VM {name} is not running")) };
+                if let Some(why) = vm.ended_outside_guest() {
+                    return Some(format!("VM {name}: {why}"));
+                }
+            }
+            if Instant::now() >= until {
+                return None;
+            }
+            tokio::time::sleep(Duration::from_millis(50)).await;
+        }
     }
 }
 

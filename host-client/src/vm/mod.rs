@@ -467,6 +467,24 @@ impl Vm {
         }
     }
 
+    /// Whether QEMU has ended for a reason outside the guest, and which: killed
+    /// or crashed (an exit by a signal or with an error), or told to quit by the
+    /// host. `None` while it runs, and when it ended because the guest powered off.
+    pub fn ended_outside_guest(&mut self) -> Option<String> {
+        let status = match self.child.try_wait() {
+            Ok(Some(status)) => status,
+            Ok(None) => return None,
+            Err(err) => return Some(format!("QEMU's state is unknown: {err}")),
+        };
+        if !status.success() {
+            return Some(format!("QEMU ended ({status})"));
+        }
+        match self.qmp.shutdown_reason() {
+            Some(reason) if reason.starts_with("host") => Some(format!("QEMU quit at the host's request ({reason})")),
+            _ => None,
+        }
+    }
+
     /// Waits until the guest reports every component up, or `within` passes, or
     /// QEMU exits.
     ///

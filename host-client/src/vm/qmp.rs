@@ -3,6 +3,7 @@
 //! events (reset, shutdown) as names on a broadcast channel.
 
 use std::path::Path;
+use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
 use futures_util::StreamExt;
@@ -23,6 +24,13 @@ type Service = QapiService<QmpStreamTokio<WriteHalf<UnixStream>>>;
 /// One negotiated QMP connection.
 pub struct Qmp {
     service: Service,
+    /// Held by one command from before it is sent until it ends, so that a
+    /// failed call is known before the next one starts (see [`Qmp::execute`]).
+    turn: Arc<tokio::sync::Mutex<()>>,
+    /// Why the connection can carry no more commands, once it cannot.
+    broken: Arc<Mutex<Option<String>>>,
+    /// The `reason` of the last `SHUTDOWN` event (`guest-shutdown`, `host-signal`, ...).
+    shutdown: Arc<Mutex<Option<String>>>,
     events: broadcast::Sender<String>,
     reader: tokio::task::JoinHandle<()>,
     /// Deadline of one command.
@@ -76,16 +84,24 @@ impl Qmp {
         let (service, mut events) = stream.into_parts();
         let (tx, _) = broadcast::channel(64);
         let sender = tx.clone();
+        let broken = Arc::new(Mutex::new(None));
+        let reader_broken = Arc::clone(&broken);
+        let shutdown = Arc::new(Mutex::new(None));
+        let reader_shutdown = Arc::clone(&shutdown);
         // The reader delivers command answers to `service` and events to the channel.
         let reader = tokio::spawn(async move {
             let mut errors = 0u32;
             while let Some(item) = events.next().await {
                 match item {
                     Ok(event) => {
-                        let name = serde_json::to_value(&event)
-                            .ok()
-                            .and_then(|v| v.get("event").and_then(|e| e.as_str()).map(str::to_owned))
-                            .unwrap_or_else(|| "UNKNOWN".to_owned());
+                        let value = serde_json::to_value(&event).unwrap_or_default();
+                        let name = value.get("event").and_then(|e| e.as_str()).unwrap_or("UNKNOWN").to_owned();
+                        if name == "SHUTDOWN" {
+                            let reason = value.pointer("/data/reason").and_then(|r| r.as_str()).unwrap_or("unknown");
+                            if let Ok(mut slot) = reader_shutdown.lock() {
+                                *slot = Some(reason.to_owned());
+                            }
+                        }
                         tracing::debug!(event = %name, "QMP event");
                         let _ = sender.send(name);
                     }
@@ -100,9 +116,24 @@ impl Qmp {
                     }
                 }
             }
+            mark_broken(&reader_broken, "QEMU closed the monitor connection");
             let _ = sender.send(CLOSED.to_owned());
         });
-        Ok(Qmp { service, events: tx, reader, timeout: Duration::from_secs(30) })
+        Ok(Qmp {
+            service,
+            turn: Arc::default(),
+            broken,
+            shutdown,
+            events: tx,
+            reader,
+            timeout: Duration::from_secs(30),
+        })
+    }
+
+    /// Why QEMU last said it shuts down (the `reason` of its `SHUTDOWN` event:
+    /// `guest-shutdown` when the guest powered off, `host-...` when the host asked).
+    pub fn shutdown_reason(&self) -> Option<String> {
+        self.shutdown.lock().ok().and_then(|slot| slot.clone())
     }
 
     /// The VM's events from now on, by name (`RESET`, `SHUTDOWN`, `STOP`, ...;
@@ -120,16 +151,42 @@ impl Qmp {
         // The call runs as its own task, so that a deadline here (or a caller's
         // own timeout around this) never drops it midway. QEMU's monitor here
         // answers without command ids, so qapi gives every command id 0 and
-        // holds the connection until the answer comes; a call dropped after
-        // sending leaves its id pending, and the next command then panics
-        // inside qapi ("QAPI duplicate command id 0"), aborting the program.
-        // A call left running keeps its place: later ones wait behind it and
-        // meet their own deadlines.
-        let call = tokio::spawn(self.service.execute(command));
+        // files it as pending until its answer comes; a second command filed
+        // while one is pending panics inside qapi ("QAPI duplicate command id
+        // 0") and poisons its lock. Two ways leave one pending: a call dropped
+        // after sending, and a send that fails because QEMU is going away
+        // (qapi files the command before writing it and does not take it back).
+        // So each call holds `turn` from before it is filed until it ends, and
+        // one that fails on the connection marks it broken under that turn:
+        // the next call sees the mark and never reaches qapi. A call left
+        // running past its deadline keeps its turn; later ones wait behind it
+        // and meet their own deadlines.
+        let turn = Arc::clone(&self.turn);
+        let broken = Arc::clone(&self.broken);
+        let service_call = self.service.execute(command);
+        let call = tokio::spawn(async move {
+            let _turn = turn.lock_owned().await;
+            if let Some(why) = broken.lock().map_err(|_| "a monitor call failed".to_owned())?.clone() {
+                return Err(why);
+            }
+            match service_call.await {
+                Ok(ok) => Ok(ok),
+                // An answer this schema cannot read: the connection is still good.
+                Err(qapi::ExecuteError::Io(err)) if err.kind() != std::io::ErrorKind::InvalidData => {
+                    let why = format!("the monitor connection failed: {err}");
+                    mark_broken(&broken, &why);
+                    Err(why)
+                }
+                Err(err) => Err(err.to_string()),
+            }
+        });
         match tokio::time::timeout(timeout, call).await {
             Ok(Ok(Ok(ok))) => Ok(ok),
             Ok(Ok(Err(err))) => Err(qmp_error(name, err)),
-            Ok(Err(err)) => Err(qmp_error(name, format!("the call ended abnormally: {err}"))),
+            Ok(Err(err)) => {
+                mark_broken(&self.broken, "a monitor call ended abnormally");
+                Err(qmp_error(name, format!("the call ended abnormally: {err}")))
+            }
             Err(_) => Err(qmp_error(name, format!("no answer in {} s", timeout.as_secs()))),
         }
     }
@@ -259,6 +316,53 @@ impl Qmp {
 /// The event name sent when the QMP connection ends.
 pub const CLOSED: &str = "QMP_CLOSED";
 
+/// Records the first reason the connection cannot carry commands.
+fn mark_broken(broken: &Mutex<Option<String>>, why: &str) {
+    if let Ok(mut slot) = broken.lock() {
+        slot.get_or_insert_with(|| why.to_owned());
+    }
+}
+
 fn qmp_error(what: &str, err: impl std::fmt::Display) -> VmError {
     VmError::Qmp { what: what.to_owned(), message: err.to_string() }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use tokio::io::{AsyncBufReadExt, AsyncWriteExt, BufReader};
+
+    /// A monitor that greets, accepts the capabilities, then hangs up on the
+    /// first command: that command fails, and every later one fails at once
+    /// naming why, without reaching qapi (whose pending command 0 would make
+    /// the next one panic).
+    #[tokio::test]
+    async fn a_monitor_that_hangs_up_fails_every_later_command_without_a_panic() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("qmp.sock");
+        let listener = tokio::net::UnixListener::bind(&path).unwrap();
+        let server = tokio::spawn(async move {
+            let (stream, _) = listener.accept().await.unwrap();
+            let (read, mut write) = stream.into_split();
+            let mut lines = BufReader::new(read).lines();
+            write
+                .write_all(b"{\"QMP\": {\"version\": {\"qemu\": {\"micro\": 0, \"minor\": 2, \"major\": 8}, \"package\": \"\"}, \"capabilities\": []}}\r\n")
+                .await
+                .unwrap();
+            let negotiate = lines.next_line().await.unwrap().unwrap_or_default();
+            assert!(negotiate.contains("qmp_capabilities"), "{negotiate}");
+            write.write_all(b"{\"return\": {}}\r\n").await.unwrap();
+            let first = lines.next_line().await.unwrap().unwrap_or_default();
+            first
+        });
+        let qmp = Qmp::connect(&path, Duration::from_secs(5)).await.unwrap();
+        let first = qmp.status().await.unwrap_err().to_string();
+        let sent = server.await.unwrap();
+        assert!(sent.contains("query-status"), "{sent}");
+        assert!(first.contains("query-status"), "{first}");
+        for _ in 0..3 {
+            let later = qmp.quit().await.unwrap_err().to_string();
+            assert!(later.contains("quit") && later.contains("monitor connection"), "{later}");
+        }
+    }
 }
