@@ -476,13 +476,7 @@ impl Vm {
             Ok(None) => return None,
             Err(err) => return Some(format!("QEMU's state is unknown: {err}")),
         };
-        if !status.success() {
-            return Some(format!("QEMU ended ({status})"));
-        }
-        match self.qmp.shutdown_reason() {
-            Some(reason) if reason.starts_with("host") => Some(format!("QEMU quit at the host's request ({reason})")),
-            _ => None,
-        }
+        outside_guest(status, self.qmp.shutdown_reason().as_deref())
     }
 
     /// Waits until the guest reports every component up, or `within` passes, or
@@ -743,6 +737,20 @@ pub fn log_tail(path: &Path) -> String {
     format!(": {}", lines[start..].join(" | "))
 }
 
+/// Why a QEMU that ended with `status`, after a `SHUTDOWN` event of `reason`
+/// if any, ended for a cause outside its guest: an exit by a signal or with an
+/// error code (killed, crashed), or a clean exit the host asked for (QEMU's
+/// `host-...` reasons). `None` for a clean exit the guest caused (it powered off).
+fn outside_guest(status: std::process::ExitStatus, reason: Option<&str>) -> Option<String> {
+    if !status.success() {
+        return Some(format!("QEMU ended ({status})"));
+    }
+    match reason {
+        Some(reason) if reason.starts_with("host") => Some(format!("QEMU quit at the host's request ({reason})")),
+        _ => None,
+    }
+}
+
 /// The VM's display as QEMU's `screendump` gives it.
 #[derive(Debug, Clone)]
 pub struct ScreenDump {
@@ -777,6 +785,23 @@ pub fn folder_drive(folder: &Path, removable: bool) -> FolderDrive {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// QEMU killed (signal 9), crashed (signal 11, exit 1) or quit by the host is
+    /// the environment's; a guest that powered off (exit 0) is not.
+    #[cfg(unix)]
+    #[test]
+    fn a_qemu_that_ended_outside_its_guest_is_told_from_a_guest_that_powered_off() {
+        use std::os::unix::process::ExitStatusExt;
+        let status = std::process::ExitStatus::from_raw;
+        let killed = outside_guest(status(9), None).unwrap();
+        assert!(killed.contains("signal: 9"), "{killed}");
+        assert!(outside_guest(status(11), Some("guest-shutdown")).is_some());
+        assert!(outside_guest(status(1 << 8), None).unwrap().contains("exit status: 1"));
+        let quit = outside_guest(status(0), Some("host-signal")).unwrap();
+        assert!(quit.contains("host-signal"), "{quit}");
+        assert_eq!(outside_guest(status(0), Some("guest-shutdown")), None);
+        assert_eq!(outside_guest(status(0), None), None);
+    }
 
     /// A child started with the hook (as prepare starts `qemu-img`) dies when the
     /// process that started it ends: this test runs itself again as that parent.
