@@ -82,6 +82,22 @@ pub fn render(summary: &Summary, found: &[FoundTask], title: &str) -> String {
             missing.join(", ")
         );
     }
+    if let Some(words) = summary.pooled_words() {
+        let _ = writeln!(html, "<p class=\"warn\" id=\"pooled\">{}</p>", escape(&words));
+        html.push_str("<table id=\"agents\"><tr><th>Agent and model</th><th>Tasks</th><th>Success rate</th><th>Strict rate</th><th>Unfinished</th></tr>\n");
+        for row in &summary.agents {
+            let _ = writeln!(
+                html,
+                "<tr><td>{}</td><td>{}</td><td>{:.1}%</td><td>{:.1}%</td><td>{}</td></tr>",
+                escape(&row.domain),
+                row.tasks,
+                row.success_rate,
+                row.strict_rate,
+                row.unfinished
+            );
+        }
+        html.push_str("</table>\n");
+    }
     html.push_str(&trials_html(summary));
     html.push_str(&ledger_html(summary));
     html.push_str("<h2>Success per domain</h2>\n");

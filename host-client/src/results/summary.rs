@@ -176,6 +176,10 @@ pub struct Summary {
     /// The tasks whose finished trials both passed and failed (`arena run --trials K`).
     #[serde(default)]
     pub flaky_tasks: Vec<FlakyTask>,
+    /// One row per agent and model (`<action space>/<observation>/<model>`) when
+    /// the folder holds more than one: the rows above pool them, and say so.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub agents: Vec<DomainRow>,
     /// The run's budget (`--max-cost`, `--max-total-tokens`): limits, spend, and
     /// whether it stopped the run starting tasks (`budget.json`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -235,6 +239,7 @@ impl Summary {
             .collect();
         let all: Vec<&TaskRow> = tasks.iter().collect();
         let overall = domain_row("Overall", &all, never_started.len());
+        let agents = agent_rows(&tasks, &never_started);
         let mut missing: Vec<MissingTask> = tasks
             .iter()
             .filter(|t| t.score.is_none())
@@ -267,7 +272,20 @@ impl Summary {
                 passes: t.passes,
             })
             .collect();
-        Summary { overall, domains, groups, tasks, options, trials, missing, flaky_tasks, budget: None }
+        Summary { overall, domains, groups, tasks, options, trials, missing, flaky_tasks, agents, budget: None }
+    }
+
+    /// The words that say the rows pool different agents or models, or `None`
+    /// when the folder holds one.
+    pub fn pooled_words(&self) -> Option<String> {
+        (self.agents.len() > 1).then(|| {
+            let names: Vec<&str> = self.agents.iter().map(|a| a.domain.as_str()).collect();
+            format!(
+                "This folder holds the results of {} different agents or models ({}): every rate above pools them into one row, which compares nothing. The rows by agent give each alone; `arena report` on one agent's folder gives its full report.",
+                names.len(),
+                names.join(", ")
+            )
+        })
     }
 
     /// The words that mark an incomplete run, or `None` when every task has a result.
@@ -469,6 +487,23 @@ impl Summary {
         if let Some(words) = self.incomplete_words() {
             let _ = writeln!(md, "**{words}**\n");
         }
+        if let Some(words) = self.pooled_words() {
+            let _ = writeln!(md, "**{words}**\n");
+            md.push_str("| Agent and model | Tasks | Success rate | Strict rate | Solved | Unfinished |\n|---|---:|---:|---:|---:|---:|\n");
+            for row in &self.agents {
+                let _ = writeln!(
+                    md,
+                    "| {} | {} | {:.1}% | {:.1}% | {} | {} |",
+                    md_escape(&row.domain),
+                    row.tasks,
+                    row.success_rate,
+                    row.strict_rate,
+                    row.successes,
+                    row.unfinished
+                );
+            }
+            md.push('\n');
+        }
         if !self.options.is_empty() {
             let list: Vec<String> = self.options.iter().map(|(k, v)| format!("{k}={}", v.join("|"))).collect();
             let _ = writeln!(md, "Options in force: {}.\n", list.join(", "));
@@ -661,6 +696,32 @@ pub(crate) struct TaskTrials<'a> {
     pub passes: u32,
     /// The mean score of the finished trials.
     pub mean_score: f64,
+}
+
+/// The agent-and-model level of a task folder's path (`<action space>/<observation>/<model>`,
+/// everything above the trial, domain and task levels).
+fn agent_of(path: &str) -> &str {
+    path.rsplitn(4, '/').nth(3).unwrap_or("")
+}
+
+/// [`Summary::agents`]: a row per agent and model when there is more than one.
+fn agent_rows(tasks: &[TaskRow], never_started: &[MissingTask]) -> Vec<DomainRow> {
+    let mut by_agent: BTreeMap<&str, Vec<&TaskRow>> = BTreeMap::new();
+    for row in tasks {
+        by_agent.entry(agent_of(&row.path)).or_default().push(row);
+    }
+    for m in never_started {
+        by_agent.entry(agent_of(&m.path)).or_default();
+    }
+    if by_agent.len() < 2 {
+        return Vec::new();
+    }
+    by_agent
+        .iter()
+        .map(|(agent, rows)| {
+            domain_row(agent, rows, never_started.iter().filter(|m| agent_of(&m.path) == *agent).count())
+        })
+        .collect()
 }
 
 /// A task's identity across trials: its path without the trial level

@@ -273,6 +273,38 @@ fn the_summary_gives_the_papers_table() {
     assert!(md.contains("plan used up"), "{md}");
 }
 
+#[test]
+fn a_folder_of_two_agents_says_its_rows_pool_them_and_gives_each_alone() {
+    let root = tempfile::tempdir().unwrap();
+    write_task(root.path(), "notepad", "a", 1.0, EpisodeStatus::Completed);
+    write_task(root.path(), "notepad", "b", 1.0, EpisodeStatus::Completed);
+    let one = Summary::from_dir(root.path()).unwrap();
+    assert!(one.agents.is_empty() && one.pooled_words().is_none(), "{:?}", one.agents);
+    assert!(!one.markdown().contains("different agents"));
+    // A second agent's results in the same folder: a different model level.
+    let other = RunLayout { model: "external-0badc0de".into(), ..layout(root.path()) };
+    for (name, score) in [("a", 0.0), ("b", 0.0)] {
+        let dir = other.task_dir(&task("notepad", name));
+        dir.prepare().unwrap();
+        dir.finish(&episode("notepad", name, score, EpisodeStatus::Completed, 2), Some(&reset()), &[step(1)]).unwrap();
+    }
+    let both = Summary::from_dir(root.path()).unwrap();
+    assert_eq!(both.overall.success_rate, 50.0);
+    let rows: Vec<(&str, u32, f64)> =
+        both.agents.iter().map(|r| (r.domain.as_str(), r.tasks, r.success_rate)).collect();
+    assert_eq!(
+        rows,
+        vec![("scripted/a11y_tree/external-0badc0de", 2, 0.0), ("scripted/a11y_tree/meta_llama_3", 2, 100.0)]
+    );
+    let words = both.pooled_words().unwrap();
+    assert!(words.contains("2 different agents or models"), "{words}");
+    let md = both.markdown();
+    assert!(md.contains(&words), "{md}");
+    assert!(md.contains("| scripted/a11y_tree/meta_llama_3 | 2 | 100.0% | 100.0% | 2 | 0 |"), "{md}");
+    let html = super::html::render(&both, &[], "t");
+    assert!(html.contains("id=\"pooled\"") && html.contains("external-0badc0de"), "{html}");
+}
+
 /// (tasks, rate) of a set of tasks.
 type Rate = (usize, f64);
 
