@@ -431,7 +431,12 @@ impl Episode {
             let detail = post.last().map(|r| r.detail.clone()).unwrap_or_default();
             return Err(EpisodeStatus::InfraError(format!("postconfig {detail}")));
         }
-        let ectx = EvalContext { client: client.clone(), cache: config.cache.clone(), work_dir: out.eval_dir() };
+        let ectx = EvalContext {
+            client: client.clone(),
+            cache: config.cache.clone(),
+            work_dir: out.eval_dir(),
+            task_dir: task.path.parent().map(std::path::Path::to_path_buf),
+        };
         let outcome = arena_eval::evaluate(&ectx, &task.evaluator, last.as_ref()).await;
         self.result.eval_ms = ms(eval_started.elapsed());
         self.release_keys(client).await;

@@ -242,10 +242,8 @@ fn the_step_protocol_example_agent_runs() {
     }
     let tmp = tempfile::tempdir().expect("tmp");
     let tasks = tmp.path().join("tasks/mixed");
-    std::fs::create_dir_all(&tasks).expect("tasks");
-    for file in ["notepad/stub-notepad-draft.json", "settings/stub-settings-infeasible.json"] {
-        let from = repo().join("tasks/stub/examples").join(file);
-        std::fs::copy(&from, tasks.join(from.file_name().expect("name"))).expect("copy");
+    for (domain, name) in [("notepad", "stub-notepad-draft"), ("settings", "stub-settings-infeasible")] {
+        arena_test_support::copy_stub_task(domain, name, &tasks);
     }
     let out = tmp.path().join("out");
     let exe = workspace_binary("arena-host", "arena").expect("the arena binary");
@@ -268,13 +266,7 @@ fn the_step_protocol_example_agent_runs() {
 /// The first request a mock model was sent for `arena run ARGS` on the draft task, one step.
 fn first_request(tmp: &Path, label: &str, args: &[&str], env: &[(&str, String)]) -> Value {
     let model = mock_model::start("Saving.\n```decision\nDONE\n```").expect("a mock model");
-    let tasks = tmp.join(label).join("tasks/notepad");
-    std::fs::create_dir_all(&tasks).expect("tasks");
-    std::fs::copy(
-        repo().join("tasks/stub/examples/notepad/stub-notepad-draft.json"),
-        tasks.join("stub-notepad-draft.json"),
-    )
-    .expect("copy");
+    arena_test_support::copy_stub_task("notepad", "stub-notepad-draft", &tmp.join(label).join("tasks/notepad"));
     let exe = workspace_binary("arena-host", "arena").expect("the arena binary");
     let mut cmd = Command::new(exe);
     cmd.args(["run", "--stub-guests", "1", "--pauses", "fast", "--max-steps", "1", "--tasks"])

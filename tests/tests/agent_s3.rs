@@ -102,12 +102,7 @@ fn agent_s3_from_gui_agents_solves_a_stub_task_through_the_step_protocol() {
     let Some(python) = gui_agents_python(test) else { return };
     let tmp = tempfile::tempdir().expect("tmp");
     let tasks = tmp.path().join("tasks/notepad");
-    std::fs::create_dir_all(&tasks).expect("tasks");
-    std::fs::copy(
-        repo().join("tasks/stub/examples/notepad/stub-notepad-draft.json"),
-        tasks.join("stub-notepad-draft.json"),
-    )
-    .expect("copy the task");
+    arena_test_support::copy_stub_task("notepad", "stub-notepad-draft", &tasks);
     let log = tmp.path().join("models.jsonl");
     let mocks = Mocks::start(&python, &log);
 

@@ -30,14 +30,14 @@ const VICTIM: &str = "stub-notepad-count";
 
 /// The stub tasks' examples, copied beside an index of four of them.
 fn corpus(dir: &Path) -> PathBuf {
-    let stub = Path::new(env!("CARGO_MANIFEST_DIR")).join("../tasks/stub/examples");
-    for domain in ["settings", "notepad"] {
-        let to = dir.join("examples").join(domain);
-        std::fs::create_dir_all(&to).expect("a domain folder");
-        for entry in std::fs::read_dir(stub.join(domain)).expect("the stub tasks") {
-            let entry = entry.expect("an entry");
-            std::fs::copy(entry.path(), to.join(entry.file_name())).expect("a task copied");
-        }
+    let tasks = [
+        ("settings", "stub-settings-infeasible"),
+        ("notepad", "stub-notepad-count"),
+        ("notepad", "stub-notepad-append"),
+        ("notepad", "stub-notepad-draft"),
+    ];
+    for (domain, name) in tasks {
+        arena_test_support::copy_stub_task(domain, name, &dir.join("examples").join(domain));
     }
     let index = dir.join("test_some.json");
     let text = r#"{"settings": ["stub-settings-infeasible"], "notepad": ["stub-notepad-count", "stub-notepad-append", "stub-notepad-draft"]}"#;

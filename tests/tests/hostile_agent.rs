@@ -35,17 +35,10 @@ const VICTIM: &str = "stub-notepad-append";
 /// Runs first (`--order sorted`: its domain sorts before the victim's).
 const OTHER: &str = "stub-explorer-open-folder";
 
-fn repo() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
-}
-
 /// A task folder with the victim and one other stub task.
 fn tasks(tmp: &Path) -> PathBuf {
     for (domain, name) in [("notepad", VICTIM), ("file_explorer", OTHER)] {
-        let dir = tmp.join("tasks").join(domain);
-        std::fs::create_dir_all(&dir).expect("tasks");
-        let from = repo().join(format!("tasks/stub/examples/{domain}/{name}.json"));
-        std::fs::copy(&from, dir.join(format!("{name}.json"))).expect("copy a task");
+        arena_test_support::copy_stub_task(domain, name, &tmp.join("tasks").join(domain));
     }
     tmp.join("tasks")
 }

@@ -28,11 +28,8 @@ fn repo() -> PathBuf {
 
 /// Two stub tasks in a task folder of their own.
 fn two_tasks(root: &Path) -> PathBuf {
-    let dir = root.join("tasks/notepad");
-    std::fs::create_dir_all(&dir).expect("task folder");
     for name in ["stub-notepad-count", "stub-notepad-draft"] {
-        let from = repo().join(format!("tasks/stub/examples/notepad/{name}.json"));
-        std::fs::copy(&from, dir.join(format!("{name}.json"))).expect("copy a stub task");
+        arena_test_support::copy_stub_task("notepad", name, &root.join("tasks/notepad"));
     }
     root.join("tasks")
 }
@@ -256,10 +253,8 @@ fn the_python_mcp_example_plays_two_stub_tasks() {
     let Some(python) = python_with_mcp("the_python_mcp_example_plays_two_stub_tasks") else { return };
     let tmp = tempfile::tempdir().expect("tmp");
     let tasks = tmp.path().join("tasks/mixed");
-    std::fs::create_dir_all(&tasks).expect("tasks");
-    for file in ["notepad/stub-notepad-draft.json", "settings/stub-settings-infeasible.json"] {
-        let from = repo().join("tasks/stub/examples").join(file);
-        std::fs::copy(&from, tasks.join(from.file_name().expect("name"))).expect("copy");
+    for (domain, name) in [("notepad", "stub-notepad-draft"), ("settings", "stub-settings-infeasible")] {
+        arena_test_support::copy_stub_task(domain, name, &tasks);
     }
     let out = tmp.path().join("out");
     let (child, url) = start_run(&tmp.path().join("tasks"), &out);

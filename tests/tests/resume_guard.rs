@@ -15,10 +15,7 @@ use arena_test_support::workspace_binary;
 fn tasks(dir: &Path, name: &str, tasks: &[(&str, &str)]) -> PathBuf {
     let root = dir.join(name);
     for (domain, task) in tasks {
-        let to = root.join(domain);
-        std::fs::create_dir_all(&to).expect("a task folder");
-        let from = Path::new(env!("CARGO_MANIFEST_DIR")).join(format!("../tasks/stub/examples/{domain}/{task}.json"));
-        std::fs::copy(from, to.join(format!("{task}.json"))).expect("the task");
+        arena_test_support::copy_stub_task(domain, task, &root.join(domain));
     }
     root
 }

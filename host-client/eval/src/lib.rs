@@ -58,6 +58,8 @@ pub struct EvalContext {
     pub cache: DownloadCache,
     /// Per-task folder where getters put `dest` files; created when needed.
     pub work_dir: PathBuf,
+    /// The folder of the task file, where `host_file` reads (None: no such getter works).
+    pub task_dir: Option<PathBuf>,
 }
 
 /// The agent's final control word.

@@ -18,7 +18,7 @@ fn offline_ctx(dir: &Path) -> EvalContext {
     let config = ClientConfig { token: None, timeout: Duration::from_secs(2), retries: 0 };
     let client = GuestClient::new("http://127.0.0.1:9", config).expect("client");
     let cache = DownloadCache::new(dir.join("cache")).expect("cache");
-    EvalContext { client, cache, work_dir: dir.join("work") }
+    EvalContext { client, cache, work_dir: dir.join("work"), task_dir: None }
 }
 
 fn evaluator(value: Value) -> Evaluator {

@@ -4,7 +4,9 @@
 //!
 //! It talks to no guest and downloads nothing. A file that does not load is
 //! an error (exit code 1) naming the file and the problem; a getter or metric
-//! this build lacks is reported, and is an error only with `--strict`.
+//! this build lacks is reported, and is an error only with `--strict`. A task
+//! whose setup puts its own expected side into the guest is warned about
+//! (`arena_task::gold`): the agent could read the answer.
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -51,6 +53,9 @@ pub struct TaskReport {
     pub apps: Vec<String>,
     /// Steps, getters and metrics this build does not implement.
     pub unsupported: Vec<String>,
+    /// What is wrong with the task though it runs: setup steps that hand the
+    /// agent the expected side ([`arena_task::gold::exposed_answers`]).
+    pub warnings: Vec<String>,
 }
 
 impl TaskReport {
@@ -73,6 +78,7 @@ impl TaskReport {
             metrics: needs.metrics,
             apps: needs.apps,
             unsupported,
+            warnings: arena_task::gold::exposed_answers(task),
         }
     }
 
@@ -96,6 +102,8 @@ pub struct Totals {
     pub metrics_implemented: usize,
     /// Each unimplemented name with the number of tasks that need it.
     pub missing: BTreeMap<String, usize>,
+    /// Tasks with at least one warning.
+    pub warned: usize,
 }
 
 /// The whole report.
@@ -120,6 +128,7 @@ impl Report {
         let (mut steps, mut getters, mut metrics) = (BTreeMap::new(), BTreeMap::new(), BTreeMap::new());
         for task in &tasks {
             totals.supported += usize::from(task.supported());
+            totals.warned += usize::from(!task.warnings.is_empty());
             for name in &task.unsupported {
                 *totals.missing.entry(name.clone()).or_insert(0) += 1;
             }
@@ -160,6 +169,11 @@ impl Report {
         for error in &self.errors {
             out.push_str(&format!("error: {error}\n"));
         }
+        for task in &self.tasks {
+            for warning in &task.warnings {
+                out.push_str(&format!("warning: {}/{}: {warning}\n", task.domain, task.name));
+            }
+        }
         let t = &self.totals;
         out.push_str(&format!(
             "\n{} files: {} loaded, {} failed; {} of {} tasks fully supported\n",
@@ -169,6 +183,9 @@ impl Report {
             "steps used: {}; getters: {} of {} implemented; metrics: {} of {} implemented\n",
             t.steps_used, t.getters_implemented, t.getters_used, t.metrics_implemented, t.metrics_used
         ));
+        if t.warned > 0 {
+            out.push_str(&format!("{} task(s) hand the agent their expected side (warnings above)\n", t.warned));
+        }
         if !t.missing.is_empty() {
             let list: Vec<String> = t.missing.iter().map(|(name, n)| format!("{name} ({n})")).collect();
             out.push_str(&format!("not implemented (tasks needing it): {}\n", list.join(", ")));

@@ -15,6 +15,7 @@
 
 #![forbid(unsafe_code)]
 
+pub mod gold;
 pub mod names;
 mod raw;
 
@@ -590,8 +591,8 @@ fn evaluator(data: EvaluatorData) -> Result<Evaluator, String> {
     {
         let place = if listed { format!("[{idx}]") } else { String::new() };
         let result = getter(result, names::RESULT_GETTERS).map_err(|err| format!("evaluator.result{place}: {err}"))?;
-        let expected =
-            getter(expected, names::EXPECTED_GETTERS).map_err(|err| format!("evaluator.expected{place}: {err}"))?;
+        let expected = getter(expected, &[names::EXPECTED_GETTERS, names::ARENA_EXPECTED_GETTERS].concat())
+            .map_err(|err| format!("evaluator.expected{place}: {err}"))?;
         let options = match options {
             Value::Null => Map::new(),
             Value::Object(map) => map,

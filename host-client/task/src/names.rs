@@ -99,6 +99,11 @@ pub const RESULT_GETTERS: &[&str] = &[
 /// Expected getter types (`evaluator.expected[].type`).
 pub const EXPECTED_GETTERS: &[&str] = &["rule", "cloud_file", "vm_file", "pdf_from_url", "rule_relativeTime"];
 
+/// Expected getters of this project's own, which no upstream task uses: `host_file`
+/// reads a file kept beside the task file on the host (the stub tasks' gold,
+/// which must never enter the guest; docs/compatibility.md).
+pub const ARENA_EXPECTED_GETTERS: &[&str] = &["host_file"];
+
 /// Metric names (`evaluator.func`).
 pub const METRICS: &[&str] = &[
     "exact_match",

@@ -11,6 +11,7 @@
 //!   loud, counted skip.
 //! - [`eventually`] (feature `guest`): polling a condition until it holds or a deadline passes.
 //! - [`png_claiming`]: a PNG header claiming any size, for the image guards.
+//! - [`copy_stub_task`]: a stub task with its host-side gold, copied for a test.
 //!
 //! It is not product code, and it does not depend on `arena-host`: the host's own
 //! tests use it, and a dependency back on the host would build the host twice.
@@ -19,7 +20,7 @@
 //!
 //! Layout: `guest.rs` (in-process launcher), `process.rs` (child-process launcher),
 //! `corpus.rs` (corpus locator), `wine.rs` (Wine locator), `standin.rs` (stand-in
-//! image locator), `wait.rs` (polling), `png.rs` (PNG bombs).
+//! image locator), `wait.rs` (polling), `png.rs` (PNG bombs), `stub_tasks.rs` (the stub tasks).
 
 #![forbid(unsafe_code)]
 
@@ -29,6 +30,7 @@ mod guest;
 mod png;
 mod process;
 mod standin;
+mod stub_tasks;
 #[cfg(feature = "guest")]
 mod wait;
 mod wine;
@@ -39,6 +41,7 @@ pub use guest::StubGuest;
 pub use png::png_claiming;
 pub use process::{bench_guests, python3_or_skip, workspace_binary, Served, BENCH_GUESTS_VAR};
 pub use standin::{standin_image, StandinImage, REQUIRE_QEMU_VAR, STANDIN_DIR_VAR};
+pub use stub_tasks::{copy_stub_task, stub_tasks_dir};
 #[cfg(feature = "guest")]
 pub use wait::eventually;
 pub use wine::{wine_or_skip, WineSetup};

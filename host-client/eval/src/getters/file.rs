@@ -1,6 +1,7 @@
 //! Getters of upstream's `getters/file.py`: guest files (`vm_file`), files
 //! from the web through the host's download cache (`cloud_file`), and a file
-//! existence check (`vm_file_exists_in_vm_folder`).
+//! existence check (`vm_file_exists_in_vm_folder`); and this project's
+//! `host_file`, expected files kept on the host beside the task file.
 
 use std::time::{SystemTime, UNIX_EPOCH};
 
@@ -86,6 +87,37 @@ pub(super) async fn cloud_file(ctx: &EvalContext, params: &Params<'_>) -> Result
             .await
             .map_err(|err| GetterError::Download { getter: params.getter, message: err.to_string() })?;
         std::fs::copy(&cached, &local).map_err(|err| params.io(&local, err))?;
+        if gives.contains(&idx) {
+            out.push(Fetched::File(local));
+        }
+    }
+    Ok(one_or_list(out))
+}
+
+/// `host_file` (this project's, no upstream task uses it): copies each `path`,
+/// relative to the task file's folder, into the work folder as `dest`; returns
+/// the `gives` entries like [`vm_file`]. It is how expected files stay with the
+/// grader, as `cloud_file` gold does upstream, without a web server: the guest
+/// never holds them. A path that is absolute or climbs out of the task's folder
+/// is refused, and a missing file is an error (the task is broken, not the agent).
+pub(super) fn host_file(ctx: &EvalContext, params: &Params<'_>) -> Result<Fetched, GetterError> {
+    let pairs = pairs(params)?;
+    let gives = params.gives()?;
+    let Some(task_dir) = &ctx.task_dir else {
+        return Err(params.bad("the task file's folder is not known here, so no host file can be read"));
+    };
+    let mut out = Vec::new();
+    for (idx, (path, dest)) in pairs.iter().enumerate() {
+        let relative = std::path::Path::new(path);
+        let inside = !path.is_empty()
+            && !path.contains('\\')
+            && relative.components().all(|c| matches!(c, std::path::Component::Normal(_)));
+        if !inside {
+            return Err(params.bad(format!("`path` {path:?} must be a relative path inside the task file's folder")));
+        }
+        let source = task_dir.join(relative);
+        let local = dest_path(ctx, params, dest)?;
+        std::fs::copy(&source, &local).map_err(|err| params.io(&source, err))?;
         if gives.contains(&idx) {
             out.push(Fetched::File(local));
         }

@@ -70,6 +70,8 @@ pub enum GetterError {
 pub enum Getter {
     Rule,
     CloudFile,
+    /// This project's `host_file` (names::ARENA_EXPECTED_GETTERS).
+    HostFile,
     VmFile,
     VmFileExistsInVmFolder,
     VmFolderExistsInDocuments,
@@ -98,6 +100,7 @@ pub fn lookup(name: &str) -> Option<Getter> {
     Some(match name {
         "rule" => Getter::Rule,
         "cloud_file" => Getter::CloudFile,
+        "host_file" => Getter::HostFile,
         "vm_file" => Getter::VmFile,
         "vm_file_exists_in_vm_folder" => Getter::VmFileExistsInVmFolder,
         "vm_folder_exists_in_documents" => Getter::VmFolderExistsInDocuments,
@@ -120,6 +123,7 @@ impl Getter {
         match self {
             Getter::Rule => general::rule(&Params::new("rule", params)),
             Getter::CloudFile => file::cloud_file(ctx, &Params::new("cloud_file", params)).await,
+            Getter::HostFile => file::host_file(ctx, &Params::new("host_file", params)),
             Getter::VmFile => file::vm_file(ctx, &Params::new("vm_file", params)).await,
             Getter::VmFileExistsInVmFolder => {
                 file::vm_file_exists_in_vm_folder(ctx, &Params::new("vm_file_exists_in_vm_folder", params)).await

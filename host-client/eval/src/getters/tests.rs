@@ -54,7 +54,8 @@ pub(crate) async fn start_guest_with(scenario: Option<Value>, configure: impl Fn
             .expect("client");
     client.wait_ready(&[], Duration::from_secs(20), Duration::from_millis(50)).await.expect("stub ready");
     let cache = DownloadCache::new(host.path().join("cache")).expect("cache");
-    let ctx = EvalContext { client, cache, work_dir: host.path().join("work") };
+    let ctx =
+        EvalContext { client, cache, work_dir: host.path().join("work"), task_dir: Some(host.path().join("task")) };
     Guest { ctx, stub, _host: host }
 }
 
@@ -325,6 +326,33 @@ async fn file_server() -> (String, std::sync::Arc<std::sync::atomic::AtomicUsize
         }
     });
     (url, hits, task)
+}
+
+#[tokio::test]
+async fn host_file_copies_gold_from_beside_the_task_and_refuses_paths_out_of_it() {
+    let guest = start_guest().await;
+    let work = guest.ctx.work_dir.clone();
+    let task_dir = guest.ctx.task_dir.clone().unwrap();
+    std::fs::create_dir_all(task_dir.join("gold")).unwrap();
+    std::fs::write(task_dir.join("gold/count.txt"), "3").unwrap();
+    check(
+        &guest,
+        json!({"type": "host_file", "path": "gold/count.txt", "dest": "count_gold.txt"}),
+        Ok(Fetched::File(work.join("count_gold.txt"))),
+    )
+    .await;
+    assert_eq!(std::fs::read(work.join("count_gold.txt")).unwrap(), b"3");
+    for outside in ["../secret.txt", "/etc/hostname", "gold\\count.txt", ""] {
+        check(
+            &guest,
+            json!({"type": "host_file", "path": outside, "dest": "x.txt"}),
+            Err("must be a relative path inside the task file's folder"),
+        )
+        .await;
+    }
+    check(&guest, json!({"type": "host_file", "path": "gold/none.txt", "dest": "n.txt"}), Err("none.txt")).await;
+    // Nothing of it is in the guest.
+    assert!(guest.ctx.client.stat("C:\\arena-gold\\count.txt").await.is_err());
 }
 
 #[tokio::test]
