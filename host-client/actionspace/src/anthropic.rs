@@ -18,6 +18,13 @@
 //! | `screenshot` | | [`Step::Screenshot`] |
 //! | `zoom` (`computer_20251124` only) | `region` `[x1, y1, x2, y2]` | [`Step::Zoom`] (the agent answers) |
 //!
+//! `computer_toolset_20260801` ([`parse_member`]) offers the same actions as
+//! member tools: a `tool_use` block is named by its member (`left_click`) and its
+//! `input` holds the parameters above without `action`; `key` also takes `repeat`
+//! (1 to [`MAX_KEY_REPEAT`] presses of the whole key string), and `zoom` is a
+//! member. The member names and parameters are the `anthropic` SDK's
+//! (`types/computer_member_name.py` and `computer_*_input.py`, release 2.14.0).
+//!
 //! Coordinates are pixels of the screenshot the model was shown; the agent
 //! passes that size as [`Coords::Image`](super::Coords::Image). Keys are xdotool
 //! keysym names (`Return`, `Page_Down`, `super`, `KP_0`), mapped by [`KEYS`].
@@ -148,6 +155,75 @@ pub const ACTIONS_20250124: [&str; 16] = [
     "wait",
     "screenshot",
 ];
+
+/// The members of `computer_toolset_20260801`, as the SDK lists them
+/// (`BETA_COMPUTER_MEMBER_NAME_VALUES`).
+pub const TOOLSET_MEMBERS: [&str; 17] = [
+    "key",
+    "hold_key",
+    "type",
+    "cursor_position",
+    "mouse_move",
+    "left_mouse_down",
+    "left_mouse_up",
+    "left_click",
+    "left_click_drag",
+    "right_click",
+    "middle_click",
+    "double_click",
+    "triple_click",
+    "scroll",
+    "wait",
+    "screenshot",
+    "zoom",
+];
+
+/// The most presses one toolset `key` call may ask for (`repeat`).
+pub const MAX_KEY_REPEAT: u32 = 100;
+
+/// One `tool_use` block of a `computer_toolset_20260801` member,
+/// `{"name": member, "input": {...}}` (other keys of the block, `id`, `type` and
+/// `toolset_name`, are ignored).
+///
+/// # Errors
+///
+/// [`ActionError`] naming the member: an unknown member, an input that is not an
+/// object or carries `action`, a `repeat` out of range, or what [`parse`] finds
+/// wrong with the member's parameters.
+pub fn parse_member(block: &Value, ctx: &Context) -> Result<Vec<Step>, ActionError> {
+    let space = ActionSpace::AnthropicToolset20260801;
+    if !block.is_object() {
+        return Err(ActionError::new(space, format!("expected a tool_use block object, got {}", json_type(block))));
+    }
+    let name = string(space, block, "name")?;
+    if !TOOLSET_MEMBERS.contains(&name) {
+        return Err(ActionError::new(
+            space,
+            format!("unknown member {name:?} (expected one of {})", TOOLSET_MEMBERS.join(", ")),
+        ));
+    }
+    let member = |message: String| ActionError::new(space, format!("{name}: {message}"));
+    let mut input = match block.get("input") {
+        None | Some(Value::Null) => serde_json::Map::new(),
+        Some(Value::Object(map)) => map.clone(),
+        Some(other) => return Err(member(format!("`input` must be an object, got {}", json_type(other)))),
+    };
+    if input.contains_key("action") {
+        return Err(member("a member's input carries no `action` (the member's name is the action)".into()));
+    }
+    let repeat = match input.remove("repeat") {
+        None | Some(Value::Null) => 1,
+        Some(_) if name != "key" => return Err(member("only `key` takes `repeat`".into())),
+        Some(Value::Number(n)) => match n.as_u64() {
+            Some(r) if (1..=u64::from(MAX_KEY_REPEAT)).contains(&r) => r as usize,
+            _ => return Err(member(format!("`repeat` must be a whole number from 1 to {MAX_KEY_REPEAT}, got {n}"))),
+        },
+        Some(other) => return Err(member(format!("`repeat` must be a number, got {}", json_type(&other)))),
+    };
+    input.insert("action".into(), Value::String(name.to_owned()));
+    let steps = parse(space, &Value::Object(input), ctx).map_err(|err| member(err.message))?;
+    Ok(steps.iter().cloned().cycle().take(steps.len() * repeat).collect())
+}
 
 /// The chords of an xdotool key string: `"ctrl+a Delete"` is two.
 ///
@@ -292,7 +368,7 @@ pub fn parse(space: ActionSpace, input: &Value, ctx: &Context) -> Result<Vec<Ste
             let ms = millis(space, "duration", opt_number(space, input, "duration")?.unwrap_or(1.0))?;
             Ok(vec![Step::Act(Action::Wait { ms })])
         }
-        "zoom" if space == ActionSpace::Anthropic20251124 => {
+        "zoom" if space != ActionSpace::Anthropic20250124 => {
             let region = match input.get("region") {
                 Some(Value::Array(r)) if r.len() == 4 && r.iter().all(Value::is_number) => {
                     let n: Vec<f64> = r.iter().map(|v| v.as_f64().unwrap_or_default()).collect();
@@ -313,7 +389,7 @@ pub fn parse(space: ActionSpace, input: &Value, ctx: &Context) -> Result<Vec<Ste
             Ok(vec![Step::Zoom(region)])
         }
         other => {
-            let zoom = if space == ActionSpace::Anthropic20251124 { ", zoom" } else { "" };
+            let zoom = if space == ActionSpace::Anthropic20250124 { "" } else { ", zoom" };
             Err(ActionError::new(
                 space,
                 format!("unknown action {other:?} (expected one of {}{zoom})", ACTIONS_20250124.join(", ")),

@@ -69,6 +69,9 @@ pub enum ActionSpace {
     Anthropic20250124,
     /// Anthropic's `computer_20251124` tool input (adds `zoom`).
     Anthropic20251124,
+    /// Anthropic's `computer_toolset_20260801`: member-named `tool_use` blocks
+    /// (`{"name": "left_click", "input": {...}}`).
+    AnthropicToolset20260801,
     /// OpenAI's `computer_call` action objects (`computer_use_preview`).
     OpenAi,
     /// UI-TARS replies (`Thought: ... Action: click(...)`).
@@ -79,11 +82,12 @@ pub enum ActionSpace {
 
 impl ActionSpace {
     /// Every space, in the order the docs list them.
-    pub const ALL: [ActionSpace; 7] = [
+    pub const ALL: [ActionSpace; 8] = [
         ActionSpace::Pyautogui,
         ActionSpace::Computer13,
         ActionSpace::Anthropic20250124,
         ActionSpace::Anthropic20251124,
+        ActionSpace::AnthropicToolset20260801,
         ActionSpace::OpenAi,
         ActionSpace::UiTars,
         ActionSpace::Typed,
@@ -96,6 +100,7 @@ impl ActionSpace {
             ActionSpace::Computer13 => "computer_13",
             ActionSpace::Anthropic20250124 => "computer_20250124",
             ActionSpace::Anthropic20251124 => "computer_20251124",
+            ActionSpace::AnthropicToolset20260801 => "computer_toolset_20260801",
             ActionSpace::OpenAi => "openai_computer",
             ActionSpace::UiTars => "uitars",
             ActionSpace::Typed => "typed",
@@ -272,6 +277,7 @@ pub fn parse(space: ActionSpace, input: &Value, ctx: &Context) -> Result<Vec<Ste
         ActionSpace::Anthropic20250124 | ActionSpace::Anthropic20251124 => {
             each(space, input, |v| anthropic::parse(space, v, ctx))
         }
+        ActionSpace::AnthropicToolset20260801 => each(space, input, |v| anthropic::parse_member(v, ctx)),
         ActionSpace::OpenAi => each(space, input, |v| openai::parse(v, ctx)),
         ActionSpace::Typed => each(space, input, |v| {
             typed_action(v).map(|a| vec![Step::Act(a)]).map_err(|why| ActionError::new(space, why))

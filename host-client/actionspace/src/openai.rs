@@ -1,6 +1,9 @@
-//! OpenAI's `computer_call` actions (the `computer_use_preview` tool of the Responses API).
+//! OpenAI's `computer_call` actions: the `action` of a `computer_use_preview`
+//! call, and each action of a GA `computer` call's `actions` batch (a list, which
+//! this space takes as it takes any list, in order).
 //!
-//! The action objects are those of OpenAI's computer-use guide and API reference:
+//! The action objects are those of OpenAI's computer-use guide and API reference
+//! (and of the `openai` SDK's `types/responses/computer_action.py`, release 3.57.0):
 //!
 //! | `type` | fields | becomes |
 //! |---|---|---|
@@ -13,6 +16,9 @@
 //! | `scroll` | `x`, `y`, `scroll_x`, `scroll_y` (pixels; positive `scroll_y` scrolls down) | wheel turns at the point, 120 per 100 pixels |
 //! | `type` | `text` | typed text |
 //! | `wait` | | a 1 s wait (the duration of OpenAI's sample environments) |
+//!
+//! `click`, `double_click`, `drag`, `move` and `scroll` may carry `keys`, held
+//! while the action runs (pressed in order before it, released in reverse after).
 //!
 //! Keys come in the model's spelling (`CTRL`, `ENTER`, `ARROWLEFT`, `CMD`, `SPACE`), mapped by [`KEYS`].
 
@@ -64,11 +70,28 @@ pub fn parse(action: &Value, ctx: &Context) -> Result<Vec<Step>, ActionError> {
     if !action.is_object() {
         return Err(ActionError::new(SPACE, format!("expected an action object, got {}", json_type(action))));
     }
+    let kind = string(SPACE, action, "type")?;
+    let held = match action.get("keys") {
+        Some(Value::Array(keys)) if keys.is_empty() => Vec::new(),
+        Some(keys) if kind != "keypress" && !keys.is_null() => key_list(SPACE, KEYS, Some(keys), kind)?,
+        _ => Vec::new(),
+    };
+    let steps = one(kind, action, ctx)?;
+    if held.is_empty() {
+        return Ok(steps);
+    }
+    let downs = held.iter().map(|k| Step::Act(Action::KeyDown { key: k.clone() }));
+    let ups = held.iter().rev().map(|k| Step::Act(Action::KeyUp { key: k.clone() }));
+    Ok(downs.chain(steps).chain(ups).collect())
+}
+
+/// The steps of one action of type `kind`, without its held `keys`.
+fn one(kind: &str, action: &Value, ctx: &Context) -> Result<Vec<Step>, ActionError> {
     let point = |v: &Value| -> Result<(i32, i32), ActionError> {
         Ok(ctx.point(number(SPACE, v, "x")?, number(SPACE, v, "y")?))
     };
     let act = |a: Action| Ok(vec![Step::Act(a)]);
-    match string(SPACE, action, "type")? {
+    match kind {
         "click" => {
             let (x, y) = point(action)?;
             let button = match action.get("button").and_then(Value::as_str).unwrap_or("left") {
@@ -99,7 +122,7 @@ pub fn parse(action: &Value, ctx: &Context) -> Result<Vec<Step>, ActionError> {
             let Some(Value::Array(path)) = action.get("path") else {
                 return Err(ActionError::new(SPACE, "drag needs `path`, a list of {x, y} points"));
             };
-            let points = path.iter().map(point).collect::<Result<Vec<_>, _>>()?;
+            let points = path.iter().map(&point).collect::<Result<Vec<_>, _>>()?;
             match points.as_slice() {
                 [] | [_] => Err(ActionError::new(SPACE, "drag needs at least two points in `path`")),
                 [(fx, fy), (tx, ty)] => act(Action::Drag {

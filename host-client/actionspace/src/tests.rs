@@ -422,6 +422,132 @@ fn anthropic_every_action_of_both_versions() {
 }
 
 #[test]
+fn anthropic_toolset_members_are_the_tool_actions_named_by_the_block() {
+    let t = ActionSpace::AnthropicToolset20260801;
+    let px = Coords::Pixels;
+    let table: Vec<(Value, Vec<Step>)> = vec![
+        (json!({"name": "key", "input": {"text": "ctrl+s"}}), vec![hotkey(&["ctrl", "s"])]),
+        (json!({"name": "key", "input": {"text": "Down", "repeat": 3}}), vec![key("down"), key("down"), key("down")]),
+        (
+            json!({"name": "hold_key", "input": {"text": "shift", "duration": 1}}),
+            vec![
+                act(Action::KeyDown { key: "shift".into() }),
+                act(Action::Wait { ms: 1000 }),
+                act(Action::KeyUp { key: "shift".into() }),
+            ],
+        ),
+        (
+            json!({"name": "type", "input": {"text": "hi"}}),
+            vec![act(Action::TypeText { text: "hi".into(), interval_ms: None })],
+        ),
+        (json!({"name": "cursor_position", "input": {}}), vec![Step::CursorPosition]),
+        (json!({"name": "mouse_move", "input": {"coordinate": [5, 6]}}), vec![act(Action::MoveTo { x: 5, y: 6 })]),
+        (
+            json!({"name": "left_mouse_down"}),
+            vec![act(Action::MouseDown { button: MouseButton::Left, x: None, y: None })],
+        ),
+        (
+            json!({"name": "left_mouse_up", "input": null}),
+            vec![act(Action::MouseUp { button: MouseButton::Left, x: None, y: None })],
+        ),
+        (
+            json!({"type": "tool_use", "id": "t1", "toolset_name": "computer", "name": "left_click", "input": {"coordinate": [7, 8]}}),
+            vec![click(7, 8, MouseButton::Left, 1)],
+        ),
+        (
+            json!({"name": "left_click", "input": {"coordinate": [7, 8], "text": "ctrl"}}),
+            vec![
+                act(Action::KeyDown { key: "ctrl".into() }),
+                click(7, 8, MouseButton::Left, 1),
+                act(Action::KeyUp { key: "ctrl".into() }),
+            ],
+        ),
+        (
+            json!({"name": "left_click_drag", "input": {"start_coordinate": [1, 2], "coordinate": [3, 4]}}),
+            vec![act(Action::Drag {
+                from: Some(Point { x: 1, y: 2 }),
+                to: Point { x: 3, y: 4 },
+                button: MouseButton::Left,
+                duration_ms: None,
+            })],
+        ),
+        (json!({"name": "right_click", "input": {"coordinate": [1, 1]}}), vec![click(1, 1, MouseButton::Right, 1)]),
+        (json!({"name": "middle_click", "input": {"coordinate": [1, 1]}}), vec![click(1, 1, MouseButton::Middle, 1)]),
+        (json!({"name": "double_click", "input": {"coordinate": [1, 1]}}), vec![click(1, 1, MouseButton::Left, 2)]),
+        (json!({"name": "triple_click", "input": {"coordinate": [1, 1]}}), vec![click(1, 1, MouseButton::Left, 3)]),
+        (
+            json!({"name": "scroll", "input": {"scroll_direction": "down", "scroll_amount": 2}}),
+            vec![act(Action::Scroll { x: None, y: None, dx: 0, dy: -240 })],
+        ),
+        (json!({"name": "wait", "input": {"duration": 2}}), vec![act(Action::Wait { ms: 2000 })]),
+        (json!({"name": "screenshot", "input": {}}), vec![Step::Screenshot]),
+        (json!({"name": "zoom", "input": {"region": [0, 0, 100, 50]}}), vec![Step::Zoom([0, 0, 100, 50])]),
+    ];
+    let named: std::collections::BTreeSet<&str> = table.iter().filter_map(|(v, _)| v["name"].as_str()).collect();
+    assert_eq!(named.len(), anthropic::TOOLSET_MEMBERS.len(), "a row per member");
+    for (input, expected) in table {
+        check(t, px, input, &expected);
+    }
+    // Several blocks of one turn, in order.
+    check(
+        t,
+        px,
+        json!([{"name": "left_click", "input": {"coordinate": [1, 1]}}, {"name": "type", "input": {"text": "x"}}]),
+        &[click(1, 1, MouseButton::Left, 1), act(Action::TypeText { text: "x".into(), interval_ms: None })],
+    );
+    check_err(
+        t,
+        json!({"name": "computer", "input": {"action": "left_click"}}),
+        &["unknown member \"computer\"", "zoom"],
+    );
+    check_err(
+        t,
+        json!({"name": "left_click", "input": {"action": "left_click"}}),
+        &["left_click:", "carries no `action`"],
+    );
+    check_err(t, json!({"name": "left_click", "input": [1, 2]}), &["left_click:", "must be an object"]);
+    check_err(t, json!({"name": "key", "input": {"text": "a", "repeat": 0}}), &["key:", "1 to 100"]);
+    check_err(t, json!({"name": "key", "input": {"text": "a", "repeat": 101}}), &["1 to 100"]);
+    check_err(t, json!({"name": "type", "input": {"text": "a", "repeat": 2}}), &["only `key` takes `repeat`"]);
+    check_err(t, json!({"name": "mouse_move", "input": {}}), &["mouse_move:", "needs `coordinate`"]);
+    check_err(t, json!({"name": "key", "input": {"text": "Hyper_L"}}), &["key:", "Hyper_L"]);
+    check_err(t, json!({"input": {}}), &["name"]);
+}
+
+#[test]
+fn openai_keys_held_during_a_mouse_action() {
+    let o = ActionSpace::OpenAi;
+    let px = Coords::Pixels;
+    let down = |k: &str| act(Action::KeyDown { key: k.into() });
+    let up = |k: &str| act(Action::KeyUp { key: k.into() });
+    check(
+        o,
+        px,
+        json!({"type": "click", "button": "left", "x": 5, "y": 6, "keys": ["SHIFT", "CTRL"]}),
+        &[down("shift"), down("ctrl"), click(5, 6, MouseButton::Left, 1), up("ctrl"), up("shift")],
+    );
+    check(o, px, json!({"type": "move", "x": 1, "y": 2, "keys": []}), &[act(Action::MoveTo { x: 1, y: 2 })]);
+    check(
+        o,
+        px,
+        json!({"type": "double_click", "x": 1, "y": 2, "keys": null}),
+        &[act(Action::DoubleClick { x: Some(1), y: Some(2) })],
+    );
+    // A GA `computer_call.actions` batch is a list, done in order.
+    check(
+        o,
+        px,
+        json!([{"type": "click", "button": "left", "x": 5, "y": 6}, {"type": "type", "text": "hi"}, {"type": "keypress", "keys": ["CTRL", "S"]}]),
+        &[
+            click(5, 6, MouseButton::Left, 1),
+            act(Action::TypeText { text: "hi".into(), interval_ms: None }),
+            hotkey(&["ctrl", "s"]),
+        ],
+    );
+    check_err(o, json!({"type": "click", "button": "left", "x": 5, "y": 6, "keys": ["HYPER"]}), &["HYPER"]);
+}
+
+#[test]
 fn openai_every_action() {
     let o = ActionSpace::OpenAi;
     let px = Coords::Pixels;
