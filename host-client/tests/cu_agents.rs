@@ -21,8 +21,8 @@ use serde_json::{json, Value};
 use tokio::net::TcpListener;
 
 use arena_host::actionspace::uitars::UiTarsVersion;
-use arena_host::actionspace::ActionSpace;
 use arena_host::agent::cu::anthropic::{AnthropicAgent, AnthropicConfig};
+use arena_host::agent::cu::models::Form;
 use arena_host::agent::cu::openai::{OpenAiAgent, OpenAiConfig, SafetyChecks};
 use arena_host::agent::cu::uitars::{UiTarsAgent, UiTarsConfig};
 use arena_host::agent::llm::RetryPolicy;
@@ -174,6 +174,32 @@ fn png_size(b64: &str) -> (u32, u32) {
     (image.width(), image.height())
 }
 
+/// Checks `bodies` (the API each speaks, the body sent) against the vendors' SDK
+/// types with `cu_agents/sdk_check.py`, in a Python that has the SDKs; a loud skip
+/// without one.
+fn check_against_sdk_types(test: &str, bodies: &[(&str, &Value)]) {
+    let Some(python) = arena_test_support::gui_agents_python_or_skip(test) else { return };
+    let here = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let list: Vec<Value> = bodies.iter().map(|(api, body)| json!({"api": api, "body": body})).collect();
+    let mut child = std::process::Command::new(python)
+        .arg(here.join("tests/cu_agents/sdk_check.py"))
+        .arg(here.join("../examples/agent_s3/mock_models.py"))
+        .stdin(std::process::Stdio::piped())
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .expect("the checker starts");
+    std::io::Write::write_all(&mut child.stdin.take().unwrap(), serde_json::to_string(&list).unwrap().as_bytes())
+        .unwrap();
+    let out = child.wait_with_output().unwrap();
+    assert!(
+        out.status.success(),
+        "{test}: requests the SDK types do not allow:\n{}{}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
+
 // ---------------------------------------------------------------- Anthropic
 
 fn tool_use(id: &str, input: Value) -> Value {
@@ -195,7 +221,7 @@ fn end_turn(text: &str) -> Value {
     })
 }
 
-async fn anthropic_agent(mock: &Mock, tool: ActionSpace) -> AnthropicAgent {
+async fn anthropic_agent(mock: &Mock, tool: Form) -> AnthropicAgent {
     let base = serve(mock.clone(), "/v1/messages", "").await;
     let mut config = AnthropicConfig::new(&base, "claude-test");
     config.endpoint.api_key = Some(KEY.into());
@@ -253,7 +279,7 @@ async fn anthropic_cu_solves_two_stub_tasks_and_every_request_is_well_formed() {
         end_turn("The draft is saved. DONE"),
     ];
     let mock = Mock::new(replies.iter().cloned().map(ok).collect());
-    let mut agent = anthropic_agent(&mock, ActionSpace::Anthropic20250124).await;
+    let mut agent = anthropic_agent(&mock, Form::Computer20250124).await;
     let (result, dir) = episode(&draft, &mut agent, tmp.path()).await;
     assert_solved(&result);
     assert_eq!(result.steps, 3);
@@ -273,7 +299,7 @@ async fn anthropic_cu_solves_two_stub_tasks_and_every_request_is_well_formed() {
         end_turn("Saved. DONE"),
     ];
     let mock = Mock::new(replies.iter().cloned().map(ok).collect());
-    let mut agent = anthropic_agent(&mock, ActionSpace::Anthropic20251124).await;
+    let mut agent = anthropic_agent(&mock, Form::Computer20251124).await;
     let (result, _) = episode(&count, &mut agent, tmp.path()).await;
     assert_solved(&result);
     let requests = mock.requests();
@@ -282,11 +308,13 @@ async fn anthropic_cu_solves_two_stub_tasks_and_every_request_is_well_formed() {
     // The cursor comes back in the screenshot's coordinates: (720, 450) on the screen.
     let cursor = &requests[2].1["messages"].as_array().unwrap().last().unwrap()["content"][0]["content"][0];
     assert_eq!(cursor["text"], "X=640,Y=400");
+    let bodies: Vec<(&str, &Value)> = requests.iter().map(|(_, b)| ("anthropic-beta", b)).collect();
+    check_against_sdk_types("anthropic_cu_solves_two_stub_tasks_and_every_request_is_well_formed", &bodies);
 
     // Infeasible: the model says FAIL in its last message.
     let infeasible = stub_task("stub-settings-infeasible");
     let mock = Mock::new(vec![ok(end_turn("This computer has no such setting. FAIL"))]);
-    let mut agent = anthropic_agent(&mock, ActionSpace::Anthropic20250124).await;
+    let mut agent = anthropic_agent(&mock, Form::Computer20250124).await;
     let (result, _) = episode(&infeasible, &mut agent, tmp.path()).await;
     assert_solved(&result);
 }
@@ -301,14 +329,14 @@ async fn anthropic_cu_errors_malformed_refusal_429_and_bad_actions() {
     let mock = Mock::new(vec![ok(json!({
         "id": "msg_r", "type": "message", "role": "assistant", "content": [], "stop_reason": "refusal",
     }))]);
-    let mut agent = anthropic_agent(&mock, ActionSpace::Anthropic20250124).await;
+    let mut agent = anthropic_agent(&mock, Form::Computer20250124).await;
     let p = agent.predict(&obs).await.expect("an answer");
     assert_eq!(p.actions, [AgentAction::Fail]);
     assert!(p.response.contains("refused"), "{}", p.response);
 
     // A malformed reply is a model error (the task is left unfinished), naming what is wrong.
     let mock = Mock::new(vec![ok(json!({"type": "message", "text": "hi"}))]);
-    let mut agent = anthropic_agent(&mock, ActionSpace::Anthropic20250124).await;
+    let mut agent = anthropic_agent(&mock, Form::Computer20250124).await;
     match agent.predict(&obs).await {
         Err(AgentError::Model { reason, .. }) => assert!(reason.contains("no `content` list"), "{reason}"),
         other => panic!("expected a model error, got {other:?}"),
@@ -319,7 +347,7 @@ async fn anthropic_cu_errors_malformed_refusal_429_and_bad_actions() {
         (429, vec![("retry-after", "1")], json!({"type": "error", "error": {"type": "rate_limit_error"}})),
         ok(tool_use("toolu_1", json!({"action": "key", "text": "Return"}))),
     ]);
-    let mut agent = anthropic_agent(&mock, ActionSpace::Anthropic20250124).await;
+    let mut agent = anthropic_agent(&mock, Form::Computer20250124).await;
     let started = std::time::Instant::now();
     let p = agent.predict(&obs).await.expect("an answer after the 429");
     assert!(started.elapsed() >= Duration::from_secs(1), "Retry-After is honoured");
@@ -331,7 +359,7 @@ async fn anthropic_cu_errors_malformed_refusal_429_and_bad_actions() {
 
     // An endpoint that stays down: a model error once the retry budget is spent.
     let mock = Mock::new((0..500).map(|_| (503, Vec::new(), json!({"error": "overloaded"}))).collect());
-    let mut agent = anthropic_agent(&mock, ActionSpace::Anthropic20250124).await;
+    let mut agent = anthropic_agent(&mock, Form::Computer20250124).await;
     match agent.predict(&obs).await {
         Err(AgentError::Model { reason, .. }) => assert!(reason.contains("gave up"), "{reason}"),
         other => panic!("expected a model error, got {other:?}"),
@@ -342,7 +370,7 @@ async fn anthropic_cu_errors_malformed_refusal_429_and_bad_actions() {
         ok(tool_use("toolu_x", json!({"action": "teleport", "coordinate": [1, 1]}))),
         ok(end_turn("DONE")),
     ]);
-    let mut agent = anthropic_agent(&mock, ActionSpace::Anthropic20250124).await;
+    let mut agent = anthropic_agent(&mock, Form::Computer20250124).await;
     let p = agent.predict(&obs).await.expect("an answer");
     assert!(p.actions.is_empty());
     assert!(p.raw_error.as_deref().unwrap_or_default().contains("unknown action \"teleport\""), "{p:?}");
@@ -352,6 +380,154 @@ async fn anthropic_cu_errors_malformed_refusal_429_and_bad_actions() {
     let result = &second["messages"].as_array().unwrap().last().unwrap()["content"][0];
     assert_eq!(result["is_error"], true);
     assert!(result["content"][0]["text"].as_str().unwrap().contains("teleport"));
+}
+
+/// One assistant message with several `tool_use` blocks (`blocks`: id, name, input;
+/// toolset members carry `toolset_name`).
+fn tool_uses(id: &str, blocks: &[(&str, &str, Value)], toolset: bool) -> Value {
+    let mut content = vec![json!({"type": "text", "text": "Several actions at once."})];
+    for (block_id, name, input) in blocks {
+        let mut block = json!({"type": "tool_use", "id": block_id, "name": name, "input": input});
+        if toolset {
+            block["toolset_name"] = json!("computer");
+        }
+        content.push(block);
+    }
+    json!({
+        "id": format!("msg_{id}"), "type": "message", "role": "assistant", "model": "claude-test",
+        "content": content, "stop_reason": "tool_use", "usage": {"input_tokens": 1, "output_tokens": 1},
+    })
+}
+
+/// The tool results of request `n` answer every block of `reply`, in order, in
+/// one user message; `toolset` results name their toolset. Answers the results.
+fn check_results_answer(body: &Value, reply: &Value, toolset: bool) -> Vec<Value> {
+    let ids: Vec<&str> = reply["content"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter_map(|b| b["id"].as_str())
+        .filter(|id| id.starts_with("toolu"))
+        .collect();
+    let last = body["messages"].as_array().unwrap().last().unwrap().clone();
+    assert_eq!(last["role"], "user");
+    let results = last["content"].as_array().unwrap().clone();
+    let answered: Vec<&str> = results.iter().map(|r| r["tool_use_id"].as_str().unwrap()).collect();
+    assert_eq!(answered, ids, "one tool_result per tool_use, in order, in one message");
+    for result in &results {
+        assert_eq!(result["type"], "tool_result");
+        assert_eq!(result.get("toolset_name").and_then(Value::as_str), toolset.then_some("computer"), "{result}");
+        assert!(result.get("is_error").is_none(), "{result}");
+    }
+    results
+}
+
+#[tokio::test]
+async fn anthropic_toolset_solves_the_draft_with_several_members_in_one_turn() {
+    let tmp = tempfile::tempdir().unwrap();
+    let draft = stub_task("stub-notepad-draft");
+    let replies = [
+        tool_uses(
+            "1",
+            &[
+                ("toolu_1", "left_click", json!({"coordinate": [640, 400]})),
+                ("toolu_2", "type", json!({"text": "This is a draft."})),
+                ("toolu_3", "screenshot", json!({})),
+                ("toolu_4", "key", json!({"text": "ctrl+s"})),
+            ],
+            true,
+        ),
+        end_turn("Saved. DONE"),
+    ];
+    let mock = Mock::new(replies.iter().cloned().map(ok).collect());
+    let base = serve(mock.clone(), "/v1/messages", "").await;
+    let mut config = AnthropicConfig::new(&base, "claude-test");
+    config.endpoint.api_key = Some(KEY.into());
+    config.tool = Form::ComputerToolset20260801;
+    config.image = arena_host::agent::cu::models::ImageLimit::Within { side: 2576, pixels: 3_750_000 };
+    config.disabled_members = vec!["hold_key".into()];
+    let mut agent = AnthropicAgent::new(config).expect("agent");
+    let (result, _) = episode(&draft, &mut agent, tmp.path()).await;
+    assert_solved(&result);
+    assert_eq!(result.steps, 2, "four members in one turn are one step");
+    let requests = mock.requests();
+    assert_eq!(requests.len(), 2);
+    for (headers, body) in &requests {
+        // The toolset is a type of the GA API: no beta header.
+        assert!(headers.get("anthropic-beta").is_none(), "{headers:?}");
+        assert_eq!(header(headers, "anthropic-version"), "2023-06-01");
+        // The entry carries only type and configs: no name, no display size.
+        assert_eq!(
+            body["tools"],
+            json!([{"type": "computer_toolset_20260801",
+                    "configs": {"zoom": {"enabled": false}, "hold_key": {"enabled": false}}}])
+        );
+    }
+    // The screen goes as it is: Opus 4.7's limit takes 1440x900.
+    let first = &requests[0].1["messages"][0]["content"][1];
+    assert_eq!(png_size(first["source"]["data"].as_str().unwrap()), (1440, 900));
+    let results = check_results_answer(&requests[1].1, &replies[0], true);
+    // The screenshot member and the last result carry the screen after all four.
+    for (i, result) in results.iter().enumerate() {
+        let images = result["content"].as_array().unwrap().iter().filter(|c| c["type"] == "image").count();
+        assert_eq!(images, usize::from(i == 2 || i == 3), "result {i}: {result}");
+    }
+    // The answer went back as it came, members and toolset names included.
+    assert_eq!(requests[1].1["messages"][1]["content"], replies[0]["content"]);
+    let bodies: Vec<(&str, &Value)> = requests.iter().map(|(_, b)| ("anthropic", b)).collect();
+    check_against_sdk_types("anthropic_toolset_solves_the_draft_with_several_members_in_one_turn", &bodies);
+}
+
+#[tokio::test]
+async fn anthropic_toolset_errors_name_the_member_and_nothing_of_the_turn_runs() {
+    let guest = StubGuest::start().await;
+    let c = client(guest.url());
+    let obs = Observation::capture(&c, 1, "do it").await.expect("observe");
+    let replies = [tool_uses(
+        "1",
+        &[("toolu_1", "type", json!({"text": "x"})), ("toolu_2", "key", json!({"text": "a", "repeat": 500}))],
+        true,
+    )];
+    let mock = Mock::new(replies.iter().cloned().map(ok).collect());
+    let base = serve(mock.clone(), "/v1/messages", "").await;
+    let mut config = AnthropicConfig::new(&base, "claude-test");
+    config.endpoint.api_key = Some(KEY.into());
+    config.tool = Form::ComputerToolset20260801;
+    let mut agent = AnthropicAgent::new(config).expect("agent");
+    let prediction = agent.predict(&obs).await.expect("an answer");
+    assert!(prediction.actions.is_empty(), "{:?}", prediction.actions);
+    let error = prediction.raw_error.expect("the unreadable member");
+    assert!(
+        error.contains("computer_toolset_20260801") && error.contains("key:") && error.contains("repeat"),
+        "{error}"
+    );
+}
+
+#[tokio::test]
+async fn anthropic_20251124_answers_several_tool_uses_of_one_turn_in_one_message() {
+    let tmp = tempfile::tempdir().unwrap();
+    let draft = stub_task("stub-notepad-draft");
+    let replies = [
+        tool_uses(
+            "1",
+            &[
+                ("toolu_1", "computer", json!({"action": "type", "text": "This is a draft."})),
+                ("toolu_2", "computer", json!({"action": "key", "text": "ctrl+s"})),
+            ],
+            false,
+        ),
+        end_turn("Saved. DONE"),
+    ];
+    let mock = Mock::new(replies.iter().cloned().map(ok).collect());
+    let mut agent = anthropic_agent(&mock, Form::Computer20251124).await;
+    let (result, _) = episode(&draft, &mut agent, tmp.path()).await;
+    assert_solved(&result);
+    let requests = mock.requests();
+    assert_eq!(header(&requests[0].0, "anthropic-beta"), "computer-use-2025-11-24");
+    let results = check_results_answer(&requests[1].1, &replies[0], false);
+    assert_eq!(results.len(), 2);
+    let bodies: Vec<(&str, &Value)> = requests.iter().map(|(_, b)| ("anthropic-beta", b)).collect();
+    check_against_sdk_types("anthropic_20251124_answers_several_tool_uses_of_one_turn_in_one_message", &bodies);
 }
 
 // ---------------------------------------------------------------- OpenAI
@@ -452,7 +628,131 @@ async fn openai_cu_solves_two_stub_tasks_with_chaining_and_acknowledged_safety_c
     let mut agent = openai_agent(&mock, SafetyChecks::Ack).await;
     let (result, _) = episode(&append, &mut agent, tmp.path()).await;
     assert_solved(&result);
-    check_openai_requests(&mock.requests(), &replies, &append.instruction);
+    let requests = mock.requests();
+    check_openai_requests(&requests, &replies, &append.instruction);
+    let bodies: Vec<(&str, &Value)> = requests.iter().map(|(_, b)| ("openai", b)).collect();
+    check_against_sdk_types("openai_cu_solves_two_stub_tasks_with_chaining_and_acknowledged_safety_checks", &bodies);
+}
+
+/// A GA `computer` answer: one `computer_call` with an `actions` batch.
+fn computer_batch(id: &str, call_id: &str, actions: Value) -> Value {
+    json!({
+        "id": id, "object": "response", "status": "completed",
+        "output": [
+            {"type": "computer_call", "id": format!("cu_{id}"), "call_id": call_id, "actions": actions,
+             "pending_safety_checks": [], "status": "completed"},
+        ],
+    })
+}
+
+#[tokio::test]
+async fn openai_ga_computer_runs_a_batch_in_order_and_answers_the_call_once() {
+    let tmp = tempfile::tempdir().unwrap();
+    let draft = stub_task("stub-notepad-draft");
+    let replies = [
+        computer_batch(
+            "resp_1",
+            "call_1",
+            json!([
+                {"type": "click", "button": "left", "x": 700, "y": 400},
+                {"type": "type", "text": "This is a draft."},
+                {"type": "keypress", "keys": ["CTRL", "s"]},
+                {"type": "screenshot"},
+            ]),
+        ),
+        message("resp_2", json!({"type": "output_text", "text": "Saved. DONE", "annotations": []})),
+    ];
+    let mock = Mock::new(replies.iter().cloned().map(ok).collect());
+    let base = serve(mock.clone(), "/v1/responses", "/v1").await;
+    let mut config = OpenAiConfig::new(&base, "gpt-5.4");
+    config.endpoint.api_key = Some(KEY.into());
+    config.tool = Form::Computer;
+    config.image =
+        arena_host::agent::cu::models::choose(arena_host::agent::cu::models::Vendor::OpenAi, "gpt-5.4").image;
+    let mut agent = OpenAiAgent::new(config).expect("agent");
+    let (result, _) = episode(&draft, &mut agent, tmp.path()).await;
+    assert_solved(&result);
+    assert_eq!(result.steps, 2, "the batch is one step");
+    let requests = mock.requests();
+    assert_eq!(requests.len(), 2);
+    for (_, body) in &requests {
+        assert_eq!(body["tools"], json!([{"type": "computer"}]), "the GA tool carries nothing but its type");
+    }
+    let url = requests[0].1["input"][0]["content"][1]["image_url"].as_str().unwrap();
+    assert_eq!(png_size(url.strip_prefix("data:image/png;base64,").unwrap()), (1440, 900), "sent as it is");
+    let input = requests[1].1["input"].as_array().unwrap();
+    assert_eq!(input.len(), 1, "one output for the one call: {input:?}");
+    assert_eq!(input[0]["type"], "computer_call_output");
+    assert_eq!(input[0]["call_id"], "call_1");
+    assert_eq!(requests[1].1["previous_response_id"], "resp_1");
+    let bodies: Vec<(&str, &Value)> = requests.iter().map(|(_, b)| ("openai", b)).collect();
+    check_against_sdk_types("openai_ga_computer_runs_a_batch_in_order_and_answers_the_call_once", &bodies);
+    // A GA call without its batch is a malformed answer.
+    let mock = Mock::new(vec![ok(
+        json!({"id": "r", "output": [{"type": "computer_call", "call_id": "c", "pending_safety_checks": []}]}),
+    )]);
+    let base = serve(mock.clone(), "/v1/responses", "/v1").await;
+    let mut config = OpenAiConfig::new(&base, "gpt-5.4");
+    config.endpoint.api_key = Some(KEY.into());
+    config.tool = Form::Computer;
+    let mut agent = OpenAiAgent::new(config).expect("agent");
+    let guest = StubGuest::start().await;
+    let obs = Observation::capture(&client(guest.url()), 1, "do it").await.expect("observe");
+    let err = agent.predict(&obs).await.unwrap_err().to_string();
+    assert!(err.contains("without `actions`"), "{err}");
+}
+
+/// `arena run` without `--computer-tool` asks the table: the recorded options say
+/// which tool and image limit the model got, and from where.
+#[tokio::test]
+async fn without_computer_tool_the_models_row_chooses_and_the_run_records_it() {
+    use clap::Parser as _;
+    let cases = [
+        ("claude-opus-4-7", "anthropic-cu", "computer_20251124 (model table)", "computer-use-2025-11-24"),
+        ("claude-sonnet-4-5", "anthropic-cu", "computer_20250124 (model table)", "computer-use-2025-01-24"),
+        ("claude-opus-5", "anthropic-cu", "computer_toolset_20260801 (newest, model not in the table)", ""),
+    ];
+    for (model, agent, recorded, beta) in cases {
+        let tmp = tempfile::tempdir().unwrap();
+        let domain = tmp.path().join("tasks").join("settings");
+        std::fs::create_dir_all(&domain).unwrap();
+        let source =
+            Path::new(env!("CARGO_MANIFEST_DIR")).join("../tasks/stub/examples/settings/stub-settings-infeasible.json");
+        std::fs::copy(&source, domain.join("stub-settings-infeasible.json")).unwrap();
+        let mock = Mock::new(vec![ok(end_turn("No such setting. FAIL"))]);
+        let base = serve(mock.clone(), "/v1/messages", "").await;
+        let out = tmp.path().join("out");
+        let tasks = tmp.path().join("tasks");
+        let words = [
+            "arena",
+            "run",
+            "--tasks",
+            tasks.to_str().unwrap(),
+            "--agent",
+            agent,
+            "--llm-url",
+            &base,
+            "--model",
+            model,
+            "--stub-guests",
+            "1",
+            "--out",
+            out.to_str().unwrap(),
+            "--no-preflight",
+        ];
+        let mut cli = arena_host::Cli::try_parse_from(words).expect("arguments parse");
+        cli.connection.token = None;
+        cli.connection.token_file = None;
+        cli.connection.guest = None;
+        let code = arena_host::run(cli).await.expect("the run runs");
+        assert_eq!(code, std::process::ExitCode::SUCCESS, "{model}");
+        let summary: Value = serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
+        assert_eq!(summary["options"]["computer_tool"], json!([recorded]), "{model}: {summary}");
+        assert!(summary["options"]["image_limit"][0].as_str().is_some(), "{model}");
+        let requests = mock.requests();
+        let sent = requests[0].0.get("anthropic-beta").map(|v| v.to_str().unwrap().to_owned()).unwrap_or_default();
+        assert_eq!(sent, beta, "{model}");
+    }
 }
 
 #[tokio::test]
@@ -656,6 +956,10 @@ fn run_help_lists_the_agents_and_the_coordinate_conventions() {
         "--safety-checks",
         "--prompt-file",
         "--keep-images",
+        "computer_toolset_20260801",
+        "computer_use_preview",
+        "--max-image-side",
+        "--toolset-disable",
     ] {
         assert!(help.contains(needle), "`arena run --help` lacks {needle}");
     }
@@ -839,7 +1143,7 @@ async fn one_anthropic_step_decodes_each_screenshot_once() {
     let base = serve(mock.clone(), "/v1/messages", "").await;
     let mut config = AnthropicConfig::new(&base, "claude-test");
     config.endpoint.api_key = Some(KEY.into());
-    config.tool = ActionSpace::Anthropic20251124;
+    config.tool = Form::Computer20251124;
     config.enable_zoom = true;
     let mut agent = AnthropicAgent::new(config).expect("agent");
     one_decode_per_step(&mut agent, 2).await;

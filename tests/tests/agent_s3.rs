@@ -29,26 +29,6 @@ fn repo() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
 }
 
-/// A Python that imports Agent S3 and what the mocks need; without one, a loud
-/// skip (a failure with `ARENA_REQUIRE_GUI_AGENTS=1`).
-fn gui_agents_python(test: &str) -> Option<String> {
-    let candidate = std::env::var("ARENA_GUI_AGENTS_PYTHON").unwrap_or_else(|_| "python3".to_owned());
-    let imports = "import gui_agents.s3.agents.agent_s, gui_agents.s3.agents.grounding, openai, pydantic, numpy, PIL";
-    let ok = Command::new(&candidate).args(["-c", imports]).output().is_ok_and(|o| o.status.success());
-    if ok {
-        return Some(candidate);
-    }
-    assert!(
-        std::env::var("ARENA_REQUIRE_GUI_AGENTS").as_deref() != Ok("1"),
-        "{test}: {candidate} cannot import gui-agents and ARENA_REQUIRE_GUI_AGENTS=1 (set ARENA_GUI_AGENTS_PYTHON)"
-    );
-    // Straight to the process's stderr (libtest does not capture it), in one write, so
-    // that test.sh counts it.
-    let line = format!("SKIPPED: {test}: gui-agents not installed\n  (set ARENA_GUI_AGENTS_PYTHON to a Python with it; .ci/run installs it)\n");
-    let _ = std::io::Write::write_all(&mut std::io::stderr(), line.as_bytes());
-    None
-}
-
 /// The two mock models, ended when dropped.
 struct Mocks {
     child: Child,
@@ -99,7 +79,7 @@ fn read_jsonl(path: &Path) -> Vec<Value> {
 #[test]
 fn agent_s3_from_gui_agents_solves_a_stub_task_through_the_step_protocol() {
     let test = "agent_s3_from_gui_agents_solves_a_stub_task_through_the_step_protocol";
-    let Some(python) = gui_agents_python(test) else { return };
+    let Some(python) = arena_test_support::gui_agents_python_or_skip(test) else { return };
     let tmp = tempfile::tempdir().expect("tmp");
     let tasks = tmp.path().join("tasks/notepad");
     arena_test_support::copy_stub_task("notepad", "stub-notepad-draft", &tasks);
@@ -183,7 +163,7 @@ fn agent_s3_from_gui_agents_solves_a_stub_task_through_the_step_protocol() {
 #[tokio::test]
 async fn the_mock_models_refuse_what_the_sdk_types_refuse() {
     let test = "the_mock_models_refuse_what_the_sdk_types_refuse";
-    let Some(python) = gui_agents_python(test) else { return };
+    let Some(python) = arena_test_support::gui_agents_python_or_skip(test) else { return };
     let tmp = tempfile::tempdir().expect("tmp");
     let mocks = Mocks::start(&python, &tmp.path().join("models.jsonl"));
     let client = reqwest::Client::new();

@@ -19,6 +19,7 @@ use arena_actionspace::uitars::UiTarsVersion;
 use arena_actionspace::{ActionSpace, Coords};
 
 use super::cu::anthropic::{AnthropicAgent, AnthropicConfig};
+use super::cu::models::{Form, ImageLimit, Vendor};
 use super::cu::openai::{OpenAiAgent, OpenAiConfig, SafetyChecks};
 use super::cu::uitars::{UiTarsAgent, UiTarsConfig};
 use super::cu::Endpoint;
@@ -106,8 +107,12 @@ pub struct AgentOptions {
     pub llm_retry: f64,
     /// `--coords`: the outside agents' convention unless their `hello` names one.
     pub coords: Coords,
-    /// `--computer-tool`: [`ActionSpace::Anthropic20250124`] or [`ActionSpace::Anthropic20251124`].
-    pub computer_tool: ActionSpace,
+    /// `--computer-tool`; `None` lets the model table choose ([`super::cu::models`]).
+    pub computer_tool: Option<super::cu::models::Form>,
+    /// `--max-image-side`: the longest side of a screenshot sent to a computer-use model.
+    pub max_image_side: Option<u32>,
+    /// `--toolset-disable`: members of the computer toolset withheld from the model.
+    pub toolset_disable: Vec<String>,
     /// `--zoom`.
     pub zoom: bool,
     /// `--thinking-budget`.
@@ -330,6 +335,54 @@ fn cu_endpoint(options: &AgentOptions, name: &str) -> anyhow::Result<Endpoint> {
     Ok(endpoint)
 }
 
+/// Options to record, by name.
+type Recorded = Vec<(String, String)>;
+
+/// The tool form and screenshot limit of a computer-use run: `--computer-tool`
+/// and `--max-image-side` when given, else the model table's row for `model`
+/// (a model it does not know gets the newest form, and a notice). Answers them
+/// with the options to record: `computer_tool` and `image_limit`, each with where
+/// it came from.
+///
+/// # Errors
+///
+/// A `--computer-tool` of the other vendor's API, or a `--max-image-side` below 64.
+fn form_and_image(options: &AgentOptions, vendor: Vendor, model: &str) -> anyhow::Result<(Form, ImageLimit, Recorded)> {
+    let choice = super::cu::models::choose(vendor, model);
+    let form = match options.computer_tool {
+        Some(form) if form.vendor() != vendor => {
+            let theirs: Vec<&str> = Form::ALL.iter().filter(|f| f.vendor() == vendor).map(|f| f.name()).collect();
+            bail!("--computer-tool {} is not a tool of this agent's API (it takes {})", form.name(), theirs.join(", "))
+        }
+        Some(form) => (form, "--computer-tool"),
+        None => {
+            if let Some(notice) = &choice.notice {
+                tracing::warn!("{notice}");
+            }
+            (choice.form, if choice.notice.is_some() { "newest, model not in the table" } else { "model table" })
+        }
+    };
+    let image = match options.max_image_side {
+        Some(side) if side < 64 => bail!("--max-image-side {side} is too small to see a desktop (at least 64)"),
+        Some(side) => (ImageLimit::Within { side, pixels: u64::from(side) * u64::from(side) }, "--max-image-side"),
+        None if form.0 != choice.form => {
+            // A form the table would not give this model: the form's own default limit.
+            let of_form = super::cu::models::ANTHROPIC
+                .iter()
+                .chain(super::cu::models::OPENAI)
+                .find(|row| row.form == form.0)
+                .map_or(choice.image, |row| row.image);
+            (of_form, "the tool's default")
+        }
+        None => (choice.image, if choice.notice.is_some() { "newest, model not in the table" } else { "model table" }),
+    };
+    let recorded = vec![
+        ("computer_tool".to_owned(), format!("{} ({})", form.0.name(), form.1)),
+        ("image_limit".to_owned(), format!("{} ({})", image.0.describe(), image.1)),
+    ];
+    Ok((form.0, image.0, recorded))
+}
+
 /// `anthropic-cu`, `openai-cu` and `ui-tars`.
 fn computer_use(options: &AgentOptions) -> anyhow::Result<ChosenAgent> {
     let option = |k: &str, v: String| (k.to_owned(), v);
@@ -343,9 +396,12 @@ fn computer_use(options: &AgentOptions) -> anyhow::Result<ChosenAgent> {
         Preflight,
     ) = match options.kind {
         AgentKind::AnthropicCu => {
+            let (form, image, mut recorded) = form_and_image(options, Vendor::Anthropic, &model)?;
             let mut config = AnthropicConfig::new("", "");
             config.endpoint = cu_endpoint(options, "anthropic-cu")?;
-            config.tool = options.computer_tool;
+            config.tool = form;
+            config.image = image;
+            config.disabled_members = options.toolset_disable.clone();
             config.enable_zoom = options.zoom;
             config.thinking_budget = options.thinking_budget;
             config.prompt_caching = options.prompt_caching;
@@ -353,29 +409,36 @@ fn computer_use(options: &AgentOptions) -> anyhow::Result<ChosenAgent> {
             let probe = AnthropicAgent::new(config.clone())?;
             let body = serde_json::json!({"model": model, "max_tokens": 16, "messages": [{"role": "user", "content": PROBE_TEXT}]});
             let preflight = Preflight::model(probe.client(), body);
-            let recorded = vec![
+            recorded.extend([
                 option("keep_images", config.keep_images.to_string()),
                 option("thinking_budget", config.thinking_budget.map_or("off".into(), |b| b.to_string())),
                 option("prompt_caching", if config.prompt_caching { "on" } else { "off" }.into()),
                 option("zoom", if config.enable_zoom { "on" } else { "off" }.into()),
-            ];
-            let space = config.tool;
+            ]);
+            if !config.disabled_members.is_empty() {
+                recorded.push(option("toolset_disable", config.disabled_members.join(",")));
+            }
+            let space = config.space();
+            let coords = format!("image:{}", config.image.describe());
             let factory: AgentFactory =
                 Arc::new(move || Ok(Box::new(AnthropicAgent::new(config.clone())?) as Box<dyn Agent>));
-            (factory, space, "image:recommended-size".into(), recorded, preflight)
+            (factory, space, coords, recorded, preflight)
         }
         AgentKind::OpenaiCu => {
+            let (form, image, mut recorded) = form_and_image(options, Vendor::OpenAi, &model)?;
             let mut config = OpenAiConfig::new("", "");
             config.endpoint = cu_endpoint(options, "openai-cu")?;
             config.safety_checks = options.safety_checks;
+            config.tool = form;
+            config.image = image;
             let probe = OpenAiAgent::new(config.clone())?;
             let body = serde_json::json!({"model": model, "input": PROBE_TEXT, "max_output_tokens": 16});
             let preflight = Preflight::model(probe.client(), body);
-            let recorded = vec![option("safety_checks", config.safety_checks.name().into())];
+            recorded.push(option("safety_checks", config.safety_checks.name().into()));
+            let coords = format!("image:{}", config.image.describe());
             let factory: AgentFactory =
                 Arc::new(move || Ok(Box::new(OpenAiAgent::new(config.clone())?) as Box<dyn Agent>));
-            let (w, h) = super::cu::openai::MAX_DISPLAY;
-            (factory, ActionSpace::OpenAi, format!("image:within-{w}x{h}"), recorded, preflight)
+            (factory, ActionSpace::OpenAi, coords, recorded, preflight)
         }
         _ => {
             let Some(path) = &options.prompt_file else {

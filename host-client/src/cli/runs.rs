@@ -35,7 +35,7 @@ use crate::run::shard::Shard;
 use crate::run::{load_tasks, run_tasks, RunOptions, TaskOrder};
 use crate::som::SomOrigin;
 use arena_actionspace::uitars::UiTarsVersion;
-use arena_actionspace::{ActionSpace, Coords};
+use arena_actionspace::Coords;
 use arena_setup::{DownloadCache, Settle};
 use arena_task::Difficulty;
 
@@ -134,10 +134,22 @@ pub struct RunArgs {
     /// computer-use agents use their model's own convention. Recorded in the results.
     #[arg(long, default_value = "pixels", value_parser = parse_coords, value_name = "CONVENTION")]
     pub coords: Coords,
-    /// anthropic-cu: the computer tool's version.
-    #[arg(long, value_enum, default_value_t = ComputerTool::Computer20250124)]
-    pub computer_tool: ComputerTool,
-    /// anthropic-cu: offer the `zoom` action (computer_20251124 only).
+    /// anthropic-cu and openai-cu: the tool form. Without it the model's row of the
+    /// table in docs/agents.md chooses (a model not in it gets its vendor's newest form,
+    /// with a notice). Recorded in the results.
+    #[arg(long, value_enum, value_name = "TOOL")]
+    pub computer_tool: Option<ComputerTool>,
+    /// anthropic-cu and openai-cu: the longest side, in pixels, of the screenshots sent
+    /// (scaled down, never up; coordinates are mapped back). Without it the model's row
+    /// of the table chooses. Recorded in the results.
+    #[arg(long, value_name = "PIXELS")]
+    pub max_image_side: Option<u32>,
+    /// anthropic-cu with computer_toolset_20260801: withhold a member tool from the model
+    /// (its `configs` entry says `enabled: false`); may be given more than once.
+    #[arg(long, value_name = "MEMBER")]
+    pub toolset_disable: Vec<String>,
+    /// anthropic-cu: offer zoom (computer_20251124, or the toolset's `zoom` member,
+    /// which is withheld without this).
     #[arg(long)]
     pub zoom: bool,
     /// anthropic-cu: the extended-thinking budget in tokens (at least 1024, below --max-tokens),
@@ -469,10 +481,35 @@ pub fn differences_from_upstream(args: &RunArgs, fast: bool) -> Vec<String> {
 /// `--computer-tool`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
 pub enum ComputerTool {
+    /// Anthropic's tool, beta header computer-use-2025-01-24.
     #[value(name = "computer_20250124")]
     Computer20250124,
+    /// Anthropic's tool with zoom, beta header computer-use-2025-11-24.
     #[value(name = "computer_20251124")]
     Computer20251124,
+    /// Anthropic's computer toolset: one tool per action.
+    #[value(name = "computer_toolset_20260801")]
+    ComputerToolset20260801,
+    /// OpenAI's preview tool (computer-use-preview).
+    #[value(name = "computer_use_preview")]
+    ComputerUsePreview,
+    /// OpenAI's GA tool, batched actions.
+    #[value(name = "computer")]
+    Computer,
+}
+
+impl ComputerTool {
+    /// The form it names.
+    pub fn form(self) -> crate::agent::cu::models::Form {
+        use crate::agent::cu::models::Form;
+        match self {
+            ComputerTool::Computer20250124 => Form::Computer20250124,
+            ComputerTool::Computer20251124 => Form::Computer20251124,
+            ComputerTool::ComputerToolset20260801 => Form::ComputerToolset20260801,
+            ComputerTool::ComputerUsePreview => Form::ComputerUsePreview,
+            ComputerTool::Computer => Form::Computer,
+        }
+    }
 }
 
 /// `--navi-style`.
@@ -602,10 +639,9 @@ impl RunArgs {
             llm_timeout: self.llm_timeout,
             llm_retry: self.llm_retry,
             coords: self.coords,
-            computer_tool: match self.computer_tool {
-                ComputerTool::Computer20250124 => ActionSpace::Anthropic20250124,
-                ComputerTool::Computer20251124 => ActionSpace::Anthropic20251124,
-            },
+            computer_tool: self.computer_tool.map(ComputerTool::form),
+            max_image_side: self.max_image_side,
+            toolset_disable: self.toolset_disable.clone(),
             zoom: self.zoom,
             thinking_budget: self.thinking_budget,
             prompt_caching: !self.no_prompt_cache,

@@ -205,3 +205,31 @@ pub fn python3_or_skip(test: &str) -> bool {
     let _ = writeln!(std::io::stderr(), "SKIPPED: {test}: python3 not found");
     false
 }
+
+/// A Python that has the `gui-agents` package and the vendor SDKs it pins
+/// (`openai`, `anthropic`, with `pydantic`, `numpy`, Pillow): `ARENA_GUI_AGENTS_PYTHON`,
+/// else `python3`. Without one the test is skipped loudly (`SKIPPED: <test>:
+/// gui-agents not installed`, counted by `./test.sh`).
+///
+/// # Panics
+///
+/// When there is none and `ARENA_REQUIRE_GUI_AGENTS=1` (CI, where `.ci/run` installs it).
+pub fn gui_agents_python_or_skip(test: &str) -> Option<String> {
+    let candidate = std::env::var("ARENA_GUI_AGENTS_PYTHON").unwrap_or_else(|_| "python3".to_owned());
+    let imports =
+        "import gui_agents.s3.agents.agent_s, gui_agents.s3.agents.grounding, openai, anthropic, pydantic, numpy, PIL";
+    if Command::new(&candidate).args(["-c", imports]).output().is_ok_and(|o| o.status.success()) {
+        return Some(candidate);
+    }
+    assert!(
+        std::env::var("ARENA_REQUIRE_GUI_AGENTS").as_deref() != Ok("1"),
+        "{test}: {candidate} cannot import gui-agents and ARENA_REQUIRE_GUI_AGENTS=1 (set ARENA_GUI_AGENTS_PYTHON)"
+    );
+    // Straight to the process's stderr (libtest does not capture it), in one write,
+    // so that test.sh counts it.
+    let line = format!(
+        "SKIPPED: {test}: gui-agents not installed\n  (set ARENA_GUI_AGENTS_PYTHON to a Python with it; .ci/run installs it)\n"
+    );
+    let _ = std::io::stderr().write_all(line.as_bytes());
+    None
+}

@@ -1,4 +1,5 @@
-//! [`AnthropicAgent`]: Claude with Anthropic's `computer` tool, over the Messages API.
+//! [`AnthropicAgent`]: Claude with Anthropic's `computer` tool or computer toolset,
+//! over the Messages API.
 //!
 //! The protocol is Anthropic's published one (Messages API and computer-use tool docs):
 //! `POST {base}/v1/messages` with `x-api-key`, `anthropic-version: 2023-06-01` and
@@ -7,14 +8,27 @@
 //! `{"type": "computer_20250124", "name": "computer", "display_width_px", "display_height_px"}`
 //! (`"enable_zoom": true` with `computer_20251124` when zoom is on).
 //!
+//! The toolset `computer_toolset_20260801` (the `anthropic` SDK 2.14.0's
+//! `ComputerToolset20260801Param`, a type of the generally available API: no beta
+//! header) is one `tools` entry with `type` and, when the run disables members,
+//! `configs` (`{"zoom": {"enabled": false}}` unless `--zoom`; every member is on by
+//! default, zoom included); it carries no name and no display size. The model
+//! answers with `tool_use` blocks named by their member (`left_click`) with
+//! `toolset_name: "computer"`, and each `tool_result` carries the same `toolset_name`.
+//!
 //! - **One conversation per episode.** The first user message holds the task and
 //!   the screenshot; each later one holds a `tool_result` for every `tool_use` of
 //!   the previous answer, the last carrying the new screenshot (a `cursor_position`
-//!   result carries the position, a `zoom` result the region's crop, an action
-//!   that could not be read `is_error` and why).
-//! - **Screenshots** are scaled to the resolution the tool documentation recommends
-//!   ([`recommended_size`]: XGA, WXGA or FWXGA by aspect ratio, else within the
-//!   API's image limits), and the model's coordinates are scaled back.
+//!   result carries the position, a `zoom` result the region's crop, a toolset
+//!   `screenshot` member's result the new screenshot, an action that could not be
+//!   read `is_error` and why). The actions of all the answer's `tool_use` blocks
+//!   run in order before the next observation, so every screenshot in the answer
+//!   is the screen after all of them.
+//! - **Screenshots** are scaled to the model's limit ([`super::models`]: for
+//!   models limited to 1568 px, the resolution the tool documentation recommends,
+//!   [`recommended_size`]: XGA, WXGA or FWXGA by aspect ratio, else within the
+//!   API's image limits; for Opus 4.7, up to 2576 px, so a 1440x900 screen is sent
+//!   as it is), or to `--max-image-side`, and the model's coordinates are scaled back.
 //! - **Images kept**: only the last `keep_images` screenshots stay in the
 //!   conversation; older ones become a short text.
 //! - **Prompt caching**: the system prompt (and the tool list before it) is
@@ -31,6 +45,7 @@ use serde_json::{json, Value};
 
 use arena_script::host::cursor_after;
 
+use super::models::{Form, ImageLimit};
 use super::{base64_png, cropped_png, exchange_logs, resized_png, screen_of, Endpoint};
 use crate::agent::llm::{ApiKind, ModelClient};
 use crate::agent::{Agent, AgentError, Prediction, StepLog};
@@ -55,8 +70,12 @@ tool call and end your message with the word FAIL.";
 #[derive(Debug, Clone, PartialEq)]
 pub struct AnthropicConfig {
     pub endpoint: Endpoint,
-    /// [`ActionSpace::Anthropic20250124`] or [`ActionSpace::Anthropic20251124`].
-    pub tool: ActionSpace,
+    /// [`Form::Computer20250124`], [`Form::Computer20251124`] or [`Form::ComputerToolset20260801`].
+    pub tool: Form,
+    /// The largest screenshot sent.
+    pub image: ImageLimit,
+    /// Toolset members the run withholds from the model (`configs`), besides zoom without `--zoom`.
+    pub disabled_members: Vec<String>,
     /// How many screenshots stay in the conversation (`--keep-images`).
     pub keep_images: usize,
     /// Extended thinking's budget in tokens, for models that take one.
@@ -71,7 +90,9 @@ impl AnthropicConfig {
     pub fn new(base_url: &str, model: &str) -> AnthropicConfig {
         AnthropicConfig {
             endpoint: Endpoint::new(base_url, model),
-            tool: ActionSpace::Anthropic20250124,
+            tool: Form::Computer20250124,
+            image: ImageLimit::AnthropicRecommended,
+            disabled_members: Vec::new(),
             keep_images: 3,
             thinking_budget: None,
             prompt_caching: true,
@@ -84,12 +105,30 @@ impl AnthropicConfig {
         self.tool.name()
     }
 
-    /// The beta header the tool version needs.
-    pub fn beta(&self) -> &'static str {
-        match self.tool {
-            ActionSpace::Anthropic20251124 => "computer-use-2025-11-24",
-            _ => "computer-use-2025-01-24",
+    /// The beta header the tool version needs (none for the toolset).
+    pub fn beta(&self) -> Option<&'static str> {
+        self.tool.beta_header()
+    }
+
+    /// The action space of the tool's answers.
+    pub fn space(&self) -> ActionSpace {
+        self.tool.action_space()
+    }
+
+    /// The toolset's `tools` entry: `type`, and `configs` for each member the run withholds.
+    fn toolset_entry(&self) -> Value {
+        let mut configs = serde_json::Map::new();
+        if !self.enable_zoom {
+            configs.insert("zoom".into(), json!({"enabled": false}));
         }
+        for member in &self.disabled_members {
+            configs.insert(member.clone(), json!({"enabled": false}));
+        }
+        let mut entry = json!({"type": self.tool_type()});
+        if !configs.is_empty() {
+            entry["configs"] = Value::Object(configs);
+        }
+        entry
     }
 
     /// The Messages URL: `/v1/messages` after the base (or `/messages` after a base ending in `/v1`).
@@ -129,6 +168,8 @@ pub fn recommended_size(screen: (u32, u32)) -> (u32, u32) {
 enum Answer {
     /// Carried out (or nothing to do): the screenshot, if it is the last.
     Done,
+    /// A toolset `screenshot` member: the new screenshot.
+    Screenshot,
     /// The cursor position.
     Cursor,
     /// The crop of this region of the new screenshot.
@@ -166,11 +207,27 @@ impl AnthropicAgent {
     ///
     /// [`AgentError::Config`] for an unusable URL, model, tool version or thinking budget.
     pub fn new(config: AnthropicConfig) -> Result<AnthropicAgent, AgentError> {
-        if !matches!(config.tool, ActionSpace::Anthropic20250124 | ActionSpace::Anthropic20251124) {
-            return Err(AgentError::Config(format!("{} is not a version of Anthropic's computer tool", config.tool)));
+        if config.tool.vendor() != super::models::Vendor::Anthropic {
+            return Err(AgentError::Config(format!(
+                "{} is not a version of Anthropic's computer tool",
+                config.tool.name()
+            )));
         }
-        if config.enable_zoom && config.tool != ActionSpace::Anthropic20251124 {
-            return Err(AgentError::Config("zoom needs the computer_20251124 tool".into()));
+        if config.enable_zoom && config.tool == Form::Computer20250124 {
+            return Err(AgentError::Config("zoom needs the computer_20251124 tool or the computer toolset".into()));
+        }
+        if let Some(bad) = config
+            .disabled_members
+            .iter()
+            .find(|m| !arena_actionspace::anthropic::TOOLSET_MEMBERS.contains(&m.as_str()))
+        {
+            return Err(AgentError::Config(format!(
+                "{bad:?} is not a member of computer_toolset_20260801 (members: {})",
+                arena_actionspace::anthropic::TOOLSET_MEMBERS.join(", ")
+            )));
+        }
+        if !config.disabled_members.is_empty() && config.tool != Form::ComputerToolset20260801 {
+            return Err(AgentError::Config("only the computer toolset has members to disable".into()));
         }
         if let Some(budget) = config.thinking_budget {
             if budget < 1024 || budget >= config.endpoint.max_tokens {
@@ -180,24 +237,31 @@ impl AnthropicAgent {
                 )));
             }
         }
-        let client = config
+        let mut client = config
             .endpoint
             .client(&config.url()?, ApiKind::Anthropic, &KEY_VARS)?
-            .with_header("anthropic-version", API_VERSION)
-            .with_header("anthropic-beta", config.beta());
+            .with_header("anthropic-version", API_VERSION);
+        if let Some(beta) = config.beta() {
+            client = client.with_header("anthropic-beta", beta);
+        }
         Ok(AnthropicAgent { config, client, messages: Vec::new(), pending: Vec::new(), cursor: (0, 0) })
     }
 
     fn body(&self, messages: &[Value], size: (u32, u32)) -> Value {
-        let mut tool = json!({
-            "type": self.config.tool_type(),
-            "name": "computer",
-            "display_width_px": size.0,
-            "display_height_px": size.1,
-        });
-        if self.config.enable_zoom {
-            tool["enable_zoom"] = json!(true);
-        }
+        let tool = if self.config.tool == Form::ComputerToolset20260801 {
+            self.config.toolset_entry()
+        } else {
+            let mut tool = json!({
+                "type": self.config.tool_type(),
+                "name": "computer",
+                "display_width_px": size.0,
+                "display_height_px": size.1,
+            });
+            if self.config.enable_zoom {
+                tool["enable_zoom"] = json!(true);
+            }
+            tool
+        };
         let mut system = json!({"type": "text", "text": SYSTEM_PROMPT});
         if self.config.prompt_caching {
             system["cache_control"] = json!({"type": "ephemeral"});
@@ -286,7 +350,8 @@ impl Agent for AnthropicAgent {
 
     async fn predict(&mut self, obs: &Observation) -> Result<Prediction, AgentError> {
         let (frame, screen) = screen_of(obs);
-        let size = recommended_size(screen);
+        let size = self.config.image.size_for(screen);
+        let toolset = self.config.tool == Form::ComputerToolset20260801;
         let coords = Coords::Image { width: size.0, height: size.1 };
         let shot = image_block(&resized_png(frame, size)?);
 
@@ -298,8 +363,11 @@ impl Agent for AnthropicAgent {
             for (i, pending) in self.pending.iter().enumerate() {
                 let mut content = Vec::new();
                 let mut is_error = false;
+                let last = i + 1 == self.pending.len();
                 match &pending.answer {
                     Answer::Done => {}
+                    Answer::Screenshot if !last => content.push(shot.clone()),
+                    Answer::Screenshot => {}
                     Answer::Cursor => {
                         let (x, y) = coords.from_screen(self.cursor.0, self.cursor.1, screen);
                         content.push(text_block(&format!("X={},Y={}", x.round(), y.round())));
@@ -310,12 +378,15 @@ impl Agent for AnthropicAgent {
                         content.push(text_block(why));
                     }
                 }
-                if i + 1 == self.pending.len() {
+                if last {
                     content.push(shot.clone());
                 }
                 let mut result = json!({"type": "tool_result", "tool_use_id": pending.id, "content": content});
                 if is_error {
                     result["is_error"] = json!(true);
+                }
+                if toolset {
+                    result["toolset_name"] = json!("computer");
                 }
                 results.push(result);
             }
@@ -360,17 +431,24 @@ impl Agent for AnthropicAgent {
             let id = block.get("id").and_then(Value::as_str).ok_or_else(|| malformed("a tool_use without an id"))?;
             let input = block.get("input").cloned().unwrap_or(Value::Null);
             response.push_str(&format!("\n{input}"));
-            let parsed = match block.get("name").and_then(Value::as_str) {
-                Some("computer") => arena_actionspace::parse(self.config.tool, &input, &ctx),
-                other => Err(arena_actionspace::ActionError::new(self.config.tool, format!("unknown tool {other:?}"))),
+            let space = self.config.space();
+            let parsed = match (block.get("name").and_then(Value::as_str), toolset) {
+                (Some("computer"), false) => arena_actionspace::parse(space, &input, &ctx),
+                // A member's block: its name and input are the action.
+                (Some(_), true) if block.get("toolset_name").and_then(Value::as_str) == Some("computer") => {
+                    arena_actionspace::parse(space, block, &ctx)
+                }
+                (other, _) => Err(arena_actionspace::ActionError::new(space, format!("unknown tool {other:?}"))),
             };
             let answer = match parsed {
                 Ok(s) => {
-                    let answer = match s.iter().find(|s| matches!(s, Step::CursorPosition | Step::Zoom(_))) {
-                        Some(Step::Zoom(rect)) => Answer::Zoom(*rect),
-                        Some(_) => Answer::Cursor,
-                        None => Answer::Done,
-                    };
+                    let answer =
+                        match s.iter().find(|s| matches!(s, Step::CursorPosition | Step::Zoom(_) | Step::Screenshot)) {
+                            Some(Step::Zoom(rect)) => Answer::Zoom(*rect),
+                            Some(Step::CursorPosition) => Answer::Cursor,
+                            Some(_) if toolset => Answer::Screenshot,
+                            _ => Answer::Done,
+                        };
                     steps.extend(s);
                     answer
                 }
@@ -447,11 +525,19 @@ mod tests {
         let mut config = AnthropicConfig::new("https://api.anthropic.com", "claude");
         config.enable_zoom = true;
         assert!(AnthropicAgent::new(config.clone()).is_err());
-        config.tool = ActionSpace::Anthropic20251124;
+        config.tool = Form::Computer20251124;
         assert!(AnthropicAgent::new(config.clone()).is_ok());
+        config.disabled_members = vec!["scroll".into()];
+        assert!(AnthropicAgent::new(config.clone()).is_err(), "members are the toolset's");
+        config.tool = Form::ComputerToolset20260801;
+        assert!(AnthropicAgent::new(config.clone()).is_ok());
+        config.disabled_members = vec!["teleport".into()];
+        assert!(AnthropicAgent::new(config.clone()).is_err(), "not a member");
+        config.disabled_members.clear();
         config.thinking_budget = Some(8192);
         assert!(AnthropicAgent::new(config.clone()).is_err(), "a budget above max_tokens");
-        config.tool = ActionSpace::OpenAi;
+        config.thinking_budget = None;
+        config.tool = Form::Computer;
         assert!(AnthropicAgent::new(config).is_err());
         assert_eq!(AnthropicConfig::new("https://gw.example/v1", "m").url().unwrap(), "https://gw.example/v1/messages");
     }

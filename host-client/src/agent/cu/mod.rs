@@ -1,8 +1,10 @@
 //! The computer-use agents: models that drive a desktop through their vendor's
 //! own tool protocol and action grammar, scored unchanged.
 //!
-//! - [`anthropic`]: [`anthropic::AnthropicAgent`], Anthropic's Messages API with the `computer` tool.
-//! - [`openai`]: [`openai::OpenAiAgent`], OpenAI's Responses API with `computer_use_preview`.
+//! - [`anthropic`]: [`anthropic::AnthropicAgent`], Anthropic's Messages API with the `computer` tool
+//!   or the computer toolset.
+//! - [`openai`]: [`openai::OpenAiAgent`], OpenAI's Responses API with `computer_use_preview` or the GA `computer` tool.
+//! - [`models`]: which tool form and screenshot size each model gets by default, with sources.
 //! - [`uitars`]: [`uitars::UiTarsAgent`], UI-TARS over an OpenAI-compatible chat endpoint (vLLM).
 //!
 //! All three call their endpoint through [`super::llm::ModelClient`] (backoff,
@@ -18,6 +20,7 @@
 //! cropped (never decoded again) and encoded by the host's one PNG encoder.
 
 pub mod anthropic;
+pub mod models;
 pub mod openai;
 pub mod uitars;
 

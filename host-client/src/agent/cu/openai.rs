@@ -1,13 +1,20 @@
-//! [`OpenAiAgent`]: OpenAI's computer-use model over the Responses API.
+//! [`OpenAiAgent`]: OpenAI's computer-use models over the Responses API.
 //!
-//! The protocol is OpenAI's published one (the computer-use guide and the
-//! Responses API reference): `POST {base}/responses` with a Bearer key, the tool
-//! `{"type": "computer_use_preview", "display_width", "display_height", "environment": "windows"}`
-//! and `truncation: "auto"`.
+//! The protocol is OpenAI's published one (the computer-use guide, the Responses
+//! API reference and the `openai` SDK 3.57.0's types): `POST {base}/responses`
+//! with a Bearer key and `truncation: "auto"`, and one of two tools:
+//!
+//! - `computer_use_preview` ([`Form::ComputerUsePreview`]):
+//!   `{"type": "computer_use_preview", "display_width", "display_height", "environment": "windows"}`;
+//!   each `computer_call` carries one `action`.
+//! - the GA `computer` tool ([`Form::Computer`]): `{"type": "computer"}` and nothing
+//!   else (`ComputerToolParam`); each `computer_call` carries an `actions` batch,
+//!   run in order.
 //!
 //! - The first request's input is the task and the screenshot; each later one
-//!   chains with `previous_response_id` and answers the last `computer_call` with a
-//!   `computer_call_output` holding the new screenshot (`computer_screenshot`).
+//!   chains with `previous_response_id` and answers every `computer_call` of the
+//!   last answer with one `computer_call_output` holding the new screenshot
+//!   (`computer_screenshot`), taken after all the calls' actions ran.
 //! - `pending_safety_checks` on a call follow the policy ([`SafetyChecks`],
 //!   `--safety-checks`): `ack` carries out the action and acknowledges the checks
 //!   in the next `computer_call_output`; `fail` ends the episode as `FAIL`, the
@@ -15,9 +22,10 @@
 //! - An answer with no `computer_call` ends the episode: `FAIL` when its text says
 //!   FAIL (the instructions ask for that word), `DONE` otherwise; a `refusal`
 //!   content part is `FAIL`.
-//! - Screenshots: the tool's declared `display_width`/`display_height` is the size
-//!   of every screenshot sent ([`display_size`]): the screen's own when it fits
-//!   within [`MAX_DISPLAY`], else the screen scaled down to fit it (aspect ratio
+//! - Screenshots: the model's limit ([`super::models`]) or `--max-image-side`
+//!   decides the size of every screenshot sent: with the preview tool, the declared
+//!   `display_width`/`display_height`, at most [`MAX_DISPLAY`] ([`display_size`]);
+//!   with the GA tool, the screen as it is when it fits within 2048 px (aspect ratio
 //!   kept, by the same resize and coordinate convention the Anthropic agent uses,
 //!   `Coords::Image`), and the model's coordinates are scaled back to the screen's.
 //!
@@ -26,6 +34,7 @@
 use serde_json::{json, Value};
 
 use super::anthropic::ending;
+use super::models::{Form, ImageLimit};
 use super::{base64_png, exchange_logs, resized_png, screen_of, Endpoint};
 use crate::agent::llm::{ApiKind, ModelClient};
 use crate::agent::{Agent, AgentError, Prediction};
@@ -81,15 +90,24 @@ impl SafetyChecks {
 pub struct OpenAiConfig {
     pub endpoint: Endpoint,
     pub safety_checks: SafetyChecks,
+    /// [`Form::ComputerUsePreview`] or [`Form::Computer`].
+    pub tool: Form,
+    /// The largest screenshot sent.
+    pub image: ImageLimit,
 }
 
 impl OpenAiConfig {
     pub fn new(base_url: &str, model: &str) -> OpenAiConfig {
-        OpenAiConfig { endpoint: Endpoint::new(base_url, model), safety_checks: SafetyChecks::default() }
+        OpenAiConfig {
+            endpoint: Endpoint::new(base_url, model),
+            safety_checks: SafetyChecks::default(),
+            tool: Form::ComputerUsePreview,
+            image: ImageLimit::Display(MAX_DISPLAY.0, MAX_DISPLAY.1),
+        }
     }
 }
 
-/// The call the next request answers.
+/// A call the next request answers.
 #[derive(Debug, Clone, PartialEq)]
 struct PendingCall {
     call_id: String,
@@ -102,7 +120,7 @@ pub struct OpenAiAgent {
     config: OpenAiConfig,
     client: ModelClient,
     previous_response_id: Option<String>,
-    pending: Option<PendingCall>,
+    pending: Vec<PendingCall>,
 }
 
 impl OpenAiAgent {
@@ -117,8 +135,35 @@ impl OpenAiAgent {
     ///
     /// [`AgentError::Config`] for an unusable URL or model name.
     pub fn new(config: OpenAiConfig) -> Result<OpenAiAgent, AgentError> {
+        if config.tool.vendor() != super::models::Vendor::OpenAi {
+            return Err(AgentError::Config(format!("{} is not one of OpenAI's computer tools", config.tool.name())));
+        }
         let client = config.endpoint.client(&config.endpoint.url("/responses")?, ApiKind::OpenAi, &KEY_VARS)?;
-        Ok(OpenAiAgent { config, client, previous_response_id: None, pending: None })
+        Ok(OpenAiAgent { config, client, previous_response_id: None, pending: Vec::new() })
+    }
+
+    /// The first screenshot's `detail`, which the SDK's `ResponseInputImageParam`
+    /// requires: `auto` (what the API assumed when it was left out) with the preview
+    /// tool, `high` with the GA tool, whose screenshots the table keeps within the
+    /// 2048-pixel box that detail level takes.
+    fn image_detail(&self) -> &'static str {
+        match self.config.tool {
+            Form::Computer => "high",
+            _ => "auto",
+        }
+    }
+
+    /// The `tools` entry of the configured form.
+    fn tool(&self, size: (u32, u32)) -> Value {
+        match self.config.tool {
+            Form::Computer => json!({"type": "computer"}),
+            _ => json!({
+                "type": "computer_use_preview",
+                "display_width": size.0,
+                "display_height": size.1,
+                "environment": "windows",
+            }),
+        }
     }
 }
 
@@ -134,42 +179,44 @@ impl Agent for OpenAiAgent {
 
     async fn reset(&mut self, _task: &Task) {
         self.previous_response_id = None;
-        self.pending = None;
+        self.pending.clear();
     }
 
     async fn predict(&mut self, obs: &Observation) -> Result<Prediction, AgentError> {
         let (frame, screen) = screen_of(obs);
-        let size = display_size(screen);
+        let size = self.config.image.size_for(screen);
         let image_url = format!("data:image/png;base64,{}", base64_png(&resized_png(frame, size)?));
-        let input = match (&self.previous_response_id, &self.pending) {
-            (Some(_), Some(call)) => json!([{
-                "type": "computer_call_output",
-                "call_id": call.call_id,
-                "acknowledged_safety_checks": call.acknowledged,
-                "output": {"type": "computer_screenshot", "image_url": image_url},
-            }]),
+        let input = match (&self.previous_response_id, self.pending.is_empty()) {
+            (Some(_), false) => Value::Array(
+                self.pending
+                    .iter()
+                    .map(|call| {
+                        json!({
+                            "type": "computer_call_output",
+                            "call_id": call.call_id,
+                            "acknowledged_safety_checks": call.acknowledged,
+                            "output": {"type": "computer_screenshot", "image_url": image_url},
+                        })
+                    })
+                    .collect(),
+            ),
             _ => json!([{
                 "role": "user",
                 "content": [
                     {"type": "input_text", "text": obs.instruction},
-                    {"type": "input_image", "image_url": image_url},
+                    {"type": "input_image", "image_url": image_url, "detail": self.image_detail()},
                 ],
             }]),
         };
         let mut body = json!({
             "model": self.config.endpoint.model,
             "instructions": INSTRUCTIONS,
-            "tools": [{
-                "type": "computer_use_preview",
-                "display_width": size.0,
-                "display_height": size.1,
-                "environment": "windows",
-            }],
+            "tools": [self.tool(size)],
             "input": input,
             "truncation": "auto",
             "max_output_tokens": self.config.endpoint.max_tokens,
         });
-        if let (Some(id), Some(_)) = (&self.previous_response_id, &self.pending) {
+        if let (Some(id), false) = (&self.previous_response_id, self.pending.is_empty()) {
             body["previous_response_id"] = json!(id);
         }
         let answer = self.client.call(&body).await?;
@@ -199,42 +246,68 @@ impl Agent for OpenAiAgent {
             }
         }
         let text = text.join("\n");
-        let call = output.iter().find(|i| i.get("type").and_then(Value::as_str) == Some("computer_call"));
-        let Some(call) = call.filter(|_| !refused) else {
+        let calls: Vec<&Value> =
+            output.iter().filter(|i| i.get("type").and_then(Value::as_str) == Some("computer_call")).collect();
+        if calls.is_empty() || refused {
             self.previous_response_id = Some(id);
-            self.pending = None;
+            self.pending.clear();
             return Ok(ending(text, refused, logs));
-        };
-        let call_id =
-            call.get("call_id").and_then(Value::as_str).ok_or_else(|| malformed("a computer_call without call_id"))?;
-        let action = call.get("action").cloned().unwrap_or(Value::Null);
-        let checks: Vec<Value> =
-            call.get("pending_safety_checks").and_then(Value::as_array).cloned().unwrap_or_default();
-        let mut response = format!("{text}\n{action}").trim().to_owned();
-        if !checks.is_empty() {
+        }
+        let mut response = text;
+        let mut pending = Vec::new();
+        let mut batch = Vec::new();
+        let mut all_checks = Vec::new();
+        for call in calls {
+            let call_id = call
+                .get("call_id")
+                .and_then(Value::as_str)
+                .ok_or_else(|| malformed("a computer_call without call_id"))?;
+            // The GA tool batches its actions; the preview tool sends one.
+            let actions = match (self.config.tool, call.get("actions"), call.get("action")) {
+                (Form::Computer, Some(list @ Value::Array(_)), _) => list.clone(),
+                (_, _, Some(one)) if !one.is_null() => one.clone(),
+                (Form::Computer, _, _) => return Err(malformed("a computer_call without `actions`")),
+                _ => return Err(malformed("a computer_call without `action`")),
+            };
+            response.push_str(&format!("\n{actions}"));
+            batch.push(actions);
+            let checks: Vec<Value> =
+                call.get("pending_safety_checks").and_then(Value::as_array).cloned().unwrap_or_default();
+            all_checks.extend(checks.iter().cloned());
+            // Acknowledged checks are exactly the pending ones, with their id, code and message.
+            pending.push(PendingCall { call_id: call_id.to_owned(), acknowledged: checks });
+        }
+        let mut response = response.trim().to_owned();
+        if !all_checks.is_empty() {
             response.push_str(&format!(
                 "\npending safety checks ({}): {}",
                 self.config.safety_checks.name(),
-                Value::Array(checks.clone())
+                Value::Array(all_checks)
             ));
             if self.config.safety_checks == SafetyChecks::Fail {
                 self.previous_response_id = Some(id);
-                self.pending = None;
+                self.pending.clear();
                 return Ok(super::translated(response, vec![AgentAction::Fail], None, logs));
             }
         }
-        // The model's pixels are the declared display's: scaled back to the screen's.
+        // The model's pixels are the screenshot's: scaled back to the screen's.
         let ctx = Context { screen, cursor: (0, 0), coords: Coords::Image { width: size.0, height: size.1 } };
-        let (actions, raw_error) = match arena_actionspace::parse(ActionSpace::OpenAi, &action, &ctx) {
-            Ok(steps) => (
-                AgentAction::from_steps(&steps.into_iter().filter(|s| *s != Step::Screenshot).collect::<Vec<_>>()),
-                None,
-            ),
-            Err(err) => (Vec::new(), Some(err.to_string())),
-        };
-        // Acknowledged checks are exactly the pending ones, with their id, code and message.
+        let mut steps = Vec::new();
+        let mut raw_error = None;
+        for actions in &batch {
+            match arena_actionspace::parse(ActionSpace::OpenAi, actions, &ctx) {
+                Ok(more) => steps.extend(more.into_iter().filter(|s| *s != Step::Screenshot)),
+                Err(err) => {
+                    // Nothing of an answer with an unreadable action is done.
+                    raw_error = Some(err.to_string());
+                    steps.clear();
+                    break;
+                }
+            }
+        }
+        let actions = AgentAction::from_steps(&steps);
         self.previous_response_id = Some(id);
-        self.pending = Some(PendingCall { call_id: call_id.to_owned(), acknowledged: checks });
+        self.pending = pending;
         Ok(super::translated(response, actions, raw_error, logs))
     }
 }
