@@ -537,7 +537,7 @@ fn openai_keys_held_during_a_mouse_action() {
     check(
         o,
         px,
-        json!([{"type": "click", "button": "left", "x": 5, "y": 6}, {"type": "type", "text": "hi"}, {"type": "keypress", "keys": ["CTRL", "S"]}]),
+        json!([{"type": "click", "button": "left", "x": 5, "y": 6}, {"type": "type", "text": "hi"}, {"type": "keypress", "keys": ["CTRL", "s"]}]),
         &[
             click(5, 6, MouseButton::Left, 1),
             act(Action::TypeText { text: "hi".into(), interval_ms: None }),
