@@ -72,6 +72,26 @@ pub fn render(summary: &Summary, found: &[FoundTask], title: &str) -> String {
         o.solved_rate,
         o.unfinished
     );
+    if let Some(words) = summary.floor_words() {
+        let _ = writeln!(html, "<p class=\"meta\" id=\"floor\">{}.</p>", escape(&words));
+    }
+    if let Some(record) = &summary.certificates {
+        let broken = summary.certified_broken();
+        let items: Vec<String> = broken
+            .iter()
+            .map(|(d, n, why)| {
+                format!("<li><code>{}</code>: certified broken: {}</li>", escape(&format!("{d}/{n}")), escape(why))
+            })
+            .collect();
+        let _ = writeln!(
+            html,
+            "<div class=\"warn\" id=\"certified-broken\"><p>Certificates from {} ({} task(s)): {} task(s) of this run certified broken.</p><ul>{}</ul></div>",
+            escape(&record.source),
+            record.certificates,
+            broken.len(),
+            items.join("")
+        );
+    }
     if let Some(words) = summary.incomplete_words() {
         let missing: Vec<String> =
             summary.missing.iter().map(|m| escape(&format!("{}/{}", m.domain, m.name))).collect();
