@@ -229,6 +229,11 @@ fn certificates_that_call_a_task_broken_mark_it_in_the_summary_and_report() {
     let output = arena([os("report"), os(&run)]);
     assert!(output.status.success(), "{}", text(&output));
     check(&run, &text(&output));
+    // A merge of the run keeps the record.
+    let merged = tmp.path().join("merged");
+    let output = arena([os("merge"), os(&merged), os(&run)]);
+    assert!(output.status.success(), "{}", text(&output));
+    check(&merged, &text(&output));
 
     // A run made without certificates is marked by `arena report --certificates`.
     let plain = tmp.path().join("plain");
