@@ -223,6 +223,7 @@ fn certificates_that_call_a_task_broken_mark_it_in_the_summary_and_report() {
         assert!(printed.contains("`notepad/stub-notepad-count`: certified broken"), "{printed}");
         let html = std::fs::read_to_string(dir.join("report.html")).expect("report.html");
         assert!(html.contains("id=\"certified-broken\"") && html.contains("notepad/stub-notepad-count"), "the report");
+        assert_eq!(html.matches("(certified broken)</span>").count(), 1, "the task's own section is marked");
     };
     check(&run, &all);
     // `arena report` keeps the record without the flag.
