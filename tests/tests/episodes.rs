@@ -233,6 +233,9 @@ async fn two_shards_merged_summarise_like_one_run() {
     assert!(report.duplicates.is_empty());
     assert_eq!(report.summary.table(), one.summary.table());
     assert_eq!(report.summary.outcomes(), one.summary.outcomes());
+    // The FAIL-always floor survives the merge: one infeasible task of six.
+    assert!(one.summary.overall.fail_floor.is_some_and(|f| (f - 100.0 / 6.0).abs() < 1e-9));
+    assert_eq!(report.summary.overall.fail_floor, one.summary.overall.fail_floor);
     assert_eq!(Summary::from_dir(&merged).unwrap(), report.summary, "the written summary is the merged one");
 }
 

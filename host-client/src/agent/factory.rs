@@ -4,7 +4,8 @@
 //! folders' labels and the agent's named options recorded in the results.
 //!
 //! It builds every agent kind of this layer: scripted, replay, Navi, the
-//! computer-use agents and the outside agents over the step protocol. It is not
+//! computer-use agents, the outside agents over the step protocol and the
+//! floor agents (`noop`, `fail`). It is not
 //! the command line (`crate::cli` turns flags into [`AgentOptions`]), and it does
 //! not build the MCP agent, whose endpoint serves HTTP (`crate::mcp`, feature
 //! `mcp-endpoint`).
@@ -25,6 +26,7 @@ use super::cu::uitars::{UiTarsAgent, UiTarsConfig};
 use super::cu::Endpoint;
 use super::external::transport::{HttpAgent, ProcessPool};
 use super::external::{Connector, ExternalAgent};
+use super::floor::{Floor, FloorAgent};
 use super::llm::{ApiKind, Refusals};
 use super::navi::{NaviAgent, NaviConfig, NaviStyle};
 use super::replay::{ReplayAgent, ReplaySource};
@@ -58,6 +60,10 @@ pub enum AgentKind {
     /// An MCP client driving each episode through the tools served at `--mcp-listen`
     /// (feature `mcp-endpoint`).
     Mcp,
+    /// Does nothing: answers DONE at its first step (a task it passes is broken).
+    Noop,
+    /// Gives up at once: answers FAIL at its first step (the infeasible tasks' floor).
+    Fail,
 }
 
 /// Where the behaviour constants a run uses come from, whatever `--waa-root` says:
@@ -257,23 +263,49 @@ pub fn build(options: &AgentOptions) -> anyhow::Result<ChosenAgent> {
         AgentKind::AnthropicCu | AgentKind::OpenaiCu | AgentKind::UiTars => computer_use(options),
         AgentKind::Exec | AgentKind::Http => external(options),
         AgentKind::Mcp => bail!("--agent mcp is set up by `arena run` itself"),
+        AgentKind::Noop => Ok(floor(Floor::Noop)),
+        AgentKind::Fail => Ok(floor(Floor::Fail)),
     }
 }
 
-fn scripted(options: &AgentOptions) -> anyhow::Result<ChosenAgent> {
+/// `noop` or `fail`: both folder levels name the floor, so their results never
+/// share a folder with another agent's.
+fn floor(floor: Floor) -> ChosenAgent {
+    let factory: AgentFactory = Arc::new(move || Ok(Box::new(FloorAgent::new(floor)) as Box<dyn Agent>));
+    ChosenAgent {
+        factory,
+        label: floor.name().into(),
+        model: floor.name().into(),
+        options: Vec::new(),
+        preflight: None,
+    }
+}
+
+/// Where the scripted agent of `options` finds its plans: `--plans` (a file for
+/// every task, or a folder), else the `plans` folder beside `--tasks` when it
+/// exists, else each task's own `plan` key.
+///
+/// # Errors
+///
+/// `--plans` names a plan file that does not load.
+pub fn plan_source(options: &AgentOptions) -> anyhow::Result<PlanSource> {
     let default_dir = if options.tasks.is_dir() {
         Some(options.tasks.join("plans"))
     } else {
         options.tasks.parent().map(|p| p.join("plans"))
     };
-    let source = match &options.plans {
+    Ok(match &options.plans {
         Some(path) if path.is_dir() => PlanSource::Dir(path.clone()),
         Some(path) => PlanSource::Fixed(Plan::load(path)?),
         None => match default_dir.filter(|d| d.is_dir()) {
             Some(dir) => PlanSource::Dir(dir),
             None => PlanSource::TaskKey,
         },
-    };
+    })
+}
+
+fn scripted(options: &AgentOptions) -> anyhow::Result<ChosenAgent> {
+    let source = plan_source(options)?;
     let factory: AgentFactory = Arc::new(move || Ok(Box::new(ScriptedAgent::new(source.clone())) as Box<dyn Agent>));
     Ok(ChosenAgent { factory, label: "scripted".into(), model: "plan".into(), options: Vec::new(), preflight: None })
 }

@@ -18,11 +18,13 @@
 //! - [`replay`]: [`replay::ReplayAgent`], which repeats a recorded trajectory.
 //! - [`cu`]: the computer-use agents (Anthropic's `computer` tool, OpenAI's Responses API, UI-TARS).
 //! - [`external`]: [`external::ExternalAgent`], an agent in another program over the step protocol.
+//! - [`floor`]: [`floor::FloorAgent`], `--agent noop` (DONE at once) and `--agent fail` (FAIL at once).
 //! - [`factory`]: [`factory::build`], a run's agent from its [`factory::AgentOptions`].
 
 pub mod cu;
 pub mod external;
 pub mod factory;
+pub mod floor;
 pub mod llm;
 pub mod navi;
 pub mod parse;

@@ -129,6 +129,22 @@ pub enum PlanSource {
     TaskKey,
 }
 
+impl PlanSource {
+    /// Whether this source has a plan for `task` (a file or the task's `plan`
+    /// key; a plan that exists but does not parse counts: playing it fails loudly).
+    pub fn has_plan(&self, task: &Task) -> bool {
+        match self {
+            PlanSource::Fixed(_) => true,
+            PlanSource::TaskKey => task.extra.contains_key(TASK_PLAN_KEY),
+            PlanSource::Dir(dir) => {
+                dir.join(&task.domain).join(format!("{}.json", task.name)).is_file()
+                    || dir.join(format!("{}.json", task.name)).is_file()
+                    || task.extra.contains_key(TASK_PLAN_KEY)
+            }
+        }
+    }
+}
+
 /// Follows a plan: step `n` of the episode answers the plan's step `n`.
 #[derive(Debug)]
 pub struct ScriptedAgent {

@@ -34,9 +34,9 @@ pub struct ExternalArgs {
 }
 
 #[cfg(feature = "mcp-endpoint")]
-pub(crate) use with_mcp::{mcp, run_with_mcp};
+pub(crate) use with_mcp::{mcp, run_with_mcp, McpEndpoint};
 #[cfg(not(feature = "mcp-endpoint"))]
-pub(crate) use without_mcp::{mcp, run_with_mcp};
+pub(crate) use without_mcp::{mcp, run_with_mcp, McpEndpoint};
 
 #[cfg(feature = "mcp-endpoint")]
 mod with_mcp {

@@ -15,6 +15,7 @@
 //! - [`demo`]: the end-to-end demonstration.
 
 pub mod act;
+pub mod certify;
 pub mod corpus;
 pub mod demo;
 pub mod external;
@@ -246,6 +247,10 @@ pub enum Command {
     Merge(runs::MergeArgs),
     /// Rebuild summary.json, summary.md and report.html of a result folder.
     Report(runs::ReportArgs),
+    /// Certify a task list: play it with `noop` (DONE at once), `fail` (FAIL at once) and,
+    /// where plans exist, the oracle, K times each, and write one certificate per task
+    /// (passes without acting, infeasible floor, oracle pass rate, flake rate, guest image).
+    Certify(Box<certify::CertifyArgs>),
     /// Compare two result folders task by task: the difference in success rate with a
     /// paired bootstrap interval, and the tasks that did better or worse.
     Compare(runs::CompareArgs),
@@ -589,6 +594,7 @@ pub async fn run(cli: Cli) -> anyhow::Result<ExitCode> {
         Command::Merge(args) => runs::merge(&args),
         Command::Report(args) => runs::report(&args),
         Command::Compare(args) => runs::compare(&args),
+        Command::Certify(args) => certify::run(conn, *args).await,
         Command::Prep(args) => oem::run(conn, args).await,
         Command::Corpus(args) => corpus::run(args).await,
         Command::Vm(args) => vm::run(conn, args).await,

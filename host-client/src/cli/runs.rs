@@ -288,6 +288,11 @@ pub struct RunArgs {
     /// (--max-tokens is the model's longest answer, upstream's parameter.)
     #[arg(long, value_name = "N")]
     pub max_total_tokens: Option<u64>,
+    /// Task certificates (an `arena certify --out` folder, or its `certificates`
+    /// folder): the summary and report mark the tasks they call broken. Recorded
+    /// in the result folder (`certified_broken.json`) and the summary.
+    #[arg(long, value_name = "DIR")]
+    pub certificates: Option<PathBuf>,
     /// Run the tasks in VMs this run starts with QEMU, each on an overlay of this
     /// read-only golden image, restored to its `ready` snapshot as --reset says.
     #[arg(long, value_name = "IMAGE")]
@@ -566,6 +571,11 @@ pub struct MergeArgs {
 pub struct ReportArgs {
     /// A result folder.
     pub dir: PathBuf,
+    /// Task certificates (an `arena certify --out` folder, or its `certificates`
+    /// folder) whose broken tasks the report marks; kept in the folder
+    /// (`certified_broken.json`) for later reports.
+    #[arg(long, value_name = "DIR")]
+    pub certificates: Option<PathBuf>,
 }
 
 /// Arguments of `arena compare`.
@@ -665,26 +675,217 @@ impl RunArgs {
 ///
 /// Unusable arguments, tasks that do not load, no guest, or results that cannot be written.
 pub async fn run(conn: &Connection, args: RunArgs) -> anyhow::Result<ExitCode> {
-    let args = match args.preset {
-        Some(preset) => preset.apply(&args)?,
-        None => args,
-    };
-    if args.trials > 1 && args.trial_id != crate::results::DEFAULT_TRIAL_ID {
-        bail!(
-            "--trials {} writes trial folders 0..{}; it cannot be combined with --trial-id {}",
-            args.trials,
-            args.trials - 1,
-            args.trial_id
-        );
+    let prepared = Prepared::new(args).await?;
+    let guests = Guests::start(conn, &prepared.args).await?;
+    let guest_count = guests.urls.len();
+    let played = play(prepared, &guests).await;
+    guests.stop().await;
+    let played = played?;
+    let Played { outcome, interrupted, shard } = played;
+
+    emit(&format!(
+        "shard {}: {} task(s) run, {} already finished, {} episode(s) on {} guest(s)\n\n",
+        shard, outcome.todo, outcome.skipped, outcome.pool.episodes, guest_count
+    ))?;
+    emit(&outcome.summary.markdown())?;
+    emit(&format!("\nreport: {}\n", outcome.report.display()))?;
+    let unfinished: Vec<&crate::results::EpisodeResult> =
+        outcome.pool.results.iter().filter(|r| r.status.is_unfinished()).collect();
+    let count = outcome.pool.not_run.len() + unfinished.len();
+    if count > 0 {
+        let mut lines =
+            format!("{count} task(s) are unfinished (no result.txt); run the same command again to retry them:\n");
+        for r in &unfinished {
+            let why = r.status.message().unwrap_or_default();
+            lines.push_str(&format!("  {}/{}: {}: {why}\n", r.domain, r.task_name, r.status.kind()));
+        }
+        let budget = outcome.summary.budget.as_ref().and_then(|b| b.stopped.as_deref());
+        for task in &outcome.pool.not_run {
+            let why = match budget {
+                Some(why) => format!("not started: the budget is reached ({why})"),
+                None => "not run (no healthy guest left)".to_owned(),
+            };
+            lines.push_str(&format!("  {task}: {why}\n"));
+        }
+        if let Some(why) = &outcome.pool.ended_early {
+            let down = outcome.pool.guests_down.join(", ");
+            lines.push_str(&format!("the run ended early: {why} (guests down: {down})\n"));
+        }
+        emit(&lines)?;
+        return Ok(ExitCode::from(if interrupted { 130 } else { 2 }));
     }
-    let tasks = load_tasks(&args.tasks, args.difficulty.into())?;
-    let (chosen, mcp) = if args.agent == AgentKind::Mcp {
-        let (chosen, endpoint) =
-            super::external::mcp(&args.external, args.max_steps, &args.out, args.model.clone()).await?;
-        (chosen, Some(endpoint))
-    } else {
-        (factory::build(&args.agent_options())?, None)
-    };
+    Ok(ExitCode::SUCCESS)
+}
+
+/// A run's arguments checked, its tasks loaded and its agent built, before any
+/// guest or VM starts.
+pub(crate) struct Prepared {
+    pub(crate) args: RunArgs,
+    pub(crate) tasks: Vec<arena_task::Task>,
+    chosen: ChosenAgent,
+    mcp: Option<super::external::McpEndpoint>,
+    price: Option<crate::results::ledger::Price>,
+    certificates: Option<crate::results::certificate::CertifiedRecord>,
+}
+
+impl Prepared {
+    /// Checks `args` (a preset applied), loads the tasks and builds the agent.
+    ///
+    /// # Errors
+    ///
+    /// Unusable arguments, tasks that do not load, an agent that cannot be built,
+    /// prices or certificates that cannot be read.
+    pub(crate) async fn new(args: RunArgs) -> anyhow::Result<Prepared> {
+        let args = match args.preset {
+            Some(preset) => preset.apply(&args)?,
+            None => args,
+        };
+        if args.trials > 1 && args.trial_id != crate::results::DEFAULT_TRIAL_ID {
+            bail!(
+                "--trials {} writes trial folders 0..{}; it cannot be combined with --trial-id {}",
+                args.trials,
+                args.trials - 1,
+                args.trial_id
+            );
+        }
+        let tasks = load_tasks(&args.tasks, args.difficulty.into())?;
+        let certificates = match &args.certificates {
+            Some(dir) => Some(
+                crate::results::certificate::CertifiedRecord::from_dir(dir)
+                    .with_context(|| format!("--certificates {}", dir.display()))?,
+            ),
+            None => None,
+        };
+        let (chosen, mcp) = if args.agent == AgentKind::Mcp {
+            let (chosen, endpoint) =
+                super::external::mcp(&args.external, args.max_steps, &args.out, args.model.clone()).await?;
+            (chosen, Some(endpoint))
+        } else {
+            (factory::build(&args.agent_options())?, None)
+        };
+        // The cost ledger's price and budget are checked before any guest or VM starts.
+        let price = match &args.prices {
+            Some(path) => Some(crate::results::ledger::Prices::load(path)?.of(&chosen.model, path)?),
+            None => None,
+        };
+        if let Some(max) = args.max_cost.filter(|m| !m.is_finite() || *m < 0.0) {
+            bail!("--max-cost {max}: give a number of US dollars, 0 or more");
+        }
+        Ok(Prepared { args, tasks, chosen, mcp, price, certificates })
+    }
+}
+
+/// A run's guests: those given by URL, and the stub guests and VMs it started
+/// (stopped by [`Guests::stop`]). `arena certify` plays its agents on one set.
+pub(crate) struct Guests {
+    pub(crate) urls: Vec<String>,
+    pub(crate) clients: Vec<arena_client::GuestClient>,
+    stubs: Vec<stub::RunningStub>,
+    pub(crate) fleet: Option<Arc<crate::vm::fleet::VmFleet>>,
+}
+
+impl Guests {
+    /// The guests `args` name, the stub guests and VMs they ask for started.
+    ///
+    /// # Errors
+    ///
+    /// A guests file that cannot be read, a VM or stub guest that does not start, or no guest at all.
+    pub(crate) async fn start(conn: &Connection, args: &RunArgs) -> anyhow::Result<Guests> {
+        let mut urls: Vec<String> = conn.guest.iter().cloned().collect();
+        urls.extend(args.guests.iter().map(|s| s.trim().to_owned()).filter(|s| !s.is_empty()));
+        if let Some(file) = &args.guests_file {
+            urls.extend(guests_from_file(file)?);
+        }
+        let fleet = match &args.vm_image {
+            Some(image) => {
+                let dir = args.vm_dir.clone().unwrap_or_else(|| args.out.join("vms"));
+                let template = args.vm.config(image, &dir, "vm", conn.resolve_token()?)?;
+                let configs = crate::vm::fleet::configs(&template, args.vms.max(1));
+                emit(&format!("booting {} VM(s) on {}\n", configs.len(), image.display()))?;
+                let fleet = crate::vm::fleet::VmFleet::boot(configs, args.reset).await?;
+                urls.extend(fleet.urls());
+                Some(Arc::new(fleet))
+            }
+            None => None,
+        };
+        let mut guests = Guests { urls, clients: Vec::new(), stubs: Vec::new(), fleet };
+        for _ in 0..args.stub_guests.unwrap_or(0) {
+            let stub_args = stub::StubArgs { stub_host_exec: args.stub_host_exec, ..stub::StubArgs::default() };
+            let token = match conn.resolve_token() {
+                Ok(token) => token,
+                Err(err) => {
+                    guests.stop().await;
+                    return Err(err);
+                }
+            };
+            match stub::start(&stub_args, token).await {
+                Ok(running) => {
+                    guests.urls.push(running.url());
+                    guests.stubs.push(running);
+                }
+                Err(err) => {
+                    guests.stop().await;
+                    return Err(err);
+                }
+            }
+        }
+        guests.urls.dedup();
+        if guests.urls.is_empty() {
+            bail!("no guest: give --guest, --guests, --guests-file or --stub-guests");
+        }
+        let vm_urls = guests.fleet.as_ref().map(|f| f.urls()).unwrap_or_default();
+        let clients = guests
+            .urls
+            .iter()
+            .map(|u| {
+                let client = conn.client_for(u)?;
+                // A VM restored to its snapshot has forgotten every connection made since.
+                Ok(if vm_urls.contains(u) { client.without_kept_connections()? } else { client })
+            })
+            .collect::<anyhow::Result<Vec<_>>>();
+        match clients {
+            Ok(clients) => guests.clients = clients,
+            Err(err) => {
+                guests.stop().await;
+                return Err(err);
+            }
+        }
+        Ok(guests)
+    }
+
+    /// Stops the VMs and stub guests this run started.
+    pub(crate) async fn stop(self) {
+        if let Some(fleet) = self.fleet {
+            // The runs' options held the fleet; they are dropped by now.
+            match Arc::try_unwrap(fleet) {
+                Ok(fleet) => fleet.stop().await,
+                Err(_) => tracing::warn!("the VMs are still in use; they stop when this program ends"),
+            }
+        }
+        for stub in self.stubs {
+            if let Err(err) = stub.stop().await {
+                tracing::warn!(error = format!("{err:#}"), "stopping a stub guest");
+            }
+        }
+    }
+}
+
+/// What [`play`] did.
+pub(crate) struct Played {
+    pub(crate) outcome: crate::run::RunOutcome,
+    /// Ctrl-C stopped it.
+    pub(crate) interrupted: bool,
+    pub(crate) shard: Shard,
+}
+
+/// Plays a prepared run on `guests`: the preflight, the options recorded and
+/// checked against the folder's, the tasks, the summary and report.
+///
+/// # Errors
+///
+/// The preflight fails, the folder holds results of other options, or results cannot be written.
+pub(crate) async fn play(prepared: Prepared, guests: &Guests) -> anyhow::Result<Played> {
+    let Prepared { args, tasks, chosen, mcp, price, certificates } = prepared;
     let ChosenAgent { factory: agents, label: agent_label, model, options: mut agent_options, preflight } = chosen;
     // Every run records who played, in which action space and coordinates.
     let agent_name = args.agent.to_possible_value().map(|v| v.get_name().to_owned()).unwrap_or_default();
@@ -697,64 +898,12 @@ pub async fn run(conn: &Connection, args: RunArgs) -> anyhow::Result<ExitCode> {
         agent_options.push(("action_space".into(), agent_label.clone()));
         agent_options.push(("coords".into(), args.coords.name()));
     }
-
-    // The cost ledger's price and budget are checked before any guest or VM starts.
-    let price = match &args.prices {
-        Some(path) => Some(crate::results::ledger::Prices::load(path)?.of(&model, path)?),
-        None => None,
-    };
-    if let Some(max) = args.max_cost.filter(|m| !m.is_finite() || *m < 0.0) {
-        bail!("--max-cost {max}: give a number of US dollars, 0 or more");
-    }
-
-    let mut urls: Vec<String> = conn.guest.iter().cloned().collect();
-    urls.extend(args.guests.iter().map(|s| s.trim().to_owned()).filter(|s| !s.is_empty()));
-    if let Some(file) = &args.guests_file {
-        urls.extend(guests_from_file(file)?);
-    }
-    let fleet = match &args.vm_image {
-        Some(image) => {
-            let dir = args.vm_dir.clone().unwrap_or_else(|| args.out.join("vms"));
-            let template = args.vm.config(image, &dir, "vm", conn.resolve_token()?)?;
-            let configs = crate::vm::fleet::configs(&template, args.vms.max(1));
-            emit(&format!("booting {} VM(s) on {}\n", configs.len(), image.display()))?;
-            let fleet = crate::vm::fleet::VmFleet::boot(configs, args.reset).await?;
-            urls.extend(fleet.urls());
-            Some(Arc::new(fleet))
-        }
-        None => None,
-    };
-    let mut stubs = Vec::new();
-    for _ in 0..args.stub_guests.unwrap_or(0) {
-        let stub_args = stub::StubArgs { stub_host_exec: args.stub_host_exec, ..stub::StubArgs::default() };
-        let running = stub::start(&stub_args, conn.resolve_token()?).await?;
-        urls.push(running.url());
-        stubs.push(running);
-    }
-    urls.dedup();
-    if urls.is_empty() {
-        bail!("no guest: give --guest, --guests, --guests-file or --stub-guests");
-    }
-    let vm_urls = fleet.as_ref().map(|f| f.urls()).unwrap_or_default();
-    let guests = urls
-        .iter()
-        .map(|u| {
-            let client = conn.client_for(u)?;
-            // A VM restored to its snapshot has forgotten every connection made since.
-            Ok(if vm_urls.contains(u) { client.without_kept_connections()? } else { client })
-        })
-        .collect::<anyhow::Result<Vec<_>>>()?;
+    let fleet = guests.fleet.clone();
 
     let mut hello = None;
     if !args.no_preflight {
         // A setup mistake ends the run here, before any score is written.
-        let result = self::preflight(preflight.as_ref(), &guests).await;
-        if result.is_err() {
-            for stub in std::mem::take(&mut stubs) {
-                let _ = stub.stop().await;
-            }
-        }
-        hello = result?;
+        hello = self::preflight(preflight.as_ref(), &guests.clients).await?;
     }
     // An outside agent is named by its hello (else by the fingerprint the factory
     // gave), and what it declared is recorded, not the run's defaults.
@@ -870,61 +1019,17 @@ pub async fn run(conn: &Connection, args: RunArgs) -> anyhow::Result<ExitCode> {
     config.stop = stop.clone();
     let watcher = tokio::spawn(watch_interrupts(stop.clone()));
     let runner = EpisodeRunner { layout, config, agents };
+    if let Some(record) = &certificates {
+        record.write(&args.out)?;
+    }
+    let clients = guests.clients.clone();
     let outcome = match mcp {
-        Some(endpoint) => super::external::run_with_mcp(endpoint, tasks, guests, runner, &options).await,
-        None => run_tasks(tasks, guests, Arc::new(runner), &options).await,
+        Some(endpoint) => super::external::run_with_mcp(endpoint, tasks, clients, runner, &options).await,
+        None => run_tasks(tasks, clients, Arc::new(runner), &options).await,
     };
     watcher.abort();
-    if let Some(fleet) = fleet {
-        drop(options);
-        match Arc::try_unwrap(fleet) {
-            Ok(fleet) => fleet.stop().await,
-            Err(_) => tracing::warn!("the VMs are still in use; they stop when this program ends"),
-        }
-    }
-    let outcome = outcome?;
-    for stub in stubs {
-        if let Err(err) = stub.stop().await {
-            tracing::warn!(error = format!("{err:#}"), "stopping a stub guest");
-        }
-    }
-
-    emit(&format!(
-        "shard {}: {} task(s) run, {} already finished, {} episode(s) on {} guest(s)\n\n",
-        args.shard,
-        outcome.todo,
-        outcome.skipped,
-        outcome.pool.episodes,
-        urls.len()
-    ))?;
-    emit(&outcome.summary.markdown())?;
-    emit(&format!("\nreport: {}\n", outcome.report.display()))?;
-    let unfinished: Vec<&crate::results::EpisodeResult> =
-        outcome.pool.results.iter().filter(|r| r.status.is_unfinished()).collect();
-    let count = outcome.pool.not_run.len() + unfinished.len();
-    if count > 0 {
-        let mut lines =
-            format!("{count} task(s) are unfinished (no result.txt); run the same command again to retry them:\n");
-        for r in &unfinished {
-            let why = r.status.message().unwrap_or_default();
-            lines.push_str(&format!("  {}/{}: {}: {why}\n", r.domain, r.task_name, r.status.kind()));
-        }
-        let budget = outcome.summary.budget.as_ref().and_then(|b| b.stopped.as_deref());
-        for task in &outcome.pool.not_run {
-            let why = match budget {
-                Some(why) => format!("not started: the budget is reached ({why})"),
-                None => "not run (no healthy guest left)".to_owned(),
-            };
-            lines.push_str(&format!("  {task}: {why}\n"));
-        }
-        if let Some(why) = &outcome.pool.ended_early {
-            let down = outcome.pool.guests_down.join(", ");
-            lines.push_str(&format!("the run ended early: {why} (guests down: {down})\n"));
-        }
-        emit(&lines)?;
-        return Ok(ExitCode::from(if stop.is_cancelled() { 130 } else { 2 }));
-    }
-    Ok(ExitCode::SUCCESS)
+    drop(options);
+    Ok(Played { outcome: outcome?, interrupted: stop.is_cancelled(), shard: args.shard })
 }
 
 /// The checks before a run's first task: the agent's ([`factory::Preflight`]),
@@ -1087,6 +1192,14 @@ pub fn merge(args: &MergeArgs) -> anyhow::Result<ExitCode> {
 ///
 /// The folder cannot be read or the files cannot be written.
 pub fn report(args: &ReportArgs) -> anyhow::Result<ExitCode> {
+    if let Some(dir) = &args.certificates {
+        if !args.dir.is_dir() {
+            bail!("{}: no such result folder", args.dir.display());
+        }
+        crate::results::certificate::CertifiedRecord::from_dir(dir)
+            .with_context(|| format!("--certificates {}", dir.display()))?
+            .write(&args.dir)?;
+    }
     let (summary, path): (Summary, PathBuf) =
         write_report(&args.dir, &format!("arena report: {}", args.dir.display()))?;
     emit(&summary.markdown())?;

@@ -72,6 +72,26 @@ pub fn render(summary: &Summary, found: &[FoundTask], title: &str) -> String {
         o.solved_rate,
         o.unfinished
     );
+    if let Some(words) = summary.floor_words() {
+        let _ = writeln!(html, "<p class=\"meta\" id=\"floor\">{}.</p>", escape(&words));
+    }
+    if let Some(record) = &summary.certificates {
+        let broken = summary.certified_broken();
+        let items: Vec<String> = broken
+            .iter()
+            .map(|(d, n, why)| {
+                format!("<li><code>{}</code>: certified broken: {}</li>", escape(&format!("{d}/{n}")), escape(why))
+            })
+            .collect();
+        let _ = writeln!(
+            html,
+            "<div class=\"warn\" id=\"certified-broken\"><p>Certificates from {} ({} task(s)): {} task(s) of this run certified broken.</p><ul>{}</ul></div>",
+            escape(&record.source),
+            record.certificates,
+            broken.len(),
+            items.join("")
+        );
+    }
     if let Some(words) = summary.incomplete_words() {
         let missing: Vec<String> =
             summary.missing.iter().map(|m| escape(&format!("{}/{}", m.domain, m.name))).collect();
@@ -105,7 +125,8 @@ pub fn render(summary: &Summary, found: &[FoundTask], title: &str) -> String {
     html.push_str(&table(summary));
     html.push_str("<h2>Tasks</h2>\n");
     for task in found {
-        html.push_str(&task_section(task));
+        let broken = summary.certificates.as_ref().is_some_and(|r| r.broken(&task.domain(), &task.name()).is_some());
+        html.push_str(&task_section(task, broken));
     }
     html.push_str("</body></html>\n");
     html
@@ -304,7 +325,7 @@ fn relative_str(path: &Path) -> String {
 pub fn write_task_page(dir: &super::TaskDir, episode: &super::EpisodeResult) -> Result<(), ResultsError> {
     let score = (!episode.status.is_unfinished()).then_some(episode.score);
     let task = FoundTask { dir: dir.clone(), relative: PathBuf::from("."), score, episode: Some(episode.clone()) };
-    let section = task_section(&task).replacen("<details id=", "<details open id=", 1);
+    let section = task_section(&task, false).replacen("<details id=", "<details open id=", 1);
     let page = format!(
         "<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\"><meta name=\"viewport\" content=\"width=device-width\">\
          <title>{} / {}</title><style>{STYLE}</style></head><body>\n{section}</body></html>\n",
@@ -314,7 +335,8 @@ pub fn write_task_page(dir: &super::TaskDir, episode: &super::EpisodeResult) -> 
     write_atomic(&dir.path().join(super::TRAJ_HTML), page.as_bytes())
 }
 
-fn task_section(task: &FoundTask) -> String {
+/// A task's section; `broken`: certificates call the task broken.
+fn task_section(task: &FoundTask, broken: bool) -> String {
     let rel = relative_str(&task.relative);
     let mut s = String::new();
     let (class, score) = match task.score {
@@ -324,10 +346,11 @@ fn task_section(task: &FoundTask) -> String {
     };
     let _ = writeln!(
         s,
-        "<details id=\"{}\"><summary>{} / {} &mdash; <span class=\"{class}\">{score}</span></summary>",
+        "<details id=\"{}\"><summary>{} / {} &mdash; <span class=\"{class}\">{score}</span>{}</summary>",
         anchor(&rel),
         escape(&task.domain()),
-        escape(&task.name())
+        escape(&task.name()),
+        if broken { " <span class=\"warn\">(certified broken)</span>" } else { "" }
     );
     if let Some(ep) = &task.episode {
         let _ = writeln!(

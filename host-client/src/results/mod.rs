@@ -31,11 +31,13 @@
 //! - this file: [`RunLayout`], [`TaskDir`], the records, atomic writes, scanning.
 //! - [`summary`]: [`summary::Summary`], `summary.json` and `summary.md`.
 //! - [`compare`]: [`compare::Comparison`], `arena compare` of two folders.
+//! - [`certificate`]: task certificates (`arena certify`) and a folder's record of the tasks they call broken.
 //! - [`ledger`]: prices, the budget and its record (the cost ledger).
 //! - [`stats`]: pass@k, pass^k and the bootstrap intervals of repeated trials.
 //! - [`html`]: the HTML report, `report.html`.
 //! - [`task_list`]: the run's task list in each trial folder (`task_list.json`).
 
+pub mod certificate;
 pub mod compare;
 pub mod html;
 pub mod ledger;

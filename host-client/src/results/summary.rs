@@ -93,6 +93,12 @@ pub struct DomainRow {
     /// What they cost in US dollars (`--prices`), when priced.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub cost_usd: Option<f64>,
+    /// The FAIL-always floor, in percent: the share of the row's listed tasks
+    /// (every trial) whose evaluator is `infeasible`, which is what an agent
+    /// answering FAIL to every task scores under upstream's rules; `null` when
+    /// the folder's task lists do not say ([`super::task_list::listed_kinds`]).
+    #[serde(default)]
+    pub fail_floor: Option<f64>,
 }
 
 /// A task of the task list without a result.
@@ -149,6 +155,9 @@ pub struct TaskRow {
     /// What they cost in US dollars (`--prices`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub cost_usd: Option<f64>,
+    /// Certificates given with `--certificates` call this task broken.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub certified_broken: bool,
 }
 
 /// The summary of a result folder.
@@ -184,6 +193,10 @@ pub struct Summary {
     /// whether it stopped the run starting tasks (`budget.json`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub budget: Option<super::ledger::BudgetRecord>,
+    /// The certificates the folder was given (`--certificates`, `certified_broken.json`):
+    /// where from, and the tasks they call broken.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub certificates: Option<super::certificate::CertifiedRecord>,
 }
 
 impl Summary {
@@ -207,7 +220,55 @@ impl Summary {
             .filter(|(_, _, path)| !known.contains(path))
             .map(|(domain, name, path)| MissingTask { domain, name, path: slash_path(&path) })
             .collect();
-        Summary::summarise(found, never_started)
+        let mut summary = Summary::summarise(found, never_started);
+        if let Some(kinds) = task_list::listed_kinds(root) {
+            summary.set_fail_floor(&kinds);
+        }
+        if let Some(record) = super::certificate::CertifiedRecord::read(root) {
+            for task in &mut summary.tasks {
+                task.certified_broken = record.broken(&task.domain, &task.name).is_some();
+            }
+            summary.certificates = Some(record);
+        }
+        summary
+    }
+
+    /// Sets each row's FAIL-always floor from the listed tasks' kinds: (domain, name, infeasible).
+    fn set_fail_floor(&mut self, kinds: &[(String, String, bool)]) {
+        let floor = |members: &dyn Fn(&str) -> bool| {
+            let rows: Vec<bool> = kinds.iter().filter(|k| members(&k.0)).map(|k| k.2).collect();
+            (!rows.is_empty()).then(|| 100.0 * rows.iter().filter(|i| **i).count() as f64 / rows.len() as f64)
+        };
+        self.overall.fail_floor = floor(&|_| true);
+        for row in &mut self.domains {
+            row.fail_floor = floor(&|d| d == row.domain);
+        }
+        for row in &mut self.groups {
+            let members = GROUPS.iter().find(|(name, _)| *name == row.domain).map_or(&[][..], |(_, m)| *m);
+            row.fail_floor = floor(&|d| members.contains(&d));
+        }
+    }
+
+    /// The listed tasks (or finished ones) the certificates call broken: (domain, name, why).
+    pub fn certified_broken(&self) -> Vec<(&str, &str, String)> {
+        let Some(record) = &self.certificates else { return Vec::new() };
+        let mut seen = std::collections::BTreeSet::new();
+        self.tasks
+            .iter()
+            .map(|t| (t.domain.as_str(), t.name.as_str()))
+            .chain(self.missing.iter().map(|m| (m.domain.as_str(), m.name.as_str())))
+            .filter(|key| seen.insert(*key))
+            .filter_map(|(d, n)| record.broken(d, n).map(|b| (d, n, b.because.join("; "))))
+            .collect()
+    }
+
+    /// The words beside the rate about the FAIL-always floor, when it is known.
+    pub fn floor_words(&self) -> Option<String> {
+        self.overall.fail_floor.map(|floor| {
+            format!(
+                "FAIL-always floor {floor:.1}% (the share of the task list whose evaluator is `infeasible`: what an agent answering FAIL to every task scores)"
+            )
+        })
     }
 
     /// Summarises task folders already found, knowing no task list.
@@ -272,7 +333,19 @@ impl Summary {
                 passes: t.passes,
             })
             .collect();
-        Summary { overall, domains, groups, tasks, options, trials, missing, flaky_tasks, agents, budget: None }
+        Summary {
+            overall,
+            domains,
+            groups,
+            tasks,
+            options,
+            trials,
+            missing,
+            flaky_tasks,
+            agents,
+            budget: None,
+            certificates: None,
+        }
     }
 
     /// The words that say the rows pool different agents or models, or `None`
@@ -425,6 +498,24 @@ impl Summary {
         md
     }
 
+    /// The tasks certificates call broken, when certificates were given.
+    fn certificates_markdown(&self) -> String {
+        let Some(record) = &self.certificates else { return String::new() };
+        let broken = self.certified_broken();
+        let mut md = format!(
+            "Certificates from {} ({} task(s)): {} task(s) of this run certified broken{}\n",
+            record.source,
+            record.certificates,
+            broken.len(),
+            if broken.is_empty() { "." } else { " (their scores say nothing of the agent):" }
+        );
+        for (domain, name, why) in &broken {
+            let _ = writeln!(md, "- `{domain}/{name}`: certified broken: {}", md_escape(why));
+        }
+        md.push('\n');
+        md
+    }
+
     /// The interval, and with more than one trial per task pass@k, pass^k and the flaky tasks.
     fn trials_markdown(&self) -> String {
         let mut md = String::new();
@@ -484,6 +575,9 @@ impl Summary {
             o.strict_rate,
             o.tasks + o.unfinished
         );
+        if let Some(words) = self.floor_words() {
+            let _ = writeln!(md, "{words}.\n");
+        }
         if let Some(words) = self.incomplete_words() {
             let _ = writeln!(md, "**{words}**\n");
         }
@@ -504,6 +598,7 @@ impl Summary {
             }
             md.push('\n');
         }
+        md.push_str(&self.certificates_markdown());
         if !self.options.is_empty() {
             let list: Vec<String> = self.options.iter().map(|(k, v)| format!("{k}={}", v.join("|"))).collect();
             let _ = writeln!(md, "Options in force: {}.\n", list.join(", "));
@@ -551,9 +646,10 @@ impl Summary {
         md.push_str("\n## Tasks\n\n| Domain | Task | Score | Status | Failed by | Steps | Time (s) | Attempt |\n|---|---|---:|---|---|---:|---:|---:|\n");
         for t in &self.tasks {
             let score = t.score.map_or_else(|| "-".to_owned(), super::python_float);
+            let mark = if t.certified_broken { " (certified broken)" } else { "" };
             let _ = writeln!(
                 md,
-                "| {} | {} | {score} | {} | {} | {} | {:.1} | {} |",
+                "| {} | {}{mark} | {score} | {} | {} | {} | {:.1} | {} |",
                 md_escape(&t.domain),
                 md_escape(&t.name),
                 t.status,
@@ -632,6 +728,7 @@ fn task_row(found: &FoundTask) -> TaskRow {
         failed_by: blame.map_or("unknown", super::Blame::side).to_owned(),
         tokens: episode.and_then(|e| e.tokens),
         cost_usd: episode.and_then(|e| e.cost_usd),
+        certified_broken: false,
     }
 }
 
@@ -681,6 +778,7 @@ fn domain_row(domain: &str, rows: &[&TaskRow], not_run: usize) -> DomainRow {
             sum
         }),
         cost_usd: rows.iter().any(|r| r.cost_usd.is_some()).then(|| rows.iter().filter_map(|r| r.cost_usd).sum()),
+        fail_floor: None,
     }
 }
 

@@ -6,6 +6,11 @@
 //! A run adds its shard's tasks to the file (a union, so resuming with another
 //! shard or a longer list only grows it); `arena merge` unions the shards' files.
 //! It does no guest I/O.
+//!
+//! Beside it, `infeasible_tasks.json` (the same shape) names the listed tasks
+//! whose evaluator is upstream's `infeasible`: what an agent answering FAIL to
+//! every task scores is their share of the list, the run's FAIL-always floor
+//! ([`listed_kinds`]).
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -18,6 +23,9 @@ use arena_task::Task;
 
 /// The task list's file name, in a trial folder (`<action space>/<observation>/<model>/<trial>`).
 pub const TASK_LIST_JSON: &str = "task_list.json";
+
+/// The infeasible tasks of the task list, beside it in each trial folder.
+pub const INFEASIBLE_JSON: &str = "infeasible_tasks.json";
 
 /// Domain -> task names.
 pub type TaskList = BTreeMap<String, Vec<String>>;
@@ -64,10 +72,42 @@ pub fn add(path: &Path, more: &TaskList) -> Result<(), ResultsError> {
 /// The file cannot be written.
 pub fn record(base: &Path, tasks: &[&Task]) -> Result<(), ResultsError> {
     let mut list = TaskList::new();
+    let mut infeasible = TaskList::new();
     for task in tasks {
         list.entry(task.domain.clone()).or_default().push(task.name.clone());
+        if matches!(task.evaluator.scoring, arena_task::Scoring::Infeasible) {
+            infeasible.entry(task.domain.clone()).or_default().push(task.name.clone());
+        }
     }
+    // Written even when empty: "none is infeasible" is known, unlike a folder from before.
+    add(&base.join(INFEASIBLE_JSON), &infeasible)?;
     add(&base.join(TASK_LIST_JSON), &list)
+}
+
+/// Every task listed below `root` with whether its evaluator is `infeasible`:
+/// (domain, name, infeasible); `None` when a task list has no
+/// `infeasible_tasks.json` beside it (a folder from before the floor was kept)
+/// or there is no task list.
+pub fn listed_kinds(root: &Path) -> Option<Vec<(String, String, bool)>> {
+    let lists = lists_below(root);
+    if lists.is_empty() {
+        return None;
+    }
+    let mut out = Vec::new();
+    for (trial, list) in lists {
+        let file = root.join(&trial).join(INFEASIBLE_JSON);
+        if !file.is_file() {
+            return None;
+        }
+        let infeasible = read(&file);
+        for (domain, names) in list {
+            for name in names {
+                let kind = infeasible.get(&domain).is_some_and(|n| n.contains(&name));
+                out.push((domain.clone(), name, kind));
+            }
+        }
+    }
+    Some(out)
 }
 
 /// Every task list below `root`, as (its folder relative to `root`, the list).
@@ -117,6 +157,10 @@ pub fn listed_tasks(root: &Path) -> Vec<(String, String, PathBuf)> {
 /// A file cannot be written.
 pub fn merge_into(to: &Path, from: &Path) -> Result<(), ResultsError> {
     for (trial, list) in lists_below(from) {
+        let infeasible = from.join(&trial).join(INFEASIBLE_JSON);
+        if infeasible.is_file() {
+            add(&to.join(&trial).join(INFEASIBLE_JSON), &read(&infeasible))?;
+        }
         add(&to.join(trial).join(TASK_LIST_JSON), &list)?;
     }
     Ok(())
@@ -142,5 +186,27 @@ mod tests {
         assert_eq!(read(&merged.path().join("a/o/m/0").join(TASK_LIST_JSON)), read(&file));
         std::fs::write(&file, "not json").unwrap();
         assert!(read(&file).is_empty());
+    }
+
+    #[test]
+    fn the_kinds_of_listed_tasks_need_the_infeasible_file_beside_every_list() {
+        let tmp = tempfile::tempdir().expect("tmp");
+        let (a, b) = (tmp.path().join("x/o/m/0"), tmp.path().join("x/o/m/1"));
+        let list: TaskList = [("settings".to_owned(), vec!["inf".to_owned(), "ok".to_owned()])].into();
+        let infeasible: TaskList = [("settings".to_owned(), vec!["inf".to_owned()])].into();
+        assert_eq!(listed_kinds(tmp.path()), None);
+        add(&a.join(TASK_LIST_JSON), &list).unwrap();
+        add(&b.join(TASK_LIST_JSON), &list).unwrap();
+        add(&a.join(INFEASIBLE_JSON), &infeasible).unwrap();
+        // Trial 1 is from before the floor was kept: unknown.
+        assert_eq!(listed_kinds(tmp.path()), None);
+        add(&b.join(INFEASIBLE_JSON), &TaskList::new()).unwrap();
+        let kinds = listed_kinds(tmp.path()).expect("known");
+        let flags: Vec<bool> = kinds.iter().map(|k| k.2).collect();
+        assert_eq!(flags, [true, false, false, false]);
+        // A merge carries the infeasible files with the lists.
+        let merged = tempfile::tempdir().expect("tmp");
+        merge_into(merged.path(), tmp.path()).unwrap();
+        assert_eq!(listed_kinds(merged.path()), Some(kinds));
     }
 }

@@ -406,3 +406,34 @@ fn the_report_holds_the_table_the_chart_and_escaped_trajectories() {
     assert!(!page.contains("<link") && !page.contains("<script") && !page.contains("url("), "nothing is fetched");
     assert!(root.path().join(SUMMARY_JSON).is_file() && root.path().join(SUMMARY_MD).is_file());
 }
+
+#[test]
+fn the_fail_always_floor_is_the_infeasible_share_of_the_task_list_per_row() {
+    let root = tempfile::tempdir().unwrap();
+    write_task(root.path(), "settings", "inf", 1.0, EpisodeStatus::Completed);
+    write_task(root.path(), "notepad", "a", 0.0, EpisodeStatus::Completed);
+    // A folder from before the floor was kept: no task list, no floor.
+    let old = Summary::from_dir(root.path()).unwrap();
+    assert_eq!(old.overall.fail_floor, None);
+    assert!(old.floor_words().is_none() && !old.markdown().contains("FAIL-always floor"));
+    // The run's list: one infeasible task of four (one never started), recorded beside it.
+    let infeasible = task("settings", "inf");
+    let mut feasible: Vec<Task> = ["a", "b"].iter().map(|n| task("notepad", n)).collect();
+    feasible.push(task("file_explorer", "c"));
+    for t in &mut feasible {
+        t.evaluator.scoring =
+            arena_task::Scoring::Metrics { conj: arena_task::Conj::And, calls: Vec::new(), listed: false };
+    }
+    let listed: Vec<&Task> = std::iter::once(&infeasible).chain(&feasible).collect();
+    task_list::record(&layout(root.path()).base(), &listed).unwrap();
+    let summary = Summary::from_dir(root.path()).unwrap();
+    assert_eq!(summary.overall.fail_floor, Some(25.0));
+    let floor = |name: &str| summary.domains.iter().find(|d| d.domain == name).and_then(|d| d.fail_floor);
+    assert_eq!((floor("settings"), floor("notepad"), floor("file_explorer")), (Some(100.0), Some(0.0), Some(0.0)));
+    // The Windows System group (file_explorer, settings): one of two.
+    let group = summary.groups.iter().find(|g| g.domain == "Windows System").expect("the group");
+    assert_eq!(group.fail_floor, Some(50.0));
+    assert!(summary.markdown().contains("FAIL-always floor 25.0%"), "{}", summary.markdown());
+    let json: Value = serde_json::to_value(&summary).unwrap();
+    assert_eq!(json["overall"]["fail_floor"], 25.0);
+}

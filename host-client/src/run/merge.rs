@@ -5,7 +5,8 @@
 //! when the file system allows, copied otherwise), then the summary and the
 //! report are written for `OUT`. When two shards hold the same task, a
 //! finished one wins over an unfinished one, and otherwise the first given
-//! wins; either way the clash is reported.
+//! wins; either way the clash is reported. The shards' task lists are
+//! unioned, and the first shard's record of certified-broken tasks is kept.
 
 use std::path::{Path, PathBuf};
 
@@ -36,6 +37,7 @@ pub fn merge(out: &Path, shards: &[PathBuf], title: &str) -> Result<MergeReport,
     let mut duplicates = Vec::new();
     // Relative path -> whether the copy in `out` is finished.
     let mut seen: std::collections::BTreeMap<PathBuf, bool> = std::collections::BTreeMap::new();
+    let mut certified_carried = false;
     for shard in shards {
         let shard_real = shard.canonicalize().map_err(|source| ResultsError::Io { path: shard.clone(), source })?;
         if shard_real == out_real || out_real.starts_with(&shard_real) {
@@ -73,6 +75,12 @@ pub fn merge(out: &Path, shards: &[PathBuf], title: &str) -> Result<MergeReport,
             copied += 1;
         }
         crate::results::task_list::merge_into(out, shard)?;
+        // The certificates a shard was given mark the merged folder too (the first shard's win).
+        let record = crate::results::certificate::CertifiedRecord::read(shard);
+        if let Some(record) = record.filter(|_| !certified_carried) {
+            record.write(out)?;
+            certified_carried = true;
+        }
     }
     let (summary, report) = write_report(out, title)?;
     Ok(MergeReport { copied, duplicates, summary, report })
