@@ -838,6 +838,9 @@ fn chat(content: &str) -> Reply {
     ok(json!({
         "id": "chatcmpl-1", "object": "chat.completion",
         "choices": [{"index": 0, "message": {"role": "assistant", "content": content}, "finish_reason": "stop"}],
+        // The chat-completions usage vLLM reports (openai-python's CompletionUsage).
+        "usage": {"prompt_tokens": 7, "completion_tokens": 2, "total_tokens": 9,
+                  "prompt_tokens_details": {"cached_tokens": 4}},
     }))
 }
 
@@ -888,6 +891,21 @@ async fn ui_tars_solves_two_stub_tasks_with_history_and_both_coordinate_versions
     assert_solved(&result);
     check_uitars_requests(&mock.requests(), &replies, &draft.instruction, 2);
     assert_exchanges_recorded(&dir, 3);
+    // Each step's usage in traj.jsonl, the task's sum in its result.
+    let tokens = result.tokens.expect("the task's tokens");
+    assert_eq!((tokens.input, tokens.output, tokens.cached), (21, 6, 12));
+    let traj = std::fs::read_to_string(dir.join("traj.jsonl")).unwrap();
+    // The first line of each step's record carries its usage (a step's other
+    // actions have lines of their own, as upstream writes them).
+    let usages: Vec<Value> =
+        traj.lines().filter_map(|line| serde_json::from_str::<Value>(line).ok()?.get("usage").cloned()).collect();
+    assert_eq!(usages.len(), 3, "{traj}");
+    for usage in usages {
+        assert_eq!(
+            (usage["input"].as_u64(), usage["output"].as_u64(), usage["cached"].as_u64()),
+            (Some(7), Some(2), Some(4))
+        );
+    }
 
     // UI-TARS 1.0's 0..1000 grid: a hover at the centre, then the answer and a save.
     let count = stub_task("stub-notepad-count");

@@ -263,6 +263,27 @@ fn the_step_protocol_example_agent_runs() {
     assert!(rows.values().all(|r| r.score == Some(1.0)), "{rows:?}");
 }
 
+/// The built-in Navi counts what its model reports in `usage` (the chat-completions
+/// `prompt_tokens` and `completion_tokens`; the mock reports 1 and 1): in the
+/// step's `traj.jsonl` line, the task's `episode.json` and the run's summary.
+#[test]
+fn the_built_in_navi_records_its_models_usage_per_step_task_and_run() {
+    let tmp = tempfile::tempdir().expect("tmp");
+    let args = ["--agent", "navi", "--model", "gpt-4o", "--navi-style", "arena", "--som-origin", "a11y"];
+    first_request(tmp.path(), "navi", &args, &[]);
+    let out = tmp.path().join("navi/out");
+    let summary: Value = serde_json::from_slice(&std::fs::read(out.join("summary.json")).expect("summary")).unwrap();
+    assert_eq!(summary["overall"]["tokens"]["input"], 1, "{summary}");
+    assert_eq!(summary["overall"]["tokens"]["output"], 1, "{summary}");
+    let task = out.join("pyautogui/a11y_tree/gpt-4o/0/notepad/stub-notepad-draft");
+    let episode: Value = serde_json::from_slice(&std::fs::read(task.join("episode.json")).expect("episode")).unwrap();
+    assert_eq!((episode["tokens"]["input"].as_u64(), episode["tokens"]["output"].as_u64()), (Some(1), Some(1)));
+    let traj = std::fs::read_to_string(task.join("traj.jsonl")).expect("traj");
+    // The first line is the reset's; the step follows.
+    let step: Value = serde_json::from_str(traj.lines().nth(1).expect("a step")).unwrap();
+    assert_eq!((step["usage"]["input"].as_u64(), step["usage"]["output"].as_u64()), (Some(1), Some(1)), "{traj}");
+}
+
 /// The first request a mock model was sent for `arena run ARGS` on the draft task, one step.
 fn first_request(tmp: &Path, label: &str, args: &[&str], env: &[(&str, String)]) -> Value {
     let model = mock_model::start("Saving.\n```decision\nDONE\n```").expect("a mock model");
