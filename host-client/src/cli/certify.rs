@@ -44,33 +44,8 @@ pub struct CertifyArgs {
     /// The certificates and the three runs' result folders (`noop/`, `fail/`, `oracle/`).
     #[arg(long, default_value = "certify", value_name = "DIR")]
     pub out: PathBuf,
-    /// Guests of the pool, comma-separated (repeatable); the global --guest is added to them.
-    #[arg(long, value_delimiter = ',', value_name = "URL,...")]
-    pub guests: Vec<String>,
-    /// A file of guest URLs, one per line (blank lines and `#` comments ignored).
-    #[arg(long, value_name = "FILE")]
-    pub guests_file: Option<PathBuf>,
-    /// Start N embedded stub guests (implies --pauses fast).
-    #[arg(long, value_name = "N")]
-    pub stub_guests: Option<u16>,
-    /// The embedded stub guests run commands that are none of their simulated
-    /// programs as REAL processes on this machine (as `arena run --stub-host-exec`).
-    #[arg(long, requires = "stub_guests")]
-    pub stub_host_exec: bool,
-    /// Run the tasks in VMs started with QEMU on overlays of this golden image (as `arena run`).
-    #[arg(long, value_name = "IMAGE")]
-    pub vm_image: Option<PathBuf>,
-    /// How many VMs --vm-image starts.
-    #[arg(long, default_value_t = 1, value_name = "N", requires = "vm_image")]
-    pub vms: usize,
-    /// When a VM goes back to its `ready` snapshot: `per-task`, `every:K` tasks, or `never`.
-    #[arg(long, default_value = "per-task", value_parser = super::vm::parse_reset, value_name = "POLICY")]
-    pub reset: crate::vm::fleet::ResetPolicy,
-    /// The VMs' folders [default: <out>/vms].
-    #[arg(long, value_name = "DIR")]
-    pub vm_dir: Option<PathBuf>,
     #[command(flatten)]
-    pub vm: super::vm::VmArgs,
+    pub source: super::runs::GuestSource,
     /// Step cap per episode (upstream: 15); the floor agents use one step.
     #[arg(long, default_value_t = crate::episode::DEFAULT_MAX_STEPS)]
     pub max_steps: u32,
@@ -107,15 +82,9 @@ impl CertifyArgs {
         run.plans = self.plans.clone();
         run.trials = self.trials;
         run.out = self.out.join(folder);
-        run.guests = self.guests.clone();
-        run.guests_file = self.guests_file.clone();
-        run.stub_guests = self.stub_guests;
-        run.stub_host_exec = self.stub_host_exec;
-        run.vm_image = self.vm_image.clone();
-        run.vms = self.vms;
-        run.reset = self.reset;
-        run.vm_dir = Some(self.vm_dir.clone().unwrap_or_else(|| self.out.join("vms")));
-        run.vm = self.vm.clone();
+        run.source = self.source.clone();
+        // The VMs' folders go beside the three runs, not into one of them.
+        run.source.vm_dir = Some(self.source.vm_dir.clone().unwrap_or_else(|| self.out.join("vms")));
         run.max_steps = self.max_steps;
         run.pauses = self.pauses;
         run.attempts = self.attempts;
@@ -151,7 +120,7 @@ pub async fn run(conn: &Connection, args: CertifyArgs) -> anyhow::Result<ExitCod
     }
     let tasks = runs.first().map(|(_, p)| p.tasks.clone()).unwrap_or_default();
     let guests = Guests::start(conn, &template).await?;
-    let images = guest_images(&guests, args.vm_image.as_ref().map(|p| p.display().to_string())).await;
+    let images = guest_images(&guests, args.source.vm_image.as_ref().map(|p| p.display().to_string())).await;
     let mut summaries: BTreeMap<&str, Summary> = BTreeMap::new();
     let mut unfinished = false;
     for (name, prepared) in runs {
@@ -291,7 +260,7 @@ mod tests {
         let run = cli.certify.run_args(AgentKind::Noop, NOOP).unwrap();
         assert_eq!(run.agent, AgentKind::Noop);
         assert_eq!(run.out, PathBuf::from("o/noop"));
-        assert_eq!((run.trials, run.stub_guests, run.pauses), (3, Some(2), Some(PausesArg::Fast)));
+        assert_eq!((run.trials, run.source.stub_guests, run.pauses), (3, Some(2), Some(PausesArg::Fast)));
         assert_eq!(run.tasks, PathBuf::from("tasks/stub/test_all.json"));
         // `arena run`'s own defaults otherwise.
         assert_eq!(run.max_steps, crate::episode::DEFAULT_MAX_STEPS);

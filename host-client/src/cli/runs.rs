@@ -175,20 +175,8 @@ pub struct RunArgs {
     /// 2B/7B/72B) or `1.5` (pixels of the smart-resized screenshot, UI-TARS-1.5).
     #[arg(long, value_enum, default_value_t = UiTarsVersionArg::V1_5)]
     pub uitars_version: UiTarsVersionArg,
-    /// Guests of the pool, comma-separated (repeatable); the global --guest is added to them.
-    #[arg(long, value_delimiter = ',', value_name = "URL,...")]
-    pub guests: Vec<String>,
-    /// A file of guest URLs, one per line (blank lines and `#` comments ignored).
-    #[arg(long, value_name = "FILE")]
-    pub guests_file: Option<PathBuf>,
-    /// Start N embedded stub guests for the run (demos and tests); implies --fast.
-    #[arg(long, value_name = "N")]
-    pub stub_guests: Option<u16>,
-    /// The embedded stub guests run commands that are none of their simulated
-    /// programs as REAL processes on this machine (off: refused, so agent code
-    /// starts nothing on the host). Recorded in the results as `stub_host_exec=on`.
-    #[arg(long, requires = "stub_guests")]
-    pub stub_host_exec: bool,
+    #[command(flatten)]
+    pub source: GuestSource,
     /// This machine's slice, i/n with i from 1 (a 0-based JOB_COMPLETION_INDEX is $((INDEX + 1))/N).
     #[arg(long, default_value = "1/1", value_parser = parse_shard)]
     pub shard: Shard,
@@ -293,6 +281,26 @@ pub struct RunArgs {
     /// in the result folder (`certified_broken.json`) and the summary.
     #[arg(long, value_name = "DIR")]
     pub certificates: Option<PathBuf>,
+}
+
+/// Where a run's guests come from: URLs, embedded stub guests, or VMs it starts
+/// (shared by `arena run` and `arena certify`).
+#[derive(Debug, Clone, clap::Args)]
+pub struct GuestSource {
+    /// Guests of the pool, comma-separated (repeatable); the global --guest is added to them.
+    #[arg(long, value_delimiter = ',', value_name = "URL,...")]
+    pub guests: Vec<String>,
+    /// A file of guest URLs, one per line (blank lines and `#` comments ignored).
+    #[arg(long, value_name = "FILE")]
+    pub guests_file: Option<PathBuf>,
+    /// Start N embedded stub guests for the run (demos and tests); implies --fast.
+    #[arg(long, value_name = "N")]
+    pub stub_guests: Option<u16>,
+    /// The embedded stub guests run commands that are none of their simulated
+    /// programs as REAL processes on this machine (off: refused, so agent code
+    /// starts nothing on the host). Recorded in the results as `stub_host_exec=on`.
+    #[arg(long, requires = "stub_guests")]
+    pub stub_host_exec: bool,
     /// Run the tasks in VMs this run starts with QEMU, each on an overlay of this
     /// read-only golden image, restored to its `ready` snapshot as --reset says.
     #[arg(long, value_name = "IMAGE")]
@@ -792,25 +800,25 @@ impl Guests {
     /// A guests file that cannot be read, a VM or stub guest that does not start, or no guest at all.
     pub(crate) async fn start(conn: &Connection, args: &RunArgs) -> anyhow::Result<Guests> {
         let mut urls: Vec<String> = conn.guest.iter().cloned().collect();
-        urls.extend(args.guests.iter().map(|s| s.trim().to_owned()).filter(|s| !s.is_empty()));
-        if let Some(file) = &args.guests_file {
+        urls.extend(args.source.guests.iter().map(|s| s.trim().to_owned()).filter(|s| !s.is_empty()));
+        if let Some(file) = &args.source.guests_file {
             urls.extend(guests_from_file(file)?);
         }
-        let fleet = match &args.vm_image {
+        let fleet = match &args.source.vm_image {
             Some(image) => {
-                let dir = args.vm_dir.clone().unwrap_or_else(|| args.out.join("vms"));
-                let template = args.vm.config(image, &dir, "vm", conn.resolve_token()?)?;
-                let configs = crate::vm::fleet::configs(&template, args.vms.max(1));
+                let dir = args.source.vm_dir.clone().unwrap_or_else(|| args.out.join("vms"));
+                let template = args.source.vm.config(image, &dir, "vm", conn.resolve_token()?)?;
+                let configs = crate::vm::fleet::configs(&template, args.source.vms.max(1));
                 emit(&format!("booting {} VM(s) on {}\n", configs.len(), image.display()))?;
-                let fleet = crate::vm::fleet::VmFleet::boot(configs, args.reset).await?;
+                let fleet = crate::vm::fleet::VmFleet::boot(configs, args.source.reset).await?;
                 urls.extend(fleet.urls());
                 Some(Arc::new(fleet))
             }
             None => None,
         };
         let mut guests = Guests { urls, clients: Vec::new(), stubs: Vec::new(), fleet };
-        for _ in 0..args.stub_guests.unwrap_or(0) {
-            let stub_args = stub::StubArgs { stub_host_exec: args.stub_host_exec, ..stub::StubArgs::default() };
+        for _ in 0..args.source.stub_guests.unwrap_or(0) {
+            let stub_args = stub::StubArgs { stub_host_exec: args.source.stub_host_exec, ..stub::StubArgs::default() };
             let token = match conn.resolve_token() {
                 Ok(token) => token,
                 Err(err) => {
@@ -926,7 +934,7 @@ pub(crate) async fn play(prepared: Prepared, guests: &Guests) -> anyhow::Result<
     let fast = match args.pauses {
         Some(PausesArg::Fast) => true,
         Some(PausesArg::Upstream) => false,
-        None => args.fast || args.stub_guests.is_some(),
+        None => args.fast || args.source.stub_guests.is_some(),
     };
     let mut config = if fast { EpisodeConfig::instant(cache) } else { EpisodeConfig::upstream(cache) };
     config.max_steps = args.max_steps;
@@ -956,7 +964,7 @@ pub(crate) async fn play(prepared: Prepared, guests: &Guests) -> anyhow::Result<
     if args.activate_non_strict {
         config.options.insert("activate_non_strict".into(), "on".into());
     }
-    if args.stub_host_exec {
+    if args.source.stub_host_exec {
         config.options.insert("stub_host_exec".into(), "on".into());
     }
     if fast {
@@ -964,7 +972,7 @@ pub(crate) async fn play(prepared: Prepared, guests: &Guests) -> anyhow::Result<
         config.exec = ExecOptions::instant();
     }
     if let Some(fleet) = &fleet {
-        config.options.insert("vm_reset".into(), args.reset.to_string());
+        config.options.insert("vm_reset".into(), args.source.reset.to_string());
         config.screen_source = Some(Arc::clone(fleet) as Arc<dyn crate::ports::observe::ScreenSource>);
         config.guest_watch = Some(Arc::clone(fleet) as Arc<dyn crate::run::blame::GuestWatch>);
     }
