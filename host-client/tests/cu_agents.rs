@@ -200,6 +200,36 @@ fn check_against_sdk_types(test: &str, bodies: &[(&str, &Value)]) {
     );
 }
 
+/// A folder holding the infeasible stub task alone, in `tmp/tasks`.
+fn infeasible_task_folder(tmp: &Path) -> PathBuf {
+    let domain = tmp.join("tasks").join("settings");
+    std::fs::create_dir_all(&domain).unwrap();
+    let source =
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../tasks/stub/examples/settings/stub-settings-infeasible.json");
+    std::fs::copy(&source, domain.join("stub-settings-infeasible.json")).unwrap();
+    tmp.join("tasks")
+}
+
+/// `arena run` of the infeasible stub task on one stub guest into `tmp/out`,
+/// without the preflight (the mocks answer only their scripted replies; the
+/// preflight is tests/tests/preflight.rs's), with `args` (the agent and its
+/// options); the run must succeed. Answers the results folder.
+async fn run_infeasible_task(tmp: &Path, args: &[&str]) -> PathBuf {
+    use clap::Parser as _;
+    let tasks = infeasible_task_folder(tmp);
+    let out = tmp.join("out");
+    let mut words = vec!["arena", "run", "--tasks", tasks.to_str().unwrap(), "--stub-guests", "1"];
+    words.extend(["--out", out.to_str().unwrap(), "--no-preflight"]);
+    words.extend(args);
+    let mut cli = arena_host::Cli::try_parse_from(words).expect("arguments parse");
+    cli.connection.token = None;
+    cli.connection.token_file = None;
+    cli.connection.guest = None;
+    let code = arena_host::run(cli).await.expect("the run runs");
+    assert_eq!(code, std::process::ExitCode::SUCCESS, "{args:?}");
+    out
+}
+
 // ---------------------------------------------------------------- Anthropic
 
 fn tool_use(id: &str, input: Value) -> Value {
@@ -706,7 +736,6 @@ async fn openai_ga_computer_runs_a_batch_in_order_and_answers_the_call_once() {
 /// which tool and image limit the model got, and from where.
 #[tokio::test]
 async fn without_computer_tool_the_models_row_chooses_and_the_run_records_it() {
-    use clap::Parser as _;
     let cases = [
         ("claude-opus-4-7", "anthropic-cu", "computer_20251124 (model table)", "computer-use-2025-11-24"),
         ("claude-sonnet-4-5", "anthropic-cu", "computer_20250124 (model table)", "computer-use-2025-01-24"),
@@ -714,38 +743,9 @@ async fn without_computer_tool_the_models_row_chooses_and_the_run_records_it() {
     ];
     for (model, agent, recorded, beta) in cases {
         let tmp = tempfile::tempdir().unwrap();
-        let domain = tmp.path().join("tasks").join("settings");
-        std::fs::create_dir_all(&domain).unwrap();
-        let source =
-            Path::new(env!("CARGO_MANIFEST_DIR")).join("../tasks/stub/examples/settings/stub-settings-infeasible.json");
-        std::fs::copy(&source, domain.join("stub-settings-infeasible.json")).unwrap();
         let mock = Mock::new(vec![ok(end_turn("No such setting. FAIL"))]);
         let base = serve(mock.clone(), "/v1/messages", "").await;
-        let out = tmp.path().join("out");
-        let tasks = tmp.path().join("tasks");
-        let words = [
-            "arena",
-            "run",
-            "--tasks",
-            tasks.to_str().unwrap(),
-            "--agent",
-            agent,
-            "--llm-url",
-            &base,
-            "--model",
-            model,
-            "--stub-guests",
-            "1",
-            "--out",
-            out.to_str().unwrap(),
-            "--no-preflight",
-        ];
-        let mut cli = arena_host::Cli::try_parse_from(words).expect("arguments parse");
-        cli.connection.token = None;
-        cli.connection.token_file = None;
-        cli.connection.guest = None;
-        let code = arena_host::run(cli).await.expect("the run runs");
-        assert_eq!(code, std::process::ExitCode::SUCCESS, "{model}");
+        let out = run_infeasible_task(tmp.path(), &["--agent", agent, "--llm-url", &base, "--model", model]).await;
         let summary: Value = serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
         assert_eq!(summary["options"]["computer_tool"], json!([recorded]), "{model}: {summary}");
         assert!(summary["options"]["image_limit"][0].as_str().is_some(), "{model}");
@@ -985,43 +985,12 @@ fn run_help_lists_the_agents_and_the_coordinate_conventions() {
 
 #[tokio::test]
 async fn arena_run_with_openai_cu_records_agent_model_action_space_and_coordinates() {
-    use clap::Parser as _;
     let tmp = tempfile::tempdir().unwrap();
-    let domain = tmp.path().join("tasks").join("settings");
-    std::fs::create_dir_all(&domain).unwrap();
-    let source =
-        Path::new(env!("CARGO_MANIFEST_DIR")).join("../tasks/stub/examples/settings/stub-settings-infeasible.json");
-    std::fs::copy(&source, domain.join("stub-settings-infeasible.json")).unwrap();
     let mock = Mock::new(vec![ok(message("r1", json!({"type": "output_text", "text": "No such setting. FAIL"})))]);
     let base = serve(mock.clone(), "/v1/responses", "/v1").await;
-    let out = tmp.path().join("out");
-    let tasks = tmp.path().join("tasks");
-    let words = [
-        "arena",
-        "run",
-        "--tasks",
-        tasks.to_str().unwrap(),
-        "--agent",
-        "openai-cu",
-        "--llm-url",
-        &base,
-        "--model",
-        "computer-use-preview",
-        "--stub-guests",
-        "1",
-        "--out",
-        out.to_str().unwrap(),
-        "--safety-checks",
-        "fail",
-        // The mock answers one scripted reply; the preflight is tests/tests/preflight.rs's.
-        "--no-preflight",
-    ];
-    let mut cli = arena_host::Cli::try_parse_from(words).expect("arguments parse");
-    cli.connection.token = None;
-    cli.connection.token_file = None;
-    cli.connection.guest = None;
-    let code = arena_host::run(cli).await.expect("the run runs");
-    assert_eq!(code, std::process::ExitCode::SUCCESS);
+    let args =
+        ["--agent", "openai-cu", "--llm-url", &base, "--model", "computer-use-preview", "--safety-checks", "fail"];
+    let out = run_infeasible_task(tmp.path(), &args).await;
     assert_eq!(mock.requests().len(), 1);
     let summary: Value = serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
     let options = &summary["options"];
@@ -1039,48 +1008,17 @@ async fn arena_run_with_openai_cu_records_agent_model_action_space_and_coordinat
 async fn a_mock_models_usage_is_the_tasks_and_the_runs_tokens_and_cost() {
     use clap::Parser as _;
     let tmp = tempfile::tempdir().unwrap();
-    let domain = tmp.path().join("tasks").join("settings");
-    std::fs::create_dir_all(&domain).unwrap();
-    let source =
-        Path::new(env!("CARGO_MANIFEST_DIR")).join("../tasks/stub/examples/settings/stub-settings-infeasible.json");
-    std::fs::copy(&source, domain.join("stub-settings-infeasible.json")).unwrap();
     // The Responses API's usage (openai-python's ResponseUsage).
     let mut reply = message("r1", json!({"type": "output_text", "text": "No such setting. FAIL"}));
     reply["usage"] = json!({"input_tokens": 1500, "input_tokens_details": {"cached_tokens": 1000},
         "output_tokens": 40, "output_tokens_details": {"reasoning_tokens": 0}, "total_tokens": 1540});
     let mock = Mock::new(vec![ok(reply)]);
     let base = serve(mock.clone(), "/v1/responses", "/v1").await;
-    let out = tmp.path().join("out");
-    let tasks = tmp.path().join("tasks");
     let prices = tmp.path().join("prices.json");
     std::fs::write(&prices, r#"{"computer-use-preview": {"input": 3.0, "output": 12.0, "cached_input": 0.75}}"#)
         .unwrap();
-    let words = [
-        "arena",
-        "run",
-        "--tasks",
-        tasks.to_str().unwrap(),
-        "--agent",
-        "openai-cu",
-        "--llm-url",
-        &base,
-        "--model",
-        "computer-use-preview",
-        "--stub-guests",
-        "1",
-        "--out",
-        out.to_str().unwrap(),
-        "--prices",
-        prices.to_str().unwrap(),
-        // The mock answers only its scripted replies, not a preflight request.
-        "--no-preflight",
-    ];
-    let mut cli = arena_host::Cli::try_parse_from(words).expect("arguments parse");
-    cli.connection.token = None;
-    cli.connection.token_file = None;
-    cli.connection.guest = None;
-    let code = arena_host::run(cli).await.expect("the run runs");
-    assert_eq!(code, std::process::ExitCode::SUCCESS);
+    let model = ["--agent", "openai-cu", "--llm-url", &base, "--model", "computer-use-preview"];
+    let out = run_infeasible_task(tmp.path(), &[&model[..], &["--prices", prices.to_str().unwrap()]].concat()).await;
     let dir = out.join("openai_computer/a11y_tree/computer-use-preview/0/settings/stub-settings-infeasible");
     let traj = std::fs::read_to_string(dir.join("traj.jsonl")).unwrap();
     let step: Value =
@@ -1103,6 +1041,7 @@ async fn a_mock_models_usage_is_the_tasks_and_the_runs_tokens_and_cost() {
     // A price file without the run's model is refused before anything runs, naming both.
     std::fs::write(&prices, r#"{"gpt-4o": {"input": 2.5, "output": 10.0}}"#).unwrap();
     let fresh = tmp.path().join("fresh");
+    let tasks = tmp.path().join("tasks");
     let words = [
         "arena",
         "run",
