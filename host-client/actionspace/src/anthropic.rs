@@ -136,28 +136,9 @@ pub const KEYS: super::KeyTable = &[
     ("asciitilde", "~"),
 ];
 
-/// The actions of `computer_20250124`.
-pub const ACTIONS_20250124: [&str; 16] = [
-    "key",
-    "hold_key",
-    "type",
-    "cursor_position",
-    "mouse_move",
-    "left_mouse_down",
-    "left_mouse_up",
-    "left_click",
-    "left_click_drag",
-    "right_click",
-    "middle_click",
-    "double_click",
-    "triple_click",
-    "scroll",
-    "wait",
-    "screenshot",
-];
-
 /// The members of `computer_toolset_20260801`, as the SDK lists them
-/// (`BETA_COMPUTER_MEMBER_NAME_VALUES`).
+/// (`BETA_COMPUTER_MEMBER_NAME_VALUES`): the actions of `computer_20251124`, in
+/// the same order.
 pub const TOOLSET_MEMBERS: [&str; 17] = [
     "key",
     "hold_key",
@@ -177,6 +158,9 @@ pub const TOOLSET_MEMBERS: [&str; 17] = [
     "screenshot",
     "zoom",
 ];
+
+/// The actions of `computer_20250124`: every member but `zoom`.
+pub const ACTIONS_20250124: &[&str] = TOOLSET_MEMBERS.split_at(16).0;
 
 /// The most presses one toolset `key` call may ask for (`repeat`).
 pub const MAX_KEY_REPEAT: u32 = 100;
