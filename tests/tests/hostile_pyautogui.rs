@@ -191,6 +191,17 @@ fn mcp(code: &str) -> Vec<AgentAction> {
     arena_host::mcp::agent_action(ToolCall::RunPython(code.to_owned())).into_iter().collect()
 }
 
+/// What each way into a step makes of `code`: Navi's reply, an exec agent's and an
+/// HTTP agent's act, and MCP's `run_python` (`dir` holds the exec agent's files).
+async fn every_way(dir: &Path, obs: &Observation, task: &Task, code: &str) -> Vec<(&'static str, Vec<AgentAction>)> {
+    vec![
+        ("navi", navi(obs, task, code).await),
+        ("exec", exec_agent(dir, obs, task, code).await),
+        ("http", http_agent(obs, task, code).await),
+        ("mcp", mcp(code)),
+    ]
+}
+
 /// What a translation error says after quoting the code.
 fn reason(error: &str) -> &str {
     error.rfind("\": ").map_or(error, |at| &error[at + 3..])
@@ -237,12 +248,7 @@ async fn hostile_pyautogui_has_the_same_effect_through_every_way_by_default() {
     for (n, code) in hostile().iter().enumerate() {
         let dir: PathBuf = tmp.path().join(format!("exec-{n}"));
         std::fs::create_dir_all(&dir).expect("dir");
-        let ways: Vec<(&str, Vec<AgentAction>)> = vec![
-            ("navi", navi(&obs, &task, code).await),
-            ("exec", exec_agent(&dir, &obs, &task, code).await),
-            ("http", http_agent(&obs, &task, code).await),
-            ("mcp", mcp(code)),
-        ];
+        let ways = every_way(&dir, &obs, &task, code).await;
         let mut seen: Option<(Vec<String>, GuestState)> = None;
         for (way, actions) in ways {
             restore(&c).await;
@@ -288,12 +294,7 @@ async fn hostile_pyautogui_gets_the_same_answer_through_every_way_when_translate
         let expected = translate_pyautogui(code, &ctx).expect_err("hostile code does not translate");
         let dir: PathBuf = tmp.path().join(format!("exec-{n}"));
         std::fs::create_dir_all(&dir).expect("dir");
-        let ways: Vec<(&str, Vec<AgentAction>)> = vec![
-            ("navi", navi(&obs, &task, code).await),
-            ("exec", exec_agent(&dir, &obs, &task, code).await),
-            ("http", http_agent(&obs, &task, code).await),
-            ("mcp", mcp(code)),
-        ];
+        let ways = every_way(&dir, &obs, &task, code).await;
         for (way, actions) in ways {
             // Navi keeps the block's last newline; the code is the same.
             let [AgentAction::Pyautogui(got)] = &actions[..] else { panic!("{way}: {actions:?}") };
@@ -316,13 +317,8 @@ async fn hostile_pyautogui_gets_the_same_answer_through_every_way_when_translate
     let mut uitars =
         UiTarsAgent::new(UiTarsConfig::new(&mock.url, "ui-tars", "Do this: {instruction}")).expect("ui-tars");
     uitars.reset(&task).await;
-    let ways: Vec<(&str, Vec<AgentAction>)> = vec![
-        ("navi", navi(&obs, &task, PASTE).await),
-        ("exec", exec_agent(&dir, &obs, &task, PASTE).await),
-        ("http", http_agent(&obs, &task, PASTE).await),
-        ("mcp", mcp(PASTE)),
-        ("ui-tars", uitars.predict(&obs).await.expect("a prediction").actions),
-    ];
+    let mut ways = every_way(&dir, &obs, &task, PASTE).await;
+    ways.push(("ui-tars", uitars.predict(&obs).await.expect("a prediction").actions));
     let mut typed = String::new();
     for (way, actions) in ways {
         c.clipboard_set(&ClipboardContent::Text { text: String::new() }).await.expect("clear the clipboard");
@@ -362,12 +358,7 @@ async fn on_the_stub_host_reaching_code_is_refused_the_same_way_through_every_wa
     for (n, code) in host_reaching(&marker).iter().enumerate() {
         let dir: PathBuf = tmp.path().join(format!("host-{n}"));
         std::fs::create_dir_all(&dir).expect("dir");
-        let ways: Vec<(&str, Vec<AgentAction>)> = vec![
-            ("navi", navi(&obs, &task, code).await),
-            ("exec", exec_agent(&dir, &obs, &task, code).await),
-            ("http", http_agent(&obs, &task, code).await),
-            ("mcp", mcp(code)),
-        ];
+        let ways = every_way(&dir, &obs, &task, code).await;
         let mut seen: Option<Vec<String>> = None;
         for (way, actions) in ways {
             let errors = carry_out(&c, &actions).await;
