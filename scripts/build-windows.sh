@@ -3,9 +3,11 @@
 # (the server, a console program, crate arena-guest) and arena-guest-logon.exe (the logon
 # task's launcher, a GUI-subsystem program of its own small crate, arena-guest-launch in
 # guest-server/launch/; they ship together), and the bcryptprimitives.dll shim that lets
-# Rust programs start under Wine 8.
+# Rust programs start under Wine 8. Then it type-checks the host crate, arena-host, for
+# the same target with our crates' warnings denied (on a Windows host an exec agent runs
+# in a job object: host-client/src/agent/external/windows/), in the same target folder.
 #
-# Usage: scripts/build-windows.sh [--release] [--no-install]
+# Usage: scripts/build-windows.sh [--release] [--no-install] [--no-host-check]
 #
 # The rustup toolchain on these machines has only the Linux standard library, so
 # this uses Debian's Rust (/usr/bin/cargo, /usr/bin/rustc, the std source in
@@ -22,11 +24,13 @@ cd "$(dirname "$0")/.."
 ROOT=$PWD
 PROFILE=debug
 INSTALL=1
+HOST_CHECK=1
 for arg in "$@"; do
     case "$arg" in
         --release) PROFILE=release ;;
         --no-install) INSTALL=0 ;;
-        -h|--help) sed -n '2,18p' "$0"; exit 0 ;;
+        --no-host-check) HOST_CHECK=0 ;;
+        -h|--help) sed -n '2,20p' "$0"; exit 0 ;;
         *) echo "unknown argument: $arg" >&2; exit 2 ;;
     esac
 done
@@ -65,6 +69,15 @@ fi
 started=$(date +%s)
 /usr/bin/cargo "${args[@]}"
 echo "cross build took $(( $(date +%s) - started )) s"
+
+if [ "$HOST_CHECK" = 1 ]; then
+    # A check (no code generated, nothing linked); -Zwarnings works on Debian's cargo
+    # through RUSTC_BOOTSTRAP=1, as -Zbuild-std does.
+    started=$(date +%s)
+    /usr/bin/cargo check -p arena-host --target "$TARGET" -Zbuild-std=std,panic_abort --locked \
+        -Zwarnings --config 'build.warnings="deny"'
+    echo "host check for $TARGET took $(( $(date +%s) - started )) s"
+fi
 
 # The Wine shim: exports ProcessPrng, which Wine 8's DLLs lack.
 SHIM_DIR="$CARGO_TARGET_DIR/wine"

@@ -38,7 +38,8 @@ pub mod ports;
 pub mod results;
 pub mod run;
 pub mod som;
-// The one module with `unsafe`: libc calls for the QEMU processes (prctl, kill, access).
+// A module with `unsafe`: libc calls for the QEMU processes (prctl, kill, access).
+// The other is `agent::external::windows`: Win32 calls for an exec agent's job object.
 #[allow(unsafe_code)]
 pub mod vm;
 

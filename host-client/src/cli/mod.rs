@@ -683,6 +683,28 @@ fn exit_code(code: Option<i32>) -> ExitCode {
     }
 }
 
+/// A future that resolves when this process is asked to terminate: SIGTERM on
+/// Unix (a pod being deleted, `docker stop`), listened for from this call on.
+/// Other hosts have no SIGTERM and it never resolves there: Ctrl-C
+/// (`tokio::signal::ctrl_c`, heard on both) is how they stop a command.
+///
+/// # Errors
+///
+/// The signal handler cannot be installed.
+pub(crate) fn terminate_requested() -> std::io::Result<impl std::future::Future<Output = ()> + Send> {
+    #[cfg(unix)]
+    {
+        let mut term = tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate())?;
+        Ok(async move {
+            term.recv().await;
+        })
+    }
+    #[cfg(not(unix))]
+    {
+        Ok(std::future::pending())
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

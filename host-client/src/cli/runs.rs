@@ -1141,18 +1141,11 @@ fn reproduction(args: &RunArgs, fast: bool) -> anyhow::Result<Vec<(String, Strin
 /// at once with 130; every file already written stays, as each is written whole.
 async fn watch_interrupts(stop: tokio_util::sync::CancellationToken) {
     // SIGTERM (a pod being deleted, `docker stop`) counts as the first Ctrl-C.
-    let mut term = match tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate()) {
-        Ok(term) => Some(term),
-        Err(err) => {
-            tracing::warn!(error = %err, "cannot listen for SIGTERM");
-            None
-        }
-    };
+    let term =
+        super::terminate_requested().inspect_err(|err| tracing::warn!(error = %err, "cannot listen for SIGTERM")).ok();
     let terminated = async {
-        match term.as_mut() {
-            Some(term) => {
-                term.recv().await;
-            }
+        match term {
+            Some(term) => term.await,
             None => std::future::pending::<()>().await,
         }
     };

@@ -543,13 +543,13 @@ async fn start(
     emit(&format!("guest ready: {}\n", vm.url()))?;
     // Watch: a QEMU that dies is started again from the ready snapshot; a
     // guest that shuts down (the power button, `arena vm stop`) ends the watch.
-    let mut term =
-        tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate()).context("listening for SIGTERM")?;
+    let term = super::terminate_requested().context("listening for SIGTERM")?;
+    tokio::pin!(term);
     let mut events = vm.qmp.events();
     loop {
         tokio::select! {
             _ = tokio::signal::ctrl_c() => break,
-            _ = term.recv() => break,
+            () = &mut term => break,
             Ok(name) = events.recv() => {
                 if name == "SHUTDOWN" {
                     emit("the guest shut down\n")?;

@@ -248,6 +248,7 @@ pub fn is_read_only(path: &Path, meta: &std::fs::Metadata) -> bool {
     }
     #[cfg(not(unix))]
     {
+        let _ = path;
         false
     }
 }

@@ -349,6 +349,7 @@ impl Vm {
     /// QEMU or `qemu-img` is missing, the golden image is writable or missing, the
     /// overlay's backing file moved, the port is taken, or QEMU exits at once.
     pub async fn start(config: &VmConfig, boot: Boot) -> Result<Vm, VmError> {
+        linux_host()?;
         let qemu = qemu::find_qemu(config.qemu.as_deref())?;
         let img = config.qemu_img()?;
         let info = img.check_golden(&config.golden)?;
@@ -626,6 +627,19 @@ pub(crate) fn die_with_this_process_std(command: &mut std::process::Command) {
     }
     #[cfg(not(target_os = "linux"))]
     let _ = command;
+}
+
+/// VMs run on a Linux host: QEMU's monitor and the TPM speak over Unix sockets,
+/// and QEMU's processes end with this one through Linux's `PR_SET_PDEATHSIG`.
+/// Elsewhere (a Windows host) starting one is refused with a clear error; runs
+/// there use guests served from elsewhere (`--guest URL`) or the stub.
+fn linux_host() -> Result<(), VmError> {
+    if cfg!(unix) {
+        return Ok(());
+    }
+    Err(VmError::Invalid(
+        "VMs are driven from a Linux host (QEMU's monitor and TPM are Unix sockets): start them there and pass the guest's URL with --guest".to_owned(),
+    ))
 }
 
 /// The child's side: SIGKILL when the parent dies (`PR_SET_PDEATHSIG`, prctl(2)),

@@ -318,6 +318,7 @@ fn io(what: String) -> impl FnOnce(std::io::Error) -> VmError {
 
 /// The programs of a prepare that hold files of its folder: QEMU and
 /// `qemu-img` (the disk's lock), swtpm (the TPM state's lock).
+#[cfg_attr(not(target_os = "linux"), expect(dead_code, reason = "found only through /proc"))]
 const HOLDERS: &[&str] = &["qemu-system", "qemu-img", "swtpm"];
 
 /// How long a leftover `qemu-img` may take to finish on its own (a snapshot
@@ -362,6 +363,7 @@ fn end_leftovers(dir: &Path) {
 /// options (`file=PATH,format=qcow2`), so each part between `,` and `=` is
 /// read as a path, relative to the process's working folder.
 fn holders_of(dir: &Path) -> Vec<(u32, String)> {
+    #[cfg_attr(not(target_os = "linux"), expect(unused_mut, reason = "found only through /proc"))]
     let mut found = Vec::new();
     #[cfg(target_os = "linux")]
     {

@@ -1,6 +1,9 @@
 //! The QMP control socket of one VM, through the `qapi` crate: commands with
 //! deadlines, the monitor's text commands (`savevm`, `loadvm`), and the VM's
 //! events (reset, shutdown) as names on a broadcast channel.
+//!
+//! QEMU serves QMP here on a Unix socket (`-qmp unix:`, see `qemu.rs`), so VMs
+//! are driven from a Linux host; elsewhere [`Qmp::connect`] says so at once.
 
 use std::path::Path;
 use std::sync::{Arc, Mutex};
@@ -10,7 +13,6 @@ use futures_util::StreamExt;
 use qapi::futures::{QapiService, QmpStreamTokio};
 use qapi::qmp;
 use tokio::io::WriteHalf;
-use tokio::net::UnixStream;
 use tokio::sync::broadcast;
 use tokio::time::Instant;
 
@@ -19,7 +21,29 @@ use super::{check_snapshot_name, known_list, parse_snapshot_list, VmError};
 /// How long saving or loading a snapshot may take (memory of a large guest).
 pub(crate) const SNAPSHOT_TIMEOUT: Duration = Duration::from_secs(600);
 
-type Service = QapiService<QmpStreamTokio<WriteHalf<UnixStream>>>;
+/// The monitor's socket.
+#[cfg(unix)]
+type Socket = tokio::net::UnixStream;
+/// Never connected ([`open`] refuses): a stand-in so that the types stay the same.
+#[cfg(not(unix))]
+type Socket = tokio::net::TcpStream;
+
+type Service = QapiService<QmpStreamTokio<WriteHalf<Socket>>>;
+
+/// Connects to the monitor's socket at `path`.
+#[cfg(unix)]
+async fn open(path: &Path) -> std::io::Result<Socket> {
+    Socket::connect(path).await
+}
+
+/// Refuses: QEMU's monitor is a Unix socket, driven from a Linux host.
+#[cfg(not(unix))]
+async fn open(path: &Path) -> std::io::Result<Socket> {
+    Err(std::io::Error::new(
+        std::io::ErrorKind::Unsupported,
+        format!("{} is a Unix socket: VMs are driven from a Linux host", path.display()),
+    ))
+}
 
 /// One negotiated QMP connection.
 pub struct Qmp {
@@ -65,9 +89,12 @@ impl Qmp {
         // `within`, and at least 10 s.
         let stream = loop {
             let greeting = within.saturating_sub(started.elapsed()).max(Duration::from_secs(10));
-            let attempt = async { QmpStreamTokio::open_uds(path).await?.negotiate().await };
+            let attempt = async { QmpStreamTokio::open(open(path).await?).await?.negotiate().await };
             match tokio::time::timeout(greeting, attempt).await {
                 Ok(Ok(stream)) => break stream,
+                Ok(Err(err)) if err.kind() == std::io::ErrorKind::Unsupported => {
+                    return Err(qmp_error(&format!("connecting to {}", path.display()), err))
+                }
                 Ok(Err(err)) if started.elapsed() < within => {
                     tracing::trace!(socket = %path.display(), error = %err, "QMP socket not ready yet");
                     tokio::time::sleep(Duration::from_millis(50)).await;
@@ -327,7 +354,8 @@ fn qmp_error(what: &str, err: impl std::fmt::Display) -> VmError {
     VmError::Qmp { what: what.to_owned(), message: err.to_string() }
 }
 
-#[cfg(test)]
+// A Unix socket monitor, as QEMU's.
+#[cfg(all(test, unix))]
 mod tests {
     use super::*;
     use tokio::io::{AsyncBufReadExt, AsyncWriteExt, BufReader};

@@ -22,7 +22,8 @@
 //! - [`observe`]: the one adapter from an [`Observation`] to an `observe` message.
 //! - [`spaces`]: answers' actions to [`AgentAction`]s, with the `computer_13` seam.
 //! - [`stderr`]: an exec agent's stderr into the run's log, bounded per task.
-//! - [`tree`]: an exec agent's process group and descendants, ended with it.
+//! - [`tree`]: an exec agent's process group and descendants (Unix) or job
+//!   object (Windows, [`windows`]), ended with it.
 
 pub mod observe;
 pub mod protocol;
@@ -30,6 +31,7 @@ pub mod spaces;
 pub mod stderr;
 pub mod transport;
 pub mod tree;
+pub mod windows;
 
 use std::time::Duration;
 

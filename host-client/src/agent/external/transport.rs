@@ -72,8 +72,7 @@ impl ProcessPool {
         command.kill_on_drop(true);
         super::tree::own_group(&mut command);
         let mut child = command.spawn().map_err(|err| format!("cannot start {:?}: {err}", self.argv[0]))?;
-        let pid = child.id().unwrap_or_default();
-        super::tree::register(pid);
+        let pid = super::tree::register(&mut child)?;
         tracing::info!(pid, command = %self.argv.join(" "), "agent process started");
         let budget = StderrBudget::new(pid);
         if let Some(stderr) = child.stderr.take() {

@@ -1,57 +1,89 @@
-//! An exec agent's processes end with it. The agent starts in a process group
-//! of its own; ending it ends that group, every process descending from the
-//! agent (found through `/proc` on Linux, so a child that left the group or
-//! started a new session goes too) and the groups those lead. The agents of a
-//! run are registered here, so that an exit that skips destructors (a second
-//! Ctrl-C) can end them all ([`end_all`]).
+//! An exec agent's processes end with it. On Unix the agent starts in a process
+//! group of its own; ending it ends that group, every process descending from
+//! the agent (found through `/proc` on Linux, so a child that left the group or
+//! started a new session goes too) and the groups those lead. On Windows the
+//! agent starts suspended, is put in a job object of its own
+//! (`JOB_OBJECT_LIMIT_KILL_ON_JOB_CLOSE`, see [`super::windows`]) and only then
+//! runs; ending it terminates the job, which holds everything it started,
+//! detached processes and new consoles included, and the system closes the job
+//! (ending them too) if this program dies first. The agents of a run are
+//! registered here, so that an exit that skips destructors (a second Ctrl-C)
+//! can end them all ([`end_all`]).
 //!
-//! Not covered: a process that double-forks away from a dead parent and out of
-//! the agent's group before the end (no ancestry is left to follow without
-//! cgroups), and Windows hosts, where only the agent process itself is ended.
+//! Not covered: on Unix, a process that double-forks away from a dead parent and
+//! out of the agent's group before the end (no ancestry is left to follow
+//! without cgroups).
 
 use std::sync::Mutex;
 
-/// The agents running now, by pid (each leads its group).
-static LIVE: Mutex<Vec<u32>> = Mutex::new(Vec::new());
+/// What ends one agent's processes besides its pid: nothing more on Unix (the
+/// pid leads its group), its job object on Windows.
+#[cfg(unix)]
+type Hold = ();
+#[cfg(not(unix))]
+type Hold = super::windows::Job;
 
-/// Starts the agent in a process group of its own (Unix).
+/// The agents running now, by pid.
+static LIVE: Mutex<Vec<(u32, Hold)>> = Mutex::new(Vec::new());
+
+/// Prepares the agent's command: a process group of its own (Unix); created
+/// suspended, to be resumed inside its job by [`register`] (Windows).
 pub fn own_group(command: &mut tokio::process::Command) {
     #[cfg(unix)]
     command.process_group(0);
     #[cfg(not(unix))]
-    let _ = command;
+    super::windows::start_suspended(command);
 }
 
-/// Registers the agent `pid`, for [`end_all`].
-pub fn register(pid: u32) {
+/// Registers the agent just started from a command [`own_group`] prepared,
+/// for [`end`] and [`end_all`], and answers its pid. On Windows this puts it
+/// in its job object and lets it run.
+///
+/// # Errors
+///
+/// Windows: the job object cannot be made or the process put in it (the process
+/// is then killed: better no agent than one whose children could outlive it).
+pub fn register(child: &mut tokio::process::Child) -> Result<u32, String> {
+    let pid = child.id().unwrap_or_default();
+    let entry = (pid, hold(child)?);
     if let Ok(mut live) = LIVE.lock() {
-        live.push(pid);
+        live.push(entry);
     }
+    Ok(pid)
+}
+
+#[cfg(unix)]
+fn hold(_child: &mut tokio::process::Child) -> Result<Hold, String> {
+    Ok(())
+}
+
+#[cfg(not(unix))]
+fn hold(child: &mut tokio::process::Child) -> Result<Hold, String> {
+    super::windows::Job::adopt(child)
 }
 
 /// Ends the agent `pid` with everything it started, and forgets it; once only
 /// (after that the number may name another process).
 pub fn end(pid: u32) {
-    let registered = LIVE.lock().is_ok_and(|mut live| {
-        let before = live.len();
-        live.retain(|&p| p != pid);
-        live.len() < before
+    let found = LIVE.lock().ok().and_then(|mut live| {
+        let at = live.iter().position(|&(p, _)| p == pid)?;
+        Some(live.swap_remove(at))
     });
-    if registered {
-        end_tree(pid);
+    if let Some((pid, hold)) = found {
+        end_tree(pid, hold);
     }
 }
 
 /// Ends every registered agent with everything it started.
 pub fn end_all() {
     let live = LIVE.lock().map(|mut live| std::mem::take(&mut *live)).unwrap_or_default();
-    for pid in live {
-        end_tree(pid);
+    for (pid, hold) in live {
+        end_tree(pid, hold);
     }
 }
 
 #[cfg(unix)]
-fn end_tree(pid: u32) {
+fn end_tree(pid: u32, (): Hold) {
     use rustix::process::{getpgid, getpgrp, kill_process, kill_process_group, Pid, Signal};
     let Some(leader) = i32::try_from(pid).ok().and_then(Pid::from_raw) else { return };
     if leader.is_init() {
@@ -78,8 +110,11 @@ fn end_tree(pid: u32) {
     }
 }
 
+/// Terminates the job (and closes it, as `job` drops).
 #[cfg(not(unix))]
-fn end_tree(_pid: u32) {}
+fn end_tree(_pid: u32, job: Hold) {
+    job.end();
+}
 
 /// Every process below `root`, by the parent each names in `/proc/PID/stat`
 /// (empty where there is no `/proc`). Read by hand: a dozen lines, where the
@@ -126,8 +161,7 @@ mod tests {
         command.args(["-c", script]).stdout(std::process::Stdio::piped()).kill_on_drop(true);
         own_group(&mut command);
         let mut child = command.spawn().expect("sh starts");
-        let pid = child.id().expect("a pid");
-        register(pid);
+        let pid = register(&mut child).expect("registered");
         let mut line = String::new();
         let stdout = child.stdout.take().expect("stdout");
         tokio::io::AsyncBufReadExt::read_line(&mut tokio::io::BufReader::new(stdout), &mut line).await.expect("a line");
