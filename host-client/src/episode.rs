@@ -677,6 +677,7 @@ impl Episode {
         if let Some(raw) = &prediction.raw_error {
             // The step is spent; the agent keeps the error to tell the model next time.
             record.error = Some(raw.clone());
+            self.result.action_errors += 1;
         }
         Ok(Some(prediction))
     }
@@ -725,6 +726,7 @@ impl Episode {
                     Ok(Ok(outcome)) => {
                         if let Some(error) = &outcome.error {
                             tracing::debug!(task = %play.task.name, step = record.step, error, "an action failed");
+                            self.result.action_errors += 1;
                         }
                         for key in &outcome.keys_down {
                             if !self.keys_down.contains(key) {
@@ -741,8 +743,12 @@ impl Episode {
                         let url = play.client.base_url();
                         return Err(blame::after_action_unless_outside(watch, url, record.step, &what, err).await);
                     }
-                    Ok(Err(err)) => record.outcomes.push(serde_json::json!({ "error": err.to_string() })),
+                    Ok(Err(err)) => {
+                        self.result.action_errors += 1;
+                        record.outcomes.push(serde_json::json!({ "error": err.to_string() }));
+                    }
                     Err(_) => {
+                        self.result.action_errors += 1;
                         let message =
                             format!("the action outlasted the step's {} s", config.step_timeout.as_secs_f64());
                         record.timings.timeouts.push(format!("action {}: {message}", k + 1));

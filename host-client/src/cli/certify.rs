@@ -287,6 +287,7 @@ mod tests {
             tokens: None,
             cost_usd: None,
             certified_broken: false,
+            action_errors: 0,
         };
         let mut summary = Summary::from_found(&[]);
         // Trial 2 unfinished, trial 3 from an earlier, longer certification.

@@ -281,7 +281,7 @@ fn table(summary: &Summary) -> String {
         );
     }
     t.push_str("</tbody></table>\n");
-    t.push_str("<table id=\"tasks\"><thead><tr><th>Domain</th><th>Task</th><th>Score</th><th>Status</th><th>Failed by</th><th>Steps</th><th>Time (s)</th><th>Attempt</th><th>Guest</th></tr></thead><tbody>\n");
+    t.push_str("<table id=\"tasks\"><thead><tr><th>Domain</th><th>Task</th><th>Score</th><th>Status</th><th>Failed by</th><th>Steps</th><th>Time (s)</th><th>Attempt</th><th>Guest</th><th>Action errors</th></tr></thead><tbody>\n");
     for task in &summary.tasks {
         let (class, score) = match task.score {
             Some(s) if task.success => ("ok", super::python_float(s)),
@@ -290,7 +290,7 @@ fn table(summary: &Summary) -> String {
         };
         let _ = writeln!(
             t,
-            "<tr><td>{}</td><td><a href=\"#{}\">{}</a></td><td class=\"num {class}\">{score}</td><td>{}</td><td>{}</td><td class=\"num\">{}</td><td class=\"num\">{:.1}</td><td class=\"num\">{}</td><td>{}</td></tr>",
+            "<tr><td>{}</td><td><a href=\"#{}\">{}</a></td><td class=\"num {class}\">{score}</td><td>{}</td><td>{}</td><td class=\"num\">{}</td><td class=\"num\">{:.1}</td><td class=\"num\">{}</td><td>{}</td><td class=\"num action-errors\">{}</td></tr>",
             escape(&task.domain),
             anchor(&task.path),
             escape(&task.name),
@@ -299,7 +299,8 @@ fn table(summary: &Summary) -> String {
             task.steps,
             task.elapsed_ms as f64 / 1000.0,
             task.attempt,
-            escape(&task.guest)
+            escape(&task.guest),
+            task.action_errors
         );
     }
     t.push_str("</tbody></table>\n");

@@ -430,6 +430,11 @@ pub struct EpisodeResult {
     /// What [`EpisodeResult::tokens`] cost in US dollars, by the run's `--prices` file.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub cost_usd: Option<f64>,
+    /// Actions of the agent that failed and the episode went on, as upstream goes
+    /// on: an answer that did not translate (an unknown key, an unsupported call,
+    /// refused code), an action the guest refused, an action past the step's deadline.
+    #[serde(default)]
+    pub action_errors: u32,
 }
 
 /// Where a task's VM started from, recorded in `episode.json`. A plain record
@@ -499,6 +504,7 @@ impl EpisodeResult {
             vm: None,
             tokens: None,
             cost_usd: None,
+            action_errors: 0,
         }
     }
 

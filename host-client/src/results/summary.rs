@@ -68,6 +68,9 @@ pub struct DomainRow {
     pub avg_seconds: f64,
     /// Finished tasks whose agent failed.
     pub agent_errors: u32,
+    /// The agents' failed actions, over every task of the row (the episodes went on).
+    #[serde(default)]
+    pub action_errors: u32,
     /// Tasks with no score: unfinished, or listed and never started.
     pub unfinished: u32,
     /// Mean score × 100 over every task (finished or not, unfinished as 0).
@@ -158,6 +161,9 @@ pub struct TaskRow {
     /// Certificates given with `--certificates` call this task broken.
     #[serde(default, skip_serializing_if = "std::ops::Not::not")]
     pub certified_broken: bool,
+    /// The agent's failed actions in this task ([`super::EpisodeResult::action_errors`]).
+    #[serde(default)]
+    pub action_errors: u32,
 }
 
 /// The summary of a result folder.
@@ -619,6 +625,13 @@ impl Summary {
         let parts: Vec<String> = parts.iter().map(|(k, n)| format!("{k} {n}")).collect();
         let parts = if parts.is_empty() { String::new() } else { format!(" ({})", parts.join(", ")) };
         let _ = writeln!(md, "Failures: {agent} the agent's, {environment} the environment's{parts}.\n");
+        if self.overall.action_errors > 0 {
+            let _ = writeln!(
+                md,
+                "Action errors: {} (actions that failed while their episodes went on, as upstream's do; per task below).\n",
+                self.overall.action_errors
+            );
+        }
         md.push_str("| Domain | Tasks | Success rate | Solved | Solved rate | Avg steps | Avg time (s) | Agent errors | Unfinished |\n");
         md.push_str("|---|---:|---:|---:|---:|---:|---:|---:|---:|\n");
         let rows = self
@@ -643,20 +656,21 @@ impl Summary {
         }
         md.push_str(&self.trials_markdown());
         md.push_str(&self.ledger_markdown());
-        md.push_str("\n## Tasks\n\n| Domain | Task | Score | Status | Failed by | Steps | Time (s) | Attempt |\n|---|---|---:|---|---|---:|---:|---:|\n");
+        md.push_str("\n## Tasks\n\n| Domain | Task | Score | Status | Failed by | Steps | Time (s) | Attempt | Action errors |\n|---|---|---:|---|---|---:|---:|---:|---:|\n");
         for t in &self.tasks {
             let score = t.score.map_or_else(|| "-".to_owned(), super::python_float);
             let mark = if t.certified_broken { " (certified broken)" } else { "" };
             let _ = writeln!(
                 md,
-                "| {} | {}{mark} | {score} | {} | {} | {} | {:.1} | {} |",
+                "| {} | {}{mark} | {score} | {} | {} | {} | {:.1} | {} | {} |",
                 md_escape(&t.domain),
                 md_escape(&t.name),
                 t.status,
                 failed_by_text(t),
                 t.steps,
                 t.elapsed_ms as f64 / 1000.0,
-                t.attempt
+                t.attempt,
+                t.action_errors
             );
         }
         if !self.missing.is_empty() {
@@ -729,6 +743,7 @@ fn task_row(found: &FoundTask) -> TaskRow {
         tokens: episode.and_then(|e| e.tokens),
         cost_usd: episode.and_then(|e| e.cost_usd),
         certified_broken: false,
+        action_errors: episode.map_or(0, |e| e.action_errors),
     }
 }
 
@@ -763,6 +778,7 @@ fn domain_row(domain: &str, rows: &[&TaskRow], not_run: usize) -> DomainRow {
         avg_steps: mean(&|r| f64::from(r.steps)),
         avg_seconds: mean(&|r| r.elapsed_ms as f64 / 1000.0),
         agent_errors: finished.iter().filter(|r| r.status == "agent_error").count() as u32,
+        action_errors: rows.iter().map(|r| r.action_errors).sum(),
         unfinished: (rows.len() + not_run) as u32 - n,
         strict_rate: if rows.len() + not_run == 0 {
             0.0

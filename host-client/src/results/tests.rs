@@ -31,6 +31,7 @@ pub(crate) fn episode(domain: &str, name: &str, score: f64, status: EpisodeStatu
         vm: None,
         tokens: None,
         cost_usd: None,
+        action_errors: 0,
     }
 }
 

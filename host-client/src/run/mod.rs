@@ -278,7 +278,14 @@ pub async fn run_tasks(
                     no_new_tasks.cancel();
                 }
             }
-            tracing::info!(task = %task.name, domain = %task.domain, score = result.score, status = result.status.kind(), steps = result.steps, "task finished");
+            tracing::info!(task = %task.name, domain = %task.domain, score = result.score, status = result.status.kind(), steps = result.steps, action_errors = result.action_errors, "task finished");
+            if result.action_errors > 0 {
+                tracing::warn!(task = %task.name, action_errors = result.action_errors, "actions failed; the episode went on");
+                bar.println(format!(
+                    "{}/{}: {} action error(s); the episode went on (see traj.jsonl)",
+                    task.domain, task.name, result.action_errors
+                ));
+            }
             bar.inc(1);
             bar.set_message(format!(
                 "{solved} solved; last {}/{} {}",
