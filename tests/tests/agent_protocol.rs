@@ -40,7 +40,7 @@ fn here() -> PathBuf {
 
 /// PYTHONPATH with the package and the test's agents.
 fn pythonpath() -> String {
-    format!("{}:{}", repo().join("python").display(), here().display())
+    arena_test_support::agent_pythonpath(&["tests/tests/agent_protocol"])
 }
 
 /// `arena run` over the stub tasks on two stub guests with `agent_args`; answers its stderr.

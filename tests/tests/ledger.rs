@@ -10,7 +10,7 @@
 
 #![cfg(unix)]
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::Command;
 
 use arena_test_support::workspace_binary;
@@ -27,10 +27,6 @@ const PRICE_CACHED: f64 = 0.5;
 const PRICE_OUTPUT: f64 = 10.0;
 const MODEL: &str = "metered-model";
 
-fn repo() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
-}
-
 /// The cost of one step's usage, in USD, from the prices' definition.
 fn step_cost() -> f64 {
     ((INPUT - CACHED) as f64 * PRICE_INPUT + CACHED as f64 * PRICE_CACHED + OUTPUT as f64 * PRICE_OUTPUT) / 1e6
@@ -43,7 +39,7 @@ fn run(out: &Path, extra: &[&str]) -> String {
     std::fs::write(&prices, text.to_string()).expect("the price file");
     let output = Command::new(workspace_binary("arena-host", "arena").expect("the arena binary"))
         .args(["run", "--stub-guests", "1", "--pauses", "fast", "--tasks"])
-        .arg(repo().join("tasks/stub"))
+        .arg(arena_test_support::workspace_root().join("tasks/stub"))
         .arg("--out")
         .arg(out)
         .args(["--agent", "exec", "--agent-timeout", "60", "--model", MODEL, "--prices"])
@@ -51,15 +47,7 @@ fn run(out: &Path, extra: &[&str]) -> String {
         .args(extra)
         .arg("--agent-cmd")
         .arg("python3 -m arena_agent metered_agent:Metered")
-        .env(
-            "PYTHONPATH",
-            format!(
-                "{}:{}:{}",
-                repo().join("python").display(),
-                repo().join("tests/tests/agent_protocol").display(),
-                repo().join("tests/tests/ledger").display()
-            ),
-        )
+        .env("PYTHONPATH", arena_test_support::agent_pythonpath(&["tests/tests/agent_protocol", "tests/tests/ledger"]))
         .output()
         .expect("arena run starts");
     format!("{}\n{}", String::from_utf8_lossy(&output.stdout), String::from_utf8_lossy(&output.stderr))
@@ -170,7 +158,7 @@ fn a_budget_stops_the_run_after_the_task_that_reaches_it() {
 
 #[test]
 fn the_act_schema_takes_an_optional_usage() {
-    let path = repo().join("schemas/agent-protocol/act.json");
+    let path = arena_test_support::workspace_root().join("schemas/agent-protocol/act.json");
     let schema: Value = serde_json::from_slice(&std::fs::read(path).expect("act.json")).expect("JSON");
     let validator = jsonschema::validator_for(&schema).expect("a valid schema");
     assert!(validator.is_valid(&json!({"type": "act", "usage": {"input_tokens": 5, "output_tokens": 1}})));

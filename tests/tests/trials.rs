@@ -32,10 +32,6 @@ const PATTERN_A: [&str; 6] = ["PPP", "FFF", "PFP", "FPF", "PPP", "FFP"];
 /// Run B, one trial.
 const PATTERN_B: [&str; 6] = ["F", "P", "P", "F", "P", "P"];
 
-fn repo() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
-}
-
 fn arena() -> PathBuf {
     workspace_binary("arena-host", "arena").expect("the arena binary")
 }
@@ -46,20 +42,12 @@ fn run_flaky(out: &Path, state: &Path, pattern: &[&str; 6], trials: u32) -> Stri
     let pattern: BTreeMap<&str, &str> = TASKS.iter().map(|(_, n)| *n).zip(pattern.iter().copied()).collect();
     let output = Command::new(arena())
         .args(["run", "--stub-guests", "1", "--pauses", "fast", "--tasks"])
-        .arg(repo().join("tasks/stub"))
+        .arg(arena_test_support::workspace_root().join("tasks/stub"))
         .arg("--out")
         .arg(out)
         .args(["--trials", &trials.to_string(), "--agent", "exec", "--agent-timeout", "60", "--agent-cmd"])
         .arg("python3 -m arena_agent flaky_agent:Flaky")
-        .env(
-            "PYTHONPATH",
-            format!(
-                "{}:{}:{}",
-                repo().join("python").display(),
-                repo().join("tests/tests/agent_protocol").display(),
-                repo().join("tests/tests/trials").display()
-            ),
-        )
+        .env("PYTHONPATH", arena_test_support::agent_pythonpath(&["tests/tests/agent_protocol", "tests/tests/trials"]))
         .env("ARENA_FLAKY_DIR", state)
         .env("ARENA_FLAKY_PATTERN", serde_json::to_string(&pattern).expect("JSON"))
         .output()

@@ -40,7 +40,8 @@ pub use corpus::{waa_corpus, CORPUS_VAR, REQUIRE_CORPUS_VAR, SKIP_PREFIX};
 pub use guest::StubGuest;
 pub use png::png_claiming;
 pub use process::{
-    bench_guests, gui_agents_python_or_skip, python3_or_skip, workspace_binary, Served, BENCH_GUESTS_VAR,
+    agent_pythonpath, bench_guests, gui_agents_python_or_skip, python3_or_skip, workspace_binary, workspace_root,
+    Served, BENCH_GUESTS_VAR,
 };
 pub use standin::{standin_image, StandinImage, REQUIRE_QEMU_VAR, STANDIN_DIR_VAR};
 pub use stub_tasks::{copy_stub_task, stub_tasks_dir};

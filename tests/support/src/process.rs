@@ -49,8 +49,20 @@ pub fn workspace_binary(package: &str, bin: &str) -> anyhow::Result<PathBuf> {
 }
 
 /// The workspace this crate sits in, two folders up (`tests/support/`).
-fn workspace_root() -> PathBuf {
+pub fn workspace_root() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../..")
+}
+
+/// The `PYTHONPATH` of a test's step-protocol agent written in Python: the
+/// project's `python/` package (`arena_agent`), then each of `dirs` (folders
+/// relative to the workspace root that hold the test's agents), `:`-separated.
+pub fn agent_pythonpath(dirs: &[&str]) -> String {
+    let root = workspace_root();
+    std::iter::once("python")
+        .chain(dirs.iter().copied())
+        .map(|dir| root.join(dir).display().to_string())
+        .collect::<Vec<_>>()
+        .join(":")
 }
 
 /// The directory cargo puts binaries of the current profile in: the test
