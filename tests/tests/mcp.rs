@@ -36,6 +36,11 @@ fn two_tasks(root: &Path) -> PathBuf {
 
 /// `arena run --agent mcp` on one stub guest; answers the child and its MCP URL.
 pub(crate) fn start_run(tasks: &Path, out: &Path) -> (Child, String) {
+    start_run_with(tasks, out, Stdio::inherit())
+}
+
+/// [`start_run`] with the run's stderr sent to `stderr`.
+fn start_run_with(tasks: &Path, out: &Path, stderr: Stdio) -> (Child, String) {
     let exe = workspace_binary("arena-host", "arena").expect("the arena binary");
     let mut child = Command::new(exe)
         .args(["run", "--stub-guests", "1", "--pauses", "fast", "--agent", "mcp", "--mcp-listen", "127.0.0.1:0"])
@@ -44,7 +49,7 @@ pub(crate) fn start_run(tasks: &Path, out: &Path) -> (Child, String) {
         .arg("--out")
         .arg(out)
         .stdout(Stdio::piped())
-        .stderr(Stdio::inherit())
+        .stderr(stderr)
         .spawn()
         .expect("arena run starts");
     let mut lines = BufReader::new(child.stdout.take().expect("stdout")).lines();
@@ -289,4 +294,124 @@ async fn the_guest_serves_mcp_behind_its_token() {
     let ran = json_of(&call(&client, "run_python", json!({"code": "print(pyautogui.size())"})).await);
     assert_eq!(ran["exit_code"], json!(0), "{ran}");
     let _ = client.cancel().await;
+}
+
+/// The JSON-RPC message of an MCP HTTP answer, whether sent as JSON or as an SSE event.
+fn rpc_answer(body: &str) -> Value {
+    let data = body.lines().filter_map(|l| l.strip_prefix("data:")).map(str::trim).find(|d| d.starts_with('{'));
+    serde_json::from_str(data.unwrap_or(body)).unwrap_or_else(|e| panic!("an MCP answer: {e}: {body}"))
+}
+
+/// A client that speaks MCP over plain HTTP, holds the session's standalone stream
+/// open, takes a task with `get_task`, then vanishes without ending its session:
+/// what a crashed agent process leaves behind. Answers the task it was given.
+async fn take_a_task_and_vanish(url: &str) -> String {
+    let http = reqwest::Client::new();
+    let post = |session: Option<&str>, body: Value| {
+        let mut request = http
+            .post(url)
+            .bearer_auth(TOKEN)
+            .header("Accept", "application/json, text/event-stream")
+            .header("MCP-Protocol-Version", "2025-06-18")
+            .json(&body);
+        if let Some(session) = session {
+            request = request.header("Mcp-Session-Id", session);
+        }
+        request.send()
+    };
+    let init = post(
+        None,
+        json!({"jsonrpc": "2.0", "id": 1, "method": "initialize", "params": {
+        "protocolVersion": "2025-06-18", "capabilities": {}, "clientInfo": {"name": "vanishing", "version": "0"}}}),
+    )
+    .await
+    .expect("initialize");
+    let session = init.headers()["mcp-session-id"].to_str().expect("a session id").to_owned();
+    let _ = init.text().await;
+    let initialized = post(Some(&session), json!({"jsonrpc": "2.0", "method": "notifications/initialized"}))
+        .await
+        .expect("initialized");
+    assert!(initialized.status().is_success(), "{}", initialized.status());
+    let stream = http
+        .get(url)
+        .bearer_auth(TOKEN)
+        .header("Accept", "text/event-stream")
+        .header("Mcp-Session-Id", &session)
+        .header("MCP-Protocol-Version", "2025-06-18")
+        .send()
+        .await
+        .expect("the standalone stream");
+    assert_eq!(stream.status(), 200, "the standalone stream opens");
+    let taken = post(
+        Some(&session),
+        json!({"jsonrpc": "2.0", "id": 2, "method": "tools/call",
+        "params": {"name": "get_task", "arguments": {}}}),
+    )
+    .await
+    .expect("get_task")
+    .text()
+    .await
+    .expect("get_task's answer");
+    let answer = rpc_answer(&taken);
+    let task: Value = serde_json::from_str(answer["result"]["content"][0]["text"].as_str().expect("text"))
+        .unwrap_or_else(|e| panic!("{e}: {answer}"));
+    // Gone: the stream and every connection closed, no DELETE sent.
+    drop(stream);
+    drop(http);
+    task["task_id"].as_str().expect("a task").to_owned()
+}
+
+/// Plays one stub notepad task with `client` (typing its answer, saving, done)
+/// and answers its result.
+async fn play_notepad_task(client: &RunningService<RoleClient, ClientConfig>, task: &Value) -> Value {
+    let text = if task["instruction"].as_str().unwrap_or("").contains("count") { "3" } else { "This is a draft." };
+    call(client, "type_text", json!({"text": text})).await;
+    call(client, "press_keys", json!({"keys": ["ctrl", "s"]})).await;
+    json_of(&call(client, "done", json!({})).await)
+}
+
+#[tokio::test(flavor = "multi_thread")]
+async fn a_task_whose_mcp_session_went_away_before_acting_goes_to_the_next_session_within_seconds() {
+    let tmp = tempfile::tempdir().expect("tmp");
+    let (tasks, out) = (two_tasks(tmp.path()), tmp.path().join("out"));
+    let log_path = tmp.path().join("run.stderr");
+    let log = std::fs::File::create(&log_path).expect("a log file");
+    let (child, url) = start_run_with(&tasks, &out, Stdio::from(log));
+
+    // A client takes the first task and vanishes (stream lost, no DELETE).
+    let first = take_a_task_and_vanish(&url).await;
+    let player = connect(&url).await;
+    let asked = Instant::now();
+    let task = json_of(&call(&player, "get_task", json!({})).await);
+    let waited = asked.elapsed();
+    assert_eq!(task["task_id"].as_str(), Some(first.as_str()), "the vanished client's task is handed on: {task}");
+    assert!(waited < Duration::from_secs(20), "handed back after {waited:?}, not the --agent-timeout of 60 s");
+    assert_eq!(task["steps_left"], json!(15), "nothing was spent: {task}");
+    let ended = play_notepad_task(&player, &task).await;
+    assert_eq!(ended["result"]["score"], json!(1.0), "{ended}");
+
+    // A client that ends its session (DELETE) after taking a task hands it back at once.
+    let quitter = connect(&url).await;
+    let second = json_of(&call(&quitter, "get_task", json!({})).await);
+    let second_id = second["task_id"].as_str().expect("a second task").to_owned();
+    let _ = quitter.cancel().await;
+    let asked = Instant::now();
+    let task = json_of(&call(&player, "get_task", json!({})).await);
+    assert_eq!(task["task_id"].as_str(), Some(second_id.as_str()), "{task}");
+    assert!(asked.elapsed() < Duration::from_secs(10), "handed back after {:?}", asked.elapsed());
+    let ended = play_notepad_task(&player, &task).await;
+    assert_eq!(ended["result"]["score"], json!(1.0), "{ended}");
+    let none = json_of(&call(&player, "get_task", json!({})).await);
+    assert_eq!(none["task_id"], Value::Null, "{none}");
+    let _ = player.cancel().await;
+
+    assert!(wait_exit(child, Duration::from_secs(60)).success());
+    let summary = Summary::from_dir(&out).expect("summary");
+    assert_eq!(summary.tasks.len(), 2);
+    for task in &summary.tasks {
+        assert_eq!((task.status.as_str(), task.score, task.steps), ("completed", Some(1.0), 3), "{task:?}");
+    }
+    let log = std::fs::read_to_string(&log_path).expect("the run's stderr");
+    assert!(log.contains("opened") && log.contains("lost its stream"), "sessions are said: {log}");
+    assert_eq!(log.matches("went away before acting; the task goes back to the queue").count(), 2, "{log}");
 }

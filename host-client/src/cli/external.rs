@@ -20,8 +20,9 @@ pub struct ExternalArgs {
     /// HTTP agent: the URL each step-protocol message is POSTed to.
     #[arg(long, env = "ARENA_AGENT_URL", value_name = "URL")]
     pub agent_url: Option<String>,
-    /// Exec and HTTP agents: longest wait for one answer, in seconds; past it
-    /// the episode ends as an agent error (and the process is replaced).
+    /// Exec, HTTP and MCP agents: longest wait for one answer, in seconds (for MCP:
+    /// for a session to take an offered episode, and for each tool call after);
+    /// past it the episode ends as an agent error (an exec process is replaced).
     #[arg(long, default_value_t = 300.0, value_name = "SECONDS")]
     pub agent_timeout: f64,
     /// MCP agent: where to serve MCP (`http://ADDR/mcp`), e.g. 127.0.0.1:8765.
@@ -139,6 +140,7 @@ mod with_mcp {
             endpoint.token.clone(),
             served.clone(),
         ));
+        endpoint.hub.set_watch(Arc::clone(&options.watch));
         let runner = crate::mcp::McpRunner { inner: runner, hub: Arc::clone(&endpoint.hub) };
         let outcome = run_tasks(tasks, guests, Arc::new(runner), options).await;
         endpoint.hub.close();

@@ -15,6 +15,13 @@
 //! Reading tools (`screenshot`, `accessibility_tree`, `list_windows`) answer
 //! from the step's observation, which the episode records, and spend no step;
 //! every other tool is one step, so `--max-steps` counts actions as for any agent.
+//!
+//! A session that goes away (closed by its client, idle past the limit, or its
+//! stream lost and not back within `arena_mcp::STREAM_GRACE`) lets its episode go
+//! at once: one it had not acted in yet goes back to the hub for the next session
+//! (nothing happened in it, so no agent gains a second try at anything), one it
+//! had acted in ends as the agent's error. `--agent-timeout` bounds the wait for
+//! a session to take an episode and for each tool call after it.
 
 pub mod server;
 
@@ -72,6 +79,8 @@ pub struct EpisodeLink {
     pub calls: mpsc::Sender<Pending>,
     pub latest: Mutex<Snapshot>,
     pub ended: std::sync::atomic::AtomicBool,
+    /// Cancelled when the session that took the episode goes away.
+    pub abandoned: tokio_util::sync::CancellationToken,
 }
 
 impl EpisodeLink {
@@ -92,12 +101,73 @@ pub struct Hub {
     results: Mutex<HashMap<String, Value>>,
     published: Notify,
     closed: std::sync::atomic::AtomicBool,
+    watch: Mutex<Watching>,
+}
+
+/// Where the hub's notes go: the run's watch once it has one; until then they wait
+/// (sessions may open before the run's first task).
+#[derive(Debug, Default)]
+struct Watching {
+    watch: Option<Arc<dyn crate::run::watch::RunWatch>>,
+    early: Vec<String>,
 }
 
 impl Hub {
     /// A hub for one run.
     pub fn new() -> Arc<Hub> {
         Arc::new(Hub::default())
+    }
+
+    /// Where the hub's notes go (the run's progress display).
+    pub fn set_watch(&self, watch: Arc<dyn crate::run::watch::RunWatch>) {
+        let early = match self.watch.lock() {
+            Ok(mut slot) => {
+                slot.watch = Some(Arc::clone(&watch));
+                std::mem::take(&mut slot.early)
+            }
+            Err(_) => Vec::new(),
+        };
+        for line in early {
+            watch.note(&line);
+        }
+    }
+
+    /// A line for the console (and the log).
+    pub fn note(&self, line: &str) {
+        tracing::info!("{line}");
+        let watch = match self.watch.lock() {
+            Ok(mut slot) => match &slot.watch {
+                Some(watch) => Some(Arc::clone(watch)),
+                None => {
+                    // Bounded: a flood of sessions before the run starts keeps its last notes.
+                    if slot.early.len() >= 256 {
+                        slot.early.remove(0);
+                    }
+                    slot.early.push(line.to_owned());
+                    None
+                }
+            },
+            Err(_) => None,
+        };
+        if let Some(watch) = watch {
+            watch.note(line);
+        }
+    }
+
+    /// What the session manager tells of sessions, as console notes.
+    pub fn session_event(&self, event: arena_mcp::SessionEvent) {
+        use arena_mcp::SessionEvent;
+        let short = |id: &str| id.chars().take(8).collect::<String>();
+        let line = match &event {
+            SessionEvent::Opened(id) => format!("MCP session {} opened", short(id)),
+            SessionEvent::StreamLost(id) => format!(
+                "MCP session {} lost its stream; it closes in {} s unless its client comes back",
+                short(id),
+                arena_mcp::STREAM_GRACE.as_secs()
+            ),
+            SessionEvent::Closed { id, why } => format!("MCP session {} closed ({why})", short(id)),
+        };
+        self.note(&line);
     }
 
     fn offer(&self, link: Arc<EpisodeLink>) {
@@ -178,16 +248,44 @@ pub struct McpAgent {
     max_steps: u32,
     /// Longest wait for a session, and for each tool call.
     timeout: Duration,
+    /// Whether a session has acted in this episode (a step was taken).
+    acted: bool,
 }
 
 impl McpAgent {
     /// An agent for one episode of a run served by `hub`.
     pub fn new(hub: Arc<Hub>, max_steps: u32, timeout: Duration) -> McpAgent {
-        McpAgent { hub, task: None, link: None, calls: None, pending: None, max_steps, timeout }
+        McpAgent { hub, task: None, link: None, calls: None, pending: None, max_steps, timeout, acted: false }
     }
 
     fn error(reason: impl Into<String>) -> AgentError {
         AgentError::External { agent: "mcp".into(), reason: reason.into() }
+    }
+
+    /// Offers this episode to the sessions, on a fresh link (a link is one session's).
+    fn offer(&mut self, obs: &Observation) -> Result<(), AgentError> {
+        let Some(task) = &self.task else { return Err(Self::error("no task")) };
+        let (width, height) = obs.screen_size();
+        let (tx, rx) = mpsc::channel(1);
+        let link = Arc::new(EpisodeLink {
+            task: json!({
+                "instruction": task.instruction,
+                "task_id": task.id,
+                "domain": task.domain,
+                "screen_width": width,
+                "screen_height": height,
+            }),
+            task_name: task.name.clone(),
+            max_steps: self.max_steps,
+            calls: tx,
+            latest: Mutex::new(snapshot(obs)),
+            ended: Default::default(),
+            abandoned: Default::default(),
+        });
+        self.hub.offer(Arc::clone(&link));
+        self.link = Some(link);
+        self.calls = Some(rx);
+        Ok(())
     }
 }
 
@@ -226,26 +324,7 @@ impl Agent for McpAgent {
 
     async fn predict(&mut self, obs: &Observation) -> Result<Prediction, AgentError> {
         if self.link.is_none() {
-            let Some(task) = &self.task else { return Err(Self::error("no task")) };
-            let (width, height) = obs.screen_size();
-            let (tx, rx) = mpsc::channel(1);
-            let link = Arc::new(EpisodeLink {
-                task: json!({
-                    "instruction": task.instruction,
-                    "task_id": task.id,
-                    "domain": task.domain,
-                    "screen_width": width,
-                    "screen_height": height,
-                }),
-                task_name: task.name.clone(),
-                max_steps: self.max_steps,
-                calls: tx,
-                latest: Mutex::new(snapshot(obs)),
-                ended: Default::default(),
-            });
-            self.hub.offer(Arc::clone(&link));
-            self.link = Some(link);
-            self.calls = Some(rx);
+            self.offer(obs)?;
         } else if let Some(link) = &self.link {
             if let Ok(mut latest) = link.latest.lock() {
                 *latest = snapshot(obs);
@@ -255,14 +334,36 @@ impl Agent for McpAgent {
             let steps_left = self.max_steps.saturating_sub(obs.step.saturating_sub(1));
             let _ = reply.send(Reply::Stepped { step: obs.step.saturating_sub(1), steps_left });
         }
-        let Some(calls) = self.calls.as_mut() else { return Err(Self::error("no session channel")) };
-        let call = match tokio::time::timeout(self.timeout, calls.recv()).await {
-            Ok(Some(call)) => call,
-            Ok(None) => return Err(Self::error("the MCP session closed")),
-            Err(_) => {
-                return Err(Self::error(format!("no tool call within {} s", self.timeout.as_secs_f64())));
+        let call = loop {
+            let Some(link) = self.link.clone() else { return Err(Self::error("no episode link")) };
+            let Some(calls) = self.calls.as_mut() else { return Err(Self::error("no session channel")) };
+            let waited = tokio::select! {
+                call = tokio::time::timeout(self.timeout, calls.recv()) => Some(call),
+                () = link.abandoned.cancelled() => None,
+            };
+            match waited {
+                Some(Ok(Some(call))) => break call,
+                Some(Ok(None)) => return Err(Self::error("the MCP session closed")),
+                Some(Err(_)) => {
+                    return Err(Self::error(format!("no tool call within {} s", self.timeout.as_secs_f64())));
+                }
+                None => {
+                    let task = format!("{}/{}", link.task["domain"].as_str().unwrap_or(""), link.task_name);
+                    if self.acted {
+                        self.hub.note(&format!(
+                            "{task}: its MCP session went away after acting; the episode ends as the agent's error"
+                        ));
+                        return Err(Self::error("the MCP session that was playing this episode went away"));
+                    }
+                    self.hub.note(&format!(
+                        "{task}: its MCP session went away before acting; the task goes back to the queue"
+                    ));
+                    link.ended.store(true, std::sync::atomic::Ordering::SeqCst);
+                    self.offer(obs)?;
+                }
             }
         };
+        self.acted = true;
         self.pending = Some(call.reply);
         let logs = vec![
             StepLog { key: "tool".into(), value: LogValue::Inline(Value::String(call.tool.clone())) },

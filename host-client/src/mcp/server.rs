@@ -63,8 +63,13 @@ impl ArenaSession {
             }
             return match self.hub.take().await {
                 Some(link) => {
+                    // Should this call be dropped before the episode is bound (its
+                    // client hung up), the episode is let go rather than lost.
+                    let taken = Unbound(Some(link));
+                    let mut bound = self.bound.lock().await;
+                    let Some(link) = taken.bind() else { return tool_error("get_task: the episode was lost") };
                     let info = link.task_info();
-                    *self.bound.lock().await = Some(link);
+                    *bound = Some(link);
                     text(info.to_string())
                 }
                 None => text(json!({"task_id": null}).to_string()),
@@ -121,11 +126,32 @@ impl ArenaSession {
     }
 }
 
+/// An episode taken from the hub and not yet bound to its session: dropped
+/// unbound, it is let go as a closed session's would be.
+struct Unbound(Option<Arc<EpisodeLink>>);
+
+impl Unbound {
+    fn bind(mut self) -> Option<Arc<EpisodeLink>> {
+        self.0.take()
+    }
+}
+
+impl Drop for Unbound {
+    fn drop(&mut self) {
+        if let Some(link) = self.0.take() {
+            link.abandoned.cancel();
+        }
+    }
+}
+
 impl Drop for ArenaSession {
     fn drop(&mut self) {
-        // A closed session ends its episode: the agent's next wait sees the channel closed.
+        // A closed session lets its episode go at once: the agent's wait sees it
+        // abandoned (and hands it back, or ends it, by whether the session acted).
         if let Ok(mut bound) = self.bound.try_lock() {
-            bound.take();
+            if let Some(link) = bound.take() {
+                link.abandoned.cancel();
+            }
         }
     }
 }
@@ -155,8 +181,15 @@ async fn require_token(token: Arc<str>, request: Request, next: Next) -> Respons
 }
 
 /// `/mcp` with `make` as the per-session handler, behind `token`, accepting
-/// `Host` names of loopback and `listen`'s own address, refusing every `Origin`.
-pub fn router<S, F>(make: F, token: &str, listen: SocketAddr, stop: CancellationToken) -> axum::Router
+/// `Host` names of loopback and `listen`'s own address, refusing every `Origin`;
+/// sessions kept by `sessions`.
+pub fn router<S, F>(
+    make: F,
+    token: &str,
+    listen: SocketAddr,
+    stop: CancellationToken,
+    sessions: Arc<BoundedSessions>,
+) -> axum::Router
 where
     S: ServerHandler + Send + 'static,
     F: Fn() -> S + Send + Sync + 'static,
@@ -167,10 +200,8 @@ where
     let mut config = arena_mcp::http_config().with_cancellation_token(stop);
     config.allowed_hosts = hosts;
     config.legacy_session_mode = true;
-    // At most 64 sessions (a new one closes the one idle longest), each closed after
-    // 2 minutes without a call, a call whose client hung up cancelled.
     let service: StreamableHttpService<S, BoundedSessions> =
-        StreamableHttpService::new(move || Ok(make()), BoundedSessions::new(SessionLimits::DEFAULT), config);
+        StreamableHttpService::new(move || Ok(make()), sessions, config);
     let token: Arc<str> = Arc::from(token);
     axum::Router::new()
         .nest_service("/mcp", service)
@@ -186,7 +217,12 @@ pub async fn serve(listener: tokio::net::TcpListener, hub: Arc<Hub>, token: Stri
             return;
         }
     };
-    let app = router(move || Server(ArenaSession::new(Arc::clone(&hub))), &token, addr, stop.clone());
+    // At most 64 sessions (a new one closes the one idle longest), each closed after
+    // 2 minutes without a call or soon after its stream is lost, a call whose client
+    // hung up cancelled; every opening and closing is a note of the run.
+    let events = Arc::clone(&hub);
+    let sessions = BoundedSessions::with_events(SessionLimits::DEFAULT, Arc::new(move |e| events.session_event(e)));
+    let app = router(move || Server(ArenaSession::new(Arc::clone(&hub))), &token, addr, stop.clone(), sessions);
     if let Err(err) = axum::serve(listener, app).with_graceful_shutdown(stop.cancelled_owned()).await {
         tracing::error!(error = %err, "the MCP server stopped");
     }
@@ -220,7 +256,8 @@ mod tests {
         let addr = listener.local_addr().expect("an address");
         let stop = CancellationToken::new();
         let hub = super::super::Hub::new();
-        let app = router(move || Server(ArenaSession::new(Arc::clone(&hub))), "t0ken", addr, stop.clone());
+        let sessions = BoundedSessions::new(SessionLimits::DEFAULT);
+        let app = router(move || Server(ArenaSession::new(Arc::clone(&hub))), "t0ken", addr, stop.clone(), sessions);
         let served = tokio::spawn(async move { axum::serve(listener, app).await });
         let url = format!("http://{addr}/mcp");
         let http = reqwest::Client::new();

@@ -16,7 +16,7 @@
 
 pub mod sessions;
 
-pub use sessions::{BoundedSessions, SessionLimits};
+pub use sessions::{BoundedSessions, CloseReason, SessionEvent, SessionEvents, SessionLimits, STREAM_GRACE};
 
 use std::borrow::Cow;
 use std::future::Future;

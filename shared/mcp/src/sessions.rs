@@ -1,7 +1,7 @@
 //! Bounded MCP sessions, for both servers: rmcp's [`LocalSessionManager`] keeps every
 //! session until its keep-alive passes (300 s by default), so a client that only
 //! sends `initialize` grows a server by tens of KiB a call without end.
-//! [`BoundedSessions`] wraps it with three rules:
+//! [`BoundedSessions`] wraps it with four rules:
 //!
 //! - **a cap**: at most [`SessionLimits::max_sessions`] open; a new session first
 //!   closes the one idle longest (no call running), and when every open session has a
@@ -16,15 +16,28 @@
 //!   request's token and [`crate::Server`] drops the tool's future, which stops its work
 //!   (the guest's interpreter through its cancel flag).
 //!
+//! - **a lost stream closes the session**: a client that opened the session's standalone
+//!   stream (the GET that the official SDKs hold open) and then lost it, with no other
+//!   request for [`STREAM_GRACE`] after, has gone away (a crashed process, a dropped
+//!   network): its session is closed then rather than after the idle period, so what it
+//!   held (the host's `--agent mcp` episode) is let go within seconds. A client that
+//!   never opens that stream is judged by the idle rule alone.
+//!
 //! rmcp's own idle timer is off: it counts time since the session's last message, so it
 //! would close a session in the middle of a long call; the sweeper here counts only
 //! time with no call running.
+//!
+//! Every session opening and closing, and every stream lost, is a tracing event and, for
+//! a caller that asks ([`BoundedSessions::with_events`]), a [`SessionEvent`].
 
 use std::collections::HashMap;
 use std::pin::Pin;
 use std::sync::{Arc, Mutex, PoisonError, Weak};
 use std::task::{Context, Poll};
-use std::time::{Duration, Instant};
+use std::time::Duration;
+
+// Tokio's clock, which tests can pause and advance.
+use tokio::time::Instant;
 
 use rmcp::model::{
     CancelledNotification, CancelledNotificationParam, ClientJsonRpcMessage, ClientNotification, JsonRpcMessage,
@@ -55,6 +68,49 @@ impl Default for SessionLimits {
     }
 }
 
+/// How long a session whose standalone stream ended may stay without a request or a
+/// new stream before it is closed as gone.
+pub const STREAM_GRACE: Duration = Duration::from_secs(3);
+
+/// What happened to a session, for a caller that shows it.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum SessionEvent {
+    /// A session opened.
+    Opened(SessionId),
+    /// A session's standalone stream ended; it is closed after [`STREAM_GRACE`]
+    /// unless the client comes back.
+    StreamLost(SessionId),
+    /// A session closed, and why.
+    Closed { id: SessionId, why: CloseReason },
+}
+
+/// Why a session closed.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum CloseReason {
+    /// The client ended it (`DELETE`).
+    Client,
+    /// No call for [`SessionLimits::idle`].
+    Idle,
+    /// The cap was reached and it was the one idle longest.
+    Cap,
+    /// Its stream ended and nothing came back within [`STREAM_GRACE`].
+    StreamLost,
+}
+
+impl std::fmt::Display for CloseReason {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            CloseReason::Client => "by the client",
+            CloseReason::Idle => "idle too long",
+            CloseReason::Cap => "to make room under the session cap",
+            CloseReason::StreamLost => "its stream ended and the client did not come back",
+        })
+    }
+}
+
+/// Who is told of [`SessionEvent`]s.
+pub type SessionEvents = Arc<dyn Fn(SessionEvent) + Send + Sync>;
+
 /// What the manager knows of one open session.
 #[derive(Debug, Clone, Copy)]
 struct Activity {
@@ -62,6 +118,22 @@ struct Activity {
     last: Instant,
     /// Calls whose answer stream is open now.
     running: usize,
+    /// Standalone streams open now.
+    streams: usize,
+    /// When the last standalone stream ended, if none is open and nothing came since.
+    lost: Option<Instant>,
+}
+
+impl Activity {
+    fn new() -> Activity {
+        Activity { last: Instant::now(), running: 0, streams: 0, lost: None }
+    }
+
+    /// Its stream ended at least [`STREAM_GRACE`] ago, nothing came from the client
+    /// since (which clears `lost`), and no call runs.
+    fn gone(&self) -> bool {
+        self.running == 0 && self.streams == 0 && self.lost.is_some_and(|lost| lost.elapsed() >= STREAM_GRACE)
+    }
 }
 
 /// Why a session could not be opened.
@@ -75,20 +147,36 @@ pub enum SessionsError {
     Local(#[from] LocalSessionManagerError),
 }
 
-/// rmcp's [`LocalSessionManager`] with a cap, idle expiry and hung-up calls cancelled
-/// (see the module documentation).
-#[derive(Debug)]
+/// rmcp's [`LocalSessionManager`] with a cap, idle expiry, hung-up calls cancelled and
+/// sessions that lost their stream closed (see the module documentation).
 pub struct BoundedSessions {
     inner: LocalSessionManager,
     limits: SessionLimits,
     open: Mutex<HashMap<SessionId, Activity>>,
     sweeping: std::sync::atomic::AtomicBool,
     me: Weak<BoundedSessions>,
+    events: Option<SessionEvents>,
+}
+
+impl std::fmt::Debug for BoundedSessions {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("BoundedSessions").field("limits", &self.limits).finish_non_exhaustive()
+    }
 }
 
 impl BoundedSessions {
     /// A manager enforcing `limits`.
     pub fn new(limits: SessionLimits) -> Arc<BoundedSessions> {
+        Self::build(limits, None)
+    }
+
+    /// A manager enforcing `limits` that tells `events` of every session opened, closed
+    /// or left without its stream.
+    pub fn with_events(limits: SessionLimits, events: SessionEvents) -> Arc<BoundedSessions> {
+        Self::build(limits, Some(events))
+    }
+
+    fn build(limits: SessionLimits, events: Option<SessionEvents>) -> Arc<BoundedSessions> {
         let mut inner = LocalSessionManager::default();
         // Idle time is this manager's to count (calls running do not count as idle).
         inner.session_config.keep_alive = None;
@@ -99,7 +187,70 @@ impl BoundedSessions {
             open: Mutex::new(HashMap::new()),
             sweeping: std::sync::atomic::AtomicBool::new(false),
             me: me.clone(),
+            events,
         })
+    }
+
+    fn tell(&self, event: SessionEvent) {
+        match &event {
+            SessionEvent::Opened(id) => tracing::info!(session = %id, "MCP session opened"),
+            SessionEvent::StreamLost(id) => {
+                tracing::info!(session = %id, grace_secs = STREAM_GRACE.as_secs(), "an MCP session's stream ended")
+            }
+            SessionEvent::Closed { id, why } => tracing::info!(session = %id, %why, "MCP session closed"),
+        }
+        if let Some(events) = &self.events {
+            events(event);
+        }
+    }
+
+    /// Closes session `id` for `why`, telling it once.
+    async fn close_for(&self, id: &SessionId, why: CloseReason) -> Result<(), SessionsError> {
+        let was_open = self.table().remove(id).is_some();
+        let closed = self.inner.close_session(id).await;
+        if was_open {
+            self.tell(SessionEvent::Closed { id: id.clone(), why });
+        }
+        Ok(closed?)
+    }
+
+    /// A standalone stream of session `id` opened (`true`) or ended (`false`).
+    fn stream(&self, id: &SessionId, opened: bool) {
+        let lost = {
+            let mut table = self.table();
+            let Some(activity) = table.get_mut(id) else { return };
+            if opened {
+                activity.streams += 1;
+                activity.lost = None;
+                false
+            } else {
+                activity.streams = activity.streams.saturating_sub(1);
+                if activity.streams == 0 {
+                    activity.lost = Some(Instant::now());
+                }
+                activity.streams == 0
+            }
+        };
+        if !lost {
+            return;
+        }
+        self.tell(SessionEvent::StreamLost(id.clone()));
+        let (me, id) = (self.me.clone(), id.clone());
+        if let Ok(runtime) = tokio::runtime::Handle::try_current() {
+            runtime.spawn(async move {
+                tokio::time::sleep(STREAM_GRACE).await;
+                let Some(sessions) = me.upgrade() else { return };
+                if sessions.gone(&id) {
+                    let _ = sessions.close_for(&id, CloseReason::StreamLost).await;
+                }
+            });
+        }
+    }
+
+    /// Whether session `id` lost its stream at least [`STREAM_GRACE`] ago with
+    /// nothing from its client since.
+    fn gone(&self, id: &SessionId) -> bool {
+        self.table().get(id).is_some_and(Activity::gone)
     }
 
     /// The limits in force.
@@ -120,6 +271,9 @@ impl BoundedSessions {
     fn call(&self, id: &SessionId, started: bool) {
         if let Some(activity) = self.table().get_mut(id) {
             activity.last = Instant::now();
+            if started {
+                activity.lost = None;
+            }
             activity.running = if started { activity.running + 1 } else { activity.running.saturating_sub(1) };
         }
     }
@@ -127,6 +281,7 @@ impl BoundedSessions {
     fn touch(&self, id: &SessionId) {
         if let Some(activity) = self.table().get_mut(id) {
             activity.last = Instant::now();
+            activity.lost = None;
         }
     }
 
@@ -140,10 +295,14 @@ impl BoundedSessions {
             .map(|(id, _)| id.clone())
             .collect();
         for id in &expired {
-            tracing::info!(session = %id, idle_secs = idle.as_secs(), "closing an idle MCP session");
-            let _ = self.close_session(id).await;
+            let _ = self.close_for(id, CloseReason::Idle).await;
         }
-        expired.len()
+        // Those whose stream ended while a call still ran, once the call is over.
+        let gone: Vec<SessionId> = self.table().iter().filter(|(_, a)| a.gone()).map(|(id, _)| id.clone()).collect();
+        for id in &gone {
+            let _ = self.close_for(id, CloseReason::StreamLost).await;
+        }
+        expired.len() + gone.len()
     }
 
     /// Starts the sweeper once, on the runtime of the first session.
@@ -174,10 +333,7 @@ impl BoundedSessions {
                 table.iter().filter(|(_, a)| a.running == 0).min_by_key(|(_, a)| a.last).map(|(id, _)| id.clone())
             };
             match victim {
-                Some(id) => {
-                    tracing::info!(session = %id, max = self.limits.max_sessions, "closing the MCP session idle longest to open a new one");
-                    self.close_session(&id).await?;
-                }
+                Some(id) => self.close_for(&id, CloseReason::Cap).await?,
                 None => return Err(SessionsError::Full(self.limits.max_sessions)),
             }
         }
@@ -247,6 +403,30 @@ impl Drop for CallStream {
     }
 }
 
+/// A session's standalone stream: counted while open, and when it ends the session
+/// has [`STREAM_GRACE`] to come back.
+struct StandaloneStream {
+    inner: Pin<Box<dyn futures_util::Stream<Item = ServerSseMessage> + Send + Sync>>,
+    sessions: Weak<BoundedSessions>,
+    session: SessionId,
+}
+
+impl futures_util::Stream for StandaloneStream {
+    type Item = ServerSseMessage;
+
+    fn poll_next(mut self: Pin<&mut Self>, cx: &mut Context<'_>) -> Poll<Option<ServerSseMessage>> {
+        self.inner.as_mut().poll_next(cx)
+    }
+}
+
+impl Drop for StandaloneStream {
+    fn drop(&mut self) {
+        if let Some(sessions) = self.sessions.upgrade() {
+            sessions.stream(&self.session, false);
+        }
+    }
+}
+
 impl SessionManager for BoundedSessions {
     type Error = SessionsError;
     type Transport = WorkerTransport<rmcp::transport::streamable_http_server::session::local::LocalSessionWorker>;
@@ -255,7 +435,8 @@ impl SessionManager for BoundedSessions {
         self.start_sweeper();
         self.make_room().await?;
         let (id, transport) = self.inner.create_session().await?;
-        self.table().insert(id.clone(), Activity { last: Instant::now(), running: 0 });
+        self.table().insert(id.clone(), Activity::new());
+        self.tell(SessionEvent::Opened(id.clone()));
         Ok((id, transport))
     }
 
@@ -273,8 +454,8 @@ impl SessionManager for BoundedSessions {
     }
 
     async fn close_session(&self, id: &SessionId) -> Result<(), Self::Error> {
-        self.table().remove(id);
-        Ok(self.inner.close_session(id).await?)
+        // rmcp calls this for a client's DELETE; this manager's own closings go through `close_for`.
+        self.close_for(id, CloseReason::Client).await
     }
 
     async fn create_stream(
@@ -324,7 +505,9 @@ impl SessionManager for BoundedSessions {
         id: &SessionId,
     ) -> Result<impl futures_util::Stream<Item = ServerSseMessage> + Send + Sync + 'static, Self::Error> {
         self.touch(id);
-        Ok(self.inner.create_standalone_stream(id).await?)
+        let stream = self.inner.create_standalone_stream(id).await?;
+        self.stream(id, true);
+        Ok(StandaloneStream { inner: Box::pin(stream), sessions: self.me.clone(), session: id.clone() })
     }
 
     async fn resume(
@@ -371,6 +554,58 @@ mod tests {
         }
         assert_eq!(sessions.open_sessions(), 64);
         assert_eq!(sessions.inner.sessions.read().await.len(), 64, "rmcp's own table holds no more");
+    }
+
+    /// A manager without its sweeper that records its events.
+    fn recorded() -> (Arc<BoundedSessions>, Arc<Mutex<Vec<SessionEvent>>>) {
+        let seen = Arc::new(Mutex::new(Vec::new()));
+        let log = Arc::clone(&seen);
+        let limits = SessionLimits { max_sessions: 8, idle: Duration::from_secs(600) };
+        let sessions = BoundedSessions::with_events(limits, Arc::new(move |e| log.lock().unwrap().push(e)));
+        sessions.sweeping.store(true, std::sync::atomic::Ordering::Relaxed);
+        (sessions, seen)
+    }
+
+    #[tokio::test(start_paused = true)]
+    async fn a_session_whose_stream_ended_closes_after_the_grace_unless_its_client_comes_back() {
+        let (sessions, seen) = recorded();
+        let (gone, _) = sessions.create_session().await.expect("opens");
+        let (back, _) = sessions.create_session().await.expect("opens");
+        let (quiet, _) = sessions.create_session().await.expect("opens");
+        for id in [&gone, &back] {
+            sessions.stream(id, true);
+            sessions.stream(id, false);
+        }
+        // `back` sends a request within the grace; `quiet` never opened a stream.
+        tokio::time::sleep(STREAM_GRACE / 2).await;
+        sessions.touch(&back);
+        tokio::time::sleep(STREAM_GRACE).await;
+        tokio::task::yield_now().await;
+        assert!(!sessions.has_session(&gone).await.expect("answers"), "the session that went away is closed");
+        assert!(sessions.has_session(&back).await.expect("answers"), "a client that came back keeps its session");
+        assert!(sessions.has_session(&quiet).await.expect("answers"), "no stream, no stream rule");
+        let seen = seen.lock().unwrap().clone();
+        assert!(seen.contains(&SessionEvent::Opened(gone.clone())), "{seen:?}");
+        assert!(seen.contains(&SessionEvent::StreamLost(gone.clone())), "{seen:?}");
+        assert!(seen.contains(&SessionEvent::Closed { id: gone.clone(), why: CloseReason::StreamLost }), "{seen:?}");
+        assert!(!seen.iter().any(|e| matches!(e, SessionEvent::Closed { id, .. } if *id == back)), "{seen:?}");
+    }
+
+    #[tokio::test(start_paused = true)]
+    async fn a_stream_lost_during_a_call_closes_the_session_once_the_call_is_over() {
+        let (sessions, seen) = recorded();
+        let (id, _) = sessions.create_session().await.expect("opens");
+        sessions.stream(&id, true);
+        sessions.call(&id, true);
+        sessions.stream(&id, false);
+        tokio::time::sleep(STREAM_GRACE * 2).await;
+        assert!(sessions.has_session(&id).await.expect("answers"), "a call still runs");
+        sessions.call(&id, false);
+        assert_eq!(sessions.sweep().await, 1);
+        assert!(!sessions.has_session(&id).await.expect("answers"));
+        let _ = sessions.close_session(&id).await;
+        let closed = seen.lock().unwrap().iter().filter(|e| matches!(e, SessionEvent::Closed { .. })).count();
+        assert_eq!(closed, 1, "told once");
     }
 
     #[tokio::test]
