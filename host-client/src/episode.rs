@@ -106,6 +106,8 @@ pub struct EpisodeConfig {
     pub guest_watch: Option<Arc<dyn blame::GuestWatch>>,
     /// The price of the run's model (`--prices`): each episode's tokens are priced into `cost_usd`.
     pub price: Option<crate::results::ledger::Price>,
+    /// Told of each step as it begins (the run's progress display).
+    pub watch: Option<Arc<dyn crate::run::watch::RunWatch>>,
 }
 
 impl EpisodeConfig {
@@ -130,6 +132,7 @@ impl EpisodeConfig {
             screen_source: None,
             guest_watch: None,
             price: None,
+            watch: None,
         }
     }
 
@@ -397,6 +400,9 @@ impl Episode {
         let mut last: Option<LastAction> = None;
         for step in 1..=config.max_steps {
             interrupted(config, "between steps")?;
+            if let Some(watch) = &config.watch {
+                watch.step(client.base_url(), task, step);
+            }
             // A stop does not wait for the step: whatever the agent answered,
             // its prediction and actions end here (the task runs again next time).
             let (stop, step_last, next) = tokio::select! {

@@ -71,7 +71,7 @@ fn options(root: &Path, shard: Shard) -> RunOptions {
             no_guest_timeout: Duration::from_secs(60),
             ..PoolConfig::default()
         },
-        progress: false,
+        watch: std::sync::Arc::new(arena_host::run::watch::Unwatched),
         title: "stub run".into(),
         order: Default::default(),
         trials: 1,

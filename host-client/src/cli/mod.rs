@@ -13,6 +13,7 @@
 //! - [`local`]: atomic local writes.
 //! - [`stub`]: the embedded stub guest.
 //! - [`demo`]: the end-to-end demonstration.
+//! - [`progress`]: what `arena run` shows while it goes (`--progress`).
 
 pub mod act;
 pub mod certify;
@@ -21,6 +22,7 @@ pub mod demo;
 pub mod external;
 pub mod local;
 pub mod oem;
+pub mod progress;
 pub mod render;
 pub mod runs;
 pub mod stub;

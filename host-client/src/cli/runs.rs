@@ -11,7 +11,6 @@
 //! URL,URL,...` (repeatable) or a file of URLs, one per line (`#` comments).
 //! It is not the run machinery itself ([`crate::run`], [`crate::episode`]).
 
-use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::sync::Arc;
@@ -195,6 +194,11 @@ pub struct RunArgs {
     /// The same as `--pauses fast` (the default with --stub-guests).
     #[arg(long)]
     pub fast: bool,
+    /// What stderr shows while the run goes: `auto` (a live display of tasks done,
+    /// solved so far, ETA and each guest's task and step on a terminal; `plain`
+    /// otherwise or under CI), `bar`, `plain` (one line per finished task) or `none`.
+    #[arg(long, value_enum, default_value_t = super::progress::ProgressArg::Auto)]
+    pub progress: super::progress::ProgressArg,
     /// Resume into a results folder whose recorded options differ from this run's
     /// (refused otherwise, naming the differences). Recorded as `force_resume=on`.
     #[arg(long)]
@@ -610,11 +614,6 @@ fn parse_coords(text: &str) -> Result<Coords, String> {
     text.parse()
 }
 
-/// Whether to draw a progress bar: on a terminal, and not in CI.
-fn progress_wanted() -> bool {
-    std::io::stderr().is_terminal() && std::env::var_os("CI").is_none()
-}
-
 fn guests_from_file(path: &Path) -> anyhow::Result<Vec<String>> {
     let text = std::fs::read_to_string(path).with_context(|| format!("reading --guests-file {}", path.display()))?;
     Ok(text
@@ -1006,6 +1005,8 @@ pub(crate) async fn play(prepared: Prepared, guests: &Guests) -> anyhow::Result<
         tracing::warn!(differences = %differences.join("; "), "--force-resume: mixing runs with different options");
         config.options.insert(FORCE_RESUME.into(), "on".into());
     }
+    let watch = super::progress::watch(args.progress);
+    config.watch = Some(Arc::clone(&watch));
     let options = RunOptions {
         layout: layout.clone(),
         shard: args.shard,
@@ -1016,7 +1017,7 @@ pub(crate) async fn play(prepared: Prepared, guests: &Guests) -> anyhow::Result<
             lifecycle: fleet.clone().map(|f| f as Arc<dyn crate::run::pool::GuestLifecycle>),
             ..PoolConfig::default()
         },
-        progress: progress_wanted(),
+        watch: Arc::clone(&watch),
         title: format!("arena run: {} ({})", args.tasks.display(), layout.base().display()),
         order,
         trials: args.trials,

@@ -20,11 +20,13 @@
 //! - [`shard`]: [`shard::Shard`], `--shard i/n`.
 //! - [`merge`]: [`merge::merge`], shard folders into one.
 //! - [`blame`]: whose failure a guest that stops answering is, by what the agent did in the step.
+//! - [`watch`]: [`watch::RunWatch`], what a run tells whoever watches it as it goes.
 
 pub mod blame;
 pub mod merge;
 pub mod pool;
 pub mod shard;
+pub mod watch;
 
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -193,8 +195,8 @@ pub struct RunOptions {
     /// Skip tasks that have a `result.txt` (default on).
     pub resume: bool,
     pub pool: PoolConfig,
-    /// Show a progress bar on stderr.
-    pub progress: bool,
+    /// Who is told of the run as it goes (the CLI's progress display).
+    pub watch: Arc<dyn watch::RunWatch>,
     /// The report's title.
     pub title: String,
     /// The order tasks go to the guests in.
@@ -239,16 +241,10 @@ pub async fn run_tasks(
     let listed: Vec<&Task> = plan.todo.iter().chain(&plan.finished).collect();
     crate::results::task_list::record(&options.layout.base(), &listed)?;
     tracing::info!(shard = %options.shard, todo, skipped, guests = guests.len(), "starting the run");
-    let bar = if options.progress {
-        let bar = indicatif::ProgressBar::new(todo as u64);
-        if let Ok(style) = indicatif::ProgressStyle::with_template("{elapsed_precise} [{bar:30}] {pos}/{len} {msg}") {
-            bar.set_style(style.progress_chars("=> "));
-        }
-        bar
-    } else {
-        indicatif::ProgressBar::hidden()
-    };
-    let mut solved = 0u32;
+    let watch = Arc::clone(&options.watch);
+    let guest_urls: Vec<String> = guests.iter().map(|g| g.base_url().to_owned()).collect();
+    watch.begin(todo, &guest_urls);
+    let mut tally = watch::Tally { total: todo, ..watch::Tally::default() };
     let budget = options.budget;
     let mut spent = crate::results::ledger::Spent::default();
     if budget.is_set() {
@@ -264,51 +260,51 @@ pub async fn run_tasks(
     let mut on_event = |event: PoolEvent<'_>| match event {
         PoolEvent::Started { task, guest, attempt } => {
             tracing::info!(task = %task.name, domain = %task.domain, guest, attempt, "task started");
+            watch.started(task, guest, attempt);
         }
         PoolEvent::Finished { task, result } => {
+            tally.done += 1;
+            tally.score_sum += result.score;
             if result.success() {
-                solved += 1;
+                tally.solved += 1;
             }
             spent.add(result.tokens.as_ref(), result.cost_usd);
             if stopped.is_none() {
                 stopped = budget.reached(&spent);
                 if let Some(why) = &stopped {
                     tracing::warn!(why, "the budget is spent: no new task starts");
-                    bar.println(format!("budget reached ({why}): no new task starts; running ones finish"));
+                    watch.note(&format!("budget reached ({why}): no new task starts; running ones finish"));
                     no_new_tasks.cancel();
                 }
             }
             tracing::info!(task = %task.name, domain = %task.domain, score = result.score, status = result.status.kind(), steps = result.steps, action_errors = result.action_errors, "task finished");
             if result.action_errors > 0 {
                 tracing::warn!(task = %task.name, action_errors = result.action_errors, "actions failed; the episode went on");
-                bar.println(format!(
-                    "{}/{}: {} action error(s); the episode went on (see traj.jsonl)",
-                    task.domain, task.name, result.action_errors
-                ));
             }
-            bar.inc(1);
-            bar.set_message(format!(
-                "{solved} solved; last {}/{} {}",
-                task.domain,
-                task.name,
-                crate::results::python_float(result.score)
-            ));
+            watch.finished(task, &result.guest, result, &tally);
         }
-        PoolEvent::Retrying { task, attempt, error } => {
+        PoolEvent::Retrying { task, guest, attempt, error } => {
             tracing::warn!(task = %task.name, attempt, error, "infrastructure error: trying the task again");
+            watch.note(&format!(
+                "{}/{}: infrastructure error on {guest} ({error}); try {attempt} follows",
+                task.domain, task.name
+            ));
         }
         PoolEvent::GuestDown { guest, error } => {
             tracing::warn!(guest, error, "guest taken out of the pool until it answers again");
-            bar.println(format!("guest {guest} is down: {error}"));
+            watch.note(&format!("guest {guest} is down: {error}"));
         }
-        PoolEvent::GuestBack { guest } => tracing::info!(guest, "guest back in the pool"),
+        PoolEvent::GuestBack { guest } => {
+            tracing::info!(guest, "guest back in the pool");
+            watch.note(&format!("guest {guest} is back"));
+        }
         PoolEvent::GaveUp { task, reason } => {
             tracing::error!(task = %task.name, reason, "task given up");
-            bar.println(format!("gave up {}/{}: {reason}", task.domain, task.name));
+            watch.note(&format!("gave up {}/{}: {reason}", task.domain, task.name));
         }
     };
     let report = run_pool(guests, plan.todo, runner, &options.pool, &mut on_event).await;
-    bar.finish_and_clear();
+    watch.end(&tally);
     if budget.is_set() {
         let not_started = if stopped.is_some() { report.not_run.clone() } else { Vec::new() };
         crate::results::ledger::BudgetRecord { budget, spent, stopped, not_started }.write(root)?;

@@ -103,6 +103,8 @@ pub enum PoolEvent<'a> {
     /// The task will be tried again after an infrastructure error.
     Retrying {
         task: &'a Task,
+        /// The guest the failed try ran on.
+        guest: &'a str,
         attempt: u32,
         error: &'a str,
     },
@@ -268,7 +270,12 @@ pub async fn run_pool(
                             probes.spawn(probe(guest.clone(), config.probe_interval, config.health_timeout, config.lifecycle.clone()));
                         }
                         if item.attempt < config.max_attempts {
-                            on_event(PoolEvent::Retrying { task: &item.task, attempt: item.attempt + 1, error: &error });
+                            on_event(PoolEvent::Retrying {
+                                task: &item.task,
+                                guest: guest.base_url(),
+                                attempt: item.attempt + 1,
+                                error: &error,
+                            });
                             let mut avoid = item.avoid;
                             avoid.push(guest.base_url().to_owned());
                             pending.push_front(Pending { task: item.task, attempt: item.attempt + 1, avoid });

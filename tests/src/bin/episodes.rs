@@ -157,7 +157,7 @@ async fn pool_run(guests: &[Served], pause: Duration) -> anyhow::Result<(Duratio
         shard: Shard::ALL,
         resume: true,
         pool: PoolConfig::default(),
-        progress: false,
+        watch: std::sync::Arc::new(arena_host::run::watch::Unwatched),
         title: "bench".into(),
         order: Default::default(),
         trials: 1,
