@@ -3,7 +3,8 @@
 //! Each window a person sees (the Windows backend's root filter,
 //! [`shell::seen_on_desktop`], over the scenario's styles) becomes a node (UIA: role
 //! `Window` with a `TitleBar` of caption buttons; Win32: roles from window classes, no
-//! title bar), then the scenario's `elements`, then a document node when the window
+//! title bar), then the scenario's `elements`, then File Explorer's navigation tree and
+//! items list for a window showing a folder, then a document node when the window
 //! holds text. A popup menu is a `Menu` (UIA) or `PopupMenu` (win32) of its items. Program Manager comes
 //! last, as UIA lists it, with its Desktop icon list. This is a model of the shapes
 //! agents read, not a UI Automation provider.
@@ -20,7 +21,7 @@ use arena_shared::geometry::Rect;
 use arena_shared::observation::{A11yBackend, A11yNode, A11yStates, A11yTree, TreeBudget};
 
 use super::input::ICON_PITCH;
-use super::window::{Caption, Dialog, State, Window, WindowModel, RUN_FIELD_LABEL, RUN_PROMPT};
+use super::window::{Caption, Dialog, Listings, State, Window, WindowModel, EXPLORER_NAV, RUN_FIELD_LABEL, RUN_PROMPT};
 use crate::desktop::a11y_walk::{self, TreeSource};
 use crate::desktop::cancel;
 use crate::desktop::windows::shell;
@@ -48,7 +49,7 @@ fn leaf(role: &str, class_name: &str, name: &str, rect: Rect) -> A11yNode {
 }
 
 /// The full (unpruned) tree of one window.
-fn window_node(window: &Window, focused: bool, backend: A11yBackend, desktop_items: &[String]) -> A11yNode {
+fn window_node(window: &Window, focused: bool, backend: A11yBackend, listings: &Listings) -> A11yNode {
     let uia = backend != A11yBackend::Win32;
     let mut node = leaf(
         &if window.is_desktop {
@@ -70,7 +71,8 @@ fn window_node(window: &Window, focused: bool, backend: A11yBackend, desktop_ite
     node.focused = focused;
     if window.is_desktop {
         let mut list = leaf(if uia { "List" } else { "ListView" }, "SysListView32", "Desktop", window.rect);
-        list.children = desktop_items
+        list.children = listings
+            .desktop
             .iter()
             .enumerate()
             .map(|(i, name)| {
@@ -127,6 +129,9 @@ fn window_node(window: &Window, focused: bool, backend: A11yBackend, desktop_ite
         node.children.extend(controls);
         return node;
     }
+    if let Some(items) = listings.folders.get(&window.id) {
+        node.children.extend(explorer_panes(window, items, uia));
+    }
     if let Some(buf) = &window.text {
         let mut doc = leaf(if uia { "Document" } else { "Edit" }, "Edit", "Text Editor", window.body());
         doc.value = Some(buf.text.clone());
@@ -135,6 +140,33 @@ fn window_node(window: &Window, focused: bool, backend: A11yBackend, desktop_ite
         node.children.push(doc);
     }
     node
+}
+
+/// A File Explorer window's panes as UI Automation shows them: the navigation pane's
+/// tree and the items view's list, an item per entry of the folder, where they are drawn.
+fn explorer_panes(window: &Window, items: &[String], uia: bool) -> [A11yNode; 2] {
+    let (nav_rect, list_rect) = window.explorer_panes();
+    let (tree_role, tree_item, list_role, list_item) = if uia {
+        ("Tree", "TreeItem", "List", "ListItem")
+    } else {
+        ("TreeView", "TreeItem", "ListView", "ListViewItem")
+    };
+    let rows = |pane: Rect, names: &mut dyn Iterator<Item = &str>, role: &str| -> Vec<A11yNode> {
+        names
+            .enumerate()
+            .map(|(i, name)| {
+                let mut row = leaf(role, "", name, Window::explorer_row(pane, i));
+                // A row below the pane is there but scrolled out of view.
+                row.visible = row.rect.is_some_and(|r| r.bottom() <= pane.bottom());
+                row
+            })
+            .collect()
+    };
+    let mut nav = leaf(tree_role, "SysTreeView32", "Navigation Pane", nav_rect);
+    nav.children = rows(nav_rect, &mut EXPLORER_NAV.iter().copied(), tree_item);
+    let mut list = leaf(list_role, "UIItemsView", "Items View", list_rect);
+    list.children = rows(list_rect, &mut items.iter().map(String::as_str), list_item);
+    [nav, list]
 }
 
 /// A dialog's controls with UI Automation's control types and their Win32 classes: its
@@ -223,7 +255,7 @@ pub(crate) fn roots(
     state: &State,
     backend: A11yBackend,
     foreground_only: bool,
-    desktop_items: &[String],
+    listings: &Listings,
 ) -> DesktopResult<Vec<StubRoot>> {
     if backend == A11yBackend::Unknown {
         return Err(DesktopError::InvalidInput("unknown accessibility backend".into()));
@@ -236,7 +268,7 @@ pub(crate) fn roots(
         .filter(|w| !foreground_only || w.id == state.focus)
         .map(|w| StubRoot {
             id: w.id,
-            node: window_node(w, w.id == state.focus, backend, desktop_items),
+            node: window_node(w, w.id == state.focus, backend, listings),
             model: w.model,
             focused: w.id == state.focus,
         })

@@ -509,8 +509,8 @@ fn edit(state: &mut State, f: impl FnOnce(&mut super::window::TextBuf)) {
     let Some(window) = state.focused_app_mut() else {
         return;
     };
-    if matches!(window.dialog, Some(Dialog::Message(_))) {
-        // A message box has nothing to type into.
+    if matches!(window.dialog, Some(Dialog::Message(_))) || window.folder.is_some() {
+        // A message box, and File Explorer's lists, have nothing to type into.
         return;
     }
     let buf = window.text.get_or_insert_with(Default::default);

@@ -40,7 +40,10 @@ use arena_shared::registry::RegistryValue;
 
 use self::process::Program;
 pub use self::scenario::{Scenario, ScenarioError};
-use self::window::{NewWindow, State, WallpaperCache, WindowModel};
+use self::window::{Listings, NewWindow, State, WallpaperCache, WindowModel};
+
+/// The folder a bare `explorer` (and Win+E) opens: the user's own.
+const EXPLORER_HOME: &str = r"C:\Users\Docker";
 use super::{
     ClipboardData, CommandSpec, Desktop, DesktopError, DesktopResult, ExecLimits, ExecOutput, Frame, WindowState,
 };
@@ -231,6 +234,7 @@ impl StubDesktop {
                 rect: spec.rect,
                 text: spec.text.clone(),
                 file,
+                folder: None,
                 elements: spec.elements.clone(),
                 refuse_close: spec.refuse_close,
                 dialog: None,
@@ -408,11 +412,17 @@ impl StubDesktop {
             text: program.text.clone(),
             ..NewWindow::default()
         };
+        let explorer = program.process_name.eq_ignore_ascii_case("explorer.exe");
+        if explorer && target.is_none() {
+            // Bare `explorer` (and Win+E): the user's folder, under the program's own title.
+            new.folder = self.map_path(EXPLORER_HOME).ok().filter(|local| local.is_dir());
+        }
         if let Some((guest, local)) = target {
             let name = display_name(&guest);
             if local.is_dir() {
                 new.title = name;
                 new.text = None;
+                new.folder = Some(local);
             } else {
                 new.title = format!("{name} - {}", program.app_name);
                 new.text = read_document(&local);
@@ -452,6 +462,22 @@ impl StubDesktop {
         Ok(Some(local))
     }
 
+    /// What the windows show of the file system: the desktop's icons and each File
+    /// Explorer window's entries, read with the state unlocked.
+    fn listings(&self) -> Listings {
+        let folders: Vec<(u64, PathBuf)> =
+            self.lock().windows.iter().filter_map(|w| w.folder.clone().map(|f| (w.id, f))).collect();
+        let folders = folders
+            .into_iter()
+            .map(|(id, folder)| {
+                let mut names = arena_shared::ntfs::list_dir(&folder).unwrap_or_default();
+                names.truncate(window::EXPLORER_MAX_ITEMS);
+                (id, names)
+            })
+            .collect();
+        Listings { desktop: self.desktop_items(), folders }
+    }
+
     /// Names in the Desktop folder, sorted, as the desktop icons show them.
     fn desktop_items(&self) -> Vec<String> {
         let Ok(dir) = self.map_path(r"C:\Users\Docker\Desktop") else {
@@ -488,10 +514,10 @@ impl StubDesktop {
     }
 
     fn render_frame(&self, draw_cursor: bool) -> Frame {
-        let items = self.desktop_items();
+        let listings = self.listings();
         let mut state = self.lock();
         let wallpaper = self.wallpaper_image(&mut state);
-        let mut image = render::render(&state, wallpaper.as_ref(), &items);
+        let mut image = render::render(&state, wallpaper.as_ref(), &listings);
         let cursor = state.cursor;
         drop(state);
         if draw_cursor {
@@ -688,10 +714,10 @@ impl Desktop for StubDesktop {
         budget: &TreeBudget,
         foreground_only: bool,
     ) -> DesktopResult<A11yTree> {
-        let items = self.desktop_items();
+        let listings = self.listings();
         // The windows' trees are copied under the lock and walked without it, so a
         // scenario's slow UI Automation does not hold up the rest of the desktop.
-        let roots = a11y::roots(&self.lock(), backend, foreground_only, &items)?;
+        let roots = a11y::roots(&self.lock(), backend, foreground_only, &listings)?;
         let empty = backend == A11yBackend::Uia && self.uia_model().answers_empty();
         a11y::walk(roots, backend, budget, foreground_only, empty)
     }
@@ -738,6 +764,7 @@ impl Desktop for StubDesktop {
                 class_name: "CabinetWClass".into(),
                 process_name: "explorer.exe".into(),
                 pid: Some(pid),
+                folder: Some(local),
                 ..NewWindow::default()
             });
             return Ok(());

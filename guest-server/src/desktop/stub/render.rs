@@ -9,7 +9,8 @@ use font8x8::UnicodeFonts;
 use image::RgbaImage;
 
 use super::window::{
-    layout, Caption, Dialog, State, Window, BODY_PAD, GLYPH_W, LINE_H, RUN_FIELD_LABEL, RUN_PROMPT, TASKBAR_H,
+    layout, Caption, Dialog, Listings, State, Window, BODY_PAD, EXPLORER_NAV, GLYPH_W, LINE_H, RUN_FIELD_LABEL,
+    RUN_PROMPT, TASKBAR_H,
 };
 
 /// Desktop background when there is no wallpaper.
@@ -24,6 +25,8 @@ const BORDER_FOCUSED: [u8; 4] = [0, 60, 120, 255];
 const BORDER_UNFOCUSED: [u8; 4] = [150, 150, 150, 255];
 const BODY: [u8; 4] = [255, 255, 255, 255];
 const BODY_TEXT: [u8; 4] = [20, 20, 20, 255];
+/// File Explorer's navigation pane.
+const EXPLORER_NAV_FILL: [u8; 4] = [243, 243, 243, 255];
 const SELECTION: [u8; 4] = [153, 201, 255, 255];
 const CLOSE_HOVER: [u8; 4] = [196, 43, 28, 255];
 /// The taskbar along the bottom of the screen.
@@ -141,7 +144,7 @@ pub(crate) fn taskbar_buttons(state: &State) -> Vec<(u64, Rect)> {
 }
 
 /// Renders the desktop; `background` is the wallpaper already scaled to the screen, if any.
-pub(crate) fn render(state: &State, background: Option<&RgbaImage>, desktop_icons: &[String]) -> RgbaImage {
+pub(crate) fn render(state: &State, background: Option<&RgbaImage>, listings: &Listings) -> RgbaImage {
     let (w, h) = state.screen;
     let raw = match background {
         Some(img) if img.width() == w && img.height() == h => img.as_raw().clone(),
@@ -151,9 +154,12 @@ pub(crate) fn render(state: &State, background: Option<&RgbaImage>, desktop_icon
     {
         let mut canvas = Canvas { buf: &mut raw, width: w as i32, height: h as i32 };
         let screen = Rect::new(0, 0, w as i32, h as i32);
-        draw_icons(&mut canvas, screen, desktop_icons);
+        draw_icons(&mut canvas, screen, &listings.desktop);
         for window in state.windows.iter().rev().filter(|w| w.shown() && !w.is_desktop) {
             draw_window(&mut canvas, window, window.id == state.focus, screen);
+            if let Some(items) = listings.folders.get(&window.id) {
+                draw_explorer(&mut canvas, window, items, screen);
+            }
         }
         draw_taskbar(&mut canvas, state, screen);
     }
@@ -227,6 +233,30 @@ fn draw_window(canvas: &mut Canvas<'_>, window: &Window, focused: bool, screen: 
                 let x = inner.x + (buf.caret - line.start) as i32 * GLYPH_W;
                 canvas.fill(Rect::new(x, y - 1, 1, 10), text_clip, BODY_TEXT);
             }
+        }
+    }
+}
+
+/// A File Explorer window's panes: the navigation entries on the left, the folder's
+/// entries on the right, a row each (rows past the body are not drawn).
+fn draw_explorer(canvas: &mut Canvas<'_>, window: &Window, items: &[String], screen: Rect) {
+    let Some(clip) = intersect(window.rect, screen) else {
+        return;
+    };
+    let (nav, list) = window.explorer_panes();
+    canvas.fill(nav, clip, EXPLORER_NAV_FILL);
+    for (pane, names) in
+        [(nav, EXPLORER_NAV.iter().map(|s| (*s).to_owned()).collect::<Vec<_>>()), (list, items.to_vec())]
+    {
+        let Some(pane_clip) = intersect(pane, clip) else {
+            continue;
+        };
+        for (i, name) in names.iter().enumerate() {
+            let row = Window::explorer_row(pane, i);
+            if row.y > pane.bottom() {
+                break;
+            }
+            canvas.text(row.x, row.y + (row.height - 8) / 2, name, pane_clip, BODY_TEXT);
         }
     }
 }

@@ -952,11 +952,54 @@ fn the_run_dialog_buttons_click() {
 
 #[test]
 fn win_e_opens_file_explorer() {
-    let d = stub();
+    let d = stub_with(r#"{"dirs": ["C:\\Users\\Docker\\Documents"]}"#);
     d.perform(&hotkey(&["win", "e"])).unwrap();
     let top = d.windows().unwrap().into_iter().next().unwrap();
     assert_eq!(
         (top.title.as_str(), top.class_name.as_str(), top.process_name.as_str(), top.process_id, top.focused),
         ("File Explorer", "CabinetWClass", "explorer.exe", 1000, true)
     );
+    // A window like the others File Explorer opens: the user's folder listed, nothing to type into.
+    d.perform(&type_text("hello")).unwrap();
+    assert_eq!(d.window_text(top.id), None, "no text document in File Explorer");
+    let tree = d.accessibility(A11yBackend::Uia, &TreeBudget::WAA, true).unwrap();
+    let roles: Vec<&str> = tree.windows[0].children.iter().map(|c| c.role.as_str()).collect();
+    assert_eq!(roles, ["TitleBar", "Tree", "List"], "no Document: {roles:?}");
+    let items: Vec<&str> = tree.windows[0].children[2].children.iter().map(|c| c.name.as_str()).collect();
+    assert!(items.contains(&"Documents") && items.contains(&"Desktop"), "{items:?}");
+}
+
+#[test]
+fn file_explorer_lists_its_folder_in_the_tree_and_on_the_screen() {
+    let d = stub_with(
+        r#"{"dirs": ["C:\\Users\\Docker\\Documents\\Reports\\2024"],
+            "files": {"C:\\Users\\Docker\\Documents\\Reports\\b.txt": "b",
+                      "C:\\Users\\Docker\\Documents\\Reports\\a.xlsx": "a"}}"#,
+    );
+    d.open_path(r"C:\Users\Docker\Documents\Reports").unwrap();
+    let id = d.find_window("Reports").unwrap();
+    let blank = d.capture(false).unwrap();
+    let tree = d.accessibility(A11yBackend::Uia, &TreeBudget::WAA, true).unwrap();
+    let window = &tree.windows[0];
+    let nav = &window.children[1];
+    assert_eq!((nav.role.as_str(), nav.name.as_str()), ("Tree", "Navigation Pane"));
+    assert!(nav.children.iter().any(|n| n.role == "TreeItem" && n.name == "Documents"));
+    let list = &window.children[2];
+    assert_eq!((list.role.as_str(), list.name.as_str()), ("List", "Items View"));
+    let names: Vec<&str> = list.children.iter().map(|c| c.name.as_str()).collect();
+    assert_eq!(names, ["2024", "a.xlsx", "b.txt"], "the folder's entries, sorted as the shell sorts them");
+    assert!(list.children.iter().all(|c| c.role == "ListItem" && c.window_id == Some(id)));
+    // Each item is drawn where the tree says it is: its row holds text pixels.
+    let row = list.children[1].rect.expect("a rect");
+    let inked = (row.x..row.x + 40)
+        .flat_map(|x| (row.y..row.bottom()).map(move |y| (x, y)))
+        .filter(|&(x, y)| blank.image.get_pixel(x as u32, y as u32).0 == [20, 20, 20, 255])
+        .count();
+    assert!(inked > 10, "the name is drawn in its row ({inked} dark pixels)");
+    // A file that appears is listed at once, as File Explorer refreshes.
+    std::fs::write(d.map_path(r"C:\Users\Docker\Documents\Reports\c.md").unwrap(), "c").unwrap();
+    let tree = d.accessibility(A11yBackend::Win32, &TreeBudget::WAA, true).unwrap();
+    let list = tree.windows[0].children.iter().find(|c| c.name == "Items View").expect("the list");
+    assert_eq!(list.role, "ListView");
+    assert_eq!(list.children.last().map(|c| c.name.as_str()), Some("c.md"));
 }

@@ -27,6 +27,23 @@ pub(crate) const GLYPH_W: i32 = 8;
 pub(crate) const LINE_H: i32 = 12;
 /// Padding between a body's edge and its text.
 pub(crate) const BODY_PAD: i32 = 4;
+/// Width of a File Explorer window's navigation pane.
+pub(crate) const EXPLORER_NAV_W: i32 = 160;
+/// Height of a row in File Explorer's panes.
+pub(crate) const EXPLORER_ROW_H: i32 = 16;
+/// The navigation pane's entries, as Windows 11's File Explorer lists them first.
+pub(crate) const EXPLORER_NAV: [&str; 8] =
+    ["Home", "Desktop", "Downloads", "Documents", "Pictures", "Music", "Videos", "This PC"];
+/// Most entries a File Explorer window lists (a folder may hold any number).
+pub(crate) const EXPLORER_MAX_ITEMS: usize = 500;
+
+/// What the stub's windows show of the file system, read before the state is locked:
+/// the Desktop folder's names (the desktop icons) and each File Explorer window's.
+#[derive(Debug, Clone, Default)]
+pub(crate) struct Listings {
+    pub(crate) desktop: Vec<String>,
+    pub(crate) folders: std::collections::HashMap<u64, Vec<String>>,
+}
 /// The first window id, as a real desktop's first HWNDs look.
 pub(crate) const FIRST_WINDOW_ID: u64 = 0x10010;
 /// The first fake process id.
@@ -284,6 +301,8 @@ pub(crate) struct Window {
     pub(crate) scroll: usize,
     /// Local file `ctrl+s` writes the document to.
     pub(crate) file: Option<PathBuf>,
+    /// The local folder a File Explorer window shows.
+    pub(crate) folder: Option<PathBuf>,
     /// Accessibility subtrees from the scenario.
     pub(crate) elements: Vec<A11yNode>,
     /// What the shell and UI Automation make of it (the scenario's window fields).
@@ -343,6 +362,22 @@ impl Window {
     pub(crate) fn body(&self) -> Rect {
         let r = self.rect;
         Rect::new(r.x + 1, r.y + 1 + TITLE_H, (r.width - 2).max(0), (r.height - 2 - TITLE_H).max(0))
+    }
+
+    /// A File Explorer window's navigation pane (left) and items view (right), in its body.
+    pub(crate) fn explorer_panes(&self) -> (Rect, Rect) {
+        let body = self.body();
+        let nav_w = EXPLORER_NAV_W.min(body.width / 3);
+        (
+            Rect::new(body.x, body.y, nav_w, body.height),
+            Rect::new(body.x + nav_w + 1, body.y, (body.width - nav_w - 1).max(0), body.height),
+        )
+    }
+
+    /// Row `i` of a File Explorer pane: its navigation entries or its items.
+    pub(crate) fn explorer_row(pane: Rect, i: usize) -> Rect {
+        let y = pane.y + BODY_PAD + i32::try_from(i).unwrap_or(i32::MAX / 2).saturating_mul(EXPLORER_ROW_H);
+        Rect::new(pane.x + BODY_PAD, y, (pane.width - 2 * BODY_PAD).max(0), EXPLORER_ROW_H - 2)
     }
 
     /// The caption buttons, right to left as they are laid out: close, maximise, minimise.
@@ -446,6 +481,8 @@ pub(crate) struct NewWindow {
     pub(crate) rect: Option<Rect>,
     pub(crate) text: Option<String>,
     pub(crate) file: Option<PathBuf>,
+    /// A File Explorer window: the local folder it lists.
+    pub(crate) folder: Option<PathBuf>,
     pub(crate) elements: Vec<A11yNode>,
     pub(crate) refuse_close: bool,
     pub(crate) dialog: Option<Dialog>,
@@ -570,6 +607,7 @@ impl State {
             text: None,
             scroll: 0,
             file: None,
+            folder: None,
             elements: Vec::new(),
             model: WindowModel::default(),
             dialog: None,
@@ -707,6 +745,7 @@ impl State {
                 text: new.text.map(TextBuf::new),
                 scroll: 0,
                 file: new.file,
+                folder: new.folder,
                 elements: new.elements,
                 model: WindowModel::default(),
                 dialog: new.dialog,
