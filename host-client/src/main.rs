@@ -6,12 +6,11 @@
 use std::io::IsTerminal;
 use std::process::ExitCode;
 
-use clap::Parser;
 use tracing_subscriber::EnvFilter;
 
 #[tokio::main]
 async fn main() -> ExitCode {
-    let cli = arena_host::Cli::parse();
+    let cli = arena_host::Cli::parse_args();
     // An outside agent's stderr (target `arena::agent`) is part of the run's log.
     let filter = EnvFilter::try_from_env("ARENA_LOG").unwrap_or_else(|_| EnvFilter::new("warn,arena::agent=info"));
     tracing_subscriber::fmt()

@@ -59,6 +59,38 @@ pub struct Cli {
     pub command: Command,
 }
 
+/// The subcommands that never reach a guest: their help leaves out the connection
+/// options, which every other subcommand takes (and which they accept and ignore).
+pub const OFFLINE_SUBCOMMANDS: [&str; 5] = ["validate", "merge", "report", "compare", "corpus"];
+
+/// The connection options that are global (given before or after the subcommand).
+const CONNECTION_GLOBALS: [&str; 3] = ["guest", "token", "token_file"];
+
+impl Cli {
+    /// The command line's definition, with the connection options hidden from the
+    /// help of [`OFFLINE_SUBCOMMANDS`].
+    pub fn definition() -> clap::Command {
+        let mut command = <Cli as clap::CommandFactory>::command();
+        let globals: Vec<clap::Arg> =
+            command.get_arguments().filter(|a| CONNECTION_GLOBALS.contains(&a.get_id().as_str())).cloned().collect();
+        for name in OFFLINE_SUBCOMMANDS {
+            let globals = globals.clone();
+            // clap copies a global option into a subcommand only where the subcommand has
+            // none of that name: a hidden copy of its own keeps it out of the help.
+            command = command.mut_subcommand(name, move |sub| {
+                globals.into_iter().fold(sub, |sub, arg| sub.arg(arg.global(false).env(None::<&str>).hide(true)))
+            });
+        }
+        command
+    }
+
+    /// Parses the process's arguments (exiting with clap's message on an error).
+    pub fn parse_args() -> Cli {
+        let matches = Cli::definition().get_matches();
+        <Cli as clap::FromArgMatches>::from_arg_matches(&matches).unwrap_or_else(|err| err.exit())
+    }
+}
+
 /// How to reach the guest: the settings every subcommand shares.
 #[derive(Debug, Clone, Args)]
 pub struct Connection {
@@ -712,13 +744,38 @@ mod tests {
     use super::*;
 
     fn parse(words: &[&str]) -> Result<Cli, clap::Error> {
-        Cli::try_parse_from(std::iter::once("arena").chain(words.iter().copied()))
+        let matches = Cli::definition().try_get_matches_from(std::iter::once("arena").chain(words.iter().copied()))?;
+        <Cli as clap::FromArgMatches>::from_arg_matches(&matches)
     }
 
     #[test]
     fn the_command_line_is_consistent() {
         use clap::CommandFactory;
         Cli::command().debug_assert();
+        Cli::definition().debug_assert();
+    }
+
+    #[test]
+    fn offline_subcommands_leave_the_connection_options_out_of_their_help() {
+        let help = |name: &str| {
+            let mut command = Cli::definition();
+            command.build();
+            let sub = command.find_subcommand_mut(name).unwrap_or_else(|| panic!("{name}"));
+            sub.render_long_help().to_string()
+        };
+        for name in OFFLINE_SUBCOMMANDS {
+            let text = help(name);
+            for option in ["--guest", "--token", "--token-file"] {
+                assert!(!text.contains(option), "{name} --help shows {option}: {text}");
+            }
+        }
+        assert!(help("health").contains("--guest"), "a guest command keeps them");
+        assert!(help("run").contains("--token-file"));
+        // Given anyway, they are accepted as before (and ignored).
+        let cli = parse(&["report", "--guest", "http://10.0.0.2:5000", "results"]).expect("parses");
+        assert!(matches!(cli.command, Command::Report(_)));
+        let cli = parse(&["--guest", "http://10.0.0.9:5000", "health"]).expect("parses");
+        assert_eq!(cli.connection.guest_url(), "http://10.0.0.9:5000");
     }
 
     #[test]
