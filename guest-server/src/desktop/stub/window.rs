@@ -755,8 +755,13 @@ impl State {
         id
     }
 
-    /// The next default window position: a cascade from the top-left, 30 pixels a step.
+    /// The next default window position: a cascade from the top-left, 30 pixels a step,
+    /// begun again when no window but the desktop is left (so an episode's windows
+    /// open where they opened in the last one, whatever ran on the guest before).
     fn cascade_rect(&mut self) -> Rect {
+        if self.windows.iter().all(|w| w.is_desktop) {
+            self.cascade = 0;
+        }
         let work = self.work_area();
         let step = self.cascade % 8;
         self.cascade += 1;
