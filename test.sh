@@ -59,6 +59,7 @@ count_skips "VM tests" "QEMU stand-in image not found"
 count_skips "Agent S3 tests" "gui-agents not installed"
 count_skips "UI-TARS parser tests" "ui-tars not installed"
 count_skips "MCP SDK tests" "no Python with the MCP SDK (set ARENA_MCP_PYTHON to one)"
+count_skips "gymnasium tests" "gymnasium not installed"
 echo "skips of any kind: $(grep -ao 'SKIPPED: ' "$log" | wc -l)"
 
 if [ "${ARENA_SKIP_WINE:-0}" = 1 ]; then

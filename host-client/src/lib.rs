@@ -11,7 +11,7 @@
 //! It is not the guest server (see `arena-guest`, which this crate embeds only with
 //! its default `stub-guest` feature, for `arena serve-stub`, `run --stub-guests` and
 //! a self-contained `arena demo`), it does not speak the legacy WAA routes, and it
-//! serves HTTP only with its default `mcp-endpoint` feature (`arena run --agent mcp`).
+//! serves HTTP only with its default `mcp-endpoint` and `env-server` features (`arena run --agent mcp`, `arena env serve`).
 //!
 //! # Layout
 //!
@@ -20,6 +20,7 @@
 //! - [`agent`]: the agent trait; Navi, scripted, replay and computer-use agents; outside agents over the step protocol; the factory of a run's agent.
 //! - `mcp` (feature `mcp-endpoint`): the MCP endpoint of `arena run --agent mcp`, where an outside agent drives each episode.
 //! - [`episode`]: one episode: reset, setup, the observe/act loop, evaluation.
+//! - `envserve` (feature `env-server`): `arena env serve`, episodes a program drives over HTTP (reset, step, evaluate).
 //! - [`results`]: result folders in upstream's layout, the summary and the HTML report.
 //! - [`run`]: task lists, shards, the pool of guests, merging shards.
 //! - [`oem`]: staging a Windows image's OEM folder and waiting for its guest.
@@ -30,6 +31,8 @@
 
 pub mod agent;
 pub mod cli;
+#[cfg(feature = "env-server")]
+pub mod envserve;
 pub mod episode;
 #[cfg(feature = "mcp-endpoint")]
 pub mod mcp;

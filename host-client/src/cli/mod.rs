@@ -13,12 +13,14 @@
 //! - [`local`]: atomic local writes.
 //! - [`stub`]: the embedded stub guest.
 //! - [`demo`]: the end-to-end demonstration.
+//! - [`env`]: `arena env serve`, the harness as an environment a program drives.
 //! - [`progress`]: what `arena run` shows while it goes (`--progress`).
 
 pub mod act;
 pub mod certify;
 pub mod corpus;
 pub mod demo;
+pub mod env;
 pub mod external;
 pub mod local;
 pub mod oem;
@@ -295,6 +297,9 @@ pub enum Command {
     /// Run Windows VMs with QEMU: start one on an overlay of a golden image, snapshot,
     /// restore, screendump, stop, or prepare a golden image from an installer ISO.
     Vm(vm::VmCommandArgs),
+    /// The harness as an environment a program drives (`arena env serve`: reset,
+    /// step and evaluate over HTTP, for RL trainers, notebooks and `arena_agent.env`).
+    Env(env::EnvArgs),
 }
 
 /// Arguments of `arena tree`.
@@ -632,6 +637,7 @@ pub async fn run(cli: Cli) -> anyhow::Result<ExitCode> {
         Command::Prep(args) => oem::run(conn, args).await,
         Command::Corpus(args) => corpus::run(args).await,
         Command::Vm(args) => vm::run(conn, args).await,
+        Command::Env(args) => env::run(conn, args).await,
     }
 }
 
