@@ -2,7 +2,10 @@
 //! written with the official Rust SDK (`rmcp`) plays two stub tasks through the
 //! tools, a bad argument is a tool error on a session that lives on, the tool
 //! list has the documented names, and the bearer token is checked (refused without it);
-//! and `arena-guest --mcp`, the guest as an MCP server on its own.
+//! and `arena-guest --mcp`, the guest as an MCP server on its own: its own tools
+//! (programs, windows, the clipboard, numbered elements, the shell only with
+//! `--mcp-shell`), the official Python SDK driving Notepad through them and ending its
+//! session without a complaint, and the tool table of docs/agents.md against `tools/list`.
 
 #![cfg(unix)]
 
@@ -18,6 +21,7 @@ use rmcp::service::RunningService;
 use rmcp::transport::streamable_http_client::StreamableHttpClientTransportConfig;
 use rmcp::transport::StreamableHttpClientTransport;
 use rmcp::{RoleClient, ServiceExt};
+use arena_shared::mcp_tools::GUEST_ONLY;
 use serde_json::{json, Value};
 
 const TOKEN: &str = "mcp-test-token";
@@ -231,26 +235,11 @@ async fn an_rmcp_client_plays_two_stub_tasks() {
     }
 }
 
-/// A Python with the official MCP SDK: `ARENA_MCP_PYTHON`, else `python3` when
-/// it imports `mcp`; without one, a loud skip (a failure with `ARENA_REQUIRE_MCP_SDK=1`).
-fn python_with_mcp(test: &str) -> Option<String> {
-    let candidate = std::env::var("ARENA_MCP_PYTHON").unwrap_or_else(|_| "python3".to_owned());
-    let ok = Command::new(&candidate).args(["-c", "import mcp, httpx2"]).output().is_ok_and(|o| o.status.success());
-    if ok {
-        return Some(candidate);
-    }
-    assert!(
-        std::env::var("ARENA_REQUIRE_MCP_SDK").as_deref() != Ok("1"),
-        "{test}: no Python with the MCP SDK ({candidate}) and ARENA_REQUIRE_MCP_SDK=1"
-    );
-    // Straight to the process's stderr: libtest captures println!, and test.sh counts this line.
-    let _ = writeln!(std::io::stderr(), "SKIPPED: {test}: no Python with the MCP SDK (set ARENA_MCP_PYTHON to one)");
-    None
-}
-
 #[test]
 fn the_python_mcp_example_plays_two_stub_tasks() {
-    let Some(python) = python_with_mcp("the_python_mcp_example_plays_two_stub_tasks") else { return };
+    let Some(python) = arena_test_support::python_with_mcp("the_python_mcp_example_plays_two_stub_tasks") else {
+        return;
+    };
     let tmp = tempfile::tempdir().expect("tmp");
     let tasks = tmp.path().join("tasks/mixed");
     for (domain, name) in [("notepad", "stub-notepad-draft"), ("settings", "stub-settings-infeasible")] {
@@ -280,7 +269,9 @@ async fn the_guest_serves_mcp_behind_its_token() {
     assert_bearer_checked(&url, "guest-secret-token-0123").await;
 
     let client = connect_with(&url, "guest-secret-token-0123").await;
-    assert_eq!(tool_names(&client).await, DESKTOP_TOOLS, "the desktop tools, without the task and decision tools");
+    let mut expected: Vec<&str> = DESKTOP_TOOLS.to_vec();
+    expected.extend(GUEST_ONLY);
+    assert_eq!(tool_names(&client).await, expected, "the desktop tools and the guest's own, without the task and decision tools");
     assert_png(&call(&client, "screenshot", json!({})).await);
     let typed = call(&client, "type_text", json!({"text": "hello"})).await;
     assert_ne!(typed.is_error, Some(true), "{typed:?}");
@@ -289,4 +280,124 @@ async fn the_guest_serves_mcp_behind_its_token() {
     let ran = json_of(&call(&client, "run_python", json!({"code": "print(pyautogui.size())"})).await);
     assert_eq!(ran["exit_code"], json!(0), "{ran}");
     let _ = client.cancel().await;
+}
+
+/// The guest's own tools on the stub: programs, windows, the clipboard and numbered
+/// elements; `shell` refused without `--mcp-shell`.
+#[tokio::test(flavor = "multi_thread")]
+async fn the_guest_tools_drive_windows_programs_the_clipboard_and_elements() {
+    let token = "guest-secret-token-0123";
+    let guest = arena_test_support::Served::guest(&["--mcp", "--token", token]).expect("arena-guest --mcp");
+    let client = connect_with(&format!("{}/mcp", guest.url.trim_end_matches('/')), token).await;
+    let error_of = |r: CallToolResult| {
+        assert_eq!(r.is_error, Some(true), "{r:?}");
+        text_of(&r)
+    };
+
+    let launched = json_of(&call(&client, "launch_app", json!({"name": "notepad"})).await);
+    assert_eq!(launched["window"], json!("Untitled - Notepad"), "{launched}");
+    let unknown = error_of(call(&client, "launch_app", json!({"name": "no-such-program-xyz"})).await);
+    assert!(unknown.contains("no-such-program-xyz"), "{unknown}");
+    let opened = json_of(&call(&client, "launch_app", json!({"name": "calc"})).await);
+    assert_eq!(opened["window"], json!("Calculator"), "{opened}");
+
+    // Notepad, behind Calculator, comes to the front by a part of its title.
+    let switched = json_of(&call(&client, "switch_window", json!({"title": "notepad"})).await);
+    assert_eq!(switched["window"], json!("Untitled - Notepad"), "{switched}");
+    let windows = json_of(&call(&client, "list_windows", json!({})).await);
+    assert_eq!(windows["foreground"], json!("Untitled - Notepad"), "{windows}");
+    let missing = error_of(call(&client, "switch_window", json!({"title": "Paint"})).await);
+    assert!(missing.contains("no window is titled \"Paint\""), "{missing}");
+
+    let resized = json_of(
+        &call(&client, "resize_window", json!({"title": "Notepad", "x": 100, "y": 50, "width": 640, "height": 480})).await,
+    );
+    assert_eq!(resized["rect"], json!({"x": 100, "y": 50, "width": 640, "height": 480}), "{resized}");
+    let maximised = json_of(&call(&client, "resize_window", json!({"state": "maximized"})).await);
+    assert_eq!((maximised["window"].as_str(), maximised["maximized"].as_bool()), (Some("Untitled - Notepad"), Some(true)));
+    let minimised = json_of(&call(&client, "resize_window", json!({"title": "Calculator", "state": "minimized"})).await);
+    assert_eq!(minimised["minimized"], json!(true), "{minimised}");
+    let desktop = error_of(call(&client, "resize_window", json!({"title": "Program Manager", "width": 5})).await);
+    assert!(desktop.contains("the desktop itself"), "{desktop}");
+
+    assert_eq!(json_of(&call(&client, "clipboard_get", json!({}))).await)["format"], json!("empty"));
+    call(&client, "clipboard_set", json!({"text": "from the clipboard"})).await;
+    let clip = json_of(&call(&client, "clipboard_get", json!({})).await);
+    assert_eq!((clip["format"].as_str(), clip["text"].as_str()), (Some("text"), Some("from the clipboard")), "{clip}");
+
+    // Numbered elements: the maximised Notepad's text area, then its Close button.
+    let early = error_of(call(&client, "click_element", json!({"element": 1})).await);
+    assert!(early.contains("call state first"), "{early}");
+    let state = json_of(&call(&client, "state", json!({})).await);
+    assert_eq!(state["foreground"], json!("Untitled - Notepad"), "{state}");
+    let elements = state["elements"].as_array().expect("elements");
+    let find = |role: &str, name: &str| {
+        elements
+            .iter()
+            .find(|e| e["window"] == json!("Untitled - Notepad") && e["role"] == json!(role) && e["name"] == json!(name))
+            .unwrap_or_else(|| panic!("{role} {name:?} in {state}"))
+            .clone()
+    };
+    let area = find("Document", "Text Editor");
+    assert!(elements.iter().all(|e| e["window"] != json!("Calculator")), "a minimised window lists nothing: {state}");
+    let number = area["element"].as_u64().expect("a number");
+    call(&client, "type_into_element", json!({"element": number, "text": "typed", "press_enter": true})).await;
+    call(&client, "type_into_element", json!({"element": number, "text": "again", "clear": true})).await;
+    let tree = text_of(&call(&client, "accessibility_tree", json!({})).await);
+    assert!(tree.contains("again") && !tree.contains("typed"), "clear emptied the field first: {tree}");
+    let unknown = error_of(call(&client, "click_element", json!({"element": 100_000})).await);
+    assert!(unknown.starts_with("click_element: element 100000 is unknown"), "{unknown}");
+
+    // Moving the window makes its elements stale.
+    let close = find("Button", "Close")["element"].as_u64().expect("a number");
+    call(&client, "resize_window", json!({"title": "Notepad", "state": "normal"})).await;
+    let stale = error_of(call(&client, "click_element", json!({"element": close})).await);
+    assert!(stale.contains(&format!("element {close} is stale")) && stale.contains("moved or was resized"), "{stale}");
+
+    let refused = error_of(call(&client, "shell", json!({"command": "echo hi"})).await);
+    assert!(refused.contains("refused") && refused.contains("--mcp-shell"), "{refused}");
+    let _ = client.cancel().await;
+}
+
+/// `--mcp-shell` lets `shell` run a command line in the stub's shell.
+#[tokio::test(flavor = "multi_thread")]
+async fn the_guest_shell_runs_only_with_its_option() {
+    let token = "guest-secret-token-0123";
+    let guest = arena_test_support::Served::guest(&["--mcp", "--mcp-shell", "--token", token]).expect("arena-guest");
+    let client = connect_with(&format!("{}/mcp", guest.url.trim_end_matches('/')), token).await;
+    let ran = json_of(&call(&client, "shell", json!({"command": "echo shell-says-hi; exit 3"})).await);
+    assert_eq!((ran["stdout"].as_str(), ran["exit_code"].as_i64()), (Some("shell-says-hi\n"), Some(3)), "{ran}");
+    assert_eq!(ran["timed_out"], json!(false), "{ran}");
+    let _ = client.cancel().await;
+}
+
+/// The official Python SDK (`mcp`) drives the guest: starts Notepad, types into its text
+/// area by the number `state` gave it, reads the clipboard, is refused `shell`, and ends
+/// its session without `Session termination failed` (the SDK's complaint about a
+/// `DELETE` answered anything but 200 or 204).
+#[test]
+fn the_python_sdk_drives_the_guest_and_ends_its_session_cleanly() {
+    let test = "the_python_sdk_drives_the_guest_and_ends_its_session_cleanly";
+    let Some(python) = arena_test_support::python_with_mcp(test) else { return };
+    let token = "guest-secret-token-0123";
+    let guest = arena_test_support::Served::guest(&["--mcp", "--token", token]).expect("arena-guest --mcp");
+    let url = format!("{}/mcp", guest.url.trim_end_matches('/'));
+    let ran = Command::new(python)
+        .arg(repo().join("examples/guest_mcp_client.py"))
+        .args([url.as_str(), token, "Typed by the Python SDK"])
+        .output()
+        .expect("the example runs");
+    let (stdout, stderr) = (String::from_utf8_lossy(&ran.stdout), String::from_utf8_lossy(&ran.stderr));
+    assert!(ran.status.success(), "{stdout}\n{stderr}");
+    assert!(!stderr.contains("Session termination failed"), "the session's end was answered as the SDK expects: {stderr}");
+    let said: Value = serde_json::from_str(stdout.trim()).unwrap_or_else(|e| panic!("{e}: {stdout}"));
+    let names: Vec<&str> = said["tools"].as_array().expect("tools").iter().filter_map(Value::as_str).collect();
+    assert!(GUEST_ONLY.iter().all(|t| names.contains(t)), "{names:?}");
+    assert_eq!(said["launched"]["window"], json!("Untitled - Notepad"), "{said}");
+    assert_eq!(said["element"]["role"], json!("Document"), "{said}");
+    assert_eq!(said["clipboard"]["text"], json!("Typed by the Python SDK"), "{said}");
+    assert_eq!(said["stale"]["is_error"], json!(true), "{said}");
+    assert!(said["stale"]["text"].as_str().is_some_and(|t| t.contains("is stale")), "{said}");
+    assert_eq!(said["shell"]["is_error"], json!(true), "{said}");
+    assert!(said["shell"]["text"].as_str().is_some_and(|t| t.contains("--mcp-shell")), "{said}");
 }
