@@ -205,7 +205,9 @@ impl Numbering {
     /// A number no state gave, or one an earlier state gave (stale), named with what to do.
     pub fn get(&self, number: u64) -> Result<&Element, String> {
         if self.states == 0 {
-            return Err(format!("element {number} is unknown: no state has numbered any element yet; call state first"));
+            return Err(format!(
+                "element {number} is unknown: no state has numbered any element yet; call state first"
+            ));
         }
         let end = self.first + self.elements.len() as u64;
         let latest = if self.elements.is_empty() {
@@ -262,7 +264,12 @@ mod tests {
         doc.states = A11yStates { editable: Some(true), ..A11yStates::default() };
         let mut disabled = node("Button", "Greyed", Rect::new(20, 20, 10, 10), vec![]);
         disabled.enabled = false;
-        let mut hidden = node("Pane", "hidden", Rect::new(0, 0, 50, 50), vec![node("Button", "Inside", Rect::new(1, 1, 5, 5), vec![])]);
+        let mut hidden = node(
+            "Pane",
+            "hidden",
+            Rect::new(0, 0, 50, 50),
+            vec![node("Button", "Inside", Rect::new(1, 1, 5, 5), vec![])],
+        );
         hidden.visible = false;
         let pane = node(
             "Pane",
@@ -280,7 +287,12 @@ mod tests {
         );
         let back = node("Window", "Back", Rect::new(0, 0, 800, 600), vec![pane]);
         // A window above covers the Save button's centre.
-        let mut front = node("Window", "Front", Rect::new(340, 0, 100, 100), vec![node("Button", "OK", Rect::new(360, 50, 30, 20), vec![])]);
+        let mut front = node(
+            "Window",
+            "Front",
+            Rect::new(340, 0, 100, 100),
+            vec![node("Button", "OK", Rect::new(360, 50, 30, 20), vec![])],
+        );
         front.window_id = Some(9);
         front.children[0].window_id = Some(9);
         let windows = [WindowInfo { id: 9, rect: Rect::new(340, 0, 100, 100), ..WindowInfo::default() }];
@@ -296,9 +308,11 @@ mod tests {
 
     #[test]
     fn minimised_windows_neither_list_nor_cover() {
-        let mut min = node("Window", "Min", Rect::new(0, 0, 800, 600), vec![node("Button", "A", Rect::new(1, 1, 9, 9), vec![])]);
+        let mut min =
+            node("Window", "Min", Rect::new(0, 0, 800, 600), vec![node("Button", "A", Rect::new(1, 1, 9, 9), vec![])]);
         min.states.minimized = Some(true);
-        let back = node("Window", "Back", Rect::new(0, 0, 800, 600), vec![node("Button", "B", Rect::new(1, 1, 9, 9), vec![])]);
+        let back =
+            node("Window", "Back", Rect::new(0, 0, 800, 600), vec![node("Button", "B", Rect::new(1, 1, 9, 9), vec![])]);
         let (found, _) = collect(&tree(vec![min, back]), &[], (1024, 768));
         assert_eq!(found.iter().map(|e| e.name.as_str()).collect::<Vec<_>>(), ["B"]);
     }
@@ -334,7 +348,10 @@ mod tests {
         assert_eq!(numbering.number(vec![element("c")]), (2, 3));
         assert_eq!(numbering.get(3).map(|e| e.name.as_str()), Ok("c"));
         let stale = numbering.get(2).expect_err("stale");
-        assert!(stale.starts_with("element 2 is stale") && stale.contains("state 2 numbers its elements 3 to 3"), "{stale}");
+        assert!(
+            stale.starts_with("element 2 is stale") && stale.contains("state 2 numbers its elements 3 to 3"),
+            "{stale}"
+        );
         let unknown = numbering.get(4).expect_err("unknown");
         assert!(unknown.starts_with("element 4 is unknown"), "{unknown}");
         assert!(numbering.get(0).expect_err("unknown").starts_with("element 0 is unknown"));

@@ -104,6 +104,18 @@ pub const DEFAULT_SHELL_SECONDS: f64 = 30.0;
 /// Farthest a window's corner may be moved from the screen's origin, and its largest size.
 pub const MAX_WINDOW_PIXELS: i32 = 16_384;
 
+/// Longest program name (`launch_app`) or window title (`switch_window`,
+/// `resize_window`) a call may give, in characters.
+pub const MAX_NAME_CHARS: usize = 1024;
+
+/// Longest `shell` command line, in UTF-16 code units: PowerShell gets it as
+/// `-EncodedCommand` (base64 of UTF-16LE, 8/3 characters a unit), and the whole
+/// Windows command line holds at most 32,767 characters.
+pub const MAX_SHELL_COMMAND_UNITS: usize = 8192;
+
+/// Most bytes of text `clipboard_set` puts on the clipboard (as much as one `type_text` types).
+pub const MAX_CLIPBOARD_TEXT_BYTES: usize = crate::action::MAX_TYPE_TEXT_BYTES;
+
 /// Longest `wait` one call may ask for.
 pub const MAX_WAIT_SECONDS: f64 = 60.0;
 
@@ -380,12 +392,14 @@ pub fn parse(
 /// The tools of [`GUEST_ONLY`], in its order.
 fn guest_tools() -> Vec<(&'static str, &'static str, Value)> {
     let none = object(json!({}), &[]);
-    let string = |what: &str| json!({"type": "string", "minLength": 1, "description": what});
+    let string =
+        |what: &str| json!({"type": "string", "minLength": 1, "maxLength": MAX_NAME_CHARS, "description": what});
     let click = json!({
         "button": {"type": "string", "enum": ["left", "right", "middle"], "default": "left"},
         "clicks": {"type": "integer", "minimum": 1, "maximum": 3, "default": 1},
     });
-    let element = json!({"element": {"type": "integer", "minimum": 1, "description": "a number from the latest state"}});
+    let element =
+        json!({"element": {"type": "integer", "minimum": 1, "description": "a number from the latest state"}});
     let coordinate = |what: &str| json!({"type": "integer", "minimum": -MAX_WINDOW_PIXELS, "maximum": MAX_WINDOW_PIXELS, "description": what});
     let size = |what: &str| json!({"type": "integer", "minimum": 1, "maximum": MAX_WINDOW_PIXELS, "description": what});
     vec![
@@ -422,11 +436,12 @@ fn guest_tools() -> Vec<(&'static str, &'static str, Value)> {
         ("clipboard_set", "Puts text on the clipboard.", object(json!({"text": {"type": "string"}}), &["text"])),
         (
             "shell",
-            "Runs a command line in the guest's shell (PowerShell on Windows) and answers its exit code and \
-             output. Refused unless the guest was started with --mcp-shell.",
+            "Runs a command line in the guest's shell and answers its exit code and output: Windows PowerShell \
+             on Windows; on the stub backend, the stub's simulated programs, or `sh -c` on the stub's machine \
+             when the guest also has --stub-host-exec. Refused unless the guest was started with --mcp-shell.",
             object(
                 json!({
-                    "command": string("the command line"),
+                    "command": {"type": "string", "minLength": 1, "maxLength": MAX_SHELL_COMMAND_UNITS, "description": "the command line"},
                     "timeout": {"type": "number", "exclusiveMinimum": 0, "maximum": MAX_SHELL_SECONDS, "default": DEFAULT_SHELL_SECONDS, "description": "seconds before the command is ended"},
                 }),
                 &["command"],
@@ -490,6 +505,16 @@ impl Args<'_> {
         Ok(s)
     }
 
+    /// A program's name or a window's title: not empty, at most [`MAX_NAME_CHARS`].
+    fn name(&mut self, name: &str) -> Result<String, String> {
+        let s = self.nonempty(name)?;
+        let chars = s.chars().count();
+        if chars > MAX_NAME_CHARS {
+            return Err(self.bad(format!("{name} is {chars} characters long; at most {MAX_NAME_CHARS}")));
+        }
+        Ok(s)
+    }
+
     fn element(&mut self) -> Result<u64, String> {
         match self.take("element") {
             None => Err(self.bad("missing argument \"element\"")),
@@ -522,13 +547,12 @@ impl Args<'_> {
 /// A call of a [`GUEST_ONLY`] tool.
 fn guest_call(args: &mut Args<'_>) -> Result<ToolCall, String> {
     Ok(match args.tool {
-        "launch_app" => ToolCall::LaunchApp { name: args.nonempty("name")? },
-        "switch_window" => ToolCall::SwitchWindow { title: args.nonempty("title")? },
+        "launch_app" => ToolCall::LaunchApp { name: args.name("name")? },
+        "switch_window" => ToolCall::SwitchWindow { title: args.name("title")? },
         "resize_window" => {
-            let title = match args.take("title") {
-                None => None,
-                Some(Value::String(t)) if !t.trim().is_empty() => Some(t),
-                Some(v) => return Err(args.bad(format!("title must be a window's title, not {v}"))),
+            let title = match args.map.get("title") {
+                None | Some(Value::Null) => None,
+                Some(_) => Some(args.name("title")?),
             };
             let show = match args.take("state") {
                 None => None,
@@ -555,9 +579,25 @@ fn guest_call(args: &mut Args<'_>) -> Result<ToolCall, String> {
             ToolCall::ResizeWindow(change)
         }
         "clipboard_get" => ToolCall::ClipboardGet,
-        "clipboard_set" => ToolCall::ClipboardSet(args.string("text")?),
+        "clipboard_set" => {
+            let text = args.string("text")?;
+            if text.len() > MAX_CLIPBOARD_TEXT_BYTES {
+                return Err(args.bad(format!(
+                    "text holds {} bytes; at most {MAX_CLIPBOARD_TEXT_BYTES} go on the clipboard in one call",
+                    text.len()
+                )));
+            }
+            ToolCall::ClipboardSet(text)
+        }
         "shell" => {
             let command = args.nonempty("command")?;
+            let units = command.encode_utf16().count();
+            if units > MAX_SHELL_COMMAND_UNITS {
+                return Err(args.bad(format!(
+                    "command is {units} UTF-16 units long; at most {MAX_SHELL_COMMAND_UNITS} fit a Windows command \
+                     line (write a longer script to a file and run that)"
+                )));
+            }
             let seconds = match args.take("timeout") {
                 None => DEFAULT_SHELL_SECONDS,
                 Some(v) => match v.as_f64() {
@@ -669,14 +709,40 @@ mod tests {
     fn bad_guest_arguments_are_named() {
         let err = |tool: &str, args: Value| guest(tool, args).expect_err("refused");
         assert_eq!(err("launch_app", json!({"name": " "})), "launch_app: name must not be empty");
-        assert_eq!(err("click_element", json!({"element": 0})), "click_element: element must be a number from the latest state (1 or more), not 0");
+        assert_eq!(
+            err("click_element", json!({"element": 0})),
+            "click_element: element must be a number from the latest state (1 or more), not 0"
+        );
         assert_eq!(err("click_element", json!({})), "click_element: missing argument \"element\"");
-        assert_eq!(err("type_into_element", json!({"element": 1, "text": "a", "clear": "yes"})), "type_into_element: clear must be true or false, not \"yes\"");
+        assert_eq!(
+            err("type_into_element", json!({"element": 1, "text": "a", "clear": "yes"})),
+            "type_into_element: clear must be true or false, not \"yes\""
+        );
         assert_eq!(err("resize_window", json!({})), "resize_window: nothing to do: give x, y, width, height or state");
         assert!(err("resize_window", json!({"state": "maximized", "x": 3})).contains("give state normal"));
         assert_eq!(err("resize_window", json!({"width": 0})), "resize_window: width must be from 1 to 16384, not 0");
-        assert_eq!(err("resize_window", json!({"state": "huge"})), "resize_window: state must be normal, maximized or minimized, not \"huge\"");
+        assert_eq!(
+            err("resize_window", json!({"state": "huge"})),
+            "resize_window: state must be normal, maximized or minimized, not \"huge\""
+        );
         assert!(err("shell", json!({"command": "dir", "timeout": 601})).starts_with("shell: timeout must be"));
+        let long = "x".repeat(MAX_SHELL_COMMAND_UNITS + 1);
+        assert!(err("shell", json!({"command": long})).starts_with("shell: command is 8193 UTF-16 units long"));
+        let title = "t".repeat(MAX_NAME_CHARS + 1);
+        assert_eq!(
+            err("switch_window", json!({"title": title})),
+            "switch_window: title is 1025 characters long; at most 1024"
+        );
+        assert_eq!(
+            err("resize_window", json!({"title": " ", "state": "normal"})),
+            "resize_window: title must not be empty"
+        );
+        assert_eq!(
+            err("resize_window", json!({"title": 3, "state": "normal"})),
+            "resize_window: title must be a string, not 3"
+        );
+        let big = "c".repeat(MAX_CLIPBOARD_TEXT_BYTES + 1);
+        assert!(err("clipboard_set", json!({"text": big})).starts_with("clipboard_set: text holds 1048577 bytes"));
         assert_eq!(err("state", json!({"window": "x"})), "state: unknown argument \"window\"");
     }
 
