@@ -66,13 +66,18 @@ pub enum ClipboardData {
 
 pub use arena_shared::cmdline::CommandSpec;
 
+/// The line [`powershell_command`] puts before a script: its output in the ANSI code
+/// page, which is how the Windows backend decodes a program's output
+/// (`[Console]::OutputEncoding` is the OEM code page otherwise); in a `try`, since a
+/// process without a console cannot set it, and the script runs either way.
+pub const POWERSHELL_PROLOGUE: &str = "try { [Console]::OutputEncoding = [System.Text.Encoding]::Default } catch {}";
+
 /// Windows PowerShell running `script`: no profile, no prompts, the script passed as
-/// `-EncodedCommand` (base64 of UTF-16LE, so no quoting of the line can go wrong), and
-/// its output written in the ANSI code page, which is how the Windows backend decodes
-/// a program's output (`[Console]::OutputEncoding` is the OEM code page otherwise).
+/// `-EncodedCommand` (base64 of UTF-16LE, so no quoting of the line can go wrong), after
+/// [`POWERSHELL_PROLOGUE`].
 pub fn powershell_command(script: &str) -> CommandSpec {
     use base64::Engine as _;
-    let whole = format!("[Console]::OutputEncoding = [System.Text.Encoding]::Default\n{script}");
+    let whole = format!("{POWERSHELL_PROLOGUE}\n{script}");
     let utf16: Vec<u8> = whole.encode_utf16().flat_map(u16::to_le_bytes).collect();
     let encoded = base64::engine::general_purpose::STANDARD.encode(utf16);
     CommandSpec::Argv(
@@ -286,11 +291,22 @@ mod tests {
     fn powershell_gets_the_script_encoded_whole() {
         let script = "Get-ChildItem \"C:\\a b\" | % { $_.Name } # ü";
         let CommandSpec::Argv(argv) = powershell_command(script) else { panic!("an argument vector") };
-        assert_eq!(argv[..7], ["powershell.exe", "-NoLogo", "-NoProfile", "-NonInteractive", "-ExecutionPolicy", "Bypass", "-EncodedCommand"]);
+        assert_eq!(
+            argv[..7],
+            [
+                "powershell.exe",
+                "-NoLogo",
+                "-NoProfile",
+                "-NonInteractive",
+                "-ExecutionPolicy",
+                "Bypass",
+                "-EncodedCommand"
+            ]
+        );
         use base64::Engine as _;
         let bytes = base64::engine::general_purpose::STANDARD.decode(&argv[7]).expect("base64");
         let units: Vec<u16> = bytes.chunks_exact(2).map(|p| u16::from_le_bytes([p[0], p[1]])).collect();
         let decoded = String::from_utf16(&units).expect("UTF-16LE");
-        assert_eq!(decoded, format!("[Console]::OutputEncoding = [System.Text.Encoding]::Default\n{script}"));
+        assert_eq!(decoded, format!("{POWERSHELL_PROLOGUE}\n{script}"));
     }
 }

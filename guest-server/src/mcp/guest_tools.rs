@@ -3,7 +3,8 @@
 //! the shell (`shell`, refused without `--mcp-shell`) and numbered elements (`state`,
 //! `click_element`, `type_into_element`). Each calls the [`Desktop`] through
 //! [`crate::call::blocking`], as every tool does; input-like tools take the input lock's
-//! shared side, as the input tools do.
+//! shared side, as the input tools do, and the actions an element tool makes are checked
+//! as `/v1/actions` checks a batch (`crate::native::input::validate`) before any runs.
 //!
 //! Where a behaviour exists already it is reused: `launch_app` starts a program as
 //! Navi's `computer.os.open_program` does (`arena_script::Composed::open_program`),
@@ -30,6 +31,7 @@ use arena_shared::window_list::{foreground_title_of, window_names};
 
 use crate::call::blocking;
 use crate::desktop::{cancel, ClipboardData, Desktop, DesktopError, DesktopResult, ExecLimits, WindowState};
+use crate::native::input::validate;
 use crate::script_host::DesktopHost;
 use crate::state::AppState;
 
@@ -83,7 +85,10 @@ pub async fn call(
         ToolCall::LaunchApp { name } => {
             let _input = state.input_share().await;
             let wait = LAUNCH_WAIT.min(timeout);
-            answer(tool, blocking(desktop, "launch_app", timeout + wait, move |d| launch(d, &name, timeout, wait)).await)
+            answer(
+                tool,
+                blocking(desktop, "launch_app", timeout + wait, move |d| launch(d, &name, timeout, wait)).await,
+            )
         }
         ToolCall::SwitchWindow { title } => {
             let _input = state.input_share().await;
@@ -190,45 +195,28 @@ pub async fn call(
             )
         }
         ToolCall::ClickElement { element, button, clicks } => {
-            let found = lock(elements).get(element).cloned();
-            let found = match found {
+            let found = match lock(elements).get(element).cloned() {
                 Ok(found) => found,
                 Err(message) => return tool_error(format!("{tool}: {message}")),
             };
-            let _input = state.input_share().await;
-            answer(
-                tool,
-                blocking(desktop, "click_element", timeout, move |d| {
-                    act_on(d, element, &found, |p| vec![click(p, button, clicks)])
-                })
-                .await,
-            )
+            let actions = vec![click(found.centre(), button, clicks)];
+            act_on_element(state, tool, "click_element", element, found, actions).await
         }
         ToolCall::TypeIntoElement { element, text: typed, clear, press_enter } => {
-            let found = lock(elements).get(element).cloned();
-            let found = match found {
+            let found = match lock(elements).get(element).cloned() {
                 Ok(found) => found,
                 Err(message) => return tool_error(format!("{tool}: {message}")),
             };
-            let _input = state.input_share().await;
-            answer(
-                tool,
-                blocking(desktop, "type_into_element", timeout, move |d| {
-                    act_on(d, element, &found, |p| {
-                        let mut actions = vec![click(p, MouseButton::Left, 1)];
-                        if clear {
-                            actions.push(Action::Hotkey { keys: vec!["ctrl".into(), "a".into()] });
-                            actions.push(Action::KeyPress { key: "backspace".into(), presses: 1 });
-                        }
-                        actions.push(Action::TypeText { text: typed, interval_ms: None });
-                        if press_enter {
-                            actions.push(Action::KeyPress { key: "enter".into(), presses: 1 });
-                        }
-                        actions
-                    })
-                })
-                .await,
-            )
+            let mut actions = vec![click(found.centre(), MouseButton::Left, 1)];
+            if clear {
+                actions.push(Action::Hotkey { keys: vec!["ctrl".into(), "a".into()] });
+                actions.push(Action::KeyPress { key: "backspace".into(), presses: 1 });
+            }
+            actions.push(Action::TypeText { text: typed, interval_ms: None });
+            if press_enter {
+                actions.push(Action::KeyPress { key: "enter".into(), presses: 1 });
+            }
+            act_on_element(state, tool, "type_into_element", element, found, actions).await
         }
         other => tool_error(format!("{tool}: not a guest tool ({other:?})")),
     }
@@ -258,21 +246,34 @@ fn element_json(e: &Element) -> Value {
     value
 }
 
-/// Checks that `element` is where its state saw it, then performs what `actions` makes
-/// of its centre.
-fn act_on(
-    d: &dyn Desktop,
+/// `click_element` and `type_into_element`: `actions` (made of the element's centre)
+/// checked as `/v1/actions` checks a batch, then, under the input lock's shared side,
+/// performed in order once the element is where its state saw it.
+async fn act_on_element(
+    state: &AppState,
+    tool: &str,
+    op: &'static str,
     number: u64,
-    element: &Element,
-    actions: impl FnOnce(arena_shared::geometry::Point) -> Vec<Action>,
-) -> DesktopResult<Result<Value, String>> {
+    element: Element,
+    actions: Vec<Action>,
+) -> CallToolResponse {
+    let timeout = state.call_timeout();
+    if let Err(err) = validate(&actions, timeout) {
+        return tool_error(format!("{tool}: {err}"));
+    }
+    let _input = state.input_share().await;
+    answer(tool, blocking(&state.desktop, op, timeout, move |d| act_on(d, number, &element, &actions)).await)
+}
+
+/// Checks that `element` is where its state saw it, then performs `actions`.
+fn act_on(d: &dyn Desktop, number: u64, element: &Element, actions: &[Action]) -> DesktopResult<Result<Value, String>> {
     if let Err(message) = interactive::check_current(number, element, &d.windows()?) {
         return Ok(Err(message));
     }
-    let centre = element.centre();
-    for action in actions(centre) {
-        d.perform(&action)?;
+    for action in actions {
+        d.perform(action)?;
     }
+    let centre = element.centre();
     Ok(Ok(json!({"ok": true, "element": number, "x": centre.x, "y": centre.y})))
 }
 
@@ -289,7 +290,9 @@ fn find_window(windows: &[WindowInfo], title: &str) -> Result<WindowInfo, String
         .find(|w| w.title == title)
         .or_else(|| ordered.iter().find(|w| w.title.to_lowercase().contains(&wanted)))
         .map(|w| (*w).clone())
-        .ok_or_else(|| format!("no window is titled {title:?} or has it in its title; open windows: {:?}", window_names(windows)))
+        .ok_or_else(|| {
+            format!("no window is titled {title:?} or has it in its title; open windows: {:?}", window_names(windows))
+        })
 }
 
 /// `resize_window`: the show state, then the position and size.
@@ -427,11 +430,15 @@ mod tests {
 
     #[test]
     fn a_window_is_found_by_its_title_then_by_a_part_of_it() {
-        let windows = [window(1, "notes.txt - Notepad", 0), window(2, "Notepad", 1), window(3, "Untitled - Notepad", 2)];
+        let windows =
+            [window(1, "notes.txt - Notepad", 0), window(2, "Notepad", 1), window(3, "Untitled - Notepad", 2)];
         assert_eq!(find_window(&windows, "Notepad").map(|w| w.id), Ok(2), "the exact title first");
         assert_eq!(find_window(&windows, "untitled").map(|w| w.id), Ok(3));
         assert_eq!(find_window(&windows, "notepad").map(|w| w.id), Ok(1), "the topmost that contains it");
         let missing = find_window(&windows, "Paint").expect_err("none");
-        assert!(missing.contains("no window is titled \"Paint\"") && missing.contains("Untitled - Notepad"), "{missing}");
+        assert!(
+            missing.contains("no window is titled \"Paint\"") && missing.contains("Untitled - Notepad"),
+            "{missing}"
+        );
     }
 }
