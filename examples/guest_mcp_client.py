@@ -1,8 +1,9 @@
 """Drives a guest's desktop over MCP with the official MCP Python SDK (`pip install mcp`):
-starts Notepad, finds its text area among the numbered elements of `state`, types
-into it, copies the text and reads it back from the clipboard, then tries `shell`
-(refused unless the guest runs with --mcp-shell). Prints one JSON object saying what
-each step answered.
+lists the tools, starts Notepad, finds its text area among the numbered elements of
+`state`, types into it, copies the text and reads it back from the clipboard, puts
+other text on the clipboard and reads that, checks that an old number is refused
+once a newer state has numbered the screen, then tries `shell` (refused unless the
+guest runs with --mcp-shell). Prints one JSON object saying what each step answered.
 
     arena-guest --backend stub --mcp --token A-TOKEN-OF-16-CHARS --port 5000 &
     python3 examples/guest_mcp_client.py http://127.0.0.1:5000/mcp A-TOKEN-OF-16-CHARS
@@ -49,9 +50,11 @@ async def drive(url, token, words):
                 )
                 await call(session, "press_keys", {"keys": ["ctrl", "a"]})
                 await call(session, "press_keys", {"keys": ["ctrl", "c"]})
-                said["clipboard"] = await call(session, "clipboard_get", {})
+                said["copied"] = await call(session, "clipboard_get", {})
+                await call(session, "clipboard_set", {"text": "Set by the Python SDK"})
+                said["set"] = await call(session, "clipboard_get", {})
 
-                # A newer state makes the old numbers stale.
+                # A newer state numbers on from the last: the old numbers are refused as stale.
                 await call(session, "state", {})
                 stale = await session.call_tool("click_element", {"element": text_area["element"]})
                 said["stale"] = {"is_error": bool(stale.is_error), "text": text_of(stale)}

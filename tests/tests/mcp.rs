@@ -9,19 +9,19 @@
 
 #![cfg(unix)]
 
-use std::io::{BufRead, BufReader, Write};
+use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
 use arena_host::results::summary::Summary;
+use arena_shared::mcp_tools::{self, GUEST_ONLY};
 use arena_test_support::workspace_binary;
 use rmcp::model::{CallToolRequestParams, CallToolResult, ClientConfig, ProtocolVersion};
 use rmcp::service::RunningService;
 use rmcp::transport::streamable_http_client::StreamableHttpClientTransportConfig;
 use rmcp::transport::StreamableHttpClientTransport;
 use rmcp::{RoleClient, ServiceExt};
-use arena_shared::mcp_tools::GUEST_ONLY;
 use serde_json::{json, Value};
 
 const TOKEN: &str = "mcp-test-token";
@@ -260,142 +260,236 @@ fn the_python_mcp_example_plays_two_stub_tasks() {
     assert!(summary.tasks.iter().all(|t| t.score == Some(1.0)), "{:?}", summary.tasks);
 }
 
+const GUEST_TOKEN: &str = "guest-secret-token-0123";
+
+/// `arena-guest --mcp` on the stub with `more` options; answers it and its MCP URL.
+fn guest_mcp(more: &[&str]) -> (arena_test_support::Served, String) {
+    let mut args = vec!["--mcp", "--token", GUEST_TOKEN];
+    args.extend_from_slice(more);
+    let guest = arena_test_support::Served::guest(&args).expect("arena-guest --mcp");
+    let url = format!("{}/mcp", guest.url.trim_end_matches('/'));
+    (guest, url)
+}
+
+/// A call that must succeed, its JSON text parsed.
+async fn ok(client: &RunningService<RoleClient, ClientConfig>, tool: &str, args: Value) -> Value {
+    let answer = call(client, tool, args).await;
+    assert_ne!(answer.is_error, Some(true), "{tool}: {answer:?}");
+    json_of(&answer)
+}
+
+/// A call that must fail, its message.
+async fn refused(client: &RunningService<RoleClient, ClientConfig>, tool: &str, args: Value) -> String {
+    let answer = call(client, tool, args).await;
+    assert_eq!(answer.is_error, Some(true), "{tool} should fail: {answer:?}");
+    text_of(&answer)
+}
+
+/// The guest's tools as the one table (`arena_shared::mcp_tools::tool_list`) gives them.
+fn guest_tool_table() -> Vec<&'static str> {
+    mcp_tools::tool_list(false).into_iter().map(|(name, _, _)| name).collect()
+}
+
 #[tokio::test(flavor = "multi_thread")]
 async fn the_guest_serves_mcp_behind_its_token() {
-    let guest =
-        arena_test_support::Served::guest(&["--mcp", "--token", "guest-secret-token-0123"]).expect("arena-guest --mcp");
-    let url = format!("{}/mcp", guest.url.trim_end_matches('/'));
+    let (_guest, url) = guest_mcp(&[]);
 
-    assert_bearer_checked(&url, "guest-secret-token-0123").await;
+    assert_bearer_checked(&url, GUEST_TOKEN).await;
 
-    let client = connect_with(&url, "guest-secret-token-0123").await;
+    let client = connect_with(&url, GUEST_TOKEN).await;
     let mut expected: Vec<&str> = DESKTOP_TOOLS.to_vec();
     expected.extend(GUEST_ONLY);
-    assert_eq!(tool_names(&client).await, expected, "the desktop tools and the guest's own, without the task and decision tools");
+    assert_eq!(guest_tool_table(), expected, "the desktop tools, then the guest's own");
+    assert_eq!(
+        tool_names(&client).await,
+        expected,
+        "the desktop tools and the guest's own, without the task and decision tools"
+    );
     assert_png(&call(&client, "screenshot", json!({})).await);
-    let typed = call(&client, "type_text", json!({"text": "hello"})).await;
-    assert_ne!(typed.is_error, Some(true), "{typed:?}");
-    let bad = call(&client, "get_task", json!({})).await;
-    assert_eq!(bad.is_error, Some(true), "no task tools on the guest: {bad:?}");
-    let ran = json_of(&call(&client, "run_python", json!({"code": "print(pyautogui.size())"})).await);
+    ok(&client, "type_text", json!({"text": "hello"})).await;
+    let bad = refused(&client, "get_task", json!({})).await;
+    assert!(bad.contains("unknown tool \"get_task\""), "no task tools on the guest: {bad}");
+    let ran = ok(&client, "run_python", json!({"code": "print(pyautogui.size())"})).await;
     assert_eq!(ran["exit_code"], json!(0), "{ran}");
     let _ = client.cancel().await;
 }
 
+/// The guest's section of docs/agents.md has one row per guest-only tool, in the
+/// table's order, and names each of its arguments.
+#[test]
+fn the_guest_tools_are_documented_as_the_table_has_them() {
+    let doc = std::fs::read_to_string(repo().join("docs/agents.md")).expect("docs/agents.md");
+    let section = doc.split("\n## The guest as an MCP server\n").nth(1).expect("the guest's section");
+    // Up to the next heading: the comparison with Windows-MCP that follows has a table too.
+    let section = section.split("\n#").next().expect("its text");
+    let rows: Vec<(&str, &str)> =
+        section.lines().filter_map(|line| line.strip_prefix("| `")).filter_map(|line| line.split_once("` |")).collect();
+    let names: Vec<&str> = rows.iter().map(|(name, _)| *name).collect();
+    assert_eq!(names, GUEST_ONLY, "the guest's tool table in docs/agents.md");
+    for (name, _, schema) in mcp_tools::tool_list(false) {
+        let Some((_, row)) = rows.iter().find(|(n, _)| *n == name) else { continue };
+        let arguments = schema["properties"].as_object().expect("properties");
+        for argument in arguments.keys() {
+            assert!(
+                row.contains(&format!("`{argument}`")),
+                "docs/agents.md's row for {name} names `{argument}`: {row}"
+            );
+        }
+    }
+}
+
 /// The guest's own tools on the stub: programs, windows, the clipboard and numbered
-/// elements; `shell` refused without `--mcp-shell`.
+/// elements (typing through one, stale numbers refused, bad input checked as
+/// `/v1/actions` checks it); `shell` refused without `--mcp-shell`.
 #[tokio::test(flavor = "multi_thread")]
 async fn the_guest_tools_drive_windows_programs_the_clipboard_and_elements() {
-    let token = "guest-secret-token-0123";
-    let guest = arena_test_support::Served::guest(&["--mcp", "--token", token]).expect("arena-guest --mcp");
-    let client = connect_with(&format!("{}/mcp", guest.url.trim_end_matches('/')), token).await;
-    let error_of = |r: CallToolResult| {
-        assert_eq!(r.is_error, Some(true), "{r:?}");
-        text_of(&r)
-    };
+    let (_guest, url) = guest_mcp(&[]);
+    let client = connect_with(&url, GUEST_TOKEN).await;
 
-    let launched = json_of(&call(&client, "launch_app", json!({"name": "notepad"})).await);
+    let launched = ok(&client, "launch_app", json!({"name": "notepad"})).await;
     assert_eq!(launched["window"], json!("Untitled - Notepad"), "{launched}");
-    let unknown = error_of(call(&client, "launch_app", json!({"name": "no-such-program-xyz"})).await);
-    assert!(unknown.contains("no-such-program-xyz"), "{unknown}");
-    let opened = json_of(&call(&client, "launch_app", json!({"name": "calc"})).await);
+    let unknown = refused(&client, "launch_app", json!({"name": "no-such-program-xyz"})).await;
+    assert!(unknown.contains("no program or Start menu shortcut is named \"no-such-program-xyz\""), "{unknown}");
+    let shell_syntax = refused(&client, "launch_app", json!({"name": "notepad & calc"})).await;
+    assert!(shell_syntax.contains("is not a program name"), "{shell_syntax}");
+    let opened = ok(&client, "launch_app", json!({"name": "calc"})).await;
     assert_eq!(opened["window"], json!("Calculator"), "{opened}");
 
     // Notepad, behind Calculator, comes to the front by a part of its title.
-    let switched = json_of(&call(&client, "switch_window", json!({"title": "notepad"})).await);
+    let switched = ok(&client, "switch_window", json!({"title": "notepad"})).await;
     assert_eq!(switched["window"], json!("Untitled - Notepad"), "{switched}");
-    let windows = json_of(&call(&client, "list_windows", json!({})).await);
+    let windows = ok(&client, "list_windows", json!({})).await;
     assert_eq!(windows["foreground"], json!("Untitled - Notepad"), "{windows}");
-    let missing = error_of(call(&client, "switch_window", json!({"title": "Paint"})).await);
+    let missing = refused(&client, "switch_window", json!({"title": "Paint"})).await;
     assert!(missing.contains("no window is titled \"Paint\""), "{missing}");
 
-    let resized = json_of(
-        &call(&client, "resize_window", json!({"title": "Notepad", "x": 100, "y": 50, "width": 640, "height": 480})).await,
-    );
+    let resized =
+        ok(&client, "resize_window", json!({"title": "Notepad", "x": 100, "y": 50, "width": 640, "height": 480})).await;
     assert_eq!(resized["rect"], json!({"x": 100, "y": 50, "width": 640, "height": 480}), "{resized}");
-    let maximised = json_of(&call(&client, "resize_window", json!({"state": "maximized"})).await);
-    assert_eq!((maximised["window"].as_str(), maximised["maximized"].as_bool()), (Some("Untitled - Notepad"), Some(true)));
-    let minimised = json_of(&call(&client, "resize_window", json!({"title": "Calculator", "state": "minimized"})).await);
+    let maximised = ok(&client, "resize_window", json!({"state": "maximized"})).await;
+    assert_eq!(
+        (maximised["window"].as_str(), maximised["maximized"].as_bool()),
+        (Some("Untitled - Notepad"), Some(true))
+    );
+    let minimised = ok(&client, "resize_window", json!({"title": "Calculator", "state": "minimized"})).await;
     assert_eq!(minimised["minimized"], json!(true), "{minimised}");
-    let desktop = error_of(call(&client, "resize_window", json!({"title": "Program Manager", "width": 5})).await);
+    let desktop = refused(&client, "resize_window", json!({"title": "Program Manager", "width": 5})).await;
     assert!(desktop.contains("the desktop itself"), "{desktop}");
 
-    assert_eq!(json_of(&call(&client, "clipboard_get", json!({}))).await)["format"], json!("empty"));
-    call(&client, "clipboard_set", json!({"text": "from the clipboard"})).await;
-    let clip = json_of(&call(&client, "clipboard_get", json!({})).await);
+    assert_eq!(ok(&client, "clipboard_get", json!({})).await["format"], json!("empty"));
+    ok(&client, "clipboard_set", json!({"text": "from the clipboard"})).await;
+    let clip = ok(&client, "clipboard_get", json!({})).await;
     assert_eq!((clip["format"].as_str(), clip["text"].as_str()), (Some("text"), Some("from the clipboard")), "{clip}");
 
     // Numbered elements: the maximised Notepad's text area, then its Close button.
-    let early = error_of(call(&client, "click_element", json!({"element": 1})).await);
+    let early = refused(&client, "click_element", json!({"element": 1})).await;
     assert!(early.contains("call state first"), "{early}");
-    let state = json_of(&call(&client, "state", json!({})).await);
+    let state = ok(&client, "state", json!({})).await;
     assert_eq!(state["foreground"], json!("Untitled - Notepad"), "{state}");
     let elements = state["elements"].as_array().expect("elements");
     let find = |role: &str, name: &str| {
         elements
             .iter()
-            .find(|e| e["window"] == json!("Untitled - Notepad") && e["role"] == json!(role) && e["name"] == json!(name))
+            .find(|e| {
+                e["window"] == json!("Untitled - Notepad") && e["role"] == json!(role) && e["name"] == json!(name)
+            })
             .unwrap_or_else(|| panic!("{role} {name:?} in {state}"))
             .clone()
     };
     let area = find("Document", "Text Editor");
     assert!(elements.iter().all(|e| e["window"] != json!("Calculator")), "a minimised window lists nothing: {state}");
     let number = area["element"].as_u64().expect("a number");
-    call(&client, "type_into_element", json!({"element": number, "text": "typed", "press_enter": true})).await;
-    call(&client, "type_into_element", json!({"element": number, "text": "again", "clear": true})).await;
+    ok(&client, "type_into_element", json!({"element": number, "text": "typed", "press_enter": true})).await;
+    ok(&client, "type_into_element", json!({"element": number, "text": "again", "clear": true})).await;
     let tree = text_of(&call(&client, "accessibility_tree", json!({})).await);
     assert!(tree.contains("again") && !tree.contains("typed"), "clear emptied the field first: {tree}");
-    let unknown = error_of(call(&client, "click_element", json!({"element": 100_000})).await);
+    // What the element tools type is checked as /v1/actions checks a type_text.
+    let huge = "x".repeat(arena_shared::action::MAX_TYPE_TEXT_BYTES + 1);
+    let too_long = refused(&client, "type_into_element", json!({"element": number, "text": huge})).await;
+    assert!(too_long.contains("type_text holds 1048577 bytes"), "{too_long}");
+    let tree = text_of(&call(&client, "accessibility_tree", json!({})).await);
+    assert!(tree.contains("again") && !tree.contains("xxxx"), "nothing was typed: the check runs before any action");
+    let unknown = refused(&client, "click_element", json!({"element": 100_000})).await;
     assert!(unknown.starts_with("click_element: element 100000 is unknown"), "{unknown}");
 
     // Moving the window makes its elements stale.
     let close = find("Button", "Close")["element"].as_u64().expect("a number");
-    call(&client, "resize_window", json!({"title": "Notepad", "state": "normal"})).await;
-    let stale = error_of(call(&client, "click_element", json!({"element": close})).await);
+    ok(&client, "resize_window", json!({"title": "Notepad", "state": "normal"})).await;
+    let stale = refused(&client, "click_element", json!({"element": close})).await;
     assert!(stale.contains(&format!("element {close} is stale")) && stale.contains("moved or was resized"), "{stale}");
+    // A new state numbers on from the last, so the old numbers stay stale.
+    let again = ok(&client, "state", json!({})).await;
+    let first = again["elements"][0]["element"].as_u64().expect("a number");
+    assert!(first > close, "numbers are not reused: {again}");
+    let old = refused(&client, "click_element", json!({"element": number})).await;
+    assert!(old.contains(&format!("element {number} is stale")), "{old}");
 
-    let refused = error_of(call(&client, "shell", json!({"command": "echo hi"})).await);
-    assert!(refused.contains("refused") && refused.contains("--mcp-shell"), "{refused}");
+    let shell = refused(&client, "shell", json!({"command": "echo hi"})).await;
+    assert!(shell.contains("refused") && shell.contains("--mcp-shell"), "{shell}");
     let _ = client.cancel().await;
 }
 
-/// `--mcp-shell` lets `shell` run a command line in the stub's shell.
+/// `--mcp-shell` lets `shell` run: on the stub, its simulated programs (the rest is
+/// refused, naming `--stub-host-exec`), and with `--stub-host-exec` a real `sh -c`.
 #[tokio::test(flavor = "multi_thread")]
 async fn the_guest_shell_runs_only_with_its_option() {
-    let token = "guest-secret-token-0123";
-    let guest = arena_test_support::Served::guest(&["--mcp", "--mcp-shell", "--token", token]).expect("arena-guest");
-    let client = connect_with(&format!("{}/mcp", guest.url.trim_end_matches('/')), token).await;
-    let ran = json_of(&call(&client, "shell", json!({"command": "echo shell-says-hi; exit 3"})).await);
+    let (_guest, url) = guest_mcp(&["--mcp-shell"]);
+    let client = connect_with(&url, GUEST_TOKEN).await;
+    let ran = ok(&client, "shell", json!({"command": "notepad"})).await;
+    assert_eq!(ran["exit_code"], json!(0), "{ran}");
+    let windows = ok(&client, "list_windows", json!({})).await;
+    assert_eq!(windows["foreground"], json!("Untitled - Notepad"), "the stub's Notepad opened: {windows}");
+    let real = refused(&client, "shell", json!({"command": "echo hi"})).await;
+    assert!(real.contains("--stub-host-exec"), "{real}");
+    let _ = client.cancel().await;
+
+    let (_guest, url) = guest_mcp(&["--mcp-shell", "--stub-host-exec"]);
+    let client = connect_with(&url, GUEST_TOKEN).await;
+    let ran = ok(&client, "shell", json!({"command": "echo shell-says-hi; exit 3"})).await;
     assert_eq!((ran["stdout"].as_str(), ran["exit_code"].as_i64()), (Some("shell-says-hi\n"), Some(3)), "{ran}");
     assert_eq!(ran["timed_out"], json!(false), "{ran}");
     let _ = client.cancel().await;
 }
 
-/// The official Python SDK (`mcp`) drives the guest: starts Notepad, types into its text
-/// area by the number `state` gave it, reads the clipboard, is refused `shell`, and ends
-/// its session without `Session termination failed` (the SDK's complaint about a
-/// `DELETE` answered anything but 200 or 204).
+/// `--mcp-shell` is an option of `--mcp`: alone it is refused at start.
+#[test]
+fn the_shell_option_needs_mcp() {
+    let exe = workspace_binary("arena-guest", "arena-guest").expect("the arena-guest binary");
+    let out = Command::new(exe).args(["--backend", "stub", "--mcp-shell"]).output().expect("arena-guest runs");
+    assert!(!out.status.success());
+    let said = String::from_utf8_lossy(&out.stderr);
+    assert!(said.contains("--mcp-shell") && said.contains("--mcp"), "{said}");
+}
+
+/// The official Python SDK (`mcp`) drives the guest: lists the tools, starts Notepad,
+/// types into its text area by the number `state` gave it, copies it and reads the
+/// clipboard, sets and reads the clipboard, is refused `shell`, and ends its session
+/// without `Session termination failed: 202` (the SDK's complaint about a `DELETE`
+/// answered anything but 200 or 204).
 #[test]
 fn the_python_sdk_drives_the_guest_and_ends_its_session_cleanly() {
     let test = "the_python_sdk_drives_the_guest_and_ends_its_session_cleanly";
     let Some(python) = arena_test_support::python_with_mcp(test) else { return };
-    let token = "guest-secret-token-0123";
-    let guest = arena_test_support::Served::guest(&["--mcp", "--token", token]).expect("arena-guest --mcp");
-    let url = format!("{}/mcp", guest.url.trim_end_matches('/'));
+    let (_guest, url) = guest_mcp(&[]);
     let ran = Command::new(python)
         .arg(repo().join("examples/guest_mcp_client.py"))
-        .args([url.as_str(), token, "Typed by the Python SDK"])
+        .args([url.as_str(), GUEST_TOKEN, "Typed by the Python SDK"])
         .output()
         .expect("the example runs");
     let (stdout, stderr) = (String::from_utf8_lossy(&ran.stdout), String::from_utf8_lossy(&ran.stderr));
     assert!(ran.status.success(), "{stdout}\n{stderr}");
-    assert!(!stderr.contains("Session termination failed"), "the session's end was answered as the SDK expects: {stderr}");
+    assert!(
+        !stderr.contains("Session termination failed"),
+        "the session's end was answered as the SDK expects: {stderr}"
+    );
     let said: Value = serde_json::from_str(stdout.trim()).unwrap_or_else(|e| panic!("{e}: {stdout}"));
     let names: Vec<&str> = said["tools"].as_array().expect("tools").iter().filter_map(Value::as_str).collect();
-    assert!(GUEST_ONLY.iter().all(|t| names.contains(t)), "{names:?}");
+    assert_eq!(names, guest_tool_table(), "{said}");
     assert_eq!(said["launched"]["window"], json!("Untitled - Notepad"), "{said}");
     assert_eq!(said["element"]["role"], json!("Document"), "{said}");
-    assert_eq!(said["clipboard"]["text"], json!("Typed by the Python SDK"), "{said}");
+    assert_eq!(said["typed"]["ok"], json!(true), "{said}");
+    assert_eq!(said["copied"]["text"], json!("Typed by the Python SDK"), "{said}");
+    assert_eq!(said["set"]["text"], json!("Set by the Python SDK"), "{said}");
     assert_eq!(said["stale"]["is_error"], json!(true), "{said}");
     assert!(said["stale"]["text"].as_str().is_some_and(|t| t.contains("is stale")), "{said}");
     assert_eq!(said["shell"]["is_error"], json!(true), "{said}");

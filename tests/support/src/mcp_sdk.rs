@@ -35,9 +35,14 @@ pub fn python_with_mcp(test: &str) -> Option<String> {
 
 /// The skip's line, or the failure when the SDK is required.
 fn skip(test: &str, candidate: &str, required: bool, out: &mut dyn std::io::Write) {
-    assert!(!required, "{test}: {candidate} cannot import the MCP SDK and {REQUIRE_MCP_SDK_VAR}=1 (set {MCP_PYTHON_VAR})");
+    assert!(
+        !required,
+        "{test}: {candidate} cannot import the MCP SDK and {REQUIRE_MCP_SDK_VAR}=1 (set {MCP_PYTHON_VAR})"
+    );
     // One write of the whole line, so output from other test threads cannot split it.
-    let line = format!("{SKIP_PREFIX}{test}: {MCP_SDK_SKIP}\n  ({candidate} cannot import mcp; .ci/run makes a venv with it)\n");
+    let line = format!(
+        "{SKIP_PREFIX}{test}: {MCP_SDK_SKIP}\n  ({candidate} cannot import mcp; .ci/run makes a venv with it)\n"
+    );
     let _ = out.write_all(line.as_bytes());
 }
 
@@ -50,7 +55,10 @@ mod tests {
         let mut out = Vec::new();
         skip("some_test", "python9", false, &mut out);
         let said = String::from_utf8(out).expect("utf-8");
-        assert!(said.starts_with("SKIPPED: some_test: no Python with the MCP SDK (set ARENA_MCP_PYTHON to one)\n"), "{said}");
+        assert!(
+            said.starts_with("SKIPPED: some_test: no Python with the MCP SDK (set ARENA_MCP_PYTHON to one)\n"),
+            "{said}"
+        );
         let failed = std::panic::catch_unwind(|| skip("some_test", "python9", true, &mut Vec::new()));
         let message = *failed.expect_err("fails").downcast::<String>().expect("message");
         assert!(message.contains("ARENA_REQUIRE_MCP_SDK=1"), "{message}");
