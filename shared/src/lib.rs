@@ -24,7 +24,8 @@
 //! - [`health`]: the staged readiness report; [`doctor`]: the end-to-end capability report.
 //! - [`error`]: the error body every native route answers with.
 //! - [`window_list`]: the window list and title the model is shown, as upstream builds them.
-//! - [`mcp_tools`]: the desktop tools both MCP servers offer, each call checked into an action.
+//! - [`mcp_tools`]: the desktop tools both MCP servers offer, each call checked into an action;
+//!   [`interactive`]: the numbered interactive elements of the `state` tool.
 //! - [`token`]: a bearer token parsed from a token file's text or an option, and the one
 //!   check of an `Authorization` header against it, which every server uses.
 //! - [`ntpath`]: Python 3.10's Windows path rules (`os.path` on upstream's guest).
@@ -58,6 +59,7 @@ pub mod files;
 pub mod geometry;
 pub mod health;
 pub mod imaging;
+pub mod interactive;
 pub mod keys;
 pub mod markup;
 pub mod mcp_tools;

@@ -2,16 +2,20 @@
 //! written with the official Rust SDK (`rmcp`) plays two stub tasks through the
 //! tools, a bad argument is a tool error on a session that lives on, the tool
 //! list has the documented names, and the bearer token is checked (refused without it);
-//! and `arena-guest --mcp`, the guest as an MCP server on its own.
+//! and `arena-guest --mcp`, the guest as an MCP server on its own: its own tools
+//! (programs, windows, the clipboard, numbered elements, the shell only with
+//! `--mcp-shell`), the official Python SDK driving Notepad through them and ending its
+//! session without a complaint, and the tool table of docs/agents.md against `tools/list`.
 
 #![cfg(unix)]
 
-use std::io::{BufRead, BufReader, Write};
+use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
 use arena_host::results::summary::Summary;
+use arena_shared::mcp_tools::{self, GUEST_ONLY};
 use arena_test_support::workspace_binary;
 use rmcp::model::{CallToolRequestParams, CallToolResult, ClientConfig, ProtocolVersion};
 use rmcp::service::RunningService;
@@ -236,26 +240,11 @@ async fn an_rmcp_client_plays_two_stub_tasks() {
     }
 }
 
-/// A Python with the official MCP SDK: `ARENA_MCP_PYTHON`, else `python3` when
-/// it imports `mcp`; without one, a loud skip (a failure with `ARENA_REQUIRE_MCP_SDK=1`).
-fn python_with_mcp(test: &str) -> Option<String> {
-    let candidate = std::env::var("ARENA_MCP_PYTHON").unwrap_or_else(|_| "python3".to_owned());
-    let ok = Command::new(&candidate).args(["-c", "import mcp, httpx2"]).output().is_ok_and(|o| o.status.success());
-    if ok {
-        return Some(candidate);
-    }
-    assert!(
-        std::env::var("ARENA_REQUIRE_MCP_SDK").as_deref() != Ok("1"),
-        "{test}: no Python with the MCP SDK ({candidate}) and ARENA_REQUIRE_MCP_SDK=1"
-    );
-    // Straight to the process's stderr: libtest captures println!, and test.sh counts this line.
-    let _ = writeln!(std::io::stderr(), "SKIPPED: {test}: no Python with the MCP SDK (set ARENA_MCP_PYTHON to one)");
-    None
-}
-
 #[test]
 fn the_python_mcp_example_plays_two_stub_tasks() {
-    let Some(python) = python_with_mcp("the_python_mcp_example_plays_two_stub_tasks") else { return };
+    let Some(python) = arena_test_support::python_with_mcp("the_python_mcp_example_plays_two_stub_tasks") else {
+        return;
+    };
     let tmp = tempfile::tempdir().expect("tmp");
     let tasks = tmp.path().join("tasks/mixed");
     for (domain, name) in [("notepad", "stub-notepad-draft"), ("settings", "stub-settings-infeasible")] {
@@ -269,29 +258,66 @@ fn the_python_mcp_example_plays_two_stub_tasks() {
         .output()
         .expect("the example runs");
     let said = String::from_utf8_lossy(&played.stdout);
-    assert!(played.status.success(), "{said}\n{}", String::from_utf8_lossy(&played.stderr));
+    let stderr = String::from_utf8_lossy(&played.stderr);
+    assert!(played.status.success(), "{said}\n{stderr}");
+    // The endpoint answers the session's DELETE as the SDK expects (arena_mcp::SessionEndOk).
+    assert!(!stderr.contains("Session termination failed"), "{stderr}");
     assert!(said.contains("stub-notepad-draft: 1.0") && said.contains("stub-settings-infeasible: 1.0"), "{said}");
     assert!(wait_exit(child, Duration::from_secs(60)).success());
     let summary = Summary::from_dir(&out).expect("summary");
     assert!(summary.tasks.iter().all(|t| t.score == Some(1.0)), "{:?}", summary.tasks);
 }
 
+const GUEST_TOKEN: &str = "guest-secret-token-0123";
+
+/// `arena-guest --mcp` on the stub with `more` options; answers it and its MCP URL.
+fn guest_mcp(more: &[&str]) -> (arena_test_support::Served, String) {
+    let mut args = vec!["--mcp", "--token", GUEST_TOKEN];
+    args.extend_from_slice(more);
+    let guest = arena_test_support::Served::guest(&args).expect("arena-guest --mcp");
+    let url = format!("{}/mcp", guest.url.trim_end_matches('/'));
+    (guest, url)
+}
+
+/// A call that must succeed, its JSON text parsed.
+async fn ok(client: &RunningService<RoleClient, ClientConfig>, tool: &str, args: Value) -> Value {
+    let answer = call(client, tool, args).await;
+    assert_ne!(answer.is_error, Some(true), "{tool}: {answer:?}");
+    json_of(&answer)
+}
+
+/// A call that must fail, its message.
+async fn refused(client: &RunningService<RoleClient, ClientConfig>, tool: &str, args: Value) -> String {
+    let answer = call(client, tool, args).await;
+    assert_eq!(answer.is_error, Some(true), "{tool} should fail: {answer:?}");
+    text_of(&answer)
+}
+
+/// The guest's tools as the one table (`arena_shared::mcp_tools::tool_list`) gives them.
+fn guest_tool_table() -> Vec<&'static str> {
+    mcp_tools::tool_list(false).into_iter().map(|(name, _, _)| name).collect()
+}
+
 #[tokio::test(flavor = "multi_thread")]
 async fn the_guest_serves_mcp_behind_its_token() {
-    let guest =
-        arena_test_support::Served::guest(&["--mcp", "--token", "guest-secret-token-0123"]).expect("arena-guest --mcp");
-    let url = format!("{}/mcp", guest.url.trim_end_matches('/'));
+    let (_guest, url) = guest_mcp(&[]);
 
-    assert_bearer_checked(&url, "guest-secret-token-0123").await;
+    assert_bearer_checked(&url, GUEST_TOKEN).await;
 
-    let client = connect_with(&url, "guest-secret-token-0123").await;
-    assert_eq!(tool_names(&client).await, DESKTOP_TOOLS, "the desktop tools, without the task and decision tools");
+    let client = connect_with(&url, GUEST_TOKEN).await;
+    let mut expected: Vec<&str> = DESKTOP_TOOLS.to_vec();
+    expected.extend(GUEST_ONLY);
+    assert_eq!(guest_tool_table(), expected, "the desktop tools, then the guest's own");
+    assert_eq!(
+        tool_names(&client).await,
+        expected,
+        "the desktop tools and the guest's own, without the task and decision tools"
+    );
     assert_png(&call(&client, "screenshot", json!({})).await);
-    let typed = call(&client, "type_text", json!({"text": "hello"})).await;
-    assert_ne!(typed.is_error, Some(true), "{typed:?}");
-    let bad = call(&client, "get_task", json!({})).await;
-    assert_eq!(bad.is_error, Some(true), "no task tools on the guest: {bad:?}");
-    let ran = json_of(&call(&client, "run_python", json!({"code": "print(pyautogui.size())"})).await);
+    ok(&client, "type_text", json!({"text": "hello"})).await;
+    let bad = refused(&client, "get_task", json!({})).await;
+    assert!(bad.contains("unknown tool \"get_task\""), "no task tools on the guest: {bad}");
+    let ran = ok(&client, "run_python", json!({"code": "print(pyautogui.size())"})).await;
     assert_eq!(ran["exit_code"], json!(0), "{ran}");
     let _ = client.cancel().await;
 }
@@ -414,4 +440,186 @@ async fn a_task_whose_mcp_session_went_away_before_acting_goes_to_the_next_sessi
     let log = std::fs::read_to_string(&log_path).expect("the run's stderr");
     assert!(log.contains("opened") && log.contains("lost its stream"), "sessions are said: {log}");
     assert_eq!(log.matches("went away before acting; the task goes back to the queue").count(), 2, "{log}");
+}
+
+/// The guest's section of docs/agents.md has one row per guest-only tool, in the
+/// table's order, and names each of its arguments.
+#[test]
+fn the_guest_tools_are_documented_as_the_table_has_them() {
+    let doc = std::fs::read_to_string(repo().join("docs/agents.md")).expect("docs/agents.md");
+    let section = doc.split("\n## The guest as an MCP server\n").nth(1).expect("the guest's section");
+    // Up to the next heading: the comparison with Windows-MCP that follows has a table too.
+    let section = section.split("\n#").next().expect("its text");
+    let rows: Vec<(&str, &str)> =
+        section.lines().filter_map(|line| line.strip_prefix("| `")).filter_map(|line| line.split_once("` |")).collect();
+    let names: Vec<&str> = rows.iter().map(|(name, _)| *name).collect();
+    assert_eq!(names, GUEST_ONLY, "the guest's tool table in docs/agents.md");
+    for (name, _, schema) in mcp_tools::tool_list(false) {
+        let Some((_, row)) = rows.iter().find(|(n, _)| *n == name) else { continue };
+        let arguments = schema["properties"].as_object().expect("properties");
+        for argument in arguments.keys() {
+            assert!(
+                row.contains(&format!("`{argument}`")),
+                "docs/agents.md's row for {name} names `{argument}`: {row}"
+            );
+        }
+    }
+}
+
+/// The guest's own tools on the stub: programs, windows, the clipboard and numbered
+/// elements (typing through one, stale numbers refused, bad input checked as
+/// `/v1/actions` checks it); `shell` refused without `--mcp-shell`.
+#[tokio::test(flavor = "multi_thread")]
+async fn the_guest_tools_drive_windows_programs_the_clipboard_and_elements() {
+    let (_guest, url) = guest_mcp(&[]);
+    let client = connect_with(&url, GUEST_TOKEN).await;
+
+    let launched = ok(&client, "launch_app", json!({"name": "notepad"})).await;
+    assert_eq!(launched["window"], json!("Untitled - Notepad"), "{launched}");
+    let unknown = refused(&client, "launch_app", json!({"name": "no-such-program-xyz"})).await;
+    assert!(unknown.contains("no program or Start menu shortcut is named \"no-such-program-xyz\""), "{unknown}");
+    let shell_syntax = refused(&client, "launch_app", json!({"name": "notepad & calc"})).await;
+    assert!(shell_syntax.contains("is not a program name"), "{shell_syntax}");
+    let opened = ok(&client, "launch_app", json!({"name": "calc"})).await;
+    assert_eq!(opened["window"], json!("Calculator"), "{opened}");
+
+    // Notepad, behind Calculator, comes to the front by a part of its title.
+    let switched = ok(&client, "switch_window", json!({"title": "notepad"})).await;
+    assert_eq!(switched["window"], json!("Untitled - Notepad"), "{switched}");
+    let windows = ok(&client, "list_windows", json!({})).await;
+    assert_eq!(windows["foreground"], json!("Untitled - Notepad"), "{windows}");
+    let missing = refused(&client, "switch_window", json!({"title": "Paint"})).await;
+    assert!(missing.contains("no window is titled \"Paint\""), "{missing}");
+
+    let resized =
+        ok(&client, "resize_window", json!({"title": "Notepad", "x": 100, "y": 50, "width": 640, "height": 480})).await;
+    assert_eq!(resized["rect"], json!({"x": 100, "y": 50, "width": 640, "height": 480}), "{resized}");
+    let maximised = ok(&client, "resize_window", json!({"state": "maximized"})).await;
+    assert_eq!(
+        (maximised["window"].as_str(), maximised["maximized"].as_bool()),
+        (Some("Untitled - Notepad"), Some(true))
+    );
+    let minimised = ok(&client, "resize_window", json!({"title": "Calculator", "state": "minimized"})).await;
+    assert_eq!(minimised["minimized"], json!(true), "{minimised}");
+    let desktop = refused(&client, "resize_window", json!({"title": "Program Manager", "width": 5})).await;
+    assert!(desktop.contains("the desktop itself"), "{desktop}");
+
+    assert_eq!(ok(&client, "clipboard_get", json!({})).await["format"], json!("empty"));
+    ok(&client, "clipboard_set", json!({"text": "from the clipboard"})).await;
+    let clip = ok(&client, "clipboard_get", json!({})).await;
+    assert_eq!((clip["format"].as_str(), clip["text"].as_str()), (Some("text"), Some("from the clipboard")), "{clip}");
+
+    // Numbered elements: the maximised Notepad's text area, then its Close button.
+    let early = refused(&client, "click_element", json!({"element": 1})).await;
+    assert!(early.contains("call state first"), "{early}");
+    let state = ok(&client, "state", json!({})).await;
+    assert_eq!(state["foreground"], json!("Untitled - Notepad"), "{state}");
+    let elements = state["elements"].as_array().expect("elements");
+    let find = |role: &str, name: &str| {
+        elements
+            .iter()
+            .find(|e| {
+                e["window"] == json!("Untitled - Notepad") && e["role"] == json!(role) && e["name"] == json!(name)
+            })
+            .unwrap_or_else(|| panic!("{role} {name:?} in {state}"))
+            .clone()
+    };
+    let area = find("Document", "Text Editor");
+    assert!(elements.iter().all(|e| e["window"] != json!("Calculator")), "a minimised window lists nothing: {state}");
+    let number = area["element"].as_u64().expect("a number");
+    ok(&client, "type_into_element", json!({"element": number, "text": "typed", "press_enter": true})).await;
+    ok(&client, "type_into_element", json!({"element": number, "text": "again", "clear": true})).await;
+    let tree = text_of(&call(&client, "accessibility_tree", json!({})).await);
+    assert!(tree.contains("again") && !tree.contains("typed"), "clear emptied the field first: {tree}");
+    // What the element tools type is checked as /v1/actions checks a type_text.
+    let huge = "x".repeat(arena_shared::action::MAX_TYPE_TEXT_BYTES + 1);
+    let too_long = refused(&client, "type_into_element", json!({"element": number, "text": huge})).await;
+    assert!(too_long.contains("type_text holds 1048577 bytes"), "{too_long}");
+    let tree = text_of(&call(&client, "accessibility_tree", json!({})).await);
+    assert!(tree.contains("again") && !tree.contains("xxxx"), "nothing was typed: the check runs before any action");
+    let unknown = refused(&client, "click_element", json!({"element": 100_000})).await;
+    assert!(unknown.starts_with("click_element: element 100000 is unknown"), "{unknown}");
+
+    // Moving the window makes its elements stale.
+    let close = find("Button", "Close")["element"].as_u64().expect("a number");
+    ok(&client, "resize_window", json!({"title": "Notepad", "state": "normal"})).await;
+    let stale = refused(&client, "click_element", json!({"element": close})).await;
+    assert!(stale.contains(&format!("element {close} is stale")) && stale.contains("moved or was resized"), "{stale}");
+    // A new state numbers on from the last, so the old numbers stay stale.
+    let again = ok(&client, "state", json!({})).await;
+    let first = again["elements"][0]["element"].as_u64().expect("a number");
+    assert!(first > close, "numbers are not reused: {again}");
+    let old = refused(&client, "click_element", json!({"element": number})).await;
+    assert!(old.contains(&format!("element {number} is stale")), "{old}");
+
+    let shell = refused(&client, "shell", json!({"command": "echo hi"})).await;
+    assert!(shell.contains("refused") && shell.contains("--mcp-shell"), "{shell}");
+    let _ = client.cancel().await;
+}
+
+/// `--mcp-shell` lets `shell` run: on the stub, its simulated programs (the rest is
+/// refused, naming `--stub-host-exec`), and with `--stub-host-exec` a real `sh -c`.
+#[tokio::test(flavor = "multi_thread")]
+async fn the_guest_shell_runs_only_with_its_option() {
+    let (_guest, url) = guest_mcp(&["--mcp-shell"]);
+    let client = connect_with(&url, GUEST_TOKEN).await;
+    let ran = ok(&client, "shell", json!({"command": "notepad"})).await;
+    assert_eq!(ran["exit_code"], json!(0), "{ran}");
+    let windows = ok(&client, "list_windows", json!({})).await;
+    assert_eq!(windows["foreground"], json!("Untitled - Notepad"), "the stub's Notepad opened: {windows}");
+    let real = refused(&client, "shell", json!({"command": "echo hi"})).await;
+    assert!(real.contains("--stub-host-exec"), "{real}");
+    let _ = client.cancel().await;
+
+    let (_guest, url) = guest_mcp(&["--mcp-shell", "--stub-host-exec"]);
+    let client = connect_with(&url, GUEST_TOKEN).await;
+    let ran = ok(&client, "shell", json!({"command": "echo shell-says-hi; exit 3"})).await;
+    assert_eq!((ran["stdout"].as_str(), ran["exit_code"].as_i64()), (Some("shell-says-hi\n"), Some(3)), "{ran}");
+    assert_eq!(ran["timed_out"], json!(false), "{ran}");
+    let _ = client.cancel().await;
+}
+
+/// `--mcp-shell` is an option of `--mcp`: alone it is refused at start.
+#[test]
+fn the_shell_option_needs_mcp() {
+    let exe = workspace_binary("arena-guest", "arena-guest").expect("the arena-guest binary");
+    let out = Command::new(exe).args(["--backend", "stub", "--mcp-shell"]).output().expect("arena-guest runs");
+    assert!(!out.status.success());
+    let said = String::from_utf8_lossy(&out.stderr);
+    assert!(said.contains("--mcp-shell") && said.contains("--mcp"), "{said}");
+}
+
+/// The official Python SDK (`mcp`) drives the guest: lists the tools, starts Notepad,
+/// types into its text area by the number `state` gave it, copies it and reads the
+/// clipboard, sets and reads the clipboard, is refused `shell`, and ends its session
+/// without `Session termination failed: 202` (the SDK's complaint about a `DELETE`
+/// answered anything but 200 or 204).
+#[test]
+fn the_python_sdk_drives_the_guest_and_ends_its_session_cleanly() {
+    let test = "the_python_sdk_drives_the_guest_and_ends_its_session_cleanly";
+    let Some(python) = arena_test_support::python_with_mcp(test) else { return };
+    let (_guest, url) = guest_mcp(&[]);
+    let ran = Command::new(python)
+        .arg(repo().join("examples/guest_mcp_client.py"))
+        .args([url.as_str(), GUEST_TOKEN, "Typed by the Python SDK"])
+        .output()
+        .expect("the example runs");
+    let (stdout, stderr) = (String::from_utf8_lossy(&ran.stdout), String::from_utf8_lossy(&ran.stderr));
+    assert!(ran.status.success(), "{stdout}\n{stderr}");
+    assert!(
+        !stderr.contains("Session termination failed"),
+        "the session's end was answered as the SDK expects: {stderr}"
+    );
+    let said: Value = serde_json::from_str(stdout.trim()).unwrap_or_else(|e| panic!("{e}: {stdout}"));
+    let names: Vec<&str> = said["tools"].as_array().expect("tools").iter().filter_map(Value::as_str).collect();
+    assert_eq!(names, guest_tool_table(), "{said}");
+    assert_eq!(said["launched"]["window"], json!("Untitled - Notepad"), "{said}");
+    assert_eq!(said["element"]["role"], json!("Document"), "{said}");
+    assert_eq!(said["typed"]["ok"], json!(true), "{said}");
+    assert_eq!(said["copied"]["text"], json!("Typed by the Python SDK"), "{said}");
+    assert_eq!(said["set"]["text"], json!("Set by the Python SDK"), "{said}");
+    assert_eq!(said["stale"]["is_error"], json!(true), "{said}");
+    assert!(said["stale"]["text"].as_str().is_some_and(|t| t.contains("is stale")), "{said}");
+    assert_eq!(said["shell"]["is_error"], json!(true), "{said}");
+    assert!(said["shell"]["text"].as_str().is_some_and(|t| t.contains("--mcp-shell")), "{said}");
 }

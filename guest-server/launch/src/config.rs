@@ -211,6 +211,12 @@ pub struct ServerConfig {
     #[arg(long, env = "ARENA_MCP")]
     pub mcp: bool,
 
+    /// With `--mcp`: let MCP clients run command lines in the guest's shell (the `shell`
+    /// tool: PowerShell on Windows, the stub's shell elsewhere). Off by default, and
+    /// `shell` is then refused: a shell reaches everything the server's account can.
+    #[arg(long, env = "ARENA_MCP_SHELL", requires = "mcp")]
+    pub mcp_shell: bool,
+
     /// Set by the Windows service's supervisor on the worker it starts: the worker shuts
     /// down gracefully when its standard input closes (the supervisor's stop signal, which
     /// also fires when the supervisor dies) and logs without colours, since its output
@@ -267,6 +273,7 @@ impl ServerConfig {
             setup_status: None,
             log_format: LogFormat::Text,
             mcp: false,
+            mcp_shell: false,
             worker: false,
         }
     }

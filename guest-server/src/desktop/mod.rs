@@ -25,7 +25,7 @@ use std::path::PathBuf;
 
 use arena_shared::action::Action;
 use arena_shared::files::KnownFolder;
-use arena_shared::geometry::Point;
+use arena_shared::geometry::{Point, Rect};
 use arena_shared::health::Component;
 use arena_shared::observation::{A11yBackend, A11yTree, ScreenInfo, TreeBudget, WindowInfo};
 use arena_shared::registry::RegistryValue;
@@ -65,6 +65,29 @@ pub enum ClipboardData {
 }
 
 pub use arena_shared::cmdline::CommandSpec;
+
+/// The line [`powershell_command`] puts before a script: its output in the ANSI code
+/// page, which is how the Windows backend decodes a program's output
+/// (`[Console]::OutputEncoding` is the OEM code page otherwise); in a `try`, since a
+/// process without a console cannot set it, and the script runs either way.
+pub const POWERSHELL_PROLOGUE: &str = "try { [Console]::OutputEncoding = [System.Text.Encoding]::Default } catch {}";
+
+/// Windows PowerShell running `script`: no profile, no prompts, the script passed as
+/// `-EncodedCommand` (base64 of UTF-16LE, so no quoting of the line can go wrong), after
+/// [`POWERSHELL_PROLOGUE`].
+pub fn powershell_command(script: &str) -> CommandSpec {
+    use base64::Engine as _;
+    let whole = format!("{POWERSHELL_PROLOGUE}\n{script}");
+    let utf16: Vec<u8> = whole.encode_utf16().flat_map(u16::to_le_bytes).collect();
+    let encoded = base64::engine::general_purpose::STANDARD.encode(utf16);
+    CommandSpec::Argv(
+        ["powershell.exe", "-NoLogo", "-NoProfile", "-NonInteractive", "-ExecutionPolicy", "Bypass", "-EncodedCommand"]
+            .iter()
+            .map(|s| (*s).to_owned())
+            .chain(std::iter::once(encoded))
+            .collect(),
+    )
+}
 
 /// Limits on [`Desktop::run`].
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -158,6 +181,18 @@ pub trait Desktop: Send + Sync + std::fmt::Debug {
     /// Asks a window to close (`WM_CLOSE`): the program may refuse or prompt.
     fn close_window(&self, id: u64) -> DesktopResult<()>;
 
+    /// Moves and sizes a window to `rect` (its outer rectangle), restoring it first
+    /// when it is minimised or maximised. The desktop itself cannot be moved.
+    ///
+    /// # Errors
+    ///
+    /// [`DesktopError::NotFound`] for a window that is gone; [`DesktopError::Unsupported`]
+    /// where the backend cannot move windows.
+    fn move_window(&self, id: u64, rect: Rect) -> DesktopResult<()> {
+        let _ = (id, rect);
+        Err(DesktopError::Unsupported(format!("the {} backend cannot move windows", self.kind())))
+    }
+
     // ----- accessibility -----
 
     /// Walks the accessibility tree of the visible top-level windows within `budget`.
@@ -237,6 +272,41 @@ pub trait Desktop: Send + Sync + std::fmt::Debug {
     /// Starts a program without waiting; returns its process id.
     fn spawn(&self, cmd: &CommandSpec) -> DesktopResult<u32>;
 
+    /// How the desktop's shell runs a command line a person types (the MCP `shell`
+    /// tool): the stub's shell (`sh -c`, `cmd /c` in the Windows exe) by default;
+    /// PowerShell on the Windows backend ([`powershell_command`]).
+    fn shell_command(&self, line: &str) -> CommandSpec {
+        CommandSpec::Shell(line.to_owned())
+    }
+
     /// Shuts the machine down.
     fn shutdown(&self) -> DesktopResult<()>;
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn powershell_gets_the_script_encoded_whole() {
+        let script = "Get-ChildItem \"C:\\a b\" | % { $_.Name } # ü";
+        let CommandSpec::Argv(argv) = powershell_command(script) else { panic!("an argument vector") };
+        assert_eq!(
+            argv[..7],
+            [
+                "powershell.exe",
+                "-NoLogo",
+                "-NoProfile",
+                "-NonInteractive",
+                "-ExecutionPolicy",
+                "Bypass",
+                "-EncodedCommand"
+            ]
+        );
+        use base64::Engine as _;
+        let bytes = base64::engine::general_purpose::STANDARD.decode(&argv[7]).expect("base64");
+        let units: Vec<u16> = bytes.chunks_exact(2).map(|p| u16::from_le_bytes([p[0], p[1]])).collect();
+        let decoded = String::from_utf16(&units).expect("UTF-16LE");
+        assert_eq!(decoded, format!("{POWERSHELL_PROLOGUE}\n{script}"));
+    }
 }

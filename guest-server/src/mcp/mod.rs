@@ -5,14 +5,17 @@
 //!
 //! The tools are the desktop tools of `arena_shared::mcp_tools` (the same names
 //! and arguments as the host's benchmark endpoint), without `get_task`, `done`
-//! and `fail`; the handler, the tool table and the result shapes are `arena_mcp`'s,
-//! which the host's endpoint shares. Each tool calls the
-//! [`Desktop`](crate::desktop::Desktop) through [`crate::call::blocking`], as the
+//! and `fail`, and the guest's own tools ([`guest_tools`]: programs, windows, the
+//! clipboard, the shell, numbered elements); the handler, the tool table and the
+//! result shapes are `arena_mcp`'s, which the host's endpoint shares. Each tool calls
+//! the [`Desktop`](crate::desktop::Desktop) through [`crate::call::blocking`], as the
 //! native routes do; `run_python` runs in the shared interpreter.
+
+pub mod guest_tools;
 
 use std::time::{Duration, Instant};
 
-use arena_mcp::{image_png, text, tool_error, BoundedSessions, Server, SessionLimits, ToolServer};
+use arena_mcp::{image_png, text, tool_error, BoundedSessions, Server, SessionEndOk, SessionLimits, ToolServer};
 use base64::Engine as _;
 use rmcp::model::{CallToolRequestParams, CallToolResponse};
 use rmcp::transport::streamable_http_server::StreamableHttpService;
@@ -32,26 +35,29 @@ use crate::state::AppState;
 /// The `/mcp` service: one [`GuestMcp`] per session, at most `--mcp-max-sessions`
 /// open (a new one closes the one idle longest), each closed after
 /// `--mcp-idle-secs` without a call, a call whose client hung up cancelled
-/// ([`arena_mcp::BoundedSessions`]). rmcp's own `Host` check is off because
+/// ([`arena_mcp::BoundedSessions`]), a session's `DELETE` answered `200`
+/// ([`SessionEndOk`]). rmcp's own `Host` check is off because
 /// [`crate::auth::guard`] in front of it already makes that decision for every
 /// route (loopback names, `--allow-host`).
-pub fn service(state: AppState) -> StreamableHttpService<Server<GuestMcp>, BoundedSessions> {
+pub fn service(state: AppState) -> SessionEndOk<StreamableHttpService<Server<GuestMcp>, BoundedSessions>> {
     let config = arena_mcp::http_config().disable_allowed_hosts();
     let limits = SessionLimits {
         max_sessions: state.config.mcp_max_sessions as usize,
         idle: Duration::from_secs(state.config.mcp_idle_secs),
     };
-    StreamableHttpService::new(
-        move || Ok(Server(GuestMcp { state: state.clone() })),
+    SessionEndOk(StreamableHttpService::new(
+        move || Ok(Server(GuestMcp { state: state.clone(), elements: guest_tools::Elements::default() })),
         BoundedSessions::new(limits),
         config,
-    )
+    ))
 }
 
 /// One MCP session over the guest's desktop.
 #[derive(Debug, Clone)]
 pub struct GuestMcp {
     state: AppState,
+    /// The elements this session's latest `state` numbered.
+    elements: guest_tools::Elements,
 }
 
 fn failed(tool: &str, err: &DesktopError) -> CallToolResponse {
@@ -128,6 +134,7 @@ impl GuestMcp {
             }
             ToolCall::RunPython(code) => self.run_python(&tool, code, screen).await,
             ToolCall::GetTask | ToolCall::Done | ToolCall::Fail => tool_error(format!("unknown tool {tool:?}")),
+            guest => guest_tools::call(&self.state, &self.elements, &tool, guest, screen).await,
         }
     }
 
@@ -175,7 +182,8 @@ impl ToolServer for GuestMcp {
     const NAME: &'static str = "arena-guest";
     const VERSION: &'static str = env!("CARGO_PKG_VERSION");
     const INSTRUCTIONS: &'static str =
-        "The desktop of this machine: screenshot, accessibility tree, windows, mouse and keyboard.";
+        "The desktop of this machine: screenshot, accessibility tree, numbered interactive elements (state), windows, \
+         programs, the clipboard, mouse and keyboard.";
     const WITH_TASK: bool = false;
 
     async fn call(&self, request: CallToolRequestParams) -> CallToolResponse {

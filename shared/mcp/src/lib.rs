@@ -5,8 +5,9 @@
 //! offers the tools of [`arena_shared::mcp_tools`] ([`tools`]), answers with the
 //! result shapes both use ([`text`], [`image_png`], [`tool_error`]), speaks the
 //! protocol revisions up to [`MAX_PROTOCOL`], and is served with the same
-//! streamable-HTTP settings ([`http_config`]) and the same bounded sessions
-//! ([`BoundedSessions`]: a cap, idle expiry, hung-up calls cancelled).
+//! streamable-HTTP settings ([`http_config`]), the same bounded sessions
+//! ([`BoundedSessions`]: a cap, idle expiry, hung-up calls cancelled) and the
+//! session's end answered as the official SDKs expect ([`SessionEndOk`]).
 //!
 //! What is not here: the tools' names, arguments and checks (`arena_shared::mcp_tools`),
 //! the bearer check (`arena_shared::token::bearer_matches`, which every server of the
@@ -20,7 +21,9 @@ pub use sessions::{BoundedSessions, CloseReason, SessionEvent, SessionEvents, Se
 
 use std::borrow::Cow;
 use std::future::Future;
+use std::pin::Pin;
 use std::sync::Arc;
+use std::task::{Context, Poll};
 use std::time::Duration;
 
 use rmcp::model::{
@@ -75,6 +78,48 @@ pub fn tool_error(message: impl Into<String>) -> CallToolResponse {
 /// adds its own `Host` rule and shutdown.
 pub fn http_config() -> StreamableHttpServerConfig {
     StreamableHttpServerConfig::default().with_sse_keep_alive(Some(SSE_KEEP_ALIVE)).enforce_origin_validation()
+}
+
+/// A streamable-HTTP MCP service (rmcp's `StreamableHttpService`) whose answer to a
+/// session's `DELETE` is `200 OK` instead of rmcp's `202 Accepted`.
+///
+/// The MCP specification (transports, "Session Management") lets a client end its
+/// session with `DELETE` and names only `405` as an answer, for servers that do not
+/// allow it; it says nothing of the success status. The official SDKs' servers answer
+/// `200` (the Python SDK's `StreamableHTTPServerTransport._handle_delete_request`, the
+/// TypeScript SDK's `handleDeleteRequest`), and the Python SDK's client, which every
+/// Python MCP user has, takes `200` and `204` as success and logs
+/// `Session termination failed: 202` for anything else (`mcp` 2.3.0,
+/// `mcp/client/streamable_http.py`, `terminate_session`). The session is closed when
+/// rmcp answers; only the status changes, and only for `DELETE` (a `POST` of a
+/// notification keeps its `202`).
+#[derive(Debug, Clone)]
+pub struct SessionEndOk<S>(pub S);
+
+impl<S, B, R> tower_service::Service<http::Request<B>> for SessionEndOk<S>
+where
+    S: tower_service::Service<http::Request<B>, Response = http::Response<R>>,
+    S::Future: Send + 'static,
+{
+    type Response = http::Response<R>;
+    type Error = S::Error;
+    type Future = Pin<Box<dyn Future<Output = Result<http::Response<R>, S::Error>> + Send>>;
+
+    fn poll_ready(&mut self, cx: &mut Context<'_>) -> Poll<Result<(), Self::Error>> {
+        self.0.poll_ready(cx)
+    }
+
+    fn call(&mut self, request: http::Request<B>) -> Self::Future {
+        let delete = request.method() == http::Method::DELETE;
+        let answer = self.0.call(request);
+        Box::pin(async move {
+            let mut response = answer.await?;
+            if delete && response.status() == http::StatusCode::ACCEPTED {
+                *response.status_mut() = http::StatusCode::OK;
+            }
+            Ok(response)
+        })
+    }
 }
 
 /// What one MCP server does with its tools; [`Server`] does the rest.
@@ -178,6 +223,40 @@ mod tests {
         assert!(info.capabilities.tools.is_some());
         let versions = server.supported_protocol_versions();
         assert_eq!(versions.last(), Some(&MAX_PROTOCOL));
+    }
+
+    /// Answers every request `202 Accepted`, as rmcp answers a session's `DELETE` and a notification.
+    #[derive(Clone)]
+    struct Accepts;
+
+    impl tower_service::Service<http::Request<()>> for Accepts {
+        type Response = http::Response<()>;
+        type Error = std::convert::Infallible;
+        type Future = std::future::Ready<Result<http::Response<()>, std::convert::Infallible>>;
+
+        fn poll_ready(&mut self, _cx: &mut Context<'_>) -> Poll<Result<(), Self::Error>> {
+            Poll::Ready(Ok(()))
+        }
+
+        fn call(&mut self, _request: http::Request<()>) -> Self::Future {
+            let mut response = http::Response::new(());
+            *response.status_mut() = http::StatusCode::ACCEPTED;
+            std::future::ready(Ok(response))
+        }
+    }
+
+    #[tokio::test]
+    async fn a_session_delete_is_answered_200_and_nothing_else_changes() {
+        use tower_service::Service as _;
+        let mut service = SessionEndOk(Accepts);
+        let mut status = |method: http::Method| {
+            let request = http::Request::builder().method(method).uri("/mcp").body(()).expect("a request");
+            service.call(request)
+        };
+        let deleted = status(http::Method::DELETE).await.expect("an answer");
+        assert_eq!(deleted.status(), http::StatusCode::OK, "what the Python SDK's client takes as success");
+        let posted = status(http::Method::POST).await.expect("an answer");
+        assert_eq!(posted.status(), http::StatusCode::ACCEPTED, "a notification's 202 stays");
     }
 
     #[tokio::test]

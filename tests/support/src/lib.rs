@@ -9,6 +9,7 @@
 //! - [`wine_or_skip`]: the Wine pieces the Windows-backend suite needs, or a loud skip.
 //! - [`standin_image`]: the QEMU stand-in guest image and `qemu-system-x86_64`, or a
 //!   loud, counted skip.
+//! - [`python_with_mcp`]: a Python with the official MCP SDK, or a loud, counted skip.
 //! - [`eventually`] (feature `guest`): polling a condition until it holds or a deadline passes.
 //! - [`png_claiming`]: a PNG header claiming any size, for the image guards.
 //! - [`copy_stub_task`]: a stub task with its host-side gold, copied for a test.
@@ -20,13 +21,15 @@
 //!
 //! Layout: `guest.rs` (in-process launcher), `process.rs` (child-process launcher),
 //! `corpus.rs` (corpus locator), `wine.rs` (Wine locator), `standin.rs` (stand-in
-//! image locator), `wait.rs` (polling), `png.rs` (PNG bombs), `stub_tasks.rs` (the stub tasks).
+//! image locator), `mcp_sdk.rs` (MCP SDK locator), `wait.rs` (polling), `png.rs` (PNG bombs),
+//! `stub_tasks.rs` (the stub tasks).
 
 #![forbid(unsafe_code)]
 
 mod corpus;
 #[cfg(feature = "guest")]
 mod guest;
+mod mcp_sdk;
 mod png;
 mod process;
 mod standin;
@@ -38,6 +41,7 @@ mod wine;
 pub use corpus::{waa_corpus, CORPUS_VAR, REQUIRE_CORPUS_VAR, SKIP_PREFIX};
 #[cfg(feature = "guest")]
 pub use guest::StubGuest;
+pub use mcp_sdk::{python_with_mcp, MCP_PYTHON_VAR, MCP_SDK_SKIP, REQUIRE_MCP_SDK_VAR};
 pub use png::png_claiming;
 pub use process::{
     agent_pythonpath, bench_guests, gui_agents_python_or_skip, python3_or_skip, workspace_binary, workspace_root,

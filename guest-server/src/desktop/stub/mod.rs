@@ -708,6 +708,10 @@ impl Desktop for StubDesktop {
         self.lock().close(id)
     }
 
+    fn move_window(&self, id: u64, rect: Rect) -> DesktopResult<()> {
+        self.lock().move_window(id, rect)
+    }
+
     fn accessibility(
         &self,
         backend: A11yBackend,

@@ -831,6 +831,21 @@ impl State {
         self.activate(id)
     }
 
+    /// `SetWindowPos` after a restore: the window takes `rect` (no longer minimised or
+    /// maximised) and keeps its place in the z-order and the focus.
+    pub(crate) fn move_window(&mut self, id: u64, rect: Rect) -> DesktopResult<()> {
+        let index = self.index(id)?;
+        let window = &mut self.windows[index];
+        if window.is_desktop {
+            return Err(DesktopError::PermissionDenied("Program Manager (the desktop) cannot be moved".into()));
+        }
+        window.minimized = false;
+        window.maximized = false;
+        window.rect = rect;
+        window.restore_rect = rect;
+        Ok(())
+    }
+
     /// `WM_CLOSE`: the window goes away unless it refuses.
     pub(crate) fn close(&mut self, id: u64) -> DesktopResult<()> {
         let index = self.index(id)?;

@@ -12,7 +12,7 @@ use std::time::Instant;
 
 use arena_shared::action::Action;
 use arena_shared::files::KnownFolder;
-use arena_shared::geometry::Point;
+use arena_shared::geometry::{Point, Rect};
 use arena_shared::health::Component;
 use arena_shared::observation::{A11yBackend, A11yTree, ScreenInfo, TreeBudget, WindowInfo};
 use arena_shared::registry::RegistryValue;
@@ -269,6 +269,11 @@ impl Desktop for WindowsDesktop {
         window::close(id)
     }
 
+    fn move_window(&self, id: u64, rect: Rect) -> DesktopResult<()> {
+        self.need_desktop("move window")?;
+        window::move_to(id, rect)
+    }
+
     fn accessibility(
         &self,
         backend: A11yBackend,
@@ -373,6 +378,10 @@ impl Desktop for WindowsDesktop {
 
     fn spawn(&self, cmd: &CommandSpec) -> DesktopResult<u32> {
         process::spawn(cmd)
+    }
+
+    fn shell_command(&self, line: &str) -> CommandSpec {
+        crate::desktop::powershell_command(line)
     }
 
     fn shutdown(&self) -> DesktopResult<()> {

@@ -18,7 +18,8 @@ use windows::Win32::UI::Input::KeyboardAndMouse::{
 use windows::Win32::UI::WindowsAndMessaging::{
     BringWindowToTop, EnumWindows, GetClassNameW, GetForegroundWindow, GetWindowLongPtrW, GetWindowRect,
     GetWindowTextW, GetWindowThreadProcessId, IsIconic, IsWindow, IsWindowVisible, IsZoomed, PostMessageW,
-    SetForegroundWindow, ShowWindow, GWL_EXSTYLE, GWL_STYLE, SW_MAXIMIZE, SW_MINIMIZE, SW_RESTORE, WM_CLOSE,
+    SetForegroundWindow, SetWindowPos, ShowWindow, GWL_EXSTYLE, GWL_STYLE, SWP_NOACTIVATE, SWP_NOZORDER, SW_MAXIMIZE,
+    SW_MINIMIZE, SW_RESTORE, WM_CLOSE,
 };
 
 use super::shell;
@@ -280,6 +281,21 @@ pub(super) fn set_state(id: u64, state: WindowState) -> DesktopResult<()> {
     // SAFETY: hwnd names a window; the return value is the previous visibility, not an error.
     let _ = unsafe { ShowWindow(hwnd, cmd) };
     Ok(())
+}
+
+/// Moves and sizes `id` to `rect`, restoring it first when it is minimised or
+/// maximised (a maximised window's position is the work area's, not its own).
+pub(super) fn move_to(id: u64, rect: Rect) -> DesktopResult<()> {
+    let hwnd = live(id)?;
+    // SAFETY: hwnd names a window; ShowWindow's result is the previous visibility, not an error.
+    unsafe {
+        if IsIconic(hwnd).as_bool() || IsZoomed(hwnd).as_bool() {
+            let _ = ShowWindow(hwnd, SW_RESTORE);
+        }
+    }
+    // SAFETY: hwnd names a window; no z-order or activation change is asked for.
+    unsafe { SetWindowPos(hwnd, None, rect.x, rect.y, rect.width, rect.height, SWP_NOZORDER | SWP_NOACTIVATE) }
+        .map_err(|err| os("move window", &err))
 }
 
 /// Posts `WM_CLOSE` to `id` (never waits for the program).
