@@ -48,9 +48,12 @@ fn chromium() -> Option<PathBuf> {
     candidates.into_iter().find(|p| p.is_file())
 }
 
+/// A request the mock got: its headers and body.
+type Request = (HeaderMap, Value);
+
 /// The Messages API mock: answers its replies in order and keeps each request.
 #[derive(Clone, Default)]
-struct Mock(Arc<Mutex<(Vec<Value>, Vec<(HeaderMap, Value)>)>>);
+struct Mock(Arc<Mutex<(Vec<Value>, Vec<Request>)>>);
 
 async fn answer(State(mock): State<Mock>, headers: HeaderMap, Json(body): Json<Value>) -> Json<Value> {
     let mut script = mock.0.lock().expect("the mock's lock");
@@ -89,7 +92,7 @@ fn stub_task(name: &str) -> Task {
 /// in-process stub guest (five steps: solved), then the infeasible task (the mock,
 /// its script used up, says DONE: failed by the agent); answers the draft's
 /// folder and the requests of each episode.
-async fn computer_use_episodes(root: &Path) -> (PathBuf, Vec<Vec<(HeaderMap, Value)>>) {
+async fn computer_use_episodes(root: &Path) -> (PathBuf, Vec<Vec<Request>>) {
     let replies = vec![
         tool_use("toolu_1", FIRST_TEXT, json!({"action": "left_click", "coordinate": [640, 400]}), (1234, 56)),
         tool_use(
@@ -142,7 +145,7 @@ async fn computer_use_episodes(root: &Path) -> (PathBuf, Vec<Vec<(HeaderMap, Val
 }
 
 /// Each request is a Messages API request for the `computer` tool (anthropic-python's types).
-fn check_requests(requests: &[(HeaderMap, Value)], steps: usize) {
+fn check_requests(requests: &[Request], steps: usize) {
     assert_eq!(requests.len(), steps);
     for (n, (headers, body)) in requests.iter().enumerate() {
         let header = |name: &str| headers.get(name).and_then(|v| v.to_str().ok()).unwrap_or_default().to_owned();
