@@ -546,6 +546,11 @@ fn replies_of_each_vendor_shape_and_the_report_filter() {
     s.response = "../../response-step_0_x.json".into();
     let reply = super::viewer::reply_of(dir.path(), &s, &Value::Null);
     assert_eq!((reply.record, reply.texts[0].1.as_str()), (None, "../../response-step_0_x.json"));
+    // A reply that only looks like a record name, with no such file: its text, and why it is no record.
+    s.response = "response-step_9_nothing.json".into();
+    let reply = super::viewer::reply_of(dir.path(), &s, &Value::Null);
+    assert_eq!(reply.texts[0].1, "response-step_9_nothing.json");
+    assert!(reply.problem.is_some_and(|p| p.starts_with("response-step_9_nothing.json: ")));
 
     // The report's filter offers each domain, status and "Failed by" of the run.
     write_task(root.path(), "settings", "b", 1.0, EpisodeStatus::Completed);

@@ -97,7 +97,11 @@ pub fn reply_of(dir: &Path, step: &StepRecord, line: &Value) -> Reply {
                 }
                 None => reply.texts.push(("record".into(), pretty(&value))),
             },
-            Err(problem) => reply.problem = Some(problem),
+            Err(problem) => {
+                // Not a record after all (or one that is gone): the text as it was recorded.
+                reply.texts.push(("text".into(), step.response.clone()));
+                reply.problem = Some(problem);
+            }
         }
     } else if !response.is_empty() {
         reply.texts.push(("text".into(), step.response.clone()));
