@@ -771,6 +771,9 @@ fn action_text(action: &crate::ports::AgentAction) -> String {
 }
 
 /// Scans `root`, writes `summary.json`, `summary.md` and `report.html` there, and returns the summary.
+/// Each task's `traj.html` is written again from its records too, so a folder
+/// written by an older version (or merged from several) gets the current viewer;
+/// a page that cannot be written is logged and the report goes on.
 ///
 /// # Errors
 ///
@@ -782,5 +785,12 @@ pub fn write_report(root: &Path, title: &str) -> Result<(Summary, PathBuf), Resu
     summary.write(root)?;
     let path = root.join(REPORT_HTML);
     write_atomic(&path, render(&summary, &found, title).as_bytes())?;
+    for task in &found {
+        if let Some(episode) = &task.episode {
+            if let Err(err) = write_task_page(&task.dir, episode) {
+                tracing::warn!(error = %err, "the task's page was not written again");
+            }
+        }
+    }
     Ok((summary, path))
 }

@@ -552,9 +552,12 @@ fn replies_of_each_vendor_shape_and_the_report_filter() {
     assert_eq!(reply.texts[0].1, "response-step_9_nothing.json");
     assert!(reply.problem.is_some_and(|p| p.starts_with("response-step_9_nothing.json: ")));
 
-    // The report's filter offers each domain, status and "Failed by" of the run.
+    // The report's filter offers each domain, status and "Failed by" of the run;
+    // writing the report writes each task's page again (a folder of an older version gets the viewer).
     write_task(root.path(), "settings", "b", 1.0, EpisodeStatus::Completed);
+    std::fs::write(dir.path().join(TRAJ_HTML), "old").unwrap();
     let (_, path) = html::write_report(root.path(), "run").unwrap();
+    assert!(std::fs::read_to_string(dir.path().join(TRAJ_HTML)).unwrap().contains("class=\"step\""));
     let page = std::fs::read_to_string(path).unwrap();
     for option in ["<option value=\"notepad\">", "<option value=\"settings\">", "<option value=\"completed\">"] {
         assert!(page.contains(option), "{option}: {page}");
