@@ -445,4 +445,9 @@ async fn a_computer_use_task_page_shows_the_models_text_a_click_marker_where_it_
     assert_eq!(page.eval(&choose("failed-by", "-")).await, json!(["1 of 2 tasks shown", ["notepad"], 1]));
     assert_eq!(page.eval(&choose("failed-by", "agent")).await, json!(["1 of 2 tasks shown", ["settings"], 1]));
     assert_eq!(page.eval(&choose("domain", "notepad")).await, json!(["0 of 2 tasks shown", [], 0]));
+    // A task's link in the table opens its section.
+    let follow = "new Promise(function (resolve) { var a = document.querySelector('#tasks a');\
+        var target = document.getElementById(a.getAttribute('href').slice(1)); var before = target.open;\
+        addEventListener('hashchange', function () { resolve([before, target.open]); }, {once: true}); a.click(); })";
+    assert_eq!(page.eval(follow).await, json!([false, true]));
 }

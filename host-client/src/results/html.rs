@@ -104,6 +104,15 @@ const SCRIPT: &str = r#"(function () {
     if (old) { old.classList.remove("current"); }
     step.classList.add("current");
   });
+  // A link to a task or a step opens the sections around it.
+  function openTarget() {
+    var el = location.hash.length > 1 ? document.getElementById(decodeURIComponent(location.hash.slice(1))) : null;
+    for (; el; el = el.parentElement) {
+      if (el.tagName === "DETAILS") { el.open = true; }
+    }
+  }
+  window.addEventListener("hashchange", openTarget);
+  openTarget();
   var filter = document.getElementById("filter");
   if (!filter) { return; }
   function apply() {
