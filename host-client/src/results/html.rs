@@ -638,7 +638,9 @@ fn step_html(
     cursor: Option<(i32, i32)>,
 ) -> (String, Option<(i32, i32)>) {
     let src = url_path(&format!("{rel}/{}", step.screenshot_file));
-    let size = image::image_dimensions(dir.join(&step.screenshot_file)).ok();
+    // The screenshot's size from its header, for a file of the task folder (a record names nothing else).
+    let plain = !step.screenshot_file.contains(['/', '\\']) && !step.screenshot_file.starts_with('.');
+    let size = plain.then(|| image::image_dimensions(dir.join(&step.screenshot_file)).ok()).flatten();
     let coords =
         line.get("coords").and_then(serde_json::Value::as_str).and_then(viewer::coords_named).unwrap_or(coords);
     let (marks, after) = viewer::marks_of(step, size.unwrap_or((1, 1)), coords, cursor);
