@@ -366,6 +366,7 @@ async fn a_computer_use_task_page_shows_the_models_text_a_click_marker_where_it_
         .expect("a click with its position in step 1");
     assert_eq!(clicked, (720, 450));
     let shot = image::image_dimensions(dir.join(step["screenshot_file"].as_str().expect("screenshot"))).expect("png");
+    assert_eq!(step["screen"], json!([shot.0, shot.1]), "the screen the actions are measured on is the screenshot's");
     let (input, output) = (step["usage"]["input"].as_u64(), step["usage"]["output"].as_u64());
     assert_eq!((input, output), (Some(1234), Some(56)));
     assert!(step["response"].as_str().is_some_and(|r| r.starts_with("response-step_0_")), "{step}");

@@ -563,13 +563,16 @@ fn mark_colour(kind: MarkKind) -> &'static str {
 }
 
 /// A marker as SVG in the screenshot's pixels, `r` its ring's radius there.
-fn mark_svg(n: usize, mark: &viewer::Mark, r: f64) -> String {
+fn mark_svg(n: usize, mark: &viewer::Mark, r: f64, scale: (f64, f64)) -> String {
     let c = mark_colour(mark.kind);
-    let (x, y) = mark.at;
+    // Drawn in the screenshot's pixels; `data-x`/`data-y` keep the recorded screen pixels.
+    let (x, y) = (f64::from(mark.at.0) * scale.0, f64::from(mark.at.1) * scale.1);
     let w = r / 4.0;
     let mut g = format!(
-        "<g class=\"mark\" data-n=\"{n}\" data-kind=\"{}\" data-x=\"{x}\" data-y=\"{y}\" data-action=\"{}\"",
+        "<g class=\"mark\" data-n=\"{n}\" data-kind=\"{}\" data-x=\"{}\" data-y=\"{}\" data-action=\"{}\"",
         mark.kind.name(),
+        mark.at.0,
+        mark.at.1,
         mark.action
     );
     if let Some((x2, y2)) = mark.to {
@@ -584,42 +587,43 @@ fn mark_svg(n: usize, mark: &viewer::Mark, r: f64) -> String {
     let ring = if mark.kind == MarkKind::Move { r / 2.0 } else { r };
     let _ = write!(
         g,
-        "<circle class=\"ring\" cx=\"{x}\" cy=\"{y}\" r=\"{ring:.1}\" fill=\"none\" stroke=\"{c}\" stroke-width=\"{w:.1}\"{dash}/>"
+        "<circle class=\"ring\" cx=\"{x:.1}\" cy=\"{y:.1}\" r=\"{ring:.1}\" fill=\"none\" stroke=\"{c}\" stroke-width=\"{w:.1}\"{dash}/>"
     );
     if mark.kind == MarkKind::DoubleClick {
         let _ = write!(
             g,
-            "<circle cx=\"{x}\" cy=\"{y}\" r=\"{:.1}\" fill=\"none\" stroke=\"{c}\" stroke-width=\"{w:.1}\"/>",
+            "<circle cx=\"{x:.1}\" cy=\"{y:.1}\" r=\"{:.1}\" fill=\"none\" stroke=\"{c}\" stroke-width=\"{w:.1}\"/>",
             r * 1.45
         );
     }
     if let Some((x2, y2)) = mark.to {
+        let (x2, y2) = (f64::from(x2) * scale.0, f64::from(y2) * scale.1);
         let _ = write!(
             g,
-            "<line x1=\"{x}\" y1=\"{y}\" x2=\"{x2}\" y2=\"{y2}\" stroke=\"{c}\" stroke-width=\"{w:.1}\"/>\
-             <circle class=\"end\" cx=\"{x2}\" cy=\"{y2}\" r=\"{r:.1}\" fill=\"none\" stroke=\"{c}\" stroke-width=\"{w:.1}\"/>"
+            "<line x1=\"{x:.1}\" y1=\"{y:.1}\" x2=\"{x2:.1}\" y2=\"{y2:.1}\" stroke=\"{c}\" stroke-width=\"{w:.1}\"/>\
+             <circle class=\"end\" cx=\"{x2:.1}\" cy=\"{y2:.1}\" r=\"{r:.1}\" fill=\"none\" stroke=\"{c}\" stroke-width=\"{w:.1}\"/>"
         );
     }
     if mark.kind == MarkKind::Scroll {
         // An arrow the way the page moves under the wheel: up for a positive dy.
         let (dx, dy) = mark.scroll;
         let (ux, uy) = (f64::from(dx.signum()), -f64::from(dy.signum()));
-        let (ex, ey) = (f64::from(x) + ux * r * 2.2, f64::from(y) + uy * r * 2.2);
+        let (ex, ey) = (x + ux * r * 2.2, y + uy * r * 2.2);
         let _ = write!(
             g,
-            "<line x1=\"{x}\" y1=\"{y}\" x2=\"{ex:.1}\" y2=\"{ey:.1}\" stroke=\"{c}\" stroke-width=\"{w:.1}\"/>\
+            "<line x1=\"{x:.1}\" y1=\"{y:.1}\" x2=\"{ex:.1}\" y2=\"{ey:.1}\" stroke=\"{c}\" stroke-width=\"{w:.1}\"/>\
              <circle cx=\"{ex:.1}\" cy=\"{ey:.1}\" r=\"{:.1}\" fill=\"{c}\"/>",
             w * 1.2
         );
     }
     if mark.kind != MarkKind::Move {
-        let _ = write!(g, "<circle class=\"dot\" cx=\"{x}\" cy=\"{y}\" r=\"{:.1}\" fill=\"{c}\"/>", r / 3.0);
+        let _ = write!(g, "<circle class=\"dot\" cx=\"{x:.1}\" cy=\"{y:.1}\" r=\"{:.1}\" fill=\"{c}\"/>", r / 3.0);
     }
     let _ = write!(
         g,
         "<text x=\"{:.1}\" y=\"{:.1}\" font-size=\"{:.1}\" font-family=\"sans-serif\" font-weight=\"bold\" fill=\"{c}\" stroke=\"#fff\" stroke-width=\"{:.1}\" paint-order=\"stroke\">{n}</text></g>",
-        f64::from(x) + r * 1.1,
-        f64::from(y) - r * 1.1,
+        x + r * 1.1,
+        y - r * 1.1,
         r * 1.3,
         r / 4.0
     );
@@ -643,7 +647,14 @@ fn step_html(
     let size = plain.then(|| image::image_dimensions(dir.join(&step.screenshot_file)).ok()).flatten();
     let coords =
         line.get("coords").and_then(serde_json::Value::as_str).and_then(viewer::coords_named).unwrap_or(coords);
-    let (marks, after) = viewer::marks_of(step, size.unwrap_or((1, 1)), coords, cursor);
+    // Actions are in the screen's physical pixels, which the step records; the
+    // screenshot is of the same screen (the same size, unless a capture was scaled).
+    let screen = step.screen.map(|[w, h]| (w, h)).filter(|&(w, h)| w > 0 && h > 0).or(size);
+    let (marks, after) = viewer::marks_of(step, screen.unwrap_or((1, 1)), coords, cursor);
+    let scale = match (size, screen) {
+        (Some((sw, sh)), Some((w, h))) => (f64::from(sw) / f64::from(w), f64::from(sh) / f64::from(h)),
+        _ => (1.0, 1.0),
+    };
     let n = step.step;
     let mut s = format!(
         "<section class=\"step\" id=\"{task_id}-step-{n}\" data-step=\"{n}\"><div class=\"shot\"><a href=\"{src}\"><img loading=\"lazy\" src=\"{src}\" alt=\"step {n} screenshot\"{}></a>",
@@ -656,7 +667,7 @@ fn step_html(
             "<svg class=\"marks\" xmlns=\"http://www.w3.org/2000/svg\" viewBox=\"0 0 {w} {h}\" preserveAspectRatio=\"none\" aria-hidden=\"true\">"
         );
         for (i, mark) in marks.iter().enumerate() {
-            s.push_str(&mark_svg(i + 1, mark, r));
+            s.push_str(&mark_svg(i + 1, mark, r, scale));
         }
         s.push_str("</svg>");
     }
@@ -738,7 +749,16 @@ fn step_html(
         s.push_str("</ol>");
     }
     if !marks.is_empty() {
-        s.push_str("<h4>Markers</h4><ol class=\"legend\">");
+        s.push_str("<h4>Markers</h4>");
+        if let (Some((sw, sh)), Some((w, h))) = (size, screen) {
+            if (sw, sh) != (w, h) {
+                let _ = write!(
+                    s,
+                    "<p class=\"meta scaled\">positions in the screen's {w}x{h} pixels, drawn on the {sw}x{sh} screenshot</p>"
+                );
+            }
+        }
+        s.push_str("<ol class=\"legend\">");
         for mark in &marks {
             let _ = write!(s, "<li>action {}: {}</li>", mark.action, escape(&mark.describe()));
         }

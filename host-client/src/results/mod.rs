@@ -354,6 +354,11 @@ pub struct StepRecord {
     /// Per-action outcomes the agent's executor reported (free-form).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub outcomes: Vec<Value>,
+    /// The guest's screen in physical pixels when the step was observed (width,
+    /// height): the space of the step's typed actions, which the viewer maps onto
+    /// the screenshot's pixels.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub screen: Option<[u32; 2]>,
     /// The tokens and model time of the step's prediction (the cost ledger),
     /// when the agent reports them.
     #[serde(default, skip_serializing_if = "Option::is_none")]

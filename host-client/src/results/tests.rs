@@ -58,6 +58,7 @@ fn step(n: u32) -> StepRecord {
         actions: vec![crate::ports::AgentAction::Done],
         ended: true,
         screenshot_source: None,
+        screen: None,
         screenshot_file: TaskDir::screenshot_name(None, &timestamp),
         timings: StepTimings { observe_ms: 3, predict_ms: 1, act_ms: 2, pause_ms: 0, ..StepTimings::default() },
         usage: None,
@@ -516,6 +517,22 @@ fn a_computer_use_step_shows_the_models_text_tool_calls_markers_tokens_and_error
     // The saved screenshot is left as it was: markers are drawn by the page.
     let shot = image::open(dir.path().join(TaskDir::screenshot_name(None, &format_timestamp(0)))).unwrap();
     assert!(shot.to_rgba8().pixels().all(|p| p.0 == [200, 200, 200, 255]));
+}
+
+#[test]
+fn markers_of_a_screen_larger_than_its_screenshot_are_drawn_scaled_onto_it() {
+    let root = tempfile::tempdir().unwrap();
+    let dir = computer_use_task(root.path(), &serde_json::json!({"content": "ok"}));
+    let mut steps = dir.read_trajectory().unwrap();
+    // The screen was 80x40 and the screenshot is 40x20: the click at (30, 5) is drawn at (15, 2.5).
+    steps[0].screen = Some([80, 40]);
+    let episode = dir.read_episode().unwrap();
+    dir.write_trajectory(None, &steps).unwrap();
+    html::write_task_page(&dir, &episode).unwrap();
+    let page = std::fs::read_to_string(dir.path().join(TRAJ_HTML)).unwrap();
+    assert!(page.contains("data-kind=\"click\" data-x=\"30\" data-y=\"5\""), "{page}");
+    assert!(page.contains("<circle class=\"dot\" cx=\"15.0\" cy=\"2.5\""), "{page}");
+    assert!(page.contains("positions in the screen's 80x40 pixels, drawn on the 40x20 screenshot"));
 }
 
 #[test]
