@@ -519,6 +519,7 @@ impl Episode {
             ended: false,
             screenshot_file: seen.file.clone(),
             screenshot_source: seen.obs.screenshot_source.clone(),
+            screen: Some(<[u32; 2]>::from(seen.obs.screen_size())),
             timings: StepTimings {
                 observe_ms: seen.obs.timings.total_ms,
                 observe: seen.obs.timings,

@@ -34,7 +34,8 @@
 //! - [`certificate`]: task certificates (`arena certify`) and a folder's record of the tasks they call broken.
 //! - [`ledger`]: prices, the budget and its record (the cost ledger).
 //! - [`stats`]: pass@k, pass^k and the bootstrap intervals of repeated trials.
-//! - [`html`]: the HTML report, `report.html`.
+//! - [`html`]: the HTML report, `report.html`, and each task's `traj.html`.
+//! - [`viewer`]: the trajectory viewer's parts of a step: the model's reply read from the records, the markers of its actions.
 //! - [`task_list`]: the run's task list in each trial folder (`task_list.json`).
 
 pub mod certificate;
@@ -44,6 +45,7 @@ pub mod ledger;
 pub mod stats;
 pub mod summary;
 pub mod task_list;
+pub mod viewer;
 
 use std::path::{Path, PathBuf};
 use std::time::{SystemTime, UNIX_EPOCH};
@@ -352,6 +354,11 @@ pub struct StepRecord {
     /// Per-action outcomes the agent's executor reported (free-form).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub outcomes: Vec<Value>,
+    /// The guest's screen in physical pixels when the step was observed (width,
+    /// height): the space of the step's typed actions, which the viewer maps onto
+    /// the screenshot's pixels.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub screen: Option<[u32; 2]>,
     /// The tokens and model time of the step's prediction (the cost ledger),
     /// when the agent reports them.
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -826,6 +833,16 @@ pub fn read_episode(path: &Path) -> Result<EpisodeResult, ResultsError> {
 ///
 /// A line that is not JSON, or a step line that is not a [`StepRecord`], naming its number.
 pub fn read_trajectory(path: &Path) -> Result<Vec<StepRecord>, ResultsError> {
+    Ok(read_trajectory_lines(path)?.into_iter().map(|(step, _)| step).collect())
+}
+
+/// [`read_trajectory`], each step with its line as JSON (which holds the
+/// agent's logs, [`StepRecord::logs`], that a [`StepRecord`] does not read back).
+///
+/// # Errors
+///
+/// As [`read_trajectory`].
+pub fn read_trajectory_lines(path: &Path) -> Result<Vec<(StepRecord, Value)>, ResultsError> {
     let text = match std::fs::read_to_string(path) {
         Ok(text) => text,
         Err(err) if err.kind() == std::io::ErrorKind::NotFound => return Ok(Vec::new()),
@@ -839,7 +856,7 @@ pub fn read_trajectory(path: &Path) -> Result<Vec<StepRecord>, ResultsError> {
     for (idx, line) in text.lines().enumerate().filter(|(_, line)| !line.trim().is_empty()) {
         let value: Value = serde_json::from_str(line).map_err(|err| bad(idx, err))?;
         if value.get("step").is_some() {
-            steps.push(serde_json::from_value(value).map_err(|err| bad(idx, err))?);
+            steps.push((serde_json::from_value(value.clone()).map_err(|err| bad(idx, err))?, value));
         }
     }
     Ok(steps)

@@ -58,6 +58,7 @@ fn step(n: u32) -> StepRecord {
         actions: vec![crate::ports::AgentAction::Done],
         ended: true,
         screenshot_source: None,
+        screen: None,
         screenshot_file: TaskDir::screenshot_name(None, &timestamp),
         timings: StepTimings { observe_ms: 3, predict_ms: 1, act_ms: 2, pause_ms: 0, ..StepTimings::default() },
         usage: None,
@@ -395,7 +396,7 @@ fn the_report_holds_the_table_the_chart_and_escaped_trajectories() {
     let page = std::fs::read_to_string(path).unwrap();
     assert!(page.starts_with("<!DOCTYPE html>"));
     assert!(page.contains("<table id=\"summary\">") && page.contains("<svg") && page.contains("Run &lt;1&gt;"));
-    assert!(!page.contains("<script>"), "task text is escaped");
+    assert!(page.contains("&lt;script&gt;") && page.matches("<script>").count() == 1, "task text is escaped");
     assert!(page.contains("&lt;b&gt;ok&lt;/b&gt;"), "model text is escaped");
     // Safe names keep spaces out of folders; links are relative and encoded.
     assert!(
@@ -404,7 +405,9 @@ fn the_report_holds_the_table_the_chart_and_escaped_trajectories() {
         ),
         "{page}"
     );
-    assert!(!page.contains("<link") && !page.contains("<script") && !page.contains("url("), "nothing is fetched");
+    assert!(!page.contains("<link") && !page.contains("url("), "nothing is fetched");
+    assert_eq!(page.matches("<script").count(), 1, "the page's own script alone");
+    assert!(page.contains("Content-Security-Policy") && page.contains("script-src 'sha256-"));
     assert!(root.path().join(SUMMARY_JSON).is_file() && root.path().join(SUMMARY_MD).is_file());
 }
 
@@ -437,4 +440,145 @@ fn the_fail_always_floor_is_the_infeasible_share_of_the_task_list_per_row() {
     assert!(summary.markdown().contains("FAIL-always floor 25.0%"), "{}", summary.markdown());
     let json: Value = serde_json::to_value(&summary).unwrap();
     assert_eq!(json["overall"]["fail_floor"], 25.0);
+}
+
+/// A task folder holding one computer-use step: a 40x20 screenshot, the
+/// vendor's answer kept as `response-step_0_<time>.json` (its name in the line's
+/// `response`, as the recorder leaves it), a click and a drag in typed actions,
+/// the step's tokens and an action error.
+fn computer_use_task(root: &Path, answer: &Value) -> TaskDir {
+    let dir = layout(root).task_dir(&task("notepad", "cu"));
+    dir.prepare().unwrap();
+    let timestamp = format_timestamp(0);
+    let mut png = Vec::new();
+    image::RgbaImage::from_pixel(40, 20, image::Rgba([200, 200, 200, 255]))
+        .write_to(&mut std::io::Cursor::new(&mut png), image::ImageFormat::Png)
+        .unwrap();
+    let shot = dir.write_screenshot(None, &timestamp, &png).unwrap();
+    let record = format!("response-step_0_{timestamp}.json");
+    dir.write_file(&record, serde_json::to_vec(answer).unwrap().as_slice()).unwrap();
+    let mut first = step(1);
+    first.screenshot_file = shot;
+    first.response = record.clone();
+    first.logs.insert("response".into(), Value::String(record));
+    first.actions = vec![
+        crate::ports::AgentAction::Typed(vec![
+            arena_shared::action::Action::Click { x: Some(30), y: Some(5), button: Default::default(), count: 1 },
+            arena_shared::action::Action::Drag {
+                from: Some(arena_shared::geometry::Point::new(2, 3)),
+                to: arena_shared::geometry::Point::new(12, 13),
+                button: Default::default(),
+                duration_ms: None,
+            },
+        ]),
+        crate::ports::AgentAction::Done,
+    ];
+    first.outcomes = vec![serde_json::json!({"error": "key <x> unknown", "performed": 1, "elapsed_ms": 1})];
+    first.usage = Some(crate::agent::Usage { input: 1234, output: 56, cached: 1000, model_ms: 250 });
+    let mut episode = episode("notepad", "cu", 0.0, EpisodeStatus::Completed, 1);
+    episode.action_errors = 1;
+    dir.finish(&episode, Some(&reset()), &[first]).unwrap();
+    dir
+}
+
+#[test]
+fn a_computer_use_step_shows_the_models_text_tool_calls_markers_tokens_and_errors_escaped() {
+    let root = tempfile::tempdir().unwrap();
+    let answer = serde_json::json!({
+        "type": "message", "role": "assistant", "stop_reason": "tool_use",
+        "content": [
+            {"type": "thinking", "thinking": "Where is the box?"},
+            {"type": "text", "text": "I click <script>alert(1)</script> & go"},
+            {"type": "tool_use", "id": "t1", "name": "computer", "input": {"action": "left_click", "coordinate": [27, 4]}},
+        ],
+        "usage": {"input_tokens": 234, "cache_read_input_tokens": 1000, "output_tokens": 56},
+    });
+    let dir = computer_use_task(root.path(), &answer);
+    let page = std::fs::read_to_string(dir.path().join(TRAJ_HTML)).unwrap();
+    // The model's text and reasoning, escaped; the tool call with its input.
+    assert!(page.contains("I click &lt;script&gt;alert(1)&lt;/script&gt; &amp; go"), "{page}");
+    assert!(!page.contains("<script>alert"), "a reply cannot inject markup");
+    assert_eq!(page.matches("<script").count(), 1, "the page's own script alone");
+    assert!(page.contains("Where is the box?") && page.contains("<code>computer</code>"));
+    assert!(page.contains("&quot;left_click&quot;") && page.contains("&quot;coordinate&quot;"), "{page}");
+    assert!(page.contains("href=\"./response-step_0_19700101@000000.json\""), "the record is linked");
+    // Markers in the screenshot's pixels over an image of its natural size.
+    assert!(page.contains("viewBox=\"0 0 40 20\""), "{page}");
+    assert!(page.contains("data-kind=\"click\" data-x=\"30\" data-y=\"5\" data-action=\"1\""), "{page}");
+    assert!(
+        page.contains("data-kind=\"drag\" data-x=\"2\" data-y=\"3\" data-action=\"1\" data-x2=\"12\" data-y2=\"13\"")
+    );
+    assert!(page.contains("<li>action 1: drag from (2, 3) to (12, 13)</li>"));
+    // Tokens, the action error (escaped), the keys.
+    assert!(page.contains("data-input=\"1234\" data-output=\"56\" data-cached=\"1000\""), "{page}");
+    assert!(page.contains("action 1: key &lt;x&gt; unknown"), "{page}");
+    assert!(page.contains("<span class=\"action-errors\">1</span>"));
+    assert!(page.contains("id=\"keys\"") && page.contains("<kbd>j</kbd>"));
+    // The saved screenshot is left as it was: markers are drawn by the page.
+    let shot = image::open(dir.path().join(TaskDir::screenshot_name(None, &format_timestamp(0)))).unwrap();
+    assert!(shot.to_rgba8().pixels().all(|p| p.0 == [200, 200, 200, 255]));
+}
+
+#[test]
+fn markers_of_a_screen_larger_than_its_screenshot_are_drawn_scaled_onto_it() {
+    let root = tempfile::tempdir().unwrap();
+    let dir = computer_use_task(root.path(), &serde_json::json!({"content": "ok"}));
+    let mut steps = dir.read_trajectory().unwrap();
+    // The screen was 80x40 and the screenshot is 40x20: the click at (30, 5) is drawn at (15, 2.5).
+    steps[0].screen = Some([80, 40]);
+    let episode = dir.read_episode().unwrap();
+    dir.write_trajectory(None, &steps).unwrap();
+    html::write_task_page(&dir, &episode).unwrap();
+    let page = std::fs::read_to_string(dir.path().join(TRAJ_HTML)).unwrap();
+    assert!(page.contains("data-kind=\"click\" data-x=\"30\" data-y=\"5\""), "{page}");
+    assert!(page.contains("<circle class=\"dot\" cx=\"15.0\" cy=\"2.5\""), "{page}");
+    assert!(page.contains("positions in the screen's 80x40 pixels, drawn on the 40x20 screenshot"));
+}
+
+#[test]
+fn replies_of_each_vendor_shape_and_the_report_filter() {
+    use super::viewer::vendor_reply;
+    let responses = serde_json::json!({"output": [
+        {"type": "reasoning", "summary": [{"type": "summary_text", "text": "think"}]},
+        {"type": "message", "content": [{"type": "output_text", "text": "hello"}]},
+        {"type": "computer_call", "call_id": "c", "action": {"type": "click", "x": 1, "y": 2}},
+        {"type": "function_call", "name": "f", "arguments": "{\"a\": 1}"},
+    ]});
+    let r = vendor_reply(&responses).unwrap();
+    assert_eq!(r.texts, [("reasoning".to_owned(), "think".to_owned()), ("text".to_owned(), "hello".to_owned())]);
+    assert_eq!(r.tool_calls.iter().map(|c| c.name.as_str()).collect::<Vec<_>>(), ["computer", "f"]);
+    assert!(r.tool_calls[0].input.contains("\"click\"") && r.tool_calls[1].input.contains("\"a\": 1"));
+    let chat = serde_json::json!({"choices": [{"message": {"content": "Thought: x\nAction: click(start_box='(1,2)')",
+        "tool_calls": [{"function": {"name": "g", "arguments": "not json"}}]}}]});
+    let r = vendor_reply(&chat).unwrap();
+    assert!(r.texts[0].1.starts_with("Thought: x"));
+    assert_eq!((r.tool_calls[0].name.as_str(), r.tool_calls[0].input.as_str()), ("g", "not json"));
+    assert_eq!(vendor_reply(&serde_json::json!({"content": "uitars"})).unwrap().texts[0].1, "uitars");
+    assert!(vendor_reply(&serde_json::json!({"other": 1})).is_none());
+
+    // A record name that leaves the folder is text, never a file read.
+    let root = tempfile::tempdir().unwrap();
+    let dir = computer_use_task(root.path(), &serde_json::json!({"content": "ok"}));
+    let mut s = step(1);
+    s.response = "../../response-step_0_x.json".into();
+    let reply = super::viewer::reply_of(dir.path(), &s, &Value::Null);
+    assert_eq!((reply.record, reply.texts[0].1.as_str()), (None, "../../response-step_0_x.json"));
+    // A reply that only looks like a record name, with no such file: its text, and why it is no record.
+    s.response = "response-step_9_nothing.json".into();
+    let reply = super::viewer::reply_of(dir.path(), &s, &Value::Null);
+    assert_eq!(reply.texts[0].1, "response-step_9_nothing.json");
+    assert!(reply.problem.is_some_and(|p| p.starts_with("response-step_9_nothing.json: ")));
+
+    // The report's filter offers each domain, status and "Failed by" of the run;
+    // writing the report writes each task's page again (a folder of an older version gets the viewer).
+    write_task(root.path(), "settings", "b", 1.0, EpisodeStatus::Completed);
+    std::fs::write(dir.path().join(TRAJ_HTML), "old").unwrap();
+    let (_, path) = html::write_report(root.path(), "run").unwrap();
+    assert!(std::fs::read_to_string(dir.path().join(TRAJ_HTML)).unwrap().contains("class=\"step\""));
+    let page = std::fs::read_to_string(path).unwrap();
+    for option in ["<option value=\"notepad\">", "<option value=\"settings\">", "<option value=\"completed\">"] {
+        assert!(page.contains(option), "{option}: {page}");
+    }
+    assert!(page.contains("<select name=\"failed-by\">") && page.contains("<option value=\"agent\">"), "{page}");
+    assert!(page.contains("data-task=\"\" data-domain=\"settings\" data-status=\"completed\" data-failed-by=\"-\""));
 }
