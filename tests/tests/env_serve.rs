@@ -14,12 +14,18 @@ use serde_json::{json, Value};
 
 /// `arena env serve` on two stub guests with the stub tasks; the child and its URL.
 fn serve(out: &std::path::Path) -> (Child, String) {
+    serve_with(out, &[])
+}
+
+/// [`serve`] with more arguments.
+fn serve_with(out: &std::path::Path, more: &[&str]) -> (Child, String) {
     // The URL ends with `/`.
     let mut child = Command::new(workspace_binary("arena-host", "arena").expect("the arena binary"))
         .args(["env", "serve", "--listen", "127.0.0.1:0", "--stub-guests", "2", "--tasks"])
         .arg(stub_tasks_dir().join("examples"))
         .arg("--out")
         .arg(out)
+        .args(more)
         .stdout(Stdio::piped())
         .stderr(Stdio::inherit())
         .spawn()
@@ -70,9 +76,26 @@ fn a_python_client_plays_two_stub_tasks_through_the_environment() {
     for task in ["stub-notepad-draft", "stub-notepad-count", "stub-settings-infeasible"] {
         assert_eq!(scores[task], 1.0, "{task}: {scores}");
     }
-    // Each episode left its result folder, as a run's do.
-    let result = tmp.path().join("out/env/env/env/0/notepad/stub-notepad-draft/result.txt");
-    assert_eq!(std::fs::read_to_string(&result).expect("result.txt").trim(), "1.0");
+    // Each episode left its result folder, as a run's do: one per session and episode.
+    let results = results_of(&tmp.path().join("out"), "stub-notepad-draft");
+    assert_eq!(results.len(), 1, "{results:?}");
+    assert_eq!(std::fs::read_to_string(&results[0]).expect("result.txt").trim(), "1.0");
+}
+
+/// The `result.txt` files under `dir` of the task named `task`.
+fn results_of(dir: &std::path::Path, task: &str) -> Vec<std::path::PathBuf> {
+    let mut found = Vec::new();
+    for entry in std::fs::read_dir(dir).into_iter().flatten().flatten() {
+        let path = entry.path();
+        if path.is_dir() {
+            found.extend(results_of(&path, task));
+        } else if path.file_name().is_some_and(|n| n == "result.txt")
+            && path.parent().and_then(|p| p.file_name()).is_some_and(|n| n == task)
+        {
+            found.push(path);
+        }
+    }
+    found
 }
 
 /// A Python with gymnasium, numpy and Pillow: `ARENA_GYM_PYTHON`, else `python3`.
@@ -131,7 +154,8 @@ fn assert_valid(name: &str, value: &Value) {
 #[tokio::test(flavor = "multi_thread")]
 async fn every_request_and_answer_has_the_documented_shape_and_bad_requests_are_named() {
     let tmp = tempfile::tempdir().expect("tmp");
-    let (child, url) = serve(&tmp.path().join("out"));
+    // A second's pause after each action, so that a step lasts long enough to hang up on.
+    let (child, url) = serve_with(&tmp.path().join("out"), &["--sleep-after", "1"]);
     let _served = Served(child);
     let http = reqwest::Client::new();
     let post = |path: &str, body: Value| {
@@ -174,6 +198,18 @@ async fn every_request_and_answer_has_the_documented_shape_and_bad_requests_are_
         assert_valid("error.json", &answer);
         assert!(answer["error"].as_str().is_some_and(|e| e.contains(names)), "{path}: {answer}");
     }
+    // A step whose client hangs up before the answer still runs; the next step's
+    // answer is the next step's, not the one the client missed.
+    let hung_up = http
+        .post(format!("{url}step"))
+        .timeout(std::time::Duration::from_millis(300))
+        .json(&json!({"session": session, "actions": "pyautogui.press('end')"}))
+        .send()
+        .await;
+    assert!(hung_up.is_err(), "the client gave up first");
+    tokio::time::sleep(std::time::Duration::from_millis(1200)).await;
+    let (status, answer) = post("step", json!({"session": session, "actions": "WAIT"})).await;
+    assert_eq!((status, &answer["info"]["step"]), (200, &json!(4)), "steps 2, 3 (missed), 4: {answer}");
     // Both guests held: a third session is refused, saying why.
     let (status, _) = post("reset", json!({"task": "stub-notepad-count"})).await;
     assert_eq!(status, 200);

@@ -134,7 +134,7 @@ async fn serve_env(conn: &Connection, args: ServeArgs) -> anyhow::Result<ExitCod
     super::emit(&format!("{}\n", crate::envserve::describe(addr, &tasks, guests.clients.len())))?;
     let server = crate::envserve::EnvServer::new(tasks, guests.clients.clone(), options);
     let served = tokio::spawn(crate::envserve::serve(Arc::clone(&server), listener, stop.clone()));
-    wait_for_interrupt().await;
+    super::interrupt().await;
     stop.cancel();
     let outcome = served.await;
     drop(server);
@@ -143,22 +143,5 @@ async fn serve_env(conn: &Connection, args: ServeArgs) -> anyhow::Result<ExitCod
         Ok(Ok(())) => Ok(ExitCode::SUCCESS),
         Ok(Err(err)) => Err(anyhow::Error::new(err).context("serving the environment")),
         Err(err) => Err(anyhow::anyhow!("the environment's server stopped: {err}")),
-    }
-}
-
-/// Until Ctrl-C or SIGTERM.
-#[cfg(feature = "env-server")]
-async fn wait_for_interrupt() {
-    let term =
-        super::terminate_requested().inspect_err(|err| tracing::warn!(error = %err, "cannot listen for SIGTERM")).ok();
-    let terminated = async {
-        match term {
-            Some(term) => term.await,
-            None => std::future::pending::<()>().await,
-        }
-    };
-    tokio::select! {
-        _ = tokio::signal::ctrl_c() => {}
-        () = terminated => {}
     }
 }

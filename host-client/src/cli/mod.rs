@@ -730,6 +730,22 @@ fn exit_code(code: Option<i32>) -> ExitCode {
 ///
 /// # Errors
 ///
+/// Until Ctrl-C or SIGTERM (SIGTERM on Unix only: a pod being deleted, `docker stop`).
+/// `false` when Ctrl-C cannot be listened for.
+pub(crate) async fn interrupt() -> bool {
+    let term = terminate_requested().inspect_err(|err| tracing::warn!(error = %err, "cannot listen for SIGTERM")).ok();
+    let terminated = async {
+        match term {
+            Some(term) => term.await,
+            None => std::future::pending::<()>().await,
+        }
+    };
+    tokio::select! {
+        signal = tokio::signal::ctrl_c() => signal.is_ok(),
+        () = terminated => true,
+    }
+}
+
 /// The signal handler cannot be installed.
 pub(crate) fn terminate_requested() -> std::io::Result<impl std::future::Future<Output = ()> + Send> {
     #[cfg(unix)]

@@ -1142,17 +1142,8 @@ fn reproduction(args: &RunArgs, fast: bool) -> anyhow::Result<Vec<(String, Strin
 /// at once with 130; every file already written stays, as each is written whole.
 async fn watch_interrupts(stop: tokio_util::sync::CancellationToken) {
     // SIGTERM (a pod being deleted, `docker stop`) counts as the first Ctrl-C.
-    let term =
-        super::terminate_requested().inspect_err(|err| tracing::warn!(error = %err, "cannot listen for SIGTERM")).ok();
-    let terminated = async {
-        match term {
-            Some(term) => term.await,
-            None => std::future::pending::<()>().await,
-        }
-    };
-    tokio::select! {
-        signal = tokio::signal::ctrl_c() => if signal.is_err() { return },
-        () = terminated => {}
+    if !super::interrupt().await {
+        return;
     }
     eprintln!(
         "\ninterrupted: no new task starts; running episodes stop now, unevaluated, and summary.json is written (Ctrl-C again to exit at once)"

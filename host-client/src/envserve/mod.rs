@@ -24,6 +24,9 @@
 //! - `POST /evaluate` `{"session"}`: the ended episode's score;
 //! - `POST /close` `{"session"}`: ends the episode and frees the guest.
 //!
+//! Each episode's result folder is `<out>/<session>/env/env/env/<n>/<domain>/<task>`
+//! (`n` counting the session's episodes from 1), so sessions never share one.
+//!
 //! Bounded as the step protocol is: a body of at most `MAX_ANSWER`, at most
 //! `MAX_ACTIONS` actions a step, one session per guest, and a session whose client
 //! sends nothing for `idle` ends as an agent error and frees its guest.
@@ -57,7 +60,7 @@ use arena_task::Task;
 /// How the server behaves.
 #[derive(Debug, Clone)]
 pub struct EnvOptions {
-    /// Where each episode's result folder goes (`<out>/env/<observation>/env/0/<domain>/<task>`).
+    /// Where each episode's result folder goes (`<out>/<session>/env/env/env/<n>/<domain>/<task>`).
     pub out: PathBuf,
     /// The episodes' configuration (step cap, pauses, downloads).
     pub config: EpisodeConfig,
@@ -123,7 +126,12 @@ impl Agent for EnvAgent {
 /// One session: a guest, and the episode it plays now.
 #[derive(Debug)]
 struct Session {
+    id: String,
     guest: GuestClient,
+    /// Episodes begun, for their folders' names.
+    episodes: u32,
+    /// When its client last asked something.
+    touched: std::time::Instant,
     episode: Option<Episode>,
 }
 
@@ -268,7 +276,10 @@ impl EnvServer {
                     .join(format!("{}.json", crate::results::safe_component(id)));
                 Task::parse(&spec.to_string(), &path).map_err(|err| bad(format!("task: {err}")))
             }
-            other => Err(bad(format!("task: a task id or name, or a task object; got {}", kind(other)))),
+            other => Err(bad(format!(
+                "task: a task id or name, or a task object; got {}",
+                arena_shared::error::json_kind(other)
+            ))),
         }
     }
 
@@ -278,12 +289,14 @@ impl EnvServer {
         let (turns_tx, mut turns) = mpsc::channel(1);
         let (actions, actions_rx) = mpsc::channel(1);
         let agent = EnvAgent { turns: turns_tx.clone(), actions: actions_rx, hello, idle: self.options.idle };
+        // A folder per session and episode: two sessions on one task never share one.
+        session.episodes += 1;
         let layout = RunLayout {
-            root: self.options.out.clone(),
+            root: self.options.out.join(&session.id),
             agent: "env".into(),
             observation: "env".into(),
             model: "env".into(),
-            trial: crate::results::DEFAULT_TRIAL_ID.into(),
+            trial: session.episodes.to_string(),
         };
         let (guest, config, played) = (session.guest.clone(), self.options.config.clone(), task.clone());
         let worker = tokio::spawn(async move {
@@ -337,17 +350,6 @@ impl EnvServer {
     }
 }
 
-fn kind(value: &Value) -> &'static str {
-    match value {
-        Value::Null => "null",
-        Value::Bool(_) => "a boolean",
-        Value::Number(_) => "a number",
-        Value::String(_) => "a string",
-        Value::Array(_) => "a list",
-        Value::Object(_) => "an object",
-    }
-}
-
 async fn info(State(server): State<Arc<EnvServer>>) -> Json<Value> {
     let tasks: Vec<Value> = server
         .tasks
@@ -387,7 +389,13 @@ async fn reset(State(server): State<Arc<EnvServer>>, payload: Result<Json<ResetR
                 )
             })?;
             let id = format!("{:016x}", rand::random::<u64>());
-            let session = Arc::new(Mutex::new(Session { guest, episode: None }));
+            let session = Arc::new(Mutex::new(Session {
+                id: id.clone(),
+                guest,
+                episodes: 0,
+                episode: None,
+                touched: std::time::Instant::now(),
+            }));
             if let Ok(mut sessions) = server.sessions.lock() {
                 sessions.insert(id.clone(), Arc::clone(&session));
             }
@@ -395,6 +403,7 @@ async fn reset(State(server): State<Arc<EnvServer>>, payload: Result<Json<ResetR
         }
     };
     let mut held = session.lock().await;
+    held.touched = std::time::Instant::now();
     let info = json!({
         "task_id": task.id,
         "task_name": task.name,
@@ -413,9 +422,22 @@ async fn step(State(server): State<Arc<EnvServer>>, payload: Result<Json<StepReq
     let request = body(payload)?;
     let session = server.session(&request.session)?;
     let mut held = session.lock().await;
+    held.touched = std::time::Instant::now();
     let Some(episode) = held.episode.as_mut() else {
         return Err(Refusal(StatusCode::CONFLICT, "the session has no episode: reset it to a task".into()));
     };
+    // A step whose client hung up before its answer left that answer here: take it in,
+    // so this step's answer is this step's.
+    while let Ok(turn) = episode.turns.try_recv() {
+        match turn {
+            Turn::Observed { observation, step, screen } => {
+                episode.last = observation;
+                episode.step = step;
+                episode.screen = screen;
+            }
+            Turn::Ended(result) => episode.ended = Some(result),
+        }
+    }
     if let Some(result) = &episode.ended {
         return Err(Refusal(
             StatusCode::CONFLICT,
@@ -475,7 +497,8 @@ async fn evaluate(
 ) -> Answer {
     let request = body(payload)?;
     let session = server.session(&request.session)?;
-    let held = session.lock().await;
+    let mut held = session.lock().await;
+    held.touched = std::time::Instant::now();
     match held.episode.as_ref().map(|e| e.ended.as_ref()) {
         Some(Some(result)) => Ok(Json(json!({
             "score": result.score,
@@ -495,13 +518,51 @@ async fn close(State(server): State<Arc<EnvServer>>, payload: Result<Json<Sessio
     let session = server.session(&request.session)?;
     let held = {
         let mut guard = session.lock().await;
-        Session { guest: guard.guest.clone(), episode: guard.episode.take() }
+        guard.detach()
     };
     server.forget(&request.session, held);
     Ok(Json(json!({"closed": true})))
 }
 
-/// Serves `server` on `listener` until `stop`.
+impl Session {
+    /// This session's guest and episode, taken out (the episode, dropped, stops).
+    fn detach(&mut self) -> Session {
+        Session {
+            id: self.id.clone(),
+            guest: self.guest.clone(),
+            episodes: self.episodes,
+            episode: self.episode.take(),
+            touched: self.touched,
+        }
+    }
+}
+
+impl EnvServer {
+    /// Closes the sessions whose client asked nothing for `idle` (a client that went
+    /// away without `close`), freeing their guests; answers how many.
+    pub async fn sweep(&self) -> usize {
+        let sessions: Vec<(String, Arc<Mutex<Session>>)> = match self.sessions.lock() {
+            Ok(sessions) => sessions.iter().map(|(id, s)| (id.clone(), Arc::clone(s))).collect(),
+            Err(_) => return 0,
+        };
+        let mut closed = 0;
+        for (id, session) in sessions {
+            // A session busy with a request is in use.
+            let Ok(mut guard) = session.try_lock() else { continue };
+            if guard.touched.elapsed() < self.options.idle {
+                continue;
+            }
+            tracing::info!(session = %id, idle_secs = self.options.idle.as_secs(), "closing an idle environment session");
+            let held = guard.detach();
+            drop(guard);
+            self.forget(&id, held);
+            closed += 1;
+        }
+        closed
+    }
+}
+
+/// Serves `server` on `listener` until `stop`, closing idle sessions as it goes.
 ///
 /// # Errors
 ///
@@ -511,7 +572,18 @@ pub async fn serve(
     listener: tokio::net::TcpListener,
     stop: CancellationToken,
 ) -> std::io::Result<()> {
-    axum::serve(listener, server.router()).with_graceful_shutdown(stop.cancelled_owned()).await
+    let sweeper = {
+        let (server, stop) = (Arc::clone(&server), stop.clone());
+        let period = (server.options.idle / 4).clamp(Duration::from_millis(100), Duration::from_secs(30));
+        tokio::spawn(async move {
+            while tokio::time::timeout(period, stop.cancelled()).await.is_err() {
+                server.sweep().await;
+            }
+        })
+    };
+    let served = axum::serve(listener, server.router()).with_graceful_shutdown(stop.cancelled_owned()).await;
+    sweeper.abort();
+    served
 }
 
 /// The address a listener took, for the banner.
@@ -521,4 +593,51 @@ pub fn describe(addr: SocketAddr, tasks: &[Task], guests: usize) -> String {
         m
     });
     format!("environment: http://{addr}/ ({} task(s) in {} domain(s), {guests} guest(s))", tasks.len(), domains.len())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use arena_client::client::ClientConfig;
+
+    /// A server over two guests nothing listens on, with `idle` as its limit.
+    fn server(idle: Duration, dir: &std::path::Path) -> Arc<EnvServer> {
+        let guests = ["http://127.0.0.1:9/", "http://127.0.0.1:10/"]
+            .iter()
+            .map(|url| {
+                GuestClient::new(url, ClientConfig { token: None, timeout: Duration::from_secs(1), retries: 0 })
+                    .expect("a client")
+            })
+            .collect();
+        let cache = arena_setup::DownloadCache::new(dir.join("cache")).expect("a cache");
+        let options = EnvOptions { out: dir.to_owned(), config: EpisodeConfig::instant(cache), idle, screen: None };
+        EnvServer::new(Vec::new(), guests, options)
+    }
+
+    /// Opens a session as a reset does, without an episode.
+    fn open(server: &EnvServer, id: &str) {
+        let guest = server.free.lock().expect("free").pop().expect("a free guest");
+        let session = Session { id: id.into(), guest, episodes: 0, episode: None, touched: std::time::Instant::now() };
+        server.sessions.lock().expect("sessions").insert(id.into(), Arc::new(Mutex::new(session)));
+    }
+
+    #[tokio::test]
+    async fn idle_sessions_are_closed_and_their_guests_freed() {
+        let dir = tempfile::tempdir().expect("tmp");
+        let patient = server(Duration::from_secs(600), dir.path());
+        open(&patient, "a");
+        assert_eq!(patient.sweep().await, 0, "a session used just now stays");
+        let strict = server(Duration::ZERO, dir.path());
+        open(&strict, "a");
+        open(&strict, "b");
+        assert_eq!(strict.free.lock().expect("free").len(), 0);
+        // A session busy with a request is left alone.
+        let busy = strict.session("b").expect("b");
+        let held = busy.lock().await;
+        assert_eq!(strict.sweep().await, 1);
+        drop(held);
+        assert_eq!(strict.sweep().await, 1);
+        assert_eq!(strict.free.lock().expect("free").len(), 2, "both guests back");
+        assert_eq!(strict.session("a").expect_err("gone").0, StatusCode::NOT_FOUND);
+    }
 }
