@@ -54,12 +54,13 @@ impl Prices {
     /// The file cannot be read, is not the format above, or holds a negative or non-finite price.
     pub fn load(path: &Path) -> Result<Prices, ResultsError> {
         let bad = |message: String| ResultsError::Format { path: path.to_owned(), message };
-        let meta = std::fs::metadata(path).map_err(|source| ResultsError::Io { path: path.to_owned(), source })?;
+        let meta =
+            std::fs::metadata(path).map_err(|source| ResultsError::Io { path: path.to_owned(), reason: source })?;
         if meta.len() > MAX_PRICES_BYTES {
             return Err(bad(format!("a price file of {} bytes is over the limit of {MAX_PRICES_BYTES}", meta.len())));
         }
-        let text =
-            std::fs::read_to_string(path).map_err(|source| ResultsError::Io { path: path.to_owned(), source })?;
+        let text = std::fs::read_to_string(path)
+            .map_err(|source| ResultsError::Io { path: path.to_owned(), reason: source })?;
         let prices: Prices = serde_json::from_str(&text).map_err(|err| {
             bad(format!(
                 "{err}; expected {{\"MODEL\": {{\"input\": USD, \"output\": USD, \"cached_input\": USD}}}} per million tokens"

@@ -76,19 +76,17 @@ pub const REPORT_HTML: &str = "report.html";
 #[derive(Debug, thiserror::Error)]
 #[non_exhaustive]
 pub enum ResultsError {
-    #[error("{path}: {source}")]
-    Io {
-        path: PathBuf,
-        #[source]
-        source: std::io::Error,
-    },
+    /// The I/O error is in the message and not chained as a source, so that a chain
+    /// (`{:#}`) says it once.
+    #[error("{path}: {reason}")]
+    Io { path: PathBuf, reason: std::io::Error },
     #[error("{path}: {message}")]
     Format { path: PathBuf, message: String },
 }
 
 impl ResultsError {
     fn io(path: &Path, source: std::io::Error) -> ResultsError {
-        ResultsError::Io { path: path.to_owned(), source }
+        ResultsError::Io { path: path.to_owned(), reason: source }
     }
 }
 

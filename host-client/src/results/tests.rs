@@ -582,3 +582,12 @@ fn replies_of_each_vendor_shape_and_the_report_filter() {
     assert!(page.contains("<select name=\"failed-by\">") && page.contains("<option value=\"agent\">"), "{page}");
     assert!(page.contains("data-task=\"\" data-domain=\"settings\" data-status=\"completed\" data-failed-by=\"-\""));
 }
+
+#[test]
+fn an_io_error_is_said_once_in_a_chain() {
+    let err =
+        super::ResultsError::io(Path::new("/nowhere/results"), std::io::Error::from(std::io::ErrorKind::NotFound));
+    let said = format!("{:#}", anyhow::Error::new(err).context("arena report"));
+    assert_eq!(said.matches("not found").count(), 1, "{said}");
+    assert!(said.contains("/nowhere/results"), "{said}");
+}

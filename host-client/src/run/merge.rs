@@ -31,15 +31,16 @@ pub struct MergeReport {
 ///
 /// A shard cannot be read, `out` is one of the shards, or a file cannot be copied.
 pub fn merge(out: &Path, shards: &[PathBuf], title: &str) -> Result<MergeReport, ResultsError> {
-    std::fs::create_dir_all(out).map_err(|source| ResultsError::Io { path: out.to_owned(), source })?;
-    let out_real = out.canonicalize().map_err(|source| ResultsError::Io { path: out.to_owned(), source })?;
+    std::fs::create_dir_all(out).map_err(|source| ResultsError::Io { path: out.to_owned(), reason: source })?;
+    let out_real = out.canonicalize().map_err(|source| ResultsError::Io { path: out.to_owned(), reason: source })?;
     let mut copied = 0;
     let mut duplicates = Vec::new();
     // Relative path -> whether the copy in `out` is finished.
     let mut seen: std::collections::BTreeMap<PathBuf, bool> = std::collections::BTreeMap::new();
     let mut certified_carried = false;
     for shard in shards {
-        let shard_real = shard.canonicalize().map_err(|source| ResultsError::Io { path: shard.clone(), source })?;
+        let shard_real =
+            shard.canonicalize().map_err(|source| ResultsError::Io { path: shard.clone(), reason: source })?;
         if shard_real == out_real || out_real.starts_with(&shard_real) {
             return Err(ResultsError::Format {
                 path: shard.clone(),
@@ -60,13 +61,14 @@ pub fn merge(out: &Path, shards: &[PathBuf], title: &str) -> Result<MergeReport,
                 }
                 Some(false) => {
                     duplicates.push((found.relative.display().to_string(), found.dir.path().to_owned()));
-                    std::fs::remove_dir_all(&dest).map_err(|source| ResultsError::Io { path: dest.clone(), source })?;
+                    std::fs::remove_dir_all(&dest)
+                        .map_err(|source| ResultsError::Io { path: dest.clone(), reason: source })?;
                 }
                 None => {
                     // A folder left by an earlier merge into the same output is replaced.
                     if dest.exists() {
                         std::fs::remove_dir_all(&dest)
-                            .map_err(|source| ResultsError::Io { path: dest.clone(), source })?;
+                            .map_err(|source| ResultsError::Io { path: dest.clone(), reason: source })?;
                     }
                 }
             }
@@ -90,7 +92,7 @@ pub fn merge(out: &Path, shards: &[PathBuf], title: &str) -> Result<MergeReport,
 fn copy_tree(from: &Path, to: &Path) -> Result<(), ResultsError> {
     let io = |path: &Path| {
         let path = path.to_owned();
-        move |source| ResultsError::Io { path, source }
+        move |source| ResultsError::Io { path, reason: source }
     };
     std::fs::create_dir_all(to).map_err(io(to))?;
     for entry in std::fs::read_dir(from).map_err(io(from))? {

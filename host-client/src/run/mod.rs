@@ -234,7 +234,7 @@ pub async fn run_tasks(
     options: &RunOptions,
 ) -> Result<RunOutcome, ResultsError> {
     let root = &options.layout.root;
-    std::fs::create_dir_all(root).map_err(|source| ResultsError::Io { path: root.clone(), source })?;
+    std::fs::create_dir_all(root).map_err(|source| ResultsError::Io { path: root.clone(), reason: source })?;
     let plan = plan_trials(tasks, options.shard, &options.layout, options.resume, options.order, options.trials);
     let (todo, skipped) = (plan.todo.len(), plan.finished.len());
     // The whole list, so that a task that never starts still counts (the strict rate).
