@@ -147,6 +147,20 @@ struct Episode {
     worker: tokio::task::JoinHandle<()>,
 }
 
+impl Episode {
+    /// Takes in what the episode handed over: its latest observation, or its end.
+    fn record(&mut self, turn: Turn) {
+        match turn {
+            Turn::Observed { observation, step, screen } => {
+                self.last = observation;
+                self.step = step;
+                self.screen = screen;
+            }
+            Turn::Ended(result) => self.ended = Some(result),
+        }
+    }
+}
+
 impl Drop for Episode {
     fn drop(&mut self) {
         self.worker.abort();
@@ -303,26 +317,15 @@ impl EnvServer {
             let mut agent = agent;
             let out = layout.task_dir(&played);
             let result = crate::episode::run_attempt(&guest, &played, &mut agent, &config, &out, 1, None).await;
-            drop(agent);
             let _ = turns_tx.send(Turn::Ended(Box::new(result))).await;
         });
-        let mut episode = Episode {
-            task,
-            actions,
-            turns: mpsc::channel(1).1,
-            last: Value::Null,
-            step: 0,
-            screen: (0, 0),
-            ended: None,
-            worker,
-        };
         let first = turns.recv().await;
-        episode.turns = turns;
+        let mut episode =
+            Episode { task, actions, turns, last: Value::Null, step: 0, screen: (0, 0), ended: None, worker };
         match first {
-            Some(Turn::Observed { observation, step, screen }) => {
-                episode.last = observation.clone();
-                episode.step = step;
-                episode.screen = screen;
+            Some(turn @ Turn::Observed { .. }) => {
+                episode.record(turn);
+                let observation = episode.last.clone();
                 session.episode = Some(episode);
                 Ok(observation)
             }
@@ -429,14 +432,7 @@ async fn step(State(server): State<Arc<EnvServer>>, payload: Result<Json<StepReq
     // A step whose client hung up before its answer left that answer here: take it in,
     // so this step's answer is this step's.
     while let Ok(turn) = episode.turns.try_recv() {
-        match turn {
-            Turn::Observed { observation, step, screen } => {
-                episode.last = observation;
-                episode.step = step;
-                episode.screen = screen;
-            }
-            Turn::Ended(result) => episode.ended = Some(result),
-        }
+        episode.record(turn);
     }
     if let Some(result) = &episode.ended {
         return Err(Refusal(
@@ -457,38 +453,33 @@ async fn step(State(server): State<Arc<EnvServer>>, payload: Result<Json<StepReq
     if episode.actions.send((actions, coords)).await.is_err() {
         return Err(Refusal(StatusCode::CONFLICT, "the episode is no longer waiting for a step".into()));
     }
-    match episode.turns.recv().await {
-        Some(Turn::Observed { observation, step, screen }) => {
-            episode.last = observation.clone();
-            episode.step = step;
-            episode.screen = screen;
-            Ok(Json(json!({
-                "observation": observation,
-                "reward": 0.0,
-                "done": false,
-                "info": {"step": step, "task_id": episode.task.id},
-            })))
-        }
-        Some(Turn::Ended(result)) => {
-            let answer = json!({
-                "observation": episode.last,
-                "reward": result.score,
-                "done": true,
-                "info": {
-                    "step": episode.step,
-                    "task_id": episode.task.id,
-                    "score": result.score,
-                    "status": result.status.kind(),
-                    "error": result.status.message(),
-                    "steps": result.steps,
-                    "action_errors": result.action_errors,
-                },
-            });
-            episode.ended = Some(result);
-            Ok(Json(answer))
-        }
-        None => Err(Refusal(StatusCode::INTERNAL_SERVER_ERROR, "the episode stopped".into())),
-    }
+    let Some(turn) = episode.turns.recv().await else {
+        return Err(Refusal(StatusCode::INTERNAL_SERVER_ERROR, "the episode stopped".into()));
+    };
+    episode.record(turn);
+    let answer = match &episode.ended {
+        None => json!({
+            "observation": episode.last,
+            "reward": 0.0,
+            "done": false,
+            "info": {"step": episode.step, "task_id": episode.task.id},
+        }),
+        Some(result) => json!({
+            "observation": episode.last,
+            "reward": result.score,
+            "done": true,
+            "info": {
+                "step": episode.step,
+                "task_id": episode.task.id,
+                "score": result.score,
+                "status": result.status.kind(),
+                "error": result.status.message(),
+                "steps": result.steps,
+                "action_errors": result.action_errors,
+            },
+        }),
+    };
+    Ok(Json(answer))
 }
 
 async fn evaluate(
