@@ -248,14 +248,12 @@ pub struct McpAgent {
     max_steps: u32,
     /// Longest wait for a session, and for each tool call.
     timeout: Duration,
-    /// Whether a session has acted in this episode (a step was taken).
-    acted: bool,
 }
 
 impl McpAgent {
     /// An agent for one episode of a run served by `hub`.
     pub fn new(hub: Arc<Hub>, max_steps: u32, timeout: Duration) -> McpAgent {
-        McpAgent { hub, task: None, link: None, calls: None, pending: None, max_steps, timeout, acted: false }
+        McpAgent { hub, task: None, link: None, calls: None, pending: None, max_steps, timeout }
     }
 
     fn error(reason: impl Into<String>) -> AgentError {
@@ -349,7 +347,8 @@ impl Agent for McpAgent {
                 }
                 None => {
                     let task = format!("{}/{}", link.task["domain"].as_str().unwrap_or(""), link.task_name);
-                    if self.acted {
+                    // Every tool call is one step: past step 1, a session has acted.
+                    if obs.step > 1 {
                         self.hub.note(&format!(
                             "{task}: its MCP session went away after acting; the episode ends as the agent's error"
                         ));
@@ -363,7 +362,6 @@ impl Agent for McpAgent {
                 }
             }
         };
-        self.acted = true;
         self.pending = Some(call.reply);
         let logs = vec![
             StepLog { key: "tool".into(), value: LogValue::Inline(Value::String(call.tool.clone())) },

@@ -245,19 +245,21 @@ fn draw_explorer(canvas: &mut Canvas<'_>, window: &Window, items: &[String], scr
     };
     let (nav, list) = window.explorer_panes();
     canvas.fill(nav, clip, EXPLORER_NAV_FILL);
-    for (pane, names) in
-        [(nav, EXPLORER_NAV.iter().map(|s| (*s).to_owned()).collect::<Vec<_>>()), (list, items.to_vec())]
-    {
-        let Some(pane_clip) = intersect(pane, clip) else {
-            continue;
-        };
-        for (i, name) in names.iter().enumerate() {
-            let row = Window::explorer_row(pane, i);
-            if row.y > pane.bottom() {
-                break;
-            }
-            canvas.text(row.x, row.y + (row.height - 8) / 2, name, pane_clip, BODY_TEXT);
+    draw_rows(canvas, nav, clip, EXPLORER_NAV.iter().copied());
+    draw_rows(canvas, list, clip, items.iter().map(String::as_str));
+}
+
+/// `names` a row each down `pane` (File Explorer's rows), stopping at its bottom.
+fn draw_rows<'a>(canvas: &mut Canvas<'_>, pane: Rect, clip: Rect, names: impl Iterator<Item = &'a str>) {
+    let Some(pane_clip) = intersect(pane, clip) else {
+        return;
+    };
+    for (i, name) in names.enumerate() {
+        let row = Window::explorer_row(pane, i);
+        if row.y > pane.bottom() {
+            break;
         }
+        canvas.text(row.x, row.y + (row.height - 8) / 2, name, pane_clip, BODY_TEXT);
     }
 }
 
