@@ -6,7 +6,7 @@
 
 #![cfg(unix)]
 
-use std::io::{BufRead, BufReader, Write as _};
+use std::io::{BufRead, BufReader};
 use std::process::{Child, Command, Stdio};
 
 use arena_test_support::{agent_pythonpath, python3_or_skip, stub_tasks_dir, workspace_binary, workspace_root};
@@ -99,27 +99,17 @@ fn results_of(dir: &std::path::Path, task: &str) -> Vec<std::path::PathBuf> {
 }
 
 /// A Python with gymnasium, numpy and Pillow: `ARENA_GYM_PYTHON`, else `python3`.
-fn gym_python(test: &str) -> Option<String> {
-    let candidate = std::env::var("ARENA_GYM_PYTHON").unwrap_or_else(|_| "python3".to_owned());
-    let ok = Command::new(&candidate)
-        .args(["-c", "import gymnasium, numpy, PIL"])
-        .output()
-        .is_ok_and(|o| o.status.success());
-    if ok {
-        return Some(candidate);
-    }
-    assert!(
-        std::env::var("ARENA_REQUIRE_GYM").as_deref() != Ok("1"),
-        "{test}: {candidate} cannot import gymnasium and ARENA_REQUIRE_GYM=1 (set ARENA_GYM_PYTHON)"
-    );
-    // Straight to the process's stderr, in one write, so that test.sh counts it.
-    let _ = std::io::stderr().write_all(format!("SKIPPED: {test}: gymnasium not installed\n").as_bytes());
-    None
-}
+const GYM: arena_test_support::PythonNeed = arena_test_support::PythonNeed {
+    python_var: "ARENA_GYM_PYTHON",
+    require_var: "ARENA_REQUIRE_GYM",
+    imports: "import gymnasium, numpy, PIL",
+    what: "gymnasium",
+    reason: "gymnasium not installed",
+};
 
 #[test]
 fn the_gymnasium_wrapper_passes_gymnasiums_env_checker() {
-    let Some(gym) = gym_python("the_gymnasium_wrapper_passes_gymnasiums_env_checker") else { return };
+    let Some(gym) = GYM.find("the_gymnasium_wrapper_passes_gymnasiums_env_checker") else { return };
     let tmp = tempfile::tempdir().expect("tmp");
     let (child, url) = serve(&tmp.path().join("out"));
     let _served = Served(child);

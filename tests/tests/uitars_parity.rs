@@ -31,27 +31,15 @@ fn here() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/uitars_parity")
 }
 
-/// A Python that imports the `ui-tars` package; without one, a loud skip (a failure
-/// with `ARENA_REQUIRE_UI_TARS=1`).
-fn ui_tars_python(test: &str) -> Option<String> {
-    let candidate = std::env::var("ARENA_UI_TARS_PYTHON").unwrap_or_else(|_| "python3".to_owned());
-    let ok = Command::new(&candidate)
-        .args(["-c", "import ui_tars.action_parser"])
-        .output()
-        .is_ok_and(|o| o.status.success());
-    if ok {
-        return Some(candidate);
-    }
-    assert!(
-        std::env::var("ARENA_REQUIRE_UI_TARS").as_deref() != Ok("1"),
-        "{test}: {candidate} cannot import ui_tars and ARENA_REQUIRE_UI_TARS=1 (set ARENA_UI_TARS_PYTHON)"
-    );
-    // Straight to the process's stderr (libtest does not capture it), in one write, so
-    // that test.sh counts it.
-    let line = format!("SKIPPED: {test}: ui-tars not installed\n  (set ARENA_UI_TARS_PYTHON to a Python with it; .ci/run installs it)\n");
-    let _ = std::io::Write::write_all(&mut std::io::stderr(), line.as_bytes());
-    None
-}
+/// ByteDance's published `ui-tars` parser; without it, a loud skip (a failure with
+/// `ARENA_REQUIRE_UI_TARS=1`).
+const UI_TARS: arena_test_support::PythonNeed = arena_test_support::PythonNeed {
+    python_var: "ARENA_UI_TARS_PYTHON",
+    require_var: "ARENA_REQUIRE_UI_TARS",
+    imports: "import ui_tars.action_parser",
+    what: "ui_tars",
+    reason: "ui-tars not installed",
+};
 
 /// What one parser made of a reply: its steps and thought, or why it refused.
 type Outcome = Result<(Vec<Step>, Option<String>), String>;
@@ -83,7 +71,7 @@ fn screen(entry: &Value) -> (u32, u32) {
 #[test]
 fn our_uitars_parser_agrees_with_the_published_package() {
     let test = "our_uitars_parser_agrees_with_the_published_package";
-    let Some(python) = ui_tars_python(test) else { return };
+    let Some(python) = UI_TARS.find(test) else { return };
     let corpus_path = here().join("corpus.json");
     let corpus: Value = serde_json::from_str(&std::fs::read_to_string(&corpus_path).expect("corpus")).expect("JSON");
     let entries = corpus["entries"].as_array().expect("entries");

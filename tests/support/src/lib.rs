@@ -41,11 +41,11 @@ mod wine;
 pub use corpus::{waa_corpus, CORPUS_VAR, REQUIRE_CORPUS_VAR, SKIP_PREFIX};
 #[cfg(feature = "guest")]
 pub use guest::StubGuest;
-pub use mcp_sdk::{python_with_mcp, MCP_PYTHON_VAR, MCP_SDK_SKIP, REQUIRE_MCP_SDK_VAR};
+pub use mcp_sdk::{python_with_mcp, MCP_PYTHON_VAR, MCP_SDK, MCP_SDK_SKIP, REQUIRE_MCP_SDK_VAR};
 pub use png::png_claiming;
 pub use process::{
     agent_pythonpath, bench_guests, gui_agents_python_or_skip, python3_or_skip, workspace_binary, workspace_root,
-    Served, BENCH_GUESTS_VAR,
+    PythonNeed, Served, BENCH_GUESTS_VAR, GUI_AGENTS,
 };
 pub use standin::{standin_image, StandinImage, REQUIRE_QEMU_VAR, STANDIN_DIR_VAR};
 pub use stub_tasks::{copy_stub_task, stub_tasks_dir};

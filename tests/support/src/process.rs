@@ -218,30 +218,77 @@ pub fn python3_or_skip(test: &str) -> bool {
     false
 }
 
-/// A Python that has the `gui-agents` package and the vendor SDKs it pins
-/// (`openai`, `anthropic`, with `pydantic`, `numpy`, Pillow): `ARENA_GUI_AGENTS_PYTHON`,
-/// else `python3`. Without one the test is skipped loudly (`SKIPPED: <test>:
-/// gui-agents not installed`, counted by `./test.sh`).
+/// A Python a test needs: what it must import, the variable naming it, the variable
+/// that makes its absence a failure (CI), and the reason a skip gives (`test.sh`
+/// counts skips by their reason).
+#[derive(Debug, Clone, Copy)]
+pub struct PythonNeed {
+    /// The environment variable naming the Python (`.ci/run` makes one under `target/`).
+    pub python_var: &'static str,
+    /// The environment variable that, set to `1`, turns a missing Python into a failure.
+    pub require_var: &'static str,
+    /// The statement that must run, e.g. `import mcp`.
+    pub imports: &'static str,
+    /// What is missing, in words, for the messages.
+    pub what: &'static str,
+    /// The skip's reason: `SKIPPED: <test>: <reason>`.
+    pub reason: &'static str,
+}
+
+impl PythonNeed {
+    /// A Python that runs [`PythonNeed::imports`] for `test`: `$python_var`, else
+    /// `python3`. Without one the skip is said on the process's standard error
+    /// directly (libtest does not capture it), so `test.sh` counts it; the test
+    /// should then return.
+    ///
+    /// # Panics
+    ///
+    /// When there is none and `$require_var` is `1`.
+    pub fn find(&self, test: &str) -> Option<String> {
+        let candidate = std::env::var(self.python_var).unwrap_or_else(|_| "python3".to_owned());
+        if Command::new(&candidate).args(["-c", self.imports]).output().is_ok_and(|o| o.status.success()) {
+            return Some(candidate);
+        }
+        let required = std::env::var(self.require_var).is_ok_and(|v| v == "1");
+        self.skip(test, &candidate, required, &mut std::io::stderr());
+        None
+    }
+
+    /// The skip's line, or the failure when the Python is required.
+    pub fn skip(&self, test: &str, candidate: &str, required: bool, out: &mut dyn std::io::Write) {
+        assert!(
+            !required,
+            "{test}: {candidate} cannot import {} and {}=1 (set {})",
+            self.what, self.require_var, self.python_var
+        );
+        // One write of the whole line, so output from other test threads cannot split it.
+        let line = format!(
+            "{}{test}: {}\n  ({candidate} cannot import {}: set {} to a Python with it; .ci/run makes a venv with it)\n",
+            crate::SKIP_PREFIX,
+            self.reason,
+            self.what,
+            self.python_var
+        );
+        let _ = out.write_all(line.as_bytes());
+    }
+}
+
+/// `gui-agents` and the vendor SDKs it pins (`openai`, `anthropic`, with `pydantic`,
+/// `numpy`, Pillow).
+pub const GUI_AGENTS: PythonNeed = PythonNeed {
+    python_var: "ARENA_GUI_AGENTS_PYTHON",
+    require_var: "ARENA_REQUIRE_GUI_AGENTS",
+    imports:
+        "import gui_agents.s3.agents.agent_s, gui_agents.s3.agents.grounding, openai, anthropic, pydantic, numpy, PIL",
+    what: "gui-agents",
+    reason: "gui-agents not installed",
+};
+
+/// A Python that has the `gui-agents` package ([`GUI_AGENTS`]), or a loud, counted skip.
 ///
 /// # Panics
 ///
 /// When there is none and `ARENA_REQUIRE_GUI_AGENTS=1` (CI, where `.ci/run` installs it).
 pub fn gui_agents_python_or_skip(test: &str) -> Option<String> {
-    let candidate = std::env::var("ARENA_GUI_AGENTS_PYTHON").unwrap_or_else(|_| "python3".to_owned());
-    let imports =
-        "import gui_agents.s3.agents.agent_s, gui_agents.s3.agents.grounding, openai, anthropic, pydantic, numpy, PIL";
-    if Command::new(&candidate).args(["-c", imports]).output().is_ok_and(|o| o.status.success()) {
-        return Some(candidate);
-    }
-    assert!(
-        std::env::var("ARENA_REQUIRE_GUI_AGENTS").as_deref() != Ok("1"),
-        "{test}: {candidate} cannot import gui-agents and ARENA_REQUIRE_GUI_AGENTS=1 (set ARENA_GUI_AGENTS_PYTHON)"
-    );
-    // Straight to the process's stderr (libtest does not capture it), in one write,
-    // so that test.sh counts it.
-    let line = format!(
-        "SKIPPED: {test}: gui-agents not installed\n  (set ARENA_GUI_AGENTS_PYTHON to a Python with it; .ci/run installs it)\n"
-    );
-    let _ = std::io::stderr().write_all(line.as_bytes());
-    None
+    GUI_AGENTS.find(test)
 }
