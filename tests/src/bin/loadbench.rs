@@ -19,12 +19,19 @@
 //! Run it in release mode: `cargo run --release -p arena-tests --bin loadbench`
 //! (`-- guards` runs the guards section alone). With `ARENA_BENCH_GUESTS=LABEL=PATH,...`
 //! it first runs the mixed workload against a process of each named guest build, side
-//! by side in rotated rounds (`-- side-by-side` runs that alone).
+//! by side in rotated rounds (`-- side-by-side` runs that alone). There the clients
+//! run on one thread of their own (a current-thread runtime), so the other core is the
+//! guest's and no client waits on another client's scheduler, and each phase is run
+//! twice: with the host's [`GuestClient`], as every earlier round measured, and with a
+//! lean client ([`lean`]) that spends far less CPU per request. Each phase prints
+//! p50/p99 by kind of request as well.
 
 #![forbid(unsafe_code)]
 
 #[path = "loadbench/guards.rs"]
 mod guards;
+#[path = "loadbench/lean.rs"]
+mod lean;
 
 use std::process::ExitCode;
 use std::time::{Duration, Instant};
@@ -61,13 +68,18 @@ fn mib(value: Option<f64>) -> String {
     value.map_or_else(|| "unknown".to_owned(), |v| format!("{v:.0} MiB"))
 }
 
-/// One client's loop: the mixed workload until `until`; latencies and errors.
-async fn client_loop(client: GuestClient, until: Instant, id: usize) -> (Vec<Duration>, usize) {
+/// The requests of the mixed workload, in the order each client cycles through them.
+const KINDS: [&str; 5] = ["health", "screen", "action", "stat", "a11y"];
+
+/// One client's loop: the mixed workload until `until`; each answer's kind (an index
+/// into [`KINDS`]) and latency, and the number of errors.
+async fn client_loop(client: GuestClient, until: Instant, id: usize) -> (Vec<(usize, Duration)>, usize) {
     let (mut latencies, mut errors) = (Vec::new(), 0);
     let mut n = id;
     while Instant::now() < until {
         let started = Instant::now();
-        let result = match n % 5 {
+        let kind = n % KINDS.len();
+        let result = match kind {
             0 => client.health().await.map(drop),
             1 => client.screen().await.map(drop),
             2 => client.act_one(Action::MoveTo { x: (n % 1400) as i32, y: 300 }).await.map(drop),
@@ -75,12 +87,35 @@ async fn client_loop(client: GuestClient, until: Instant, id: usize) -> (Vec<Dur
             _ => client.a11y(&A11yQuery { foreground_only: true, ..A11yQuery::default() }).await.map(drop),
         };
         match result {
-            Ok(()) => latencies.push(started.elapsed()),
+            Ok(()) => latencies.push((kind, started.elapsed())),
             Err(_) => errors += 1,
         }
         n += 1;
     }
     (latencies, errors)
+}
+
+/// The `p`th quantile of sorted latencies (zero when there are none).
+fn quantile(sorted: &[Duration], p: f64) -> Duration {
+    sorted.get(((sorted.len().max(1) - 1) as f64 * p) as usize).copied().unwrap_or_default()
+}
+
+/// Which client drives the mixed workload.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Driver {
+    /// The host's own [`GuestClient`].
+    Host,
+    /// [`lean::client_loop`]: one HTTP/1.1 connection per client, answers not decoded.
+    Lean,
+}
+
+impl Driver {
+    fn name(self) -> &'static str {
+        match self {
+            Driver::Host => "GuestClient",
+            Driver::Lean => "lean client",
+        }
+    }
 }
 
 /// What one load phase measured.
@@ -90,6 +125,8 @@ struct Figures {
     p50: Duration,
     p99: Duration,
     errors: usize,
+    /// p50 and p99 of each kind of request, as in [`KINDS`].
+    kinds: [(Duration, Duration); KINDS.len()],
 }
 
 impl Figures {
@@ -102,32 +139,63 @@ impl Figures {
             self.errors
         );
     }
+
+    /// One line of p50/p99 by kind of request, to tell which one makes the tail.
+    fn print_kinds(&self) {
+        let by_kind: Vec<String> = KINDS
+            .iter()
+            .zip(self.kinds)
+            .map(|(kind, (p50, p99))| {
+                format!("{kind} {:.2}/{:.2}", p50.as_secs_f64() * 1000.0, p99.as_secs_f64() * 1000.0)
+            })
+            .collect();
+        println!("{:<46} p50/p99 ms by request: {}", "", by_kind.join(", "));
+    }
 }
 
 /// Runs `clients` concurrent clients for [`PHASE`] and prints the figures.
 async fn phase(url: &str, name: &str, clients: usize) -> anyhow::Result<()> {
-    measure(url, clients).await?.print(name);
+    let figures = measure(url, clients, Driver::Host).await?;
+    figures.print(name);
+    figures.print_kinds();
     Ok(())
 }
 
 /// Runs `clients` concurrent clients for [`PHASE`] against `url`.
-async fn measure(url: &str, clients: usize) -> anyhow::Result<Figures> {
+async fn measure(url: &str, clients: usize, driver: Driver) -> anyhow::Result<Figures> {
     let until = Instant::now() + PHASE;
     let mut tasks = tokio::task::JoinSet::new();
     for id in 0..clients {
-        let config = ClientConfig { token: None, timeout: Duration::from_secs(30), retries: 0 };
-        let client = GuestClient::new(url, config)?;
-        tasks.spawn(client_loop(client, until, id));
+        match driver {
+            Driver::Lean => tasks.spawn(lean::client_loop(url.trim_start_matches("http://").to_owned(), until, id)),
+            Driver::Host => {
+                let config = ClientConfig { token: None, timeout: Duration::from_secs(30), retries: 0 };
+                let client = GuestClient::new(url, config)?;
+                tasks.spawn(async move { Ok(client_loop(client, until, id).await) })
+            }
+        };
     }
     let (mut latencies, mut errors) = (Vec::new(), 0);
     while let Some(done) = tasks.join_next().await {
-        let (l, e) = done.context("a client task failed")?;
+        let (l, e) = done.context("a client task failed")??;
         latencies.extend(l);
         errors += e;
     }
-    latencies.sort();
-    let pct = |p: f64| latencies.get(((latencies.len().max(1) - 1) as f64 * p) as usize).copied().unwrap_or_default();
-    Ok(Figures { per_second: latencies.len() as f64 / PHASE.as_secs_f64(), p50: pct(0.5), p99: pct(0.99), errors })
+    let mut kinds = [(Duration::ZERO, Duration::ZERO); KINDS.len()];
+    for (k, figures) in kinds.iter_mut().enumerate() {
+        let mut of_kind: Vec<Duration> = latencies.iter().filter(|(kind, _)| *kind == k).map(|(_, l)| *l).collect();
+        of_kind.sort();
+        *figures = (quantile(&of_kind, 0.5), quantile(&of_kind, 0.99));
+    }
+    let mut all: Vec<Duration> = latencies.into_iter().map(|(_, l)| l).collect();
+    all.sort();
+    Ok(Figures {
+        per_second: all.len() as f64 / PHASE.as_secs_f64(),
+        p50: quantile(&all, 0.5),
+        p99: quantile(&all, 0.99),
+        errors,
+        kinds,
+    })
 }
 
 /// Rounds of the side-by-side load comparison (builds rotated each round).
@@ -137,7 +205,10 @@ const ROUNDS: usize = 3;
 /// `ARENA_BENCH_GUESTS`, all started alike, in interleaved rounds; every round's row
 /// and each build's median round (by p99) are printed.
 async fn side_by_side(builds: &[(String, std::path::PathBuf)]) -> anyhow::Result<()> {
-    println!("side by side, guest processes ({ROUNDS} rounds of {} s per phase, builds rotated):", PHASE.as_secs());
+    println!(
+        "side by side, guest processes ({ROUNDS} rounds of {} s per phase, builds rotated; clients on one thread of their own):",
+        PHASE.as_secs()
+    );
     let extra = ["--computer-action-delay-ms", "0", "--max-connections", "1024"];
     let served: Vec<arena_test_support::Served> = builds
         .iter()
@@ -145,19 +216,22 @@ async fn side_by_side(builds: &[(String, std::path::PathBuf)]) -> anyhow::Result
             arena_test_support::Served::guest_of(exe, &extra).with_context(|| format!("starting the {label} guest"))
         })
         .collect::<anyhow::Result<_>>()?;
-    for clients in [50, 200] {
+    for (driver, clients) in [(Driver::Host, 50), (Driver::Host, 200), (Driver::Lean, 50), (Driver::Lean, 200)] {
+        let how = driver.name();
         let mut rounds = vec![Vec::new(); builds.len()];
         for round in 0..ROUNDS {
             for i in 0..builds.len() {
                 let b = (i + round) % builds.len();
-                let figures = measure(&served[b].url, clients).await?;
-                figures.print(&format!("{}: {clients} clients, round {}", builds[b].0, round + 1));
+                let figures = measure(&served[b].url, clients, driver).await?;
+                figures.print(&format!("{}: {clients} {how}, round {}", builds[b].0, round + 1));
                 rounds[b].push(figures);
             }
         }
         for ((label, _), mut figures) in builds.iter().zip(rounds) {
             figures.sort_by_key(|f| f.p99);
-            figures[figures.len() / 2].print(&format!("{label}: {clients} clients, median round"));
+            let median = figures[figures.len() / 2];
+            median.print(&format!("{label}: {clients} {how}, median"));
+            median.print_kinds();
         }
     }
     Ok(())
@@ -166,7 +240,12 @@ async fn side_by_side(builds: &[(String, std::path::PathBuf)]) -> anyhow::Result
 async fn run() -> anyhow::Result<()> {
     let builds = arena_test_support::bench_guests()?;
     if !builds.is_empty() {
-        side_by_side(&builds).await?;
+        // The clients on a thread and runtime of their own (see the module's notes).
+        tokio::task::spawn_blocking(move || {
+            tokio::runtime::Builder::new_current_thread().enable_all().build()?.block_on(side_by_side(&builds))
+        })
+        .await
+        .context("the side-by-side thread failed")??;
     }
     if std::env::args().nth(1).as_deref() == Some("side-by-side") {
         return Ok(());
