@@ -260,7 +260,7 @@ fn the_python_mcp_example_plays_two_stub_tasks() {
     let said = String::from_utf8_lossy(&played.stdout);
     let stderr = String::from_utf8_lossy(&played.stderr);
     assert!(played.status.success(), "{said}\n{stderr}");
-    // The endpoint answers the session's DELETE as the SDK expects (arena_mcp::SessionEndOk).
+    // The endpoint answers the session's DELETE as the SDK expects (arena_mcp::HttpStatuses).
     assert!(!stderr.contains("Session termination failed"), "{stderr}");
     assert!(said.contains("stub-notepad-draft: 1.0") && said.contains("stub-settings-infeasible: 1.0"), "{said}");
     assert!(wait_exit(child, Duration::from_secs(60)).success());

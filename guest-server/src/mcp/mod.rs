@@ -15,7 +15,7 @@ pub mod guest_tools;
 
 use std::time::{Duration, Instant};
 
-use arena_mcp::{image_png, text, tool_error, BoundedSessions, Server, SessionEndOk, SessionLimits, ToolServer};
+use arena_mcp::{image_png, text, tool_error, BoundedSessions, HttpStatuses, Server, SessionLimits, ToolServer};
 use base64::Engine as _;
 use rmcp::model::{CallToolRequestParams, CallToolResponse};
 use rmcp::transport::streamable_http_server::StreamableHttpService;
@@ -36,16 +36,16 @@ use crate::state::AppState;
 /// open (a new one closes the one idle longest), each closed after
 /// `--mcp-idle-secs` without a call, a call whose client hung up cancelled
 /// ([`arena_mcp::BoundedSessions`]), a session's `DELETE` answered `200`
-/// ([`SessionEndOk`]). rmcp's own `Host` check is off because
+/// ([`HttpStatuses`]). rmcp's own `Host` check is off because
 /// [`crate::auth::guard`] in front of it already makes that decision for every
 /// route (loopback names, `--allow-host`).
-pub fn service(state: AppState) -> SessionEndOk<StreamableHttpService<Server<GuestMcp>, BoundedSessions>> {
+pub fn service(state: AppState) -> HttpStatuses<StreamableHttpService<Server<GuestMcp>, BoundedSessions>> {
     let config = arena_mcp::http_config().disable_allowed_hosts();
     let limits = SessionLimits {
         max_sessions: state.config.mcp_max_sessions as usize,
         idle: Duration::from_secs(state.config.mcp_idle_secs),
     };
-    SessionEndOk(StreamableHttpService::new(
+    HttpStatuses(StreamableHttpService::new(
         move || Ok(Server(GuestMcp { state: state.clone(), elements: guest_tools::Elements::default() })),
         BoundedSessions::new(limits),
         config,

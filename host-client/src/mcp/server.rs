@@ -204,7 +204,7 @@ where
         StreamableHttpService::new(move || Ok(make()), sessions, config);
     let token: Arc<str> = Arc::from(token);
     axum::Router::new()
-        .nest_service("/mcp", arena_mcp::SessionEndOk(service))
+        .nest_service("/mcp", arena_mcp::HttpStatuses(service))
         .layer(axum::middleware::from_fn(move |req, next| require_token(Arc::clone(&token), req, next)))
 }
 

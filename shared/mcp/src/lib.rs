@@ -7,7 +7,7 @@
 //! protocol revisions up to [`MAX_PROTOCOL`], and is served with the same
 //! streamable-HTTP settings ([`http_config`]), the same bounded sessions
 //! ([`BoundedSessions`]: a cap, idle expiry, hung-up calls cancelled) and the
-//! session's end answered as the official SDKs expect ([`SessionEndOk`]).
+//! session's end and a refused session answered as clients expect ([`HttpStatuses`]).
 //!
 //! What is not here: the tools' names, arguments and checks (`arena_shared::mcp_tools`),
 //! the bearer check (`arena_shared::token::bearer_matches`, which every server of the
@@ -80,23 +80,40 @@ pub fn http_config() -> StreamableHttpServerConfig {
     StreamableHttpServerConfig::default().with_sse_keep_alive(Some(SSE_KEEP_ALIVE)).enforce_origin_validation()
 }
 
-/// A streamable-HTTP MCP service (rmcp's `StreamableHttpService`) whose answer to a
-/// session's `DELETE` is `200 OK` instead of rmcp's `202 Accepted`.
+/// A streamable-HTTP MCP service (rmcp's `StreamableHttpService`) with two of its
+/// statuses changed to what clients expect; bodies and every other answer are rmcp's.
 ///
-/// The MCP specification (transports, "Session Management") lets a client end its
-/// session with `DELETE` and names only `405` as an answer, for servers that do not
-/// allow it; it says nothing of the success status. The official SDKs' servers answer
-/// `200` (the Python SDK's `StreamableHTTPServerTransport._handle_delete_request`, the
-/// TypeScript SDK's `handleDeleteRequest`), and the Python SDK's client, which every
-/// Python MCP user has, takes `200` and `204` as success and logs
-/// `Session termination failed: 202` for anything else (`mcp` 2.3.0,
-/// `mcp/client/streamable_http.py`, `terminate_session`). The session is closed when
-/// rmcp answers; only the status changes, and only for `DELETE` (a `POST` of a
-/// notification keeps its `202`).
+/// - **A session's `DELETE`: `200 OK`, not rmcp's `202 Accepted`.** The MCP
+///   specification (transports, "Session Management") lets a client end its session
+///   with `DELETE` and names only `405` as an answer, for servers that do not allow it;
+///   it says nothing of the success status. The official SDKs' servers answer `200`
+///   (the Python SDK's `StreamableHTTPServerTransport._handle_delete_request`, the
+///   TypeScript SDK's `handleDeleteRequest`), and the Python SDK's client, which every
+///   Python MCP user has, takes `200` and `204` as success and logs `Session
+///   termination failed: 202` for anything else (`mcp` 2.3.0,
+///   `mcp/client/streamable_http.py`, `terminate_session`). The session is closed when
+///   rmcp answers; only the status changes, and only for `DELETE` (a `POST` of a
+///   notification keeps its `202`).
+/// - **A new session refused because every open one is busy
+///   ([`sessions::SessionsError::Full`]): `503 Service Unavailable` with `Retry-After`, not
+///   rmcp's `500`.** rmcp answers any failure of its session manager `500` (its
+///   `internal_error_response`), which says the server is broken; this refusal is a
+///   temporary overload, which HTTP answers `503` and `Retry-After` (RFC 9110, 15.6.4
+///   and 10.2.3). The request's own refusal is told apart from any other failure by a
+///   flag [`BoundedSessions`] sets in the request's task, so no other `500` changes.
 #[derive(Debug, Clone)]
-pub struct SessionEndOk<S>(pub S);
+pub struct HttpStatuses<S>(pub S);
 
-impl<S, B, R> tower_service::Service<http::Request<B>> for SessionEndOk<S>
+/// Seconds a client refused a session is told to wait before it tries again.
+pub const BUSY_RETRY_AFTER_SECS: u32 = 5;
+
+tokio::task_local! {
+    /// Set by [`BoundedSessions`] when it refuses the session of the request being
+    /// answered in this task ([`HttpStatuses`]).
+    pub(crate) static SESSION_REFUSED: std::cell::Cell<bool>;
+}
+
+impl<S, B, R> tower_service::Service<http::Request<B>> for HttpStatuses<S>
 where
     S: tower_service::Service<http::Request<B>, Response = http::Response<R>>,
     S::Future: Send + 'static,
@@ -112,13 +129,20 @@ where
     fn call(&mut self, request: http::Request<B>) -> Self::Future {
         let delete = request.method() == http::Method::DELETE;
         let answer = self.0.call(request);
-        Box::pin(async move {
+        Box::pin(SESSION_REFUSED.scope(std::cell::Cell::new(false), async move {
             let mut response = answer.await?;
             if delete && response.status() == http::StatusCode::ACCEPTED {
                 *response.status_mut() = http::StatusCode::OK;
             }
+            let refused = SESSION_REFUSED.with(std::cell::Cell::get);
+            if refused && response.status() == http::StatusCode::INTERNAL_SERVER_ERROR {
+                *response.status_mut() = http::StatusCode::SERVICE_UNAVAILABLE;
+                response
+                    .headers_mut()
+                    .insert(http::header::RETRY_AFTER, http::HeaderValue::from(BUSY_RETRY_AFTER_SECS));
+            }
             Ok(response)
-        })
+        }))
     }
 }
 
@@ -181,7 +205,7 @@ impl<T: ToolServer> ServerHandler for Server<T> {
 mod tests {
     use super::*;
 
-    struct Echo;
+    pub(crate) struct Echo;
 
     impl ToolServer for Echo {
         const NAME: &'static str = "echo";
@@ -248,7 +272,7 @@ mod tests {
     #[tokio::test]
     async fn a_session_delete_is_answered_200_and_nothing_else_changes() {
         use tower_service::Service as _;
-        let mut service = SessionEndOk(Accepts);
+        let mut service = HttpStatuses(Accepts);
         let mut status = |method: http::Method| {
             let request = http::Request::builder().method(method).uri("/mcp").body(()).expect("a request");
             service.call(request)

@@ -334,7 +334,11 @@ impl BoundedSessions {
             };
             match victim {
                 Some(id) => self.close_for(&id, CloseReason::Cap).await?,
-                None => return Err(SessionsError::Full(self.limits.max_sessions)),
+                None => {
+                    // Outside a request's task (tests, other callers) there is nothing to tell.
+                    let _ = crate::SESSION_REFUSED.try_with(|refused| refused.set(true));
+                    return Err(SessionsError::Full(self.limits.max_sessions));
+                }
             }
         }
     }
@@ -544,6 +548,49 @@ mod tests {
         sessions.call(&fourth, true);
         let Err(err) = sessions.create_session().await else { panic!("a session opened though all are busy") };
         assert!(err.to_string().contains("3 MCP sessions are open"), "{err}");
+    }
+
+    /// An `initialize` as a client opens its session with, over streamable HTTP.
+    fn initialize() -> http::Request<http_body_util::Full<bytes::Bytes>> {
+        let body = serde_json::json!({
+            "jsonrpc": "2.0", "id": 1, "method": "initialize",
+            "params": {"protocolVersion": "2025-06-18", "capabilities": {}, "clientInfo": {"name": "t", "version": "1"}},
+        });
+        http::Request::post("/mcp")
+            .header(http::header::HOST, "localhost")
+            .header(http::header::ACCEPT, "application/json, text/event-stream")
+            .header(http::header::CONTENT_TYPE, "application/json")
+            .body(http_body_util::Full::new(serde_json::to_vec(&body).expect("serialises").into()))
+            .expect("a request")
+    }
+
+    #[tokio::test]
+    async fn a_session_refused_because_all_are_busy_is_a_503_with_retry_after() {
+        use tower_service::Service as _;
+        let sessions = BoundedSessions::new(SessionLimits { max_sessions: 1, idle: Duration::from_secs(600) });
+        let mut service = crate::HttpStatuses(rmcp::transport::StreamableHttpService::new(
+            || Ok(crate::Server(crate::tests::Echo)),
+            Arc::clone(&sessions),
+            crate::http_config(),
+        ));
+        let (busy, _) = sessions.create_session().await.expect("opens");
+        sessions.call(&busy, true);
+
+        let refused = service.call(initialize()).await.expect("an answer");
+        assert_eq!(refused.status(), http::StatusCode::SERVICE_UNAVAILABLE);
+        let retry = refused.headers().get(http::header::RETRY_AFTER).expect("Retry-After is set");
+        assert_eq!(retry.to_str().expect("ASCII"), crate::BUSY_RETRY_AFTER_SECS.to_string());
+        let body = http_body_util::BodyExt::collect(refused.into_body()).await.expect("a body").to_bytes();
+        let body = String::from_utf8_lossy(&body);
+        assert!(body.contains("1 MCP sessions are open") && body.contains("every one has a call running"), "{body}");
+        assert_eq!(sessions.open_sessions(), 1, "nothing was closed to make room");
+
+        // Once the call ends, the idle session makes room and the next one opens.
+        sessions.call(&busy, false);
+        let opened = service.call(initialize()).await.expect("an answer");
+        assert_eq!(opened.status(), http::StatusCode::OK);
+        assert!(opened.headers().contains_key("mcp-session-id"), "{:?}", opened.headers());
+        assert!(!sessions.has_session(&busy).await.expect("answers"), "the idle one made room");
     }
 
     #[tokio::test]
