@@ -20,6 +20,7 @@ gymnasium when gymnasium is installed.
 from __future__ import annotations
 
 import json
+import os
 import urllib.error
 import urllib.request
 from typing import Any, Dict, List, Optional, Tuple, Union
@@ -42,12 +43,21 @@ Actions = Union[str, Dict[str, Any], List[Union[str, Dict[str, Any]]]]
 class ArenaEnv:
     """One session of an ``arena env serve`` server: one guest, one episode at a time."""
 
-    def __init__(self, url: str, observation: Optional[Dict[str, Any]] = None, timeout: float = 900.0):
+    def __init__(
+        self,
+        url: str,
+        observation: Optional[Dict[str, Any]] = None,
+        timeout: float = 900.0,
+        token: Optional[str] = None,
+    ):
         """``url``: the server's address; ``observation``: what each observation
         carries, as the step protocol's ``hello`` asks it (``{"a11y": "none"}``, ...);
         ``timeout``: the longest wait for one answer, in seconds (a step includes the
-        task's setup, pauses and evaluation)."""
+        task's setup, pauses and evaluation); ``token``: the server's ``--env-token``,
+        by default ``ARENA_ENV_TOKEN`` from the environment (none for a server
+        without one)."""
         self.url = url.rstrip("/")
+        self.token = token if token is not None else os.environ.get("ARENA_ENV_TOKEN") or None
         self.observation = observation
         self.timeout = timeout
         self.session: Optional[str] = None
@@ -58,6 +68,8 @@ class ArenaEnv:
         data = None if body is None else json.dumps(body).encode()
         request = urllib.request.Request(self.url + path, data=data, method=method)
         request.add_header("Content-Type", "application/json")
+        if self.token:
+            request.add_header("Authorization", f"Bearer {self.token}")
         try:
             with urllib.request.urlopen(request, timeout=self.timeout) as answer:
                 return json.loads(answer.read())

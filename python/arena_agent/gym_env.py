@@ -50,10 +50,11 @@ class ArenaGymEnv(gym.Env):
         action_space: str = "pyautogui",
         max_action_length: int = 4096,
         render_mode: Optional[str] = None,
+        token: Optional[str] = None,
     ):
         if render_mode not in (None, "rgb_array"):
             raise ValueError(f"render_mode {render_mode!r}: only 'rgb_array' is offered")
-        self.arena = ArenaEnv(url, observation={"screenshot": "inline"})
+        self.arena = ArenaEnv(url, observation={"screenshot": "inline"}, token=token)
         served = self.arena.info()
         screen = served.get("screen") or {}
         if not screen:

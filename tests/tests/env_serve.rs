@@ -215,3 +215,73 @@ async fn every_request_and_answer_has_the_documented_shape_and_bad_requests_are_
     let (status, _) = post("close", json!({"session": session})).await;
     assert_eq!(status, 200);
 }
+
+/// Who may drive the guests: without `--env-token` only loopback `Host` names (a page
+/// that rebinds its name to 127.0.0.1 is refused) and never a browser (`Origin`); with
+/// it, only a client sending the token, which `ArenaEnv` takes from `ARENA_ENV_TOKEN`;
+/// and no non-loopback address without a token.
+#[tokio::test(flavor = "multi_thread")]
+async fn only_loopback_clients_or_token_holders_drive_the_guests() {
+    let tmp = tempfile::tempdir().expect("tmp");
+    let http = reqwest::Client::new();
+    let info = |url: &str, headers: &[(&str, &str)]| {
+        let mut request = http.get(format!("{url}info"));
+        for (name, value) in headers {
+            request = request.header(*name, *value);
+        }
+        async move {
+            let answer = request.send().await.expect("an answer");
+            (answer.status().as_u16(), answer.json::<Value>().await.expect("JSON"))
+        }
+    };
+
+    let (child, url) = serve(&tmp.path().join("open"));
+    let open = Served(child);
+    assert_eq!(info(&url, &[]).await.0, 200, "a loopback client without a token");
+    let (status, answer) = info(&url, &[("host", "attacker.example:8766")]).await;
+    assert_eq!(status, 403, "{answer}");
+    assert!(answer["error"].as_str().is_some_and(|e| e.contains("attacker.example")), "{answer}");
+    let (status, answer) = info(&url, &[("origin", "http://127.0.0.1:8766")]).await;
+    assert_eq!(status, 403, "{answer}");
+    assert!(answer["error"].as_str().is_some_and(|e| e.contains("Origin")), "{answer}");
+    drop(open);
+
+    let (child, url) = serve_with(&tmp.path().join("token"), &["--env-token", "s3cret-env"]);
+    let _guarded = Served(child);
+    for headers in [vec![], vec![("authorization", "Bearer wrong")]] {
+        let (status, answer) = info(&url, &headers).await;
+        assert_eq!(status, 401, "{headers:?}: {answer}");
+        assert!(answer["error"].as_str().is_some_and(|e| e.contains("--env-token")), "{answer}");
+    }
+    let (status, answer) = info(&url, &[("authorization", "Bearer s3cret-env")]).await;
+    assert_eq!(status, 200, "{answer}");
+    // The Python client sends the token it finds in the environment.
+    if python3_or_skip("ArenaEnv with a token") {
+        let script = "import sys\nfrom arena_agent.env import ArenaEnv, ArenaEnvError\n\
+                      print(len(ArenaEnv(sys.argv[1]).info()['tasks']))\n\
+                      try:\n    ArenaEnv(sys.argv[1], token='wrong').info()\nexcept ArenaEnvError as err:\n    print(err.status)\n";
+        let ran = Command::new("python3")
+            .args(["-c", script, &url])
+            .env("PYTHONPATH", agent_pythonpath(&[]))
+            .env("ARENA_ENV_TOKEN", "s3cret-env")
+            .output()
+            .expect("python runs");
+        let out = String::from_utf8_lossy(&ran.stdout);
+        assert!(ran.status.success(), "{out}{}", String::from_utf8_lossy(&ran.stderr));
+        let served = answer["tasks"].as_array().map_or(0, Vec::len);
+        assert_eq!(out.lines().collect::<Vec<_>>(), [served.to_string().as_str(), "401"], "{out}");
+    }
+
+    // Anyone who reaches a non-loopback address could drive the guests: refused without a token.
+    let refused = Command::new(workspace_binary("arena-host", "arena").expect("the arena binary"))
+        .args(["env", "serve", "--listen", "0.0.0.0:0", "--stub-guests", "1", "--tasks"])
+        .arg(stub_tasks_dir().join("examples"))
+        .arg("--out")
+        .arg(tmp.path().join("wide"))
+        .env_remove("ARENA_ENV_TOKEN")
+        .output()
+        .expect("arena runs");
+    let stderr = String::from_utf8_lossy(&refused.stderr);
+    assert!(!refused.status.success(), "{stderr}");
+    assert!(stderr.contains("not a loopback address") && stderr.contains("--env-token"), "{stderr}");
+}

@@ -54,6 +54,11 @@ pub struct ServeArgs {
     /// A session whose client sends nothing for this many seconds ends and frees its guest.
     #[arg(long, default_value_t = 600, value_name = "SECONDS")]
     pub idle_secs: u64,
+    /// A bearer token every client must send (`Authorization: Bearer TOKEN`;
+    /// `ArenaEnv(url, token=...)` or `ARENA_ENV_TOKEN` on the client's side). Without
+    /// one, --listen must be a loopback address.
+    #[arg(long, env = "ARENA_ENV_TOKEN", value_name = "TOKEN", hide_env_values = true)]
+    pub env_token: Option<String>,
     #[command(flatten)]
     pub source: GuestSource,
 }
@@ -114,10 +119,18 @@ async fn serve_env(conn: &Connection, args: ServeArgs) -> anyhow::Result<ExitCod
             Duration::try_from_secs_f64(secs).context("--sleep-after must be a number of seconds, 0 or more")?;
     }
     config.options.insert("env".into(), "on".into());
+    let token = args.env_token.clone().filter(|t| !t.trim().is_empty());
     let listener = tokio::net::TcpListener::bind(args.listen.as_str())
         .await
         .with_context(|| format!("binding --listen {}", args.listen))?;
     let addr = listener.local_addr().context("the listener's address")?;
+    if token.is_none() && !addr.ip().is_loopback() {
+        anyhow::bail!(
+            "--listen {} is not a loopback address: anyone who reaches it could drive the guests, so give \
+             --env-token TOKEN (or ARENA_ENV_TOKEN) for clients to send, or listen on 127.0.0.1",
+            args.listen
+        );
+    }
     let guests = super::runs::Guests::start(conn, &run).await?;
     let stop = tokio_util::sync::CancellationToken::new();
     config.stop = stop.clone();
@@ -130,6 +143,7 @@ async fn serve_env(conn: &Connection, args: ServeArgs) -> anyhow::Result<ExitCod
         config,
         idle: Duration::from_secs(args.idle_secs),
         screen,
+        token,
     };
     super::emit(&format!("{}\n", crate::envserve::describe(addr, &tasks, guests.clients.len())))?;
     let server = crate::envserve::EnvServer::new(tasks, guests.clients.clone(), options);

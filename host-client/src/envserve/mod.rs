@@ -30,6 +30,12 @@
 //! Bounded as the step protocol is: a body of at most `MAX_ANSWER`, at most
 //! `MAX_ACTIONS` actions a step, one session per guest, and a session whose client
 //! sends nothing for `idle` ends as an agent error and frees its guest.
+//!
+//! Guarded ([`guard`]): with a token ([`EnvOptions::token`]) every request needs it as
+//! a bearer token; without one the server listens on loopback only (the command refuses
+//! any other address) and takes only loopback `Host` names, so a web page that rebinds
+//! its name to 127.0.0.1 cannot drive the guests; and a request with an `Origin` (a
+//! browser's) is refused either way.
 
 use std::collections::{BTreeMap, HashMap};
 use std::net::SocketAddr;
@@ -69,6 +75,8 @@ pub struct EnvOptions {
     /// The guests' screen in pixels (the first guest's), for clients that size
     /// their observation space before the first reset.
     pub screen: Option<(u32, u32)>,
+    /// The bearer token every request must carry; `None` serves loopback clients only.
+    pub token: Option<String>,
 }
 
 /// What one turn of an episode hands the waiting request.
@@ -260,6 +268,7 @@ impl EnvServer {
             .route("/evaluate", post(evaluate))
             .route("/close", post(close))
             .layer(axum::extract::DefaultBodyLimit::max(MAX_ANSWER))
+            .layer(axum::middleware::from_fn_with_state(Arc::clone(self), guard))
             .with_state(Arc::clone(self))
     }
 
@@ -553,6 +562,58 @@ impl EnvServer {
     }
 }
 
+/// Whether `host` (a `Host` header's value) names this machine's loopback interface:
+/// `localhost`, `127.0.0.1` or `[::1]`, with or without a port.
+fn loopback_host(host: &str) -> bool {
+    let name = match host.strip_prefix('[') {
+        Some(rest) => rest.split(']').next().unwrap_or_default(),
+        None => host.rsplit_once(':').map_or(host, |(name, _)| name),
+    };
+    name.eq_ignore_ascii_case("localhost") || name.parse::<std::net::IpAddr>().is_ok_and(|ip| ip.is_loopback())
+}
+
+/// Refuses what must not reach the routes (see the module's notes): a browser's
+/// request (`Origin`), a request without the token when there is one, and a `Host`
+/// that is not loopback when there is none.
+async fn guard(
+    State(server): State<Arc<EnvServer>>,
+    request: axum::extract::Request,
+    next: axum::middleware::Next,
+) -> Response {
+    let headers = request.headers();
+    if headers.contains_key(axum::http::header::ORIGIN) {
+        return Refusal(StatusCode::FORBIDDEN, "requests from web pages (with an Origin header) are refused".into())
+            .into_response();
+    }
+    match &server.options.token {
+        Some(token) => {
+            let given = headers.get(axum::http::header::AUTHORIZATION).map(|v| v.as_bytes());
+            if !arena_shared::token::bearer_matches(given, token) {
+                let mut refused =
+                    Refusal(StatusCode::UNAUTHORIZED, "a bearer token is required (the server's --env-token)".into())
+                        .into_response();
+                refused
+                    .headers_mut()
+                    .insert(axum::http::header::WWW_AUTHENTICATE, axum::http::HeaderValue::from_static("Bearer"));
+                return refused;
+            }
+        }
+        None => {
+            let host = headers.get(axum::http::header::HOST).and_then(|v| v.to_str().ok()).unwrap_or_default();
+            if !loopback_host(host) {
+                return Refusal(
+                    StatusCode::FORBIDDEN,
+                    format!(
+                        "Host {host:?} is not a loopback name; without --env-token only loopback clients are served"
+                    ),
+                )
+                .into_response();
+            }
+        }
+    }
+    next.run(request).await
+}
+
 /// Serves `server` on `listener` until `stop`, closing idle sessions as it goes.
 ///
 /// # Errors
@@ -601,8 +662,36 @@ mod tests {
             })
             .collect();
         let cache = arena_setup::DownloadCache::new(dir.join("cache")).expect("a cache");
-        let options = EnvOptions { out: dir.to_owned(), config: EpisodeConfig::instant(cache), idle, screen: None };
+        let options =
+            EnvOptions { out: dir.to_owned(), config: EpisodeConfig::instant(cache), idle, screen: None, token: None };
         EnvServer::new(Vec::new(), guests, options)
+    }
+
+    #[test]
+    fn only_loopback_names_are_loopback_hosts() {
+        for host in [
+            "localhost",
+            "localhost:8766",
+            "LOCALHOST",
+            "127.0.0.1",
+            "127.0.0.1:0",
+            "127.1.2.3:9",
+            "[::1]",
+            "[::1]:8766",
+        ] {
+            assert!(loopback_host(host), "{host}");
+        }
+        for host in [
+            "",
+            "example.com",
+            "example.com:8766",
+            "10.0.0.2:8766",
+            "[::2]:1",
+            "localhost.example.com",
+            "127.0.0.1.nip.io",
+        ] {
+            assert!(!loopback_host(host), "{host}");
+        }
     }
 
     /// Opens a session as a reset does, without an episode.
