@@ -369,7 +369,10 @@ async fn a_computer_use_task_page_shows_the_models_text_a_click_marker_where_it_
     assert_eq!(step["screen"], json!([shot.0, shot.1]), "the screen the actions are measured on is the screenshot's");
     let (input, output) = (step["usage"]["input"].as_u64(), step["usage"]["output"].as_u64());
     assert_eq!((input, output), (Some(1234), Some(56)));
-    assert!(step["response"].as_str().is_some_and(|r| r.starts_with("response-step_0_")), "{step}");
+    // The vendor's answer is a record named in `log_response`, beside the model's text in `response`.
+    assert!(step["log_response"].as_str().is_some_and(|r| r.starts_with("response-step_0_")), "{step}");
+    assert!(step["response"].as_str().is_some_and(|r| !r.starts_with("response-step_")), "{step}");
+    assert_eq!(traj.matches("\"response\":").count(), traj.lines().filter(|l| l.contains("\"step\":")).count());
 
     let page_file = dir.join(TRAJ_HTML);
     let url = format!("file://{}", page_file.display());

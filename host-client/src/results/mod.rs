@@ -366,9 +366,49 @@ pub struct StepRecord {
     pub more: Vec<ActionRecord>,
     /// The agent's logs of the step, as upstream's recorder adds them to the
     /// line: a file name for text, images and JSON, the value itself otherwise.
-    /// Written, not read back.
-    #[serde(flatten, skip_deserializing)]
+    /// Written by [`StepRecord::line`] (a log named as a field the line already has
+    /// goes in as `log_<name>`), not read back.
+    #[serde(skip)]
     pub logs: std::collections::BTreeMap<String, Value>,
+}
+
+/// The prefix of a log whose name the `traj.jsonl` line already has ([`StepRecord::line`]).
+pub const LOG_PREFIX: &str = "log_";
+
+impl StepRecord {
+    /// The step's first `traj.jsonl` line: its fields, then the agent's logs beside
+    /// them as upstream's recorder adds them. A log named as a field the line already
+    /// has (`step`, `reward`, `screenshot_file`, the computer-use agents' `response`
+    /// record, or any field an agent's `record` names) goes in as `log_<name>`
+    /// (`log_log_<name>` if that is taken too), so the line never holds a key twice and
+    /// no agent can overwrite what the harness recorded: every JSON reader takes the
+    /// last of two equal keys, which would be the agent's.
+    ///
+    /// # Errors
+    ///
+    /// A field that does not serialise (none of the harness's do).
+    pub fn line(&self) -> Result<String, serde_json::Error> {
+        // The fields in the struct's order, then the logs in theirs.
+        let mut line = serde_json::to_string(self)?;
+        let mut taken: std::collections::HashSet<String> =
+            serde_json::from_str::<serde_json::Map<String, Value>>(&line)?.into_iter().map(|(key, _)| key).collect();
+        line.pop(); // the closing brace
+        for (name, value) in &self.logs {
+            let mut key = name.clone();
+            while taken.contains(&key) {
+                key.insert_str(0, LOG_PREFIX);
+            }
+            if line.len() > 1 {
+                line.push(',');
+            }
+            line.push_str(&serde_json::to_string(&key)?);
+            line.push(':');
+            line.push_str(&serde_json::to_string(value)?);
+            taken.insert(key);
+        }
+        line.push('}');
+        Ok(line)
+    }
 }
 
 /// Everything about one episode; `episode.json`.
@@ -700,7 +740,7 @@ impl TaskDir {
             text.push('\n');
         }
         for step in steps {
-            text.push_str(&serde_json::to_string(step).map_err(format)?);
+            text.push_str(&step.line().map_err(format)?);
             text.push('\n');
             for more in &step.more {
                 text.push_str(&serde_json::to_string(more).map_err(format)?);

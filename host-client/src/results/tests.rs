@@ -443,9 +443,9 @@ fn the_fail_always_floor_is_the_infeasible_share_of_the_task_list_per_row() {
 }
 
 /// A task folder holding one computer-use step: a 40x20 screenshot, the
-/// vendor's answer kept as `response-step_0_<time>.json` (its name in the line's
-/// `response`, as the recorder leaves it), a click and a drag in typed actions,
-/// the step's tokens and an action error.
+/// vendor's answer kept as `response-step_0_<time>.json` (a log named `response`,
+/// so the line has its name in `log_response` beside the model's text), a click
+/// and a drag in typed actions, the step's tokens and an action error.
 fn computer_use_task(root: &Path, answer: &Value) -> TaskDir {
     let dir = layout(root).task_dir(&task("notepad", "cu"));
     dir.prepare().unwrap();
@@ -459,7 +459,7 @@ fn computer_use_task(root: &Path, answer: &Value) -> TaskDir {
     dir.write_file(&record, serde_json::to_vec(answer).unwrap().as_slice()).unwrap();
     let mut first = step(1);
     first.screenshot_file = shot;
-    first.response = record.clone();
+    first.response = "the model's text".into();
     first.logs.insert("response".into(), Value::String(record));
     first.actions = vec![
         crate::ports::AgentAction::Typed(vec![
@@ -479,6 +479,49 @@ fn computer_use_task(root: &Path, answer: &Value) -> TaskDir {
     episode.action_errors = 1;
     dir.finish(&episode, Some(&reset()), &[first]).unwrap();
     dir
+}
+
+/// An agent's `record` (or any log) naming fields the line already has cannot
+/// overwrite them: each goes in as `log_<name>`, and no key is written twice.
+#[test]
+fn logs_named_as_the_lines_own_fields_never_overwrite_them() {
+    let root = tempfile::tempdir().unwrap();
+    let dir = layout(root.path()).task_dir(&task("notepad", "hostile"));
+    dir.prepare().unwrap();
+    let mut first = step(1);
+    first.response = "hi".into();
+    first.screenshot_file = "shot.png".into();
+    for (key, value) in [
+        ("step", serde_json::json!("pwned")),
+        ("reward", serde_json::json!(99)),
+        ("screenshot_file", serde_json::json!("../../../../etc/passwd")),
+        ("log_step", serde_json::json!("taken")),
+        ("thoughts", serde_json::json!("fine")),
+    ] {
+        first.logs.insert(key.into(), value);
+    }
+    let episode = episode("notepad", "hostile", 0.0, EpisodeStatus::Completed, 1);
+    dir.finish(&episode, Some(&reset()), std::slice::from_ref(&first)).unwrap();
+    let text = std::fs::read_to_string(dir.path().join(TRAJ_FILE)).unwrap();
+    let line = text.lines().nth(1).expect("the step's line");
+    for key in ["\"step\":", "\"reward\":", "\"screenshot_file\":", "\"log_step\":"] {
+        assert_eq!(line.matches(key).count(), 1, "{key} once in {line}");
+    }
+    let value: Value = serde_json::from_str(line).unwrap();
+    assert_eq!(
+        (&value["step"], &value["reward"], &value["screenshot_file"]),
+        (&serde_json::json!(1), &serde_json::json!(0.0), &serde_json::json!("shot.png"))
+    );
+    assert_eq!(value["log_reward"], 99);
+    assert_eq!(value["log_screenshot_file"], "../../../../etc/passwd");
+    assert_eq!(
+        (&value["log_step"], &value["log_log_step"]),
+        (&serde_json::json!("taken"), &serde_json::json!("pwned"))
+    );
+    assert_eq!(value["thoughts"], "fine", "a name the line does not have goes in as it is");
+    assert!(line.starts_with("{\"step_num\":1,"), "the line's own fields keep their order: {line}");
+    let back = dir.read_trajectory().unwrap();
+    assert_eq!((back.len(), back[0].step, back[0].screenshot_file.as_str()), (1, 1, "shot.png"));
 }
 
 #[test]

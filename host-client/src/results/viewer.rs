@@ -5,8 +5,9 @@
 //! Replies: a step's `response` is the agent's text (Navi, UI-TARS, the
 //! external step agents, the scripted plans), except for the agents that keep
 //! their vendor's answer as a record beside the trajectory (the computer-use
-//! agents, `response-step_<i>_<time>.json`, which upstream's recorder naming
-//! puts in the line's `response` key). [`reply_of`] reads such a record and
+//! agents, `response-step_<i>_<time>.json`, named in the line's `log_response`;
+//! older folders have the name in `response` itself, where upstream's recorder
+//! puts a log of that name). [`reply_of`] reads such a record and
 //! takes the text, reasoning and tool calls out of it in whichever vendor shape
 //! it has: Anthropic's Messages (`content` blocks), OpenAI's Responses
 //! (`output` items), chat completions (`choices[0].message`), and the
@@ -86,7 +87,10 @@ fn is_record_name(name: &str) -> bool {
 /// The reply of `step`, whose `traj.jsonl` line is `line`, in the task folder `dir`.
 pub fn reply_of(dir: &Path, step: &StepRecord, line: &Value) -> Reply {
     let mut reply = Reply::default();
-    let response = step.response.trim();
+    // The record's name: in `log_response` beside the model's text (older folders have
+    // it in `response` itself, as upstream's recorder left it there).
+    let logged = line.get(format!("{}response", super::LOG_PREFIX)).and_then(Value::as_str).map(str::trim);
+    let response = logged.filter(|name| is_record_name(name)).unwrap_or_else(|| step.response.trim());
     if is_record_name(response) {
         reply.record = Some(response.to_owned());
         match read_record(&dir.join(response)) {
