@@ -281,6 +281,46 @@ fn write_log(out: &TaskDir, step: u32, timestamp: &str, log: &StepLog) -> Result
     Ok(Value::String(file))
 }
 
+/// The key of a step's note of what its record left out ([`crate::results::RecordBudget`]).
+const NOT_RECORDED: &str = "not_recorded";
+
+/// `actions` as the step's record keeps them: their strings within `budget`, and the
+/// actions that no longer fit left out (counted in the budget's note).
+fn recorded_actions(actions: &[AgentAction], budget: &mut crate::results::RecordBudget) -> Vec<AgentAction> {
+    let mut kept = Vec::new();
+    for (i, action) in actions.iter().enumerate() {
+        if budget.exhausted() {
+            budget.drop_items(actions.len() - i);
+            break;
+        }
+        kept.push(match action {
+            AgentAction::Computer(code) => AgentAction::Computer(budget.text(code)),
+            AgentAction::Pyautogui(code) => AgentAction::Pyautogui(budget.text(code)),
+            AgentAction::Clipboard(text) => AgentAction::Clipboard(budget.text(text)),
+            AgentAction::Typed(typed) => {
+                let mut kept_typed = Vec::new();
+                for (j, one) in typed.iter().enumerate() {
+                    // An action that came back whole (its strings cut, none of its fields left out).
+                    let bounded = serde_json::to_value(one)
+                        .ok()
+                        .and_then(|value| budget.value(&value))
+                        .and_then(|value| serde_json::from_value(value).ok());
+                    match bounded {
+                        Some(one) => kept_typed.push(one),
+                        None => {
+                            budget.drop_items(typed.len() - j);
+                            break;
+                        }
+                    }
+                }
+                AgentAction::Typed(kept_typed)
+            }
+            AgentAction::Wait | AgentAction::Done | AgentAction::Fail => action.clone(),
+        });
+    }
+    kept
+}
+
 /// The action as upstream's trajectory logs it: the code, or the control word.
 fn upstream_action(action: &AgentAction) -> String {
     match action {
@@ -569,7 +609,8 @@ impl Episode {
             } else {
                 ActionRecord { step_num: step, action_timestamp: timestamp_now(), ..ActionRecord::default() }
             };
-            line.action = upstream_action(action);
+            // From the record's copy, bounded as the rest of the record is.
+            line.action = record.actions.get(k).map_or_else(|| "[not recorded]".to_owned(), upstream_action);
             line.info = match action {
                 AgentAction::Done => serde_json::json!({"done": true}),
                 AgentAction::Fail => serde_json::json!({"fail": true}),
@@ -673,18 +714,30 @@ impl Episode {
             }
         };
         record.timings.predict = prediction.timings;
-        record.response = prediction.response.clone();
-        record.actions = prediction.actions.clone();
+        // The record keeps a bounded share of what the agent sent (the actions run whole).
+        let mut budget = crate::results::RecordBudget::default();
+        record.response = budget.text(&prediction.response);
+        record.actions = recorded_actions(&prediction.actions, &mut budget);
         let timestamp = record.first.action_timestamp.clone();
         for log in &prediction.logs {
-            let value =
-                write_log(out, record.step, &timestamp, log).map_err(|err| infra("writing the step's logs", err))?;
-            record.logs.insert(log.key.clone(), value);
+            let value = match &log.value {
+                LogValue::Inline(value) => match budget.value(value) {
+                    Some(value) => value,
+                    None => continue,
+                },
+                _ => {
+                    write_log(out, record.step, &timestamp, log).map_err(|err| infra("writing the step's logs", err))?
+                }
+            };
+            record.logs.insert(budget.text(&log.key), value);
         }
         if let Some(raw) = &prediction.raw_error {
             // The step is spent; the agent keeps the error to tell the model next time.
-            record.error = Some(raw.clone());
+            record.error = Some(budget.text(raw));
             self.result.action_errors += 1;
+        }
+        if let Some(note) = budget.note() {
+            record.logs.insert(NOT_RECORDED.into(), Value::String(note));
         }
         Ok(Some(prediction))
     }
@@ -1102,6 +1155,39 @@ mod tests {
         assert_eq!(list, serde_json::json!([{"id": 1}]));
         assert_eq!(line["a11y_truncated"], Value::Bool(false));
         assert_eq!(out.read_trajectory().unwrap().len(), 1, "the logs do not disturb reading the steps back");
+    }
+
+    /// A hostile agent's answer near the line limit: the step runs, and its record
+    /// keeps a bounded share of the response, the actions and the record fields.
+    #[tokio::test]
+    async fn a_huge_answer_is_recorded_within_the_steps_budget() {
+        let big = "x".repeat(8 << 20);
+        let mut actions: Vec<AgentAction> =
+            (0..300).map(|i| AgentAction::Pyautogui(format!("# {i} {}", &big[..100_000]))).collect();
+        actions.push(AgentAction::Typed(vec![Action::TypeText { text: big.clone(), interval_ms: None }]));
+        actions.push(AgentAction::Done);
+        let logs = (0..1000)
+            .map(|i| StepLog { key: format!("field{i}"), value: LogValue::Inline(Value::String(big[..50_000].into())) })
+            .collect();
+        let answer = Prediction { response: big.clone(), actions, logs, ..Prediction::default() };
+        let (result, out, _tmp) = play(&task("exact_match"), vec![Some(Ok(answer))], false).await;
+        assert_eq!(result.status, EpisodeStatus::Completed, "{result:?}");
+        let text = std::fs::read_to_string(out.path().join(crate::results::TRAJ_FILE)).unwrap();
+        assert!(text.len() < 4 * crate::results::STEP_BUDGET, "{} bytes of trajectory", text.len());
+        let lines: Vec<Value> = text.lines().map(|l| serde_json::from_str(l).unwrap()).collect();
+        let step = &lines[1];
+        let response = step["response"].as_str().unwrap();
+        assert!(response.starts_with("xxx") && response.ends_with("more bytes not recorded]"), "{}", response.len());
+        assert!(
+            step["not_recorded"].as_str().is_some_and(|n| n.contains("items left out")),
+            "{}",
+            step["not_recorded"]
+        );
+        assert!(step["actions"].as_array().unwrap().len() < 302, "actions past the budget are left out");
+        // Every action ran: 302 upstream lines, the ones past the budget marked so.
+        assert_eq!(lines.len(), 1 + 302);
+        assert_eq!(lines.last().unwrap()["action"], "[not recorded]");
+        assert_eq!(out.read_trajectory().unwrap().len(), 1);
     }
 
     #[tokio::test]

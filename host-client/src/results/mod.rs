@@ -38,6 +38,7 @@
 //! - [`viewer`]: the trajectory viewer's parts of a step: the model's reply read from the records, the markers of its actions.
 //! - [`task_list`]: the run's task list in each trial folder (`task_list.json`).
 
+mod budget;
 pub mod certificate;
 pub mod compare;
 pub mod html;
@@ -46,6 +47,8 @@ pub mod stats;
 pub mod summary;
 pub mod task_list;
 pub mod viewer;
+
+pub use budget::{RecordBudget, MAX_RECORDED_TEXT, STEP_BUDGET};
 
 use std::path::{Path, PathBuf};
 use std::time::{SystemTime, UNIX_EPOCH};
