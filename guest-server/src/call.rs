@@ -40,7 +40,20 @@ struct Flags {
 
 /// The flags of the calls running now, by the address of their backend, so that
 /// shutting one server down stops its calls and no other's.
-static RUNNING: Mutex<Vec<(usize, Weak<Flags>)>> = Mutex::new(Vec::new());
+static RUNNING: Mutex<Running> = Mutex::new(Running { calls: Vec::new(), sweep_at: SWEEP_FLOOR });
+
+/// The calls' flags, with finished ones forgotten now and then: a sweep when the list
+/// has doubled since the last one keeps it within twice the running calls (plus
+/// [`SWEEP_FLOOR`]) at a constant cost per call, where a sweep per call cost time in
+/// proportion to the calls running.
+struct Running {
+    calls: Vec<(usize, Weak<Flags>)>,
+    /// The length at which the next registration sweeps.
+    sweep_at: usize,
+}
+
+/// The shortest list that is swept.
+const SWEEP_FLOOR: usize = 64;
 
 fn backend_key(desktop: &Arc<dyn Desktop>) -> usize {
     Arc::as_ptr(desktop).cast::<()>() as usize
@@ -48,9 +61,12 @@ fn backend_key(desktop: &Arc<dyn Desktop>) -> usize {
 
 fn register(desktop: &Arc<dyn Desktop>, flags: &Arc<Flags>) {
     let mut running = RUNNING.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
-    // Finished calls drop their flags; forget them as new ones come.
-    running.retain(|(_, flags)| flags.strong_count() > 0);
-    running.push((backend_key(desktop), Arc::downgrade(flags)));
+    if running.calls.len() >= running.sweep_at {
+        // Finished calls drop their flags; forget them.
+        running.calls.retain(|(_, flags)| flags.strong_count() > 0);
+        running.sweep_at = (running.calls.len() * 2).max(SWEEP_FLOOR);
+    }
+    running.calls.push((backend_key(desktop), Arc::downgrade(flags)));
 }
 
 /// Tells every call running against `desktop` to stop, as a timeout does; answers how
@@ -59,7 +75,7 @@ pub fn cancel_all(desktop: &Arc<dyn Desktop>) -> usize {
     let key = backend_key(desktop);
     let running = RUNNING.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
     let mut told = 0;
-    for flags in running.iter().filter(|(k, _)| *k == key).filter_map(|(_, flags)| flags.upgrade()) {
+    for flags in running.calls.iter().filter(|(k, _)| *k == key).filter_map(|(_, flags)| flags.upgrade()) {
         flags.shutdown.store(true, Ordering::Relaxed);
         flags.cancel.store(true, Ordering::Relaxed);
         told += 1;
@@ -114,6 +130,24 @@ where
 mod tests {
     use super::*;
     use crate::desktop::stub::StubDesktop;
+
+    #[test]
+    fn finished_calls_are_forgotten_so_the_list_stays_bounded() {
+        let dir = tempfile::tempdir().unwrap();
+        let desktop: Arc<dyn Desktop> = Arc::new(StubDesktop::new(dir.path().to_path_buf()).unwrap());
+        let live: Vec<Arc<Flags>> = (0..10).map(|_| Arc::new(Flags::default())).collect();
+        for flags in &live {
+            register(&desktop, flags);
+        }
+        for _ in 0..10_000 {
+            register(&desktop, &Arc::new(Flags::default())); // finished at once
+        }
+        let len = RUNNING.lock().unwrap().calls.len();
+        // Other tests' calls may be running too; without the sweeps this would be 10 010.
+        assert!(len < 2 * (live.len() + 100) + SWEEP_FLOOR, "{len} entries");
+        assert_eq!(cancel_all(&desktop), live.len(), "the running calls are all still known");
+        assert!(live.iter().all(|flags| flags.cancel.load(Ordering::Relaxed)));
+    }
 
     #[tokio::test]
     async fn a_slow_call_times_out_without_blocking_the_caller() {

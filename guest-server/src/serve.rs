@@ -495,7 +495,10 @@ async fn serve_connection(
     let body: Arc<Mutex<Option<BodyProgress>>> = Arc::default();
     let conn = Conn { spoke: Arc::clone(&spoke), body: Arc::clone(&body), evict: evict.clone(), on_probation: false };
     table.admit(id, conn);
-    let context = ConnContext { shutdown: stop, _slot: Arc::new(permit), connections: Arc::clone(&table), id, body };
+    // A child of the server's token: cancelled with it, but each wake of this
+    // connection checks its own, so connections do not contend for one lock.
+    let shutdown = stop.child_token();
+    let context = ConnContext { shutdown, _slot: Arc::new(permit), connections: Arc::clone(&table), id, body };
     let per_request = context.clone();
     let (grace, rate) = (limits.header_timeout, limits.min_body_rate);
     let service = TowerToHyperService::new(app.map_request(move |request: hyper::Request<Incoming>| {
