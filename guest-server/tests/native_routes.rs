@@ -251,6 +251,13 @@ async fn actions_move_the_cursor_and_type_into_a_launched_notepad() {
     assert_eq!(report.executed, 5);
     assert_eq!(report.cursor, Point::new(300, 200));
 
+    // The cursor is reported after a batch that ends with a wait, and after an empty one.
+    for actions in [json!([{"type": "move_to", "x": 40, "y": 50}, {"type": "wait", "ms": 1}]), json!([])] {
+        let report: ActionReport = app.post("/v1/actions", json!({"actions": actions})).await.json();
+        assert_eq!(report.cursor, Point::new(40, 50), "{actions}");
+    }
+    app.post("/v1/actions", json!({"actions": [{"type": "move_to", "x": 300, "y": 200}]})).await;
+
     let tree: A11yTree = app.get("/v1/a11y?backend=uia&foreground_only=true").await.json();
     let edit = tree
         .windows

@@ -54,20 +54,31 @@ async fn actions(
     let _input = state.input_share().await;
     let started = Instant::now();
     let total = batch.actions.len();
+    // The cursor the answer reports, read in the last action's own backend call when
+    // the batch ends with one (one handoff to the blocking pool fewer per batch).
+    let mut cursor = None;
     for (index, action) in batch.actions.into_iter().enumerate() {
         if let Action::Wait { ms } = action {
             tokio::time::sleep(Duration::from_millis(ms)).await;
             continue;
         }
         let name = action_name(&action);
-        let res = blocking(&state.desktop, "perform", state.call_timeout(), move |d| d.perform(&action)).await;
-        if let Err(err) = res {
-            return Err(batch_failed(ApiError::from(err), index, name, total));
+        let last = index + 1 == total;
+        let res = blocking(&state.desktop, "perform", state.call_timeout(), move |d| {
+            d.perform(&action)?;
+            Ok(last.then(|| d.cursor_position()))
+        })
+        .await;
+        match res {
+            Ok(read) => cursor = read,
+            Err(err) => return Err(batch_failed(ApiError::from(err), index, name, total)),
         }
     }
-    let cursor = blocking(&state.desktop, "cursor_position", state.call_timeout(), |d| d.cursor_position())
-        .await
-        .map_err(|err| ApiError::from(err).into_response())?;
+    let cursor = match cursor {
+        Some(read) => read,
+        None => blocking(&state.desktop, "cursor_position", state.call_timeout(), |d| d.cursor_position()).await,
+    }
+    .map_err(|err| ApiError::from(err).into_response())?;
     Ok(AppJson(ActionReport { executed: total, cursor, elapsed_ms: millis(started.elapsed()) }))
 }
 
