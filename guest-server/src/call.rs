@@ -1,7 +1,7 @@
 //! Calling the synchronous backend from async handlers, with a deadline.
 //!
-//! Every backend call goes through [`blocking`]: it runs on tokio's blocking
-//! pool and the request gets [`DesktopError::Timeout`] when the deadline
+//! Every backend call goes through [`blocking`]: it runs on the backend's own
+//! thread pool ([`pool`]) and the request gets [`DesktopError::Timeout`] when the deadline
 //! passes. A hung window or provider then costs that one request, never the
 //! server. The call itself is told to stop ([`crate::desktop::cancel`]): work
 //! that checks between its units (keystrokes, pauses) ends within one unit; a
@@ -14,6 +14,8 @@
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex, Weak};
 use std::time::Duration;
+
+mod pool;
 
 use crate::desktop::cancel::Scope;
 use crate::desktop::{Desktop, DesktopError, DesktopResult};
@@ -83,7 +85,7 @@ pub fn cancel_all(desktop: &Arc<dyn Desktop>) -> usize {
     told
 }
 
-/// Runs `f` against the backend on the blocking pool, failing after `deadline`.
+/// Runs `f` against the backend on the backend pool, failing after `deadline`.
 ///
 /// # Errors
 ///
@@ -99,7 +101,7 @@ where
     let flags = Arc::new(Flags::default());
     register(&desktop, &flags);
     let ms = u64::try_from(deadline.as_millis()).unwrap_or(u64::MAX);
-    let task = tokio::task::spawn_blocking({
+    let task = pool::global().run({
         let cancel = Arc::clone(&flags.cancel);
         move || {
             let _scope = Scope::enter(op, ms, cancel);
@@ -111,14 +113,20 @@ where
     match tokio::time::timeout(deadline, task).await {
         // Work stopped by the shutdown ends as a timeout would (the backend cannot
         // tell the two apart); the answer says what happened.
-        Ok(Ok(Err(DesktopError::Timeout { .. }))) if flags.shutdown.load(Ordering::Relaxed) => {
+        Ok(Ok(Ok(Err(DesktopError::Timeout { .. })))) if flags.shutdown.load(Ordering::Relaxed) => {
             Err(DesktopError::ShuttingDown { op })
         }
-        Ok(Ok(res)) => res,
-        Ok(Err(join_err)) => {
-            tracing::error!(op, error = %join_err, "backend call panicked");
+        Ok(Ok(Ok(res))) => res,
+        Ok(Ok(Err(panic))) => {
+            let message = panic
+                .downcast_ref::<&str>()
+                .map(|s| (*s).to_owned())
+                .or_else(|| panic.downcast_ref::<String>().cloned())
+                .unwrap_or_default();
+            tracing::error!(op, panic = %message, "backend call panicked");
             Err(DesktopError::Os { op, message: "the backend call panicked; see the guest log".into() })
         }
+        Ok(Err(_)) => Err(DesktopError::Os { op, message: "the backend call was dropped before it ran".into() }),
         Err(_) => {
             tracing::warn!(op, deadline_ms = deadline.as_millis() as u64, "backend call timed out");
             Err(DesktopError::Timeout { op, ms: deadline.as_millis() as u64 })

@@ -2,7 +2,7 @@
 //!
 //! Images travel as base64 PNG on the wire and as RGBA in the backend; the
 //! conversion (PNG encoding and decoding) runs inside the backend call, on the
-//! blocking pool.
+//! backend pool.
 
 use axum::extract::State;
 use axum::http::StatusCode;

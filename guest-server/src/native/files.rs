@@ -7,7 +7,7 @@
 //! backend onto a path this process can open ([`Desktop::map_path`]), which
 //! refuses relative paths and paths that climb out of the backend's root.
 //! The file work itself is plain `std::fs`, inside the backend call so that it
-//! runs on the blocking pool under the call's deadline.
+//! runs on the backend pool under the call's deadline.
 //!
 //! Writes are atomic: the body goes to a temporary file beside the target,
 //! is flushed to disk and then renamed over the target, so a failed or

@@ -55,7 +55,7 @@ async fn actions(
     let started = Instant::now();
     let total = batch.actions.len();
     // The cursor the answer reports, read in the last action's own backend call when
-    // the batch ends with one (one handoff to the blocking pool fewer per batch).
+    // the batch ends with one (one handoff to the backend pool fewer per batch).
     let mut cursor = None;
     for (index, action) in batch.actions.into_iter().enumerate() {
         if let Action::Wait { ms } = action {

@@ -4,7 +4,7 @@
 //! compact JSON in the `x-arena-screenshot` header, so the host gets the pixels
 //! without base64 and still learns how image pixels map to physical pixels.
 //! Capture, black-frame check, cursor drawing, downscaling and encoding all run
-//! in one backend call on the blocking pool; none of that work touches the
+//! in one backend call on the backend pool; none of that work touches the
 //! async workers.
 
 use std::time::Instant;

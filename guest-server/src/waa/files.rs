@@ -5,7 +5,7 @@
 //!
 //! Guest paths are expanded where upstream expands them (`expandvars(expanduser(p))`),
 //! mapped to local paths by the backend ([`Desktop::map_path`]) and then handled with
-//! `std::fs`, on the blocking pool.
+//! `std::fs`, on the backend pool.
 
 use std::path::Path;
 use std::time::Duration;

@@ -221,7 +221,7 @@ pub(crate) fn text_err(status: StatusCode, body: impl Into<String>) -> WaaError 
     WaaError::custom(text(status, body))
 }
 
-/// Runs synchronous work (backend calls, `std::fs`) on the blocking pool with the
+/// Runs synchronous work (backend calls, `std::fs`) on the backend pool with the
 /// ordinary call deadline.
 pub(crate) async fn on_backend<T, F>(state: &AppState, op: &'static str, f: F) -> Result<T, WaaError>
 where
