@@ -8,8 +8,16 @@ use crate::desktop::Desktop;
 
 /// State of every handler: the backend and the configuration. (The WAA layer's
 /// session state is its own: see [`crate::waa::routes`].)
+///
+/// One `Arc` around all of it: the router clones the state for every request (the
+/// middleware and the handler each take a copy), so a clone is one reference count,
+/// not one per field.
 #[derive(Debug, Clone)]
-pub struct AppState {
+pub struct AppState(Arc<Shared>);
+
+/// What [`AppState`] holds.
+#[derive(Debug)]
+pub struct Shared {
     pub desktop: Arc<dyn Desktop>,
     pub config: Arc<ServerConfig>,
     /// The bearer token in force, if any.
@@ -25,10 +33,18 @@ pub struct AppState {
     pub programs: Arc<crate::programs::Programs>,
 }
 
+impl std::ops::Deref for AppState {
+    type Target = Shared;
+
+    fn deref(&self) -> &Shared {
+        &self.0
+    }
+}
+
 impl AppState {
     pub fn new(desktop: Arc<dyn Desktop>, config: ServerConfig, token: Option<String>) -> AppState {
         let programs = Arc::new(crate::programs::Programs::from_config(&config));
-        AppState {
+        AppState(Arc::new(Shared {
             desktop,
             programs,
             config: Arc::new(config),
@@ -36,7 +52,7 @@ impl AppState {
             started: Instant::now(),
             health: Arc::default(),
             input: Arc::default(),
-        }
+        }))
     }
 
     /// A share of the keyboard and mouse, held by every request that may drive them
