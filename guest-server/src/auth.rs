@@ -96,24 +96,12 @@ fn host_allowed(headers: &HeaderMap, allowed: &[String]) -> Result<(), String> {
         return Ok(());
     };
     let Ok(host) = value.to_str() else { return Err("<binary>".to_owned()) };
-    let name = host_name(host);
-    let loopback_name = name.eq_ignore_ascii_case("localhost") || name.to_ascii_lowercase().ends_with(".localhost");
+    let name = arena_shared::host_header::name(host);
     let listed = allowed.iter().any(|a| a.trim().eq_ignore_ascii_case(name));
-    if name.parse::<std::net::IpAddr>().is_ok() || loopback_name || listed {
+    if name.parse::<std::net::IpAddr>().is_ok() || arena_shared::host_header::is_localhost(name) || listed {
         Ok(())
     } else {
         Err(host.to_owned())
-    }
-}
-
-/// The name or address of a `Host` header, without its port or IPv6 brackets.
-fn host_name(host: &str) -> &str {
-    if let Some(rest) = host.strip_prefix('[') {
-        return rest.split(']').next().unwrap_or(rest);
-    }
-    match host.rsplit_once(':') {
-        Some((name, port)) if port.chars().all(|c| c.is_ascii_digit()) => name,
-        _ => host,
     }
 }
 

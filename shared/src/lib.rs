@@ -58,6 +58,7 @@ pub mod fastimg;
 pub mod files;
 pub mod geometry;
 pub mod health;
+pub mod host_header;
 pub mod imaging;
 pub mod interactive;
 pub mod keys;

@@ -562,16 +562,6 @@ impl EnvServer {
     }
 }
 
-/// Whether `host` (a `Host` header's value) names this machine's loopback interface:
-/// `localhost`, `127.0.0.1` or `[::1]`, with or without a port.
-fn loopback_host(host: &str) -> bool {
-    let name = match host.strip_prefix('[') {
-        Some(rest) => rest.split(']').next().unwrap_or_default(),
-        None => host.rsplit_once(':').map_or(host, |(name, _)| name),
-    };
-    name.eq_ignore_ascii_case("localhost") || name.parse::<std::net::IpAddr>().is_ok_and(|ip| ip.is_loopback())
-}
-
 /// Refuses what must not reach the routes (see the module's notes): a browser's
 /// request (`Origin`), a request without the token when there is one, and a `Host`
 /// that is not loopback when there is none.
@@ -600,7 +590,7 @@ async fn guard(
         }
         None => {
             let host = headers.get(axum::http::header::HOST).and_then(|v| v.to_str().ok()).unwrap_or_default();
-            if !loopback_host(host) {
+            if !arena_shared::host_header::is_loopback(host) {
                 return Refusal(
                     StatusCode::FORBIDDEN,
                     format!(
@@ -665,33 +655,6 @@ mod tests {
         let options =
             EnvOptions { out: dir.to_owned(), config: EpisodeConfig::instant(cache), idle, screen: None, token: None };
         EnvServer::new(Vec::new(), guests, options)
-    }
-
-    #[test]
-    fn only_loopback_names_are_loopback_hosts() {
-        for host in [
-            "localhost",
-            "localhost:8766",
-            "LOCALHOST",
-            "127.0.0.1",
-            "127.0.0.1:0",
-            "127.1.2.3:9",
-            "[::1]",
-            "[::1]:8766",
-        ] {
-            assert!(loopback_host(host), "{host}");
-        }
-        for host in [
-            "",
-            "example.com",
-            "example.com:8766",
-            "10.0.0.2:8766",
-            "[::2]:1",
-            "localhost.example.com",
-            "127.0.0.1.nip.io",
-        ] {
-            assert!(!loopback_host(host), "{host}");
-        }
     }
 
     /// Opens a session as a reset does, without an episode.
