@@ -268,14 +268,30 @@ struct Acted {
 
 /// Writes one of an agent's step logs as upstream's recorder names its files
 /// (`<key>-step_<step - 1>_<time>.<ext>`); answers what the trajectory line holds.
+///
+/// Text and JSON (a model's answer, a prompt) are written within
+/// [`crate::results::MAX_LOG_FILE`]: past it a text is cut with a note, and a JSON
+/// value is kept as `{"not_recorded": note, "kept": <its strings cut and its items
+/// counted as the step's record is>}`.
 fn write_log(out: &TaskDir, step: u32, timestamp: &str, log: &StepLog) -> Result<Value, crate::results::ResultsError> {
     let name = |ext: &str| format!("{}-step_{}_{timestamp}.{ext}", crate::results::safe_component(&log.key), step - 1);
     let (file, bytes) = match &log.value {
         LogValue::Inline(value) => return Ok(value.clone()),
-        LogValue::Text(text) => (name("txt"), text.clone().into_bytes()),
+        LogValue::Text(text) => (name("txt"), crate::results::RecordBudget::log_file().text(text).into_bytes()),
         LogValue::Png(png) => (name("png"), png.clone()),
         LogValue::Image(pixels) => (name("png"), arena_client::frame::encode_png(pixels)),
-        LogValue::Json(value) => (name("json"), serde_json::to_vec_pretty(value).unwrap_or_default()),
+        LogValue::Json(value) => {
+            let mut bytes = serde_json::to_vec_pretty(value).unwrap_or_default();
+            if bytes.len() > crate::results::MAX_LOG_FILE {
+                let mut budget = crate::results::RecordBudget::log_file();
+                let kept = budget.value(value).unwrap_or(Value::Null);
+                let note = budget.note().unwrap_or_default();
+                // Compact: indenting a deeply nested value could outgrow the budget.
+                bytes =
+                    serde_json::to_vec(&serde_json::json!({ NOT_RECORDED: note, "kept": kept })).unwrap_or_default();
+            }
+            (name("json"), bytes)
+        }
     };
     out.write_file(&file, &bytes)?;
     Ok(Value::String(file))
@@ -1155,6 +1171,32 @@ mod tests {
         assert_eq!(list, serde_json::json!([{"id": 1}]));
         assert_eq!(line["a11y_truncated"], Value::Bool(false));
         assert_eq!(out.read_trajectory().unwrap().len(), 1, "the logs do not disturb reading the steps back");
+    }
+
+    #[test]
+    fn a_huge_text_or_json_log_is_written_within_its_file_limit() {
+        use crate::results::MAX_LOG_FILE;
+        let tmp = tempfile::tempdir().unwrap();
+        let out = TaskDir::new(tmp.path().to_path_buf());
+        let huge = "é".repeat(5 << 20); // 10 MiB
+        let logs = [
+            StepLog { key: "plan_result".into(), value: LogValue::Text(huge.clone()) },
+            StepLog { key: "response".into(), value: LogValue::Json(serde_json::json!({"output": [huge, "b"]})) },
+            StepLog { key: "small".into(), value: LogValue::Json(serde_json::json!({"output": "fine"})) },
+        ];
+        let files: Vec<String> = logs
+            .iter()
+            .map(|log| write_log(&out, 1, "t", log).unwrap().as_str().expect("a file name").to_owned())
+            .collect();
+        let read = |name: &str| std::fs::read_to_string(tmp.path().join(name)).unwrap();
+        let text = read(&files[0]);
+        assert!(text.len() <= MAX_LOG_FILE + 100 && text.ends_with("more bytes not recorded]"), "{}", text.len());
+        let json: Value = serde_json::from_str(&read(&files[1])).expect("still JSON");
+        assert!(json[NOT_RECORDED].as_str().is_some_and(|n| n.contains("1 items left out")), "{}", json[NOT_RECORDED]);
+        assert!(json["kept"]["output"][0].as_str().is_some_and(|s| s.len() <= MAX_LOG_FILE + 100));
+        assert!(read(&files[1]).len() <= MAX_LOG_FILE + 1000);
+        // Under the limit a log is written as it was.
+        assert_eq!(serde_json::from_str::<Value>(&read(&files[2])).unwrap(), serde_json::json!({"output": "fine"}));
     }
 
     /// A hostile agent's answer near the line limit: the step runs, and its record

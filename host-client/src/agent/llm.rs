@@ -180,6 +180,13 @@ struct Failure {
     refused: Option<String>,
 }
 
+/// The most of a model's answer that is read: the step protocol's limit on an agent's
+/// answer. Vendors' answers are kilobytes; a larger one is an endpoint gone wrong.
+pub const MAX_MODEL_ANSWER: usize = super::external::transport::MAX_ANSWER;
+
+/// How much of an error page is read (its first 300 characters are shown).
+const ERROR_SHOWN: usize = 4096;
+
 impl ModelClient {
     /// A client for `base_url` (see the module documentation for the two kinds).
     ///
@@ -347,7 +354,8 @@ impl ModelClient {
         if status.is_success() {
             return Ok(None);
         }
-        let snippet: String = response.text().await.unwrap_or_default().chars().take(300).collect();
+        let start = super::body::read_bounded(response, ERROR_SHOWN, true).await.unwrap_or_default();
+        let snippet: String = String::from_utf8_lossy(&start).chars().take(300).collect();
         let said = format!("{} answered HTTP {status}: {snippet}", self.endpoint);
         match status.as_u16() {
             401 | 403 => {
@@ -380,9 +388,19 @@ impl ModelClient {
         let response = request.send().await.map_err(|e| transient(error_chain(&e)))?;
         let status = response.status();
         let wait_at_least = retry_after(response.headers());
-        let text = response.text().await.map_err(|e| transient(error_chain(&e)))?;
+        // An answer past the limit is refused (not tried again: the endpoint would
+        // send another); of an error page only the start is read.
+        let (limit, cut) = if status.is_success() { (MAX_MODEL_ANSWER, false) } else { (ERROR_SHOWN, true) };
+        let body = match super::body::read_bounded(response, limit, cut).await {
+            Ok(body) => body,
+            Err(super::body::BodyError::Read(err)) => return Err(transient(err)),
+            Err(super::body::BodyError::TooLong { limit }) => {
+                let reason = format!("the model's answer is longer than {} MiB", limit >> 20);
+                return Err(Failure { reason, transient: false, wait_at_least: None, refused: None });
+            }
+        };
         if !status.is_success() {
-            let snippet: String = text.chars().take(300).collect();
+            let snippet: String = String::from_utf8_lossy(&body).chars().take(300).collect();
             let code = status.as_u16();
             return Err(Failure {
                 reason: format!("HTTP {status}: {snippet}"),
@@ -391,8 +409,8 @@ impl ModelClient {
                 refused: None,
             });
         }
-        let value: Value =
-            serde_json::from_str(&text).map_err(|e| transient(format!("the answer is not JSON (cut short?): {e}")))?;
+        let value: Value = serde_json::from_slice(&body)
+            .map_err(|e| transient(format!("the answer is not JSON (cut short?): {e}")))?;
         if !chat {
             return Ok(value);
         }

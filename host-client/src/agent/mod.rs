@@ -21,6 +21,7 @@
 //! - [`floor`]: [`floor::FloorAgent`], `--agent noop` (DONE at once) and `--agent fail` (FAIL at once).
 //! - [`factory`]: [`factory::build`], a run's agent from its [`factory::AgentOptions`].
 
+pub mod body;
 pub mod cu;
 pub mod external;
 pub mod factory;

@@ -14,6 +14,10 @@ use serde_json::{Map, Value};
 pub const MAX_RECORDED_TEXT: usize = 64 * 1024;
 /// The most of one step's strings (response, actions, logs) its record keeps.
 pub const STEP_BUDGET: usize = 512 * 1024;
+/// The most of one of an agent's log files (`<key>-step_<i>_<time>.txt` or `.json`)
+/// that is written: vendors' answers and prompts are far smaller, so only an endpoint
+/// that answers tens of megabytes per step is cut.
+pub const MAX_LOG_FILE: usize = 4 << 20;
 /// What each string, number or key costs beyond its bytes (quotes, separators), so
 /// that millions of empty strings are bounded too.
 const ITEM_COST: usize = 8;
@@ -21,6 +25,10 @@ const ITEM_COST: usize = 8;
 /// The budget of one step's record.
 #[derive(Debug)]
 pub struct RecordBudget {
+    /// The most of any one string.
+    max_text: usize,
+    /// The most of all strings together.
+    total: usize,
     left: usize,
     /// Bytes of strings cut short.
     cut: usize,
@@ -30,11 +38,16 @@ pub struct RecordBudget {
 
 impl Default for RecordBudget {
     fn default() -> Self {
-        RecordBudget { left: STEP_BUDGET, cut: 0, dropped: 0 }
+        RecordBudget { max_text: MAX_RECORDED_TEXT, total: STEP_BUDGET, left: STEP_BUDGET, cut: 0, dropped: 0 }
     }
 }
 
 impl RecordBudget {
+    /// The budget of one log file: [`MAX_LOG_FILE`] for the file and for any string in it.
+    pub fn log_file() -> RecordBudget {
+        RecordBudget { max_text: MAX_LOG_FILE, total: MAX_LOG_FILE, left: MAX_LOG_FILE, cut: 0, dropped: 0 }
+    }
+
     /// Whether nothing more fits.
     pub fn exhausted(&self) -> bool {
         self.left == 0
@@ -49,7 +62,7 @@ impl RecordBudget {
     /// boundary) and a note of how many were left out.
     pub fn text(&mut self, text: &str) -> String {
         self.left = self.left.saturating_sub(ITEM_COST);
-        let room = MAX_RECORDED_TEXT.min(self.left);
+        let room = self.max_text.min(self.left);
         if text.len() <= room {
             self.left -= text.len();
             return text.to_owned();
@@ -90,16 +103,22 @@ impl RecordBudget {
             Value::Object(fields) => {
                 let mut kept = Map::new();
                 for (i, (key, item)) in fields.iter().enumerate() {
-                    let key = if self.exhausted() { None } else { Some(self.text(key)) };
-                    match key.and_then(|key| self.value(item).map(|item| (key, item))) {
-                        Some((key, item)) => {
-                            kept.insert(key, item);
-                        }
-                        None => {
-                            self.dropped += fields.len() - i - 1;
-                            break;
-                        }
+                    if self.exhausted() {
+                        self.dropped += fields.len() - i;
+                        break;
                     }
+                    let key = self.text(key);
+                    let Some(item) = self.value(item) else {
+                        // `value` counted this field's value; the rest are left out too.
+                        self.dropped += fields.len() - i - 1;
+                        break;
+                    };
+                    if kept.contains_key(&key) {
+                        // Two long keys cut to the same text: the later one is left out.
+                        self.dropped += 1;
+                        continue;
+                    }
+                    kept.insert(key, item);
                 }
                 Value::Object(kept)
             }
@@ -114,9 +133,9 @@ impl RecordBudget {
     pub fn note(&self) -> Option<String> {
         (self.cut > 0 || self.dropped > 0).then(|| {
             format!(
-                "the record keeps {MAX_RECORDED_TEXT} bytes of a string and {STEP_BUDGET} of a step: \
+                "the record keeps {} bytes of a string and {} in all: \
                  {} bytes cut from strings, {} items left out",
-                self.cut, self.dropped
+                self.max_text, self.total, self.cut, self.dropped
             )
         })
     }
@@ -159,5 +178,24 @@ mod tests {
             assert!(budget.exhausted() && budget.note().is_some());
             assert_eq!(budget.value(&Value::from(1)), None, "nothing more fits");
         }
+    }
+
+    #[test]
+    fn every_field_left_out_is_counted_once() {
+        // Fields of every size, so that the budget runs out on keys and on values.
+        for value_size in [0, 1, 7, 100, 5000] {
+            let fields = 50_000;
+            let object: Value =
+                Value::Object((0..fields).map(|i| (format!("k{i}"), Value::String("v".repeat(value_size)))).collect());
+            let mut budget = RecordBudget::default();
+            let Some(Value::Object(kept)) = budget.value(&object) else { panic!("an object is kept") };
+            assert_eq!(kept.len() + budget.dropped, fields, "value size {value_size}");
+        }
+        // Two keys longer than a string may be, alike up to the cut.
+        let long = "k".repeat(MAX_RECORDED_TEXT);
+        let object = serde_json::json!({ format!("{long}a"): 1, format!("{long}b"): 2 });
+        let mut budget = RecordBudget::default();
+        let Some(Value::Object(kept)) = budget.value(&object) else { panic!("an object is kept") };
+        assert_eq!((kept.len(), budget.dropped), (1, 1));
     }
 }

@@ -48,7 +48,7 @@ pub mod summary;
 pub mod task_list;
 pub mod viewer;
 
-pub use budget::{RecordBudget, MAX_RECORDED_TEXT, STEP_BUDGET};
+pub use budget::{RecordBudget, MAX_LOG_FILE, MAX_RECORDED_TEXT, STEP_BUDGET};
 
 use std::path::{Path, PathBuf};
 use std::time::{SystemTime, UNIX_EPOCH};

@@ -297,7 +297,15 @@ impl HttpAgent {
         let status = response.status();
         // Only the start of an error body is shown.
         let (limit, cut) = if status.is_success() { (MAX_ANSWER, false) } else { (4096, true) };
-        let body = read_bounded(response, limit, cut).await.map_err(|err| format!("POST {}: {err}", self.url))?;
+        let body = crate::agent::body::read_bounded(response, limit, cut).await.map_err(|err| {
+            let said = match err {
+                crate::agent::body::BodyError::TooLong { .. } => {
+                    format!("the agent's answer is longer than {} MiB", MAX_ANSWER >> 20)
+                }
+                crate::agent::body::BodyError::Read(_) => err.to_string(),
+            };
+            format!("POST {}: {said}", self.url)
+        })?;
         if !status.is_success() {
             let shown: String = String::from_utf8_lossy(&body).chars().take(200).collect();
             return Err(format!("POST {}: HTTP {status}: {shown}", self.url));
@@ -312,28 +320,6 @@ impl HttpAgent {
             }
         }
     }
-}
-
-/// A response body read chunk by chunk, at most `limit` bytes: a body announced
-/// or found longer is refused as soon as that is known, or with `cut` kept to
-/// its first `limit` bytes. The client's timeout bounds a slow body.
-async fn read_bounded(mut response: reqwest::Response, limit: usize, cut: bool) -> Result<Vec<u8>, String> {
-    let too_long = || format!("the agent's answer is longer than {} MiB", limit >> 20);
-    if !cut && response.content_length().is_some_and(|n| n > limit as u64) {
-        return Err(too_long());
-    }
-    let mut body = Vec::new();
-    while let Some(chunk) = response.chunk().await.map_err(|err| format!("reading the answer: {err}"))? {
-        if body.len() + chunk.len() > limit {
-            if cut {
-                body.extend_from_slice(&chunk[..limit - body.len()]);
-                break;
-            }
-            return Err(too_long());
-        }
-        body.extend_from_slice(&chunk);
-    }
-    Ok(body)
 }
 
 /// An [`HttpAgent`] after its handshake.

@@ -180,3 +180,62 @@ async fn azure_deployments_get_their_path_query_and_api_key_header() {
     assert_eq!(seen[0].1.get("api-key").unwrap(), "sk-test");
     assert!(seen[0].1.get("authorization").is_none());
 }
+
+/// A model endpoint whose answer never ends (chunked, a MiB of JSON whitespace at a
+/// time), or that announces a gigabyte: the answer is refused at its limit, once,
+/// without the host holding more than the limit.
+#[tokio::test]
+async fn an_endless_or_huge_answer_is_refused_at_the_limit_and_not_asked_again() {
+    use std::sync::atomic::{AtomicUsize, Ordering};
+    let asked = Arc::new(AtomicUsize::new(0));
+    let sent = Arc::new(AtomicUsize::new(0));
+    let app = axum::Router::new().route(
+        "/endless/chat/completions",
+        axum::routing::post({
+            let (asked, sent) = (Arc::clone(&asked), Arc::clone(&sent));
+            move || async move {
+                asked.fetch_add(1, Ordering::Relaxed);
+                let chunk = axum::body::Bytes::from(vec![b' '; 1 << 20]);
+                let stream = futures_util::stream::repeat_with(move || {
+                    sent.fetch_add(chunk.len(), Ordering::Relaxed);
+                    Ok::<_, std::convert::Infallible>(chunk.clone())
+                });
+                Response::new(axum::body::Body::from_stream(stream))
+            }
+        }),
+    );
+    let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
+    let endless = listener.local_addr().unwrap();
+    tokio::spawn(async move { axum::serve(listener, app).await.unwrap() });
+    // A gigabyte announced and never sent: written by hand, since hyper's server will
+    // not send a length its body does not have.
+    let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
+    let announced = listener.local_addr().unwrap();
+    tokio::spawn({
+        let asked = Arc::clone(&asked);
+        async move {
+            use tokio::io::{AsyncReadExt as _, AsyncWriteExt as _};
+            let mut held = Vec::new();
+            while let Ok((mut conn, _)) = listener.accept().await {
+                asked.fetch_add(1, Ordering::Relaxed);
+                let mut request = [0u8; 4096];
+                let _ = conn.read(&mut request).await;
+                let _ = conn.write_all(b"HTTP/1.1 200 OK\r\ncontent-length: 1073741824\r\n\r\n{}").await;
+                held.push(conn);
+            }
+        }
+    });
+
+    for (path, addr) in [("endless", endless), ("announced", announced)] {
+        asked.store(0, Ordering::Relaxed);
+        let (client, pauses) =
+            model(&format!("http://{addr}/{path}"), ApiKind::OpenAi, Duration::from_secs(60), RetryPolicy::default());
+        let err = client.complete(&body()).await.unwrap_err();
+        let AgentError::Model { reason, .. } = &err else { panic!("{path}: {err:?}") };
+        assert!(reason.contains("the model's answer is longer than 64 MiB"), "{path}: {reason}");
+        assert_eq!((asked.load(Ordering::Relaxed), pauses.0.lock().unwrap().len()), (1, 0), "{path}: asked once");
+    }
+    // The endless answer was read to its limit and no further (plus what was in flight).
+    let sent = sent.load(Ordering::Relaxed);
+    assert!((MAX_MODEL_ANSWER..MAX_MODEL_ANSWER + (32 << 20)).contains(&sent), "{sent} bytes sent");
+}

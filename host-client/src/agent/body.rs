@@ -1,0 +1,49 @@
+//! Answers over HTTP from parties the harness does not trust (an agent's server, a
+//! model endpoint) read chunk by chunk up to a limit, so that a huge or endless answer
+//! costs an error for that task instead of the host's memory.
+
+/// Why a bounded answer could not be read.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum BodyError {
+    /// Announced or found longer than the limit.
+    TooLong { limit: usize },
+    /// The connection failed (or the client's timeout ran out) while reading.
+    Read(String),
+}
+
+impl std::fmt::Display for BodyError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            BodyError::TooLong { limit } if *limit >= 1 << 20 => {
+                write!(f, "the answer is longer than {} MiB", limit >> 20)
+            }
+            BodyError::TooLong { limit } => write!(f, "the answer is longer than {limit} bytes"),
+            BodyError::Read(err) => write!(f, "reading the answer: {err}"),
+        }
+    }
+}
+
+/// The body of `response`, at most `limit` bytes: one announced or found longer is
+/// refused as soon as that is known, or with `cut` kept to its first `limit` bytes
+/// (for the start of an error page). The client's own timeout bounds a slow body.
+///
+/// # Errors
+///
+/// [`BodyError`], saying which limit or what failed.
+pub async fn read_bounded(mut response: reqwest::Response, limit: usize, cut: bool) -> Result<Vec<u8>, BodyError> {
+    if !cut && response.content_length().is_some_and(|n| n > limit as u64) {
+        return Err(BodyError::TooLong { limit });
+    }
+    let mut body = Vec::new();
+    while let Some(chunk) = response.chunk().await.map_err(|err| BodyError::Read(super::llm::error_chain(&err)))? {
+        if body.len() + chunk.len() > limit {
+            if cut {
+                body.extend_from_slice(&chunk[..limit - body.len()]);
+                break;
+            }
+            return Err(BodyError::TooLong { limit });
+        }
+        body.extend_from_slice(&chunk);
+    }
+    Ok(body)
+}
