@@ -113,6 +113,18 @@ tokio::task_local! {
     pub(crate) static SESSION_REFUSED: std::cell::Cell<bool>;
 }
 
+/// A log filter for the servers' subscribers: it drops the error rmcp logs for a
+/// session [`BoundedSessions`] refused (answered 503 by [`HttpStatuses`]), which a
+/// client asking again and again would otherwise write once per request. The manager
+/// reports its refusals itself, counted, every [`sessions::REFUSAL_WARNING_EVERY`].
+pub fn without_refusal_noise() -> tracing_subscriber::filter::FilterFn<impl Fn(&tracing::Metadata<'_>) -> bool> {
+    tracing_subscriber::filter::filter_fn(|meta| {
+        !(meta.target().starts_with("rmcp")
+            && *meta.level() == tracing::Level::ERROR
+            && SESSION_REFUSED.try_with(std::cell::Cell::get).unwrap_or(false))
+    })
+}
+
 impl<S, B, R> tower_service::Service<http::Request<B>> for HttpStatuses<S>
 where
     S: tower_service::Service<http::Request<B>, Response = http::Response<R>>,

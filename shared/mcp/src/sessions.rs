@@ -156,7 +156,14 @@ pub struct BoundedSessions {
     sweeping: std::sync::atomic::AtomicBool,
     me: Weak<BoundedSessions>,
     events: Option<SessionEvents>,
+    /// Sessions refused since the last warning, and when that was: a client that
+    /// keeps asking while every session is busy gets one line per
+    /// [`REFUSAL_WARNING_EVERY`], not one per request.
+    refusals: Mutex<(u64, Option<tokio::time::Instant>)>,
 }
+
+/// How often refused sessions are reported in the log (with their count).
+pub const REFUSAL_WARNING_EVERY: Duration = Duration::from_secs(10);
 
 impl std::fmt::Debug for BoundedSessions {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
@@ -188,7 +195,24 @@ impl BoundedSessions {
             sweeping: std::sync::atomic::AtomicBool::new(false),
             me: me.clone(),
             events,
+            refusals: Mutex::new((0, None)),
         })
+    }
+
+    /// Counts a refused session, and warns of the refusals when the last warning is
+    /// [`REFUSAL_WARNING_EVERY`] old.
+    fn refused(&self) {
+        let now = tokio::time::Instant::now();
+        let mut refusals = self.refusals.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
+        refusals.0 += 1;
+        if refusals.1.is_none_or(|last| now.duration_since(last) >= REFUSAL_WARNING_EVERY) {
+            tracing::warn!(
+                refused = refusals.0,
+                max_sessions = self.limits.max_sessions,
+                "new MCP sessions refused (503): every open session has a call running"
+            );
+            *refusals = (0, Some(now));
+        }
     }
 
     fn tell(&self, event: SessionEvent) {
@@ -335,6 +359,7 @@ impl BoundedSessions {
             match victim {
                 Some(id) => self.close_for(&id, CloseReason::Cap).await?,
                 None => {
+                    self.refused();
                     // Outside a request's task (tests, other callers) there is nothing to tell.
                     let _ = crate::SESSION_REFUSED.try_with(|refused| refused.set(true));
                     return Err(SessionsError::Full(self.limits.max_sessions));
@@ -591,6 +616,65 @@ mod tests {
         assert_eq!(opened.status(), http::StatusCode::OK);
         assert!(opened.headers().contains_key("mcp-session-id"), "{:?}", opened.headers());
         assert!(!sessions.has_session(&busy).await.expect("answers"), "the idle one made room");
+    }
+
+    /// What a log layer wrote.
+    #[derive(Clone, Default)]
+    struct Captured(Arc<Mutex<Vec<u8>>>);
+
+    impl std::io::Write for Captured {
+        fn write(&mut self, bytes: &[u8]) -> std::io::Result<usize> {
+            self.0.lock().expect("not poisoned").extend_from_slice(bytes);
+            Ok(bytes.len())
+        }
+
+        fn flush(&mut self) -> std::io::Result<()> {
+            Ok(())
+        }
+    }
+
+    impl Captured {
+        fn text(&self) -> String {
+            String::from_utf8_lossy(&self.0.lock().expect("not poisoned")).into_owned()
+        }
+    }
+
+    #[tokio::test]
+    async fn refused_sessions_are_one_counted_warning_not_an_error_each() {
+        use tower_service::Service as _;
+        use tracing_subscriber::layer::SubscriberExt as _;
+        use tracing_subscriber::Layer as _;
+        // The same events twice: through the servers' filter, and unfiltered.
+        let (filtered, all) = (Captured::default(), Captured::default());
+        let (to_filtered, to_all) = (filtered.clone(), all.clone());
+        let subscriber = tracing_subscriber::registry()
+            .with(
+                tracing_subscriber::fmt::layer()
+                    .with_ansi(false)
+                    .with_writer(move || to_filtered.clone())
+                    .with_filter(crate::without_refusal_noise()),
+            )
+            .with(tracing_subscriber::fmt::layer().with_ansi(false).with_writer(move || to_all.clone()));
+        let _log = tracing::subscriber::set_default(subscriber);
+
+        let sessions = BoundedSessions::new(SessionLimits { max_sessions: 1, idle: Duration::from_secs(600) });
+        let mut service = crate::HttpStatuses(rmcp::transport::StreamableHttpService::new(
+            || Ok(crate::Server(crate::tests::Echo)),
+            Arc::clone(&sessions),
+            crate::http_config(),
+        ));
+        let (busy, _) = sessions.create_session().await.expect("opens");
+        sessions.call(&busy, true);
+        for _ in 0..50 {
+            let refused = service.call(initialize()).await.expect("an answer");
+            assert_eq!(refused.status(), http::StatusCode::SERVICE_UNAVAILABLE);
+        }
+        let rmcp_errors = |log: &str| log.lines().filter(|l| l.contains("ERROR") && l.contains("rmcp")).count();
+        let warnings = |log: &str| log.lines().filter(|l| l.contains("new MCP sessions refused")).count();
+        let (filtered, all) = (filtered.text(), all.text());
+        assert_eq!(rmcp_errors(&all), 50, "rmcp logs every refusal:\n{all}");
+        assert_eq!(rmcp_errors(&filtered), 0, "{filtered}");
+        assert_eq!(warnings(&filtered), 1, "one warning per {REFUSAL_WARNING_EVERY:?}:\n{filtered}");
     }
 
     #[tokio::test]

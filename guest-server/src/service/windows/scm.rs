@@ -21,6 +21,10 @@ use std::sync::mpsc;
 use std::sync::{Mutex, OnceLock};
 use std::time::{Duration, Instant};
 
+use tracing_subscriber::layer::SubscriberExt as _;
+use tracing_subscriber::util::SubscriberInitExt as _;
+use tracing_subscriber::Layer as _;
+
 use windows::core::{PCWSTR, PWSTR};
 use windows::Win32::Foundation::{
     SetHandleInformation, ERROR_FAILED_SERVICE_CONTROLLER_CONNECT, ERROR_NO_TOKEN, HANDLE, HANDLE_FLAGS,
@@ -288,7 +292,12 @@ fn init_file_logging(dir: &Path) -> Result<(), ServiceCliError> {
         .map_err(io(format!("opening {}", path.display())))?;
     let filter = tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| "arena_guest=info".into());
     // A second initialisation (never expected) keeps the first subscriber.
-    let _ = tracing_subscriber::fmt().with_env_filter(filter).with_ansi(false).with_writer(Mutex::new(file)).try_init();
+    let layer = tracing_subscriber::fmt::layer()
+        .with_ansi(false)
+        .with_writer(Mutex::new(file))
+        .with_filter(filter)
+        .with_filter(arena_mcp::without_refusal_noise());
+    let _ = tracing_subscriber::registry().with(layer).try_init();
     Ok(())
 }
 
