@@ -8,6 +8,7 @@ use std::net::SocketAddr;
 use std::process::ExitCode;
 
 use clap::Parser;
+use tracing_subscriber::filter::FilterExt as _;
 use tracing_subscriber::layer::SubscriberExt as _;
 use tracing_subscriber::util::SubscriberInitExt as _;
 use tracing_subscriber::Layer as _;
@@ -158,15 +159,15 @@ async fn run(config: ServerConfig) -> anyhow::Result<()> {
 
 fn init_tracing(format: LogFormat, plain: bool) {
     let filter = tracing_subscriber::EnvFilter::try_from_default_env()
-        .unwrap_or_else(|_| "arena_guest=info,tower_http=warn".into());
+        .unwrap_or_else(|_| "arena_guest=info,arena_mcp=warn,tower_http=warn".into());
     let layer = tracing_subscriber::fmt::layer().with_writer(std::io::stderr).with_ansi(!plain);
     // A client asking for MCP sessions while all are busy gets a counted warning, not
     // one error line per request.
-    let quiet = arena_mcp::without_refusal_noise();
+    let filter = filter.and(arena_mcp::without_refusal_noise());
     let registry = tracing_subscriber::registry();
     match format {
-        LogFormat::Text => registry.with(layer.with_filter(filter).with_filter(quiet)).init(),
-        LogFormat::Json => registry.with(layer.json().with_filter(filter).with_filter(quiet)).init(),
+        LogFormat::Text => registry.with(layer.with_filter(filter)).init(),
+        LogFormat::Json => registry.with(layer.json().with_filter(filter)).init(),
     }
 }
 

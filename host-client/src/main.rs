@@ -15,14 +15,14 @@ async fn main() -> ExitCode {
     let cli = arena_host::Cli::parse_args();
     // An outside agent's stderr (target `arena::agent`) is part of the run's log.
     let filter = EnvFilter::try_from_env("ARENA_LOG").unwrap_or_else(|_| EnvFilter::new("warn,arena::agent=info"));
+    // An MCP agent asking for sessions while all are busy gets a counted warning, not
+    // one error line per request.
+    #[cfg(feature = "mcp-endpoint")]
+    let filter = tracing_subscriber::filter::FilterExt::and(filter, arena_mcp::without_refusal_noise());
     let layer = tracing_subscriber::fmt::layer()
         .with_writer(std::io::stderr)
         .with_ansi(std::io::stderr().is_terminal())
         .with_filter(filter);
-    // An MCP agent asking for sessions while all are busy gets a counted warning, not
-    // one error line per request.
-    #[cfg(feature = "mcp-endpoint")]
-    let layer = layer.with_filter(arena_mcp::without_refusal_noise());
     tracing_subscriber::registry().with(layer).init();
     match arena_host::run(cli).await {
         Ok(code) => code,

@@ -113,16 +113,32 @@ tokio::task_local! {
     pub(crate) static SESSION_REFUSED: std::cell::Cell<bool>;
 }
 
-/// A log filter for the servers' subscribers: it drops the error rmcp logs for a
-/// session [`BoundedSessions`] refused (answered 503 by [`HttpStatuses`]), which a
-/// client asking again and again would otherwise write once per request. The manager
-/// reports its refusals itself, counted, every [`sessions::REFUSAL_WARNING_EVERY`].
-pub fn without_refusal_noise() -> tracing_subscriber::filter::FilterFn<impl Fn(&tracing::Metadata<'_>) -> bool> {
-    tracing_subscriber::filter::filter_fn(|meta| {
-        !(meta.target().starts_with("rmcp")
-            && *meta.level() == tracing::Level::ERROR
-            && SESSION_REFUSED.try_with(std::cell::Cell::get).unwrap_or(false))
+/// A log filter for the servers' subscribers, to combine with their level filter
+/// (`level.and(without_refusal_noise())`): it drops the error rmcp logs for a session
+/// [`BoundedSessions`] refused (answered 503 by [`HttpStatuses`]), which a client
+/// asking again and again would otherwise write once per request; the manager reports
+/// its refusals itself, counted, every [`sessions::REFUSAL_WARNING_EVERY`].
+///
+/// Only rmcp's error call sites are asked per event (whether the request being
+/// answered was refused); every other call site keeps the level filter's own cached
+/// answer and level hint, so nothing else costs more. rmcp logs every internal
+/// error from one call site, so the per-event question is what keeps its other
+/// errors in the log.
+pub fn without_refusal_noise<S: tracing::Subscriber>() -> impl tracing_subscriber::layer::Filter<S> {
+    fn rmcp_error(meta: &tracing::Metadata<'_>) -> bool {
+        meta.target().starts_with("rmcp") && *meta.level() == tracing::Level::ERROR
+    }
+    tracing_subscriber::filter::DynFilterFn::new(|meta, _| {
+        !(rmcp_error(meta) && SESSION_REFUSED.try_with(std::cell::Cell::get).unwrap_or(false))
     })
+    .with_callsite_filter(|meta| {
+        if rmcp_error(meta) {
+            tracing::subscriber::Interest::sometimes()
+        } else {
+            tracing::subscriber::Interest::always()
+        }
+    })
+    .with_max_level_hint(tracing_subscriber::filter::LevelFilter::TRACE)
 }
 
 impl<S, B, R> tower_service::Service<http::Request<B>> for HttpStatuses<S>

@@ -555,6 +555,7 @@ mod tests {
 
     #[tokio::test]
     async fn sessions_past_the_cap_close_the_one_idle_longest() {
+        let _one_at_a_time = REFUSING.lock().await;
         let sessions = BoundedSessions::new(SessionLimits { max_sessions: 3, idle: Duration::from_secs(600) });
         let mut ids = Vec::new();
         for _ in 0..3 {
@@ -589,17 +590,29 @@ mod tests {
             .expect("a request")
     }
 
-    #[tokio::test]
-    async fn a_session_refused_because_all_are_busy_is_a_503_with_retry_after() {
-        use tower_service::Service as _;
+    /// The streamable-HTTP service both servers run, over a manager capped at one
+    /// session, and that session with a call running.
+    async fn one_busy_session() -> (
+        Arc<BoundedSessions>,
+        SessionId,
+        crate::HttpStatuses<rmcp::transport::StreamableHttpService<crate::Server<crate::tests::Echo>, BoundedSessions>>,
+    ) {
         let sessions = BoundedSessions::new(SessionLimits { max_sessions: 1, idle: Duration::from_secs(600) });
-        let mut service = crate::HttpStatuses(rmcp::transport::StreamableHttpService::new(
+        let service = crate::HttpStatuses(rmcp::transport::StreamableHttpService::new(
             || Ok(crate::Server(crate::tests::Echo)),
             Arc::clone(&sessions),
             crate::http_config(),
         ));
         let (busy, _) = sessions.create_session().await.expect("opens");
         sessions.call(&busy, true);
+        (sessions, busy, service)
+    }
+
+    #[tokio::test]
+    async fn a_session_refused_because_all_are_busy_is_a_503_with_retry_after() {
+        let _one_at_a_time = REFUSING.lock().await;
+        use tower_service::Service as _;
+        let (sessions, busy, mut service) = one_busy_session().await;
 
         let refused = service.call(initialize()).await.expect("an answer");
         assert_eq!(refused.status(), http::StatusCode::SERVICE_UNAVAILABLE);
@@ -617,6 +630,11 @@ mod tests {
         assert!(opened.headers().contains_key("mcp-session-id"), "{:?}", opened.headers());
         assert!(!sessions.has_session(&busy).await.expect("answers"), "the idle one made room");
     }
+
+    /// Held by the tests that refuse sessions: a log call site that another thread
+    /// registers while this test installs its subscriber can keep the interest computed
+    /// without it (tracing-core's registration race), and the test's log would miss it.
+    static REFUSING: tokio::sync::Mutex<()> = tokio::sync::Mutex::const_new(());
 
     /// What a log layer wrote.
     #[derive(Clone, Default)]
@@ -641,6 +659,7 @@ mod tests {
 
     #[tokio::test]
     async fn refused_sessions_are_one_counted_warning_not_an_error_each() {
+        let _one_at_a_time = REFUSING.lock().await;
         use tower_service::Service as _;
         use tracing_subscriber::layer::SubscriberExt as _;
         use tracing_subscriber::Layer as _;
@@ -649,31 +668,36 @@ mod tests {
         let (to_filtered, to_all) = (filtered.clone(), all.clone());
         let subscriber = tracing_subscriber::registry()
             .with(
-                tracing_subscriber::fmt::layer()
-                    .with_ansi(false)
-                    .with_writer(move || to_filtered.clone())
-                    .with_filter(crate::without_refusal_noise()),
+                tracing_subscriber::fmt::layer().with_ansi(false).with_writer(move || to_filtered.clone()).with_filter(
+                    tracing_subscriber::filter::FilterExt::and(
+                        tracing_subscriber::filter::LevelFilter::INFO,
+                        crate::without_refusal_noise(),
+                    ),
+                ),
             )
             .with(tracing_subscriber::fmt::layer().with_ansi(false).with_writer(move || to_all.clone()));
         let _log = tracing::subscriber::set_default(subscriber);
 
-        let sessions = BoundedSessions::new(SessionLimits { max_sessions: 1, idle: Duration::from_secs(600) });
-        let mut service = crate::HttpStatuses(rmcp::transport::StreamableHttpService::new(
-            || Ok(crate::Server(crate::tests::Echo)),
-            Arc::clone(&sessions),
-            crate::http_config(),
-        ));
-        let (busy, _) = sessions.create_session().await.expect("opens");
-        sessions.call(&busy, true);
+        let (_sessions, _busy, mut service) = one_busy_session().await;
         for _ in 0..50 {
             let refused = service.call(initialize()).await.expect("an answer");
             assert_eq!(refused.status(), http::StatusCode::SERVICE_UNAVAILABLE);
         }
+        // rmcp's other internal errors come from the same call site, and stay in the log.
+        let mut broken = crate::HttpStatuses(rmcp::transport::StreamableHttpService::new(
+            || Err::<crate::Server<crate::tests::Echo>, _>(std::io::Error::other("no service")),
+            BoundedSessions::new(SessionLimits { max_sessions: 1, idle: Duration::from_secs(600) }),
+            crate::http_config(),
+        ));
+        let failed = broken.call(initialize()).await.expect("an answer");
+        assert_eq!(failed.status(), http::StatusCode::INTERNAL_SERVER_ERROR);
+
         let rmcp_errors = |log: &str| log.lines().filter(|l| l.contains("ERROR") && l.contains("rmcp")).count();
         let warnings = |log: &str| log.lines().filter(|l| l.contains("new MCP sessions refused")).count();
         let (filtered, all) = (filtered.text(), all.text());
-        assert_eq!(rmcp_errors(&all), 50, "rmcp logs every refusal:\n{all}");
-        assert_eq!(rmcp_errors(&filtered), 0, "{filtered}");
+        assert_eq!(rmcp_errors(&all), 51, "rmcp logs every refusal:\n{all}");
+        assert_eq!(rmcp_errors(&filtered), 1, "only the real failure is kept:\n{filtered}");
+        assert!(filtered.contains("no service"), "{filtered}");
         assert_eq!(warnings(&filtered), 1, "one warning per {REFUSAL_WARNING_EVERY:?}:\n{filtered}");
     }
 

@@ -21,6 +21,7 @@ use std::sync::mpsc;
 use std::sync::{Mutex, OnceLock};
 use std::time::{Duration, Instant};
 
+use tracing_subscriber::filter::FilterExt as _;
 use tracing_subscriber::layer::SubscriberExt as _;
 use tracing_subscriber::util::SubscriberInitExt as _;
 use tracing_subscriber::Layer as _;
@@ -290,13 +291,13 @@ fn init_file_logging(dir: &Path) -> Result<(), ServiceCliError> {
         .append(true)
         .open(&path)
         .map_err(io(format!("opening {}", path.display())))?;
-    let filter = tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| "arena_guest=info".into());
+    let filter = tracing_subscriber::EnvFilter::try_from_default_env()
+        .unwrap_or_else(|_| "arena_guest=info,arena_mcp=warn".into());
     // A second initialisation (never expected) keeps the first subscriber.
     let layer = tracing_subscriber::fmt::layer()
         .with_ansi(false)
         .with_writer(Mutex::new(file))
-        .with_filter(filter)
-        .with_filter(arena_mcp::without_refusal_noise());
+        .with_filter(filter.and(arena_mcp::without_refusal_noise()));
     let _ = tracing_subscriber::registry().with(layer).try_init();
     Ok(())
 }
