@@ -239,27 +239,11 @@ async fn two_shards_merged_summarise_like_one_run() {
     assert_eq!(Summary::from_dir(&merged).unwrap(), report.summary, "the written summary is the merged one");
 }
 
-/// A headless Chromium: `$CHROMIUM`, else Debian's `chromium` or `chromium-headless-shell`.
-fn chromium() -> Option<PathBuf> {
-    let candidates = std::env::var_os("CHROMIUM").map(PathBuf::from).into_iter().chain(
-        ["/usr/bin/chromium", "/usr/bin/chromium-headless-shell", "/usr/lib/chromium/chromium-headless-shell"]
-            .map(PathBuf::from),
-    );
-    candidates.into_iter().find(|p| p.is_file())
-}
-
 #[tokio::test]
 async fn the_report_opens_in_headless_chromium_and_shows_the_table() {
-    let Some(browser) = chromium() else {
-        // Written to the process's stderr directly, past the test harness's capture, so it is seen.
-        let _ = writeln!(
-            std::io::stderr(),
-            "SKIPPED: chromium not installed (apt-get install chromium, or set CHROMIUM); the HTML report was not opened in a browser"
-        );
-        assert!(
-            std::env::var("ARENA_REQUIRE_CHROMIUM").as_deref() != Ok("1"),
-            "ARENA_REQUIRE_CHROMIUM=1 but no chromium was found"
-        );
+    let Some(browser) =
+        arena_test_support::chromium_or_skip("the_report_opens_in_headless_chromium_and_shows_the_table")
+    else {
         return;
     };
     let guest = Served::guest(&[]).expect("guest starts");

@@ -10,7 +10,6 @@
 //! Without Chromium the test prints `SKIPPED: ...` (a failure with
 //! `ARENA_REQUIRE_CHROMIUM=1`).
 
-use std::io::Write as _;
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
@@ -38,15 +37,6 @@ use arena_test_support::StubGuest;
 const KEY: &str = "test-key";
 /// What the model says in its first step, a script tag included.
 const FIRST_TEXT: &str = "I click the text box. <script>window.injected = 1</script>";
-
-/// A headless Chromium: `$CHROMIUM`, else Debian's `chromium` or `chromium-headless-shell`.
-fn chromium() -> Option<PathBuf> {
-    let candidates = std::env::var_os("CHROMIUM").map(PathBuf::from).into_iter().chain(
-        ["/usr/bin/chromium", "/usr/bin/chromium-headless-shell", "/usr/lib/chromium/chromium-headless-shell"]
-            .map(PathBuf::from),
-    );
-    candidates.into_iter().find(|p| p.is_file())
-}
 
 /// A request the mock got: its headers and body.
 type Request = (HeaderMap, Value);
@@ -162,42 +152,18 @@ fn check_requests(requests: &[Request], steps: usize) {
     }
 }
 
-/// A headless Chromium with DevTools on a free port, on a blank page, killed on drop.
-struct Browser {
-    child: tokio::process::Child,
-    port: u16,
-    _profile: tempfile::TempDir,
-}
+/// A headless Chromium on a blank page, the size the pages are checked at.
+struct Browser(arena_test_support::Chromium);
 
 impl Browser {
     async fn start(binary: &Path) -> Browser {
-        let profile = tempfile::tempdir().expect("profile");
-        let mut child = tokio::process::Command::new(binary)
-            .args(["--headless", "--no-sandbox", "--disable-gpu", "--no-first-run", "--hide-scrollbars"])
-            .args(["--remote-debugging-port=0", "--window-size=1600,1000", "--force-device-scale-factor=1"])
-            .arg(format!("--user-data-dir={}", profile.path().display()))
-            .arg("about:blank")
-            .stdout(std::process::Stdio::null())
-            .stderr(std::process::Stdio::piped())
-            .kill_on_drop(true)
-            .spawn()
-            .expect("chromium starts");
-        // Chromium prints "DevTools listening on ws://127.0.0.1:<port>/devtools/browser/<id>" when ready.
-        use tokio::io::AsyncBufReadExt as _;
-        let mut lines = tokio::io::BufReader::new(child.stderr.take().expect("stderr")).lines();
-        let port = loop {
-            let line = lines.next_line().await.expect("chromium's stderr").expect("chromium exited before DevTools");
-            if let Some(rest) = line.split("ws://127.0.0.1:").nth(1) {
-                break rest.split('/').next().and_then(|p| p.parse::<u16>().ok()).expect("a port");
-            }
-        };
-        tokio::spawn(async move { while let Ok(Some(_)) = lines.next_line().await {} });
-        Browser { child, port, _profile: profile }
+        let args = ["--hide-scrollbars", "--window-size=1600,1000", "--force-device-scale-factor=1"];
+        Browser(arena_test_support::Chromium::start(binary, &args, "about:blank").await)
     }
 
     /// A DevTools session with the page whose address ends with `suffix`.
     async fn page(&self, suffix: &str) -> Page {
-        let list: Vec<Value> = reqwest::get(format!("http://127.0.0.1:{}/json/list", self.port))
+        let list: Vec<Value> = reqwest::get(format!("http://127.0.0.1:{}/json/list", self.0.port))
             .await
             .expect("json/list")
             .json()
@@ -211,12 +177,6 @@ impl Browser {
             .to_owned();
         let (socket, _) = tokio_tungstenite::connect_async(ws.as_str()).await.expect("the page's DevTools socket");
         Page { socket, id: 0 }
-    }
-}
-
-impl Drop for Browser {
-    fn drop(&mut self) {
-        let _ = self.child.start_kill();
     }
 }
 
@@ -327,16 +287,7 @@ const MEASURE: &str = r#"(n) => new Promise(function (resolve) {
 #[tokio::test]
 async fn a_computer_use_task_page_shows_the_models_text_a_click_marker_where_it_was_recorded_and_the_tokens() {
     let test = "a_computer_use_task_page_shows_the_models_text_a_click_marker_where_it_was_recorded_and_the_tokens";
-    let Some(binary) = chromium() else {
-        // Written to the process's stderr directly, past the test harness's capture, so it is seen.
-        let _ = writeln!(
-            std::io::stderr(),
-            "SKIPPED: {test}: chromium not installed (apt-get install chromium-headless-shell, or set CHROMIUM)"
-        );
-        assert!(
-            std::env::var("ARENA_REQUIRE_CHROMIUM").as_deref() != Ok("1"),
-            "ARENA_REQUIRE_CHROMIUM=1 but no chromium was found"
-        );
+    let Some(binary) = arena_test_support::chromium_or_skip(test) else {
         return;
     };
     let tmp = tempfile::tempdir().expect("tmp");

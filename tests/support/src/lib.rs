@@ -10,6 +10,8 @@
 //! - [`standin_image`]: the QEMU stand-in guest image and `qemu-system-x86_64`, or a
 //!   loud, counted skip.
 //! - [`python_with_mcp`]: a Python with the official MCP SDK, or a loud, counted skip.
+//! - [`chromium_or_skip`]: a headless Chromium, or a loud skip; [`Chromium`] (feature
+//!   `guest`) starts it with DevTools on a free port.
 //! - [`eventually`] (feature `guest`): polling a condition until it holds or a deadline passes.
 //! - [`png_claiming`]: a PNG header claiming any size, for the image guards.
 //! - [`copy_stub_task`]: a stub task with its host-side gold, copied for a test.
@@ -20,12 +22,13 @@
 //! of the crate it tests.
 //!
 //! Layout: `guest.rs` (in-process launcher), `process.rs` (child-process launcher),
-//! `corpus.rs` (corpus locator), `wine.rs` (Wine locator), `standin.rs` (stand-in
+//! `chromium.rs` (Chromium locator and launcher), `corpus.rs` (corpus locator), `wine.rs` (Wine locator), `standin.rs` (stand-in
 //! image locator), `mcp_sdk.rs` (MCP SDK locator), `wait.rs` (polling), `png.rs` (PNG bombs),
 //! `stub_tasks.rs` (the stub tasks).
 
 #![forbid(unsafe_code)]
 
+mod chromium;
 mod corpus;
 #[cfg(feature = "guest")]
 mod guest;
@@ -38,6 +41,9 @@ mod stub_tasks;
 mod wait;
 mod wine;
 
+#[cfg(feature = "guest")]
+pub use chromium::Chromium;
+pub use chromium::{chromium_or_skip, find_chromium, CHROMIUM_VAR, REQUIRE_CHROMIUM_VAR};
 pub use corpus::{waa_corpus, CORPUS_VAR, REQUIRE_CORPUS_VAR, SKIP_PREFIX};
 #[cfg(feature = "guest")]
 pub use guest::StubGuest;

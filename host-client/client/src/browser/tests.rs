@@ -3,7 +3,6 @@
 //! real headless Chromium when one is installed (`SKIPPED: ...` otherwise, a
 //! failure with `ARENA_REQUIRE_CHROMIUM=1`).
 
-use std::path::PathBuf;
 use std::time::Duration;
 
 use arena_shared::geometry::Rect;
@@ -109,72 +108,10 @@ async fn commands_answer_by_id_and_errors_are_named() {
     session.close().await;
 }
 
-/// A headless Chromium: `$CHROMIUM`, else Debian's `chromium` or `chromium-headless-shell`.
-fn chromium() -> Option<PathBuf> {
-    let candidates = std::env::var_os("CHROMIUM").map(PathBuf::from).into_iter().chain(
-        ["/usr/bin/chromium", "/usr/bin/chromium-headless-shell", "/usr/lib/chromium/chromium-headless-shell"]
-            .into_iter()
-            .map(PathBuf::from),
-    );
-    candidates.into_iter().find(|path| path.is_file())
-}
-
-/// A headless Chromium with DevTools on a free port, killed on drop.
-struct Chromium {
-    child: tokio::process::Child,
-    port: u16,
-    _profile: tempfile::TempDir,
-}
-
-impl Chromium {
-    async fn start(binary: &std::path::Path, url: &str) -> Chromium {
-        let profile = tempfile::tempdir().expect("profile");
-        let mut child = tokio::process::Command::new(binary)
-            .args([
-                "--headless",
-                "--no-sandbox",
-                "--disable-gpu",
-                "--no-first-run",
-                "--remote-debugging-port=0",
-                "--window-size=800,600",
-            ])
-            .arg(format!("--user-data-dir={}", profile.path().display()))
-            .arg(url)
-            .stdout(std::process::Stdio::null())
-            .stderr(std::process::Stdio::piped())
-            .kill_on_drop(true)
-            .spawn()
-            .expect("chromium starts");
-        // Chromium prints "DevTools listening on ws://127.0.0.1:<port>/devtools/browser/<id>" when ready.
-        use tokio::io::AsyncBufReadExt as _;
-        let mut lines = tokio::io::BufReader::new(child.stderr.take().expect("stderr")).lines();
-        let port = loop {
-            let line =
-                lines.next_line().await.expect("chromium's stderr").expect("chromium exited before DevTools listened");
-            if let Some(rest) = line.split("ws://127.0.0.1:").nth(1) {
-                break rest.split('/').next().and_then(|p| p.parse::<u16>().ok()).expect("a port");
-            }
-        };
-        // Keep draining its log so it never blocks on a full pipe.
-        tokio::spawn(async move { while let Ok(Some(_)) = lines.next_line().await {} });
-        Chromium { child, port, _profile: profile }
-    }
-}
-
-impl Drop for Chromium {
-    fn drop(&mut self) {
-        let _ = self.child.start_kill();
-    }
-}
-
 #[tokio::test]
 async fn a_real_headless_chromium_is_driven_through_the_relay() {
-    let Some(binary) = chromium() else {
-        assert!(
-            std::env::var("ARENA_REQUIRE_CHROMIUM").as_deref() != Ok("1"),
-            "ARENA_REQUIRE_CHROMIUM=1 but no chromium was found"
-        );
-        eprintln!("SKIPPED: a_real_headless_chromium_is_driven_through_the_relay: chromium not found");
+    let Some(binary) = arena_test_support::chromium_or_skip("a_real_headless_chromium_is_driven_through_the_relay")
+    else {
         return;
     };
     let html = "<!DOCTYPE html><html><head><title>Arena test page</title></head>\
@@ -185,7 +122,8 @@ async fn a_real_headless_chromium_is_driven_through_the_relay() {
     let dir = tempfile::tempdir().expect("page dir");
     let page = dir.path().join("page.html");
     std::fs::write(&page, html).expect("write the page");
-    let chromium = Chromium::start(&binary, &format!("file://{}", page.display())).await;
+    let url = format!("file://{}", page.display());
+    let chromium = arena_test_support::Chromium::start(&binary, &["--window-size=800,600"], &url).await;
     let (_stub, client) = guest(chromium.port, true).await;
 
     // The page may still be loading when DevTools first answers.
