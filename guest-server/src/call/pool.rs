@@ -9,10 +9,11 @@
 //! are cores working through one queue: a thread that finishes a call takes the next
 //! without sleeping, and a call is handed to a parked thread only when one is parked.
 //! It starts another thread only when calls are waiting and fewer than that many
-//! threads are free of a call that has run longer than [`STUCK_AFTER`]: a hung UI Automation provider, a window that does not
-//! answer, or a long interpreter run then holds its own thread while the calls queued
-//! behind it go on, as they did on tokio's pool, after at most that delay. Threads
-//! beyond the core count end after [`KEEP_ALIVE`] without work.
+//! threads are free of a call that has run longer than [`STUCK_AFTER`]: a hung UI
+//! Automation provider, a window that does not answer, or a long interpreter run then
+//! holds its own thread while the calls queued behind it go on, as they did on tokio's
+//! pool, after at most that delay. Threads beyond the core count end after
+//! [`KEEP_ALIVE`] without work.
 //!
 //! No published pool grows this way: rusty_pool, `blocking` and tokio's own grow as
 //! soon as no thread is idle, which is the behaviour this replaces.
@@ -75,14 +76,20 @@ struct State {
     /// When each running call started, by the slot of its thread; `None` for a thread
     /// without a call, and for a slot no thread holds (see `free`).
     started: Vec<Option<Instant>>,
-    /// Slots no thread holds.
+    /// Slots no thread holds: every other slot is one running thread's.
     free: Vec<usize>,
-    threads: usize,
     /// Threads waiting on `work`.
     parked: usize,
     /// The watchdog waits for calls to be queued (rather than for a call to turn stuck).
     watchdog_asleep: bool,
     watchdog_started: bool,
+}
+
+impl State {
+    /// Threads the pool runs now: one per held slot.
+    fn threads(&self) -> usize {
+        self.started.len() - self.free.len()
+    }
 }
 
 fn lock(mutex: &Mutex<State>) -> MutexGuard<'_, State> {
@@ -130,7 +137,7 @@ impl Pool {
         state.queue.push_back(job);
         if state.parked > 0 {
             shared.work.notify_one();
-        } else if state.threads < shared.config.core && spawn_thread(shared, &mut state) {
+        } else if state.threads() < shared.config.core && spawn_thread(shared, &mut state) {
             return;
         }
         // More calls wait than parked threads will take: the watchdog finds out whether
@@ -155,7 +162,7 @@ impl Pool {
     /// Threads the pool runs now.
     #[cfg(test)]
     pub(super) fn threads(&self) -> usize {
-        lock(&self.shared.state).threads
+        lock(&self.shared.state).threads()
     }
 }
 
@@ -165,13 +172,11 @@ fn spawn_thread(shared: &Arc<Shared>, state: &mut State) -> bool {
         state.started.push(None);
         state.started.len() - 1
     });
-    state.threads += 1;
     let worker = Arc::clone(shared);
     let spawned = std::thread::Builder::new().name("backend".into()).spawn(move || work(&worker, slot));
     if let Err(err) = spawned {
         // The queued calls wait for a running thread (or time out); the server goes on.
         tracing::error!(error = %err, "could not start a backend thread");
-        state.threads -= 1;
         state.free.push(slot);
         return false;
     }
@@ -196,8 +201,7 @@ fn work(shared: &Shared, slot: usize) {
             shared.work.wait_timeout(state, shared.config.keep_alive).unwrap_or_else(PoisonError::into_inner);
         state = next;
         state.parked -= 1;
-        if timeout.timed_out() && state.queue.is_empty() && state.threads > shared.config.core {
-            state.threads -= 1;
+        if timeout.timed_out() && state.queue.is_empty() && state.threads() > shared.config.core {
             state.free.push(slot);
             return;
         }
@@ -226,7 +230,8 @@ fn watchdog(shared: &Arc<Shared>) {
                 next_check = next_check.min(config.stuck_after - running);
             }
         }
-        if state.threads - stuck < config.core && state.threads < config.max && spawn_thread(shared, &mut state) {
+        let threads = state.threads();
+        if threads - stuck < config.core && threads < config.max && spawn_thread(shared, &mut state) {
             continue;
         }
         state.watchdog_asleep = false;
