@@ -5,8 +5,9 @@
 /// Why a bounded answer could not be read.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub enum BodyError {
-    /// Announced or found longer than the limit.
-    TooLong { limit: usize },
+    /// Announced or found longer than the limit; `whose` names the party ("the
+    /// agent's", "the model's").
+    TooLong { whose: &'static str, limit: usize },
     /// The connection failed (or the client's timeout ran out) while reading.
     Read(String),
 }
@@ -14,25 +15,28 @@ pub enum BodyError {
 impl std::fmt::Display for BodyError {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         match self {
-            BodyError::TooLong { limit } if *limit >= 1 << 20 => {
-                write!(f, "the answer is longer than {} MiB", limit >> 20)
-            }
-            BodyError::TooLong { limit } => write!(f, "the answer is longer than {limit} bytes"),
+            BodyError::TooLong { whose, limit } => write!(f, "{whose} answer is longer than {} MiB", limit >> 20),
             BodyError::Read(err) => write!(f, "reading the answer: {err}"),
         }
     }
 }
 
-/// The body of `response`, at most `limit` bytes: one announced or found longer is
-/// refused as soon as that is known, or with `cut` kept to its first `limit` bytes
-/// (for the start of an error page). The client's own timeout bounds a slow body.
+/// The body of `response` from `whose` party, at most `limit` bytes (a whole number of
+/// MiB, as the error says): one announced or found longer is refused as soon as that is
+/// known, or with `cut` kept to its first `limit` bytes (for the start of an error
+/// page). The client's own timeout bounds a slow body.
 ///
 /// # Errors
 ///
 /// [`BodyError`], saying which limit or what failed.
-pub async fn read_bounded(mut response: reqwest::Response, limit: usize, cut: bool) -> Result<Vec<u8>, BodyError> {
+pub async fn read_bounded(
+    mut response: reqwest::Response,
+    whose: &'static str,
+    limit: usize,
+    cut: bool,
+) -> Result<Vec<u8>, BodyError> {
     if !cut && response.content_length().is_some_and(|n| n > limit as u64) {
-        return Err(BodyError::TooLong { limit });
+        return Err(BodyError::TooLong { whose, limit });
     }
     let mut body = Vec::new();
     while let Some(chunk) = response.chunk().await.map_err(|err| BodyError::Read(super::llm::error_chain(&err)))? {
@@ -41,7 +45,7 @@ pub async fn read_bounded(mut response: reqwest::Response, limit: usize, cut: bo
                 body.extend_from_slice(&chunk[..limit - body.len()]);
                 break;
             }
-            return Err(BodyError::TooLong { limit });
+            return Err(BodyError::TooLong { whose, limit });
         }
         body.extend_from_slice(&chunk);
     }

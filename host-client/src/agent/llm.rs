@@ -354,7 +354,7 @@ impl ModelClient {
         if status.is_success() {
             return Ok(None);
         }
-        let start = super::body::read_bounded(response, ERROR_SHOWN, true).await.unwrap_or_default();
+        let start = super::body::read_bounded(response, "the model's", ERROR_SHOWN, true).await.unwrap_or_default();
         let snippet: String = String::from_utf8_lossy(&start).chars().take(300).collect();
         let said = format!("{} answered HTTP {status}: {snippet}", self.endpoint);
         match status.as_u16() {
@@ -391,12 +391,11 @@ impl ModelClient {
         // An answer past the limit is refused (not tried again: the endpoint would
         // send another); of an error page only the start is read.
         let (limit, cut) = if status.is_success() { (MAX_MODEL_ANSWER, false) } else { (ERROR_SHOWN, true) };
-        let body = match super::body::read_bounded(response, limit, cut).await {
+        let body = match super::body::read_bounded(response, "the model's", limit, cut).await {
             Ok(body) => body,
             Err(super::body::BodyError::Read(err)) => return Err(transient(err)),
-            Err(super::body::BodyError::TooLong { limit }) => {
-                let reason = format!("the model's answer is longer than {} MiB", limit >> 20);
-                return Err(Failure { reason, transient: false, wait_at_least: None, refused: None });
+            Err(err @ super::body::BodyError::TooLong { .. }) => {
+                return Err(Failure { reason: err.to_string(), transient: false, wait_at_least: None, refused: None });
             }
         };
         if !status.is_success() {

@@ -177,7 +177,9 @@ impl AgentProcess {
         match read {
             Ok(0) => return Err(self.gone("the agent closed its output").await),
             Ok(_) if answer.len() > MAX_ANSWER => {
-                return Err(format!("the agent's answer is longer than {} MiB", MAX_ANSWER >> 20));
+                return Err(
+                    crate::agent::body::BodyError::TooLong { whose: "the agent's", limit: MAX_ANSWER }.to_string()
+                );
             }
             Ok(_) => {}
             Err(err) => return Err(format!("reading the agent's answer: {err}")),
@@ -297,15 +299,9 @@ impl HttpAgent {
         let status = response.status();
         // Only the start of an error body is shown.
         let (limit, cut) = if status.is_success() { (MAX_ANSWER, false) } else { (4096, true) };
-        let body = crate::agent::body::read_bounded(response, limit, cut).await.map_err(|err| {
-            let said = match err {
-                crate::agent::body::BodyError::TooLong { .. } => {
-                    format!("the agent's answer is longer than {} MiB", MAX_ANSWER >> 20)
-                }
-                crate::agent::body::BodyError::Read(_) => err.to_string(),
-            };
-            format!("POST {}: {said}", self.url)
-        })?;
+        let body = crate::agent::body::read_bounded(response, "the agent's", limit, cut)
+            .await
+            .map_err(|err| format!("POST {}: {err}", self.url))?;
         if !status.is_success() {
             let shown: String = String::from_utf8_lossy(&body).chars().take(200).collect();
             return Err(format!("POST {}: HTTP {status}: {shown}", self.url));
