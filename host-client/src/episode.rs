@@ -13,7 +13,7 @@
 //! 2. Up to `max_steps` times: observe (screenshot, accessibility tree,
 //!    windows, clipboard), `agent.predict`, then each action in order:
 //!    `DONE`/`FAIL` stop, `WAIT` pauses, anything else is carried out by
-//!    [`ports::exec::execute_with`](crate::ports::exec::execute_with) and followed by the pause upstream calls
+//!    [`arena_exec::execute_with`] and followed by the pause upstream calls
 //!    `--sleep_after_execution`.
 //! 3. The evaluator's `postconfig` steps, then [`arena_eval::evaluate`] with the
 //!    agent's last control word.
@@ -39,20 +39,23 @@ use arena_shared::action::{Action, ActionBatch};
 use arena_shared::observation::A11yQuery;
 
 use crate::agent::{Agent, AgentError, AgentFactory, LogValue, Prediction, StepLog};
-use crate::ports::exec::{self, ExecError, ExecOptions};
 use crate::ports::observe::{self, ObserveConfig, ScreenSource};
-use crate::ports::{AgentAction, Observation};
-use crate::results::{
-    timestamp_now, ActionRecord, ObservationKeys, ResetRecord, RunLayout, StepRecord, StepTimings, TaskDir,
-};
+use crate::ports::Observation;
 use crate::run::blame::{self, Phase};
 use crate::run::pool::TaskRunner;
+use crate::som::Marks;
+use arena_client::cache::DownloadCache;
 use arena_client::client::GuestClient;
 use arena_eval::{EvalContext, LastAction};
-use arena_setup::{DownloadCache, Settle, SetupContext};
+use arena_exec::AgentAction;
+use arena_exec::{self as exec, ExecError, ExecOptions};
+use arena_results::{
+    timestamp_now, ActionRecord, ObservationKeys, ResetRecord, RunLayout, StepRecord, StepTimings, TaskDir,
+};
+use arena_setup::{Settle, SetupContext};
 use arena_task::Task;
 
-use crate::results::{EpisodeResult, EpisodeStatus};
+use arena_results::{EpisodeResult, EpisodeStatus};
 
 /// Upstream's `--max_steps`.
 pub const DEFAULT_MAX_STEPS: u32 = 15;
@@ -105,7 +108,7 @@ pub struct EpisodeConfig {
     /// VMs: a guest whose QEMU died is the environment's failure (run::blame).
     pub guest_watch: Option<Arc<dyn blame::GuestWatch>>,
     /// The price of the run's model (`--prices`): each episode's tokens are priced into `cost_usd`.
-    pub price: Option<crate::results::ledger::Price>,
+    pub price: Option<arena_results::ledger::Price>,
     /// Told of each step as it begins (the run's progress display).
     pub watch: Option<Arc<dyn crate::run::watch::RunWatch>>,
 }
@@ -171,7 +174,7 @@ pub async fn run_attempt(
     config: &EpisodeConfig,
     out: &TaskDir,
     attempt: u32,
-    vm: Option<crate::results::VmStart>,
+    vm: Option<arena_results::VmStart>,
 ) -> EpisodeResult {
     let started = Instant::now();
     let mut ep = Episode {
@@ -270,20 +273,20 @@ struct Acted {
 /// (`<key>-step_<step - 1>_<time>.<ext>`); answers what the trajectory line holds.
 ///
 /// Text and JSON (a model's answer, a prompt) are written within
-/// [`crate::results::MAX_LOG_FILE`]: past it a text is cut with a note, and a JSON
+/// [`arena_results::MAX_LOG_FILE`]: past it a text is cut with a note, and a JSON
 /// value is kept as `{"not_recorded": note, "kept": <its strings cut and its items
 /// counted as the step's record is>}`.
-fn write_log(out: &TaskDir, step: u32, timestamp: &str, log: &StepLog) -> Result<Value, crate::results::ResultsError> {
-    let name = |ext: &str| format!("{}-step_{}_{timestamp}.{ext}", crate::results::safe_component(&log.key), step - 1);
+fn write_log(out: &TaskDir, step: u32, timestamp: &str, log: &StepLog) -> Result<Value, arena_results::ResultsError> {
+    let name = |ext: &str| format!("{}-step_{}_{timestamp}.{ext}", arena_results::safe_component(&log.key), step - 1);
     let (file, bytes) = match &log.value {
         LogValue::Inline(value) => return Ok(value.clone()),
-        LogValue::Text(text) => (name("txt"), crate::results::RecordBudget::log_file().text(text).into_bytes()),
+        LogValue::Text(text) => (name("txt"), arena_results::RecordBudget::log_file().text(text).into_bytes()),
         LogValue::Png(png) => (name("png"), png.clone()),
         LogValue::Image(pixels) => (name("png"), arena_client::frame::encode_png(pixels)),
         LogValue::Json(value) => {
             let mut bytes = serde_json::to_vec_pretty(value).unwrap_or_default();
-            if bytes.len() > crate::results::MAX_LOG_FILE {
-                let mut budget = crate::results::RecordBudget::log_file();
+            if bytes.len() > arena_results::MAX_LOG_FILE {
+                let mut budget = arena_results::RecordBudget::log_file();
                 let kept = budget.value(value).unwrap_or(Value::Null);
                 let note = budget.note().unwrap_or_default();
                 // Compact: indenting a deeply nested value could outgrow the budget.
@@ -297,12 +300,12 @@ fn write_log(out: &TaskDir, step: u32, timestamp: &str, log: &StepLog) -> Result
     Ok(Value::String(file))
 }
 
-/// The key of a step's note of what its record left out ([`crate::results::RecordBudget`]).
+/// The key of a step's note of what its record left out ([`arena_results::RecordBudget`]).
 const NOT_RECORDED: &str = "not_recorded";
 
 /// `actions` as the step's record keeps them: their strings within `budget`, and the
 /// actions that no longer fit left out (counted in the budget's note).
-fn recorded_actions(actions: &[AgentAction], budget: &mut crate::results::RecordBudget) -> Vec<AgentAction> {
+fn recorded_actions(actions: &[AgentAction], budget: &mut arena_results::RecordBudget) -> Vec<AgentAction> {
     let mut kept = Vec::new();
     for (i, action) in actions.iter().enumerate() {
         if budget.exhausted() {
@@ -731,7 +734,7 @@ impl Episode {
         };
         record.timings.predict = prediction.timings;
         // The record keeps a bounded share of what the agent sent (the actions run whole).
-        let mut budget = crate::results::RecordBudget::default();
+        let mut budget = arena_results::RecordBudget::default();
         record.response = budget.text(&prediction.response);
         record.actions = recorded_actions(&prediction.actions, &mut budget);
         let timestamp = record.first.action_timestamp.clone();
@@ -796,7 +799,13 @@ impl Episode {
                     _ => std::borrow::Cow::Borrowed(&config.exec),
                 };
                 acted.ran = true;
-                let run = exec::execute_with(play.client, action, prediction.marks.as_ref(), computer, &options);
+                let run = exec::execute_with(
+                    play.client,
+                    action,
+                    prediction.marks.as_ref().map(Marks::boxes),
+                    computer,
+                    &options,
+                );
                 let deadline = acted.deadline.unwrap_or_else(|| tokio::time::Instant::now() + config.step_timeout);
                 match tokio::time::timeout_at(deadline, run).await {
                     Ok(Ok(outcome)) => {
@@ -899,7 +908,7 @@ impl TaskRunner for EpisodeRunner {
         guest: &GuestClient,
         task: &Task,
         attempt: u32,
-        vm: Option<crate::results::VmStart>,
+        vm: Option<arena_results::VmStart>,
     ) -> EpisodeResult {
         let out = self.layout.task_dir(task);
         match (self.agents)() {
@@ -931,9 +940,9 @@ mod tests {
     use super::*;
     use crate::cli::stub::{start, RunningStub, StubArgs};
     use crate::ports::observe::fallback_reason;
-    use crate::results::RESULT_FILE;
     use arena_client::client::ClientConfig;
     use arena_client::error::ClientError;
+    use arena_results::RESULT_FILE;
     use arena_shared::observation::ImageFormat;
 
     /// Answers from a script of results; a `None` entry stops the guest first.
@@ -1030,7 +1039,7 @@ mod tests {
         // Upstream observes after every action, DONE included: the step with two
         // actions has two lines, each naming the screenshot taken after it.
         assert_eq!(traj[1].more.len(), 0, "further lines are upstream's only, not read back");
-        let text = std::fs::read_to_string(out.path().join(crate::results::TRAJ_FILE)).unwrap();
+        let text = std::fs::read_to_string(out.path().join(arena_results::TRAJ_FILE)).unwrap();
         let lines: Vec<Value> = text.lines().map(|l| serde_json::from_str(l).unwrap()).collect();
         let actions: Vec<(u64, Value, bool)> = lines
             .iter()
@@ -1153,7 +1162,7 @@ mod tests {
             Prediction { response: "ok".into(), actions: vec![AgentAction::Done], logs, ..Prediction::default() };
         let (result, out, _tmp) = play(&task("exact_match"), vec![Some(Ok(done))], false).await;
         assert_eq!(result.status, EpisodeStatus::Completed);
-        let text = std::fs::read_to_string(out.path().join(crate::results::TRAJ_FILE)).unwrap();
+        let text = std::fs::read_to_string(out.path().join(arena_results::TRAJ_FILE)).unwrap();
         let line: Value = serde_json::from_str(text.lines().nth(1).unwrap()).unwrap();
         let ts = line["action_timestamp"].as_str().unwrap();
         assert_eq!(line["user_question"], format!("user_question-step_0_{ts}.txt"));
@@ -1175,7 +1184,7 @@ mod tests {
 
     #[test]
     fn a_huge_text_or_json_log_is_written_within_its_file_limit() {
-        use crate::results::MAX_LOG_FILE;
+        use arena_results::MAX_LOG_FILE;
         let tmp = tempfile::tempdir().unwrap();
         let out = TaskDir::new(tmp.path().to_path_buf());
         let huge = "é".repeat(5 << 20); // 10 MiB
@@ -1214,8 +1223,8 @@ mod tests {
         let answer = Prediction { response: big.clone(), actions, logs, ..Prediction::default() };
         let (result, out, _tmp) = play(&task("exact_match"), vec![Some(Ok(answer))], false).await;
         assert_eq!(result.status, EpisodeStatus::Completed, "{result:?}");
-        let text = std::fs::read_to_string(out.path().join(crate::results::TRAJ_FILE)).unwrap();
-        assert!(text.len() < 4 * crate::results::STEP_BUDGET, "{} bytes of trajectory", text.len());
+        let text = std::fs::read_to_string(out.path().join(arena_results::TRAJ_FILE)).unwrap();
+        assert!(text.len() < 4 * arena_results::STEP_BUDGET, "{} bytes of trajectory", text.len());
         let lines: Vec<Value> = text.lines().map(|l| serde_json::from_str(l).unwrap()).collect();
         let step = &lines[1];
         let response = step["response"].as_str().unwrap();
@@ -1238,7 +1247,7 @@ mod tests {
         let script = vec![says(vec![copy, AgentAction::Done])];
         let (result, out, _tmp) = play(&task("exact_match"), script, false).await;
         assert_eq!(result.status, EpisodeStatus::Completed, "{result:?}");
-        let text = std::fs::read_to_string(out.path().join(crate::results::TRAJ_FILE)).unwrap();
+        let text = std::fs::read_to_string(out.path().join(arena_results::TRAJ_FILE)).unwrap();
         let lines: Vec<Value> = text.lines().map(|l| serde_json::from_str(l).unwrap()).collect();
         // Upstream's computer_clipboard is Navi's own copy: empty at the reset, then what the code copied.
         let clipboards: Vec<&str> = lines.iter().map(|l| l["computer_clipboard"].as_str().unwrap()).collect();
@@ -1285,7 +1294,7 @@ mod tests {
             ..EpisodeConfig::instant(cache)
         };
         let (_, out, _tmp) = play_with(&task("exact_match"), script, false, configure, None).await;
-        let text = std::fs::read_to_string(out.path().join(crate::results::TRAJ_FILE)).unwrap();
+        let text = std::fs::read_to_string(out.path().join(arena_results::TRAJ_FILE)).unwrap();
         let ran = text.lines().filter(|l| serde_json::from_str::<Value>(l).unwrap()["step_num"] == 1).count();
         assert!((1..50).contains(&ran), "{ran} of the 50 actions ran");
         let traj = out.read_trajectory().unwrap();
@@ -1305,7 +1314,7 @@ mod tests {
         assert_eq!(result.last_action, "done");
         assert_eq!(std::fs::read_to_string(out.path().join(RESULT_FILE)).unwrap(), "1.0\n");
         // The retries are in the step's line of traj.jsonl.
-        let text = std::fs::read_to_string(out.path().join(crate::results::TRAJ_FILE)).unwrap();
+        let text = std::fs::read_to_string(out.path().join(arena_results::TRAJ_FILE)).unwrap();
         let line: Value = serde_json::from_str(text.lines().nth(1).unwrap()).unwrap();
         assert_eq!(line["timings"]["predict_retries"], 2, "{line}");
     }
@@ -1314,7 +1323,7 @@ mod tests {
     async fn every_step_line_times_each_part_of_the_observation_and_the_prediction() {
         let (result, out, _tmp) = play(&task("exact_match"), vec![says(vec![AgentAction::Done])], false).await;
         assert_eq!(result.status, EpisodeStatus::Completed, "{result:?}");
-        let text = std::fs::read_to_string(out.path().join(crate::results::TRAJ_FILE)).unwrap();
+        let text = std::fs::read_to_string(out.path().join(arena_results::TRAJ_FILE)).unwrap();
         let line: Value = serde_json::from_str(text.lines().nth(1).unwrap()).unwrap();
         let timings = &line["timings"];
         for part in ["screenshot_ms", "decode_ms", "tree_ms", "windows_ms", "clipboard_ms", "total_ms"] {
@@ -1333,7 +1342,7 @@ mod tests {
 
     #[tokio::test]
     async fn the_report_tells_environment_failures_from_the_agents() {
-        use crate::results::summary::Summary;
+        use arena_results::summary::Summary;
         let root = tempfile::tempdir().unwrap();
         let named = |name: &str| {
             let text = r#"{"id": "t", "instruction": "do it", "config": [{"type": "launch", "parameters": {"command": "notepad"}}],

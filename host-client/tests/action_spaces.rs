@@ -11,15 +11,16 @@ use std::time::Duration;
 
 use serde_json::{json, Value};
 
-use arena_host::actionspace::{self, ActionSpace, Context, Coords};
+use arena_actionspace::{ActionSpace, Context, Coords};
+use arena_client::cache::DownloadCache;
+use arena_client::client::{ClientConfig, GuestClient};
+use arena_exec::AgentAction;
 use arena_host::agent::{Agent, AgentError, Prediction};
-use arena_host::client::{ClientConfig, GuestClient};
 use arena_host::episode::{run_episode, EpisodeConfig};
-use arena_host::ports::{AgentAction, Observation};
-use arena_host::results::{EpisodeStatus, RunLayout};
+use arena_host::ports::Observation;
 use arena_host::run::load_tasks;
-use arena_host::setup::DownloadCache;
-use arena_host::task::{Difficulty, Task};
+use arena_results::{EpisodeStatus, RunLayout};
+use arena_task::{Difficulty, Task};
 use arena_test_support::StubGuest;
 
 /// One oracle answer: in the grammar, or a decision for grammars that have none
@@ -53,7 +54,7 @@ impl Agent for Oracle {
             Answer::Fail => ("FAIL".to_owned(), vec![AgentAction::Fail]),
             Answer::In(value) => {
                 let ctx = Context::new(obs.screen_size(), self.coords);
-                let steps = actionspace::parse(self.space, &value, &ctx)
+                let steps = arena_actionspace::parse(self.space, &value, &ctx)
                     .map_err(|e| AgentError::Plan { path: "oracle".into(), reason: e.to_string() })?;
                 (value.to_string(), AgentAction::from_steps(&steps))
             }

@@ -15,20 +15,22 @@ use base64::Engine as _;
 use serde_json::{json, Value};
 use tokio::net::TcpListener;
 
+use arena_client::client::{ClientConfig, GuestClient};
+use arena_exec::AgentAction;
+use arena_exec::{execute_with, ActionOutcome, ExecError, ExecOptions};
 use arena_host::agent::llm::RetryPolicy;
 use arena_host::agent::navi::{NaviAgent, NaviConfig, NaviStyle};
 use arena_host::agent::replay::{ReplayAgent, ReplaySource, TrajectoryStep};
 use arena_host::agent::scripted::{PlanSource, ScriptedAgent};
 use arena_host::agent::{Agent, AgentError};
-use arena_host::client::{ClientConfig, GuestClient};
-use arena_host::ports::exec::{execute_with, ActionOutcome, ExecError, ExecOptions};
-use arena_host::ports::{AgentAction, Observation};
-use arena_host::task::Task;
+use arena_host::ports::Observation;
+use arena_host::som::Marks;
 use arena_script::ComputerState;
 use arena_shared::action::Action;
 use arena_shared::clipboard::ClipboardContent;
 use arena_shared::exec::LaunchRequest;
 use arena_shared::observation::{A11yNode, A11yQuery, WindowTarget};
+use arena_task::Task;
 use arena_test_support::StubGuest;
 
 async fn start_guest() -> StubGuest {
@@ -74,7 +76,9 @@ fn task(dir: &Path, extra: &str) -> Task {
 }
 
 async fn run(c: &GuestClient, action: &AgentAction, obs: &Observation, state: &mut ComputerState) -> ActionOutcome {
-    execute_with(c, action, obs.marks().as_ref(), state, &ExecOptions::instant()).await.expect("execute")
+    execute_with(c, action, obs.marks().as_ref().map(Marks::boxes), state, &ExecOptions::instant())
+        .await
+        .expect("execute")
 }
 
 fn computer(code: &str) -> AgentAction {
@@ -290,7 +294,9 @@ async fn navi_sends_the_annotated_screenshot_and_elements_and_retries_malformed_
     assert!(text.contains("could not be used"), "{text}");
     let mut state = ComputerState::for_screen(1, 1);
     let outcome =
-        execute_with(&c, &p.actions[0], p.marks.as_ref(), &mut state, &ExecOptions::instant()).await.expect("execute");
+        execute_with(&c, &p.actions[0], p.marks.as_ref().map(Marks::boxes), &mut state, &ExecOptions::instant())
+            .await
+            .expect("execute");
     assert_eq!(outcome.error, None, "{outcome:?}");
     assert_eq!(notepad_text(&c).await, "hello");
 
@@ -418,9 +424,10 @@ async fn scripted_agent_follows_a_plan_file_against_the_stub() {
         let obs = Observation::capture(&c, step, &t.instruction).await.expect("observe");
         let p = agent.predict(&obs).await.expect("prediction");
         assert_eq!(p.actions.len(), 1);
-        let outcome = execute_with(&c, &p.actions[0], p.marks.as_ref(), &mut state, &ExecOptions::instant())
-            .await
-            .expect("execute");
+        let outcome =
+            execute_with(&c, &p.actions[0], p.marks.as_ref().map(Marks::boxes), &mut state, &ExecOptions::instant())
+                .await
+                .expect("execute");
         assert_eq!(outcome.error, None, "step {step}: {outcome:?}");
         seen.push(p.actions[0].clone());
     }
@@ -483,7 +490,9 @@ async fn replay_repeats_a_recorded_trajectory() {
         let obs = Observation::capture(&c, step, &t.instruction).await.expect("observe");
         let p = agent.predict(&obs).await.expect("prediction");
         for action in &p.actions {
-            execute_with(&c, action, p.marks.as_ref(), &mut state, &ExecOptions::instant()).await.expect("execute");
+            execute_with(&c, action, p.marks.as_ref().map(Marks::boxes), &mut state, &ExecOptions::instant())
+                .await
+                .expect("execute");
         }
         replayed.push(TrajectoryStep { step, actions: p.actions });
     }
@@ -561,7 +570,7 @@ async fn the_observation_lists_windows_and_names_the_foreground_as_upstream() {
 
 #[tokio::test]
 async fn one_navi_step_decodes_each_screenshot_once() {
-    use arena_host::frame::decodes_on_this_thread;
+    use arena_client::frame::decodes_on_this_thread;
     let (_guest, c) = guest_with_notepad().await;
     let reply = "Look.\n```python\ncomputer.mouse.move_abs(x=0.5, y=0.5)\n```\n```decision\nCOMMAND\n```";
     let (url, _mock) = start_mock(&[(200, reply), (200, reply)]).await;
@@ -606,18 +615,18 @@ fn exec_agent(dir: &Path, extra: &str, code: &str) -> arena_host::agent::externa
 #[cfg(unix)]
 async fn cursor_after_episode(
     mut agent: arena_host::agent::external::ExternalAgent,
-    coords: arena_host::actionspace::Coords,
+    coords: arena_actionspace::Coords,
     dir: &Path,
 ) -> (i32, i32) {
     use arena_host::episode::{run_episode, EpisodeConfig};
-    use arena_host::results::EpisodeStatus;
+    use arena_results::EpisodeStatus;
     let guest = start_guest().await;
     let c = client(guest.url());
     let mut config =
-        EpisodeConfig::instant(arena_host::setup::DownloadCache::new(dir.join("cache")).expect("a download cache"));
+        EpisodeConfig::instant(arena_client::cache::DownloadCache::new(dir.join("cache")).expect("a download cache"));
     config.exec.coords = coords;
     let task = task(dir, "");
-    let layout = arena_host::results::RunLayout {
+    let layout = arena_results::RunLayout {
         root: dir.join("results"),
         agent: "exec".into(),
         observation: "screenshot".into(),
@@ -633,7 +642,7 @@ async fn cursor_after_episode(
 #[cfg(unix)]
 #[tokio::test]
 async fn an_exec_agents_pyautogui_is_rescaled_from_the_runs_or_its_own_coordinate_convention() {
-    use arena_host::actionspace::Coords;
+    use arena_actionspace::Coords;
     let tmp = tempfile::tempdir().expect("tmp");
     // The run's --coords grid1000: (250, 750) on the grid is (360, 675) of 1440x900.
     let dir = tmp.path().join("grid");
@@ -661,9 +670,9 @@ fn dir_made(dir: &Path) -> std::path::PathBuf {
 #[cfg(unix)]
 #[tokio::test]
 async fn one_step_protocol_step_decodes_each_screenshot_once() {
+    use arena_client::frame::decodes_on_this_thread;
     use arena_host::agent::external::transport::ProcessPool;
     use arena_host::agent::external::ExternalAgent;
-    use arena_host::frame::decodes_on_this_thread;
     let (_guest, c) = guest_with_notepad().await;
     let dir = tempfile::tempdir().expect("dir");
     let hello = r#"{"type":"hello","protocol":1,"agent":"sh","action_space":"pyautogui","observation":{"screenshot":"inline","a11y":"xml","windows":true,"clipboard":true,"som":true}}"#;

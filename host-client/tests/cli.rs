@@ -63,7 +63,7 @@ async fn doctor_reports_a_healthy_stub_and_exits_zero() {
     for words in [&["doctor", "--guest", &url][..], &["doctor", "--json", "--guest", &url][..]] {
         assert_eq!(arena_host::run(cli(words)).await.expect("doctor"), ExitCode::SUCCESS, "{words:?}");
     }
-    let client = arena_host::GuestClient::new(&url, arena_host::ClientConfig::default()).expect("client");
+    let client = arena_client::GuestClient::new(&url, arena_client::ClientConfig::default()).expect("client");
     let report = client.doctor().await.expect("doctor report");
     assert!(report.passed(), "{}", report.render_text());
     assert!(report.check("notepad_typing").is_some(), "{}", report.render_text());

@@ -20,22 +20,23 @@ use base64::Engine as _;
 use serde_json::{json, Value};
 use tokio::net::TcpListener;
 
-use arena_host::actionspace::uitars::UiTarsVersion;
+use arena_actionspace::uitars::UiTarsVersion;
+use arena_client::cache::DownloadCache;
+use arena_client::client::{ClientConfig, GuestClient};
+use arena_exec::AgentAction;
 use arena_host::agent::cu::anthropic::{AnthropicAgent, AnthropicConfig};
 use arena_host::agent::cu::models::Form;
 use arena_host::agent::cu::openai::{OpenAiAgent, OpenAiConfig, SafetyChecks};
 use arena_host::agent::cu::uitars::{UiTarsAgent, UiTarsConfig};
 use arena_host::agent::llm::RetryPolicy;
 use arena_host::agent::{Agent, AgentError};
-use arena_host::client::{ClientConfig, GuestClient};
 use arena_host::episode::{run_episode, EpisodeConfig};
-use arena_host::ports::{AgentAction, Observation};
-use arena_host::results::{EpisodeResult, EpisodeStatus, RunLayout};
+use arena_host::ports::Observation;
 use arena_host::run::load_tasks;
-use arena_host::setup::DownloadCache;
-use arena_host::task::{Difficulty, Task};
+use arena_results::{EpisodeResult, EpisodeStatus, RunLayout};
 use arena_shared::action::{Action, MouseButton};
 use arena_shared::geometry::Point;
+use arena_task::{Difficulty, Task};
 use arena_test_support::StubGuest;
 
 const KEY: &str = "test-key";
@@ -1074,7 +1075,7 @@ async fn a_mock_models_usage_is_the_tasks_and_the_runs_tokens_and_cost() {
 /// one decode of the screenshot: the observation's. The agent's images (resized,
 /// cropped for a zoom, or the bytes as sent) come from the observation's frame.
 async fn one_decode_per_step(agent: &mut dyn Agent, steps: u32) {
-    use arena_host::frame::decodes_on_this_thread;
+    use arena_client::frame::decodes_on_this_thread;
     let guest = StubGuest::start().await;
     let c = client(guest.url());
     let task = stub_task("stub-notepad-draft");

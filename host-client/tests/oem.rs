@@ -9,10 +9,10 @@
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
-use arena_host::client::{sha256_hex, ClientConfig, GuestClient};
-use arena_host::error::ClientError;
-use arena_host::oem::{self, PrepError, StageOptions, WaitEvent};
+use arena_client::client::{sha256_hex, ClientConfig, GuestClient};
+use arena_client::error::ClientError;
 use arena_test_support::StubGuest;
+use arena_vm::oem::{self, PrepError, StageOptions, WaitEvent};
 
 fn scripts_dir() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("..").join("setup-scripts")

@@ -22,7 +22,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
-use arena_host::results::RESULT_FILE;
+use arena_results::RESULT_FILE;
 use arena_test_support::{workspace_binary, Served};
 use serde_json::{json, Value};
 

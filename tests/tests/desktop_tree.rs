@@ -11,8 +11,8 @@
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
-use arena_host::client::{ClientConfig, GuestClient};
-use arena_host::error::ClientError;
+use arena_client::client::{ClientConfig, GuestClient};
+use arena_client::error::ClientError;
 use arena_host::som::marks_from_tree;
 use arena_shared::health::Component;
 use arena_shared::observation::{A11yBackend, A11yNode, A11yQuery, A11yTree};

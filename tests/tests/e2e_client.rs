@@ -4,7 +4,7 @@
 use std::process::Command;
 use std::time::Duration;
 
-use arena_host::client::{ClientConfig, GuestClient};
+use arena_client::client::{ClientConfig, GuestClient};
 use arena_shared::action::{Action, ActionBatch};
 use arena_shared::exec::{ExecRequest, LaunchRequest};
 use arena_shared::health::{Component, Readiness};

@@ -8,21 +8,21 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::time::Duration;
 
+use arena_client::cache::DownloadCache;
+use arena_client::client::{ClientConfig, GuestClient};
+use arena_exec::AgentAction;
 use arena_host::agent::replay::{ReplayAgent, ReplaySource};
 use arena_host::agent::scripted::{PlanSource, ScriptedAgent};
 use arena_host::agent::Agent;
 use arena_host::agent::AgentFactory;
-use arena_host::client::{ClientConfig, GuestClient};
 use arena_host::episode::{run_episode, EpisodeConfig, EpisodeRunner};
-use arena_host::ports::AgentAction;
-use arena_host::results::summary::Summary;
-use arena_host::results::{EpisodeStatus, RunLayout, RESULT_FILE};
 use arena_host::run::merge::merge;
 use arena_host::run::pool::PoolConfig;
 use arena_host::run::shard::Shard;
 use arena_host::run::{load_tasks, run_tasks, RunOptions, RunOutcome};
-use arena_host::setup::DownloadCache;
-use arena_host::task::{Difficulty, Task};
+use arena_results::summary::Summary;
+use arena_results::{EpisodeStatus, RunLayout, RESULT_FILE};
+use arena_task::{Difficulty, Task};
 use arena_test_support::Served;
 
 fn stub_tasks_dir() -> PathBuf {

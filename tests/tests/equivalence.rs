@@ -18,9 +18,9 @@
 
 use std::time::Duration;
 
-use arena_host::ports::exec::{execute_with, ExecOptions};
-use arena_host::ports::AgentAction;
-use arena_host::{ClientConfig, GuestClient};
+use arena_client::{ClientConfig, GuestClient};
+use arena_exec::AgentAction;
+use arena_exec::{execute_with, ExecOptions, PyautoguiPolicy};
 use arena_script::ComputerState;
 use arena_shared::exec::LaunchRequest;
 use arena_shared::observation::WindowTarget;
@@ -59,7 +59,7 @@ async fn guest_side(base: &str) -> String {
 async fn host_side(client: &GuestClient) -> String {
     let mut computer = ComputerState::for_screen(1440, 900);
     let action = AgentAction::Pyautogui(program("host"));
-    let options = ExecOptions { pyautogui_effects: true, ..ExecOptions::instant() };
+    let options = ExecOptions { pyautogui: PyautoguiPolicy::Effects, ..ExecOptions::instant() };
     let outcome = execute_with(client, &action, None, &mut computer, &options).await.expect("guest reachable");
     assert_eq!(outcome.error, None, "{outcome:?}");
     outcome.stdout

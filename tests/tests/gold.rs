@@ -6,7 +6,7 @@
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-use arena_host::task::{gold::exposed_answers, load_dir, Scoring};
+use arena_task::{gold::exposed_answers, load_dir, Scoring};
 use arena_test_support::{stub_tasks_dir, waa_corpus, workspace_binary};
 
 fn arena() -> Command {

@@ -27,7 +27,7 @@ use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
 use arena_host::agent::external::stderr;
-use arena_host::results::summary::{Summary, TaskRow};
+use arena_results::summary::{Summary, TaskRow};
 use arena_test_support::workspace_binary;
 use serde_json::{json, Value};
 

@@ -23,21 +23,22 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::time::Duration;
 
-use arena_host::actionspace::Coords;
+use arena_actionspace::Coords;
+use arena_client::{ClientConfig, GuestClient};
+use arena_exec::AgentAction;
+use arena_exec::{execute_with, pointer, translate_pyautogui, ExecOptions, PyautoguiPolicy};
 use arena_host::agent::cu::uitars::{UiTarsAgent, UiTarsConfig};
 use arena_host::agent::external::transport::{HttpAgent, ProcessPool};
 use arena_host::agent::external::ExternalAgent;
 use arena_host::agent::navi::{NaviAgent, NaviConfig};
 use arena_host::agent::Agent;
-use arena_host::ports::exec::{execute_with, pointer, translate_pyautogui, ExecOptions};
-use arena_host::ports::{AgentAction, Observation};
-use arena_host::task::Task;
-use arena_host::{ClientConfig, GuestClient};
+use arena_host::ports::Observation;
 use arena_script::ComputerState;
 use arena_shared::clipboard::ClipboardContent;
 use arena_shared::exec::LaunchRequest;
 use arena_shared::mcp_tools::ToolCall;
 use arena_shared::observation::A11yQuery;
+use arena_task::Task;
 use arena_test_support::{workspace_binary, StubGuest};
 use serde_json::{json, Value};
 
@@ -244,7 +245,7 @@ async fn hostile_pyautogui_has_the_same_effect_through_every_way_by_default() {
     restore(&c).await;
     let obs = Observation::capture(&c, 1, &task.instruction).await.expect("observe");
     let effects = ExecOptions::instant();
-    assert!(effects.pyautogui_effects, "upstream's rule is the default");
+    assert_eq!(effects.pyautogui, PyautoguiPolicy::Effects, "upstream's rule is the default");
     for (n, code) in hostile().iter().enumerate() {
         let dir: PathBuf = tmp.path().join(format!("exec-{n}"));
         std::fs::create_dir_all(&dir).expect("dir");
@@ -288,7 +289,7 @@ async fn hostile_pyautogui_gets_the_same_answer_through_every_way_when_translate
     c.launch(&LaunchRequest { shell: None, argv: vec!["notepad.exe".into()] }).await.expect("notepad");
     let obs = Observation::capture(&c, 1, &task.instruction).await.expect("observe");
     let ctx = pointer(&c, Coords::Pixels).await.expect("screen and cursor");
-    let translate_only = ExecOptions { pyautogui_effects: false, ..ExecOptions::instant() };
+    let translate_only = ExecOptions { pyautogui: PyautoguiPolicy::TranslateOnly, ..ExecOptions::instant() };
 
     for (n, code) in hostile().iter().enumerate() {
         let expected = translate_pyautogui(code, &ctx).expect_err("hostile code does not translate");

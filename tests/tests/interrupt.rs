@@ -8,8 +8,8 @@ use std::path::{Path, PathBuf};
 use std::process::{Child, Command, ExitStatus, Stdio};
 use std::time::{Duration, Instant};
 
-use arena_host::results::summary::Summary;
-use arena_host::results::RESULT_FILE;
+use arena_results::summary::Summary;
+use arena_results::RESULT_FILE;
 use arena_test_support::workspace_binary;
 
 fn stub_index() -> PathBuf {

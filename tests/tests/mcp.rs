@@ -14,7 +14,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
-use arena_host::results::summary::Summary;
+use arena_results::summary::Summary;
 use arena_shared::mcp_tools::{self, GUEST_ONLY};
 use arena_test_support::workspace_binary;
 use rmcp::model::{CallToolRequestParams, CallToolResult, ClientConfig, ProtocolVersion};

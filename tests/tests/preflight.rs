@@ -11,7 +11,7 @@ use std::process::{Command, Stdio};
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::Arc;
 
-use arena_host::results::RESULT_FILE;
+use arena_results::RESULT_FILE;
 use arena_test_support::workspace_binary;
 
 fn stub_tasks() -> std::path::PathBuf {

@@ -22,16 +22,16 @@ use futures_util::{SinkExt as _, StreamExt as _};
 use serde_json::{json, Value};
 use tokio_tungstenite::tungstenite::Message;
 
+use arena_client::cache::DownloadCache;
+use arena_client::client::{ClientConfig, GuestClient};
+use arena_exec::AgentAction;
 use arena_host::agent::cu::anthropic::{AnthropicAgent, AnthropicConfig};
 use arena_host::agent::cu::models::Form;
-use arena_host::client::{ClientConfig, GuestClient};
 use arena_host::episode::{run_episode, EpisodeConfig};
-use arena_host::ports::AgentAction;
-use arena_host::results::{RunLayout, TRAJ_HTML};
 use arena_host::run::load_tasks;
-use arena_host::setup::DownloadCache;
-use arena_host::task::{Difficulty, Task};
+use arena_results::{RunLayout, TRAJ_HTML};
 use arena_shared::action::Action;
+use arena_task::{Difficulty, Task};
 use arena_test_support::StubGuest;
 
 const KEY: &str = "test-key";
@@ -382,7 +382,7 @@ async fn a_computer_use_task_page_shows_the_models_text_a_click_marker_where_it_
     assert!(help.as_str().is_some_and(|h| h.contains("j") && h.contains("next")), "{help}");
 
     // The run's report filters its tasks by domain, status and "Failed by".
-    let (summary, report) = arena_host::results::html::write_report(tmp.path(), "viewer").expect("the report");
+    let (summary, report) = arena_results::html::write_report(tmp.path(), "viewer").expect("the report");
     assert_eq!(summary.overall.tasks, 2);
     page.open(&format!("file://{}", report.display())).await;
     let choose = |name: &str, value: &str| {

@@ -24,7 +24,7 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 
 // The one place this test reaches into the host's crate: the two action spaces.
-use arena_host::actionspace::{parse as parse_space, uitars, ActionSpace, Context, Coords, Step};
+use arena_actionspace::{parse as parse_space, uitars, ActionSpace, Context, Coords, Step};
 use serde_json::Value;
 
 fn here() -> PathBuf {

@@ -14,18 +14,17 @@
 
 #![cfg(target_os = "linux")]
 
-use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Output, Stdio};
 use std::time::{Duration, Instant};
 
-use arena_host::client::{ClientConfig, GuestClient};
-use arena_host::results::{read_episode, EPISODE_FILE, RESULT_FILE};
-use arena_host::vm::fleet::check_screen;
-use arena_host::vm::qemu::{Accel, DiskBus, NicModel};
-use arena_host::vm::{Boot, Vm, VmConfig, VmError, READY_SNAPSHOT};
+use arena_client::client::{ClientConfig, GuestClient};
+use arena_results::{read_episode, EPISODE_FILE, RESULT_FILE};
 use arena_shared::exec::LaunchRequest;
 use arena_test_support::{standin_image, workspace_binary};
+use arena_vm::fleet::check_screen;
+use arena_vm::qemu::{Accel, DiskBus, NicModel};
+use arena_vm::{Boot, Vm, VmConfig, VmError, READY_SNAPSHOT};
 
 /// The VM options every test uses: the stand-in's small machine, emulated.
 const VM_FLAGS: &[&str] = &[
@@ -179,7 +178,7 @@ fn results(root: &Path) -> std::collections::BTreeMap<String, String> {
         .collect()
 }
 
-fn episodes(root: &Path) -> Vec<arena_host::results::EpisodeResult> {
+fn episodes(root: &Path) -> Vec<arena_results::EpisodeResult> {
     files_named(root, EPISODE_FILE).iter().map(|path| read_episode(path).unwrap()).collect()
 }
 
@@ -285,7 +284,7 @@ const PREPARE_FLAGS: &[&str] = &[
 fn oem_folder(root: &Path, token: &str) -> PathBuf {
     let oem = root.join("oem");
     std::fs::create_dir_all(&oem).unwrap();
-    std::fs::write(oem.join(arena_host::oem::TOKEN_NAME), format!("{token}\n")).unwrap();
+    std::fs::write(oem.join(arena_vm::oem::TOKEN_NAME), format!("{token}\n")).unwrap();
     std::fs::write(oem.join("install.bat"), "@echo off\r\n").unwrap();
     oem
 }
@@ -406,7 +405,7 @@ fn prepare_is_killed_in_every_stage_and_the_reruns_seal_it() {
     let token = "7f".repeat(32);
     let oem = oem_folder(dir.path(), &token);
     let out = dir.path().join("golden.qcow2");
-    let work = arena_host::vm::prepare::work_dir(&out);
+    let work = arena_vm::prepare::work_dir(&out);
     let status_says = |stage: &str| {
         let status = arena().args(["vm", "prepare", "--status", "--out"]).arg(&out).output().unwrap();
         let text = String::from_utf8_lossy(&status.stdout).into_owned();
@@ -565,8 +564,7 @@ fn the_stand_in_setup_refuses_what_windows_setup_refuses() {
     let probe = dir.path().join("probe.qcow2");
     let dry = prepare_command(&image, &oem, &probe, &["--dry-run"]).output().unwrap();
     assert!(dry.status.success(), "{}", String::from_utf8_lossy(&dry.stderr));
-    let generated =
-        std::fs::read_to_string(arena_host::vm::prepare::work_dir(&probe).join("autounattend.xml")).unwrap();
+    let generated = std::fs::read_to_string(arena_vm::prepare::work_dir(&probe).join("autounattend.xml")).unwrap();
     let without =
         |needle: &str| -> String { generated.lines().filter(|l| !l.contains(needle)).collect::<Vec<_>>().join("\n") };
     let no_bypass = dir.path().join("no-bypass.xml");
@@ -623,14 +621,14 @@ fn dry_run_writes_what_it_would_attach_and_prints_both_command_lines() {
     let lines: Vec<&str> = said.lines().collect();
     assert_eq!(lines.len(), 2, "{said}");
     assert!(lines[0].starts_with("swtpm socket --tpm2"), "{said}");
-    let swtpm_socket = arena_host::vm::prepare::work_dir(&out).join("swtpm.sock");
+    let swtpm_socket = arena_vm::prepare::work_dir(&out).join("swtpm.sock");
     assert!(lines[0].contains(&format!("type=unixio,path={}", swtpm_socket.display())), "{said}");
     let q = lines[1];
     assert!(q.starts_with("qemu-system-x86_64 "), "{said}");
     assert!(q.contains(",smm=on") && q.contains("OVMF_CODE_4M.secboot.fd") && q.contains("property=secure,value=on"));
     assert!(q.contains(&format!("-chardev socket,id=chrtpm,path={}", swtpm_socket.display())), "{q}");
     assert!(q.contains("-tpmdev emulator,id=tpm0,chardev=chrtpm -device tpm-tis,tpmdev=tpm0"), "{q}");
-    let work = arena_host::vm::prepare::work_dir(&out);
+    let work = arena_vm::prepare::work_dir(&out);
     for file in ["autounattend.xml", "oem-media.iso", "uefi-vars.qcow2"] {
         assert!(work.join(file).is_file(), "{file} was not written");
     }
@@ -652,12 +650,10 @@ fn prepare_on_uefi_with_secure_boot_and_swtpm_seals_an_image_that_boots_healthy(
     let Some(image) = standin_image(TEST) else {
         return;
     };
-    let uefi = match arena_host::vm::Uefi::debian_secure_boot() {
+    let uefi = match arena_vm::Uefi::debian_secure_boot() {
         Ok(uefi) => uefi,
         Err(err) => {
-            assert!(std::env::var("ARENA_REQUIRE_QEMU").as_deref() != Ok("1"), "{err}");
-            // Straight to stderr (libtest captures eprintln!), so test.sh counts it.
-            let _ = writeln!(std::io::stderr(), "SKIPPED: {TEST}: {err}");
+            arena_test_support::skip(TEST, &format!("no secure-boot UEFI firmware: {err}"), "ARENA_REQUIRE_QEMU");
             return;
         }
     };
@@ -667,7 +663,7 @@ fn prepare_on_uefi_with_secure_boot_and_swtpm_seals_an_image_that_boots_healthy(
     let token = "5e".repeat(32);
     let oem = oem_folder(dir.path(), &token);
     let out = dir.path().join("golden.qcow2");
-    let work = arena_host::vm::prepare::work_dir(&out);
+    let work = arena_vm::prepare::work_dir(&out);
     let done: Output =
         prepare_command(&image, &oem, &out, &["--size", "64G", "--firmware", "uefi", "--vm-machine", "q35"])
             .output()
@@ -705,7 +701,7 @@ fn prepare_on_uefi_with_secure_boot_and_swtpm_seals_an_image_that_boots_healthy(
     });
     let booted = std::fs::read_to_string(dir.path().join("vm/serial.log")).unwrap();
     assert!(booted.contains("firmware: UEFI, Secure Boot on"), "{booted}");
-    assert!(dir.path().join("vm/tpm").is_dir() && dir.path().join("vm").join(arena_host::vm::UEFI_VARS_FILE).is_file());
+    assert!(dir.path().join("vm/tpm").is_dir() && dir.path().join("vm").join(arena_vm::UEFI_VARS_FILE).is_file());
     // Setup saw the TPM and Secure Boot it asks for, not bypass keys.
     assert!(serial.contains("firmware: UEFI, Secure Boot on"), "{serial}");
     assert!(serial.contains("TPM 2.0 present"), "{serial}");
@@ -749,12 +745,12 @@ fn a_foreign_folder_is_never_used_as_a_vm_folder() {
     for name in ["overlay.qcow2", "qmp.sock", "control.sock", "qemu.log", "serial.log"] {
         assert_eq!(std::fs::read(foreign.join(name)).unwrap(), b"precious", "{name} was changed");
     }
-    assert!(!foreign.join(arena_host::vm::DIR_MARKER).exists());
+    assert!(!foreign.join(arena_vm::DIR_MARKER).exists());
     // An empty folder becomes ours.
     let empty = dir.path().join("empty");
     std::fs::create_dir_all(&empty).unwrap();
-    arena_host::vm::claim_dir(&empty).unwrap();
-    assert!(empty.join(arena_host::vm::DIR_MARKER).is_file());
+    arena_vm::claim_dir(&empty).unwrap();
+    assert!(empty.join(arena_vm::DIR_MARKER).is_file());
     assert!(qemus_naming(&dir.path().display().to_string()).is_empty());
 }
 
@@ -870,7 +866,7 @@ fn prepare_seals_only_after_the_oem_install_says_it_is_done() {
     let oem = oem_folder(dir.path(), &token);
     oem_hooks(&oem, 40, None);
     let out = dir.path().join("golden.qcow2");
-    let work = arena_host::vm::prepare::work_dir(&out);
+    let work = arena_vm::prepare::work_dir(&out);
     let mut run = prepare_command(&image, &oem, &out, &["--size", "64G"]).spawn().unwrap();
     // The guest answers healthy during the hold, with its setup component down.
     let said = read_until(&mut run, |line| line.starts_with("stage oem-install"));
@@ -948,7 +944,7 @@ fn a_failed_oem_step_fails_prepare_naming_it_and_keeps_the_logs() {
     let oem = oem_folder(dir.path(), &"5b".repeat(32));
     oem_hooks(&oem, 2, Some("prep-apps.ps1"));
     let out = dir.path().join("golden.qcow2");
-    let work = arena_host::vm::prepare::work_dir(&out);
+    let work = arena_vm::prepare::work_dir(&out);
     let run = prepare_command(&image, &oem, &out, &["--size", "64G"]).output().unwrap();
     let err = String::from_utf8_lossy(&run.stderr);
     assert!(!run.status.success(), "the prepare succeeded");
@@ -973,10 +969,10 @@ fn a_failed_oem_step_fails_prepare_naming_it_and_keeps_the_logs() {
 #[test]
 fn list_editions_reads_the_image_list_of_a_udf_iso() {
     let Some(genisoimage) = arena_shared::search_path::find_program(Path::new("genisoimage")) else {
-        assert!(std::env::var("ARENA_REQUIRE_QEMU").as_deref() != Ok("1"), "genisoimage is missing");
-        let _ = writeln!(
-            std::io::stderr(),
-            "SKIPPED: list_editions_reads_the_image_list_of_a_udf_iso: genisoimage not found"
+        arena_test_support::skip(
+            "list_editions_reads_the_image_list_of_a_udf_iso",
+            "genisoimage not found",
+            "ARENA_REQUIRE_QEMU",
         );
         return;
     };
@@ -1014,7 +1010,7 @@ fn list_editions_reads_the_image_list_of_a_udf_iso() {
         .output()
         .unwrap();
     if dry.status.success() {
-        let answer = std::fs::read_to_string(arena_host::vm::prepare::work_dir(&out).join("autounattend.xml")).unwrap();
+        let answer = std::fs::read_to_string(arena_vm::prepare::work_dir(&out).join("autounattend.xml")).unwrap();
         assert!(answer.contains("<Value>2</Value>") && answer.contains("W269N-WFGWX-YVC9B-4J6C9-T83GX"), "{answer}");
     } else {
         // Without QEMU the dry run stops before the answer file is used; the choice is unit-tested.

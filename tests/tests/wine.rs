@@ -11,7 +11,7 @@
 
 use std::time::{Duration, Instant};
 
-use arena_host::client::{ClientConfig, GuestClient};
+use arena_client::client::{ClientConfig, GuestClient};
 use arena_shared::action::{Action, ActionBatch, MouseButton};
 use arena_shared::clipboard::ClipboardContent;
 use arena_shared::exec::{ExecRequest, LaunchRequest};

@@ -11,10 +11,10 @@
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
-use arena_host::client::{ClientConfig, GuestClient};
-use arena_host::error::ClientError;
-use arena_host::oem::{self, StageOptions};
+use arena_client::client::{ClientConfig, GuestClient};
+use arena_client::error::ClientError;
 use arena_test_support::Served;
+use arena_vm::oem::{self, StageOptions};
 
 fn setup() -> Option<(PathBuf, PathBuf)> {
     arena_test_support::wine_or_skip("the Wine prep test").map(|it| (it.wine, it.exe))

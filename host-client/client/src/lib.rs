@@ -17,14 +17,18 @@
 //!   [`error::ClientError::out_of_reach`].
 //! - [`frame`]: [`frame::Frame`], a screenshot decoded once, and the host's one PNG decoder and encoder.
 //! - [`browser`]: the guest's browser over the DevTools protocol (DOM elements, page contents).
+//! - [`cache`]: [`cache::DownloadCache`], the host's content-addressed store of the files
+//!   setup steps download and getters read from the cloud (below both, which share it).
 
 #![forbid(unsafe_code)]
 
 pub mod browser;
+pub mod cache;
 pub mod client;
 pub mod error;
 pub mod frame;
 
+pub use cache::{CacheError, DownloadCache};
 pub use client::{ClientConfig, GuestClient};
 pub use error::ClientError;
 pub use frame::Frame;

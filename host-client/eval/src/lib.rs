@@ -5,8 +5,8 @@
 //!
 //! What it is: the framework ([`evaluate`], the outcome types, the getter and
 //! metric registries), the getters and metrics with the file formats they read
-//! (PDF, SQLite, 7z, audio, video, Office packages), and the host's download
-//! cache ([`cache`], shared with the setup steps). What it is not: it does not
+//! (PDF, SQLite, 7z, audio, video, Office packages); the download cache it reads
+//! cloud files through is `arena_client::cache`, which the setup steps share. What it is not: it does not
 //! run `postconfig` (the episode runner runs those steps with `arena-setup`
 //! first) and it never fails: a getter or metric that cannot produce a value
 //! scores 0 with the reason recorded in the outcome.
@@ -21,14 +21,12 @@
 //!
 //! # Layout
 //!
-//! - [`cache`]: [`DownloadCache`], the host's content-addressed store of downloaded files.
 //! - [`value`]: [`Fetched`], what getters return, and Python's `==` over JSON.
 //! - [`getters`]: the getter registry ([`getters::lookup`]), one file per family.
 //! - [`metrics`]: the metric registry ([`metrics::lookup`]), one file per family.
 
 #![forbid(unsafe_code)]
 
-pub mod cache;
 pub mod getters;
 pub mod metrics;
 pub mod value;
@@ -42,10 +40,10 @@ use std::time::Instant;
 use serde::{Deserialize, Serialize};
 use serde_json::Value;
 
+use arena_client::cache::DownloadCache;
 use arena_client::client::GuestClient;
 use arena_task::{Conj, Evaluator, GetterSpec, MetricCall, Scoring, Task};
 
-pub use cache::{CacheError, DownloadCache};
 pub use getters::{Getter, GetterError};
 pub use metrics::{MetricError, MetricFn, MetricInput};
 pub use value::Fetched;

@@ -6,9 +6,9 @@
 //! (`/setup/launch`, `/setup/execute`, ...) and the guest does the work. Here
 //! the host does what upstream's host *and* guest did together, one typed call
 //! at a time: a `download` is fetched into the host's content-addressed cache
-//! (`arena_eval::cache`, which the getters share) and pushed as bytes, an `execute`
-//! of `python -c <pyautogui code>` becomes typed input actions through the host's
-//! one pyautogui translation (`arena_actionspace::pyautogui::parse`), the browser
+//! (`arena_client::cache`, which the getters share) and pushed as bytes, an `execute`
+//! of `python -c <pyautogui code>` that is input alone is carried out by the
+//! executor agents' actions go through (`arena_exec`, policy `InputOnly`), the browser
 //! tab steps talk to the browser's DevTools HTTP
 //! endpoint through the guest, and the browse-history steps build Chrome's
 //! SQLite database on the host.
@@ -43,11 +43,11 @@ use serde::Serialize;
 
 use arena_shared::files::{FileKind, KnownFolder};
 
+use arena_client::cache::{CacheError, DownloadCache};
 use arena_client::client::GuestClient;
 use arena_client::error::ClientError;
 use arena_task::SetupStep;
 
-pub use arena_eval::cache::DownloadCache;
 pub use cdp::compare_urls;
 
 /// How long [`reset`] waits for the guest's staged health (upstream polls `/probe` 20 × 5 s).
@@ -70,11 +70,11 @@ pub enum SetupError {
     Guest(#[from] ClientError),
 }
 
-impl From<arena_eval::CacheError> for SetupError {
-    fn from(err: arena_eval::CacheError) -> SetupError {
+impl From<CacheError> for SetupError {
+    fn from(err: CacheError) -> SetupError {
         match err {
-            arena_eval::CacheError::Download { url, reason } => SetupError::Download { url, reason },
-            arena_eval::CacheError::Cache { path, reason } => SetupError::Cache { path, reason },
+            CacheError::Download { url, reason } => SetupError::Download { url, reason },
+            CacheError::Cache { path, reason } => SetupError::Cache { path, reason },
             other => SetupError::Cache { path: PathBuf::new(), reason: other.to_string() },
         }
     }

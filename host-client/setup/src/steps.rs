@@ -9,9 +9,7 @@
 use std::path::{Component, Path};
 use std::time::{Duration, SystemTime};
 
-use arena_actionspace::pyautogui;
-use arena_actionspace::{Context, Coords, Step};
-use arena_shared::action::ActionBatch;
+use arena_exec::InputOnly;
 use arena_shared::exec::{ExecRequest, ExecResult, LaunchRequest};
 use arena_shared::files::KnownFolder;
 use arena_shared::observation::{WindowInfo, WindowTarget};
@@ -352,26 +350,26 @@ async fn execute(
 }
 
 /// One attempt of an `execute` step: pyautogui code as typed actions when it is only
-/// input (translated by the host's one pyautogui translation), any other command
-/// (or code doing more than input: files, processes, the clipboard) run on the guest.
+/// input (the executor's [`arena_exec::PyautoguiPolicy::InputOnly`], in pixels),
+/// any other command (or code doing more than input: files, processes, the
+/// clipboard) run on the guest.
 async fn run_once(client: &GuestClient, plan: &ExecPlan) -> Result<Ran, String> {
     let spec = match plan {
         ExecPlan::Run(spec) => spec,
         ExecPlan::Python { code, command } => {
-            let (screen, cursor) = client.pointer().await.map_err(|err| err.to_string())?;
-            let ctx = Context { screen, cursor, coords: Coords::Pixels };
-            match input_only(pyautogui::parse(code, &ctx)) {
-                Ok(actions) => {
-                    let n = actions.len();
-                    client.act(&ActionBatch { actions }).await.map_err(|err| err.to_string())?;
+            match arena_exec::perform_input_only(client, code, Default::default())
+                .await
+                .map_err(|err| err.to_string())?
+            {
+                InputOnly::Performed { actions, .. } => {
                     return Ok(Ran {
                         returncode: Some(0),
                         output: String::new(),
                         error: String::new(),
-                        how: format!("python -c translated into {n} input actions"),
+                        how: format!("python -c translated into {actions} input actions"),
                     });
                 }
-                Err(why) => {
+                InputOnly::NotInput(why) => {
                     tracing::info!(reason = %why, "python code is not only input; running it on the guest");
                     command
                 }
@@ -385,20 +383,6 @@ async fn run_once(client: &GuestClient, plan: &ExecPlan) -> Result<Ran, String> 
         how.push_str(&format!(" (killed after {} s)", EXEC_TIMEOUT_MS / 1000));
     }
     Ok(Ran { returncode: result.exit_code.map(i64::from), output: result.stdout, error: result.stderr, how })
-}
-
-/// The input actions of a translation that is only input.
-fn input_only(
-    steps: Result<Vec<Step>, arena_actionspace::ActionError>,
-) -> Result<Vec<arena_shared::action::Action>, String> {
-    steps
-        .map_err(|err| err.to_string())?
-        .into_iter()
-        .map(|step| match step {
-            Step::Act(action) => Ok(action),
-            other => Err(format!("the code asks for {other:?}, which is not an input action")),
-        })
-        .collect()
 }
 
 #[cfg(test)]

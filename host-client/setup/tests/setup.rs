@@ -14,8 +14,9 @@ use axum::{Json, Router};
 use serde_json::{json, Value};
 use tokio::net::TcpListener;
 
+use arena_client::cache::DownloadCache;
 use arena_client::client::{ClientConfig, GuestClient};
-use arena_setup::{DownloadCache, Settle, SetupContext, SetupError, StepReport};
+use arena_setup::{Settle, SetupContext, SetupError, StepReport};
 use arena_shared::files::FileKind;
 use arena_shared::observation::WindowInfo;
 use arena_task::{Browser, CommandArg, DownloadFile, HistoryEntry, SetupStep, Until};

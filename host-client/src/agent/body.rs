@@ -2,6 +2,12 @@
 //! model endpoint) read chunk by chunk up to a limit, so that a huge or endless answer
 //! costs an error for that task instead of the host's memory.
 
+/// The longest answer an outside party may give: one line or HTTP body of an
+/// agent over the step protocol (a screenshot inline is far less), or a model
+/// endpoint's answer (vendors' answers are kilobytes). A longer one is an error for
+/// its task, read no further than this, so it never costs the run more memory.
+pub const MAX_ANSWER: usize = 64 << 20;
+
 /// Why a bounded answer could not be read.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub enum BodyError {
@@ -39,7 +45,7 @@ pub async fn read_bounded(
         return Err(BodyError::TooLong { whose, limit });
     }
     let mut body = Vec::new();
-    while let Some(chunk) = response.chunk().await.map_err(|err| BodyError::Read(super::llm::error_chain(&err)))? {
+    while let Some(chunk) = response.chunk().await.map_err(|err| BodyError::Read(error_chain(&err)))? {
         if body.len() + chunk.len() > limit {
             if cut {
                 body.extend_from_slice(&chunk[..limit - body.len()]);
@@ -50,4 +56,19 @@ pub async fn read_bounded(
         body.extend_from_slice(&chunk);
     }
     Ok(body)
+}
+
+/// An error and its sources on one line (reqwest hides the useful part in the chain).
+pub(crate) fn error_chain(err: &(dyn std::error::Error + 'static)) -> String {
+    let mut text = err.to_string();
+    let mut source = err.source();
+    while let Some(inner) = source {
+        let more = inner.to_string();
+        if !text.contains(&more) {
+            text.push_str(": ");
+            text.push_str(&more);
+        }
+        source = inner.source();
+    }
+    text
 }

@@ -9,7 +9,8 @@
 //! They never look at the observation and need no guest feature.
 
 use super::{Agent, AgentError, Prediction};
-use crate::ports::{AgentAction, Observation};
+use crate::ports::Observation;
+use arena_exec::AgentAction;
 use arena_task::Task;
 
 /// Which decision a [`FloorAgent`] answers.

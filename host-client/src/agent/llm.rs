@@ -34,6 +34,7 @@ use rand::Rng as _;
 use reqwest::header::{HeaderMap, RETRY_AFTER};
 use serde_json::Value;
 
+use super::body::error_chain;
 use super::AgentError;
 
 /// Which API the endpoint speaks.
@@ -180,9 +181,17 @@ struct Failure {
     refused: Option<String>,
 }
 
+/// An image as a data URL (`data:<mime>;base64,<bytes>`), as every vendor's API
+/// takes an inline image: the one place the URL is built.
+pub fn image_data_url(mime: &str, bytes: &[u8]) -> String {
+    use base64::Engine as _;
+    format!("data:{mime};base64,{}", base64::engine::general_purpose::STANDARD.encode(bytes))
+}
+
 /// The most of a model's answer that is read: the step protocol's limit on an agent's
-/// answer. Vendors' answers are kilobytes; a larger one is an endpoint gone wrong.
-pub const MAX_MODEL_ANSWER: usize = super::external::transport::MAX_ANSWER;
+/// answer ([`super::body::MAX_ANSWER`]). Vendors' answers are kilobytes; a larger one
+/// is an endpoint gone wrong.
+pub const MAX_MODEL_ANSWER: usize = super::body::MAX_ANSWER;
 
 /// How much of an error page is read (its first 300 characters are shown).
 const ERROR_SHOWN: usize = 4096;
@@ -456,21 +465,6 @@ fn retry_after(headers: &HeaderMap) -> Option<Duration> {
     let text = headers.get(RETRY_AFTER)?.to_str().ok()?;
     let secs: f64 = text.trim().parse().ok()?;
     Duration::try_from_secs_f64(secs).ok()
-}
-
-/// An error and its sources on one line (reqwest hides the useful part in the chain).
-pub(crate) fn error_chain(err: &(dyn std::error::Error + 'static)) -> String {
-    let mut text = err.to_string();
-    let mut source = err.source();
-    while let Some(inner) = source {
-        let more = inner.to_string();
-        if !text.contains(&more) {
-            text.push_str(": ");
-            text.push_str(&more);
-        }
-        source = inner.source();
-    }
-    text
 }
 
 /// The refusal's text when `choices[0].message` holds a refusal and no content.

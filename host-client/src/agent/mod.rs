@@ -2,7 +2,7 @@
 //!
 //! Every agent implements [`Agent`]: it gets an [`Observation`] and answers a
 //! [`Prediction`] holding [`AgentAction`]s, which the episode carries out through
-//! its action port (`crate::ports::exec`). [`factory`] builds the agent of a run
+//! its action port (`arena_exec`). [`factory`] builds the agent of a run
 //! from its options.
 //!
 //! It is not the episode loop (observe, predict, execute, evaluate: that is
@@ -39,9 +39,12 @@ use serde::{Deserialize, Serialize};
 
 use arena_client::error::ClientError;
 
-use crate::ports::exec::ExecError;
-use crate::ports::{AgentAction, Observation};
+use crate::ports::Observation;
 use crate::som::Marks;
+use arena_exec::AgentAction;
+use arena_exec::ExecError;
+use arena_results::ledger::Usage;
+use arena_results::timings::PredictTimings;
 use arena_task::Task;
 
 /// An agent's answer for one step.
@@ -76,88 +79,6 @@ pub struct Prediction {
     /// agent from its `act`'s `usage`).
     #[serde(skip)]
     pub usage: Option<Usage>,
-}
-
-/// Tokens and model time: of one step, a task, a domain or a run (the cost ledger).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
-pub struct Usage {
-    /// Prompt tokens, those read from a cache included.
-    #[serde(default)]
-    pub input: u64,
-    /// Completion tokens (reasoning included where the vendor counts it there).
-    #[serde(default)]
-    pub output: u64,
-    /// The part of [`Usage::input`] read from the vendor's prompt cache.
-    #[serde(default)]
-    pub cached: u64,
-    /// Wall time of the model calls that answered, in milliseconds.
-    #[serde(default)]
-    pub model_ms: u64,
-}
-
-impl Usage {
-    /// Adds `other` into this one (saturating).
-    pub fn add(&mut self, other: &Usage) {
-        self.input = self.input.saturating_add(other.input);
-        self.output = self.output.saturating_add(other.output);
-        self.cached = self.cached.saturating_add(other.cached);
-        self.model_ms = self.model_ms.saturating_add(other.model_ms);
-    }
-
-    /// Input plus output tokens.
-    pub fn total(&self) -> u64 {
-        self.input.saturating_add(self.output)
-    }
-
-    /// The `usage` object of a model response, whichever vendor's shape it has:
-    /// chat completions (`prompt_tokens`, `completion_tokens`,
-    /// `prompt_tokens_details.cached_tokens`; openai-python's `CompletionUsage`),
-    /// the Responses API (`input_tokens`, `output_tokens`,
-    /// `input_tokens_details.cached_tokens`; `ResponseUsage`), and Anthropic's
-    /// Messages (`input_tokens` without the cache, `cache_read_input_tokens`,
-    /// `cache_creation_input_tokens`, `output_tokens`; anthropic-python's `Usage`),
-    /// whose input here is the three input counts together. `None` without a
-    /// `usage` object or counts in it.
-    pub fn of_response(answer: &serde_json::Value) -> Option<Usage> {
-        let usage = answer.get("usage")?;
-        let n = |v: &serde_json::Value, key: &str| v.get(key).and_then(serde_json::Value::as_u64);
-        if let (Some(input), Some(output)) = (n(usage, "prompt_tokens"), n(usage, "completion_tokens")) {
-            let cached = usage.get("prompt_tokens_details").and_then(|d| n(d, "cached_tokens")).unwrap_or(0);
-            return Some(Usage { input, output, cached: cached.min(input), model_ms: 0 });
-        }
-        let (input, output) = (n(usage, "input_tokens")?, n(usage, "output_tokens")?);
-        let read = n(usage, "cache_read_input_tokens");
-        let written = n(usage, "cache_creation_input_tokens");
-        if read.is_some() || written.is_some() {
-            let (read, written) = (read.unwrap_or(0), written.unwrap_or(0));
-            return Some(Usage {
-                input: input.saturating_add(read).saturating_add(written),
-                output,
-                cached: read,
-                model_ms: 0,
-            });
-        }
-        let cached = usage.get("input_tokens_details").and_then(|d| n(d, "cached_tokens")).unwrap_or(0);
-        Some(Usage { input, output, cached: cached.min(input), model_ms: 0 })
-    }
-}
-
-/// The parts of one prediction an agent times, in milliseconds; `None`: the agent has no such part.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
-pub struct PredictTimings {
-    /// Making the Set-of-Marks (its sources and the annotated image).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub som_ms: Option<u64>,
-    /// The model call, its own retries included.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub model_ms: Option<u64>,
-    /// Tries the model client made (1 when the first answered; 0 without a model).
-    #[serde(default, skip_serializing_if = "is_zero")]
-    pub model_tries: u32,
-}
-
-fn is_zero(n: &u32) -> bool {
-    *n == 0
 }
 
 /// One entry of an agent's per-step logs.

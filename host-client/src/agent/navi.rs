@@ -24,7 +24,6 @@
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
-use base64::Engine as _;
 use image::RgbaImage;
 use serde_json::{json, Value};
 
@@ -32,9 +31,10 @@ use super::llm::{self, ApiKind, ModelClient, Refusals, RetryPolicy, TokensField}
 use super::parse::{parse_navi_reply, parse_reply};
 use super::waa_prompts::{UserInputs, WaaPrompts};
 use super::{Agent, AgentError, LogValue, PredictTimings, Prediction, StepLog};
-use crate::ports::{AgentAction, Observation};
+use crate::ports::Observation;
 use crate::som::{annotate, Marks, ProposedEntity, SomConfig, SomInput, SomSources};
 use arena_client::frame::encode_png;
+use arena_exec::AgentAction;
 use arena_task::Task;
 
 /// Environment variables the API key is read from, in order, when the configuration has none.
@@ -219,9 +219,7 @@ pub struct NaviAgent {
 /// the observation's pixels. An image that cannot be converted is sent as PNG.
 fn jpeg_part(pixels: &RgbaImage) -> Value {
     let url = match arena_shared::fastimg::rgba_to_model_jpeg(pixels, arena_shared::fastimg::PILLOW_JPEG_QUALITY) {
-        Ok(model) => {
-            format!("data:image/jpeg;base64,{}", base64::engine::general_purpose::STANDARD.encode(&model.jpeg))
-        }
+        Ok(model) => crate::agent::llm::image_data_url("image/jpeg", &model.jpeg),
         Err(err) => {
             tracing::warn!(error = %err, "cannot make the model's JPEG; sending PNG");
             data_uri(pixels)
@@ -232,7 +230,7 @@ fn jpeg_part(pixels: &RgbaImage) -> Value {
 
 /// The pixels as a PNG data URI (the [`NaviStyle::Arena`] request).
 fn data_uri(pixels: &RgbaImage) -> String {
-    format!("data:image/png;base64,{}", base64::engine::general_purpose::STANDARD.encode(encode_png(pixels)))
+    crate::agent::llm::image_data_url("image/png", &encode_png(pixels))
 }
 
 impl NaviAgent {
@@ -469,7 +467,7 @@ impl Agent for NaviAgent {
         "navi"
     }
 
-    fn take_usage(&mut self) -> Option<crate::agent::Usage> {
+    fn take_usage(&mut self) -> Option<arena_results::ledger::Usage> {
         self.client.take_usage()
     }
 

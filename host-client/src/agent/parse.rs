@@ -16,7 +16,7 @@
 use arena_actionspace::Decision;
 use arena_script::{dialect_of, parse, Dialect};
 
-use crate::ports::AgentAction;
+use arena_exec::AgentAction;
 
 /// What a reply holds.
 #[derive(Debug, Clone, PartialEq)]

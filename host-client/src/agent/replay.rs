@@ -19,7 +19,8 @@ use std::path::{Path, PathBuf};
 use serde::{Deserialize, Serialize};
 
 use super::{Agent, AgentError, Prediction};
-use crate::ports::{AgentAction, Observation};
+use crate::ports::Observation;
+use arena_exec::AgentAction;
 use arena_task::Task;
 
 /// What a replay reads from one trajectory line.

@@ -29,7 +29,8 @@ use serde::{Deserialize, Serialize};
 use arena_shared::action::Action;
 
 use super::{Agent, AgentError, Prediction};
-use crate::ports::{AgentAction, Observation};
+use crate::ports::Observation;
+use arena_exec::AgentAction;
 use arena_task::Task;
 
 /// One plan step as written.

@@ -5,7 +5,7 @@
 //! anything is sent, so a typo is reported with the name that was wrong
 //! rather than as a guest error after half a batch ran.
 //! `--pyautogui` code goes through the host's one pyautogui translation, the one
-//! every agent's pyautogui answer goes through (`crate::ports::exec`), and its
+//! every agent's pyautogui answer goes through (`arena_exec`), and its
 //! steps are carried out the same way: input as typed batches, `pyperclip.copy`
 //! as one clipboard call. It is not an action interpreter: the guest performs the batch.
 
@@ -196,12 +196,12 @@ impl ActArgs {
     /// cannot be translated (the action space's message), or it answers a decision
     /// or asks for something only an agent can (a screenshot), which `arena act`
     /// does not do.
-    pub async fn steps_for(&self, client: &crate::GuestClient) -> anyhow::Result<Vec<Step>> {
+    pub async fn steps_for(&self, client: &arena_client::GuestClient) -> anyhow::Result<Vec<Step>> {
         let Some(code) = &self.pyautogui else {
             return Ok(self.to_batch()?.actions.into_iter().map(Step::Act).collect());
         };
-        let ctx = crate::ports::exec::pointer(client, Coords::Pixels).await?;
-        let steps = crate::ports::exec::translate_pyautogui(code, &ctx).map_err(anyhow::Error::msg)?;
+        let ctx = arena_exec::pointer(client, Coords::Pixels).await?;
+        let steps = arena_exec::translate_pyautogui(code, &ctx).map_err(anyhow::Error::msg)?;
         let mut actions = Vec::new();
         for step in &steps {
             match step {
@@ -492,7 +492,8 @@ mod tests {
         .expect("parses");
         assert!(format!("{:#}", harness.act.to_batch().expect_err("needs the guest")).contains("steps_for"));
         let stub = crate::cli::stub::start(&crate::cli::stub::StubArgs::default(), None).await.expect("stub guest");
-        let client = crate::GuestClient::new(&stub.url(), crate::ClientConfig::default()).expect("client");
+        let client =
+            arena_client::GuestClient::new(&stub.url(), arena_client::ClientConfig::default()).expect("client");
         let steps = harness.act.steps_for(&client).await.expect("translated");
         assert_eq!(
             steps,
@@ -502,8 +503,8 @@ mod tests {
                 Step::Act(Action::Click { x: None, y: None, button: MouseButton::Left, count: 1 }),
             ]
         );
-        let options = crate::ports::exec::ExecOptions::default();
-        let outcome = crate::ports::exec::perform_steps(&client, &steps, &options).await.expect("performed");
+        let options = arena_exec::ExecOptions::default();
+        let outcome = arena_exec::perform_steps(&client, &steps, &options).await.expect("performed");
         let cursor = outcome.cursor.expect("a cursor");
         assert_eq!((cursor.x, cursor.y, outcome.performed), (31, 42, 3));
         let bad = Harness::try_parse_from(["act", "--pyautogui", "pyautogui.screenshot('x.png')"]).expect("parses");

@@ -1,7 +1,7 @@
 //! `arena certify TASKS`: plays every task with the floor agents (`noop`,
 //! `fail`) and, where a plan exists, the oracle (the scripted agent), K times
 //! each, and writes one certificate per task and their table
-//! ([`crate::results::certificate`], docs/results.md "Certificates").
+//! ([`arena_results::certificate`], docs/results.md "Certificates").
 //!
 //! It is three `arena run`s on one set of guests: the runs' own machinery
 //! ([`super::runs::Prepared`], [`super::runs::play`]: the pool, the episode
@@ -20,8 +20,8 @@ use clap::{Args, Parser};
 use super::runs::{self, DifficultyArg, Guests, PausesArg, Prepared, RunArgs};
 use super::{emit, Connection};
 use crate::agent::factory::{self, AgentKind};
-use crate::results::certificate::{self, AgentTrials, Certificate, GuestImage, FAIL, NOOP, ORACLE};
-use crate::results::summary::Summary;
+use arena_results::certificate::{self, AgentTrials, Certificate, GuestImage, FAIL, NOOP, ORACLE};
+use arena_results::summary::Summary;
 use arena_shared::registry::RegistryValue;
 
 /// Arguments of `arena certify`.
@@ -270,7 +270,7 @@ mod tests {
 
     #[test]
     fn an_agents_trials_are_read_from_its_summary_within_k_trial_folders() {
-        let row = |trial: u32, score: Option<f64>| crate::results::summary::TaskRow {
+        let row = |trial: u32, score: Option<f64>| arena_results::summary::TaskRow {
             domain: "d".into(),
             name: "t".into(),
             path: format!("noop/a11y_tree/noop/{trial}/d/t"),

@@ -101,7 +101,7 @@ async fn serve_env(conn: &Connection, args: ServeArgs) -> anyhow::Result<ExitCod
     run.source = args.source.clone();
     run.out = args.out.clone();
     let cache_dir = args.out.join("download-cache");
-    let cache = arena_setup::DownloadCache::new(&cache_dir)
+    let cache = arena_client::cache::DownloadCache::new(&cache_dir)
         .with_context(|| format!("opening the download cache {}", cache_dir.display()))?;
     let fast = match args.pauses {
         Some(PausesArg::Fast) => true,

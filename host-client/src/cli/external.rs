@@ -51,9 +51,9 @@ mod with_mcp {
     use crate::agent::factory::{agent_timeout, ChosenAgent};
     use crate::agent::{Agent, AgentFactory};
     use crate::episode::EpisodeRunner;
-    use crate::results::ResultsError;
     use crate::run::{run_tasks, RunOptions, RunOutcome};
     use arena_client::GuestClient;
+    use arena_results::ResultsError;
     use arena_task::Task;
 
     /// The MCP endpoint of a run: its hub, where it listens and its token.
@@ -156,9 +156,9 @@ mod without_mcp {
     use super::ExternalArgs;
     use crate::agent::factory::ChosenAgent;
     use crate::episode::EpisodeRunner;
-    use crate::results::ResultsError;
     use crate::run::{RunOptions, RunOutcome};
     use arena_client::GuestClient;
+    use arena_results::ResultsError;
     use arena_task::Task;
 
     /// No MCP endpoint in this build: nothing can hold one.

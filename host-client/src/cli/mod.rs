@@ -522,8 +522,7 @@ pub async fn run(cli: Cli) -> anyhow::Result<ExitCode> {
             let client = conn.client()?;
             let steps = args.steps_for(&client).await?;
             let started = std::time::Instant::now();
-            let outcome =
-                crate::ports::exec::perform_steps(&client, &steps, &crate::ports::exec::ExecOptions::default()).await?;
+            let outcome = arena_exec::perform_steps(&client, &steps, &arena_exec::ExecOptions::default()).await?;
             if let Some(error) = outcome.error {
                 anyhow::bail!("{error}");
             }

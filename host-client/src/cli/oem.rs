@@ -1,7 +1,7 @@
 //! `arena prep`: stage an OEM folder for a new Windows image, verify a staged
 //! folder against its manifest, and wait for a prepared VM's guest to be healthy.
 //!
-//! The work is in [`crate::oem`]; this module only turns arguments into its
+//! The work is in [`arena_vm::oem`]; this module only turns arguments into its
 //! options and its results into lines on stdout.
 
 use std::path::PathBuf;
@@ -10,7 +10,7 @@ use std::time::Duration;
 
 use clap::{Args, Subcommand};
 
-use crate::oem::{self, component_name, StageOptions, WaitEvent};
+use arena_vm::oem::{self, component_name, StageOptions, WaitEvent};
 
 use super::{emit, parse_seconds, Connection};
 

@@ -14,8 +14,8 @@ use std::time::Duration;
 use arena_task::Task;
 use indicatif::{MultiProgress, ProgressBar, ProgressDrawTarget, ProgressStyle};
 
-use crate::results::EpisodeResult;
 use crate::run::watch::{RunWatch, Tally, Unwatched};
+use arena_results::EpisodeResult;
 
 /// `--progress`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
@@ -43,7 +43,7 @@ pub fn watch(arg: ProgressArg) -> Arc<dyn RunWatch> {
 
 /// `domain/name`, with the trial when there are several.
 fn label(task: &Task) -> String {
-    match task.extra.get(crate::results::TRIAL_KEY).and_then(serde_json::Value::as_u64) {
+    match task.extra.get(arena_results::TRIAL_KEY).and_then(serde_json::Value::as_u64) {
         Some(trial) => format!("{}/{} (trial {trial})", task.domain, task.name),
         None => format!("{}/{}", task.domain, task.name),
     }
@@ -53,7 +53,7 @@ fn label(task: &Task) -> String {
 fn outcome(result: &EpisodeResult) -> String {
     let mut line = format!(
         "score {} ({}, {} step{}, {:.1} s",
-        crate::results::python_float(result.score),
+        arena_results::python_float(result.score),
         result.status.kind(),
         result.steps,
         if result.steps == 1 { "" } else { "s" },
@@ -204,7 +204,7 @@ impl RunWatch for Live {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::results::EpisodeStatus;
+    use arena_results::EpisodeStatus;
 
     #[test]
     fn a_finished_task_says_its_score_status_steps_and_action_errors() {

@@ -25,17 +25,18 @@ use crate::agent::factory::{self, AgentKind, AgentOptions, ChosenAgent};
 use crate::agent::llm::{ApiKind, Refusals};
 use crate::agent::navi::NaviStyle;
 use crate::episode::{EpisodeConfig, EpisodeRunner};
-use crate::ports::exec::ExecOptions;
-use crate::results::html::write_report;
-use crate::results::summary::Summary;
-use crate::results::RunLayout;
 use crate::run::pool::PoolConfig;
 use crate::run::shard::Shard;
 use crate::run::{load_tasks, run_tasks, RunOptions, TaskOrder};
 use crate::som::SomOrigin;
 use arena_actionspace::uitars::UiTarsVersion;
 use arena_actionspace::Coords;
-use arena_setup::{DownloadCache, Settle};
+use arena_client::cache::DownloadCache;
+use arena_exec::ExecOptions;
+use arena_results::html::write_report;
+use arena_results::summary::Summary;
+use arena_results::RunLayout;
+use arena_setup::Settle;
 use arena_task::Difficulty;
 
 /// Arguments of `arena run`.
@@ -258,7 +259,7 @@ pub struct RunArgs {
     #[arg(long)]
     pub pyautogui_translate_only: bool,
     /// The trial folder level of the results (upstream's --trial_id).
-    #[arg(long, default_value = crate::results::DEFAULT_TRIAL_ID, value_name = "ID")]
+    #[arg(long, default_value = arena_results::DEFAULT_TRIAL_ID, value_name = "ID")]
     pub trial_id: String,
     /// Run each task K times, trial k in trial folder k (0..K-1, upstream's trial
     /// level), trial-major: every task of trial 0, then of trial 1, ...; each trial
@@ -315,7 +316,7 @@ pub struct GuestSource {
     /// When a VM goes back to its `ready` snapshot: `per-task`, `every:K` tasks, or
     /// `never` (tasks meet what the ones before left, as upstream runs). Recorded.
     #[arg(long, default_value = "per-task", value_parser = super::vm::parse_reset, value_name = "POLICY")]
-    pub reset: crate::vm::fleet::ResetPolicy,
+    pub reset: arena_vm::fleet::ResetPolicy,
     /// The VMs' folders (overlays, QMP sockets, logs) [default: <out>/vms].
     #[arg(long, value_name = "DIR")]
     pub vm_dir: Option<PathBuf>,
@@ -696,7 +697,7 @@ pub async fn run(conn: &Connection, args: RunArgs) -> anyhow::Result<ExitCode> {
     ))?;
     emit(&outcome.summary.markdown())?;
     emit(&format!("\nreport: {}\n", outcome.report.display()))?;
-    let unfinished: Vec<&crate::results::EpisodeResult> =
+    let unfinished: Vec<&arena_results::EpisodeResult> =
         outcome.pool.results.iter().filter(|r| r.status.is_unfinished()).collect();
     let count = outcome.pool.not_run.len() + unfinished.len();
     if count > 0 {
@@ -731,8 +732,8 @@ pub(crate) struct Prepared {
     pub(crate) tasks: Vec<arena_task::Task>,
     chosen: ChosenAgent,
     mcp: Option<super::external::McpEndpoint>,
-    price: Option<crate::results::ledger::Price>,
-    certificates: Option<crate::results::certificate::CertifiedRecord>,
+    price: Option<arena_results::ledger::Price>,
+    certificates: Option<arena_results::certificate::CertifiedRecord>,
 }
 
 impl Prepared {
@@ -747,7 +748,7 @@ impl Prepared {
             Some(preset) => preset.apply(&args)?,
             None => args,
         };
-        if args.trials > 1 && args.trial_id != crate::results::DEFAULT_TRIAL_ID {
+        if args.trials > 1 && args.trial_id != arena_results::DEFAULT_TRIAL_ID {
             bail!(
                 "--trials {} writes trial folders 0..{}; it cannot be combined with --trial-id {}",
                 args.trials,
@@ -758,7 +759,7 @@ impl Prepared {
         let tasks = load_tasks(&args.tasks, args.difficulty.into())?;
         let certificates = match &args.certificates {
             Some(dir) => Some(
-                crate::results::certificate::CertifiedRecord::from_dir(dir)
+                arena_results::certificate::CertifiedRecord::from_dir(dir)
                     .with_context(|| format!("--certificates {}", dir.display()))?,
             ),
             None => None,
@@ -772,7 +773,7 @@ impl Prepared {
         };
         // The cost ledger's price and budget are checked before any guest or VM starts.
         let price = match &args.prices {
-            Some(path) => Some(crate::results::ledger::Prices::load(path)?.of(&chosen.model, path)?),
+            Some(path) => Some(arena_results::ledger::Prices::load(path)?.of(&chosen.model, path)?),
             None => None,
         };
         if let Some(max) = args.max_cost.filter(|m| !m.is_finite() || *m < 0.0) {
@@ -788,7 +789,7 @@ pub(crate) struct Guests {
     pub(crate) urls: Vec<String>,
     pub(crate) clients: Vec<arena_client::GuestClient>,
     stubs: Vec<stub::RunningStub>,
-    pub(crate) fleet: Option<Arc<crate::vm::fleet::VmFleet>>,
+    pub(crate) fleet: Option<Arc<arena_vm::fleet::VmFleet>>,
 }
 
 impl Guests {
@@ -807,9 +808,9 @@ impl Guests {
             Some(image) => {
                 let dir = args.source.vm_dir.clone().unwrap_or_else(|| args.out.join("vms"));
                 let template = args.source.vm.config(image, &dir, "vm", conn.resolve_token()?)?;
-                let configs = crate::vm::fleet::configs(&template, args.source.vms.max(1));
+                let configs = arena_vm::fleet::configs(&template, args.source.vms.max(1));
                 emit(&format!("booting {} VM(s) on {}\n", configs.len(), image.display()))?;
-                let fleet = crate::vm::fleet::VmFleet::boot(configs, args.source.reset).await?;
+                let fleet = arena_vm::fleet::VmFleet::boot(configs, args.source.reset).await?;
                 urls.extend(fleet.urls());
                 Some(Arc::new(fleet))
             }
@@ -918,7 +919,7 @@ pub(crate) async fn play(prepared: Prepared, guests: &Guests) -> anyhow::Result<
     if let Some(hello) = &hello {
         if let Some(name) = hello.agent.as_deref().map(str::trim).filter(|n| !n.is_empty()) {
             if args.model.is_none() {
-                model = crate::results::safe_component(name);
+                model = arena_results::safe_component(name);
             }
             agent_options.push(("agent_name".into(), name.to_owned()));
         }
@@ -979,7 +980,7 @@ pub(crate) async fn play(prepared: Prepared, guests: &Guests) -> anyhow::Result<
         config.exec.coords = args.coords;
     }
     if args.pyautogui_translate_only {
-        config.exec.pyautogui_effects = false;
+        config.exec.pyautogui = arena_exec::PyautoguiPolicy::TranslateOnly;
         config.options.insert("pyautogui_effects".into(), "off".into());
     }
     if args.held_keys == HeldKeysArg::Action {
@@ -1021,7 +1022,7 @@ pub(crate) async fn play(prepared: Prepared, guests: &Guests) -> anyhow::Result<
         title: format!("arena run: {} ({})", args.tasks.display(), layout.base().display()),
         order,
         trials: args.trials,
-        budget: crate::results::ledger::Budget { max_cost_usd: args.max_cost, max_tokens: args.max_total_tokens },
+        budget: arena_results::ledger::Budget { max_cost_usd: args.max_cost, max_tokens: args.max_total_tokens },
     };
     // Ctrl-C: the first stops the run gently, the second abandons it.
     let stop = options.pool.stop.clone();
@@ -1089,9 +1090,9 @@ fn option_differences(base: &Path, ours: &std::collections::BTreeMap<String, Str
     if !base.is_dir() {
         return Ok(Vec::new());
     }
-    let found = crate::results::scan(base)?;
+    let found = arena_results::scan(base)?;
     let mut theirs: std::collections::BTreeMap<&str, std::collections::BTreeSet<&str>> = Default::default();
-    let episodes: Vec<&crate::results::EpisodeResult> = found.iter().filter_map(|f| f.episode.as_ref()).collect();
+    let episodes: Vec<&arena_results::EpisodeResult> = found.iter().filter_map(|f| f.episode.as_ref()).collect();
     if episodes.is_empty() {
         return Ok(Vec::new());
     }
@@ -1152,7 +1153,7 @@ async fn watch_interrupts(stop: tokio_util::sync::CancellationToken) {
     if tokio::signal::ctrl_c().await.is_ok() {
         eprintln!("abandoned: finished tasks are kept; the others run again with the same command");
         // No destructor runs past this: outside agents are ended here.
-        crate::agent::external::tree::end_all();
+        arena_vm::child::tree::end_all();
         std::process::exit(130);
     }
 }
@@ -1189,7 +1190,7 @@ pub fn report(args: &ReportArgs) -> anyhow::Result<ExitCode> {
         if !args.dir.is_dir() {
             bail!("{}: no such result folder", args.dir.display());
         }
-        crate::results::certificate::CertifiedRecord::from_dir(dir)
+        arena_results::certificate::CertifiedRecord::from_dir(dir)
             .with_context(|| format!("--certificates {}", dir.display()))?
             .write(&args.dir)?;
     }
@@ -1206,7 +1207,7 @@ pub fn report(args: &ReportArgs) -> anyhow::Result<ExitCode> {
 ///
 /// A folder cannot be read or mixes agents.
 pub fn compare(args: &CompareArgs) -> anyhow::Result<ExitCode> {
-    let comparison = crate::results::compare::Comparison::of_dirs(&args.run_a, &args.run_b)?;
+    let comparison = arena_results::compare::Comparison::of_dirs(&args.run_a, &args.run_b)?;
     if args.json {
         emit(&format!("{}\n", serde_json::to_string_pretty(&comparison)?))?;
     } else {

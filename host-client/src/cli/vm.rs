@@ -6,7 +6,7 @@
 //! snapshot if QEMU dies) until Ctrl-C or SIGTERM, which shut it down through
 //! ACPI. `snapshot`, `restore`, `screendump` and `stop` talk to a running VM
 //! through the QMP socket in its folder. `prepare` makes a golden image from
-//! an installer ISO. The work is in [`crate::vm`].
+//! an installer ISO. The work is in [`arena_vm`].
 
 use std::net::IpAddr;
 use std::path::{Path, PathBuf};
@@ -17,12 +17,12 @@ use anyhow::Context;
 use clap::{Args, Subcommand, ValueEnum};
 
 use super::{emit, parse_seconds, Connection};
-use crate::vm::fleet::ResetPolicy;
-use crate::vm::prepare::{self, Answer, PrepareEvent, PrepareOptions, Stage, StageTimeouts};
-use crate::vm::qemu::{Accel, DiskBus, NicModel};
-use crate::vm::qmp::Qmp;
-use crate::vm::unattend::{choose_image, AnswerOptions, FirmwareKind, Uac};
-use crate::vm::{Boot, Uefi, Vm, VmConfig, READY_SNAPSHOT};
+use arena_vm::fleet::ResetPolicy;
+use arena_vm::prepare::{self, Answer, PrepareEvent, PrepareOptions, Stage, StageTimeouts};
+use arena_vm::qemu::{Accel, DiskBus, NicModel};
+use arena_vm::qmp::Qmp;
+use arena_vm::unattend::{choose_image, AnswerOptions, FirmwareKind, Uac};
+use arena_vm::{Boot, Uefi, Vm, VmConfig, READY_SNAPSHOT};
 
 /// `--vm-accel`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
@@ -300,10 +300,10 @@ pub struct PrepareArgs {
 
 impl PrepareArgs {
     /// The answer file's options; the image and key from the ISO's image list
-    /// when it can be read ([`crate::vm::iso::list_images`]), else from the options alone.
+    /// when it can be read ([`arena_vm::iso::list_images`]), else from the options alone.
     fn answer(&self, uefi: bool, tpm: bool, iso: &Path) -> anyhow::Result<AnswerOptions> {
         let mut a = AnswerOptions::new();
-        let images = match crate::vm::iso::list_images(iso) {
+        let images = match arena_vm::iso::list_images(iso) {
             Ok(images) => Some(images),
             Err(why) => {
                 tracing::info!(%why, "the ISO's image list could not be read; the image is chosen from the options alone");
@@ -345,7 +345,7 @@ pub fn parse_reset(text: &str) -> Result<ResetPolicy, String> {
 }
 
 async fn qmp_of(dir: &Path) -> anyhow::Result<Qmp> {
-    let socket = dir.join(crate::vm::CONTROL_SOCKET);
+    let socket = dir.join(arena_vm::CONTROL_SOCKET);
     if !socket.exists() {
         anyhow::bail!(
             "no VM runs in {}: {} does not exist (start one with `arena vm start --dir`)",
@@ -372,7 +372,7 @@ pub async fn run(conn: &Connection, args: VmCommandArgs) -> anyhow::Result<ExitC
             Ok(ExitCode::SUCCESS)
         }
         VmCommand::Restore { dir, name } => {
-            let took = qmp_of(&dir).await?.restore_snapshot(&name, &dir.join(crate::vm::OVERLAY_FILE)).await?;
+            let took = qmp_of(&dir).await?.restore_snapshot(&name, &dir.join(arena_vm::OVERLAY_FILE)).await?;
             emit(&format!("restored snapshot {name} in {:.1} s\n", took.as_secs_f64()))?;
             Ok(ExitCode::SUCCESS)
         }
@@ -389,7 +389,7 @@ pub async fn run(conn: &Connection, args: VmCommandArgs) -> anyhow::Result<ExitC
             qmp.powerdown().await?;
             let ended = tokio::time::timeout(grace, async {
                 while let Ok(name) = events.recv().await {
-                    if name == "SHUTDOWN" || name == crate::vm::qmp::CLOSED {
+                    if name == "SHUTDOWN" || name == arena_vm::qmp::CLOSED {
                         return;
                     }
                 }
@@ -409,8 +409,8 @@ pub async fn run(conn: &Connection, args: VmCommandArgs) -> anyhow::Result<ExitC
 
 async fn prepare_command(conn: &Connection, args: PrepareArgs) -> anyhow::Result<ExitCode> {
     if let Some(iso) = &args.list_editions {
-        let images = crate::vm::iso::list_images(iso).map_err(anyhow::Error::msg)?;
-        emit(&crate::vm::iso::render_list(&images))?;
+        let images = arena_vm::iso::list_images(iso).map_err(anyhow::Error::msg)?;
+        emit(&arena_vm::iso::render_list(&images))?;
         return Ok(ExitCode::SUCCESS);
     }
     let Some(out) = args.out.clone() else { anyhow::bail!("arena vm prepare needs --out") };
@@ -452,7 +452,7 @@ async fn prepare_command(conn: &Connection, args: PrepareArgs) -> anyhow::Result
     let accel = match args.vm.vm_accel {
         AccelArg::Kvm => Accel::Kvm,
         AccelArg::Tcg => Accel::Tcg,
-        AccelArg::Auto => crate::vm::qemu::detect_accel().0,
+        AccelArg::Auto => arena_vm::qemu::detect_accel().0,
     };
     let mut timeouts = StageTimeouts::for_accel(accel);
     if let Some(grace) = args.shutdown_timeout {
@@ -507,7 +507,7 @@ async fn prepare_command(conn: &Connection, args: PrepareArgs) -> anyhow::Result
 
 /// The token `arena prep stage` put in the OEM folder, for waiting on the guest it installs.
 fn read_oem_token(oem: &Path) -> Option<String> {
-    let text = std::fs::read_to_string(oem.join(crate::oem::TOKEN_NAME)).ok()?;
+    let text = std::fs::read_to_string(oem.join(arena_vm::oem::TOKEN_NAME)).ok()?;
     arena_shared::token::parse(&text).ok()
 }
 
@@ -524,7 +524,7 @@ async fn start(
     config.host_port = port;
     config.host_addr = bind;
     let has_ready = reuse
-        && crate::vm::disk::QemuImg { program: crate::vm::qemu::find_qemu_img(args.qemu_img.as_deref())? }
+        && arena_vm::disk::QemuImg { program: arena_vm::qemu::find_qemu_img(args.qemu_img.as_deref())? }
             .check_overlay(&config.overlay())
             .is_ok_and(|info| info.snapshots.iter().any(|s| s.name == READY_SNAPSHOT));
     let boot = match (reuse, has_ready) {

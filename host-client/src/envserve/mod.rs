@@ -53,14 +53,15 @@ use serde_json::{json, Value};
 use tokio::sync::{mpsc, Mutex};
 use tokio_util::sync::CancellationToken;
 
+use crate::agent::body::MAX_ANSWER;
 use crate::agent::external::protocol::{AgentHello, ObservationWants, ACTION_SPACES, MAX_ACTIONS};
-use crate::agent::external::transport::MAX_ANSWER;
 use crate::agent::{Agent, AgentError, Prediction};
 use crate::episode::EpisodeConfig;
-use crate::ports::{AgentAction, Observation};
-use crate::results::{EpisodeResult, RunLayout};
+use crate::ports::Observation;
 use arena_actionspace::Coords;
 use arena_client::client::GuestClient;
+use arena_exec::AgentAction;
+use arena_results::{EpisodeResult, RunLayout};
 use arena_task::Task;
 
 /// How the server behaves.
@@ -295,8 +296,8 @@ impl EnvServer {
                 let domain = fields.get("domain").and_then(Value::as_str).unwrap_or("custom");
                 let id = fields.get("id").and_then(Value::as_str).unwrap_or("task");
                 let path = PathBuf::from("env-tasks")
-                    .join(crate::results::safe_component(domain))
-                    .join(format!("{}.json", crate::results::safe_component(id)));
+                    .join(arena_results::safe_component(domain))
+                    .join(format!("{}.json", arena_results::safe_component(id)));
                 Task::parse(&spec.to_string(), &path).map_err(|err| bad(format!("task: {err}")))
             }
             other => Err(bad(format!(
@@ -651,7 +652,7 @@ mod tests {
                     .expect("a client")
             })
             .collect();
-        let cache = arena_setup::DownloadCache::new(dir.join("cache")).expect("a cache");
+        let cache = arena_client::cache::DownloadCache::new(dir.join("cache")).expect("a cache");
         let options =
             EnvOptions { out: dir.to_owned(), config: EpisodeConfig::instant(cache), idle, screen: None, token: None };
         EnvServer::new(Vec::new(), guests, options)

@@ -33,10 +33,11 @@ use serde_json::{json, Value};
 use tokio::sync::{mpsc, oneshot, Notify};
 
 use crate::agent::{Agent, AgentError, LogValue, Prediction, StepLog};
-use crate::ports::{AgentAction, Observation};
-use crate::results::EpisodeResult;
+use crate::ports::Observation;
 use crate::run::pool::TaskRunner;
 use arena_client::client::GuestClient;
+use arena_exec::AgentAction;
+use arena_results::EpisodeResult;
 use arena_task::Task;
 
 /// What the session is told when its action tool call has been carried out.
@@ -394,7 +395,7 @@ impl<R: TaskRunner> TaskRunner for McpRunner<R> {
         guest: &GuestClient,
         task: &Task,
         attempt: u32,
-        vm: Option<crate::results::VmStart>,
+        vm: Option<arena_results::VmStart>,
     ) -> EpisodeResult {
         let result = self.inner.run(guest, task, attempt, vm).await;
         self.hub.publish(&task.name, &result);

@@ -23,8 +23,6 @@
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
-use serde::{Deserialize, Serialize};
-
 use arena_shared::clipboard::ClipboardContent;
 use arena_shared::observation::{A11yQuery, ImageFormat, ScreenInfo, ScreenshotQuery};
 use arena_shared::window_list;
@@ -33,27 +31,7 @@ use super::Observation;
 use arena_client::client::GuestClient;
 use arena_client::error::ClientError;
 use arena_client::frame::Frame;
-
-/// How long each part of one observation took, in milliseconds. `None`: the part was not read.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
-pub struct ObserveTimings {
-    /// The guest's screenshot call (and the VM display's, when it stood in).
-    pub screenshot_ms: u64,
-    /// Decoding the screenshot into pixels.
-    pub decode_ms: u64,
-    /// The accessibility tree.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub tree_ms: Option<u64>,
-    /// The window list.
-    pub windows_ms: u64,
-    /// The clipboard.
-    pub clipboard_ms: u64,
-    /// The browser's DOM elements.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub dom_ms: Option<u64>,
-    /// The whole observation, wall time.
-    pub total_ms: u64,
-}
+use arena_results::timings::ObserveTimings;
 
 /// A guest's screen as seen from outside it (QEMU's screendump of its VM).
 #[async_trait::async_trait]

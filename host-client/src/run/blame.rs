@@ -24,8 +24,8 @@
 
 use std::time::Duration;
 
-use crate::ports::AgentAction;
-use crate::results::EpisodeStatus;
+use arena_exec::AgentAction;
+use arena_results::EpisodeStatus;
 
 /// Longest the question "does the guest still answer?" before a step's actions
 /// may take: a hung guest costs this much, then the step is the environment's.
@@ -125,7 +125,7 @@ mod tests {
         assert!(guest_lost_by_agent(&acting));
         assert!(!guest_lost_by_agent(&deciding));
         assert!(!guest_lost_by_agent(&EpisodeStatus::AgentError("the plan is used up".into())));
-        assert_eq!(crate::results::Blame::of(&acting, 0.0).name(), "agent");
+        assert_eq!(arena_results::Blame::of(&acting, 0.0).name(), "agent");
     }
 
     struct Watch(Option<&'static str>);

@@ -1,6 +1,6 @@
 //! `arena merge OUT SHARD_DIR...`: one result folder from the folders of several shards.
 //!
-//! Every task folder found under a shard (see [`crate::results::scan`]) is
+//! Every task folder found under a shard (see [`arena_results::scan`]) is
 //! copied to the same relative path under `OUT` (hard-linked file by file
 //! when the file system allows, copied otherwise), then the summary and the
 //! report are written for `OUT`. When two shards hold the same task, a
@@ -10,9 +10,9 @@
 
 use std::path::{Path, PathBuf};
 
-use crate::results::html::write_report;
-use crate::results::summary::Summary;
-use crate::results::{scan, ResultsError};
+use arena_results::html::write_report;
+use arena_results::summary::Summary;
+use arena_results::{scan, ResultsError};
 
 /// What a merge did.
 #[derive(Debug)]
@@ -76,9 +76,9 @@ pub fn merge(out: &Path, shards: &[PathBuf], title: &str) -> Result<MergeReport,
             seen.insert(found.relative.clone(), finished);
             copied += 1;
         }
-        crate::results::task_list::merge_into(out, shard)?;
+        arena_results::task_list::merge_into(out, shard)?;
         // The certificates a shard was given mark the merged folder too (the first shard's win).
-        let record = crate::results::certificate::CertifiedRecord::read(shard);
+        let record = arena_results::certificate::CertifiedRecord::read(shard);
         if let Some(record) = record.filter(|_| !certified_carried) {
             record.write(out)?;
             certified_carried = true;
@@ -112,10 +112,10 @@ fn copy_tree(from: &Path, to: &Path) -> Result<(), ResultsError> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::results::EpisodeStatus;
+    use arena_results::EpisodeStatus;
 
     fn write(root: &Path, domain: &str, name: &str, score: f64, status: EpisodeStatus) {
-        crate::results::tests::write_task(root, domain, name, score, status);
+        arena_results::fixtures::write_task(root, domain, name, score, status);
     }
 
     #[test]

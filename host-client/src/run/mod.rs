@@ -21,8 +21,10 @@
 //! - [`merge`]: [`merge::merge`], shard folders into one.
 //! - [`blame`]: whose failure a guest that stops answering is, by what the agent did in the step.
 //! - [`watch`]: [`watch::RunWatch`], what a run tells whoever watches it as it goes.
+//! - `fleet`: the run's VMs (`arena_vm::fleet::VmFleet`) as the pool's lifecycle, the blame's watch and the observation's stand-in screen.
 
 pub mod blame;
+mod fleet;
 pub mod merge;
 pub mod pool;
 pub mod shard;
@@ -31,10 +33,10 @@ pub mod watch;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
-use crate::results::html::write_report;
-use crate::results::summary::Summary;
-use crate::results::{ResultsError, RunLayout};
 use arena_client::client::GuestClient;
+use arena_results::html::write_report;
+use arena_results::summary::Summary;
+use arena_results::{ResultsError, RunLayout};
 use arena_task::{Difficulty, Task, TaskError};
 
 use self::pool::{run_pool, PoolConfig, PoolEvent, PoolReport, TaskRunner};
@@ -141,7 +143,7 @@ pub fn plan(tasks: Vec<Task>, shard: Shard, layout: &RunLayout, resume: bool, or
 /// queued once per trial, trial-major (every task of trial 0 in `order`, then of
 /// trial 1, ...), so that what drifts over a run (a guest, a model endpoint) is
 /// spread over the trials instead of lining up with one; each copy carries its
-/// trial ([`crate::results::TRIAL_KEY`]), which puts it in trial folder 0..K-1
+/// trial ([`arena_results::TRIAL_KEY`]), which puts it in trial folder 0..K-1
 /// ([`RunLayout::task_dir`]), finished or not on its own.
 pub fn plan_trials(
     tasks: Vec<Task>,
@@ -166,7 +168,7 @@ pub fn plan_trials(
         }
     }
     let mine = mine.into_iter().map(|(_, mut task)| {
-        task.extra.remove(crate::results::TRIAL_KEY);
+        task.extra.remove(arena_results::TRIAL_KEY);
         task
     });
     let queue: Vec<Task> = if trials > 1 {
@@ -175,7 +177,7 @@ pub fn plan_trials(
             .flat_map(|trial| {
                 mine.iter().map(move |task| {
                     let mut task = task.clone();
-                    task.extra.insert(crate::results::TRIAL_KEY.to_owned(), trial.into());
+                    task.extra.insert(arena_results::TRIAL_KEY.to_owned(), trial.into());
                     task
                 })
             })
@@ -205,7 +207,7 @@ pub struct RunOptions {
     pub trials: u32,
     /// Spend after which no new task starts (`--max-cost`, `--max-total-tokens`);
     /// the spend of the folder's earlier runs counts.
-    pub budget: crate::results::ledger::Budget,
+    pub budget: arena_results::ledger::Budget,
 }
 
 /// What a run did.
@@ -239,14 +241,14 @@ pub async fn run_tasks(
     let (todo, skipped) = (plan.todo.len(), plan.finished.len());
     // The whole list, so that a task that never starts still counts (the strict rate).
     let listed: Vec<&Task> = plan.todo.iter().chain(&plan.finished).collect();
-    crate::results::task_list::record(&options.layout.base(), &listed)?;
+    arena_results::task_list::record(&options.layout.base(), &listed)?;
     tracing::info!(shard = %options.shard, todo, skipped, guests = guests.len(), "starting the run");
     let watch = Arc::clone(&options.watch);
     let guest_urls: Vec<String> = guests.iter().map(|g| g.base_url().to_owned()).collect();
     watch.begin(todo, &guest_urls);
     let mut tally = watch::Tally { total: todo, ..watch::Tally::default() };
     let budget = options.budget;
-    let mut spent = crate::results::ledger::Spent::default();
+    let mut spent = arena_results::ledger::Spent::default();
     if budget.is_set() {
         for task in Summary::from_dir(root)?.tasks {
             spent.add(task.tokens.as_ref(), task.cost_usd);
@@ -307,7 +309,7 @@ pub async fn run_tasks(
     watch.end(&tally);
     if budget.is_set() {
         let not_started = if stopped.is_some() { report.not_run.clone() } else { Vec::new() };
-        crate::results::ledger::BudgetRecord { budget, spent, stopped, not_started }.write(root)?;
+        arena_results::ledger::BudgetRecord { budget, spent, stopped, not_started }.write(root)?;
     }
     let (summary, path) = write_report(root, &options.title)?;
     Ok(RunOutcome { todo, skipped, pool: report, summary, report: path })

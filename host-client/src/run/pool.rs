@@ -19,9 +19,9 @@ use std::time::{Duration, Instant};
 use tokio::task::JoinSet;
 use tokio_util::sync::CancellationToken;
 
-use crate::results::VmStart;
-use crate::results::{EpisodeResult, EpisodeStatus};
 use arena_client::client::GuestClient;
+use arena_results::VmStart;
+use arena_results::{EpisodeResult, EpisodeStatus};
 use arena_task::Task;
 
 /// Runs one task on one guest. Implemented by the episode runner; tests use fakes.

@@ -6,9 +6,9 @@ use std::time::Duration;
 
 use super::pool::*;
 use super::*;
-use crate::results::tests::{episode, layout, write_task};
-use crate::results::{EpisodeResult, EpisodeStatus};
 use arena_client::client::ClientConfig;
+use arena_results::fixtures::{episode, layout, write_task};
+use arena_results::{EpisodeResult, EpisodeStatus};
 
 fn task(domain: &str, name: &str) -> Task {
     let text = r#"{"id": "x", "instruction": "i", "config": [], "evaluator": {"func": "infeasible"}}"#;
@@ -58,7 +58,7 @@ impl TaskRunner for Fake {
         guest: &GuestClient,
         task: &Task,
         attempt: u32,
-        _vm: Option<crate::results::VmStart>,
+        _vm: Option<arena_results::VmStart>,
     ) -> EpisodeResult {
         let url = guest.base_url().to_owned();
         {
@@ -173,7 +173,7 @@ async fn a_guest_that_comes_back_rejoins_the_pool() {
             guest: &GuestClient,
             task: &Task,
             attempt: u32,
-            _vm: Option<crate::results::VmStart>,
+            _vm: Option<arena_results::VmStart>,
         ) -> EpisodeResult {
             let first = !std::mem::replace(&mut *self.failed.lock().unwrap(), true);
             let status = if first { EpisodeStatus::InfraError("down".into()) } else { EpisodeStatus::Completed };
@@ -297,7 +297,7 @@ fn trials_are_queued_trial_major_each_in_its_folder_and_resume_alone() {
     let names: Vec<String> = all.iter().map(|t| t.name.clone()).collect();
     // Trial 1 of the second task is already finished (trial folder `1`).
     let mut done = all[1].clone();
-    done.extra.insert(crate::results::TRIAL_KEY.into(), 1.into());
+    done.extra.insert(arena_results::TRIAL_KEY.into(), 1.into());
     let dir = layout.task_dir(&done);
     assert!(dir.path().ends_with(format!("1/{}/{}", done.domain, done.name)), "{}", dir.path().display());
     dir.prepare().unwrap();
@@ -305,7 +305,7 @@ fn trials_are_queued_trial_major_each_in_its_folder_and_resume_alone() {
 
     let p = plan_trials(all.clone(), Shard::ALL, &layout, true, TaskOrder::Index, 3);
     let queued: Vec<(u64, String)> =
-        p.todo.iter().map(|t| (crate::results::trial_of(t).unwrap(), t.name.clone())).collect();
+        p.todo.iter().map(|t| (arena_results::trial_of(t).unwrap(), t.name.clone())).collect();
     let mut want = Vec::new();
     for trial in 0..3u64 {
         for (i, name) in names.iter().enumerate() {
@@ -319,8 +319,8 @@ fn trials_are_queued_trial_major_each_in_its_folder_and_resume_alone() {
 
     // One trial: no mark, upstream's trial folder, and a task file cannot choose one.
     let mut sneaky = all.clone();
-    sneaky[0].extra.insert(crate::results::TRIAL_KEY.into(), 7.into());
+    sneaky[0].extra.insert(arena_results::TRIAL_KEY.into(), 7.into());
     let p = plan_trials(sneaky, Shard::ALL, &layout, true, TaskOrder::Index, 1);
-    assert!(p.todo.iter().all(|t| crate::results::trial_of(t).is_none()));
+    assert!(p.todo.iter().all(|t| arena_results::trial_of(t).is_none()));
     assert_eq!(layout.task_dir(&p.todo[0]).path(), layout.base().join(&all[0].domain).join(&all[0].name));
 }

@@ -10,7 +10,7 @@
 
 use arena_task::Task;
 
-use crate::results::EpisodeResult;
+use arena_results::EpisodeResult;
 
 /// Where a run stands, after a task finished.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]

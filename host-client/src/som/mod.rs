@@ -197,6 +197,13 @@ pub struct Marks {
     pub size: (u32, u32),
 }
 
+impl Marks {
+    /// The boxes as the executor hands them to Navi's `computer` object.
+    pub fn boxes(&self) -> arena_exec::Boxes<'_> {
+        arena_exec::Boxes { rects: &self.rects, size: self.size }
+    }
+}
+
 /// Upstream's `parser_to_prompt` numbering: ids over the whole list, the
 /// drawable entities listed, colours from `origin`'s prompt colour map.
 pub fn number(origin: SomOrigin, entities: Vec<ProposedEntity>, size: (u32, u32)) -> Marks {

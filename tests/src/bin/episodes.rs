@@ -21,24 +21,24 @@ use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use anyhow::Context;
+use arena_client::cache::DownloadCache;
+use arena_client::client::{ClientConfig, GuestClient};
+use arena_exec::AgentAction;
+use arena_exec::{execute_with, ExecOptions};
 use arena_host::agent::scripted::{PlanSource, ScriptedAgent};
 use arena_host::agent::Agent;
 use arena_host::agent::AgentFactory;
-use arena_host::client::{ClientConfig, GuestClient};
 use arena_host::episode::{EpisodeConfig, EpisodeRunner};
-use arena_host::ports::exec::{execute_with, ExecOptions};
-use arena_host::ports::AgentAction;
-use arena_host::results::RunLayout;
 use arena_host::run::pool::PoolConfig;
 use arena_host::run::shard::Shard;
 use arena_host::run::{load_tasks, run_tasks, RunOptions};
-use arena_host::setup::DownloadCache;
 use arena_host::som::{annotate, marks_from_tree};
-use arena_host::task::{Difficulty, Task};
+use arena_results::RunLayout;
 use arena_script::ComputerState;
 use arena_shared::clipboard::ClipboardContent;
 use arena_shared::exec::LaunchRequest;
 use arena_shared::observation::{A11yQuery, ImageFormat, ScreenshotQuery};
+use arena_task::{Difficulty, Task};
 use arena_test_support::Served;
 
 const STEPS: usize = 40;
@@ -98,12 +98,12 @@ async fn per_step(url: &str) -> anyhow::Result<()> {
         let t1 = Instant::now();
         let marks = marks_from_tree(&tree, size);
         // Decoded once, as the observation does, then annotated in pixels.
-        let frame = arena_host::frame::Frame::decode(shot.bytes).map_err(anyhow::Error::msg)?;
+        let frame = arena_client::frame::Frame::decode(shot.bytes).map_err(anyhow::Error::msg)?;
         let annotated = annotate(&frame.pixels, &marks);
         anyhow::ensure!(annotated.width() > 0);
         marks_count = marks.entities.len();
         let t2 = Instant::now();
-        let outcome = execute_with(&client, &action, Some(&marks), &mut computer, &options).await?;
+        let outcome = execute_with(&client, &action, Some(marks.boxes()), &mut computer, &options).await?;
         anyhow::ensure!(outcome.error.is_none(), "the action failed: {:?}", outcome.error);
         let t3 = Instant::now();
         observe.push(t1 - t0);

@@ -37,7 +37,7 @@ use std::process::ExitCode;
 use std::time::{Duration, Instant};
 
 use anyhow::Context;
-use arena_host::client::{ClientConfig, GuestClient};
+use arena_client::client::{ClientConfig, GuestClient};
 use arena_shared::action::Action;
 use arena_shared::observation::A11yQuery;
 use tokio::io::AsyncWriteExt as _;

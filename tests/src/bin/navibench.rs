@@ -20,13 +20,13 @@
 use std::process::ExitCode;
 use std::time::Duration;
 
+use arena_client::cache::DownloadCache;
+use arena_client::client::{ClientConfig, GuestClient};
 use arena_host::agent::navi::{NaviAgent, NaviConfig};
 use arena_host::agent::Agent;
-use arena_host::client::{ClientConfig, GuestClient};
 use arena_host::episode::{run_episode, EpisodeConfig};
-use arena_host::results::TaskDir;
-use arena_host::setup::DownloadCache;
-use arena_host::task::Task;
+use arena_results::TaskDir;
+use arena_task::Task;
 use arena_test_support::StubGuest;
 use tokio::io::{AsyncReadExt, AsyncWriteExt};
 use tokio::net::TcpListener;

@@ -5,7 +5,7 @@
 //! It writes a pair of 1000-row x 20-column workbooks (numbers, text and a
 //! formula column with cached results; one fill-styled column) and a pair of
 //! 200-paragraph documents into a temporary folder, then calls the registered
-//! metrics through `arena_host::eval::metrics::lookup`, exactly as an
+//! metrics through `arena_eval::metrics::lookup`, exactly as an
 //! evaluation does. Each comparison opens and parses both files from disk.
 //! Run it in release mode: `cargo run --release -p arena-tests --bin officebench [iterations] [--keep DIR]`.
 //! `--keep DIR` writes the files into DIR and leaves them there, so that
@@ -19,8 +19,8 @@ use std::process::ExitCode;
 use std::time::{Duration, Instant};
 
 use anyhow::{bail, Context};
-use arena_host::eval::metrics::{lookup, MetricInput};
-use arena_host::eval::Fetched;
+use arena_eval::metrics::{lookup, MetricInput};
+use arena_eval::Fetched;
 use rust_xlsxwriter::{Format, FormatPattern, Formula, Workbook};
 use serde_json::{json, Map, Value};
 

@@ -19,9 +19,9 @@ use std::process::ExitCode;
 use std::time::{Duration, Instant};
 
 use anyhow::Context;
-use arena_host::vm::disk::make_read_only;
-use arena_host::vm::qemu::{Accel, DiskBus, NicModel};
-use arena_host::vm::{Boot, Vm, VmConfig, READY_SNAPSHOT};
+use arena_vm::disk::make_read_only;
+use arena_vm::qemu::{Accel, DiskBus, NicModel};
+use arena_vm::{Boot, Vm, VmConfig, READY_SNAPSHOT};
 
 /// Runs of each measurement.
 const RUNS: usize = 3;
@@ -130,7 +130,7 @@ async fn run() -> anyhow::Result<()> {
     // and a snapshot save and restore that carry the TPM's state.
     let mut uefi_starts = Vec::new();
     let mut uefi_snapshots = Vec::new();
-    match arena_host::vm::Uefi::debian_secure_boot() {
+    match arena_vm::Uefi::debian_secure_boot() {
         Ok(uefi) => {
             for i in 0..RUNS {
                 let mut c = config(&golden, &work.path().join(format!("uefi-{i}")), accel);

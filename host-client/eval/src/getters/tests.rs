@@ -10,9 +10,9 @@ use arena_test_support::StubGuest;
 use serde_json::{json, Value};
 
 use super::{lookup, GetterError, Params};
-use crate::cache::DownloadCache;
 use crate::value::Fetched;
 use crate::{fetch, EvalContext};
+use arena_client::cache::DownloadCache;
 use arena_client::client::{ClientConfig, GuestClient};
 use arena_task::GetterSpec;
 

@@ -26,7 +26,7 @@
 //!   is the screen after all of them.
 //! - **Screenshots** are scaled to the model's limit ([`super::models`]: for
 //!   models limited to 1568 px, the resolution the tool documentation recommends,
-//!   [`recommended_size`]: XGA, WXGA or FWXGA by aspect ratio, else within the
+//!   `models::recommended_size`: XGA, WXGA or FWXGA by aspect ratio, else within the
 //!   API's image limits; for Opus 4.7, up to 2576 px, so a 1440x900 screen is sent
 //!   as it is), or to `--max-image-side`, and the model's coordinates are scaled back.
 //! - **Images kept**: only the last `keep_images` screenshots stay in the
@@ -49,8 +49,9 @@ use super::models::{Form, ImageLimit};
 use super::{base64_png, cropped_png, exchange_logs, resized_png, screen_of, Endpoint};
 use crate::agent::llm::{ApiKind, ModelClient};
 use crate::agent::{Agent, AgentError, Prediction, StepLog};
-use crate::ports::{AgentAction, Observation};
+use crate::ports::Observation;
 use arena_actionspace::{ActionSpace, Context, Coords, Decision, Step};
+use arena_exec::AgentAction;
 use arena_task::Task;
 
 /// Environment variables the key is read from, in order.
@@ -144,23 +145,6 @@ impl AnthropicConfig {
         };
         self.endpoint.url(route)
     }
-}
-
-/// The screenshot size the computer-use documentation recommends for a screen:
-/// the first of XGA (1024×768), WXGA (1280×800) and FWXGA (1366×768) whose aspect
-/// ratio is within 0.02 of the screen's and which is smaller; else the screen
-/// scaled to fit the API's image limits (1568 pixels on the long side, about 1.15
-/// megapixels), or left as it is when it fits.
-pub fn recommended_size(screen: (u32, u32)) -> (u32, u32) {
-    const TARGETS: [(u32, u32); 3] = [(1024, 768), (1280, 800), (1366, 768)];
-    let (w, h) = (screen.0.max(1), screen.1.max(1));
-    let ratio = f64::from(w) / f64::from(h);
-    if let Some(&t) = TARGETS.iter().find(|(tw, th)| (f64::from(*tw) / f64::from(*th) - ratio).abs() < 0.02 && *tw < w)
-    {
-        return t;
-    }
-    let long = f64::from(w.max(h));
-    super::scaled_size((w, h), (1568.0 / long).min((1_150_000.0 / (f64::from(w) * f64::from(h))).sqrt()))
 }
 
 /// What the next message must answer about a `tool_use` of the last answer.
@@ -338,7 +322,7 @@ impl Agent for AnthropicAgent {
         "anthropic-cu"
     }
 
-    fn take_usage(&mut self) -> Option<crate::agent::Usage> {
+    fn take_usage(&mut self) -> Option<arena_results::ledger::Usage> {
         self.client.take_usage()
     }
 
@@ -485,6 +469,7 @@ impl Agent for AnthropicAgent {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::agent::cu::models::recommended_size;
 
     #[test]
     fn the_recommended_sizes_follow_the_aspect_ratio() {

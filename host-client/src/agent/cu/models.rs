@@ -113,7 +113,7 @@ pub enum Vendor {
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum ImageLimit {
     /// Anthropic's recommended sizes for models limited to 1568 px and 1.15 MP
-    /// (`anthropic::recommended_size`).
+    /// ([`recommended_size`]).
     AnthropicRecommended,
     /// At most `side` pixels on the long edge and `pixels` in all; a screen that fits is sent as it is.
     Within { side: u32, pixels: u64 },
@@ -125,7 +125,7 @@ impl ImageLimit {
     /// The size a `screen` is sent at.
     pub fn size_for(self, screen: (u32, u32)) -> (u32, u32) {
         match self {
-            ImageLimit::AnthropicRecommended => super::anthropic::recommended_size(screen),
+            ImageLimit::AnthropicRecommended => recommended_size(screen),
             ImageLimit::Within { side, pixels } => within(screen, side, pixels),
             ImageLimit::Display(w, h) => super::fit_within(screen, (w, h)),
         }
@@ -252,6 +252,23 @@ pub fn choose(vendor: Vendor, model: &str) -> Choice {
             image.describe()
         )),
     }
+}
+
+/// The screenshot size the computer-use documentation recommends for a screen:
+/// the first of XGA (1024×768), WXGA (1280×800) and FWXGA (1366×768) whose aspect
+/// ratio is within 0.02 of the screen's and which is smaller; else the screen
+/// scaled to fit the API's image limits (1568 pixels on the long side, about 1.15
+/// megapixels), or left as it is when it fits.
+pub fn recommended_size(screen: (u32, u32)) -> (u32, u32) {
+    const TARGETS: [(u32, u32); 3] = [(1024, 768), (1280, 800), (1366, 768)];
+    let (w, h) = (screen.0.max(1), screen.1.max(1));
+    let ratio = f64::from(w) / f64::from(h);
+    if let Some(&t) = TARGETS.iter().find(|(tw, th)| (f64::from(*tw) / f64::from(*th) - ratio).abs() < 0.02 && *tw < w)
+    {
+        return t;
+    }
+    let long = f64::from(w.max(h));
+    super::scaled_size((w, h), (1568.0 / long).min((1_150_000.0 / (f64::from(w) * f64::from(h))).sqrt()))
 }
 
 #[cfg(test)]

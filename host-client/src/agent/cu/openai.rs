@@ -35,11 +35,12 @@ use serde_json::{json, Value};
 
 use super::anthropic::ending;
 use super::models::{Form, ImageLimit};
-use super::{base64_png, exchange_logs, resized_png, screen_of, Endpoint};
+use super::{exchange_logs, resized_png, screen_of, Endpoint};
 use crate::agent::llm::{ApiKind, ModelClient};
 use crate::agent::{Agent, AgentError, Prediction};
-use crate::ports::{AgentAction, Observation};
+use crate::ports::Observation;
 use arena_actionspace::{ActionSpace, Context, Coords, Step};
+use arena_exec::AgentAction;
 use arena_task::Task;
 
 /// Environment variables the key is read from, in order.
@@ -173,7 +174,7 @@ impl Agent for OpenAiAgent {
         "openai-cu"
     }
 
-    fn take_usage(&mut self) -> Option<crate::agent::Usage> {
+    fn take_usage(&mut self) -> Option<arena_results::ledger::Usage> {
         self.client.take_usage()
     }
 
@@ -185,7 +186,7 @@ impl Agent for OpenAiAgent {
     async fn predict(&mut self, obs: &Observation) -> Result<Prediction, AgentError> {
         let (frame, screen) = screen_of(obs);
         let size = self.config.image.size_for(screen);
-        let image_url = format!("data:image/png;base64,{}", base64_png(&resized_png(frame, size)?));
+        let image_url = crate::agent::llm::image_data_url("image/png", &resized_png(frame, size)?);
         let input = match (&self.previous_response_id, self.pending.is_empty()) {
             (Some(_), false) => Value::Array(
                 self.pending

@@ -14,12 +14,13 @@
 
 use serde_json::{json, Value};
 
-use super::{base64_png, exchange_logs, screen_of, Endpoint};
+use super::{exchange_logs, screen_of, Endpoint};
 use crate::agent::llm::{ApiKind, ModelClient};
 use crate::agent::{Agent, AgentError, Prediction};
-use crate::ports::{AgentAction, Observation};
+use crate::ports::Observation;
 use arena_actionspace::uitars::UiTarsVersion;
 use arena_actionspace::{ActionSpace, Context};
+use arena_exec::AgentAction;
 use arena_task::Task;
 
 /// Environment variables the key is read from, in order (vLLM takes any key, or none).
@@ -135,7 +136,7 @@ impl Agent for UiTarsAgent {
         "ui-tars"
     }
 
-    fn take_usage(&mut self) -> Option<crate::agent::Usage> {
+    fn take_usage(&mut self) -> Option<arena_results::ledger::Usage> {
         self.client.take_usage()
     }
 
@@ -145,7 +146,7 @@ impl Agent for UiTarsAgent {
 
     async fn predict(&mut self, obs: &Observation) -> Result<Prediction, AgentError> {
         let (frame, screen) = screen_of(obs);
-        let image_url = format!("data:image/png;base64,{}", base64_png(&frame.encoded));
+        let image_url = crate::agent::llm::image_data_url("image/png", &frame.encoded);
         let body = self.body(&obs.instruction, &image_url);
         let reply = self.client.complete(&body).await?;
         let logs = exchange_logs(&body, &json!({"content": reply}));

@@ -11,7 +11,7 @@
 //!
 //! It is not the MCP endpoint (the agent drives there: `crate::mcp`), nor the
 //! action spaces themselves: code runs through the action port
-//! (`crate::ports::exec`), and `computer_13` and typed actions go through
+//! (`arena_exec`), and `computer_13` and typed actions go through
 //! `arena_actionspace::parse` ([`spaces`]).
 //!
 //! # Layout
@@ -22,25 +22,25 @@
 //! - [`observe`]: the one adapter from an [`Observation`] to an `observe` message.
 //! - [`spaces`]: answers' actions to [`AgentAction`]s, with the `computer_13` seam.
 //! - [`stderr`]: an exec agent's stderr into the run's log, bounded per task.
-//! - [`tree`]: an exec agent's process group and descendants (Unix) or job
-//!   object (Windows, [`windows`]), ended with it.
+//!
+//! An exec agent's process tree (its group or job object, ended with it) is
+//! `arena_vm::child::tree`, with the host side's other system calls.
 
 pub mod observe;
 pub mod protocol;
 pub mod spaces;
 pub mod stderr;
 pub mod transport;
-pub mod tree;
-pub mod windows;
 
 use std::time::Duration;
 
 use serde_json::{json, Value};
 
 use crate::agent::{Agent, AgentError, LogValue, Prediction, StepLog};
-use crate::ports::{AgentAction, Observation};
+use crate::ports::Observation;
 use crate::som::Marks;
 use arena_actionspace::Coords;
+use arena_exec::AgentAction;
 use arena_task::Task;
 
 use protocol::{AgentHello, AgentMessage, PROTOCOL_VERSION};
@@ -418,7 +418,7 @@ impl Agent for ExternalAgent {
 /// An `act` answer as the episode's [`Prediction`]: actions in order, then the
 /// decision; each `record` field becomes a field of the step's trajectory line.
 /// `coords` is the convention of the answer's `computer_13` actions (translated
-/// here) and of its pyautogui code (translated where code runs, `crate::ports::exec`).
+/// here) and of its pyautogui code (translated where code runs, `arena_exec`).
 ///
 /// # Errors
 ///
@@ -449,7 +449,7 @@ pub fn prediction(
         logs,
         timings: Default::default(),
         coords: Some(coords),
-        usage: act.usage.map(|u| crate::agent::Usage {
+        usage: act.usage.map(|u| arena_results::ledger::Usage {
             input: u.input_tokens,
             output: u.output_tokens,
             cached: u.cached_tokens.min(u.input_tokens),

@@ -11,7 +11,7 @@ use serde_json::Value;
 
 use arena_actionspace::{ActionSpace, Context, Coords, Decision};
 
-use crate::ports::AgentAction;
+use arena_exec::AgentAction;
 
 /// Checks that `space` is one the harness accepts.
 ///
@@ -30,7 +30,7 @@ pub fn check_space(space: &str) -> Result<(), String> {
 }
 
 /// The answer's `actions` in `space`, in order; `computer_13` coordinates are in
-/// `coords` (pyautogui code is translated in them where it runs, `crate::ports::exec`).
+/// `coords` (pyautogui code is translated in them where it runs, `arena_exec`).
 ///
 /// # Errors
 ///

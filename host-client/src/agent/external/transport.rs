@@ -24,10 +24,7 @@ use super::protocol::AgentHello;
 use super::stderr::StderrBudget;
 use super::{check_hello, hello_message, short, Connector, Transport};
 
-/// The longest answer an agent may give, one line from a process or one HTTP
-/// body (a screenshot inline is far less): a longer one is an agent error for
-/// its task, read no further than this, so it never costs the run more memory.
-pub const MAX_ANSWER: usize = 64 << 20;
+use crate::agent::body::MAX_ANSWER;
 
 /// Agent processes started from one command line, one per episode running at once.
 #[derive(Debug)]
@@ -70,9 +67,9 @@ impl ProcessPool {
         let mut command = tokio::process::Command::new(&self.argv[0]);
         command.args(&self.argv[1..]).stdin(Stdio::piped()).stdout(Stdio::piped()).stderr(Stdio::piped());
         command.kill_on_drop(true);
-        super::tree::own_group(&mut command);
+        arena_vm::child::tree::own_group(&mut command);
         let mut child = command.spawn().map_err(|err| format!("cannot start {:?}: {err}", self.argv[0]))?;
-        let pid = super::tree::register(&mut child)?;
+        let pid = arena_vm::child::tree::register(&mut child)?;
         tracing::info!(pid, command = %self.argv.join(" "), "agent process started");
         let budget = StderrBudget::new(pid);
         if let Some(stderr) = child.stderr.take() {
@@ -147,7 +144,7 @@ impl Drop for AgentProcess {
     /// The process and everything it started end with it: when it broke the
     /// protocol and is replaced, when its episode worker stops, when the run ends.
     fn drop(&mut self) {
-        super::tree::end(self.pid);
+        arena_vm::child::tree::end(self.pid);
         self.budget.end_task();
     }
 }
@@ -239,7 +236,7 @@ impl Transport for AgentProcess {
 
     fn poison(&mut self) {
         self.poisoned = true;
-        super::tree::end(self.pid);
+        arena_vm::child::tree::end(self.pid);
         let _ = self.child.start_kill();
     }
 

@@ -1,20 +1,22 @@
-//! The episode's action port: carrying out an [`AgentAction`] on a guest, [`execute`].
+//! Carrying out an [`AgentAction`] on a guest: [`execute_with`], and the runner of
+//! an action space's steps, [`perform_steps`].
 //!
 //! Each kind of action has one way in:
 //! - typed actions are one `POST /v1/actions` batch, and a clipboard action one
 //!   `PUT /v1/clipboard`;
-//! - pyautogui code, whichever way it came (Navi, a scripted plan, the step
-//!   protocol, MCP's `run_python`, `arena act --pyautogui`), is translated whole by
-//!   the `pyautogui` action space (`arena_actionspace::parse`, for the guest's
-//!   screen and cursor: [`pointer`]) and its steps are carried out by
-//!   [`perform_steps`], so every way refuses the same files and processes and
-//!   turns the same `pyperclip.copy` into the same clipboard call;
-//! - Navi `computer.*` code runs here on the host, in the `arena_script`
-//!   interpreter, against [`GuestHost`]: a [`ScriptHost`] whose every effect is a
-//!   typed call of the guest's `/v1` API (an input action is `POST /v1/actions`,
-//!   `subprocess.run` is `POST /v1/exec`, `pyperclip.copy` is `PUT /v1/clipboard`,
-//!   ...). The interpreter is synchronous, so a script runs on a blocking worker
-//!   thread and reaches the async client through the runtime's [`Handle`].
+//! - Navi `computer.*` code, and pyautogui code under [`PyautoguiPolicy::Effects`]
+//!   (the default, as upstream's `python -c` runs it), run here on the host in the
+//!   `arena_script` interpreter against [`GuestHost`]: a [`arena_script::ScriptHost`]
+//!   whose every effect is a typed call of the guest's `/v1` API (an input action is
+//!   `POST /v1/actions`, `subprocess.run` is `POST /v1/exec`, `pyperclip.copy` is
+//!   `PUT /v1/clipboard`, ...). The interpreter is synchronous, so a script runs on
+//!   a blocking worker thread and reaches the async client through the runtime's [`Handle`];
+//! - pyautogui code under [`PyautoguiPolicy::TranslateOnly`] is translated whole by
+//!   the `pyautogui` action space (for the guest's screen and cursor: [`pointer`])
+//!   and its steps carried out by [`perform_steps`]: input and the clipboard only;
+//! - under [`PyautoguiPolicy::InputOnly`] (a setup step's `python -c`) code that is
+//!   input alone is one typed batch and any other code is left to the caller
+//!   ([`perform_input_only`]).
 //!
 //! Failures are sorted in two: what the agent did wrong or the desktop refused
 //! (a Python exception, code that does not translate, an unknown key, a program
@@ -30,47 +32,34 @@
 //! - Environment variables are read by running `cmd.exe /d /c echo %NAME%` on the
 //!   guest, so they need a Windows guest; on the stub they are unset.
 //!
-//! [`GuestHost`] implements only the primitives (capture, input, windows, files,
+//! [`GuestHost`] (module `guest_host`) implements only the primitives (capture, input, windows, files,
 //! processes, registry, clipboard, environment); every behaviour made of them (the
 //! window list, `switch_to_application`, `open_program`, `platform.version()`, saved
 //! screenshots, crops, command lines) is `arena_script::compose`'s, the same
 //! code the guest's own script host runs, so code gives the same result whether it
 //! runs here or in the guest's `/execute`.
 
-use std::future::Future;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
-use base64::Engine as _;
-use image::RgbaImage;
 use serde::{Deserialize, Serialize};
 use tokio::runtime::Handle;
 
 use arena_actionspace::{ActionSpace, Context, Coords, Step};
 use arena_client::client::GuestClient;
 use arena_client::error::ClientError;
-use arena_client::frame::{encode_png, Frame};
-use arena_script::{
-    parse, run, CommandOutput, ComputerState, Globals, HostError, HostResult, PathKind, ScriptError, ScriptHost, Stop,
-    WindowChange,
-};
+use arena_script::{parse, run, ComputerState, Globals, ScriptError, Stop};
 use arena_shared::action::{Action, ActionBatch};
 use arena_shared::clipboard::ClipboardContent;
-use arena_shared::cmdline::CommandSpec;
-use arena_shared::exec::{ExecRequest, LaunchRequest};
-use arena_shared::files::FileKind;
 use arena_shared::geometry::Point;
 use arena_shared::keys::HeldKeys;
-use arena_shared::observation::{ImageFormat, ScreenshotQuery, WindowInfo, WindowTarget};
-use arena_shared::registry::RegistryValue;
 
-use super::AgentAction;
-use crate::som::Marks;
+use crate::guest_host::GuestHost;
+use crate::AgentAction;
 
 /// Why an action could not be carried out at all: an infrastructure failure, never the agent's.
 #[derive(Debug, thiserror::Error)]
-#[non_exhaustive]
 pub enum ExecError {
     /// The guest is out of reach ([`ClientError::out_of_reach`]).
     #[error(transparent)]
@@ -93,16 +82,29 @@ pub struct ExecOptions {
     /// action ends, instead of at the end of the episode (`--held-keys action`).
     pub release_held_keys: bool,
     /// What the coordinates of pyautogui code are measured in (`--coords`): every
-    /// pyautogui answer, from any agent, is translated in this convention by the
-    /// `pyautogui` action space. A prediction may name its own
-    /// ([`crate::agent::Prediction::coords`]).
+    /// pyautogui answer, from any agent, is read in this convention, whichever
+    /// [`PyautoguiPolicy`] carries it out. A prediction may name its own (the
+    /// host's `Prediction::coords`).
     pub coords: Coords,
-    /// Run pyautogui code with its effects (the default, as upstream's `python -c`
-    /// runs it): in the host's interpreter against [`GuestHost`], files, processes
-    /// and screenshots through the guest's API. Off (`--pyautogui-translate-only`),
-    /// it is translated by the `pyautogui` action space: input and clipboard only,
-    /// and code reaching for anything else is the step's error.
-    pub pyautogui_effects: bool,
+    /// How pyautogui code is carried out.
+    pub pyautogui: PyautoguiPolicy,
+}
+
+/// How pyautogui code is carried out: the one choice each caller of the executor names.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum PyautoguiPolicy {
+    /// With its effects (agents' default, as upstream's `python -c` runs it): in
+    /// the host's interpreter against [`GuestHost`], files, processes and
+    /// screenshots through the guest's API.
+    #[default]
+    Effects,
+    /// Translated by the `pyautogui` action space (`--pyautogui-translate-only`):
+    /// input and the clipboard only; code reaching for anything else is the step's error.
+    TranslateOnly,
+    /// Carried out only when it is input alone, as one typed batch (a setup step's
+    /// `python -c`); other code is refused here, and [`perform_input_only`] tells
+    /// its caller so, which then runs the command on the guest as upstream does.
+    InputOnly,
 }
 
 impl Default for ExecOptions {
@@ -113,7 +115,7 @@ impl Default for ExecOptions {
             max_duration: Duration::from_secs(90),
             release_held_keys: false,
             coords: Coords::Pixels,
-            pyautogui_effects: true,
+            pyautogui: PyautoguiPolicy::Effects,
         }
     }
 }
@@ -123,6 +125,14 @@ impl ExecOptions {
     pub fn instant() -> ExecOptions {
         ExecOptions { sleep_scale: 0.0, computer_action_delay: 0.0, ..ExecOptions::default() }
     }
+}
+
+/// The Set-of-Marks boxes of an observation, as Navi's `computer` object takes them:
+/// one rectangle `[left, top, right, bottom]` per element id, on a screen of `size`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Boxes<'a> {
+    pub rects: &'a [[i32; 4]],
+    pub size: (u32, u32),
 }
 
 /// What carrying out one action did.
@@ -149,7 +159,7 @@ pub struct ActionOutcome {
 
 /// Carries out `action` on the guest with upstream's timings ([`ExecOptions::default`]).
 ///
-/// `marks` (when given) become the `computer` state's `rects` with
+/// `marks` (the Set-of-Marks boxes, when given) become the `computer` state's `rects` with
 /// `window_rect = [0, 0, W, H]` and scale 1, as Navi's `/update_computer`;
 /// `computer` keeps the clipboard text and the rest across steps.
 /// `WAIT`, `DONE` and `FAIL` do nothing here: pausing and stopping are the episode's business.
@@ -162,7 +172,7 @@ pub struct ActionOutcome {
 pub async fn execute(
     client: &GuestClient,
     action: &AgentAction,
-    marks: Option<&Marks>,
+    marks: Option<Boxes<'_>>,
     computer: &mut ComputerState,
 ) -> Result<ActionOutcome, ExecError> {
     execute_with(client, action, marks, computer, &ExecOptions::default()).await
@@ -176,7 +186,7 @@ pub async fn execute(
 pub async fn execute_with(
     client: &GuestClient,
     action: &AgentAction,
-    marks: Option<&Marks>,
+    marks: Option<Boxes<'_>>,
     computer: &mut ComputerState,
     options: &ExecOptions,
 ) -> Result<ActionOutcome, ExecError> {
@@ -189,10 +199,18 @@ pub async fn execute_with(
         AgentAction::Typed(actions) => typed(client, actions, options.release_held_keys).await?,
         AgentAction::Clipboard(text) => clipboard(client, text).await?,
         AgentAction::Computer(code) => run_script(client, code, Lang::Computer, computer, options).await?,
-        AgentAction::Pyautogui(code) if options.pyautogui_effects => {
-            run_script(client, code, Lang::Pyautogui, computer, options).await?
-        }
-        AgentAction::Pyautogui(code) => pyautogui(client, code, options).await?,
+        AgentAction::Pyautogui(code) => match options.pyautogui {
+            PyautoguiPolicy::Effects => run_script(client, code, Lang::Pyautogui, computer, options).await?,
+            PyautoguiPolicy::TranslateOnly => pyautogui(client, code, options).await?,
+            PyautoguiPolicy::InputOnly => match perform_input_only(client, code, options.coords).await {
+                Ok(InputOnly::Performed { actions, cursor }) => {
+                    ActionOutcome { performed: actions, cursor: Some(cursor), ..ActionOutcome::default() }
+                }
+                Ok(InputOnly::NotInput(why)) => refused(why),
+                Err(err) if err.out_of_reach() => return Err(ExecError::Guest(err)),
+                Err(err) => refused(err.to_string()),
+            },
+        },
     };
     outcome.elapsed_ms = u64::try_from(started.elapsed().as_millis()).unwrap_or(u64::MAX);
     Ok(outcome)
@@ -227,6 +245,44 @@ async fn pyautogui(client: &GuestClient, code: &str, options: &ExecOptions) -> R
 pub fn translate_pyautogui(code: &str, ctx: &Context) -> Result<Vec<Step>, String> {
     arena_actionspace::parse(ActionSpace::Pyautogui, &serde_json::Value::String(code.to_owned()), ctx)
         .map_err(|err| err.to_string())
+}
+
+/// What [`perform_input_only`] did.
+#[derive(Debug, Clone, PartialEq)]
+pub enum InputOnly {
+    /// The code was input alone, sent as one batch of `actions` input actions.
+    Performed { actions: usize, cursor: Point },
+    /// The code does more than input (or does not translate): nothing was done; why.
+    NotInput(String),
+}
+
+/// pyautogui code carried out as one typed batch when it is input alone
+/// ([`PyautoguiPolicy::InputOnly`]): translated by the `pyautogui` action space
+/// for the guest's screen and cursor, in `coords`. Code that asks for anything
+/// else (the clipboard, a screenshot, files, processes) or does not translate is
+/// [`InputOnly::NotInput`] and nothing is sent.
+///
+/// # Errors
+///
+/// The guest's screen or cursor cannot be read, or it refused the batch.
+pub async fn perform_input_only(client: &GuestClient, code: &str, coords: Coords) -> Result<InputOnly, ClientError> {
+    let ctx = pointer(client, coords).await?;
+    let steps = match translate_pyautogui(code, &ctx) {
+        Ok(steps) => steps,
+        Err(why) => return Ok(InputOnly::NotInput(why)),
+    };
+    let mut actions = Vec::with_capacity(steps.len());
+    for step in steps {
+        match step {
+            Step::Act(action) => actions.push(action),
+            other => {
+                return Ok(InputOnly::NotInput(format!("the code asks for {other:?}, which is not an input action")))
+            }
+        }
+    }
+    let n = actions.len();
+    let report = client.act(&ActionBatch { actions }).await?;
+    Ok(InputOnly::Performed { actions: n, cursor: report.cursor })
 }
 
 /// What pyautogui code is translated against on the guest behind `client`: its
@@ -310,9 +366,9 @@ async fn clipboard(client: &GuestClient, text: &str) -> Result<ActionOutcome, Ex
 
 /// Navi's `/update_computer` from the Set-of-Marks: the element boxes, the whole
 /// screen as the view, and scale 1. `current_id` is forgotten when the boxes change.
-fn apply_marks(computer: &mut ComputerState, marks: &Marks) {
+fn apply_marks(computer: &mut ComputerState, marks: Boxes<'_>) {
     if computer.rects != marks.rects {
-        computer.rects = marks.rects.clone();
+        computer.rects = marks.rects.to_vec();
         computer.current_id = None;
     }
     let (w, h) = marks.size;
@@ -476,241 +532,6 @@ fn script_error(err: &ScriptError) -> String {
     }
 }
 
-/// A [`ScriptHost`] whose effects are calls of one guest's `/v1` API.
-///
-/// It must run on a thread that is not a runtime worker (a `spawn_blocking`
-/// thread), because it blocks on the client's futures through `rt`. On a
-/// current-thread runtime this works only while that thread is inside
-/// `Runtime::block_on` (awaiting the script), which drives the I/O; [`execute`]
-/// guarantees that by awaiting the worker.
-#[derive(Debug)]
-pub struct GuestHost {
-    client: GuestClient,
-    rt: Handle,
-    options: ExecOptions,
-    started: Instant,
-    /// The cursor after the last input action.
-    pub cursor: Option<Point>,
-    /// How many input actions were sent.
-    pub performed: usize,
-    /// The first error that showed the guest unreachable. The script saw it as a
-    /// [`HostError::Unreachable`] and stopped; the client error is kept for the caller.
-    pub unreachable: Option<ClientError>,
-    /// Keys the script pressed with `keyDown` and has not released yet.
-    pub held: HeldKeys,
-    /// Every key the script pressed with `keyDown`, each once.
-    pub keys_down: Vec<String>,
-}
-
-impl GuestHost {
-    pub fn new(client: GuestClient, rt: Handle, options: ExecOptions) -> GuestHost {
-        GuestHost {
-            client,
-            rt,
-            options,
-            started: Instant::now(),
-            cursor: None,
-            performed: 0,
-            unreachable: None,
-            held: HeldKeys::default(),
-            keys_down: Vec::new(),
-        }
-    }
-
-    /// Runs one client call to completion, remembering an unreachable guest.
-    fn call<T, F>(&mut self, call: impl FnOnce(GuestClient) -> F) -> HostResult<T>
-    where
-        F: Future<Output = Result<T, ClientError>>,
-    {
-        if let Some(err) = &self.unreachable {
-            return Err(HostError::Unreachable(format!("the guest is unreachable: {err}")));
-        }
-        let result = self.rt.block_on(call(self.client.clone()));
-        result.map_err(|err| self.client_error(err))
-    }
-
-    /// A client error as the script sees it; an unreachable guest is remembered.
-    fn client_error(&mut self, err: ClientError) -> HostError {
-        let message = err.to_string();
-        if err.out_of_reach() {
-            self.unreachable = Some(err);
-            return HostError::Unreachable(message);
-        }
-        HostError::Failed(message)
-    }
-
-    fn remaining(&self) -> Duration {
-        self.options.max_duration.saturating_sub(self.started.elapsed())
-    }
-}
-
-impl ScriptHost for GuestHost {
-    fn perform(&mut self, action: Action) -> HostResult<()> {
-        let tracked = action.clone();
-        let report = self.call(|c| async move { c.act_one(action).await })?;
-        self.held.track(&tracked);
-        if let Action::KeyDown { key } = &tracked {
-            if !self.keys_down.contains(key) {
-                self.keys_down.push(key.clone());
-            }
-        }
-        self.cursor = Some(report.cursor);
-        self.performed += 1;
-        Ok(())
-    }
-
-    fn sleep(&mut self, seconds: f64) -> HostResult<()> {
-        let scaled = (seconds * self.options.sleep_scale).max(0.0);
-        let wanted = Duration::try_from_secs_f64(scaled).unwrap_or(Duration::MAX);
-        if wanted > self.remaining() {
-            return Err(HostError::TimedOut(format!(
-                "sleeping {seconds} s would take the action past its {} s limit",
-                self.options.max_duration.as_secs()
-            )));
-        }
-        std::thread::sleep(wanted);
-        Ok(())
-    }
-
-    fn cursor_position(&mut self) -> HostResult<(i32, i32)> {
-        // An empty batch does nothing and reports where the cursor is.
-        let report = self.call(|c| async move { c.act(&ActionBatch { actions: Vec::new() }).await })?;
-        self.cursor = Some(report.cursor);
-        Ok((report.cursor.x, report.cursor.y))
-    }
-
-    fn screen_size(&mut self) -> HostResult<(u32, u32)> {
-        let screen = self.call(|c| async move { c.screen().await })?;
-        Ok((screen.physical_width, screen.physical_height))
-    }
-
-    fn capture(&mut self) -> HostResult<RgbaImage> {
-        let query = ScreenshotQuery { format: ImageFormat::Png, cursor: Some(false), ..ScreenshotQuery::default() };
-        let shot = self.call(|c| async move { c.screenshot(&query).await })?;
-        Frame::decode(shot.bytes)
-            .map(|frame| Arc::unwrap_or_clone(frame.pixels))
-            .map_err(|e| HostError::Failed(format!("cannot decode the screenshot: {e}")))
-    }
-
-    fn observed_screenshot(&mut self) -> HostResult<RgbaImage> {
-        // The agent's own observation is not kept here (see the module doc).
-        self.capture()
-    }
-
-    fn windows(&mut self) -> HostResult<Vec<WindowInfo>> {
-        self.call(|c| async move { c.windows().await })
-    }
-
-    fn change_window(&mut self, id: u64, change: WindowChange) -> HostResult<()> {
-        let target = WindowTarget { id: Some(id), title: None };
-        self.call(|c| async move {
-            match change {
-                WindowChange::Restore => c.restore_window(&target).await,
-                WindowChange::Maximize => c.maximize_window(&target).await,
-                WindowChange::Activate => c.activate_window(&target).await,
-            }
-        })
-        .map(drop)
-    }
-
-    fn path_kind(&mut self, path: &str) -> Option<PathKind> {
-        let path = path.to_owned();
-        let exists = self.call(|c| async move { c.exists(&path).await }).ok()?;
-        match (exists.exists, exists.kind) {
-            (false, _) => None,
-            (true, Some(FileKind::Dir)) => Some(PathKind::Dir),
-            (true, _) => Some(PathKind::File),
-        }
-    }
-
-    fn list_dir(&mut self, path: &str) -> HostResult<Vec<String>> {
-        let path = path.to_owned();
-        let listing = self.call(|c| async move { c.list_dir(&path).await })?;
-        let mut names: Vec<String> = listing.entries.into_iter().map(|e| e.name).collect();
-        // The guest lists in this order already; sorting keeps `os.listdir` right
-        // against a guest that does not.
-        arena_shared::ntfs::sort_names(&mut names);
-        Ok(names)
-    }
-
-    fn write_file(&mut self, path: &str, bytes: Vec<u8>) -> HostResult<()> {
-        let path = path.to_owned();
-        // As Python's `open(path, "wb")`: no missing folder is created.
-        self.call(|c| async move { c.push_file(&path, bytes, Some(false)).await }).map(drop)
-    }
-
-    fn run(&mut self, command: &CommandSpec) -> HostResult<CommandOutput> {
-        let timeout_ms = u64::try_from(self.remaining().as_millis()).unwrap_or(u64::MAX).max(1);
-        let request = ExecRequest { timeout_ms: Some(timeout_ms), ..ExecRequest::new(command.clone()) };
-        let result = self.call(|c| async move { c.exec(&request).await })?;
-        if result.timed_out {
-            return Err(HostError::TimedOut("the command ran out of time".to_owned()));
-        }
-        Ok(CommandOutput { code: result.exit_code.unwrap_or(-1), stdout: result.stdout, stderr: result.stderr })
-    }
-
-    fn launch(&mut self, command: &CommandSpec) -> HostResult<Option<u32>> {
-        if let Some(err) = &self.unreachable {
-            return Err(HostError::Unreachable(format!("the guest is unreachable: {err}")));
-        }
-        let request = LaunchRequest::new(command.clone());
-        match self.rt.block_on(self.client.launch(&request)) {
-            Ok(launched) => Ok(Some(launched.pid)),
-            // The guest answers 404 when the program does not exist.
-            Err(err) if err.status() == Some(404) => Ok(None),
-            Err(err) => Err(self.client_error(err)),
-        }
-    }
-
-    fn registry_read(&mut self, key: &str, value: Option<&str>) -> HostResult<Option<RegistryValue>> {
-        if let Some(err) = &self.unreachable {
-            return Err(HostError::Unreachable(format!("the guest is unreachable: {err}")));
-        }
-        match self.rt.block_on(self.client.registry_get(key, value)) {
-            Ok(read) => Ok(Some(read.data)),
-            // The guest answers 404 when the key or the value does not exist.
-            Err(err) if err.status() == Some(404) => Ok(None),
-            Err(err) => Err(self.client_error(err)),
-        }
-    }
-
-    fn clipboard_set_text(&mut self, text: &str) -> HostResult<()> {
-        let content = ClipboardContent::Text { text: text.to_owned() };
-        self.call(|c| async move { c.clipboard_set(&content).await })
-    }
-
-    fn clipboard_get_text(&mut self) -> HostResult<String> {
-        match self.call(|c| async move { c.clipboard_get().await })? {
-            ClipboardContent::Text { text } => Ok(text),
-            // pyperclip.paste() gives "" when the clipboard holds no text.
-            _ => Ok(String::new()),
-        }
-    }
-
-    fn clipboard_set_image(&mut self, image: RgbaImage) -> HostResult<()> {
-        let png = encode_png(&image);
-        if png.is_empty() {
-            return Err(HostError::Failed("cannot encode the image".into()));
-        }
-        let content = ClipboardContent::Image {
-            width: image.width(),
-            height: image.height(),
-            png_base64: base64::engine::general_purpose::STANDARD.encode(png),
-        };
-        self.call(|c| async move { c.clipboard_set(&content).await })
-    }
-
-    fn env_var(&mut self, name: &str) -> Option<String> {
-        if name.is_empty() || !name.chars().all(|c| c.is_ascii_alphanumeric() || "_()".contains(c)) {
-            return None;
-        }
-        let out = self.run(&CommandSpec::Shell(format!("echo %{name}%"))).ok()?;
-        let value = out.stdout.trim_end_matches(['\r', '\n']).to_owned();
-        // cmd.exe echoes an undefined variable's reference unchanged.
-        (out.code == 0 && value != format!("%{name}%")).then_some(value)
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -720,14 +541,15 @@ mod tests {
         let mut state = ComputerState::for_screen(10, 10);
         state.current_id = Some(0);
         state.clipboard_content = Some("kept".into());
-        let marks = Marks { entities: Vec::new(), rects: vec![[1, 2, 3, 4]], size: (1920, 1080) };
-        apply_marks(&mut state, &marks);
+        let rects = [[1, 2, 3, 4]];
+        let marks = Boxes { rects: &rects, size: (1920, 1080) };
+        apply_marks(&mut state, marks);
         assert_eq!(state.rects, vec![[1, 2, 3, 4]]);
         assert_eq!(state.window_rect, [0, 0, 1920, 1080]);
         assert_eq!(state.current_id, None);
         assert_eq!(state.clipboard_content.as_deref(), Some("kept"));
         state.current_id = Some(0);
-        apply_marks(&mut state, &marks);
+        apply_marks(&mut state, marks);
         assert_eq!(state.current_id, Some(0), "the same boxes keep the current id");
     }
 }

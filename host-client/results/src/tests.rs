@@ -2,102 +2,9 @@
 
 use std::collections::BTreeMap;
 
+use super::fixtures::{episode, layout, reset, step, task, write_task};
 use super::summary::{self, Summary};
 use super::*;
-
-pub(crate) fn episode(domain: &str, name: &str, score: f64, status: EpisodeStatus, steps: u32) -> EpisodeResult {
-    EpisodeResult {
-        score_is_int: false,
-        task_id: format!("{name}-id"),
-        task_name: name.to_owned(),
-        domain: domain.to_owned(),
-        instruction: format!("do {name}"),
-        agent: "scripted".into(),
-        model: "plan".into(),
-        guest: "http://g".into(),
-        attempt: 1,
-        score,
-        status,
-        steps,
-        last_action: "done".into(),
-        elapsed_ms: 1500,
-        setup_ms: 100,
-        eval_ms: 50,
-        started_unix: 0,
-        setup: Vec::new(),
-        eval: Value::Null,
-        timings: Vec::new(),
-        options: Default::default(),
-        vm: None,
-        tokens: None,
-        cost_usd: None,
-        action_errors: 0,
-    }
-}
-
-fn step(n: u32) -> StepRecord {
-    let timestamp = format_timestamp(0);
-    StepRecord {
-        first: ActionRecord {
-            step_num: n,
-            action_timestamp: timestamp.clone(),
-            action: "DONE".into(),
-            reward: 0.0,
-            done: true,
-            info: serde_json::json!({"done": true}),
-            observation: ObservationKeys {
-                screenshot: TaskDir::screenshot_name(Some(n - 1), &timestamp),
-                instruction: "i".into(),
-                window_title: "Untitled - Notepad".into(),
-                window_names_str: "Untitled - Notepad".into(),
-                ..ObservationKeys::default()
-            },
-        },
-        step: n,
-        response: "<b>ok</b>".into(),
-        actions: vec![crate::ports::AgentAction::Done],
-        ended: true,
-        screenshot_source: None,
-        screen: None,
-        screenshot_file: TaskDir::screenshot_name(None, &timestamp),
-        timings: StepTimings { observe_ms: 3, predict_ms: 1, act_ms: 2, pause_ms: 0, ..StepTimings::default() },
-        usage: None,
-        error: None,
-        outcomes: Vec::new(),
-        more: Vec::new(),
-        logs: Default::default(),
-    }
-}
-
-fn reset() -> ResetRecord {
-    ResetRecord {
-        step_num: 0,
-        action_timestamp: format_timestamp(0),
-        action: None,
-        observation: ObservationKeys {
-            screenshot: TaskDir::screenshot_name(None, &format_timestamp(0)),
-            instruction: "i".into(),
-            window_title: "Program Manager".into(),
-            window_names_str: "Program Manager".into(),
-            ..ObservationKeys::default()
-        },
-    }
-}
-
-pub(crate) fn layout(root: &Path) -> RunLayout {
-    RunLayout {
-        root: root.to_owned(),
-        agent: "scripted".into(),
-        observation: "a11y_tree".into(),
-        model: "meta/llama:3".into(),
-        trial: "0".into(),
-    }
-}
-
-fn task(domain: &str, name: &str) -> Task {
-    let text = r#"{"id": "x", "instruction": "i", "config": [], "evaluator": {"func": "infeasible"}}"#;
-    Task::parse(text, &PathBuf::from(format!("/tasks/{domain}/{name}.json"))).unwrap()
-}
 
 #[test]
 fn scores_are_written_as_python_prints_floats() {
@@ -223,14 +130,6 @@ fn a_bad_trajectory_line_is_named() {
     let err = read_trajectory(&path).unwrap_err().to_string();
     assert!(err.contains("line 3"), "{err}");
     assert!(read_trajectory(&dir.path().join("absent.jsonl")).unwrap().is_empty());
-}
-
-/// Writes a finished (or unfinished) task under `root` with the upstream layout.
-pub(crate) fn write_task(root: &Path, domain: &str, name: &str, score: f64, status: EpisodeStatus) {
-    let dir = layout(root).task_dir(&task(domain, name));
-    dir.prepare().unwrap();
-    dir.write_screenshot(None, &format_timestamp(0), b"png").unwrap();
-    dir.finish(&episode(domain, name, score, status, 2), Some(&reset()), &[step(1)]).unwrap();
 }
 
 #[test]
@@ -462,7 +361,7 @@ fn computer_use_task(root: &Path, answer: &Value) -> TaskDir {
     first.response = "the model's text".into();
     first.logs.insert("response".into(), Value::String(record));
     first.actions = vec![
-        crate::ports::AgentAction::Typed(vec![
+        arena_exec::AgentAction::Typed(vec![
             arena_shared::action::Action::Click { x: Some(30), y: Some(5), button: Default::default(), count: 1 },
             arena_shared::action::Action::Drag {
                 from: Some(arena_shared::geometry::Point::new(2, 3)),
@@ -471,10 +370,10 @@ fn computer_use_task(root: &Path, answer: &Value) -> TaskDir {
                 duration_ms: None,
             },
         ]),
-        crate::ports::AgentAction::Done,
+        arena_exec::AgentAction::Done,
     ];
     first.outcomes = vec![serde_json::json!({"error": "key <x> unknown", "performed": 1, "elapsed_ms": 1})];
-    first.usage = Some(crate::agent::Usage { input: 1234, output: 56, cached: 1000, model_ms: 250 });
+    first.usage = Some(crate::ledger::Usage { input: 1234, output: 56, cached: 1000, model_ms: 250 });
     let mut episode = episode("notepad", "cu", 0.0, EpisodeStatus::Completed, 1);
     episode.action_errors = 1;
     dir.finish(&episode, Some(&reset()), &[first]).unwrap();

@@ -2,7 +2,7 @@
 //! stops a run from starting new tasks (`--max-cost`, `--max-total-tokens`).
 //!
 //! Tokens are counted per step from the model agents' responses and from an
-//! outside agent's `act` ([`crate::agent::Usage`]); a task's total is in its
+//! outside agent's `act` ([`Usage`]); a task's total is in its
 //! `episode.json`, with its cost when a price file was given. No price is
 //! built in: prices change, and a stale one would be a wrong number.
 //!
@@ -22,9 +22,71 @@ use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
-use crate::agent::Usage;
+use super::{write_json, ResultsError};
 
-use super::{write_atomic, ResultsError};
+/// Tokens and model time: of one step, a task, a domain or a run (the cost ledger).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+pub struct Usage {
+    /// Prompt tokens, those read from a cache included.
+    #[serde(default)]
+    pub input: u64,
+    /// Completion tokens (reasoning included where the vendor counts it there).
+    #[serde(default)]
+    pub output: u64,
+    /// The part of [`Usage::input`] read from the vendor's prompt cache.
+    #[serde(default)]
+    pub cached: u64,
+    /// Wall time of the model calls that answered, in milliseconds.
+    #[serde(default)]
+    pub model_ms: u64,
+}
+
+impl Usage {
+    /// Adds `other` into this one (saturating).
+    pub fn add(&mut self, other: &Usage) {
+        self.input = self.input.saturating_add(other.input);
+        self.output = self.output.saturating_add(other.output);
+        self.cached = self.cached.saturating_add(other.cached);
+        self.model_ms = self.model_ms.saturating_add(other.model_ms);
+    }
+
+    /// Input plus output tokens.
+    pub fn total(&self) -> u64 {
+        self.input.saturating_add(self.output)
+    }
+
+    /// The `usage` object of a model response, whichever vendor's shape it has:
+    /// chat completions (`prompt_tokens`, `completion_tokens`,
+    /// `prompt_tokens_details.cached_tokens`; openai-python's `CompletionUsage`),
+    /// the Responses API (`input_tokens`, `output_tokens`,
+    /// `input_tokens_details.cached_tokens`; `ResponseUsage`), and Anthropic's
+    /// Messages (`input_tokens` without the cache, `cache_read_input_tokens`,
+    /// `cache_creation_input_tokens`, `output_tokens`; anthropic-python's `Usage`),
+    /// whose input here is the three input counts together. `None` without a
+    /// `usage` object or counts in it.
+    pub fn of_response(answer: &serde_json::Value) -> Option<Usage> {
+        let usage = answer.get("usage")?;
+        let n = |v: &serde_json::Value, key: &str| v.get(key).and_then(serde_json::Value::as_u64);
+        if let (Some(input), Some(output)) = (n(usage, "prompt_tokens"), n(usage, "completion_tokens")) {
+            let cached = usage.get("prompt_tokens_details").and_then(|d| n(d, "cached_tokens")).unwrap_or(0);
+            return Some(Usage { input, output, cached: cached.min(input), model_ms: 0 });
+        }
+        let (input, output) = (n(usage, "input_tokens")?, n(usage, "output_tokens")?);
+        let read = n(usage, "cache_read_input_tokens");
+        let written = n(usage, "cache_creation_input_tokens");
+        if read.is_some() || written.is_some() {
+            let (read, written) = (read.unwrap_or(0), written.unwrap_or(0));
+            return Some(Usage {
+                input: input.saturating_add(read).saturating_add(written),
+                output,
+                cached: read,
+                model_ms: 0,
+            });
+        }
+        let cached = usage.get("input_tokens_details").and_then(|d| n(d, "cached_tokens")).unwrap_or(0);
+        Some(Usage { input, output, cached: cached.min(input), model_ms: 0 })
+    }
+}
 
 /// The run's budget record, at the root of the result folder; the summary shows it.
 pub const BUDGET_JSON: &str = "budget.json";
@@ -178,9 +240,7 @@ impl BudgetRecord {
     /// The file cannot be written.
     pub fn write(&self, root: &Path) -> Result<PathBuf, ResultsError> {
         let path = root.join(BUDGET_JSON);
-        let bytes = serde_json::to_vec_pretty(self)
-            .map_err(|err| ResultsError::Format { path: path.clone(), message: err.to_string() })?;
-        write_atomic(&path, &bytes)?;
+        write_json(&path, self)?;
         Ok(path)
     }
 

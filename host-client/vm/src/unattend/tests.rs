@@ -222,8 +222,8 @@ fn the_limits_check_fails_on_a_260_character_specialize_command() {
     assert!(oem_copy_command().len() < 259, "{}", oem_copy_command().len());
 }
 
-fn images() -> Vec<crate::vm::iso::IsoImage> {
-    let image = |index, name: &str, id: &str| crate::vm::iso::IsoImage {
+fn images() -> Vec<crate::iso::IsoImage> {
+    let image = |index, name: &str, id: &str| crate::iso::IsoImage {
         index,
         name: name.into(),
         display_name: None,

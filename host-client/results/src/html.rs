@@ -309,7 +309,7 @@ fn chart(domains: &[DomainRow], overall: &DomainRow) -> String {
 /// The run's tokens, model time and cost, and its budget, when any task reported tokens.
 fn ledger_html(summary: &Summary) -> String {
     let o = &summary.overall;
-    if o.tokens == crate::agent::Usage::default() && o.cost_usd.is_none() && summary.budget.is_none() {
+    if o.tokens == crate::ledger::Usage::default() && o.cost_usd.is_none() && summary.budget.is_none() {
         return String::new();
     }
     let mut h = format!(
@@ -540,7 +540,7 @@ fn task_section(task: &FoundTask, broken: bool, row: Option<&super::summary::Tas
 }
 
 /// Tokens in words: `1234 in (1000 cached), 56 out; model 1.2 s`.
-fn tokens_words(u: &crate::agent::Usage) -> String {
+fn tokens_words(u: &crate::ledger::Usage) -> String {
     format!(
         "<span class=\"tokens-in\">{}</span> in ({} cached), <span class=\"tokens-out\">{}</span> out; model {:.2} s",
         u.input,
@@ -789,12 +789,10 @@ fn step_html(
 }
 
 /// An action as the page lists it: code as written, typed actions one per line as JSON.
-fn action_text(action: &crate::ports::AgentAction) -> String {
+fn action_text(action: &arena_exec::AgentAction) -> String {
     match action {
-        crate::ports::AgentAction::Computer(code) | crate::ports::AgentAction::Pyautogui(code) => {
-            code.trim().to_owned()
-        }
-        crate::ports::AgentAction::Typed(actions) => {
+        arena_exec::AgentAction::Computer(code) | arena_exec::AgentAction::Pyautogui(code) => code.trim().to_owned(),
+        arena_exec::AgentAction::Typed(actions) => {
             actions.iter().map(|a| serde_json::to_string(a).unwrap_or_default()).collect::<Vec<_>>().join("\n")
         }
         other => other.summary(),

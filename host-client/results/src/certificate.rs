@@ -7,7 +7,7 @@
 //! The format is documented in docs/results.md ("Certificates"). This module
 //! computes certificates from scores already read back from result folders,
 //! writes and reads them; it runs nothing and does no guest I/O (the command
-//! is `crate::cli::certify`).
+//! is the host's `cli::certify`).
 
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
@@ -15,7 +15,7 @@ use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
-use super::{safe_component, write_atomic, ResultsError};
+use super::{safe_component, write_atomic, write_json, ResultsError};
 
 /// The version of the certificate format this build writes and reads.
 pub const CERTIFICATE_VERSION: u32 = 1;
@@ -203,13 +203,6 @@ pub fn write_all(out: &Path, certificates: &[Certificate]) -> Result<PathBuf, Re
     let md = out.join(CERTIFICATES_MD);
     write_atomic(&md, table(certificates).as_bytes())?;
     Ok(md)
-}
-
-/// `value` as pretty JSON into `path`, atomically.
-fn write_json(path: &Path, value: &impl Serialize) -> Result<(), ResultsError> {
-    let text = serde_json::to_string_pretty(value)
-        .map_err(|err| ResultsError::Format { path: path.to_owned(), message: err.to_string() })?;
-    write_atomic(path, text.as_bytes())
 }
 
 /// A share as a percentage cell, `-` for none.

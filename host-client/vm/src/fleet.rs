@@ -11,9 +11,8 @@ use arena_shared::observation::ScreenshotQuery;
 use tokio::sync::Mutex;
 
 use super::{Boot, Vm, VmConfig, VmError, READY_SNAPSHOT};
-use crate::results::VmStart;
-use crate::run::pool::GuestLifecycle;
 use arena_client::client::GuestClient;
+use arena_results::VmStart;
 
 /// When a VM goes back to its `ready` snapshot.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -63,7 +62,7 @@ impl ResetPolicy {
     }
 }
 
-pub use crate::results::ScreenCheck;
+pub use arena_results::ScreenCheck;
 
 /// Takes QEMU's screendump and the guest's own screenshot and compares them.
 ///
@@ -214,9 +213,14 @@ impl VmFleet {
     }
 }
 
-#[async_trait::async_trait]
-impl GuestLifecycle for VmFleet {
-    async fn before_task(&self, guest: &GuestClient) -> Result<Option<VmStart>, String> {
+impl VmFleet {
+    /// Before a task on `guest`: restores its VM's `ready` snapshot when the
+    /// [`ResetPolicy`] says it is due, and checks the restored screen.
+    ///
+    /// # Errors
+    ///
+    /// The VM is not one of this fleet's, is not running, or did not come back.
+    pub async fn before_task(&self, guest: &GuestClient) -> Result<Option<VmStart>, String> {
         let slot = self.slot(guest)?;
         let mut state = slot.state.lock().await;
         let state = &mut *state;
@@ -252,7 +256,13 @@ impl GuestLifecycle for VmFleet {
         Ok(Some(start))
     }
 
-    async fn revive(&self, guest: &GuestClient) -> Result<(), String> {
+    /// Kills `guest`'s VM and starts it again from its overlay's `ready`
+    /// snapshot, or failing that from a new overlay.
+    ///
+    /// # Errors
+    ///
+    /// The VM is not one of this fleet's, or neither way brought it back.
+    pub async fn revive(&self, guest: &GuestClient) -> Result<(), String> {
         let slot = self.slot(guest)?;
         let mut state = slot.state.lock().await;
         let state = &mut *state;
@@ -285,9 +295,11 @@ impl GuestLifecycle for VmFleet {
 /// a killed process closes its sockets a moment before it can be reaped.
 const EXIT_SHOWS_WITHIN: Duration = Duration::from_secs(1);
 
-#[async_trait::async_trait]
-impl crate::run::blame::GuestWatch for VmFleet {
-    async fn outside_failure(&self, guest: &str) -> Option<String> {
+impl VmFleet {
+    /// Why the VM of `guest` (its base URL) stopped, when the cause is outside
+    /// the guest (QEMU gone or killed); `None` when it still runs, or stopped
+    /// from inside.
+    pub async fn outside_failure(&self, guest: &str) -> Option<String> {
         let slot = self.slots.iter().find(|s| s.url == guest)?;
         let until = Instant::now() + EXIT_SHOWS_WITHIN;
         loop {
@@ -307,9 +319,9 @@ impl crate::run::blame::GuestWatch for VmFleet {
     }
 }
 
-#[async_trait::async_trait]
-impl crate::ports::observe::ScreenSource for VmFleet {
-    async fn screendump(&self, guest: &str) -> Option<Vec<u8>> {
+impl VmFleet {
+    /// QEMU's screendump of the VM `guest` (its base URL) runs in, as PNG.
+    pub async fn screendump(&self, guest: &str) -> Option<Vec<u8>> {
         let slot = self.slots.iter().find(|s| s.url == guest)?;
         let state = slot.state.lock().await;
         match state.vm.as_ref()?.screendump().await {

@@ -1,4 +1,4 @@
-//! Windows VMs this program runs itself with QEMU.
+//! Windows VMs this program runs itself with QEMU (`arena-vm`).
 //!
 //! Each VM runs on a copy-on-write overlay (qcow2 with a backing file) of a
 //! read-only golden image, with a QMP control socket, user-mode networking that
@@ -10,14 +10,21 @@
 //! - [`qemu`]: the command line, as data; where QEMU is; KVM or software emulation.
 //! - [`disk`]: `qemu-img`: image facts, golden-image checks, overlays.
 //! - [`qmp`]: the control socket (commands, monitor lines, events).
+//! - [`child`]: a child dies with us: the host side's only system calls (QEMU's
+//!   helpers and an exec agent's process tree end with this program).
+//! - [`oem`]: staging a Windows image's OEM folder and waiting for its guest.
 //!
 //! It is not the guest: the server inside the VM is `arena-guest`, reached over
 //! HTTP like any other guest.
 
+#![deny(unsafe_code)]
+
 pub mod bundle;
+pub mod child;
 pub mod disk;
 pub mod fleet;
 pub mod iso;
+pub mod oem;
 pub mod ovmf;
 pub mod prepare;
 pub mod qemu;
@@ -406,7 +413,7 @@ impl Vm {
             .stdout(Stdio::from(log))
             .stderr(Stdio::from(log_err))
             .kill_on_drop(true);
-        die_with_this_process(&mut command);
+        child::die_with_this_process(&mut command);
         let mut child = command
             .spawn()
             .map_err(|source| VmError::Io { what: format!("starting {}", spec.qemu.display()), source })?;
@@ -597,38 +604,6 @@ fn qmp_deadline(spec: &VmSpec) -> Duration {
     }
 }
 
-/// Makes the child `command` starts (QEMU, swtpm) end with this program even
-/// when it is killed outright, so no VM outlives the run that owns it. (The
-/// signal follows the thread that started the child: a runtime worker, which
-/// lives as long as the runtime.)
-pub(crate) fn die_with_this_process(command: &mut tokio::process::Command) {
-    #[cfg(target_os = "linux")]
-    // SAFETY: the hook runs in the child between fork and exec and only calls
-    // prctl and getppid, which are async-signal-safe, and allocates nothing.
-    unsafe {
-        command.pre_exec(parent_death_hook());
-    }
-    #[cfg(not(target_os = "linux"))]
-    let _ = command;
-}
-
-/// [`die_with_this_process`] for a child run to its end (`qemu-img`, `xorriso`):
-/// the thread that starts it waits for it, so the signal comes exactly when
-/// this program dies. Without it a `qemu-img` of a killed prepare runs on and
-/// keeps the disk's lock, and the rerun cannot open the disk.
-pub(crate) fn die_with_this_process_std(command: &mut std::process::Command) {
-    #[cfg(target_os = "linux")]
-    {
-        use std::os::unix::process::CommandExt;
-        // SAFETY: as in die_with_this_process.
-        unsafe {
-            command.pre_exec(parent_death_hook());
-        }
-    }
-    #[cfg(not(target_os = "linux"))]
-    let _ = command;
-}
-
 /// VMs run on a Linux host: QEMU's monitor and the TPM speak over Unix sockets,
 /// and QEMU's processes end with this one through Linux's `PR_SET_PDEATHSIG`.
 /// Elsewhere (a Windows host) starting one is refused with a clear error; runs
@@ -640,25 +615,6 @@ fn linux_host() -> Result<(), VmError> {
     Err(VmError::Invalid(
         "VMs are driven from a Linux host (QEMU's monitor and TPM are Unix sockets): start them there and pass the guest's URL with --guest".to_owned(),
     ))
-}
-
-/// The child's side: SIGKILL when the parent dies (`PR_SET_PDEATHSIG`, prctl(2)),
-/// and a refusal to start when the parent already died between fork and prctl
-/// (then no signal would ever come: the child has been handed to another parent).
-#[cfg(target_os = "linux")]
-fn parent_death_hook() -> impl FnMut() -> std::io::Result<()> + Send + Sync + 'static {
-    let parent = std::process::id();
-    move || {
-        // SAFETY: plain system calls with no pointers.
-        let (set, now) = unsafe { (libc::prctl(libc::PR_SET_PDEATHSIG, libc::SIGKILL), libc::getppid()) };
-        if set != 0 {
-            return Err(std::io::Error::last_os_error());
-        }
-        if u32::try_from(now).ok() != Some(parent) {
-            return Err(std::io::Error::from_raw_os_error(libc::ESRCH));
-        }
-        Ok(())
-    }
 }
 
 /// Returns once QEMU reports that the guest can no longer run (an emulation
@@ -815,57 +771,6 @@ mod tests {
         assert!(quit.contains("host-signal"), "{quit}");
         assert_eq!(outside_guest(status(0), Some("guest-shutdown")), None);
         assert_eq!(outside_guest(status(0), None), None);
-    }
-
-    /// A child started with the hook (as prepare starts `qemu-img`) dies when the
-    /// process that started it ends: this test runs itself again as that parent.
-    #[cfg(target_os = "linux")]
-    #[test]
-    fn a_child_started_with_the_hook_dies_with_its_parent() {
-        const PARENT: &str = "ARENA_TEST_PARENT_DEATH_PIDFILE";
-        if let Some(pidfile) = std::env::var_os(PARENT) {
-            let mut command = std::process::Command::new("sleep");
-            command
-                .arg("600")
-                .stdin(std::process::Stdio::null())
-                .stdout(std::process::Stdio::null())
-                .stderr(std::process::Stdio::null());
-            die_with_this_process_std(&mut command);
-            let child = command.spawn().expect("sleep starts");
-            std::fs::write(pidfile, child.id().to_string()).expect("pid written");
-            // Not waited for: the parent ends with the child still running.
-            std::mem::forget(child);
-            return;
-        }
-        let dir = tempfile::tempdir().expect("dir");
-        let pidfile = dir.path().join("pid");
-        let status = std::process::Command::new(std::env::current_exe().expect("the test binary"))
-            .args(["--exact", "vm::tests::a_child_started_with_the_hook_dies_with_its_parent", "--test-threads=1"])
-            .env(PARENT, &pidfile)
-            .stdin(std::process::Stdio::null())
-            .stdout(std::process::Stdio::null())
-            .stderr(std::process::Stdio::null())
-            .status()
-            .expect("the parent runs");
-        assert!(status.success(), "{status}");
-        let pid: u32 = std::fs::read_to_string(&pidfile).expect("pid").trim().parse().expect("a pid");
-        // Gone, or a zombie waiting for its new parent to reap it: either way dead.
-        let running = || {
-            std::fs::read_to_string(format!("/proc/{pid}/status"))
-                .ok()
-                .and_then(|s| s.lines().find(|l| l.starts_with("State:")).map(|l| !l.contains('Z')))
-                .unwrap_or(false)
-        };
-        let until = std::time::Instant::now() + Duration::from_secs(10);
-        while running() && std::time::Instant::now() < until {
-            std::thread::sleep(Duration::from_millis(20));
-        }
-        let alive = running();
-        if alive {
-            // SAFETY: a plain signal to the process this test started.
-            unsafe { libc::kill(pid as i32, libc::SIGKILL) };
-        }
-        assert!(!alive, "sleep {pid} outlived the process that started it");
     }
 
     #[test]

@@ -25,7 +25,7 @@ use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
-use super::{scan, task_list, write_atomic, FoundTask, ResultsError, SUMMARY_JSON, SUMMARY_MD};
+use super::{scan, task_list, write_atomic, write_json, FoundTask, ResultsError, SUMMARY_JSON, SUMMARY_MD};
 
 /// Upstream's groups of domains, in the order they are printed. Upstream's
 /// `show_result.py` at 6d39ed88 prints the first three (Office, Daily,
@@ -92,7 +92,7 @@ pub struct DomainRow {
     pub rate_ci95: Option<[f64; 2]>,
     /// Tokens and model time of every task of the row, finished or not (the cost ledger).
     #[serde(default)]
-    pub tokens: crate::agent::Usage,
+    pub tokens: crate::ledger::Usage,
     /// What they cost in US dollars (`--prices`), when priced.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub cost_usd: Option<f64>,
@@ -154,7 +154,7 @@ pub struct TaskRow {
     pub failed_by: String,
     /// The task's tokens and model time, when its agent reported them.
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub tokens: Option<crate::agent::Usage>,
+    pub tokens: Option<crate::ledger::Usage>,
     /// What they cost in US dollars (`--prices`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub cost_usd: Option<f64>,
@@ -413,9 +413,7 @@ impl Summary {
     /// A file cannot be written.
     pub fn write(&self, root: &Path) -> Result<(PathBuf, PathBuf), ResultsError> {
         let json_path = root.join(SUMMARY_JSON);
-        let json = serde_json::to_vec_pretty(self)
-            .map_err(|err| ResultsError::Format { path: json_path.clone(), message: err.to_string() })?;
-        write_atomic(&json_path, &json)?;
+        write_json(&json_path, self)?;
         let md_path = root.join(SUMMARY_MD);
         write_atomic(&md_path, self.markdown().as_bytes())?;
         self.write_trial_files(root)?;
@@ -458,7 +456,7 @@ impl Summary {
     fn ledger_markdown(&self) -> String {
         let mut md = String::new();
         let o = &self.overall;
-        if o.tokens == crate::agent::Usage::default() && o.cost_usd.is_none() && self.budget.is_none() {
+        if o.tokens == crate::ledger::Usage::default() && o.cost_usd.is_none() && self.budget.is_none() {
             return md;
         }
         md.push_str("\n## Cost\n\n| Domain | Input tokens | Cached | Output tokens | Model time (s) | Cost (USD) |\n|---|---:|---:|---:|---:|---:|\n");
@@ -789,7 +787,7 @@ fn domain_row(domain: &str, rows: &[&TaskRow], not_run: usize) -> DomainRow {
         pass_at_k,
         pass_hat_k,
         rate_ci95: super::stats::bootstrap_ci95(&means).map(|[low, high]| [100.0 * low, 100.0 * high]),
-        tokens: rows.iter().filter_map(|r| r.tokens.as_ref()).fold(crate::agent::Usage::default(), |mut sum, t| {
+        tokens: rows.iter().filter_map(|r| r.tokens.as_ref()).fold(crate::ledger::Usage::default(), |mut sum, t| {
             sum.add(t);
             sum
         }),

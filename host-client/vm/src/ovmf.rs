@@ -146,7 +146,11 @@ mod tests {
     fn the_resolution_is_written_read_back_and_replaced() {
         let files = debian_vars();
         if files.is_empty() {
-            eprintln!("SKIPPED: the_resolution_is_written_read_back_and_replaced: Debian's ovmf is not installed");
+            arena_test_support::skip(
+                "the_resolution_is_written_read_back_and_replaced",
+                "Debian's ovmf is not installed",
+                "ARENA_REQUIRE_QEMU",
+            );
             return;
         }
         for (path, original) in files {

@@ -128,7 +128,7 @@ fn append(path: &Path, bytes: &[u8]) {
 }
 
 /// Copies [`SETUP_LOGS`] from the guest while it answers, into `into`; the names copied.
-pub async fn copy_logs_from_guest(client: &crate::client::GuestClient, into: &Path) -> Vec<String> {
+pub async fn copy_logs_from_guest(client: &arena_client::client::GuestClient, into: &Path) -> Vec<String> {
     let mut copied = Vec::new();
     for log in SETUP_LOGS {
         let guest_path = format!("C:\\{}", log.replace('/', "\\"));

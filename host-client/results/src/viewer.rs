@@ -34,7 +34,7 @@ use arena_actionspace::{ActionSpace, Context, Coords, Step};
 use arena_shared::action::{Action, MouseButton};
 
 use super::StepRecord;
-use crate::ports::AgentAction;
+use arena_exec::AgentAction;
 
 /// The largest response record read for the page (a vendor answer is a few kilobytes).
 pub const MAX_RECORD_BYTES: u64 = 4 << 20;

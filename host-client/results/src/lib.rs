@@ -1,5 +1,5 @@
-//! Result folders of a run: where each task's trajectory, screenshots, score
-//! and record go, and how they are read back.
+//! Result folders of a run (`arena-results`): where each task's trajectory,
+//! screenshots, score and record go, and how they are read back.
 //!
 //! The layout is upstream's (`lib_run_single.py` under `run.py`'s result
 //! directory), so upstream's `show_result.py` reads it:
@@ -23,7 +23,7 @@
 //! infrastructure error gets an `episode.json` but no `result.txt`, so the
 //! next run of the same folder tries it again.
 //!
-//! This module does no guest I/O and knows nothing of agents; [`summary`]
+//! This crate does no guest I/O and knows nothing of agents; [`summary`]
 //! aggregates folders into the paper's table and [`html`] renders the report.
 //!
 //! # Layout
@@ -37,6 +37,8 @@
 //! - [`html`]: the HTML report, `report.html`, and each task's `traj.html`.
 //! - [`viewer`]: the trajectory viewer's parts of a step: the model's reply read from the records, the markers of its actions.
 //! - [`task_list`]: the run's task list in each trial folder (`task_list.json`).
+//! - [`timings`]: the timed parts of a step's observation and prediction.
+//! - `fixtures` (feature `fixtures`, for tests): an episode record, a layout, a finished task written.
 
 mod budget;
 pub mod certificate;
@@ -46,6 +48,7 @@ pub mod ledger;
 pub mod stats;
 pub mod summary;
 pub mod task_list;
+pub mod timings;
 pub mod viewer;
 
 pub use budget::{RecordBudget, MAX_LOG_FILE, MAX_RECORDED_TEXT, STEP_BUDGET};
@@ -57,7 +60,7 @@ use arena_shared::calendar::civil_from_days;
 use serde::{Deserialize, Serialize};
 use serde_json::Value;
 
-use crate::ports::AgentAction;
+use arena_exec::AgentAction;
 use arena_task::Task;
 
 /// The score file upstream writes and reads.
@@ -90,6 +93,12 @@ pub enum ResultsError {
 impl ResultsError {
     fn io(path: &Path, source: std::io::Error) -> ResultsError {
         ResultsError::Io { path: path.to_owned(), reason: source }
+    }
+
+    /// The one format error: `path` holds (or would hold) something that is not
+    /// what it should be, and why.
+    pub fn format(path: &Path, why: impl std::fmt::Display) -> ResultsError {
+        ResultsError::Format { path: path.to_owned(), message: why.to_string() }
     }
 }
 
@@ -246,10 +255,10 @@ pub struct StepTimings {
     pub pause_ms: u64,
     /// Each part of the observation the agent was given: screenshot, decode, tree, windows, clipboard, DOM.
     #[serde(default)]
-    pub observe: crate::ports::ObserveTimings,
+    pub observe: crate::timings::ObserveTimings,
     /// The agent's own parts: Set-of-Marks, the model call and its tries.
     #[serde(default)]
-    pub predict: crate::agent::PredictTimings,
+    pub predict: crate::timings::PredictTimings,
     /// Times the harness asked the agent again after a model failure within the step.
     #[serde(default, skip_serializing_if = "is_zero")]
     pub predict_retries: u32,
@@ -331,7 +340,7 @@ pub struct ActionRecord {
 pub struct StepRecord {
     #[serde(flatten)]
     pub first: ActionRecord,
-    /// The step number again, under the name the replay agent reads ([`crate::agent::replay`]).
+    /// The step number again, under the name the replay agent reads (the host's replay agent).
     pub step: u32,
     /// The agent's raw response (the model's text).
     pub response: String,
@@ -363,7 +372,7 @@ pub struct StepRecord {
     /// The tokens and model time of the step's prediction (the cost ledger),
     /// when the agent reports them.
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub usage: Option<crate::agent::Usage>,
+    pub usage: Option<crate::ledger::Usage>,
     /// Upstream's lines for the step's second and further actions.
     #[serde(skip)]
     pub more: Vec<ActionRecord>,
@@ -474,7 +483,7 @@ pub struct EpisodeResult {
     pub vm: Option<VmStart>,
     /// The steps' tokens and model time together, when the agent reported any.
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub tokens: Option<crate::agent::Usage>,
+    pub tokens: Option<crate::ledger::Usage>,
     /// What [`EpisodeResult::tokens`] cost in US dollars, by the run's `--prices` file.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub cost_usd: Option<f64>,
@@ -486,7 +495,7 @@ pub struct EpisodeResult {
 }
 
 /// Where a task's VM started from, recorded in `episode.json`. A plain record
-/// of the results: the VM code (`crate::vm`) fills it, and neither the results
+/// of the results: the VM code (`arena-host`'s `vm`) fills it, and neither the results
 /// nor the runner depend on the VM code.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct VmStart {
@@ -616,7 +625,7 @@ pub const DEFAULT_TRIAL_ID: &str = "0";
 
 /// The key of a task's `extra` map that carries its trial number (0..K-1) in a
 /// run of several trials: the run sets it on each copy of a task it queues
-/// (`crate::run::plan`) and removes it in a run of one, so a task file cannot choose it.
+/// (the host's `run::plan`) and removes it in a run of one, so a task file cannot choose it.
 pub const TRIAL_KEY: &str = "_arena_trial";
 
 /// The trial a run marked `task` with ([`TRIAL_KEY`]).
@@ -736,7 +745,7 @@ impl TaskDir {
     /// The file cannot be written.
     pub fn write_trajectory(&self, reset: Option<&ResetRecord>, steps: &[StepRecord]) -> Result<(), ResultsError> {
         let path = self.path.join(TRAJ_FILE);
-        let format = |err: serde_json::Error| ResultsError::Format { path: path.clone(), message: err.to_string() };
+        let format = |err: serde_json::Error| ResultsError::format(&path, err);
         let mut text = String::new();
         if let Some(reset) = reset {
             text.push_str(&serde_json::to_string(reset).map_err(format)?);
@@ -759,10 +768,7 @@ impl TaskDir {
     ///
     /// The file cannot be written.
     pub fn write_episode(&self, episode: &EpisodeResult) -> Result<(), ResultsError> {
-        let path = self.path.join(EPISODE_FILE);
-        let text = serde_json::to_vec_pretty(episode)
-            .map_err(|err| ResultsError::Format { path: path.clone(), message: err.to_string() })?;
-        write_atomic(&path, &text)
+        write_json(&self.path.join(EPISODE_FILE), episode)
     }
 
     /// Writes `result.txt` as upstream does, `f"{result}\n"` (see
@@ -862,8 +868,7 @@ pub fn read_score(path: &Path) -> Result<f64, ResultsError> {
 /// The file is missing or malformed.
 pub fn read_episode(path: &Path) -> Result<EpisodeResult, ResultsError> {
     let bytes = std::fs::read(path).map_err(|err| ResultsError::io(path, err))?;
-    serde_json::from_slice(&bytes)
-        .map_err(|err| ResultsError::Format { path: path.to_owned(), message: err.to_string() })
+    serde_json::from_slice(&bytes).map_err(|err| ResultsError::format(path, err))
 }
 
 /// Reads the steps of a `traj.jsonl` (an absent file is an empty trajectory):
@@ -919,6 +924,17 @@ fn truncate(text: &str, max: usize) -> &str {
 /// The folder is missing or not writable, or the disk is full.
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), ResultsError> {
     arena_shared::atomic::write_atomic(path, bytes).map_err(|err| ResultsError::io(path, err))
+}
+
+/// `value` as pretty JSON into `path`, atomically ([`write_atomic`]): the one way
+/// the results write a JSON file.
+///
+/// # Errors
+///
+/// [`ResultsError::Format`] when the value does not encode; else as [`write_atomic`].
+pub fn write_json(path: &Path, value: &impl Serialize) -> Result<(), ResultsError> {
+    let bytes = serde_json::to_vec_pretty(value).map_err(|err| ResultsError::format(path, err))?;
+    write_atomic(path, &bytes)
 }
 
 /// A task folder found under a result root.
@@ -1024,5 +1040,7 @@ pub fn format_timestamp(secs: u64) -> String {
     format!("{y:04}{m:02}{d:02}@{:02}{:02}{:02}", rem / 3600, rem % 3600 / 60, rem % 60)
 }
 
+#[cfg(any(test, feature = "fixtures"))]
+pub mod fixtures;
 #[cfg(test)]
-pub(crate) mod tests;
+mod tests;

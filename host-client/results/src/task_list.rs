@@ -15,7 +15,7 @@
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
-use super::{safe_component, write_atomic, ResultsError, EPISODE_FILE, RESULT_FILE};
+use super::{safe_component, write_json, ResultsError, EPISODE_FILE, RESULT_FILE};
 
 /// How deep below a root task lists are looked for (a trial folder is 4 levels down).
 const MAX_LIST_DEPTH: usize = 6;
@@ -60,9 +60,7 @@ pub fn add(path: &Path, more: &TaskList) -> Result<(), ResultsError> {
     if let Some(dir) = path.parent() {
         std::fs::create_dir_all(dir).map_err(|err| ResultsError::io(dir, err))?;
     }
-    let text = serde_json::to_string_pretty(&list)
-        .map_err(|err| ResultsError::Format { path: path.to_owned(), message: err.to_string() })?;
-    write_atomic(path, text.as_bytes())
+    write_json(path, &list)
 }
 
 /// Records `tasks` in the trial folder `base`.

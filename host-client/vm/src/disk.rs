@@ -47,7 +47,7 @@ impl QemuImg {
         command.args(args);
         // A prepare killed while qemu-img works (a snapshot, the sealing copy)
         // takes it along, so the disk's lock is not left held.
-        super::die_with_this_process_std(&mut command);
+        crate::child::die_with_this_process_std(&mut command);
         let output = command
             .output()
             .map_err(|source| VmError::Io { what: format!("starting {}", self.program.display()), source })?;
@@ -236,21 +236,8 @@ pub fn is_read_only(path: &Path, meta: &std::fs::Metadata) -> bool {
     if meta.permissions().readonly() {
         return true;
     }
-    #[cfg(unix)]
-    {
-        use std::os::unix::ffi::OsStrExt;
-        let Ok(c_path) = std::ffi::CString::new(path.as_os_str().as_bytes()) else { return false };
-        // SAFETY: c_path is a valid NUL-terminated string that lives across the call;
-        // access() only reads it.
-        let writable = unsafe { libc::access(c_path.as_ptr(), libc::W_OK) } == 0;
-        // root may write a file without write bits, but not on a read-only mount: EROFS is what counts.
-        !writable
-    }
-    #[cfg(not(unix))]
-    {
-        let _ = path;
-        false
-    }
+    // root may write a file without write bits, but not on a read-only mount: EROFS is what counts.
+    crate::child::writable(path).is_some_and(|writable| !writable)
 }
 
 /// Removes the write bits of `path`.
@@ -292,8 +279,11 @@ mod tests {
     #[test]
     fn golden_and_overlay_checks_name_what_is_wrong() {
         let Some(img) = qemu_img() else {
-            assert!(std::env::var("ARENA_REQUIRE_QEMU").is_err(), "ARENA_REQUIRE_QEMU is set but qemu-img is missing");
-            eprintln!("SKIPPED: golden_and_overlay_checks_name_what_is_wrong: qemu-img not found");
+            arena_test_support::skip(
+                "golden_and_overlay_checks_name_what_is_wrong",
+                "qemu-img not found",
+                "ARENA_REQUIRE_QEMU",
+            );
             return;
         };
         let dir = tempfile::tempdir().unwrap();

@@ -263,7 +263,6 @@ pub struct PrepareOptions {
 
 /// What a prepare tells as it goes.
 #[derive(Debug)]
-#[non_exhaustive]
 pub enum PrepareEvent<'a> {
     /// Entering a stage (`resumed` when it was reached by an earlier run), with its deadline.
     Stage { stage: Stage, resumed: bool, limit: Option<Duration> },
@@ -342,12 +341,8 @@ fn end_leftovers(dir: &Path) {
             let let_finish = program.starts_with("qemu-img") && started.elapsed() < QEMU_IMG_GRACE;
             if !let_finish {
                 tracing::warn!(pid, program = %program, "ending what an interrupted prepare left running");
-                #[cfg(unix)]
-                // SAFETY: a plain system call; the process is this user's and runs
-                // one of our programs on our files (checked just now).
-                unsafe {
-                    libc::kill(*pid as libc::pid_t, libc::SIGKILL);
-                }
+                // The process is this user's and runs one of our programs on our files (checked just now).
+                crate::child::kill(*pid);
             }
         }
         if started.elapsed() > QEMU_IMG_GRACE + Duration::from_secs(10) {
@@ -370,8 +365,7 @@ fn holders_of(dir: &Path) -> Vec<(u32, String)> {
         use std::os::unix::fs::MetadataExt;
         let folders: Vec<PathBuf> =
             [std::path::absolute(dir).ok(), std::fs::canonicalize(dir).ok()].into_iter().flatten().collect();
-        // SAFETY: geteuid has no arguments and cannot fail.
-        let me = unsafe { libc::geteuid() };
+        let me = crate::child::effective_uid();
         let own = std::process::id();
         for entry in std::fs::read_dir("/proc").into_iter().flatten().flatten() {
             let Ok(pid) = entry.file_name().to_string_lossy().parse::<u32>() else { continue };
@@ -456,7 +450,7 @@ fn write_media(options: &PrepareOptions, dir: &Path) -> Result<PathBuf, VmError>
     let args = media_args(&answer, &marker, &script, &options.oem, &iso);
     let mut command = std::process::Command::new(&xorriso);
     command.args(&args);
-    super::die_with_this_process_std(&mut command);
+    crate::child::die_with_this_process_std(&mut command);
     Bundle::new(dir).command(&shell_line(&xorriso, &args));
     let out = command.output().map_err(io(format!("starting {}", xorriso.display())))?;
     if !out.status.success() {
@@ -1190,7 +1184,7 @@ mod tests {
         assert_eq!(found, vec![(ours.id(), "qemu-system-x86_64".to_owned())]);
         end_leftovers(&dir);
         use std::os::unix::process::ExitStatusExt;
-        assert_eq!(ours.wait().unwrap().signal(), Some(libc::SIGKILL));
+        assert_eq!(ours.wait().unwrap().signal(), Some(9), "SIGKILL");
         assert!(theirs.try_wait().unwrap().is_none(), "a process of another folder was ended");
         assert_eq!(holders_of(&other).len(), 1);
         theirs.kill().unwrap();

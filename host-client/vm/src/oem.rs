@@ -298,7 +298,8 @@ pub fn stage(options: &StageOptions) -> Result<Staged, PrepError> {
     let mut text = serde_json::to_string_pretty(&manifest)
         .map_err(|err| PrepError::Manifest { path: manifest_path.clone(), reason: err.to_string() })?;
     text.push('\n');
-    std::fs::write(&manifest_path, text).map_err(io("writing", &manifest_path))?;
+    // Atomically: a staged folder with a half-written manifest would check as broken.
+    arena_shared::atomic::write_atomic(&manifest_path, text.as_bytes()).map_err(io("writing", &manifest_path))?;
     tracing::info!(out = %out.display(), files = manifest.files.len(), "staged the OEM folder");
     Ok(Staged { manifest, token_path, token_out: options.token_out.clone() })
 }
@@ -461,7 +462,6 @@ pub fn verify(dir: &Path) -> Result<VerifyReport, PrepError> {
 
 /// Progress of [`wait_healthy`], for the caller to show.
 #[derive(Debug, Clone, Copy)]
-#[non_exhaustive]
 pub enum WaitEvent<'a> {
     /// The guest could not be reached (said once per new reason).
     Unreachable { error: &'a str },

@@ -90,7 +90,7 @@ impl Swtpm {
         let _ = std::fs::remove_file(&spec.socket);
         let mut command = tokio::process::Command::new(&spec.program);
         command.args(spec.args()).stdin(Stdio::null()).stdout(Stdio::null()).stderr(Stdio::null()).kill_on_drop(true);
-        super::die_with_this_process(&mut command);
+        crate::child::die_with_this_process(&mut command);
         let mut child = command
             .spawn()
             .map_err(|source| VmError::Io { what: format!("starting {}", spec.program.display()), source })?;
@@ -150,7 +150,11 @@ mod tests {
     #[tokio::test]
     async fn swtpm_starts_and_makes_its_socket() {
         let Ok(program) = find_swtpm(None) else {
-            eprintln!("SKIPPED: swtpm_starts_and_makes_its_socket: swtpm not found (Debian's swtpm package)");
+            arena_test_support::skip(
+                "swtpm_starts_and_makes_its_socket",
+                "swtpm not found (Debian's swtpm package)",
+                "ARENA_REQUIRE_QEMU",
+            );
             return;
         };
         let dir = tempfile::tempdir().unwrap();

@@ -227,7 +227,7 @@ fn is_sha256(s: &str) -> bool {
 
 /// A reqwest error as one line, with its innermost cause ("Connection refused").
 fn describe(err: &reqwest::Error) -> String {
-    arena_client::error::flatten(err)
+    crate::error::flatten(err)
 }
 
 #[cfg(test)]

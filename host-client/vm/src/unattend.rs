@@ -1100,7 +1100,7 @@ impl Xml {
 /// XML text and attribute escaping: the five predefined entities (the
 /// apostrophe as a character reference), as the HTML report escapes.
 fn escape(text: &str) -> String {
-    crate::results::html::escape(text)
+    arena_results::html::escape(text)
 }
 
 #[cfg(test)]
