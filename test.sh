@@ -60,6 +60,13 @@ count_skips "Agent S3 tests" "gui-agents not installed"
 count_skips "UI-TARS parser tests" "ui-tars not installed"
 count_skips "MCP SDK tests" "no Python with the MCP SDK (set ARENA_MCP_PYTHON to one)"
 count_skips "gymnasium tests" "gymnasium not installed"
+count_skips "Python tests" "python3 not found"
+count_skips "OCR tests" "tesseract not found"
+count_skips "QEMU tool tests" "\(qemu-img not found\|genisoimage not found\|swtpm not found.*\|Debian's ovmf is not installed\|no secure-boot UEFI firmware.*\)"
+# No registry serves upstream's checkout, so these skip wherever ARENA_WAA_ROOT is unset.
+count_skips "upstream checkout tests" "ARENA_WAA_ROOT names no WindowsAgentArena checkout"
+# The live-desktop suite drives a real Windows desktop (the Windows workflow runs it).
+count_skips "live-desktop checks" "\(ARENA_LIVE_DESKTOP is not 1.*\|no notepad.exe in.*\|it needs a Windows 11 client image.*\)"
 echo "skips of any kind: $(grep -ao 'SKIPPED: ' "$log" | wc -l)"
 
 if [ "${ARENA_SKIP_WINE:-0}" = 1 ]; then

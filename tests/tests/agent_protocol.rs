@@ -21,7 +21,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
-use arena_host::results::summary::{Summary, TaskRow};
+use arena_results::summary::{Summary, TaskRow};
 use arena_test_support::workspace_binary;
 use serde_json::Value;
 
@@ -314,7 +314,7 @@ fn first_request(tmp: &Path, label: &str, args: &[&str], env: &[(&str, String)])
 fn upstream_navi_through_the_runner_asks_what_the_built_in_navi_asks() {
     let test = "upstream_navi_through_the_runner_asks_what_the_built_in_navi_asks";
     let Some(root) = std::env::var_os("ARENA_WAA_ROOT").map(PathBuf::from) else {
-        println!("SKIPPED: {test}: ARENA_WAA_ROOT does not name a WindowsAgentArena checkout");
+        arena_test_support::skip(test, arena_test_support::UPSTREAM_CHECKOUT_SKIP, "ARENA_REQUIRE_WAA_ROOT");
         return;
     };
     if !arena_test_support::python3_or_skip(test) {

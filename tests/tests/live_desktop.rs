@@ -19,7 +19,7 @@
 
 use std::time::{Duration, Instant};
 
-use arena_host::client::{ClientConfig, GuestClient};
+use arena_client::client::{ClientConfig, GuestClient};
 use arena_shared::action::{Action, MouseButton};
 use arena_shared::clipboard::ClipboardContent;
 use arena_shared::exec::{ExecRequest, LaunchRequest};
@@ -32,7 +32,11 @@ fn live() -> bool {
     if std::env::var("ARENA_LIVE_DESKTOP").as_deref() == Ok("1") {
         return true;
     }
-    println!("SKIPPED: the live-desktop suite: ARENA_LIVE_DESKTOP is not 1 (it drives the real Windows desktop)");
+    arena_test_support::skip(
+        "the live-desktop suite",
+        "ARENA_LIVE_DESKTOP is not 1 (it drives the real Windows desktop)",
+        "ARENA_REQUIRE_LIVE_DESKTOP",
+    );
     false
 }
 
@@ -184,13 +188,18 @@ async fn the_windows_backend_drives_a_real_desktop() {
     let pad = if std::path::Path::new(&system_root).join(r"System32\notepad.exe").is_file() {
         Some(notepad(&c).await)
     } else {
-        println!("SKIPPED: the live-desktop suite's Notepad check: no notepad.exe in {system_root}\\System32");
+        let why = format!("no notepad.exe in {system_root}\\System32");
+        arena_test_support::skip("the live-desktop suite's Notepad check", &why, "ARENA_REQUIRE_LIVE_NOTEPAD");
         None
     };
     if std::env::var("ARENA_LIVE_WIN11").as_deref() == Ok("1") {
         calculator(&c).await;
     } else {
-        println!("SKIPPED: the live-desktop suite's Calculator check: it needs a Windows 11 client image (ARENA_LIVE_WIN11=1)");
+        arena_test_support::skip(
+            "the live-desktop suite's Calculator check",
+            "it needs a Windows 11 client image (ARENA_LIVE_WIN11=1)",
+            "ARENA_REQUIRE_LIVE_WIN11",
+        );
     }
     explorer(&c).await;
 

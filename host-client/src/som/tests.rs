@@ -213,23 +213,15 @@ fn render_words(img: &mut RgbaImage, x0: u32, y0: u32, text: &str, scale: u32) {
     }
 }
 
-/// Whether Tesseract is here; prints the skip line (or fails under ARENA_REQUIRE_TESSERACT=1) when not.
+/// Whether Tesseract is here; a counted skip (or a failure under ARENA_REQUIRE_TESSERACT=1) when not.
 fn tesseract_or_skip(test: &str) -> bool {
-    let found = std::process::Command::new(ocr::DEFAULT_PROGRAM)
-        .arg("--version")
-        .stdout(std::process::Stdio::null())
-        .stderr(std::process::Stdio::null())
-        .status()
-        .is_ok();
-    if found {
-        return true;
-    }
-    assert!(
-        std::env::var("ARENA_REQUIRE_TESSERACT").as_deref() != Ok("1"),
-        "{test}: tesseract not found and ARENA_REQUIRE_TESSERACT=1"
-    );
-    println!("SKIPPED: {test}: tesseract not found");
-    false
+    arena_test_support::program_or_skip(
+        test,
+        ocr::DEFAULT_PROGRAM,
+        &["--version"],
+        "tesseract not found",
+        "ARENA_REQUIRE_TESSERACT",
+    )
 }
 
 #[tokio::test]

@@ -130,17 +130,9 @@ fn cpython(src: &str) -> Option<Trace> {
     })
 }
 
-/// Whether `python3` runs here; without it, a loud skip (or a failure when required).
+/// Whether `python3` runs here; without it, a counted skip (or a failure when required).
 fn python_available(test: &str) -> bool {
-    if Command::new("python3").arg("--version").output().is_ok() {
-        return true;
-    }
-    assert!(
-        std::env::var_os("ARENA_REQUIRE_PYTHON").is_none(),
-        "{test}: python3 not found and ARENA_REQUIRE_PYTHON is set"
-    );
-    println!("SKIPPED: {test}: python3 not found");
-    false
+    arena_test_support::python3_or_skip(test)
 }
 
 /// The corpus: (name, program, expected result), every program ending by printing

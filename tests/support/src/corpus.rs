@@ -1,5 +1,6 @@
 //! Where the upstream WAA task corpus is, or a loud skip that `test.sh` counts.
 
+use crate::skip::SKIP_PREFIX;
 use std::path::{Path, PathBuf};
 
 /// The environment variable that names the corpus folder (holding `examples/`,
@@ -8,9 +9,6 @@ pub const CORPUS_VAR: &str = "ARENA_WAA_TASKS";
 
 /// The environment variable that, set to `1`, turns a missing corpus into a failure (CI).
 pub const REQUIRE_CORPUS_VAR: &str = "ARENA_REQUIRE_CORPUS";
-
-/// The line a skipped corpus test writes, before its name.
-pub const SKIP_PREFIX: &str = "SKIPPED: ";
 
 /// Where the corpus is by default: `shared/reference/waa-tasks` beside the workspace.
 fn default_corpus() -> PathBuf {

@@ -13,6 +13,8 @@
 //! - [`chromium_or_skip`]: a headless Chromium, or a loud skip; [`Chromium`] (feature
 //!   `guest`) starts it with DevTools on a free port.
 //! - [`eventually`] (feature `guest`): polling a condition until it holds or a deadline passes.
+//! - [`skip`] and [`program_or_skip`]: the one way a test says it was skipped (a
+//!   counted line, or a failure under its `ARENA_REQUIRE_*` switch).
 //! - [`png_claiming`]: a PNG header claiming any size, for the image guards.
 //! - [`copy_stub_task`]: a stub task with its host-side gold, copied for a test.
 //!
@@ -23,7 +25,7 @@
 //!
 //! Layout: `guest.rs` (in-process launcher), `process.rs` (child-process launcher),
 //! `chromium.rs` (Chromium locator and launcher), `corpus.rs` (corpus locator), `wine.rs` (Wine locator), `standin.rs` (stand-in
-//! image locator), `mcp_sdk.rs` (MCP SDK locator), `wait.rs` (polling), `png.rs` (PNG bombs),
+//! image locator), `mcp_sdk.rs` (MCP SDK locator), `wait.rs` (polling), `png.rs` (PNG bombs), `skip.rs` (skip lines),
 //! `stub_tasks.rs` (the stub tasks).
 
 #![forbid(unsafe_code)]
@@ -35,6 +37,7 @@ mod guest;
 mod mcp_sdk;
 mod png;
 mod process;
+mod skip;
 mod standin;
 mod stub_tasks;
 #[cfg(feature = "guest")]
@@ -44,7 +47,7 @@ mod wine;
 #[cfg(feature = "guest")]
 pub use chromium::Chromium;
 pub use chromium::{chromium_or_skip, find_chromium, CHROMIUM_VAR, REQUIRE_CHROMIUM_VAR};
-pub use corpus::{waa_corpus, CORPUS_VAR, REQUIRE_CORPUS_VAR, SKIP_PREFIX};
+pub use corpus::{waa_corpus, CORPUS_VAR, REQUIRE_CORPUS_VAR};
 #[cfg(feature = "guest")]
 pub use guest::StubGuest;
 pub use mcp_sdk::{python_with_mcp, MCP_PYTHON_VAR, MCP_SDK, MCP_SDK_SKIP, REQUIRE_MCP_SDK_VAR};
@@ -53,6 +56,7 @@ pub use process::{
     agent_pythonpath, bench_guests, gui_agents_python_or_skip, python3_or_skip, workspace_binary, workspace_root,
     PythonNeed, Served, BENCH_GUESTS_VAR, GUI_AGENTS,
 };
+pub use skip::{program_or_skip, skip, SKIP_PREFIX, UPSTREAM_CHECKOUT_SKIP};
 pub use standin::{standin_image, StandinImage, REQUIRE_QEMU_VAR, STANDIN_DIR_VAR};
 pub use stub_tasks::{copy_stub_task, stub_tasks_dir};
 #[cfg(feature = "guest")]

@@ -2,7 +2,7 @@
 //! use with the cargo that runs the tests, started on port 0, and asked where they
 //! listen (their `listening on URL` line).
 
-use std::io::{BufRead, BufReader, Write as _};
+use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::sync::OnceLock;
@@ -207,15 +207,7 @@ pub const BENCH_GUESTS_VAR: &str = "ARENA_BENCH_GUESTS";
 ///
 /// When `python3` is missing and `ARENA_REQUIRE_PYTHON` is set.
 pub fn python3_or_skip(test: &str) -> bool {
-    if Command::new("python3").arg("--version").output().is_ok_and(|o| o.status.success()) {
-        return true;
-    }
-    assert!(
-        std::env::var_os("ARENA_REQUIRE_PYTHON").is_none(),
-        "{test}: python3 not found and ARENA_REQUIRE_PYTHON is set"
-    );
-    let _ = writeln!(std::io::stderr(), "SKIPPED: {test}: python3 not found");
-    false
+    crate::program_or_skip(test, "python3", &["--version"], "python3 not found", "ARENA_REQUIRE_PYTHON")
 }
 
 /// A Python a test needs: what it must import, the variable naming it, the variable

@@ -3,7 +3,7 @@
 
 use std::path::{Path, PathBuf};
 
-use crate::corpus::SKIP_PREFIX;
+use crate::skip::SKIP_PREFIX;
 
 /// The environment variable that names the folder the image was built into.
 pub const STANDIN_DIR_VAR: &str = "ARENA_STANDIN_DIR";

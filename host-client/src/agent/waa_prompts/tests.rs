@@ -130,7 +130,11 @@ fn a_checkout_laid_out_differently_is_refused_naming_the_file_and_symbol() {
 #[test]
 fn the_users_checkout_reads_when_one_is_given() {
     let Some(root) = std::env::var_os("ARENA_WAA_ROOT") else {
-        eprintln!("SKIPPED: ARENA_WAA_ROOT is not set, so upstream's own prompt files were not read");
+        arena_test_support::skip(
+            "the_users_checkout_reads_when_one_is_given",
+            arena_test_support::UPSTREAM_CHECKOUT_SKIP,
+            "ARENA_REQUIRE_WAA_ROOT",
+        );
         return;
     };
     let prompts = WaaPrompts::load(Path::new(&root)).expect("the checkout's prompts read");
