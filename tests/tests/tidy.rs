@@ -335,24 +335,52 @@ fn normalize(path: &str) -> String {
     parts.join("/")
 }
 
-/// The top-level modules of the crate rooted at `root`, each with all its files and
-/// their depth below the crate root (1 for the module's own file).
-fn top_level_modules<'a>(root: &str, files: &Files<'a>) -> Vec<(String, Vec<(&'a str, usize)>)> {
-    let Some(text) = files.get(root) else { return Vec::new() };
-    declared_module_files(root, text, true, files)
-        .into_iter()
-        .map(|(name, file)| {
-            let mut all = vec![(file, 1)];
-            let mut i = 0;
-            while i < all.len() {
-                let (path, depth) = all[i];
-                let children = declared_module_files(path, files[path], false, files);
-                all.extend(children.into_iter().map(|(_, child)| (child, depth + 1)));
-                i += 1;
+/// A module of a crate: its path below the crate root (empty for the root), its own
+/// file, and its child modules.
+struct ModuleNode<'a> {
+    path: Vec<String>,
+    file: &'a str,
+    children: Vec<ModuleNode<'a>>,
+}
+
+impl<'a> ModuleNode<'a> {
+    /// The module tree of the crate rooted at `root`.
+    fn of_crate(root: &'a str, files: &Files<'a>) -> ModuleNode<'a> {
+        fn grow<'a>(node: &mut ModuleNode<'a>, files: &Files<'a>) {
+            let is_root = node.path.is_empty();
+            for (name, file) in declared_module_files(node.file, files[node.file], is_root, files) {
+                let mut path = node.path.clone();
+                path.push(name);
+                let mut child = ModuleNode { path, file, children: Vec::new() };
+                grow(&mut child, files);
+                node.children.push(child);
             }
-            (name, all)
-        })
-        .collect()
+        }
+        let mut node = ModuleNode { path: Vec::new(), file: root, children: Vec::new() };
+        if files.contains_key(root) {
+            grow(&mut node, files);
+        }
+        node
+    }
+
+    /// This module's files and those of every module below it, each with its depth
+    /// below the crate root (the length of its module path).
+    fn all_files(&self) -> Vec<(&'a str, usize)> {
+        let mut out = vec![(self.file, self.path.len())];
+        for child in &self.children {
+            out.extend(child.all_files());
+        }
+        out
+    }
+
+    /// Every module of the tree, this one first.
+    fn all_modules(&self) -> Vec<&ModuleNode<'a>> {
+        let mut out = vec![self];
+        for child in &self.children {
+            out.extend(child.all_modules());
+        }
+        out
+    }
 }
 
 /// `text` without comments, string contents and `#[cfg(test)]` modules.
@@ -418,15 +446,29 @@ fn group_heads(group: &str) -> Vec<&str> {
     heads
 }
 
-/// The top-level modules a file at `depth` below the crate root names: `crate::X`,
-/// `crate::{X, Y}`, and `super::` chains that reach the crate root.
-fn named_top_level(code: &str, depth: usize) -> Vec<&str> {
+/// The children of the module at `parent` (a path below the crate root) that a file
+/// at `depth` below the crate root names: `crate::<parent>::X`, `crate::<parent>::{X, Y}`,
+/// and `super::` chains that reach `parent`. With an empty `parent`: the top-level modules.
+fn named_children<'c>(code: &'c str, depth: usize, parent: &[String]) -> Vec<&'c str> {
     let mut out = Vec::new();
     let word_start = |i: usize| i == 0 || !code[..i].ends_with(|c: char| c.is_alphanumeric() || c == '_' || c == ':');
-    let mut after_root = Vec::new();
+    let mut after_parent = Vec::new();
     for (i, _) in code.match_indices("crate::") {
-        if word_start(i) {
-            after_root.push(i + "crate::".len());
+        if !word_start(i) {
+            continue;
+        }
+        let mut at = i + "crate::".len();
+        let reached = parent.iter().all(|component| {
+            let step = format!("{component}::");
+            let rest = &code[at..];
+            let ok = rest.starts_with(&step);
+            if ok {
+                at += step.len();
+            }
+            ok
+        });
+        if reached {
+            after_parent.push(at);
         }
     }
     for (i, _) in code.match_indices("super::") {
@@ -439,11 +481,11 @@ fn named_top_level(code: &str, depth: usize) -> Vec<&str> {
             end += "super::".len();
             levels += 1;
         }
-        if levels == depth {
-            after_root.push(end);
+        if depth.checked_sub(levels) == Some(parent.len()) {
+            after_parent.push(end);
         }
     }
-    for start in after_root {
+    for start in after_parent {
         let rest = &code[start..];
         if let Some(group) = rest.strip_prefix('{') {
             out.extend(group_heads(group));
@@ -519,40 +561,49 @@ fn loops(edges: &std::collections::BTreeMap<String, std::collections::BTreeSet<S
     walk.found
 }
 
-/// The import loops between the top-level modules of the crate rooted at `root`, each
-/// as `a -> b -> ... ` lines.
+/// The import loops of the crate rooted at `root`, at every depth: between the
+/// top-level modules, and between the child modules of any folder module (a loop
+/// inside `agent/` counts as much as one between `agent` and `run`), each as a line
+/// naming the module, the loop's members and their edges.
 fn import_loops(root: &str, files: &Files<'_>) -> Vec<String> {
-    let modules = top_level_modules(root, files);
-    let names: std::collections::BTreeSet<&str> = modules.iter().map(|(name, _)| name.as_str()).collect();
-    let mut edges: std::collections::BTreeMap<String, std::collections::BTreeSet<String>> = Default::default();
-    for (name, module_files) in &modules {
-        let targets = edges.entry(name.clone()).or_default();
-        for (path, depth) in module_files {
-            if is_test_file(path) || path.contains("/tests/") {
-                continue;
-            }
-            let code = code_without_tests(files[path]);
-            for target in named_top_level(&code, *depth) {
-                if target != name && names.contains(target) {
-                    targets.insert(target.to_owned());
+    let tree = ModuleNode::of_crate(root, files);
+    let mut found = Vec::new();
+    for parent in tree.all_modules() {
+        if parent.children.len() < 2 {
+            continue;
+        }
+        let names: std::collections::BTreeSet<&str> =
+            parent.children.iter().filter_map(|c| c.path.last().map(String::as_str)).collect();
+        let mut edges: std::collections::BTreeMap<String, std::collections::BTreeSet<String>> = Default::default();
+        for child in &parent.children {
+            let name = child.path.last().cloned().unwrap_or_default();
+            let targets = edges.entry(name.clone()).or_default();
+            for (path, depth) in child.all_files() {
+                if is_test_file(path) || path.contains("/tests/") {
+                    continue;
+                }
+                let code = code_without_tests(files[path]);
+                for target in named_children(&code, depth, &parent.path) {
+                    if target != name && names.contains(target) {
+                        targets.insert(target.to_owned());
+                    }
                 }
             }
         }
-    }
-    loops(&edges)
-        .into_iter()
-        .map(|component| {
+        let place = if parent.path.is_empty() { String::new() } else { format!(" in {}", parent.path.join("::")) };
+        for component in loops(&edges) {
             let inside = |m: &String| {
                 let to: Vec<&str> = edges[m].iter().filter(|t| component.contains(t)).map(String::as_str).collect();
                 format!("{m} -> {}", to.join(", "))
             };
-            format!(
-                "import loop between {}: {}",
+            found.push(format!(
+                "import loop{place} between {}: {}",
                 component.join(", "),
                 component.iter().map(inside).collect::<Vec<_>>().join("; ")
-            )
-        })
-        .collect()
+            ));
+        }
+    }
+    found
 }
 
 /// Whether `text` has `unsafe` code (a block, function, impl or extern block).
@@ -573,14 +624,25 @@ fn has_unsafe(text: &str) -> bool {
 /// A crate root whose crate has no `unsafe` code and that does not forbid it.
 fn forbids_unsafe_where_none(root: &str, files: &Files<'_>) -> Option<&'static str> {
     let text = files.get(root)?;
-    let crate_files = std::iter::once(*text)
-        .chain(top_level_modules(root, files).into_iter().flat_map(|(_, fs)| fs.into_iter().map(|(p, _)| files[p])));
-    let mut any_unsafe = false;
-    for file in crate_files {
-        any_unsafe |= has_unsafe(file);
-    }
+    let any_unsafe = ModuleNode::of_crate(root, files).all_files().into_iter().any(|(path, _)| has_unsafe(files[path]));
     let forbids = text.lines().any(|l| l.trim() == "#![forbid(unsafe_code)]");
     (!any_unsafe && !forbids).then_some("a crate without unsafe code whose root does not say #![forbid(unsafe_code)]")
+}
+
+/// The longest line the code map may have, in characters: a map whose lines run
+/// on restates behaviour, which is what drifts; a long line is a sign to say less.
+const CODE_MAP_LINE: usize = 400;
+
+/// Lines of ARCHITECTURE.md longer than [`CODE_MAP_LINE`] characters.
+fn code_map_lines(path: &str, text: &str) -> Vec<Violation> {
+    if path != "ARCHITECTURE.md" {
+        return Vec::new();
+    }
+    text.lines()
+        .enumerate()
+        .filter(|(_, line)| line.chars().count() > CODE_MAP_LINE)
+        .map(|(i, _)| at(i + 1, "a line of the code map over 400 characters: say less, or split it"))
+        .collect()
 }
 
 fn opens_with_module_doc(path: &str, text: &str) -> Vec<Violation> {
@@ -653,13 +715,14 @@ fn code_lines_all(text: &str) -> impl Iterator<Item = (usize, &str)> {
 
 type Rule = fn(&str, &str) -> Vec<Violation>;
 
-const RULES: [Rule; 6] = [
+const RULES: [Rule; 7] = [
     no_printing,
     unsafe_has_safety,
     cfg_windows_in_windows_folders,
     opens_with_module_doc,
     no_machine_paths,
     no_ignored_tests,
+    code_map_lines,
 ];
 
 /// The repository's files, relative to its root.
@@ -845,6 +908,115 @@ fn import_loops_between_top_level_modules_are_caught() {
     let found = import_loops("y/src/main.rs", &files_of(&ring));
     assert_eq!(found, ["import loop between p, q, r: p -> q; q -> r; r -> p"], "{found:?}");
     assert_eq!(crate_roots(&files_of(&ring)), ["y/src/main.rs"]);
+}
+
+#[test]
+fn import_loops_inside_a_folder_module_are_caught() {
+    let nested = [
+        (
+            "z/src/lib.rs",
+            "//! Root.
+pub mod agent;
+pub mod run;
+",
+        ),
+        (
+            "z/src/agent/mod.rs",
+            "//! Agent.
+pub mod body;
+pub mod llm;
+pub mod external;
+pub mod cu;
+",
+        ),
+        // body -> llm by its full path from the crate root.
+        (
+            "z/src/agent/body.rs",
+            "//! Body.
+use crate::agent::llm::Client;
+",
+        ),
+        // llm -> external through `super::`.
+        (
+            "z/src/agent/llm.rs",
+            "//! Llm.
+use super::external::transport;
+",
+        ),
+        // external -> body from a file one level further down: `super::super::body`.
+        (
+            "z/src/agent/external/mod.rs",
+            "//! External.
+pub mod transport;
+",
+        ),
+        (
+            "z/src/agent/external/transport.rs",
+            "//! Transport.
+use super::super::body::read;
+",
+        ),
+        // Two levels down: cu's children a and m name each other; a grouped use.
+        (
+            "z/src/agent/cu/mod.rs",
+            "//! Cu.
+mod anthropic;
+mod models;
+",
+        ),
+        (
+            "z/src/agent/cu/anthropic.rs",
+            "//! A.
+use crate::agent::cu::{models::Row, anthropic as _};
+",
+        ),
+        (
+            "z/src/agent/cu/models.rs",
+            "//! M.
+use super::anthropic::Tool;
+",
+        ),
+        // run names agent and agent names nothing above it: no top-level loop.
+        (
+            "z/src/run.rs",
+            "//! Run.
+use crate::agent::body;
+",
+        ),
+    ];
+    let found = import_loops("z/src/lib.rs", &files_of(&nested));
+    assert_eq!(
+        found,
+        [
+            "import loop in agent between body, external, llm: body -> llm; external -> body; llm -> external",
+            "import loop in agent::cu between anthropic, models: anthropic -> models; models -> anthropic",
+        ],
+        "{found:?}"
+    );
+    // Without the edge back, nothing.
+    let mut fixed = nested;
+    fixed[5] = (
+        "z/src/agent/external/transport.rs",
+        "//! Transport.
+use crate::run;
+",
+    );
+    fixed[8] = (
+        "z/src/agent/cu/models.rs",
+        "//! M.
+",
+    );
+    assert!(import_loops("z/src/lib.rs", &files_of(&fixed)).is_empty());
+}
+
+#[test]
+fn the_code_map_has_no_overlong_line() {
+    let map = format!("# Architecture\n\nshort\n{}\nshort again\n{}\n", "x".repeat(401), "y".repeat(400));
+    assert_eq!(lines_of(code_map_lines("ARCHITECTURE.md", &map)), [4]);
+    // Other Markdown files are not the code map.
+    assert!(code_map_lines("docs/x.md", &"z".repeat(900)).is_empty());
+    // Characters, not bytes: 400 accented letters are within the limit.
+    assert!(code_map_lines("ARCHITECTURE.md", &"é".repeat(400)).is_empty());
 }
 
 #[test]
