@@ -2,8 +2,10 @@
 //! `arena_mcp::ToolServer`: the handler, tool table, result shapes and protocol
 //! version are `arena_mcp`'s, which the guest's `--mcp` shares), served with rmcp's
 //! streamable-HTTP transport at `/mcp` behind the bearer token (the project's one
-//! check, `arena_shared::token::bearer_matches`), with rmcp's `Host` check and every
-//! `Origin` refused (a browser page cannot reach it), as the guest's own guards.
+//! check, `arena_shared::token::bearer_matches`), answering only `Host` names of this
+//! machine (`arena_shared::host_header`, the rule the guest and `arena env serve`
+//! use) and refusing every `Origin` (a browser page cannot reach it), as the guest's
+//! own guards.
 
 use std::net::SocketAddr;
 use std::sync::Arc;
@@ -180,6 +182,26 @@ async fn require_token(token: Arc<str>, request: Request, next: Next) -> Respons
     }
 }
 
+/// Whether a request's `Host` names this endpoint: a loopback name or address
+/// (`arena_shared::host_header::is_loopback`) or the address it listens on. A
+/// missing `Host` (HTTP/1.0) passes, as rmcp's own check lets it.
+fn host_allowed(host: Option<&str>, listen: SocketAddr) -> bool {
+    let Some(host) = host else { return true };
+    let name = arena_shared::host_header::name(host);
+    arena_shared::host_header::is_loopback(host) || name.parse::<std::net::IpAddr>().is_ok_and(|ip| ip == listen.ip())
+}
+
+/// Refuses a request whose `Host` is not this endpoint's ([`host_allowed`]), with
+/// rmcp's own answer to that (403).
+async fn require_host(listen: SocketAddr, request: Request, next: Next) -> Response {
+    let host = request.headers().get(axum::http::header::HOST).and_then(|v| v.to_str().ok());
+    if host_allowed(host, listen) {
+        next.run(request).await
+    } else {
+        (StatusCode::FORBIDDEN, "Forbidden: Host header is not allowed\n").into_response()
+    }
+}
+
 /// `/mcp` with `make` as the per-session handler, behind `token`, accepting
 /// `Host` names of loopback and `listen`'s own address, refusing every `Origin`;
 /// sessions kept by `sessions`.
@@ -194,11 +216,8 @@ where
     S: ServerHandler + Send + 'static,
     F: Fn() -> S + Send + Sync + 'static,
 {
-    let mut hosts: Vec<String> = ["localhost", "127.0.0.1", "::1", "[::1]"].iter().map(|s| (*s).to_owned()).collect();
-    hosts.push(listen.ip().to_string());
-    hosts.push(listen.to_string());
-    let mut config = arena_mcp::http_config().with_cancellation_token(stop);
-    config.allowed_hosts = hosts;
+    // The Host rule is the project's one (`require_host`), not a list of rmcp's.
+    let mut config = arena_mcp::http_config().with_cancellation_token(stop).disable_allowed_hosts();
     config.legacy_session_mode = true;
     let service: StreamableHttpService<S, BoundedSessions> =
         StreamableHttpService::new(move || Ok(make()), sessions, config);
@@ -206,6 +225,7 @@ where
     axum::Router::new()
         .nest_service("/mcp", arena_mcp::HttpStatuses(service))
         .layer(axum::middleware::from_fn(move |req, next| require_token(Arc::clone(&token), req, next)))
+        .layer(axum::middleware::from_fn(move |req, next| require_host(listen, req, next)))
 }
 
 /// Serves the run's MCP endpoint on `listener` until `stop`.
@@ -231,6 +251,19 @@ pub async fn serve(listener: tokio::net::TcpListener, hub: Arc<Hub>, token: Stri
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn only_this_machines_host_names_pass() {
+        let listen: SocketAddr = "10.1.2.3:8791".parse().unwrap();
+        for host in ["localhost", "localhost:8791", "agent.localhost", "127.0.0.1:8791", "[::1]:8791", "10.1.2.3:8791"]
+        {
+            assert!(host_allowed(Some(host), listen), "{host}");
+        }
+        for host in ["evil.example:8791", "10.1.2.4:8791", "localhost.evil.example", "127.0.0.1.nip.io"] {
+            assert!(!host_allowed(Some(host), listen), "{host}");
+        }
+        assert!(host_allowed(None, listen), "HTTP/1.0 sends no Host");
+    }
 
     /// `initialize` on the endpoint; answers the status and the session id.
     async fn initialize(http: &reqwest::Client, url: &str) -> (u16, Option<String>) {
