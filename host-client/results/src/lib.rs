@@ -40,6 +40,8 @@
 //! - [`timings`]: the timed parts of a step's observation and prediction.
 //! - `fixtures` (feature `fixtures`, for tests): an episode record, a layout, a finished task written.
 
+#![forbid(unsafe_code)]
+
 mod budget;
 pub mod certificate;
 pub mod compare;
