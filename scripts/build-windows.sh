@@ -5,7 +5,7 @@
 # guest-server/launch/; they ship together), and the bcryptprimitives.dll shim that lets
 # Rust programs start under Wine 8. Then it type-checks the host crate, arena-host, for
 # the same target with our crates' warnings denied (on a Windows host an exec agent runs
-# in a job object: host-client/src/agent/external/windows/), in the same target folder.
+# in a job object: host-client/vm/src/child/windows/), in the same target folder.
 #
 # Usage: scripts/build-windows.sh [--release] [--no-install] [--no-host-check]
 #

@@ -6,9 +6,9 @@
 #
 # Usage: scripts/wine-test.sh [--release] [--no-build] [--host]
 #
-# --host also cross-builds arena-host's unit tests and runs its Windows-only ones under
-# Wine (an exec agent's job object: agent::external::windows). That builds the whole
-# host for Windows, minutes on 2 cores, so it is not done by default.
+# --host also cross-builds arena-vm's unit tests and runs its Windows-only ones under
+# Wine (an exec agent's job object: child::windows). That builds arena-vm and its
+# dependencies for Windows, minutes on 2 cores, so it is not done by default.
 #
 # Environment (all optional):
 #   DISPLAY             an X display to use; default: starts Xvfb on :99 (1440x900x24)
@@ -108,7 +108,7 @@ if [ "$HOST" = 1 ]; then
     PATH="/usr/bin:$PATH" RUSTC=/usr/bin/rustc RUSTDOC=/usr/bin/rustdoc RUSTC_BOOTSTRAP=1 \
         CARGO_TARGET_X86_64_PC_WINDOWS_GNU_LINKER=x86_64-w64-mingw32-gcc \
         CARGO_TARGET_X86_64_PC_WINDOWS_GNU_RUNNER="$ARENA_WINE" CARGO_TARGET_DIR="$TARGET_DIR" \
-        /usr/bin/cargo test -p arena-host --lib --target x86_64-pc-windows-gnu -Zbuild-std=std,panic_abort --locked \
-        -- agent::external::windows
+        /usr/bin/cargo test -p arena-vm --lib --target x86_64-pc-windows-gnu -Zbuild-std=std,panic_abort --locked \
+        -- child::windows
     echo "host tests under Wine took $(( $(date +%s) - started )) s"
 fi
