@@ -113,7 +113,8 @@ async fn pyautogui_hotkeys_and_the_clipboard_work_through_the_guest() {
     let (_guest, c) = guest_with_notepad().await;
     let obs = Observation::capture(&c, 1, "copy").await.expect("observe");
     let mut state = ComputerState::for_screen(1, 1);
-    // pyautogui code is translated whole (its prints are not kept) and carried out.
+    // pyautogui code runs in the host's interpreter (the default policy, `Effects`),
+    // each input call one action on the guest.
     let code = "pyautogui.write('abc')\npyautogui.hotkey('ctrl', 'a')\npyautogui.hotkey('ctrl', 'c')\nprint(pyautogui.position())";
     let outcome = run(&c, &AgentAction::Pyautogui(code.into()), &obs, &mut state).await;
     assert_eq!(outcome.error, None, "{outcome:?}");

@@ -17,8 +17,9 @@ use arena_shared::action::Action;
 pub enum AgentAction {
     /// Navi `computer.*` code, run with `computer` bound (upstream's `/execute_windows`).
     Computer(String),
-    /// pyautogui code, translated by the `pyautogui` action space (with `pyautogui`
-    /// and `time` imported, as upstream's `python -c`) and carried out as its steps.
+    /// pyautogui code (with `pyautogui` and `time` imported, as upstream's `python -c`),
+    /// carried out as the executor's [`PyautoguiPolicy`](crate::PyautoguiPolicy) says:
+    /// with its effects by default, or translated by the `pyautogui` action space.
     Pyautogui(String),
     /// Typed input actions, sent as one batch.
     Typed(Vec<Action>),

@@ -188,7 +188,7 @@ pub fn parse_navi_reply(text: &str) -> NaviReply {
     let memory_block = fenced(text, "memory").map(|inner| format!("```memory\n{inner}```"));
     let code = fenced(text, "python").and_then(|c| dedent(&c));
     let mut actions = vec![match &code {
-        // Code that does not use the `computer` object is pyautogui code, translated
+        // Code that does not use the `computer` object is pyautogui code, carried out
         // as every pyautogui answer is (upstream runs any code as `computer` code).
         Some(code) if dialect_of(code) == Dialect::Pyautogui && meaningful(code) => {
             AgentAction::Pyautogui(code.clone())

@@ -418,7 +418,7 @@ impl Agent for ExternalAgent {
 /// An `act` answer as the episode's [`Prediction`]: actions in order, then the
 /// decision; each `record` field becomes a field of the step's trajectory line.
 /// `coords` is the convention of the answer's `computer_13` actions (translated
-/// here) and of its pyautogui code (translated where code runs, `arena_exec`).
+/// here) and of its pyautogui code (read in it where code runs, `arena_exec`).
 ///
 /// # Errors
 ///

@@ -1,7 +1,7 @@
 //! The action spaces an outside agent may answer in, mapped to [`AgentAction`]s:
 //! WAA `computer` code (run by the host's interpreter, as Navi's is), pyautogui
-//! code (translated where it runs by the `pyautogui` action space, as every
-//! pyautogui answer is), and OSWorld's `computer_13` JSON actions and typed
+//! code (carried out by `arena_exec` as every pyautogui answer is: with its
+//! effects, or translated under `--pyautogui-translate-only`), and OSWorld's `computer_13` JSON actions and typed
 //! actions (`arena_shared::action::Action` as JSON), both through the one entry
 //! point of the action spaces, `arena_actionspace::parse`. In every space the
 //! strings `DONE`, `FAIL` and `WAIT` are the decisions ([`Decision::parse`]), as
@@ -30,7 +30,7 @@ pub fn check_space(space: &str) -> Result<(), String> {
 }
 
 /// The answer's `actions` in `space`, in order; `computer_13` coordinates are in
-/// `coords` (pyautogui code is translated in them where it runs, `arena_exec`).
+/// `coords` (pyautogui code is read in them where it runs, `arena_exec`).
 ///
 /// # Errors
 ///
