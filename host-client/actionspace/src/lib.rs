@@ -2,9 +2,9 @@
 //! translated into the guest's typed [`Action`]s and the step decisions `WAIT`,
 //! `DONE` and `FAIL`.
 //!
-//! One entry point serves every caller (the computer-use agents, the agent
-//! executor for every pyautogui answer whichever way it came in, `arena act`,
-//! setup steps through [`pyautogui::parse`], tests):
+//! One entry point serves every caller (the computer-use agents, the executor
+//! `arena-exec` for pyautogui answers under `--pyautogui-translate-only` and for a
+//! setup step's input-only `python -c`, `arena act`, tests):
 //!
 //! ```text
 //! actionspace::parse(space, &input, &ctx) -> Result<Vec<Step>, ActionError>
@@ -19,7 +19,7 @@
 //! - A [`Step`] is one typed input action, a clipboard write (pyperclip, UI-TARS
 //!   typing), a decision, or a request only the agent can answer (a
 //!   screenshot, the cursor position, a zoomed region). Steps are all this crate
-//!   answers: carrying them out is the host's agent executor's business.
+//!   answers: carrying them out is the executor's business (`arena-exec`).
 //!
 //! An unknown action, parameter value or key is an [`ActionError`] naming the
 //! grammar and what was wrong, never a silent no-op.
