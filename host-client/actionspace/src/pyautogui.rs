@@ -1,7 +1,9 @@
 //! pyautogui code as OSWorld agents write it, turned into steps: the host's one
-//! translation of pyautogui into actions ([`parse`]), for agents (every way an
-//! answer comes in: Navi, the step protocol, MCP's `run_python`, `arena act`) and
-//! for tasks' `execute` setup steps alike, under one deadline.
+//! translation of pyautogui into actions ([`parse`]), for agents under
+//! `--pyautogui-translate-only` (every way an answer comes in: Navi, the step
+//! protocol, MCP's `run_python`), for `arena act` and for tasks' `execute` setup
+//! steps alike, under one deadline. (By default an agent's pyautogui code runs with
+//! its effects in the host's interpreter instead: `arena-exec`.)
 //!
 //! The code runs in the shared interpreter (`arena_script`, the same
 //! parser and pyautogui semantics the guest's `/execute` has) against a host that
