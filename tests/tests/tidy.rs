@@ -995,12 +995,7 @@ use crate::agent::body;
     );
     // Without the edge back, nothing.
     let mut fixed = nested;
-    fixed[5] = (
-        "z/src/agent/external/transport.rs",
-        "//! Transport.
-use crate::run;
-",
-    );
+    fixed[5] = ("z/src/agent/external/transport.rs", "//! Transport.\n");
     fixed[8] = (
         "z/src/agent/cu/models.rs",
         "//! M.

@@ -23,7 +23,7 @@ use arena_shared::keys::HeldKeys;
 use arena_shared::observation::{ImageFormat, ScreenshotQuery, WindowInfo, WindowTarget};
 use arena_shared::registry::RegistryValue;
 
-use crate::execute::ExecOptions;
+use crate::options::ExecOptions;
 
 /// A [`ScriptHost`] whose effects are calls of one guest's `/v1` API.
 ///

@@ -16,6 +16,7 @@
 //!
 //! - [`action`]: [`AgentAction`], its JSON record and how an action space's steps become actions.
 //! - [`execute`]: [`execute_with`], [`perform_steps`], [`perform_input_only`] and their options and outcome.
+//! - [`options`]: [`ExecOptions`], [`PyautoguiPolicy`] and [`Boxes`], what the executor is handed.
 //! - `guest_host`: [`GuestHost`], the script host over a guest's `/v1` API.
 
 #![forbid(unsafe_code)]
@@ -23,10 +24,12 @@
 pub mod action;
 pub mod execute;
 mod guest_host;
+pub mod options;
 
 pub use action::AgentAction;
 pub use execute::{
-    execute, execute_with, perform_input_only, perform_steps, pointer, translate_pyautogui, ActionOutcome, Boxes,
-    ExecError, ExecOptions, InputOnly, PyautoguiPolicy,
+    execute, execute_with, perform_input_only, perform_steps, pointer, translate_pyautogui, ActionOutcome, ExecError,
+    InputOnly,
 };
 pub use guest_host::GuestHost;
+pub use options::{Boxes, ExecOptions, PyautoguiPolicy};

@@ -16,6 +16,7 @@ use arena_shared::keys::{parse_chord, Key};
 
 use super::render::taskbar_buttons;
 use super::window::{
+    Effect,
     layout, Caption, Dialog, DialogButton, Grab, Hit, Press, State, Window, BODY_PAD, GLYPH_W, LINE_H, TASKBAR_H,
 };
 use crate::desktop::{ClipboardData, DesktopError, DesktopResult, WindowState};
@@ -27,16 +28,6 @@ pub(crate) const ICON_PITCH: i32 = 24;
 /// Width of a desktop icon's clickable area.
 const ICON_W: i32 = 140;
 
-/// Something an action asks the desktop to do beyond the state (it needs the file system).
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub(crate) enum Effect {
-    /// Open the `n`th Desktop item (sorted by name), after a double click on its icon.
-    OpenDesktopItem(usize),
-    /// Start a command line as the shell does (`win+e` starts `explorer`).
-    Launch(String),
-    /// The Run dialog `dialog` was told to run `line` (`enter` or its OK button).
-    RunDialog { dialog: u64, line: String },
-}
 
 /// Applies one action.
 ///

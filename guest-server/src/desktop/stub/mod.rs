@@ -313,20 +313,20 @@ impl StubDesktop {
     }
 
     /// Does what input asked of the rest of the desktop, with the state unlocked.
-    fn apply_effects(&self, effects: Vec<input::Effect>) -> DesktopResult<()> {
+    fn apply_effects(&self, effects: Vec<window::Effect>) -> DesktopResult<()> {
         for effect in effects {
             match effect {
-                input::Effect::OpenDesktopItem(n) => {
+                window::Effect::OpenDesktopItem(n) => {
                     if let Some(name) = self.desktop_items().get(n) {
                         self.open_path(&format!(r"C:\Users\Docker\Desktop\{name}"))?;
                     }
                 }
-                input::Effect::Launch(line) => {
+                window::Effect::Launch(line) => {
                     if self.launch_modelled(&CommandSpec::Shell(line.clone()))?.is_none() {
                         return Err(DesktopError::NotFound(format!("program {line} not found")));
                     }
                 }
-                input::Effect::RunDialog { dialog, line } => self.run_dialog(dialog, &line),
+                window::Effect::RunDialog { dialog, line } => self.run_dialog(dialog, &line),
             }
         }
         Ok(())

@@ -10,7 +10,6 @@ use arena_shared::action::{Action, MouseButton};
 use arena_shared::geometry::{Point, Rect};
 use arena_shared::observation::{A11yNode, WindowInfo};
 
-use super::input::Effect;
 use super::registry::Registry;
 use crate::desktop::windows::shell;
 use crate::desktop::{ClipboardData, DesktopError, DesktopResult, WindowState};
@@ -543,7 +542,7 @@ pub(crate) struct State {
     pub(crate) log: std::collections::VecDeque<Action>,
     pub(crate) shutdown: bool,
     pub(crate) wallpaper: Option<WallpaperCache>,
-    /// What the action being performed asks of the rest of the desktop (see [`super::input::perform`]).
+    /// What the action being performed asks of the rest of the desktop (see `super::input::perform`).
     pub(crate) effects: Vec<Effect>,
     /// The command the Run dialog ran last, which it offers again (selected) when it opens.
     pub(crate) run_mru: Option<String>,
@@ -874,6 +873,17 @@ impl State {
     pub(crate) fn clamp(&self, p: Point) -> Point {
         Point::new(p.x.clamp(0, self.screen.0 as i32 - 1), p.y.clamp(0, self.screen.1 as i32 - 1))
     }
+}
+
+/// Something an action asks the desktop to do beyond the state (it needs the file system).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub(crate) enum Effect {
+    /// Open the `n`th Desktop item (sorted by name), after a double click on its icon.
+    OpenDesktopItem(usize),
+    /// Start a command line as the shell does (`win+e` starts `explorer`).
+    Launch(String),
+    /// The Run dialog `dialog` was told to run `line` (`enter` or its OK button).
+    RunDialog { dialog: u64, line: String },
 }
 
 #[cfg(test)]

@@ -523,9 +523,10 @@ fn field_value(name: &str, pos: &[Value], kw: &[(String, Value)], auto: &mut usi
             (Value::List(items) | Value::Tuple(items), Ok(i)) => {
                 items.get(i).cloned().ok_or_else(|| ScriptError::new(ErrorKind::Index, "list index out of range"))?
             }
+            // A str key equals only a str of the same text, so this is the dict's own lookup.
             (Value::Dict(entries), _) => entries
-                .get(&super::heap::Key(Value::str(key)))
-                .cloned()
+                .iter()
+                .find_map(|(k, v)| matches!(&k.0, Value::Str(s) if s.as_str() == key).then(|| v.clone()))
                 .ok_or_else(|| ScriptError::new(ErrorKind::Key, super::str_repr(key)))?,
             (other, _) => return Err(type_error(format!("'{}' object is not subscriptable", other.type_name()))),
         };
