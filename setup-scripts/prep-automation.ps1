@@ -2,8 +2,10 @@
 .SYNOPSIS
 Turns off what breaks unattended desktop automation: Windows Update, Defender's
 real-time protection, SmartScreen, Smart App Control, password expiry, the lock
-screen, the screen saver, sleep, UAC's secure desktop, first-run pop-ups and
-focus-stealing notifications; shows file extensions.
+screen, the screen saver, sleep, UAC's secure desktop, first-run pop-ups,
+focus-stealing notifications, Store updates and OneDrive's setup at logon; shows
+file extensions; draws the first logon's screen as upstream's image does (no
+unsupported-hardware watermark, no Task View, Widgets, Chat or Copilot button).
 
 .DESCRIPTION
 Run it in the benchmark user's session (setup.ps1 does, at first logon): the
@@ -114,6 +116,34 @@ try {
 
     # File extensions: tasks name files with their extension and check Explorer's view.
     Set-RegistryValue 'HKCU:\Software\Microsoft\Windows\CurrentVersion\Explorer\Advanced' 'HideFileExt' 0
+
+    # The screen at first logon as upstream's image shows it (the answer file's first
+    # logon commands write the same; this is for images made another way): no "System
+    # requirements not met" watermark on a VM Windows 11 calls unsupported, and no Task
+    # View, Widgets, Chat or Copilot button on the taskbar.
+    Set-RegistryValue 'HKCU:\Control Panel\UnsupportedHardwareNotificationCache' 'SV1' 0
+    Set-RegistryValue 'HKCU:\Control Panel\UnsupportedHardwareNotificationCache' 'SV2' 0
+    $advanced = 'HKCU:\Software\Microsoft\Windows\CurrentVersion\Explorer\Advanced'
+    Set-RegistryValue $advanced 'ShowTaskViewButton' 0
+    Set-RegistryValue $advanced 'TaskbarMn' 0
+    Set-RegistryValue $advanced 'ShowCopilotButton' 0
+    # Recent builds refuse a script's write of TaskbarDa (the User Choice Protection
+    # driver); the documented widgets policy hides the button either way.
+    Set-RegistryValue 'HKLM:\SOFTWARE\Policies\Microsoft\Dsh' 'AllowNewsAndInterests' 0
+    try {
+        Set-RegistryValue $advanced 'TaskbarDa' 0
+    }
+    catch {
+        Write-Step "TaskbarDa not written ($($_.Exception.Message)); the widgets policy hides the button"
+    }
+    # The Store would update apps under a frozen image (2: automatic downloads off).
+    Set-RegistryValue 'HKLM:\SOFTWARE\Policies\Microsoft\WindowsStore' 'AutoDownload' 2
+    # OneDrive's per-user setup would start at every logon and put its window over the task's.
+    $run = 'HKCU:\Software\Microsoft\Windows\CurrentVersion\Run'
+    if ($null -ne (Get-ItemProperty -LiteralPath $run -Name 'OneDriveSetup' -ErrorAction SilentlyContinue)) {
+        Remove-ItemProperty -LiteralPath $run -Name 'OneDriveSetup'
+        Write-Step "removed $run\OneDriveSetup"
+    }
 }
 catch {
     Write-Step "ERROR: $($_.Exception.Message)"

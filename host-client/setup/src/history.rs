@@ -9,12 +9,17 @@
 //! 1601-01-01 UTC. Upstream computed them from the host's local time, which is
 //! off by the host's UTC offset; this uses UTC, as Chrome does.
 //!
+//! The file goes where the browser keeps its profile ([`guest_path`], by
+//! `arena_client::browser::profile`'s rule, which the history getters read by too).
+//!
 //! It is not a history reader: evaluators read the file back with their own getters.
 
 use std::time::{Duration, SystemTime, UNIX_EPOCH};
 
 use rusqlite::{params, Connection};
 
+use arena_client::browser::profile;
+use arena_client::client::GuestClient;
 use arena_task::{Browser, HistoryEntry};
 
 /// Seconds from 1601-01-01 to 1970-01-01.
@@ -67,12 +72,19 @@ CREATE TABLE downloads_slices (download_id INTEGER NOT NULL, offset INTEGER NOT 
     received_bytes INTEGER NOT NULL, finished INTEGER NOT NULL DEFAULT 0, PRIMARY KEY (download_id, offset));
 ";
 
-/// The guest path of a browser's History file (the guest expands `%LOCALAPPDATA%`).
-pub fn guest_path(browser: Browser) -> &'static str {
-    match browser {
-        Browser::Chrome => r"%LOCALAPPDATA%\Google\Chrome\User Data\Default\History",
-        Browser::Edge => r"%LOCALAPPDATA%\Microsoft\Edge\User Data\Default\History",
-    }
+/// The guest path of a browser's History file: under the user-data folder
+/// [`profile::user_data_dir`] finds, the folder the history getters read.
+///
+/// # Errors
+///
+/// The rule's error as text: a failed guest call or a policy naming no usable folder.
+pub async fn guest_path(client: &GuestClient, browser: Browser) -> Result<String, String> {
+    let browser = match browser {
+        Browser::Chrome => profile::Browser::Chrome,
+        Browser::Edge => profile::Browser::Edge,
+    };
+    let dir = profile::user_data_dir(client, browser).await.map_err(|err| err.to_string())?;
+    Ok(dir.file(profile::HISTORY))
 }
 
 /// Microseconds since 1601-01-01 UTC of `time` (Chrome's `base::Time` internal value).

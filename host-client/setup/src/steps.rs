@@ -68,10 +68,10 @@ pub(super) async fn run(ctx: &SetupContext, step: &SetupStep) -> Result<Outcome,
             let entries = entries.clone();
             let built = tokio::task::spawn_blocking(move || history::build(&entries, SystemTime::now())).await;
             match built {
-                Ok(Ok(bytes)) => {
-                    let path = history::guest_path(*browser);
-                    Outcome::of(client.push_file(path, bytes, Some(true)).await, format!("wrote {path}"))
-                }
+                Ok(Ok(bytes)) => match history::guest_path(client, *browser).await {
+                    Ok(path) => Outcome::of(client.push_file(&path, bytes, Some(true)).await, format!("wrote {path}")),
+                    Err(err) => Outcome::failed(err),
+                },
                 Ok(Err(err)) => Outcome::failed(err),
                 Err(err) => Outcome::failed(format!("building the History database failed: {err}")),
             }

@@ -643,6 +643,63 @@ async fn browse_history_lands_in_the_browser_profile_with_webkit_times() {
     assert_eq!(rows[0].0, "https://news.example/");
 }
 
+/// The history step writes where the history getters read: at the folder of
+/// the browser's `UserDataDir` policy when one is set (this project's image),
+/// at the default folder when none is (upstream's), each read back by
+/// `arena_eval`'s `history` / `history_for_edge` getter.
+#[tokio::test]
+async fn the_history_step_writes_where_the_history_getters_read() {
+    use arena_eval::value::Fetched;
+    use arena_shared::registry::{RegistryValue, RegistryWrite};
+    let guest = start_guest().await;
+    let ctx = &guest.ctx;
+    let eval = arena_eval::EvalContext {
+        client: ctx.client.clone(),
+        cache: ctx.cache.clone(),
+        work_dir: guest.host_dir.path().join("work"),
+        task_dir: None,
+    };
+    let urls = |fetched: Fetched| -> Vec<String> {
+        let Fetched::Json(Value::Array(rows)) = fetched else { panic!("history rows: {fetched:?}") };
+        rows.iter().map(|row| row[0].as_str().expect("url").to_owned()).collect()
+    };
+    let getter = |kind: &str| {
+        let Value::Object(params) = json!({"dest": format!("{kind}.sqlite")}) else { unreachable!() };
+        arena_task::GetterSpec { kind: kind.to_owned(), params }
+    };
+    let entry = |url: &str| HistoryEntry { url: url.into(), title: "T".into(), visit_time_from_now_in_seconds: 5.0 };
+
+    // Chrome with its policy set, as prep-browser.ps1 sets it; Edge without one.
+    let policy = RegistryWrite {
+        key: r"HKLM\SOFTWARE\Policies\Google\Chrome".into(),
+        value: Some("UserDataDir".into()),
+        data: RegistryValue::String(r"${local_app_data}\Arena\Chrome".into()),
+    };
+    ctx.client.registry_set(&policy).await.expect("policy");
+    step_ok(
+        ctx,
+        SetupStep::UpdateBrowseHistory { browser: Browser::Chrome, history: vec![entry("https://a.example/")] },
+    )
+    .await;
+    step_ok(ctx, SetupStep::UpdateBrowseHistory { browser: Browser::Edge, history: vec![entry("https://b.example/")] })
+        .await;
+    let chrome = arena_eval::fetch(&eval, &getter("history")).await.expect("Chrome's history");
+    assert_eq!(urls(chrome), ["https://a.example/"]);
+    let edge = arena_eval::fetch(&eval, &getter("history_for_edge")).await.expect("Edge's history");
+    assert_eq!(urls(edge), ["https://b.example/"]);
+    // The policy's folder, not the default one.
+    let moved = r"C:\Users\Docker\AppData\Local\Arena\Chrome\Default\History";
+    assert_eq!(read_history(ctx, moved, guest.host_dir.path()).await.len(), 1);
+    let default = r"C:\Users\Docker\AppData\Local\Google\Chrome\User Data\Default\History";
+    assert!(!ctx.client.exists(default).await.expect("exists").exists);
+
+    // A policy naming no usable folder fails the step by name, writing nothing.
+    let relative = RegistryWrite { data: RegistryValue::String(r"Arena\Chrome".into()), ..policy };
+    ctx.client.registry_set(&relative).await.expect("policy");
+    let report = step(ctx, SetupStep::UpdateBrowseHistory { browser: Browser::Chrome, history: vec![] }).await;
+    assert!(!report.ok && report.detail.contains("UserDataDir"), "{report:?}");
+}
+
 // ----- reset -----
 
 #[tokio::test]

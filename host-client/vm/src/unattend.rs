@@ -21,13 +21,16 @@
 //! - offlineServicing: UAC (`EnableLUA`), off by default as in upstream's images.
 //! - specialize: computer name, time zone, `BypassNRO` (a local account without
 //!   a network), passwords that never expire, Windows Update, Defender's
-//!   real-time protection, SmartScreen and Smart App Control off ([`SPECIALIZE_POLICIES`]),
+//!   real-time protection, SmartScreen, Smart App Control, Store updates and
+//!   Widgets off ([`SPECIALIZE_POLICIES`]),
 //!   and the copy of the OEM media to `C:\OEM` by a script on the media
 //!   ([`oem_copy_command`], [`oem_copy_script`]).
 //! - oobeSystem: no automatic device encryption (each VM has its own TPM),
 //!   locale, the local administrator account, auto-logon, OOBE's pages hidden,
-//!   the account's password set never to expire, and `C:\OEM\install.bat` as
-//!   the first logon command.
+//!   the account's password set never to expire, the first logon's screen as
+//!   upstream's ([`FIRST_LOGON_SCREEN`]: no unsupported-hardware watermark, no
+//!   Task View, Widgets, Chat or Copilot button, no OneDrive setup), and
+//!   `C:\OEM\install.bat` as the last first logon command.
 //!
 //! Every string written is checked against the maximum the reference gives for
 //! its setting ([`LIMITS`], [`check_limits`]) before the file is used.
@@ -538,6 +541,52 @@ pub const SPECIALIZE_POLICIES: &[(&str, &str)] = &[
         r#"reg.exe add "HKLM\SYSTEM\CurrentControlSet\Control\CI\Policy" /v VerifiedAndReputablePolicyState /t REG_DWORD /d 0 /f"#,
         "Smart App Control off, before its first evaluation (VerifiedAndReputablePolicyState)",
     ),
+    (
+        r#"reg.exe add "HKLM\SOFTWARE\Policies\Microsoft\WindowsStore" /v AutoDownload /t REG_DWORD /d 2 /f"#,
+        "Microsoft Store: no automatic app updates (policy AutoDownload=2)",
+    ),
+    (
+        r#"reg.exe add "HKLM\SOFTWARE\Policies\Microsoft\Dsh" /v AllowNewsAndInterests /t REG_DWORD /d 0 /f"#,
+        "no Widgets board or taskbar button (policy AllowNewsAndInterests)",
+    ),
+];
+
+/// The first logon's screen as upstream's image draws it, written in the
+/// user's own hive (`HKCU`) before the OEM install: no "System requirements not
+/// met" watermark on a VM Windows 11 calls unsupported (the notification
+/// cache's `SV1` and `SV2`, as WAA's answer file and dockur's logon script write them), no
+/// Task View, Widgets, Chat or Copilot button on the taskbar, and no OneDrive
+/// setup started at every logon. `prep-automation.ps1` writes them again, for
+/// images made another way.
+pub const FIRST_LOGON_SCREEN: &[(&str, &str)] = &[
+    (
+        r#"reg.exe add "HKCU\Control Panel\UnsupportedHardwareNotificationCache" /v SV1 /t REG_DWORD /d 0 /f"#,
+        "no unsupported-hardware watermark (SV1)",
+    ),
+    (
+        r#"reg.exe add "HKCU\Control Panel\UnsupportedHardwareNotificationCache" /v SV2 /t REG_DWORD /d 0 /f"#,
+        "no unsupported-hardware watermark (SV2)",
+    ),
+    (
+        r#"reg.exe add "HKCU\Software\Microsoft\Windows\CurrentVersion\Explorer\Advanced" /v ShowTaskViewButton /t REG_DWORD /d 0 /f"#,
+        "no Task View button",
+    ),
+    (
+        r#"reg.exe add "HKCU\Software\Microsoft\Windows\CurrentVersion\Explorer\Advanced" /v TaskbarDa /t REG_DWORD /d 0 /f"#,
+        "no Widgets button (recent builds may refuse it; the specialize pass's policy hides it too)",
+    ),
+    (
+        r#"reg.exe add "HKCU\Software\Microsoft\Windows\CurrentVersion\Explorer\Advanced" /v TaskbarMn /t REG_DWORD /d 0 /f"#,
+        "no Chat button",
+    ),
+    (
+        r#"reg.exe add "HKCU\Software\Microsoft\Windows\CurrentVersion\Explorer\Advanced" /v ShowCopilotButton /t REG_DWORD /d 0 /f"#,
+        "no Copilot button",
+    ),
+    (
+        r#"reg.exe delete "HKCU\Software\Microsoft\Windows\CurrentVersion\Run" /v OneDriveSetup /f"#,
+        "no OneDrive setup at logon (its Run value removed)",
+    ),
 ];
 
 /// Passwords never expire: the local accounts' maximum password age becomes
@@ -744,13 +793,16 @@ pub fn specialize_commands() -> Vec<(String, String)> {
     commands
 }
 
-/// The first logon commands, in order.
+/// The first logon commands, in order: the stage line, the account's password,
+/// the screen ([`FIRST_LOGON_SCREEN`]), the OEM install.
 pub fn first_logon_commands(user: &str) -> Vec<(String, String)> {
-    vec![
+    let mut commands = vec![
         (stage_command("first-logon"), "tell arena vm prepare that the user logged on".to_owned()),
         (password_never_expires_command(user), "the account's password never expires".to_owned()),
-        (FIRST_LOGON_COMMAND.to_owned(), "arena OEM install (setup.ps1)".to_owned()),
-    ]
+    ];
+    commands.extend(FIRST_LOGON_SCREEN.iter().map(|(command, what)| ((*command).to_owned(), (*what).to_owned())));
+    commands.push((FIRST_LOGON_COMMAND.to_owned(), "arena OEM install (setup.ps1)".to_owned()));
+    commands
 }
 
 /// One documented maximum: the setting (its element names from the component

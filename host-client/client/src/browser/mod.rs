@@ -1,6 +1,8 @@
 //! The browser inside the guest over the DevTools protocol, through the
-//! guest's websocket relay (`/v1/browser/devtools/...`).
+//! guest's websocket relay (`/v1/browser/devtools/...`), and where it keeps its profile.
 //!
+//! - [`profile`]: [`profile::user_data_dir`], the one rule for Chrome's and Edge's user-data folder
+//!   (their `UserDataDir` policy, else the default folder).
 //! - [`cdp`]: [`cdp::CdpSession`], commands by id over one target's websocket, and the target list.
 //! - [`dom`]: [`dom::dom_elements`], the front page's elements in screen pixels (upstream Navi's `webparse`).
 //! - [`page`]: a page's title, address and HTML (upstream's `page_info` and `active_tab_info`).
@@ -13,6 +15,7 @@
 pub mod cdp;
 pub mod dom;
 pub mod page;
+pub mod profile;
 
 #[cfg(any(test, feature = "fake-devtools"))]
 pub mod fake;

@@ -3,9 +3,13 @@
 //! Local State, Bookmarks, and the History and Cookies databases), the open
 //! tabs, the active tab's address, desktop shortcuts, and installed web apps.
 //!
-//! Where upstream asks the guest's Python for `%LOCALAPPDATA%`, the guest's
-//! known-folder list says; files come through `pull_file`, and SQLite files are
-//! saved under the task's work folder as `dest` and queried on the host.
+//! Upstream reads every profile file under `%LOCALAPPDATA%\...\User Data`, the
+//! default folder, since its image sets no `UserDataDir` policy. Here the folder
+//! is the one the browser really uses: [`arena_client::browser::profile`]'s rule
+//! (the policy's folder when one is set, as on this project's image, else the
+//! default), the rule the browse-history setup steps write by. Files come
+//! through `pull_file`, and SQLite files are saved under the task's work folder
+//! as `dest` and queried on the host.
 //!
 //! Tabs: upstream drives Chrome through Playwright over the DevTools websocket.
 //! Tab lists come from the DevTools HTTP `json/list` (forwarded by the guest),
@@ -23,11 +27,12 @@ use arena_shared::observation::{A11yBackend, A11yNode, A11yQuery, A11yTree};
 use serde_json::{json, Map, Value};
 
 use super::explorer::known_folder;
-use super::{dest_path, guest_join, GetterError, Params};
+use super::{dest_path, guest_join, pull_optional, GetterError, Params};
 use crate::value::{py_eq, py_truthy, Fetched};
 use crate::EvalContext;
 use arena_client::browser::cdp::CdpError;
 use arena_client::browser::page::{self, LoadState};
+use arena_client::browser::profile::{user_data_dir, Browser, UserDataError, HISTORY};
 use arena_client::error::ClientError;
 
 #[cfg(test)]
@@ -240,47 +245,19 @@ const SECURE_PREFERENCES: &str = r"Default\Secure Preferences";
 const LOCAL_STATE: &str = "Local State";
 const BOOKMARKS: &str = r"Default\Bookmarks";
 const COOKIES: &str = r"Default\Network\Cookies";
-const HISTORY: &str = r"Default\History";
 
-/// Which browser's profile a getter reads.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-enum Browser {
-    Chrome,
-    Edge,
-}
-
-impl Browser {
-    /// The user-data folder under `%LOCALAPPDATA%`.
-    fn user_data(self) -> &'static str {
-        match self {
-            Browser::Chrome => r"Google\Chrome\User Data",
-            Browser::Edge => r"Microsoft\Edge\User Data",
-        }
-    }
-}
-
-/// The guest path of a profile file (`relative` under the browser's user-data folder).
+/// The guest path of a profile file (`relative` under the browser's user-data
+/// folder, which [`arena_client::browser::profile`] decides for getters and setup steps alike).
 async fn profile_path(
     ctx: &EvalContext,
     p: &Params<'_>,
     browser: Browser,
     relative: &str,
 ) -> Result<String, GetterError> {
-    let local = known_folder(ctx, p, KnownFolder::LocalAppData).await?;
-    Ok(guest_join(&guest_join(&local, browser.user_data()), relative))
-}
-
-/// A guest file's bytes; `None` when the guest answers that it has no such
-/// readable file (upstream's `get_file` returns `None`). A guest that cannot
-/// be reached is an error, so an infrastructure fault is not scored as a miss.
-async fn pull_optional(ctx: &EvalContext, p: &Params<'_>, path: &str) -> Result<Option<Vec<u8>>, GetterError> {
-    match ctx.client.pull_file(path).await {
-        Ok(file) => Ok(Some(file.bytes)),
-        Err(ClientError::Api { .. }) => {
-            tracing::debug!(getter = p.getter, %path, "the guest has no such file");
-            Ok(None)
-        }
-        Err(err) => Err(p.guest(err)),
+    match user_data_dir(&ctx.client, browser).await {
+        Ok(dir) => Ok(dir.file(relative)),
+        Err(UserDataError::Guest(err)) => Err(p.guest(err)),
+        Err(err) => Err(p.failed(err.to_string())),
     }
 }
 

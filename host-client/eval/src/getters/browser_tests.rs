@@ -652,3 +652,98 @@ async fn pdf_from_url_needs_chrome_in_the_guest() {
     assert!(argv.contains(&r"--user-data-dir=C:\Temp\profile".to_owned()));
     assert_eq!(argv.last().map(String::as_str), Some("https://example.org/"));
 }
+
+/// Writes `value` as `browser`'s `UserDataDir` policy in the guest's HKLM.
+async fn set_policy(guest: &Guest, browser: arena_client::browser::profile::Browser, value: &str) {
+    use arena_shared::registry::{RegistryValue, RegistryWrite};
+    let write = RegistryWrite {
+        key: browser.policy_key("HKLM"),
+        value: Some("UserDataDir".into()),
+        data: RegistryValue::String(value.into()),
+    };
+    guest.ctx.client.registry_set(&write).await.expect("policy write");
+}
+
+/// The shape of upstream's chrome task 7a5a7856 (a page saved to the bookmark
+/// bar, read from the Bookmarks file) and of a Preferences task (Edge's profile
+/// name), written here: each scores 1 with the profile at the `UserDataDir`
+/// policy's folder and the policy set, as on this project's image, and 1 with
+/// the profile at the default folder and no policy, as on upstream's. A profile
+/// left at the default folder while the policy points elsewhere is not read.
+#[tokio::test]
+async fn profile_tasks_score_at_the_policy_folder_and_at_the_default() {
+    use crate::{evaluate, LastAction};
+    use arena_client::browser::profile::Browser;
+    let url = "https://jalammar.github.io/illustrated-transformer/";
+    let bookmarks_task = json!({
+        "id": "bookmark-bar", "instruction": "save this page to the bookmarks bar",
+        "evaluator": {
+            "func": "is_expected_bookmarks",
+            "result": {"type": "bookmarks"},
+            "expected": {"type": "rule", "rules": {"type": "bookmark_bar_websites_urls", "urls": [url]}}
+        }
+    });
+    let name_task = json!({
+        "id": "profile-name", "instruction": "name the Edge profile Arena",
+        "evaluator": {
+            "func": "exact_match",
+            "result": {"type": "profile_name_from_edge"},
+            "expected": {"type": "rule", "rules": {"expected": "Arena"}}
+        }
+    });
+    let evaluator = |task: &Value, path: &str| {
+        arena_task::Task::parse(&task.to_string(), Path::new(path)).expect("task parses").evaluator
+    };
+    let bookmarks_eval = evaluator(&bookmarks_task, "chrome/bookmark-bar.json");
+    let name_eval = evaluator(&name_task, "msedge/profile-name.json");
+    let bookmarks = json!({"roots": {
+        "bookmark_bar": {"type": "folder", "name": "Bookmarks bar", "children": [
+            {"type": "url", "name": "The Illustrated Transformer", "url": url}
+        ]},
+        "other": {"type": "folder", "children": []}
+    }})
+    .to_string()
+    .into_bytes();
+    let prefs = json!({"profile": {"name": "Arena"}}).to_string().into_bytes();
+    let score = |outcome: crate::EvalOutcome| outcome.score;
+
+    // This project's image: the policy moves both profiles.
+    let guest = start(None, None).await;
+    let local = folder(&guest, KnownFolder::LocalAppData).await;
+    set_policy(&guest, Browser::Chrome, r"${local_app_data}\Arena\Chrome").await;
+    set_policy(&guest, Browser::Edge, r"${local_app_data}\Arena\Edge").await;
+    // The files at the default folders are not the browsers' any more.
+    push_profile(&guest, false, r"Default\Bookmarks", bookmarks.clone()).await;
+    push_profile(&guest, true, r"Default\Preferences", prefs.clone()).await;
+    assert_eq!(score(evaluate(&guest.ctx, &bookmarks_eval, Some(&LastAction::Done)).await), 0.0);
+    assert_eq!(score(evaluate(&guest.ctx, &name_eval, Some(&LastAction::Done)).await), 0.0);
+    push(&guest, &format!(r"{local}\Arena\Chrome\Default\Bookmarks"), bookmarks.clone()).await;
+    push(&guest, &format!(r"{local}\Arena\Edge\Default\Preferences"), prefs.clone()).await;
+    let outcome = evaluate(&guest.ctx, &bookmarks_eval, Some(&LastAction::Done)).await;
+    assert_eq!((outcome.score, &outcome.error), (1.0, &None), "{outcome:?}");
+    let outcome = evaluate(&guest.ctx, &name_eval, Some(&LastAction::Done)).await;
+    assert_eq!((outcome.score, &outcome.error), (1.0, &None), "{outcome:?}");
+
+    // Upstream's image: no policy, the default folders.
+    let guest = start(None, None).await;
+    assert_eq!(score(evaluate(&guest.ctx, &bookmarks_eval, Some(&LastAction::Done)).await), 0.0);
+    push_profile(&guest, false, r"Default\Bookmarks", bookmarks).await;
+    push_profile(&guest, true, r"Default\Preferences", prefs).await;
+    let outcome = evaluate(&guest.ctx, &bookmarks_eval, Some(&LastAction::Done)).await;
+    assert_eq!((outcome.score, &outcome.error), (1.0, &None), "{outcome:?}");
+    let outcome = evaluate(&guest.ctx, &name_eval, Some(&LastAction::Done)).await;
+    assert_eq!((outcome.score, &outcome.error), (1.0, &None), "{outcome:?}");
+}
+
+/// A policy naming no usable folder fails the getter with a message naming the
+/// policy (scored 0 with the reason recorded), never a silent miss at another folder.
+#[tokio::test]
+async fn a_relative_policy_fails_the_profile_getters_by_name() {
+    use arena_client::browser::profile::Browser;
+    let guest = start(None, None).await;
+    set_policy(&guest, Browser::Chrome, r"Arena\Chrome").await;
+    check(&guest, json!({"type": "bookmarks"}), Err(r"HKLM\SOFTWARE\Policies\Google\Chrome\UserDataDir")).await;
+    check(&guest, json!({"type": "history", "dest": "h.db"}), Err("not an absolute path")).await;
+    // Edge's profile is not concerned.
+    check(&guest, json!({"type": "favorites"}), data(json!([]))).await;
+}

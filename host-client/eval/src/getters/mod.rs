@@ -250,11 +250,26 @@ pub(crate) fn one_or_list(mut values: Vec<Fetched>) -> Fetched {
     }
 }
 
-/// Joins a guest folder and a name with a backslash, as Windows paths are written.
+/// Joins a guest folder and a name as Windows paths are joined (`ntpath.join`).
 pub(crate) fn guest_join(folder: &str, name: &str) -> String {
-    if folder.is_empty() || folder.ends_with(['\\', '/']) {
-        format!("{folder}{name}")
-    } else {
-        format!("{folder}\\{name}")
+    arena_shared::ntpath::join(&[folder, name])
+}
+
+/// A guest file's bytes; `None` when the guest answers that it has no such
+/// readable file (or refuses it), as upstream's `get_file` returns `None` for
+/// any non-200. A guest that cannot be reached is an error, so an
+/// infrastructure fault is not scored as a miss.
+pub(crate) async fn pull_optional(
+    ctx: &EvalContext,
+    p: &Params<'_>,
+    path: &str,
+) -> Result<Option<Vec<u8>>, GetterError> {
+    match ctx.client.pull_file(path).await {
+        Ok(file) => Ok(Some(file.bytes)),
+        Err(ClientError::Api { .. }) => {
+            tracing::debug!(getter = p.getter, %path, "the guest has no such file");
+            Ok(None)
+        }
+        Err(err) => Err(p.guest(err)),
     }
 }

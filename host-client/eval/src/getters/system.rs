@@ -25,7 +25,7 @@ use arena_shared::registry::RegistryValue;
 use serde_json::{Map, Value};
 
 use super::explorer::known_folder;
-use super::{dest_path, guest_join, GetterError, Params};
+use super::{dest_path, guest_join, pull_optional, GetterError, Params};
 use crate::value::{json_kind, Fetched};
 use crate::EvalContext;
 use arena_client::error::ClientError;
@@ -164,19 +164,6 @@ fn required_text<'a>(p: &Params<'a>, key: &str) -> Result<&'a str, GetterError> 
         return Err(p.bad(format!("`{key}` is required")));
     }
     Ok(text)
-}
-
-/// Downloads a guest file; `None` when the guest answers that it has none (or
-/// refuses it), as upstream's `get_file` returns `None` for any non-200.
-async fn pull_optional(ctx: &EvalContext, p: &Params<'_>, path: &str) -> Result<Option<Vec<u8>>, GetterError> {
-    match ctx.client.pull_file(path).await {
-        Ok(file) => Ok(Some(file.bytes)),
-        Err(ClientError::Api { .. }) => {
-            tracing::debug!(getter = p.getter, %path, "the guest has no such file");
-            Ok(None)
-        }
-        Err(err) => Err(p.guest(err)),
-    }
 }
 
 /// Text of a file as Windows programs save it: UTF-8 (a BOM is dropped) or

@@ -103,7 +103,7 @@ fn the_default_file_uses_only_documented_settings_and_answers_every_page() {
     assert_eq!(text_of(&doc, "oobeSystem", &["OOBE", "HideOnlineAccountScreens"]), ["true"]);
     let first_logon = text_of(&doc, "oobeSystem", &["FirstLogonCommands", "SynchronousCommand", "CommandLine"]);
     assert_eq!(first_logon[0], stage_command("first-logon"));
-    assert_eq!(first_logon[2], FIRST_LOGON_COMMAND);
+    assert_eq!(first_logon.last().copied(), Some(FIRST_LOGON_COMMAND));
     let specialize = text_of(&doc, "specialize", &["RunSynchronous", "RunSynchronousCommand", "Path"]);
     assert_eq!(specialize[0], BYPASS_NRO);
     let copy = specialize.iter().find(|p| p.contains(OEM_MARKER)).expect("the OEM copy");
@@ -148,6 +148,40 @@ fn the_policies_are_written_in_the_specialize_pass() {
     ] {
         assert!(specialize.iter().any(|p| p.contains(needle) && p.contains(value)), "{needle}: {specialize:?}");
     }
+}
+
+/// Upstream's screen at first logon: the unsupported-hardware watermark's
+/// cache (`SV1`, `SV2`) and the taskbar buttons are written in the user's hive
+/// before the OEM install, the Store's automatic updates are off by policy in
+/// the specialize pass, and OneDrive's setup is taken out of the Run key.
+#[test]
+fn the_first_logon_draws_upstreams_screen_and_the_store_does_not_update() {
+    let xml = render(&AnswerOptions::new());
+    let doc = roxmltree::Document::parse(&xml).unwrap();
+    let first_logon = text_of(&doc, "oobeSystem", &["FirstLogonCommands", "SynchronousCommand", "CommandLine"]);
+    let install = first_logon.iter().position(|c| *c == FIRST_LOGON_COMMAND).expect("the OEM install");
+    for (key, value) in [
+        (r"HKCU\Control Panel\UnsupportedHardwareNotificationCache", "/v SV1 /t REG_DWORD /d 0 /f"),
+        (r"HKCU\Control Panel\UnsupportedHardwareNotificationCache", "/v SV2 /t REG_DWORD /d 0 /f"),
+        (r"Explorer\Advanced", "/v ShowTaskViewButton /t REG_DWORD /d 0"),
+        (r"Explorer\Advanced", "/v TaskbarDa /t REG_DWORD /d 0"),
+        (r"Explorer\Advanced", "/v TaskbarMn /t REG_DWORD /d 0"),
+        (r"Explorer\Advanced", "/v ShowCopilotButton /t REG_DWORD /d 0"),
+        (r"reg.exe delete HKCU\Software\Microsoft\Windows\CurrentVersion\Run", "/v OneDriveSetup /f"),
+    ] {
+        let at = first_logon
+            .iter()
+            .position(|c| c.replace('"', "").contains(key) && c.contains(value))
+            .unwrap_or_else(|| panic!("{key} {value}: {first_logon:?}"));
+        assert!(at < install, "{value} after the OEM install: {first_logon:?}");
+    }
+    let specialize = text_of(&doc, "specialize", &["RunSynchronous", "RunSynchronousCommand", "Path"]);
+    assert!(
+        specialize.iter().any(|p| p.contains(r"HKLM\SOFTWARE\Policies\Microsoft\WindowsStore")
+            && p.contains("/v AutoDownload /t REG_DWORD /d 2 /f")),
+        "{specialize:?}"
+    );
+    check_limits(&xml, true).unwrap();
 }
 
 /// Every string the generator writes, for both firmware paths and every
