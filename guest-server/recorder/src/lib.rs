@@ -1,6 +1,6 @@
 //! The input recorder (`arena-input-recorder`): a window that writes every input
 //! message it receives as JSON lines ([`arena_shared::input_log::Recorded`]), the
-//! witness the host's input check (`arena-inputcheck`, `arena doctor --input`) compares
+//! witness the host's input check (`arena-inputcheck`) compares
 //! with what each case of its catalogue should deliver.
 //!
 //! # Layout
@@ -20,8 +20,7 @@ pub mod decode;
 pub mod windows;
 
 /// How to call the recorder.
-pub const USAGE: &str =
-    "usage: arena-input-recorder LOG [--x N] [--y N] [--width N] [--height N] [--title TEXT]";
+pub const USAGE: &str = "usage: arena-input-recorder LOG [--x N] [--y N] [--width N] [--height N] [--title TEXT]";
 
 /// The title of the recorder's window, by which the host finds it.
 pub const TITLE: &str = "Arena input recorder";

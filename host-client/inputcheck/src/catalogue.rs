@@ -156,7 +156,8 @@ fn parse_case(item: &Value) -> Result<Case, String> {
             continue;
         }
         for space in spaces_of(key)? {
-            let input = if space == ActionSpace::AnthropicToolset20260801 { toolset_blocks(input)? } else { input.clone() };
+            let input =
+                if space == ActionSpace::AnthropicToolset20260801 { toolset_blocks(input)? } else { input.clone() };
             inputs.push((space, input));
         }
     }

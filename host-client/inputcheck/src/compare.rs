@@ -71,9 +71,10 @@ fn matches(want: &Expected, got: &Expected) -> bool {
                 && extended.is_none_or(|x| Some(x) == *e)
                 && scan.is_none_or(|x| Some(x) == *sc)
         }
-        (Expected::Wheel { horizontal, delta, at, mods }, Expected::Wheel { horizontal: h, delta: d, at: a, mods: m }) => {
-            horizontal == h && delta == d && mods == m && at.is_none_or(|p| Some(p) == *a)
-        }
+        (
+            Expected::Wheel { horizontal, delta, at, mods },
+            Expected::Wheel { horizontal: h, delta: d, at: a, mods: m },
+        ) => horizontal == h && delta == d && mods == m && at.is_none_or(|p| Some(p) == *a),
         (want, got) => want == got,
     }
 }
@@ -142,7 +143,11 @@ pub fn compare_text(text: &str, received: &[Recorded]) -> Result<(), Difference>
     if got == text {
         return Ok(());
     }
-    Err(Difference { at: 0, expected: format!("text {}", shown_text(text)), received: format!("text {}", shown_text(&got)) })
+    Err(Difference {
+        at: 0,
+        expected: format!("text {}", shown_text(text)),
+        received: format!("text {}", shown_text(&got)),
+    })
 }
 
 /// Whether `record` is the separator key going down or up, with no modifier held.

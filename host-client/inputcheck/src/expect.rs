@@ -3,7 +3,7 @@
 //! | line | event |
 //! |---|---|
 //! | `kd KEY`, `ku KEY` | `WM_KEYDOWN`/`WM_KEYUP` of the virtual key `KEY` (`arena_shared::vkeys::vk_code` names: `a`, `shift`, `f5`, `packet`) |
-//! | `char TEXT`, `syschar TEXT` | `WM_CHAR`/`WM_SYSCHAR` with `TEXT` (everything after one space, control characters included) |
+//! | `char TEXT`, `syschar TEXT` | `WM_CHAR`/`WM_SYSCHAR` with `TEXT` (everything after one space, control characters included; the modifiers after a tab) |
 //! | `down BUTTON X,Y`, `up ...`, `dbl ...` | a button message (`left`, `right`, `middle`, `x1`, `x2`) at screen point `X,Y` |
 //! | `move X,Y` | a `WM_MOUSEMOVE` at `X,Y` somewhere before the next event (other moves are skipped) |
 //! | `wheel DELTA [X,Y]`, `hwheel DELTA [X,Y]` | a wheel message with that signed delta (and point) |
@@ -42,10 +42,11 @@ impl Expected {
             if rest.is_empty() {
                 return Err(format!("{line:?}: {head} needs the text"));
             }
-            // The modifiers, when given, follow the text after a tab.
-            let (text, mods) = match rest.split_once('\t') {
-                Some((text, mods)) => (text, parse_mods(mods.trim())?),
-                None => (rest, Mods::NONE),
+            // The modifiers, when given, follow the text after a tab (a tab that is the
+            // text itself, `char \t`, is followed by none).
+            let (text, mods) = match rest.rsplit_once('\t') {
+                Some((text, mods)) if !text.is_empty() && mods.starts_with('+') => (text, parse_mods(mods)?),
+                _ => (rest, Mods::NONE),
             };
             return Ok(Expected::Char { text: text.to_owned(), sys: head == "syschar", mods });
         }
@@ -190,6 +191,14 @@ mod tests {
             let event = Expected::parse(&written).unwrap_or_else(|e| panic!("{e}"));
             assert_eq!(event.to_string(), line);
         }
+        assert_eq!(
+            Expected::parse("char \t").unwrap(),
+            Expected::Char { text: "\t".into(), sys: false, mods: Mods::NONE }
+        );
+        assert_eq!(
+            Expected::parse("syschar \t\t+alt").unwrap(),
+            Expected::Char { text: "\t".into(), sys: true, mods: Mods::parse("alt").unwrap() }
+        );
         assert_eq!(
             Expected::parse("char  ").unwrap(),
             Expected::Char { text: " ".into(), sys: false, mods: Mods::NONE }

@@ -1,4 +1,4 @@
-//! The input check (`arena-inputcheck`, `arena doctor --input`): input you can prove.
+//! The input check (`arena-inputcheck`): input you can prove.
 //!
 //! A catalogue of input intents, written once as data, each with the exact events a
 //! window must receive and its expression in every action space that can express it;

@@ -40,7 +40,10 @@ fn a_shift_click_compares_in_screen_coordinates() {
     assert_eq!(compare(&want, &got, (10, 20)), Ok(()));
     // The same events from a window elsewhere are elsewhere on the screen.
     let err = compare(&want, &got, (0, 0)).unwrap_err();
-    assert_eq!((err.at, err.expected.as_str(), err.received.as_str()), (1, "down left 400,300 +shift", "down left 390,280 +shift"));
+    assert_eq!(
+        (err.at, err.expected.as_str(), err.received.as_str()),
+        (1, "down left 400,300 +shift", "down left 390,280 +shift")
+    );
 }
 
 #[test]
@@ -79,9 +82,11 @@ fn extra_events_and_expected_moves_are_checked() {
 #[test]
 fn wheel_deltas_and_text_are_compared_exactly() {
     let want = expected(&["wheel -360 400,300"]);
-    let got = vec![Recorded::Wheel { horizontal: false, delta: -360, x: 400, y: 300, mods: Mods::NONE, mk: 0, time: 0 }];
+    let got =
+        vec![Recorded::Wheel { horizontal: false, delta: -360, x: 400, y: 300, mods: Mods::NONE, mk: 0, time: 0 }];
     assert_eq!(compare(&want, &got, (0, 0)), Ok(()));
-    let notches = vec![Recorded::Wheel { horizontal: false, delta: -3, x: 400, y: 300, mods: Mods::NONE, mk: 0, time: 0 }];
+    let notches =
+        vec![Recorded::Wheel { horizontal: false, delta: -3, x: 400, y: 300, mods: Mods::NONE, mk: 0, time: 0 }];
     assert!(compare(&want, &notches, (0, 0)).is_err());
     let chars: Vec<Recorded> = ["n", "a", "ï", "😀"]
         .iter()

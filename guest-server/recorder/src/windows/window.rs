@@ -26,8 +26,8 @@ use windows::Win32::UI::WindowsAndMessaging::{
     CS_DBLCLKS, IDC_ARROW, MSG, SC_KEYMENU, SM_CXSCREEN, SM_CYSCREEN, WM_CHAR, WM_CLOSE, WM_DESTROY, WM_KEYDOWN,
     WM_KEYUP, WM_LBUTTONDBLCLK, WM_LBUTTONDOWN, WM_LBUTTONUP, WM_MBUTTONDBLCLK, WM_MBUTTONDOWN, WM_MBUTTONUP,
     WM_MOUSEHWHEEL, WM_MOUSEMOVE, WM_MOUSEWHEEL, WM_RBUTTONDBLCLK, WM_RBUTTONDOWN, WM_RBUTTONUP, WM_SYSCHAR,
-    WM_SYSCOMMAND, WM_SYSKEYDOWN, WM_SYSKEYUP, WM_UNICHAR, WM_XBUTTONDBLCLK, WM_XBUTTONDOWN, WM_XBUTTONUP,
-    WNDCLASSEXW, WS_EX_TOPMOST, WS_POPUP, WS_VISIBLE,
+    WM_SYSCOMMAND, WM_SYSKEYDOWN, WM_SYSKEYUP, WM_UNICHAR, WM_XBUTTONDBLCLK, WM_XBUTTONDOWN, WM_XBUTTONUP, WNDCLASSEXW,
+    WS_EX_TOPMOST, WS_POPUP, WS_VISIBLE,
 };
 
 use crate::decode::{self, Utf16Joiner};
@@ -194,8 +194,7 @@ fn wide(text: &str) -> Vec<u16> {
 }
 
 pub(super) fn run(options: &crate::Options) -> Result<(), String> {
-    let log =
-        File::create(&options.log).map_err(|err| format!("creating the log {}: {err}", options.log.display()))?;
+    let log = File::create(&options.log).map_err(|err| format!("creating the log {}: {err}", options.log.display()))?;
     RECORDER.with(|cell| *cell.borrow_mut() = Some(Recorder { log, chars: Utf16Joiner::default(), failed: None }));
 
     // SAFETY: GetModuleHandleW(None) is this exe's module; the class structure and the
