@@ -2,7 +2,9 @@
 # Cross-builds the guest's two exes for x86_64-pc-windows-gnu on Debian: arena-guest.exe
 # (the server, a console program, crate arena-guest) and arena-guest-logon.exe (the logon
 # task's launcher, a GUI-subsystem program of its own small crate, arena-guest-launch in
-# guest-server/launch/; they ship together), and the bcryptprimitives.dll shim that lets
+# guest-server/launch/; they ship together), arena-input-recorder.exe (the window the input
+# check records with, guest-server/recorder/, shipped beside them), and the
+# bcryptprimitives.dll shim that lets
 # Rust programs start under Wine 8. Then it type-checks the host crate, arena-host, for
 # the same target with our crates' warnings denied (on a Windows host an exec agent runs
 # in a job object: host-client/vm/src/child/windows/), in the same target folder.
@@ -17,7 +19,7 @@
 #
 # Run as root, it installs the Debian packages it needs when they are missing.
 # Prints the exes' paths and sizes last; other scripts read the lines `exe: PATH` and
-# `launcher: PATH`.
+# `launcher: PATH` and `recorder: PATH`.
 set -euo pipefail
 
 cd "$(dirname "$0")/.."
@@ -62,7 +64,8 @@ export RUSTC_BOOTSTRAP=1
 export CARGO_TARGET_X86_64_PC_WINDOWS_GNU_LINKER=x86_64-w64-mingw32-gcc
 export CARGO_TARGET_DIR="$ROOT/target/windows"
 
-args=(build -p arena-guest -p arena-guest-launch --bin arena-guest --bin arena-guest-logon --target "$TARGET" -Zbuild-std=std,panic_abort)
+args=(build -p arena-guest -p arena-guest-launch -p arena-input-recorder --bin arena-guest --bin arena-guest-logon
+      --bin arena-input-recorder --target "$TARGET" -Zbuild-std=std,panic_abort)
 if [ "$PROFILE" = release ]; then
     args+=(--release)
 fi
@@ -89,7 +92,8 @@ fi
 
 EXE="$CARGO_TARGET_DIR/$TARGET/$PROFILE/arena-guest.exe"
 LAUNCHER="$CARGO_TARGET_DIR/$TARGET/$PROFILE/arena-guest-logon.exe"
-for f in "$EXE" "$LAUNCHER"; do
+RECORDER="$CARGO_TARGET_DIR/$TARGET/$PROFILE/arena-input-recorder.exe"
+for f in "$EXE" "$LAUNCHER" "$RECORDER"; do
     if [ ! -f "$f" ]; then
         echo "the build finished but $f is missing" >&2
         exit 1
@@ -112,3 +116,4 @@ if command -v x86_64-w64-mingw32-strip >/dev/null; then
 fi
 echo "exe: $EXE"
 echo "launcher: $LAUNCHER"
+echo "recorder: $RECORDER"

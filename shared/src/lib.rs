@@ -16,7 +16,8 @@
 //!
 //! - [`geometry`]: points and rectangles in a named coordinate space.
 //! - [`action`]: the [`action::Action`] enum and mouse buttons.
-//! - [`keys`]: pyautogui key names and chord parsing.
+//! - [`keys`]: pyautogui key names and chord parsing; [`vkeys`]: their Windows virtual-key codes.
+//! - [`input_log`]: the input recorder's log lines (what its window received).
 //! - [`observation`]: screen, screenshot, window and accessibility types.
 //! - [`exec`], [`files`], [`clipboard`], [`registry`]: request and result types.
 //! - [`eval`]: the evaluation queries under `/v1/eval/`.
@@ -60,6 +61,7 @@ pub mod geometry;
 pub mod health;
 pub mod host_header;
 pub mod imaging;
+pub mod input_log;
 pub mod interactive;
 pub mod keys;
 pub mod markup;
@@ -70,6 +72,7 @@ pub mod observation;
 pub mod registry;
 pub mod search_path;
 pub mod token;
+pub mod vkeys;
 pub mod window_list;
 
 /// The version of the native API spoken under `/v1/`.

@@ -46,6 +46,7 @@ fn is_library_code(path: &str) -> bool {
         // Binaries' entry points report to their user; the bench binaries print figures.
         "guest-server/src/main.rs",
         "guest-server/launch/src/main.rs",
+        "guest-server/recorder/src/main.rs",
         "host-client/src/main.rs",
         "tests/src/",
         // The `arena` command line is the host's user interface.

@@ -20,7 +20,8 @@
 //! `click`, `double_click`, `drag`, `move` and `scroll` may carry `keys`, held
 //! while the action runs (pressed in order before it, released in reverse after).
 //!
-//! Keys come in the model's spelling (`CTRL`, `ENTER`, `ARROWLEFT`, `CMD`, `SPACE`), mapped by [`KEYS`].
+//! Keys come in the model's spelling (`CTRL`, `ENTER`, `ARROWLEFT`, `CMD`, `SPACE`), mapped by [`KEYS`];
+//! a letter names its key in either case (`["CTRL", "C"]` is Ctrl+C, not Ctrl+Shift+C).
 
 use serde_json::Value;
 
@@ -55,6 +56,34 @@ pub const KEYS: super::KeyTable = &[
     ("spacebar", "space"),
     ("/", "/"),
     ("\\", "\\"),
+    // A letter is its key, whatever its case: the models write `CTRL` and `C` for Ctrl+C,
+    // which an upper-case character would turn into Ctrl+Shift+C (Save As for Ctrl+S).
+    ("a", "a"),
+    ("b", "b"),
+    ("c", "c"),
+    ("d", "d"),
+    ("e", "e"),
+    ("f", "f"),
+    ("g", "g"),
+    ("h", "h"),
+    ("i", "i"),
+    ("j", "j"),
+    ("k", "k"),
+    ("l", "l"),
+    ("m", "m"),
+    ("n", "n"),
+    ("o", "o"),
+    ("p", "p"),
+    ("q", "q"),
+    ("r", "r"),
+    ("s", "s"),
+    ("t", "t"),
+    ("u", "u"),
+    ("v", "v"),
+    ("w", "w"),
+    ("x", "x"),
+    ("y", "y"),
+    ("z", "z"),
 ];
 
 /// The action types.

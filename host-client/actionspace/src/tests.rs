@@ -581,7 +581,7 @@ fn openai_every_action() {
                 act(Action::MouseUp { button: MouseButton::Left, x: Some(5), y: Some(6) }),
             ],
         ),
-        (json!({"type": "keypress", "keys": ["CTRL", "S"]}), vec![hotkey(&["ctrl", "S"])]),
+        (json!({"type": "keypress", "keys": ["CTRL", "S"]}), vec![hotkey(&["ctrl", "s"])]),
         (json!({"type": "keypress", "keys": ["ENTER"]}), vec![key("enter")]),
         (json!({"type": "keypress", "keys": ["ARROWLEFT"]}), vec![key("left")]),
         (json!({"type": "keypress", "keys": ["CMD", "SPACE"]}), vec![hotkey(&["win", "space"])]),
@@ -752,4 +752,14 @@ fn every_key_table_entry_names_a_guest_key() {
             assert!(key_name(space, table, from).is_ok(), "{space}: {from}");
         }
     }
+}
+
+#[test]
+fn openai_letters_are_keys_not_shifted_characters() {
+    // Found by the input catalogue (`ctrl_c` in openai_computer): `C` became Shift+C.
+    let ctx = Context::new((1440, 900), Coords::Pixels);
+    let steps = parse(ActionSpace::OpenAi, &json!({"type": "keypress", "keys": ["CTRL", "C"]}), &ctx).unwrap();
+    assert_eq!(steps, vec![Step::Act(Action::Hotkey { keys: vec!["ctrl".into(), "c".into()] })]);
+    let steps = parse(ActionSpace::OpenAi, &json!({"type": "keypress", "keys": ["A"]}), &ctx).unwrap();
+    assert_eq!(steps, vec![Step::Act(Action::KeyPress { key: "a".into(), presses: 1 })]);
 }

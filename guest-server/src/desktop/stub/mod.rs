@@ -13,12 +13,14 @@
 //!
 //! Layout: [`scenario`] (the seed file format), `window` (state, windows, documents),
 //! `input` (actions), `render` (screenshots), `a11y` (accessibility trees), `fs` (path
-//! mapping and the profile), `registry`, `process` (programs and real processes).
+//! mapping and the profile), `registry`, `process` (programs and real processes), `recorder`
+//! (the input recorder's model: what its window would receive, written to its log).
 
 mod a11y;
 mod fs;
 mod input;
 mod process;
+mod recorder;
 mod registry;
 mod render;
 pub mod scenario;
@@ -88,6 +90,8 @@ pub struct StubDesktop {
     uia: Mutex<a11y::UiaModel>,
     /// Real host processes allowed (`StubConfig::host_exec`).
     host_exec: bool,
+    /// The input recorder, while its window is open.
+    recorder: Mutex<Option<recorder::Model>>,
 }
 
 impl StubDesktop {
@@ -167,6 +171,7 @@ impl StubDesktop {
             state: Mutex::new(State::new(screen)),
             uia: Mutex::new(uia),
             host_exec: config.host_exec,
+            recorder: Mutex::new(None),
         };
         stub.apply_scenario(&scenario)?;
         Ok(stub)
@@ -306,7 +311,7 @@ impl StubDesktop {
                 super::cancel::sleep(pause)?;
             }
             let one = Action::TypeText { text: c.to_string(), interval_ms: None };
-            let effects = input::perform(&mut self.lock(), &one)?;
+            let effects = self.perform_locked(&mut self.lock(), &one)?;
             self.apply_effects(effects)?;
         }
         Ok(())
@@ -395,11 +400,54 @@ impl StubDesktop {
         self.lock().windows.iter().find(|w| w.title.to_lowercase().contains(&needle)).map(|w| w.id)
     }
 
+    /// Starts the input recorder's model: its window over the work area, focused, and
+    /// its log (the first argument, a guest path) begun with the `ready` line.
+    fn launch_recorder(&self, program: &Program, args: &[String]) -> DesktopResult<u32> {
+        let Some(log) = args.first() else {
+            return Err(DesktopError::InvalidInput(format!("{} needs the log file to write", recorder::PROGRAM)));
+        };
+        let local = self.map_path(log)?;
+        let mut state = self.lock();
+        let rect = state.work_area();
+        let id = state.open(NewWindow {
+            title: program.title.clone(),
+            class_name: program.class_name.clone(),
+            process_name: program.process_name.clone(),
+            rect: Some(rect),
+            ..NewWindow::default()
+        });
+        let model = recorder::Model::start(id, local, &state)?;
+        let pid = state.window(id).map_or(0, |w| w.pid);
+        *self.recorder.lock().unwrap_or_else(std::sync::PoisonError::into_inner) = Some(model);
+        Ok(pid)
+    }
+
+    /// One action on the locked desktop, and what the input recorder (when one is open)
+    /// received from it.
+    fn perform_locked(&self, state: &mut State, action: &Action) -> DesktopResult<Vec<input::Effect>> {
+        let mut guard = self.recorder.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
+        if guard.as_ref().is_some_and(|model| state.window(model.window).is_none()) {
+            *guard = None;
+        }
+        let records = match guard.as_mut() {
+            Some(model) => model.observe(state, action)?,
+            None => Vec::new(),
+        };
+        let effects = input::perform(state, action)?;
+        if let Some(model) = guard.as_ref() {
+            model.commit(&records)?;
+        }
+        Ok(effects)
+    }
+
     /// Opens a known program's window; `args` may name a file or folder to open in it.
     fn launch_known(&self, key: &str, args: &[String]) -> DesktopResult<u32> {
         let Some(program) = self.programs.get(key) else {
             return Err(DesktopError::NotFound(format!("program {key} not found")));
         };
+        if key == recorder::PROGRAM {
+            return self.launch_recorder(program, args);
+        }
         // The first argument that names an existing guest file or folder is opened in the program.
         let target = args.iter().filter(|a| !a.starts_with(['-', '/'])).find_map(|a| {
             let local = self.map_path(a).ok()?;
@@ -680,7 +728,7 @@ impl Desktop for StubDesktop {
         }
         let effects = {
             let mut state = self.lock();
-            let effects = input::perform(&mut state, action)?;
+            let effects = self.perform_locked(&mut state, action)?;
             state.record(action);
             effects
         };

@@ -64,6 +64,15 @@ pub(crate) fn default_programs() -> BTreeMap<String, Program> {
         ("swriter", "Untitled 1 - LibreOffice Writer", "SALFRAME", "soffice.bin", Some(""), "LibreOffice Writer"),
         ("mspaint", "Untitled - Paint", "MSPaintApp", "mspaint.exe", None, "Paint"),
         ("photos", "Photos", "ApplicationFrameWindow", "Microsoft.Photos.exe", None, "Photos"),
+        // The input recorder, modelled by `recorder` (the log it writes is its first argument).
+        (
+            super::recorder::PROGRAM,
+            super::recorder::TITLE,
+            "ArenaInputRecorder",
+            "arena-input-recorder.exe",
+            None,
+            super::recorder::TITLE,
+        ),
     ];
     table
         .iter()

@@ -1,7 +1,7 @@
 //! pyautogui key names to Windows virtual-key strokes.
 //!
 //! The Windows backend sends keys with `SendInput`; this module decides *which*
-//! strokes: the virtual-key code of each named key (pyautogui's `_pyautogui_win`
+//! strokes: the virtual-key code of each named key (`arena_shared::vkeys`, pyautogui's `_pyautogui_win`
 //! table), which keys need the extended-key flag, which modifiers a character needs
 //! on the current layout (from `VkKeyScanW`, asked through a closure), and the order
 //! of downs and ups for presses, chords and typed text.
@@ -19,115 +19,7 @@
 
 use arena_shared::keys::Key;
 
-pub const VK_BACK: u16 = 0x08;
-pub const VK_TAB: u16 = 0x09;
-pub const VK_RETURN: u16 = 0x0D;
-pub const VK_SHIFT: u16 = 0x10;
-pub const VK_CONTROL: u16 = 0x11;
-pub const VK_MENU: u16 = 0x12;
-
-/// The virtual-key code of a canonical pyautogui key name, or `None` when Windows has
-/// no such key (`fn`, `yen`) or the name is not a canonical one.
-pub fn named_vk(name: &str) -> Option<u16> {
-    let vk = match name {
-        "backspace" => VK_BACK,
-        "tab" => VK_TAB,
-        "clear" => 0x0C,
-        "enter" => VK_RETURN,
-        "shift" => VK_SHIFT,
-        "ctrl" => VK_CONTROL,
-        "alt" => VK_MENU,
-        "pause" => 0x13,
-        "capslock" => 0x14,
-        "kana" | "hangul" => 0x15,
-        "junja" => 0x17,
-        "final" => 0x18,
-        "hanja" | "kanji" => 0x19,
-        "esc" => 0x1B,
-        "convert" => 0x1C,
-        "nonconvert" => 0x1D,
-        "accept" => 0x1E,
-        "modechange" => 0x1F,
-        "space" => 0x20,
-        "pageup" => 0x21,
-        "pagedown" => 0x22,
-        "end" => 0x23,
-        "home" => 0x24,
-        "left" => 0x25,
-        "up" => 0x26,
-        "right" => 0x27,
-        "down" => 0x28,
-        "select" => 0x29,
-        "execute" => 0x2B,
-        "printscreen" => 0x2C,
-        "insert" => 0x2D,
-        "delete" => 0x2E,
-        "help" => 0x2F,
-        "win" | "winleft" => 0x5B,
-        "winright" => 0x5C,
-        "apps" => 0x5D,
-        "sleep" => 0x5F,
-        "multiply" => 0x6A,
-        "add" => 0x6B,
-        "separator" => 0x6C,
-        "subtract" => 0x6D,
-        "decimal" => 0x6E,
-        "divide" => 0x6F,
-        "numlock" => 0x90,
-        "scrolllock" => 0x91,
-        "shiftleft" => 0xA0,
-        "shiftright" => 0xA1,
-        "ctrlleft" => 0xA2,
-        "ctrlright" => 0xA3,
-        "altleft" => 0xA4,
-        "altright" => 0xA5,
-        "browserback" => 0xA6,
-        "browserforward" => 0xA7,
-        "browserrefresh" => 0xA8,
-        "browserstop" => 0xA9,
-        "browsersearch" => 0xAA,
-        "browserfavorites" => 0xAB,
-        "browserhome" => 0xAC,
-        "volumemute" => 0xAD,
-        "volumedown" => 0xAE,
-        "volumeup" => 0xAF,
-        "nexttrack" => 0xB0,
-        "prevtrack" => 0xB1,
-        "stop" => 0xB2,
-        "playpause" => 0xB3,
-        "launchmail" => 0xB4,
-        "launchmediaselect" => 0xB5,
-        "launchapp1" => 0xB6,
-        "launchapp2" => 0xB7,
-        other => {
-            if let Some(n) = other.strip_prefix("num").and_then(|d| d.parse::<u16>().ok()).filter(|n| *n <= 9) {
-                return Some(0x60 + n);
-            }
-            if let Some(n) =
-                other.strip_prefix('f').and_then(|d| d.parse::<u16>().ok()).filter(|n| (1..=24).contains(n))
-            {
-                return Some(0x6F + n);
-            }
-            return None;
-        }
-    };
-    Some(vk)
-}
-
-/// Whether `vk` is an extended key: its scan code needs `KEYEVENTF_EXTENDEDKEY`, or
-/// the arrows act as the numeric keypad's.
-pub fn is_extended(vk: u16) -> bool {
-    matches!(
-        vk,
-        0x21..=0x28 // page up/down, end, home, arrows
-            | 0x2C | 0x2D | 0x2E // print screen, insert, delete
-            | 0x5B | 0x5C | 0x5D // windows keys, apps
-            | 0x6F // divide
-            | 0x90 // num lock
-            | 0xA3 | 0xA5 // right ctrl, right alt
-            | 0xA6..=0xB7 // browser, media and launch keys
-    )
-}
+pub use arena_shared::vkeys::{is_extended, named_vk, VK_BACK, VK_CONTROL, VK_MENU, VK_RETURN, VK_SHIFT, VK_TAB};
 
 /// What `VkKeyScanW` says about a character on the current layout.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -255,11 +147,38 @@ pub fn press(key: Key, layout: &dyn Fn(char) -> Option<CharKey>) -> Vec<Stroke> 
 }
 
 /// Strokes of a chord, as pyautogui's `hotkey`: every key down in order, then every
-/// key up in reverse.
+/// key up in reverse. A character that needs a modifier the chord already holds (the
+/// `A` of `shift`+`A`) is not given it again: pressing and releasing Shift around the
+/// key would let Shift go in the middle of the chord.
 pub fn chord(keys: &[Key], layout: &dyn Fn(char) -> Option<CharKey>) -> Vec<Stroke> {
-    let mut out: Vec<Stroke> = keys.iter().flat_map(|&k| key_down(k, layout)).collect();
+    let mut out = Vec::new();
+    let mut held: Vec<u16> = Vec::new();
+    for &key in keys {
+        match plan(key, layout) {
+            Plan::Key { vk: code, mods } => {
+                let extra: Vec<u16> = mods.into_iter().filter(|&m| !holds(&held, m)).collect();
+                out.extend(extra.iter().map(|&m| vk(m, false)));
+                out.push(vk(code, false));
+                out.extend(extra.iter().rev().map(|&m| vk(m, true)));
+                held.push(code);
+            }
+            _ => out.extend(key_down(key, layout)),
+        }
+    }
     out.extend(keys.iter().rev().flat_map(|&k| key_up(k, layout)));
     out
+}
+
+/// Whether the keys `held` hold the modifier `m` (`VK_SHIFT`, `VK_CONTROL` or
+/// `VK_MENU`), by its generic or its left or right key.
+fn holds(held: &[u16], m: u16) -> bool {
+    let sides: &[u16] = match m {
+        VK_SHIFT => &[VK_SHIFT, 0xA0, 0xA1],
+        VK_CONTROL => &[VK_CONTROL, 0xA2, 0xA3],
+        VK_MENU => &[VK_MENU, 0xA4, 0xA5],
+        other => return held.contains(&other),
+    };
+    held.iter().any(|h| sides.contains(h))
 }
 
 /// Strokes that type `text`, one group per character (so a caller can pause between
@@ -370,6 +289,31 @@ mod tests {
         check(press(Key::Char('a'), &us), &[(0x41, false), (0x41, true)]);
         check(press(Key::Named("enter"), &us), &[(VK_RETURN, false), (VK_RETURN, true)]);
         assert!(press(Key::Named("fn"), &us).is_empty());
+    }
+
+    #[test]
+    fn a_chord_does_not_press_again_a_modifier_it_holds() {
+        // The input catalogue's `press_upper_a` in OpenAI's space: keys SHIFT and A.
+        check(
+            chord(&[Key::Named("shift"), Key::Char('A')], &us),
+            &[(VK_SHIFT, false), (0x41, false), (0x41, true), (VK_SHIFT, true)],
+        );
+        // Held by its left key, it is held too; a modifier the chord lacks still comes and goes.
+        check(
+            chord(&[Key::Named("shiftleft"), Key::Char('!')], &us),
+            &[(0xA0, false), (0x31, false), (0x31, true), (0xA0, true)],
+        );
+        check(
+            chord(&[Key::Named("ctrl"), Key::Char('+')], &us),
+            &[
+                (VK_CONTROL, false),
+                (VK_SHIFT, false),
+                (0xBB, false),
+                (VK_SHIFT, true),
+                (0xBB, true),
+                (VK_CONTROL, true),
+            ],
+        );
     }
 
     #[test]

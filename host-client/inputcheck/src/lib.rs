@@ -1,0 +1,34 @@
+//! The input check (`arena-inputcheck`): input you can prove.
+//!
+//! A catalogue of input intents, written once as data, each with the exact events a
+//! window must receive and its expression in every action space that can express it;
+//! the run that sends each through the host's own translation to a guest where the
+//! input recorder (`arena-input-recorder`, or the stub's model of it) writes what its
+//! window received; and the comparison of the two.
+//!
+//! # Layout
+//!
+//! - [`expect`]: the notation of expected events (`kd shift +shift`, `down left 400,300`).
+//! - [`compare`]: expected against received, and the recorder's log cut into cases.
+//! - [`catalogue`]: the built-in catalogue (`catalogue.json`), its reading, and the
+//!   translation of a case into steps through `arena_actionspace::parse`.
+//! - [`drive`]: the run against a guest and its [`Report`].
+//!
+//! It does no I/O of its own but through the guest client, and carries out steps only
+//! through a [`StepRunner`] its caller gives (the host's executor).
+
+#![forbid(unsafe_code)]
+
+pub mod catalogue;
+pub mod compare;
+pub mod drive;
+pub mod expect;
+
+pub use catalogue::{Case, Catalogue, Check};
+pub use drive::{
+    default_log, default_recorder, run_check, CheckError, CheckOptions, Mismatch, Report, StepRunner, Tally,
+    OEM_RECORDER, RECORDER_TITLE, STUB_RECORDER,
+};
+
+#[cfg(test)]
+mod tests;
