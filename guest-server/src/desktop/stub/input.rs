@@ -16,8 +16,8 @@ use arena_shared::keys::{parse_chord, Key};
 
 use super::render::taskbar_buttons;
 use super::window::{
-    Effect,
-    layout, Caption, Dialog, DialogButton, Grab, Hit, Press, State, Window, BODY_PAD, GLYPH_W, LINE_H, TASKBAR_H,
+    layout, Caption, Dialog, DialogButton, Effect, Grab, Hit, Press, State, Window, BODY_PAD, GLYPH_W, LINE_H,
+    TASKBAR_H,
 };
 use crate::desktop::{ClipboardData, DesktopError, DesktopResult, WindowState};
 
@@ -27,7 +27,6 @@ const MAX_REPEAT: u32 = 1000;
 pub(crate) const ICON_PITCH: i32 = 24;
 /// Width of a desktop icon's clickable area.
 const ICON_W: i32 = 140;
-
 
 /// Applies one action.
 ///
