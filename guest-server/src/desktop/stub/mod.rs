@@ -424,7 +424,7 @@ impl StubDesktop {
 
     /// One action on the locked desktop, and what the input recorder (when one is open)
     /// received from it.
-    fn perform_locked(&self, state: &mut State, action: &Action) -> DesktopResult<Vec<input::Effect>> {
+    fn perform_locked(&self, state: &mut State, action: &Action) -> DesktopResult<Vec<window::Effect>> {
         let mut guard = self.recorder.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
         if guard.as_ref().is_some_and(|model| state.window(model.window).is_none()) {
             *guard = None;
