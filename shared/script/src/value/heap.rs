@@ -437,11 +437,8 @@ impl<T: Payload> Drop for HeapMut<'_, T> {
 #[derive(Debug, Clone)]
 pub(crate) struct Key(pub(crate) Value);
 
-impl PartialEq for Key {
-    fn eq(&self, other: &Key) -> bool {
-        super::ops::equal(&self.0, &other.0)
-    }
-}
+// `PartialEq` for `Key` is Python's equality, `ops::equal`: implemented in the parent
+// module, so that this module and `ops` (which builds on the heap) do not name each other.
 
 impl Eq for Key {}
 

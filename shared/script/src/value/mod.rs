@@ -396,6 +396,13 @@ impl Value {
 #[derive(Debug)]
 struct Overflow;
 
+/// Dict keys and set items compare as Python's `==` does (`1`, `1.0` and `True` are one key).
+impl PartialEq for heap::Key {
+    fn eq(&self, other: &heap::Key) -> bool {
+        ops::equal(&self.0, &other.0)
+    }
+}
+
 /// How many numbers `range(start, stop, step)` holds (`step` is never 0).
 pub(crate) fn range_len(start: i64, stop: i64, step: i64) -> u64 {
     let (lo, hi, step) = if step > 0 { (start, stop, step) } else { (stop, start, step.saturating_neg()) };
