@@ -16,15 +16,16 @@ use axum::body::{Body, Bytes};
 use axum::http::{header, Method, Request, StatusCode};
 use axum::Router;
 use base64::Engine as _;
-use http_body_util::BodyExt as _;
 use serde_json::{json, Value};
 use tower::ServiceExt as _;
 
 use arena_guest::config::ServerConfig;
-use arena_guest::desktop::stub::{StubConfig, StubDesktop};
+use arena_guest::desktop::stub::StubDesktop;
 use arena_guest::desktop::{CommandSpec, Desktop, DesktopError};
 use arena_guest::state::AppState;
 use arena_shared::action::Action;
+
+pub mod harness;
 
 /// Counts the bytes live now and the most live since the last [`reset_peak`].
 struct Counting;
@@ -94,15 +95,7 @@ struct App {
 
 fn app_with(configure: impl FnOnce(&mut ServerConfig)) -> App {
     let dir = tempfile::tempdir().expect("temp dir");
-    let stub = Arc::new(
-        StubDesktop::with_config(StubConfig {
-            root: Some(dir.path().into()),
-            screen: (1440, 900),
-            scenario: None,
-            host_exec: false,
-        })
-        .expect("stub desktop"),
-    );
+    let stub = Arc::new(harness::stub_in(dir.path(), None, false));
     let mut config = ServerConfig::for_stub();
     configure(&mut config);
     let state = AppState::new(stub.clone(), config, None);
@@ -135,11 +128,9 @@ impl Answer {
 impl App {
     async fn send(&self, request: Request<Body>) -> Answer {
         let before = reset_peak();
-        let response = self.router.clone().oneshot(request).await.expect("infallible");
-        let (parts, body) = response.into_parts();
-        let body = body.collect().await.expect("body").to_bytes();
+        let (status, _headers, body) = harness::send(&self.router, request).await;
         let peak = PEAK.load(Ordering::Relaxed).saturating_sub(before);
-        Answer { status: parts.status, body, peak }
+        Answer { status, body, peak }
     }
 
     async fn json(&self, method: Method, uri: &str, body: Vec<u8>) -> Answer {
@@ -327,13 +318,7 @@ async fn gray_and_one_bit_png_bombs_are_refused_before_decoding() {
 async fn a_request_without_the_token_closes_its_connection() {
     let _turn = SERIAL.lock().await;
     let dir = tempfile::tempdir().expect("temp dir");
-    let stub = StubDesktop::with_config(StubConfig {
-        root: Some(dir.path().into()),
-        screen: (1440, 900),
-        scenario: None,
-        host_exec: false,
-    })
-    .expect("stub desktop");
+    let stub = harness::stub_in(dir.path(), None, false);
     let state = AppState::new(Arc::new(stub), ServerConfig::for_stub(), Some("0123456789abcdef0123".into()));
     let router = arena_guest::router(state);
     let request = Request::builder().uri("/v1/screen").header(header::HOST, "127.0.0.1").body(Body::empty()).unwrap();

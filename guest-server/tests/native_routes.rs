@@ -7,13 +7,12 @@ use axum::body::{Body, Bytes};
 use axum::http::{header, HeaderMap, Method, Request, StatusCode};
 use axum::Router;
 use base64::Engine as _;
-use http_body_util::BodyExt as _;
 use serde::de::DeserializeOwned;
 use serde_json::{json, Value};
 use tower::ServiceExt as _;
 
 use arena_guest::config::ServerConfig;
-use arena_guest::desktop::stub::{StubConfig, StubDesktop};
+use arena_guest::desktop::stub::StubDesktop;
 use arena_guest::state::AppState;
 use arena_shared::action::ActionReport;
 use arena_shared::clipboard::ClipboardContent;
@@ -67,13 +66,7 @@ impl Answer {
 
 fn app_with(token: Option<&str>) -> TestApp {
     let dir = tempfile::tempdir().expect("temp dir");
-    let stub = StubDesktop::with_config(StubConfig {
-        root: Some(dir.path().into()),
-        screen: (1440, 900),
-        scenario: None,
-        host_exec: true,
-    })
-    .expect("stub desktop");
+    let stub = crate::harness::stub_in(dir.path(), None, true);
     let state = AppState::new(Arc::new(stub), ServerConfig::for_stub(), token.map(str::to_owned));
     TestApp { router: arena_guest::router(state), dir }
 }
@@ -84,10 +77,7 @@ fn app() -> TestApp {
 
 impl TestApp {
     async fn send(&self, request: Request<Body>) -> Answer {
-        let response = self.router.clone().oneshot(request).await.expect("infallible router");
-        let status = response.status();
-        let headers = response.headers().clone();
-        let body = response.into_body().collect().await.expect("body").to_bytes();
+        let (status, headers, body) = crate::harness::send(&self.router, request).await;
         Answer { status, headers, body }
     }
 
@@ -763,13 +753,7 @@ async fn wallpaper_is_set_from_an_existing_image_only() {
 /// A router over a fresh stub whose browser debugging port is `cdp_port`.
 fn app_with_cdp_port(cdp_port: u16) -> TestApp {
     let dir = tempfile::tempdir().expect("temp dir");
-    let stub = StubDesktop::with_config(StubConfig {
-        root: Some(dir.path().into()),
-        screen: (1440, 900),
-        scenario: None,
-        host_exec: false,
-    })
-    .expect("stub desktop");
+    let stub = crate::harness::stub_in(dir.path(), None, false);
     let mut config = ServerConfig::for_stub();
     config.cdp_port = cdp_port;
     let state = AppState::new(Arc::new(stub), config, None);
@@ -921,13 +905,7 @@ async fn health_without_the_token_shows_stages_only() {
 /// Five health polls against a stub that counts its probes, with `cache_ms` of reuse.
 async fn probes_for_five_polls(cache_ms: u64) -> usize {
     let dir = tempfile::tempdir().unwrap();
-    let inner = StubDesktop::with_config(StubConfig {
-        root: Some(dir.path().into()),
-        screen: (1440, 900),
-        scenario: None,
-        host_exec: false,
-    })
-    .unwrap();
+    let inner = crate::harness::stub_in(dir.path(), None, false);
     let desktop = Arc::new(HangsOnText::new(inner, "never"));
     let mut config = ServerConfig::for_stub();
     config.health_cache_ms = cache_ms;
@@ -998,13 +976,7 @@ async fn without_a_token_only_this_servers_host_names_are_served() {
 #[tokio::test]
 async fn allowed_host_names_and_a_token_let_other_names_through() {
     let dir = tempfile::tempdir().expect("temp dir");
-    let stub = StubDesktop::with_config(StubConfig {
-        root: Some(dir.path().into()),
-        screen: (1440, 900),
-        scenario: None,
-        host_exec: false,
-    })
-    .expect("stub desktop");
+    let stub = crate::harness::stub_in(dir.path(), None, false);
     let mut config = ServerConfig::for_stub();
     config.allow_host = vec!["guest-7.cluster.local".into()];
     let app = TestApp { router: arena_guest::router(AppState::new(Arc::new(stub), config, None)), dir };
@@ -1150,13 +1122,7 @@ mod delegate {
 #[tokio::test]
 async fn a_failing_action_stops_the_batch_and_says_where() {
     let dir = tempfile::tempdir().unwrap();
-    let inner = StubDesktop::with_config(StubConfig {
-        root: Some(dir.path().into()),
-        screen: (1440, 900),
-        scenario: None,
-        host_exec: false,
-    })
-    .unwrap();
+    let inner = crate::harness::stub_in(dir.path(), None, false);
     let state = AppState::new(Arc::new(HangsOnText::new(inner, "boom")), ServerConfig::for_stub(), None);
     let app = TestApp { router: arena_guest::router(state), dir };
     let batch = json!({"actions": [
@@ -1222,15 +1188,7 @@ async fn eventually(what: &str, mut f: impl FnMut() -> bool) {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn slow_typing_leaves_the_desktop_to_other_calls_and_stops_when_abandoned() {
     let dir = tempfile::tempdir().unwrap();
-    let stub = Arc::new(
-        StubDesktop::with_config(StubConfig {
-            root: Some(dir.path().into()),
-            screen: (1440, 900),
-            scenario: None,
-            host_exec: false,
-        })
-        .unwrap(),
-    );
+    let stub = Arc::new(crate::harness::stub_in(dir.path(), None, false));
     let app = TestApp { router: arena_guest::router(AppState::new(stub.clone(), ServerConfig::for_stub(), None)), dir };
     app.post("/v1/launch", json!({"argv": ["notepad"]})).await.assert_status(StatusCode::OK);
     let notepad = stub.find_window("Notepad").expect("notepad opened");
@@ -1288,13 +1246,7 @@ async fn registry_paths_past_windows_limits_are_refused_and_not_stored() {
 #[tokio::test]
 async fn temporary_files_of_interrupted_writes_are_swept_at_start_up() {
     let dir = tempfile::tempdir().unwrap();
-    let stub = StubDesktop::with_config(StubConfig {
-        root: Some(dir.path().into()),
-        screen: (1440, 900),
-        scenario: None,
-        host_exec: false,
-    })
-    .unwrap();
+    let stub = crate::harness::stub_in(dir.path(), None, false);
     let folder = dir.path().join("C/Users/Docker/Documents/reports");
     std::fs::create_dir_all(&folder).unwrap();
     let stale = folder.join(format!("{}x1y2z3", arena_shared::atomic::TEMP_PREFIX));
@@ -1314,13 +1266,7 @@ async fn temporary_files_of_interrupted_writes_are_swept_at_start_up() {
 #[tokio::test]
 async fn large_files_stream_both_ways_and_an_oversized_body_writes_nothing() {
     let dir = tempfile::tempdir().unwrap();
-    let stub = StubDesktop::with_config(StubConfig {
-        root: Some(dir.path().into()),
-        screen: (1440, 900),
-        scenario: None,
-        host_exec: false,
-    })
-    .unwrap();
+    let stub = crate::harness::stub_in(dir.path(), None, false);
     let mut config = ServerConfig::for_stub();
     config.max_body_bytes = 3 << 20;
     let app = TestApp { router: arena_guest::router(AppState::new(Arc::new(stub), config, None)), dir };

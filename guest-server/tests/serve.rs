@@ -10,7 +10,6 @@ use tokio::io::{AsyncReadExt, AsyncWriteExt};
 use tokio::net::{TcpListener, TcpStream};
 
 use arena_guest::config::ServerConfig;
-use arena_guest::desktop::stub::{StubConfig, StubDesktop};
 use arena_guest::state::AppState;
 
 /// A guest on `127.0.0.1:0` with `configure`d limits; the sender stops it.
@@ -29,13 +28,7 @@ const TOKEN: &str = "0123456789abcdef0123";
 
 async fn start_with(token: Option<&str>, configure: impl FnOnce(&mut ServerConfig)) -> Guest {
     let dir = tempfile::tempdir().expect("dir");
-    let stub = StubDesktop::with_config(StubConfig {
-        root: Some(dir.path().into()),
-        screen: (1440, 900),
-        scenario: None,
-        host_exec: false,
-    })
-    .expect("stub");
+    let stub = crate::harness::stub_in(dir.path(), None, false);
     let mut config = ServerConfig::for_stub();
     configure(&mut config);
     let state = AppState::new(Arc::new(stub), config, token.map(str::to_owned));

@@ -9,12 +9,10 @@ use axum::body::{Body, Bytes};
 use axum::http::{header, HeaderMap, Method, Request, StatusCode};
 use axum::Router;
 use base64::Engine as _;
-use http_body_util::BodyExt as _;
 use serde_json::{json, Value};
-use tower::ServiceExt as _;
 
 use arena_guest::config::ServerConfig;
-use arena_guest::desktop::stub::{Scenario, StubConfig, StubDesktop};
+use arena_guest::desktop::stub::{Scenario, StubDesktop};
 use arena_guest::desktop::Desktop;
 use arena_guest::state::AppState;
 use arena_shared::action::Action;
@@ -78,15 +76,7 @@ fn scenario(value: Value) -> Scenario {
 
 fn app_with(scenario: Option<Scenario>, config: ServerConfig) -> TestApp {
     let dir = tempfile::tempdir().expect("temp dir");
-    let stub = Arc::new(
-        StubDesktop::with_config(StubConfig {
-            root: Some(dir.path().into()),
-            screen: (1440, 900),
-            scenario,
-            host_exec: true,
-        })
-        .expect("stub desktop"),
-    );
+    let stub = Arc::new(crate::harness::stub_in(dir.path(), scenario, true));
     let state = AppState::new(stub.clone(), config, None);
     TestApp { router: arena_guest::router(state), stub, _dir: dir }
 }
@@ -128,10 +118,7 @@ fn multipart(fields: &[(&str, &str)], files: &[(&str, &str, &[u8])]) -> Vec<u8> 
 
 impl TestApp {
     async fn send(&self, request: Request<Body>) -> Answer {
-        let response = self.router.clone().oneshot(request).await.expect("infallible router");
-        let status = response.status();
-        let headers = response.headers().clone();
-        let body = response.into_body().collect().await.expect("body").to_bytes();
+        let (status, headers, body) = crate::harness::send(&self.router, request).await;
         Answer { status, headers, body }
     }
 

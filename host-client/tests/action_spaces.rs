@@ -12,12 +12,12 @@ use std::time::Duration;
 use serde_json::{json, Value};
 
 use arena_actionspace::{ActionSpace, Context, Coords};
+use arena_agents::observation::Observation;
+use arena_agents::{Agent, AgentError, Prediction};
 use arena_client::cache::DownloadCache;
 use arena_client::client::{ClientConfig, GuestClient};
 use arena_exec::AgentAction;
-use arena_host::agent::{Agent, AgentError, Prediction};
 use arena_host::episode::{run_episode, EpisodeConfig};
-use arena_host::ports::Observation;
 use arena_host::run::load_tasks;
 use arena_results::{EpisodeStatus, RunLayout};
 use arena_task::{Difficulty, Task};

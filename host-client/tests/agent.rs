@@ -15,21 +15,21 @@ use base64::Engine as _;
 use serde_json::{json, Value};
 use tokio::net::TcpListener;
 
+use arena_agents::llm::RetryPolicy;
+use arena_agents::navi::{NaviAgent, NaviConfig, NaviStyle};
+use arena_agents::observation::Observation;
+use arena_agents::replay::{ReplayAgent, ReplaySource, TrajectoryStep};
+use arena_agents::scripted::{PlanSource, ScriptedAgent};
+use arena_agents::{Agent, AgentError};
 use arena_client::client::{ClientConfig, GuestClient};
 use arena_exec::AgentAction;
 use arena_exec::{execute_with, ActionOutcome, ExecError, ExecOptions};
-use arena_host::agent::llm::RetryPolicy;
-use arena_host::agent::navi::{NaviAgent, NaviConfig, NaviStyle};
-use arena_host::agent::replay::{ReplayAgent, ReplaySource, TrajectoryStep};
-use arena_host::agent::scripted::{PlanSource, ScriptedAgent};
-use arena_host::agent::{Agent, AgentError};
-use arena_host::ports::Observation;
-use arena_host::som::Marks;
 use arena_script::ComputerState;
 use arena_shared::action::Action;
 use arena_shared::clipboard::ClipboardContent;
 use arena_shared::exec::LaunchRequest;
 use arena_shared::observation::{A11yNode, A11yQuery, WindowTarget};
+use arena_som::Marks;
 use arena_task::Task;
 use arena_test_support::StubGuest;
 
@@ -596,8 +596,8 @@ async fn one_navi_step_decodes_each_screenshot_once() {
 /// answers `hello` with `hello` (adding `extra` to it), `reset` with `ready`, the
 /// first `observe` with `code` in pyautogui and the next with `DONE`.
 #[cfg(unix)]
-fn exec_agent(dir: &Path, extra: &str, code: &str) -> arena_host::agent::external::ExternalAgent {
-    use arena_host::agent::external::transport::ProcessPool;
+fn exec_agent(dir: &Path, extra: &str, code: &str) -> arena_agents::external::ExternalAgent {
+    use arena_agents::external::transport::ProcessPool;
     let hello = format!(
         r#"{{"type":"hello","protocol":1,"agent":"sh","action_space":"pyautogui"{extra},"observation":{{"screenshot":"none","a11y":"none","windows":false,"clipboard":false}}}}"#
     );
@@ -608,14 +608,14 @@ fn exec_agent(dir: &Path, extra: &str, code: &str) -> arena_host::agent::externa
     let path = dir.join("agent.sh");
     std::fs::write(&path, script).expect("write the agent script");
     let pool = ProcessPool::new(&format!("sh {}", path.display())).expect("a process pool");
-    arena_host::agent::external::ExternalAgent::new("exec", Arc::new(pool), Duration::from_secs(20))
+    arena_agents::external::ExternalAgent::new("exec", Arc::new(pool), Duration::from_secs(20))
 }
 
 /// Runs one episode of `agent` on a fresh stub guest (1440x900) with the run's
 /// `coords`, and answers where the cursor ended.
 #[cfg(unix)]
 async fn cursor_after_episode(
-    mut agent: arena_host::agent::external::ExternalAgent,
+    mut agent: arena_agents::external::ExternalAgent,
     coords: arena_actionspace::Coords,
     dir: &Path,
 ) -> (i32, i32) {
@@ -671,9 +671,9 @@ fn dir_made(dir: &Path) -> std::path::PathBuf {
 #[cfg(unix)]
 #[tokio::test]
 async fn one_step_protocol_step_decodes_each_screenshot_once() {
+    use arena_agents::external::transport::ProcessPool;
+    use arena_agents::external::ExternalAgent;
     use arena_client::frame::decodes_on_this_thread;
-    use arena_host::agent::external::transport::ProcessPool;
-    use arena_host::agent::external::ExternalAgent;
     let (_guest, c) = guest_with_notepad().await;
     let dir = tempfile::tempdir().expect("dir");
     let hello = r#"{"type":"hello","protocol":1,"agent":"sh","action_space":"pyautogui","observation":{"screenshot":"inline","a11y":"xml","windows":true,"clipboard":true,"som":true}}"#;

@@ -6,7 +6,7 @@ use std::time::Duration;
 
 use clap::Parser;
 
-use arena_host::cli::stub::{start, StubArgs};
+use arena_host::driver::stub::{start, StubArgs};
 use arena_host::Cli;
 
 fn cli(words: &[&str]) -> Cli {

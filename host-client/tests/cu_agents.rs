@@ -21,17 +21,17 @@ use serde_json::{json, Value};
 use tokio::net::TcpListener;
 
 use arena_actionspace::uitars::UiTarsVersion;
+use arena_agents::cu::anthropic::{AnthropicAgent, AnthropicConfig};
+use arena_agents::cu::models::Form;
+use arena_agents::cu::openai::{OpenAiAgent, OpenAiConfig, SafetyChecks};
+use arena_agents::cu::uitars::{UiTarsAgent, UiTarsConfig};
+use arena_agents::llm::RetryPolicy;
+use arena_agents::observation::Observation;
+use arena_agents::{Agent, AgentError};
 use arena_client::cache::DownloadCache;
 use arena_client::client::{ClientConfig, GuestClient};
 use arena_exec::AgentAction;
-use arena_host::agent::cu::anthropic::{AnthropicAgent, AnthropicConfig};
-use arena_host::agent::cu::models::Form;
-use arena_host::agent::cu::openai::{OpenAiAgent, OpenAiConfig, SafetyChecks};
-use arena_host::agent::cu::uitars::{UiTarsAgent, UiTarsConfig};
-use arena_host::agent::llm::RetryPolicy;
-use arena_host::agent::{Agent, AgentError};
 use arena_host::episode::{run_episode, EpisodeConfig};
-use arena_host::ports::Observation;
 use arena_host::run::load_tasks;
 use arena_results::{EpisodeResult, EpisodeStatus, RunLayout};
 use arena_shared::action::{Action, MouseButton};
@@ -475,7 +475,7 @@ async fn anthropic_toolset_solves_the_draft_with_several_members_in_one_turn() {
     let mut config = AnthropicConfig::new(&base, "claude-test");
     config.endpoint.api_key = Some(KEY.into());
     config.tool = Form::ComputerToolset20260801;
-    config.image = arena_host::agent::cu::models::ImageLimit::Within { side: 2576, pixels: 3_750_000 };
+    config.image = arena_agents::cu::models::ImageLimit::Within { side: 2576, pixels: 3_750_000 };
     config.disabled_members = vec!["hold_key".into()];
     let mut agent = AnthropicAgent::new(config).expect("agent");
     let (result, _) = episode(&draft, &mut agent, tmp.path()).await;
@@ -698,8 +698,7 @@ async fn openai_ga_computer_runs_a_batch_in_order_and_answers_the_call_once() {
     let mut config = OpenAiConfig::new(&base, "gpt-5.4");
     config.endpoint.api_key = Some(KEY.into());
     config.tool = Form::Computer;
-    config.image =
-        arena_host::agent::cu::models::choose(arena_host::agent::cu::models::Vendor::OpenAi, "gpt-5.4").image;
+    config.image = arena_agents::cu::models::choose(arena_agents::cu::models::Vendor::OpenAi, "gpt-5.4").image;
     let mut agent = OpenAiAgent::new(config).expect("agent");
     let (result, _) = episode(&draft, &mut agent, tmp.path()).await;
     assert_solved(&result);

@@ -26,7 +26,7 @@ use arena_test_support::workspace_binary;
 use serde_json::Value;
 
 #[path = "agent_protocol/mock_model.rs"]
-mod mock_model;
+pub mod mock_model;
 
 const VICTIM: &str = "stub-notepad-append";
 

@@ -13,9 +13,9 @@ use std::time::{Duration, Instant};
 
 use arena_client::client::{ClientConfig, GuestClient};
 use arena_client::error::ClientError;
-use arena_host::som::marks_from_tree;
 use arena_shared::health::Component;
 use arena_shared::observation::{A11yBackend, A11yNode, A11yQuery, A11yTree};
+use arena_som::marks_from_tree;
 use arena_test_support::StubGuest;
 use serde_json::{json, Value};
 

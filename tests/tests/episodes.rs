@@ -8,13 +8,13 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::time::Duration;
 
+use arena_agents::replay::{ReplayAgent, ReplaySource};
+use arena_agents::scripted::{PlanSource, ScriptedAgent};
+use arena_agents::Agent;
+use arena_agents::AgentFactory;
 use arena_client::cache::DownloadCache;
 use arena_client::client::{ClientConfig, GuestClient};
 use arena_exec::AgentAction;
-use arena_host::agent::replay::{ReplayAgent, ReplaySource};
-use arena_host::agent::scripted::{PlanSource, ScriptedAgent};
-use arena_host::agent::Agent;
-use arena_host::agent::AgentFactory;
 use arena_host::episode::{run_episode, EpisodeConfig, EpisodeRunner};
 use arena_host::run::merge::merge;
 use arena_host::run::pool::PoolConfig;

@@ -26,7 +26,7 @@ use std::process::{Child, Command, ExitStatus, Stdio};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
-use arena_host::agent::external::stderr;
+use arena_agents::external::stderr;
 use arena_results::summary::{Summary, TaskRow};
 use arena_test_support::workspace_binary;
 use serde_json::{json, Value};

@@ -24,15 +24,15 @@ use std::sync::Arc;
 use std::time::Duration;
 
 use arena_actionspace::Coords;
+use arena_agents::cu::uitars::{UiTarsAgent, UiTarsConfig};
+use arena_agents::external::transport::{HttpAgent, ProcessPool};
+use arena_agents::external::ExternalAgent;
+use arena_agents::navi::{NaviAgent, NaviConfig};
+use arena_agents::observation::Observation;
+use arena_agents::Agent;
 use arena_client::{ClientConfig, GuestClient};
 use arena_exec::AgentAction;
 use arena_exec::{execute_with, pointer, translate_pyautogui, ExecOptions, PyautoguiPolicy};
-use arena_host::agent::cu::uitars::{UiTarsAgent, UiTarsConfig};
-use arena_host::agent::external::transport::{HttpAgent, ProcessPool};
-use arena_host::agent::external::ExternalAgent;
-use arena_host::agent::navi::{NaviAgent, NaviConfig};
-use arena_host::agent::Agent;
-use arena_host::ports::Observation;
 use arena_script::ComputerState;
 use arena_shared::clipboard::ClipboardContent;
 use arena_shared::exec::LaunchRequest;
@@ -42,8 +42,7 @@ use arena_task::Task;
 use arena_test_support::{workspace_binary, StubGuest};
 use serde_json::{json, Value};
 
-#[path = "agent_protocol/mock_model.rs"]
-mod mock_model;
+use crate::agent_protocol::mock_model;
 
 /// The file the hostile code goes for, and what it holds.
 const TARGET: &str = r"C:\Users\Docker\Desktop\keep.txt";

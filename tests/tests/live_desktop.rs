@@ -90,7 +90,7 @@ async fn click_marks(c: &GuestClient, buttons: &[&str]) {
     let screen = c.screen().await.expect("screen");
     for &button in buttons {
         let tree = c.a11y(&A11yQuery { foreground_only: true, ..A11yQuery::default() }).await.expect("tree");
-        let marks = arena_host::som::marks_from_tree(&tree, (screen.physical_width, screen.physical_height));
+        let marks = arena_som::marks_from_tree(&tree, (screen.physical_width, screen.physical_height));
         let mark = marks
             .entities
             .iter()
@@ -130,7 +130,7 @@ async fn testpad(c: &GuestClient) {
     eventually("the context menu's items in the tree and in Set-of-Marks", Duration::from_secs(10), || async {
         let tree = c.a11y(&A11yQuery::default()).await.ok()?;
         let in_tree = tree.windows.iter().any(|w| find(w, &|n| n.name == "Select All").is_some());
-        let marks = arena_host::som::marks_from_tree(&tree, (screen.physical_width, screen.physical_height));
+        let marks = arena_som::marks_from_tree(&tree, (screen.physical_width, screen.physical_height));
         (in_tree && marks.entities.iter().any(|m| m.text == "Select All")).then_some(())
     })
     .await;

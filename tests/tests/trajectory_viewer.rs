@@ -22,11 +22,11 @@ use futures_util::{SinkExt as _, StreamExt as _};
 use serde_json::{json, Value};
 use tokio_tungstenite::tungstenite::Message;
 
+use arena_agents::cu::anthropic::{AnthropicAgent, AnthropicConfig};
+use arena_agents::cu::models::Form;
 use arena_client::cache::DownloadCache;
 use arena_client::client::{ClientConfig, GuestClient};
 use arena_exec::AgentAction;
-use arena_host::agent::cu::anthropic::{AnthropicAgent, AnthropicConfig};
-use arena_host::agent::cu::models::Form;
 use arena_host::episode::{run_episode, EpisodeConfig};
 use arena_host::run::load_tasks;
 use arena_results::{RunLayout, TRAJ_HTML};

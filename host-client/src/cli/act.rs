@@ -491,7 +491,8 @@ mod tests {
         ])
         .expect("parses");
         assert!(format!("{:#}", harness.act.to_batch().expect_err("needs the guest")).contains("steps_for"));
-        let stub = crate::cli::stub::start(&crate::cli::stub::StubArgs::default(), None).await.expect("stub guest");
+        let stub =
+            crate::driver::stub::start(&crate::driver::stub::StubArgs::default(), None).await.expect("stub guest");
         let client =
             arena_client::GuestClient::new(&stub.url(), arena_client::ClientConfig::default()).expect("client");
         let steps = harness.act.steps_for(&client).await.expect("translated");

@@ -4,7 +4,7 @@
 //! ([`arena_results::certificate`], docs/results.md "Certificates").
 //!
 //! It is three `arena run`s on one set of guests: the runs' own machinery
-//! ([`super::runs::Prepared`], [`super::runs::play`]: the pool, the episode
+//! (`crate::driver`'s `Prepared` and `play`, through `runs`: the pool, the episode
 //! runner, `--trials`, resuming), into `OUT/noop`, `OUT/fail` and `OUT/oracle`,
 //! each a result folder of its own with its summary and report. The guests'
 //! identity is read once from their health route and Windows' version keys.
@@ -17,9 +17,10 @@ use std::time::Duration;
 use anyhow::Context as _;
 use clap::{Args, Parser};
 
-use super::runs::{self, DifficultyArg, Guests, PausesArg, Prepared, RunArgs};
+use super::runs::{self, DifficultyArg, PausesArg, RunArgs};
 use super::{emit, Connection};
-use crate::agent::factory::{self, AgentKind};
+use crate::driver::{Guests, Prepared};
+use arena_agents::factory::{self, AgentKind};
 use arena_results::certificate::{self, AgentTrials, Certificate, GuestImage, FAIL, NOOP, ORACLE};
 use arena_results::summary::Summary;
 use arena_shared::registry::RegistryValue;
@@ -108,7 +109,7 @@ pub async fn run(conn: &Connection, args: CertifyArgs) -> anyhow::Result<ExitCod
     let plans = factory::plan_source(&template.agent_options())?;
     let mut runs: Vec<(&str, Prepared)> = Vec::new();
     for (name, kind) in [(NOOP, AgentKind::Noop), (FAIL, AgentKind::Fail), (ORACLE, AgentKind::Scripted)] {
-        let mut prepared = Prepared::new(args.run_args(kind, name)?).await?;
+        let mut prepared = runs::prepare(&args.run_args(kind, name)?).await?;
         if kind == AgentKind::Scripted {
             prepared.tasks.retain(|task| plans.has_plan(task));
             if prepared.tasks.is_empty() {
@@ -119,7 +120,7 @@ pub async fn run(conn: &Connection, args: CertifyArgs) -> anyhow::Result<ExitCod
         runs.push((name, prepared));
     }
     let tasks = runs.first().map(|(_, p)| p.tasks.clone()).unwrap_or_default();
-    let guests = Guests::start(conn, &template).await?;
+    let guests = runs::start_guests(conn, &template).await?;
     let images = guest_images(&guests, args.source.vm_image.as_ref().map(|p| p.display().to_string())).await;
     let mut summaries: BTreeMap<&str, Summary> = BTreeMap::new();
     let mut unfinished = false;

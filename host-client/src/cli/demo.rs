@@ -24,7 +24,8 @@ use arena_shared::exec::{ExecRequest, LaunchRequest};
 use arena_shared::files::KnownFolder;
 use arena_shared::observation::{A11yNode, A11yQuery, ScreenshotQuery, WindowInfo, WindowTarget};
 
-use super::{emit, local, render, stub, with_spinner, Connection};
+use super::{emit, local, render, with_spinner, Connection};
+use crate::driver::stub;
 use arena_client::client::GuestClient;
 
 /// The sentence typed into Notepad and looked for in the tree.

@@ -131,7 +131,7 @@ async fn serve_env(conn: &Connection, args: ServeArgs) -> anyhow::Result<ExitCod
             args.listen
         );
     }
-    let guests = super::runs::Guests::start(conn, &run).await?;
+    let guests = super::runs::start_guests(conn, &run).await?;
     let stop = tokio_util::sync::CancellationToken::new();
     config.stop = stop.clone();
     let screen = match guests.clients.first() {
@@ -148,7 +148,7 @@ async fn serve_env(conn: &Connection, args: ServeArgs) -> anyhow::Result<ExitCod
     super::emit(&format!("{}\n", crate::envserve::describe(addr, &tasks, guests.clients.len())))?;
     let server = crate::envserve::EnvServer::new(tasks, guests.clients.clone(), options);
     let served = tokio::spawn(crate::envserve::serve(Arc::clone(&server), listener, stop.clone()));
-    super::interrupt().await;
+    crate::cli::signals::interrupt().await;
     stop.cancel();
     let outcome = served.await;
     drop(server);

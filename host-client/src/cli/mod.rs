@@ -11,10 +11,12 @@
 //! - [`act`]: the `act` words and JSON batches.
 //! - [`render`]: tables and outlines.
 //! - [`local`]: atomic local writes.
-//! - [`stub`]: the embedded stub guest.
 //! - [`demo`]: the end-to-end demonstration.
 //! - [`env`]: `arena env serve`, the harness as an environment a program drives.
 //! - [`progress`]: what `arena run` shows while it goes (`--progress`).
+//! - [`runs`]: `arena run`, `merge`, `report` and `compare`: their flags resolved into the run driver's plan (`crate::driver`), and what they print.
+//! - `signals`: Ctrl-C and SIGTERM.
+//! - [`preset`]: `--preset` and how a run stands to upstream's.
 
 pub mod act;
 pub mod certify;
@@ -24,10 +26,11 @@ pub mod env;
 pub mod external;
 pub mod local;
 pub mod oem;
+pub mod preset;
 pub mod progress;
 pub mod render;
 pub mod runs;
-pub mod stub;
+pub(crate) mod signals;
 pub mod validate;
 pub mod vm;
 
@@ -38,6 +41,9 @@ use std::time::Duration;
 
 use anyhow::Context;
 use clap::{Args, Parser, Subcommand, ValueEnum};
+
+#[cfg(feature = "stub-guest")]
+use crate::driver::stub;
 
 use arena_shared::clipboard::ClipboardContent;
 use arena_shared::exec::{ExecRequest, LaunchRequest};
@@ -146,8 +152,16 @@ impl Connection {
     ///
     /// An unreadable token file or an invalid URL.
     pub fn client_for(&self, url: &str) -> anyhow::Result<GuestClient> {
-        let config = ClientConfig { token: self.resolve_token()?, timeout: self.timeout, retries: self.retries };
-        Ok(GuestClient::new(url, config)?)
+        Ok(GuestClient::new(url, self.client_config()?)?)
+    }
+
+    /// How a client talks with these settings: the token, the deadline, the retries.
+    ///
+    /// # Errors
+    ///
+    /// An unreadable token file.
+    pub fn client_config(&self) -> anyhow::Result<ClientConfig> {
+        Ok(ClientConfig { token: self.resolve_token()?, timeout: self.timeout, retries: self.retries })
     }
 
     /// A client of the configured guest.
@@ -722,44 +736,6 @@ fn exit_code(code: Option<i32>) -> ExitCode {
     }
 }
 
-/// A future that resolves when this process is asked to terminate: SIGTERM on
-/// Unix (a pod being deleted, `docker stop`), listened for from this call on.
-/// Other hosts have no SIGTERM and it never resolves there: Ctrl-C
-/// (`tokio::signal::ctrl_c`, heard on both) is how they stop a command.
-///
-/// # Errors
-///
-/// Until Ctrl-C or SIGTERM (SIGTERM on Unix only: a pod being deleted, `docker stop`).
-/// `false` when Ctrl-C cannot be listened for.
-pub(crate) async fn interrupt() -> bool {
-    let term = terminate_requested().inspect_err(|err| tracing::warn!(error = %err, "cannot listen for SIGTERM")).ok();
-    let terminated = async {
-        match term {
-            Some(term) => term.await,
-            None => std::future::pending::<()>().await,
-        }
-    };
-    tokio::select! {
-        signal = tokio::signal::ctrl_c() => signal.is_ok(),
-        () = terminated => true,
-    }
-}
-
-/// The signal handler cannot be installed.
-pub(crate) fn terminate_requested() -> std::io::Result<impl std::future::Future<Output = ()> + Send> {
-    #[cfg(unix)]
-    {
-        let mut term = tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate())?;
-        Ok(async move {
-            term.recv().await;
-        })
-    }
-    #[cfg(not(unix))]
-    {
-        Ok(std::future::pending())
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -843,7 +819,7 @@ mod tests {
     fn som_origin_takes_upstreams_names_and_is_recorded() {
         let cli = parse(&["run", "--tasks", "t", "--agent", "navi"]).unwrap();
         let Command::Run(args) = cli.command else { panic!("not run") };
-        assert_eq!(args.som_origin, crate::som::SomOrigin::A11y);
+        assert_eq!(args.som_origin, arena_som::SomOrigin::A11y);
         let cli = parse(&[
             "run",
             "--tasks",
@@ -861,8 +837,8 @@ mod tests {
         ])
         .unwrap();
         let Command::Run(args) = cli.command else { panic!("not run") };
-        assert_eq!(args.som_origin, crate::som::SomOrigin::MixedOmni);
-        let chosen = crate::agent::factory::build(&args.agent_options()).unwrap();
+        assert_eq!(args.som_origin, arena_som::SomOrigin::MixedOmni);
+        let chosen = arena_agents::factory::build(&args.agent_options()).unwrap();
         assert!(chosen.options.contains(&("som_origin".to_owned(), "mixed-omni".to_owned())), "{:?}", chosen.options);
         // The service a pixel origin needs is checked before the run starts.
         let cli = parse(&[
@@ -881,7 +857,7 @@ mod tests {
         .unwrap();
         let Command::Run(args) = cli.command else { panic!("not run") };
         if std::env::var_os("ARENA_DETECTOR_URL").is_none() {
-            let err = format!("{:#}", crate::agent::factory::build(&args.agent_options()).expect_err("refused"));
+            let err = format!("{:#}", arena_agents::factory::build(&args.agent_options()).expect_err("refused"));
             assert!(err.contains("--detector-url"), "{err}");
         }
         let err = parse(&["run", "--tasks", "t", "--som-origin", "mixed"]).unwrap_err().to_string();

@@ -13,31 +13,27 @@
 
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
-use std::sync::Arc;
 use std::time::Duration;
 
 use anyhow::{bail, Context};
 use clap::{Args, ValueEnum};
 
-use super::{emit, stub, Connection};
-use crate::agent::cu::openai::SafetyChecks;
-use crate::agent::factory::{self, AgentKind, AgentOptions, ChosenAgent};
-use crate::agent::llm::{ApiKind, Refusals};
-use crate::agent::navi::NaviStyle;
-use crate::episode::{EpisodeConfig, EpisodeRunner};
-use crate::run::pool::PoolConfig;
+use super::preset::{reproduction, Preset};
+use super::{emit, Connection};
+use crate::driver::{self, GuestPlan, Guests, Played, Prepared, RunPlan, VmPlan};
 use crate::run::shard::Shard;
-use crate::run::{load_tasks, run_tasks, RunOptions, TaskOrder};
-use crate::som::SomOrigin;
+use crate::run::TaskOrder;
 use arena_actionspace::uitars::UiTarsVersion;
 use arena_actionspace::Coords;
-use arena_client::cache::DownloadCache;
-use arena_exec::ExecOptions;
+use arena_agents::cu::openai::SafetyChecks;
+use arena_agents::factory::{AgentKind, AgentOptions};
+use arena_agents::llm::{ApiKind, Refusals};
+use arena_agents::navi::NaviStyle;
 use arena_results::html::write_report;
 use arena_results::summary::Summary;
-use arena_results::RunLayout;
-use arena_setup::Settle;
+use arena_som::SomOrigin;
 use arena_task::Difficulty;
+use tokio_util::sync::CancellationToken;
 
 /// Arguments of `arena run`.
 #[derive(Debug, Clone, Args)]
@@ -368,134 +364,6 @@ pub enum RefusalsArg {
     Answer,
 }
 
-/// `--preset`: the rows of the WAA paper's Navi comparison that this project
-/// can run, as upstream's README lists them ("Available Configurations",
-/// microsoft/WindowsAgentArena at 6d39ed88, whose `run-local.sh` takes
-/// `--som-origin` and `--a11y-backend` and passes them to `run.py`).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
-pub enum Preset {
-    /// `--som-origin mixed-omni --a11y-backend uia`: OmniParser with the UIA tree, the paper's best row.
-    PaperMixedOmni,
-    /// `--som-origin omni`: OmniParser alone.
-    PaperOmni,
-    /// `--som-origin oss`: webparse, Grounding DINO and Tesseract OCR, the baseline.
-    PaperOss,
-    /// `--som-origin a11y --a11y-backend uia`: the UIA tree.
-    PaperA11yUia,
-    /// `--som-origin a11y --a11y-backend win32`: the win32 tree, the fastest.
-    PaperA11yWin32,
-    /// `--som-origin mixed-oss --a11y-backend uia`: the `oss` sources with the UIA tree.
-    PaperMixedOss,
-}
-
-/// Upstream's default run, the reference a non-preset Navi run is compared with:
-/// `run.py` and `start_client.sh` at 6d39ed88 (`--som_origin oss`, `--a11y_backend uia`,
-/// `--temperature 1.0`, `--max_steps 15`, `--sleep_after_execution 3`), Navi's
-/// `max_tokens` of 4096 (its planner's request), and the prompts of the checkout.
-pub mod upstream_default {
-    use super::SomOrigin;
-    pub const SOM_ORIGIN: SomOrigin = SomOrigin::Oss;
-    pub const A11Y_BACKEND: &str = "uia";
-    pub const TEMPERATURE: f64 = 1.0;
-    pub const MAX_TOKENS: u32 = 4096;
-    pub const MAX_STEPS: u32 = crate::episode::DEFAULT_MAX_STEPS;
-    pub const SLEEP_AFTER_SECONDS: f64 = 3.0;
-}
-
-impl Preset {
-    /// `paper-mixed-omni`, ...
-    pub fn name(self) -> &'static str {
-        match self {
-            Preset::PaperMixedOmni => "paper-mixed-omni",
-            Preset::PaperOmni => "paper-omni",
-            Preset::PaperOss => "paper-oss",
-            Preset::PaperA11yUia => "paper-a11y-uia",
-            Preset::PaperA11yWin32 => "paper-a11y-win32",
-            Preset::PaperMixedOss => "paper-mixed-oss",
-        }
-    }
-
-    /// The row's Set-of-Marks origin and accessibility backend.
-    pub fn row(self) -> (SomOrigin, A11yBackendArg) {
-        match self {
-            Preset::PaperMixedOmni => (SomOrigin::MixedOmni, A11yBackendArg::Uia),
-            // Upstream's default backend is uia; the row does not change it.
-            Preset::PaperOmni => (SomOrigin::Omni, A11yBackendArg::Uia),
-            Preset::PaperOss => (SomOrigin::Oss, A11yBackendArg::Uia),
-            Preset::PaperA11yUia => (SomOrigin::A11y, A11yBackendArg::Uia),
-            Preset::PaperA11yWin32 => (SomOrigin::A11y, A11yBackendArg::Win32),
-            Preset::PaperMixedOss => (SomOrigin::MixedOss, A11yBackendArg::Uia),
-        }
-    }
-
-    /// `args` with the row's settings and upstream's model parameters, step cap and pauses.
-    ///
-    /// # Errors
-    ///
-    /// Without --waa-root (a reproduction sends upstream's own prompts), or with an agent other than Navi.
-    pub fn apply(self, args: &RunArgs) -> anyhow::Result<RunArgs> {
-        if args.agent != AgentKind::Navi {
-            bail!("--preset {} is a Navi configuration: give --agent navi", self.name());
-        }
-        if args.waa_root.is_none() {
-            bail!(
-                "--preset {} reproduces upstream's run and needs upstream's prompts: give --waa-root (or ARENA_WAA_ROOT), a WindowsAgentArena checkout",
-                self.name()
-            );
-        }
-        let (som_origin, a11y_backend) = self.row();
-        Ok(RunArgs {
-            som_origin,
-            a11y_backend,
-            temperature: upstream_default::TEMPERATURE,
-            max_tokens: upstream_default::MAX_TOKENS,
-            navi_style: NaviStyleArg::Waa,
-            max_steps: upstream_default::MAX_STEPS,
-            sleep_after: None,
-            fast: false,
-            pauses: Some(PausesArg::Upstream),
-            no_a11y: false,
-            ..args.clone()
-        })
-    }
-}
-
-/// What a Navi run that is no preset changes from upstream's default run, one
-/// `name=ours (upstream: theirs)` item each; empty when nothing differs.
-pub fn differences_from_upstream(args: &RunArgs, fast: bool) -> Vec<String> {
-    let mut out = Vec::new();
-    let mut differs = |name: &str, ours: String, theirs: String| {
-        if ours != theirs {
-            out.push(format!("{name}={ours} (upstream: {theirs})"));
-        }
-    };
-    differs("som_origin", args.som_origin.name().to_owned(), upstream_default::SOM_ORIGIN.name().to_owned());
-    let backend = if args.a11y_backend == A11yBackendArg::Win32 { "win32" } else { "uia" };
-    differs("a11y_backend", backend.to_owned(), upstream_default::A11Y_BACKEND.to_owned());
-    let prompt = match (args.navi_style, &args.waa_root) {
-        (NaviStyleArg::Arena, _) => "arena (this project's prompt and reply reader)",
-        (NaviStyleArg::Waa, None) => "ours (no --waa-root)",
-        (NaviStyleArg::Waa, Some(_)) => "the checkout's",
-    };
-    differs("prompt", prompt.to_owned(), "the checkout's".to_owned());
-    differs("temperature", format!("{}", args.temperature), format!("{}", upstream_default::TEMPERATURE));
-    differs("max_tokens", args.max_tokens.to_string(), upstream_default::MAX_TOKENS.to_string());
-    differs("max_steps", args.max_steps.to_string(), upstream_default::MAX_STEPS.to_string());
-    let upstream_pauses = "5 s after the reset and the setup, 3 s after each action";
-    let pauses = if fast { "fast (none)" } else { upstream_pauses };
-    differs("pauses", pauses.to_owned(), upstream_pauses.to_owned());
-    if let Some(secs) = args.sleep_after {
-        differs("sleep_after", format!("{secs}"), format!("{}", upstream_default::SLEEP_AFTER_SECONDS));
-    }
-    if args.no_a11y {
-        differs("a11y", "off".to_owned(), "on".to_owned());
-    }
-    if args.refusals == RefusalsArg::Answer {
-        differs("refusals", "answer".to_owned(), "unfinished".to_owned());
-    }
-    out
-}
-
 /// `--computer-tool`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
 pub enum ComputerTool {
@@ -518,8 +386,8 @@ pub enum ComputerTool {
 
 impl ComputerTool {
     /// The form it names.
-    pub fn form(self) -> crate::agent::cu::models::Form {
-        use crate::agent::cu::models::Form;
+    pub fn form(self) -> arena_agents::cu::models::Form {
+        use arena_agents::cu::models::Form;
         match self {
             ComputerTool::Computer20250124 => Form::Computer20250124,
             ComputerTool::Computer20251124 => Form::Computer20251124,
@@ -626,7 +494,7 @@ fn guests_from_file(path: &Path) -> anyhow::Result<Vec<String>> {
 }
 
 impl RunArgs {
-    /// What these flags say about the agent, for [`factory::build`].
+    /// What these flags say about the agent, for [`arena_agents::factory::build`].
     pub fn agent_options(&self) -> AgentOptions {
         AgentOptions {
             kind: self.agent,
@@ -683,8 +551,8 @@ impl RunArgs {
 ///
 /// Unusable arguments, tasks that do not load, no guest, or results that cannot be written.
 pub async fn run(conn: &Connection, args: RunArgs) -> anyhow::Result<ExitCode> {
-    let prepared = Prepared::new(args).await?;
-    let guests = Guests::start(conn, &prepared.args).await?;
+    let prepared = prepare(&args).await?;
+    let guests = start_guests(conn, &args).await?;
     let guest_count = guests.urls.len();
     let played = play(prepared, &guests).await;
     guests.stop().await;
@@ -725,425 +593,44 @@ pub async fn run(conn: &Connection, args: RunArgs) -> anyhow::Result<ExitCode> {
     Ok(ExitCode::SUCCESS)
 }
 
-/// A run's arguments checked, its tasks loaded and its agent built, before any
-/// guest or VM starts.
-pub(crate) struct Prepared {
-    pub(crate) args: RunArgs,
-    pub(crate) tasks: Vec<arena_task::Task>,
-    chosen: ChosenAgent,
-    mcp: Option<super::external::McpEndpoint>,
-    price: Option<arena_results::ledger::Price>,
-    certificates: Option<arena_results::certificate::CertifiedRecord>,
-}
-
-impl Prepared {
-    /// Checks `args` (a preset applied), loads the tasks and builds the agent.
-    ///
-    /// # Errors
-    ///
-    /// Unusable arguments, tasks that do not load, an agent that cannot be built,
-    /// prices or certificates that cannot be read.
-    pub(crate) async fn new(args: RunArgs) -> anyhow::Result<Prepared> {
-        let args = match args.preset {
-            Some(preset) => preset.apply(&args)?,
-            None => args,
-        };
-        if args.trials > 1 && args.trial_id != arena_results::DEFAULT_TRIAL_ID {
-            bail!(
-                "--trials {} writes trial folders 0..{}; it cannot be combined with --trial-id {}",
-                args.trials,
-                args.trials - 1,
-                args.trial_id
-            );
-        }
-        let tasks = load_tasks(&args.tasks, args.difficulty.into())?;
-        let certificates = match &args.certificates {
-            Some(dir) => Some(
-                arena_results::certificate::CertifiedRecord::from_dir(dir)
-                    .with_context(|| format!("--certificates {}", dir.display()))?,
-            ),
-            None => None,
-        };
-        let (chosen, mcp) = if args.agent == AgentKind::Mcp {
-            let (chosen, endpoint) =
-                super::external::mcp(&args.external, args.max_steps, &args.out, args.model.clone()).await?;
-            (chosen, Some(endpoint))
-        } else {
-            (factory::build(&args.agent_options())?, None)
-        };
-        // The cost ledger's price and budget are checked before any guest or VM starts.
-        let price = match &args.prices {
-            Some(path) => Some(arena_results::ledger::Prices::load(path)?.of(&chosen.model, path)?),
-            None => None,
-        };
-        if let Some(max) = args.max_cost.filter(|m| !m.is_finite() || *m < 0.0) {
-            bail!("--max-cost {max}: give a number of US dollars, 0 or more");
-        }
-        Ok(Prepared { args, tasks, chosen, mcp, price, certificates })
-    }
-}
-
-/// A run's guests: those given by URL, and the stub guests and VMs it started
-/// (stopped by [`Guests::stop`]). `arena certify` plays its agents on one set.
-pub(crate) struct Guests {
-    pub(crate) urls: Vec<String>,
-    pub(crate) clients: Vec<arena_client::GuestClient>,
-    stubs: Vec<stub::RunningStub>,
-    pub(crate) fleet: Option<Arc<arena_vm::fleet::VmFleet>>,
-}
-
-impl Guests {
-    /// The guests `args` name, the stub guests and VMs they ask for started.
-    ///
-    /// # Errors
-    ///
-    /// A guests file that cannot be read, a VM or stub guest that does not start, or no guest at all.
-    pub(crate) async fn start(conn: &Connection, args: &RunArgs) -> anyhow::Result<Guests> {
-        let mut urls: Vec<String> = conn.guest.iter().cloned().collect();
-        urls.extend(args.source.guests.iter().map(|s| s.trim().to_owned()).filter(|s| !s.is_empty()));
-        if let Some(file) = &args.source.guests_file {
-            urls.extend(guests_from_file(file)?);
-        }
-        let fleet = match &args.source.vm_image {
-            Some(image) => {
-                let dir = args.source.vm_dir.clone().unwrap_or_else(|| args.out.join("vms"));
-                let template = args.source.vm.config(image, &dir, "vm", conn.resolve_token()?)?;
-                let configs = arena_vm::fleet::configs(&template, args.source.vms.max(1));
-                emit(&format!("booting {} VM(s) on {}\n", configs.len(), image.display()))?;
-                let fleet = arena_vm::fleet::VmFleet::boot(configs, args.source.reset).await?;
-                urls.extend(fleet.urls());
-                Some(Arc::new(fleet))
-            }
-            None => None,
-        };
-        let mut guests = Guests { urls, clients: Vec::new(), stubs: Vec::new(), fleet };
-        for _ in 0..args.source.stub_guests.unwrap_or(0) {
-            let stub_args = stub::StubArgs { stub_host_exec: args.source.stub_host_exec, ..stub::StubArgs::default() };
-            let token = match conn.resolve_token() {
-                Ok(token) => token,
-                Err(err) => {
-                    guests.stop().await;
-                    return Err(err);
-                }
-            };
-            match stub::start(&stub_args, token).await {
-                Ok(running) => {
-                    guests.urls.push(running.url());
-                    guests.stubs.push(running);
-                }
-                Err(err) => {
-                    guests.stop().await;
-                    return Err(err);
-                }
-            }
-        }
-        guests.urls.dedup();
-        if guests.urls.is_empty() {
-            bail!("no guest: give --guest, --guests, --guests-file or --stub-guests");
-        }
-        let vm_urls = guests.fleet.as_ref().map(|f| f.urls()).unwrap_or_default();
-        let clients = guests
-            .urls
-            .iter()
-            .map(|u| {
-                let client = conn.client_for(u)?;
-                // A VM restored to its snapshot has forgotten every connection made since.
-                Ok(if vm_urls.contains(u) { client.without_kept_connections()? } else { client })
-            })
-            .collect::<anyhow::Result<Vec<_>>>();
-        match clients {
-            Ok(clients) => guests.clients = clients,
-            Err(err) => {
-                guests.stop().await;
-                return Err(err);
-            }
-        }
-        Ok(guests)
-    }
-
-    /// Stops the VMs and stub guests this run started.
-    pub(crate) async fn stop(self) {
-        if let Some(fleet) = self.fleet {
-            // The runs' options held the fleet; they are dropped by now.
-            match Arc::try_unwrap(fleet) {
-                Ok(fleet) => fleet.stop().await,
-                Err(_) => tracing::warn!("the VMs are still in use; they stop when this program ends"),
-            }
-        }
-        for stub in self.stubs {
-            if let Err(err) = stub.stop().await {
-                tracing::warn!(error = format!("{err:#}"), "stopping a stub guest");
-            }
-        }
-    }
-}
-
-/// What [`play`] did.
-pub(crate) struct Played {
-    pub(crate) outcome: crate::run::RunOutcome,
-    /// Ctrl-C stopped it.
-    pub(crate) interrupted: bool,
-    pub(crate) shard: Shard,
-}
-
-/// Plays a prepared run on `guests`: the preflight, the options recorded and
-/// checked against the folder's, the tasks, the summary and report.
+/// Prepares the run `args` ask for (a preset applied): see [`Prepared::new`];
+/// prints where the MCP endpoint of `--agent mcp` listens.
 ///
 /// # Errors
 ///
-/// The preflight fails, the folder holds results of other options, or results cannot be written.
+/// As [`Prepared::new`], and a preset that refuses the arguments.
+pub(crate) async fn prepare(args: &RunArgs) -> anyhow::Result<Prepared> {
+    let prepared = Prepared::new(args.plan()?).await?;
+    if let Some(endpoint) = &prepared.mcp {
+        if let Some(file) = endpoint.token_file() {
+            emit(&format!("MCP token (also in {}): {}\n", file.display(), endpoint.token()))?;
+        }
+        emit(&format!("MCP endpoint: {}\n", endpoint.url()))?;
+    }
+    Ok(prepared)
+}
+
+/// Plays a prepared run ([`driver::play`]) with Ctrl-C listened for: the first
+/// stops the run gently, the second abandons it.
+///
+/// # Errors
+///
+/// As [`driver::play`].
 pub(crate) async fn play(prepared: Prepared, guests: &Guests) -> anyhow::Result<Played> {
-    let Prepared { args, tasks, chosen, mcp, price, certificates } = prepared;
-    let ChosenAgent { factory: agents, label: agent_label, model, options: mut agent_options, preflight } = chosen;
-    // Every run records who played, in which action space and coordinates.
-    let agent_name = args.agent.to_possible_value().map(|v| v.get_name().to_owned()).unwrap_or_default();
-    agent_options.push(("agent".into(), agent_name));
-    agent_options.push(("model".into(), model.clone()));
-    // Agents with their own convention (the computer-use agents) state it; for every
-    // other agent `--coords` is what its pyautogui code is rescaled from.
-    let run_coords = !agent_options.iter().any(|(k, _)| k == "action_space");
-    if run_coords {
-        agent_options.push(("action_space".into(), agent_label.clone()));
-        agent_options.push(("coords".into(), args.coords.name()));
-    }
-    let fleet = guests.fleet.clone();
-
-    let mut hello = None;
-    if !args.no_preflight {
-        // A setup mistake ends the run here, before any score is written.
-        hello = self::preflight(preflight.as_ref(), &guests.clients).await?;
-    }
-    // An outside agent is named by its hello (else by the fingerprint the factory
-    // gave), and what it declared is recorded, not the run's defaults.
-    let mut model = model;
-    if let Some(hello) = &hello {
-        if let Some(name) = hello.agent.as_deref().map(str::trim).filter(|n| !n.is_empty()) {
-            if args.model.is_none() {
-                model = arena_results::safe_component(name);
-            }
-            agent_options.push(("agent_name".into(), name.to_owned()));
-        }
-        agent_options.retain(|(k, _)| k != "model" && k != "action_space" && k != "coords");
-        agent_options.push(("model".into(), model.clone()));
-        agent_options.push(("action_space".into(), hello.action_space.clone()));
-        agent_options.push(("coords".into(), hello.coords.clone().unwrap_or_else(|| args.coords.name())));
-    }
-    let cache_dir = args.cache.clone().unwrap_or_else(|| args.out.join("download-cache"));
-    let cache = DownloadCache::new(&cache_dir)
-        .with_context(|| format!("opening the download cache {}", cache_dir.display()))?;
-    let fast = match args.pauses {
-        Some(PausesArg::Fast) => true,
-        Some(PausesArg::Upstream) => false,
-        None => args.fast || args.source.stub_guests.is_some(),
-    };
-    let mut config = if fast { EpisodeConfig::instant(cache) } else { EpisodeConfig::upstream(cache) };
-    config.max_steps = args.max_steps;
-    config.a11y = !args.no_a11y;
-    if args.a11y_backend == A11yBackendArg::Win32 {
-        config.a11y_query.backend = arena_shared::observation::A11yBackend::Win32;
-        config.options.insert("a11y_backend".into(), "win32".into());
-    }
-    config.options.extend(reproduction(&args, fast)?);
-    config.model = model.clone();
-    config.price = price;
-    if let Some(secs) = args.sleep_after {
-        config.sleep_after_action =
-            Duration::try_from_secs_f64(secs).context("--sleep-after must be a number of seconds, 0 or more")?;
-        config.options.insert("sleep_after".into(), format!("{secs}"));
-    }
-    let order = match args.order {
-        OrderArg::Index => TaskOrder::Index,
-        OrderArg::Sorted => TaskOrder::Sorted,
-        OrderArg::Shuffle => TaskOrder::Shuffle { seed: args.seed },
-    };
-    config.options.insert("order".into(), order.to_string());
-    config.options.extend(agent_options);
-    if args.trials > 1 {
-        config.options.insert("trials".into(), args.trials.to_string());
-    }
-    if args.activate_non_strict {
-        config.options.insert("activate_non_strict".into(), "on".into());
-    }
-    if args.source.stub_host_exec {
-        config.options.insert("stub_host_exec".into(), "on".into());
-    }
-    if fast {
-        config.settle = Settle::none();
-        config.exec = ExecOptions::instant();
-    }
-    if let Some(fleet) = &fleet {
-        config.options.insert("vm_reset".into(), args.source.reset.to_string());
-        config.screen_source = Some(Arc::clone(fleet) as Arc<dyn crate::ports::observe::ScreenSource>);
-        config.guest_watch = Some(Arc::clone(fleet) as Arc<dyn crate::run::blame::GuestWatch>);
-    }
-    if run_coords {
-        config.exec.coords = args.coords;
-    }
-    if args.pyautogui_translate_only {
-        config.exec.pyautogui = arena_exec::PyautoguiPolicy::TranslateOnly;
-        config.options.insert("pyautogui_effects".into(), "off".into());
-    }
-    if args.held_keys == HeldKeysArg::Action {
-        config.exec.release_held_keys = true;
-        config.options.insert("held_keys".into(), "action".into());
-    }
-    let layout = RunLayout {
-        root: args.out.clone(),
-        agent: args.action_space_label.clone().unwrap_or(agent_label),
-        observation: args.observation.clone(),
-        model,
-        trial: args.trial_id.clone(),
-    };
-    let differences = option_differences(&layout.base(), &config.options)?;
-    if !differences.is_empty() {
-        if !args.force_resume {
-            bail!(
-                "{} holds results run with other options; resuming would mix two runs in one number:\n  {}\nuse another --out, or --force-resume to mix them anyway (recorded)",
-                layout.base().display(),
-                differences.join("\n  ")
-            );
-        }
-        tracing::warn!(differences = %differences.join("; "), "--force-resume: mixing runs with different options");
-        config.options.insert(FORCE_RESUME.into(), "on".into());
-    }
-    let watch = super::progress::watch(args.progress);
-    config.watch = Some(Arc::clone(&watch));
-    let options = RunOptions {
-        layout: layout.clone(),
-        shard: args.shard,
-        resume: !args.no_resume,
-        pool: PoolConfig {
-            max_attempts: args.attempts.max(1),
-            no_guest_timeout: Duration::from_secs(args.guest_wait),
-            lifecycle: fleet.clone().map(|f| f as Arc<dyn crate::run::pool::GuestLifecycle>),
-            ..PoolConfig::default()
-        },
-        watch: Arc::clone(&watch),
-        title: format!("arena run: {} ({})", args.tasks.display(), layout.base().display()),
-        order,
-        trials: args.trials,
-        budget: arena_results::ledger::Budget { max_cost_usd: args.max_cost, max_tokens: args.max_total_tokens },
-    };
-    // Ctrl-C: the first stops the run gently, the second abandons it.
-    let stop = options.pool.stop.clone();
-    config.stop = stop.clone();
+    let stop = CancellationToken::new();
     let watcher = tokio::spawn(watch_interrupts(stop.clone()));
-    let runner = EpisodeRunner { layout, config, agents };
-    if let Some(record) = &certificates {
-        record.write(&args.out)?;
-    }
-    let clients = guests.clients.clone();
-    let outcome = match mcp {
-        Some(endpoint) => super::external::run_with_mcp(endpoint, tasks, clients, runner, &options).await,
-        None => run_tasks(tasks, clients, Arc::new(runner), &options).await,
-    };
+    let played = driver::play(prepared, guests, stop).await;
     watcher.abort();
-    drop(options);
-    Ok(Played { outcome: outcome?, interrupted: stop.is_cancelled(), shard: args.shard })
-}
-
-/// The checks before a run's first task: the agent's ([`factory::Preflight`]),
-/// then the guests' health (at least one must answer; the others are said).
-async fn preflight(
-    agent: Option<&factory::Preflight>,
-    guests: &[arena_client::GuestClient],
-) -> anyhow::Result<Option<crate::agent::external::protocol::AgentHello>> {
-    let mut hello = None;
-    if let Some(check) = agent {
-        match check.check().await {
-            Ok(checked) => {
-                if let Some(note) = checked.note {
-                    tracing::warn!(%note, "preflight: the model endpoint did not answer well; going on");
-                }
-                hello = checked.hello;
-            }
-            Err(err) => {
-                bail!("preflight: {err:#}\nno task was run and no result written (--no-preflight skips these checks)")
-            }
-        }
-    }
-    let mut down = Vec::new();
-    for guest in guests {
-        if let Err(err) = guest.with_timeout(Duration::from_secs(30)).health().await {
-            down.push(format!("{}: {err}", guest.base_url()));
-        }
-    }
-    if !guests.is_empty() && down.len() == guests.len() {
-        bail!(
-            "preflight: no guest answers its health check:\n  {}\nno task was run and no result written (--no-preflight skips these checks)",
-            down.join("\n  ")
-        );
-    }
-    for line in down {
-        tracing::warn!(guest = %line, "preflight: a guest does not answer; the run goes on without it until it does");
-    }
-    Ok(hello)
-}
-
-/// The option `--force-resume` records, left out of the comparison.
-const FORCE_RESUME: &str = "force_resume";
-
-/// How the options recorded in the task folders below `base` differ from `ours`,
-/// one line per option (`name: the folder has A, this run B`); empty for a new
-/// folder or the same options.
-fn option_differences(base: &Path, ours: &std::collections::BTreeMap<String, String>) -> anyhow::Result<Vec<String>> {
-    if !base.is_dir() {
-        return Ok(Vec::new());
-    }
-    let found = arena_results::scan(base)?;
-    let mut theirs: std::collections::BTreeMap<&str, std::collections::BTreeSet<&str>> = Default::default();
-    let episodes: Vec<&arena_results::EpisodeResult> = found.iter().filter_map(|f| f.episode.as_ref()).collect();
-    if episodes.is_empty() {
-        return Ok(Vec::new());
-    }
-    for episode in &episodes {
-        for (name, value) in &episode.options {
-            theirs.entry(name).or_default().insert(value);
-        }
-    }
-    let mut names: std::collections::BTreeSet<&str> = theirs.keys().copied().collect();
-    names.extend(ours.keys().map(String::as_str));
-    names.remove(FORCE_RESUME);
-    let mut out = Vec::new();
-    for name in names {
-        let had: Vec<&str> = theirs.get(name).map(|v| v.iter().copied().collect()).unwrap_or_default();
-        let have = ours.get(name).map(String::as_str);
-        let same = match have {
-            Some(v) => had.len() == 1 && had[0] == v && episodes.iter().all(|e| e.options.contains_key(name)),
-            None => had.is_empty(),
-        };
-        if !same {
-            let had = if had.is_empty() { "not set".to_owned() } else { had.join(" | ") };
-            out.push(format!("{name}: the folder has {had}, this run {}", have.unwrap_or("not set")));
-        }
-    }
-    Ok(out)
-}
-
-/// How the run stands to upstream's, as named options: `preset` for a preset,
-/// else, for Navi, `differs_from_upstream` listing what differs, announced in one
-/// line now (and shown by the report, which lists the options).
-fn reproduction(args: &RunArgs, fast: bool) -> anyhow::Result<Vec<(String, String)>> {
-    if let Some(preset) = args.preset {
-        emit(&format!("preset {}: reproducing that row of upstream's Navi table\n", preset.name()))?;
-        return Ok(vec![("preset".into(), preset.name().into())]);
-    }
-    if args.agent != AgentKind::Navi {
-        return Ok(Vec::new());
-    }
-    let differences = differences_from_upstream(args, fast);
-    let text = if differences.is_empty() { "none".to_owned() } else { differences.join("; ") };
-    emit(&format!("not a reproduction: differs from upstream's default Navi run in {text}\n"))?;
-    Ok(vec![("differs_from_upstream".into(), text)])
+    played
 }
 
 /// The first Ctrl-C cancels `stop`: no new task starts and running episodes end
 /// at once, in the middle of a step whatever the agent answered, unevaluated
-/// (they run again next time). The second exits
-/// at once with 130; every file already written stays, as each is written whole.
-async fn watch_interrupts(stop: tokio_util::sync::CancellationToken) {
+/// (they run again next time). The second exits at once with 130; every file
+/// already written stays, as each is written whole.
+async fn watch_interrupts(stop: CancellationToken) {
     // SIGTERM (a pod being deleted, `docker stop`) counts as the first Ctrl-C.
-    if !super::interrupt().await {
+    if !crate::cli::signals::interrupt().await {
         return;
     }
     eprintln!(
@@ -1155,6 +642,118 @@ async fn watch_interrupts(stop: tokio_util::sync::CancellationToken) {
         // No destructor runs past this: outside agents are ended here.
         arena_vm::child::tree::end_all();
         std::process::exit(130);
+    }
+}
+
+/// Starts the guests `args` name (see [`Guests::start`]), saying when VMs boot.
+///
+/// # Errors
+///
+/// As [`RunArgs::guest_plan`] and [`Guests::start`].
+pub(crate) async fn start_guests(conn: &Connection, args: &RunArgs) -> anyhow::Result<Guests> {
+    let plan = args.guest_plan(conn)?;
+    if let (Some(vms), Some(image)) = (&plan.vms, &args.source.vm_image) {
+        emit(&format!("booting {} VM(s) on {}\n", vms.count.max(1), image.display()))?;
+    }
+    Guests::start(&plan).await
+}
+
+impl RunArgs {
+    /// The run these flags ask for, a preset applied; says how it stands to upstream's.
+    ///
+    /// # Errors
+    ///
+    /// A preset that refuses the other flags.
+    pub(crate) fn plan(&self) -> anyhow::Result<RunPlan> {
+        let preset;
+        let args = match self.preset {
+            Some(p) => {
+                preset = p.apply(self)?;
+                &preset
+            }
+            None => self,
+        };
+        let fast = match args.pauses {
+            Some(PausesArg::Fast) => true,
+            Some(PausesArg::Upstream) => false,
+            None => args.fast || args.source.stub_guests.is_some(),
+        };
+        Ok(RunPlan {
+            tasks: args.tasks.clone(),
+            difficulty: args.difficulty.into(),
+            out: args.out.clone(),
+            agent: args.agent,
+            agent_name: args.agent.to_possible_value().map(|v| v.get_name().to_owned()).unwrap_or_default(),
+            agent_options: args.agent_options(),
+            mcp: args.external.mcp_plan(),
+            model: args.model.clone(),
+            max_steps: args.max_steps,
+            trials: args.trials,
+            trial_id: args.trial_id.clone(),
+            certificates: args.certificates.clone(),
+            prices: args.prices.clone(),
+            max_cost: args.max_cost,
+            max_total_tokens: args.max_total_tokens,
+            preflight: !args.no_preflight,
+            coords: args.coords,
+            cache: args.cache.clone(),
+            fast,
+            a11y: !args.no_a11y,
+            a11y_win32: args.a11y_backend == A11yBackendArg::Win32,
+            reproduction: reproduction(args, fast)?,
+            sleep_after: args.sleep_after,
+            order: match args.order {
+                OrderArg::Index => TaskOrder::Index,
+                OrderArg::Sorted => TaskOrder::Sorted,
+                OrderArg::Shuffle => TaskOrder::Shuffle { seed: args.seed },
+            },
+            activate_non_strict: args.activate_non_strict,
+            stub_host_exec: args.source.stub_host_exec,
+            vm_reset: args.source.reset,
+            pyautogui_translate_only: args.pyautogui_translate_only,
+            release_held_keys: args.held_keys == HeldKeysArg::Action,
+            action_space_label: args.action_space_label.clone(),
+            observation: args.observation.clone(),
+            force_resume: args.force_resume,
+            watch: super::progress::watch(args.progress),
+            shard: args.shard,
+            resume: !args.no_resume,
+            attempts: args.attempts,
+            guest_wait: Duration::from_secs(args.guest_wait),
+        })
+    }
+
+    /// Where this run's guests come from: the global `--guest`, `--guests`,
+    /// `--guests-file`, the VMs of `--vm-image` and the stub guests.
+    ///
+    /// # Errors
+    ///
+    /// A guests file or token file that cannot be read, or VM options that do not make a VM.
+    pub(crate) fn guest_plan(&self, conn: &Connection) -> anyhow::Result<GuestPlan> {
+        let mut urls: Vec<String> = conn.guest.iter().cloned().collect();
+        urls.extend(self.source.guests.iter().map(|s| s.trim().to_owned()).filter(|s| !s.is_empty()));
+        if let Some(file) = &self.source.guests_file {
+            urls.extend(guests_from_file(file)?);
+        }
+        let client = conn.client_config()?;
+        let vms = match &self.source.vm_image {
+            Some(image) => {
+                let dir = self.source.vm_dir.clone().unwrap_or_else(|| self.out.join("vms"));
+                Some(VmPlan {
+                    template: self.source.vm.config(image, &dir, "vm", client.token.clone())?,
+                    count: self.source.vms.max(1),
+                    reset: self.source.reset,
+                })
+            }
+            None => None,
+        };
+        Ok(GuestPlan {
+            urls,
+            vms,
+            stubs: self.source.stub_guests.unwrap_or(0),
+            stub_host_exec: self.source.stub_host_exec,
+            client,
+        })
     }
 }
 
@@ -1214,89 +813,4 @@ pub fn compare(args: &CompareArgs) -> anyhow::Result<ExitCode> {
         emit(&comparison.text())?;
     }
     Ok(ExitCode::SUCCESS)
-}
-
-#[cfg(test)]
-mod tests {
-    use clap::Parser;
-
-    use super::*;
-
-    #[derive(Parser)]
-    struct Cli {
-        #[command(flatten)]
-        run: RunArgs,
-    }
-
-    fn parse(args: &[&str]) -> Result<RunArgs, clap::Error> {
-        Cli::try_parse_from(["arena", "--tasks", "t"].iter().chain(args)).map(|c| c.run)
-    }
-
-    const NAVI: [&str; 6] = ["--agent", "navi", "--llm-url", "http://127.0.0.1:9/v1", "--model", "m"];
-
-    #[test]
-    fn each_preset_sets_its_rows_origin_and_backend_and_upstreams_parameters_and_pauses() {
-        let rows = [
-            ("paper-mixed-omni", SomOrigin::MixedOmni, A11yBackendArg::Uia),
-            ("paper-omni", SomOrigin::Omni, A11yBackendArg::Uia),
-            ("paper-oss", SomOrigin::Oss, A11yBackendArg::Uia),
-            ("paper-a11y-uia", SomOrigin::A11y, A11yBackendArg::Uia),
-            ("paper-a11y-win32", SomOrigin::A11y, A11yBackendArg::Win32),
-            ("paper-mixed-oss", SomOrigin::MixedOss, A11yBackendArg::Uia),
-        ];
-        for (name, origin, backend) in rows {
-            let mut args = NAVI.to_vec();
-            args.extend(["--preset", name, "--waa-root", "/waa", "--stub-guests", "1"]);
-            let parsed = parse(&args).unwrap();
-            let preset = parsed.preset.expect("a preset");
-            assert_eq!(preset.name(), name);
-            let applied = preset.apply(&parsed).unwrap();
-            assert_eq!((applied.som_origin, applied.a11y_backend), (origin, backend), "{name}");
-            assert_eq!((applied.temperature, applied.max_tokens, applied.max_steps), (1.0, 4096, 15), "{name}");
-            assert_eq!(applied.navi_style, NaviStyleArg::Waa, "{name}");
-            // Upstream's pauses even against stub guests, which would otherwise run fast.
-            assert_eq!(applied.pauses, Some(PausesArg::Upstream), "{name}");
-            // Only the prompt source and the refusal rule could still differ; neither does.
-            let differences = differences_from_upstream(&applied, false);
-            let allowed = ["som_origin=", "a11y_backend="];
-            assert!(differences.iter().all(|d| allowed.iter().any(|a| d.starts_with(a))), "{name}: {differences:?}");
-
-            // A preset needs the checkout's prompts and the Navi agent.
-            let without_root: Vec<&str> = NAVI.iter().copied().chain(["--preset", name]).collect();
-            let err = preset.apply(&parse(&without_root).unwrap()).unwrap_err().to_string();
-            assert!(err.contains("--waa-root") && err.contains(name), "{err}");
-            let scripted = parse(&["--preset", name, "--waa-root", "/waa"]).unwrap();
-            assert!(preset.apply(&scripted).unwrap_err().to_string().contains("--agent navi"));
-        }
-    }
-
-    #[test]
-    fn a_preset_refuses_settings_that_would_change_its_row() {
-        for extra in [["--som-origin", "oss"], ["--temperature", "0.5"], ["--max-steps", "30"], ["--pauses", "fast"]] {
-            let mut args = NAVI.to_vec();
-            args.extend(["--preset", "paper-oss", "--waa-root", "/waa"]);
-            args.extend(extra);
-            let err = parse(&args).err().unwrap_or_else(|| panic!("{extra:?} accepted"));
-            assert_eq!(err.kind(), clap::error::ErrorKind::ArgumentConflict, "{extra:?}");
-        }
-    }
-
-    #[test]
-    fn a_default_navi_run_names_every_difference_from_upstreams_default_run() {
-        let args = parse(&NAVI).unwrap();
-        assert_eq!(
-            differences_from_upstream(&args, true),
-            [
-                "som_origin=a11y (upstream: oss)",
-                "prompt=ours (no --waa-root) (upstream: the checkout's)",
-                "pauses=fast (none) (upstream: 5 s after the reset and the setup, 3 s after each action)",
-            ]
-        );
-        let mut close = NAVI.to_vec();
-        close.extend(["--som-origin", "oss", "--waa-root", "/waa", "--refusals", "answer", "--a11y-backend", "win32"]);
-        assert_eq!(
-            differences_from_upstream(&parse(&close).unwrap(), false),
-            ["a11y_backend=win32 (upstream: uia)", "refusals=answer (upstream: unfinished)"]
-        );
-    }
 }

@@ -543,7 +543,7 @@ async fn start(
     emit(&format!("guest ready: {}\n", vm.url()))?;
     // Watch: a QEMU that dies is started again from the ready snapshot; a
     // guest that shuts down (the power button, `arena vm stop`) ends the watch.
-    let term = super::terminate_requested().context("listening for SIGTERM")?;
+    let term = crate::cli::signals::terminate_requested().context("listening for SIGTERM")?;
     tokio::pin!(term);
     let mut events = vm.qmp.events();
     loop {

@@ -9,8 +9,8 @@
 //! spaces, the pauses, the evaluation with the task's getters and metrics, and
 //! its result folder. Only the agent differs: [`EnvAgent`]'s every prediction
 //! waits for the client's next `step`. The observation is the step protocol's
-//! `observe` message ([`crate::agent::external::observe`]); the actions are its
-//! `act` actions ([`crate::agent::external::spaces`]).
+//! `observe` message ([`arena_agents::external::observe`]); the actions are its
+//! `act` actions ([`arena_agents::external::spaces`]).
 //!
 //! HTTP, JSON bodies (schemas in `schemas/env/`, docs in docs/env.md):
 //!
@@ -53,12 +53,12 @@ use serde_json::{json, Value};
 use tokio::sync::{mpsc, Mutex};
 use tokio_util::sync::CancellationToken;
 
-use crate::agent::body::MAX_ANSWER;
-use crate::agent::external::protocol::{AgentHello, ObservationWants, ACTION_SPACES, MAX_ACTIONS};
-use crate::agent::{Agent, AgentError, Prediction};
 use crate::episode::EpisodeConfig;
-use crate::ports::Observation;
 use arena_actionspace::Coords;
+use arena_agents::body::MAX_ANSWER;
+use arena_agents::external::protocol::{AgentHello, ObservationWants, ACTION_SPACES, MAX_ACTIONS};
+use arena_agents::observation::Observation;
+use arena_agents::{Agent, AgentError, Prediction};
 use arena_client::client::GuestClient;
 use arena_exec::AgentAction;
 use arena_results::{EpisodeResult, RunLayout};
@@ -113,7 +113,7 @@ impl Agent for EnvAgent {
 
     async fn predict(&mut self, obs: &Observation) -> Result<Prediction, AgentError> {
         let (observation, marks) =
-            crate::agent::external::observe::observe_message(obs, &self.hello, false, None).map_err(agent_error)?;
+            arena_agents::external::observe::observe_message(obs, &self.hello, false, None).map_err(agent_error)?;
         let turn = Turn::Observed { observation, step: obs.step, screen: obs.screen_size() };
         if self.turns.send(turn).await.is_err() {
             return Err(agent_error("the environment's session was closed"));
@@ -458,7 +458,7 @@ async fn step(State(server): State<Arc<EnvServer>>, payload: Result<Json<StepReq
         return Err(bad(format!("{} actions in one step; the most is {MAX_ACTIONS}", list.len())));
     }
     let coords = coords_of(request.coords.as_deref())?;
-    let actions = crate::agent::external::spaces::to_actions(&request.action_space, &list, episode.screen, coords)
+    let actions = arena_agents::external::spaces::to_actions(&request.action_space, &list, episode.screen, coords)
         .map_err(bad)?;
     if episode.actions.send((actions, coords)).await.is_err() {
         return Err(Refusal(StatusCode::CONFLICT, "the episode is no longer waiting for a step".into()));

@@ -32,9 +32,9 @@ use std::time::Duration;
 use serde_json::{json, Value};
 use tokio::sync::{mpsc, oneshot, Notify};
 
-use crate::agent::{Agent, AgentError, LogValue, Prediction, StepLog};
-use crate::ports::Observation;
 use crate::run::pool::TaskRunner;
+use arena_agents::observation::Observation;
+use arena_agents::{Agent, AgentError, LogValue, Prediction, StepLog};
 use arena_client::client::GuestClient;
 use arena_exec::AgentAction;
 use arena_results::EpisodeResult;

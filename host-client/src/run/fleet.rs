@@ -1,7 +1,8 @@
 //! The VMs of a run (`arena_vm::fleet::VmFleet`) as the run sees its guests: the
 //! pool's lifecycle (a snapshot restored before a task, a VM rebuilt when it
-//! died), the blame's watch (QEMU ended from outside) and the observation's
-//! stand-in screen (QEMU's screendump).
+//! died) and the blame's watch (QEMU ended from outside). The observation's
+//! stand-in screen (QEMU's screendump) is implemented beside its trait, in
+//! `arena_agents::observation::observe`.
 
 use arena_client::client::GuestClient;
 use arena_results::VmStart;
@@ -9,7 +10,6 @@ use arena_vm::fleet::VmFleet;
 
 use super::blame::GuestWatch;
 use super::pool::GuestLifecycle;
-use crate::ports::observe::ScreenSource;
 
 #[async_trait::async_trait]
 impl GuestLifecycle for VmFleet {
@@ -26,12 +26,5 @@ impl GuestLifecycle for VmFleet {
 impl GuestWatch for VmFleet {
     async fn outside_failure(&self, guest: &str) -> Option<String> {
         VmFleet::outside_failure(self, guest).await
-    }
-}
-
-#[async_trait::async_trait]
-impl ScreenSource for VmFleet {
-    async fn screendump(&self, guest: &str) -> Option<Vec<u8>> {
-        VmFleet::screendump(self, guest).await
     }
 }

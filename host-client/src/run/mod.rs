@@ -11,8 +11,9 @@
 //! order ([`pool`]); then write
 //! `summary.json`, `summary.md` and `report.html` at the root of the output.
 //!
-//! It is not the episode (see [`crate::episode`]) and it does not parse the
-//! command line (see `crate::cli::run`).
+//! It is not the episode (see [`crate::episode`]), nor `arena run`'s driver (the
+//! plan, the guests, the preflight: `crate::driver`), and it does not parse the
+//! command line or print (see `crate::cli`).
 //!
 //! # Layout
 //!

@@ -84,10 +84,10 @@ impl TaskRunner for Fake {
     }
 }
 
-async fn stubs(n: usize) -> Vec<crate::cli::stub::RunningStub> {
+async fn stubs(n: usize) -> Vec<crate::driver::stub::RunningStub> {
     let mut out = Vec::new();
     for _ in 0..n {
-        out.push(crate::cli::stub::start(&crate::cli::stub::StubArgs::default(), None).await.unwrap());
+        out.push(crate::driver::stub::start(&crate::driver::stub::StubArgs::default(), None).await.unwrap());
     }
     out
 }
@@ -184,7 +184,7 @@ async fn a_guest_that_comes_back_rejoins_the_pool() {
         }
     }
     let runner = Arc::new(FlakyOnce { failed: Mutex::new(false) });
-    let args = crate::cli::stub::StubArgs { port, ..crate::cli::stub::StubArgs::default() };
+    let args = crate::driver::stub::StubArgs { port, ..crate::driver::stub::StubArgs::default() };
     let mut back = 0;
     let pool_config = PoolConfig { no_guest_timeout: Duration::from_secs(20), ..fast_pool() };
     let mut count_back = |e: PoolEvent<'_>| {
@@ -195,7 +195,7 @@ async fn a_guest_that_comes_back_rejoins_the_pool() {
     let (report, stub) =
         tokio::join!(run_pool(vec![client(&url)], tasks(2), runner, &pool_config, &mut count_back), async {
             tokio::time::sleep(Duration::from_millis(300)).await;
-            crate::cli::stub::start(&args, None).await.unwrap()
+            crate::driver::stub::start(&args, None).await.unwrap()
         });
     assert_eq!(back, 1);
     assert_eq!(report.results.len(), 2);

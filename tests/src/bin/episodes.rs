@@ -21,23 +21,23 @@ use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use anyhow::Context;
+use arena_agents::scripted::{PlanSource, ScriptedAgent};
+use arena_agents::Agent;
+use arena_agents::AgentFactory;
 use arena_client::cache::DownloadCache;
 use arena_client::client::{ClientConfig, GuestClient};
 use arena_exec::AgentAction;
 use arena_exec::{execute_with, ExecOptions};
-use arena_host::agent::scripted::{PlanSource, ScriptedAgent};
-use arena_host::agent::Agent;
-use arena_host::agent::AgentFactory;
 use arena_host::episode::{EpisodeConfig, EpisodeRunner};
 use arena_host::run::pool::PoolConfig;
 use arena_host::run::shard::Shard;
 use arena_host::run::{load_tasks, run_tasks, RunOptions};
-use arena_host::som::{annotate, marks_from_tree};
 use arena_results::RunLayout;
 use arena_script::ComputerState;
 use arena_shared::clipboard::ClipboardContent;
 use arena_shared::exec::LaunchRequest;
 use arena_shared::observation::{A11yQuery, ImageFormat, ScreenshotQuery};
+use arena_som::{annotate, marks_from_tree};
 use arena_task::{Difficulty, Task};
 use arena_test_support::Served;
 

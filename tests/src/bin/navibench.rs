@@ -20,10 +20,10 @@
 use std::process::ExitCode;
 use std::time::Duration;
 
+use arena_agents::navi::{NaviAgent, NaviConfig};
+use arena_agents::Agent;
 use arena_client::cache::DownloadCache;
 use arena_client::client::{ClientConfig, GuestClient};
-use arena_host::agent::navi::{NaviAgent, NaviConfig};
-use arena_host::agent::Agent;
 use arena_host::episode::{run_episode, EpisodeConfig};
 use arena_results::TaskDir;
 use arena_task::Task;

@@ -6,55 +6,11 @@
 use std::io::{Cursor, Write};
 use std::path::Path;
 
-use serde_json::{json, Map, Value};
+use serde_json::{json, Value};
 
-use super::lookup;
 use super::video::{phash_of_gray32, same_video};
-use crate::metrics::tests::pdf_bytes;
-use crate::metrics::MetricInput;
+use crate::metrics::tests::{check, file, input, pdf_bytes, rules, Want};
 use crate::value::Fetched;
-use crate::LastAction;
-
-#[derive(Debug)]
-enum Want {
-    Score(f64),
-    /// A score in `[lo, hi]`.
-    Between(f64, f64),
-    Error(&'static str),
-}
-
-fn check(metric: &str, input: MetricInput, want: Want) {
-    let f = lookup(metric).unwrap_or_else(|| panic!("metric {metric} is not registered"));
-    let got = f(&input);
-    match (&got, &want) {
-        (Ok(score), Want::Score(expected)) => assert_eq!(score, expected, "{metric} on {input:?}"),
-        (Ok(score), Want::Between(lo, hi)) => {
-            assert!(lo <= score && score <= hi, "{metric} on {input:?}: {score} not in [{lo}, {hi}]")
-        }
-        (Err(err), Want::Error(text)) => {
-            assert!(err.to_string().contains(text), "{metric}: error {err:?} lacks {text:?}")
-        }
-        _ => panic!("{metric} on {input:?}: got {got:?}, want {want:?}"),
-    }
-}
-
-fn input(result: Fetched, expected: Option<Fetched>, options: Value) -> MetricInput {
-    let options = match options {
-        Value::Object(map) => map,
-        _ => Map::new(),
-    };
-    MetricInput { result, expected, options, last_action: Some(LastAction::Done) }
-}
-
-fn rules(value: Value) -> Option<Fetched> {
-    Some(Fetched::Json(value))
-}
-
-fn file(dir: &Path, name: &str, bytes: &[u8]) -> Fetched {
-    let path = dir.join(name);
-    std::fs::write(&path, bytes).expect("write test file");
-    Fetched::File(path)
-}
 
 /// A vlcrc as VLC writes it: sections, comments, defaults commented out.
 fn vlcrc(settings: &str) -> Vec<u8> {

@@ -9,18 +9,25 @@ use super::{lookup, MetricInput};
 use crate::value::Fetched;
 use crate::LastAction;
 
-/// What a case should give: a score, or an error whose message contains the text.
+/// What a case should give: a score, a score in a range, or an error whose
+/// message contains the text. Shared with the media metrics' tests.
 #[derive(Debug)]
-enum Want {
+pub(crate) enum Want {
     Score(f64),
+    /// A score in `[lo, hi]`.
+    Between(f64, f64),
     Error(&'static str),
 }
 
-fn check(metric: &str, input: MetricInput, want: Want) {
+/// Runs the registered `metric` on `input` and checks it gives `want`.
+pub(crate) fn check(metric: &str, input: MetricInput, want: Want) {
     let f = lookup(metric).unwrap_or_else(|| panic!("metric {metric} is not registered"));
     let got = f(&input);
     match (&got, &want) {
         (Ok(score), Want::Score(expected)) => assert_eq!(score, expected, "{metric} on {input:?}"),
+        (Ok(score), Want::Between(lo, hi)) => {
+            assert!(lo <= score && score <= hi, "{metric} on {input:?}: {score} not in [{lo}, {hi}]")
+        }
         (Err(err), Want::Error(text)) => {
             assert!(err.to_string().contains(text), "{metric}: error {err:?} lacks {text:?}")
         }
@@ -28,7 +35,8 @@ fn check(metric: &str, input: MetricInput, want: Want) {
     }
 }
 
-fn input(result: Fetched, expected: Option<Fetched>, options: Value) -> MetricInput {
+/// A metric's input after `DONE`, its options from a JSON object (anything else: none).
+pub(crate) fn input(result: Fetched, expected: Option<Fetched>, options: Value) -> MetricInput {
     let options = match options {
         Value::Object(map) => map,
         _ => Map::new(),
@@ -36,11 +44,13 @@ fn input(result: Fetched, expected: Option<Fetched>, options: Value) -> MetricIn
     MetricInput { result, expected, options, last_action: Some(LastAction::Done) }
 }
 
-fn rules(value: Value) -> Option<Fetched> {
+/// Expected rules, as a `rule` getter hands them over.
+pub(crate) fn rules(value: Value) -> Option<Fetched> {
     Some(Fetched::Json(value))
 }
 
-fn file(dir: &Path, name: &str, bytes: &[u8]) -> Fetched {
+/// `bytes` written to `dir/name`, fetched as a file.
+pub(crate) fn file(dir: &Path, name: &str, bytes: &[u8]) -> Fetched {
     let path = dir.join(name);
     std::fs::write(&path, bytes).expect("write test file");
     Fetched::File(path)

@@ -33,7 +33,7 @@ use arena_client::frame::{encode_png, Frame};
 
 use super::llm::{ApiKind, ModelClient, RetryPolicy};
 use super::{AgentError, LogValue, StepLog};
-use crate::ports::Observation;
+use crate::observation::Observation;
 
 /// What a computer-use agent takes from an observation: the screenshot's frame
 /// and the screen's size in physical pixels (which typed actions use).

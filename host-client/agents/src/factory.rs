@@ -6,8 +6,8 @@
 //! It builds every agent kind of this layer: scripted, replay, Navi, the
 //! computer-use agents, the outside agents over the step protocol and the
 //! floor agents (`noop`, `fail`). It is not
-//! the command line (`crate::cli` turns flags into [`AgentOptions`]), and it does
-//! not build the MCP agent, whose endpoint serves HTTP (`crate::mcp`, feature
+//! the command line (`arena_host::cli` turns flags into [`AgentOptions`]), and it does
+//! not build the MCP agent, whose endpoint serves HTTP (`arena_host::mcp`, feature
 //! `mcp-endpoint`).
 
 use std::path::PathBuf;
@@ -33,7 +33,7 @@ use super::replay::{ReplayAgent, ReplaySource};
 use super::scripted::{Plan, PlanSource, ScriptedAgent};
 use super::waa_prompts::WaaPrompts;
 use super::{Agent, AgentFactory};
-use crate::som::SomOrigin;
+use arena_som::SomOrigin;
 
 /// Which agent plays.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]

@@ -15,9 +15,9 @@
 use serde_json::{json, Value};
 
 use super::{exchange_logs, screen_of, Endpoint};
-use crate::agent::llm::{ApiKind, ModelClient};
-use crate::agent::{Agent, AgentError, Prediction};
-use crate::ports::Observation;
+use crate::llm::{ApiKind, ModelClient};
+use crate::observation::Observation;
+use crate::{Agent, AgentError, Prediction};
 use arena_actionspace::uitars::UiTarsVersion;
 use arena_actionspace::{ActionSpace, Context};
 use arena_exec::AgentAction;
@@ -87,7 +87,7 @@ pub struct UiTarsAgent {
 
 impl UiTarsAgent {
     /// The model client, for `arena run`'s preflight.
-    pub fn client(&self) -> &crate::agent::llm::ModelClient {
+    pub fn client(&self) -> &crate::llm::ModelClient {
         &self.client
     }
 
@@ -146,7 +146,7 @@ impl Agent for UiTarsAgent {
 
     async fn predict(&mut self, obs: &Observation) -> Result<Prediction, AgentError> {
         let (frame, screen) = screen_of(obs);
-        let image_url = crate::agent::llm::image_data_url("image/png", &frame.encoded);
+        let image_url = crate::llm::image_data_url("image/png", &frame.encoded);
         let body = self.body(&obs.instruction, &image_url);
         let reply = self.client.complete(&body).await?;
         let logs = exchange_logs(&body, &json!({"content": reply}));

@@ -14,7 +14,7 @@
 //!
 //! The Set-of-Marks boxes come from the configured source ([`NaviConfig::som`],
 //! upstream's `--som_origin`): the accessibility tree by default, or OCR, the
-//! icon detector and OmniParser through [`crate::som::SomSources`]. A source
+//! icon detector and OmniParser through [`arena_som::SomSources`]. A source
 //! that fails (Tesseract missing, a service down) fails the step as a model
 //! failure does: it is asked again, then the task is left unfinished.
 //!
@@ -31,10 +31,10 @@ use super::llm::{self, ApiKind, ModelClient, Refusals, RetryPolicy, TokensField}
 use super::parse::{parse_navi_reply, parse_reply};
 use super::waa_prompts::{UserInputs, WaaPrompts};
 use super::{Agent, AgentError, LogValue, PredictTimings, Prediction, StepLog};
-use crate::ports::Observation;
-use crate::som::{annotate, Marks, ProposedEntity, SomConfig, SomInput, SomSources};
+use crate::observation::Observation;
 use arena_client::frame::encode_png;
 use arena_exec::AgentAction;
+use arena_som::{annotate, Marks, ProposedEntity, SomConfig, SomInput, SomSources};
 use arena_task::Task;
 
 /// Environment variables the API key is read from, in order, when the configuration has none.
@@ -219,7 +219,7 @@ pub struct NaviAgent {
 /// the observation's pixels. An image that cannot be converted is sent as PNG.
 fn jpeg_part(pixels: &RgbaImage) -> Value {
     let url = match arena_shared::fastimg::rgba_to_model_jpeg(pixels, arena_shared::fastimg::PILLOW_JPEG_QUALITY) {
-        Ok(model) => crate::agent::llm::image_data_url("image/jpeg", &model.jpeg),
+        Ok(model) => crate::llm::image_data_url("image/jpeg", &model.jpeg),
         Err(err) => {
             tracing::warn!(error = %err, "cannot make the model's JPEG; sending PNG");
             data_uri(pixels)
@@ -230,12 +230,12 @@ fn jpeg_part(pixels: &RgbaImage) -> Value {
 
 /// The pixels as a PNG data URI (the [`NaviStyle::Arena`] request).
 fn data_uri(pixels: &RgbaImage) -> String {
-    crate::agent::llm::image_data_url("image/png", &encode_png(pixels))
+    crate::llm::image_data_url("image/png", &encode_png(pixels))
 }
 
 impl NaviAgent {
     /// The model client, for `arena run`'s preflight.
-    pub fn client(&self) -> &crate::agent::llm::ModelClient {
+    pub fn client(&self) -> &crate::llm::ModelClient {
         &self.client
     }
 
@@ -557,7 +557,7 @@ impl Agent for NaviAgent {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::som::SomOrigin;
+    use arena_som::SomOrigin;
 
     #[test]
     fn endpoints() {
@@ -608,8 +608,8 @@ mod tests {
     #[test]
     fn a_pixel_som_origin_without_its_service_is_refused() {
         let mut config = NaviConfig::new("http://x/v1", "gpt-4o");
-        assert_eq!(config.som.origin, crate::som::SomOrigin::A11y);
-        config.som.origin = crate::som::SomOrigin::Omni;
+        assert_eq!(config.som.origin, arena_som::SomOrigin::A11y);
+        config.som.origin = arena_som::SomOrigin::Omni;
         let Err(AgentError::Config(message)) = NaviAgent::new(config.clone()) else { panic!("accepted") };
         assert!(message.contains("--omniparser-url"), "{message}");
         config.som.omniparser_url = Some("http://127.0.0.1:8000".into());
@@ -675,7 +675,7 @@ mod tests {
 
         // With a checkout's prompts, its texts are what is sent.
         let root = tempfile::tempdir().unwrap();
-        crate::agent::waa_prompts::tests::fake_checkout(root.path());
+        crate::waa_prompts::tests::fake_checkout(root.path());
         let mut config = NaviConfig::new("http://x/v1", "gpt-4o");
         config.waa_prompts = Some(std::sync::Arc::new(WaaPrompts::load(root.path()).unwrap()));
         let agent = NaviAgent::new(config).unwrap();

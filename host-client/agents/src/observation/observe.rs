@@ -41,6 +41,14 @@ pub trait ScreenSource: Send + Sync {
     async fn screendump(&self, guest: &str) -> Option<Vec<u8>>;
 }
 
+/// A run's VMs: QEMU's screendump of the VM a guest runs in.
+#[async_trait::async_trait]
+impl ScreenSource for arena_vm::fleet::VmFleet {
+    async fn screendump(&self, guest: &str) -> Option<Vec<u8>> {
+        arena_vm::fleet::VmFleet::screendump(self, guest).await
+    }
+}
+
 impl std::fmt::Debug for dyn ScreenSource {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.write_str("ScreenSource")
@@ -54,7 +62,7 @@ pub struct ObserveConfig {
     pub a11y: bool,
     /// Budget of one accessibility-tree walk.
     pub a11y_query: A11yQuery,
-    /// Whether the browser's DOM elements are read ([`crate::som::SomOrigin::needs_dom`]).
+    /// Whether the browser's DOM elements are read ([`arena_som::SomOrigin::needs_dom`]).
     pub dom: bool,
     /// The VM's own display, when the run owns its VMs: the screenshot when the
     /// guest's capture fails or is black.
@@ -211,4 +219,49 @@ pub async fn observe(
         dom,
         timings,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::fallback_reason;
+    use arena_client::error::ClientError;
+
+    #[test]
+    fn the_vm_display_stands_in_for_a_black_or_failed_capture_of_a_guest_that_answers() {
+        use arena_client::client::Screenshot;
+        use arena_client::error::CallSite;
+        use arena_shared::geometry::CoordinateSpace;
+        use arena_shared::observation::ScreenshotMeta;
+        let shot = |black: bool| -> Result<Screenshot, ClientError> {
+            Ok(Screenshot {
+                meta: ScreenshotMeta {
+                    width: 8,
+                    height: 8,
+                    physical_width: 8,
+                    physical_height: 8,
+                    scale: 1.0,
+                    format: arena_shared::observation::ImageFormat::Png,
+                    coordinate_space: CoordinateSpace::Physical,
+                    cursor: None,
+                    cursor_drawn: false,
+                    black_frame: black,
+                    capture_ms: 1,
+                },
+                bytes: Vec::new(),
+            })
+        };
+        let site = || CallSite { guest: "http://127.0.0.1:1".into(), method: "GET", path: "/v1/screenshot".into() };
+        assert_eq!(fallback_reason(&shot(false)), None);
+        assert_eq!(fallback_reason(&shot(true)).as_deref(), Some("the guest's screenshot was black"));
+        let failed = Err(ClientError::Api {
+            call: site(),
+            status: 500,
+            code: arena_shared::error::ErrorCode::Internal,
+            message: "BitBlt failed".into(),
+        });
+        assert!(fallback_reason(&failed).unwrap().contains("BitBlt failed"));
+        // A guest that does not answer is an infrastructure error, not a screen problem.
+        let gone = Err(ClientError::Connect { call: site(), reason: "refused".into() });
+        assert_eq!(fallback_reason(&gone), None);
+    }
 }

@@ -4,10 +4,10 @@
 //! that share it.
 //!
 //! Every agent family meets the guest only through the two: it is handed an
-//! [`Observation`] and answers `AgentAction`s; the episode loop (`crate::episode`)
+//! [`Observation`] and answers `AgentAction`s; the episode loop (`arena_host::episode`)
 //! calls both.
 //!
-//! It is not an agent (`crate::agent`) and does not decide when a step counts.
+//! It is not an agent (the rest of this crate) and does not decide when a step counts.
 //!
 //! # Layout
 //!
@@ -21,7 +21,7 @@ use arena_client::client::GuestClient;
 use arena_client::frame::Frame;
 use arena_shared::observation::{A11yTree, ScreenInfo};
 
-use crate::som::Marks;
+use arena_som::Marks;
 
 pub use observe::{ObserveConfig, ObserveError};
 
@@ -71,7 +71,7 @@ impl Observation {
 
     /// The Set-of-Marks boxes of this observation, when it has a tree.
     pub fn marks(&self) -> Option<Marks> {
-        self.a11y.as_ref().map(|tree| crate::som::marks_from_tree(tree, self.screen_size()))
+        self.a11y.as_ref().map(|tree| arena_som::marks_from_tree(tree, self.screen_size()))
     }
 
     /// The harness's observation ([`observe::observe`] with the default

@@ -47,9 +47,9 @@ use arena_script::host::cursor_after;
 
 use super::models::{Form, ImageLimit};
 use super::{base64_png, cropped_png, exchange_logs, resized_png, screen_of, Endpoint};
-use crate::agent::llm::{ApiKind, ModelClient};
-use crate::agent::{Agent, AgentError, Prediction, StepLog};
-use crate::ports::Observation;
+use crate::llm::{ApiKind, ModelClient};
+use crate::observation::Observation;
+use crate::{Agent, AgentError, Prediction, StepLog};
 use arena_actionspace::{ActionSpace, Context, Coords, Decision, Step};
 use arena_exec::AgentAction;
 use arena_task::Task;
@@ -181,7 +181,7 @@ pub struct AnthropicAgent {
 
 impl AnthropicAgent {
     /// The model client, for `arena run`'s preflight.
-    pub fn client(&self) -> &crate::agent::llm::ModelClient {
+    pub fn client(&self) -> &crate::llm::ModelClient {
         &self.client
     }
 
@@ -469,7 +469,7 @@ impl Agent for AnthropicAgent {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::agent::cu::models::recommended_size;
+    use crate::cu::models::recommended_size;
 
     #[test]
     fn the_recommended_sizes_follow_the_aspect_ratio() {

@@ -19,7 +19,7 @@ use std::path::{Path, PathBuf};
 use serde::{Deserialize, Serialize};
 
 use super::{Agent, AgentError, Prediction};
-use crate::ports::Observation;
+use crate::observation::Observation;
 use arena_exec::AgentAction;
 use arena_task::Task;
 

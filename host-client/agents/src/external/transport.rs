@@ -24,7 +24,7 @@ use super::protocol::AgentHello;
 use super::stderr::StderrBudget;
 use super::{check_hello, hello_message, short, Connector, Transport};
 
-use crate::agent::body::MAX_ANSWER;
+use crate::body::MAX_ANSWER;
 
 /// Agent processes started from one command line, one per episode running at once.
 #[derive(Debug)]
@@ -174,9 +174,7 @@ impl AgentProcess {
         match read {
             Ok(0) => return Err(self.gone("the agent closed its output").await),
             Ok(_) if answer.len() > MAX_ANSWER => {
-                return Err(
-                    crate::agent::body::BodyError::TooLong { whose: "the agent's", limit: MAX_ANSWER }.to_string()
-                );
+                return Err(crate::body::BodyError::TooLong { whose: "the agent's", limit: MAX_ANSWER }.to_string());
             }
             Ok(_) => {}
             Err(err) => return Err(format!("reading the agent's answer: {err}")),
@@ -296,7 +294,7 @@ impl HttpAgent {
         let status = response.status();
         // Only the start of an error body is shown.
         let (limit, cut) = if status.is_success() { (MAX_ANSWER, false) } else { (4096, true) };
-        let body = crate::agent::body::read_bounded(response, "the agent's", limit, cut)
+        let body = crate::body::read_bounded(response, "the agent's", limit, cut)
             .await
             .map_err(|err| format!("POST {}: {err}", self.url))?;
         if !status.is_success() {

@@ -36,9 +36,9 @@ use serde_json::{json, Value};
 use super::anthropic::ending;
 use super::models::{Form, ImageLimit};
 use super::{exchange_logs, resized_png, screen_of, Endpoint};
-use crate::agent::llm::{ApiKind, ModelClient};
-use crate::agent::{Agent, AgentError, Prediction};
-use crate::ports::Observation;
+use crate::llm::{ApiKind, ModelClient};
+use crate::observation::Observation;
+use crate::{Agent, AgentError, Prediction};
 use arena_actionspace::{ActionSpace, Context, Coords, Step};
 use arena_exec::AgentAction;
 use arena_task::Task;
@@ -126,7 +126,7 @@ pub struct OpenAiAgent {
 
 impl OpenAiAgent {
     /// The model client, for `arena run`'s preflight.
-    pub fn client(&self) -> &crate::agent::llm::ModelClient {
+    pub fn client(&self) -> &crate::llm::ModelClient {
         &self.client
     }
 
@@ -186,7 +186,7 @@ impl Agent for OpenAiAgent {
     async fn predict(&mut self, obs: &Observation) -> Result<Prediction, AgentError> {
         let (frame, screen) = screen_of(obs);
         let size = self.config.image.size_for(screen);
-        let image_url = crate::agent::llm::image_data_url("image/png", &resized_png(frame, size)?);
+        let image_url = crate::llm::image_data_url("image/png", &resized_png(frame, size)?);
         let input = match (&self.previous_response_id, self.pending.is_empty()) {
             (Some(_), false) => Value::Array(
                 self.pending

@@ -1,16 +1,22 @@
-//! Agents: what decides the next actions from an observation.
+//! The agents of a run (`arena-agents`): what decides the next actions from an
+//! observation, and the observation it decides from.
 //!
-//! Every agent implements [`Agent`]: it gets an [`Observation`] and answers a
-//! [`Prediction`] holding [`AgentAction`]s, which the episode carries out through
-//! its action port (`arena_exec`). [`factory`] builds the agent of a run
-//! from its options.
+//! Every agent implements [`Agent`]: it gets an [`Observation`] (built by
+//! [`observation::observe`]) and answers a [`Prediction`] holding [`AgentAction`]s,
+//! which the episode carries out through the executor (`arena-exec`). [`factory`]
+//! builds the agent of a run from its options.
 //!
 //! It is not the episode loop (observe, predict, execute, evaluate: that is
-//! `crate::episode`), it does not carry actions out (`crate::ports`), and it does
-//! not decide when a step counts or when to stop.
+//! `arena_host::episode`, above this crate), it does not carry actions out
+//! (`arena-exec`, below it), and it does not decide when a step counts or when to
+//! stop. It imports only the crates below it: the client, the action spaces, the
+//! executor, the task files, the setup steps' clock, the results' timings and
+//! ledger, Set-of-Marks (`arena-som`) and `arena_vm::child` for an exec agent's
+//! process tree.
 //!
 //! # Layout
 //!
+//! - [`observation`]: [`Observation`], what an agent sees at one step, and its one builder ([`observation::observe`]).
 //! - [`parse`]: code blocks, `DONE`/`FAIL`/`WAIT` and the memory block in model output.
 //! - [`navi`]: [`navi::NaviAgent`], Navi-style prompting of any OpenAI-compatible chat endpoint;
 //!   [`waa_prompts`], upstream's prompt texts read from a WAA checkout; [`llm`], the chat client.
@@ -20,6 +26,9 @@
 //! - [`external`]: [`external::ExternalAgent`], an agent in another program over the step protocol.
 //! - [`floor`]: [`floor::FloorAgent`], `--agent noop` (DONE at once) and `--agent fail` (FAIL at once).
 //! - [`factory`]: [`factory::build`], a run's agent from its [`factory::AgentOptions`].
+//! - [`body`]: the bounds on what an agent sends (the answer cap) and error chains.
+
+#![forbid(unsafe_code)]
 
 pub mod body;
 pub mod cu;
@@ -28,6 +37,7 @@ pub mod factory;
 pub mod floor;
 pub mod llm;
 pub mod navi;
+pub mod observation;
 pub mod parse;
 pub mod replay;
 pub mod scripted;
@@ -39,12 +49,12 @@ use serde::{Deserialize, Serialize};
 
 use arena_client::error::ClientError;
 
-use crate::ports::Observation;
-use crate::som::Marks;
+use crate::observation::Observation;
 use arena_exec::AgentAction;
 use arena_exec::ExecError;
 use arena_results::ledger::Usage;
 use arena_results::timings::PredictTimings;
+use arena_som::Marks;
 use arena_task::Task;
 
 /// An agent's answer for one step.

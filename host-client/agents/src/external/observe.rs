@@ -7,8 +7,8 @@ use std::path::Path;
 use base64::Engine as _;
 use serde_json::{json, Map, Value};
 
-use crate::ports::Observation;
-use crate::som::Marks;
+use crate::observation::Observation;
+use arena_som::Marks;
 use arena_task::Task;
 
 use super::protocol::{AgentHello, ScreenshotMode, TreeMode};

@@ -145,7 +145,7 @@ pub fn clip_to_screen(entities: Vec<ProposedEntity>, (width, height): (u32, u32)
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::som::{marks_from_tree, Marks};
+    use crate::{marks_from_tree, Marks};
     use arena_shared::geometry::CoordinateSpace;
     use arena_shared::observation::A11yBackend;
 

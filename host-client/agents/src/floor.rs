@@ -9,7 +9,7 @@
 //! They never look at the observation and need no guest feature.
 
 use super::{Agent, AgentError, Prediction};
-use crate::ports::Observation;
+use crate::observation::Observation;
 use arena_exec::AgentAction;
 use arena_task::Task;
 

@@ -1,5 +1,5 @@
-//! The embedded stub guest: `arena serve-stub`, and the guest `arena demo`
-//! starts when it is given none.
+//! The embedded stub guest: `arena serve-stub`, the guests of `arena run
+//! --stub-guests`, and the guest `arena demo` starts when it is given none.
 //!
 //! It runs the real `arena-guest` router over its deterministic stub desktop
 //! in this process, so the host side can be tried without a VM.
@@ -19,7 +19,7 @@ use tokio::task::JoinHandle;
 #[cfg(feature = "stub-guest")]
 use arena_guest::config::ServerConfig;
 
-/// Arguments of `arena serve-stub`.
+/// A stub guest's settings; also the arguments of `arena serve-stub`.
 #[derive(Debug, Clone, Args)]
 pub struct StubArgs {
     /// TCP port (0 picks a free one).

@@ -29,7 +29,7 @@ use serde::{Deserialize, Serialize};
 use arena_shared::action::Action;
 
 use super::{Agent, AgentError, Prediction};
-use crate::ports::Observation;
+use crate::observation::Observation;
 use arena_exec::AgentAction;
 use arena_task::Task;
 

@@ -9,7 +9,7 @@
 //! agent process is an [`AgentError::External`]: the episode records the step and
 //! ends as an agent error; the process is replaced before the next episode.
 //!
-//! It is not the MCP endpoint (the agent drives there: `crate::mcp`), nor the
+//! It is not the MCP endpoint (the agent drives there: `arena_host::mcp`), nor the
 //! action spaces themselves: code runs through the action port
 //! (`arena_exec`), and `computer_13` and typed actions go through
 //! `arena_actionspace::parse` ([`spaces`]).
@@ -36,11 +36,11 @@ use std::time::Duration;
 
 use serde_json::{json, Value};
 
-use crate::agent::{Agent, AgentError, LogValue, Prediction, StepLog};
-use crate::ports::Observation;
-use crate::som::Marks;
+use crate::observation::Observation;
+use crate::{Agent, AgentError, LogValue, Prediction, StepLog};
 use arena_actionspace::Coords;
 use arena_exec::AgentAction;
+use arena_som::Marks;
 use arena_task::Task;
 
 use protocol::{AgentHello, AgentMessage, PROTOCOL_VERSION};
