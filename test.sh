@@ -26,7 +26,11 @@ mkdir -p target
 # The stand-in guest image the VM tests boot under QEMU (docs/vm-standin.md):
 # the Linux guest binary in an initramfs beside a kernel from Debian's packages.
 # Without its tools the VM tests skip loudly (a failure with ARENA_REQUIRE_QEMU=1).
-cargo build -p arena-guest --bin arena-guest --locked
+# One build of every test and binary, with the features `cargo test --workspace`
+# resolves: the stand-in image embeds this arena-guest, and the suites' own
+# `workspace_binary` (tests/support) finds both binaries fresh. A narrower build
+# here (`cargo build -p arena-guest`) resolves other features and rebuilds.
+cargo test --workspace --locked --no-run
 if scripts/build-standin-image.sh >target/standin-build.log 2>&1; then
     tail -1 target/standin-build.log
 else

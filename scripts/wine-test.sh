@@ -99,7 +99,9 @@ export ARENA_WINDOWS_EXE="$EXE"
 export ARENA_WINE="${ARENA_WINE:-$(command -v wine)}"
 export ARENA_REQUIRE_WINE="${ARENA_REQUIRE_WINE:-1}"
 started=$(date +%s)
-cargo test -p arena-tests --test wine --test wine_prep -- --nocapture
+# --workspace: the features of the workspace's test build, so nothing is rebuilt
+# after ./test.sh (with -p arena-tests cargo resolves other features and rebuilds).
+cargo test --workspace --test wine --test wine_prep -- --nocapture
 echo "wine suite took $(( $(date +%s) - started )) s"
 
 if [ "$HOST" = 1 ]; then

@@ -12,6 +12,12 @@ use anyhow::Context;
 
 /// Path of a workspace binary, built on first use with the same cargo that runs the tests.
 ///
+/// It is built as `cargo test --workspace` builds it (`--no-run`), so that the
+/// binary has the features the workspace's test build gives its dependencies:
+/// under `./test.sh` that build is already done and this one does nothing, where
+/// a narrower build (`cargo build -p arena-host`) would resolve other features,
+/// rebuild dozens of crates and relink both binaries (three minutes on CI).
+///
 /// # Errors
 ///
 /// The build failing or the binary still missing afterwards.
@@ -20,24 +26,13 @@ pub fn workspace_binary(package: &str, bin: &str) -> anyhow::Result<PathBuf> {
     let built = BUILT.get_or_init(|| {
         let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
         let status = Command::new(cargo)
-            .args([
-                "build",
-                "--quiet",
-                "-p",
-                "arena-guest",
-                "--bin",
-                "arena-guest",
-                "-p",
-                "arena-host",
-                "--bin",
-                "arena",
-            ])
+            .args(["test", "--workspace", "--no-run", "--quiet"])
             .current_dir(workspace_root())
             .status();
         match status {
             Ok(s) if s.success() => Ok(()),
-            Ok(s) => Err(format!("cargo build of the binaries exited with {s}")),
-            Err(err) => Err(format!("running cargo build: {err}")),
+            Ok(s) => Err(format!("cargo test --workspace --no-run (which builds the binaries) exited with {s}")),
+            Err(err) => Err(format!("running cargo test --workspace --no-run: {err}")),
         }
     });
     if let Err(err) = built {
