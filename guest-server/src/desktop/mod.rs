@@ -281,6 +281,29 @@ pub trait Desktop: Send + Sync + std::fmt::Debug {
 
     /// Shuts the machine down.
     fn shutdown(&self) -> DesktopResult<()>;
+
+    // ----- the clock -----
+
+    /// The machine's wall clock, milliseconds since the Unix epoch (UTC).
+    ///
+    /// # Errors
+    ///
+    /// The backend cannot read it.
+    fn system_time(&self) -> DesktopResult<i64> {
+        Ok(arena_shared::clock::now_unix_ms())
+    }
+
+    /// Sets the machine's wall clock to `unix_ms` (checked by
+    /// [`arena_shared::clock::check`] first): `SetSystemTime` on Windows, a
+    /// modelled offset in the stub.
+    ///
+    /// # Errors
+    ///
+    /// [`DesktopError::Unsupported`] by default; the system's refusal.
+    fn set_system_time(&self, unix_ms: i64) -> DesktopResult<()> {
+        let _ = unix_ms;
+        Err(DesktopError::Unsupported(format!("the {} backend cannot set the clock", self.kind())))
+    }
 }
 
 #[cfg(test)]

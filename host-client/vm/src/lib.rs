@@ -125,6 +125,8 @@ pub struct VmConfig {
     /// The screen the firmware starts with under UEFI (OVMF's `PlatformConfig`,
     /// [`ovmf`]): Windows' basic display driver keeps it.
     pub screen: (u32, u32),
+    /// The real-time clock's base: UTC for a guest whose zone is UTC.
+    pub rtc: qemu::RtcBase,
 }
 
 impl VmConfig {
@@ -153,6 +155,7 @@ impl VmConfig {
             token: None,
             boot_timeout: Duration::from_secs(900),
             screen: (1440, 900),
+            rtc: qemu::RtcBase::Localtime,
         }
     }
 
@@ -228,6 +231,7 @@ impl VmConfig {
             folders: Vec::new(),
             loadvm: None,
             screen: self.screen,
+            rtc: self.rtc,
         };
         Ok((spec, accel_note))
     }

@@ -550,7 +550,24 @@ fn prepare_config(options: &PrepareOptions, dir: &Path) -> VmConfig {
     config.dir = dir.to_owned();
     config.golden = dir.join("disk.qcow2");
     config.name = "prepare".into();
+    if let Some(zone) = guest_zone(&options.answer) {
+        config.rtc = qemu::RtcBase::for_zone(&zone);
+    }
     config
+}
+
+/// The Windows time zone the answer file gives the guest: `--timezone`, or
+/// the first `TimeZone` of the user's own answer file (`None` without one).
+pub fn guest_zone(answer: &Answer) -> Option<String> {
+    match answer {
+        Answer::Generated(options) => Some(options.timezone.clone()),
+        Answer::File(path) => {
+            let text = std::fs::read_to_string(path).ok()?;
+            let doc = roxmltree::Document::parse(&text).ok()?;
+            let zone = doc.descendants().find(|n| n.tag_name().name() == "TimeZone")?.text()?.trim().to_owned();
+            Some(zone)
+        }
+    }
 }
 
 /// Runs (or resumes) a prepare to the sealed golden image.

@@ -388,4 +388,8 @@ impl Desktop for WindowsDesktop {
         tracing::warn!("shutting the machine down as asked");
         system::shutdown()
     }
+
+    fn set_system_time(&self, unix_ms: i64) -> DesktopResult<()> {
+        system::set_system_time(unix_ms)
+    }
 }
