@@ -15,7 +15,8 @@ pub const QEMU_IMG_PACKAGE: &str = "qemu-utils";
 
 /// How the system disk is attached. Windows needs drivers for the virtio
 /// buses (dockur's images have them); AHCI works on any Windows install.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "kebab-case")]
 pub enum DiskBus {
     /// SATA on the q35 machine's AHCI controller (IDE on `pc`).
     Ahci,
@@ -24,7 +25,8 @@ pub enum DiskBus {
 }
 
 /// The network card.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "kebab-case")]
 pub enum NicModel {
     /// Intel 82574, which Windows drives without extra drivers.
     E1000e,
