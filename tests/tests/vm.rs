@@ -678,6 +678,16 @@ fn dry_run_writes_what_it_would_attach_and_prints_both_command_lines() {
     // With TPM and Secure Boot there are no bypass keys; the disk is GPT.
     let answer = std::fs::read_to_string(work.join("autounattend.xml")).unwrap();
     assert!(!answer.contains("LabConfig") && answer.contains("<Type>EFI</Type>"), "{answer}");
+    // The guest's zone is UTC (the default --timezone): the RTC is UTC, not the host's local time.
+    assert!(q.contains(" -rtc base=utc ") && !q.contains("localtime"), "{q}");
+    // Defender's path exclusions for the guest's folders and C:\OEM, by policy in specialize.
+    for folder in [r"C:\Program Files\Arena", r"C:\ProgramData\arena", r"C:\OEM"] {
+        let line = format!(
+            r#"reg.exe add &quot;HKLM\SOFTWARE\Policies\Microsoft\Windows Defender\Exclusions\Paths&quot; /v &quot;{folder}&quot; /t REG_DWORD /d 0 /f"#
+        );
+        assert!(answer.contains(&line), "{line} is not in the answer file");
+    }
+    assert!(answer.contains("/v Exclusions_Paths /t REG_DWORD /d 1 /f"), "{answer}");
     assert!(!out.exists() && qemus_naming(&dir.path().display().to_string()).is_empty());
 }
 

@@ -7,7 +7,8 @@
 //! the Windows exe too); [`windows`] holds the Windows backend, whose FFI glue is
 //! compiled only for Windows and whose neutral halves everywhere.
 //! [`a11y_walk`] is the accessibility walker every backend feeds its trees through;
-//! [`uia_health`] decides the UI Automation health stage (and re-creation) for both.
+//! [`uia_health`] decides the UI Automation health stage (and re-creation) for both;
+//! [`defender`] reads Microsoft Defender's state for the doctor.
 //!
 //! # Coordinates
 //!
@@ -16,6 +17,7 @@
 
 pub mod a11y_walk;
 pub mod cancel;
+pub mod defender;
 pub mod stub;
 pub mod uia_health;
 pub mod uia_process;
@@ -303,6 +305,19 @@ pub trait Desktop: Send + Sync + std::fmt::Debug {
     fn set_system_time(&self, unix_ms: i64) -> DesktopResult<()> {
         let _ = unix_ms;
         Err(DesktopError::Unsupported(format!("the {} backend cannot set the clock", self.kind())))
+    }
+
+    // ----- Microsoft Defender -----
+
+    /// Defender's Tamper Protection, real-time protection and detections, for
+    /// the doctor. By default (the stub) there is no Defender: every fact is
+    /// unknown and there are no detections.
+    ///
+    /// # Errors
+    ///
+    /// Defender's state could not be asked at all.
+    fn defender(&self) -> DesktopResult<defender::DefenderStatus> {
+        Ok(defender::DefenderStatus::absent(&format!("the {} backend has no Microsoft Defender", self.kind())))
     }
 }
 
