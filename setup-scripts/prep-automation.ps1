@@ -1,7 +1,7 @@
 <#
 .SYNOPSIS
 Turns off what breaks unattended desktop automation: Windows Update, Defender's
-real-time protection, SmartScreen, Smart App Control, password expiry, the lock
+real-time protection (and excludes the guest's folders from its scans), SmartScreen, Smart App Control, password expiry, the lock
 screen, the screen saver, sleep, UAC's secure desktop, first-run pop-ups,
 focus-stealing notifications, Store updates and OneDrive's setup at logon; shows
 file extensions; draws the first logon's screen as upstream's image does (no
@@ -61,6 +61,13 @@ try {
     # made another way. Tamper Protection may keep real-time protection on regardless
     # (docs/vm.md); a task's downloads and programs must not be held up or blocked.
     Set-RegistryValue 'HKLM:\SOFTWARE\Policies\Microsoft\Windows Defender\Real-Time Protection' 'DisableRealtimeMonitoring' 1
+    # Defender never scans the guest's exes, its data or the OEM folder (path exclusions by
+    # policy: Microsoft Learn, "Configure and validate exclusions based on file extension and
+    # folder location"; each value named by its path, 0), whatever Tamper Protection leaves on.
+    Set-RegistryValue 'HKLM:\SOFTWARE\Policies\Microsoft\Windows Defender\Exclusions' 'Exclusions_Paths' 1
+    foreach ($excluded in @((Join-Path $env:ProgramFiles 'Arena'), (Join-Path $env:ProgramData 'arena'), 'C:\OEM')) {
+        Set-RegistryValue 'HKLM:\SOFTWARE\Policies\Microsoft\Windows Defender\Exclusions\Paths' $excluded 0
+    }
     Set-RegistryValue 'HKLM:\SOFTWARE\Policies\Microsoft\Windows\System' 'EnableSmartScreen' 0
     Set-RegistryValue 'HKLM:\SYSTEM\CurrentControlSet\Control\CI\Policy' 'VerifiedAndReputablePolicyState' 0
     # Passwords never expire (Windows' default maximum age is 42 days, after which the

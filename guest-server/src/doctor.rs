@@ -100,6 +100,7 @@ pub fn run(desktop: &dyn Desktop, options: &DoctorOptions) -> DoctorReport {
     time("exec_timeout", &mut || exec_timeout(desktop));
     time("files", &mut || files(desktop));
     time("reachability", &mut || reachability(options));
+    time("defender", &mut || defender(desktop));
     let deep = options.deep.then(|| deep(desktop, wait));
     if let Some(Point { x, y }) = cursor_before {
         if let Err(err) = desktop.perform(&Action::MoveTo { x, y }) {
@@ -270,6 +271,21 @@ fn session(desktop: &dyn Desktop) -> Outcome {
         Err(err) => format!("UAC unknown ({err})"),
     };
     Ok((CheckStatus::Info, format!("{session}; {uac}")))
+}
+
+/// Microsoft Defender: Tamper Protection, real-time protection and detections
+/// (a fact, `INFO`), failing when a detection names the guest's own files.
+fn defender(desktop: &dyn Desktop) -> Outcome {
+    let status = desktop.defender()?;
+    let taken = status.guest_detections();
+    if !taken.is_empty() {
+        return Err(fail(format!(
+            "Defender detected the guest's own files ({}): {}",
+            taken.iter().map(|d| d.threat.as_str()).collect::<Vec<_>>().join(", "),
+            status.summary()
+        )));
+    }
+    Ok((CheckStatus::Info, status.summary()))
 }
 
 fn integrity(desktop: &dyn Desktop) -> Outcome {

@@ -1337,3 +1337,46 @@ async fn doctor_needs_the_token_and_passes_every_check_on_the_stub() {
     };
     assert!(!windows.iter().any(|w| w.title.contains("Notepad")), "{windows:?}");
 }
+
+#[tokio::test]
+async fn the_clock_is_read_set_and_guarded_by_the_token() {
+    use arena_shared::clock::{now_unix_ms, ClockReading, ClockSetResult};
+    let app = app_with(Some(TOKEN));
+    let with_token = |method: Method, body: Option<Value>| {
+        let builder = Request::builder()
+            .method(method)
+            .uri("/v1/clock")
+            .header(header::AUTHORIZATION, format!("Bearer {TOKEN}"))
+            .header(header::CONTENT_TYPE, "application/json");
+        builder.body(body.map_or_else(Body::empty, |b| Body::from(b.to_string()))).unwrap()
+    };
+    // Without the token neither reading nor setting is served.
+    app.get("/v1/clock").await.assert_error(StatusCode::UNAUTHORIZED, ErrorCode::Unauthorized, "Bearer");
+    app.json(Method::PUT, "/v1/clock", json!({"unix_ms": now_unix_ms()})).await.assert_error(
+        StatusCode::UNAUTHORIZED,
+        ErrorCode::Unauthorized,
+        "Bearer",
+    );
+
+    // Put back an hour, as a restore does, then set right again.
+    let hour = 3_600_000;
+    let back = app.send(with_token(Method::PUT, Some(json!({"unix_ms": now_unix_ms() - hour})))).await;
+    back.assert_status(StatusCode::OK);
+    let read: ClockReading = app.send(with_token(Method::GET, None)).await.json();
+    let behind = now_unix_ms() - read.unix_ms;
+    assert!((hour - 5_000..=hour + 5_000).contains(&behind), "the stub's clock is {behind} ms behind, not an hour");
+    let host = now_unix_ms();
+    let set: ClockSetResult = app.send(with_token(Method::PUT, Some(json!({"unix_ms": host})))).await.json();
+    assert_eq!(set.unix_ms, host);
+    assert!((hour - 5_000..=hour + 5_000).contains(&set.corrected_ms()), "corrected {} ms", set.corrected_ms());
+    let read: ClockReading = app.send(with_token(Method::GET, None)).await.json();
+    assert!((now_unix_ms() - read.unix_ms).abs() < 5_000, "the clock was not set: {read:?}");
+
+    // Bad input is named, and the clock is left alone.
+    let zero = app.send(with_token(Method::PUT, Some(json!({"unix_ms": 0})))).await;
+    zero.assert_error(StatusCode::BAD_REQUEST, ErrorCode::BadRequest, "milliseconds since 1970");
+    let text = app.send(with_token(Method::PUT, Some(json!({"unix_ms": "now"})))).await;
+    assert_eq!(text.status, StatusCode::BAD_REQUEST, "{}", String::from_utf8_lossy(&text.body));
+    let read: ClockReading = app.send(with_token(Method::GET, None)).await.json();
+    assert!((now_unix_ms() - read.unix_ms).abs() < 5_000, "a refused set changed the clock: {read:?}");
+}

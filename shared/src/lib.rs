@@ -20,6 +20,7 @@
 //! - [`input_log`]: the input recorder's log lines (what its window received).
 //! - [`observation`]: screen, screenshot, window and accessibility types.
 //! - [`exec`], [`files`], [`clipboard`], [`registry`]: request and result types.
+//! - [`clock`]: the guest's wall clock, read and set (after a snapshot restore).
 //! - [`eval`]: the evaluation queries under `/v1/eval/`.
 //! - [`fastimg`]: upstream's model-image size, a SIMD resize and a SIMD JPEG encoder.
 //! - [`health`]: the staged readiness report; [`doctor`]: the end-to-end capability report.
@@ -49,6 +50,7 @@ pub mod action;
 pub mod atomic;
 pub mod calendar;
 pub mod clipboard;
+pub mod clock;
 pub mod close_all;
 pub mod cmdline;
 pub mod doctor;

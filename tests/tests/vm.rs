@@ -6,7 +6,8 @@
 //! every stage (the stand-in held in the mid-install ones by its test hook)
 //! and resumed to a sealed image, with a 1 GiB OEM payload; Setup's
 //! refusals; `--dry-run`; the install on the UEFI machine with Secure Boot and
-//! swtpm; foreign VM folders;
+//! swtpm, and the sealed image's sidecar (a VM on other firmware refused at
+//! once); the clock a restore puts back, set right by the fleet; foreign VM folders;
 //! and the errors bad input gets.
 //!
 //! Without the image or QEMU each test says `SKIPPED:` (counted by test.sh;
@@ -142,6 +143,43 @@ async fn a_vm_boots_snapshots_restores_and_shuts_down() {
     // The overlay keeps its snapshot; asking a cold start for another one fails before QEMU runs.
     let err = Vm::start(&config, Boot::FromSnapshot("other".into())).await.unwrap_err();
     assert!(matches!(err, VmError::NoSnapshot { .. }), "{err}");
+}
+
+/// A restore puts the stand-in's clock back to the snapshot's time, as it puts
+/// Windows'; the fleet sets it to the host's before the task and records by how
+/// much (`vm.clock` in `episode.json`).
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_restore_puts_the_clock_back_and_the_fleet_sets_it_right() {
+    use arena_shared::clock::now_unix_ms;
+    use arena_vm::fleet::{configs, ResetPolicy, VmFleet};
+    let Some(image) = standin_image("a_restore_puts_the_clock_back_and_the_fleet_sets_it_right") else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let template = config(&image.golden, &dir.path().join("vms"), "clock");
+    let fleet = VmFleet::boot(configs(&template, 1), ResetPolicy::PerTask).await.unwrap();
+    let saved = Instant::now();
+    let client =
+        GuestClient::new(&fleet.urls()[0], ClientConfig { token: None, timeout: Duration::from_secs(20), retries: 0 })
+            .unwrap();
+    // How far the freshly booted guest is from the host (the RTC's base and boot rounding).
+    let skew = now_unix_ms() - client.clock().await.unwrap().unix_ms;
+    assert!(skew.abs() < 120_000, "the booted guest is {skew} ms off the host");
+
+    tokio::time::sleep(Duration::from_secs(8)).await;
+    let start = fleet.before_task(&client).await.unwrap().expect("a VM start record");
+    let slept = i64::try_from(saved.elapsed().as_millis()).unwrap();
+    assert_eq!(start.snapshot.as_deref(), Some(READY_SNAPSHOT));
+    let clock = start.clock.expect("the clock set after the restore");
+    assert_eq!(clock.error, None);
+    let corrected = clock.corrected_ms.expect("a correction");
+    // The restored guest woke at the snapshot's time: behind by at least the sleep.
+    assert!(corrected >= skew + 6_000, "corrected {corrected} ms after {slept} ms since the snapshot (skew {skew})");
+    assert!(corrected <= skew + slept + 60_000, "corrected {corrected} ms, more than the time since the snapshot");
+    let after = now_unix_ms() - client.clock().await.unwrap().unix_ms;
+    assert!(after.abs() < 5_000, "the guest is still {after} ms off after the set");
+    // Recorded as episode.json records it.
+    let json = serde_json::to_value(&start).unwrap();
+    assert_eq!(json["clock"]["corrected_ms"], serde_json::json!(corrected));
+    fleet.stop().await;
 }
 
 fn stub_index() -> PathBuf {
@@ -280,10 +318,12 @@ const PREPARE_FLAGS: &[&str] = &[
     "virtio-net",
 ];
 
-/// An OEM folder as `arena prep stage` leaves it, as far as the stand-in reads it.
+/// An OEM folder as `arena prep stage` leaves it, as far as the stand-in reads
+/// it, and an empty driver folder beside it (`drivers`).
 fn oem_folder(root: &Path, token: &str) -> PathBuf {
     let oem = root.join("oem");
     std::fs::create_dir_all(&oem).unwrap();
+    std::fs::create_dir_all(root.join("drivers")).unwrap();
     std::fs::write(oem.join(arena_vm::oem::TOKEN_NAME), format!("{token}\n")).unwrap();
     std::fs::write(oem.join("install.bat"), "@echo off\r\n").unwrap();
     oem
@@ -300,6 +340,9 @@ fn prepare_command(image: &arena_test_support::StandinImage, oem: &Path, out: &P
         .arg(out)
         // Each option and value of PREPARE_FLAGS that `extra` does not give itself.
         .args(PREPARE_FLAGS.chunks(2).filter(|pair| !extra.contains(&pair[0])).flatten())
+        // The stand-in needs no drivers, but prepare refuses a virtio bus without a folder of them.
+        .arg("--drivers")
+        .arg(oem.parent().unwrap_or(oem).join("drivers"))
         .args(["--stage-timeout", "setup=10m", "--stage-timeout", "shut-down=120"])
         .args(extra)
         .env_remove("ARENA_TOKEN")
@@ -635,6 +678,16 @@ fn dry_run_writes_what_it_would_attach_and_prints_both_command_lines() {
     // With TPM and Secure Boot there are no bypass keys; the disk is GPT.
     let answer = std::fs::read_to_string(work.join("autounattend.xml")).unwrap();
     assert!(!answer.contains("LabConfig") && answer.contains("<Type>EFI</Type>"), "{answer}");
+    // The guest's zone is UTC (the default --timezone): the RTC is UTC, not the host's local time.
+    assert!(q.contains(" -rtc base=utc ") && !q.contains("localtime"), "{q}");
+    // Defender's path exclusions for the guest's folders and C:\OEM, by policy in specialize.
+    for folder in [r"C:\Program Files\Arena", r"C:\ProgramData\arena", r"C:\OEM"] {
+        let line = format!(
+            r#"reg.exe add &quot;HKLM\SOFTWARE\Policies\Microsoft\Windows Defender\Exclusions\Paths&quot; /v &quot;{folder}&quot; /t REG_DWORD /d 0 /f"#
+        );
+        assert!(answer.contains(&line), "{line} is not in the answer file");
+    }
+    assert!(answer.contains("/v Exclusions_Paths /t REG_DWORD /d 1 /f"), "{answer}");
     assert!(!out.exists() && qemus_naming(&dir.path().display().to_string()).is_empty());
 }
 
@@ -679,6 +732,31 @@ fn prepare_on_uefi_with_secure_boot_and_swtpm_seals_an_image_that_boots_healthy(
     assert!(!answer.contains("LabConfig"), "a TPM and Secure Boot need no bypass keys");
     eprintln!("prepare (UEFI, Secure Boot, swtpm): {:.0} s", started.elapsed().as_secs_f64());
 
+    // The image knows itself: the sidecar says how it was installed, the final
+    // UEFI variables sit beside it, and a VM on other firmware is refused at once.
+    let facts = arena_vm::sidecar::read(&out).unwrap().expect("the sealed image's sidecar");
+    assert_eq!((facts.firmware.as_str(), facts.secure_boot, facts.tpm), ("uefi", true, true), "{facts:?}");
+    assert_eq!((facts.machine.as_str(), facts.disk_bus, facts.screen), ("q35", DiskBus::VirtioBlk, (1440, 900)));
+    assert_eq!((facts.language.as_deref(), facts.timezone.as_deref()), (Some("en-US"), Some("UTC")));
+    assert!(facts.installed_unix > 1_700_000_000, "{facts:?}");
+    let vars = facts.uefi_vars.clone().expect("the UEFI variables' copy");
+    assert!(vars.is_file() && vars.parent() == out.parent(), "{vars:?}");
+    let asked = Instant::now();
+    let refused = arena()
+        .args(["vm", "start", "--image"])
+        .arg(&out)
+        .arg("--dir")
+        .arg(dir.path().join("vm-bios"))
+        .args(VM_FLAGS.chunks(2).filter(|pair| pair[0] != "--vm-machine").flatten())
+        .args(["--vm-machine", "q35", "--port", "0"])
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&refused.stderr);
+    assert!(!refused.status.success(), "a UEFI image booted on SeaBIOS: {err}");
+    assert!(err.contains("use --vm-firmware uefi") && err.contains("golden.qcow2.arena.json"), "{err}");
+    assert!(asked.elapsed() < Duration::from_secs(30), "refused only after {:?}", asked.elapsed());
+    assert!(!dir.path().join("vm-bios").exists(), "the refused VM's folder was made");
+
     // The sealed image boots healthy on the UEFI machine, with Secure Boot on.
     let rt = tokio::runtime::Builder::new_multi_thread().worker_threads(2).enable_all().build().unwrap();
     rt.block_on(async {
@@ -689,6 +767,8 @@ fn prepare_on_uefi_with_secure_boot_and_swtpm_seals_an_image_that_boots_healthy(
         config.token = Some(token.clone());
         let mut vm = Vm::start(&config, Boot::Fresh).await.unwrap();
         assert!(vm.spec.args().iter().any(|a| a.to_string_lossy().contains("smm=on")));
+        // The image's zone is UTC (its sidecar says so): the RTC is UTC too.
+        assert!(vm.spec.args().iter().any(|a| a == "base=utc"), "{:?}", vm.spec.args());
         let tpm = vm.qmp.hmp("info tpm", Duration::from_secs(10)).await.unwrap();
         assert!(tpm.contains("tpm-tis") && tpm.contains("emulator"), "{tpm}");
         vm.wait_healthy(config.boot_timeout, |_| {}).await.unwrap();
@@ -806,6 +886,58 @@ fn bad_input_gets_errors_that_name_it() {
     std::fs::rename(&golden, dir.path().join("moved.qcow2")).unwrap();
     let err = start(&image.golden, &["--reuse"]);
     assert!(err.contains("g.qcow2") && err.contains("does not exist"), "{err}");
+
+    // An image whose sidecar says it was installed on UEFI, started on SeaBIOS:
+    // refused at once, naming the flag, before its VM folder is made.
+    let sided = dir.path().join("sided.qcow2");
+    std::fs::copy(&image.golden, &sided).unwrap();
+    let mut perms = std::fs::metadata(&sided).unwrap().permissions();
+    perms.set_readonly(true);
+    std::fs::set_permissions(&sided, perms).unwrap();
+    let facts = arena_vm::sidecar::ImageFacts {
+        format: arena_vm::sidecar::FORMAT,
+        firmware: "uefi".into(),
+        secure_boot: true,
+        screen: (1440, 900),
+        machine: "pc".into(),
+        disk_bus: DiskBus::VirtioBlk,
+        nic: NicModel::VirtioNet,
+        tpm: false,
+        edition: None,
+        build: None,
+        language: None,
+        timezone: Some("UTC".into()),
+        installed_unix: 1_790_000_000,
+        licence_expires_unix: None,
+        uefi_vars: None,
+    };
+    arena_vm::sidecar::write(&sided, &facts).unwrap();
+    let asked = Instant::now();
+    let out = arena()
+        .args(["vm", "start", "--dir"])
+        .arg(dir.path().join("vm-sided"))
+        .arg("--image")
+        .arg(&sided)
+        .args(VM_FLAGS)
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        !out.status.success() && err.contains("installed on uefi firmware, this VM has bios: use --vm-firmware uefi"),
+        "{err}"
+    );
+    assert!(asked.elapsed() < Duration::from_secs(30) && !dir.path().join("vm-sided").exists(), "{err}");
+    std::fs::write(arena_vm::sidecar::path_for(&sided), "{\"format\": 1}").unwrap();
+    let out = arena()
+        .args(["vm", "start", "--dir"])
+        .arg(dir.path().join("vm-sided"))
+        .arg("--image")
+        .arg(&sided)
+        .args(VM_FLAGS)
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success() && err.contains("sided.qcow2.arena.json: not an image sidecar"), "{err}");
 
     // Commands for a VM that is not running.
     let out = arena().args(["vm", "restore", "--dir"]).arg(dir.path().join("none")).arg("ready").output().unwrap();

@@ -7,7 +7,8 @@
 //! the Windows exe too); [`windows`] holds the Windows backend, whose FFI glue is
 //! compiled only for Windows and whose neutral halves everywhere.
 //! [`a11y_walk`] is the accessibility walker every backend feeds its trees through;
-//! [`uia_health`] decides the UI Automation health stage (and re-creation) for both.
+//! [`uia_health`] decides the UI Automation health stage (and re-creation) for both;
+//! [`defender`] reads Microsoft Defender's state for the doctor.
 //!
 //! # Coordinates
 //!
@@ -16,6 +17,7 @@
 
 pub mod a11y_walk;
 pub mod cancel;
+pub mod defender;
 pub mod stub;
 pub mod uia_health;
 pub mod uia_process;
@@ -281,6 +283,42 @@ pub trait Desktop: Send + Sync + std::fmt::Debug {
 
     /// Shuts the machine down.
     fn shutdown(&self) -> DesktopResult<()>;
+
+    // ----- the clock -----
+
+    /// The machine's wall clock, milliseconds since the Unix epoch (UTC).
+    ///
+    /// # Errors
+    ///
+    /// The backend cannot read it.
+    fn system_time(&self) -> DesktopResult<i64> {
+        Ok(arena_shared::clock::now_unix_ms())
+    }
+
+    /// Sets the machine's wall clock to `unix_ms` (checked by
+    /// [`arena_shared::clock::check`] first): `SetSystemTime` on Windows, a
+    /// modelled offset in the stub.
+    ///
+    /// # Errors
+    ///
+    /// [`DesktopError::Unsupported`] by default; the system's refusal.
+    fn set_system_time(&self, unix_ms: i64) -> DesktopResult<()> {
+        let _ = unix_ms;
+        Err(DesktopError::Unsupported(format!("the {} backend cannot set the clock", self.kind())))
+    }
+
+    // ----- Microsoft Defender -----
+
+    /// Defender's Tamper Protection, real-time protection and detections, for
+    /// the doctor. By default (the stub) there is no Defender: every fact is
+    /// unknown and there are no detections.
+    ///
+    /// # Errors
+    ///
+    /// Defender's state could not be asked at all.
+    fn defender(&self) -> DesktopResult<defender::DefenderStatus> {
+        Ok(defender::DefenderStatus::absent(&format!("the {} backend has no Microsoft Defender", self.kind())))
+    }
 }
 
 #[cfg(test)]

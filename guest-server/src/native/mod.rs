@@ -14,7 +14,8 @@
 //!
 //! One private module per resource, each exposing its own `routes()`:
 //! `health`, `screen`, `input`, `a11y`, `windows`, `clipboard`, `files`,
-//! `exec` (exec, launch, open), `registry` (registry, wallpaper), `doctor`
+//! `exec` (exec, launch, open), `registry` (registry, wallpaper), `clock` (the
+//! wall clock the host sets after a restore), `doctor`
 //! (every capability end to end), `browser` (the browser's DevTools HTTP endpoint,
 //! forwarded) and `browser_ws` (its DevTools websocket, relayed).
 //!
@@ -26,6 +27,7 @@ mod a11y;
 mod browser;
 mod browser_ws;
 mod clipboard;
+mod clock;
 mod doctor;
 pub use doctor::ask_running_server;
 mod eval_queries;
@@ -57,6 +59,7 @@ pub fn routes() -> Router<AppState> {
         .merge(files::routes())
         .merge(exec::routes())
         .merge(registry::routes())
+        .merge(clock::routes())
         .merge(browser::routes())
         .merge(browser_ws::routes())
         .merge(eval_queries::routes())

@@ -28,6 +28,7 @@ use sha2::{Digest, Sha256};
 
 use arena_shared::action::{Action, ActionBatch, ActionReport};
 use arena_shared::clipboard::ClipboardContent;
+use arena_shared::clock::{ClockReading, ClockSet, ClockSetResult};
 use arena_shared::error::ErrorBody;
 use arena_shared::eval::{
     DetailsViewQuery, EvalAnswer, ImagesTaggedQuery, LibraryFolders, LibraryQuery, ReadOnlyQuery,
@@ -726,6 +727,31 @@ impl GuestClient {
     pub async fn registry_set(&self, write: &RegistryWrite) -> Result<(), ClientError> {
         let call = Call { payload: json_payload(write), ..self.call(Method::PUT, "/v1/registry") };
         self.send(call).await.map(drop)
+    }
+
+    /// `GET /v1/clock`: the guest's wall clock.
+    ///
+    /// # Errors
+    ///
+    /// Any [`ClientError`] of the call.
+    pub async fn clock(&self) -> Result<ClockReading, ClientError> {
+        self.get_json("/v1/clock", None).await
+    }
+
+    /// `PUT /v1/clock`: sets the guest's wall clock to `unix_ms` (milliseconds
+    /// since the Unix epoch, UTC). Never retried: a retry would set a stale time.
+    ///
+    /// # Errors
+    ///
+    /// Any [`ClientError`] of the call; `bad_request` for a time outside
+    /// [`arena_shared::clock::check`]'s range.
+    pub async fn set_clock(&self, unix_ms: i64) -> Result<ClockSetResult, ClientError> {
+        let call = Call {
+            payload: json_payload(&ClockSet { unix_ms }),
+            retry: Retry::Never,
+            ..self.call(Method::PUT, "/v1/clock")
+        };
+        self.json(call).await
     }
 
     /// `PUT /v1/wallpaper`: sets the wallpaper to an existing guest image.

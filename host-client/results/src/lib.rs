@@ -514,6 +514,22 @@ pub struct VmStart {
     /// QEMU's display against the guest's screenshot after the restore.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub screen: Option<ScreenCheck>,
+    /// The guest's clock set to the host's after the restore (a restored VM
+    /// wakes with the time it was saved at), and how far off it was.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub clock: Option<ClockSync>,
+}
+
+/// The guest's clock set after a restore or rebuild.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct ClockSync {
+    /// How far the guest's clock was behind the host's, in milliseconds
+    /// (negative: ahead); `None` when it could not be set.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub corrected_ms: Option<i64>,
+    /// Why the clock was not set.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub error: Option<String>,
 }
 
 /// How QEMU's own view of the screen compares with the guest's screenshot.

@@ -294,6 +294,10 @@ pub struct PrepareArgs {
     /// xorriso, which builds the OEM media [default: on PATH].
     #[arg(long, value_name = "PATH")]
     pub xorriso: Option<PathBuf>,
+    /// A folder of Windows drivers Setup loads (put on the OEM media as `$WinPEDriver$`):
+    /// virtio-win's, needed for `--vm-disk-bus virtio-blk|virtio-scsi`.
+    #[arg(long, value_name = "DIR")]
+    pub drivers: Option<PathBuf>,
     #[command(flatten)]
     pub vm: VmArgs,
 }
@@ -474,6 +478,7 @@ async fn prepare_command(conn: &Connection, args: PrepareArgs) -> anyhow::Result
         vm: config,
         timeouts,
         xorriso: args.xorriso.clone(),
+        drivers: args.drivers.clone(),
     };
     if args.dry_run {
         let lines = prepare::dry_run(&options)?;

@@ -12,7 +12,7 @@ use tokio::sync::Mutex;
 
 use super::{Boot, Vm, VmConfig, VmError, READY_SNAPSHOT};
 use arena_client::client::GuestClient;
-use arena_results::VmStart;
+use arena_results::{ClockSync, VmStart};
 
 /// When a VM goes back to its `ready` snapshot.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -95,6 +95,24 @@ pub async fn check_screen(vm: &Vm) -> Result<ScreenCheck, VmError> {
         guest_black,
         problem,
     })
+}
+
+/// Sets the guest's clock to this machine's and says how far off it was.
+/// A guest that refuses (an older one without `PUT /v1/clock`) is logged and
+/// recorded, not an error: the task runs on with the clock it has.
+pub async fn sync_clock(client: &GuestClient, vm: &str) -> ClockSync {
+    let host = arena_shared::clock::now_unix_ms();
+    match client.set_clock(host).await {
+        Ok(set) => {
+            let corrected = set.corrected_ms();
+            tracing::info!(vm, corrected_ms = corrected, "set the guest's clock");
+            ClockSync { corrected_ms: Some(corrected), error: None }
+        }
+        Err(err) => {
+            tracing::warn!(vm, error = %err, "the guest's clock was not set");
+            ClockSync { corrected_ms: None, error: Some(err.to_string()) }
+        }
+    }
 }
 
 struct Slot {
@@ -229,14 +247,22 @@ impl VmFleet {
         if let Some(status) = vm.exited() {
             return Err(format!("VM {name}: QEMU exited ({status})"));
         }
-        let mut start =
-            VmStart { vm: name.clone(), snapshot: None, restore_ms: 0, rebuilt: state.rebuilt, screen: None };
+        let mut start = VmStart {
+            vm: name.clone(),
+            snapshot: None,
+            restore_ms: 0,
+            rebuilt: state.rebuilt,
+            screen: None,
+            clock: None,
+        };
         if self.reset.due(state.since_reset, state.first) {
             let started = Instant::now();
             vm.restore_snapshot(READY_SNAPSHOT).await.map_err(|e| e.to_string())?;
             vm.wait_healthy(state.config.boot_timeout, |_| {}).await.map_err(|e| e.to_string())?;
             start.snapshot = Some(READY_SNAPSHOT.to_owned());
             start.restore_ms = u64::try_from(started.elapsed().as_millis()).unwrap_or(u64::MAX);
+            // Before anything else runs: a restored guest's clock is the snapshot's.
+            start.clock = Some(sync_clock(vm.client(), &name).await);
             // QEMU's view of the restored screen against the guest's own capture.
             match check_screen(vm).await {
                 Ok(check) => {
@@ -249,6 +275,10 @@ impl VmFleet {
             }
             state.since_reset = 0;
             tracing::info!(vm = %name, restore_ms = start.restore_ms, "restored the ready snapshot");
+        }
+        if start.clock.is_none() && state.rebuilt {
+            // Rebuilt from the snapshot and not restored (`--reset never`): the same clock.
+            start.clock = Some(sync_clock(vm.client(), &name).await);
         }
         state.since_reset += 1;
         state.first = false;

@@ -13,6 +13,7 @@
 //! - [`child`]: a child dies with us: the host side's only system calls (QEMU's
 //!   helpers and an exec agent's process tree end with this program).
 //! - [`oem`]: staging a Windows image's OEM folder and waiting for its guest.
+//! - [`sidecar`]: what a golden image knows of itself, checked before a VM boots on it.
 //!
 //! It is not the guest: the server inside the VM is `arena-guest`, reached over
 //! HTTP like any other guest.
@@ -29,6 +30,7 @@ pub mod ovmf;
 pub mod prepare;
 pub mod qemu;
 pub mod qmp;
+pub mod sidecar;
 pub mod tpm;
 pub mod unattend;
 
@@ -125,6 +127,8 @@ pub struct VmConfig {
     /// The screen the firmware starts with under UEFI (OVMF's `PlatformConfig`,
     /// [`ovmf`]): Windows' basic display driver keeps it.
     pub screen: (u32, u32),
+    /// The real-time clock's base: UTC for a guest whose zone is UTC.
+    pub rtc: qemu::RtcBase,
 }
 
 impl VmConfig {
@@ -153,6 +157,7 @@ impl VmConfig {
             token: None,
             boot_timeout: Duration::from_secs(900),
             screen: (1440, 900),
+            rtc: qemu::RtcBase::Localtime,
         }
     }
 
@@ -228,6 +233,7 @@ impl VmConfig {
             folders: Vec::new(),
             loadvm: None,
             screen: self.screen,
+            rtc: self.rtc,
         };
         Ok((spec, accel_note))
     }
@@ -360,6 +366,14 @@ impl Vm {
         let qemu = qemu::find_qemu(config.qemu.as_deref())?;
         let img = config.qemu_img()?;
         let info = img.check_golden(&config.golden)?;
+        // The image's own record of its machine, before anything is touched.
+        let facts = sidecar::read(&config.golden)?;
+        if let Some(facts) = &facts {
+            let now = arena_shared::clock::now_unix_ms().div_euclid(1000);
+            for warning in sidecar::check(facts, config, &config.golden, now)? {
+                tracing::warn!(vm = %config.name, "{warning}");
+            }
+        }
         claim_dir(&config.dir)?;
         let overlay = config.overlay();
         let mut loadvm = None;
@@ -383,6 +397,10 @@ impl Vm {
         }
         let (mut spec, accel_note) = config.spec(qemu, overlay, &img, boot == Boot::Fresh)?;
         spec.loadvm = loadvm;
+        // The RTC as the image's time zone needs it (Windows reads it as local time).
+        if let Some(zone) = facts.as_ref().and_then(|f| f.timezone.as_deref()) {
+            spec.rtc = qemu::RtcBase::for_zone(zone);
+        }
         Vm::launch(config, spec, accel_note).await
     }
 

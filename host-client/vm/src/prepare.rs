@@ -42,6 +42,7 @@ use serde::{Deserialize, Serialize};
 use super::bundle::{self, Bundle};
 use super::disk::{make_read_only, QemuImg};
 use super::qemu::{self, Accel};
+use super::sidecar::{self, ImageFacts};
 use super::tpm::{self, SwtpmSpec};
 use super::unattend::{self, AnswerOptions};
 use super::{claim_dir, Vm, VmConfig, VmError, UEFI_VARS_FILE};
@@ -234,6 +235,13 @@ pub struct State {
     /// Seconds spent in each stage so far.
     #[serde(default)]
     pub seconds: BTreeMap<String, f64>,
+    /// When this prepare began (seconds since 1970): the install date when
+    /// Windows does not say its own.
+    #[serde(default)]
+    pub started_unix: Option<i64>,
+    /// What the healthy guest said of its Windows, for the image's sidecar.
+    #[serde(default)]
+    pub guest: Option<sidecar::GuestFacts>,
 }
 
 /// The answer file: generated from options, or the user's own.
@@ -259,6 +267,9 @@ pub struct PrepareOptions {
     pub timeouts: StageTimeouts,
     /// `xorriso` [default: on PATH].
     pub xorriso: Option<PathBuf>,
+    /// Drivers Setup loads from the OEM media's `$WinPEDriver$` folder (virtio-win's,
+    /// for a virtio disk bus), or `None`.
+    pub drivers: Option<PathBuf>,
 }
 
 /// What a prepare tells as it goes.
@@ -410,6 +421,7 @@ fn check_inputs(options: &PrepareOptions) -> Result<(), VmError> {
     if !options.oem.is_dir() {
         return Err(VmError::Invalid(format!("--oem {} is not a folder", options.oem.display())));
     }
+    check_drivers(options.vm.disk_bus, options.drivers.as_deref())?;
     match &options.answer {
         Answer::Generated(answer) => answer.check().map_err(VmError::Invalid)?,
         Answer::File(path) => {
@@ -419,6 +431,35 @@ fn check_inputs(options: &PrepareOptions) -> Result<(), VmError> {
         }
     }
     Ok(())
+}
+
+/// The folder on the OEM media Windows Setup loads drivers from, at the root of
+/// every medium it sees (Microsoft Learn, "Add device drivers to Windows during
+/// Windows Setup": the `$WinPEDriver$` folder), so no drive letter is guessed.
+pub const DRIVERS_FOLDER: &str = "$WinPEDriver$";
+
+/// A virtio disk bus needs a driver Windows Setup does not have (virtio-win's
+/// `viostor` or `vioscsi`): without one Setup finds no disk to install on and
+/// waits. Refused unless `--drivers` gives a folder of drivers.
+///
+/// # Errors
+///
+/// A virtio bus without `--drivers`, or `--drivers` that is not a folder.
+pub fn check_drivers(bus: qemu::DiskBus, drivers: Option<&Path>) -> Result<(), VmError> {
+    if let Some(folder) = drivers {
+        if !folder.is_dir() {
+            return Err(VmError::Invalid(format!("--drivers {}: not a folder", folder.display())));
+        }
+        return Ok(());
+    }
+    let name = match bus {
+        qemu::DiskBus::Ahci => return Ok(()),
+        qemu::DiskBus::VirtioBlk => "virtio-blk (virtio-win's viostor)",
+        qemu::DiskBus::VirtioScsi => "virtio-scsi (virtio-win's vioscsi)",
+    };
+    Err(VmError::Invalid(format!(
+        "--vm-disk-bus {name}: Windows Setup has no driver for this disk and would find none to install on; give --drivers DIR (a folder of Windows drivers, such as virtio-win's, which Setup loads from the OEM media's {DRIVERS_FOLDER}) or use --vm-disk-bus ahci"
+    )))
 }
 
 /// Writes the answer file and the OEM media into `dir`.
@@ -447,7 +488,7 @@ fn write_media(options: &PrepareOptions, dir: &Path) -> Result<PathBuf, VmError>
     std::fs::write(&script, unattend::oem_copy_script()).map_err(io(format!("writing {}", script.display())))?;
     let iso = dir.join(MEDIA_FILE);
     let xorriso = find_xorriso(options.xorriso.as_deref())?;
-    let args = media_args(&answer, &marker, &script, &options.oem, &iso);
+    let args = media_args(&answer, &marker, &script, &options.oem, options.drivers.as_deref(), &iso);
     let mut command = std::process::Command::new(&xorriso);
     command.args(&args);
     crate::child::die_with_this_process_std(&mut command);
@@ -474,7 +515,14 @@ pub fn find_xorriso(explicit: Option<&Path>) -> Result<PathBuf, VmError> {
 /// xorriso's arguments for the OEM media: ISO 9660 level 3 (files over 4 GiB
 /// in several extents), Joliet with long names (what Windows reads), Rock
 /// Ridge (what Linux reads), the label, and the three parts grafted in place.
-pub fn media_args(answer: &Path, marker: &Path, script: &Path, oem: &Path, iso: &Path) -> Vec<OsString> {
+pub fn media_args(
+    answer: &Path,
+    marker: &Path,
+    script: &Path,
+    oem: &Path,
+    drivers: Option<&Path>,
+    iso: &Path,
+) -> Vec<OsString> {
     let graft = |name: &str, path: &Path| {
         let mut arg = OsString::from(format!("{name}="));
         arg.push(path);
@@ -491,6 +539,9 @@ pub fn media_args(answer: &Path, marker: &Path, script: &Path, oem: &Path, iso: 
     args.push(graft(unattend::OEM_MARKER, marker));
     args.push(graft(unattend::OEM_SCRIPT, script));
     args.push(graft(&format!("{}/", unattend::OEM_MEDIA_FOLDER), oem));
+    if let Some(drivers) = drivers {
+        args.push(graft(&format!("{DRIVERS_FOLDER}/"), drivers));
+    }
     args
 }
 
@@ -550,7 +601,24 @@ fn prepare_config(options: &PrepareOptions, dir: &Path) -> VmConfig {
     config.dir = dir.to_owned();
     config.golden = dir.join("disk.qcow2");
     config.name = "prepare".into();
+    if let Some(zone) = guest_zone(&options.answer) {
+        config.rtc = qemu::RtcBase::for_zone(&zone);
+    }
     config
+}
+
+/// The Windows time zone the answer file gives the guest: `--timezone`, or
+/// the first `TimeZone` of the user's own answer file (`None` without one).
+pub fn guest_zone(answer: &Answer) -> Option<String> {
+    match answer {
+        Answer::Generated(options) => Some(options.timezone.clone()),
+        Answer::File(path) => {
+            let text = std::fs::read_to_string(path).ok()?;
+            let doc = roxmltree::Document::parse(&text).ok()?;
+            let zone = doc.descendants().find(|n| n.tag_name().name() == "TimeZone")?.text()?.trim().to_owned();
+            Some(zone)
+        }
+    }
 }
 
 /// Runs (or resumes) a prepare to the sealed golden image.
@@ -594,6 +662,8 @@ pub async fn prepare(options: &PrepareOptions, mut progress: impl FnMut(PrepareE
                 reboots: 0,
                 restarts: 0,
                 seconds: Default::default(),
+                started_unix: Some(arena_shared::clock::now_unix_ms().div_euclid(1000)),
+                guest: None,
             };
             write_media(options, &dir)?;
             img.create_blank(&disk, &options.size)?;
@@ -648,6 +718,7 @@ pub async fn prepare(options: &PrepareOptions, mut progress: impl FnMut(PrepareE
                     write_state(&dir, &state)?;
                     return Err(finish_evidence(evidence, &img, &disk, &bundle, err));
                 }
+                state.guest = Some(guest_facts(&vm).await);
                 // Healthy: a safe point to come back to, then the shutdown.
                 if let Err(err) = vm.save_snapshot(HEALTHY_SNAPSHOT).await {
                     vm.kill().await;
@@ -678,6 +749,10 @@ pub async fn prepare(options: &PrepareOptions, mut progress: impl FnMut(PrepareE
                     write_state(&dir, &state)?;
                     return Err(finish_evidence(evidence, &img, &disk, &bundle, err));
                 }
+                if state.guest.is_none() {
+                    state.guest = Some(guest_facts(&vm).await);
+                    write_state(&dir, &state)?;
+                }
                 announced = Some(Stage::ShutDown);
                 shut_down(vm, options, &dir, &mut state, &mut progress).await?
             }
@@ -696,6 +771,7 @@ pub async fn prepare(options: &PrepareOptions, mut progress: impl FnMut(PrepareE
                     options.out.display()
                 )))?;
                 make_read_only(&options.out)?;
+                write_sidecar(options, &config, &state, &dir)?;
                 let _ = std::fs::remove_file(&disk);
                 Stage::Sealed
             }
@@ -712,6 +788,82 @@ pub async fn prepare(options: &PrepareOptions, mut progress: impl FnMut(PrepareE
         state.stage = next;
         write_state(&dir, &state)?;
     }
+}
+
+/// What the healthy guest says of its Windows (`EditionID`, the build,
+/// `InstallDate` under [`sidecar::CURRENT_VERSION_KEY`]); each fact it cannot
+/// read is left out.
+async fn guest_facts(vm: &Vm) -> sidecar::GuestFacts {
+    use arena_shared::registry::RegistryValue;
+    let read = |value: &'static str| async move {
+        vm.client().registry_get(sidecar::CURRENT_VERSION_KEY, Some(value)).await.ok().map(|r| r.data)
+    };
+    let text = |data: Option<RegistryValue>| match data {
+        Some(RegistryValue::String(s)) if !s.trim().is_empty() => Some(s.trim().to_owned()),
+        _ => None,
+    };
+    let edition_id = text(read("EditionID").await);
+    let ubr = match read("UBR").await {
+        Some(RegistryValue::Dword(ubr)) => Some(ubr),
+        _ => None,
+    };
+    let build = text(read("CurrentBuild").await).map(|build| match ubr {
+        Some(ubr) => format!("{build}.{ubr}"),
+        None => build,
+    });
+    let install_date_unix = match read("InstallDate").await {
+        Some(RegistryValue::Dword(secs)) => Some(i64::from(secs)),
+        _ => None,
+    };
+    sidecar::GuestFacts { edition_id, build, install_date_unix }
+}
+
+/// Writes the sealed image's sidecar ([`sidecar`]), with a copy of the
+/// prepare's final UEFI variables beside the image (read-only, as the image).
+fn write_sidecar(options: &PrepareOptions, config: &VmConfig, state: &State, dir: &Path) -> Result<(), VmError> {
+    let uefi_vars = match &config.uefi {
+        Some(_) if dir.join(UEFI_VARS_FILE).is_file() => {
+            let copy = sidecar::uefi_vars_for(&options.out);
+            std::fs::copy(dir.join(UEFI_VARS_FILE), &copy)
+                .map_err(io(format!("copying the UEFI variables to {}", copy.display())))?;
+            make_read_only(&copy)?;
+            Some(copy)
+        }
+        _ => None,
+    };
+    let guest = state.guest.clone().unwrap_or_default();
+    let (chosen, language) = match &options.answer {
+        Answer::Generated(answer) => (
+            match &answer.image {
+                unattend::ImageChoice::Name(name) => Some(name.clone()),
+                unattend::ImageChoice::Index(_) | unattend::ImageChoice::ByKey => None,
+            },
+            Some(answer.locale.clone()),
+        ),
+        Answer::File(_) => (None, None),
+    };
+    let installed_unix = guest
+        .install_date_unix
+        .or(state.started_unix)
+        .unwrap_or_else(|| arena_shared::clock::now_unix_ms().div_euclid(1000));
+    let facts = ImageFacts {
+        format: sidecar::FORMAT,
+        firmware: sidecar::firmware_name(config).to_owned(),
+        secure_boot: config.uefi.as_ref().is_some_and(|u| u.secure_boot),
+        screen: config.screen,
+        machine: config.machine.clone(),
+        disk_bus: config.disk_bus,
+        nic: config.nic,
+        tpm: config.tpm,
+        licence_expires_unix: sidecar::licence_expiry(guest.edition_id.as_deref(), installed_unix),
+        edition: guest.edition_id.or(chosen),
+        build: guest.build,
+        language,
+        timezone: guest_zone(&options.answer),
+        installed_unix,
+        uefi_vars,
+    };
+    sidecar::write(&options.out, &facts)
 }
 
 /// Why a prepare resumed at `stage` must start the install over, or `None`
@@ -1240,18 +1392,50 @@ mod tests {
     }
 
     #[test]
+    fn a_virtio_disk_bus_needs_a_driver_folder() {
+        use qemu::DiskBus;
+        assert!(check_drivers(DiskBus::Ahci, None).is_ok());
+        for (bus, driver) in [(DiskBus::VirtioBlk, "viostor"), (DiskBus::VirtioScsi, "vioscsi")] {
+            let err = check_drivers(bus, None).unwrap_err().to_string();
+            assert!(
+                err.contains(driver) && err.contains("give --drivers DIR") && err.contains("--vm-disk-bus ahci"),
+                "{err}"
+            );
+        }
+        let dir = tempfile::tempdir().unwrap();
+        assert!(check_drivers(DiskBus::VirtioBlk, Some(dir.path())).is_ok());
+        let missing = dir.path().join("nope");
+        let err = check_drivers(DiskBus::VirtioScsi, Some(&missing)).unwrap_err().to_string();
+        assert!(err.contains("--drivers") && err.contains("not a folder"), "{err}");
+    }
+
+    #[test]
     fn media_and_command_lines_read_as_typed() {
         let args = media_args(
             Path::new("/w/autounattend.xml"),
             Path::new("/w/ARENA-OEM.TXT"),
             Path::new("/w/ARENA-OEM.CMD"),
             Path::new("/stage/oem"),
+            None,
             Path::new("/w/oem-media.iso"),
         );
         let line = shell_line(Path::new("xorriso"), &args);
         assert_eq!(
             line,
             "xorriso -as mkisofs -quiet -iso-level 3 -J -joliet-long -r -V ARENA_OEM -o /w/oem-media.iso -graft-points autounattend.xml=/w/autounattend.xml ARENA-OEM.TXT=/w/ARENA-OEM.TXT ARENA-OEM.CMD=/w/ARENA-OEM.CMD OEM/=/stage/oem"
+        );
+        let with_drivers = media_args(
+            Path::new("/w/autounattend.xml"),
+            Path::new("/w/ARENA-OEM.TXT"),
+            Path::new("/w/ARENA-OEM.CMD"),
+            Path::new("/stage/oem"),
+            Some(Path::new("/virtio-win")),
+            Path::new("/w/oem-media.iso"),
+        );
+        assert!(
+            shell_line(Path::new("xorriso"), &with_drivers).ends_with(" OEM/=/stage/oem '$WinPEDriver$/=/virtio-win'"),
+            "{}",
+            shell_line(Path::new("xorriso"), &with_drivers)
         );
         let quoted = shell_line(Path::new("qemu-system-x86_64"), &["a b".into(), "it's".into(), "".into()]);
         assert_eq!(quoted, r"qemu-system-x86_64 'a b' 'it'\''s' ''");

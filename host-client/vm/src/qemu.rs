@@ -15,7 +15,8 @@ pub const QEMU_IMG_PACKAGE: &str = "qemu-utils";
 
 /// How the system disk is attached. Windows needs drivers for the virtio
 /// buses (dockur's images have them); AHCI works on any Windows install.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "kebab-case")]
 pub enum DiskBus {
     /// SATA on the q35 machine's AHCI controller (IDE on `pc`).
     Ahci,
@@ -24,7 +25,8 @@ pub enum DiskBus {
 }
 
 /// The network card.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "kebab-case")]
 pub enum NicModel {
     /// Intel 82574, which Windows drives without extra drivers.
     E1000e,
@@ -49,6 +51,36 @@ pub enum Firmware {
     /// (Debian's `OVMF_CODE_4M.secboot.fd`), which needs SMM (`smm=on`) and its
     /// flash locked to SMM (`cfi.pflash01` `secure=on`), as OVMF's README says.
     Uefi { code: PathBuf, vars: PathBuf, secure_boot: bool },
+}
+
+/// What the VM's real-time clock holds at power-on (`-rtc base=`). Windows
+/// reads the RTC as local time, so a guest whose zone is UTC needs the RTC in
+/// UTC; `localtime` (the host's zone) is what dockur's images run with.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, clap::ValueEnum, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum RtcBase {
+    Utc,
+    #[default]
+    Localtime,
+}
+
+impl RtcBase {
+    /// The RTC a guest whose Windows time zone is `zone` needs: UTC for
+    /// Microsoft's `UTC` zone ("Coordinated Universal Time", also written
+    /// `UTC+00`/`Etc/UTC`), the host's local time otherwise.
+    pub fn for_zone(zone: &str) -> RtcBase {
+        match zone.trim() {
+            "UTC" | "Etc/UTC" | "Coordinated Universal Time" => RtcBase::Utc,
+            _ => RtcBase::Localtime,
+        }
+    }
+
+    fn arg(self) -> &'static str {
+        match self {
+            RtcBase::Utc => "base=utc",
+            RtcBase::Localtime => "base=localtime",
+        }
+    }
 }
 
 /// The processor the guest sees.
@@ -147,6 +179,8 @@ pub struct VmSpec {
     pub loadvm: Option<String>,
     /// The screen, as the display's EDID offers it (its preferred mode).
     pub screen: (u32, u32),
+    /// What the real-time clock starts at.
+    pub rtc: RtcBase,
 }
 
 impl VmSpec {
@@ -172,7 +206,7 @@ impl VmSpec {
         // what Windows' display settings and the stand-in's kernel start with.
         a.push("-vga").push("none");
         a.push("-device").push(format!("VGA,edid=on,xres={},yres={}", self.screen.0, self.screen.1));
-        a.push("-rtc").push("base=localtime");
+        a.push("-rtc").push(self.rtc.arg());
         if let Firmware::Uefi { code, vars, secure_boot } = &self.firmware {
             if *secure_boot {
                 a.push("-global").push("driver=cfi.pflash01,property=secure,value=on");
@@ -362,6 +396,7 @@ mod tests {
             folders: Vec::new(),
             loadvm: None,
             screen: (1440, 900),
+            rtc: RtcBase::Localtime,
         }
     }
 
@@ -396,6 +431,19 @@ mod tests {
         assert!(text.contains("-display none"), "{text}");
         assert!(text.contains("-vga none -device VGA,edid=on,xres=1440,yres=900"), "{text}");
         assert!(!text.contains("-loadvm"), "{text}");
+    }
+
+    #[test]
+    fn the_rtc_is_utc_for_a_utc_guest_and_local_time_otherwise() {
+        let mut s = spec();
+        assert!(line(&s).contains(" -rtc base=localtime "), "{}", line(&s));
+        s.rtc = RtcBase::for_zone("UTC");
+        assert!(line(&s).contains(" -rtc base=utc "), "{}", line(&s));
+        assert!(!line(&s).contains("localtime"), "{}", line(&s));
+        assert_eq!(RtcBase::for_zone(" Etc/UTC "), RtcBase::Utc);
+        for zone in ["Pacific Standard Time", "W. Europe Standard Time", "UTC-11", "GMT Standard Time", ""] {
+            assert_eq!(RtcBase::for_zone(zone), RtcBase::Localtime, "{zone}");
+        }
     }
 
     #[test]

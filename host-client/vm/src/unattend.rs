@@ -533,6 +533,30 @@ pub const SPECIALIZE_POLICIES: &[(&str, &str)] = &[
         r#"reg.exe add "HKLM\SOFTWARE\Policies\Microsoft\Windows Defender\Real-Time Protection" /v DisableRealtimeMonitoring /t REG_DWORD /d 1 /f"#,
         "Defender: real-time protection off (policy DisableRealtimeMonitoring)",
     ),
+    // Defender's path exclusions by policy (Microsoft Learn, "Configure and validate
+    // exclusions based on file extension and folder location": Group Policy's
+    // Microsoft Defender Antivirus > Exclusions > Path Exclusions, one value per
+    // path, named by the path, value 0; WindowsDefender.admx writes the policy as
+    // `Exclusions_Paths`=1 under `...\Windows Defender\Exclusions` and the list under
+    // its `Paths` key). The guest's exes (install-guest.ps1's `-InstallDir`), its
+    // data (token, logs, setup-status.json) and the OEM folder are never scanned
+    // or quarantined, whether real-time protection stays on or not.
+    (
+        r#"reg.exe add "HKLM\SOFTWARE\Policies\Microsoft\Windows Defender\Exclusions" /v Exclusions_Paths /t REG_DWORD /d 1 /f"#,
+        "Defender: path exclusions by policy (Exclusions_Paths)",
+    ),
+    (
+        r#"reg.exe add "HKLM\SOFTWARE\Policies\Microsoft\Windows Defender\Exclusions\Paths" /v "C:\Program Files\Arena" /t REG_DWORD /d 0 /f"#,
+        "Defender: the guest's install folder excluded",
+    ),
+    (
+        r#"reg.exe add "HKLM\SOFTWARE\Policies\Microsoft\Windows Defender\Exclusions\Paths" /v "C:\ProgramData\arena" /t REG_DWORD /d 0 /f"#,
+        "Defender: the guest's data folder excluded",
+    ),
+    (
+        r#"reg.exe add "HKLM\SOFTWARE\Policies\Microsoft\Windows Defender\Exclusions\Paths" /v "C:\OEM" /t REG_DWORD /d 0 /f"#,
+        "Defender: the OEM folder excluded",
+    ),
     (
         r#"reg.exe add "HKLM\SOFTWARE\Policies\Microsoft\Windows\System" /v EnableSmartScreen /t REG_DWORD /d 0 /f"#,
         "SmartScreen for apps and files off (policy EnableSmartScreen)",

@@ -92,6 +92,10 @@ pub struct StubDesktop {
     host_exec: bool,
     /// The input recorder, while its window is open.
     recorder: Mutex<Option<recorder::Model>>,
+    /// The modelled wall clock: this process's clock plus this offset, which
+    /// `set_system_time` changes. In the stand-in VM the process's own clock is
+    /// the VM's, which a snapshot restore puts back, as Windows' is.
+    clock_offset_ms: std::sync::atomic::AtomicI64,
 }
 
 impl StubDesktop {
@@ -172,6 +176,7 @@ impl StubDesktop {
             uia: Mutex::new(uia),
             host_exec: config.host_exec,
             recorder: Mutex::new(None),
+            clock_offset_ms: std::sync::atomic::AtomicI64::new(0),
         };
         stub.apply_scenario(&scenario)?;
         Ok(stub)
@@ -864,6 +869,18 @@ impl Desktop for StubDesktop {
             Ok(_) | Err(DesktopError::NotFound(_)) => Ok(None),
             Err(err) => Err(err),
         }
+    }
+
+    fn system_time(&self) -> DesktopResult<i64> {
+        let offset = self.clock_offset_ms.load(std::sync::atomic::Ordering::Relaxed);
+        Ok(arena_shared::clock::now_unix_ms().saturating_add(offset))
+    }
+
+    fn set_system_time(&self, unix_ms: i64) -> DesktopResult<()> {
+        arena_shared::clock::check(unix_ms).map_err(DesktopError::InvalidInput)?;
+        let offset = unix_ms.saturating_sub(arena_shared::clock::now_unix_ms());
+        self.clock_offset_ms.store(offset, std::sync::atomic::Ordering::Relaxed);
+        Ok(())
     }
 
     fn set_wallpaper(&self, guest_path: &str) -> DesktopResult<()> {

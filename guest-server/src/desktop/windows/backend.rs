@@ -388,4 +388,19 @@ impl Desktop for WindowsDesktop {
         tracing::warn!("shutting the machine down as asked");
         system::shutdown()
     }
+
+    fn set_system_time(&self, unix_ms: i64) -> DesktopResult<()> {
+        system::set_system_time(unix_ms)
+    }
+
+    fn defender(&self) -> DesktopResult<crate::desktop::defender::DefenderStatus> {
+        use crate::desktop::defender;
+        let limits =
+            crate::desktop::ExecLimits { timeout_ms: 60_000, max_output_bytes: 1 << 20, cwd: None, stdin: None };
+        let out = self.run(&crate::desktop::powershell_command(defender::SCRIPT), &limits)?;
+        if out.timed_out {
+            return Err(DesktopError::Timeout { op: "Get-MpComputerStatus", ms: limits.timeout_ms });
+        }
+        defender::parse(&out.stdout).map_err(|why| DesktopError::Os { op: "Get-MpComputerStatus", message: why })
+    }
 }

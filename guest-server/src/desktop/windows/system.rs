@@ -1,5 +1,5 @@
 //! Files and the system: known folders, the Recycle Bin, the registry, the
-//! wallpaper, directory ACLs, the session id and shutdown.
+//! wallpaper, directory ACLs, the session id, shutdown and the clock.
 
 use std::path::Path;
 
@@ -403,4 +403,25 @@ pub(super) fn shutdown() -> DesktopResult<()> {
         )
     }
     .map_err(|err| os("InitiateSystemShutdownExW", &err))
+}
+
+/// Sets the wall clock to `unix_ms` (UTC) with `SetSystemTime`.
+///
+/// Microsoft's documentation of `SetSystemTime` (sysinfoapi.h): the caller needs
+/// the `SE_SYSTEMTIME_NAME` privilege, which the function itself enables for the
+/// call; an elevated administrator's token (the guest's) holds it.
+pub(super) fn set_system_time(unix_ms: i64) -> DesktopResult<()> {
+    let t = arena_shared::clock::civil(unix_ms).map_err(DesktopError::InvalidInput)?;
+    let time = windows::Win32::Foundation::SYSTEMTIME {
+        wYear: t.year,
+        wMonth: t.month,
+        wDayOfWeek: t.day_of_week,
+        wDay: t.day,
+        wHour: t.hour,
+        wMinute: t.minute,
+        wSecond: t.second,
+        wMilliseconds: t.millisecond,
+    };
+    // SAFETY: a valid pointer to a complete SYSTEMTIME that outlives the call.
+    unsafe { windows::Win32::System::SystemInformation::SetSystemTime(&time) }.map_err(|err| os("SetSystemTime", &err))
 }

@@ -150,6 +150,29 @@ fn the_policies_are_written_in_the_specialize_pass() {
     }
 }
 
+/// Defender never scans the guest's exes, its data or the OEM folder: the path
+/// exclusions policy is on and lists each, as REG_DWORD 0 named by the path, in
+/// the specialize pass, before the OEM copy puts the exes on the disk.
+#[test]
+fn defender_excludes_the_guests_folders_by_policy_before_the_oem_copy() {
+    let xml = render(&AnswerOptions::new());
+    let doc = roxmltree::Document::parse(&xml).unwrap();
+    let specialize = text_of(&doc, "specialize", &["RunSynchronous", "RunSynchronousCommand", "Path"]);
+    let copy = specialize.iter().position(|p| p.contains(OEM_SCRIPT)).unwrap();
+    let on = specialize
+        .iter()
+        .position(|p| p.contains(r#""HKLM\SOFTWARE\Policies\Microsoft\Windows Defender\Exclusions" /v Exclusions_Paths /t REG_DWORD /d 1 /f"#))
+        .unwrap_or_else(|| panic!("no Exclusions_Paths: {specialize:?}"));
+    assert!(on < copy);
+    for folder in [r"C:\Program Files\Arena", r"C:\ProgramData\arena", r"C:\OEM"] {
+        let line = format!(
+            r#"reg.exe add "HKLM\SOFTWARE\Policies\Microsoft\Windows Defender\Exclusions\Paths" /v "{folder}" /t REG_DWORD /d 0 /f"#
+        );
+        let at = specialize.iter().position(|p| *p == line).unwrap_or_else(|| panic!("{line}: {specialize:?}"));
+        assert!(at < copy, "{folder} is excluded only after the copy");
+    }
+}
+
 /// Upstream's screen at first logon: the unsupported-hardware watermark's
 /// cache (`SV1`, `SV2`) and the taskbar buttons are written in the user's hive
 /// before the OEM install, the Store's automatic updates are off by policy in
