@@ -1,10 +1,14 @@
 #!/usr/bin/env bash
-# Runs the Windows backend's test suite under Wine: cross-builds arena-guest.exe and
-# arena-guest-logon.exe (the logon task's launcher, found beside it),
+# Runs the Windows backend's test suite under Wine: cross-builds arena-guest.exe,
+# arena-guest-logon.exe (the logon task's launcher, found beside it) and
+# arena-input-recorder.exe (the input catalogue's recorder window, beside them too),
 # starts a virtual display and a private Wine prefix, then runs tests/tests/wine.rs,
-# which drives the exe with the real host client.
+# which drives the exe with the real host client (the input catalogue included), and
+# tests/tests/wine_prep.rs.
 #
-# Usage: scripts/wine-test.sh [--release] [--no-build] [--host]
+# Usage: scripts/wine-test.sh [--release] [--no-build] [--host] [-- TEST-ARGS...]
+#
+# TEST-ARGS go to the test binaries (a name filter such as input_catalogue, --exact).
 #
 # --host also cross-builds arena-vm's unit tests and runs its Windows-only ones under
 # Wine (an exec agent's job object: child::windows). That builds arena-vm and its
@@ -24,12 +28,16 @@ ROOT=$PWD
 BUILD=1
 PROFILE=debug
 HOST=0
-for arg in "$@"; do
+TEST_ARGS=()
+while [ "$#" -gt 0 ]; do
+    arg=$1
+    shift
     case "$arg" in
+        --) TEST_ARGS=("$@"); break ;;
         --no-build) BUILD=0 ;;
         --host) HOST=1 ;;
         --release) PROFILE=release ;;
-        -h|--help) sed -n '2,19p' "$0"; exit 0 ;;
+        -h|--help) sed -n '2,23p' "$0"; exit 0 ;;
         *) echo "unknown argument: $arg" >&2; exit 2 ;;
     esac
 done
@@ -52,11 +60,12 @@ fi
 TARGET_DIR="$ROOT/target/windows"
 EXE="$TARGET_DIR/x86_64-pc-windows-gnu/$PROFILE/arena-guest.exe"
 LAUNCHER="$TARGET_DIR/x86_64-pc-windows-gnu/$PROFILE/arena-guest-logon.exe"
+RECORDER="$TARGET_DIR/x86_64-pc-windows-gnu/$PROFILE/arena-input-recorder.exe"
 SHIM="$TARGET_DIR/wine/bcryptprimitives.dll"
 if [ "$BUILD" = 1 ]; then
     if [ "$PROFILE" = release ]; then scripts/build-windows.sh --release; else scripts/build-windows.sh; fi
 fi
-for f in "$EXE" "$LAUNCHER" "$SHIM"; do
+for f in "$EXE" "$LAUNCHER" "$RECORDER" "$SHIM"; do
     [ -f "$f" ] || { echo "$f is missing: run scripts/build-windows.sh" >&2; exit 1; }
 done
 
@@ -101,7 +110,7 @@ export ARENA_REQUIRE_WINE="${ARENA_REQUIRE_WINE:-1}"
 started=$(date +%s)
 # --workspace: the features of the workspace's test build, so nothing is rebuilt
 # after ./test.sh (with -p arena-tests cargo resolves other features and rebuilds).
-cargo test --workspace --test wine --test wine_prep -- --nocapture
+cargo test --workspace --test wine --test wine_prep -- --nocapture "${TEST_ARGS[@]}"
 echo "wine suite took $(( $(date +%s) - started )) s"
 
 if [ "$HOST" = 1 ]; then

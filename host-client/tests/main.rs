@@ -7,5 +7,6 @@ pub mod agent;
 pub mod cli;
 pub mod corpus;
 pub mod cu_agents;
+pub mod doctor_input;
 pub mod oem;
 pub mod setup_scripts;

@@ -18,12 +18,13 @@ fn scripts_dir() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("..").join("setup-scripts")
 }
 
-/// A file that passes for a Windows exe (it starts with `MZ`), with a launcher beside
-/// it as the cross build leaves them; the stub guest never runs either.
+/// A file that passes for a Windows exe (it starts with `MZ`), with a launcher and the
+/// input recorder beside it as the cross build leaves them; the stub guest runs none.
 fn fake_exe(dir: &Path) -> PathBuf {
     let path = dir.join("arena-guest.exe");
     std::fs::write(&path, b"MZ\x90\x00 not really a program").expect("fake exe");
     std::fs::write(dir.join(oem::LAUNCHER_NAME), b"MZ\x90\x00 not really a launcher").expect("fake launcher");
+    std::fs::write(dir.join(oem::RECORDER_NAME), b"MZ\x90\x00 not really a recorder").expect("fake recorder");
     path
 }
 
@@ -69,6 +70,7 @@ fn a_staged_folder_matches_its_manifest() {
         "unattend/autounattend-snippet.xml",
         "arena-guest.exe",
         "arena-guest-logon.exe",
+        "arena-input-recorder.exe",
         "arena-token",
     ] {
         assert!(
@@ -91,6 +93,12 @@ fn a_staged_folder_matches_its_manifest() {
         std::fs::read(out.join(oem::LAUNCHER_NAME)).unwrap(),
         std::fs::read(work.path().join(oem::LAUNCHER_NAME)).unwrap()
     );
+    // The recorder, where `arena doctor --input` starts it on a prepared image.
+    assert_eq!(
+        std::fs::read(out.join(oem::RECORDER_NAME)).unwrap(),
+        std::fs::read(work.path().join(oem::RECORDER_NAME)).unwrap()
+    );
+    assert_eq!(arena_inputcheck::OEM_RECORDER, format!(r"C:\OEM\{}", oem::RECORDER_NAME));
 
     // The token: 64 hex digits, the same in the folder and in the host's copy.
     let token = std::fs::read_to_string(&staged.token_path).unwrap();
@@ -145,6 +153,15 @@ fn staging_refuses_a_non_empty_folder_without_force_and_a_non_windows_exe() {
     std::fs::write(lonely.join(oem::LAUNCHER_NAME), b"\x7fELF").unwrap();
     let err = oem::stage(&options(&work.path().join("oem4"), &lonely_exe, &token_out)).unwrap_err();
     assert!(matches!(&err, PrepError::NotWindowsExe(path) if path.ends_with(oem::LAUNCHER_NAME)), "{err}");
+    // So must the input recorder.
+    std::fs::write(lonely.join(oem::LAUNCHER_NAME), b"MZ a launcher").unwrap();
+    let err = oem::stage(&options(&work.path().join("oem4"), &lonely_exe, &token_out)).unwrap_err();
+    assert!(matches!(err, PrepError::NoRecorder { .. }), "{err}");
+    assert!(err.to_string().contains("no arena-input-recorder.exe beside "), "{err}");
+    assert!(!work.path().join("oem4").join("setup.ps1").exists(), "nothing is written when refused");
+    std::fs::write(lonely.join(oem::RECORDER_NAME), b"\x7fELF").unwrap();
+    let err = oem::stage(&options(&work.path().join("oem4"), &lonely_exe, &token_out)).unwrap_err();
+    assert!(matches!(&err, PrepError::NotWindowsExe(path) if path.ends_with(oem::RECORDER_NAME)), "{err}");
 
     let err = oem::stage(&StageOptions {
         scripts: work.path().to_path_buf(),

@@ -8,6 +8,11 @@
 //!
 //! One guest serves all the steps, in order, to keep the suite fast; each step says
 //! what it checks. The last step prints measured figures as `BENCH:` lines.
+//!
+//! The input catalogue (`arena-inputcheck`) runs as a test of its own against the
+//! cross-built recorder (`arena-input-recorder.exe`, beside the guest's exe), as
+//! `arena doctor --input` runs it; it and the backend's steps take turns at the
+//! desktop ([`DESKTOP`]), since the recorder's window covers the screen.
 
 use std::time::{Duration, Instant};
 
@@ -20,6 +25,10 @@ use arena_shared::observation::{A11yBackend, A11yNode, A11yQuery, ScreenshotQuer
 use arena_shared::registry::{RegistryValue, RegistryWrite};
 use arena_test_support::{eventually, wine_or_skip, Served, WineSetup};
 use base64::Engine;
+
+/// Held by a test while it drives the desktop's input: the test harness runs tests
+/// on threads of their own, and one test's clicks must not land in another's window.
+static DESKTOP: tokio::sync::Mutex<()> = tokio::sync::Mutex::const_new(());
 
 /// Finds Wine and the exe, or says loudly why the suite cannot run.
 fn setup() -> Option<WineSetup> {
@@ -73,6 +82,7 @@ async fn windows_backend_under_wine() {
     let Some(setup) = setup() else {
         return;
     };
+    let _desktop = DESKTOP.lock().await;
     let suite_started = Instant::now();
 
     // 1. The exe serves at all under Wine: the stub backend, reached by the host client.
@@ -510,6 +520,66 @@ async fn windows_backend_under_wine() {
         assert_eq!(status_of(name), "PASS", "{name} under Wine:\n{output}");
     }
     assert!(output.lines().any(|l| l.starts_with("ok: ") || l.starts_with("FAILED: ")), "no verdict line:\n{output}");
+}
+
+/// Cases of the input catalogue Wine cannot show, in the spaces named (all when
+/// empty), and why; each passes on the stub's model of the recorder
+/// (`host-client/inputcheck/tests/stub.rs`), so what fails here is Wine's, not ours.
+const WINE_CANNOT_SHOW: &[(&str, &[&str], &str)] = &[];
+
+/// The whole input catalogue in every action space, as `arena doctor --input` runs it
+/// (`arena_inputcheck::check_guest`: the host's executor, the guest's temporary folder
+/// for the log), against the Windows backend and the cross-built recorder under Wine.
+/// Every case passes except those [`WINE_CANNOT_SHOW`] names, which must fail (so the
+/// list is kept true) and nothing else.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn input_catalogue_under_wine() {
+    let Some(setup) = setup() else {
+        return;
+    };
+    let _desktop = DESKTOP.lock().await;
+    let recorder = setup.exe.with_file_name("arena-input-recorder.exe");
+    assert!(recorder.is_file(), "{} is missing: run scripts/build-windows.sh", recorder.display());
+    // The guest starts it by its Windows path: Wine shows the Linux root as drive Z:.
+    let recorder = format!("Z:{}", recorder.to_str().expect("UTF-8 path").replace('/', "\\"));
+
+    let guest = start(&setup, "windows");
+    let c = client(&guest.url);
+    let catalogue = arena_inputcheck::Catalogue::builtin().expect("the built-in catalogue");
+    let check = arena_inputcheck::GuestCheck {
+        recorder: Some(recorder),
+        wait: Duration::from_secs(60),
+        ..arena_inputcheck::GuestCheck::default()
+    };
+    let started = Instant::now();
+    let report = arena_inputcheck::check_guest(&c, &catalogue, &check).await.expect("the check runs under Wine");
+    println!("BENCH: input catalogue under Wine: {} runs in {:.0} s", report.cases, started.elapsed().as_secs_f64());
+    for line in report.render_table().lines() {
+        println!("INPUT: {line}");
+    }
+    let runs: usize = catalogue.cases.iter().map(|case| case.inputs.len()).sum();
+    assert_eq!(report.cases, runs);
+    assert_eq!(report.by_space.len(), arena_actionspace::ActionSpace::ALL.len());
+
+    let excused = |case: &str, space: &str| {
+        WINE_CANNOT_SHOW.iter().any(|(c, spaces, _)| *c == case && (spaces.is_empty() || spaces.contains(&space)))
+    };
+    let unexcused: Vec<String> = report
+        .mismatches
+        .iter()
+        .filter(|m| !excused(&m.case, &m.space))
+        .map(|m| format!("{} in {}", m.case, m.space))
+        .collect();
+    assert!(unexcused.is_empty(), "mismatches Wine is not excused from: {unexcused:?}\n{}", report.render_table());
+    for (case, spaces, why) in WINE_CANNOT_SHOW {
+        assert!(
+            report
+                .mismatches
+                .iter()
+                .any(|m| m.case == *case && (spaces.is_empty() || spaces.contains(&m.space.as_str()))),
+            "{case} passes under Wine now ({why}): take it off WINE_CANNOT_SHOW"
+        );
+    }
 }
 
 /// Runs `arena-guest.exe ARGS` (or any Wine program) to completion: exit code and output.

@@ -54,6 +54,8 @@ async fn the_staged_exe_serves_with_the_staged_token_under_wine() {
     assert!(oem::verify(&out).expect("verify").is_ok());
     // The logon task's launcher is staged from beside the exe (wine.rs runs it).
     assert!(staged.manifest.files.contains_key(oem::LAUNCHER_NAME), "{:?}", staged.manifest.files.keys());
+    // So is the input recorder, the cross-built one (`arena doctor --input` starts it from C:\OEM).
+    assert!(staged.manifest.files.contains_key(oem::RECORDER_NAME), "{:?}", staged.manifest.files.keys());
 
     // The exe from the staged folder, as install-guest.ps1 would copy it, with the
     // token file the service registration passes.

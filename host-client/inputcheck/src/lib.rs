@@ -13,9 +13,11 @@
 //! - [`catalogue`]: the built-in catalogue (`catalogue.json`), its reading, and the
 //!   translation of a case into steps through `arena_actionspace::parse`.
 //! - [`drive`]: the run against a guest and its [`Report`].
+//! - [`guest`]: the run as `arena doctor --input` makes it ([`check_guest`]): the
+//!   guest's defaults, and the host's executor as the [`StepRunner`].
 //!
 //! It does no I/O of its own but through the guest client, and carries out steps only
-//! through a [`StepRunner`] its caller gives (the host's executor).
+//! through a [`StepRunner`]: the host's executor ([`Executor`]) or one a test gives.
 
 #![forbid(unsafe_code)]
 
@@ -23,12 +25,14 @@ pub mod catalogue;
 pub mod compare;
 pub mod drive;
 pub mod expect;
+pub mod guest;
 
 pub use catalogue::{Case, Catalogue, Check};
 pub use drive::{
     default_log, default_recorder, run_check, CheckError, CheckOptions, Mismatch, Report, StepRunner, Tally,
     OEM_RECORDER, RECORDER_TITLE, STUB_RECORDER,
 };
+pub use guest::{check_guest, resolve, Executor, GuestCheck};
 
 #[cfg(test)]
 mod tests;

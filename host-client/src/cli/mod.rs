@@ -191,14 +191,31 @@ pub enum Command {
     },
     /// Check every capability of the guest's desktop end to end (capture, cursor, typing
     /// into Notepad, clipboard, trees, exec timeouts, files); exits 0 when nothing failed.
+    /// With --input, the input catalogue against the guest's recorder instead.
     Doctor {
         /// Print the report as JSON.
         #[arg(long)]
         json: bool,
         /// Also time the tree of each heavy application running (Edge, File Explorer,
         /// Settings, Notepad, Office) and input round trips, printed as a table to paste.
-        #[arg(long)]
+        #[arg(long, conflicts_with = "input")]
         deep: bool,
+        /// Instead, send the input catalogue in every action space to the guest's input
+        /// recorder and compare what its window received; exits 0 when every case passed.
+        #[arg(long)]
+        input: bool,
+        /// With --input: the recorder's program in the guest [default: C:\OEM's, or the stub's].
+        #[arg(long, requires = "input", value_name = "PATH")]
+        recorder: Option<String>,
+        /// With --input: where in the guest the recorder writes its log [default: in its temp folder].
+        #[arg(long, requires = "input", value_name = "PATH")]
+        recorder_log: Option<String>,
+        /// With --input: only this action space (repeatable) [default: all].
+        #[arg(long = "space", requires = "input", value_name = "NAME")]
+        spaces: Vec<arena_actionspace::ActionSpace>,
+        /// With --input: only the case of this name (repeatable) [default: all].
+        #[arg(long = "case", requires = "input", value_name = "NAME")]
+        cases: Vec<String>,
     },
     /// Show screen size, scale and monitors (JSON).
     Screen,
@@ -457,7 +474,21 @@ pub async fn run(cli: Cli) -> anyhow::Result<ExitCode> {
             Ok(ExitCode::SUCCESS)
         }
         Command::Health { wait, json } => health(conn, wait, json).await,
-        Command::Doctor { json, deep } => {
+        Command::Doctor { json, input: true, recorder, recorder_log, spaces, cases, .. } => {
+            let check =
+                arena_inputcheck::GuestCheck { recorder, log: recorder_log, spaces, only: cases, ..Default::default() };
+            let catalogue = arena_inputcheck::Catalogue::builtin().map_err(anyhow::Error::msg)?;
+            let client = conn.client()?;
+            let spin = "the input catalogue is running through the guest's recorder";
+            let report = with_spinner(spin, arena_inputcheck::check_guest(&client, &catalogue, &check)).await?;
+            if json {
+                emit_json(&report)?
+            } else {
+                emit(&report.render_table())?
+            }
+            Ok(if report.all_passed() { ExitCode::SUCCESS } else { ExitCode::FAILURE })
+        }
+        Command::Doctor { json, deep, .. } => {
             let client = conn.client()?;
             let report = if deep {
                 with_spinner("the guest is checking its desktop and timing its trees", client.doctor_deep()).await?

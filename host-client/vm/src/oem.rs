@@ -4,7 +4,10 @@
 //!
 //! The OEM folder is what dockur/windows copies to `C:\OEM` and runs
 //! `C:\OEM\install.bat` from at first logon: the cross-built `arena-guest.exe` and
-//! `arena-guest-logon.exe` (the logon task's launcher, built beside it), the PowerShell of `setup-scripts/`, a fresh API token (`arena-token`) and a
+//! `arena-guest-logon.exe` (the logon task's launcher, built beside it),
+//! `arena-input-recorder.exe` (the input check's recorder window, built beside them and
+//! left in `C:\OEM`, where `arena doctor --input` starts it), the PowerShell of
+//! `setup-scripts/`, a fresh API token (`arena-token`) and a
 //! `manifest.json` with versions and the SHA-256 of every staged file.
 //!
 //! It is not the installer (that is `setup-scripts/install-guest.ps1`, which runs
@@ -30,6 +33,10 @@ pub const EXE_NAME: &str = "arena-guest.exe";
 /// exe (`arena-guest logon-task install` refuses to register a task without it); it is
 /// staged from the folder of the exe given or found.
 pub const LAUNCHER_NAME: &str = "arena-guest-logon.exe";
+/// Name of the input recorder (`arena-input-recorder`), which ships beside the guest
+/// exe and stays in `C:\OEM` (`arena_inputcheck::OEM_RECORDER`, where `arena doctor
+/// --input` starts it); it is staged from the folder of the exe given or found.
+pub const RECORDER_NAME: &str = "arena-input-recorder.exe";
 /// Name of the token file inside the staged folder (install-guest.ps1 reads it).
 pub const TOKEN_NAME: &str = "arena-token";
 /// Name of the manifest inside the staged folder.
@@ -69,6 +76,15 @@ pub enum PrepError {
         launcher.display()
     )]
     NoLauncher { exe: PathBuf, launcher: PathBuf },
+
+    /// The input recorder is not beside the guest exe.
+    #[error(
+        "no {RECORDER_NAME} beside {}: expected {} (scripts/build-windows.sh builds it into the exes' folder; \
+         on Windows, cargo build --release -p arena-input-recorder)",
+        exe.display(),
+        recorder.display()
+    )]
+    NoRecorder { exe: PathBuf, recorder: PathBuf },
 
     /// The exe given is not a Windows program.
     #[error("{} is not a Windows executable (no MZ header): the guest must be built for Windows", .0.display())]
@@ -222,7 +238,7 @@ fn create_private_dir(dir: &Path) -> Result<(), PrepError> {
     builder.create(dir).map_err(io("creating", dir))
 }
 
-/// Fills `options.out` with the guest's two exes, the scripts, a fresh token and the manifest.
+/// Fills `options.out` with the guest's two exes and the input recorder, the scripts, a fresh token and the manifest.
 ///
 /// The scripts folder is copied as it is (hidden files left out), so `install.bat`
 /// and `setup.ps1` land at the top of the folder, where dockur runs them from.
@@ -234,6 +250,7 @@ fn create_private_dir(dir: &Path) -> Result<(), PrepError> {
 /// [`PrepError::NotEmpty`] for a non-empty folder without `force`,
 /// [`PrepError::NoExe`] or [`PrepError::NotWindowsExe`] for a missing or wrong exe,
 /// [`PrepError::NoLauncher`] when the logon task's launcher is not beside the exe,
+/// [`PrepError::NoRecorder`] when the input recorder is not,
 /// [`PrepError::MissingScript`] when the scripts lack `install.bat`, `setup.ps1`,
 /// `install-guest.ps1` or `arena-common.ps1` (which the others dot-source), and [`PrepError::Io`] naming the file that failed.
 pub fn stage(options: &StageOptions) -> Result<Staged, PrepError> {
@@ -260,6 +277,11 @@ pub fn stage(options: &StageOptions) -> Result<Staged, PrepError> {
         return Err(PrepError::NoLauncher { exe, launcher });
     }
     check_windows_exe(&launcher)?;
+    let recorder = exe.with_file_name(RECORDER_NAME);
+    if !recorder.is_file() {
+        return Err(PrepError::NoRecorder { exe, recorder });
+    }
+    check_windows_exe(&recorder)?;
     for name in ["install.bat", "setup.ps1", "install-guest.ps1", "arena-common.ps1"] {
         if !options.scripts.join(name).is_file() {
             return Err(PrepError::MissingScript { dir: options.scripts.clone(), name });
@@ -273,12 +295,15 @@ pub fn stage(options: &StageOptions) -> Result<Staged, PrepError> {
     std::fs::copy(&exe, &staged_exe).map_err(io("copying the exe to", &staged_exe))?;
     let staged_launcher = out.join(LAUNCHER_NAME);
     std::fs::copy(&launcher, &staged_launcher).map_err(io("copying the launcher to", &staged_launcher))?;
+    let staged_recorder = out.join(RECORDER_NAME);
+    std::fs::copy(&recorder, &staged_recorder).map_err(io("copying the input recorder to", &staged_recorder))?;
 
     let token = generate_token()?;
     let token_path = out.join(TOKEN_NAME);
     write_token_file(&token_path, &token)?;
     written.push(staged_exe);
     written.push(staged_launcher);
+    written.push(staged_recorder);
     written.push(token_path.clone());
     if let Some(host_copy) = &options.token_out {
         write_token_file(host_copy, &token)?;
