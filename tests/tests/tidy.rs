@@ -265,6 +265,43 @@ fn modules_in_the_code_map(path: &str, text: &str, architecture: &str) -> Vec<Vi
     out
 }
 
+// ----- test files that no target compiles -----
+
+/// The `tests/*.rs` files of a crate whose `Cargo.toml` turns `autotests` off that are
+/// neither the path of one of its `[[test]]` targets nor a module such a target
+/// declares (`mod NAME;`): cargo would never compile them, and their tests would pass
+/// by never running. `crate_dir` is the crate's folder (`host-client/`), `manifest`
+/// its `Cargo.toml`, `files` every file of the repository.
+fn unlisted_test_files(crate_dir: &str, manifest: &str, files: &Files<'_>) -> Vec<String> {
+    let autotests_off = manifest.lines().any(|l| l.replace(' ', "") == "autotests=false");
+    if !autotests_off {
+        return Vec::new();
+    }
+    let roots: Vec<String> = manifest
+        .lines()
+        .filter_map(|l| l.trim().strip_prefix("path = \"").and_then(|r| r.strip_suffix('"')))
+        .filter(|p| p.starts_with("tests/"))
+        .map(|p| format!("{crate_dir}{p}"))
+        .collect();
+    let declared: Vec<&str> = roots
+        .iter()
+        .filter_map(|r| files.get(r.as_str()))
+        .flat_map(|text| declared_modules(text))
+        .map(|(_, m)| m)
+        .collect();
+    let folder = format!("{crate_dir}tests/");
+    files
+        .keys()
+        .filter_map(|path| path.strip_prefix(folder.as_str()).map(|name| (*path, name)))
+        .filter(|(_, name)| !name.contains('/'))
+        .filter_map(|(path, name)| Some((path, name.strip_suffix(".rs")?)))
+        .filter(|(path, name)| !roots.iter().any(|r| r == path) && !declared.contains(name))
+        .map(|(path, _)| {
+            format!("{path}:1: a test file no [[test]] target compiles (autotests is off: name it in tests/main.rs)")
+        })
+        .collect()
+}
+
 // ----- crates as module trees: import loops and `forbid(unsafe_code)` -----
 
 /// A crate's files, by path relative to the repository, and their texts.
@@ -792,6 +829,14 @@ fn the_repository_is_tidy() {
         problems.extend(import_loops(crate_root, &sources).into_iter().map(|l| format!("{crate_root}: {l}")));
         problems.extend(forbids_unsafe_where_none(crate_root, &sources).map(|rule| format!("{crate_root}:1: {rule}")));
     }
+    for (manifest_path, manifest) in files
+        .iter()
+        .filter(|f| f.ends_with("Cargo.toml"))
+        .filter_map(|f| Some((f.as_str(), std::fs::read_to_string(root.join(f)).ok()?)))
+    {
+        let crate_dir = manifest_path.strip_suffix("Cargo.toml").unwrap_or_default();
+        problems.extend(unlisted_test_files(crate_dir, &manifest, &sources));
+    }
     assert!(checked > 100, "only {checked} files were checked");
     assert!(problems.is_empty(), "{} tidy problems:\n{}", problems.len(), problems.join("\n"));
 }
@@ -1059,4 +1104,22 @@ fn docs_and_comments_name_no_machine_paths() {
 fn tests_are_never_ignored() {
     let text = "#[test]\n#[ignore]\nfn a() {}\n#[test]\n#[should_panic(expected = \"x\")]\nfn b() {}\n// #[ignore] in a comment\n";
     assert_eq!(lines_of(no_ignored_tests("a/tests/x.rs", text)), [2, 5]);
+}
+
+#[test]
+fn a_test_file_no_target_compiles_is_caught() {
+    let manifest = "[package]\nname = \"x\"\nautotests = false\n\n[[test]]\nname = \"suite\"\npath = \"tests/main.rs\"\n\n[[test]]\nname = \"alone\"\npath = \"tests/alone.rs\"\n";
+    let files = [
+        ("x/tests/main.rs", "//! Suite.\npub mod listed;\n"),
+        ("x/tests/listed.rs", "//! Listed.\n"),
+        ("x/tests/alone.rs", "//! Alone.\n"),
+        ("x/tests/forgotten.rs", "//! Forgotten.\n"),
+        ("x/tests/listed/helper.rs", "//! A module of listed.\n"),
+    ];
+    let found = unlisted_test_files("x/", manifest, &files_of(&files));
+    assert_eq!(found.len(), 1, "{found:?}");
+    assert!(found[0].starts_with("x/tests/forgotten.rs:1: "), "{found:?}");
+    // With cargo's own discovery every file is a target of its own.
+    let auto = manifest.replace("autotests = false\n", "");
+    assert!(unlisted_test_files("x/", &auto, &files_of(&files)).is_empty());
 }

@@ -168,7 +168,7 @@ async fn a_restore_puts_the_clock_back_and_the_fleet_sets_it_right() {
     let start = fleet.before_task(&client).await.unwrap().expect("a VM start record");
     let slept = i64::try_from(saved.elapsed().as_millis()).unwrap();
     assert_eq!(start.snapshot.as_deref(), Some(READY_SNAPSHOT));
-    let clock = start.clock.expect("the clock set after the restore");
+    let clock = start.clock.clone().expect("the clock set after the restore");
     assert_eq!(clock.error, None);
     let corrected = clock.corrected_ms.expect("a correction");
     // The restored guest woke at the snapshot's time: behind by at least the sleep.

@@ -23,6 +23,8 @@
 //! The pixel sources are reached asynchronously through [`SomSources`]; the
 //! accessibility proposal alone is [`marks_from_tree`], which needs no I/O.
 
+#![forbid(unsafe_code)]
+
 pub mod a11y;
 pub mod detector;
 mod draw;

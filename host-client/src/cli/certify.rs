@@ -17,7 +17,8 @@ use std::time::Duration;
 use anyhow::Context as _;
 use clap::{Args, Parser};
 
-use super::runs::{self, DifficultyArg, PausesArg, RunArgs};
+use super::run_args::{DifficultyArg, PausesArg, RunArgs};
+use super::runs;
 use super::{emit, Connection};
 use crate::driver::{Guests, Prepared};
 use arena_agents::factory::{self, AgentKind};
@@ -46,7 +47,7 @@ pub struct CertifyArgs {
     #[arg(long, default_value = "certify", value_name = "DIR")]
     pub out: PathBuf,
     #[command(flatten)]
-    pub source: super::runs::GuestSource,
+    pub source: super::run_args::GuestSource,
     /// Step cap per episode (upstream: 15); the floor agents use one step.
     #[arg(long, default_value_t = crate::episode::DEFAULT_MAX_STEPS)]
     pub max_steps: u32,

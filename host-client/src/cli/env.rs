@@ -8,7 +8,7 @@ use std::process::ExitCode;
 
 use clap::{Args, Parser, Subcommand};
 
-use super::runs::{DifficultyArg, GuestSource, PausesArg, RunArgs};
+use super::run_args::{DifficultyArg, GuestSource, PausesArg, RunArgs};
 use super::Connection;
 
 /// `arena env`.

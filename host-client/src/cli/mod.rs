@@ -17,6 +17,7 @@
 //! - [`runs`]: `arena run`, `merge`, `report` and `compare`: their flags resolved into the run driver's plan (`crate::driver`), and what they print.
 //! - `signals`: Ctrl-C and SIGTERM.
 //! - [`preset`]: `--preset` and how a run stands to upstream's.
+//! - [`run_args`]: the flags of `run`, `merge`, `report` and `compare`.
 
 pub mod act;
 pub mod certify;
@@ -29,6 +30,7 @@ pub mod oem;
 pub mod preset;
 pub mod progress;
 pub mod render;
+pub mod run_args;
 pub mod runs;
 pub(crate) mod signals;
 pub mod validate;
@@ -309,18 +311,18 @@ pub enum Command {
     /// Load a task folder and report what each task needs and whether this build supports it.
     Validate(validate::ValidateArgs),
     /// Run tasks over a pool of guests and write result folders and a report.
-    Run(Box<runs::RunArgs>),
+    Run(Box<run_args::RunArgs>),
     /// Merge shard result folders into one, with its summary and report.
-    Merge(runs::MergeArgs),
+    Merge(run_args::MergeArgs),
     /// Rebuild summary.json, summary.md and report.html of a result folder.
-    Report(runs::ReportArgs),
+    Report(run_args::ReportArgs),
     /// Certify a task list: play it with `noop` (DONE at once), `fail` (FAIL at once) and,
     /// where plans exist, the oracle, K times each, and write one certificate per task
     /// (passes without acting, infeasible floor, oracle pass rate, flake rate, guest image).
     Certify(Box<certify::CertifyArgs>),
     /// Compare two result folders task by task: the difference in success rate with a
     /// paired bootstrap interval, and the tasks that did better or worse.
-    Compare(runs::CompareArgs),
+    Compare(run_args::CompareArgs),
     /// Stage an OEM folder for a new Windows image, verify one, or wait for a prepared guest.
     Prep(oem::PrepArgs),
     /// Get the upstream WAA task corpus without cloning WindowsAgentArena.

@@ -6,29 +6,9 @@
 use anyhow::bail;
 
 use super::emit;
-use super::runs::{A11yBackendArg, NaviStyleArg, PausesArg, RefusalsArg, RunArgs};
+use super::run_args::{A11yBackendArg, NaviStyleArg, PausesArg, Preset, RefusalsArg, RunArgs};
 use arena_agents::factory::AgentKind;
 use arena_som::SomOrigin;
-
-/// `--preset`: the rows of the WAA paper's Navi comparison that this project
-/// can run, as upstream's README lists them ("Available Configurations",
-/// microsoft/WindowsAgentArena at 6d39ed88, whose `run-local.sh` takes
-/// `--som-origin` and `--a11y-backend` and passes them to `run.py`).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
-pub enum Preset {
-    /// `--som-origin mixed-omni --a11y-backend uia`: OmniParser with the UIA tree, the paper's best row.
-    PaperMixedOmni,
-    /// `--som-origin omni`: OmniParser alone.
-    PaperOmni,
-    /// `--som-origin oss`: webparse, Grounding DINO and Tesseract OCR, the baseline.
-    PaperOss,
-    /// `--som-origin a11y --a11y-backend uia`: the UIA tree.
-    PaperA11yUia,
-    /// `--som-origin a11y --a11y-backend win32`: the win32 tree, the fastest.
-    PaperA11yWin32,
-    /// `--som-origin mixed-oss --a11y-backend uia`: the `oss` sources with the UIA tree.
-    PaperMixedOss,
-}
 
 /// Upstream's default run, the reference a non-preset Navi run is compared with:
 /// `run.py` and `start_client.sh` at 6d39ed88 (`--som_origin oss`, `--a11y_backend uia`,
@@ -159,7 +139,6 @@ pub(crate) fn reproduction(args: &RunArgs, fast: bool) -> anyhow::Result<Vec<(St
 mod tests {
     use clap::Parser;
 
-    use super::super::runs::RunArgs;
     use super::*;
 
     #[derive(Parser)]

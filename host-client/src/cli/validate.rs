@@ -15,7 +15,7 @@ use std::process::ExitCode;
 use clap::Args;
 use serde::Serialize;
 
-use super::runs::DifficultyArg;
+use super::run_args::DifficultyArg;
 use arena_eval::{getter_supported, metric_supported};
 use arena_task::{load_dir, names, read_index, Difficulty, Task, TaskError};
 

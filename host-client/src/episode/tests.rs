@@ -1,3 +1,7 @@
+//! The episode loop's tests on an in-process stub guest: pauses where upstream
+//! pauses, step logs and their budgets, held keys released, deadlines, retries,
+//! and which failures leave a task unfinished.
+
 use std::collections::VecDeque;
 use std::path::PathBuf;
 

@@ -521,7 +521,8 @@ mod tests {
 
     #[test]
     fn the_hello_schema_lists_the_coordinate_conventions_the_harness_accepts() {
-        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../schemas/agent-protocol/agent-hello.json");
+        let path =
+            std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../schemas/agent-protocol/agent-hello.json");
         let schema: Value = serde_json::from_str(&std::fs::read_to_string(path).expect("the schema")).expect("JSON");
         let listed: Vec<&str> = schema["properties"]["coords"]["enum"]
             .as_array()
