@@ -41,6 +41,12 @@ pub struct Executor<'a> {
     pub options: ExecOptions,
 }
 
+impl std::fmt::Debug for Executor<'_> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Executor").finish_non_exhaustive()
+    }
+}
+
 #[async_trait::async_trait]
 impl StepRunner for Executor<'_> {
     async fn run(&self, steps: &[Step]) -> Result<(), String> {
