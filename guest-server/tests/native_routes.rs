@@ -1324,9 +1324,13 @@ async fn doctor_needs_the_token_and_passes_every_check_on_the_stub() {
         ("exec_timeout", Pass),
         ("files", Pass),
         ("reachability", Info),
+        ("defender", Info),
     ];
     let got: Vec<_> = report.checks.iter().map(|c| (c.name.as_str(), c.status)).collect();
     assert_eq!(got, expected, "{}", report.render_text());
+    // The stub has no Defender: every fact unknown, no detections.
+    let defender = report.check("defender").unwrap();
+    assert!(defender.detail.starts_with("Tamper Protection unknown, real-time protection unknown"), "{defender:?}");
     let close = report.check("window_close").unwrap();
     assert!(close.detail.contains("closed"), "{close:?}");
     // The doctor leaves the desktop as it found it: no Notepad, the clipboard as it was.
