@@ -16,7 +16,7 @@ use std::process::ExitCode;
 use std::time::Duration;
 
 use anyhow::{bail, Context};
-use clap::{Args, ValueEnum};
+use clap::ValueEnum;
 
 use super::preset::reproduction;
 use super::run_args::{
@@ -25,18 +25,13 @@ use super::run_args::{
 };
 use super::{emit, Connection};
 use crate::driver::{self, GuestPlan, Guests, Played, Prepared, RunPlan, VmPlan};
-use crate::run::shard::Shard;
 use crate::run::TaskOrder;
 use arena_actionspace::uitars::UiTarsVersion;
-use arena_actionspace::Coords;
-use arena_agents::cu::openai::SafetyChecks;
-use arena_agents::factory::{AgentKind, AgentOptions};
+use arena_agents::factory::AgentOptions;
 use arena_agents::llm::{ApiKind, Refusals};
 use arena_agents::navi::NaviStyle;
 use arena_results::html::write_report;
 use arena_results::summary::Summary;
-use arena_som::SomOrigin;
-use arena_task::Difficulty;
 use tokio_util::sync::CancellationToken;
 
 fn guests_from_file(path: &Path) -> anyhow::Result<Vec<String>> {
