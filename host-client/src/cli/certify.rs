@@ -127,7 +127,7 @@ pub async fn run(conn: &Connection, args: CertifyArgs) -> anyhow::Result<ExitCod
     let mut unfinished = false;
     for (name, prepared) in runs {
         let count = prepared.tasks.len();
-        let played = match runs::play(prepared, &guests).await {
+        let played = match runs::with_ctrl_c(prepared, &guests).await {
             Ok(played) => played,
             Err(err) => {
                 guests.stop().await;

@@ -105,7 +105,7 @@ pub async fn run(conn: &Connection, args: RunArgs) -> anyhow::Result<ExitCode> {
     let prepared = prepare(&args).await?;
     let guests = start_guests(conn, &args).await?;
     let guest_count = guests.urls.len();
-    let played = play(prepared, &guests).await;
+    let played = with_ctrl_c(prepared, &guests).await;
     guests.stop().await;
     let played = played?;
     let Played { outcome, interrupted, shard } = played;
@@ -167,7 +167,7 @@ pub(crate) async fn prepare(args: &RunArgs) -> anyhow::Result<Prepared> {
 /// # Errors
 ///
 /// As [`driver::play`].
-pub(crate) async fn play(prepared: Prepared, guests: &Guests) -> anyhow::Result<Played> {
+pub(crate) async fn with_ctrl_c(prepared: Prepared, guests: &Guests) -> anyhow::Result<Played> {
     let stop = CancellationToken::new();
     let watcher = tokio::spawn(watch_interrupts(stop.clone()));
     let played = driver::play(prepared, guests, stop).await;
