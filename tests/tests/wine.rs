@@ -534,6 +534,16 @@ const WINE_CANNOT_SHOW: &[(&str, &[&str], &str)] = &[];
 /// list is kept true) and nothing else.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn input_catalogue_under_wine() {
+    // Never yet run under Wine: it joins the CI suite once a run has named what Wine
+    // cannot show (ARENA_WINE_INPUT_CATALOGUE=1 runs it; the skip is counted).
+    if std::env::var("ARENA_WINE_INPUT_CATALOGUE").as_deref() != Ok("1") {
+        arena_test_support::skip(
+            "input_catalogue_under_wine",
+            "ARENA_WINE_INPUT_CATALOGUE is not 1 (the catalogue has not been run under Wine yet)",
+            "ARENA_REQUIRE_WINE_INPUT_CATALOGUE",
+        );
+        return;
+    }
     let Some(setup) = setup() else {
         return;
     };
