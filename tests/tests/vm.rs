@@ -916,14 +916,17 @@ fn bad_input_gets_errors_that_name_it() {
     };
     arena_vm::sidecar::write(&sided, &facts).unwrap();
     let asked = Instant::now();
-    let out = arena()
-        .args(["vm", "start", "--dir"])
-        .arg(dir.path().join("vm-sided"))
-        .arg("--image")
-        .arg(&sided)
-        .args(VM_FLAGS)
-        .output()
-        .unwrap();
+    let start_sided = || {
+        arena()
+            .args(["vm", "start", "--dir"])
+            .arg(dir.path().join("vm-sided"))
+            .arg("--image")
+            .arg(&sided)
+            .args(VM_FLAGS)
+            .output()
+            .unwrap()
+    };
+    let out = start_sided();
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(
         !out.status.success() && err.contains("installed on uefi firmware, this VM has bios: use --vm-firmware uefi"),
@@ -931,14 +934,7 @@ fn bad_input_gets_errors_that_name_it() {
     );
     assert!(asked.elapsed() < Duration::from_secs(30) && !dir.path().join("vm-sided").exists(), "{err}");
     std::fs::write(arena_vm::sidecar::path_for(&sided), "{\"format\": 1}").unwrap();
-    let out = arena()
-        .args(["vm", "start", "--dir"])
-        .arg(dir.path().join("vm-sided"))
-        .arg("--image")
-        .arg(&sided)
-        .args(VM_FLAGS)
-        .output()
-        .unwrap();
+    let out = start_sided();
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(!out.status.success() && err.contains("sided.qcow2.arena.json: not an image sidecar"), "{err}");
 

@@ -451,7 +451,7 @@ const FORCE_RESUME: &str = "force_resume";
 /// How the options recorded in the task folders below `base` differ from `ours`,
 /// one line per option (`name: the folder has A, this run B`); empty for a new
 /// folder or the same options.
-pub(crate) fn option_differences(base: &Path, ours: &BTreeMap<String, String>) -> anyhow::Result<Vec<String>> {
+fn option_differences(base: &Path, ours: &BTreeMap<String, String>) -> anyhow::Result<Vec<String>> {
     if !base.is_dir() {
         return Ok(Vec::new());
     }
