@@ -5,7 +5,7 @@
 //! accessibility Set-of-Marks built from that tree as the host builds it.
 //!
 //! The stub feeds these windows through the same walker and root filter as the
-//! Windows backend (`desktop/a11y_walk.rs`, `desktop/windows/shell.rs`), so what is
+//! Windows backend (`arena-a11y-walk`, `desktop/windows/shell.rs`), so what is
 //! asserted here is what those decide.
 
 use std::path::PathBuf;
@@ -193,7 +193,7 @@ async fn node_values_are_capped_and_the_cut_is_marked() {
     assert!(json.len() < 64 * 1024, "the tree is {} bytes", json.len());
     let value = tree.windows[0].children.iter().find_map(|c| c.value.as_deref()).expect("the document's value");
     assert!(value.starts_with(&"x".repeat(4096)));
-    assert!(value.ends_with(&arena_guest::desktop::a11y_walk::text_cut_marker(200_000 - 4096)), "{}", &value[4090..]);
+    assert!(value.ends_with(&arena_a11y_walk::text_cut_marker(200_000 - 4096)), "{}", &value[4090..]);
     assert!(tree.truncated);
     let reason = tree.windows_walked[0].reason.as_deref().unwrap_or_default();
     assert!(reason.contains("node texts were cut at 4096 characters"), "{reason}");

@@ -6,7 +6,7 @@
 //! Backends are chosen at run time: [`stub`] builds everywhere (and runs inside
 //! the Windows exe too); [`windows`] holds the Windows backend, whose FFI glue is
 //! compiled only for Windows and whose neutral halves everywhere.
-//! [`a11y_walk`] is the accessibility walker every backend feeds its trees through;
+//! `arena_a11y_walk` (its own crate) is the accessibility walker every backend feeds its trees through;
 //! [`uia_health`] decides the UI Automation health stage (and re-creation) for both;
 //! [`defender`] reads Microsoft Defender's state for the doctor.
 //!
@@ -15,7 +15,6 @@
 //! Every point and rectangle is in physical pixels of the virtual screen,
 //! the space a per-monitor DPI-aware process sees.
 
-pub mod a11y_walk;
 pub mod cancel;
 pub mod defender;
 pub mod stub;

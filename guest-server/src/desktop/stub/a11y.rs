@@ -10,7 +10,7 @@
 //! agents read, not a UI Automation provider.
 //!
 //! The budget pruning is not the stub's own: the windows' trees are fed through the
-//! same walker as the Windows backend's ([`crate::desktop::a11y_walk`]), so fair
+//! same walker as the Windows backend's ([`arena_a11y_walk`]), so fair
 //! shares, caps, the bulk fetch's part of a window's time and the `truncated` flag
 //! behave the same in every stub run. A scenario can make UI Automation slow per
 //! window (`bulk_fetch_ms`, `element_ms`) or empty ([`UiaModel`]).
@@ -22,7 +22,7 @@ use arena_shared::observation::{A11yBackend, A11yNode, A11yStates, A11yTree, Tre
 
 use super::input::ICON_PITCH;
 use super::window::{Caption, Dialog, Listings, State, Window, WindowModel, EXPLORER_NAV, RUN_FIELD_LABEL, RUN_PROMPT};
-use crate::desktop::a11y_walk::{self, TreeSource};
+use arena_a11y_walk::{self as a11y_walk, TreeSource};
 use crate::desktop::cancel;
 use crate::desktop::windows::shell;
 use crate::desktop::{DesktopError, DesktopResult};
@@ -293,6 +293,7 @@ struct StubSource<'a> {
 
 impl<'a> TreeSource for StubSource<'a> {
     type Elem = &'a A11yNode;
+    type Error = DesktopError;
 
     fn roots(&mut self, _foreground_only: bool) -> DesktopResult<Vec<(u64, &'a A11yNode)>> {
         // `roots` above already kept only the foreground window when asked to.

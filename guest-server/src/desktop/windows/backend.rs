@@ -142,7 +142,7 @@ impl WindowsDesktop {
             }
             Component::Accessibility => {
                 self.need_desktop("accessibility")?;
-                let tree = crate::desktop::a11y_walk::walk(
+                let tree = arena_a11y_walk::walk(
                     &mut win32_tree::Win32Source::new(),
                     A11yBackend::Win32,
                     &TreeBudget { max_ms: 2_000, ..TreeBudget::WAA },
@@ -282,7 +282,7 @@ impl Desktop for WindowsDesktop {
     ) -> DesktopResult<A11yTree> {
         self.need_desktop("accessibility")?;
         match backend {
-            A11yBackend::Win32 => crate::desktop::a11y_walk::walk(
+            A11yBackend::Win32 => arena_a11y_walk::walk(
                 &mut win32_tree::Win32Source::new(),
                 A11yBackend::Win32,
                 budget,

@@ -23,7 +23,7 @@
 //! error conversion), `window`, `input`, `capture`, `clipboard`, `process`,
 //! `system` (files, registry, wallpaper, ACLs, shutdown), and the two
 //! accessibility sources `win32_tree` and `uia`, which feed the shared walker
-//! [`crate::desktop::a11y_walk`].
+//! [`arena_a11y_walk`].
 //!
 //! The service mode, which starts this backend in the user's session, is not part
 //! of the backend: it lives in [`crate::service`].

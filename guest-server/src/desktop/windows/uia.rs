@@ -44,7 +44,7 @@ use windows::Win32::UI::Accessibility::*;
 use super::sys::{ComApartment, Hwnd};
 use super::window;
 use crate::config::UiaView;
-use crate::desktop::a11y_walk::{self, TreeSource, UiaProps};
+use arena_a11y_walk::{self as a11y_walk, TreeSource, UiaProps};
 use crate::desktop::uia_health::{call_detached, ThreadCap};
 use crate::desktop::uia_process::{self, WorkerAnswer, WorkerProcess, WorkerRequest, SUBCOMMAND};
 use crate::desktop::{DesktopError, DesktopResult};
@@ -321,6 +321,7 @@ const LIVE_CALL_MS: u32 = 1_000;
 
 impl TreeSource for UiaSource<'_> {
     type Elem = IUIAutomationElement;
+    type Error = DesktopError;
 
     fn roots(&mut self, foreground_only: bool) -> DesktopResult<Vec<(u64, IUIAutomationElement)>> {
         let hwnds: Vec<HWND> = if foreground_only { vec![window::foreground()] } else { window::top_level() };

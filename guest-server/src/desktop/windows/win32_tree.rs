@@ -5,7 +5,7 @@
 //! (`IsHungAppWindow`) are not asked at all. Edit controls also get their MSAA value
 //! (`AccessibleObjectFromWindow` + `get_accValue`), as pywinauto's win32 backend reports
 //! it, when the window answered in time. The walk itself is
-//! [`crate::desktop::a11y_walk::walk`].
+//! [`arena_a11y_walk::walk`].
 
 use std::collections::HashSet;
 use std::time::Duration;
@@ -24,7 +24,7 @@ use windows::Win32::UI::WindowsAndMessaging::{
 
 use super::sys::ComApartment;
 use super::window;
-use crate::desktop::a11y_walk::{win32_role, TreeSource, Win32Props};
+use arena_a11y_walk::{win32_role, TreeSource, Win32Props};
 use crate::desktop::DesktopResult;
 
 /// The longest a window may take to answer one message.
@@ -120,6 +120,7 @@ impl Win32Source {
 
 impl TreeSource for Win32Source {
     type Elem = HWND;
+    type Error = crate::desktop::DesktopError;
 
     fn foreground_id(&mut self) -> Option<u64> {
         (!self.foreground.is_invalid()).then(|| super::sys::Hwnd::id(self.foreground))

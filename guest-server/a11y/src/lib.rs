@@ -11,16 +11,18 @@
 //! - `win32`: `EnumWindows`/`EnumChildWindows`, `WM_GETTEXT` with a timeout and MSAA values;
 //! - the stub: its windows' modelled trees, read by reference.
 //!
-//! The Windows sources live in `desktop/windows/`, the stub's in `desktop/stub/a11y.rs`; this module holds the walk, the budget
+//! The Windows sources live in the guest's `desktop/windows/`, the stub's in its `desktop/stub/a11y.rs`; this module holds the walk, the budget
 //! arithmetic and the mapping from raw properties ([`UiaProps`], [`Win32Props`]) to
-//! [`A11yNode`]s, and is tested natively with a fake tree. Nothing here calls the OS.
+//! [`A11yNode`]s, and is tested natively with a fake tree. Nothing here calls the OS,
+//! and nothing here knows the guest server: a source's failures are its own
+//! [`TreeSource::Error`], which the walk only shows.
+
+#![forbid(unsafe_code)]
 
 use std::time::{Duration, Instant};
 
 use arena_shared::geometry::{CoordinateSpace, Rect};
 use arena_shared::observation::{A11yBackend, A11yNode, A11yStates, A11yTree, TreeBudget, WindowWalk};
-
-use super::{DesktopError, DesktopResult};
 
 /// A window that gets less than this many milliseconds is still given this much, so
 /// a share never rounds down to nothing.
@@ -82,6 +84,9 @@ fn cap_node_text(node: &mut A11yNode) -> bool {
 /// cached UIA element); it never leaves the thread the walk runs on.
 pub trait TreeSource {
     type Elem: Clone;
+    /// What a failed enumeration or read says (the backend's own error); the walk
+    /// only shows it, in a skipped window's reason.
+    type Error: std::fmt::Display;
 
     /// The visible top-level windows, topmost first, with their window ids (HWNDs);
     /// only the foreground one when `foreground_only`.
@@ -89,7 +94,7 @@ pub trait TreeSource {
     /// # Errors
     ///
     /// The enumeration failing as a whole.
-    fn roots(&mut self, foreground_only: bool) -> DesktopResult<Vec<(u64, Self::Elem)>>;
+    fn roots(&mut self, foreground_only: bool) -> Result<Vec<(u64, Self::Elem)>, Self::Error>;
 
     /// Windows [`TreeSource::roots`] saw but could not open (UIA: `ElementFromHandle`
     /// failing on a busy window), with the reason: the walk lists them as skipped, so
@@ -111,7 +116,7 @@ pub trait TreeSource {
     /// # Errors
     ///
     /// The window being gone, hung or refusing; the walk then tries [`TreeSource::prepare_partial`].
-    fn prepare(&mut self, root: &Self::Elem, _time: Duration) -> DesktopResult<Self::Elem> {
+    fn prepare(&mut self, root: &Self::Elem, _time: Duration) -> Result<Self::Elem, Self::Error> {
         Ok(root.clone())
     }
 
@@ -127,8 +132,8 @@ pub trait TreeSource {
         &mut self,
         _root: &Self::Elem,
         _time: Duration,
-        failed: DesktopError,
-    ) -> DesktopResult<Self::Elem> {
+        failed: Self::Error,
+    ) -> Result<Self::Elem, Self::Error> {
         Err(failed)
     }
 
@@ -305,7 +310,7 @@ pub fn walk<S: TreeSource>(
     backend: A11yBackend,
     budget: &TreeBudget,
     foreground_only: bool,
-) -> DesktopResult<A11yTree> {
+) -> Result<A11yTree, S::Error> {
     let started = Instant::now();
     let total_time = Duration::from_millis(budget.max_ms);
     let walk_end = started + total_time;
@@ -662,10 +667,24 @@ pub(crate) mod fake {
         }
     }
 
+    /// A fake source's failure, worded as the guest's timeout is.
+    #[derive(Debug)]
+    pub(crate) struct FakeTimeout {
+        pub(crate) op: &'static str,
+        pub(crate) ms: u64,
+    }
+
+    impl std::fmt::Display for FakeTimeout {
+        fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+            write!(f, "{} timed out after {} ms", self.op, self.ms)
+        }
+    }
+
     impl TreeSource for FakeTree {
         type Elem = usize;
+        type Error = FakeTimeout;
 
-        fn roots(&mut self, foreground_only: bool) -> DesktopResult<Vec<(u64, usize)>> {
+        fn roots(&mut self, foreground_only: bool) -> Result<Vec<(u64, usize)>, FakeTimeout> {
             Ok(self
                 .roots
                 .iter()
@@ -682,19 +701,19 @@ pub(crate) mod fake {
             self.foreground.map(|r| r as u64 + 100)
         }
 
-        fn prepare(&mut self, root: &usize, time: Duration) -> DesktopResult<usize> {
+        fn prepare(&mut self, root: &usize, time: Duration) -> Result<usize, FakeTimeout> {
             self.prepared.push((*root, time));
             if self.nodes[*root].slow_bulk {
                 std::thread::sleep(time);
-                return Err(crate::desktop::DesktopError::Timeout { op: "BuildUpdatedCache", ms: millis(time) });
+                return Err(FakeTimeout { op: "BuildUpdatedCache", ms: millis(time) });
             }
             if self.nodes[*root].broken || self.nodes[*root].partial {
-                return Err(crate::desktop::DesktopError::Timeout { op: "prepare", ms: 1 });
+                return Err(FakeTimeout { op: "prepare", ms: 1 });
             }
             Ok(*root)
         }
 
-        fn prepare_partial(&mut self, root: &usize, _time: Duration, failed: DesktopError) -> DesktopResult<usize> {
+        fn prepare_partial(&mut self, root: &usize, _time: Duration, failed: FakeTimeout) -> Result<usize, FakeTimeout> {
             if self.nodes[*root].partial || self.nodes[*root].slow_bulk {
                 Ok(*root)
             } else {
