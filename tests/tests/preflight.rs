@@ -1,7 +1,9 @@
 //! The checks before a run's first task (issue 30, item 5): a mistyped
 //! `--agent-cmd`, an `--agent-url` nobody listens on and a model endpoint that
 //! answers 401 each end `arena run` before the first task, saying why, with no
-//! `result.txt` written; the model endpoint is asked once, never retried.
+//! `result.txt` written; the model endpoint is asked once, never retried. A model
+//! endpoint where nothing listens ends the run there too (issue 43, item 6), and
+//! one that dies once the run is under way stops new tasks within a few calls.
 
 #![cfg(unix)]
 
@@ -18,7 +20,8 @@ fn stub_tasks() -> std::path::PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../tasks/stub")
 }
 
-/// `arena run` on one embedded stub guest with `agent_args`: its exit code and stderr.
+/// `arena run` on one embedded stub guest with `agent_args`: its exit code, and its
+/// stderr followed by its stdout (where the closing list of unfinished tasks goes).
 fn arena_run(out: &Path, agent_args: &[&str]) -> (Option<i32>, String) {
     let exe = workspace_binary("arena-host", "arena").expect("the arena binary");
     let output = Command::new(exe)
@@ -34,7 +37,8 @@ fn arena_run(out: &Path, agent_args: &[&str]) -> (Option<i32>, String) {
         .stdin(Stdio::null())
         .output()
         .expect("arena run runs");
-    (output.status.code(), String::from_utf8_lossy(&output.stderr).into_owned())
+    let text = format!("{}{}", String::from_utf8_lossy(&output.stderr), String::from_utf8_lossy(&output.stdout));
+    (output.status.code(), text)
 }
 
 /// Whether any `result.txt` exists below `dir`.
@@ -121,4 +125,48 @@ fn a_model_endpoint_answering_401_ends_the_run_before_the_first_task() {
     let (code, stderr) = arena_run(&out, &["--agent", "navi", "--llm-url", &url, "--model", "gpt-4o"]);
     assert_ended_before_the_first_task(&out, code, &stderr, "401");
     assert_eq!(requests.load(Ordering::SeqCst), 1, "one request, not retried\n{stderr}");
+}
+
+/// A URL on a loopback port where nothing listens (bound a moment ago, then let go).
+fn dead_model_url() -> String {
+    let port = std::net::TcpListener::bind("127.0.0.1:0").expect("bind").local_addr().expect("addr").port();
+    format!("http://127.0.0.1:{port}/v1")
+}
+
+#[test]
+fn a_model_endpoint_where_nothing_listens_ends_the_run_before_the_first_task() {
+    let tmp = tempfile::tempdir().expect("tmp");
+    let out = tmp.path().join("out");
+    let url = dead_model_url();
+    let (code, stderr) = arena_run(&out, &["--agent", "navi", "--llm-url", &url, "--model", "gpt-4o"]);
+    assert_ended_before_the_first_task(&out, code, &stderr, "nothing answers at the model endpoint");
+    assert!(stderr.contains(&url), "the URL named: {stderr}");
+}
+
+#[test]
+fn a_model_endpoint_dead_during_the_run_stops_new_tasks_after_three_calls() {
+    let tmp = tempfile::tempdir().expect("tmp");
+    let out = tmp.path().join("out");
+    let url = dead_model_url();
+    // No preflight: the endpoint "dies" before the first call. A short retry window
+    // stands for the real one; the calls after the first give up at once.
+    let args = ["--agent", "navi", "--llm-url", &url, "--model", "gpt-4o", "--no-preflight", "--llm-retry", "0.5"];
+    let (code, stderr) = arena_run(&out, &args);
+    assert_eq!(code, Some(2), "unfinished tasks: {stderr}");
+    assert!(
+        stderr.contains("not started: the model endpoint") && stderr.contains("did not answer in 3 calls in a row"),
+        "{stderr}"
+    );
+    assert!(!any_result(&out), "no task is scored: {stderr}");
+    let summary: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).expect("summary.json")).expect("JSON");
+    let tasks = stub_tasks_count();
+    let not_started = stderr.lines().filter(|l| l.contains("not started: the model endpoint")).count();
+    assert!(not_started >= 1 && not_started < tasks, "some tasks never started ({not_started} of {tasks}): {stderr}");
+    assert_eq!(summary["overall"]["successes"], 0, "{summary}");
+}
+
+/// How many tasks `tasks/stub` holds.
+fn stub_tasks_count() -> usize {
+    arena_host::run::load_tasks(&stub_tasks(), arena_task::Difficulty::Normal).expect("the stub tasks").len()
 }

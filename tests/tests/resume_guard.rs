@@ -102,3 +102,38 @@ fn two_agents_get_two_folders_and_resuming_into_another_agents_folder_is_refused
     let summary: serde_json::Value = serde_json::from_str(&summary).expect("JSON");
     assert_eq!(summary["options"]["force_resume"], serde_json::json!(["on"]), "{}", summary["options"]);
 }
+
+#[test]
+fn a_resume_compares_max_steps_difficulty_and_every_trial_folder() {
+    let tmp = tempfile::tempdir().expect("tmp");
+    let tasks = tasks(tmp.path(), "one", &[("settings", "stub-settings-infeasible")]);
+    let a = agent(tmp.path(), "agent-a");
+    let out = tmp.path().join("out");
+    let run = |extra: &[&str]| {
+        let mut args = vec!["--agent-cmd", a.as_str(), "--model", "m"];
+        args.extend_from_slice(extra);
+        arena_run(&tasks, &out, &args)
+    };
+    let (code, stderr) = run(&["--max-steps", "5"]);
+    assert_eq!(code, Some(0), "{stderr}");
+    // The same options resume (nothing to run again)...
+    let (code, stderr) = run(&["--max-steps", "5"]);
+    assert_eq!(code, Some(0), "{stderr}");
+    // ...another step limit or difficulty is another run.
+    let (code, stderr) = run(&["--max-steps", "6"]);
+    assert_ne!(code, Some(0), "refused\n{stderr}");
+    assert!(stderr.contains("max_steps: the folder has 5, this run 6"), "{stderr}");
+    let (code, stderr) = run(&["--max-steps", "5", "--difficulty", "hard"]);
+    assert_ne!(code, Some(0), "refused\n{stderr}");
+    assert!(stderr.contains("difficulty: the folder has normal, this run hard"), "{stderr}");
+
+    // A trial folder other than 0 written with other coordinates: a run of two
+    // trials would resume into it, so it is compared too.
+    let (code, stderr) = run(&["--max-steps", "5", "--trial-id", "1", "--coords", "grid1000"]);
+    assert_eq!(code, Some(0), "{stderr}");
+    let (code, stderr) = run(&["--max-steps", "5", "--trials", "2"]);
+    assert_ne!(code, Some(0), "refused\n{stderr}");
+    let trial_one = Path::new("m").join("1");
+    let named = stderr.lines().find(|l| l.contains("coords: the folder has grid1000, this run pixels"));
+    assert!(named.is_some_and(|l| l.contains(&*trial_one.to_string_lossy())), "trial folder 1 named: {stderr}");
+}

@@ -713,7 +713,12 @@ pub(crate) mod fake {
             Ok(*root)
         }
 
-        fn prepare_partial(&mut self, root: &usize, _time: Duration, failed: FakeTimeout) -> Result<usize, FakeTimeout> {
+        fn prepare_partial(
+            &mut self,
+            root: &usize,
+            _time: Duration,
+            failed: FakeTimeout,
+        ) -> Result<usize, FakeTimeout> {
             if self.nodes[*root].partial || self.nodes[*root].slow_bulk {
                 Ok(*root)
             } else {

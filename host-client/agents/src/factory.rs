@@ -111,6 +111,8 @@ pub struct AgentOptions {
     pub llm_timeout: f64,
     /// `--llm-retry`, seconds.
     pub llm_retry: f64,
+    /// `--llm-unreachable`: made once per run and shared by all its agents' model clients.
+    pub model_down: super::llm::EndpointDown,
     /// `--coords`: the outside agents' convention unless their `hello` names one.
     pub coords: Coords,
     /// `--computer-tool`; `None` lets the model table choose ([`super::cu::models`]).
@@ -347,6 +349,7 @@ fn navi(options: &AgentOptions) -> anyhow::Result<ChosenAgent> {
     config.api = options.llm_api;
     config.timeout = seconds(options.llm_timeout, "--llm-timeout")?;
     config.retry.give_up_after = seconds(options.llm_retry, "--llm-retry")?;
+    config.down = options.model_down.clone();
     // Fail now, not once per task, when the configuration is unusable.
     let probe = NaviAgent::new(config.clone())?;
     let preflight = Some(Preflight::model(probe.client(), chat_probe(&model)));
@@ -363,6 +366,7 @@ fn cu_endpoint(options: &AgentOptions, name: &str) -> anyhow::Result<Endpoint> {
     let mut endpoint = Endpoint::new(&url, &model);
     endpoint.timeout = seconds(options.llm_timeout, "--llm-timeout")?;
     endpoint.retry.give_up_after = seconds(options.llm_retry, "--llm-retry")?;
+    endpoint.down = options.model_down.clone();
     endpoint.max_tokens = options.max_tokens;
     Ok(endpoint)
 }

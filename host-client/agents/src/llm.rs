@@ -63,6 +63,112 @@ impl ApiKind {
     }
 }
 
+/// What a run does about a model endpoint where nothing answers (the connection
+/// refused, the host name not resolving): `--llm-unreachable`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Unreachable {
+    /// The preflight stops the run before any task; during the run, once a call has
+    /// waited its whole retry window for it, later calls give up at their first
+    /// refused try, and after [`EndpointDown::STOP_AFTER`] such calls in a row no
+    /// new task starts (those left are unfinished, and the run says why).
+    #[default]
+    Stop,
+    /// Every call waits its whole retry window, as for any other failure.
+    Wait,
+}
+
+impl Unreachable {
+    /// `stop` or `wait`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Unreachable::Stop => "stop",
+            Unreachable::Wait => "wait",
+        }
+    }
+}
+
+/// Whether a run's model endpoint is down for good, shared by every client made
+/// from one run's agent options (clones share it), so that a dead endpoint ends the
+/// run instead of costing each task its whole retry window ([`Unreachable`]).
+#[derive(Debug, Clone, Default)]
+pub struct EndpointDown(std::sync::Arc<DownState>);
+
+#[derive(Debug, Default)]
+struct DownState {
+    policy: Unreachable,
+    /// Calls in a row, over all clients, that gave up with nothing answering.
+    given_up: std::sync::atomic::AtomicU32,
+    /// Why the run starts no new task, once it is so.
+    why: std::sync::OnceLock<String>,
+    tripped: tokio::sync::Notify,
+}
+
+impl PartialEq for EndpointDown {
+    /// The same shared state.
+    fn eq(&self, other: &EndpointDown) -> bool {
+        std::sync::Arc::ptr_eq(&self.0, &other.0)
+    }
+}
+
+impl EndpointDown {
+    /// Calls in a row that give up with the endpoint unreachable before the run
+    /// starts no new task: the first waits its retry window, the others fail at once.
+    pub const STOP_AFTER: u32 = 3;
+
+    /// A fresh state with `policy`.
+    pub fn new(policy: Unreachable) -> EndpointDown {
+        EndpointDown(std::sync::Arc::new(DownState { policy, ..DownState::default() }))
+    }
+
+    /// The policy it was made with.
+    pub fn policy(&self) -> Unreachable {
+        self.0.policy
+    }
+
+    /// Why no new task may start, once the endpoint is down for good.
+    pub fn why(&self) -> Option<&str> {
+        self.0.why.get().map(String::as_str)
+    }
+
+    /// Resolves, with the reason, when the endpoint is found down for good.
+    pub async fn tripped(&self) -> String {
+        loop {
+            // Registered before the check, so a trip in between is not missed.
+            let notified = self.0.tripped.notified();
+            if let Some(why) = self.why() {
+                return why.to_owned();
+            }
+            notified.await;
+        }
+    }
+
+    /// Whether an earlier call already gave up with nothing answering (and none answered since).
+    fn gave_up_before(&self) -> bool {
+        self.0.policy == Unreachable::Stop && self.0.given_up.load(std::sync::atomic::Ordering::SeqCst) > 0
+    }
+
+    /// A call gave up with nothing answering at `endpoint`.
+    fn gave_up(&self, endpoint: &str, reason: &str) {
+        if self.0.policy == Unreachable::Wait {
+            return;
+        }
+        let calls = self.0.given_up.fetch_add(1, std::sync::atomic::Ordering::SeqCst) + 1;
+        if calls >= Self::STOP_AFTER {
+            let why = format!(
+                "the model endpoint {endpoint} did not answer in {calls} calls in a row ({reason}); no new task starts (--llm-unreachable wait keeps trying)"
+            );
+            if self.0.why.set(why).is_ok() {
+                self.0.tripped.notify_waiters();
+            }
+        }
+    }
+
+    /// A call was answered: the count starts again.
+    fn answered(&self) {
+        self.0.given_up.store(0, std::sync::atomic::Ordering::SeqCst);
+    }
+}
+
 /// How long and how often a failing call is tried again.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct RetryPolicy {
@@ -147,6 +253,8 @@ pub struct ModelClient {
     headers: Vec<(String, String)>,
     /// The tokens and time of the answers since the last [`ModelClient::take_usage`].
     usage: UsageMeter,
+    /// The run's view of the endpoint being down, shared with the run's other clients.
+    down: EndpointDown,
 }
 
 /// What a client's answers cost since it was last read; a clone starts from
@@ -179,6 +287,8 @@ struct Failure {
     wait_at_least: Option<Duration>,
     /// The model refused, with this text ([`Refusals::Unfinished`]).
     refused: Option<String>,
+    /// Nothing answered: the connection was refused or the host name did not resolve.
+    unreachable: bool,
 }
 
 /// An image as a data URL (`data:<mime>;base64,<bytes>`), as every vendor's API
@@ -241,7 +351,15 @@ impl ModelClient {
             clock: std::sync::Arc::new(arena_setup::RealClock),
             headers: Vec::new(),
             usage: UsageMeter::default(),
+            down: EndpointDown::default(),
         })
+    }
+
+    /// The same client sharing `down` with the run's other clients ([`Unreachable`]).
+    #[must_use]
+    pub fn with_down(mut self, down: EndpointDown) -> ModelClient {
+        self.down = down;
+        self
     }
 
     /// The same client sending `name: value` with every request.
@@ -321,6 +439,7 @@ impl ModelClient {
                     let mut usage = super::Usage::of_response(&answer).unwrap_or_default();
                     usage.model_ms = started.elapsed().as_millis() as u64;
                     self.usage.add(&usage);
+                    self.down.answered();
                     return Ok((answer, tries));
                 }
                 Err(failure) => failure,
@@ -328,11 +447,27 @@ impl ModelClient {
             if let Some(text) = failure.refused {
                 return Err(AgentError::Refused { endpoint: self.endpoint.clone(), text });
             }
+            if failure.unreachable && self.down.gave_up_before() {
+                // An earlier call waited its whole window for this endpoint and
+                // nothing has answered since: this one does not wait again.
+                self.down.gave_up(&self.endpoint, &failure.reason);
+                let why = self.down.why().map_or_else(String::new, |why| format!("; {why}"));
+                return Err(AgentError::Model {
+                    endpoint: self.endpoint.clone(),
+                    reason: format!(
+                        "{} (still nothing answering after an earlier call's whole retry window){why}",
+                        failure.reason
+                    ),
+                });
+            }
             let pause = rand::rng().random_range(Duration::ZERO..=delay).max(failure.wait_at_least.unwrap_or_default());
             // Time spent waiting counts against the budget (the tries themselves are
             // bounded by the call timeout), so a fake clock sees the same decisions.
             if !failure.transient || waited + pause > self.retry.give_up_after {
                 let why = if failure.transient { format!(" (gave up after {tries} tries)") } else { String::new() };
+                if failure.unreachable {
+                    self.down.gave_up(&self.endpoint, &failure.reason);
+                }
                 return Err(AgentError::Model {
                     endpoint: self.endpoint.clone(),
                     reason: format!("{}{why}", failure.reason),
@@ -347,7 +482,8 @@ impl ModelClient {
 
     /// One minimal request before a run's first task (`arena run`'s preflight),
     /// never tried again: `Err` naming the endpoint and status when it answers
-    /// 401, 403 or 404 (a wrong key, model or URL, which no retry mends);
+    /// 401, 403 or 404 (a wrong key, model or URL, which no retry mends), or when
+    /// nothing answers there and the policy is [`Unreachable::Stop`];
     /// `Ok(Some(note))` for any other failure (the run goes on and its own calls
     /// retry as usual); `Ok(None)` when it answered.
     ///
@@ -357,6 +493,13 @@ impl ModelClient {
     pub async fn preflight(&self, body: &Value) -> Result<Option<String>, String> {
         let response = match self.request(body).send().await {
             Ok(response) => response,
+            Err(err) if err.is_connect() && self.down.policy() == Unreachable::Stop => {
+                return Err(format!(
+                    "nothing answers at the model endpoint {}: {} (is the model server running and the URL right? --llm-unreachable wait goes on anyway)",
+                    self.endpoint,
+                    error_chain(&err)
+                ));
+            }
             Err(err) => return Ok(Some(format!("{}: {}", self.endpoint, error_chain(&err)))),
         };
         let status = response.status();
@@ -393,8 +536,15 @@ impl ModelClient {
 
     async fn try_once(&self, body: &Value, chat: bool) -> Result<Value, Failure> {
         let request = self.request(body);
-        let transient = |reason: String| Failure { reason, transient: true, wait_at_least: None, refused: None };
-        let response = request.send().await.map_err(|e| transient(error_chain(&e)))?;
+        let transient = |reason: String| Failure {
+            reason,
+            transient: true,
+            wait_at_least: None,
+            refused: None,
+            unreachable: false,
+        };
+        let response =
+            request.send().await.map_err(|e| Failure { unreachable: e.is_connect(), ..transient(error_chain(&e)) })?;
         let status = response.status();
         let wait_at_least = retry_after(response.headers());
         // An answer past the limit is refused (not tried again: the endpoint would
@@ -404,7 +554,13 @@ impl ModelClient {
             Ok(body) => body,
             Err(super::body::BodyError::Read(err)) => return Err(transient(err)),
             Err(err @ super::body::BodyError::TooLong { .. }) => {
-                return Err(Failure { reason: err.to_string(), transient: false, wait_at_least: None, refused: None });
+                return Err(Failure {
+                    reason: err.to_string(),
+                    transient: false,
+                    wait_at_least: None,
+                    refused: None,
+                    unreachable: false,
+                });
             }
         };
         if !status.is_success() {
@@ -415,6 +571,7 @@ impl ModelClient {
                 transient: matches!(code, 408 | 409 | 429) || status.is_server_error(),
                 wait_at_least,
                 refused: None,
+                unreachable: false,
             });
         }
         let value: Value = serde_json::from_slice(&body)
@@ -429,6 +586,7 @@ impl ModelClient {
                     transient: false,
                     wait_at_least: None,
                     refused: Some(text),
+                    unreachable: false,
                 });
             }
         }
@@ -438,6 +596,7 @@ impl ModelClient {
                 transient: false,
                 wait_at_least: None,
                 refused: None,
+                unreachable: false,
             });
         }
         Ok(value)

@@ -61,6 +61,8 @@ pub struct NaviConfig {
     pub timeout: Duration,
     /// How long a failing model is tried again before the task is left unfinished.
     pub retry: RetryPolicy,
+    /// The run's view of the endpoint being down (`--llm-unreachable`), shared by its agents.
+    pub down: llm::EndpointDown,
     /// How many previous steps the prompt's action history shows (upstream: 15).
     pub max_history: usize,
     /// The message layout and reply rules.
@@ -102,6 +104,7 @@ impl NaviConfig {
             api: None,
             timeout: Duration::from_secs(120),
             retry: RetryPolicy::default(),
+            down: llm::EndpointDown::default(),
             max_history: 15,
             style: NaviStyle::default(),
             waa_prompts: None,
@@ -250,7 +253,8 @@ impl NaviAgent {
         }
         let api = config.api.unwrap_or_else(|| ApiKind::detect(&config.base_url));
         let client = ModelClient::new(&config.base_url, api, config.resolved_key(), config.timeout, config.retry)?
-            .with_refusals(config.refusals);
+            .with_refusals(config.refusals)
+            .with_down(config.down.clone());
         let memory = empty_memory(&config);
         let som = SomSources::new(config.som.clone()).map_err(|e| AgentError::Config(e.to_string()))?;
         Ok(NaviAgent {

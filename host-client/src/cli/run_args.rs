@@ -104,6 +104,13 @@ pub struct RunArgs {
     /// in seconds of waiting, before the task is left unfinished.
     #[arg(long, default_value_t = 300.0, value_name = "SECONDS")]
     pub llm_retry: f64,
+    /// Model agents: a model endpoint where nothing answers (connection refused, a
+    /// host name that does not resolve). `stop`: the preflight ends the run before
+    /// any task, and during the run, once one call has waited its --llm-retry window
+    /// for it, later calls give up at once and after three such calls in a row no new
+    /// task starts. `wait`: every call waits its whole window.
+    #[arg(long, value_enum, default_value_t = LlmUnreachable::Stop, value_name = "POLICY")]
+    pub llm_unreachable: LlmUnreachable,
     /// What the coordinates of agents that answer in pyautogui or `computer_13` are
     /// measured in: `pixels`, `fraction` (0 to 1) or `grid1000` (0 to 1000). The
     /// computer-use agents use their model's own convention. Recorded in the results.
@@ -390,6 +397,22 @@ pub enum LlmApi {
     Auto,
     Openai,
     Azure,
+}
+
+/// `--llm-unreachable`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum LlmUnreachable {
+    Stop,
+    Wait,
+}
+
+impl LlmUnreachable {
+    pub fn policy(self) -> arena_agents::llm::Unreachable {
+        match self {
+            LlmUnreachable::Stop => arena_agents::llm::Unreachable::Stop,
+            LlmUnreachable::Wait => arena_agents::llm::Unreachable::Wait,
+        }
+    }
 }
 
 /// `--order`.

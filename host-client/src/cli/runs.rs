@@ -75,6 +75,7 @@ impl RunArgs {
             },
             llm_timeout: self.llm_timeout,
             llm_retry: self.llm_retry,
+            model_down: arena_agents::llm::EndpointDown::new(self.llm_unreachable.policy()),
             coords: self.coords,
             computer_tool: self.computer_tool.map(ComputerTool::form),
             max_image_side: self.max_image_side,
@@ -108,7 +109,7 @@ pub async fn run(conn: &Connection, args: RunArgs) -> anyhow::Result<ExitCode> {
     let played = with_ctrl_c(prepared, &guests).await;
     guests.stop().await;
     let played = played?;
-    let Played { outcome, interrupted, shard } = played;
+    let Played { outcome, interrupted, shard, model_down } = played;
 
     emit(&format!(
         "shard {}: {} task(s) run, {} already finished, {} episode(s) on {} guest(s)\n\n",
@@ -128,9 +129,10 @@ pub async fn run(conn: &Connection, args: RunArgs) -> anyhow::Result<ExitCode> {
         }
         let budget = outcome.summary.budget.as_ref().and_then(|b| b.stopped.as_deref());
         for task in &outcome.pool.not_run {
-            let why = match budget {
-                Some(why) => format!("not started: the budget is reached ({why})"),
-                None => "not run (no healthy guest left)".to_owned(),
+            let why = match (budget, &model_down) {
+                (Some(why), _) => format!("not started: the budget is reached ({why})"),
+                (None, Some(why)) => format!("not started: {why}"),
+                (None, None) => "not run (no healthy guest left)".to_owned(),
             };
             lines.push_str(&format!("  {task}: {why}\n"));
         }

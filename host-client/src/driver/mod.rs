@@ -262,6 +262,8 @@ pub(crate) struct Played {
     /// Ctrl-C stopped it.
     pub(crate) interrupted: bool,
     pub(crate) shard: Shard,
+    /// Why no new task started after the model endpoint was found down (`--llm-unreachable stop`).
+    pub(crate) model_down: Option<String>,
 }
 
 /// Plays a prepared run on `guests`: the preflight, the options recorded and
@@ -312,6 +314,9 @@ pub(crate) async fn play(prepared: Prepared, guests: &Guests, stop: Cancellation
         .with_context(|| format!("opening the download cache {}", cache_dir.display()))?;
     let mut config = if plan.fast { EpisodeConfig::instant(cache) } else { EpisodeConfig::upstream(cache) };
     config.max_steps = plan.max_steps;
+    // Both change what an episode is, so a resume compares them like any option.
+    config.options.insert("max_steps".into(), plan.max_steps.to_string());
+    config.options.insert("difficulty".into(), difficulty_name(plan.difficulty).into());
     config.a11y = plan.a11y;
     if plan.a11y_win32 {
         config.a11y_query.backend = arena_shared::observation::A11yBackend::Win32;
@@ -326,6 +331,9 @@ pub(crate) async fn play(prepared: Prepared, guests: &Guests, stop: Cancellation
         config.options.insert("sleep_after".into(), format!("{secs}"));
     }
     config.options.insert("order".into(), plan.order.to_string());
+    if plan.agent_options.model_down.policy() == arena_agents::llm::Unreachable::Wait {
+        config.options.insert("llm_unreachable".into(), "wait".into());
+    }
     config.options.extend(agent_options);
     if plan.trials > 1 {
         config.options.insert("trials".into(), plan.trials.to_string());
@@ -363,12 +371,22 @@ pub(crate) async fn play(prepared: Prepared, guests: &Guests, stop: Cancellation
         model,
         trial: plan.trial_id.clone(),
     };
-    let differences = option_differences(&layout.base(), &config.options)?;
+    // Every folder this run writes in: each trial's with --trials, else the one trial's.
+    let folders: Vec<PathBuf> = if plan.trials > 1 {
+        (0..plan.trials).map(|k| layout.trial_base(&k.to_string())).collect()
+    } else {
+        vec![layout.base()]
+    };
+    let mut differences = Vec::new();
+    for folder in &folders {
+        let lines = option_differences(folder, &config.options)?;
+        differences.extend(lines.into_iter().map(|line| format!("{}: {line}", folder.display())));
+    }
     if !differences.is_empty() {
         if !plan.force_resume {
             bail!(
                 "{} holds results run with other options; resuming would mix two runs in one number:\n  {}\nuse another --out, or --force-resume to mix them anyway (recorded)",
-                layout.base().display(),
+                plan.out.display(),
                 differences.join("\n  ")
             );
         }
@@ -394,6 +412,16 @@ pub(crate) async fn play(prepared: Prepared, guests: &Guests, stop: Cancellation
         budget: arena_results::ledger::Budget { max_cost_usd: plan.max_cost, max_tokens: plan.max_total_tokens },
     };
     config.stop = stop.clone();
+    // A model endpoint found down for good (`--llm-unreachable stop`) starts no new task.
+    let model_down = plan.agent_options.model_down.clone();
+    let no_new_tasks = options.pool.no_new_tasks.clone();
+    let run_watch = Arc::clone(&plan.watch);
+    let down_watcher = tokio::spawn(async move {
+        let why = model_down.tripped().await;
+        tracing::error!(%why, "the model endpoint is down: no new task starts");
+        run_watch.note(&format!("{why}; running tasks finish"));
+        no_new_tasks.cancel();
+    });
     let runner = EpisodeRunner { layout, config, agents };
     if let Some(record) = &certificates {
         record.write(&plan.out)?;
@@ -404,7 +432,9 @@ pub(crate) async fn play(prepared: Prepared, guests: &Guests, stop: Cancellation
         None => run_tasks(tasks, clients, Arc::new(runner), &options).await,
     };
     drop(options);
-    Ok(Played { outcome: outcome?, interrupted: stop.is_cancelled(), shard: plan.shard })
+    down_watcher.abort();
+    let model_down = plan.agent_options.model_down.why().map(str::to_owned);
+    Ok(Played { outcome: outcome?, interrupted: stop.is_cancelled(), shard: plan.shard, model_down })
 }
 
 /// The checks before a run's first task: the agent's ([`factory::Preflight`]),
@@ -443,6 +473,14 @@ async fn preflight(
         tracing::warn!(guest = %line, "preflight: a guest does not answer; the run goes on without it until it does");
     }
     Ok(hello)
+}
+
+/// How the results record a difficulty: upstream's `--diff_lvl` words.
+fn difficulty_name(difficulty: Difficulty) -> &'static str {
+    match difficulty {
+        Difficulty::Normal => "normal",
+        Difficulty::Hard => "hard",
+    }
 }
 
 /// The option `--force-resume` records, left out of the comparison.

@@ -12,6 +12,15 @@
 //!
 //! Run: `cargo run -p arena-tests --bin episodes` (add `--release` for
 //! release figures).
+//!
+//! Side by side: with `ARENA_BENCH_HOSTS=LABEL=PATH,...`, each PATH another build's
+//! `episodes` binary (built alike, say from an older commit in a worktree of its
+//! own), it first runs this build's and each named build's bench as processes of
+//! their own, in rotated rounds, and prints the per-step p50 of every build and
+//! round, then each build's median round. Each process starts its own stub guests
+//! (the `arena-guest` beside it), so a build is measured with its own guest, as a
+//! user would run it. `ARENA_BENCH_PER_STEP_ONLY=1` stops a run after the per-step
+//! figures (an older build without it runs whole; only its per-step lines are read).
 
 #![forbid(unsafe_code)]
 
@@ -43,6 +52,10 @@ use arena_test_support::Served;
 
 const STEPS: usize = 40;
 const TASKS: usize = 20;
+/// Rounds of the side-by-side comparison.
+const ROUNDS: usize = 3;
+/// The per-step lines, by the name each starts with, in the order printed.
+const PER_STEP: [&str; 4] = ["observe", "set-of-marks", "action", "total"];
 
 #[tokio::main]
 async fn main() -> ExitCode {
@@ -179,7 +192,94 @@ async fn pool_run(guests: &[Served], pause: Duration) -> anyhow::Result<(Duratio
     Ok((wall, outcome.summary.overall.successes, observe, act))
 }
 
+/// The builds `ARENA_BENCH_HOSTS` names, as (label, path).
+fn other_builds() -> anyhow::Result<Vec<(String, PathBuf)>> {
+    let Ok(list) = std::env::var("ARENA_BENCH_HOSTS") else { return Ok(Vec::new()) };
+    list.split(',')
+        .filter(|entry| !entry.trim().is_empty())
+        .map(|entry| {
+            let (label, path) = entry
+                .split_once('=')
+                .with_context(|| format!("ARENA_BENCH_HOSTS entry {entry:?} is not LABEL=PATH"))?;
+            let path = PathBuf::from(path.trim());
+            anyhow::ensure!(path.is_file(), "ARENA_BENCH_HOSTS: {label}'s bench {} is not a file", path.display());
+            Ok((label.trim().to_owned(), path))
+        })
+        .collect()
+}
+
+/// The p50 of each [`PER_STEP`] line in a bench's output, in milliseconds.
+fn per_step_p50(output: &str) -> anyhow::Result<[f64; 4]> {
+    let mut found = [None; 4];
+    for line in output.lines() {
+        let line = line.trim_start();
+        let Some(i) = PER_STEP.iter().position(|name| line.starts_with(name)) else { continue };
+        let p50 = line
+            .split_once(" p50 ")
+            .and_then(|(_, rest)| rest.split_whitespace().next())
+            .and_then(|n| n.parse::<f64>().ok());
+        found[i] = found[i].or(p50);
+    }
+    let mut out = [0.0; 4];
+    for (i, value) in found.into_iter().enumerate() {
+        out[i] = value.with_context(|| format!("no {} p50 line in the bench's output:\n{output}", PER_STEP[i]))?;
+    }
+    Ok(out)
+}
+
+/// One run of a build's bench as a process of its own; its per-step p50s.
+async fn bench_process(exe: &Path) -> anyhow::Result<[f64; 4]> {
+    let output = tokio::process::Command::new(exe)
+        .env("ARENA_BENCH_PER_STEP_ONLY", "1")
+        .env_remove("ARENA_BENCH_HOSTS")
+        .env("RUST_LOG", "off")
+        .stdin(std::process::Stdio::null())
+        .stderr(std::process::Stdio::null())
+        .kill_on_drop(true)
+        .output()
+        .await
+        .with_context(|| format!("running {}", exe.display()))?;
+    let stdout = String::from_utf8_lossy(&output.stdout);
+    anyhow::ensure!(output.status.success(), "{} failed ({}):\n{stdout}", exe.display(), output.status);
+    per_step_p50(&stdout)
+}
+
+/// This build and the `ARENA_BENCH_HOSTS` builds, each as a process, in rotated rounds.
+async fn side_by_side(others: Vec<(String, PathBuf)>) -> anyhow::Result<()> {
+    let mut builds = vec![("this build".to_owned(), std::env::current_exe()?)];
+    builds.extend(others);
+    println!(
+        "side by side: per-step p50 in ms ({ROUNDS} rounds, builds rotated; each a process with its own stub guests)"
+    );
+    println!(
+        "  {:<24} {:>5}  {:>9} {:>13} {:>8} {:>8}",
+        "build", "round", PER_STEP[0], PER_STEP[1], PER_STEP[2], PER_STEP[3]
+    );
+    let row = |label: &str, round: &str, f: &[f64; 4]| {
+        println!("  {label:<24} {round:>5}  {:>9.2} {:>13.2} {:>8.2} {:>8.2}", f[0], f[1], f[2], f[3]);
+    };
+    let mut rounds = vec![Vec::new(); builds.len()];
+    for round in 0..ROUNDS {
+        for k in 0..builds.len() {
+            let b = (k + round) % builds.len();
+            let figures = bench_process(&builds[b].1).await.with_context(|| format!("the {} bench", builds[b].0))?;
+            row(&builds[b].0, &(round + 1).to_string(), &figures);
+            rounds[b].push(figures);
+        }
+    }
+    for ((label, _), mut figures) in builds.iter().zip(rounds) {
+        // The median round by total.
+        figures.sort_by(|a, b| a[3].total_cmp(&b[3]));
+        row(label, "median", &figures[figures.len() / 2]);
+    }
+    Ok(())
+}
+
 async fn run() -> anyhow::Result<()> {
+    let others = other_builds()?;
+    if !others.is_empty() {
+        return side_by_side(others).await;
+    }
     let guests: Vec<Served> =
         (0..4).map(|_| Served::guest(&[])).collect::<anyhow::Result<_>>().context("starting stub guests")?;
     println!(
@@ -188,6 +288,9 @@ async fn run() -> anyhow::Result<()> {
         std::thread::available_parallelism().map_or(1, |n| n.get())
     );
     per_step(&guests[0].url).await?;
+    if std::env::var_os("ARENA_BENCH_PER_STEP_ONLY").is_some_and(|v| v == "1") {
+        return Ok(());
+    }
     // Without pauses the stub's work is all CPU, on the same cores as the
     // host; with a pause after each action (upstream waits 3 s) the guests'
     // time is mostly waiting, as with real VMs, and the pool's gain shows.

@@ -22,10 +22,10 @@ use arena_shared::observation::{A11yBackend, A11yNode, A11yStates, A11yTree, Tre
 
 use super::input::ICON_PITCH;
 use super::window::{Caption, Dialog, Listings, State, Window, WindowModel, EXPLORER_NAV, RUN_FIELD_LABEL, RUN_PROMPT};
-use arena_a11y_walk::{self as a11y_walk, TreeSource};
 use crate::desktop::cancel;
 use crate::desktop::windows::shell;
 use crate::desktop::{DesktopError, DesktopResult};
+use arena_a11y_walk::{self as a11y_walk, TreeSource};
 
 /// The Win32 role (pywinauto's friendly class name) of a window class, or `fallback`
 /// for a node without a class.

@@ -282,12 +282,9 @@ impl Desktop for WindowsDesktop {
     ) -> DesktopResult<A11yTree> {
         self.need_desktop("accessibility")?;
         match backend {
-            A11yBackend::Win32 => arena_a11y_walk::walk(
-                &mut win32_tree::Win32Source::new(),
-                A11yBackend::Win32,
-                budget,
-                foreground_only,
-            ),
+            A11yBackend::Win32 => {
+                arena_a11y_walk::walk(&mut win32_tree::Win32Source::new(), A11yBackend::Win32, budget, foreground_only)
+            }
             A11yBackend::Uia => self.uia.tree(budget, foreground_only),
             A11yBackend::Unknown => Err(DesktopError::InvalidInput("unknown accessibility backend".into())),
         }

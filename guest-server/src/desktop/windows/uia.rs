@@ -44,10 +44,10 @@ use windows::Win32::UI::Accessibility::*;
 use super::sys::{ComApartment, Hwnd};
 use super::window;
 use crate::config::UiaView;
-use arena_a11y_walk::{self as a11y_walk, TreeSource, UiaProps};
 use crate::desktop::uia_health::{call_detached, ThreadCap};
 use crate::desktop::uia_process::{self, WorkerAnswer, WorkerProcess, WorkerRequest, SUBCOMMAND};
 use crate::desktop::{DesktopError, DesktopResult};
+use arena_a11y_walk::{self as a11y_walk, TreeSource, UiaProps};
 
 /// Extra time the caller waits beyond the walk's own budget before abandoning the worker.
 const REPLY_GRACE: Duration = Duration::from_secs(3);

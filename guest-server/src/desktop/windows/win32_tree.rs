@@ -24,8 +24,8 @@ use windows::Win32::UI::WindowsAndMessaging::{
 
 use super::sys::ComApartment;
 use super::window;
-use arena_a11y_walk::{win32_role, TreeSource, Win32Props};
 use crate::desktop::DesktopResult;
+use arena_a11y_walk::{win32_role, TreeSource, Win32Props};
 
 /// The longest a window may take to answer one message.
 const MESSAGE_TIMEOUT: Duration = Duration::from_millis(150);

@@ -54,6 +54,8 @@ pub struct Endpoint {
     pub timeout: Duration,
     /// How long a failing model is tried again.
     pub retry: RetryPolicy,
+    /// The run's view of the endpoint being down (`--llm-unreachable`), shared by its agents.
+    pub down: super::llm::EndpointDown,
     /// Longest answer, in tokens.
     pub max_tokens: u32,
 }
@@ -66,6 +68,7 @@ impl Endpoint {
             api_key: None,
             timeout: Duration::from_secs(120),
             retry: RetryPolicy::default(),
+            down: super::llm::EndpointDown::default(),
             max_tokens: 4096,
         }
     }
@@ -105,7 +108,8 @@ impl Endpoint {
     ///
     /// [`AgentError::Config`] for a URL that does not parse or an HTTP client that cannot be built.
     pub fn client(&self, url: &str, kind: ApiKind, key_vars: &[&str]) -> Result<ModelClient, AgentError> {
-        ModelClient::with_url(url, kind, self.resolved_key(key_vars), self.timeout, self.retry)
+        Ok(ModelClient::with_url(url, kind, self.resolved_key(key_vars), self.timeout, self.retry)?
+            .with_down(self.down.clone()))
     }
 }
 

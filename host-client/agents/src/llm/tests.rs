@@ -239,3 +239,81 @@ async fn an_endless_or_huge_answer_is_refused_at_the_limit_and_not_asked_again()
     let sent = sent.load(Ordering::Relaxed);
     assert!((MAX_MODEL_ANSWER..MAX_MODEL_ANSWER + (32 << 20)).contains(&sent), "{sent} bytes sent");
 }
+
+/// A base URL on a loopback port where nothing listens (bound, then let go).
+fn closed_base() -> String {
+    let listener = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+    let port = listener.local_addr().unwrap().port();
+    drop(listener);
+    format!("http://127.0.0.1:{port}/v1")
+}
+
+#[tokio::test]
+async fn a_dead_endpoint_costs_one_retry_window_then_calls_give_up_at_once_and_the_run_is_told() {
+    let retry = RetryPolicy {
+        initial_delay: Duration::from_secs(1),
+        max_delay: Duration::from_secs(4),
+        give_up_after: Duration::from_secs(20),
+    };
+    let down = EndpointDown::new(Unreachable::Stop);
+    let (client, pauses) = model(&closed_base(), ApiKind::OpenAi, Duration::from_secs(5), retry);
+    let client = client.with_down(down.clone());
+    // The first call waits out its window, as for any failure.
+    let err = client.complete(&body()).await.unwrap_err().to_string();
+    assert!(err.contains("gave up after"), "{err}");
+    let first = pauses.0.lock().unwrap().len();
+    assert!(first >= 2, "retried: {first}");
+    assert_eq!(down.why(), None, "one call is not the endpoint down for good");
+    // A second client of the same run (another task's agent) does not wait again.
+    let (other, other_pauses) = model(&closed_base(), ApiKind::OpenAi, Duration::from_secs(5), retry);
+    let other = other.with_down(down.clone());
+    let err = other.complete(&body()).await.unwrap_err().to_string();
+    assert!(err.contains("still nothing answering"), "{err}");
+    assert!(other_pauses.0.lock().unwrap().is_empty(), "no pause: {:?}", other_pauses.0.lock().unwrap());
+    assert_eq!(down.why(), None);
+    // The third call in a row ends the run's new tasks, and says why.
+    let tripped = tokio::spawn({
+        let down = down.clone();
+        async move { down.tripped().await }
+    });
+    let err = other.complete(&body()).await.unwrap_err().to_string();
+    assert!(err.contains("no new task starts"), "{err}");
+    let why = tokio::time::timeout(Duration::from_secs(10), tripped).await.expect("tripped in time").unwrap();
+    assert!(why.contains("did not answer in 3 calls in a row") && why.contains("127.0.0.1"), "{why}");
+
+    // An answer in between starts the count again.
+    let down = EndpointDown::new(Unreachable::Stop);
+    let (dead, _) = model(&closed_base(), ApiKind::OpenAi, Duration::from_secs(5), retry);
+    let dead = dead.with_down(down.clone());
+    let (base, _mock) = serve(vec![ok("back")], "/v1").await;
+    let (alive, _) = model(&base, ApiKind::OpenAi, Duration::from_secs(5), retry);
+    let alive = alive.with_down(down.clone());
+    dead.complete(&body()).await.unwrap_err();
+    dead.complete(&body()).await.unwrap_err();
+    assert_eq!(alive.complete(&body()).await.unwrap(), "back");
+    let err = dead.complete(&body()).await.unwrap_err().to_string();
+    assert!(err.contains("gave up after"), "a full window again after an answer: {err}");
+    assert_eq!(down.why(), None);
+
+    // `--llm-unreachable wait`: every call waits its window and nothing trips.
+    let down = EndpointDown::new(Unreachable::Wait);
+    let (client, pauses) = model(&closed_base(), ApiKind::OpenAi, Duration::from_secs(5), retry);
+    let client = client.with_down(down.clone());
+    for _ in 0..3 {
+        let err = client.complete(&body()).await.unwrap_err().to_string();
+        assert!(err.contains("gave up after"), "{err}");
+    }
+    assert!(pauses.0.lock().unwrap().len() >= 6);
+    assert_eq!(down.why(), None);
+}
+
+#[tokio::test]
+async fn the_preflight_stops_at_a_dead_endpoint_unless_told_to_wait() {
+    let base = closed_base();
+    let (client, _) = model(&base, ApiKind::OpenAi, Duration::from_secs(5), RetryPolicy::default());
+    let err = client.with_down(EndpointDown::new(Unreachable::Stop)).preflight(&body()).await.unwrap_err();
+    assert!(err.contains("nothing answers at the model endpoint") && err.contains("--llm-unreachable wait"), "{err}");
+    let (client, _) = model(&base, ApiKind::OpenAi, Duration::from_secs(5), RetryPolicy::default());
+    let note = client.with_down(EndpointDown::new(Unreachable::Wait)).preflight(&body()).await.unwrap();
+    assert!(note.is_some_and(|n| n.contains("127.0.0.1")));
+}
