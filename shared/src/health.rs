@@ -152,6 +152,12 @@ pub struct HealthReport {
     /// administrator token)`), where the platform has them.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub integrity: Option<String>,
+    /// Made up anew each time the server starts (a reboot, a crash, a restart by the
+    /// service), and the same for its whole life: a host that saw one id at an
+    /// episode's start and another later knows the guest restarted in between,
+    /// even when it answered every time it was asked.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub boot_id: Option<String>,
 }
 
 impl HealthReport {

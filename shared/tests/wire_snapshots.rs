@@ -328,6 +328,7 @@ fn health() {
             auth_required: true,
             session_id: Some(1),
             integrity: Some("High, elevated (full administrator token)".into()),
+            boot_id: Some("5f0c3a9e12d4b7a1".into()),
         }
     );
 }

@@ -9,6 +9,9 @@
 //!   tasks listed.
 //! - The agent kills the guest while it decides (before any action of the step ran):
 //!   the task is the environment's, unfinished, without `result.txt`.
+//! - The same kill while it decides its second step, after its first step's action
+//!   reached the guest (a kill or reboot it scheduled, landing late): the agent's
+//!   failure again, scored 0 and not retried (issue 43, item 2).
 //!
 //! In both, `summary.json`'s `overall.strict_rate`, `overall.complete` and
 //! `missing` count every task of the task list, and `summary.md` and
@@ -220,4 +223,30 @@ fn a_guest_that_dies_while_the_agent_decides_leaves_the_task_unfinished() {
         missing_names(&summary),
         ["notepad/stub-notepad-append", "notepad/stub-notepad-count", "notepad/stub-notepad-draft"]
     );
+}
+
+#[test]
+fn a_guest_that_dies_while_the_agent_decides_after_its_first_action_is_the_agents_failure() {
+    let tmp = tempfile::tempdir().expect("tmp");
+    let index = corpus(tmp.path());
+    let guest = Served::guest(&[]).expect("the stub guest");
+    // The first step's click reaches the guest; the kill lands while the agent decides step 2.
+    let kill = format!("n=$((n+1)); if [ \"$n\" -ge 2 ]; then kill -9 {}; sleep 0.3; fi", guest.pid());
+    let agent_cmd = agent(tmp.path(), &kill, &json!({"type": "act", "actions": ["pyautogui.click(10, 10)"]}));
+    let out = tmp.path().join("out");
+    let (code, text) = arena_run(&guest.url, &index, &out, &agent_cmd, Duration::from_secs(60));
+
+    let summary = summary(&out);
+    let victim = task(&summary, VICTIM).unwrap_or_else(|| panic!("the victim has a row\n{text}"));
+    assert_eq!(victim["score"], json!(0.0), "{victim}\n{text}");
+    assert_eq!(victim["status"], "agent_error", "{victim}");
+    assert_eq!(victim["failed_by"], "agent", "{victim}");
+    assert_eq!(victim["attempt"], json!(1), "not retried: {victim}");
+    let error = victim["error"].as_str().unwrap_or_default();
+    assert!(error.contains("after the agent's action in step 1") && error.contains("decided step 2"), "{error}");
+    assert!(out.join(victim["path"].as_str().expect("path")).join(RESULT_FILE).is_file(), "result.txt written");
+    assert_incomplete(&out, &summary, code, &text);
+    let overall = &summary["overall"];
+    assert_eq!(overall["success_rate"], json!(50.0), "{overall}");
+    assert_eq!(overall["strict_rate"], json!(25.0), "{overall}");
 }

@@ -86,7 +86,14 @@ async fn fresh_report(state: &AppState) -> HealthReport {
         auth_required: state.token.is_some(),
         session_id: state.desktop.session_id(),
         integrity: state.desktop.integrity_level().ok(),
+        boot_id: Some(boot_id().to_owned()),
     }
+}
+
+/// This server process's boot id ([`HealthReport::boot_id`]): random, made once.
+fn boot_id() -> &'static str {
+    static ID: std::sync::OnceLock<String> = std::sync::OnceLock::new();
+    ID.get_or_init(|| format!("{:016x}", rand::random::<u64>()))
 }
 
 async fn probe(state: &AppState, component: Component) -> ComponentHealth {

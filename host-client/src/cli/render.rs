@@ -341,6 +341,7 @@ mod tests {
             auth_required: true,
             session_id: None,
             integrity: None,
+            boot_id: None,
         };
         let text = health("http://g:5000", &report);
         assert_eq!(

@@ -194,6 +194,8 @@ pub async fn run_attempt(
             screen_source: config.screen_source.clone(),
         },
         keys_down: Vec::new(),
+        reached: None,
+        boot_id: None,
     };
     if let Err(err) = out.prepare() {
         ep.result.status = EpisodeStatus::InfraError(format!("cannot prepare the result folder: {err}"));
@@ -232,6 +234,11 @@ struct Episode {
     observe: ObserveConfig,
     /// Every key an action pressed with `keyDown`: let go when the episode ends.
     keys_down: Vec<String>,
+    /// The step in which an action of the agent first reached the guest: from then
+    /// on a guest that stops answering or restarts is the agent's doing (run::blame).
+    reached: Option<u32>,
+    /// The guest's boot id after the setup, to tell a restart from a guest that answers.
+    boot_id: Option<String>,
 }
 
 /// An observation and the file its screenshot was written to.
@@ -412,6 +419,29 @@ impl Episode {
         self.result.setup.push(phase(&report, "teardown"));
     }
 
+    /// Why the guest is not the one the episode started on, if it is not: it does
+    /// not answer (one question within [`blame::DECIDING_CHECK`]), or its boot id
+    /// changed since the setup (it restarted).
+    async fn guest_gone(&self, client: &GuestClient) -> Option<String> {
+        match client.health_once(blame::DECIDING_CHECK).await {
+            Err(err) => Some(err.to_string()),
+            Ok(report) => blame::restarted(self.boot_id.as_deref(), report.boot_id.as_deref()),
+        }
+    }
+
+    /// The status of a guest found gone (`why`) at `when` (run::blame): the agent's
+    /// failure once an action of its reached the guest, unless the harness knows an
+    /// outside cause; before that, the environment's.
+    async fn gone(&self, play: &Play<'_>, when: &str, why: String) -> EpisodeStatus {
+        match self.reached {
+            Some(first) => {
+                let watch = play.config.guest_watch.as_deref();
+                blame::after_action_unless_outside(watch, play.client.base_url(), first, when, why).await
+            }
+            None => EpisodeStatus::InfraError(format!("the guest stopped answering {when}: {why}")),
+        }
+    }
+
     /// Steps 1 to 3 of the module documentation. `Err` is an infrastructure
     /// error that ends the episode where it happened.
     async fn play(
@@ -445,6 +475,8 @@ impl Episode {
         self.result.setup_ms = ms(started.elapsed());
         interrupted(config, "after the setup")?;
 
+        // The guest's boot id now, so that a restart later in the episode shows.
+        self.boot_id = client.health_once(blame::DECIDING_CHECK).await.ok().and_then(|h| h.boot_id);
         let screen = client.screen().await.map_err(|err| infra("reading the screen", err))?;
         let play = Play { client, task, config, out, screen: &screen };
         let mut computer = ComputerState::for_screen(
@@ -494,6 +526,9 @@ impl Episode {
         self.result.setup.extend(post.iter().map(|r| phase(r, "postconfig")));
         if arena_setup::aborted(&post) {
             let detail = post.last().map(|r| r.detail.clone()).unwrap_or_default();
+            if let Some(why) = self.guest_gone(client).await {
+                return Err(self.gone(&play, "in the postconfig", why).await);
+            }
             return Err(EpisodeStatus::InfraError(format!("postconfig {detail}")));
         }
         let ectx = EvalContext {
@@ -509,8 +544,8 @@ impl Episode {
         // A getter that failed because the guest went away scored 0 for the
         // wrong reason: find out before trusting the score.
         if outcome.error.is_some() {
-            if let Err(err) = client.health().await {
-                return Err(infra("the guest stopped answering during evaluation", err));
+            if let Some(why) = self.guest_gone(client).await {
+                return Err(self.gone(&play, "during the evaluation", why).await);
             }
         }
         if let Some(reason) = outcome.unfinished {
@@ -599,8 +634,13 @@ impl Episode {
         // The guest answered at the step's start; ask again before anything of the
         // agent's runs, so a failure from here on is decided by what it did.
         if blame::before_actions(&prediction.actions) {
-            if let Err(err) = play.client.health_once(blame::DECIDING_CHECK).await {
-                let status = blame::guest_failure(Phase::Deciding, step, "asked before the actions", err);
+            if let Some(why) = self.guest_gone(play.client).await {
+                let status = match self.reached {
+                    // An earlier step's action reached it: the agent's doing (a
+                    // reboot it scheduled, a kill that landed late).
+                    Some(_) => self.gone(play, &format!("while the agent decided step {step}"), why).await,
+                    None => blame::guest_failure(Phase::Deciding, step, "asked before the actions", why),
+                };
                 record.error = status.message().map(str::to_owned);
                 record.ended = true;
                 self.push(out, record)?;
@@ -681,6 +721,9 @@ impl Episode {
             if acted.stop {
                 break;
             }
+        }
+        if acted.ran && self.reached.is_none() {
+            self.reached = Some(step);
         }
         record.timings.act_ms = ms(t_act.elapsed().saturating_sub(acted.pause).saturating_sub(acted.observing));
         record.timings.pause_ms = ms(acted.pause);

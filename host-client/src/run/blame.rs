@@ -15,9 +15,18 @@
 //!   ([`after_action`]): the task is finished with score 0, "Failed by: agent",
 //!   and is not retried.
 //!
+//! - And from then on for the rest of the episode: once an action of the agent
+//!   has reached the guest, a guest that stops answering or restarts later (while
+//!   the agent decides a later step, in the postconfig, in the evaluation) is the
+//!   agent's failure too, so a kill or reboot it schedules to land later cannot
+//!   turn its task into an unfinished one. A restart shows as another boot id in
+//!   `/v1/health` ([`restarted`]) even when the guest answers.
+//!
 //! - Unless the harness knows the environment failed on its own: a VM whose
 //!   QEMU was killed, crashed or was told to quit by the host ([`GuestWatch`])
-//!   is the environment's failure at any point of the step.
+//!   is the environment's failure at any point of the episode. A guest that shut
+//!   itself down (QMP's `SHUTDOWN` with `guest-shutdown`) or reset itself is not
+//!   an outside cause.
 //!
 //! It is not the pool: the pool only reads the status (an agent error is never
 //! retried) and asks the guest for its health afterwards to set a dead one aside.
@@ -107,6 +116,17 @@ pub fn after_action(step: u32, what: &str, err: impl std::fmt::Display) -> Episo
 /// The words that open [`after_action`]'s message, which the pool and reports look for.
 pub const AFTER_ACTION: &str = "the guest stopped answering after the agent's action in step";
 
+/// Why the guest is another one than before, when its boot id changed from
+/// `before` to `now`; `None` when either is unknown (an older guest) or they match.
+pub fn restarted(before: Option<&str>, now: Option<&str>) -> Option<String> {
+    match (before, now) {
+        (Some(before), Some(now)) if before != now => {
+            Some(format!("the guest restarted (its boot id was {before} and is now {now})"))
+        }
+        _ => None,
+    }
+}
+
 /// Whether `status` is [`after_action`]'s: the guest is likely gone.
 pub fn guest_lost_by_agent(status: &EpisodeStatus) -> bool {
     matches!(status, EpisodeStatus::AgentError(m) if m.starts_with(AFTER_ACTION))
@@ -149,6 +169,14 @@ mod tests {
         assert!(guest_lost_by_agent(&status), "{status:?}");
         let status = after_action_unless_outside(None, "http://vm-1", 2, "action 1", "reset").await;
         assert!(guest_lost_by_agent(&status), "{status:?}");
+    }
+
+    #[test]
+    fn a_changed_boot_id_is_a_restart_and_an_unknown_one_is_not() {
+        assert!(restarted(Some("a1"), Some("b2")).is_some_and(|w| w.contains("a1") && w.contains("b2")));
+        assert_eq!(restarted(Some("a1"), Some("a1")), None);
+        assert_eq!(restarted(None, Some("a1")), None);
+        assert_eq!(restarted(Some("a1"), None), None);
     }
 
     #[test]

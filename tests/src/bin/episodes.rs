@@ -1,11 +1,14 @@
 //! `episodes`: measures the host's overhead per episode step on the stub guest,
 //! and the wall time of a 20-task run over a pool of 1 versus 4 guests.
 //!
-//! Per step (excluding any model): the observation (screenshot, accessibility
-//! tree, windows and clipboard, fetched concurrently as the episode does),
-//! Set-of-Marks (element selection and the annotated screenshot), and one
-//! action (a pyautogui line run by the host-side interpreter, which becomes a
-//! typed `/v1/actions` call). The guests are real `arena-guest` stub
+//! Per step (excluding any model): the observation as the episode makes it
+//! (`observe::observe`: screenshot, accessibility tree, windows and clipboard
+//! fetched concurrently, the screenshot decoded once as soon as it is here),
+//! Set-of-Marks (element selection and the annotated screenshot, on the decoded
+//! pixels), and one action (a pyautogui line run by the host-side interpreter,
+//! which becomes a typed `/v1/actions` call). Builds before 2026-12-02 counted
+//! the decode in Set-of-Marks and the observation without it; the total is
+//! the same work either way. The guests are real `arena-guest` stub
 //! processes on loopback; the pool runs use the oracle plans of
 //! `tasks/stub` repeated to 20 tasks, without pauses and with a 250 ms pause
 //! after each action.
@@ -30,6 +33,7 @@ use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use anyhow::Context;
+use arena_agents::observation::observe::{self, ObserveConfig};
 use arena_agents::scripted::{PlanSource, ScriptedAgent};
 use arena_agents::Agent;
 use arena_agents::AgentFactory;
@@ -43,9 +47,7 @@ use arena_host::run::shard::Shard;
 use arena_host::run::{load_tasks, run_tasks, RunOptions};
 use arena_results::RunLayout;
 use arena_script::ComputerState;
-use arena_shared::clipboard::ClipboardContent;
 use arena_shared::exec::LaunchRequest;
-use arena_shared::observation::{A11yQuery, ImageFormat, ScreenshotQuery};
 use arena_som::{annotate, marks_from_tree};
 use arena_task::{Difficulty, Task};
 use arena_test_support::Served;
@@ -96,23 +98,21 @@ async fn per_step(url: &str) -> anyhow::Result<()> {
     let screen = client.screen().await?;
     let size = (screen.physical_width, screen.physical_height);
     let mut computer = ComputerState::for_screen(i32::try_from(size.0)?, i32::try_from(size.1)?);
-    let query = ScreenshotQuery { format: ImageFormat::Png, cursor: Some(false), ..ScreenshotQuery::default() };
-    let tree_query = A11yQuery::default();
+    let observe_config = ObserveConfig::default();
     let action = AgentAction::Pyautogui("pyautogui.write('a')".into());
     let options = ExecOptions::instant();
     let (mut observe, mut som, mut act, mut total) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
     let mut marks_count = 0;
     for _ in 0..STEPS {
         let t0 = Instant::now();
-        let (shot, windows, tree, clip) =
-            tokio::join!(client.screenshot(&query), client.windows(), client.a11y(&tree_query), client.clipboard_get());
-        let (shot, _windows, tree) = (shot?, windows?, tree?);
-        let _text = matches!(clip?, ClipboardContent::Text { .. });
+        let obs = observe::observe(&client, &observe_config, &screen, 1, "bench")
+            .await
+            .map_err(|e| anyhow::anyhow!("{e}"))?;
         let t1 = Instant::now();
-        let marks = marks_from_tree(&tree, size);
-        // Decoded once, as the observation does, then annotated in pixels.
-        let frame = arena_client::frame::Frame::decode(shot.bytes).map_err(anyhow::Error::msg)?;
-        let annotated = annotate(&frame.pixels, &marks);
+        let tree = obs.a11y.as_ref().context("the stub answered no accessibility tree")?;
+        let marks = marks_from_tree(tree, size);
+        // Annotated on the observation's pixels, decoded once there.
+        let annotated = annotate(&obs.screenshot.pixels, &marks);
         anyhow::ensure!(annotated.width() > 0);
         marks_count = marks.entities.len();
         let t2 = Instant::now();
@@ -127,8 +127,8 @@ async fn per_step(url: &str) -> anyhow::Result<()> {
     println!(
         "host overhead per step on the stub ({STEPS} steps, 1440x900, Notepad open, {marks_count} marks; no model):"
     );
-    print("observe (shot+tree+windows+clip)", &mut observe);
-    print("set-of-marks (decode + select + annotate)", &mut som);
+    print("observe (shot+tree+windows+clip, decode)", &mut observe);
+    print("set-of-marks (select + annotate)", &mut som);
     print("action (pyautogui line)", &mut act);
     print("total", &mut total);
     Ok(())

@@ -129,8 +129,32 @@ pub async fn observe(
     let started = Instant::now();
     // Upstream's full-screen frames come from QEMU and carry no cursor.
     let query = ScreenshotQuery { format: ImageFormat::Png, cursor: Some(false), ..ScreenshotQuery::default() };
-    let ((shot, screenshot_ms), (windows, windows_ms), tree, (clipboard, clipboard_ms), dom) = tokio::join!(
-        timed(client.screenshot(&query)),
+    // The screenshot is decoded as soon as it is here, while the guest still
+    // answers the other questions (the tree takes longest), on this task.
+    let screenshot_part = async {
+        let (shot, mut screenshot_ms) = timed(client.screenshot(&query)).await;
+        let fallback = match (&config.screen_source, fallback_reason(&shot)) {
+            (Some(source), Some(reason)) => {
+                let (png, took) = timed(source.screendump(client.base_url())).await;
+                screenshot_ms += took;
+                png.map(|png| (png, reason))
+            }
+            _ => None,
+        };
+        let (encoded, source) = match (shot, fallback) {
+            (_, Some((png, reason))) => {
+                tracing::warn!(step, %reason, "using the VM's display as the screenshot");
+                (png, Some(format!("vm-display: {reason}")))
+            }
+            (Ok(shot), None) => (shot.bytes, None),
+            (Err(err), None) => return Err(failed("taking the screenshot", err)),
+        };
+        let (frame, decode_ms) = timed(async { Frame::decode(encoded) }).await;
+        let frame = frame.map_err(|e| failed("decoding the screenshot", e))?;
+        Ok((frame, source, screenshot_ms, decode_ms))
+    };
+    let (shot, (windows, windows_ms), tree, (clipboard, clipboard_ms), dom) = tokio::join!(
+        screenshot_part,
         timed(client.windows()),
         async {
             if config.a11y {
@@ -148,26 +172,9 @@ pub async fn observe(
             }
         },
     );
-    let mut timings = ObserveTimings { screenshot_ms, windows_ms, clipboard_ms, ..ObserveTimings::default() };
-    let fallback = match (&config.screen_source, fallback_reason(&shot)) {
-        (Some(source), Some(reason)) => {
-            let (png, took) = timed(source.screendump(client.base_url())).await;
-            timings.screenshot_ms += took;
-            png.map(|png| (png, reason))
-        }
-        _ => None,
-    };
-    let (encoded, screenshot_source) = match (shot, fallback) {
-        (_, Some((png, reason))) => {
-            tracing::warn!(step, %reason, "using the VM's display as the screenshot");
-            (png, Some(format!("vm-display: {reason}")))
-        }
-        (Ok(shot), None) => (shot.bytes, None),
-        (Err(err), None) => return Err(failed("taking the screenshot", err)),
-    };
-    let decoding = Instant::now();
-    let screenshot = Frame::decode(encoded).map_err(|e| failed("decoding the screenshot", e))?;
-    timings.decode_ms = ms(decoding.elapsed());
+    let (screenshot, screenshot_source, screenshot_ms, decode_ms) = shot?;
+    let mut timings =
+        ObserveTimings { screenshot_ms, decode_ms, windows_ms, clipboard_ms, ..ObserveTimings::default() };
     let windows = windows.map_err(|err| failed("listing windows", err))?;
     let a11y = match tree {
         None => None,
