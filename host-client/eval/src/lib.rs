@@ -323,10 +323,9 @@ async fn run_metric(ctx: &EvalContext, call: &MetricCall, last: Option<LastActio
         Some(spec) => match fetch(ctx, spec).await {
             Ok(value) => Some(value),
             Err(err) => {
-                // The expected side is the task's: whatever failed, it is not the agent's.
                 let (at, fault) = getter_failure(&err, FailedAt::Expected);
                 outcome.failed_at = Some(at);
-                outcome.fault = Some(if fault == Fault::Agent { Fault::Task } else { fault });
+                outcome.fault = Some(fault);
                 outcome.error = Some(err.to_string());
                 return finish(outcome);
             }
@@ -427,18 +426,26 @@ fn result_paths<'a>(value: &'a Fetched, out: &mut Vec<&'a std::path::Path>) {
 
 /// Where a getter's failure stands and whose it is: a getter this build lacks
 /// is [`FailedAt::Missing`] (the harness's); bad parameters are the task's; a
-/// guest out of reach, a browser not listening on its debugging port (the
-/// guest's 502), a failed download or a host file that could not be written are
-/// the harness's; anything else (the guest answered that it has no such file,
-/// key or window; what it answered is not what the getter reads) is the agent's.
+/// guest out of reach or failing (a 5xx answer, a browser not listening on its
+/// debugging port being the guest's 502), a failed download or a host file that
+/// could not be written are the harness's; anything else (the guest answered
+/// that it has no such file, key or window, or refused it; what it answered is
+/// not what the getter reads) is the agent's, except on the expected side,
+/// which is the task's whatever failed.
 fn getter_failure(err: &GetterError, stage: FailedAt) -> (FailedAt, Fault) {
-    match err {
+    let (at, fault) = match err {
         GetterError::NotImplemented(_) => (FailedAt::Missing, Fault::Harness),
         GetterError::BadParams { .. } => (stage, Fault::Task),
-        GetterError::Guest { source, .. } if source.out_of_reach() || source.is_transient() => (stage, Fault::Harness),
+        GetterError::Guest { source, .. } if source.out_of_reach() || source.status().is_some_and(|s| s >= 500) => {
+            (stage, Fault::Harness)
+        }
         GetterError::Io { .. } | GetterError::Download { .. } => (stage, Fault::Harness),
         _ => (stage, Fault::Agent),
+    };
+    if stage == FailedAt::Expected && fault == Fault::Agent {
+        return (at, Fault::Task);
     }
+    (at, fault)
 }
 
 /// Runs one getter by name.

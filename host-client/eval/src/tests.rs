@@ -238,6 +238,40 @@ fn the_judge_tells_the_results_files_from_the_tasks() {
 }
 
 #[test]
+fn a_getters_failure_is_the_harnesss_when_the_guest_failed_and_the_agents_when_it_answered() {
+    use arena_client::error::{CallSite, ClientError};
+    use arena_shared::error::ErrorCode;
+    let api = |status: u16, code: ErrorCode| GetterError::Guest {
+        getter: "open_tabs_info",
+        source: Box::new(ClientError::Api {
+            call: CallSite { guest: "http://g".into(), method: "GET", path: "/v1/browser/json/list".into() },
+            status,
+            code,
+            message: "m".into(),
+        }),
+    };
+    let cases = [
+        // No browser on the debugging port: the guest's 502.
+        (api(502, ErrorCode::Internal), Fault::Harness),
+        (api(500, ErrorCode::Internal), Fault::Harness),
+        // The guest answered that it has no such thing, or refused it.
+        (api(404, ErrorCode::NotFound), Fault::Agent),
+        (api(403, ErrorCode::Forbidden), Fault::Agent),
+        (GetterError::Failed { getter: "bookmarks", message: "not JSON".into() }, Fault::Agent),
+        (GetterError::BadParams { getter: "vm_file", message: "no path".into() }, Fault::Task),
+        (GetterError::Download { getter: "cloud_file", message: "503".into() }, Fault::Harness),
+        (GetterError::NotImplemented("x".into()), Fault::Harness),
+    ];
+    for (err, fault) in cases {
+        assert_eq!(getter_failure(&err, FailedAt::Result).1, fault, "{err}");
+        // The expected side is never the agent's.
+        let (_, on_expected) = getter_failure(&err, FailedAt::Expected);
+        assert_eq!(on_expected, if fault == Fault::Agent { Fault::Task } else { fault }, "{err}");
+    }
+    assert_eq!(getter_failure(&GetterError::NotImplemented("x".into()), FailedAt::Result).0, FailedAt::Missing);
+}
+
+#[test]
 fn last_actions_are_written_as_the_decision_words() {
     assert_eq!(serde_json::to_value(LastAction::Fail).unwrap(), json!("FAIL"));
     assert_eq!(serde_json::to_value(LastAction::Other).unwrap(), json!("OTHER"));
