@@ -375,8 +375,14 @@ impl Summary {
     pub fn incomplete_words(&self) -> Option<String> {
         let o = &self.overall;
         (!o.complete).then(|| {
+            let evaluator = match o.evaluator_errors {
+                0 => String::new(),
+                n => format!(
+                    " ({n} of them because their evaluation failed for a reason not the agent's: `evaluator_error`)"
+                ),
+            };
             format!(
-                "This run is incomplete: {} of {} tasks have no result; the success rate is over the finished tasks only, the strict rate counts the others as 0.",
+                "This run is incomplete: {} of {} tasks have no result{evaluator}; the success rate is over the finished tasks only, the strict rate counts the others as 0.",
                 o.unfinished,
                 o.tasks + o.unfinished
             )

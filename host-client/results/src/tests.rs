@@ -155,6 +155,8 @@ fn the_summary_gives_the_papers_table() {
     assert_eq!(summary.overall.solved_rate, 50.0);
     assert_eq!(summary.overall.unfinished, 2);
     assert_eq!(summary.overall.evaluator_errors, 1);
+    let words = summary.incomplete_words().unwrap_or_default();
+    assert!(words.contains("2 of 6 tasks have no result (1 of them because"), "{words}");
     assert_eq!(summary.domains[0].evaluator_errors, 1);
     assert_eq!(summary.domains[1].evaluator_errors, 0);
     assert_eq!(summary.overall.agent_errors, 1);
