@@ -9,15 +9,26 @@
 //! cloud files through is `arena_client::cache`, which the setup steps share. What it is not: it does not
 //! run `postconfig` (the episode runner runs those steps with `arena-setup`
 //! first) and it never fails: a getter or metric that cannot produce a value
-//! scores 0 with the reason recorded in the outcome.
+//! scores 0 with the reason recorded in the outcome when the failure is the
+//! agent's, and marks the outcome unfinished, naming the cause, when it is not.
 //!
 //! Scoring, as upstream:
 //! 1. `func: "infeasible"`: 1 when the agent's last word was FAIL, else 0.
 //! 2. Otherwise a FAIL scores 0 without fetching anything.
-//! 3. For each metric: the result getter (an error scores that metric 0), the
-//!    expected getter if the task has one, then `metric(result, expected, **options)`.
+//! 3. For each metric: the result getter, the expected getter if the task has
+//!    one, then `metric(result, expected, **options)`.
 //! 4. Several metrics: `and` stops at the first 0 and scores the mean of those
 //!    run; `or` stops at the first 1 and scores the max.
+//!
+//! Who a failure belongs to ([`Fault`]) decides what it does, here and not as
+//! upstream (where any exception leaves the task unscored): a failure caused by
+//! what the agent left (a result file that does not parse, an empty document, a
+//! settings file of the wrong shape, a result the guest answered it does not
+//! have) scores that metric 0, the agent's; a failure in the task's own parts
+//! (its getters' parameters, its options, its expected side, a metric or getter
+//! this build lacks) or in reaching what the harness provides (the guest, the
+//! browser's debugging port) leaves the task unfinished, `evaluator_error` with
+//! its cause (docs/compatibility.md, "Evaluator failures").
 //!
 //! # Layout
 //!
@@ -81,11 +92,42 @@ pub enum FailedAt {
     Result,
     /// The expected getter.
     Expected,
-    /// The metric itself: its options or inputs are not what it takes, or it crashed.
+    /// The metric itself.
     Metric,
-    /// The metric could not read or parse a file: scored 0, as most of upstream's
-    /// metrics catch that and return 0 (docs/compatibility.md, "Unreadable files").
-    Unreadable,
+}
+
+/// Whose failure a metric's error is: it decides whether the metric scores 0
+/// or the task is left unfinished.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Fault {
+    /// What the agent left is not what the metric reads (a file that does not
+    /// parse, an empty document, a value of the wrong shape, a result the guest
+    /// says it does not have): the metric scores 0, the agent's.
+    Agent,
+    /// The task's own parts: a getter's parameters, the metric's options or
+    /// rules, the expected side. The task is left unfinished (`evaluator_error`).
+    Task,
+    /// The harness: a getter or metric this build lacks, a guest or browser the
+    /// getter could not reach, a host file it could not write, a metric that
+    /// crashed. The task is left unfinished (`evaluator_error`).
+    Harness,
+}
+
+impl Fault {
+    /// Whether the failure leaves the task unfinished instead of scoring 0.
+    pub fn is_evaluator(self) -> bool {
+        self != Fault::Agent
+    }
+
+    /// The cause in words, for the unfinished task's reason.
+    pub fn words(self) -> &'static str {
+        match self {
+            Fault::Agent => "the agent's fault",
+            Fault::Task => "a fault of the task's evaluator",
+            Fault::Harness => "a fault of the harness",
+        }
+    }
 }
 
 /// The score of one metric and what it was computed from.
@@ -106,6 +148,10 @@ pub struct MetricOutcome {
     /// Where it failed, when `error` is set.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub failed_at: Option<FailedAt>,
+    /// Whose failure it is, when `error` is set: [`Fault::Agent`] scored 0, the
+    /// others left the task unfinished.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub fault: Option<Fault>,
     /// Time spent in the getters and the metric.
     pub elapsed_ms: u64,
 }
@@ -124,9 +170,10 @@ pub struct EvalOutcome {
     /// Why nothing was measured, when the rules decided alone (a FAIL on a feasible task).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub note: Option<String>,
-    /// Set when upstream's `evaluate` would raise here instead of returning a
-    /// score: the task is then left unfinished (no `result.txt`) and played
-    /// again by the next run. See [`evaluate`] for the rules.
+    /// Set when the evaluation failed for a reason that is not the agent's (the
+    /// task's parts, the harness; see [`Fault`]): the task is then left
+    /// unfinished (no `result.txt`, `evaluator_error`) and played again by the
+    /// next run. The reason names the metric and the cause.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub unfinished: Option<String>,
     /// Whether upstream's value is a Python `int` (`1`/`0` in `result.txt`).
@@ -154,6 +201,7 @@ pub async fn evaluate(ctx: &EvalContext, evaluator: &Evaluator, last_action: Opt
                 expected: Some(Value::String("FAIL".into())),
                 error: None,
                 failed_at: None,
+                fault: None,
                 elapsed_ms: 0,
             };
             return EvalOutcome::decided(score, vec![outcome], None);
@@ -180,19 +228,20 @@ pub async fn evaluate(ctx: &EvalContext, evaluator: &Evaluator, last_action: Opt
     for call in calls {
         let outcome = run_metric(ctx, call, last).await;
         let score = outcome.score;
-        if let Some(at) = outcome.failed_at.filter(|at| *at != FailedAt::Unreadable) {
-            let error = outcome.error.clone().unwrap_or_default();
-            // Upstream's one-metric path returns 0 when the result getter raises;
-            // everything else that raises (an expected getter, the metric, a result
-            // getter in the list path) leaves the task without a score.
+        if let (Some(at), Some(fault)) = (outcome.failed_at, outcome.fault) {
+            if fault.is_evaluator() {
+                let error = outcome.error.clone().unwrap_or_default();
+                unfinished = Some(format!("{} ({}, {}): {error}", outcome.metric, at.words(), fault.words()));
+                outcomes.push(outcome);
+                break;
+            }
+            // Upstream's one-metric path returns 0 when the result getter raises.
             if at == FailedAt::Result && !listed {
                 stopped = Some(0.0);
                 score_is_int = true;
-            } else {
-                unfinished = Some(format!("{}: {error}", outcome.metric));
+                outcomes.push(outcome);
+                break;
             }
-            outcomes.push(outcome);
-            break;
         }
         outcomes.push(outcome);
         if listed {
@@ -228,7 +277,8 @@ fn combine(conj: Conj, scores: impl Iterator<Item = f64>) -> f64 {
     }
 }
 
-/// Runs one metric with its getters; every failure becomes a 0 with the reason.
+/// Runs one metric with its getters; every failure becomes a 0 with the reason
+/// and its [`Fault`].
 async fn run_metric(ctx: &EvalContext, call: &MetricCall, last: Option<LastAction>) -> MetricOutcome {
     let started = Instant::now();
     let mut outcome = MetricOutcome {
@@ -238,26 +288,30 @@ async fn run_metric(ctx: &EvalContext, call: &MetricCall, last: Option<LastActio
         expected: None,
         error: None,
         failed_at: None,
+        fault: None,
         elapsed_ms: 0,
     };
     let finish = |mut outcome: MetricOutcome| {
         outcome.elapsed_ms = u64::try_from(started.elapsed().as_millis()).unwrap_or(u64::MAX);
         if let Some(error) = &outcome.error {
-            tracing::warn!(metric = %outcome.metric, %error, "evaluation step failed; scoring 0");
+            tracing::warn!(metric = %outcome.metric, %error, fault = ?outcome.fault, "evaluation step failed");
         }
         outcome
     };
-    let Some(metric) = metrics::lookup(&call.metric) else {
+    if metrics::lookup(&call.metric).is_none() {
         outcome.error = Some(format!("metric {} is not implemented in this build", call.metric));
         outcome.failed_at = Some(FailedAt::Missing);
+        outcome.fault = Some(Fault::Harness);
         return finish(outcome);
-    };
+    }
     let result = match &call.result {
         None => Fetched::None,
         Some(spec) => match fetch(ctx, spec).await {
             Ok(value) => value,
             Err(err) => {
-                outcome.failed_at = Some(getter_failure(&err, FailedAt::Result));
+                let (at, fault) = getter_failure(&err, FailedAt::Result);
+                outcome.failed_at = Some(at);
+                outcome.fault = Some(fault);
                 outcome.error = Some(err.to_string());
                 return finish(outcome);
             }
@@ -269,7 +323,9 @@ async fn run_metric(ctx: &EvalContext, call: &MetricCall, last: Option<LastActio
         Some(spec) => match fetch(ctx, spec).await {
             Ok(value) => Some(value),
             Err(err) => {
-                outcome.failed_at = Some(getter_failure(&err, FailedAt::Expected));
+                let (at, fault) = getter_failure(&err, FailedAt::Expected);
+                outcome.failed_at = Some(at);
+                outcome.fault = Some(fault);
                 outcome.error = Some(err.to_string());
                 return finish(outcome);
             }
@@ -277,32 +333,119 @@ async fn run_metric(ctx: &EvalContext, call: &MetricCall, last: Option<LastActio
     };
     outcome.expected = expected.as_ref().map(Fetched::summary);
     let input = MetricInput { result, expected, options: call.options.clone(), last_action: last };
+    let name = call.metric.clone();
     // Metrics parse files (spreadsheets, images, video); keep them off the async
     // workers, and turn a panic in one into that metric's error.
-    match tokio::task::spawn_blocking(move || metric(&input)).await {
-        // Upstream writes what the metric returns, unclamped.
-        Ok(Ok(score)) if score.is_finite() => outcome.score = score,
-        Ok(Ok(score)) => outcome.error = Some(format!("metric {} returned {score}, not a score", call.metric)),
-        Ok(Err(err @ (MetricError::Io { .. } | MetricError::Parse { .. }))) => {
-            outcome.error = Some(err.to_string());
-            outcome.failed_at = Some(FailedAt::Unreadable);
-        }
-        Ok(Err(err)) => outcome.error = Some(err.to_string()),
-        Err(err) => outcome.error = Some(format!("metric {} crashed: {err}", call.metric)),
-    }
-    if outcome.error.is_some() && outcome.failed_at.is_none() {
+    let judged = match tokio::task::spawn_blocking(move || judge(&name, &input)).await {
+        Ok(judged) => judged,
+        Err(err) => Judged {
+            score: 0.0,
+            error: Some(format!("metric {} crashed: {err}", call.metric)),
+            fault: Some(Fault::Harness),
+        },
+    };
+    outcome.score = judged.score;
+    outcome.error = judged.error;
+    outcome.fault = judged.fault;
+    if outcome.error.is_some() {
         outcome.failed_at = Some(FailedAt::Metric);
     }
     finish(outcome)
 }
 
-/// A getter this build lacks is [`FailedAt::Missing`] (upstream has it, so the
-/// failure is ours, never a score); any other failure is the getter's.
-fn getter_failure(err: &GetterError, stage: FailedAt) -> FailedAt {
-    match err {
-        GetterError::NotImplemented(_) => FailedAt::Missing,
-        _ => stage,
+impl FailedAt {
+    /// The stage in words, for the unfinished task's reason.
+    pub fn words(self) -> &'static str {
+        match self {
+            FailedAt::Missing => "not implemented",
+            FailedAt::Result => "the result getter",
+            FailedAt::Expected => "the expected getter",
+            FailedAt::Metric => "the metric",
+        }
     }
+}
+
+/// What one metric made of its input: a score, or the error and whose it is.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Judged {
+    /// The metric's score; 0 when `error` is set.
+    pub score: f64,
+    pub error: Option<String>,
+    /// Whose failure `error` is.
+    pub fault: Option<Fault>,
+}
+
+/// Runs the registered metric `name` on `input` (synchronously) and decides
+/// whose failure an error is: a [`MetricError::Malformed`] result, or a file of
+/// the result that cannot be read or parsed, is the agent's (score 0); an error
+/// in the options, the rules or the expected side is the task's; a metric this
+/// build lacks, or a score that is not a number, is the harness's.
+pub fn judge(name: &str, input: &MetricInput) -> Judged {
+    let Some(metric) = metrics::lookup(name) else {
+        return Judged {
+            score: 0.0,
+            error: Some(format!("metric {name} is not implemented in this build")),
+            fault: Some(Fault::Harness),
+        };
+    };
+    let failed = |error: String, fault| Judged { score: 0.0, error: Some(error), fault: Some(fault) };
+    match metric(input) {
+        // Upstream writes what the metric returns, unclamped.
+        Ok(score) if score.is_finite() => Judged { score, error: None, fault: None },
+        Ok(score) => failed(format!("metric {name} returned {score}, not a score"), Fault::Harness),
+        Err(err) => {
+            let fault = if metric_error_is_the_results(&err, &input.result) { Fault::Agent } else { Fault::Task };
+            failed(err.to_string(), fault)
+        }
+    }
+}
+
+/// Whether a metric's error was caused by the result value: it says so
+/// ([`MetricError::Malformed`]), or it is a file of the result that could not be
+/// read or parsed. Anything else (options, rules, the expected file) is the task's.
+fn metric_error_is_the_results(err: &MetricError, result: &Fetched) -> bool {
+    let mut paths = Vec::new();
+    result_paths(result, &mut paths);
+    match err {
+        MetricError::Malformed(_) => true,
+        MetricError::Io { path, .. } => paths.iter().any(|p| p == path),
+        MetricError::Parse { what, .. } => {
+            what.starts_with("the result") || paths.iter().any(|p| what.starts_with(&p.display().to_string()))
+        }
+        _ => false,
+    }
+}
+
+fn result_paths<'a>(value: &'a Fetched, out: &mut Vec<&'a std::path::Path>) {
+    match value {
+        Fetched::File(path) => out.push(path),
+        Fetched::List(items) => items.iter().for_each(|item| result_paths(item, out)),
+        _ => {}
+    }
+}
+
+/// Where a getter's failure stands and whose it is: a getter this build lacks
+/// is [`FailedAt::Missing`] (the harness's); bad parameters are the task's; a
+/// guest out of reach or failing (a 5xx answer, a browser not listening on its
+/// debugging port being the guest's 502), a failed download or a host file that
+/// could not be written are the harness's; anything else (the guest answered
+/// that it has no such file, key or window, or refused it; what it answered is
+/// not what the getter reads) is the agent's, except on the expected side,
+/// which is the task's whatever failed.
+fn getter_failure(err: &GetterError, stage: FailedAt) -> (FailedAt, Fault) {
+    let (at, fault) = match err {
+        GetterError::NotImplemented(_) => (FailedAt::Missing, Fault::Harness),
+        GetterError::BadParams { .. } => (stage, Fault::Task),
+        GetterError::Guest { source, .. } if source.out_of_reach() || source.status().is_some_and(|s| s >= 500) => {
+            (stage, Fault::Harness)
+        }
+        GetterError::Io { .. } | GetterError::Download { .. } => (stage, Fault::Harness),
+        _ => (stage, Fault::Agent),
+    };
+    if stage == FailedAt::Expected && fault == Fault::Agent {
+        return (at, Fault::Task);
+    }
+    (at, fault)
 }
 
 /// Runs one getter by name.
@@ -323,6 +466,24 @@ pub fn getter_supported(name: &str) -> bool {
 /// Whether this build implements the metric `name`.
 pub fn metric_supported(name: &str) -> bool {
     metrics::lookup(name).is_some()
+}
+
+/// The `host_file` gold of `evaluator` that cannot be read from `task_dir` (the
+/// task file's folder; `None` for a task that has no file, as a task object sent
+/// to `arena env serve`): one line per getter, naming the metric, the side and why.
+/// Empty when every such file is there.
+pub fn unresolved_host_files(evaluator: &Evaluator, task_dir: Option<&std::path::Path>) -> Vec<String> {
+    let Scoring::Metrics { calls, .. } = &evaluator.scoring else { return Vec::new() };
+    let mut problems = Vec::new();
+    for call in calls {
+        for (side, spec) in [("result", &call.result), ("expected", &call.expected)] {
+            let Some(spec) = spec.as_ref().filter(|s| s.kind == "host_file") else { continue };
+            if let Some(why) = getters::host_file_problem(task_dir, &spec.params) {
+                problems.push(format!("{} ({side}): {why}", call.metric));
+            }
+        }
+    }
+    problems
 }
 
 /// The getters and metrics `task` names that this build does not implement,

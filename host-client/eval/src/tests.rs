@@ -123,23 +123,24 @@ async fn fail_on_a_feasible_task_scores_zero_without_fetching() {
 }
 
 #[tokio::test]
-async fn getter_failures_score_zero_or_leave_the_task_unfinished_as_upstream() {
+async fn failures_not_the_agents_leave_the_task_unfinished_naming_their_cause() {
     let dir = tempfile::tempdir().unwrap();
     let ctx = offline_ctx(dir.path());
     let expected = json!({"type": "rule", "rules": {"expected": true}});
-    // (result getter, reason, unfinished): upstream's one-metric path scores 0
-    // when the result getter raises; a getter this build lacks is our gap, not a score.
+    // (result getter, reason, fault): a getter this build lacks and a guest out of
+    // reach are the harness's; a getter's bad parameters are the task's. None is
+    // the agent's, so none is scored: upstream's one-metric path would return 0.
     let cases = [
         (
             json!({"type": "vm_screen_size", "dest": "vlcrc"}),
             "getter vm_screen_size is not implemented in this build",
-            true,
+            Fault::Harness,
         ),
-        (json!({"type": "vm_file", "path": r"C:\a.txt", "dest": "../a.txt"}), "relative file name", false),
+        (json!({"type": "vm_file", "path": r"C:\a.txt", "dest": "../a.txt"}), "relative file name", Fault::Task),
         // Nothing listens on port 9: the reason names the guest and the call.
-        (json!({"type": "vm_file_exists_in_desktop", "file_name": "a.lnk"}), "http://127.0.0.1:9", false),
+        (json!({"type": "vm_file_exists_in_desktop", "file_name": "a.lnk"}), "http://127.0.0.1:9", Fault::Harness),
     ];
-    for (result, reason, unfinished) in cases {
+    for (result, reason, fault) in cases {
         let task = evaluator(json!({"func": "exact_match", "result": result, "expected": expected}));
         let outcome = evaluate(&ctx, &task, Some(&LastAction::Done)).await;
         assert_eq!(outcome.score, 0.0);
@@ -150,10 +151,12 @@ async fn getter_failures_score_zero_or_leave_the_task_unfinished_as_upstream() {
             "{outcome:?}"
         );
         assert_eq!(outcome.metrics[0].result, None);
-        assert_eq!(outcome.unfinished.is_some(), unfinished, "{outcome:?}");
-        assert_eq!(outcome.score_is_int, !unfinished, "upstream's `return 0`: {outcome:?}");
+        assert_eq!(outcome.metrics[0].fault, Some(fault), "{outcome:?}");
+        let unfinished = outcome.unfinished.as_deref().unwrap_or_default();
+        assert!(unfinished.starts_with("exact_match (") && unfinished.contains(reason), "{outcome:?}");
+        assert!(unfinished.contains(fault.words()), "{unfinished}");
     }
-    // The same result getter failing in the list path raises upstream: unfinished.
+    // The same in the list path.
     let task = evaluator(json!({
         "func": ["exact_match"],
         "result": [{"type": "vm_file_exists_in_desktop", "file_name": "a.lnk"}],
@@ -162,7 +165,7 @@ async fn getter_failures_score_zero_or_leave_the_task_unfinished_as_upstream() {
     let outcome = evaluate(&ctx, &task, Some(&LastAction::Done)).await;
     assert!(outcome.unfinished.as_deref().is_some_and(|u| u.contains("127.0.0.1:9")), "{outcome:?}");
     assert_eq!(outcome.metrics[0].failed_at, Some(FailedAt::Result));
-    // An expected getter that fails raises on both paths.
+    // An expected getter that fails is the task's on both paths.
     let task = evaluator(json!({
         "func": "exact_match",
         "result": {"type": "rule", "rules": true},
@@ -171,7 +174,8 @@ async fn getter_failures_score_zero_or_leave_the_task_unfinished_as_upstream() {
     let outcome = evaluate(&ctx, &task, Some(&LastAction::Done)).await;
     assert!(outcome.unfinished.as_deref().is_some_and(|u| u.contains("relative file name")), "{outcome:?}");
     assert_eq!(outcome.metrics[0].failed_at, Some(FailedAt::Expected));
-    // A metric that fails (here: rules without `expected`) raises too.
+    assert_eq!(outcome.metrics[0].fault, Some(Fault::Task));
+    // A metric whose rules are broken (here: without `expected`) is the task's too.
     let task = evaluator(
         json!({"func": "exact_match", "result": {"type": "rule", "rules": 1}, "expected": {"type": "rule", "rules": {"no": 1}}}),
     );
@@ -179,7 +183,92 @@ async fn getter_failures_score_zero_or_leave_the_task_unfinished_as_upstream() {
     assert_eq!(outcome.score, 0.0);
     assert_eq!(outcome.metrics[0].error.as_deref(), Some("the rules have no `expected`"));
     assert_eq!(outcome.metrics[0].failed_at, Some(FailedAt::Metric));
+    assert_eq!(outcome.metrics[0].fault, Some(Fault::Task));
     assert!(outcome.unfinished.is_some(), "{outcome:?}");
+}
+
+#[tokio::test]
+async fn a_malformed_result_scores_zero_for_the_agent_and_the_next_metric_still_runs() {
+    let dir = tempfile::tempdir().unwrap();
+    let ctx = offline_ctx(dir.path());
+    // `check_direct_json_object` parses its result as JSON: text that is not JSON is the agent's.
+    let malformed = json!({"type": "rule", "rules": "{not json"});
+    let rules = json!({"type": "rule", "rules": {"expected": {"a": 1}}});
+    let one = evaluator(json!({"func": "check_direct_json_object", "result": malformed, "expected": rules}));
+    let outcome = evaluate(&ctx, &one, Some(&LastAction::Done)).await;
+    assert_eq!((outcome.score, outcome.unfinished.clone()), (0.0, None), "{outcome:?}");
+    assert_eq!(outcome.metrics[0].fault, Some(Fault::Agent));
+    assert_eq!(outcome.metrics[0].failed_at, Some(FailedAt::Metric));
+    assert!(outcome.error.is_some(), "the reason is kept: {outcome:?}");
+    // In an `or`, the malformed metric is a 0 and the next one decides.
+    let (f, r, e) = rule_metric(true);
+    let listed = evaluator(json!({
+        "func": ["check_direct_json_object", f], "conj": "or",
+        "result": [malformed, r], "expected": [rules, e],
+    }));
+    let outcome = evaluate(&ctx, &listed, Some(&LastAction::Done)).await;
+    assert_eq!((outcome.score, outcome.metrics.len(), outcome.unfinished.clone()), (1.0, 2, None), "{outcome:?}");
+}
+
+#[test]
+fn the_judge_tells_the_results_files_from_the_tasks() {
+    let dir = tempfile::tempdir().unwrap();
+    let write = |name: &str, text: &str| {
+        let path = dir.path().join(name);
+        std::fs::write(&path, text).unwrap();
+        Fetched::File(path)
+    };
+    let (good, bad) = (write("good.txt", "same\n"), write("bad.txt", ""));
+    std::fs::write(dir.path().join("bad.txt"), [0xff, 0xfe, 0x00]).unwrap();
+    let input = |result: &Fetched, expected: &Fetched| MetricInput {
+        result: result.clone(),
+        expected: Some(expected.clone()),
+        options: serde_json::Map::new(),
+        last_action: Some(LastAction::Done),
+    };
+    // Not UTF-8 on the result's side: the agent's 0; on the expected side: the task's.
+    let agents = judge("compare_text_file", &input(&bad, &good));
+    assert_eq!((agents.score, agents.fault), (0.0, Some(Fault::Agent)), "{agents:?}");
+    let tasks = judge("compare_text_file", &input(&good, &bad));
+    assert_eq!((tasks.score, tasks.fault), (0.0, Some(Fault::Task)), "{tasks:?}");
+    let passes = judge("compare_text_file", &input(&good, &good));
+    assert_eq!(passes, Judged { score: 1.0, error: None, fault: None });
+    let missing = judge("no_such_metric", &input(&good, &good));
+    assert_eq!(missing.fault, Some(Fault::Harness));
+}
+
+#[test]
+fn a_getters_failure_is_the_harnesss_when_the_guest_failed_and_the_agents_when_it_answered() {
+    use arena_client::error::{CallSite, ClientError};
+    use arena_shared::error::ErrorCode;
+    let api = |status: u16, code: ErrorCode| GetterError::Guest {
+        getter: "open_tabs_info",
+        source: Box::new(ClientError::Api {
+            call: CallSite { guest: "http://g".into(), method: "GET", path: "/v1/browser/json/list".into() },
+            status,
+            code,
+            message: "m".into(),
+        }),
+    };
+    let cases = [
+        // No browser on the debugging port: the guest's 502.
+        (api(502, ErrorCode::Internal), Fault::Harness),
+        (api(500, ErrorCode::Internal), Fault::Harness),
+        // The guest answered that it has no such thing, or refused it.
+        (api(404, ErrorCode::NotFound), Fault::Agent),
+        (api(403, ErrorCode::Forbidden), Fault::Agent),
+        (GetterError::Failed { getter: "bookmarks", message: "not JSON".into() }, Fault::Agent),
+        (GetterError::BadParams { getter: "vm_file", message: "no path".into() }, Fault::Task),
+        (GetterError::Download { getter: "cloud_file", message: "503".into() }, Fault::Harness),
+        (GetterError::NotImplemented("x".into()), Fault::Harness),
+    ];
+    for (err, fault) in cases {
+        assert_eq!(getter_failure(&err, FailedAt::Result).1, fault, "{err}");
+        // The expected side is never the agent's.
+        let (_, on_expected) = getter_failure(&err, FailedAt::Expected);
+        assert_eq!(on_expected, if fault == Fault::Agent { Fault::Task } else { fault }, "{err}");
+    }
+    assert_eq!(getter_failure(&GetterError::NotImplemented("x".into()), FailedAt::Result).0, FailedAt::Missing);
 }
 
 #[test]

@@ -126,10 +126,14 @@ pub enum EpisodeStatus {
     /// Unfinished: the model endpoint kept failing after the retries (upstream's
     /// `predict` raises and the task is left without a result).
     ModelError(String),
-    /// Unfinished: the evaluation failed where upstream's `evaluate` raises (an
-    /// expected getter, a metric given inputs it cannot take, a gold file that
-    /// cannot be downloaded).
-    EvalError(String),
+    /// Unfinished: the evaluation failed for a reason that is not the agent's:
+    /// the task's own parts (its getters' parameters, its options, its expected
+    /// side, a metric or getter this build lacks) or what the harness provides
+    /// (the guest, the browser's debugging port, a gold file's download). The
+    /// message names the metric and the cause. Written as `evaluator_error`;
+    /// `eval_error`, its name before, is still read.
+    #[serde(alias = "eval_error")]
+    EvaluatorError(String),
     /// Unfinished: the run was interrupted (Ctrl-C) before the episode ended;
     /// nothing half-done was evaluated.
     Interrupted(String),
@@ -195,21 +199,21 @@ impl Blame {
             EpisodeStatus::InfraError(m) if m.contains("VM") => Blame::Vm,
             EpisodeStatus::InfraError(_) => Blame::Guest,
             EpisodeStatus::ModelError(_) => Blame::Model,
-            EpisodeStatus::EvalError(_) => Blame::Evaluator,
+            EpisodeStatus::EvaluatorError(_) => Blame::Evaluator,
             EpisodeStatus::Interrupted(_) => Blame::Interrupted,
         }
     }
 }
 
 impl EpisodeStatus {
-    /// `completed`, `agent_error`, `infra_error`, `model_error`, `eval_error` or `interrupted`.
+    /// `completed`, `agent_error`, `infra_error`, `model_error`, `evaluator_error` or `interrupted`.
     pub fn kind(&self) -> &'static str {
         match self {
             EpisodeStatus::Completed => "completed",
             EpisodeStatus::AgentError(_) => "agent_error",
             EpisodeStatus::InfraError(_) => "infra_error",
             EpisodeStatus::ModelError(_) => "model_error",
-            EpisodeStatus::EvalError(_) => "eval_error",
+            EpisodeStatus::EvaluatorError(_) => "evaluator_error",
             EpisodeStatus::Interrupted(_) => "interrupted",
         }
     }
@@ -221,7 +225,7 @@ impl EpisodeStatus {
             EpisodeStatus::AgentError(m)
             | EpisodeStatus::InfraError(m)
             | EpisodeStatus::ModelError(m)
-            | EpisodeStatus::EvalError(m)
+            | EpisodeStatus::EvaluatorError(m)
             | EpisodeStatus::Interrupted(m) => Some(m),
         }
     }
@@ -237,7 +241,7 @@ impl EpisodeStatus {
             self,
             EpisodeStatus::InfraError(_)
                 | EpisodeStatus::ModelError(_)
-                | EpisodeStatus::EvalError(_)
+                | EpisodeStatus::EvaluatorError(_)
                 | EpisodeStatus::Interrupted(_)
         )
     }

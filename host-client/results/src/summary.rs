@@ -73,6 +73,10 @@ pub struct DomainRow {
     pub action_errors: u32,
     /// Tasks with no score: unfinished, or listed and never started.
     pub unfinished: u32,
+    /// Of the unfinished, those whose evaluation failed for a reason not the
+    /// agent's (`evaluator_error`: the task's evaluator or the harness).
+    #[serde(default)]
+    pub evaluator_errors: u32,
     /// Mean score × 100 over every task (finished or not, unfinished as 0).
     #[serde(default)]
     pub strict_rate: f64,
@@ -371,8 +375,14 @@ impl Summary {
     pub fn incomplete_words(&self) -> Option<String> {
         let o = &self.overall;
         (!o.complete).then(|| {
+            let evaluator = match o.evaluator_errors {
+                0 => String::new(),
+                n => format!(
+                    " ({n} of them because their evaluation failed for a reason not the agent's: `evaluator_error`)"
+                ),
+            };
             format!(
-                "This run is incomplete: {} of {} tasks have no result; the success rate is over the finished tasks only, the strict rate counts the others as 0.",
+                "This run is incomplete: {} of {} tasks have no result{evaluator}; the success rate is over the finished tasks only, the strict rate counts the others as 0.",
                 o.unfinished,
                 o.tasks + o.unfinished
             )
@@ -776,6 +786,7 @@ fn domain_row(domain: &str, rows: &[&TaskRow], not_run: usize) -> DomainRow {
         avg_steps: mean(&|r| f64::from(r.steps)),
         avg_seconds: mean(&|r| r.elapsed_ms as f64 / 1000.0),
         agent_errors: finished.iter().filter(|r| r.status == "agent_error").count() as u32,
+        evaluator_errors: rows.iter().filter(|r| r.score.is_none() && r.status == "evaluator_error").count() as u32,
         action_errors: rows.iter().map(|r| r.action_errors).sum(),
         unfinished: (rows.len() + not_run) as u32 - n,
         strict_rate: if rows.len() + not_run == 0 {

@@ -140,7 +140,7 @@ fn the_summary_gives_the_papers_table() {
     write_task(root.path(), "notepad", "c", 0.5, EpisodeStatus::Completed);
     write_task(root.path(), "file_explorer", "d", 1.0, EpisodeStatus::Completed);
     write_task(root.path(), "file_explorer", "e", 0.0, EpisodeStatus::InfraError("gone".into()));
-    write_task(root.path(), "file_explorer", "f", 0.0, EpisodeStatus::EvalError("expected getter".into()));
+    write_task(root.path(), "file_explorer", "f", 0.0, EpisodeStatus::EvaluatorError("expected getter".into()));
     let summary = Summary::from_dir(root.path()).unwrap();
     // Upstream's rate: mean score x 100 over finished tasks; partial credit counts.
     assert_eq!(
@@ -154,6 +154,11 @@ fn the_summary_gives_the_papers_table() {
     assert!((summary.domains[1].solved_rate - 100.0 / 3.0).abs() < 1e-9);
     assert_eq!(summary.overall.solved_rate, 50.0);
     assert_eq!(summary.overall.unfinished, 2);
+    assert_eq!(summary.overall.evaluator_errors, 1);
+    let words = summary.incomplete_words().unwrap_or_default();
+    assert!(words.contains("2 of 6 tasks have no result (1 of them because"), "{words}");
+    assert_eq!(summary.domains[0].evaluator_errors, 1);
+    assert_eq!(summary.domains[1].evaluator_errors, 0);
     assert_eq!(summary.overall.agent_errors, 1);
     assert!((summary.overall.mean_score - 2.5 / 4.0).abs() < 1e-9);
     assert_eq!(summary.overall.avg_steps, 2.0);
@@ -532,4 +537,19 @@ fn an_io_error_is_said_once_in_a_chain() {
     let said = format!("{:#}", anyhow::Error::new(err).context("arena report"));
     assert_eq!(said.matches("not found").count(), 1, "{said}");
     assert!(said.contains("/nowhere/results"), "{said}");
+}
+
+#[test]
+fn an_old_eval_error_is_read_as_evaluator_error_and_written_by_the_new_name() {
+    // Folders written before the rename hold `eval_error`; they must merge and resume.
+    let old: EpisodeStatus =
+        serde_json::from_value(serde_json::json!({"kind": "eval_error", "message": "exact_match: gold"})).unwrap();
+    assert_eq!(old, EpisodeStatus::EvaluatorError("exact_match: gold".into()));
+    assert!(old.is_unfinished());
+    assert_eq!(old.kind(), "evaluator_error");
+    assert_eq!(Blame::of(&old, 0.0), Blame::Evaluator);
+    assert_eq!(
+        serde_json::to_value(&old).unwrap(),
+        serde_json::json!({"kind": "evaluator_error", "message": "exact_match: gold"})
+    );
 }

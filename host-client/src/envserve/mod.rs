@@ -281,8 +281,29 @@ impl EnvServer {
         })
     }
 
-    /// The task `spec` names: a served task's id or name, or a task given whole.
+    /// The task `spec` names: a served task's id or name, or a task given whole;
+    /// refused when its evaluator's `host_file` gold cannot be read, since the
+    /// episode could not be scored (a task object has no folder to read it from).
     fn task(&self, spec: &Value) -> Result<Task, Refusal> {
+        let task = self.named_task(spec)?;
+        let task_dir = if spec.is_string() { task.path.parent() } else { None };
+        let unresolved = arena_eval::unresolved_host_files(&task.evaluator, task_dir);
+        if unresolved.is_empty() {
+            return Ok(task);
+        }
+        Err(bad(format!(
+            "task {:?}: its evaluator's host_file gold cannot be read, so it could not be scored: {}{}",
+            task.name,
+            unresolved.join("; "),
+            if task_dir.is_none() {
+                " (a task object has no folder; serve the task from a file with --tasks)"
+            } else {
+                ""
+            }
+        )))
+    }
+
+    fn named_task(&self, spec: &Value) -> Result<Task, Refusal> {
         match spec {
             Value::String(key) => {
                 self.tasks.iter().find(|t| t.id == *key || t.name == *key).cloned().ok_or_else(|| {
@@ -683,5 +704,33 @@ mod tests {
         assert_eq!(strict.sweep().await, 1);
         assert_eq!(strict.free.lock().expect("free").len(), 2, "both guests back");
         assert_eq!(strict.session("a").expect_err("gone").0, StatusCode::NOT_FOUND);
+    }
+
+    #[test]
+    fn a_task_whose_host_file_gold_cannot_be_read_is_refused_naming_it() {
+        let dir = tempfile::tempdir().expect("tmp");
+        let evaluator = json!({"func": "compare_text_file",
+            "result": {"type": "vm_file", "path": "C:\\a.txt", "dest": "a.txt"},
+            "expected": {"type": "host_file", "path": "gold/a.txt", "dest": "gold.txt"}});
+        let text = json!({"id": "gold-task", "instruction": "i", "evaluator": evaluator}).to_string();
+        let folder = dir.path().join("tasks").join("notepad");
+        std::fs::create_dir_all(&folder).expect("folder");
+        let served = Task::parse(&text, &folder.join("gold-task.json")).expect("a task");
+        let mut env = server(Duration::from_secs(600), dir.path());
+        Arc::get_mut(&mut env).expect("one owner").tasks = vec![served];
+        // Served from a file whose folder lacks the gold.
+        let refused = env.task(&json!("gold-task")).expect_err("refused");
+        assert_eq!(refused.0, StatusCode::BAD_REQUEST);
+        assert!(refused.1.contains("gold-task") && refused.1.contains("gold/a.txt"), "{}", refused.1);
+        assert!(refused.1.contains("compare_text_file (expected)"), "{}", refused.1);
+        // With the gold beside it, the same task is served.
+        std::fs::create_dir_all(folder.join("gold")).expect("gold folder");
+        std::fs::write(folder.join("gold").join("a.txt"), "x").expect("gold");
+        assert_eq!(env.task(&json!("gold-task")).expect("served").name, "gold-task");
+        // Sent whole, the task has no folder: refused, saying so.
+        let object: Value = serde_json::from_str(&text).expect("json");
+        let refused = env.task(&object).expect_err("refused");
+        assert!(refused.1.contains("a task object has no folder"), "{}", refused.1);
+        assert!(refused.1.contains("task file's folder is not known"), "{}", refused.1);
     }
 }

@@ -549,7 +549,7 @@ impl Episode {
             }
         }
         if let Some(reason) = outcome.unfinished {
-            return Err(EpisodeStatus::EvalError(reason));
+            return Err(EpisodeStatus::EvaluatorError(reason));
         }
         self.result.score = outcome.score;
         self.result.score_is_int = outcome.score_is_int;

@@ -419,16 +419,85 @@ async fn a_model_that_stays_down_leaves_the_task_unfinished() {
 }
 
 #[tokio::test]
-async fn an_evaluation_that_raises_upstream_leaves_the_task_unfinished() {
-    // The expected getter reads a guest file that does not exist.
+async fn a_broken_expected_side_leaves_the_task_unfinished_as_an_evaluator_error() {
+    // The expected getter reads a guest file that does not exist (`None`), which
+    // is no rules dict: the task's gold is broken, not the agent's answer.
     let text = r#"{"id": "t", "instruction": "do it", "evaluator": {"func": "exact_match",
         "result": {"type": "rule", "rules": "x"},
         "expected": {"type": "vm_file", "path": "C:\\nope\\gold.txt", "dest": "gold.txt"}}}"#;
     let task = Task::parse(text, &PathBuf::from("/tasks/notepad/t.json")).unwrap();
     let (result, out, _tmp) = play(&task, vec![says(vec![AgentAction::Done])], false).await;
-    assert!(matches!(&result.status, EpisodeStatus::EvalError(m) if m.contains("exact_match")), "{:?}", result.status);
-    assert!(!out.is_finished(), "no result.txt for an evaluation upstream could not finish");
+    assert!(
+        matches!(&result.status, EpisodeStatus::EvaluatorError(m) if m.contains("exact_match") && m.contains("the task's evaluator")),
+        "{:?}",
+        result.status
+    );
+    assert_eq!(result.status.kind(), "evaluator_error");
+    assert_eq!(result.blame(), arena_results::Blame::Evaluator);
+    assert!(!out.is_finished(), "no result.txt for an evaluation the task's own parts broke");
     assert_eq!(out.read_episode().unwrap().status, result.status);
+}
+
+/// Plays `task` on a fresh stub guest that first holds `files` (guest path, bytes).
+async fn play_on_stub_holding(task: &Task, files: &[(&str, &[u8])]) -> (EpisodeResult, TaskDir, tempfile::TempDir) {
+    let stub = start(&StubArgs::default(), None).await.unwrap();
+    let client =
+        GuestClient::new(&stub.url(), ClientConfig { token: None, timeout: Duration::from_secs(5), retries: 1 })
+            .unwrap();
+    for (path, bytes) in files {
+        client.push_file(path, bytes.to_vec(), None).await.unwrap();
+    }
+    let tmp = tempfile::tempdir().unwrap();
+    let config =
+        EpisodeConfig { max_steps: 2, ..EpisodeConfig::instant(DownloadCache::new(tmp.path().join("cache")).unwrap()) };
+    let mut agent = Fake { script: vec![says(vec![AgentAction::Done])].into(), stub: None };
+    let out = TaskDir::new(tmp.path().join("out"));
+    let result = run_episode(&client, task, &mut agent, &config, &out).await;
+    stub.stop().await.unwrap();
+    (result, out, tmp)
+}
+
+#[tokio::test]
+async fn a_settings_file_the_agent_left_as_a_list_scores_zero_for_the_agent() {
+    // Issue 43: `[]` in the settings.json `check_json_settings` grades used to be
+    // `eval_error` (unfinished, "Failed by: environment"); it is the agent's 0.
+    let text = r#"{"id": "t", "instruction": "set the font size", "evaluator": {"func": "check_json_settings",
+        "result": {"type": "vm_file", "path": "C:\\Users\\Docker\\settings.json", "dest": "settings.json"},
+        "expected": {"type": "rule", "rules": {"expected": {"editor.fontSize": 14}}}}}"#;
+    let task = Task::parse(text, &PathBuf::from("/tasks/vs_code/t.json")).unwrap();
+    let settings = r"C:\Users\Docker\settings.json";
+    let (result, out, _tmp) = play_on_stub_holding(&task, &[(settings, b"[]")]).await;
+    assert_eq!(result.status, EpisodeStatus::Completed, "{:?}", result.eval);
+    assert_eq!(result.score, 0.0);
+    assert_eq!(result.blame(), arena_results::Blame::Agent);
+    assert!(out.is_finished(), "the agent's 0 is a result: it counts in the rate and is not replayed");
+    let metric = &result.eval["metrics"][0];
+    assert_eq!(metric["fault"], "agent", "{metric}");
+    assert!(metric["error"].as_str().unwrap_or("").contains("not a settings object"), "{metric}");
+    // The same task with the settings the agent should have written passes: the 0 was the list's.
+    let good = br#"{"editor.fontSize": 14, "files.autoSave": "off"}"#;
+    let (result, _out, _tmp) = play_on_stub_holding(&task, &[(settings, good)]).await;
+    assert_eq!((result.status.clone(), result.score), (EpisodeStatus::Completed, 1.0), "{:?}", result.eval);
+}
+
+#[tokio::test]
+async fn a_chrome_task_on_the_stub_is_an_evaluator_error_not_the_agents_zero() {
+    // Issue 43: upstream's Chrome tasks on the stub read the tabs over the debugging
+    // port, where no browser listens; that is the harness's, never the agent's 0.
+    let text = r#"{"id": "t", "instruction": "open two tabs", "evaluator": {"func": "is_expected_tabs",
+        "result": {"type": "open_tabs_info"},
+        "expected": {"type": "rule", "rules": {"type": "url", "urls": ["https://example.org/"]}}}}"#;
+    let task = Task::parse(text, &PathBuf::from("/tasks/chrome/t.json")).unwrap();
+    let (result, out, _tmp) = play_on_stub_holding(&task, &[]).await;
+    let EpisodeStatus::EvaluatorError(reason) = &result.status else {
+        panic!("{:?}: {:?}", result.status, result.eval)
+    };
+    assert!(reason.contains("no browser is listening on the debugging port"), "{reason}");
+    assert!(reason.contains("is_expected_tabs") && reason.contains("result getter"), "{reason}");
+    assert_eq!(result.blame(), arena_results::Blame::Evaluator);
+    assert_eq!(result.blame().side(), "environment");
+    assert!(!out.is_finished());
+    assert_eq!(result.eval["metrics"][0]["fault"], "harness");
 }
 
 #[tokio::test]

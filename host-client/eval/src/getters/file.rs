@@ -3,7 +3,10 @@
 //! existence check (`vm_file_exists_in_vm_folder`); and this project's
 //! `host_file`, expected files kept on the host beside the task file.
 
+use std::path::PathBuf;
 use std::time::{SystemTime, UNIX_EPOCH};
+
+use serde_json::{Map, Value};
 
 use arena_shared::calendar::{civil_from_days, days_from_civil};
 use arena_shared::files::FileKind;
@@ -103,19 +106,9 @@ pub(super) async fn cloud_file(ctx: &EvalContext, params: &Params<'_>) -> Result
 pub(super) fn host_file(ctx: &EvalContext, params: &Params<'_>) -> Result<Fetched, GetterError> {
     let pairs = pairs(params)?;
     let gives = params.gives()?;
-    let Some(task_dir) = &ctx.task_dir else {
-        return Err(params.bad("the task file's folder is not known here, so no host file can be read"));
-    };
+    let sources = host_sources(ctx.task_dir.as_deref(), params)?;
     let mut out = Vec::new();
-    for (idx, (path, dest)) in pairs.iter().enumerate() {
-        let relative = std::path::Path::new(path);
-        let inside = !path.is_empty()
-            && !path.contains('\\')
-            && relative.components().all(|c| matches!(c, std::path::Component::Normal(_)));
-        if !inside {
-            return Err(params.bad(format!("`path` {path:?} must be a relative path inside the task file's folder")));
-        }
-        let source = task_dir.join(relative);
+    for (idx, ((_, dest), source)) in pairs.iter().zip(sources).enumerate() {
         let local = dest_path(ctx, params, dest)?;
         std::fs::copy(&source, &local).map_err(|err| params.io(&source, err))?;
         if gives.contains(&idx) {
@@ -123,6 +116,46 @@ pub(super) fn host_file(ctx: &EvalContext, params: &Params<'_>) -> Result<Fetche
         }
     }
     Ok(one_or_list(out))
+}
+
+/// The host files a `host_file` getter reads: each `path` inside `task_dir`.
+///
+/// # Errors
+///
+/// [`GetterError::BadParams`] without a task folder, or for a path that is
+/// absolute or climbs out of it.
+fn host_sources(task_dir: Option<&std::path::Path>, params: &Params<'_>) -> Result<Vec<PathBuf>, GetterError> {
+    let Some(task_dir) = task_dir else {
+        return Err(params.bad("the task file's folder is not known here, so no host file can be read"));
+    };
+    pairs(params)?
+        .into_iter()
+        .map(|(path, _)| {
+            let relative = std::path::Path::new(&path);
+            let inside = !path.is_empty()
+                && !path.contains('\\')
+                && relative.components().all(|c| matches!(c, std::path::Component::Normal(_)));
+            if inside {
+                Ok(task_dir.join(relative))
+            } else {
+                Err(params.bad(format!("`path` {path:?} must be a relative path inside the task file's folder")))
+            }
+        })
+        .collect()
+}
+
+/// Why the `host_file` getter with `params` could not read its gold from
+/// `task_dir`, or `None` when every file it names is there (a check made before
+/// an episode, so a broken task is refused instead of played).
+pub(crate) fn host_file_problem(task_dir: Option<&std::path::Path>, params: &Map<String, Value>) -> Option<String> {
+    let params = Params::new("host_file", params);
+    match host_sources(task_dir, &params) {
+        Err(err) => Some(err.to_string()),
+        Ok(sources) => sources
+            .iter()
+            .find(|source| !source.is_file())
+            .map(|source| format!("getter host_file: {} is not a file", source.display())),
+    }
 }
 
 /// `get_vm_file_exists_in_vm_folder`: `1.0` when the guest has a non-empty

@@ -85,6 +85,8 @@ pub enum Getter {
     System(system::SystemGetter),
 }
 
+pub(crate) use file::host_file_problem;
+
 /// The entry of a family's name table called `name`.
 pub(super) fn by_name<G: Copy>(table: &[(&'static str, G)], name: &str) -> Option<G> {
     table.iter().find_map(|(known, getter)| (*known == name).then_some(*getter))

@@ -10,7 +10,7 @@
 
 use serde_json::{Map, Value};
 
-use super::{score, MetricError, MetricFn, MetricInput};
+use super::{malformed, score, MetricError, MetricFn, MetricInput};
 use crate::value::{json_kind, py_contains, py_eq, py_truthy, Fetched};
 
 #[cfg(test)]
@@ -40,6 +40,27 @@ fn bad(message: impl Into<String>) -> MetricError {
     MetricError::BadInput(message.into())
 }
 
+/// An error about `what`: the task's when it names the rules (`rules[...]`),
+/// else about the result the getter read (what the agent left), the agent's.
+fn shape(what: &str, message: String) -> MetricError {
+    if what.starts_with("rules") {
+        bad(message)
+    } else {
+        malformed(message)
+    }
+}
+
+/// `wanted in have` could not be asked: the agent's when the rule's value is a
+/// string (the shape every task gives), so the result is what cannot hold it.
+fn cannot_search(have: &Value, wanted: &Value) -> MetricError {
+    let message = format!("cannot search {} for {}", json_kind(have), json_kind(wanted));
+    if wanted.is_string() {
+        malformed(message)
+    } else {
+        bad(message)
+    }
+}
+
 /// `rule['type']` as a string.
 fn rule_type(input: &MetricInput) -> Result<&str, MetricError> {
     match input.rule("type")? {
@@ -55,20 +76,20 @@ fn unsupported(kind: &str) -> MetricError {
 /// `value[key]` on a dict, as Python indexes it (a missing key or a non-dict is an error).
 fn index<'a>(value: &'a Value, key: &str, what: &str) -> Result<&'a Value, MetricError> {
     match value {
-        Value::Object(map) => map.get(key).ok_or_else(|| bad(format!("{what} has no {key:?}"))),
-        other => Err(bad(format!("{what} must be a dict, not {}", json_kind(other)))),
+        Value::Object(map) => map.get(key).ok_or_else(|| shape(what, format!("{what} has no {key:?}"))),
+        other => Err(shape(what, format!("{what} must be a dict, not {}", json_kind(other)))),
     }
 }
 
 fn list<'a>(value: &'a Value, what: &str) -> Result<&'a [Value], MetricError> {
     match value {
         Value::Array(items) => Ok(items),
-        other => Err(bad(format!("{what} must be a list, not {}", json_kind(other)))),
+        other => Err(shape(what, format!("{what} must be a list, not {}", json_kind(other)))),
     }
 }
 
 fn string<'a>(value: &'a Value, what: &str) -> Result<&'a str, MetricError> {
-    value.as_str().ok_or_else(|| bad(format!("{what} must be a string, not {}", json_kind(value))))
+    value.as_str().ok_or_else(|| shape(what, format!("{what} must be a string, not {}", json_kind(value))))
 }
 
 /// Every item of `wanted` is equal to some item of `have` (Python's `set(wanted) <= set(have)`).
@@ -168,7 +189,7 @@ fn rows<'a>(value: &'a Value, what: &str) -> Result<&'a [Value], MetricError> {
 
 /// `row[idx]` of a list row.
 fn column<'a>(row: &'a Value, idx: usize, what: &str) -> Result<&'a Value, MetricError> {
-    list(row, what)?.get(idx).ok_or_else(|| bad(format!("{what} has no column {idx}")))
+    list(row, what)?.get(idx).ok_or_else(|| shape(what, format!("{what} has no column {idx}")))
 }
 
 /// `is_cookie_deleted(cookie_data, rule)`: rule type `domains`; 0 when any
@@ -205,8 +226,7 @@ pub(super) fn check_history_deleted(input: &MetricInput) -> Result<f64, MetricEr
             let urls = history.iter().map(|row| column(row, 0, "a history row")).collect::<Result<Vec<_>, _>>()?;
             for keyword in keywords {
                 for url in &urls {
-                    let found = py_contains(url, keyword)
-                        .ok_or_else(|| bad(format!("cannot search {} for {}", json_kind(url), json_kind(keyword))))?;
+                    let found = py_contains(url, keyword).ok_or_else(|| cannot_search(url, keyword))?;
                     if found {
                         return Ok(0.0);
                     }
@@ -237,9 +257,9 @@ pub(super) fn check_enabled_experiments(input: &MetricInput) -> Result<f64, Metr
 /// A number as Python compares it (`True` is 1).
 fn number(value: &Value, what: &str) -> Result<f64, MetricError> {
     match value {
-        Value::Number(n) => n.as_f64().ok_or_else(|| bad(format!("{what} is not a finite number"))),
+        Value::Number(n) => n.as_f64().ok_or_else(|| shape(what, format!("{what} is not a finite number"))),
         Value::Bool(b) => Ok(f64::from(u8::from(*b))),
-        other => Err(bad(format!("{what} must be a number, not {}", json_kind(other)))),
+        other => Err(shape(what, format!("{what} must be a number, not {}", json_kind(other)))),
     }
 }
 
@@ -336,8 +356,7 @@ pub(super) fn is_added_to_steam_cart(input: &MetricInput) -> Result<f64, MetricE
     let info = input.result.to_json();
     let content = index(&info, "content", "the page info")?;
     for item in list(input.rule("items")?, "rules[\"items\"]")? {
-        let found = py_contains(content, item)
-            .ok_or_else(|| bad(format!("cannot search {} for {}", json_kind(content), json_kind(item))))?;
+        let found = py_contains(content, item).ok_or_else(|| cannot_search(content, item))?;
         if !found {
             return Ok(0.0);
         }
@@ -351,7 +370,7 @@ pub(super) fn is_added_to_steam_cart(input: &MetricInput) -> Result<f64, MetricE
 fn shortcuts(result: &Fetched) -> Result<Map<String, Value>, MetricError> {
     match result.to_json() {
         Value::Object(map) => Ok(map),
-        other => Err(bad(format!("the shortcuts must be a dict, not {}", json_kind(&other)))),
+        other => Err(malformed(format!("the shortcuts must be a dict, not {}", json_kind(&other)))),
     }
 }
 
@@ -365,7 +384,7 @@ pub(super) fn is_shortcut_on_desktop(input: &MetricInput) -> Result<f64, MetricE
     let shortcuts = shortcuts(&input.result)?;
     let contents: Vec<&str> = shortcuts.values().filter_map(Value::as_str).collect();
     if contents.len() != shortcuts.len() {
-        return Err(bad("every shortcut's content must be text"));
+        return Err(malformed("every shortcut's content must be text"));
     }
     match rule_type(input)? {
         "name" => {
@@ -395,8 +414,7 @@ pub(super) fn is_url_shortcut_on_desktop(input: &MetricInput) -> Result<f64, Met
             let wanted = input.rule("url_content")?;
             let mut found = false;
             for content in shortcuts.values() {
-                found |= py_contains(content, wanted)
-                    .ok_or_else(|| bad(format!("cannot search {} for {}", json_kind(content), json_kind(wanted))))?;
+                found |= py_contains(content, wanted).ok_or_else(|| cannot_search(content, wanted))?;
             }
             Ok(score(found))
         }
@@ -553,14 +571,17 @@ pub(crate) fn compare_urls(a: Option<&str>, b: Option<&str>) -> bool {
 }
 
 /// [`compare_urls`] on JSON values: `None` is Python's `None`; anything else
-/// but a string cannot be parsed (upstream's `urlparse` raises).
-fn compare_url_values(a: &Value, b: &Value) -> Result<bool, MetricError> {
-    let as_url = |v: &Value| -> Result<Option<String>, MetricError> {
+/// but a string cannot be parsed (upstream's `urlparse` raises). `rule` is the
+/// task's URL, `found` the result's: a bad one is the task's, the other the agent's.
+fn compare_url_values(rule: &Value, found: &Value) -> Result<bool, MetricError> {
+    let as_url = |v: &Value| -> Result<Option<String>, String> {
         match v {
             Value::Null => Ok(None),
             Value::String(s) => Ok(Some(s.clone())),
-            other => Err(bad(format!("a URL must be a string, not {}", json_kind(other)))),
+            other => Err(format!("a URL must be a string, not {}", json_kind(other))),
         }
     };
-    Ok(compare_urls(as_url(a)?.as_deref(), as_url(b)?.as_deref()))
+    let rule = as_url(rule).map_err(bad)?;
+    let found = as_url(found).map_err(malformed)?;
+    Ok(compare_urls(rule.as_deref(), found.as_deref()))
 }

@@ -312,8 +312,8 @@ fn compare_zip_files(input: &MetricInput) -> Result<f64, MetricError> {
     }
     for ((name, a), b) in actual.iter().zip(wanted.values()) {
         let same = if name.to_lowercase().ends_with(".pdf") {
-            let text_a = super::office::pdf_text_of_bytes(a, &format!("result entry {name}"))?;
-            let text_b = super::office::pdf_text_of_bytes(b, &format!("expected entry {name}"))?;
+            let text_a = super::office::pdf_text_of_bytes(a, &format!("the result's entry {name}"))?;
+            let text_b = super::office::pdf_text_of_bytes(b, &format!("the expected entry {name}"))?;
             arena_script::sequence_ratio(&text_a, &text_b) >= PDF_TEXT_THRESHOLD
         } else {
             a == b

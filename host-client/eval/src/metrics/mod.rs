@@ -42,21 +42,29 @@ pub struct MetricInput {
     pub last_action: Option<LastAction>,
 }
 
-/// Why a metric could not score. The run records the message and scores 0.
+/// Why a metric could not score. Whose failure it is decides what the run
+/// does ([`crate::judge`]): the result's is the agent's 0, the rest leave the
+/// task unfinished.
 #[derive(Debug, thiserror::Error)]
 #[non_exhaustive]
 pub enum MetricError {
-    /// The result, expected value or options are not what the metric takes.
+    /// The expected value, the rules or the options are not what the metric
+    /// takes: the task's fault.
     #[error("{0}")]
     BadInput(String),
-    /// A host file could not be read.
+    /// The result value (what the agent left: its file's contents, its answer)
+    /// is not what the metric reads: the agent's 0.
+    #[error("{0}")]
+    Malformed(String),
+    /// A host file could not be read: the agent's when it is the result's file.
     #[error("reading {path}: {source}", path = path.display())]
     Io {
         path: PathBuf,
         #[source]
         source: std::io::Error,
     },
-    /// A file or string does not parse as the format the metric reads.
+    /// A file or string does not parse as the format the metric reads: the
+    /// agent's when `what` is the result's file (its path) or `the result ...`.
     #[error("{what}: {message}")]
     Parse { what: String, message: String },
 }
@@ -123,12 +131,72 @@ impl MetricInput {
 ///
 /// # Errors
 ///
-/// [`MetricError::BadInput`] naming `role` when the value is not a file.
+/// [`MetricError::Malformed`] when the `result` is not a file,
+/// [`MetricError::BadInput`] naming `role` when another value is not.
 pub(crate) fn file_of<'a>(value: &'a Fetched, role: &str) -> Result<&'a Path, MetricError> {
-    value
-        .as_path()
-        .ok_or_else(|| MetricError::BadInput(format!("the {role} value must be a file, not {}", value.kind())))
+    value.as_path().ok_or_else(|| {
+        let message = format!("the {role} value must be a file, not {}", value.kind());
+        if role == "result" {
+            MetricError::Malformed(message)
+        } else {
+            MetricError::BadInput(message)
+        }
+    })
 }
+
+/// A malformed result: the agent's failure, scored 0.
+pub(crate) fn malformed(message: impl Into<String>) -> MetricError {
+    MetricError::Malformed(message.into())
+}
+
+/// Every metric this build implements, by upstream's name, sorted.
+pub const NAMES: &[&str] = &[
+    "check_direct_json_object",
+    "check_edge_font_size",
+    "check_enabled_experiments",
+    "check_font_size",
+    "check_global_key_play_pause",
+    "check_highlighted_words",
+    "check_history_deleted",
+    "check_italic_font_size_14",
+    "check_json_keybindings",
+    "check_json_settings",
+    "check_one_instance_when_started_from_file",
+    "check_qt_bgcone",
+    "check_qt_max_volume",
+    "check_qt_minimal_view",
+    "check_qt_slider_colours",
+    "check_qt_video_resize",
+    "check_tabstops",
+    "compare_audios",
+    "compare_docx_files",
+    "compare_docx_tables",
+    "compare_font_names",
+    "compare_highlighted_text",
+    "compare_images",
+    "compare_line_spacing",
+    "compare_pdfs",
+    "compare_subscript_contains",
+    "compare_table",
+    "compare_text_file",
+    "compare_videos",
+    "compare_zip_files",
+    "evaluate_strike_through_last_paragraph",
+    "exact_match",
+    "find_default_font",
+    "has_page_numbers_in_footers",
+    "infeasible",
+    "is_added_to_steam_cart",
+    "is_cookie_deleted",
+    "is_expected_active_tab",
+    "is_expected_bookmarks",
+    "is_expected_tabs",
+    "is_extension_installed",
+    "is_first_line_centered",
+    "is_shortcut_on_desktop",
+    "is_url_shortcut_on_desktop",
+    "is_vlc_recordings_folder",
+];
 
 /// Reads a file as Python's `open(path).read()` does: UTF-8 text with
 /// universal newlines (`\r\n` and `\r` become `\n`).

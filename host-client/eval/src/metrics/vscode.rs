@@ -52,9 +52,11 @@ pub(super) fn check_json_settings(input: &MetricInput) -> Result<f64, MetricErro
     };
     match data {
         Value::Object(data) => Ok(score(dict_contains(&data, expect))),
-        other => {
-            Err(MetricError::BadInput(format!("{} holds {}, not a settings object", path.display(), json_kind(&other))))
-        }
+        other => Err(MetricError::Malformed(format!(
+            "{} holds {}, not a settings object",
+            path.display(),
+            json_kind(&other)
+        ))),
     }
 }
 
@@ -67,10 +69,19 @@ pub(super) fn is_extension_installed(input: &MetricInput) -> Result<f64, MetricE
     let haystack = match &input.result {
         Fetched::Text(text) => Value::String(text.clone()),
         Fetched::Json(value) => value.clone(),
-        other => return Err(MetricError::BadInput(format!("the result must be text or a list, not {}", other.kind()))),
+        other => {
+            return Err(MetricError::Malformed(format!("the result must be text or a list, not {}", other.kind())))
+        }
     };
-    let contains = py_contains(&haystack, expected)
-        .ok_or_else(|| MetricError::BadInput(format!("cannot look for {expected} in {}", json_kind(&haystack))))?;
+    let contains = py_contains(&haystack, expected).ok_or_else(|| {
+        let message = format!("cannot look for {expected} in {}", json_kind(&haystack));
+        // A string rule is the shape every task gives: the result cannot hold it.
+        if expected.is_string() {
+            MetricError::Malformed(message)
+        } else {
+            MetricError::BadInput(message)
+        }
+    })?;
     match kind.as_str() {
         Some("contain") => Ok(score(contains)),
         Some("not_contain") => Ok(score(!contains)),

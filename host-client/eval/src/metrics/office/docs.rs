@@ -185,7 +185,9 @@ pub(super) fn check_tabstops(input: &MetricInput) -> Result<f64, MetricError> {
         }
     };
     if para1.is_empty() {
-        return Err(MetricError::BadInput("no non-blank paragraphs to compare (upstream divides by zero)".into()));
+        return Err(MetricError::Malformed(
+            "the result document has no non-blank paragraphs to compare (upstream divides by zero)".into(),
+        ));
     }
     let kept = |p: &Paragraph| {
         p.tab_stops
@@ -302,7 +304,8 @@ pub(super) fn evaluate_strike_through_last_paragraph(input: &MetricInput) -> Res
         return Ok(0.0);
     }
     let doc = Document::open(result)?;
-    let last = doc.paragraphs.last().ok_or_else(|| MetricError::BadInput("the document has no paragraphs".into()))?;
+    let last =
+        doc.paragraphs.last().ok_or_else(|| MetricError::Malformed("the result document has no paragraphs".into()))?;
     Ok(score(last.runs.iter().all(|r| r.strike == Some(true))))
 }
 
@@ -355,7 +358,8 @@ pub(super) fn has_page_numbers_in_footers(input: &MetricInput) -> Result<f64, Me
 pub(super) fn is_first_line_centered(input: &MetricInput) -> Result<f64, MetricError> {
     let Some(path) = single(input)? else { return Ok(0.0) };
     let doc = Document::open(path)?;
-    let first = doc.paragraphs.first().ok_or_else(|| MetricError::BadInput("the document has no paragraphs".into()))?;
+    let first =
+        doc.paragraphs.first().ok_or_else(|| MetricError::Malformed("the result document has no paragraphs".into()))?;
     Ok(score(first.alignment.as_deref() == Some("center")))
 }
 
