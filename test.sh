@@ -66,6 +66,7 @@ count_skips "MCP SDK tests" "no Python with the MCP SDK (set ARENA_MCP_PYTHON to
 count_skips "gymnasium tests" "gymnasium not installed"
 count_skips "Python tests" "python3 not found"
 count_skips "OCR tests" "tesseract not found"
+count_skips "agent sandbox tests" "bwrap not found"
 count_skips "QEMU tool tests" "\(qemu-img not found\|genisoimage not found\|swtpm not found.*\|Debian's ovmf is not installed\|no secure-boot UEFI firmware.*\)"
 # No registry serves upstream's checkout, so these skip wherever ARENA_WAA_ROOT is unset.
 count_skips "upstream checkout tests" "ARENA_WAA_ROOT names no WindowsAgentArena checkout"

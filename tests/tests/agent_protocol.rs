@@ -47,7 +47,9 @@ fn pythonpath() -> String {
 fn arena_run(out: &Path, agent_args: &[&str]) -> String {
     let exe = workspace_binary("arena-host", "arena").expect("the arena binary");
     let mut child = Command::new(exe)
-        .args(["run", "--stub-guests", "2", "--pauses", "fast", "--tasks"])
+        .args(["run", "--stub-guests", "2", "--pauses", "fast"])
+        .args(arena_test_support::exec_sandbox_args())
+        .arg("--tasks")
         .arg(repo().join("tasks/stub"))
         .arg("--out")
         .arg(out)
@@ -141,7 +143,10 @@ fn the_stub_tasks_through_an_exec_agent_in_four_action_spaces() {
         here().join("tee.py").display(),
         logs.display()
     );
-    let stderr = arena_run(&out, &["--agent", "exec", "--agent-cmd", &cmd, "--agent-timeout", "60"]);
+    // In the default sandbox, with its log folder writable.
+    let logs_arg = logs.display().to_string();
+    let args = ["--agent", "exec", "--agent-cmd", &cmd, "--agent-timeout", "60", "--agent-writable", &logs_arg];
+    let stderr = arena_run(&out, &args);
     assert_oracle_scores(&out, &stderr);
     assert!(stderr.contains("oracle: stub-notepad-count step 1"), "the agent's stderr is in the log:\n{stderr}");
     let (sent, answered, processes) = validate_logs(&logs);
@@ -249,7 +254,9 @@ fn the_step_protocol_example_agent_runs() {
     let exe = workspace_binary("arena-host", "arena").expect("the arena binary");
     let cmd = format!("python3 {}", repo().join("examples/step_agent.py").display());
     let status = Command::new(exe)
-        .args(["run", "--stub-guests", "1", "--pauses", "fast", "--agent", "exec", "--agent-cmd", &cmd, "--tasks"])
+        .args(["run", "--stub-guests", "1", "--pauses", "fast", "--agent", "exec", "--agent-cmd", &cmd])
+        .args(arena_test_support::exec_sandbox_args())
+        .arg("--tasks")
         .arg(tmp.path().join("tasks"))
         .arg("--out")
         .arg(&out)

@@ -97,6 +97,7 @@ fn agent_s3_from_gui_agents_solves_a_stub_task_through_the_step_protocol() {
     let exe = workspace_binary("arena-host", "arena").expect("the arena binary");
     let run = Command::new(exe)
         .args(["run", "--stub-guests", "1", "--pauses", "fast", "--agent", "exec", "--agent-timeout", "60"])
+        .args(arena_test_support::exec_sandbox_args())
         .arg("--agent-cmd")
         .arg(&agent_cmd)
         .arg("--tasks")

@@ -86,6 +86,9 @@ fn arena_run(guest: &str, index: &Path, out: &Path, agent_cmd: &str, within: Dur
     let exe = workspace_binary("arena-host", "arena").expect("the arena binary");
     let mut child = Command::new(exe)
         .args(["--guest", guest, "run", "--pauses", "fast", "--agent", "exec", "--guest-wait", "2"])
+        // The agents here kill the guest's process on this machine, which the sandbox
+        // (its own PID namespace) would not let them see.
+        .args(["--agent-sandbox", "none"])
         .args(["--attempts", "2", "--agent-cmd", agent_cmd, "--tasks"])
         .arg(index)
         .arg("--out")

@@ -46,12 +46,16 @@ fn tasks(tmp: &Path) -> PathBuf {
 /// `arena run` of the two tasks on one stub guest with `agent_args`.
 fn start(tmp: &Path, agent_args: &[&str]) -> Child {
     let exe = workspace_binary("arena-host", "arena").expect("the arena binary");
+    // The suite's default sandbox, unless the test chose one.
+    let sandbox: &[&str] =
+        if agent_args.contains(&"--agent-sandbox") { &[] } else { &arena_test_support::exec_sandbox_args() };
     Command::new(exe)
         .args(["run", "--stub-guests", "1", "--pauses", "fast", "--order", "sorted", "--tasks"])
         .arg(tasks(tmp))
         .arg("--out")
         .arg(tmp.join("out"))
         .args(agent_args)
+        .args(sandbox)
         .stdout(Stdio::null())
         .stderr(Stdio::piped())
         .spawn()
@@ -288,7 +292,8 @@ fn sigterm_during_a_long_act_ends_the_run_with_its_summary() {
     let marker = tmp.path().join("marker");
     // 250 actions, each followed by a 5 s pause: the act alone would last 20 minutes.
     let mut args = hostile("long", "250", &marker);
-    args.extend(["--sleep-after".into(), "5".into()]);
+    // Outside the sandbox, so the agent can leave its marker in the test's folder.
+    args.extend(["--sleep-after".into(), "5".into(), "--agent-sandbox".into(), "none".into()]);
     let args: Vec<&str> = args.iter().map(String::as_str).collect();
     let child = start(tmp.path(), &args);
     let deadline = Instant::now() + Duration::from_secs(120);
@@ -376,7 +381,9 @@ fn an_exec_agents_children_are_gone_after_its_run() {
         return;
     }
     let tmp = tempfile::tempdir().expect("tmp");
-    let (status, stderr, _) = run_hostile(tmp.path(), "children", "-", &[]);
+    // Outside the sandbox: its children are found by their pids on this machine
+    // (inside it they would have the sandbox's own, and end with its namespace).
+    let (status, stderr, _) = run_hostile(tmp.path(), "children", "-", &["--agent-sandbox", "none"]);
     assert_eq!(status.code(), Some(0), "{stderr}");
     let text = std::fs::read_to_string(tmp.path().join("marker")).expect("the agent wrote its children's pids");
     let pids: Vec<u32> = text.lines().map(|l| l.trim().parse().expect("a pid")).collect();

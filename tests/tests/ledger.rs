@@ -42,6 +42,7 @@ fn run(out: &Path, extra: &[&str]) -> String {
         .arg(arena_test_support::workspace_root().join("tasks/stub"))
         .arg("--out")
         .arg(out)
+        .args(arena_test_support::exec_sandbox_args())
         .args(["--agent", "exec", "--agent-timeout", "60", "--model", MODEL, "--prices"])
         .arg(&prices)
         .args(extra)

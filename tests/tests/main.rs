@@ -11,6 +11,7 @@
 pub mod action_errors;
 pub mod agent_protocol;
 pub mod agent_s3;
+pub mod agent_sandbox;
 pub mod blame;
 pub mod certify;
 pub mod desktop_tree;

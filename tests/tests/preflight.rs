@@ -25,7 +25,9 @@ fn stub_tasks() -> std::path::PathBuf {
 fn arena_run(out: &Path, agent_args: &[&str]) -> (Option<i32>, String) {
     let exe = workspace_binary("arena-host", "arena").expect("the arena binary");
     let output = Command::new(exe)
-        .args(["run", "--stub-guests", "1", "--tasks"])
+        .args(["run", "--stub-guests", "1"])
+        .args(arena_test_support::exec_sandbox_args())
+        .arg("--tasks")
         .arg(stub_tasks())
         .arg("--out")
         .arg(out)

@@ -36,7 +36,9 @@ fn agent(dir: &Path, name: &str) -> String {
 fn arena_run(tasks: &Path, out: &Path, args: &[&str]) -> (Option<i32>, String) {
     let exe = workspace_binary("arena-host", "arena").expect("the arena binary");
     let output = Command::new(exe)
-        .args(["run", "--stub-guests", "1", "--agent", "exec", "--tasks"])
+        .args(["run", "--stub-guests", "1", "--agent", "exec"])
+        .args(arena_test_support::exec_sandbox_args())
+        .arg("--tasks")
         .arg(tasks)
         .arg("--out")
         .arg(out)

@@ -41,13 +41,19 @@ fn run_flaky(out: &Path, state: &Path, pattern: &[&str; 6], trials: u32) -> Stri
     std::fs::create_dir_all(state).expect("state folder");
     let pattern: BTreeMap<&str, &str> = TASKS.iter().map(|(_, n)| *n).zip(pattern.iter().copied()).collect();
     let output = Command::new(arena())
-        .args(["run", "--stub-guests", "1", "--pauses", "fast", "--tasks"])
+        .args(["run", "--stub-guests", "1", "--pauses", "fast"])
+        .args(arena_test_support::exec_sandbox_args())
+        .arg("--tasks")
         .arg(arena_test_support::workspace_root().join("tasks/stub"))
         .arg("--out")
         .arg(out)
         .args(["--trials", &trials.to_string(), "--agent", "exec", "--agent-timeout", "60", "--agent-cmd"])
         .arg("python3 -m arena_agent flaky_agent:Flaky")
         .env("PYTHONPATH", arena_test_support::agent_pythonpath(&["tests/tests/agent_protocol", "tests/tests/trials"]))
+        // The sandbox lets the agent keep its state folder and the two variables.
+        .arg("--agent-writable")
+        .arg(state)
+        .args(["--agent-env", "ARENA_FLAKY_DIR", "--agent-env", "ARENA_FLAKY_PATTERN"])
         .env("ARENA_FLAKY_DIR", state)
         .env("ARENA_FLAKY_PATTERN", serde_json::to_string(&pattern).expect("JSON"))
         .output()

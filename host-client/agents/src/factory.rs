@@ -141,6 +141,8 @@ pub struct AgentOptions {
     pub agent_url: Option<String>,
     /// `--agent-timeout`, seconds.
     pub agent_timeout: f64,
+    /// `--agent-sandbox`, `--agent-network`, `--agent-env`, and the paths an exec agent must not see.
+    pub sandbox: super::external::sandbox::SandboxOptions,
 }
 
 /// The agent a run plays with.
@@ -536,14 +538,20 @@ fn external(options: &AgentOptions) -> anyhow::Result<ChosenAgent> {
         (Arc::new(agent), "http", ("agent_url".to_owned(), url.clone()))
     } else {
         let Some(cmd) = &options.agent_cmd else { bail!("--agent exec needs --agent-cmd \"PROGRAM ARGS\"") };
-        let pool = ProcessPool::new(cmd).map_err(anyhow::Error::msg)?;
+        let mut pool = ProcessPool::new(cmd).map_err(anyhow::Error::msg)?;
+        if let Some(sandbox) = super::external::sandbox::Sandbox::new(&options.sandbox).map_err(anyhow::Error::msg)? {
+            pool = pool.with_sandbox(sandbox);
+        }
         (Arc::new(pool), "exec", ("agent_cmd".to_owned(), cmd.clone()))
     };
-    let recorded = vec![
+    let mut recorded = vec![
         option,
         ("agent_protocol".to_owned(), super::external::protocol::PROTOCOL_VERSION.to_string()),
         ("agent_timeout".to_owned(), format!("{}", options.agent_timeout)),
     ];
+    if !http {
+        recorded.extend(options.sandbox.recorded());
+    }
     let coords = options.coords;
     let preflight = Some(Preflight::Hello(Arc::clone(&connector)));
     let factory: AgentFactory = Arc::new(move || {

@@ -45,6 +45,22 @@ fn guests_from_file(path: &Path) -> anyhow::Result<Vec<String>> {
 }
 
 impl RunArgs {
+    /// What an exec agent must not see: the tasks (an index file's whole folder,
+    /// which holds the corpus), the output and the download cache.
+    fn hidden_from_agents(&self) -> Vec<PathBuf> {
+        let tasks = if self.tasks.is_file() {
+            self.tasks
+                .parent()
+                .filter(|p| !p.as_os_str().is_empty())
+                .map_or_else(|| PathBuf::from("."), Path::to_path_buf)
+        } else {
+            self.tasks.clone()
+        };
+        let mut hidden = vec![tasks, self.out.clone()];
+        hidden.extend(self.cache.clone());
+        hidden
+    }
+
     /// What these flags say about the agent, for [`arena_agents::factory::build`].
     pub fn agent_options(&self) -> AgentOptions {
         AgentOptions {
@@ -93,6 +109,7 @@ impl RunArgs {
             agent_cmd: self.external.agent_cmd.clone(),
             agent_url: self.external.agent_url.clone(),
             agent_timeout: self.external.agent_timeout,
+            sandbox: self.external.sandbox(self.hidden_from_agents()),
         }
     }
 }

@@ -17,6 +17,7 @@
 //!   counted line, or a failure under its `ARENA_REQUIRE_*` switch).
 //! - [`png_claiming`]: a PNG header claiming any size, for the image guards.
 //! - [`copy_stub_task`]: a stub task with its host-side gold, copied for a test.
+//! - [`bwrap_or_skip`] and [`exec_sandbox_args`]: the exec agents' sandbox (bubblewrap).
 //!
 //! It is not product code, and it does not depend on `arena-host`: the host's own
 //! tests use it, and a dependency back on the host would build the host twice.
@@ -26,7 +27,7 @@
 //! Layout: `guest.rs` (in-process launcher), `process.rs` (child-process launcher),
 //! `chromium.rs` (Chromium locator and launcher), `corpus.rs` (corpus locator), `wine.rs` (Wine locator), `standin.rs` (stand-in
 //! image locator), `mcp_sdk.rs` (MCP SDK locator), `wait.rs` (polling), `png.rs` (PNG bombs), `skip.rs` (skip lines),
-//! `stub_tasks.rs` (the stub tasks).
+//! `stub_tasks.rs` (the stub tasks), `sandbox.rs` (bubblewrap).
 
 #![forbid(unsafe_code)]
 
@@ -37,6 +38,7 @@ mod guest;
 mod mcp_sdk;
 mod png;
 mod process;
+mod sandbox;
 mod skip;
 mod standin;
 mod stub_tasks;
@@ -56,6 +58,7 @@ pub use process::{
     agent_pythonpath, bench_guests, gui_agents_python_or_skip, python3_or_skip, workspace_binary, workspace_root,
     PythonNeed, Served, BENCH_GUESTS_VAR, GUI_AGENTS,
 };
+pub use sandbox::{bwrap_or_skip, exec_sandbox_args, REQUIRE_BWRAP_VAR};
 pub use skip::{program_or_skip, skip, SKIP_PREFIX, UPSTREAM_CHECKOUT_SKIP};
 pub use standin::{standin_image, StandinImage, REQUIRE_QEMU_VAR, STANDIN_DIR_VAR};
 pub use stub_tasks::{copy_stub_task, stub_tasks_dir};

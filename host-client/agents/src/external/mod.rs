@@ -22,12 +22,14 @@
 //! - [`observe`]: the one adapter from an [`Observation`] to an `observe` message.
 //! - [`spaces`]: answers' actions to [`AgentAction`]s, with the `computer_13` seam.
 //! - [`stderr`]: an exec agent's stderr into the run's log, bounded per task.
+//! - [`sandbox`]: where an exec agent's process runs (bubblewrap on Linux by default).
 //!
 //! An exec agent's process tree (its group or job object, ended with it) is
 //! `arena_vm::child::tree`, with the host side's other system calls.
 
 pub mod observe;
 pub mod protocol;
+pub mod sandbox;
 pub mod spaces;
 pub mod stderr;
 pub mod transport;

@@ -34,6 +34,8 @@ pub struct ProcessPool {
     /// Screenshot files of `screenshot: path`, one folder per process.
     files: tempfile::TempDir,
     started: std::sync::atomic::AtomicU32,
+    /// Where each process runs (`--agent-sandbox`); `None` runs it as the harness does.
+    sandbox: Option<Arc<super::sandbox::Sandbox>>,
 }
 
 impl ProcessPool {
@@ -52,7 +54,14 @@ impl ProcessPool {
             .prefix("arena-agent-")
             .tempdir()
             .map_err(|err| format!("a folder for the agent's screenshots: {err}"))?;
-        Ok(ProcessPool { argv, idle: Mutex::new(Vec::new()), files, started: Default::default() })
+        Ok(ProcessPool { argv, idle: Mutex::new(Vec::new()), files, started: Default::default(), sandbox: None })
+    }
+
+    /// The same pool starting each process in `sandbox`.
+    #[must_use]
+    pub fn with_sandbox(mut self, sandbox: super::sandbox::Sandbox) -> ProcessPool {
+        self.sandbox = Some(Arc::new(sandbox));
+        self
     }
 
     /// How many processes this pool has started (restarts included).
@@ -64,8 +73,19 @@ impl ProcessPool {
         let n = self.started.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
         let dir = self.files.path().join(format!("process-{n}"));
         std::fs::create_dir_all(&dir).map_err(|err| format!("creating {}: {err}", dir.display()))?;
-        let mut command = tokio::process::Command::new(&self.argv[0]);
-        command.args(&self.argv[1..]).stdin(Stdio::piped()).stdout(Stdio::piped()).stderr(Stdio::piped());
+        let mut command = match &self.sandbox {
+            Some(sandbox) => sandbox.command(&self.argv),
+            None => {
+                let mut command = tokio::process::Command::new(&self.argv[0]);
+                command.args(&self.argv[1..]);
+                command
+            }
+        };
+        // Never the guest's token, sandboxed or not.
+        for name in super::sandbox::NEVER_ENV {
+            command.env_remove(name);
+        }
+        command.stdin(Stdio::piped()).stdout(Stdio::piped()).stderr(Stdio::piped());
         command.kill_on_drop(true);
         arena_vm::child::tree::own_group(&mut command);
         let mut child = command.spawn().map_err(|err| format!("cannot start {:?}: {err}", self.argv[0]))?;
