@@ -258,15 +258,7 @@ async fn guest_checks(
             bundle.json("doctor.json", report)?;
             bundle.write("doctor.txt", report.render_text().as_bytes())?;
             checks.push(match report.check("defender") {
-                Some(check) => VerifyCheck::new(
-                    "defender",
-                    match check.status {
-                        CheckStatus::Pass | CheckStatus::Info => Verdict::Pass,
-                        CheckStatus::Fail => Verdict::Fail,
-                        CheckStatus::Unavailable | CheckStatus::Unknown => Verdict::Skipped,
-                    },
-                    check.detail.clone(),
-                ),
+                Some(check) => judge_defender(check.status, &check.detail),
                 None => VerifyCheck::new("defender", Verdict::Skipped, "the guest's doctor has no defender check"),
             });
         }
@@ -293,6 +285,19 @@ async fn guest_checks(
         Err(err) => VerifyCheck::new("doctor", Verdict::Fail, format!("GET /v1/doctor?deep=true: {err}")),
     });
     Ok(checks)
+}
+
+/// The `defender` check's rule over the doctor's: it fails when a detection
+/// names the guest's own files; its facts (Tamper Protection, real-time
+/// protection) are reported, not judged.
+pub fn judge_defender(status: CheckStatus, detail: &str) -> VerifyCheck {
+    match status {
+        CheckStatus::Pass | CheckStatus::Info => {
+            VerifyCheck::new("defender", Verdict::Pass, format!("no detection names the guest's files; {detail}"))
+        }
+        CheckStatus::Fail => VerifyCheck::new("defender", Verdict::Fail, detail),
+        CheckStatus::Unavailable | CheckStatus::Unknown => VerifyCheck::new("defender", Verdict::Skipped, detail),
+    }
 }
 
 /// QEMU's screen against the guest's, and its size against the image's.
@@ -518,6 +523,12 @@ mod tests {
         assert_eq!(judge_watermark(&[zero.clone(), zero.clone()]).verdict, Verdict::Pass);
         assert_eq!(judge_watermark(&[zero, None]).verdict, Verdict::Warn);
         assert_eq!(judge_watermark(&[Some(RegistryValue::Dword(1)), None]).verdict, Verdict::Warn);
+
+        let taken = judge_defender(CheckStatus::Fail, "Defender detected the guest's own files (Wacatac)");
+        assert!(taken.verdict == Verdict::Fail && taken.detail.contains("Wacatac"), "{taken:?}");
+        let facts = judge_defender(CheckStatus::Info, "Tamper Protection on, real-time protection off");
+        assert!(facts.verdict == Verdict::Pass && facts.detail.starts_with("no detection"), "{facts:?}");
+        assert_eq!(judge_defender(CheckStatus::Unavailable, "no Defender").verdict, Verdict::Skipped);
 
         assert_eq!(judge_clock(-3_000).verdict, Verdict::Pass);
         let hour = judge_clock(-3_600_000);
