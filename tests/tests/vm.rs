@@ -1267,7 +1267,8 @@ fn a_failed_oem_step_fails_prepare_naming_it_and_keeps_the_logs() {
 }
 
 /// `--list-editions` reads a UDF disc as Windows ISOs are (made here with
-/// genisoimage's UDF): the images of its `sources/install.wim`.
+/// genisoimage's UDF): the images of its `sources/install.wim`; `--dry-run`
+/// refuses a `--locale` its images' default language is not, unless forced.
 #[test]
 fn list_editions_reads_the_image_list_of_a_udf_iso() {
     let Some(genisoimage) = arena_shared::search_path::find_program(Path::new("genisoimage")) else {
@@ -1281,7 +1282,7 @@ fn list_editions_reads_the_image_list_of_a_udf_iso() {
     let dir = tempfile::tempdir().unwrap();
     let root = dir.path().join("iso");
     std::fs::create_dir_all(root.join("sources")).unwrap();
-    let xml = r#"<WIM><IMAGE INDEX="1"><NAME>Windows 11 Home</NAME><WINDOWS><EDITIONID>Core</EDITIONID></WINDOWS></IMAGE><IMAGE INDEX="2"><NAME>Windows 10 Pro</NAME><DISPLAYNAME>Windows 11 Pro</DISPLAYNAME><WINDOWS><EDITIONID>Professional</EDITIONID></WINDOWS></IMAGE></WIM>"#;
+    let xml = r#"<WIM><IMAGE INDEX="1"><NAME>Windows 11 Home</NAME><WINDOWS><EDITIONID>Core</EDITIONID><LANGUAGES><LANGUAGE>en-US</LANGUAGE><DEFAULT>en-US</DEFAULT></LANGUAGES></WINDOWS></IMAGE><IMAGE INDEX="2"><NAME>Windows 10 Pro</NAME><DISPLAYNAME>Windows 11 Pro</DISPLAYNAME><WINDOWS><EDITIONID>Professional</EDITIONID><LANGUAGES><LANGUAGE>en-US</LANGUAGE><DEFAULT>en-US</DEFAULT></LANGUAGES></WINDOWS></IMAGE></WIM>"#;
     let list: Vec<u8> = std::iter::once(0xfeffu16).chain(xml.encode_utf16()).flat_map(u16::to_le_bytes).collect();
     let mut wim = vec![0u8; 208];
     wim[..8].copy_from_slice(b"MSWIM\0\0\0");
@@ -1329,4 +1330,25 @@ fn list_editions_reads_the_image_list_of_a_udf_iso() {
         .unwrap();
     let err = String::from_utf8_lossy(&home.stderr);
     assert!(!home.status.success() && err.contains("Home") && err.contains("refused"), "{err}");
+    // A --locale the media do not hold is refused in --dry-run, naming theirs, unless forced.
+    let german = |extra: &[&str]| {
+        arena()
+            .args(["vm", "prepare", "--dry-run", "--edition", "pro", "--locale", "de-DE", "--iso"])
+            .arg(&iso)
+            .arg("--oem")
+            .arg(&oem)
+            .arg("--out")
+            .arg(dir.path().join("de.qcow2"))
+            .args(extra)
+            .output()
+            .unwrap()
+    };
+    let refused = german(&[]);
+    let err = String::from_utf8_lossy(&refused.stderr);
+    assert!(!refused.status.success(), "{err}");
+    assert!(err.contains("default language is en-US") && err.contains("--force-locale"), "{err}");
+    let forced = german(&["--force-locale"]);
+    let err = String::from_utf8_lossy(&forced.stderr);
+    assert!(!err.contains("default language is en-US") || err.contains("going on"), "{err}");
+    assert_eq!(forced.status.success(), dry.status.success(), "{err}");
 }
