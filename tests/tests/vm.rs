@@ -1022,6 +1022,16 @@ fn bad_input_gets_errors_that_name_it() {
     std::fs::set_permissions(&writable, perms).unwrap();
     let err = start(&writable, &[]);
     assert!(err.contains("is writable") && err.contains("chmod a-w"), "{err}");
+    // `arena vm verify` boots the image as `start` does: the same refusal, and no VM folder is left.
+    let verify_out = dir.path().join("verify");
+    let refused =
+        arena().args(["vm", "verify"]).arg(&writable).arg("--out").arg(&verify_out).args(VM_FLAGS).output().unwrap();
+    let err = String::from_utf8_lossy(&refused.stderr);
+    assert!(!refused.status.success() && err.contains("is writable"), "{err}");
+    assert!(!verify_out.join("vm").join(arena_vm::OVERLAY_FILE).exists(), "{err}");
+
+    let err = start(&image.golden, &["--vm-settle", "5000"]);
+    assert!(err.contains("--vm-settle") && err.contains("0 to 3600"), "{err}");
 
     let err = start(&image.golden, &["--qemu", "/nonexistent/qemu-system-x86_64"]);
     assert!(err.contains("/nonexistent/qemu-system-x86_64") && err.contains("qemu-system-x86"), "{err}");
