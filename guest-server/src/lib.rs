@@ -149,6 +149,7 @@ pub fn build_state(config: ServerConfig) -> anyhow::Result<AppState> {
                 screen: config.screen,
                 scenario,
                 host_exec: config.stub_host_exec,
+                shell_after: std::time::Duration::from_millis(config.stub_shell_after_ms),
             })
             .context("starting the stub desktop")?;
             Arc::new(stub)

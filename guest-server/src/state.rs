@@ -31,6 +31,8 @@ pub struct Shared {
     pub input: Arc<tokio::sync::RwLock<()>>,
     /// The programs running now and the interpreter memory they share.
     pub programs: Arc<crate::programs::Programs>,
+    /// The shell's history for the `shell` health component (`--settle-idle-ms`).
+    pub settle: Arc<std::sync::Mutex<crate::desktop::settle::Settle>>,
 }
 
 impl std::ops::Deref for AppState {
@@ -44,6 +46,7 @@ impl std::ops::Deref for AppState {
 impl AppState {
     pub fn new(desktop: Arc<dyn Desktop>, config: ServerConfig, token: Option<String>) -> AppState {
         let programs = Arc::new(crate::programs::Programs::from_config(&config));
+        let settle = crate::desktop::settle::Settle::new(Duration::from_millis(config.settle_idle_ms));
         AppState(Arc::new(Shared {
             desktop,
             programs,
@@ -52,6 +55,7 @@ impl AppState {
             started: Instant::now(),
             health: Arc::default(),
             input: Arc::default(),
+            settle: Arc::new(std::sync::Mutex::new(settle)),
         }))
     }
 

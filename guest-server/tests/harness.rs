@@ -16,8 +16,14 @@ use arena_guest::desktop::stub::{Scenario, StubConfig, StubDesktop};
 /// `scenario`; `host_exec` lets commands that are none of its simulated
 /// programs run for real.
 pub fn stub_in(root: &Path, scenario: Option<Scenario>, host_exec: bool) -> StubDesktop {
-    StubDesktop::with_config(StubConfig { root: Some(root.into()), screen: (1440, 900), scenario, host_exec })
-        .expect("a stub desktop over a temporary folder")
+    StubDesktop::with_config(StubConfig {
+        root: Some(root.into()),
+        screen: (1440, 900),
+        scenario,
+        host_exec,
+        ..StubConfig::default()
+    })
+    .expect("a stub desktop over a temporary folder")
 }
 
 /// Sends `request` to `router`: the status, the headers and the whole body.

@@ -12,7 +12,7 @@ use serde_json::{json, Value};
 use tower::ServiceExt as _;
 
 use arena_guest::config::ServerConfig;
-use arena_guest::desktop::stub::StubDesktop;
+use arena_guest::desktop::stub::{StubConfig, StubDesktop};
 use arena_guest::state::AppState;
 use arena_shared::action::ActionReport;
 use arena_shared::clipboard::ClipboardContent;
@@ -155,7 +155,42 @@ async fn health_lists_every_component_ok_on_the_stub() {
     for component in Component::ALL {
         assert!(report.is_up(component), "{component:?} is not up: {report:?}");
     }
-    assert_eq!(report.components.len(), Component::ALL.len());
+    assert_eq!(report.components.len(), Component::REPORTED.len());
+}
+
+/// The `shell` component: down while the stub's modelled shell is still starting
+/// or a window is in front, without holding readiness; up on a settled desktop.
+#[tokio::test]
+async fn the_shell_component_waits_for_the_taskbar_and_the_desktop_in_front() {
+    let late = |after: std::time::Duration| {
+        let dir = tempfile::tempdir().expect("temp dir");
+        let stub = StubDesktop::with_config(StubConfig {
+            root: Some(dir.path().into()),
+            shell_after: after,
+            ..StubConfig::default()
+        })
+        .expect("stub");
+        let mut config = ServerConfig::for_stub();
+        config.health_cache_ms = 0;
+        TestApp { router: arena_guest::router(AppState::new(Arc::new(stub), config, None)), dir }
+    };
+    let starting = late(std::time::Duration::from_secs(3600));
+    let report: HealthReport = starting.get("/v1/health").await.json();
+    let shell = report.shell().expect("a shell component");
+    assert!(!shell.ok && shell.detail.contains("taskbar is not shown yet"), "{shell:?}");
+    assert_eq!(report.status, Readiness::Ready, "the shell does not hold readiness: {report:?}");
+    assert!(report.gated_up());
+
+    let settled = late(std::time::Duration::ZERO);
+    let report: HealthReport = settled.get("/v1/health").await.json();
+    assert!(report.is_up(Component::Shell), "{report:?}");
+    settled.post("/v1/launch", json!({"argv": ["notepad"]})).await.assert_status(StatusCode::OK);
+    let report: HealthReport = settled.get("/v1/health").await.json();
+    let shell = report.shell().unwrap();
+    assert!(
+        !shell.ok && shell.detail.contains("a window is in front") && shell.detail.contains("Notepad"),
+        "{shell:?}"
+    );
 }
 
 #[tokio::test]

@@ -45,6 +45,7 @@ impl App {
             screen: (1440, 900),
             scenario: Some(scenario),
             host_exec: true,
+            ..StubConfig::default()
         };
         let stub = Arc::new(StubDesktop::with_config(config_stub).expect("stub desktop"));
         let state = AppState::new(stub.clone(), config, None);

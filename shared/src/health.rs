@@ -24,11 +24,17 @@ pub enum Component {
     /// when this guest was not installed by it), down while a step runs or after
     /// one failed; the detail says which step ([`SetupProgress`]).
     Setup,
+    /// The desktop settled after a boot: the taskbar shown, the desktop or the
+    /// taskbar in front, and the CPU idle for the guest's `--settle-idle-ms`.
+    /// Reported beside readiness, not part of it ([`Component::gates_readiness`]):
+    /// a host waits for it before it saves a snapshot tasks start from.
+    Shell,
     #[serde(other)]
     Unknown,
 }
 
 impl Component {
+    /// Every component readiness waits for (all but [`Component::Shell`]).
     pub const ALL: [Component; 8] = [
         Component::Capture,
         Component::Input,
@@ -39,6 +45,26 @@ impl Component {
         Component::Uia,
         Component::Setup,
     ];
+
+    /// Every component a guest reports: [`Component::ALL`] and the shell's settle.
+    pub const REPORTED: [Component; 9] = [
+        Component::Capture,
+        Component::Input,
+        Component::Accessibility,
+        Component::Clipboard,
+        Component::Files,
+        Component::Exec,
+        Component::Uia,
+        Component::Setup,
+        Component::Shell,
+    ];
+
+    /// Whether the guest's readiness waits for this component. The shell's settle
+    /// does not: a restored snapshot is settled already, and a guest in use (a
+    /// window in front, a busy CPU) is still ready for requests.
+    pub fn gates_readiness(self) -> bool {
+        self != Component::Shell
+    }
 }
 
 /// Where the image's setup is, as `setup.ps1` records it in
@@ -122,7 +148,7 @@ pub struct ComponentHealth {
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum Readiness {
-    /// Every component is up.
+    /// Every component that gates readiness is up (all but [`Component::Shell`]).
     Ready,
     /// Some components are up.
     Degraded,
@@ -165,11 +191,51 @@ impl HealthReport {
     pub fn is_up(&self, component: Component) -> bool {
         self.components.iter().any(|c| c.component == component && c.ok)
     }
+
+    /// Whether every component reported that gates readiness is up (and one was).
+    pub fn gated_up(&self) -> bool {
+        let gating = || self.components.iter().filter(|c| c.component.gates_readiness());
+        gating().next().is_some() && gating().all(|c| c.ok)
+    }
+
+    /// The shell's settle as reported, or `None` from a guest that reports none
+    /// (one older than [`Component::Shell`]).
+    pub fn shell(&self) -> Option<&ComponentHealth> {
+        self.components.iter().find(|c| c.component == Component::Shell)
+    }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn readiness_waits_for_every_component_but_the_shell() {
+        let part = |component, ok| ComponentHealth { component, ok, detail: String::new(), elapsed_ms: 0 };
+        let mut report = HealthReport {
+            status: Readiness::Ready,
+            version: "0".into(),
+            api_version: "1".into(),
+            backend: "stub".into(),
+            components: Component::ALL.iter().map(|c| part(*c, true)).collect(),
+            uptime_ms: 0,
+            auth_required: false,
+            session_id: None,
+            integrity: None,
+            boot_id: None,
+        };
+        assert!(report.gated_up());
+        assert_eq!(report.shell(), None, "an older guest reports no shell");
+        report.components.push(part(Component::Shell, false));
+        assert!(report.gated_up(), "a shell still settling does not hold readiness");
+        assert!(!report.shell().unwrap().ok);
+        report.components[0].ok = false;
+        assert!(!report.gated_up());
+        report.components = vec![part(Component::Shell, true)];
+        assert!(!report.gated_up(), "the shell alone is not a ready guest");
+        assert!(Component::REPORTED.iter().filter(|c| !c.gates_readiness()).eq([Component::Shell].iter()));
+        assert!(Component::ALL.iter().all(|c| Component::REPORTED.contains(c) && c.gates_readiness()));
+    }
 
     #[test]
     fn the_setup_record_reads_with_a_byte_order_mark_and_is_judged() {

@@ -7,7 +7,9 @@
 //! and resumed to a sealed image, with a 1 GiB OEM payload; Setup's
 //! refusals; `--dry-run`; the install on the UEFI machine with Secure Boot and
 //! swtpm, and the sealed image's sidecar (a VM on other firmware refused at
-//! once); the clock a restore puts back, set right by the fleet; foreign VM folders;
+//! once); the clock a restore puts back, set right by the fleet; the `ready`
+//! snapshot waiting for a shell that settles late; `arena vm verify`'s report
+//! and bundle; foreign VM folders;
 //! and the errors bad input gets.
 //!
 //! Without the image or QEMU each test says `SKIPPED:` (counted by test.sh;
@@ -183,6 +185,157 @@ async fn a_restore_puts_the_clock_back_and_the_fleet_sets_it_right() {
     // Recorded as episode.json records it.
     assert_eq!(serde_json::to_value(&sync).unwrap()["corrected_ms"], serde_json::json!(corrected));
     assert!(vm.shutdown(Duration::from_secs(60)).await, "the guest did not power off on the ACPI button");
+}
+
+/// `image` as a read-only raw copy with `name` (holding `text`) added to its FAT volume:
+/// the stand-in's test hooks on the boot disk.
+fn golden_with(image: &Path, name: &str, text: &str, scratch: &Path) -> PathBuf {
+    let raw = scratch.join("golden-hooked.raw");
+    let made = Command::new("qemu-img").args(["convert", "-O", "raw"]).arg(image).arg(&raw).status().unwrap();
+    assert!(made.success());
+    let hook = scratch.join(name);
+    std::fs::write(&hook, text).unwrap();
+    let copied = Command::new("mcopy").arg("-i").arg(&raw).arg(&hook).arg(format!("::{name}")).output().unwrap();
+    assert!(copied.status.success(), "mcopy: {}", String::from_utf8_lossy(&copied.stderr));
+    let mut permissions = std::fs::metadata(&raw).unwrap().permissions();
+    permissions.set_readonly(true);
+    std::fs::set_permissions(&raw, permissions).unwrap();
+    raw
+}
+
+/// The fleet saves `ready` only once the guest's desktop has settled: on a
+/// stand-in whose shell settles late (its taskbar shows 20 s after the guest
+/// starts, then 5 s of idle CPU), the guest answers healthy while its `shell`
+/// component is still down, and the fleet's boot returns only once it is up.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_ready_snapshot_waits_for_a_shell_that_settles_late() {
+    use arena_vm::fleet::{ResetPolicy, VmFleet};
+    let Some(image) = standin_image("the_ready_snapshot_waits_for_a_shell_that_settles_late") else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let golden = golden_with(&image.golden, "arena-standin-shell-seconds", "20\n", dir.path());
+    let mut config = config(&golden, &dir.path().join("vms/vm-1"), "t-settle");
+    config.host_port = std::net::TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port();
+    let quick = || ClientConfig { token: None, timeout: Duration::from_secs(2), retries: 0 };
+    let client = GuestClient::new(&format!("http://127.0.0.1:{}", config.host_port), quick()).unwrap();
+
+    // Watch the guest while the fleet boots it: a healthy guest whose shell is not settled yet.
+    let watch = tokio::spawn(async move {
+        loop {
+            if let Ok(report) = client.health().await {
+                if report.gated_up() && report.shell().is_some_and(|s| !s.ok) {
+                    return report;
+                }
+            }
+            tokio::time::sleep(Duration::from_millis(250)).await;
+        }
+    });
+    let fleet = VmFleet::boot(vec![config.clone()], ResetPolicy::PerTask).await.unwrap();
+    if !watch.is_finished() {
+        watch.abort();
+        panic!("the guest was never seen healthy with its shell still settling");
+    }
+    let unsettled = watch.await.unwrap();
+    let shell = unsettled.shell().unwrap();
+    assert!(shell.detail.contains("taskbar is not shown yet") || shell.detail.contains("CPU"), "{shell:?}");
+
+    // At once after the boot: the shell has settled, after the hook's 20 s.
+    let client = GuestClient::new(&fleet.urls()[0], quick()).unwrap();
+    let report = client.health().await.unwrap();
+    let shell = report.shell().expect("the stand-in's guest reports its shell");
+    assert!(shell.ok && shell.detail.starts_with("settled"), "{report:?}");
+    assert!(report.uptime_ms >= 20_000, "ready came {} ms after the guest started", report.uptime_ms);
+    fleet.stop().await;
+
+    // --vm-settle is a floor on top of a settled shell.
+    let mut vm = Vm::start(&config_with_dir(&config, &dir.path().join("floor")), Boot::Fresh).await.unwrap();
+    vm.wait_healthy(config.boot_timeout, |_| {}).await.unwrap();
+    let first = vm.wait_settled(Duration::ZERO, config.boot_timeout).await.unwrap();
+    assert!(first.shell.as_deref().is_some_and(|s| s.starts_with("settled")), "{first:?}");
+    let floored = vm.wait_settled(Duration::from_secs(3), config.boot_timeout).await.unwrap();
+    assert!(floored.waited >= Duration::from_secs(3) && floored.settled_after < Duration::from_secs(3), "{floored:?}");
+    vm.kill().await;
+}
+
+/// `arena vm verify` on the stand-in: it boots the image once, writes its report
+/// (JSON and text) and the bundle, and removes its VM. The image's sidecar (a
+/// copy's, with an evaluation licence 5 days from its end) is read and kept.
+#[test]
+fn verify_boots_the_image_once_and_writes_its_report_and_bundle() {
+    use arena_vm::verify::{Verdict, VerifyReport, REPORT_JSON, REPORT_TEXT};
+    let Some(image) = standin_image("verify_boots_the_image_once_and_writes_its_report_and_bundle") else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let golden = dir.path().join("golden.qcow2");
+    std::fs::copy(&image.golden, &golden).unwrap();
+    let mut permissions = std::fs::metadata(&golden).unwrap().permissions();
+    permissions.set_readonly(true);
+    std::fs::set_permissions(&golden, permissions).unwrap();
+    let now = arena_shared::clock::now_unix_ms() / 1000;
+    let facts = arena_vm::sidecar::ImageFacts {
+        format: arena_vm::sidecar::FORMAT,
+        firmware: "bios".into(),
+        secure_boot: false,
+        screen: (1440, 900),
+        machine: "pc".into(),
+        disk_bus: DiskBus::VirtioBlk,
+        nic: NicModel::VirtioNet,
+        tpm: false,
+        edition: Some("EnterpriseEval".into()),
+        build: None,
+        language: Some("en-US".into()),
+        timezone: Some("UTC".into()),
+        installed_unix: now - 85 * 86_400,
+        licence_expires_unix: arena_vm::sidecar::licence_expiry(Some("EnterpriseEval"), now - 85 * 86_400),
+        uefi_vars: None,
+        startup_apps_off: Vec::new(),
+        allowed_failed_steps: Vec::new(),
+    };
+    arena_vm::sidecar::write(&golden, &facts).unwrap();
+
+    let out = dir.path().join("verify");
+    let run = arena().args(["vm", "verify"]).arg(&golden).arg("--out").arg(&out).args(VM_FLAGS).output().unwrap();
+    let stdout = String::from_utf8_lossy(&run.stdout);
+    let stderr = String::from_utf8_lossy(&run.stderr);
+    let report: VerifyReport = serde_json::from_slice(
+        &std::fs::read(out.join(REPORT_JSON)).unwrap_or_else(|err| panic!("no report ({err}): {stdout}{stderr}")),
+    )
+    .unwrap();
+    let verdict = |name: &str| report.check(name).unwrap_or_else(|| panic!("no {name} check: {report:?}")).verdict;
+    for name in ["healthy", "settled", "screen", "clock", "doctor"] {
+        assert_eq!(verdict(name), Verdict::Pass, "{name}: {report:?}");
+    }
+    // The stand-in has no watermark cache and no browser; its sidecar's licence ends in 5 days.
+    assert_eq!(verdict("watermark"), Verdict::Warn, "{report:?}");
+    assert!(matches!(verdict("browser-chrome"), Verdict::Warn | Verdict::Pass), "{report:?}");
+    let licence = report.check("licence").unwrap();
+    assert!(licence.verdict == Verdict::Warn && licence.detail.contains("4 days left"), "{licence:?}");
+    assert!(report.check("defender").is_some());
+    // Exit code and text follow the report.
+    assert_eq!(run.status.success(), report.passed(), "{stdout}{stderr}");
+    let text = std::fs::read_to_string(out.join(REPORT_TEXT)).unwrap();
+    assert!(text.contains("PASS settled") && text.contains("WARN licence"), "{text}");
+    assert!(stdout.contains("report: ") && stdout.contains(REPORT_TEXT), "{stdout}");
+    // The bundle: every file it lists is there, with the screens and the logs; the VM is gone.
+    for name in ["screendump.png", "screenshot.png", "health.json", "doctor.json", "sidecar.json", "serial.log"] {
+        assert!(report.files.iter().any(|f| f == name), "{name} not listed: {:?}", report.files);
+    }
+    for name in &report.files {
+        assert!(out.join(name).is_file(), "{name} listed but missing");
+    }
+    assert!(image_size(&out.join("screendump.png")) == (1440, 900));
+    assert!(!out.join("vm").exists(), "the VM's folder is left");
+    assert!(qemus_naming(&out.display().to_string()).is_empty(), "QEMU still runs");
+}
+
+fn image_size(png: &Path) -> (u32, u32) {
+    let dump = arena_vm::ScreenDump::from_png(std::fs::read(png).unwrap()).unwrap();
+    (dump.width, dump.height)
+}
+
+fn config_with_dir(config: &VmConfig, dir: &Path) -> VmConfig {
+    let mut config = config.clone();
+    config.dir = dir.to_owned();
+    config.host_port = 0;
+    config
 }
 
 fn stub_index() -> PathBuf {
@@ -742,6 +895,10 @@ fn prepare_on_uefi_with_secure_boot_and_swtpm_seals_an_image_that_boots_healthy(
     assert_eq!((facts.machine.as_str(), facts.disk_bus, facts.screen), ("q35", DiskBus::VirtioBlk, (1440, 900)));
     assert_eq!((facts.language.as_deref(), facts.timezone.as_deref()), (Some("en-US"), Some("UTC")));
     assert!(facts.installed_unix > 1_700_000_000, "{facts:?}");
+    // The start-up apps the answer file turned off, so the first desktop settles.
+    for what in ["AutoDownload=2", "AllowNewsAndInterests", "OneDrive"] {
+        assert!(facts.startup_apps_off.iter().any(|s| s.contains(what)), "{what}: {:?}", facts.startup_apps_off);
+    }
     let vars = facts.uefi_vars.clone().expect("the UEFI variables' copy");
     assert!(vars.is_file() && vars.parent() == out.parent(), "{vars:?}");
     let asked = Instant::now();
@@ -865,6 +1022,16 @@ fn bad_input_gets_errors_that_name_it() {
     std::fs::set_permissions(&writable, perms).unwrap();
     let err = start(&writable, &[]);
     assert!(err.contains("is writable") && err.contains("chmod a-w"), "{err}");
+    // `arena vm verify` boots the image as `start` does: the same refusal, and no VM folder is left.
+    let verify_out = dir.path().join("verify");
+    let refused =
+        arena().args(["vm", "verify"]).arg(&writable).arg("--out").arg(&verify_out).args(VM_FLAGS).output().unwrap();
+    let err = String::from_utf8_lossy(&refused.stderr);
+    assert!(!refused.status.success() && err.contains("is writable"), "{err}");
+    assert!(!verify_out.join("vm").join(arena_vm::OVERLAY_FILE).exists(), "{err}");
+
+    let err = start(&image.golden, &["--vm-settle", "5000"]);
+    assert!(err.contains("--vm-settle") && err.contains("0 to 3600"), "{err}");
 
     let err = start(&image.golden, &["--qemu", "/nonexistent/qemu-system-x86_64"]);
     assert!(err.contains("/nonexistent/qemu-system-x86_64") && err.contains("qemu-system-x86"), "{err}");
@@ -913,6 +1080,8 @@ fn bad_input_gets_errors_that_name_it() {
         installed_unix: 1_790_000_000,
         licence_expires_unix: None,
         uefi_vars: None,
+        startup_apps_off: Vec::new(),
+        allowed_failed_steps: Vec::new(),
     };
     arena_vm::sidecar::write(&sided, &facts).unwrap();
     let asked = Instant::now();
@@ -1066,7 +1235,8 @@ fn forwarded_port(work: &Path) -> u16 {
 
 /// A failed OEM step is a failed prepare that names the step; the folder holds
 /// the bundle and the failure's evidence, with the stand-in's Setup logs and the
-/// OEM install's log copied off the disk image.
+/// OEM install's log copied off the disk image. Run again with
+/// `--allow-failed-step` for that step, it seals, and the sidecar records it.
 #[test]
 fn a_failed_oem_step_fails_prepare_naming_it_and_keeps_the_logs() {
     let Some(image) = standin_image("a_failed_oem_step_fails_prepare_naming_it_and_keeps_the_logs") else { return };
@@ -1093,10 +1263,22 @@ fn a_failed_oem_step_fails_prepare_naming_it_and_keeps_the_logs() {
     assert_bundle(&work);
     let timeline = std::fs::read_to_string(work.join("timeline.log")).unwrap();
     assert!(timeline.contains("the OEM install failed") && timeline.contains("evidence kept"), "{timeline}");
+    assert!(err.contains("--allow-failed-step"), "{err}");
+
+    // The same prepare, letting that step fail: it seals, and the image says which step failed.
+    let run =
+        prepare_command(&image, &oem, &out, &["--size", "64G", "--allow-failed-step", "prep-apps"]).output().unwrap();
+    let err = String::from_utf8_lossy(&run.stderr);
+    assert!(run.status.success(), "{err}");
+    let facts = arena_vm::sidecar::read(&out).unwrap().expect("the sealed image's sidecar");
+    assert_eq!(facts.allowed_failed_steps, vec!["prep-apps.ps1 (exit code 3)".to_owned()], "{facts:?}");
+    let state: serde_json::Value = serde_json::from_slice(&std::fs::read(work.join("state.json")).unwrap()).unwrap();
+    assert_eq!(state["allowed_failures"], serde_json::json!(["prep-apps.ps1 (exit code 3)"]), "{state}");
 }
 
 /// `--list-editions` reads a UDF disc as Windows ISOs are (made here with
-/// genisoimage's UDF): the images of its `sources/install.wim`.
+/// genisoimage's UDF): the images of its `sources/install.wim`; `--dry-run`
+/// refuses a `--locale` its images' default language is not, unless forced.
 #[test]
 fn list_editions_reads_the_image_list_of_a_udf_iso() {
     let Some(genisoimage) = arena_shared::search_path::find_program(Path::new("genisoimage")) else {
@@ -1110,7 +1292,7 @@ fn list_editions_reads_the_image_list_of_a_udf_iso() {
     let dir = tempfile::tempdir().unwrap();
     let root = dir.path().join("iso");
     std::fs::create_dir_all(root.join("sources")).unwrap();
-    let xml = r#"<WIM><IMAGE INDEX="1"><NAME>Windows 11 Home</NAME><WINDOWS><EDITIONID>Core</EDITIONID></WINDOWS></IMAGE><IMAGE INDEX="2"><NAME>Windows 10 Pro</NAME><DISPLAYNAME>Windows 11 Pro</DISPLAYNAME><WINDOWS><EDITIONID>Professional</EDITIONID></WINDOWS></IMAGE></WIM>"#;
+    let xml = r#"<WIM><IMAGE INDEX="1"><NAME>Windows 11 Home</NAME><WINDOWS><EDITIONID>Core</EDITIONID><LANGUAGES><LANGUAGE>en-US</LANGUAGE><DEFAULT>en-US</DEFAULT></LANGUAGES></WINDOWS></IMAGE><IMAGE INDEX="2"><NAME>Windows 10 Pro</NAME><DISPLAYNAME>Windows 11 Pro</DISPLAYNAME><WINDOWS><EDITIONID>Professional</EDITIONID><LANGUAGES><LANGUAGE>en-US</LANGUAGE><DEFAULT>en-US</DEFAULT></LANGUAGES></WINDOWS></IMAGE></WIM>"#;
     let list: Vec<u8> = std::iter::once(0xfeffu16).chain(xml.encode_utf16()).flat_map(u16::to_le_bytes).collect();
     let mut wim = vec![0u8; 208];
     wim[..8].copy_from_slice(b"MSWIM\0\0\0");
@@ -1158,4 +1340,25 @@ fn list_editions_reads_the_image_list_of_a_udf_iso() {
         .unwrap();
     let err = String::from_utf8_lossy(&home.stderr);
     assert!(!home.status.success() && err.contains("Home") && err.contains("refused"), "{err}");
+    // A --locale the media do not hold is refused in --dry-run, naming theirs, unless forced.
+    let german = |extra: &[&str]| {
+        arena()
+            .args(["vm", "prepare", "--dry-run", "--edition", "pro", "--locale", "de-DE", "--iso"])
+            .arg(&iso)
+            .arg("--oem")
+            .arg(&oem)
+            .arg("--out")
+            .arg(dir.path().join("de.qcow2"))
+            .args(extra)
+            .output()
+            .unwrap()
+    };
+    let refused = german(&[]);
+    let err = String::from_utf8_lossy(&refused.stderr);
+    assert!(!refused.status.success(), "{err}");
+    assert!(err.contains("default language is en-US") && err.contains("--force-locale"), "{err}");
+    let forced = german(&["--force-locale"]);
+    let err = String::from_utf8_lossy(&forced.stderr);
+    assert!(!err.contains("default language is en-US") || err.contains("going on"), "{err}");
+    assert_eq!(forced.status.success(), dry.status.success(), "{err}");
 }

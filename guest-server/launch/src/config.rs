@@ -202,6 +202,19 @@ pub struct ServerConfig {
     #[arg(long, env = "ARENA_SETUP_STATUS", value_name = "FILE")]
     pub setup_status: Option<PathBuf>,
 
+    /// How long the CPU must stay idle before the `shell` health component says the
+    /// desktop has settled (with the taskbar shown and the desktop in front), in
+    /// milliseconds; 0 leaves the CPU out. A host waits for it before it saves the
+    /// snapshot its tasks start from.
+    #[arg(long, env = "ARENA_SETTLE_IDLE_MS", default_value_t = 5_000, value_parser = clap::value_parser!(u64).range(0..=3_600_000))]
+    pub settle_idle_ms: u64,
+
+    /// Stub backend: the modelled shell shows its taskbar this many milliseconds
+    /// after the server starts, and the CPU counts as busy until then (a shell that
+    /// settles late, for tests of hosts that wait for it).
+    #[arg(long, env = "ARENA_STUB_SHELL_AFTER_MS", default_value_t = 0, value_parser = clap::value_parser!(u64).range(0..=3_600_000))]
+    pub stub_shell_after_ms: u64,
+
     /// Log format.
     #[arg(long, env = "ARENA_LOG_FORMAT", value_enum, default_value_t = LogFormat::Text)]
     pub log_format: LogFormat,
@@ -271,6 +284,8 @@ impl ServerConfig {
             capture_layered: false,
             drag_step_ms: 200,
             setup_status: None,
+            settle_idle_ms: 0,
+            stub_shell_after_ms: 0,
             log_format: LogFormat::Text,
             mcp: false,
             mcp_shell: false,

@@ -17,6 +17,7 @@
 
 pub mod cancel;
 pub mod defender;
+pub mod settle;
 pub mod stub;
 pub mod uia_health;
 pub mod uia_process;
@@ -132,6 +133,16 @@ pub trait Desktop: Send + Sync + std::fmt::Debug {
     ///
     /// Why the component is not usable.
     fn probe(&self, component: Component) -> DesktopResult<String>;
+
+    /// One look at the shell for the `shell` health component ([`settle`]):
+    /// the taskbar, what is in front, the CPU's times.
+    ///
+    /// # Errors
+    ///
+    /// [`DesktopError::Unsupported`] where the backend cannot look.
+    fn shell_sample(&self) -> DesktopResult<settle::ShellSample> {
+        Err(DesktopError::Unsupported(format!("the {} backend cannot look at the shell", self.kind())))
+    }
 
     /// Windows session id of the server process, where the platform has sessions.
     fn session_id(&self) -> Option<u32> {

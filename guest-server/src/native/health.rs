@@ -68,12 +68,14 @@ fn redacted(mut report: HealthReport) -> HealthReport {
 }
 
 async fn fresh_report(state: &AppState) -> HealthReport {
-    let probes = Component::ALL.into_iter().map(|component| probe(state, component));
+    let probes = Component::REPORTED.into_iter().map(|component| probe(state, component));
     let components = futures_util::future::join_all(probes).await;
-    let up = components.iter().filter(|c| c.ok).count();
+    // The shell's settle is reported beside readiness, not part of it.
+    let gating = components.iter().filter(|c| c.component.gates_readiness());
+    let (up, total) = (gating.clone().filter(|c| c.ok).count(), gating.count());
     let status = match up {
         0 => Readiness::Starting,
-        n if n == components.len() => Readiness::Ready,
+        n if n == total => Readiness::Ready,
         _ => Readiness::Degraded,
     };
     HealthReport {
@@ -100,6 +102,24 @@ async fn probe(state: &AppState, component: Component) -> ComponentHealth {
     let started = Instant::now();
     if component == Component::Setup {
         let (ok, detail) = setup_state(crate::setup_status_file(&state.config).as_deref());
+        return ComponentHealth { component, ok, detail, elapsed_ms: millis(started.elapsed()) };
+    }
+    if component == Component::Shell {
+        let sample = blocking(&state.desktop, "shell sample", PROBE_DEADLINE, |d| d.shell_sample()).await;
+        let (ok, detail) = match sample {
+            Ok(sample) => {
+                let judged = state
+                    .settle
+                    .lock()
+                    .unwrap_or_else(std::sync::PoisonError::into_inner)
+                    .judge(Instant::now(), &sample);
+                match judged {
+                    Ok(detail) => (true, detail),
+                    Err(detail) => (false, detail),
+                }
+            }
+            Err(err) => (false, err.to_string()),
+        };
         return ComponentHealth { component, ok, detail, elapsed_ms: millis(started.elapsed()) };
     }
     let res = blocking(&state.desktop, "probe", PROBE_DEADLINE, move |d| d.probe(component)).await;

@@ -726,8 +726,7 @@ async fn health(conn: &Connection, wait: Option<Duration>, json: bool) -> anyhow
             .with_context(|| format!("one health call of up to {} s (--timeout)", per_call.as_secs_f64()))?,
     };
     show(&report)?;
-    let ready =
-        report.status == Readiness::Ready || (!report.components.is_empty() && report.components.iter().all(|c| c.ok));
+    let ready = report.status == Readiness::Ready || report.gated_up();
     Ok(if ready { ExitCode::SUCCESS } else { ExitCode::FAILURE })
 }
 

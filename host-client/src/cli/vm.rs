@@ -6,7 +6,8 @@
 //! snapshot if QEMU dies) until Ctrl-C or SIGTERM, which shut it down through
 //! ACPI. `snapshot`, `restore`, `screendump` and `stop` talk to a running VM
 //! through the QMP socket in its folder. `prepare` makes a golden image from
-//! an installer ISO. The work is in [`arena_vm`].
+//! an installer ISO; `verify` boots one once and writes what it found. The
+//! work is in [`arena_vm`].
 
 use std::net::IpAddr;
 use std::path::{Path, PathBuf};
@@ -83,6 +84,12 @@ pub struct VmArgs {
     /// How long a boot or a restore may take to reach a healthy guest.
     #[arg(long, default_value = "900", value_parser = parse_seconds, value_name = "SECONDS")]
     pub vm_boot_timeout: Duration,
+    /// The least time from a healthy guest to its `ready` snapshot. The snapshot
+    /// also waits for the guest to say its desktop has settled (taskbar shown, the
+    /// desktop in front, the CPU idle: its `shell` health component); this is a floor
+    /// on top, for what the guest cannot see.
+    #[arg(long, default_value = "0", value_parser = parse_settle, value_name = "SECONDS")]
+    pub vm_settle: Duration,
     /// The screen under UEFI, WIDTHxHEIGHT (OVMF's preferred resolution, which Windows'
     /// basic display driver keeps; 1440x900 is upstream's).
     #[arg(long, default_value = "1440x900", value_parser = parse_screen, value_name = "WxH")]
@@ -150,6 +157,7 @@ impl VmArgs {
         config.nested = self.vm_nested;
         config.guest_port = self.vm_guest_port;
         config.boot_timeout = self.vm_boot_timeout;
+        config.settle_floor = self.vm_settle;
         config.vnc = self.vm_vnc;
         config.token = token;
         config.screen = self.vm_screen;
@@ -215,6 +223,20 @@ pub enum VmCommand {
         #[arg(long, default_value = "120", value_parser = parse_seconds, value_name = "SECONDS")]
         grace: Duration,
     },
+    /// Boot IMAGE once and check what a run would meet (a healthy guest, a settled
+    /// desktop, the screen, the watermark, the clock, Defender, the browsers'
+    /// folders, the licence, the guest's deep doctor); write the report and what a
+    /// bug report needs into OUT (verify.txt, verify.json, screenshots, logs).
+    /// Exits 1 when a check failed.
+    Verify {
+        /// The read-only golden image.
+        image: PathBuf,
+        /// The bundle's folder (made if missing; the VM runs in OUT/vm, removed at the end).
+        #[arg(long, value_name = "OUT")]
+        out: PathBuf,
+        #[command(flatten)]
+        vm: Box<VmArgs>,
+    },
     /// Make a golden image from an installer ISO and an OEM folder (`arena prep stage`),
     /// with an answer file written from the options below; started again after an
     /// interruption, it goes on from the last safe stage.
@@ -265,6 +287,10 @@ pub struct PrepareArgs {
     pub password: String,
     #[arg(long, default_value = "en-US", value_name = "TAG")]
     pub locale: String,
+    /// Go on when --locale is not the installer's default language (Setup then
+    /// stops at its language page unless the media hold that language too).
+    #[arg(long)]
+    pub force_locale: bool,
     /// The input locale (0409:00000409 is US English).
     #[arg(long, default_value = "0409:00000409", value_name = "LOCALE")]
     pub keyboard: String,
@@ -294,6 +320,11 @@ pub struct PrepareArgs {
     /// xorriso, which builds the OEM media [default: on PATH].
     #[arg(long, value_name = "PATH")]
     pub xorriso: Option<PathBuf>,
+    /// Let the OEM install's step STEP fail (`prep-apps.ps1`, or `prep-apps`) and seal
+    /// the image anyway, once the guest is healthy but for its `setup` record; the
+    /// prepare's state and the image's sidecar record the failure. Repeatable.
+    #[arg(long, value_name = "STEP")]
+    pub allow_failed_step: Vec<String>,
     /// A folder of Windows drivers Setup loads (put on the OEM media as `$WinPEDriver$`):
     /// virtio-win's, needed for `--vm-disk-bus virtio-blk|virtio-scsi`.
     #[arg(long, value_name = "DIR")]
@@ -314,6 +345,13 @@ impl PrepareArgs {
                 None
             }
         };
+        if let Some(images) = &images {
+            match arena_vm::iso::check_locale(images, &self.locale) {
+                Ok(()) => {}
+                Err(why) if self.force_locale => tracing::warn!(%why, "--force-locale: going on"),
+                Err(why) => anyhow::bail!(why),
+            }
+        }
         let (image, key) =
             choose_image(self.edition.as_deref(), self.image_index, self.product_key.clone(), images.as_deref())
                 .map_err(anyhow::Error::msg)?;
@@ -340,6 +378,14 @@ fn parse_screen(text: &str) -> Result<(u32, u32), String> {
     match (side(w), side(h)) {
         (Some(w), Some(h)) => Ok((w, h)),
         _ => Err(format!("{text:?}: each side is a number from 480 to 7680")),
+    }
+}
+
+/// `--vm-settle`: seconds, 0 to an hour.
+fn parse_settle(text: &str) -> Result<Duration, String> {
+    match text.trim().parse::<f64>() {
+        Ok(secs) if secs.is_finite() && (0.0..=3600.0).contains(&secs) => Ok(Duration::from_secs_f64(secs)),
+        _ => Err(format!("--vm-settle {text:?}: use a number of seconds from 0 to 3600")),
     }
 }
 
@@ -408,7 +454,21 @@ pub async fn run(conn: &Connection, args: VmCommandArgs) -> anyhow::Result<ExitC
             Ok(ExitCode::SUCCESS)
         }
         VmCommand::Prepare(args) => prepare_command(conn, *args).await,
+        VmCommand::Verify { image, out, vm } => verify(conn, &image, &out, &vm).await,
     }
+}
+
+async fn verify(conn: &Connection, image: &Path, out: &Path, args: &VmArgs) -> anyhow::Result<ExitCode> {
+    use arena_vm::verify::{VerifyOptions, REPORT_TEXT};
+    let config = args.config(image, &arena_vm::verify::vm_dir(out), "verify", conn.resolve_token()?)?;
+    let options = VerifyOptions { config, out: out.to_owned() };
+    let report = arena_vm::verify::verify(&options, |check| {
+        let _ =
+            emit(&format!("{:<5} {}: {}\n", format!("{:?}", check.verdict).to_uppercase(), check.name, check.detail));
+    })
+    .await?;
+    emit(&format!("report: {}\n", out.join(REPORT_TEXT).display()))?;
+    Ok(if report.passed() { ExitCode::SUCCESS } else { ExitCode::from(1) })
 }
 
 async fn prepare_command(conn: &Connection, args: PrepareArgs) -> anyhow::Result<ExitCode> {
@@ -479,6 +539,7 @@ async fn prepare_command(conn: &Connection, args: PrepareArgs) -> anyhow::Result
         timeouts,
         xorriso: args.xorriso.clone(),
         drivers: args.drivers.clone(),
+        allow_failed_steps: args.allow_failed_step.clone(),
     };
     if args.dry_run {
         let lines = prepare::dry_run(&options)?;
@@ -542,6 +603,13 @@ async fn start(
     emit(&format!("VM started: {} (QEMU pid {}, {})\n", vm.url(), vm.pid().unwrap_or(0), vm.accel_note))?;
     vm.wait_healthy(config.boot_timeout, |_| {}).await?;
     if !matches!(boot, Boot::FromSnapshot(_)) {
+        let settled = vm.wait_settled(config.settle_floor, config.boot_timeout).await?;
+        match &settled.shell {
+            Some(shell) => {
+                emit(&format!("desktop settled after {:.1} s: {shell}\n", settled.settled_after.as_secs_f64()))?
+            }
+            None => emit("the guest reports no shell component (an older guest): only --vm-settle was waited\n")?,
+        }
         let took = vm.save_snapshot(READY_SNAPSHOT).await?;
         emit(&format!("saved snapshot {READY_SNAPSHOT} in {:.1} s\n", took.as_secs_f64()))?;
     }

@@ -1,5 +1,6 @@
 //! The VMs of one run (`arena run --vm-image golden.qcow2 --vms N`): each is
-//! booted on its own overlay, waited for, and saved as the `ready` snapshot;
+//! booted on its own overlay, waited for (a healthy guest, then a settled
+//! desktop and `--vm-settle`: [`Vm::wait_settled`]), and saved as the `ready` snapshot;
 //! before a task the pool asks for the snapshot back (`--reset`), and a VM
 //! that died or stopped answering is killed and started again from its
 //! overlay's snapshot (or, failing that, from a new overlay).
@@ -152,6 +153,16 @@ async fn boot_ready(config: &mut VmConfig) -> Result<Vm, VmError> {
     let name = config.name.clone();
     vm.wait_healthy(config.boot_timeout, |event| tracing::debug!(vm = %name, ?event, "boot")).await?;
     let booted = started.elapsed();
+    // Tasks start from this snapshot: not before the desktop has settled (and the floor passed).
+    let settled = vm.wait_settled(config.settle_floor, config.boot_timeout.saturating_sub(booted)).await?;
+    match &settled.shell {
+        Some(shell) => {
+            tracing::info!(vm = %name, settled_s = settled.settled_after.as_secs_f64(), waited_s = settled.waited.as_secs_f64(), %shell, "desktop settled")
+        }
+        None => {
+            tracing::warn!(vm = %name, waited_s = settled.waited.as_secs_f64(), "the guest reports no shell component (an older guest): only --vm-settle was waited")
+        }
+    }
     let saved = vm.save_snapshot(READY_SNAPSHOT).await?;
     tracing::info!(vm = %config.name, url = vm.url(), boot_s = booted.as_secs_f64(), snapshot_s = saved.as_secs_f64(), accel = %vm.accel_note, "VM ready");
     Ok(vm)

@@ -8,7 +8,9 @@
 //! resource entry at offset 72 gives the offset and size of the image list, an
 //! uncompressed UTF-16 XML document (Microsoft's "Windows Imaging File Format"
 //! white paper, `WIMHEADER_V1_PACKED` and `RESHDR_DISK_SHORT`). From that XML
-//! each `IMAGE` gives `INDEX`, `NAME`, `DISPLAYNAME` and `WINDOWS/EDITIONID`.
+//! each `IMAGE` gives `INDEX`, `NAME`, `DISPLAYNAME`, `WINDOWS/EDITIONID` and
+//! `WINDOWS/LANGUAGES/DEFAULT` (the image's default language, checked against
+//! `--locale` by [`check_locale`]).
 //!
 //! `isomage` gives a file as one run of bytes on the disc; Windows ISOs (made
 //! by `oscdimg`) store files contiguously, and a list that does not parse is an
@@ -28,6 +30,8 @@ pub struct IsoImage {
     pub display_name: Option<String>,
     /// `WINDOWS/EDITIONID` ("Professional", "Core", "Enterprise").
     pub edition_id: Option<String>,
+    /// `WINDOWS/LANGUAGES/DEFAULT` ("en-US"), when the list says it.
+    pub default_language: Option<String>,
 }
 
 /// Longest image list read (real ones are a few tens of KiB).
@@ -117,12 +121,18 @@ pub fn parse_image_list(xml: &str) -> Result<Vec<IsoImage>, String> {
             .and_then(|i| i.trim().parse().ok())
             .filter(|i| *i > 0)
             .ok_or("an IMAGE without a valid INDEX")?;
-        let edition_id = image.children().find(|c| c.has_tag_name("WINDOWS")).and_then(|w| child_text(w, "EDITIONID"));
+        let windows = image.children().find(|c| c.has_tag_name("WINDOWS"));
+        let edition_id = windows.and_then(|w| child_text(w, "EDITIONID"));
+        let default_language = windows
+            .and_then(|w| w.children().find(|c| c.has_tag_name("LANGUAGES")))
+            .and_then(|l| child_text(l, "DEFAULT"))
+            .filter(|d| !d.is_empty());
         images.push(IsoImage {
             index,
             name: child_text(image, "NAME").unwrap_or_default(),
             display_name: child_text(image, "DISPLAYNAME").filter(|d| !d.is_empty()),
             edition_id,
+            default_language,
         });
     }
     images.sort_by_key(|i| i.index);
@@ -130,6 +140,30 @@ pub fn parse_image_list(xml: &str) -> Result<Vec<IsoImage>, String> {
         return Err("the image list names no image".into());
     }
     Ok(images)
+}
+
+/// Checks `--locale` against the installer's default language. The answer
+/// file's windowsPE `UILanguage` (Microsoft's unattend reference,
+/// Microsoft-Windows-International-Core-WinPE) must be a language the media
+/// hold; one they do not leaves Setup at its language page, waiting for a
+/// person, until the stage's deadline. `None` languages (a list that does not
+/// say) pass: nothing is known to compare.
+///
+/// # Errors
+///
+/// The media's default languages, `--locale`, and the ways out.
+pub fn check_locale(images: &[IsoImage], locale: &str) -> Result<(), String> {
+    let mut languages: Vec<&str> = images.iter().filter_map(|i| i.default_language.as_deref()).collect();
+    languages.sort_unstable();
+    languages.dedup();
+    if languages.is_empty() || languages.iter().any(|l| l.eq_ignore_ascii_case(locale)) {
+        return Ok(());
+    }
+    Err(format!(
+        "--locale {locale}: the installer's default language is {}, and Windows Setup stops at its language page for a language its media do not hold; use --locale {}, an ISO in {locale}, or --force-locale to go on anyway",
+        languages.join(", "),
+        languages[0]
+    ))
 }
 
 /// The images as `--list-editions` prints them: index, name, edition.
@@ -181,6 +215,28 @@ mod tests {
         assert_eq!(images[1].display_name.as_deref(), Some("Windows 11 Pro"));
         let text = render_list(&images);
         assert!(text.contains("    2  Professional              Windows 10 Pro (Windows 11 Pro)"), "{text}");
+    }
+
+    #[test]
+    fn the_default_language_is_read_and_checked_against_the_locale() {
+        let xml = r#"<WIM><IMAGE INDEX="1"><NAME>Windows 11 Pro</NAME><WINDOWS><EDITIONID>Professional</EDITIONID>
+            <LANGUAGES><LANGUAGE>de-DE</LANGUAGE><DEFAULT>de-DE</DEFAULT></LANGUAGES></WINDOWS></IMAGE></WIM>"#;
+        let images = parse_image_list(xml).unwrap();
+        assert_eq!(images[0].default_language.as_deref(), Some("de-DE"));
+        check_locale(&images, "de-DE").unwrap();
+        check_locale(&images, "de-de").unwrap();
+        let err = check_locale(&images, "en-US").unwrap_err();
+        assert!(
+            err.contains("--locale en-US")
+                && err.contains("default language is de-DE")
+                && err.contains("--locale de-DE"),
+            "{err}"
+        );
+        assert!(err.contains("--force-locale"), "{err}");
+        // A list that does not say its language: nothing to compare.
+        let silent = parse_image_list(LIST).unwrap();
+        assert_eq!(silent[0].default_language, None);
+        check_locale(&silent, "en-US").unwrap();
     }
 
     #[test]

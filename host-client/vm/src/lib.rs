@@ -33,6 +33,7 @@ pub mod qmp;
 pub mod sidecar;
 pub mod tpm;
 pub mod unattend;
+pub mod verify;
 
 use std::net::{IpAddr, Ipv4Addr, SocketAddr, TcpListener};
 use std::path::{Path, PathBuf};
@@ -41,7 +42,7 @@ use std::time::Duration;
 
 use arena_shared::health::HealthReport;
 
-use crate::oem::{wait_healthy, PrepError, WaitEvent};
+use crate::oem::{PrepError, WaitEvent};
 use arena_client::client::{ClientConfig, GuestClient};
 use disk::{ImageInfo, QemuImg};
 use qemu::{Accel, DiskBus, Firmware, FolderDrive, NicModel, VmSpec};
@@ -88,6 +89,17 @@ pub enum VmError {
     Invalid(String),
 }
 
+/// What [`Vm::wait_settled`] waited for.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Settled {
+    /// From a healthy guest to its settled shell.
+    pub settled_after: Duration,
+    /// In all, with the `--vm-settle` floor.
+    pub waited: Duration,
+    /// The `shell` component's detail, or `None` from a guest that reports none.
+    pub shell: Option<String>,
+}
+
 /// How to run one VM.
 #[derive(Debug, Clone)]
 pub struct VmConfig {
@@ -129,6 +141,9 @@ pub struct VmConfig {
     pub screen: (u32, u32),
     /// The real-time clock's base: UTC for a guest whose zone is UTC.
     pub rtc: qemu::RtcBase,
+    /// `--vm-settle`: the least time between a healthy guest and the `ready`
+    /// snapshot, whatever the guest's `shell` component says ([`Vm::wait_settled`]).
+    pub settle_floor: Duration,
 }
 
 impl VmConfig {
@@ -158,6 +173,7 @@ impl VmConfig {
             boot_timeout: Duration::from_secs(900),
             screen: (1440, 900),
             rtc: qemu::RtcBase::Localtime,
+            settle_floor: Duration::ZERO,
         }
     }
 
@@ -516,12 +532,27 @@ impl Vm {
         within: Duration,
         progress: impl FnMut(WaitEvent<'_>),
     ) -> Result<HealthReport, VmError> {
+        self.wait_healthy_but(within, &[], progress).await
+    }
+
+    /// [`Vm::wait_healthy`] with the components in `ignore` left out (a prepare
+    /// that let a failed OEM step through does not wait for `setup`).
+    ///
+    /// # Errors
+    ///
+    /// As [`Vm::wait_healthy`].
+    pub async fn wait_healthy_but(
+        &mut self,
+        within: Duration,
+        ignore: &[arena_shared::health::Component],
+        progress: impl FnMut(WaitEvent<'_>),
+    ) -> Result<HealthReport, VmError> {
         // QEMU's forwarder accepts connections before the guest listens, and such
         // a call waits for its whole deadline: keep each question short.
         let client = self.client.with_timeout(Duration::from_secs(2));
         let poll = Duration::from_millis(250);
         tokio::select! {
-            report = wait_healthy(&client, within, poll, progress) => {
+            report = crate::oem::wait_healthy_but(&client, within, poll, ignore, progress) => {
                 report.map_err(|source| VmError::NotHealthy { name: self.config.name.clone(), source })
             }
             status = self.child.wait() => {
@@ -541,6 +572,44 @@ impl Vm {
                 )))
             }
         }
+    }
+
+    /// After [`Vm::wait_healthy`], before a snapshot tasks start from: waits
+    /// until the guest says its desktop has settled (the `shell` health
+    /// component: taskbar shown, the desktop in front, the CPU idle) and at
+    /// least `floor` (`--vm-settle`) has passed, within `within`. A guest that
+    /// reports no `shell` component (one older than it) gets the floor alone.
+    ///
+    /// # Errors
+    ///
+    /// [`VmError::Invalid`] naming what had not settled when `within` passed,
+    /// or the guest stopped answering.
+    pub async fn wait_settled(&self, floor: Duration, within: Duration) -> Result<Settled, VmError> {
+        let started = std::time::Instant::now();
+        let client = self.client.with_timeout(Duration::from_secs(5));
+        let detail = loop {
+            let last = match client.health().await {
+                Ok(report) => match report.shell() {
+                    None => break None,
+                    Some(shell) if shell.ok => break Some(shell.detail.clone()),
+                    Some(shell) => shell.detail.clone(),
+                },
+                Err(err) => format!("the guest did not answer: {err}"),
+            };
+            if started.elapsed() >= within {
+                return Err(VmError::Invalid(format!(
+                    "VM {}: the desktop did not settle within {} s of a healthy guest: {last} (the guest's `shell` health component; its --settle-idle-ms is how long the CPU must stay idle)",
+                    self.config.name,
+                    within.as_secs()
+                )));
+            }
+            tokio::time::sleep(Duration::from_millis(500)).await;
+        };
+        let settled_after = started.elapsed();
+        if settled_after < floor {
+            tokio::time::sleep(floor - settled_after).await;
+        }
+        Ok(Settled { settled_after, waited: started.elapsed(), shell: detail })
     }
 
     /// Saves the running VM's memory and disk as snapshot `name` in its overlay

@@ -541,9 +541,10 @@ pub fn component_name(component: Component) -> String {
         .unwrap_or_else(|| format!("{component:?}"))
 }
 
-/// Polls the guest's `/v1/health` every `poll` until every component it reports is
-/// up, telling `progress` about each step, then, when the client has a token,
-/// checks that an authenticated route accepts it.
+/// Polls the guest's `/v1/health` every `poll` until every component it reports
+/// that gates readiness is up (all but `shell`), telling `progress` about each
+/// step, then, when the client has a token, checks that an authenticated route
+/// accepts it.
 ///
 /// # Errors
 ///
@@ -553,8 +554,25 @@ pub async fn wait_healthy(
     client: &GuestClient,
     overall: Duration,
     poll: Duration,
+    progress: impl FnMut(WaitEvent<'_>),
+) -> Result<HealthReport, PrepError> {
+    wait_healthy_but(client, overall, poll, &[], progress).await
+}
+
+/// [`wait_healthy`], with the components in `ignore` left out of the wait (a
+/// prepare that let a failed OEM step through does not wait for `setup`).
+///
+/// # Errors
+///
+/// As [`wait_healthy`].
+pub async fn wait_healthy_but(
+    client: &GuestClient,
+    overall: Duration,
+    poll: Duration,
+    ignore: &[Component],
     mut progress: impl FnMut(WaitEvent<'_>),
 ) -> Result<HealthReport, PrepError> {
+    let waited = |c: &ComponentHealth| c.component.gates_readiness() && !ignore.contains(&c.component);
     let started = Instant::now();
     let mut reached = false;
     let mut up: Vec<Component> = Vec::new();
@@ -578,7 +596,9 @@ pub async fn wait_healthy(
                         progress(WaitEvent::Down { component });
                     }
                 }
-                let all_up = !report.components.is_empty() && report.components.iter().all(|c| c.ok);
+                // The shell's settle is not readiness: the fleet waits for it on its own.
+                let all_up = report.components.iter().any(waited)
+                    && report.components.iter().filter(|c| waited(c)).all(|c| c.ok);
                 if all_up || (report.components.is_empty() && report.status == Readiness::Ready) {
                     check_token(client).await?;
                     if client.config().token.is_some() {
@@ -599,7 +619,7 @@ pub async fn wait_healthy(
         let remaining = overall.saturating_sub(started.elapsed());
         if remaining.is_zero() {
             let missing = match &last_report {
-                Some(report) => report.components.iter().filter(|c| !c.ok).cloned().collect(),
+                Some(report) => report.components.iter().filter(|c| !c.ok && waited(c)).cloned().collect(),
                 None => Vec::new(),
             };
             return Err(PrepError::NotHealthy(WaitTimeout {

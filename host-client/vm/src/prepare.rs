@@ -242,6 +242,10 @@ pub struct State {
     /// What the healthy guest said of its Windows, for the image's sidecar.
     #[serde(default)]
     pub guest: Option<sidecar::GuestFacts>,
+    /// The OEM steps that failed and were let through (`--allow-failed-step`),
+    /// each as `setup.ps1` named it (`prep-apps.ps1 (exit code 3)`).
+    #[serde(default)]
+    pub allowed_failures: Vec<String>,
 }
 
 /// The answer file: generated from options, or the user's own.
@@ -270,6 +274,10 @@ pub struct PrepareOptions {
     /// Drivers Setup loads from the OEM media's `$WinPEDriver$` folder (virtio-win's,
     /// for a virtio disk bus), or `None`.
     pub drivers: Option<PathBuf>,
+    /// OEM steps whose failure does not stop the prepare (`--allow-failed-step`,
+    /// by script name, `.ps1` optional): the image is sealed once the guest is
+    /// healthy but for its `setup` component, and the state and sidecar record them.
+    pub allow_failed_steps: Vec<String>,
 }
 
 /// What a prepare tells as it goes.
@@ -664,6 +672,7 @@ pub async fn prepare(options: &PrepareOptions, mut progress: impl FnMut(PrepareE
                 seconds: Default::default(),
                 started_unix: Some(arena_shared::clock::now_unix_ms().div_euclid(1000)),
                 guest: None,
+                allowed_failures: Vec::new(),
             };
             write_media(options, &dir)?;
             img.create_blank(&disk, &options.size)?;
@@ -741,7 +750,10 @@ pub async fn prepare(options: &PrepareOptions, mut progress: impl FnMut(PrepareE
                 write_state(&dir, &state)?;
                 progress(PrepareEvent::QemuStarted { pid: vm.pid(), accel: &vm.accel_note });
                 let limit = options.timeouts.get(Stage::Healthy);
-                if let Err(err) = vm.wait_healthy(limit, |_| {}).await {
+                // A failed step let through leaves the `setup` component down for good.
+                let ignore: &[arena_shared::health::Component] =
+                    if state.allowed_failures.is_empty() { &[] } else { &[arena_shared::health::Component::Setup] };
+                if let Err(err) = vm.wait_healthy_but(limit, ignore, |_| {}).await {
                     bundle.note(&format!("failed in stage healthy: {err}"));
                     let evidence = keep_evidence(&vm, &dir, Stage::Healthy).await;
                     vm.kill().await;
@@ -832,15 +844,16 @@ fn write_sidecar(options: &PrepareOptions, config: &VmConfig, state: &State, dir
         _ => None,
     };
     let guest = state.guest.clone().unwrap_or_default();
-    let (chosen, language) = match &options.answer {
+    let (chosen, language, startup_apps_off) = match &options.answer {
         Answer::Generated(answer) => (
             match &answer.image {
                 unattend::ImageChoice::Name(name) => Some(name.clone()),
                 unattend::ImageChoice::Index(_) | unattend::ImageChoice::ByKey => None,
             },
             Some(answer.locale.clone()),
+            unattend::startup_apps_off(),
         ),
-        Answer::File(_) => (None, None),
+        Answer::File(_) => (None, None, Vec::new()),
     };
     let installed_unix = guest
         .install_date_unix
@@ -862,6 +875,8 @@ fn write_sidecar(options: &PrepareOptions, config: &VmConfig, state: &State, dir
         timezone: guest_zone(&options.answer),
         installed_unix,
         uefi_vars,
+        startup_apps_off,
+        allowed_failed_steps: state.allowed_failures.clone(),
     };
     sidecar::write(&options.out, &facts)
 }
@@ -1078,9 +1093,24 @@ async fn follow(
                             }
                         }
                         StageEvent::Failed(why) => {
+                            if let Some(steps) = allowed_failure(&why, &options.allow_failed_steps) {
+                                bundle.note(&format!("the OEM install failed, allowed by --allow-failed-step: {why}"));
+                                tracing::warn!(%why, "OEM steps failed and are let through (--allow-failed-step)");
+                                state.allowed_failures = steps;
+                                write_state(dir, state)?;
+                                if enter_stage(Stage::OemDone, options, dir, state, &mut stage_since, progress)? {
+                                    bundle.screendump(vm, Stage::OemDone.name()).await;
+                                }
+                                if health.is_none() {
+                                    let limit = Stage::OemDone.deadline(&options.timeouts);
+                                    // The `setup` component stays down on a failed record: every other must be up.
+                                    health = Some(Box::pin(crate::oem::wait_healthy_but(&client, limit, Duration::from_millis(500), &[arena_shared::health::Component::Setup], |_| {})));
+                                }
+                                continue;
+                            }
                             bundle.note(&format!("the OEM install failed: {why}"));
                             return Err(VmError::Invalid(format!(
-                                "the OEM install failed in stage {}: {why} (the guest's log is %ProgramData%\\arena\\logs\\setup.log; fix the cause in the OEM folder and run the same command again)",
+                                "the OEM install failed in stage {}: {why} (the guest's log is %ProgramData%\\arena\\logs\\setup.log; fix the cause in the OEM folder and run the same command again, or let a step that does not matter fail with --allow-failed-step STEP)",
                                 state.stage.name()
                             )));
                         }
@@ -1161,6 +1191,28 @@ fn enter_stage(
         return Ok(true);
     }
     Ok(false)
+}
+
+/// The failed steps of an `oem-failed` line (`prep-apps.ps1 (exit code 3),
+/// prep-x.ps1 (exit code 1); log C:\...`, as `setup.ps1` says them) when every one
+/// is allowed (by script name, case aside, `.ps1` optional), or `None`.
+pub fn allowed_failure(why: &str, allowed: &[String]) -> Option<Vec<String>> {
+    if allowed.is_empty() {
+        return None;
+    }
+    let steps_text = why.split("; log").next().unwrap_or(why);
+    let steps: Vec<String> =
+        steps_text.split(", ").map(str::trim).filter(|s| !s.is_empty()).map(str::to_owned).collect();
+    let bare = |name: &str| {
+        let name = name.trim();
+        let lower = name.to_ascii_lowercase();
+        lower.strip_suffix(".ps1").map(str::to_owned).unwrap_or(lower)
+    };
+    let is_allowed = |step: &String| {
+        let script = step.split(" (").next().unwrap_or(step);
+        allowed.iter().any(|a| bare(a) == bare(script))
+    };
+    (!steps.is_empty() && steps.iter().all(is_allowed)).then_some(steps)
 }
 
 /// The stage lines in `text`, in order: `arena-stage: NAME` for a stage,
@@ -1258,6 +1310,26 @@ fn finish_evidence(evidence: Option<Evidence>, img: &QemuImg, disk: &Path, bundl
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_failure_is_let_through_only_when_every_failed_step_is_allowed() {
+        let allow = |names: &[&str]| names.iter().map(|n| (*n).to_owned()).collect::<Vec<_>>();
+        let one = r"prep-apps.ps1 (exit code 3); log C:\ProgramData\arena\logs\setup.log";
+        assert_eq!(
+            allowed_failure(one, &allow(&["prep-apps.ps1"])),
+            Some(vec!["prep-apps.ps1 (exit code 3)".to_owned()])
+        );
+        assert_eq!(allowed_failure(one, &allow(&["PREP-APPS"])).map(|s| s.len()), Some(1), "case and .ps1 aside");
+        assert_eq!(allowed_failure(one, &allow(&[])), None);
+        assert_eq!(allowed_failure(one, &allow(&["prep-browser.ps1"])), None);
+        let two = "prep-apps.ps1 (exit code 3), prep-office.ps1 (exit code 1); log setup.log";
+        assert_eq!(allowed_failure(two, &allow(&["prep-apps.ps1"])), None, "one step not allowed holds it");
+        let both = allowed_failure(two, &allow(&["prep-apps.ps1", "prep-office"])).unwrap();
+        assert_eq!(both, vec!["prep-apps.ps1 (exit code 3)", "prep-office.ps1 (exit code 1)"]);
+        // The stand-in's and an older script's line without a log.
+        assert!(allowed_failure("prep-apps.ps1 (exit code 3)", &allow(&["prep-apps.ps1"])).is_some());
+        assert_eq!(allowed_failure("a step failed", &allow(&["prep-apps.ps1"])), None);
+    }
 
     #[test]
     fn stage_lines_are_read_once_and_only_when_whole() {

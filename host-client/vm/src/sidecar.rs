@@ -5,8 +5,8 @@
 //! It records the machine the image was installed on (firmware, screen,
 //! machine type, disk bus, network card, TPM), what Windows it holds (edition,
 //! build, language, time zone, install date, the evaluation's licence expiry
-//! where known) and the prepare's final UEFI variables file, copied beside the
-//! image. A VM whose machine differs from the recorded one is refused before
+//! where known), the start-up apps its answer file turned off, and the
+//! prepare's final UEFI variables file, copied beside the image. A VM whose machine differs from the recorded one is refused before
 //! QEMU starts, with the flag that matches (a UEFI image booted on SeaBIOS
 //! would otherwise wait out its boot deadline as "not healthy"); a licence with
 //! under [`LICENCE_WARN_DAYS`] days left is warned about. An image without a
@@ -82,6 +82,14 @@ pub struct ImageFacts {
     /// entries as Windows left them), beside the image.
     #[serde(default)]
     pub uefi_vars: Option<PathBuf>,
+    /// The start-up apps the answer file turned off, so the first desktop settles
+    /// (`unattend::startup_apps_off`); empty with an answer file of one's own.
+    #[serde(default)]
+    pub startup_apps_off: Vec<String>,
+    /// OEM steps that failed and were let through by `--allow-failed-step`
+    /// (`prep-apps.ps1 (exit code 3)`): the image lacks what they install.
+    #[serde(default)]
+    pub allowed_failed_steps: Vec<String>,
 }
 
 /// What the guest said of its Windows at the end of the prepare (all optional:
@@ -259,6 +267,8 @@ mod tests {
             installed_unix: 1_790_000_000,
             licence_expires_unix: licence_expiry(Some("EnterpriseEval"), 1_790_000_000),
             uefi_vars: Some("/g/golden.qcow2.uefi-vars.qcow2".into()),
+            startup_apps_off: crate::unattend::startup_apps_off(),
+            allowed_failed_steps: Vec::new(),
         }
     }
 

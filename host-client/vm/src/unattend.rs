@@ -804,6 +804,27 @@ pub fn render(o: &AnswerOptions) -> String {
     x.out
 }
 
+/// The values that keep start-up apps off the first desktop, so that it settles
+/// (and a `ready` snapshot is not taken over them): the Store's automatic app
+/// updates (Microsoft's WindowsStore.admx policy "Turn off Automatic Download and
+/// Install of updates", `AutoDownload`=2 under `Policies\Microsoft\WindowsStore`),
+/// the Widgets board (the Policy CSP's `NewsAndInterests/AllowNewsAndInterests`,
+/// `AllowNewsAndInterests`=0 under `Policies\Microsoft\Dsh`) and OneDrive's per-user
+/// setup (its `OneDriveSetup` value under the user's `CurrentVersion\Run` key,
+/// which starts it at every logon).
+const STARTUP_APP_VALUES: [&str; 3] = ["/v AutoDownload ", "/v AllowNewsAndInterests ", "/v OneDriveSetup "];
+
+/// What the generated answer file turns off among the apps that start at logon,
+/// in its own words (the image's sidecar records them).
+pub fn startup_apps_off() -> Vec<String> {
+    SPECIALIZE_POLICIES
+        .iter()
+        .chain(FIRST_LOGON_SCREEN)
+        .filter(|(command, _)| STARTUP_APP_VALUES.iter().any(|value| command.contains(value)))
+        .map(|(_, what)| (*what).to_owned())
+        .collect()
+}
+
 /// The specialize pass's commands, in order: a local account without a network,
 /// passwords that never expire, the policies, the OEM copy, the stage line.
 pub fn specialize_commands() -> Vec<(String, String)> {

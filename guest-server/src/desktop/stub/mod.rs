@@ -65,11 +65,20 @@ pub struct StubConfig {
     /// Whether a command that is none of the simulated programs runs as a real
     /// host process (`--stub-host-exec`); off, it is refused ([`process::refusal`]).
     pub host_exec: bool,
+    /// When the modelled shell shows its taskbar, after the stub starts
+    /// (`--stub-shell-after-ms`); the CPU counts as busy until then.
+    pub shell_after: std::time::Duration,
 }
 
 impl Default for StubConfig {
     fn default() -> StubConfig {
-        StubConfig { root: None, screen: (1440, 900), scenario: None, host_exec: false }
+        StubConfig {
+            root: None,
+            screen: (1440, 900),
+            scenario: None,
+            host_exec: false,
+            shell_after: std::time::Duration::ZERO,
+        }
     }
 }
 
@@ -96,6 +105,9 @@ pub struct StubDesktop {
     /// `set_system_time` changes. In the stand-in VM the process's own clock is
     /// the VM's, which a snapshot restore puts back, as Windows' is.
     clock_offset_ms: std::sync::atomic::AtomicI64,
+    /// When the stub started, and when its shell shows (the `shell` component's model).
+    started: std::time::Instant,
+    shell_after: std::time::Duration,
 }
 
 impl StubDesktop {
@@ -177,6 +189,8 @@ impl StubDesktop {
             host_exec: config.host_exec,
             recorder: Mutex::new(None),
             clock_offset_ms: std::sync::atomic::AtomicI64::new(0),
+            started: std::time::Instant::now(),
+            shell_after: config.shell_after,
         };
         stub.apply_scenario(&scenario)?;
         Ok(stub)
@@ -622,6 +636,23 @@ impl Desktop for StubDesktop {
         "stub"
     }
 
+    fn shell_sample(&self) -> DesktopResult<crate::desktop::settle::ShellSample> {
+        use crate::desktop::settle::{CpuTimes, Front, ShellSample};
+        // The model: a shell that starts for `shell_after` with the CPU busy, then
+        // shows its taskbar and leaves the CPU idle. Times in microseconds.
+        let up = self.started.elapsed();
+        let total = u64::try_from(up.as_micros()).unwrap_or(u64::MAX);
+        let busy = u64::try_from(up.min(self.shell_after).as_micros()).unwrap_or(u64::MAX);
+        let front = {
+            let state = self.lock();
+            match state.window(state.focus).filter(|w| w.shown()) {
+                Some(w) if !w.is_desktop => Front::Window(w.title.clone()),
+                _ => Front::Desktop,
+            }
+        };
+        Ok(ShellSample { taskbar: up >= self.shell_after, front, cpu: Some(CpuTimes { idle: total - busy, total }) })
+    }
+
     fn probe(&self, component: Component) -> DesktopResult<String> {
         let started = std::time::Instant::now();
         match component {
@@ -695,6 +726,8 @@ impl Desktop for StubDesktop {
             }
             // The server reads the setup record itself (`native::health`); nothing of the desktop's.
             Component::Setup => Ok("the setup record is the server's to read".to_owned()),
+            // The server keeps the shell's history itself (`native::health`, `settle`).
+            Component::Shell => Ok("the shell's settle is the server's to judge".to_owned()),
             Component::Unknown => Err(DesktopError::InvalidInput("unknown component".into())),
         }
     }

@@ -207,12 +207,23 @@ impl WindowsDesktop {
             }
             // The server reads the setup record itself (`native::health`); nothing of the desktop's.
             Component::Setup => Ok("the setup record is the server's to read".to_owned()),
+            // The server keeps the shell's history itself (`native::health`, `settle`).
+            Component::Shell => Ok("the shell's settle is the server's to judge".to_owned()),
             Component::Unknown => Err(DesktopError::InvalidInput("unknown component".into())),
         }
     }
 }
 
 impl Desktop for WindowsDesktop {
+    fn shell_sample(&self) -> DesktopResult<crate::desktop::settle::ShellSample> {
+        self.need_desktop("the shell")?;
+        Ok(crate::desktop::settle::ShellSample {
+            taskbar: window::taskbar_shown(),
+            front: window::front(),
+            cpu: system::cpu_times(),
+        })
+    }
+
     fn kind(&self) -> &'static str {
         "windows"
     }

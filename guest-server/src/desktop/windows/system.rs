@@ -7,8 +7,8 @@ use arena_shared::files::KnownFolder;
 use arena_shared::registry::RegistryValue;
 use windows::core::{PCWSTR, PWSTR};
 use windows::Win32::Foundation::{
-    LocalFree, ERROR_FILE_NOT_FOUND, ERROR_MORE_DATA, ERROR_NONE_MAPPED, ERROR_PATH_NOT_FOUND, ERROR_SUCCESS, HLOCAL,
-    LUID, WIN32_ERROR,
+    LocalFree, ERROR_FILE_NOT_FOUND, ERROR_MORE_DATA, ERROR_NONE_MAPPED, ERROR_PATH_NOT_FOUND, ERROR_SUCCESS, FILETIME,
+    HLOCAL, LUID, WIN32_ERROR,
 };
 use windows::Win32::Security::Authorization::{GetNamedSecurityInfoW, SE_FILE_OBJECT};
 use windows::Win32::Security::{
@@ -26,7 +26,7 @@ use windows::Win32::System::RemoteDesktop::ProcessIdToSessionId;
 use windows::Win32::System::Shutdown::{
     InitiateSystemShutdownExW, SHTDN_REASON_FLAG_PLANNED, SHTDN_REASON_MAJOR_OTHER,
 };
-use windows::Win32::System::Threading::{GetCurrentProcess, GetCurrentProcessId, OpenProcessToken};
+use windows::Win32::System::Threading::{GetCurrentProcess, GetCurrentProcessId, GetSystemTimes, OpenProcessToken};
 use windows::Win32::UI::Shell::{
     FOLDERID_Desktop, FOLDERID_Documents, FOLDERID_Downloads, FOLDERID_LocalAppData, FOLDERID_Music, FOLDERID_Pictures,
     FOLDERID_Profile, FOLDERID_RoamingAppData, FOLDERID_Videos, SHFileOperationW, SHGetKnownFolderPath, FOF_ALLOWUNDO,
@@ -424,4 +424,14 @@ pub(super) fn set_system_time(unix_ms: i64) -> DesktopResult<()> {
     };
     // SAFETY: a valid pointer to a complete SYSTEMTIME that outlives the call.
     unsafe { windows::Win32::System::SystemInformation::SetSystemTime(&time) }.map_err(|err| os("SetSystemTime", &err))
+}
+
+/// All processors' idle and busy time since boot (`GetSystemTimes`: 100 ns
+/// ticks; its kernel time includes the idle time), or `None` when it fails.
+pub(super) fn cpu_times() -> Option<crate::desktop::settle::CpuTimes> {
+    let (mut idle, mut kernel, mut user) = (FILETIME::default(), FILETIME::default(), FILETIME::default());
+    // SAFETY: three valid out-pointers to FILETIMEs on this stack frame, alive for the call.
+    unsafe { GetSystemTimes(Some(&mut idle), Some(&mut kernel), Some(&mut user)) }.ok()?;
+    let ticks = |t: FILETIME| (u64::from(t.dwHighDateTime) << 32) | u64::from(t.dwLowDateTime);
+    Some(crate::desktop::settle::CpuTimes { idle: ticks(idle), total: ticks(kernel).saturating_add(ticks(user)) })
 }

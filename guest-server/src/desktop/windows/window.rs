@@ -83,6 +83,21 @@ pub(super) fn is_minimized(hwnd: HWND) -> bool {
     unsafe { IsIconic(hwnd).as_bool() }
 }
 
+/// Whether the taskbar window (`Shell_TrayWnd`) exists and is visible.
+pub(super) fn taskbar_shown() -> bool {
+    top_level().into_iter().any(|hwnd| {
+        // SAFETY: IsWindowVisible accepts any window handle and only reads its state.
+        class_name(hwnd) == "Shell_TrayWnd" && unsafe { IsWindowVisible(hwnd) }.as_bool()
+    })
+}
+
+/// What is in front of the desktop, for the shell's settle.
+pub(super) fn front() -> crate::desktop::settle::Front {
+    let hwnd = foreground();
+    let seen = (!hwnd.is_invalid()).then(|| (class_name(hwnd), title(hwnd)));
+    crate::desktop::settle::Front::of_window(seen.as_ref().map(|(class, title)| (class.as_str(), title.as_str())))
+}
+
 pub(super) fn foreground() -> HWND {
     // SAFETY: no preconditions.
     unsafe { GetForegroundWindow() }

@@ -207,6 +207,22 @@ fn the_first_logon_draws_upstreams_screen_and_the_store_does_not_update() {
     check_limits(&xml, true).unwrap();
 }
 
+/// The start-up apps the sidecar records as off are the ones the answer file
+/// turns off: each of the three is a command the file carries.
+#[test]
+fn the_startup_apps_off_are_the_answer_files_own_commands() {
+    let off = startup_apps_off();
+    assert_eq!(off.len(), 3, "{off:?}");
+    for what in ["AutoDownload=2", "AllowNewsAndInterests", "OneDrive"] {
+        assert!(off.iter().any(|s| s.contains(what)), "{what}: {off:?}");
+    }
+    let commands: Vec<(String, String)> =
+        specialize_commands().into_iter().chain(first_logon_commands("Docker")).collect();
+    for note in &off {
+        assert!(commands.iter().any(|(_, what)| what == note), "{note} is no command of the answer file");
+    }
+}
+
 /// Every string the generator writes, for both firmware paths and every
 /// option that changes the file (UAC, bypass keys, image by index, by name and
 /// by key, a product key, long names), is within the maximum Microsoft's
@@ -285,6 +301,7 @@ fn images() -> Vec<crate::iso::IsoImage> {
         name: name.into(),
         display_name: None,
         edition_id: Some(id.into()),
+        default_language: Some("en-US".into()),
     };
     vec![
         image(1, "Windows 11 Home", "Core"),
