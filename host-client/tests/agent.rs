@@ -82,7 +82,7 @@ async fn run(c: &GuestClient, action: &AgentAction, obs: &Observation, state: &m
 }
 
 fn computer(code: &str) -> AgentAction {
-    AgentAction::Computer(code.to_owned())
+    AgentAction::Computer(code.into())
 }
 
 #[tokio::test]
@@ -338,7 +338,7 @@ async fn navi_in_upstreams_layout_reads_replies_by_upstreams_rules() {
     let p = agent.predict(&obs).await.expect("prediction");
     // The first python block, dedented; COMMAND keeps it.
     let code = format!("computer.mouse.move_id(id={doc_id})\ncomputer.mouse.single_click()\n");
-    assert_eq!(p.actions, vec![AgentAction::Computer(code.clone())]);
+    assert_eq!(p.actions, vec![AgentAction::Computer(code.clone().into())]);
     let body = mock.requests.lock().expect("lock")[0].1.clone();
     assert_eq!((body["temperature"].clone(), body["max_tokens"].clone()), (json!(1.0), json!(4096)));
     let (images, text) = user_parts(&body);

@@ -58,7 +58,7 @@ async fn guest_side(base: &str) -> String {
 /// Runs the program on the host, as an agent's pyautogui action with its effects.
 async fn host_side(client: &GuestClient) -> String {
     let mut computer = ComputerState::for_screen(1440, 900);
-    let action = AgentAction::Pyautogui(program("host"));
+    let action = AgentAction::Pyautogui(program("host").into());
     let options = ExecOptions { pyautogui: PyautoguiPolicy::Effects, ..ExecOptions::instant() };
     let outcome = execute_with(client, &action, None, &mut computer, &options).await.expect("guest reachable");
     assert_eq!(outcome.error, None, "{outcome:?}");
@@ -169,7 +169,7 @@ async fn computer_behaviours_leave_the_same_desktop_from_the_host_and_from_the_g
     let (_host_guest, host_client) = calculator_desktop().await;
     let mut computer = ComputerState::for_screen(1440, 900);
     for code in COMPUTER_CODE {
-        let action = AgentAction::Computer(code.to_owned());
+        let action = AgentAction::Computer(code.into());
         let outcome = execute_with(&host_client, &action, None, &mut computer, &ExecOptions::instant())
             .await
             .expect("guest reachable");

@@ -14,9 +14,9 @@
 //! It does not run anything and does not talk to the model.
 
 use arena_actionspace::Decision;
-use arena_script::{dialect_of, parse, Dialect};
+use arena_script::{dialect_of, Dialect};
 
-use arena_exec::AgentAction;
+use arena_exec::{AgentAction, Code};
 
 /// What a reply holds.
 #[derive(Debug, Clone, PartialEq)]
@@ -71,10 +71,11 @@ fn code_action(code: &str) -> Result<Option<AgentAction>, String> {
     if !meaningful(code) {
         return Ok(None);
     }
-    parse(code).map_err(|e| format!("the code block does not parse: {e}"))?;
+    // Parsed once, here: the program travels with the action to the executor.
+    let parsed = Code::parse(code).map_err(|e| format!("the code block does not parse: {e}"))?;
     Ok(Some(match dialect_of(code) {
-        Dialect::Pyautogui => AgentAction::Pyautogui(code.to_owned()),
-        Dialect::Computer => AgentAction::Computer(code.to_owned()),
+        Dialect::Pyautogui => AgentAction::Pyautogui(parsed),
+        Dialect::Computer => AgentAction::Computer(parsed),
     }))
 }
 
@@ -191,10 +192,10 @@ pub fn parse_navi_reply(text: &str) -> NaviReply {
         // Code that does not use the `computer` object is pyautogui code, carried out
         // as every pyautogui answer is (upstream runs any code as `computer` code).
         Some(code) if dialect_of(code) == Dialect::Pyautogui && meaningful(code) => {
-            AgentAction::Pyautogui(code.clone())
+            AgentAction::Pyautogui(code.clone().into())
         }
-        Some(code) => AgentAction::Computer(code.clone()),
-        None => AgentAction::Computer(PLAN_NOT_FOUND.to_owned()),
+        Some(code) => AgentAction::Computer(code.clone().into()),
+        None => AgentAction::Computer(PLAN_NOT_FOUND.into()),
     }];
     let code = code.unwrap_or_else(|| PLAN_NOT_FOUND.to_owned());
     if let Some(decision) = fenced(text, "decision").as_deref().and_then(Decision::named_in) {
@@ -208,8 +209,21 @@ mod tests {
     use super::*;
 
     #[test]
+    fn a_code_block_is_parsed_once_and_its_program_goes_with_the_action() {
+        let parsed = parse_reply("```python\npyautogui.click(3, 4)\n```\n```python\ncomputer.mouse.move_id(id=2)\n```");
+        let actions = parsed.expect("a usable reply").actions;
+        assert_eq!(actions.len(), 2, "{actions:?}");
+        for action in &actions {
+            match action {
+                AgentAction::Pyautogui(code) | AgentAction::Computer(code) => assert!(code.is_parsed(), "{code:?}"),
+                other => panic!("{other:?}"),
+            }
+        }
+    }
+
+    #[test]
     fn navi_replies_follow_upstreams_rules() {
-        let computer = |code: &str| vec![AgentAction::Computer(code.to_owned())];
+        let computer = |code: &str| vec![AgentAction::Computer(code.into())];
         // Only the first python block, dedented by its smallest indent.
         let r = parse_navi_reply(
             "Plan.\n```python\n    computer.mouse.move_id(id=3)\n      x = 1\n```\n```python\nother()\n```",
@@ -247,7 +261,7 @@ mod tests {
     }
 
     fn computer(code: &str) -> AgentAction {
-        AgentAction::Computer(code.to_owned())
+        AgentAction::Computer(code.into())
     }
 
     #[test]
@@ -258,7 +272,7 @@ mod tests {
         );
         check(
             "```\nimport pyautogui\npyautogui.hotkey('ctrl', 's')\n```",
-            Ok(vec![AgentAction::Pyautogui("import pyautogui\npyautogui.hotkey('ctrl', 's')".to_owned())]),
+            Ok(vec![AgentAction::Pyautogui("import pyautogui\npyautogui.hotkey('ctrl', 's')".into())]),
         );
         check(
             "```python\ncomputer.keyboard.press(\"enter\")\nDONE\n```",

@@ -76,7 +76,7 @@ pub fn parse_trajectory(text: &str, origin: &str) -> Result<Vec<TrajectoryStep>,
         let action = match value.get("action") {
             Some(serde_json::Value::String(code)) => match arena_actionspace::Decision::parse(code) {
                 Some(decision) => decision.into(),
-                None => AgentAction::Computer(code.clone()),
+                None => AgentAction::Computer(code.clone().into()),
             },
             other => return Err(bad(i, format!("`action` is not a string: {other:?}"))),
         };

@@ -71,8 +71,8 @@ impl PlanStep {
                 Some(decision) => decision.into(),
                 None => return Err(format!("unknown step {:?} (expected DONE, FAIL or WAIT)", word.trim())),
             },
-            PlanStep::Code { code, lang: CodeLang::Computer } => AgentAction::Computer(code.clone()),
-            PlanStep::Code { code, lang: CodeLang::Pyautogui } => AgentAction::Pyautogui(code.clone()),
+            PlanStep::Code { code, lang: CodeLang::Computer } => AgentAction::Computer(code.clone().into()),
+            PlanStep::Code { code, lang: CodeLang::Pyautogui } => AgentAction::Pyautogui(code.clone().into()),
             PlanStep::Actions { actions } => AgentAction::Typed(actions.clone()),
         })
     }

@@ -1,10 +1,113 @@
 //! [`AgentAction`]: one thing an agent wants done, the unit the executor carries
 //! out and trajectories record, and how an action space's steps become actions.
 
+use std::sync::Arc;
+
 use serde::{Deserialize, Serialize};
 
 use arena_actionspace::{Decision, Step};
+use arena_script::ast::Program;
+use arena_script::ParseError;
 use arena_shared::action::Action;
+
+/// Code an agent sent (Navi `computer.*` or pyautogui), with the program it parses
+/// to once something has parsed it: an agent that checks its model's reply parses
+/// the code there ([`Code::parse`]), and the executor then runs that program
+/// ([`Code::program`]) instead of reading the text again. Two codes are equal when
+/// their text is; the JSON of an action carries the text only.
+#[derive(Clone)]
+pub struct Code {
+    source: String,
+    parsed: Option<Arc<Program>>,
+}
+
+impl Code {
+    /// Code not parsed yet.
+    pub fn new(source: impl Into<String>) -> Code {
+        Code { source: source.into(), parsed: None }
+    }
+
+    /// Code parsed now, its program kept.
+    ///
+    /// # Errors
+    ///
+    /// The interpreter's parser refused it.
+    pub fn parse(source: impl Into<String>) -> Result<Code, ParseError> {
+        let source = source.into();
+        let program = arena_script::parse(&source)?;
+        Ok(Code { source, parsed: Some(Arc::new(program)) })
+    }
+
+    /// The text.
+    pub fn as_str(&self) -> &str {
+        &self.source
+    }
+
+    /// The text, owned.
+    pub fn into_string(self) -> String {
+        self.source
+    }
+
+    /// Whether the program is kept (the code was parsed once already).
+    pub fn is_parsed(&self) -> bool {
+        self.parsed.is_some()
+    }
+
+    /// The program: a copy of the kept one, else the text parsed now.
+    ///
+    /// # Errors
+    ///
+    /// The interpreter's parser refused the text.
+    pub fn program(&self) -> Result<Program, ParseError> {
+        match &self.parsed {
+            Some(program) => Ok(Program::clone(program)),
+            None => arena_script::parse(&self.source),
+        }
+    }
+}
+
+impl std::ops::Deref for Code {
+    type Target = str;
+    fn deref(&self) -> &str {
+        &self.source
+    }
+}
+
+impl std::fmt::Debug for Code {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        std::fmt::Debug::fmt(&self.source, f)
+    }
+}
+
+impl PartialEq for Code {
+    fn eq(&self, other: &Code) -> bool {
+        self.source == other.source
+    }
+}
+
+impl PartialEq<str> for Code {
+    fn eq(&self, other: &str) -> bool {
+        self.source == other
+    }
+}
+
+impl PartialEq<&str> for Code {
+    fn eq(&self, other: &&str) -> bool {
+        self.source == *other
+    }
+}
+
+impl From<String> for Code {
+    fn from(source: String) -> Code {
+        Code::new(source)
+    }
+}
+
+impl From<&str> for Code {
+    fn from(source: &str) -> Code {
+        Code::new(source)
+    }
+}
 
 /// One thing an agent wants done.
 ///
@@ -16,11 +119,11 @@ use arena_shared::action::Action;
 #[serde(into = "ActionRecord", from = "ActionRecord")]
 pub enum AgentAction {
     /// Navi `computer.*` code, run with `computer` bound (upstream's `/execute_windows`).
-    Computer(String),
+    Computer(Code),
     /// pyautogui code (with `pyautogui` and `time` imported, as upstream's `python -c`),
     /// carried out as the executor's [`PyautoguiPolicy`](crate::PyautoguiPolicy) says:
     /// with its effects by default, or translated by the `pyautogui` action space.
-    Pyautogui(String),
+    Pyautogui(Code),
     /// Typed input actions, sent as one batch.
     Typed(Vec<Action>),
     /// Text put on the clipboard (`PUT /v1/clipboard`): an action space's clipboard
@@ -113,8 +216,8 @@ enum ActionRecord {
 impl From<AgentAction> for ActionRecord {
     fn from(a: AgentAction) -> ActionRecord {
         match a {
-            AgentAction::Computer(code) => ActionRecord::Computer { code },
-            AgentAction::Pyautogui(code) => ActionRecord::Pyautogui { code },
+            AgentAction::Computer(code) => ActionRecord::Computer { code: code.into_string() },
+            AgentAction::Pyautogui(code) => ActionRecord::Pyautogui { code: code.into_string() },
             AgentAction::Typed(actions) => ActionRecord::Typed { actions },
             AgentAction::Clipboard(text) => ActionRecord::Clipboard { text },
             AgentAction::Wait => ActionRecord::Wait,
@@ -127,8 +230,8 @@ impl From<AgentAction> for ActionRecord {
 impl From<ActionRecord> for AgentAction {
     fn from(r: ActionRecord) -> AgentAction {
         match r {
-            ActionRecord::Computer { code } => AgentAction::Computer(code),
-            ActionRecord::Pyautogui { code } => AgentAction::Pyautogui(code),
+            ActionRecord::Computer { code } => AgentAction::Computer(code.into()),
+            ActionRecord::Pyautogui { code } => AgentAction::Pyautogui(code.into()),
             ActionRecord::Typed { actions } => AgentAction::Typed(actions),
             ActionRecord::Clipboard { text } => AgentAction::Clipboard(text),
             ActionRecord::Wait => AgentAction::Wait,
@@ -142,6 +245,21 @@ impl From<ActionRecord> for AgentAction {
 mod tests {
     use super::*;
     use arena_shared::action::MouseButton;
+
+    #[test]
+    fn parsed_code_keeps_its_program_and_compares_and_serializes_by_its_text() {
+        let parsed = Code::parse("pyautogui.click(1, 2)").expect("parses");
+        assert!(parsed.is_parsed());
+        let text = Code::new("pyautogui.click(1, 2)");
+        assert!(!text.is_parsed());
+        assert_eq!(parsed, text);
+        assert_eq!(parsed.program().expect("kept"), text.program().expect("parsed now"));
+        let action = AgentAction::Pyautogui(parsed);
+        let back: AgentAction = serde_json::from_str(&serde_json::to_string(&action).unwrap()).unwrap();
+        assert_eq!(back, action, "the JSON carries the text");
+        assert!(Code::parse("pyautogui.click(").is_err());
+        assert!(Code::new("pyautogui.click(").program().is_err());
+    }
 
     #[test]
     fn actions_round_trip_through_json_with_a_kind_tag() {

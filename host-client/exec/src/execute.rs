@@ -49,7 +49,7 @@ use tokio::runtime::Handle;
 use arena_actionspace::{ActionSpace, Context, Coords, Step};
 use arena_client::client::GuestClient;
 use arena_client::error::ClientError;
-use arena_script::{parse, run, ComputerState, Globals, ScriptError, Stop};
+use arena_script::{run, ComputerState, Globals, ScriptError, Stop};
 use arena_shared::action::{Action, ActionBatch};
 use arena_shared::clipboard::ClipboardContent;
 use arena_shared::geometry::Point;
@@ -359,12 +359,13 @@ enum Lang {
 /// Code run on the host against [`GuestHost`].
 async fn run_script(
     client: &GuestClient,
-    code: &str,
+    code: &crate::action::Code,
     lang: Lang,
     computer: &mut ComputerState,
     options: &ExecOptions,
 ) -> Result<ActionOutcome, ExecError> {
-    let mut program = match parse(code) {
+    // The program the agent's reply check kept, else the text parsed now.
+    let mut program = match code.program() {
         Ok(program) => program,
         Err(err) => return Ok(refused(format!("SyntaxError: {err}"))),
     };

@@ -26,7 +26,7 @@ pub mod execute;
 mod guest_host;
 pub mod options;
 
-pub use action::AgentAction;
+pub use action::{AgentAction, Code};
 pub use execute::{
     execute, execute_with, perform_input_only, perform_steps, pointer, translate_pyautogui, ActionOutcome, ExecError,
     InputOnly,

@@ -320,8 +320,8 @@ fn recorded_actions(actions: &[AgentAction], budget: &mut arena_results::RecordB
             break;
         }
         kept.push(match action {
-            AgentAction::Computer(code) => AgentAction::Computer(budget.text(code)),
-            AgentAction::Pyautogui(code) => AgentAction::Pyautogui(budget.text(code)),
+            AgentAction::Computer(code) => AgentAction::Computer(budget.text(code).into()),
+            AgentAction::Pyautogui(code) => AgentAction::Pyautogui(budget.text(code).into()),
             AgentAction::Clipboard(text) => AgentAction::Clipboard(budget.text(text)),
             AgentAction::Typed(typed) => {
                 let mut kept_typed = Vec::new();
@@ -350,7 +350,7 @@ fn recorded_actions(actions: &[AgentAction], budget: &mut arena_results::RecordB
 /// The action as upstream's trajectory logs it: the code, or the control word.
 fn upstream_action(action: &AgentAction) -> String {
     match action {
-        AgentAction::Computer(code) | AgentAction::Pyautogui(code) => code.clone(),
+        AgentAction::Computer(code) | AgentAction::Pyautogui(code) => code.as_str().to_owned(),
         AgentAction::Wait
         | AgentAction::Done
         | AgentAction::Fail

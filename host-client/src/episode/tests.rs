@@ -236,7 +236,7 @@ fn a_huge_text_or_json_log_is_written_within_its_file_limit() {
 async fn a_huge_answer_is_recorded_within_the_steps_budget() {
     let big = "x".repeat(8 << 20);
     let mut actions: Vec<AgentAction> =
-        (0..300).map(|i| AgentAction::Pyautogui(format!("# {i} {}", &big[..100_000]))).collect();
+        (0..300).map(|i| AgentAction::Pyautogui(format!("# {i} {}", &big[..100_000]).into())).collect();
     actions.push(AgentAction::Typed(vec![Action::TypeText { text: big.clone(), interval_ms: None }]));
     actions.push(AgentAction::Done);
     let logs = (0..1000)
@@ -317,7 +317,11 @@ async fn a_steps_actions_share_its_deadline_and_those_not_begun_in_time_are_not_
     assert!((1..50).contains(&ran), "{ran} of the 50 actions ran");
     let traj = out.read_trajectory().unwrap();
     let said = format!("actions {} to 50 not run: the step's 0.3 s were up", ran + 1);
-    assert_eq!(traj[0].timings.timeouts, vec![said]);
+    let timeouts = &traj[0].timings.timeouts;
+    assert_eq!(timeouts.last(), Some(&said), "{timeouts:?}");
+    // On a loaded machine the action running when the time ran out may be cut too.
+    let cut = format!("action {ran}: the action outlasted the step's 0.3 s");
+    assert!(timeouts[..timeouts.len() - 1].iter().all(|t| *t == cut), "{timeouts:?}");
 }
 
 #[tokio::test]

@@ -413,8 +413,8 @@ pub fn agent_action(call: arena_shared::mcp_tools::ToolCall) -> Option<AgentActi
     match call {
         ToolCall::Input(action) => Some(AgentAction::Typed(vec![action])),
         ToolCall::RunPython(code) => Some(match dialect_of(&code) {
-            Dialect::Computer => AgentAction::Computer(code),
-            Dialect::Pyautogui => AgentAction::Pyautogui(code),
+            Dialect::Computer => AgentAction::Computer(code.into()),
+            Dialect::Pyautogui => AgentAction::Pyautogui(code.into()),
         }),
         ToolCall::Done => Some(AgentAction::Done),
         ToolCall::Fail => Some(AgentAction::Fail),

@@ -57,9 +57,9 @@ pub fn to_actions(
                     return Err(bad(format!("expected a code string, got {}", super::short(action))));
                 };
                 out.push(if space == "computer" {
-                    AgentAction::Computer(code.to_owned())
+                    AgentAction::Computer(code.into())
                 } else {
-                    AgentAction::Pyautogui(code.to_owned())
+                    AgentAction::Pyautogui(code.into())
                 });
                 continue;
             }
