@@ -318,6 +318,9 @@ fn a_navi_run_that_is_no_preset_says_how_it_differs_from_upstream_and_the_report
         "m",
         "--llm-retry",
         "0",
+        // Nothing listens there: the run goes on, each task the model's failure.
+        "--llm-unreachable",
+        "wait",
         "--stub-guests",
         "1",
         "--max-steps",

@@ -7,6 +7,7 @@
 //! agent outside a sandbox, saying so (a failure with `ARENA_REQUIRE_BWRAP=1`,
 //! which `.ci/run` sets).
 
+use std::io::Write as _;
 use std::process::Command;
 
 /// The variable that makes a missing bubblewrap a failure.
@@ -32,6 +33,7 @@ pub fn exec_sandbox_args() -> [&'static str; 2] {
         std::env::var(REQUIRE_BWRAP_VAR).as_deref() != Ok("1"),
         "bwrap is not installed and {REQUIRE_BWRAP_VAR}=1 (apt-get install bubblewrap)"
     );
-    eprintln!("NOTE: bwrap not found: this suite's exec agent runs with --agent-sandbox none");
+    // Straight to the process's stderr, as a skip line is (libtest captures eprintln!).
+    let _ = writeln!(std::io::stderr(), "NOTE: bwrap not found: this suite's exec agent runs with --agent-sandbox none");
     ["--agent-sandbox", "none"]
 }
