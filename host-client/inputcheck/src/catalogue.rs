@@ -9,7 +9,8 @@
 //! whose keys differ by layout or by how a space types), optionally `expect_by_space`
 //! (a space whose translation differs on purpose, with its own lines, such as UI-TARS
 //! typing by paste), `note`, `wine` (a [`WineException`]: what Wine cannot show of the
-//! case, `{"reason": "...", "spaces": [...]}`, every space when `spaces` is left out),
+//! case, `{"reason": "...", "spaces": [...], "sometimes": true}`, every space when
+//! `spaces` is left out, `sometimes` when Wine fails it only now and then),
 //! and one member per action space: `pyautogui` (code),
 //! `computer_13`, `anthropic` (the `computer` tool's input, run as
 //! `computer_20250124`, as `computer_20251124` and, as member-named blocks, as
@@ -43,6 +44,9 @@ pub struct WineException {
     pub reason: String,
     /// The spaces it is excused in; every space when empty.
     pub spaces: Vec<ActionSpace>,
+    /// Wine fails it only some of the time (a race in Wine, not a fixed answer), so a
+    /// run that passes is no sign the reason has gone.
+    pub sometimes: bool,
 }
 
 impl WineException {
@@ -198,9 +202,14 @@ fn parse_wine(value: &Value) -> Result<WineException, String> {
     let Value::Object(obj) = value else {
         return Err("`wine` must be an object with `reason` (and `spaces`)".into());
     };
-    if let Some(key) = obj.keys().find(|k| *k != "reason" && *k != "spaces") {
-        return Err(format!("`wine` has an unknown member {key:?} (expected reason, spaces)"));
+    if let Some(key) = obj.keys().find(|k| !["reason", "spaces", "sometimes"].contains(&k.as_str())) {
+        return Err(format!("`wine` has an unknown member {key:?} (expected reason, spaces, sometimes)"));
     }
+    let sometimes = match obj.get("sometimes") {
+        None => false,
+        Some(Value::Bool(b)) => *b,
+        Some(other) => return Err(format!("`wine`: `sometimes` must be true or false, got {other}")),
+    };
     let reason = text_field(obj, "reason").map_err(|err| format!("`wine`: {err}"))?;
     let mut spaces = Vec::new();
     match obj.get("spaces") {
@@ -215,7 +224,7 @@ fn parse_wine(value: &Value) -> Result<WineException, String> {
         }
         Some(other) => return Err(format!("`wine`: `spaces` must be a non-empty list of names, got {other}")),
     }
-    Ok(WineException { reason, spaces })
+    Ok(WineException { reason, spaces, sometimes })
 }
 
 /// The spaces a member name stands for.

@@ -162,13 +162,16 @@ fn a_wine_exception_is_read_with_its_reason_and_spaces_and_a_bad_one_is_refused(
     assert!(wine.covers(ActionSpace::Typed) && wine.covers(ActionSpace::Pyautogui));
     let one = Catalogue::parse(&case(r#"{"reason": "r", "spaces": ["typed"]}"#)).unwrap_or_else(|e| panic!("{e}"));
     let wine = one.cases[0].wine.clone().expect("the exception");
-    assert!(wine.covers(ActionSpace::Typed) && !wine.covers(ActionSpace::Pyautogui));
+    assert!(wine.covers(ActionSpace::Typed) && !wine.covers(ActionSpace::Pyautogui) && !wine.sometimes);
+    let racy = Catalogue::parse(&case(r#"{"reason": "r", "sometimes": true}"#)).unwrap_or_else(|e| panic!("{e}"));
+    assert!(racy.cases[0].wine.as_ref().is_some_and(|w| w.sometimes));
     for (wine, says) in [
         (r#"{"spaces": ["typed"]}"#, "reason"),
         (r#"{"reason": "r", "spaces": ["telepathy"]}"#, "telepathy"),
         (r#"{"reason": "r", "spaces": ["uitars"]}"#, "not expressed in"),
         (r#"{"reason": "r", "spaces": []}"#, "non-empty"),
         (r#"{"reason": "r", "why": "x"}"#, "unknown member"),
+        (r#"{"reason": "r", "sometimes": "often"}"#, "true or false"),
         (r#""because""#, "must be an object"),
     ] {
         let err = Catalogue::parse(&case(wine)).unwrap_err();
