@@ -454,6 +454,45 @@ async fn scripted_agent_follows_a_plan_file_against_the_stub() {
 }
 
 #[tokio::test]
+async fn a_plan_step_in_a_computer_use_space_is_translated_against_the_screen() {
+    let (_guest, c) = guest_with_notepad().await;
+    let plan = json!({"steps": [
+        {"space": "computer_20250124", "input": [{"action": "type", "text": "hi "}, {"action": "key", "text": "shift+a"}]},
+        {"space": "openai_computer", "input": {"type": "type", "text": "bc"}},
+        {"space": "uitars", "input": "Action: finished(content='done')"}
+    ]});
+    let dir = tempfile::tempdir().expect("dir");
+    let path = dir.path().join("plan.json");
+    std::fs::write(&path, plan.to_string()).expect("plan");
+    let mut agent = ScriptedAgent::from_file(&path).expect("the plan loads");
+    let t = task(dir.path(), "");
+    agent.reset(&t).await;
+    let mut state = ComputerState::for_screen(1, 1);
+    let mut last = Vec::new();
+    for step in 1..=3 {
+        let obs = Observation::capture(&c, step, &t.instruction).await.expect("observe");
+        let p = agent.predict(&obs).await.expect("prediction");
+        assert!(p.response.starts_with(&format!("plan step {step}: ")), "{}", p.response);
+        for action in &p.actions {
+            let outcome = execute_with(&c, action, None, &mut state, &ExecOptions::instant()).await.expect("execute");
+            assert_eq!(outcome.error, None, "step {step}: {outcome:?}");
+        }
+        last = p.actions;
+    }
+    assert_eq!(notepad_text(&c).await, "hi Abc");
+    assert_eq!(last, vec![AgentAction::Done], "UI-TARS's finished() is the decision DONE");
+
+    // An unknown space, or an input its space does not take, fails when the plan loads.
+    for (step, says) in [
+        (json!({"space": "computer_1999", "input": {}}), "unknown action space"),
+        (json!({"space": "computer_20250124", "input": {"action": "fly"}}), "computer_20250124"),
+    ] {
+        std::fs::write(&path, json!({"steps": [step]}).to_string()).expect("plan");
+        let err = ScriptedAgent::from_file(&path).expect_err("a bad step");
+        assert!(err.to_string().contains("step 1") && err.to_string().contains(says), "{err}");
+    }
+}
+#[tokio::test]
 async fn replay_repeats_a_recorded_trajectory() {
     let (_guest, c) = guest_with_notepad().await;
     let dir = tempfile::tempdir().expect("dir");

@@ -522,28 +522,16 @@ async fn windows_backend_under_wine() {
     assert!(output.lines().any(|l| l.starts_with("ok: ") || l.starts_with("FAILED: ")), "no verdict line:\n{output}");
 }
 
-/// Cases of the input catalogue Wine cannot show, in the spaces named (all when
-/// empty), and why; each passes on the stub's model of the recorder
-/// (`host-client/inputcheck/tests/stub.rs`), so what fails here is Wine's, not ours.
-const WINE_CANNOT_SHOW: &[(&str, &[&str], &str)] = &[];
-
 /// The whole input catalogue in every action space, as `arena doctor --input` runs it
 /// (`arena_inputcheck::check_guest`: the host's executor, the guest's temporary folder
 /// for the log), against the Windows backend and the cross-built recorder under Wine.
-/// Every case passes except those [`WINE_CANNOT_SHOW`] names, which must fail (so the
-/// list is kept true) and nothing else.
+///
+/// Every case passes except those whose `wine` member in the catalogue names what Wine
+/// cannot show and why; each of those must fail here (so the catalogue's word stays
+/// true), unless the member says Wine fails it only `sometimes`, and passes on the stub's model of the recorder
+/// (`host-client/inputcheck/tests/stub.rs`), so what fails here is Wine's, not ours.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn input_catalogue_under_wine() {
-    // Never yet run under Wine: it joins the CI suite once a run has named what Wine
-    // cannot show (ARENA_WINE_INPUT_CATALOGUE=1 runs it; the skip is counted).
-    if std::env::var("ARENA_WINE_INPUT_CATALOGUE").as_deref() != Ok("1") {
-        arena_test_support::skip(
-            "input_catalogue_under_wine",
-            "ARENA_WINE_INPUT_CATALOGUE is not 1 (the catalogue has not been run under Wine yet)",
-            "ARENA_REQUIRE_WINE_INPUT_CATALOGUE",
-        );
-        return;
-    }
     let Some(setup) = setup() else {
         return;
     };
@@ -571,8 +559,10 @@ async fn input_catalogue_under_wine() {
     assert_eq!(report.cases, runs);
     assert_eq!(report.by_space.len(), arena_actionspace::ActionSpace::ALL.len());
 
+    let wine_of = |name: &str| catalogue.cases.iter().find(|c| c.name == name).and_then(|c| c.wine.as_ref());
     let excused = |case: &str, space: &str| {
-        WINE_CANNOT_SHOW.iter().any(|(c, spaces, _)| *c == case && (spaces.is_empty() || spaces.contains(&space)))
+        let space = space.parse::<arena_actionspace::ActionSpace>().ok();
+        wine_of(case).is_some_and(|wine| space.is_some_and(|s| wine.covers(s)))
     };
     let unexcused: Vec<String> = report
         .mismatches
@@ -581,15 +571,26 @@ async fn input_catalogue_under_wine() {
         .map(|m| format!("{} in {}", m.case, m.space))
         .collect();
     assert!(unexcused.is_empty(), "mismatches Wine is not excused from: {unexcused:?}\n{}", report.render_table());
-    for (case, spaces, why) in WINE_CANNOT_SHOW {
-        assert!(
-            report
-                .mismatches
-                .iter()
-                .any(|m| m.case == *case && (spaces.is_empty() || spaces.contains(&m.space.as_str()))),
-            "{case} passes under Wine now ({why}): take it off WINE_CANNOT_SHOW"
-        );
+    // Each excused run fails (unless Wine fails it only sometimes), so no exception
+    // outlives the reason it names.
+    let mut exceptions = 0;
+    for case in &catalogue.cases {
+        let Some(wine) = &case.wine else { continue };
+        for (space, _) in case.inputs.iter().filter(|(space, _)| wine.covers(*space)) {
+            exceptions += 1;
+            let failed = report.mismatches.iter().any(|m| m.case == case.name && m.space == space.name());
+            assert!(
+                failed || wine.sometimes,
+                "{} in {} passes under Wine now ({}): take it off the case's `wine` member",
+                case.name,
+                space.name(),
+                wine.reason
+            );
+            let outcome = if failed { "failed" } else { "passed this time" };
+            println!("INPUT: Wine exception: {} in {} {outcome}: {}", case.name, space.name(), wine.reason);
+        }
     }
+    println!("INPUT: {} runs passed, {exceptions} named Wine exceptions", report.passed);
 }
 
 /// Runs `arena-guest.exe ARGS` (or any Wine program) to completion: exit code and output.

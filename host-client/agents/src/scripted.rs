@@ -8,12 +8,19 @@
 //!   {"code": "computer.mouse.move_id(id=3)\ncomputer.mouse.single_click()"},
 //!   {"code": "pyautogui.hotkey('ctrl', 's')", "lang": "pyautogui"},
 //!   {"actions": [{"type": "type_text", "text": "hello"}]},
+//!   {"space": "computer_20250124", "input": {"action": "key", "text": "ctrl+s"}},
 //!   "WAIT",
 //!   "DONE"
 //! ]}
 //! ```
 //!
-//! `lang` is `computer` (the default) or `pyautogui`. Where the plan comes
+//! `lang` is `computer` (the default) or `pyautogui`. A `space` step is an
+//! answer in one of the action spaces a computer-use agent answers in
+//! (`arena_actionspace::ActionSpace`'s names: `computer_20250124`,
+//! `openai_computer`, `uitars`, ...), its `input` what such an agent sends (one
+//! action or a list), translated by `arena_actionspace::parse` against the
+//! observation's screen in pixels when the step is played, as that agent's
+//! answer would be. Where the plan comes
 //! from is a [`PlanSource`]: one plan for every task, a folder with one plan
 //! per task, or a `plan` key inside the task file itself (task files keep
 //! unknown top-level keys).
@@ -26,6 +33,7 @@ use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
+use arena_actionspace::{ActionSpace, Context, Coords};
 use arena_shared::action::Action;
 
 use super::{Agent, AgentError, Prediction};
@@ -47,6 +55,28 @@ pub enum PlanStep {
     Actions {
         actions: Vec<Action>,
     },
+    /// An answer in a computer-use action space, by the space's name.
+    Space {
+        space: String,
+        input: serde_json::Value,
+    },
+}
+
+/// A plan step ready to play: an action, or an answer in an action space that is
+/// translated against the screen of the observation it answers.
+#[derive(Debug, Clone, PartialEq)]
+enum Planned {
+    Action(AgentAction),
+    Space(ActionSpace, serde_json::Value),
+}
+
+impl Planned {
+    fn summary(&self) -> String {
+        match self {
+            Planned::Action(action) => action.summary(),
+            Planned::Space(space, input) => format!("{} {input}", space.name()),
+        }
+    }
 }
 
 /// The language of a code step.
@@ -65,6 +95,17 @@ pub struct Plan {
 }
 
 impl PlanStep {
+    fn planned(&self) -> Result<Planned, String> {
+        if let PlanStep::Space { space, input } = self {
+            let space: ActionSpace = space.parse()?;
+            // Checked now against a stand-in screen, so a bad step fails when the plan loads.
+            arena_actionspace::parse(space, input, &Context::new((1920, 1080), Coords::Pixels))
+                .map_err(|err| format!("in action space {}: {err}", space.name()))?;
+            return Ok(Planned::Space(space, input.clone()));
+        }
+        self.action().map(Planned::Action)
+    }
+
     fn action(&self) -> Result<AgentAction, String> {
         Ok(match self {
             PlanStep::Control(word) => match arena_actionspace::Decision::parse(word) {
@@ -74,6 +115,7 @@ impl PlanStep {
             PlanStep::Code { code, lang: CodeLang::Computer } => AgentAction::Computer(code.clone().into()),
             PlanStep::Code { code, lang: CodeLang::Pyautogui } => AgentAction::Pyautogui(code.clone().into()),
             PlanStep::Actions { actions } => AgentAction::Typed(actions.clone()),
+            PlanStep::Space { .. } => return Err("an action-space step is translated when it is played".into()),
         })
     }
 }
@@ -86,7 +128,7 @@ impl Plan {
     /// [`AgentError::Plan`] for bad JSON or an unknown control word, naming the step.
     pub fn parse(text: &str, origin: &str) -> Result<Plan, AgentError> {
         let plan: Plan = serde_json::from_str(text).map_err(|e| plan_error(origin, e.to_string()))?;
-        plan.actions(origin)?;
+        plan.planned(origin)?;
         Ok(plan)
     }
 
@@ -101,16 +143,12 @@ impl Plan {
         Plan::parse(&text, &origin)
     }
 
-    /// The plan's actions, one per step.
-    ///
-    /// # Errors
-    ///
-    /// [`AgentError::Plan`] naming the first step that is not a valid action.
-    pub fn actions(&self, origin: &str) -> Result<Vec<AgentAction>, AgentError> {
+    /// The plan's steps ready to play, one per step.
+    fn planned(&self, origin: &str) -> Result<Vec<Planned>, AgentError> {
         self.steps
             .iter()
             .enumerate()
-            .map(|(i, s)| s.action().map_err(|e| plan_error(origin, format!("step {}: {e}", i + 1))))
+            .map(|(i, s)| s.planned().map_err(|e| plan_error(origin, format!("step {}: {e}", i + 1))))
             .collect()
     }
 }
@@ -150,8 +188,8 @@ impl PlanSource {
 #[derive(Debug)]
 pub struct ScriptedAgent {
     source: PlanSource,
-    /// The current task's actions, or why they could not be had.
-    steps: Result<Vec<AgentAction>, String>,
+    /// The current task's steps, or why they could not be had.
+    steps: Result<Vec<Planned>, String>,
     origin: String,
     next: usize,
 }
@@ -163,14 +201,15 @@ impl ScriptedAgent {
     pub fn new(source: PlanSource) -> ScriptedAgent {
         let mut agent = ScriptedAgent { source, steps: Ok(Vec::new()), origin: String::from("plan"), next: 0 };
         if let PlanSource::Fixed(plan) = &agent.source {
-            agent.steps = plan.actions("plan").map_err(|e| e.to_string());
+            agent.steps = plan.planned("plan").map_err(|e| e.to_string());
         }
         agent
     }
 
     /// An agent that runs these actions, one per step, for any task.
     pub fn from_actions(actions: Vec<AgentAction>) -> ScriptedAgent {
-        ScriptedAgent { source: PlanSource::Fixed(Plan::default()), steps: Ok(actions), origin: "plan".into(), next: 0 }
+        let steps = Ok(actions.into_iter().map(Planned::Action).collect());
+        ScriptedAgent { source: PlanSource::Fixed(Plan::default()), steps, origin: "plan".into(), next: 0 }
     }
 
     /// An agent that runs the plan file at `path` for any task.
@@ -185,16 +224,16 @@ impl ScriptedAgent {
         Ok(agent)
     }
 
-    fn load_for(&self, task: &Task) -> Result<(Vec<AgentAction>, String), AgentError> {
-        let inline = || -> Result<(Vec<AgentAction>, String), AgentError> {
+    fn load_for(&self, task: &Task) -> Result<(Vec<Planned>, String), AgentError> {
+        let inline = || -> Result<(Vec<Planned>, String), AgentError> {
             let origin = format!("{} ({TASK_PLAN_KEY} key)", task.path.display());
             let value =
                 task.extra.get(TASK_PLAN_KEY).ok_or_else(|| plan_error(&origin, "the task has no plan".into()))?;
             let plan: Plan = serde_json::from_value(value.clone()).map_err(|e| plan_error(&origin, e.to_string()))?;
-            Ok((plan.actions(&origin)?, origin))
+            Ok((plan.planned(&origin)?, origin))
         };
         match &self.source {
-            PlanSource::Fixed(plan) => Ok((plan.actions(&self.origin)?, self.origin.clone())),
+            PlanSource::Fixed(plan) => Ok((plan.planned(&self.origin)?, self.origin.clone())),
             PlanSource::TaskKey => inline(),
             PlanSource::Dir(dir) => {
                 let candidates = [
@@ -203,7 +242,7 @@ impl ScriptedAgent {
                 ];
                 match candidates.iter().find(|p| p.is_file()) {
                     Some(path) => {
-                        Ok((Plan::load(path)?.actions(&path.display().to_string())?, path.display().to_string()))
+                        Ok((Plan::load(path)?.planned(&path.display().to_string())?, path.display().to_string()))
                     }
                     None if task.extra.contains_key(TASK_PLAN_KEY) => inline(),
                     None => Err(plan_error(
@@ -241,13 +280,25 @@ impl Agent for ScriptedAgent {
     async fn predict(&mut self, obs: &Observation) -> Result<Prediction, AgentError> {
         let steps =
             self.steps.as_ref().map_err(|e| AgentError::Plan { path: self.origin.clone(), reason: e.clone() })?;
-        let action = steps.get(self.next).cloned().ok_or_else(|| AgentError::Exhausted(self.origin.clone()))?;
+        let step = steps.get(self.next).cloned().ok_or_else(|| AgentError::Exhausted(self.origin.clone()))?;
         self.next += 1;
-        let uses_marks = matches!(action, AgentAction::Computer(_));
+        let response = format!("plan step {}: {}", self.next, step.summary());
+        let actions = match step {
+            Planned::Action(action) => vec![action],
+            Planned::Space(space, input) => {
+                let ctx = Context::new(obs.screen_size(), Coords::Pixels);
+                let steps = arena_actionspace::parse(space, &input, &ctx).map_err(|err| AgentError::Plan {
+                    path: self.origin.clone(),
+                    reason: format!("step {}: in action space {}: {err}", self.next, space.name()),
+                })?;
+                AgentAction::from_steps(&steps)
+            }
+        };
+        let uses_marks = actions.iter().any(|a| matches!(a, AgentAction::Computer(_)));
         Ok(Prediction {
-            response: format!("plan step {}: {}", self.next, action.summary()),
+            response,
             marks: if uses_marks { obs.marks() } else { None },
-            actions: vec![action],
+            actions,
             raw_error: None,
             logs: Vec::new(),
             timings: Default::default(),

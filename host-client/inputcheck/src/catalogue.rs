@@ -8,7 +8,10 @@
 //! (event lines, [`crate::expect`]) or `expect_text` (the characters typed, for cases
 //! whose keys differ by layout or by how a space types), optionally `expect_by_space`
 //! (a space whose translation differs on purpose, with its own lines, such as UI-TARS
-//! typing by paste), `note`, and one member per action space: `pyautogui` (code),
+//! typing by paste), `note`, `wine` (a [`WineException`]: what Wine cannot show of the
+//! case, `{"reason": "...", "spaces": [...], "sometimes": true}`, every space when
+//! `spaces` is left out, `sometimes` when Wine fails it only now and then),
+//! and one member per action space: `pyautogui` (code),
 //! `computer_13`, `anthropic` (the `computer` tool's input, run as
 //! `computer_20250124`, as `computer_20251124` and, as member-named blocks, as
 //! `computer_toolset_20260801`), `openai_computer` (a `computer_call` action or a GA
@@ -32,6 +35,27 @@ pub enum Check {
     Text(String),
 }
 
+/// A case, in some spaces or all, that the Windows backend under Wine cannot pass for
+/// a reason of Wine's (not of the backend's), named so the Wine suite can hold it to
+/// failing there while it passes on the stub and is still checked on a real guest.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct WineException {
+    /// Why Wine cannot show it.
+    pub reason: String,
+    /// The spaces it is excused in; every space when empty.
+    pub spaces: Vec<ActionSpace>,
+    /// Wine fails it only some of the time (a race in Wine, not a fixed answer), so a
+    /// run that passes is no sign the reason has gone.
+    pub sometimes: bool,
+}
+
+impl WineException {
+    /// Whether the exception covers `space`.
+    pub fn covers(&self, space: ActionSpace) -> bool {
+        self.spaces.is_empty() || self.spaces.contains(&space)
+    }
+}
+
 /// One intent.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Case {
@@ -41,6 +65,8 @@ pub struct Case {
     /// Spaces that reach the intent with other events on purpose, and those events.
     pub by_space: Vec<(ActionSpace, Check)>,
     pub note: Option<String>,
+    /// What Wine cannot show of the case, and why.
+    pub wine: Option<WineException>,
     /// The case in each action space that expresses it, in [`ActionSpace::ALL`]'s order.
     pub inputs: Vec<(ActionSpace, Value)>,
 }
@@ -68,7 +94,7 @@ pub struct Catalogue {
 }
 
 /// The members of a case that are not an action space.
-const CASE_FIELDS: [&str; 6] = ["name", "intent", "expect", "expect_text", "expect_by_space", "note"];
+const CASE_FIELDS: [&str; 7] = ["name", "intent", "expect", "expect_text", "expect_by_space", "note", "wine"];
 
 impl Catalogue {
     /// The catalogue built into this crate.
@@ -150,6 +176,7 @@ fn parse_case(item: &Value) -> Result<Case, String> {
         }
     }
     let note = obj.get("note").and_then(Value::as_str).map(str::to_owned);
+    let wine = obj.get("wine").map(parse_wine).transpose()?;
     let mut inputs = Vec::new();
     for (key, input) in obj {
         if CASE_FIELDS.contains(&key.as_str()) {
@@ -162,7 +189,42 @@ fn parse_case(item: &Value) -> Result<Case, String> {
         }
     }
     inputs.sort_by_key(|(space, _)| ActionSpace::ALL.iter().position(|s| s == space));
-    Ok(Case { name, intent, check, by_space, note, inputs })
+    if let Some(wine) = &wine {
+        if let Some(space) = wine.spaces.iter().find(|s| !inputs.iter().any(|(i, _)| i == *s)) {
+            return Err(format!("`wine` names {}, which the case is not expressed in", space.name()));
+        }
+    }
+    Ok(Case { name, intent, check, by_space, note, wine, inputs })
+}
+
+/// A case's `wine` member: `{"reason": "...", "spaces": ["typed", "anthropic", ...]}`.
+fn parse_wine(value: &Value) -> Result<WineException, String> {
+    let Value::Object(obj) = value else {
+        return Err("`wine` must be an object with `reason` (and `spaces`)".into());
+    };
+    if let Some(key) = obj.keys().find(|k| !["reason", "spaces", "sometimes"].contains(&k.as_str())) {
+        return Err(format!("`wine` has an unknown member {key:?} (expected reason, spaces, sometimes)"));
+    }
+    let sometimes = match obj.get("sometimes") {
+        None => false,
+        Some(Value::Bool(b)) => *b,
+        Some(other) => return Err(format!("`wine`: `sometimes` must be true or false, got {other}")),
+    };
+    let reason = text_field(obj, "reason").map_err(|err| format!("`wine`: {err}"))?;
+    let mut spaces = Vec::new();
+    match obj.get("spaces") {
+        None => {}
+        Some(Value::Array(names)) if !names.is_empty() => {
+            for name in names {
+                let Value::String(name) = name else {
+                    return Err(format!("`wine`: a space must be a name, got {name}"));
+                };
+                spaces.extend(spaces_of(name).map_err(|err| format!("`wine`: {err}"))?);
+            }
+        }
+        Some(other) => return Err(format!("`wine`: `spaces` must be a non-empty list of names, got {other}")),
+    }
+    Ok(WineException { reason, spaces, sometimes })
 }
 
 /// The spaces a member name stands for.

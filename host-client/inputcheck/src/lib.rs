@@ -27,7 +27,7 @@ pub mod drive;
 pub mod expect;
 pub mod guest;
 
-pub use catalogue::{Case, Catalogue, Check};
+pub use catalogue::{Case, Catalogue, Check, WineException};
 pub use drive::{
     default_log, default_recorder, run_check, CheckError, CheckOptions, Mismatch, Report, StepRunner, Tally,
     OEM_RECORDER, RECORDER_TITLE, STUB_RECORDER,

@@ -1,5 +1,6 @@
 //! Unit tests of the notation, the comparison, the catalogue and its translation.
 
+use arena_actionspace::ActionSpace;
 use arena_shared::input_log::{Button, Mods, Press, Recorded};
 
 use crate::catalogue::Catalogue;
@@ -146,4 +147,34 @@ fn a_broken_catalogue_is_refused_with_the_case_named() {
     assert!(Catalogue::parse(unknown_space).unwrap_err().contains("telepathy"));
     let duplicate = r#"{"cases": [{"name": "z", "intent": "i", "expect": [], "typed": []}, {"name": "z", "intent": "i", "expect": [], "typed": []}]}"#;
     assert!(Catalogue::parse(duplicate).unwrap_err().contains("twice"));
+}
+
+#[test]
+fn a_wine_exception_is_read_with_its_reason_and_spaces_and_a_bad_one_is_refused() {
+    let case = |wine: &str| {
+        format!(
+            r#"{{"cases": [{{"name": "w", "intent": "i", "expect": [], "typed": [], "pyautogui": "pass", "wine": {wine}}}]}}"#
+        )
+    };
+    let all = Catalogue::parse(&case(r#"{"reason": "Wine has no such message"}"#)).unwrap_or_else(|e| panic!("{e}"));
+    let wine = all.cases[0].wine.clone().expect("the exception");
+    assert_eq!(wine.reason, "Wine has no such message");
+    assert!(wine.covers(ActionSpace::Typed) && wine.covers(ActionSpace::Pyautogui));
+    let one = Catalogue::parse(&case(r#"{"reason": "r", "spaces": ["typed"]}"#)).unwrap_or_else(|e| panic!("{e}"));
+    let wine = one.cases[0].wine.clone().expect("the exception");
+    assert!(wine.covers(ActionSpace::Typed) && !wine.covers(ActionSpace::Pyautogui) && !wine.sometimes);
+    let racy = Catalogue::parse(&case(r#"{"reason": "r", "sometimes": true}"#)).unwrap_or_else(|e| panic!("{e}"));
+    assert!(racy.cases[0].wine.as_ref().is_some_and(|w| w.sometimes));
+    for (wine, says) in [
+        (r#"{"spaces": ["typed"]}"#, "reason"),
+        (r#"{"reason": "r", "spaces": ["telepathy"]}"#, "telepathy"),
+        (r#"{"reason": "r", "spaces": ["uitars"]}"#, "not expressed in"),
+        (r#"{"reason": "r", "spaces": []}"#, "non-empty"),
+        (r#"{"reason": "r", "why": "x"}"#, "unknown member"),
+        (r#"{"reason": "r", "sometimes": "often"}"#, "true or false"),
+        (r#""because""#, "must be an object"),
+    ] {
+        let err = Catalogue::parse(&case(wine)).unwrap_err();
+        assert!(err.contains("case w") && err.contains(says), "{wine}: {err}");
+    }
 }
