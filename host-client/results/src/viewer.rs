@@ -343,7 +343,8 @@ pub fn marks_of(
             AgentAction::Typed(actions) => actions.iter().for_each(|a| tracker.act(a, n)),
             AgentAction::Pyautogui(code) => {
                 let ctx = Context { screen, cursor: tracker.cursor.unwrap_or((0, 0)), coords };
-                if let Ok(steps) = arena_actionspace::parse(ActionSpace::Pyautogui, &Value::String(code.to_string()), &ctx)
+                if let Ok(steps) =
+                    arena_actionspace::parse(ActionSpace::Pyautogui, &Value::String(code.to_string()), &ctx)
                 {
                     for s in &steps {
                         if let Step::Act(a) = s {

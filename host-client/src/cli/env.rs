@@ -59,6 +59,11 @@ pub struct ServeArgs {
     /// one, --listen must be a loopback address.
     #[arg(long, env = "ARENA_ENV_TOKEN", value_name = "TOKEN", hide_env_values = true)]
     pub env_token: Option<String>,
+    /// Let a task sent whole (a task object in a reset) fetch URLs from this machine
+    /// (its `download` steps); without it such a task is refused. Tasks served from
+    /// --tasks may always.
+    #[arg(long)]
+    pub allow_downloads: bool,
     #[command(flatten)]
     pub source: GuestSource,
 }
@@ -144,6 +149,7 @@ async fn serve_env(conn: &Connection, args: ServeArgs) -> anyhow::Result<ExitCod
         idle: Duration::from_secs(args.idle_secs),
         screen,
         token,
+        allow_downloads: args.allow_downloads,
     };
     super::emit(&format!("{}\n", crate::envserve::describe(addr, &tasks, guests.clients.len())))?;
     let server = crate::envserve::EnvServer::new(tasks, guests.clients.clone(), options);

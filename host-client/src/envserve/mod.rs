@@ -27,7 +27,7 @@
 //! Each episode's result folder is `<out>/<session>/env/env/env/<n>/<domain>/<task>`
 //! (`n` counting the session's episodes from 1), so sessions never share one.
 //!
-//! Bounded as the step protocol is: a body of at most `MAX_ANSWER`, at most
+//! Bounded: a body of at most [`MAX_REQUEST`] (1 MiB, refused before it is parsed), at most
 //! `MAX_ACTIONS` actions a step, one session per guest, and a session whose client
 //! sends nothing for `idle` ends as an agent error and frees its guest.
 //!
@@ -55,7 +55,6 @@ use tokio_util::sync::CancellationToken;
 
 use crate::episode::EpisodeConfig;
 use arena_actionspace::Coords;
-use arena_agents::body::MAX_ANSWER;
 use arena_agents::external::protocol::{AgentHello, ObservationWants, ACTION_SPACES, MAX_ACTIONS};
 use arena_agents::observation::Observation;
 use arena_agents::{Agent, AgentError, Prediction};
@@ -78,7 +77,13 @@ pub struct EnvOptions {
     pub screen: Option<(u32, u32)>,
     /// The bearer token every request must carry; `None` serves loopback clients only.
     pub token: Option<String>,
+    /// `--allow-downloads`: a task object may fetch URLs from this machine (`download` steps).
+    pub allow_downloads: bool,
 }
+
+/// The largest request body: a reset's task object or a step's actions are far
+/// smaller; past it the request is refused (413) before any of it is parsed.
+pub const MAX_REQUEST: usize = 1024 * 1024;
 
 /// What one turn of an episode hands the waiting request.
 #[derive(Debug)]
@@ -268,7 +273,7 @@ impl EnvServer {
             .route("/step", post(step))
             .route("/evaluate", post(evaluate))
             .route("/close", post(close))
-            .layer(axum::extract::DefaultBodyLimit::max(MAX_ANSWER))
+            .layer(axum::extract::DefaultBodyLimit::max(MAX_REQUEST))
             .layer(axum::middleware::from_fn_with_state(Arc::clone(self), guard))
             .with_state(Arc::clone(self))
     }
@@ -286,6 +291,9 @@ impl EnvServer {
     /// episode could not be scored (a task object has no folder to read it from).
     fn task(&self, spec: &Value) -> Result<Task, Refusal> {
         let task = self.named_task(spec)?;
+        if spec.is_object() {
+            self.object_may_run(&task)?;
+        }
         let task_dir = if spec.is_string() { task.path.parent() } else { None };
         let unresolved = arena_eval::unresolved_host_files(&task.evaluator, task_dir);
         if unresolved.is_empty() {
@@ -303,6 +311,36 @@ impl EnvServer {
         )))
     }
 
+    /// What a task sent whole may not do: read files of this machine (`upload_file`,
+    /// which it has no folder for) or fetch URLs from it (`download`) unless the
+    /// server allows downloads.
+    fn object_may_run(&self, task: &Task) -> Result<(), Refusal> {
+        for step in task.config.iter().chain(&task.evaluator.postconfig) {
+            match step {
+                arena_task::SetupStep::UploadFile { files } => {
+                    let paths: Vec<String> = files.iter().map(|(local, _)| local.display().to_string()).collect();
+                    return Err(bad(format!(
+                        "task {:?}: its upload_file step would read files of the server's machine ({}); a task \
+                         object may not (serve the task from a file with --tasks)",
+                        task.name,
+                        paths.join(", ")
+                    )));
+                }
+                arena_task::SetupStep::Download { files } if !self.options.allow_downloads => {
+                    let urls: Vec<&str> = files.iter().map(|f| f.url.as_str()).collect();
+                    return Err(bad(format!(
+                        "task {:?}: its download step would fetch {} from the server's machine; start the server \
+                         with --allow-downloads to let task objects do that",
+                        task.name,
+                        urls.join(", ")
+                    )));
+                }
+                _ => {}
+            }
+        }
+        Ok(())
+    }
+
     fn named_task(&self, spec: &Value) -> Result<Task, Refusal> {
         match spec {
             Value::String(key) => {
@@ -314,6 +352,10 @@ impl EnvServer {
                 })
             }
             Value::Object(fields) => {
+                // The harness's own keys (a trial number that picks the result folder).
+                if let Some(key) = fields.keys().find(|k| k.starts_with("_arena")) {
+                    return Err(bad(format!("task: {key:?} is the harness's own key; a task object may not set it")));
+                }
                 let domain = fields.get("domain").and_then(Value::as_str).unwrap_or("custom");
                 let id = fields.get("id").and_then(Value::as_str).unwrap_or("task");
                 let path = PathBuf::from("env-tasks")
@@ -445,7 +487,18 @@ async fn reset(State(server): State<Arc<EnvServer>>, payload: Result<Json<ResetR
         "instruction": task.instruction,
         "max_steps": server.options.config.max_steps,
     });
-    let observation = server.start(&mut held, task, hello).await?;
+    let observation = match server.start(&mut held, task, hello).await {
+        Ok(observation) => observation,
+        Err(refusal) => {
+            // A session this reset opened gives its guest back at once.
+            if request.session.is_none() {
+                let detached = held.detach();
+                drop(held);
+                server.forget(&id, detached);
+            }
+            return Err(refusal);
+        }
+    };
     let mut info = info;
     info["screen_width"] = json!(observation["screen_width"]);
     info["screen_height"] = json!(observation["screen_height"]);
@@ -674,8 +727,14 @@ mod tests {
             })
             .collect();
         let cache = arena_client::cache::DownloadCache::new(dir.join("cache")).expect("a cache");
-        let options =
-            EnvOptions { out: dir.to_owned(), config: EpisodeConfig::instant(cache), idle, screen: None, token: None };
+        let options = EnvOptions {
+            out: dir.to_owned(),
+            config: EpisodeConfig::instant(cache),
+            idle,
+            screen: None,
+            token: None,
+            allow_downloads: false,
+        };
         EnvServer::new(Vec::new(), guests, options)
     }
 
@@ -704,6 +763,53 @@ mod tests {
         assert_eq!(strict.sweep().await, 1);
         assert_eq!(strict.free.lock().expect("free").len(), 2, "both guests back");
         assert_eq!(strict.session("a").expect_err("gone").0, StatusCode::NOT_FOUND);
+    }
+
+    #[test]
+    fn a_task_object_may_not_set_harness_keys_read_host_files_or_download_unless_allowed() {
+        let dir = tempfile::tempdir().expect("tmp");
+        let evaluator = json!({"func": "exact_match", "result": {"type": "vm_file", "path": "C:\\a.txt", "dest": "a.txt"},
+            "expected": {"type": "rule", "rules": {"expected": "x"}}});
+        let task = |config: Value, extra: Option<(&str, Value)>| {
+            let mut task = json!({"id": "t", "instruction": "i", "config": config, "evaluator": evaluator});
+            if let Some((key, value)) = extra {
+                task[key] = value;
+            }
+            task
+        };
+        let env = server(Duration::from_secs(600), dir.path());
+        assert_eq!(env.task(&task(json!([]), None)).expect("a plain task object").name, "t");
+        let refused = env.task(&task(json!([]), Some(("_arena_trial", json!(3))))).expect_err("refused");
+        assert!(refused.1.contains("\"_arena_trial\" is the harness's own key"), "{}", refused.1);
+        let upload = json!([{"type": "upload_file", "parameters": {"files": [{"local_path": "/etc/passwd", "path": "C:\\p.txt"}]}}]);
+        let refused = env.task(&task(upload, None)).expect_err("refused");
+        assert!(refused.1.contains("upload_file") && refused.1.contains("/etc/passwd"), "{}", refused.1);
+        let download =
+            json!([{"type": "download", "parameters": {"files": [{"url": "http://10.0.0.1/x", "path": "C:\\x"}]}}]);
+        let refused = env.task(&task(download.clone(), None)).expect_err("refused");
+        assert!(refused.1.contains("--allow-downloads") && refused.1.contains("http://10.0.0.1/x"), "{}", refused.1);
+        let mut allowing = server(Duration::from_secs(600), dir.path());
+        Arc::get_mut(&mut allowing).expect("one owner").options.allow_downloads = true;
+        assert_eq!(allowing.task(&task(download, None)).expect("allowed").name, "t");
+    }
+
+    #[tokio::test]
+    async fn a_reset_that_fails_gives_its_guest_back() {
+        let dir = tempfile::tempdir().expect("tmp");
+        let env = server(Duration::from_secs(600), dir.path());
+        let evaluator = json!({"func": "exact_match", "result": {"type": "vm_file", "path": "C:\\a.txt", "dest": "a.txt"},
+            "expected": {"type": "rule", "rules": {"expected": "x"}}});
+        let request = ResetRequest {
+            task: json!({"id": "t", "instruction": "i", "evaluator": evaluator}),
+            session: None,
+            observation: None,
+            coords: None,
+        };
+        // Nothing listens at the guests' addresses: the episode cannot start.
+        let refused = reset(State(Arc::clone(&env)), Ok(Json(request))).await.expect_err("refused");
+        assert_eq!(refused.0, StatusCode::BAD_GATEWAY, "{}", refused.1);
+        assert_eq!(env.free.lock().expect("free").len(), 2, "the guest is free again");
+        assert!(env.sessions.lock().expect("sessions").is_empty(), "no session is left open");
     }
 
     #[test]

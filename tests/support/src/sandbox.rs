@@ -34,6 +34,7 @@ pub fn exec_sandbox_args() -> [&'static str; 2] {
         "bwrap is not installed and {REQUIRE_BWRAP_VAR}=1 (apt-get install bubblewrap)"
     );
     // Straight to the process's stderr, as a skip line is (libtest captures eprintln!).
-    let _ = writeln!(std::io::stderr(), "NOTE: bwrap not found: this suite's exec agent runs with --agent-sandbox none");
+    let _ =
+        writeln!(std::io::stderr(), "NOTE: bwrap not found: this suite's exec agent runs with --agent-sandbox none");
     ["--agent-sandbox", "none"]
 }
