@@ -307,7 +307,9 @@ fn verify_boots_the_image_once_and_writes_its_report_and_bundle() {
     assert_eq!(verdict("watermark"), Verdict::Warn, "{report:?}");
     assert!(matches!(verdict("browser-chrome"), Verdict::Warn | Verdict::Pass), "{report:?}");
     let licence = report.check("licence").unwrap();
-    assert!(licence.verdict == Verdict::Warn && licence.detail.contains("4 days left"), "{licence:?}");
+    // Five days less the seconds the boot took: 4 or 5 whole days, by where the count rounds.
+    let days = licence.detail.contains("4 days left") || licence.detail.contains("5 days left");
+    assert!(licence.verdict == Verdict::Warn && days, "{licence:?}");
     assert!(report.check("defender").is_some());
     // Exit code and text follow the report.
     assert_eq!(run.status.success(), report.passed(), "{stdout}{stderr}");
