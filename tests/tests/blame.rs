@@ -147,6 +147,18 @@ fn missing_names(summary: &Value) -> Vec<String> {
     names
 }
 
+/// The victim's row as the agent's failure: score 0, "Failed by: agent", one
+/// attempt, `result.txt` written; answers its error.
+fn assert_the_agents_zero(out: &Path, summary: &Value, text: &str) -> String {
+    let victim = task(summary, VICTIM).unwrap_or_else(|| panic!("the victim has a row\n{text}"));
+    assert_eq!(victim["score"], json!(0.0), "{victim}\n{text}");
+    assert_eq!(victim["status"], "agent_error", "{victim}");
+    assert_eq!(victim["failed_by"], "agent", "{victim}");
+    assert_eq!(victim["attempt"], json!(1), "not retried: {victim}");
+    assert!(out.join(victim["path"].as_str().expect("path")).join(RESULT_FILE).is_file(), "result.txt written");
+    victim["error"].as_str().unwrap_or_default().to_owned()
+}
+
 /// What both runs share: the infeasible task scored 1, the two after the victim
 /// never ran, the run ended early saying so, and the summary files say it is incomplete.
 fn assert_incomplete(out: &Path, summary: &Value, code: Option<i32>, text: &str) {
@@ -177,14 +189,8 @@ fn an_agent_whose_code_ends_the_guest_fails_the_task_and_the_run_ends_by_itself(
     let (code, text) = arena_run(&guest.url, &index, &out, &agent_cmd, Duration::from_secs(60));
 
     let summary = summary(&out);
-    let victim = task(&summary, VICTIM).unwrap_or_else(|| panic!("the victim has a row\n{text}"));
-    assert_eq!(victim["score"], json!(0.0), "{victim}\n{text}");
-    assert_eq!(victim["status"], "agent_error", "{victim}");
-    assert_eq!(victim["failed_by"], "agent", "{victim}");
-    assert_eq!(victim["attempt"], json!(1), "not retried: {victim}");
-    let error = victim["error"].as_str().unwrap_or_default();
+    let error = assert_the_agents_zero(&out, &summary, &text);
     assert!(error.contains("after the agent's action"), "{error}");
-    assert!(out.join(victim["path"].as_str().expect("path")).join(RESULT_FILE).is_file(), "result.txt written");
     assert_incomplete(&out, &summary, code, &text);
     let md = std::fs::read_to_string(out.join("summary.md")).expect("summary.md");
     assert!(md.contains(&format!("| notepad | {VICTIM} | 0.0 | agent_error | agent |")), "{md}");
@@ -240,14 +246,8 @@ fn a_guest_that_dies_while_the_agent_decides_after_its_first_action_is_the_agent
     let (code, text) = arena_run(&guest.url, &index, &out, &agent_cmd, Duration::from_secs(60));
 
     let summary = summary(&out);
-    let victim = task(&summary, VICTIM).unwrap_or_else(|| panic!("the victim has a row\n{text}"));
-    assert_eq!(victim["score"], json!(0.0), "{victim}\n{text}");
-    assert_eq!(victim["status"], "agent_error", "{victim}");
-    assert_eq!(victim["failed_by"], "agent", "{victim}");
-    assert_eq!(victim["attempt"], json!(1), "not retried: {victim}");
-    let error = victim["error"].as_str().unwrap_or_default();
+    let error = assert_the_agents_zero(&out, &summary, &text);
     assert!(error.contains("after the agent's action in step 1") && error.contains("decided step 2"), "{error}");
-    assert!(out.join(victim["path"].as_str().expect("path")).join(RESULT_FILE).is_file(), "result.txt written");
     assert_incomplete(&out, &summary, code, &text);
     let overall = &summary["overall"];
     assert_eq!(overall["success_rate"], json!(50.0), "{overall}");

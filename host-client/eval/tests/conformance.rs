@@ -123,7 +123,7 @@ fn write_file(file: &Map<String, Value>, dir: &Path) -> Result<PathBuf, String> 
         ("docx", Value::Object(doc)) => docx(doc)?,
         ("odt", Value::Object(doc)) => odt(doc)?,
         ("xlsx", Value::Object(sheets)) => return xlsx(sheets, &path).map(|()| path),
-        ("pdf", Value::String(text)) => pdf(text),
+        ("pdf", Value::String(text)) => arena_test_support::pdf_showing(text),
         ("image", Value::Object(spec)) => image(spec)?,
         ("wav", Value::Object(spec)) => wav(spec)?,
         _ => return Err(format!("unknown file content {content:?} in {file:?}")),
@@ -229,33 +229,6 @@ fn xlsx(sheets: &Map<String, Value>, path: &Path) -> Result<(), String> {
         }
     }
     book.save(path).map_err(|e| e.to_string())
-}
-
-/// A one-page PDF showing `text` in Helvetica.
-fn pdf(text: &str) -> Vec<u8> {
-    let stream = format!("BT /F1 18 Tf 72 720 Td ({text}) Tj ET");
-    let objects = [
-        "<< /Type /Catalog /Pages 2 0 R >>".to_owned(),
-        "<< /Type /Pages /Kids [3 0 R] /Count 1 >>".to_owned(),
-        "<< /Type /Page /Parent 2 0 R /MediaBox [0 0 612 792] /Contents 4 0 R /Resources << /Font << /F1 5 0 R >> >> >>".to_owned(),
-        format!("<< /Length {} >>\nstream\n{stream}\nendstream", stream.len()),
-        "<< /Type /Font /Subtype /Type1 /BaseFont /Helvetica /Encoding /WinAnsiEncoding >>".to_owned(),
-    ];
-    let mut out = b"%PDF-1.4\n".to_vec();
-    let mut offsets = Vec::new();
-    for (i, object) in objects.iter().enumerate() {
-        offsets.push(out.len());
-        out.extend_from_slice(format!("{} 0 obj\n{object}\nendobj\n", i + 1).as_bytes());
-    }
-    let xref = out.len();
-    out.extend_from_slice(format!("xref\n0 {}\n0000000000 65535 f \n", objects.len() + 1).as_bytes());
-    for offset in offsets {
-        out.extend_from_slice(format!("{offset:010} 00000 n \n").as_bytes());
-    }
-    out.extend_from_slice(
-        format!("trailer\n<< /Size {} /Root 1 0 R >>\nstartxref\n{xref}\n%%EOF\n", objects.len() + 1).as_bytes(),
-    );
-    out
 }
 
 /// A PNG of `width` × `height`: `pattern` is `bands` (a disk and stripes over a

@@ -15,7 +15,7 @@
 //! - [`eventually`] (feature `guest`): polling a condition until it holds or a deadline passes.
 //! - [`skip`] and [`program_or_skip`]: the one way a test says it was skipped (a
 //!   counted line, or a failure under its `ARENA_REQUIRE_*` switch).
-//! - [`png_claiming`]: a PNG header claiming any size, for the image guards.
+//! - [`png_claiming`]: a PNG header claiming any size, for the image guards; [`pdf_showing`]: a one-page PDF for the metric tests.
 //! - [`copy_stub_task`]: a stub task with its host-side gold, copied for a test.
 //! - [`bwrap_or_skip`] and [`exec_sandbox_args`]: the exec agents' sandbox (bubblewrap).
 //!
@@ -26,7 +26,7 @@
 //!
 //! Layout: `guest.rs` (in-process launcher), `process.rs` (child-process launcher),
 //! `chromium.rs` (Chromium locator and launcher), `corpus.rs` (corpus locator), `wine.rs` (Wine locator), `standin.rs` (stand-in
-//! image locator), `mcp_sdk.rs` (MCP SDK locator), `wait.rs` (polling), `png.rs` (PNG bombs), `skip.rs` (skip lines),
+//! image locator), `mcp_sdk.rs` (MCP SDK locator), `wait.rs` (polling), `png.rs` (PNG bombs), `pdf.rs` (a one-page PDF), `skip.rs` (skip lines),
 //! `stub_tasks.rs` (the stub tasks), `sandbox.rs` (bubblewrap).
 
 #![forbid(unsafe_code)]
@@ -36,6 +36,7 @@ mod corpus;
 #[cfg(feature = "guest")]
 mod guest;
 mod mcp_sdk;
+mod pdf;
 mod png;
 mod process;
 mod sandbox;
@@ -53,6 +54,7 @@ pub use corpus::{waa_corpus, CORPUS_VAR, REQUIRE_CORPUS_VAR};
 #[cfg(feature = "guest")]
 pub use guest::StubGuest;
 pub use mcp_sdk::{python_with_mcp, MCP_PYTHON_VAR, MCP_SDK, MCP_SDK_SKIP, REQUIRE_MCP_SDK_VAR};
+pub use pdf::pdf_showing;
 pub use png::png_claiming;
 pub use process::{
     agent_pythonpath, bench_guests, gui_agents_python_or_skip, python3_or_skip, workspace_binary, workspace_root,

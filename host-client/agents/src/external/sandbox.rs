@@ -153,12 +153,6 @@ pub struct Sandbox {
     home: tempfile::TempDir,
 }
 
-/// Where `program` is found on `PATH`, if anywhere.
-fn on_path(program: &str) -> Option<PathBuf> {
-    let path = std::env::var_os("PATH")?;
-    std::env::split_paths(&path).map(|dir| dir.join(program)).find(|candidate| candidate.is_file())
-}
-
 impl Sandbox {
     /// A sandbox as `options` say; `Ok(None)` for [`SandboxMode::None`].
     ///
@@ -176,7 +170,7 @@ impl Sandbox {
         if options.mode == SandboxMode::None {
             return Ok(None);
         }
-        let Some(bwrap) = on_path("bwrap") else {
+        let Some(bwrap) = arena_shared::search_path::find_program(Path::new("bwrap")) else {
             return Err("an exec agent runs in a bubblewrap sandbox, and `bwrap` is not on PATH: install it \
                         (Debian and Ubuntu: apt-get install bubblewrap), or pass --agent-sandbox none to run the \
                         agent with the harness's own view of the machine (recorded in the results)"
@@ -292,7 +286,7 @@ mod tests {
 
     #[test]
     fn the_arguments_cover_the_hidden_paths_and_keep_only_the_listed_variables() {
-        if on_path("bwrap").is_none() {
+        if arena_shared::search_path::find_program(Path::new("bwrap")).is_none() {
             // Sandbox::new refuses without bubblewrap; the suite's end-to-end test
             // (tests/tests/agent_sandbox.rs) requires it in CI.
             return;

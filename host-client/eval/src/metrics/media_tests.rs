@@ -9,8 +9,9 @@ use std::path::Path;
 use serde_json::{json, Value};
 
 use super::video::{phash_of_gray32, same_video};
-use crate::metrics::tests::{check, file, input, pdf_bytes, rules, Want};
+use crate::metrics::tests::{check, file, input, rules, Want};
 use crate::value::Fetched;
+use arena_test_support::pdf_showing as pdf_bytes;
 
 /// A vlcrc as VLC writes it: sections, comments, defaults commented out.
 fn vlcrc(settings: &str) -> Vec<u8> {

@@ -12,9 +12,9 @@ use rust_xlsxwriter::{
 };
 use serde_json::{json, Map, Value};
 
-use crate::metrics::tests::pdf_bytes;
 use crate::metrics::{lookup, MetricInput};
 use crate::value::Fetched;
+use arena_test_support::pdf_showing as pdf_bytes;
 
 /// What a case should give: a score, or an error whose message contains the text.
 #[derive(Debug)]
